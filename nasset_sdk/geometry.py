@@ -1,0 +1,69 @@
+"""Asset geometry: triangle meshes (surface variant) and linear fiber curves (fiber variant).
+
+Object space is right-handed, +Y up, in the stage's metersPerUnit (spec/format.md#geometry).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import UsageError
+
+
+@dataclass
+class MeshGeometry:
+    """points [V,3] float32; faces [F,3] int32 (counter-clockwise = front); normals [V,3] or None."""
+
+    points: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray | None = None
+
+    @classmethod
+    def from_trimesh(cls, mesh) -> "MeshGeometry":
+        """From a ``trimesh.Trimesh``; keeps its vertex normals."""
+        pts = np.asarray(mesh.vertices, np.float32)
+        faces = np.asarray(mesh.faces, np.int32)
+        normals = np.asarray(mesh.vertex_normals, np.float32)
+        return cls(pts, faces, normals)
+
+    def validate(self) -> None:
+        p, f = np.asarray(self.points), np.asarray(self.faces)
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
+            raise UsageError(f"mesh points must be [V,3], got {p.shape}")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+            raise UsageError(f"mesh faces must be [F,3], got {f.shape}")
+        if f.min() < 0 or f.max() >= len(p):
+            raise UsageError("mesh face index out of range")
+        if not np.isfinite(p).all():
+            raise UsageError("mesh points contain NaN/Inf")
+        if self.normals is not None and np.asarray(self.normals).shape != p.shape:
+            raise UsageError("mesh normals must be [V,3] like points")
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.points.min(0), self.points.max(0)
+
+
+@dataclass
+class CurvesGeometry:
+    """Linear fiber curves. points [P,3]; counts [C] vertices per curve (>= 2); widths [P]."""
+
+    points: np.ndarray
+    counts: np.ndarray
+    widths: np.ndarray
+
+    def validate(self) -> None:
+        p, c, w = np.asarray(self.points), np.asarray(self.counts), np.asarray(self.widths)
+        if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
+            raise UsageError(f"curve points must be [P,3], got {p.shape}")
+        if c.ndim != 1 or len(c) == 0 or (c < 2).any() or int(c.sum()) != len(p):
+            raise UsageError("curve counts must be >= 2 each and sum to the number of points")
+        if w.shape != (len(p),) or not np.isfinite(w).all() or (w <= 0).any():
+            raise UsageError("curve widths must be [P], finite and > 0")
+        if not np.isfinite(p).all():
+            raise UsageError("curve points contain NaN/Inf")
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        r = self.widths[:, None] * 0.5
+        return (self.points - r).min(0), (self.points + r).max(0)

@@ -1,0 +1,119 @@
+"""Kind ``rna``: Relightable Neural Assets (papers/rna-relightable-neural-assets.txt, spec/kinds/rna.md).
+
+Triplane features zeta(x) [C] summed from three planes, concatenated with the property vector and
+decoded by an MLP into two RGB transports: y[:, 0:3] when the light is NOT occluded by the asset
+itself (unshadowed), y[:, 3:6] when it is (shadowed). Transport T is outgoing radiance per unit
+irradiance of a distant light along wi (units 1/sr), negative outputs clamp to 0.
+
+Network input, in this order (object-space unit vectors, wo and wi pointing away from the point):
+    surface: [zeta (C), xn (3), n (3), wo (3), wi (3)]            width C + 12
+    fiber:   [zeta (C), xn (3), t (3), h (1), wo (3), wi (3)]     width C + 13
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import ComponentSpec, KindContract, NetworkSpec, TensorSpec, register_kind
+from .encodings import safe_normalize, to_unit_box, triplane
+
+SIZES = {  # preset -> (triplane resolution, channels, hidden layers, hidden width)
+    "tiny": (8, 4, 2, 16),
+    "small": (64, 8, 4, 64),
+    "hq": (128, 8, 4, 128),
+}
+
+
+class RnaKind(KindContract):
+    id = "rna"
+    variants = ("surface", "fiber")
+    paper = "rna-relightable-neural-assets.txt"
+
+    def components(self, variant: str) -> dict[str, ComponentSpec]:
+        width = "C+12" if variant == "surface" else "C+13"
+        return {
+            "core": ComponentSpec(
+                required=True,
+                purpose="evaluation",
+                tensors={"triplane": TensorSpec(("3", "R", "R", "C"), "plane,v,u,channel", "feature planes XY, YZ, ZX")},
+                networks={"decoder": NetworkSpec((("x", width),), (("y", "6"),), "transport MLP, unshadowed RGB then shadowed RGB")},
+            )
+        }
+
+    def build_random(self, rng, *, variant="surface", size="small", geometry=None):
+        from ..asset import AssetBuilder
+        from ..geometry import CurvesGeometry, MeshGeometry
+        from ..networks import random_mlp
+
+        res, ch, layers, hidden = SIZES[size]
+        b = AssetBuilder("rna", variant=variant)
+        if geometry is None:
+            geometry = _example_curves(rng) if variant == "fiber" else _example_mesh()
+        if not isinstance(geometry, (MeshGeometry, CurvesGeometry)):
+            geometry = MeshGeometry.from_trimesh(geometry)
+        b.set_geometry(geometry)
+        core = b.component("core", required=True, purpose="evaluation", quality=None)
+        core.add_tensor("triplane", rng.normal(0, 0.5, (3, res, res, ch)), dtype="float16", layout="plane,v,u,channel")
+        width = ch + (12 if variant == "surface" else 13)
+        core.add_network("decoder", random_mlp(rng, [width] + [hidden] * layers + [6]))
+        b.provenance = {"generator": "random", "size": size}
+        return b
+
+    def evaluator(self, asset, **options):
+        return RnaEvaluator(asset, **options)
+
+
+class RnaEvaluator:
+    """Evaluates an rna asset's transport; all directions and points in object space."""
+
+    def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536) -> None:
+        self.asset = asset
+        self.fiber = asset.variant == "fiber"
+        self.planes = np.asarray(asset.tensor("core", "triplane"), np.float32)
+        self.lo, self.hi = asset.domain
+        self.session = asset.session("core", "decoder", intra_threads=intra_threads)
+        self.batch = int(batch)
+
+    def network_input(self, x, frame, wo, wi, h=None) -> np.ndarray:
+        """[N, C+12] (surface; frame = normal) or [N, C+13] (fiber; frame = tangent, h in [-1, 1])."""
+        xn = to_unit_box(x, self.lo, self.hi)
+        parts = [triplane(self.planes, xn), xn, safe_normalize(frame)]
+        if self.fiber:
+            hh = np.zeros(len(xn), np.float32) if h is None else np.clip(np.nan_to_num(np.asarray(h, np.float32)), -1, 1)
+            parts.append(hh[:, None])
+        parts += [safe_normalize(wo), safe_normalize(wi)]
+        return np.concatenate(parts, axis=1).astype(np.float32)
+
+    def evaluate(self, x, frame, wo, wi, h=None) -> tuple[np.ndarray, np.ndarray]:
+        """Transport (unshadowed [N,3], shadowed [N,3]), clamped to finite values >= 0."""
+        n = len(x)
+        out = np.empty((n, 6), np.float32)
+        for s in range(0, n, self.batch):
+            e = min(n, s + self.batch)
+            inp = self.network_input(x[s:e], frame[s:e], wo[s:e], wi[s:e], None if h is None else h[s:e])
+            out[s:e] = self.session.run(None, {"x": inp})[0]
+        out = np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
+        np.maximum(out, 0.0, out=out)
+        return out[:, :3], out[:, 3:]
+
+
+def _example_mesh():
+    import trimesh
+
+    from ..geometry import MeshGeometry
+
+    return MeshGeometry.from_trimesh(trimesh.creation.icosphere(subdivisions=2, radius=0.5))
+
+
+def _example_curves(rng):
+    from ..geometry import CurvesGeometry
+
+    n_curves, seg = 24, 6
+    roots = rng.uniform(-0.3, 0.3, (n_curves, 3)) * [1, 0, 1]
+    t = np.linspace(0, 1, seg + 1)[None, :, None]
+    pts = roots[:, None, :] + t * np.array([0.0, 1.0, 0.0]) + 0.05 * np.sin(6 * t) * np.array([1.0, 0, 0])
+    pts = pts.reshape(-1, 3).astype(np.float32)
+    return CurvesGeometry(pts, np.full(n_curves, seg + 1, np.int32), np.full(len(pts), 0.01, np.float32))
+
+
+register_kind(RnaKind())
