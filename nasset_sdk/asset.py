@@ -24,7 +24,7 @@ from typing import Iterable
 import numpy as np
 
 from . import limits
-from .errors import AssetReadError, UsageError, error
+from .errors import UsageError, error
 from .geometry import CurvesGeometry, MeshGeometry
 from .networks import NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
 from .plugin import register_schema
@@ -60,7 +60,8 @@ class ComponentData:
         arr = np.asarray(array)
         if arr.size > limits.MAX_TENSOR_ELEMENTS or arr.ndim > limits.MAX_TENSOR_RANK or arr.ndim == 0:
             raise UsageError(f"tensor {name!r}: shape {arr.shape} outside the format bounds")
-        stored = arr.astype(np.dtype(dtype))
+        with np.errstate(over="ignore", invalid="ignore"):
+            stored = arr.astype(np.dtype(dtype))
         if not np.isfinite(stored).all():
             raise UsageError(f"tensor {name!r} holds NaN/Inf after conversion to {dtype}")
         self.tensors[name] = (stored, dtype, layout)
@@ -139,7 +140,7 @@ class AssetBuilder:
         lo, hi = self.domain
         root.CreateAttribute("nasset:domainMin", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*map(float, lo)))
         root.CreateAttribute("nasset:domainMax", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*map(float, hi)))
-        prov = {"specVersion": limits.SPEC_VERSION, "kind": self.kind, **self.provenance}
+        prov = {**self.provenance, "specVersion": limits.SPEC_VERSION, "kind": self.kind}  # required keys win
         root.CreateAttribute("nasset:provenance", Sdf.ValueTypeNames.String).Set(json.dumps(prov, sort_keys=True))
 
         geo = self.geometry
@@ -217,7 +218,7 @@ class AssetBuilder:
         for nname, blob in data.networks.items():
             info = info_from_model(blob)
             prim = stage.DefinePrim(f"{path}/{nname}", "NeuralNetwork")
-            a = lambda n, t: prim.CreateAttribute(n, t, custom=False)  # noqa: E731
+            a = lambda n, t, prim=prim: prim.CreateAttribute(n, t, custom=False)  # noqa: E731
             a("onnx:model", Sdf.ValueTypeNames.UCharArray).Set(Vt.UCharArray.FromNumpy(np.frombuffer(blob, np.uint8)))
             a("onnx:sha256", Sdf.ValueTypeNames.String).Set(sha256_hex(blob))
             a("onnx:opset", Sdf.ValueTypeNames.Int).Set(info.opset)
@@ -290,7 +291,6 @@ class NetworkRef:
     name: str
     prim_path: str
     info: NetworkInfo
-    nbytes: int
 
 
 @dataclass
@@ -325,10 +325,13 @@ class Asset:
         *,
         load: str | Iterable[str] = "required",
         quality: dict[str, str] | str | None = None,
+        probe: bool = False,
     ) -> "Asset":
         """Open lazily (``Usd.Stage.LoadNone``) and load ``load``: 'required', 'all', 'none' or names.
 
         ``quality`` picks a quality variant ('hq', or {component: variant}) without editing the file.
+        ``probe`` first reads the whole file in a child process (nasset_sdk.safeopen): a corrupted
+        crate that would crash usd-core raises FILE_UNREADABLE instead (costs ~0.4 s + one read).
         """
         register_schema()
         from pxr import Tf, Usd
@@ -336,6 +339,10 @@ class Asset:
         p = Path(path)
         if not p.is_file():
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
+        if probe:
+            from .safeopen import ensure_readable
+
+            ensure_readable(p)
         try:
             stage = Usd.Stage.Open(str(p), Usd.Stage.LoadNone)
         except Tf.ErrorException as exc:
@@ -359,7 +366,8 @@ class Asset:
 
     def _attr(self, prim, name: str, *, required: bool = True, code: str = "SCHEMA_TYPE"):
         attr = prim.GetAttribute(name)
-        value = attr.Get() if attr else None
+        # authored opinions only: schema fallbacks (e.g. specVersion "0.1") must not stand in for them
+        value = attr.Get() if attr and attr.HasAuthoredValue() else None
         if value is None and required:
             raise error(code, f"missing attribute {name}", **self._loc(prim.GetPath(), name))
         return value
@@ -484,12 +492,10 @@ class Asset:
         for child in prim.GetChildren():
             if child.GetTypeName() != "NeuralNetwork":
                 continue
-            g = lambda n: child.GetAttribute(n).Get()  # noqa: E731
+            g = lambda n, child=child: child.GetAttribute(n).Get()  # noqa: E731
             info = NetworkInfo(tuple(g("onnx:inputNames") or ()), tuple(g("onnx:outputNames") or ()),
                                tuple(g("onnx:inputWidths") or ()), tuple(g("onnx:outputWidths") or ()), int(g("onnx:opset") or -1))
-            model = child.GetAttribute("onnx:model")
-            # crate reports array length without reading the data only via Get; read lazily
-            out[child.GetName()] = NetworkRef(component, child.GetName(), str(child.GetPath()), info, -1 if not model else 0)
+            out[child.GetName()] = NetworkRef(component, child.GetName(), str(child.GetPath()), info)
         return out
 
     def tensor(self, component: str, name: str) -> np.ndarray:

@@ -71,6 +71,28 @@ def _render_args(p):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+@verb("bake", "bake an object of a Mitsuba 3 scene into a neural asset (render data, train, export)", "nasset_sdk.bake:run")
+def _bake_args(p):
+    p.add_argument("scene", nargs="?", help="Mitsuba 3 scene .xml (omit with --example)")
+    p.add_argument("--asset", action="append", default=None, metavar="SHAPE_ID",
+                   help="id of a scene shape that belongs to the asset (repeat for several)")
+    p.add_argument("--kind", default="rna", choices=["rna"], help="asset kind to bake (rna)")
+    p.add_argument("--size", default="small", choices=["tiny", "small", "hq"], help="preset (default small)")
+    p.add_argument("-o", "--output", required=True, help="output asset .usdc")
+    p.add_argument("--example", action="store_true", help="bake the built-in example scene (no files needed)")
+    p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
+    p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")
+    p.add_argument("--res", type=int, default=None, help="image resolution per view")
+    p.add_argument("--epochs", type=int, default=None)
+    p.add_argument("--spp", type=int, default=None, help="paths per pixel (held-out views: 2x)")
+    p.add_argument("--light-angle", type=float, default=None,
+                   help="angular radius of the distant light in degrees (0 = delta; default 0, or 5 behind smooth dielectrics)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="auto", help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
 @verb("schema-path", "print the folder to add to PXR_PLUGINPATH_NAME for hosts that start USD first", "nasset_sdk.plugin:run_schema_path")
 def _schema_args(p):
     pass
@@ -106,6 +128,11 @@ def main(argv: list[str] | None = None) -> int:
         else:
             print(f"nasset {args.verb}: {exc}", file=sys.stderr)
         return 2 if exc.code == "USAGE" else 1
+    except BrokenPipeError:  # output piped into e.g. `head`
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except KeyboardInterrupt:
         print(f"nasset {args.verb}: interrupted", file=sys.stderr)
         return 1

@@ -75,6 +75,17 @@ CODES: dict[str, Code] = _codes(
     ("USAGE", "usage", "invalid argument to a public function or CLI verb", "format.md#files"),
     ("SCENE_INVALID", "scene", "the scene cannot be rendered as given", "renderer.md"),
     ("SCENE_UNSUPPORTED", "scene", "the scene uses a type the renderer does not support", "renderer.md"),
+    # converters (bake)
+    ("CONVERT_SCENE_MISSING", "scene", "the source scene file given to a converter does not exist", "bake.md#errors"),
+    ("CONVERT_SCENE_LOAD", "scene", "the source renderer cannot load the scene", "bake.md#errors"),
+    ("CONVERT_SHAPE_UNKNOWN", "scene", "a requested asset shape id is not in the source scene", "bake.md#errors"),
+    ("CONVERT_SHAPE_UNSUPPORTED", "scene", "an asset shape is not a triangle mesh the converter can store", "bake.md#errors"),
+    ("CONVERT_BACKEND", "scene", "the source renderer or the training framework is not installed or usable", "bake.md#errors"),
+    ("CONVERT_DATASET", "scene", "the dataset directory does not match the bake settings or is corrupt", "bake.md#resume"),
+    ("CONVERT_TRAINING", "scene", "training produced non-finite values or no usable samples", "bake.md#training"),
+    # validator
+    ("USD_CHECK", "format", "an OpenUSD validator (the usdchecker engine) reported a problem", "validation.md#usd-checks"),
+    ("CHECK_FAILED", "format", "a validation check could not complete on this input", "validation.md#report"),
 )
 
 

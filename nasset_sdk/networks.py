@@ -59,7 +59,7 @@ def mlp_onnx(
     layer_inputs: list[str] = []
     h = input_name
     skip_src = {dst: src for src, dst in skips}
-    for i, (w, b) in enumerate(zip(weights, biases)):
+    for i, (w, b) in enumerate(zip(weights, biases, strict=True)):
         w = np.asarray(w, np.float32)
         b = np.asarray(b, np.float32)
         layer_inputs.append(h)
@@ -96,7 +96,7 @@ def mlp_onnx(
 def random_mlp(rng: np.random.Generator, widths: Sequence[int], **kw) -> bytes:
     """An MLP with He-initialised random weights; widths = [in, hidden..., out]."""
     ws, bs = [], []
-    for a, b in zip(widths[:-1], widths[1:]):
+    for a, b in zip(widths[:-1], widths[1:], strict=True):
         ws.append(rng.normal(0.0, np.sqrt(2.0 / a), (a, b)).astype(np.float32))
         bs.append(rng.normal(0.0, 0.05, b).astype(np.float32))
     return mlp_onnx(ws, bs, **kw)
@@ -163,6 +163,9 @@ def check_model_bytes(data: bytes, declared: NetworkInfo | None = None, **loc):
         tt = v.type.tensor_type
         if tt.elem_type != TensorProto.FLOAT or len(tt.shape.dim) != 2:
             raise error("NETWORK_IO", f"{v.name!r} must be float32 of rank 2 [N, width]", **loc)
+        width = _dim_value(tt.shape.dim[1])
+        if width is None or not 1 <= width <= limits.MAX_NETWORK_WIDTH:
+            raise error("NETWORK_IO", f"{v.name!r} width must be fixed, in [1, {limits.MAX_NETWORK_WIDTH}]; got {width}", **loc)
     if declared is not None:
         got_in = tuple(v.name for v in inputs)
         got_out = tuple(v.name for v in outputs)

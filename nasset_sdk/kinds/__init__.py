@@ -102,7 +102,7 @@ class KindContract:
                 if len(shape) != len(tspec.dims):
                     out.append(Finding("TENSOR_CONTRACT", f"rank {len(shape)} != {len(tspec.dims)} for {tspec.dims}", prim_of(cname, tname), "shape"))
                     continue
-                for dim, size in zip(tspec.dims, shape):
+                for dim, size in zip(tspec.dims, shape, strict=True):
                     if _SYMBOL.match(dim) and dim not in env:
                         env[dim] = int(size)
                         if size <= 0:
@@ -124,7 +124,12 @@ class KindContract:
                     out.append(Finding("NETWORK_IO", f"I/O names {tuple(in_names)}->{tuple(out_names)} != {want_in}->{want_out}",
                                        prim_of(cname, nname), "onnx:inputNames"))
                     continue
-                for (name, expr), got in list(zip(nspec.inputs, in_w)) + list(zip(nspec.outputs, out_w)):
+                if len(in_w) != len(nspec.inputs) or len(out_w) != len(nspec.outputs):
+                    out.append(Finding("NETWORK_IO", f"declared widths {tuple(in_w)}->{tuple(out_w)} do not match the I/O names",
+                                       prim_of(cname, nname), "onnx:inputWidths"))
+                    continue
+                pairs = list(zip(nspec.inputs, in_w, strict=True)) + list(zip(nspec.outputs, out_w, strict=True))
+                for (name, expr), got in pairs:
                     if _SYMBOL.match(expr) and expr not in env:
                         env[expr] = int(got)
                         continue
@@ -150,7 +155,6 @@ class KindContract:
         from ..errors import UsageError
         from ..networks import info_from_model
 
-        present = {}
         for cname, levels in builder.components.items():
             for quality, data in levels.items():
                 tensors = {n: tuple(a.shape) for n, (a, _, _) in data.tensors.items()}
@@ -164,6 +168,11 @@ class KindContract:
                 if found:
                     raise UsageError(f"{self.id} contract ({cname}{'/' + quality if quality else ''}): "
                                      + "; ".join(f"[{f.code}] {f.message}" for f in found))
+        specs = self.components(builder.variant)
+        for cname, levels in builder.components.items():
+            for data in levels.values():
+                if cname in specs and data.required != specs[cname].required:
+                    raise UsageError(f"{self.id} component {cname!r} must have required={specs[cname].required}")
         missing = [c for c in self.required_components(builder.variant) if c not in builder.components]
         if missing:
             raise UsageError(f"{self.id} asset lacks required components {missing}")

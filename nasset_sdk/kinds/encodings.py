@@ -19,23 +19,44 @@ def grid_sample_2d(plane: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarra
     """Bilinear lookup in one feature plane [H, W, C] at u, v in [-1, 1] (texel centres, edge clamp).
 
     Continuous texel coordinate s = (u + 1) / 2 * W - 1/2, clamped to [0, W - 1]; the same for v.
-    Returns [N, C].
+    NaN coordinates read texel 0. Returns [N, C] float32.
     """
-    h, w, _ = plane.shape
-    fu = np.clip((np.asarray(u, np.float32) + 1.0) * 0.5 * w - 0.5, 0.0, w - 1)
-    fv = np.clip((np.asarray(v, np.float32) + 1.0) * 0.5 * h - 0.5, 0.0, h - 1)
-    fu = np.nan_to_num(fu, nan=0.0)
-    fv = np.nan_to_num(fv, nan=0.0)
-    u0 = np.minimum(fu.astype(np.int64), w - 1)
-    v0 = np.minimum(fv.astype(np.int64), h - 1)
-    u1 = np.minimum(u0 + 1, w - 1)
-    v1 = np.minimum(v0 + 1, h - 1)
-    au = (fu - u0)[:, None].astype(np.float32)
-    av = (fv - v0)[:, None].astype(np.float32)
-    p = plane.astype(np.float32, copy=False)
-    top = p[v0, u0] * (1 - au) + p[v0, u1] * au
-    bot = p[v1, u0] * (1 - au) + p[v1, u1] * au
-    return top * (1 - av) + bot * av
+    h, w, c = plane.shape
+
+    def texel(x, n):  # (i0 intp, fraction float32) of the clamped coordinate; NaN -> 0
+        f = np.asarray(x, np.float32) + np.float32(1.0)  # always a new array
+        f *= np.float32(0.5)
+        f *= np.float32(n)
+        f -= np.float32(0.5)
+        np.fmax(f, np.float32(0.0), out=f)  # fmax/fmin: NaN -> 0 (the lower bound), +-inf clamp
+        np.fmin(f, np.float32(n - 1), out=f)
+        i0 = f.astype(np.intp)  # f >= 0: truncation is floor, and i0 <= n - 1
+        f -= i0  # the fraction of a float32 is exact in float32
+        return i0, f
+
+    u0, au = texel(u, w)
+    v0, av = texel(v, h)
+    # flat texel rows; np.take on axis 0 of a contiguous [H W, C] array is much faster than p[v, u]
+    flat = np.ascontiguousarray(plane, np.float32).reshape(h * w, c)
+    i00 = v0 * w + u0
+    i01 = i00 + (u0 < w - 1)
+    dv = (v0 < h - 1) * w
+    i10 = i00 + dv
+    i11 = i01 + dv
+    au = au[:, None]
+    av = av[:, None]
+    bu = np.float32(1.0) - au
+    # same operations and order as top = p00 (1 - au) + p01 au, bot likewise, top (1 - av) + bot av
+    top = flat.take(i00, 0)
+    top *= bu
+    top += flat.take(i01, 0) * au
+    bot = flat.take(i10, 0)
+    bot *= bu
+    bot += flat.take(i11, 0) * au
+    top *= np.float32(1.0) - av
+    bot *= av
+    top += bot
+    return top
 
 
 #: plane index -> (u axis, v axis) of the unit-box coordinate: XY, YZ, ZX.
@@ -44,10 +65,21 @@ TRIPLANE_AXES = ((0, 1), (1, 2), (2, 0))
 
 def triplane(planes: np.ndarray, xn: np.ndarray) -> np.ndarray:
     """Sum of bilinear lookups in planes [3, R, R, C] (XY, YZ, ZX) at unit-box points xn [N,3] -> [N, C]."""
+    xn = np.asarray(xn, np.float32)
+    planes = np.asarray(planes, np.float32)  # convert once, not once per plane
+    step = 8192  # rows per pass: keeps the [rows, C] temporaries in cache (2-4x faster on large N)
+    if len(xn) > step:
+        out = np.empty((len(xn), planes.shape[-1]), np.float32)
+        for s in range(0, len(xn), step):
+            out[s:s + step] = triplane(planes, xn[s:s + step])
+        return out
     out = None
     for k, (a, b) in enumerate(TRIPLANE_AXES):
         f = grid_sample_2d(planes[k], xn[:, a], xn[:, b])
-        out = f if out is None else out + f
+        if out is None:
+            out = f
+        else:
+            out += f  # f is a fresh array: accumulate in place, same order (f0 + f1) + f2
     return out
 
 
@@ -58,4 +90,230 @@ def safe_normalize(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     ok = n > 1e-20
     out = np.where(ok, v / np.where(ok, n, 1.0), np.asarray(fallback, np.float64))
+    return out.astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------
+# frames and direction parameterisations (spec/kinds/encodings.md#frames)
+
+
+def _unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """float64 unit vectors [N,3]; zero / non-finite input becomes ``fallback``."""
+    v = np.atleast_2d(np.asarray(v, np.float64))
+    v = np.where(np.isfinite(v), v, 0.0)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    ok = n > 1e-20
+    return np.where(ok, v / np.where(ok, n, 1.0), np.asarray(fallback, np.float64))
+
+
+def local_frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Right-handed orthonormal basis (t, b, n) [N,3] each, from normals [N,3] (branchless ONB).
+
+    Duff et al. 2017: sign = copysign(1, n_z), a = -1 / (sign + n_z), c = n_x n_y a,
+    t = (1 + sign n_x^2 a, sign c, -sign n_x), b = (c, sign + n_y^2 a, -n_y). No singularity:
+    |sign + n_z| >= 1. Zero or non-finite normals become +Z. Returns float64.
+    """
+    n = _unit64(n)
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    sign = np.copysign(1.0, z)
+    a = -1.0 / (sign + z)
+    c = x * y * a
+    t = np.stack([1.0 + sign * x * x * a, sign * c, -sign * x], axis=1)
+    b = np.stack([c, sign + y * y * a, -y], axis=1)
+    return t, b, n
+
+
+def to_local(w: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Components of directions w [N,3] in the frame local_frame(n): (w.t, w.b, w.n), float64."""
+    t, b, nn = local_frame(n)
+    w = np.asarray(w, np.float64)
+    return np.stack([(w * t).sum(1), (w * b).sum(1), (w * nn).sum(1)], axis=1)
+
+
+def from_local(wl: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_local`: wl_x t + wl_y b + wl_z n, float64."""
+    t, b, nn = local_frame(n)
+    wl = np.asarray(wl, np.float64)
+    return wl[:, :1] * t + wl[:, 1:2] * b + wl[:, 2:3] * nn
+
+
+def spherical_coords(w: np.ndarray) -> np.ndarray:
+    """Normalised spherical coordinates [N,2] of directions w [N,3] (normalised first; zero -> +Z):
+
+    theta_hat = acos(clamp(w_z, -1, 1)) / pi in [0, 1], phi_hat = atan2(w_y, w_x) / (2 pi) in [-1/2, 1/2].
+    At the poles atan2(0, 0) = 0. float32.
+    """
+    w = _unit64(w)
+    theta = np.arccos(np.clip(w[:, 2], -1.0, 1.0))
+    phi = np.arctan2(w[:, 1], w[:, 0])
+    return np.stack([theta / np.pi, phi / (2.0 * np.pi)], axis=1).astype(np.float32)
+
+
+def azimuthal_equidistant(w: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Azimuthal equidistant projection of w [N,3] around n [N,3] -> p [N,2] (radians), float64.
+
+    With (l_x, l_y, l_z) = to_local(w, n): r = acos(clamp(l_z, -1, 1)) in [0, pi], phi = atan2(l_y, l_x),
+    p = r (cos phi, sin phi). The antipode -n maps to the circle r = pi (phi = 0 there).
+    """
+    loc = to_local(_unit64(w), n)
+    r = np.arccos(np.clip(loc[:, 2], -1.0, 1.0))
+    phi = np.arctan2(loc[:, 1], loc[:, 0])
+    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
+
+
+def azimuthal_equidistant_inverse(p: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Inverse projection: p [N,2] with |p| <= pi -> unit w [N,3] = cos r n + sin r (cos phi t + sin phi b), float64.
+
+    |p| is clamped to pi; p = 0 gives n.
+    """
+    p = np.nan_to_num(np.asarray(p, np.float64))
+    r = np.minimum(np.hypot(p[:, 0], p[:, 1]), np.pi)
+    phi = np.arctan2(p[:, 1], p[:, 0])
+    sr = np.sin(r)
+    loc = np.stack([sr * np.cos(phi), sr * np.sin(phi), np.cos(r)], axis=1)
+    return from_local(loc, n)
+
+
+def sh9(w: np.ndarray) -> np.ndarray:
+    """Real spherical harmonics Y_l^m, l <= 2, of unit directions [N,3] -> [N,9] in the order
+    (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0), (2,1), (2,2) (spec/kinds/encodings.md#sh)."""
+    w = _unit64(w)
+    x, y, z = w[:, 0], w[:, 1], w[:, 2]
+    return np.stack([
+        np.full_like(x, 0.282094791773878),
+        0.488602511902920 * y, 0.488602511902920 * z, 0.488602511902920 * x,
+        1.092548430592079 * x * y, 1.092548430592079 * y * z, 0.315391565252520 * (3 * z * z - 1),
+        1.092548430592079 * x * z, 0.546274215296040 * (x * x - y * y),
+    ], axis=1)
+
+
+# ----------------------------------------------------------------------------------------
+# Fourier features (spec/kinds/encodings.md#fourier)
+
+
+def fourier_features(G: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """gamma(v) = [cos(2 pi G v), sin(2 pi G v)]: G [M, n], v [N, n] -> [N, 2M] float32 (phase in float64)."""
+    G = np.asarray(G, np.float64)
+    v = np.nan_to_num(np.asarray(v, np.float64))
+    if v.ndim != 2 or G.ndim != 2 or v.shape[1] != G.shape[1]:
+        from ..errors import UsageError
+
+        raise UsageError(f"fourier_features: G {G.shape} and v {v.shape} must be [M, n] and [N, n]")
+    phase = 2.0 * np.pi * (v @ G.T)
+    return np.concatenate([np.cos(phase), np.sin(phase)], axis=1).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------------------
+# 1D grid and cubemap (spec/kinds/encodings.md#grid1d, #cubemap)
+
+
+def grid_1d(grid: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation in a feature line [K, C] at t in [-1, 1] (texel centres, edge clamp) -> [N, C].
+
+    f = clamp((t + 1) / 2 K - 1/2, 0, K - 1); i0 = floor(f), i1 = min(i0 + 1, K - 1), a = f - i0;
+    result = (1 - a) grid[i0] + a grid[i1]. NaN t reads texel 0.
+    """
+    k = grid.shape[0]
+    f = np.clip((np.asarray(t, np.float64).reshape(-1) + 1.0) * 0.5 * k - 0.5, 0.0, k - 1)
+    f = np.nan_to_num(f, nan=0.0)
+    i0 = np.minimum(f.astype(np.int64), k - 1)
+    i1 = np.minimum(i0 + 1, k - 1)
+    a = (f - i0)[:, None]
+    g = np.asarray(grid, np.float32)
+    return (g[i0] * (1 - a) + g[i1] * a).astype(np.float32)
+
+
+#: face -> (major axis, sign, (axis, sign) of s_c, (axis, sign) of t_c); OpenGL cube-map table.
+CUBE_FACES = (
+    (0, +1, (2, -1), (1, -1)),  # +X: sc = -z, tc = -y
+    (0, -1, (2, +1), (1, -1)),  # -X: sc = +z, tc = -y
+    (1, +1, (0, +1), (2, +1)),  # +Y: sc = +x, tc = +z
+    (1, -1, (0, +1), (2, -1)),  # -Y: sc = +x, tc = -z
+    (2, +1, (0, +1), (1, -1)),  # +Z: sc = +x, tc = -y
+    (2, -1, (0, -1), (1, -1)),  # -Z: sc = -x, tc = -y
+)
+
+
+def cube_face_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Direction [N,3] (any length; zero/non-finite -> +Z) -> (face [N] int, s [N], t [N]) with s, t in [0, 1].
+
+    The major axis is argmax |d_k| (ties go to the lower axis index), face = 2 axis + (d_axis < 0);
+    s = (sc / |ma| + 1) / 2, t = (tc / |ma| + 1) / 2 with sc, tc from :data:`CUBE_FACES`.
+    """
+    d = _unit64(d)
+    ad = np.abs(d)
+    axis = np.argmax(ad, axis=1)
+    neg = np.take_along_axis(d, axis[:, None], 1)[:, 0] < 0
+    face = 2 * axis + neg
+    tab = np.array([[f[2][0], f[2][1], f[3][0], f[3][1]] for f in CUBE_FACES])[face]
+    ma = np.maximum(np.take_along_axis(ad, axis[:, None], 1)[:, 0], 1e-30)
+    sc = tab[:, 1] * np.take_along_axis(d, tab[:, 0:1], 1)[:, 0]
+    tc = tab[:, 3] * np.take_along_axis(d, tab[:, 2:3], 1)[:, 0]
+    s = np.clip((sc / ma + 1.0) * 0.5, 0.0, 1.0)
+    t = np.clip((tc / ma + 1.0) * 0.5, 0.0, 1.0)
+    return face, s, t
+
+
+def _cube_face_dir(face: np.ndarray, sc: np.ndarray, tc: np.ndarray) -> np.ndarray:
+    """Point on the plane of ``face`` at face coordinates (sc, tc) in [-1-, 1+] -> 3D direction (not unit)."""
+    d = np.zeros((len(face), 3), np.float64)
+    for f, (ax, sg, (sa, ss), (ta, ts)) in enumerate(CUBE_FACES):
+        m = face == f
+        if not m.any():
+            continue
+        d[m, ax] = sg
+        d[m, sa] = ss * sc[m]
+        d[m, ta] = ts * tc[m]
+    return d
+
+
+def cubemap(grid: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Seam-safe bilinear lookup in a cube-map feature grid [6, R, R, C] (face, row t, column s, channel).
+
+    Texel (face, j, i) has its centre at s = (i + 1/2) / R, t = (j + 1/2) / R. Within a face:
+    fs = s R - 1/2, ft = t R - 1/2, i0 = floor(fs), j0 = floor(ft), bilinear weights from the fractions.
+    A tap with i or j outside [0, R-1] is re-projected: its centre (sc, tc) = (2 (i + 1/2) / R - 1, ...)
+    on the extended plane of its face gives a 3D direction, which is looked up with :func:`cube_face_uv`
+    and read at the texel containing it (min(floor(s R), R - 1), min(floor(t R), R - 1)). A tap with
+    both i and j outside (beyond a cube corner) takes the mean of the other three taps. This makes the
+    lookup continuous across face edges and corners. Returns [N, C] float32.
+    """
+    g = np.asarray(grid, np.float32)
+    r = g.shape[1]
+    face, s, t = cube_face_uv(d)
+    fs = s * r - 0.5
+    ft = t * r - 0.5
+    i0 = np.floor(fs).astype(np.int64)
+    j0 = np.floor(ft).astype(np.int64)
+    a_s = (fs - i0)[:, None]
+    a_t = (ft - j0)[:, None]
+    taps = []
+    for di, dj in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        i = i0 + di
+        j = j0 + dj
+        f = face.copy()
+        out_i = (i < 0) | (i >= r)
+        out_j = (j < 0) | (j >= r)
+        out_of = out_i | out_j
+        if out_of.any():
+            sc = 2.0 * (i[out_of] + 0.5) / r - 1.0
+            tc = 2.0 * (j[out_of] + 0.5) / r - 1.0
+            f2, s2, t2 = cube_face_uv(_cube_face_dir(face[out_of], sc, tc))
+            f[out_of] = f2
+            i = i.copy()
+            j = j.copy()
+            i[out_of] = np.minimum(np.floor(s2 * r).astype(np.int64), r - 1)
+            j[out_of] = np.minimum(np.floor(t2 * r).astype(np.int64), r - 1)
+        taps.append(g[f, j, i].astype(np.float64))
+    # a tap beyond a cube corner (both indices outside) has no texel: use the mean of the other three
+    # taps, which are then the three texels meeting at that corner
+    for k in range(4):
+        i = i0 + (k & 1)
+        j = j0 + (k >> 1)
+        corner = ((i < 0) | (i >= r)) & ((j < 0) | (j >= r))
+        if corner.any():
+            others = [taps[m][corner] for m in range(4) if m != k]
+            taps[k][corner] = (others[0] + others[1] + others[2]) / 3.0
+    out = (taps[0] * (1 - a_s) * (1 - a_t) + taps[1] * a_s * (1 - a_t)
+           + taps[2] * (1 - a_s) * a_t + taps[3] * a_s * a_t)
     return out.astype(np.float32)

@@ -1,0 +1,163 @@
+"""Load a Mitsuba scene, pick the asset's shapes, and stage them in isolation for ground truth.
+
+The asset is rendered alone (no ground, no other emitters, no environment): its shapes keep the
+BSDFs and interior media the scene gave them. Two isolated scenes are built from the same shape
+objects: ``geometry`` (asset only; primary hits, AOVs and the visibility of the light against the
+asset) and ``lit`` (asset + one distant light of unit irradiance whose direction is updated per
+group of pixels).
+
+Distant light (spec/bake.md#light): ``angle_deg == 0`` is Mitsuba's ``directional`` emitter (a
+delta light, exact but unreachable from inside smooth dielectrics); ``angle_deg > 0`` is a far
+spherical area emitter subtending that angular radius, with radiance 1 / (pi sin^2 theta) so the
+irradiance at normal incidence is exactly 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import error
+from nasset_sdk.geometry import MeshGeometry
+
+#: BSDF classes through which a delta light is never reached by next-event estimation.
+DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
+
+
+def load_scene(mi, path: str | Path):
+    """mi.Scene from an XML file; CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on failure."""
+    path = Path(path)
+    if not path.is_file():
+        raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(path))
+    try:
+        return mi.load_file(str(path))
+    except Exception as exc:
+        first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
+        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(path)) from None
+
+
+def pick_shapes(scene, ids, *, file: str | None = None) -> list:
+    """The scene's shapes with these ids, in the given order (each must be a triangle mesh)."""
+    by_id = {s.id(): s for s in scene.shapes()}
+    if not ids:
+        raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset shape id given; the scene has {sorted(by_id)}", file=file)
+    out = []
+    for i in ids:
+        if i not in by_id:
+            raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {i!r}; the scene has {sorted(by_id)}", file=file)
+        shape = by_id[i]
+        if not shape.is_mesh():
+            raise error(
+                "CONVERT_SHAPE_UNSUPPORTED",
+                f"shape {i!r} is a {str(shape).split('[')[0]}, not a triangle mesh; convert it to ply/obj",
+                file=file,
+            )
+        out.append(shape)
+    return out
+
+
+def mesh_geometry(mi, shapes) -> MeshGeometry:
+    """Merge the shapes' world-space triangles into one MeshGeometry (asset object space = scene space)."""
+    pts, faces, normals, base, have_normals = [], [], [], 0, True
+    for s in shapes:
+        params = mi.traverse(s)
+        p = np.asarray(params["vertex_positions"], np.float32).reshape(-1, 3)
+        f = np.asarray(params["faces"], np.int64).reshape(-1, 3)
+        n = np.asarray(params["vertex_normals"], np.float32).reshape(-1, 3) if "vertex_normals" in params else None
+        if n is None or n.shape != p.shape:
+            have_normals = False
+        pts.append(p)
+        faces.append(f + base)
+        normals.append(n)
+        base += len(p)
+    geo = MeshGeometry(
+        np.concatenate(pts).astype(np.float32),
+        np.concatenate(faces).astype(np.int32),
+        np.concatenate(normals).astype(np.float32) if have_normals else None,
+    )
+    geo.validate()
+    return geo
+
+
+def bsdf_names(shapes) -> list[str]:
+    return [str(s.bsdf()).split("[")[0].strip() for s in shapes]
+
+
+def blocks_delta_light(shapes) -> bool:
+    """True when a shape's BSDF is a smooth (delta) dielectric: delta lights cannot light its interior."""
+    return any(any(b in str(s.bsdf()) for b in DELTA_BLOCKING_BSDFS) for s in shapes)
+
+
+def _frame_to_world(mi, z: np.ndarray, origin: np.ndarray | None = None, scale: float = 1.0):
+    z = np.asarray(z, np.float64)
+    z = z / max(float(np.linalg.norm(z)), 1e-12)
+    up = np.array([0.0, 1.0, 0.0]) if abs(z[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    x = np.cross(up, z)
+    x /= max(float(np.linalg.norm(x)), 1e-12)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2] = x * scale, y * scale, z * scale
+    if origin is not None:
+        m[:3, 3] = origin
+    return mi.ScalarTransform4f(m.tolist())
+
+
+@dataclass
+class IsolatedAsset:
+    """The asset's shapes alone, plus a unit-irradiance distant light (see module docstring)."""
+
+    mi: object
+    shapes: list
+    center: np.ndarray
+    radius: float
+    angle_deg: float = 0.0
+    max_depth: int = 24
+    geometry_scene: object = field(init=False)
+    lit_scene: object = field(init=False)
+    integrator: object = field(init=False)
+
+    def __post_init__(self) -> None:
+        mi = self.mi
+        shapes = {f"asset_{k}": s for k, s in enumerate(self.shapes)}
+        self.geometry_scene = mi.load_dict({"type": "scene", **shapes})
+        if self.angle_deg > 0:
+            theta = math.radians(self.angle_deg)
+            self._dist = 1000.0 * max(self.radius, 1e-3)
+            self._light_radius = self._dist * math.sin(theta)
+            radiance = 1.0 / max(math.pi * math.sin(theta) ** 2, 1e-30)
+            light = {
+                "type": "sphere",
+                "to_world": self._sphere_to_world(np.array([0.0, 0.0, 1.0])),
+                "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [radiance] * 3}},
+            }
+        else:
+            light = {"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": {"type": "rgb", "value": [1.0] * 3}}
+        self.lit_scene = mi.load_dict({"type": "scene", **shapes, "light": light})
+        self._params = mi.traverse(self.lit_scene)
+        has_media = any(s.interior_medium() is not None or s.exterior_medium() is not None for s in self.shapes)
+        self.integrator = mi.load_dict(
+            {"type": "volpath" if has_media else "path", "max_depth": int(self.max_depth), "rr_depth": 8}
+        )
+
+    def _sphere_to_world(self, wi: np.ndarray):
+        pos = np.asarray(self.center, np.float64) + self._dist * np.asarray(wi, np.float64)
+        return self.mi.ScalarTransform4f().translate(pos.tolist()) @ self.mi.ScalarTransform4f().scale(self._light_radius)
+
+    def set_light(self, wi) -> None:
+        """Point the light so that it arrives from direction ``wi`` (unit, towards the light)."""
+        wi = np.asarray(wi, np.float64)
+        if self.angle_deg > 0:
+            self._params["light.to_world"] = self._sphere_to_world(wi)
+        else:
+            self._params["light.to_world"] = _frame_to_world(self.mi, -wi)
+        self._params.update()
+
+
+def bounding_sphere(geo: MeshGeometry) -> tuple[np.ndarray, float]:
+    lo, hi = geo.bounds()
+    c = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
+    r = float(np.linalg.norm(np.asarray(geo.points, np.float64) - c, axis=1).max())
+    return c, max(r, 1e-6)

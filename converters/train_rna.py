@@ -1,0 +1,359 @@
+"""Training of the ``rna`` kind in PyTorch (paper sec. 4.2-4.3; spec/bake.md#training).
+
+Model: three feature planes (XY, YZ, ZX) sampled bilinearly and summed, concatenated with
+(xn, n, wo, wi) and decoded by a ReLU MLP into two RGB transports (unshadowed, shadowed). The
+lookup is ``torch.nn.functional.grid_sample(align_corners=False, padding_mode="border")``, which
+is the format's ``encodings.grid_sample_2d`` (texel centres, edge clamp); ``check_parity``
+verifies it numerically against the SDK.
+
+Loss: L2 between log(1 + T) of prediction and ground truth, only on the output matching the
+sample's light visibility. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
+to 1 texel over the first 20 % of epochs, then kept at 1 texel; the exported planes are the
+blurred planes the decoder was trained with. Adam, learning rate halved every 20 % of epochs.
+
+This module is the only place that imports torch; the SDK itself never does.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import time
+import warnings
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from nasset_sdk.errors import error
+from nasset_sdk.kinds.encodings import TRIPLANE_AXES
+from nasset_sdk.kinds.rna import SIZES
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    size: str = "small"
+    epochs: int = 60
+    batch: int = 8192
+    lr: float = 1e-3
+    plane_lr: float = 1e-2
+    decay_every: float = 0.2  # fraction of epochs between halvings
+    blur_start: float = 4.0  # texels (footprint; Gaussian sigma = footprint / 2)
+    blur_end: float = 1.0
+    blur_until: float = 0.2  # fraction of epochs
+    init_std: float = 0.1
+    seed: int = 0
+    device: str = "auto"
+
+
+#: per-preset training defaults (the data defaults live in nasset_sdk.bake)
+TRAIN_PRESETS = {
+    "tiny": dict(epochs=40, batch=1024),
+    "small": dict(epochs=40, batch=4096, plane_lr=3e-3),
+    "hq": dict(epochs=60, batch=8192, plane_lr=3e-3),
+}
+
+
+def _torch():
+    try:
+        import torch
+    except ImportError as exc:
+        raise error("CONVERT_BACKEND", f"torch is not installed ({exc}); pip install 'nasset-sdk[train]'") from None
+    return torch
+
+
+def _pick_device(torch, want: str):
+    if want != "auto":
+        return torch.device(want)
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def build_model(size: str, *, init_std: float = 0.1, seed: int = 0):
+    """The rna surface model for a preset of ``nasset_sdk.kinds.rna.SIZES``."""
+    torch = _torch()
+    nn = torch.nn
+    F = torch.nn.functional
+    res, ch, layers, hidden = SIZES[size]
+
+    class RnaModel(nn.Module):
+        def __init__(self) -> None:
+            super().__init__()
+            g = torch.Generator().manual_seed(seed)
+            # torch layout [plane, C, v, u]; exported as [plane, v, u, C]
+            self.planes = nn.Parameter(torch.randn(3, ch, res, res, generator=g) * init_std)
+            widths = [ch + 12] + [hidden] * layers + [6]
+            mods = []
+            for i, (a, b) in enumerate(zip(widths[:-1], widths[1:], strict=False)):
+                mods.append(nn.Linear(a, b))
+                if i < len(widths) - 2:
+                    mods.append(nn.ReLU())
+            self.decoder = nn.Sequential(*mods)
+            self.register_buffer("fixed_planes", torch.zeros(0))  # set by freeze_planes()
+
+        # -- encoding ------------------------------------------------------------------------
+        def effective_planes(self, sigma: float):
+            if self.fixed_planes.numel():
+                return self.fixed_planes
+            return blur_planes(self.planes, sigma)
+
+        def features(self, xn, sigma: float):
+            planes = self.effective_planes(sigma)
+            grid = torch.stack([torch.stack([xn[:, a], xn[:, b]], dim=-1) for a, b in TRIPLANE_AXES])  # [3, N, 2]
+            f = F.grid_sample(planes, grid[:, None], mode="bilinear", padding_mode="border", align_corners=False)
+            return f[:, :, 0, :].sum(0).transpose(0, 1)  # [N, C]
+
+        def network_input(self, xn, n, wo, wi, sigma: float = 0.0):
+            return torch.cat([self.features(xn, sigma), xn, F.normalize(n, dim=1), F.normalize(wo, dim=1),
+                              F.normalize(wi, dim=1)], dim=1)
+
+        def forward(self, xn, n, wo, wi, sigma: float = 0.0):
+            return self.decoder(self.network_input(xn, n, wo, wi, sigma))
+
+        def freeze_planes(self, planes_cvu) -> None:
+            """Evaluate with these planes from now on (e.g. the stored float16 planes)."""
+            self.fixed_planes = planes_cvu.detach().clone()
+
+    return RnaModel()
+
+
+def blur_planes(planes, sigma: float):
+    """Separable Gaussian blur of [3, C, R, R] planes with edge-replicate padding; sigma in texels."""
+    torch = _torch()
+    F = torch.nn.functional
+    if sigma <= 1e-3:
+        return planes
+    rad = max(1, int(math.ceil(3.0 * sigma)))
+    rad = min(rad, planes.shape[-1] - 1) if planes.shape[-1] > 1 else 0
+    if rad <= 0:
+        return planes
+    t = torch.arange(-rad, rad + 1, dtype=planes.dtype, device=planes.device)
+    k = torch.exp(-0.5 * (t / sigma) ** 2)
+    k = k / k.sum().clamp_min(1e-12)
+    p, c, h, w = planes.shape
+    x = planes.reshape(p * c, 1, h, w)
+    x = F.pad(x, (rad, rad, 0, 0), mode="replicate")
+    x = F.conv2d(x, k.view(1, 1, 1, -1))
+    x = F.pad(x, (0, 0, rad, rad), mode="replicate")
+    x = F.conv2d(x, k.view(1, 1, -1, 1))
+    return x.reshape(p, c, h, w)
+
+
+def blur_sigma(settings: TrainSettings, epoch: int) -> float:
+    """Gaussian sigma (texels) for an epoch of the schedule."""
+    until = max(1.0, settings.blur_until * settings.epochs)
+    t = min(1.0, epoch / until)
+    footprint = settings.blur_start + (settings.blur_end - settings.blur_start) * t
+    return 0.5 * footprint
+
+
+def log_transport(p):
+    """log(1 + p) for p >= 0, continued linearly below 0 so that negative outputs are pushed up."""
+    torch = _torch()
+    return torch.log1p(torch.relu(p)) - torch.relu(-p)
+
+
+def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]:
+    """(PSNR dB, linear MSE, peak): both normalised by the ground truth's 99.5th percentile and
+    clipped to [0, 1] (a fixed exposure on a display), peak 1; over asset pixels only."""
+    gt = np.asarray(gt, np.float64)
+    pred = np.asarray(pred, np.float64)
+    mse_lin = float(np.mean((pred - gt) ** 2)) if gt.size else float("nan")
+    peak = float(np.percentile(gt, 99.5)) if gt.size else 0.0
+    if peak <= 0 or not np.isfinite(peak):
+        return float("nan"), mse_lin, peak
+    a = np.clip(pred / peak, 0.0, 1.0)
+    b = np.clip(gt / peak, 0.0, 1.0)
+    mse = float(np.mean((a - b) ** 2))
+    return (10.0 * math.log10(1.0 / max(mse, 1e-20))), mse_lin, peak
+
+
+def select_branch(y: np.ndarray, vis: np.ndarray) -> np.ndarray:
+    """Pick unshadowed (vis=1) or shadowed (vis=0) RGB from [N,6] outputs."""
+    v = np.asarray(vis).astype(bool)[:, None]
+    return np.where(v, y[:, :3], y[:, 3:6])
+
+
+@dataclass
+class TrainResult:
+    model: object
+    planes: np.ndarray  # [3, R, R, C] float16, as stored
+    onnx: bytes
+    history: list
+    val: dict
+    onnx_max_abs_diff: float
+    seconds: float
+    device: str
+
+
+def _tensors(torch, data: dict, lo, hi, device):
+    from nasset_sdk.kinds.encodings import to_unit_box
+
+    xn = to_unit_box(data["x"], lo, hi)
+    t = lambda a: torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)  # noqa: E731
+    return {
+        "xn": t(xn), "n": t(data["n"]), "wo": t(data["wo"]), "wi": t(data["wi"]),
+        "vis": torch.as_tensor(np.asarray(data["vis"]).astype(bool), device=device), "rgb": t(data["rgb"]),
+    }
+
+
+def predict(model, T: dict, batch: int = 65536, sigma: float = 0.0) -> np.ndarray:
+    torch = _torch()
+    out = []
+    with torch.no_grad():
+        for s in range(0, len(T["xn"]), batch):
+            sl = slice(s, s + batch)
+            out.append(model(T["xn"][sl], T["n"][sl], T["wo"][sl], T["wi"][sl], sigma).cpu().numpy())
+    return np.concatenate(out) if out else np.zeros((0, 6), np.float32)
+
+
+def export_onnx(model) -> bytes:
+    """The decoder MLP as ONNX (opset 17, input 'x' [N, C+12], output 'y' [N, 6], dynamic N)."""
+    torch = _torch()
+    dec = model.decoder.cpu().eval()
+    width = dec[0].in_features
+    buf = io.BytesIO()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(dec, (torch.zeros(2, width),), buf, dynamo=False, opset_version=17,
+                          input_names=["x"], output_names=["y"], dynamic_axes={"x": {0: "N"}, "y": {0: "N"}})
+    return buf.getvalue()
+
+
+def onnx_parity(model, onnx_bytes: bytes, n: int = 4096, seed: int = 0) -> float:
+    """Max |onnxruntime - torch| of the decoder on random inputs."""
+    torch = _torch()
+    from nasset_sdk.networks import make_session
+
+    dec = model.decoder.cpu().eval()
+    width = dec[0].in_features
+    x = np.random.default_rng(seed).normal(0, 1, (n, width)).astype(np.float32)
+    with torch.no_grad():
+        ref = dec(torch.from_numpy(x)).numpy()
+    got = make_session(onnx_bytes).run(None, {"x": x})[0]
+    return float(np.max(np.abs(got - ref)))
+
+
+def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, progress=None,
+          checkpoint=None) -> TrainResult:
+    """Fit the model; ``progress(epoch, loss, val_psnr)`` is called per epoch (tqdm hook).
+
+    ``checkpoint``: optional object with ``load() -> dict|None`` and ``save(dict)`` (resume).
+    """
+    torch = _torch()
+    from nasset_sdk.networks import check_model_bytes
+
+    t0 = time.perf_counter()
+    torch.manual_seed(settings.seed)
+    device = _pick_device(torch, settings.device)
+    lo, hi = domain
+    if len(train_data["x"]) == 0:
+        raise error("CONVERT_TRAINING", "no training samples: no camera ray hit the asset")
+    T = _tensors(torch, train_data, lo, hi, device)
+    V = _tensors(torch, val_data, lo, hi, device)
+    model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed).to(device)
+    opt = torch.optim.Adam([
+        {"params": [model.planes], "lr": settings.plane_lr},
+        {"params": model.decoder.parameters(), "lr": settings.lr},
+    ])
+    step = max(1, int(round(settings.decay_every * settings.epochs)))
+    sched = torch.optim.lr_scheduler.StepLR(opt, step_size=step, gamma=0.5)
+    history: list = []
+    start = 0
+    if checkpoint is not None:
+        state = checkpoint.load()
+        if state:
+            model.load_state_dict(state["model"])
+            opt.load_state_dict(state["opt"])
+            sched.load_state_dict(state["sched"])
+            history = list(state.get("history", []))
+            start = int(state["epoch"])
+    n = len(T["xn"])
+    g = torch.Generator(device="cpu").manual_seed(settings.seed)
+    for epoch in range(start, settings.epochs):
+        model.train()
+        sigma = blur_sigma(settings, epoch)
+        perm = torch.randperm(n, generator=g).to(device)
+        total, count = 0.0, 0
+        for s in range(0, n, settings.batch):
+            idx = perm[s:s + settings.batch]
+            y = model(T["xn"][idx], T["n"][idx], T["wo"][idx], T["wi"][idx], sigma)
+            pred = torch.where(T["vis"][idx][:, None], y[:, :3], y[:, 3:])
+            loss = torch.mean((log_transport(pred) - torch.log1p(T["rgb"][idx].clamp_min(0))) ** 2)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(idx)
+            count += len(idx)
+        sched.step()
+        mean_loss = total / max(count, 1)
+        if not math.isfinite(mean_loss):
+            raise error("CONVERT_TRAINING", f"loss became non-finite at epoch {epoch}")
+        val_psnr = float("nan")
+        if epoch == settings.epochs - 1 or epoch % max(1, settings.epochs // 10) == 0:
+            model.eval()
+            yv = np.maximum(predict(model, V, sigma=blur_sigma(settings, epoch)), 0.0)
+            val_psnr = display_psnr(select_branch(yv, val_data["vis"]), val_data["rgb"])[0]
+        history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "sigma": sigma})
+        if progress is not None:
+            progress(epoch, mean_loss, val_psnr)
+        if checkpoint is not None and (epoch % 5 == 4 or epoch == settings.epochs - 1):
+            checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
+                             "epoch": epoch + 1, "history": history})
+    train_s = time.perf_counter() - t0
+
+    # freeze what is stored: blurred planes rounded to float16
+    model.eval()
+    with torch.no_grad():
+        eff = blur_planes(model.planes, blur_sigma(settings, settings.epochs)).detach()
+        planes16 = eff.permute(0, 2, 3, 1).cpu().numpy().astype(np.float16)  # [3, R(v), R(u), C]
+        model.freeze_planes(torch.from_numpy(planes16.astype(np.float32)).permute(0, 3, 1, 2).to(device))
+    if not np.isfinite(planes16.astype(np.float32)).all():
+        raise error("CONVERT_TRAINING", "feature planes overflow float16")
+    yv = np.maximum(predict(model, V), 0.0)
+    pv = select_branch(yv, val_data["vis"])
+    psnr, mse_lin, peak = display_psnr(pv, val_data["rgb"])
+    log_mse = float(np.mean((np.log1p(pv) - np.log1p(np.maximum(val_data["rgb"], 0))) ** 2)) if len(pv) else float("nan")
+    onnx_bytes = export_onnx(model)
+    check_model_bytes(onnx_bytes)
+    diff = onnx_parity(model, onnx_bytes, seed=settings.seed)
+    model.to(device)
+    return TrainResult(
+        model=model, planes=planes16, onnx=onnx_bytes, history=history,
+        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv))},
+        onnx_max_abs_diff=diff, seconds=train_s, device=str(device),
+    )
+
+
+def settings_dict(settings: TrainSettings) -> dict:
+    return asdict(settings)
+
+
+class TorchCheckpoint:
+    """Training state in the dataset folder; read back with ``weights_only=True`` (no pickle code)."""
+
+    def __init__(self, path, key: dict) -> None:
+        self.path = path
+        self.key = key
+
+    def load(self):
+        import json
+        import os
+
+        torch = _torch()
+        if not os.path.exists(self.path):
+            return None
+        try:
+            state = torch.load(self.path, map_location="cpu", weights_only=True)
+        except Exception:
+            return None
+        if state.get("key") != json.dumps(self.key, sort_keys=True):
+            return None
+        return state
+
+    def save(self, state: dict) -> None:
+        import json
+        import os
+
+        torch = _torch()
+        tmp = str(self.path) + ".part"
+        torch.save({**state, "key": json.dumps(self.key, sort_keys=True)}, tmp)
+        os.replace(tmp, self.path)

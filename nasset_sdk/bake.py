@@ -1,0 +1,290 @@
+"""``nasset bake``: a Mitsuba 3 scene's object -> a trained neural asset (spec/bake.md).
+
+Stages: load scene -> render dataset (Mitsuba) -> train (PyTorch) -> export (ONNX + tensors
+through AssetBuilder) -> check (re-open the written asset, evaluate it with the SDK on the
+held-out views). Each stage shows a progress bar; a summary with per-stage times, dataset size,
+held-out PSNR and asset size closes the run.
+
+The dataset folder (``--resume DIR``, default ``OUTPUT.bake/``) is kept after an interruption
+(and after success), so a new run with the same settings continues where the last one stopped.
+The asset file is written atomically: an interrupted bake never leaves a half-written asset.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .errors import UsageError, error
+
+#: data presets: (views, val_views, res, spp, val_spp, lights_per_view)
+DATA_PRESETS = {
+    "tiny": dict(views=6, val_views=2, res=24, spp=8, val_spp=16, lights_per_view=4),
+    "small": dict(views=96, val_views=8, res=96, spp=64, val_spp=128, lights_per_view=32),
+    "hq": dict(views=200, val_views=16, res=160, spp=128, val_spp=256, lights_per_view=64),
+}
+
+
+#: default angular radius (deg) of the distant light for assets behind smooth dielectrics: measured
+#: (converters/mitsuba/light_study.py, spec/bake.md#light) 5 deg costs +5 % bias and 2.2x the
+#: per-pixel noise of a rough boundary under a delta light; 2 deg: +2 % but 7.6x the noise.
+SMOOTH_DIELECTRIC_LIGHT_ANGLE = 5.0
+
+
+def _finite(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
+
+
+def _tqdm(**kw):
+    from tqdm.auto import tqdm
+
+    return tqdm(**kw)
+
+
+def bake(
+    scene: str | Path | None,
+    asset_ids: list[str] | None,
+    output: str | Path,
+    *,
+    size: str = "small",
+    example: bool = False,
+    resume: str | Path | None = None,
+    views: int | None = None,
+    res: int | None = None,
+    epochs: int | None = None,
+    spp: int | None = None,
+    light_angle: float | None = None,
+    seed: int = 0,
+    device: str = "auto",
+    quiet: bool = False,
+    variant: str | None = None,
+    summary_stream=None,
+) -> dict:
+    """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    from converters.mitsuba import CONVERTER_VERSION, load_mitsuba
+    from converters.mitsuba import dataset as ds
+    from converters.mitsuba import scene as msc
+    from converters.train_rna import TRAIN_PRESETS, TorchCheckpoint, TrainSettings, _torch, train
+
+    from .asset import AssetBuilder
+
+    if size not in DATA_PRESETS:
+        raise UsageError(f"--size must be one of {sorted(DATA_PRESETS)}, got {size!r}")
+    for name, val in (("views", views), ("res", res), ("epochs", epochs), ("spp", spp)):
+        if val is not None and int(val) < 1:
+            raise UsageError(f"--{name} must be >= 1, got {val}")
+    if light_angle is not None and not (0.0 <= light_angle < 45.0):
+        raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
+    output = Path(output)
+    if output.suffix not in (".usdc", ".usda", ".usd"):
+        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
+    work = Path(resume) if resume else output.with_name(output.name + ".bake")
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    times: dict[str, float] = {}
+    t_all = time.perf_counter()
+
+    # -- stage 1: scene ---------------------------------------------------------------------------
+    t = time.perf_counter()
+    _torch()  # fail early (typed) when torch is missing, before minutes of rendering
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mi = load_mitsuba(variant)
+    for w in caught:
+        say(f"warning: {w.message}")
+    mi.set_log_level(mi.LogLevel.Error)
+    if example:
+        from converters.mitsuba.example_scene import EXAMPLE_ASSET_IDS, write_example_scene
+
+        scene = write_example_scene(work / "example_scene")
+        asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
+    if scene is None:
+        raise UsageError("give a scene file or --example")
+    scene = Path(scene)
+    msc_scene = msc.load_scene(mi, scene)
+    shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene))
+    geo = msc.mesh_geometry(mi, shapes)
+    center, radius = msc.bounding_sphere(geo)
+    blocks = msc.blocks_delta_light(shapes)
+    if light_angle is None:
+        light_angle = SMOOTH_DIELECTRIC_LIGHT_ANGLE if blocks else 0.0
+        if blocks:
+            say("note: the asset has a smooth dielectric boundary, which a delta light cannot reach; "
+                f"using a distant light of angular radius {light_angle} deg (spec/bake.md#light)")
+    elif blocks and light_angle == 0.0:
+        say("warning: --light-angle 0 with a smooth dielectric boundary: light transport inside it will be black")
+    dset = replace(ds.DataSettings(), **DATA_PRESETS[size], light_angle_deg=float(light_angle), seed=seed)
+    if views is not None:
+        dset = replace(dset, views=int(views), val_views=max(1, int(views) // 8))
+    if res is not None:
+        dset = replace(dset, res=int(res))
+    if spp is not None:
+        dset = replace(dset, spp=int(spp), val_spp=2 * int(spp))
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
+    renderer = ds.Renderer(mi, iso, dset)
+    times["scene_s"] = time.perf_counter() - t
+
+    # -- stage 2: dataset -------------------------------------------------------------------------
+    t = time.perf_counter()
+    store = ds.DatasetDir(work)
+    meta = ds.settings_digest(scene, asset_ids, dset, mi.variant())
+    store.prepare(meta)
+    jobs = [("train", i) for i in range(dset.views)] + [("val", i) for i in range(dset.val_views)]
+    todo = [j for j in jobs if not store.has(*j)]
+    if len(todo) < len(jobs):
+        say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
+    try:
+        bar = _tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="render views", unit="view", disable=quiet)
+        for split, i in todo:
+            data = ds.render_view(renderer, center, radius, i, validation=split == "val")
+            store.save(split, i, data)
+            bar.update(1)
+        bar.close()
+    except KeyboardInterrupt:
+        say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")
+        raise
+    train_data = store.load_split("train", dset.views)
+    val_data = store.load_split("val", dset.val_views)
+    times["dataset_s"] = time.perf_counter() - t
+    if len(val_data["x"]) == 0:
+        raise error("CONVERT_TRAINING", "no validation samples: no validation camera ray hit the asset")
+
+    # -- stage 3: train ---------------------------------------------------------------------------
+    t = time.perf_counter()
+    builder = AssetBuilder("rna", variant="surface")
+    builder.set_geometry(geo)
+    domain = builder.domain
+    tset = TrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
+    if epochs is not None:
+        tset = replace(tset, epochs=int(epochs))
+    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
+                                                      "domain": [list(map(float, d)) for d in domain]})
+    bar = _tqdm(total=tset.epochs, desc="train", unit="epoch", disable=quiet)
+    last = {"psnr": float("nan")}
+
+    def progress(epoch, loss, val_psnr):
+        if math.isfinite(val_psnr):
+            last["psnr"] = val_psnr
+        bar.n = epoch + 1
+        bar.set_postfix(loss=f"{loss:.3g}", val_psnr=f"{last['psnr']:.2f}")
+        bar.refresh()
+
+    try:
+        result = train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt)
+    except KeyboardInterrupt:
+        bar.close()
+        say(f"\ninterrupted; dataset and training state kept in {work} -- rerun with --resume {work}")
+        raise
+    bar.close()
+    times["train_s"] = time.perf_counter() - t
+
+    # -- stage 4: export --------------------------------------------------------------------------
+    t = time.perf_counter()
+    core = builder.component("core", required=True, purpose="evaluation", quality=None)
+    core.add_tensor("triplane", result.planes, dtype="float16", layout="plane,v,u,channel")
+    core.add_network("decoder", result.onnx)
+    prov = {
+        "generator": "nasset bake",
+        "converter": f"converters.mitsuba {CONVERTER_VERSION}",
+        "converterVersion": CONVERTER_VERSION,
+        "source": {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "scene": str(scene),
+                   "scene_sha256": meta["scene_sha256"], "shapes": list(asset_ids), "example": bool(example),
+                   "bsdfs": msc.bsdf_names(shapes)},
+        "light": {"type": "directional" if dset.light_angle_deg == 0 else "distant-sphere",
+                  "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
+        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"]))},
+        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
+                     "final_loss": result.history[-1]["loss"] if result.history else None},
+        "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
+        "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
+        "size": size,
+        "timings_s": {k: round(v, 3) for k, v in times.items()},
+    }
+    builder.provenance = _finite(prov)
+    path = builder.write(output)
+    times["export_s"] = time.perf_counter() - t
+
+    # -- stage 5: check the written asset with the SDK --------------------------------------------
+    t = time.perf_counter()
+    check = check_asset(path, val_data, result)
+    times["check_s"] = time.perf_counter() - t
+    times["total_s"] = time.perf_counter() - t_all
+    summary = {
+        "asset": str(path),
+        "asset_bytes": path.stat().st_size,
+        "dataset_dir": str(work),
+        "train_samples": int(len(train_data["x"])),
+        "val_samples": int(len(val_data["x"])),
+        "views": dset.views, "val_views": dset.val_views, "res": dset.res, "spp": dset.spp,
+        "variant": mi.variant(), "device": result.device,
+        "val_psnr_db": result.val["psnr_db"],
+        "sdk_val_psnr_db": check["psnr_db"],
+        "sdk_vs_torch_max_abs": check["max_abs_diff"],
+        "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
+        "times_s": {k: round(v, 2) for k, v in times.items()},
+    }
+    if not quiet:
+        _print_summary(summary, summary_stream or sys.stdout)
+    return summary
+
+
+def check_asset(path, val_data: dict, result) -> dict:
+    """Re-open the asset and evaluate it with the SDK on the held-out samples."""
+    from converters.train_rna import _torch, display_psnr, predict, select_branch
+
+    from .asset import Asset
+    from .kinds.encodings import to_unit_box
+
+    asset = Asset.open(path)
+    asset.load("all")
+    ev = asset.evaluator()
+    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"])
+    y_sdk = np.concatenate([un, sh], axis=1)
+    torch = _torch()
+    dev = next(result.model.parameters()).device
+    lo, hi = asset.domain
+    T = {k: torch.as_tensor(np.ascontiguousarray(v, np.float32), device=dev) for k, v in
+         {"xn": to_unit_box(val_data["x"], lo, hi), "n": val_data["n"], "wo": val_data["wo"], "wi": val_data["wi"]}.items()}
+    y_torch = np.maximum(predict(result.model, T), 0.0)
+    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
+    psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
+    return {"psnr_db": psnr, "max_abs_diff": diff}
+
+
+def _print_summary(s: dict, stream) -> None:
+    t = s["times_s"]
+    lines = [
+        f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB)",
+        f"  mitsuba {s['variant']}, training on {s['device']}",
+        f"  dataset: {s['views']} + {s['val_views']} held-out views at {s['res']}^2, {s['spp']} spp -> "
+        f"{s['train_samples']} train / {s['val_samples']} held-out samples  (kept in {s['dataset_dir']})",
+        f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
+        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
+    ]
+    print("\n".join(lines), file=stream)
+
+
+def run(args) -> int:
+    """CLI entry: see ``nasset bake --help``."""
+    summary = bake(
+        args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
+        views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
+        seed=args.seed, device=args.device, quiet=args.quiet,
+        summary_stream=sys.stderr if getattr(args, "json", False) else sys.stdout,
+    )
+    if getattr(args, "json", False):
+        print(json.dumps(_finite(summary), indent=2))
+    return 0

@@ -1,0 +1,250 @@
+"""Kind ``8dna``: 8D neural asset light transport (papers/8dna-8d-neural-asset-light-transport.txt,
+spec/kinds/8dna.md).
+
+Indirect transport F(x_o, w_o, x_i, w_i) = alpha(x_o, w_o) p(x_i, w_i | x_o, w_o) per colour channel.
+alpha comes from the albedo MLP; p is an autoregressive rational-quadratic spline flow over the
+bounding-box cylindrical parameters s = (u^z/|u|, atan2(u^y, u^x), w^z, atan2(w^y, w^x)) of the
+incident ray (u_i on the asset box, w_i pointing away from the asset towards the light). The direct
+lobe (one boundary reflection at x_o) is the analytic GGX rough dielectric of :mod:`.boundary`.
+
+Network inputs (object space, unit directions; xn = to_unit_box(x_o); base = [tri(xn) (C), xn (3), cube_wo(w_o) (C), w_o (3)]):
+
+    albedo: base                                                        2C + 6  -> 3
+    flow1:  base                                                        2C + 6  -> G
+    flow2:  base, grid_s1(s1) (C), s1                                   3C + 7  -> G
+    flow3:  base, cube_s12(d12) (C), d12 (3)                            3C + 9  -> G
+    flow4:  base, cube_s12(d12) (C), d12 (3), grid_s3(s3) (C), s3       4C + 10 -> G
+
+with d12 = (sqrt(1 - s1^2) cos s2, sqrt(1 - s1^2) sin s2, s1) and G = 3 (3K + 1) spline parameters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import UsageError
+from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind
+from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
+from .encodings import _unit64, cubemap, grid_1d, to_unit_box, triplane
+from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, cylindrical_to_direction
+
+#: preset -> (triplane R, channels C, cube Q (w_o and s12), 1D grid L, spline bins K,
+#:            flow hidden layers, flow width, albedo hidden layers, albedo width)
+SIZES = {
+    "tiny": (8, 4, 4, 8, 4, 2, 16, 1, 16),
+    "small": (32, 8, 16, 32, 16, 3, 64, 2, 64),
+    "hq": (64, 8, 32, 32, 32, 4, 128, 2, 128),
+}
+FLOWS = ("flow1", "flow2", "flow3", "flow4")
+
+
+def spline_bins(g_width: int) -> int | None:
+    """K from the flow output width G = 3 (3K + 1); None if G has no such form."""
+    if g_width <= 0 or g_width % 3:
+        return None
+    p = g_width // 3
+    if (p - 1) % 3 or p < 4:
+        return None
+    return (p - 1) // 3
+
+
+class EightDnaKind(KindContract):
+    id = "8dna"
+    variants = ("surface",)
+    paper = "8dna-8d-neural-asset-light-transport.txt"
+
+    def components(self, variant: str) -> dict[str, ComponentSpec]:
+        base = "2*C+6"
+        return {
+            "core": ComponentSpec(
+                required=True,
+                purpose="evaluation",
+                tensors={
+                    "triplane": TensorSpec(("3", "R", "R", "C"), "plane,v,u,channel", "x_o feature planes XY, YZ, ZX"),
+                    "woCube": TensorSpec(("6", "Q", "Q", "C"), "face,t,s,channel", "w_o cube-map features"),
+                    "s1Grid": TensorSpec(("L", "C"), "texel,channel", "1D features of s1 in [-1, 1]"),
+                    "s3Grid": TensorSpec(("L", "C"), "texel,channel", "1D features of s3 in [-1, 1]"),
+                    "s12Cube": TensorSpec(("6", "Q", "Q", "C"), "face,t,s,channel", "cube-map features of d12(s1, s2)"),
+                    "splineMinimums": TensorSpec(("3",), "parameter", "min bin width, min bin height, min derivative"),
+                    "direct": TensorSpec(("2",), "parameter", "direct lobe rough dielectric: eta (n_in/n_out), GGX alpha"),
+                },
+                networks={
+                    "albedo": NetworkSpec((("x", base),), (("y", "3"),), "indirect albedo RGB"),
+                    "flow1": NetworkSpec((("x", base),), (("g", "G"),), "spline parameters of s1"),
+                    "flow2": NetworkSpec((("x", "3*C+7"),), (("g", "G"),), "spline parameters of s2 | s1"),
+                    "flow3": NetworkSpec((("x", "3*C+9"),), (("g", "G"),), "spline parameters of s3 | s1, s2"),
+                    "flow4": NetworkSpec((("x", "4*C+10"),), (("g", "G"),), "spline parameters of s4 | s1, s2, s3"),
+                },
+            )
+        }
+
+    def value_findings(self, variant, present, get_tensor, prim_of) -> list[Finding]:
+        out: list[Finding] = []
+        if "core" not in present:
+            return out
+        tensors, networks = present["core"]
+        for name in tensors:
+            arr = np.asarray(get_tensor("core", name), np.float64)
+            if not np.isfinite(arr).all():
+                out.append(Finding("KIND_CONTRACT", f"{name} holds NaN/Inf", prim_of("core", name), "values"))
+        k = None
+        if "flow1" in networks:
+            g = int(networks["flow1"][3][0])
+            k = spline_bins(g)
+            if k is None:
+                out.append(Finding("KIND_CONTRACT", f"flow output width {g} is not 3 (3K + 1) for an integer K >= 1",
+                                   prim_of("core", "flow1"), "onnx:outputWidths"))
+        if "splineMinimums" in tensors:
+            m = np.asarray(get_tensor("core", "splineMinimums"), np.float64).reshape(-1)
+            if np.isfinite(m).all():
+                kk = k or 1
+                if not (m[0] >= 0 and m[1] >= 0 and m[0] * kk < 1 and m[1] * kk < 1 and m[2] > 0):
+                    out.append(Finding("KIND_CONTRACT", f"spline minimums {tuple(m)} make knots non-monotone or derivatives"
+                                       f" non-positive for K={kk} (need 0 <= K m_w < 1, 0 <= K m_h < 1, m_d > 0)",
+                                       prim_of("core", "splineMinimums"), "values"))
+        if "direct" in tensors:
+            d = np.asarray(get_tensor("core", "direct"), np.float64).reshape(-1)
+            if np.isfinite(d).all() and not (d[0] > 0 and d[1] > 0):
+                out.append(Finding("KIND_CONTRACT", f"direct (eta, alpha) = {tuple(d)} must both be > 0",
+                                   prim_of("core", "direct"), "values"))
+        return out
+
+    def build_random(self, rng, *, variant="surface", size="small", geometry=None):
+        from ..asset import AssetBuilder
+        from ..geometry import MeshGeometry
+        from ..networks import random_mlp
+        from .rna import _example_mesh
+
+        if variant not in self.variants:
+            raise UsageError(f"8dna has no variant {variant!r}")
+        if size not in SIZES:
+            raise UsageError(f"size must be one of {sorted(SIZES)}")
+        r, c, q, ln, k, f_layers, f_width, a_layers, a_width = SIZES[size]
+        b = AssetBuilder("8dna", variant=variant)
+        if geometry is None:
+            geometry = _example_mesh()
+        if not isinstance(geometry, MeshGeometry):
+            geometry = MeshGeometry.from_trimesh(geometry)
+        b.set_geometry(geometry)
+        core = b.component("core", required=True, purpose="evaluation", quality=None)
+        core.add_tensor("triplane", rng.normal(0, 0.5, (3, r, r, c)), dtype="float16", layout="plane,v,u,channel")
+        core.add_tensor("woCube", rng.normal(0, 0.5, (6, q, q, c)), dtype="float16", layout="face,t,s,channel")
+        core.add_tensor("s1Grid", rng.normal(0, 0.5, (ln, c)), dtype="float16", layout="texel,channel")
+        core.add_tensor("s3Grid", rng.normal(0, 0.5, (ln, c)), dtype="float16", layout="texel,channel")
+        core.add_tensor("s12Cube", rng.normal(0, 0.5, (6, q, q, c)), dtype="float16", layout="face,t,s,channel")
+        core.add_tensor("splineMinimums", np.array([MIN_BIN_WIDTH, MIN_BIN_HEIGHT, MIN_DERIVATIVE]), dtype="float32",
+                        layout="parameter")
+        core.add_tensor("direct", np.array([1.5, 0.1]), dtype="float32", layout="parameter")
+        g = 3 * (3 * k + 1)
+        core.add_network("albedo", random_mlp(rng, [2 * c + 6] + [a_width] * a_layers + [3]))
+        for name, width in zip(FLOWS, (2 * c + 6, 3 * c + 7, 3 * c + 9, 4 * c + 10), strict=True):
+            core.add_network(name, random_mlp(rng, [width] + [f_width] * f_layers + [g], output_name="g"))
+        b.provenance = {"generator": "random", "size": size}
+        return b
+
+    def evaluator(self, asset, **options):
+        return EightDnaEvaluator(asset, **options)
+
+
+def _rows3(*arrays):
+    out, n = [], None
+    for a in arrays:
+        a = np.atleast_2d(np.asarray(a, np.float64))
+        if a.ndim != 2 or a.shape[1] != 3 or (n is not None and len(a) != n):
+            raise UsageError("points and directions must be [N, 3] arrays of one N")
+        n = len(a)
+        out.append(a)
+    return out
+
+
+class EightDnaEvaluator:
+    """numpy + onnxruntime evaluation and sampling of an 8dna asset; object space throughout."""
+
+    def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536) -> None:
+        self.asset = asset
+        self.lo, self.hi = asset.domain
+        t = lambda name: np.asarray(asset.tensor("core", name), np.float32)  # noqa: E731
+        self.planes, self.wo_cube, self.s12_cube = t("triplane"), t("woCube"), t("s12Cube")
+        self.s1_grid, self.s3_grid = t("s1Grid"), t("s3Grid")
+        mins = np.asarray(asset.tensor("core", "splineMinimums"), np.float64).reshape(-1)
+        self.eta, self.alpha = boundary_params(asset.tensor("core", "direct"))
+        self.albedo_session = asset.session("core", "albedo", intra_threads=intra_threads)
+        self.flow_sessions = [asset.session("core", n, intra_threads=intra_threads) for n in FLOWS]
+        self.batch = int(batch)
+        self.box = BoxParam(self.lo, self.hi)
+        self.flow = BoxFlow(self.box, self._conditioner, context=self.base_features,
+                            min_bin_width=mins[0], min_bin_height=mins[1], min_derivative=mins[2])
+
+    def _run(self, session, x: np.ndarray) -> np.ndarray:
+        outs = [session.run(None, {session.get_inputs()[0].name: x[s:s + self.batch]})[0]
+                for s in range(0, len(x), self.batch)] or [np.zeros((0, session.get_outputs()[0].shape[1]), np.float32)]
+        return np.nan_to_num(np.concatenate(outs, axis=0).astype(np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
+
+    def base_features(self, x, wo) -> np.ndarray:
+        """[N, 2C + 6] = [triplane(xn), xn, cube_wo(w_o), w_o] (float32)."""
+        x, wo = _rows3(x, wo)
+        xn = to_unit_box(x, self.lo, self.hi)
+        wo = _unit64(wo).astype(np.float32)
+        return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo), wo], axis=1).astype(np.float32)
+
+    def flow_input(self, j: int, base: np.ndarray, s_prev: np.ndarray) -> np.ndarray:
+        """Input of conditioner j (1..4) given base features and s^1..s^{j-1} [N, j-1]."""
+        parts = [base]
+        if j == 2:
+            parts += [grid_1d(self.s1_grid, s_prev[:, 0]), s_prev[:, :1]]
+        elif j >= 3:
+            d12 = cylindrical_to_direction(s_prev[:, 0], s_prev[:, 1])
+            parts += [cubemap(self.s12_cube, d12), d12]
+            if j == 4:
+                parts += [grid_1d(self.s3_grid, s_prev[:, 2]), s_prev[:, 2:3]]
+        return np.concatenate([np.asarray(p, np.float32) for p in parts], axis=1)
+
+    def _conditioner(self, j: int, base: np.ndarray, s_prev: np.ndarray) -> np.ndarray:
+        return self._run(self.flow_sessions[j - 1], self.flow_input(j, base, s_prev))
+
+    # -- indirect transport ----------------------------------------------------------------
+    def albedo(self, x, wo) -> np.ndarray:
+        """alpha(x_o, w_o) RGB [N,3], clamped to finite values >= 0."""
+        y = self._run(self.albedo_session, self.base_features(x, wo))
+        return np.maximum(np.nan_to_num(y, posinf=0.0, neginf=0.0), 0.0).astype(np.float32)
+
+    def sample(self, x, wo, channel, rng=None, *, u=None):
+        """(u_i [N,3], w_i [N,3], pdf [N]) ~ p^channel(u_i, w_i | x_o, w_o); pdf per box area and steradian."""
+        return self.flow.sample(x, wo, channel, rng, u=u)
+
+    def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
+        """p^channel(u_i, w_i | x_o, w_o) [N] per unit box area at u_i and steradian at w_i."""
+        return self.flow.pdf(x, wo, ui, wi, channel)
+
+    def pdf_rgb(self, x, wo, ui, wi) -> np.ndarray:
+        return self.flow.pdf_rgb(x, wo, ui, wi)
+
+    def pdf_position(self, x, wo, ui, channel) -> np.ndarray:
+        return self.flow.pdf_position(x, wo, ui, channel)
+
+    def sample_direction(self, x, wo, ui, channel, rng=None, *, u=None):
+        return self.flow.sample_direction(x, wo, ui, channel, rng, u=u)
+
+    def pdf_direction(self, x, wo, ui, wi, channel) -> np.ndarray:
+        return self.flow.pdf_direction(x, wo, ui, wi, channel)
+
+    def transport(self, x, wo, ui, wi) -> np.ndarray:
+        """F = alpha p [N,3] per unit box area and steradian (indirect part)."""
+        return self.albedo(x, wo) * self.pdf_rgb(x, wo, ui, wi)
+
+    # -- direct lobe -----------------------------------------------------------------------
+    def direct_eval(self, n, wo, wi) -> np.ndarray:
+        """Cosine-weighted direct reflection f |n.wi| RGB [N,3] (grey)."""
+        n, wo, wi = _rows3(n, wo, wi)
+        return np.repeat(ggx_reflection(n, wo, wi, self.eta, self.alpha)[:, None], 3, axis=1).astype(np.float32)
+
+    def direct_sample(self, n, wo, u2):
+        n, wo = _rows3(n, wo)
+        return ggx_sample(n, wo, u2, self.alpha)
+
+    def direct_pdf(self, n, wo, wi) -> np.ndarray:
+        n, wo, wi = _rows3(n, wo, wi)
+        return ggx_pdf(n, wo, wi, self.alpha)
+
+
+register_kind(EightDnaKind())

@@ -1,0 +1,345 @@
+"""Monotone rational-quadratic splines and the 8DNA bounding-box flow (spec/kinds/8dna.md#spline).
+
+A spline maps [0, 1] onto [0, 1] through K bins (Durkan et al. 2019, "Neural Spline Flows").
+Its parameters for one channel are a row of 3K+1 unnormalised numbers ``[w~ (K), h~ (K), d~ (K+1)]``:
+
+    widths  w_k = m_w + (1 - K m_w) softmax(w~)_k      knots x_0 = 0, x_k = sum_{l<k} w_l, x_K = 1
+    heights h_k = m_h + (1 - K m_h) softmax(h~)_k      knots y_0 = 0, ..., y_K = 1
+    derivatives d_k = m_d + softplus(d~_k),  k = 0..K
+
+Forward (latent z -> value y) in bin k, xi = (z - x_k) / w_k, s_k = h_k / w_k:
+
+    y = y_k + h_k (s_k xi^2 + d_k xi (1 - xi)) / (s_k + (d_{k+1} + d_k - 2 s_k) xi (1 - xi))
+    dy/dz = s_k^2 (d_{k+1} xi^2 + 2 s_k xi (1 - xi) + d_k (1 - xi)^2) / (s_k + (d_{k+1} + d_k - 2 s_k) xi (1 - xi))^2
+
+Inverse: with dy = y - y_k, delta = d_{k+1} + d_k - 2 s_k, a = h_k (s_k - d_k) + dy delta,
+b = h_k d_k - dy delta, c = -s_k dy: xi = 2c / (-b - sqrt(max(b^2 - 4ac, 0))) (the root in [0, 1],
+written in the form without cancellation), z = x_k + xi w_k.
+
+All math is float64 and vectorised over a batch: parameters [N, 3K+1], points [N].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import UsageError
+
+#: Durkan et al.'s defaults; the 8DNA asset stores its own values in core/splineMinimums.
+MIN_BIN_WIDTH = 1e-3
+MIN_BIN_HEIGHT = 1e-3
+MIN_DERIVATIVE = 1e-3
+_TINY = 1e-300
+
+
+def _softmax(a: np.ndarray) -> np.ndarray:
+    a = np.nan_to_num(np.asarray(a, np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
+    a = a - a.max(axis=-1, keepdims=True)
+    e = np.exp(a)
+    return e / np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
+
+
+def _softplus(a: np.ndarray) -> np.ndarray:
+    a = np.nan_to_num(np.asarray(a, np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
+    return np.maximum(a, 0.0) + np.log1p(np.exp(-np.abs(a)))
+
+
+def _knots(sizes: np.ndarray) -> np.ndarray:
+    cum = np.concatenate([np.zeros((len(sizes), 1)), np.cumsum(sizes, axis=1)], axis=1)
+    cum[:, -1] = 1.0
+    return cum
+
+
+@dataclass
+class RQSpline:
+    """A batch of monotone rational-quadratic splines on [0, 1] (one per row)."""
+
+    xk: np.ndarray  # [N, K+1] input knots, xk[:, 0] = 0, xk[:, K] = 1
+    yk: np.ndarray  # [N, K+1] output knots
+    dk: np.ndarray  # [N, K+1] derivatives at the knots, > 0
+
+    @classmethod
+    def from_raw(cls, raw: np.ndarray, *, min_bin_width: float = MIN_BIN_WIDTH, min_bin_height: float = MIN_BIN_HEIGHT,
+                 min_derivative: float = MIN_DERIVATIVE) -> "RQSpline":
+        """Splines from unnormalised parameters raw [N, 3K+1] = [w~ (K), h~ (K), d~ (K+1)]."""
+        raw = np.atleast_2d(np.asarray(raw, np.float64))
+        p = raw.shape[1]
+        if (p - 1) % 3 or p < 4:
+            raise UsageError(f"spline parameters need 3K+1 columns (K >= 1), got {p}")
+        k = (p - 1) // 3
+        if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
+            raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
+        w = min_bin_width + (1 - min_bin_width * k) * _softmax(raw[:, :k])
+        h = min_bin_height + (1 - min_bin_height * k) * _softmax(raw[:, k:2 * k])
+        d = min_derivative + _softplus(raw[:, 2 * k:])
+        return cls(_knots(w), _knots(h), d)
+
+    @property
+    def bins(self) -> int:
+        return self.xk.shape[1] - 1
+
+    def _bin(self, knots: np.ndarray, v: np.ndarray) -> np.ndarray:
+        # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}
+        return (v[:, None] >= knots[:, 1:-1]).sum(axis=1)
+
+    def _gather(self, k: np.ndarray):
+        r = np.arange(len(k))
+        xk, yk, dk = self.xk, self.yk, self.dk
+        w = xk[r, k + 1] - xk[r, k]
+        h = yk[r, k + 1] - yk[r, k]
+        return xk[r, k], yk[r, k], np.maximum(w, _TINY), np.maximum(h, _TINY), dk[r, k], dk[r, k + 1]
+
+    def forward(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0)."""
+        z = np.clip(np.nan_to_num(np.asarray(z, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
+        k = self._bin(self.xk, z)
+        x0, y0, w, h, d0, d1 = self._gather(k)
+        s = h / w
+        xi = np.clip((z - x0) / w, 0.0, 1.0)
+        t = xi * (1 - xi)
+        den = s + (d1 + d0 - 2 * s) * t  # >= min(s, (d0 + d1) / 2) > 0 for xi in [0, 1]
+        den = np.maximum(den, _TINY)
+        y = y0 + h * (s * xi * xi + d0 * t) / den
+        deriv = s * s * (d1 * xi * xi + 2 * s * t + d0 * (1 - xi) ** 2) / (den * den)
+        return np.clip(y, 0.0, 1.0), np.log(np.maximum(deriv, _TINY))
+
+    def inverse(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z = rqs^-1(y) and log|dz/dy| for y [N] (clamped to [0, 1], NaN -> 0)."""
+        y = np.clip(np.nan_to_num(np.asarray(y, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
+        k = self._bin(self.yk, y)
+        x0, y0, w, h, d0, d1 = self._gather(k)
+        s = h / w
+        dy = y - y0
+        delta = d1 + d0 - 2 * s
+        a = h * (s - d0) + dy * delta
+        b = h * d0 - dy * delta
+        c = -s * dy
+        disc = np.maximum(b * b - 4 * a * c, 0.0)
+        den = -b - np.sqrt(disc)  # <= 0; == 0 only where c == 0 (xi = 0)
+        safe = den < -_TINY
+        xi = np.clip(np.where(safe, 2 * c / np.where(safe, den, -1.0), 0.0), 0.0, 1.0)
+        z = np.clip(x0 + xi * w, 0.0, 1.0)
+        t = xi * (1 - xi)
+        dd = np.maximum(s + delta * t, _TINY)
+        deriv = s * s * (d1 * xi * xi + 2 * s * t + d0 * (1 - xi) ** 2) / (dd * dd)
+        return z, -np.log(np.maximum(deriv, _TINY))
+
+
+# ----------------------------------------------------------------------------------------
+# 8DNA bounding-box cylindrical parameterisation (paper Eq. 9-10; spec/kinds/8dna.md#bbox)
+
+#: |ds / dt| for t in [0, 1]^4 -> s = (2 t1 - 1, 2 pi t2 - pi, 2 t3 - 1, 2 pi t4 - pi)
+S_PER_T = 2.0 * 2.0 * np.pi * 2.0 * 2.0 * np.pi
+
+
+def cylindrical_to_direction(z: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """(z, phi) -> unit direction (sqrt(1 - z^2) cos phi, sqrt(1 - z^2) sin phi, z), z clamped to [-1, 1]."""
+    z = np.clip(np.nan_to_num(np.asarray(z, np.float64)), -1.0, 1.0)
+    phi = np.nan_to_num(np.asarray(phi, np.float64))
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def direction_to_cylindrical(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit-normalised d [N,3] (zero -> +Z) -> (z in [-1, 1], phi = atan2(d_y, d_x) in [-pi, pi])."""
+    from .encodings import _unit64
+
+    d = _unit64(d)
+    return np.clip(d[:, 2], -1.0, 1.0), np.arctan2(d[:, 1], d[:, 0])
+
+
+class BoxParam:
+    """The bounding box (centre c, half extents e > 0) and the map s <-> (u, w) of the 8DNA paper."""
+
+    def __init__(self, lo, hi) -> None:
+        lo = np.asarray(lo, np.float64).reshape(3)
+        hi = np.asarray(hi, np.float64).reshape(3)
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all() and (hi > lo).all()):
+            raise UsageError(f"box {lo} .. {hi} must be finite with hi > lo")
+        self.center = 0.5 * (lo + hi)
+        self.half = 0.5 * (hi - lo)
+
+    def project(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Ray from the centre along unit d [N,3] -> (u [N,3] box point relative to the centre,
+        tau [N] = |u|, face axis [N]). tau = min_k e_k / |d_k| (ties to the lower axis)."""
+        ad = np.abs(d)
+        ratio = np.where(ad > 1e-300, self.half / np.maximum(ad, 1e-300), np.inf)
+        axis = np.argmin(ratio, axis=1)
+        tau = np.take_along_axis(ratio, axis[:, None], 1)[:, 0]
+        return d * tau[:, None], tau, axis
+
+    def jacobian(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u_object [N,3], |n_u . u| / |u|^3 [N]): solid angle of the direction of u per unit box area."""
+        u, tau, axis = self.project(d)
+        e_face = self.half[axis]
+        return u + self.center, e_face / np.maximum(tau, 1e-300) ** 3
+
+    def s_from_t(self, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, np.float64)
+        return np.stack([2 * t[:, 0] - 1, 2 * np.pi * t[:, 1] - np.pi, 2 * t[:, 2] - 1, 2 * np.pi * t[:, 3] - np.pi], axis=1)
+
+    def t_from_s(self, s: np.ndarray) -> np.ndarray:
+        s = np.asarray(s, np.float64)
+        t = np.stack([(s[:, 0] + 1) / 2, (s[:, 1] + np.pi) / (2 * np.pi),
+                      (s[:, 2] + 1) / 2, (s[:, 3] + np.pi) / (2 * np.pi)], axis=1)
+        return np.clip(t, 0.0, 1.0)
+
+    def to_rays(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """s [N,4] -> (u_i [N,3] object space on the box, w_i [N,3] unit, jacobian |n_u . u| / |u|^3 [N])."""
+        d = cylindrical_to_direction(s[:, 0], s[:, 1])
+        u, jac = self.jacobian(d)
+        w = cylindrical_to_direction(s[:, 2], s[:, 3])
+        return u, w, jac
+
+    def from_rays(self, u: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(u_i, w_i) -> (s [N,4], jacobian [N]); u_i is taken as the box point in direction u_i - c."""
+        from .encodings import _unit64
+
+        d = _unit64(np.asarray(u, np.float64) - self.center)
+        z1, p1 = direction_to_cylindrical(d)
+        z3, p3 = direction_to_cylindrical(w)
+        _, jac = self.jacobian(d)
+        return np.stack([z1, p1, z3, p3], axis=1), jac
+
+
+def surface_pdf(pdf_box: np.ndarray, n_x: np.ndarray, n_u: np.ndarray, w: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    """Eq. 9: density per unit area at the asset surface x_i: pdf_box |n_x . w| / max(|n_u . w|, eps)."""
+    from .encodings import _unit64
+
+    w = _unit64(w)
+    num = np.abs((_unit64(n_x) * w).sum(1))
+    den = np.maximum(np.abs((_unit64(n_u) * w).sum(1)), eps)
+    return np.asarray(pdf_box, np.float64) * num / den
+
+
+# ----------------------------------------------------------------------------------------
+# autoregressive flow over t in [0, 1]^4 (spec/kinds/8dna.md#flow)
+
+
+def _channels(channel, n: int) -> np.ndarray:
+    c = np.asarray(channel)
+    if c.ndim == 0:
+        c = np.full(n, int(c))
+    c = c.reshape(-1)
+    if len(c) != n or not np.issubdtype(c.dtype, np.integer) or (c < 0).any() or (c > 2).any():
+        raise UsageError("channel must be 0, 1 or 2 (an int or an int array [N])")
+    return c.astype(np.int64)
+
+
+class BoxFlow:
+    """p(u_i, w_i | x_o, w_o) per colour channel: an autoregressive spline flow over t in [0, 1]^4.
+
+    ``conditioner(j, ctx, s_prev)`` (j = 1..4, s_prev [N, j-1] the already fixed s^1..s^{j-1}, ctx =
+    ``context(x, wo)`` computed once per call, default the tuple (x, wo)) returns unnormalised spline
+    parameters [N, 3 (3K+1)], channel-major (channel c owns columns c (3K+1) .. (c+1)(3K+1) - 1).
+    The density w.r.t. box area
+    at u_i times solid angle at w_i is
+
+        pdf(u_i, w_i) = prod_j exp(log|d rqs_j^-1 / dt_j|) / S_PER_T * |n_u . u| / |u|^3.
+    """
+
+    def __init__(self, box: BoxParam, conditioner, *, context=None, min_bin_width=MIN_BIN_WIDTH,
+                 min_bin_height=MIN_BIN_HEIGHT, min_derivative=MIN_DERIVATIVE) -> None:
+        self.box = box
+        self.conditioner = conditioner
+        self.context = context if context is not None else (lambda x, wo: (x, wo))
+        self.minimums = dict(min_bin_width=float(min_bin_width), min_bin_height=float(min_bin_height),
+                             min_derivative=float(min_derivative))
+
+    def _spline(self, j: int, ctx, s_prev, ch: np.ndarray) -> RQSpline:
+        raw = np.asarray(self.conditioner(j, ctx, s_prev), np.float64)
+        if raw.ndim != 2 or raw.shape[1] % 3 or len(raw) != len(ch):
+            raise UsageError(f"conditioner {j} returned shape {raw.shape}; expected [N, 3 (3K+1)]")
+        p = raw.shape[1] // 3
+        cols = ch[:, None] * p + np.arange(p)[None, :]
+        return RQSpline.from_raw(np.take_along_axis(raw, cols, 1), **self.minimums)
+
+    def _walk(self, x, wo, ch, *, t=None, z=None, steps=(1, 2, 3, 4), s_prev=None):
+        """Run steps in order; forward from latents z or inverse from values t. Returns (t, s, logp)."""
+        n = len(ch)
+        t_out = np.zeros((n, 4)) if t is None else np.array(t, np.float64)
+        s = np.zeros((n, 4)) if s_prev is None else np.array(s_prev, np.float64)
+        logp = np.zeros(n)
+        ctx = self.context(x, wo)
+        for j in steps:
+            spl = self._spline(j, ctx, s[:, : j - 1], ch)
+            if z is not None:
+                tj, ld = spl.forward(z[:, j - 1])
+                logp -= ld
+            else:
+                _, ld = spl.inverse(t_out[:, j - 1])
+                tj = np.clip(t_out[:, j - 1], 0.0, 1.0)
+                logp += ld
+            t_out[:, j - 1] = tj
+            s[:, j - 1] = self.box.s_from_t(np.tile(tj[:, None], (1, 4)))[:, j - 1]
+        return t_out, s, logp
+
+    @staticmethod
+    def _prep(x, wo):
+        x = np.atleast_2d(np.asarray(x, np.float64))
+        wo = np.atleast_2d(np.asarray(wo, np.float64))
+        if x.shape[1:] != (3,) or wo.shape != x.shape:
+            raise UsageError(f"x_o {x.shape} and w_o {wo.shape} must both be [N, 3]")
+        return x, wo
+
+    @staticmethod
+    def _latents(n: int, k: int, rng, u):
+        if u is not None:
+            u = np.asarray(u, np.float64)
+            if u.shape != (n, k):
+                raise UsageError(f"u must be [N, {k}], got {u.shape}")
+            return np.clip(np.nan_to_num(u), 0.0, 1.0)
+        if rng is None:
+            raise UsageError("give rng (numpy Generator) or u")
+        return rng.random((n, k))
+
+    def sample(self, x, wo, channel, rng=None, *, u=None):
+        """(u_i [N,3], w_i [N,3], pdf [N]) for latents u [N,4] in [0,1) (drawn from rng if u is None)."""
+        x, wo = self._prep(x, wo)
+        ch = _channels(channel, len(x))
+        z = self._latents(len(x), 4, rng, u)
+        _, s, logp = self._walk(x, wo, ch, z=z)
+        ui, wi, jac = self.box.to_rays(s)
+        return ui, wi, np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac
+
+    def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
+        """Density of (u_i, w_i) per unit box area and steradian, for one channel per row."""
+        x, wo = self._prep(x, wo)
+        ch = _channels(channel, len(x))
+        s, jac = self.box.from_rays(ui, wi)
+        _, _, logp = self._walk(x, wo, ch, t=self.box.t_from_s(s), s_prev=s)
+        return np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac
+
+    def pdf_rgb(self, x, wo, ui, wi) -> np.ndarray:
+        """[N, 3]: :meth:`pdf` for each colour channel."""
+        n = len(np.atleast_2d(x))
+        return np.stack([self.pdf(x, wo, ui, wi, np.full(n, c)) for c in range(3)], axis=1)
+
+    def pdf_position(self, x, wo, ui, channel) -> np.ndarray:
+        """Marginal density of u_i per unit box area (steps 1-2 only)."""
+        x, wo = self._prep(x, wo)
+        ch = _channels(channel, len(x))
+        s, jac = self.box.from_rays(ui, np.tile([0.0, 0.0, 1.0], (len(x), 1)))
+        _, _, logp = self._walk(x, wo, ch, t=self.box.t_from_s(s), s_prev=s, steps=(1, 2))
+        return np.exp(np.minimum(logp, 700.0)) / (2.0 * 2.0 * np.pi) * jac
+
+    def sample_direction(self, x, wo, ui, channel, rng=None, *, u=None):
+        """Given u_i, draw w_i from p(w_i | u_i) (steps 3-4): (w_i [N,3], conditional pdf per steradian [N])."""
+        x, wo = self._prep(x, wo)
+        ch = _channels(channel, len(x))
+        s, _ = self.box.from_rays(ui, np.tile([0.0, 0.0, 1.0], (len(x), 1)))
+        z = np.zeros((len(x), 4))
+        z[:, 2:] = self._latents(len(x), 2, rng, u)
+        _, s, logp = self._walk(x, wo, ch, z=z, steps=(3, 4), s_prev=s)
+        w = cylindrical_to_direction(s[:, 2], s[:, 3])
+        return w, np.exp(np.minimum(logp, 700.0)) / (2.0 * 2.0 * np.pi)
+
+    def pdf_direction(self, x, wo, ui, wi, channel) -> np.ndarray:
+        """Conditional density p(w_i | u_i) per steradian (steps 3-4)."""
+        x, wo = self._prep(x, wo)
+        ch = _channels(channel, len(x))
+        s, _ = self.box.from_rays(ui, wi)
+        _, _, logp = self._walk(x, wo, ch, t=self.box.t_from_s(s), s_prev=s, steps=(3, 4))
+        return np.exp(np.minimum(logp, 700.0)) / (2.0 * 2.0 * np.pi)

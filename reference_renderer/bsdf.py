@@ -1,0 +1,129 @@
+"""UsdPreviewSurface as a BSDF: Lambert diffuse + GGX (Trowbridge-Reitz) microfacet specular.
+
+Model (spec/renderer.md#materials), in a local frame where the shading normal is +Z:
+
+    f(wo, wi) = kd / pi + D(h) G2(wo, wi) F(wo.h) / (4 cos_o cos_i)
+
+kd = diffuseColor * (1 - metallic); F is Schlick with F0 = specularColor (specular workflow)
+or lerp(((1-ior)/(1+ior))^2, diffuseColor, metallic); alpha = max(roughness^2, 1e-3);
+G2 is the height-correlated Smith term. Both sides of a surface are front faces.
+Specular directions are drawn from the distribution of visible normals (Heitz 2018).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sampling import (
+    INV_PI,
+    cosine_hemisphere_pdf,
+    luminance,
+    normalize,
+    square_to_cosine_hemisphere,
+)
+
+MIN_ALPHA = 1e-3
+
+
+# -- GGX ------------------------------------------------------------------------------------
+def ggx_d(h, alpha):
+    a2 = alpha * alpha
+    c2 = h[:, 2] ** 2
+    den = np.pi * (c2 * (a2 - 1.0) + 1.0) ** 2
+    return np.where(h[:, 2] > 0, a2 / np.maximum(den, 1e-300), 0.0)
+
+
+def ggx_lambda(w, alpha):
+    c2 = np.maximum(w[:, 2] ** 2, 1e-300)
+    t2 = np.maximum(1.0 - c2, 0.0) / c2
+    return 0.5 * (-1.0 + np.sqrt(1.0 + alpha * alpha * t2))
+
+
+def ggx_g1(w, alpha):
+    return 1.0 / (1.0 + ggx_lambda(w, alpha))
+
+
+def ggx_sample_vndf(wo, alpha, u):
+    """Half vectors distributed as D_wo(h) = G1(wo) max(0, wo.h) D(h) / cos_o (Heitz 2018)."""
+    vh = normalize(np.stack([alpha * wo[:, 0], alpha * wo[:, 1], wo[:, 2]], 1))
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    inv = np.where(lensq > 0, 1.0 / np.sqrt(np.maximum(lensq, 1e-300)), 0.0)
+    t1 = np.where((lensq > 0)[:, None], np.stack([-vh[:, 1] * inv, vh[:, 0] * inv, np.zeros_like(inv)], 1),
+                  np.array([1.0, 0.0, 0.0]))
+    t2 = np.cross(vh, t1)
+    r = np.sqrt(u[:, 0])
+    phi = 2.0 * np.pi * u[:, 1]
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2])
+    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
+    nh = p1[:, None] * t1 + p2[:, None] * t2 + np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))[:, None] * vh
+    return normalize(np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(1e-9, nh[:, 2])], 1))
+
+
+def ggx_reflect_pdf(wo, wi, alpha):
+    """Solid-angle pdf of wi = reflect(wo, h) with h ~ VNDF(wo)."""
+    h = normalize(wo + wi)
+    ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    pdf = ggx_g1(wo, alpha) * ggx_d(h, alpha) / (4.0 * np.maximum(wo[:, 2], 1e-300))
+    return np.where(ok, pdf, 0.0)
+
+
+def reflect(w, h):
+    return 2.0 * np.einsum("ij,ij->i", w, h)[:, None] * h - w
+
+
+# -- material table -------------------------------------------------------------------------
+@dataclass
+class MaterialTable:
+    """Per-material constants, indexed by material id."""
+
+    kd: np.ndarray  # [M,3]
+    f0: np.ndarray  # [M,3]
+    alpha: np.ndarray  # [M]
+    emission: np.ndarray  # [M,3]
+    names: list
+
+    @property
+    def p_spec(self) -> np.ndarray:
+        """Probability of sampling the specular lobe."""
+        sd = luminance(self.kd)
+        ss = luminance(self.f0 + (1.0 - self.f0) * 0.1)
+        ss = np.where(self.f0.max(1) > 0, ss, 0.0)
+        tot = sd + ss
+        p = np.where(tot > 0, ss / np.where(tot > 0, tot, 1.0), 0.0)
+        both = (sd > 0) & (ss > 0)
+        return np.where(both, np.clip(p, 0.1, 0.9), p)
+
+    def has_specular(self, m):
+        return self.f0[m].max(-1) > 0
+
+
+def bsdf_eval(mt: MaterialTable, m, wo, wi):
+    """f(wo, wi) [N,3] and pdf(wi) [N] for local-frame directions (normal = +Z)."""
+    kd, f0, alpha, ps = mt.kd[m], mt.f0[m], mt.alpha[m], mt.p_spec[m]
+    ok = (wo[:, 2] > 0) & (wi[:, 2] > 0)
+    h = normalize(wo + wi)
+    d = ggx_d(h, alpha)
+    g2 = 1.0 / (1.0 + ggx_lambda(wo, alpha) + ggx_lambda(wi, alpha))
+    cos_oh = np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)
+    fres = f0 + (1.0 - f0) * ((1.0 - cos_oh) ** 5)[:, None]
+    den = 4.0 * np.maximum(wo[:, 2] * wi[:, 2], 1e-300)
+    f = kd * INV_PI + fres * (d * g2 / den)[:, None]
+    f = np.where(ok[:, None], f, 0.0)
+    pdf = (1.0 - ps) * cosine_hemisphere_pdf(wi) + ps * ggx_reflect_pdf(wo, wi, alpha)
+    return f, np.where(ok, pdf, 0.0)
+
+
+def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u):
+    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample."""
+    alpha, ps = mt.alpha[m], mt.p_spec[m]
+    spec = u_lobe < ps
+    wi = square_to_cosine_hemisphere(u)
+    if spec.any():
+        h = ggx_sample_vndf(wo[spec], alpha[spec], u[spec])
+        wi[spec] = reflect(wo[spec], h)
+    f, pdf = bsdf_eval(mt, m, wo, wi)
+    return wi, f, pdf

@@ -1,0 +1,445 @@
+"""Wavefront unidirectional path tracer with next-event estimation and MIS (power heuristic).
+
+All rays of a batch advance together as arrays, one bounce per loop iteration. Neural assets
+follow spec/renderer.md#neural-assets: transport T evaluated at the hit, rays leaving the asset
+skip it, the rna branch picked by whether the asset itself blocks the direction.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .accel import Accel
+from .bsdf import bsdf_eval, bsdf_sample
+from .film import Film
+from .plan import RenderPlan, make_plan
+from .sampling import (
+    INV_4PI,
+    dot,
+    frame,
+    normalize,
+    power_heuristic,
+    square_to_uniform_sphere,
+    to_local,
+    to_world,
+)
+
+
+@dataclass
+class RenderSettings:
+    spp: int = 16
+    seed: int = 0
+    width: int | None = None
+    height: int | None = None
+    max_depth: int = 5
+    batch: int = 65536
+    tile: int = 64
+    threads: int = 0
+    rr_depth: int = 3
+    progress: bool = False
+    backend: str = "embree"
+
+
+@dataclass
+class RenderStats:
+    camera_samples: int = 0
+    rays: int = 0
+    network_evals: int = 0
+    time_total: float = 0.0
+    time: dict = field(default_factory=lambda: {"trace": 0.0, "network": 0.0, "other": 0.0})
+
+
+@dataclass
+class RenderResult:
+    film: Film
+    plan: RenderPlan
+    stats: RenderStats
+
+    @property
+    def image(self):
+        return self.film.image()
+
+    @property
+    def variance(self):
+        return self.film.variance()
+
+
+def _unique(a: np.ndarray) -> np.ndarray:
+    """np.unique, with a quick path for the common single-value array."""
+    if len(a) and (a == a[0]).all():
+        return a[:1].copy()
+    return np.unique(a)
+
+
+class _Timer:
+    def __init__(self, stats, key):
+        self.stats, self.key = stats, key
+
+    def __enter__(self):
+        self.t = time.perf_counter()
+
+    def __exit__(self, *a):
+        self.stats.time[self.key] += time.perf_counter() - self.t
+
+
+class PathIntegrator:
+    def __init__(self, scene, plan: RenderPlan, settings: RenderSettings) -> None:
+        self.scene, self.plan, self.s = scene, plan, settings
+        self.accel = Accel(scene.triangles, scene.tri_inst, backend=settings.backend)
+        self.eps = self.accel.eps
+        self.stats = RenderStats()
+        tri = scene.triangles
+        ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) if len(tri) else np.zeros((0, 3))
+        self.tri_ng = normalize(ng)
+        insts = scene.instances
+        self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
+        self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
+        self.inst_asset = np.array([i.asset for i in insts], np.int64)
+        self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
+        self.indirect = plan.instance_indirect
+        self.mt = scene.materials
+        self.emissive = self.mt.emission.max(1) > 0
+        self.nee = [k for k, on in enumerate(plan.light_nee) if on]
+        # object-space corner normals of each asset's triangles
+        self.asset_corner_n = []
+        for data in scene.assets:
+            if data.normals is not None:
+                cn = data.normals[data.faces]
+            else:
+                p = data.points[data.faces]
+                n = normalize(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
+                cn = np.repeat(n[:, None], 3, 1)
+            self.asset_corner_n.append(cn)
+
+    # -- helpers ---------------------------------------------------------------------------
+    def _trace(self, o, d, tmax=None, ignore=None):
+        with _Timer(self.stats, "trace"):
+            return self.accel.trace(o, d, tmax, ignore)
+
+    def _occluded(self, o, d, tmax):
+        with _Timer(self.stats, "trace"):
+            return self.accel.occluded(o, d, tmax)
+
+    def _mis_light(self, k, prev_pdf, specular, o, d, no_mis):
+        """Weight of radiance from light k reached by a BSDF / continuation sample."""
+        light = self.scene.lights[k]
+        if not self.plan.light_nee[k]:
+            return np.ones(len(d))
+        w = power_heuristic(prev_pdf, light.pdf(o, d))
+        return np.where(specular | no_mis, 1.0, w)
+
+    # -- main loop -------------------------------------------------------------------------
+    def radiance(self, o, d, rng) -> np.ndarray:
+        n0 = len(o)
+        L = np.zeros((n0, 3))
+        idx = np.arange(n0)
+        beta = np.ones((n0, 3))
+        prev_pdf = np.zeros(n0)
+        specular = np.ones(n0, bool)  # camera rays: emitters seen directly, weight 1
+        ignore = np.full(n0, -1, np.int64)
+        pend = None  # (mask, T_unshadowed/pdf, T_shadowed/pdf) of neural continuations
+        lights = self.scene.lights
+        depth = 0
+        while len(idx):
+            hits = self._trace(o, d, None, ignore)
+            if pend is not None:
+                m, tu, ts = pend
+                beta[m] *= np.where(hits.self_hit[m][:, None], ts, tu)
+            pend = None
+            if depth >= self.s.rr_depth:
+                q = np.clip(beta.max(1), 0.05, 1.0)
+                live = rng.random(len(idx)) < q
+                beta = beta / q[:, None]
+                sel = np.nonzero(live)[0]
+                idx, o, d, beta, prev_pdf, specular, ignore = idx[sel], o[sel], d[sel], beta[sel], prev_pdf[sel], \
+                    specular[sel], ignore[sel]
+                hits.t, hits.prim, hits.u, hits.v = hits.t[sel], hits.prim[sel], hits.u[sel], hits.v[sel]
+                if not len(idx):
+                    break
+            no_mis = np.zeros(len(idx), bool)
+            t_hit = hits.t.copy()
+            light_hit = np.full(len(idx), -1)
+            le_hit = np.zeros((len(idx), 3))
+            for k, light in enumerate(lights):
+                if light.area:
+                    tl, le = light.intersect(o, d)
+                    closer = tl < t_hit
+                    t_hit[closer] = tl[closer]
+                    light_hit[closer] = k
+                    le_hit[closer] = le[closer]
+            for k in _unique(light_hit[light_hit >= 0]):
+                m = light_hit == k
+                w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
+                L[idx[m]] += beta[m] * le_hit[m] * w[:, None]
+            esc = (hits.prim < 0) & (light_hit < 0)
+            if esc.any():
+                for k, light in enumerate(lights):
+                    if light.infinite:
+                        le = light.le_escaped(d[esc])
+                        if le.any():
+                            w = self._mis_light(k, prev_pdf[esc], specular[esc], o[esc], d[esc], no_mis[esc])
+                            L[idx[esc]] += beta[esc] * le * w[:, None]
+            sel = np.nonzero((hits.prim >= 0) & (light_hit < 0))[0]
+            if not len(sel):
+                break
+            idx, o, d, beta = idx[sel], o[sel], d[sel], beta[sel]
+            prim = hits.prim[sel]
+            bu, bv = hits.u[sel], hits.v[sel]
+            tri = self.scene.triangles[prim]
+            x = tri[:, 0] * (1 - bu - bv)[:, None] + tri[:, 1] * bu[:, None] + tri[:, 2] * bv[:, None]
+            inst = self.scene.tri_inst[prim]
+            neural = self.inst_neural[inst]
+            mesh = ~neural
+            if mesh.any():
+                em = mesh & self.emissive[self.inst_mat[inst]]
+                if em.any():
+                    L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]]
+            if depth >= self.s.max_depth:
+                break
+            new = []
+            if mesh.any():
+                new.append(self._mesh_vertex(np.nonzero(mesh)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+            if neural.any():
+                new.append(self._neural_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+            new = [n for n in new if n is not None and len(n[0])]
+            if not new:
+                break
+            idx = np.concatenate([n[0] for n in new])
+            o = np.concatenate([n[1] for n in new])
+            d = np.concatenate([n[2] for n in new])
+            beta = np.concatenate([n[3] for n in new])
+            prev_pdf = np.concatenate([n[4] for n in new])
+            ignore = np.concatenate([n[5] for n in new])
+            specular = np.zeros(len(idx), bool)
+            pm = [n[6] for n in new]
+            if any(p is not None for p in pm):
+                mask = np.concatenate([np.zeros(len(n[0]), bool) if p is None else p[0] for n, p in zip(new, pm, strict=True)])
+                tu = np.concatenate([p[1] for p in pm if p is not None])
+                ts = np.concatenate([p[2] for p in pm if p is not None])
+                pend = (mask, tu, ts)
+            depth += 1
+        return L
+
+    # -- ordinary surfaces -----------------------------------------------------------------
+    def _mesh_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
+        x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
+        wo = -d
+        ng = self.tri_ng[prim]
+        cn = self.scene.tri_normals[prim]
+        ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
+        flip = dot(ng, wo) < 0
+        ng = np.where(flip[:, None], -ng, ng)
+        ns = np.where(flip[:, None], -ns, ns)
+        ns = np.where((dot(ns, wo) <= 1e-6)[:, None], ng, ns)
+        t, b = frame(ns)
+        wo_l = to_local(wo, t, b, ns)
+        mat = self.inst_mat[inst]
+        indirect = self.indirect[inst]
+        xo = x + ng * (self.eps * (1.0 + np.abs(x).max(1)))[:, None]
+        for k in self.nee:
+            light = self.scene.lights[k]
+            wi, dist, li, pdf = light.sample(x, rng.random((len(x), 2)))
+            cos = dot(wi, ns)
+            ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (li.max(1) > 0)
+            s = np.nonzero(ok)[0]
+            if not len(s):
+                continue
+            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]))
+            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
+            c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
+            nz = c.max(1) > 0
+            s, c = s[nz], c[nz]
+            if not len(s):
+                continue
+            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * self.eps, np.inf)
+            vis = ~self._occluded(xo[s], wi[s], tmax)
+            L[ridx[s[vis]]] += c[vis]  # s holds each ray once: no repeated indices
+        cont = np.nonzero(indirect)[0]
+        if not len(cont):
+            return None
+        wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)))
+        wi = to_world(wi_l, t[cont], b[cont], ns[cont])
+        ok = (pdf > 0) & (wi_l[:, 2] > 0) & (dot(wi, ng[cont]) > 0)
+        c = cont[ok]
+        nb = beta[c] * f[ok] * (wi_l[ok, 2] / pdf[ok])[:, None]
+        return ridx[c], xo[c], wi[ok], nb, pdf[ok], np.full(len(c), -1, np.int64), None
+
+    # -- neural assets ---------------------------------------------------------------------
+    def _to_object(self, v, inst, point=False):
+        """Rows of v [n,3] in the object space of instance inst[i] (row vectors times to_object).
+
+        The same per-row product as einsum("ij,ijk->ik", v, M[inst]) but one matrix per instance
+        present instead of a gathered [n,4,4] array.
+        """
+        ids = _unique(inst)
+        if len(ids) == 1:
+            M = self.inst_to_obj[ids[0]]
+            out = np.einsum("ij,jk->ik", v, M[:3, :3])
+            if point:
+                out += M[3, :3]
+            return out
+        out = np.empty((len(v), 3))
+        for i in ids:
+            m = inst == i
+            M = self.inst_to_obj[i]
+            o = np.einsum("ij,jk->ik", v[m], M[:3, :3])
+            out[m] = o + M[3, :3] if point else o
+        return out
+
+    def _neural_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
+        if len(r) != len(x):  # (all rows in a scene of neural assets only: no gathers)
+            x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
+        else:
+            ridx = idx
+        n = len(x)
+        ng = self.tri_ng[prim]
+        scale = (self.eps * (1.0 + np.abs(x).max(1)))[:, None]
+        x_obj = self._to_object(x, inst, point=True)
+        wo_obj = normalize(self._to_object(-d, inst))
+        asset_id = self.inst_asset[inst]
+        local = self.scene.tri_local[prim]
+        assets = _unique(asset_id)
+        w0 = 1 - bu - bv
+        if len(assets) == 1:
+            cn = self.asset_corner_n[assets[0]][local]
+            n_obj = normalize(cn[:, 0] * w0[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
+        else:
+            n_obj = np.zeros((n, 3))
+            for a in assets:
+                m = asset_id == a
+                cn = self.asset_corner_n[a][local[m]]
+                n_obj[m] = normalize(cn[:, 0] * w0[m][:, None] + cn[:, 1] * bu[m][:, None] + cn[:, 2] * bv[m][:, None])
+        indirect = self.indirect[inst]
+        rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []  # kind 0 = light sample
+        for k in self.nee:
+            light = self.scene.lights[k]
+            wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
+            ok = (pdf > 0) & (li.max(1) > 0)
+            s = np.nonzero(ok)[0]
+            if not len(s):
+                continue
+            if len(s) == n:
+                ng_s, wi_s, x_s, scale_s, dist_s, inst_s = ng, wi, x, scale, dist, inst
+            else:
+                ng_s, wi_s, x_s, scale_s, dist_s, inst_s = ng[s], wi[s], x[s], scale[s], dist[s], inst[s]
+            side = np.sign(dot(ng_s, wi_s))[:, None]
+            origin = x_s + ng_s * side * scale_s
+            tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * self.eps, np.inf)
+            h = self._trace(origin, wi_s, tmax, inst_s)
+            free = h.prim < 0  # no other object in the way
+            s = s[free]
+            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
+            rows_ray.append(s)
+            rows_wi.append(wi[s])
+            rows_w.append(li[s] * (w / pdf[s])[:, None])
+            rows_self.append(h.self_hit[free])
+            rows_kind.append(np.zeros(len(s), bool))
+        cont = np.nonzero(indirect)[0]
+        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
+        rows_ray.append(cont)
+        rows_wi.append(wi_c)
+        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+        rows_self.append(np.zeros(len(cont), bool))
+        rows_kind.append(np.ones(len(cont), bool))
+        ray = np.concatenate(rows_ray)
+        wi_all = np.concatenate(rows_wi)
+        w_all = np.concatenate(rows_w)
+        self_all = np.concatenate(rows_self)
+        is_cont = np.concatenate(rows_kind)
+        tu = np.zeros((len(ray), 3))
+        ts = np.zeros((len(ray), 3))
+        if len(ray):
+            wi_obj = normalize(self._to_object(wi_all, inst[ray]))
+            ray_asset = asset_id[ray]
+            for a in _unique(ray_asset):
+                ev = self.scene.assets[a].evaluator
+                if len(assets) == 1:
+                    m, rr, wi_m = slice(None), ray, wi_obj
+                else:
+                    m = ray_asset == a
+                    rr, wi_m = ray[m], wi_obj[m]
+                t0 = time.perf_counter()
+                u_, s_ = ev.evaluate(x_obj[rr].astype(np.float32), n_obj[rr].astype(np.float32),
+                                     wo_obj[rr].astype(np.float32), wi_m.astype(np.float32))
+                self.stats.time["network"] += time.perf_counter() - t0
+                self.stats.network_evals += len(rr)
+                tu[m], ts[m] = u_, s_
+        light_rows = ~is_cont
+        if light_rows.any():
+            lr = ray[light_rows]
+            tsel = np.where(self_all[light_rows][:, None], ts[light_rows], tu[light_rows])
+            c = beta[lr] * tsel * w_all[light_rows]
+            if len(self.nee) == 1:  # one row per ray: plain indexed add (np.add.at only for repeats)
+                L[ridx[lr]] += c
+            else:
+                np.add.at(L, ridx[lr], c)
+        if not len(cont):
+            return None
+        cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
+        origin = x[cont] + ng[cont] * np.sign(dot(ng[cont], wi_c))[:, None] * scale[cont]
+        mask = np.ones(len(cont), bool)
+        return ridx[cont], origin, wi_c, beta[cont], np.full(len(cont), INV_4PI), inst[cont], (mask, cu, cs)
+
+
+def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | None = None,
+           load_components: bool = True) -> RenderResult:
+    """Render ``scene`` (from :func:`reference_renderer.scene.load_scene`)."""
+    s = settings or RenderSettings()
+    width, height = scene.camera.default_resolution(s.width, s.height)
+    if plan is None:
+        plan = make_plan(scene, width=width, height=height, spp=s.spp, max_depth=s.max_depth, tile=s.tile, batch=s.batch)
+    if load_components:
+        prepare_assets(scene, plan, s)
+    integ = PathIntegrator(scene, plan, s)
+    film = Film(width, height)
+    tile = max(1, s.tile)
+    tiles = [(x0, y0) for y0 in range(0, height, tile) for x0 in range(0, width, tile)]
+    passes = [(p0, min(s.spp, p0 + plan.spp_per_pass)) for p0 in range(0, s.spp, plan.spp_per_pass)]
+    bar = None
+    if s.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tiles) * len(passes), unit="pass", desc="render", leave=False)
+    t_start = time.perf_counter()
+    for ti, (x0, y0) in enumerate(tiles):
+        x1, y1 = min(width, x0 + tile), min(height, y0 + tile)
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        pix_tile = (ys * width + xs).ravel()
+        for pi, (p0, p1) in enumerate(passes):
+            rng = np.random.default_rng([s.seed, ti, pi])
+            pix = np.tile(pix_tile, p1 - p0)
+            jit = rng.random((len(pix), 2))
+            px = (pix % width) + jit[:, 0]
+            py = (pix // width) + jit[:, 1]
+            o, d = scene.camera.generate_rays(px, py, width, height)
+            L = integ.radiance(o, d, rng)
+            film.add_passes(pix_tile, L)  # pix is pix_tile repeated p1 - p0 times
+            integ.stats.camera_samples += len(pix)
+            if bar is not None:
+                bar.update(1)
+    if bar is not None:
+        bar.close()
+    st = integ.stats
+    st.time_total = time.perf_counter() - t_start
+    st.rays = integ.accel.rays_cast
+    st.time["other"] = st.time_total - st.time["trace"] - st.time["network"]
+    return RenderResult(film, plan, st)
+
+
+def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings) -> None:
+    """Load what the plan needs of each asset and build its evaluator (once per file)."""
+    from nasset_sdk.errors import NassetError, SceneError
+
+    for data in scene.assets:
+        if data.evaluator is not None:
+            continue
+        loaded, _ = plan.components[str(data.path)]
+        try:
+            data.asset.load(loaded)
+            data.evaluator = data.asset.evaluator(intra_threads=settings.threads, batch=max(1024, settings.batch))
+        except NassetError as exc:
+            raise SceneError("SCENE_INVALID", f"referenced asset {data.path} is invalid: {exc}", file=scene.file,
+                             prim=data.prims[0] if data.prims else None) from None

@@ -1,0 +1,284 @@
+"""UsdLux lights: sampling, pdfs and emitted radiance (spec/renderer.md#lights).
+
+Every light is sampled at every shading vertex (no light selection), so its MIS weight only
+involves its own pdf and the BSDF's. Conventions (radiance L, irradiance E, all RGB and
+multiplied by ``color * 2^exposure``):
+
+* DistantLight: ``intensity`` is the irradiance E at normal incidence. ``angle`` (degrees, the
+  full apex angle) > 0 makes a uniform cone of half-angle t with L = E / (pi sin^2 t), sampled
+  uniformly in the cone; angle 0 is a delta light. Light arrives from the prim's +Z axis.
+* SphereLight: radiance L = intensity from a sphere of ``radius`` (sampled by the cone it
+  subtends); radius 0 (or ``treatAsPoint``) is a point light of radiant intensity I = intensity
+  (E = I / d^2).
+* RectLight: radiance L = intensity from a ``width`` x ``height`` rectangle in the local XY
+  plane, emitting toward local -Z only; sampled uniformly by area.
+* DomeLight: radiance L(d) = intensity * texture(d) (or constant without a texture).
+  Lat-long lookup in the dome's local frame: u = 0.5 + atan2(d.x, -d.z) / 2pi,
+  v = acos(d.y) / pi (v = 0 is the top row); importance-sampled by luminance * sin(theta).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .sampling import (
+    INV_4PI,
+    Distribution2D,
+    dot,
+    frame,
+    luminance,
+    normalize,
+    square_to_uniform_cone,
+    square_to_uniform_sphere,
+    to_world,
+)
+
+INF = np.inf
+
+
+class Light:
+    """Interface. ``sample(p, u)`` -> (wi, dist, Li, pdf); delta lights return pdf 1."""
+
+    delta = False
+    infinite = False  # reached by escaping rays
+    area = False  # has a shape that rays can hit
+    prim = ""
+
+    def sample(self, p, u):
+        raise NotImplementedError
+
+    def pdf(self, p, wi):
+        return np.zeros(len(p))
+
+    def le_escaped(self, d):
+        """Radiance toward -d for rays that escape the scene along d."""
+        return np.zeros((len(d), 3))
+
+    def intersect(self, o, d):
+        """(t [N], Le [N,3]) of the light's own shape; t = inf on a miss."""
+        return np.full(len(o), INF), np.zeros((len(o), 3))
+
+    def power_is_zero(self) -> bool:
+        return False
+
+
+class DistantLight(Light):
+    infinite = True
+
+    def __init__(self, direction, irradiance, angle_deg: float, prim: str = "") -> None:
+        self.w = normalize(np.asarray(direction, np.float64)[None])[0]  # toward the light
+        self.E = np.asarray(irradiance, np.float64)
+        self.prim = prim
+        half = np.radians(max(float(angle_deg), 0.0)) * 0.5
+        self.delta = half <= 0.0
+        if not self.delta:
+            self.cos_max = float(np.cos(half))
+            self.L = self.E / (np.pi * np.sin(half) ** 2)
+            self.t, self.b = (a[0] for a in frame(self.w[None]))
+
+    def power_is_zero(self):
+        return not (self.E > 0).any()
+
+    def sample(self, p, u):
+        n = len(p)
+        if self.delta:
+            return np.broadcast_to(self.w, (n, 3)).copy(), np.full(n, INF), np.broadcast_to(self.E, (n, 3)).copy(), np.ones(n)
+        loc = square_to_uniform_cone(u, self.cos_max)
+        wi = loc[:, 0:1] * self.t + loc[:, 1:2] * self.b + loc[:, 2:3] * self.w
+        pdf = np.full(n, 1.0 / (2.0 * np.pi * (1.0 - self.cos_max)))
+        return wi, np.full(n, INF), np.broadcast_to(self.L, (n, 3)).copy(), pdf
+
+    def pdf(self, p, wi):
+        if self.delta:
+            return np.zeros(len(wi))
+        return np.where(wi @ self.w >= self.cos_max, 1.0 / (2.0 * np.pi * (1.0 - self.cos_max)), 0.0)
+
+    def le_escaped(self, d):
+        if self.delta:
+            return np.zeros((len(d), 3))
+        return np.where((d @ self.w >= self.cos_max)[:, None], self.L, 0.0)
+
+
+class PointLight(Light):
+    delta = True
+
+    def __init__(self, position, intensity, prim: str = "") -> None:
+        self.c = np.asarray(position, np.float64)
+        self.I = np.asarray(intensity, np.float64)
+        self.prim = prim
+
+    def power_is_zero(self):
+        return not (self.I > 0).any()
+
+    def sample(self, p, u):
+        v = self.c - p
+        d2 = np.maximum(dot(v, v), 1e-300)
+        dist = np.sqrt(d2)
+        return v / dist[:, None], dist, self.I / d2[:, None], np.ones(len(p))
+
+
+class SphereLight(Light):
+    area = True
+
+    def __init__(self, center, radius: float, radiance, prim: str = "") -> None:
+        self.c = np.asarray(center, np.float64)
+        self.r = float(radius)
+        self.L = np.asarray(radiance, np.float64)
+        self.prim = prim
+
+    def power_is_zero(self):
+        return not (self.L > 0).any()
+
+    def _cone(self, p):
+        v = self.c - p
+        d2 = dot(v, v)
+        dist = np.sqrt(d2)
+        outside = d2 > self.r * self.r * (1 + 1e-9)
+        sin2 = np.where(outside, self.r * self.r / np.where(outside, d2, 1.0), 1.0)
+        cos_max = np.sqrt(np.maximum(0.0, 1.0 - sin2))
+        axis = v / np.maximum(dist, 1e-300)[:, None]
+        return axis, cos_max, outside
+
+    def sample(self, p, u):
+        axis, cos_max, outside = self._cone(p)
+        t, b = frame(axis)
+        wi = to_world(square_to_uniform_cone(u, cos_max), t, b, axis)
+        pdf = np.where(outside, 1.0 / (2.0 * np.pi * np.maximum(1.0 - cos_max, 1e-300)), 0.0)
+        tt = self._hit(p, wi)
+        ok = outside & np.isfinite(tt)
+        return wi, np.where(ok, tt, INF), np.where(ok[:, None], self.L, 0.0), np.where(ok, pdf, 0.0)
+
+    def pdf(self, p, wi):
+        axis, cos_max, outside = self._cone(p)
+        inside_cone = dot(wi, axis) >= cos_max
+        return np.where(outside & inside_cone, 1.0 / (2.0 * np.pi * np.maximum(1.0 - cos_max, 1e-300)), 0.0)
+
+    def _hit(self, o, d):
+        oc = o - self.c
+        b = dot(oc, d)
+        c = dot(oc, oc) - self.r * self.r
+        disc = b * b - c
+        sq = np.sqrt(np.maximum(disc, 0.0))
+        t0 = -b - sq
+        ok = (disc >= 0) & (c > 0) & (t0 > 0)  # outside, hitting the front (emitting) side
+        return np.where(ok, t0, INF)
+
+    def intersect(self, o, d):
+        t = self._hit(o, d)
+        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+
+
+class RectLight(Light):
+    area = True
+
+    def __init__(self, center, axis_x, axis_y, radiance, prim: str = "") -> None:
+        """axis_x / axis_y: full edge vectors (width and height, world space, scale included)."""
+        self.c = np.asarray(center, np.float64)
+        self.ex = np.asarray(axis_x, np.float64)
+        self.ey = np.asarray(axis_y, np.float64)
+        cr = np.cross(self.ex, self.ey)
+        self.A = float(np.linalg.norm(cr))
+        self.n = -cr / max(self.A, 1e-300)  # emission direction: local -Z
+        self.L = np.asarray(radiance, np.float64)
+        self.prim = prim
+
+    def power_is_zero(self):
+        return not (self.L > 0).any() or self.A <= 0
+
+    def sample(self, p, u):
+        q = self.c + (u[:, 0:1] - 0.5) * self.ex + (u[:, 1:2] - 0.5) * self.ey
+        v = q - p
+        d2 = np.maximum(dot(v, v), 1e-300)
+        dist = np.sqrt(d2)
+        wi = v / dist[:, None]
+        cos_l = -(wi @ self.n)
+        ok = cos_l > 1e-9
+        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+
+    def _hit(self, o, d):
+        den = d @ self.n
+        front = den < -1e-12  # ray travels against the emission direction
+        t = np.where(front, ((self.c - o) @ self.n) / np.where(front, den, -1.0), INF)
+        q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
+        sx = (q @ self.ex) / (self.ex @ self.ex)
+        sy = (q @ self.ey) / (self.ey @ self.ey)
+        ok = front & (t > 0) & (np.abs(sx) <= 0.5) & (np.abs(sy) <= 0.5)
+        return np.where(ok, t, INF)
+
+    def pdf(self, p, wi):
+        t = self._hit(p, wi)
+        cos_l = -(wi @ self.n)
+        ok = np.isfinite(t) & (cos_l > 1e-9)
+        tt = np.where(ok, t, 0.0)
+        return np.where(ok, tt * tt / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+
+    def intersect(self, o, d):
+        t = self._hit(o, d)
+        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+
+
+class DomeLight(Light):
+    infinite = True
+
+    def __init__(self, scale, image=None, rotation=None, prim: str = "") -> None:
+        """scale: RGB multiplier; image: [H, W, 3] lat-long radiance or None (constant);
+        rotation: 3x3 local->world (row-vector convention: world = local @ rotation)."""
+        self.scale = np.asarray(scale, np.float64)
+        self.prim = prim
+        self.R = np.eye(3) if rotation is None else np.asarray(rotation, np.float64)
+        self.Rinv = np.linalg.inv(self.R)
+        self.image = None if image is None else np.asarray(image, np.float64)
+        if self.image is not None:
+            h, w = self.image.shape[:2]
+            theta = (np.arange(h) + 0.5) / h * np.pi
+            lum = np.maximum(luminance(self.image * self.scale), 0.0)
+            self.dist = Distribution2D(lum * np.sin(theta)[:, None])
+
+    def power_is_zero(self):
+        if not (self.scale > 0).any():
+            return True
+        return self.image is not None and not (self.image > 0).any()
+
+    # direction <-> lat-long uv in the local frame
+    @staticmethod
+    def dir_to_uv(d):
+        u = 0.5 + np.arctan2(d[:, 0], -d[:, 2]) / (2.0 * np.pi)
+        v = np.arccos(np.clip(d[:, 1], -1.0, 1.0)) / np.pi
+        return np.stack([np.mod(u, 1.0), v], 1)
+
+    @staticmethod
+    def uv_to_dir(uv):
+        phi = (uv[:, 0] - 0.5) * 2.0 * np.pi
+        theta = uv[:, 1] * np.pi
+        s = np.sin(theta)
+        return np.stack([s * np.sin(phi), np.cos(theta), -s * np.cos(phi)], 1), s
+
+    def _lookup(self, uv):
+        h, w = self.image.shape[:2]
+        c = np.clip((uv[:, 0] * w).astype(np.int64), 0, w - 1)
+        r = np.clip((uv[:, 1] * h).astype(np.int64), 0, h - 1)
+        return self.image[r, c] * self.scale
+
+    def sample(self, p, u):
+        n = len(p)
+        if self.image is None:
+            wi = square_to_uniform_sphere(u)
+            return wi, np.full(n, INF), np.broadcast_to(self.scale, (n, 3)).copy(), np.full(n, INV_4PI)
+        uv, pdf_uv = self.dist.sample(u)
+        dl, s = self.uv_to_dir(uv)
+        pdf = np.where(s > 0, pdf_uv / (2.0 * np.pi * np.pi * np.maximum(s, 1e-300)), 0.0)
+        return dl @ self.R, np.full(n, INF), self._lookup(uv), pdf
+
+    def pdf(self, p, wi):
+        if self.image is None:
+            return np.full(len(wi), INV_4PI)
+        dl = wi @ self.Rinv
+        uv = self.dir_to_uv(dl)
+        s = np.sqrt(np.maximum(0.0, 1.0 - np.clip(dl[:, 1], -1, 1) ** 2))
+        return np.where(s > 0, self.dist.pdf(uv) / (2.0 * np.pi * np.pi * np.maximum(s, 1e-300)), 0.0)
+
+    def le_escaped(self, d):
+        if self.image is None:
+            return np.broadcast_to(self.scale, (len(d), 3)).copy()
+        return self._lookup(self.dir_to_uv(d @ self.Rinv))

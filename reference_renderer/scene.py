@@ -1,0 +1,538 @@
+"""USD stage -> renderer arrays: camera, triangles with instance/material ids, lights, assets.
+
+Neural assets are found by prim type ``NeuralAsset`` (a ``def NeuralAsset`` or an untyped
+``def`` that references an asset file); their subtree is not traversed further (the asset's own
+Geometry and fallback material are for tools without neural support). Each distinct asset file
+is opened once (components are loaded later, by the plan); every referencing prim is an
+instance with its own transform.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import NassetError, SceneError
+
+from .bsdf import MIN_ALPHA, MaterialTable
+from .camera import PerspectiveCamera
+from .lights import DistantLight, DomeLight, Light, PointLight, RectLight, SphereLight
+
+
+class SceneWarning(UserWarning):
+    """Something in the scene is ignored or approximated; the render still runs."""
+
+
+SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DomeLight")
+PREVIEW_DEFAULTS = {
+    "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
+    "specularColor": (0.0, 0.0, 0.0), "metallic": 0.0, "roughness": 0.5, "ior": 1.5, "opacity": 1.0,
+    "clearcoat": 0.0, "clearcoatRoughness": 0.01, "opacityThreshold": 0.0, "normal": None,
+    "displacement": 0.0, "occlusion": 1.0, "opacityMode": None,
+}
+_LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:normalize",
+                 "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular"}
+_LIGHT_INPUTS = {
+    "DistantLight": {"inputs:angle"},
+    "SphereLight": {"inputs:radius", "treatAsPoint"},
+    "RectLight": {"inputs:width", "inputs:height"},
+    "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
+}
+_IGNORED_PREFIXES = ("xformOp", "visibility", "purpose", "extent", "proxyPrim", "collection:", "light:", "primvars:",
+                     "physics", "doubleSided")
+
+
+@dataclass
+class NeuralAssetData:
+    """One asset file, opened once; ``evaluator`` is built after the plan loads components."""
+
+    path: Path
+    asset: object
+    points: np.ndarray  # object space [V,3]
+    faces: np.ndarray  # [F,3]
+    normals: np.ndarray | None  # [V,3] object space or None
+    evaluator: object = None
+    prims: list = field(default_factory=list)
+
+
+@dataclass
+class Instance:
+    kind: str  # "mesh" | "neural"
+    prim: str
+    first_tri: int
+    n_tri: int
+    to_world: np.ndarray  # 4x4 row-vector convention
+    asset: int = -1  # index into Scene.assets
+    material: int = -1
+    planar: bool = False
+
+    def __post_init__(self):
+        self.to_object = np.linalg.inv(self.to_world)
+
+
+@dataclass
+class Scene:
+    file: str
+    camera: PerspectiveCamera
+    triangles: np.ndarray  # [F,3,3] world
+    tri_inst: np.ndarray  # [F]
+    tri_local: np.ndarray  # [F] face index inside its instance's source geometry
+    tri_normals: np.ndarray  # [F,3,3] world shading normals at the corners (meshes), geometric where none
+    instances: list
+    materials: MaterialTable
+    lights: list
+    assets: list
+    warnings: list = field(default_factory=list)
+
+    @property
+    def bounds(self):
+        if len(self.triangles) == 0:
+            return np.zeros(3), np.zeros(3)
+        p = self.triangles.reshape(-1, 3)
+        return p.min(0), p.max(0)
+
+
+def _matrix(xformable, time):
+    return np.array(xformable.ComputeLocalToWorldTransform(time), np.float64)
+
+
+def _warn(scene_warnings: list, message: str) -> None:
+    scene_warnings.append(message)
+    warnings.warn(message, SceneWarning, stacklevel=3)
+
+
+def open_stage(path: str):
+    from pxr import Tf, Usd
+
+    from nasset_sdk.plugin import register_schema
+
+    register_schema()
+    p = Path(path)
+    if not p.is_file():
+        raise SceneError("SCENE_INVALID", "scene file does not exist", file=str(p))
+    try:
+        stage = Usd.Stage.Open(str(p))
+    except Tf.ErrorException as exc:
+        raise SceneError("SCENE_INVALID", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
+    if stage is None:
+        raise SceneError("SCENE_INVALID", "USD cannot open it", file=str(p))
+    return stage
+
+
+def is_asset_file(path: str) -> bool:
+    """True when ``path`` is a neural asset itself (defaultPrim of type NeuralAsset)."""
+    from pxr import Sdf
+
+    try:
+        layer = Sdf.Layer.FindOrOpen(str(path))
+    except Exception:  # noqa: BLE001 - an unreadable file is not an asset; open_stage reports it
+        return False
+    if layer is None or not layer.defaultPrim:
+        return False
+    spec = layer.GetPrimAtPath("/" + layer.defaultPrim)
+    return spec is not None and spec.typeName == "NeuralAsset"
+
+
+def load_scene(source, *, time=None) -> Scene:
+    """Load a scene from a path or an opened ``Usd.Stage``."""
+    from pxr import Usd
+
+    if isinstance(source, (str, os.PathLike)):
+        if is_asset_file(str(source)):
+            from .studio import studio_stage
+
+            stage = studio_stage(str(source))
+            file = str(source)
+        else:
+            stage = open_stage(str(source))
+            file = str(source)
+    else:
+        stage = source
+        file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
+    return _Loader(stage, file, Usd.TimeCode.Default() if time is None else time).load()
+
+
+class _Loader:
+    def __init__(self, stage, file: str, time) -> None:
+        self.stage, self.file, self.time = stage, file, time
+        self.warnings: list[str] = []
+        self.tris: list = []
+        self.tri_local: list = []
+        self.tri_normals: list = []
+        self.tri_inst: list = []
+        self.instances: list[Instance] = []
+        self.mat_rows: list = []
+        self.mat_index: dict = {}
+        self.lights: list[Light] = []
+        self.assets: list[NeuralAssetData] = []
+        self.asset_index: dict = {}
+        self.cameras: list = []
+
+    def err(self, code, msg, prim=None, attribute=None):
+        return SceneError(code, msg, file=self.file, prim=None if prim is None else str(prim), attribute=attribute)
+
+    def warn(self, msg, prim=None):
+        _warn(self.warnings, f"{self.file}:{prim}: {msg}" if prim else f"{self.file}: {msg}")
+
+    # -- traversal -------------------------------------------------------------------------
+    def load(self) -> Scene:
+        from pxr import Usd, UsdGeom, UsdLux
+
+        it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
+        for prim in it:
+            path = str(prim.GetPath())
+            if prim.IsA(UsdGeom.Imageable):
+                img = UsdGeom.Imageable(prim)
+                if img.ComputeVisibility(self.time) == UsdGeom.Tokens.invisible or \
+                        img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+                    it.PruneChildren()
+                    continue
+            tname = str(prim.GetTypeName())
+            if tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
+                self._neural(prim)
+                it.PruneChildren()
+            elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
+                self._light(prim, tname)
+            elif tname == "Camera":
+                self.cameras.append(prim)
+            elif tname == "Mesh":
+                self._mesh(prim)
+            elif tname in ("Sphere", "Cube"):
+                self._implicit(prim, tname)
+            elif tname in ("Cylinder", "Cone", "Capsule", "Plane", "BasisCurves", "NurbsCurves", "NurbsPatch", "Points",
+                           "HermiteCurves", "TetMesh", "PointInstancer", "Volume"):
+                raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh, Sphere, Cube are)", path)
+        if not self.cameras:
+            raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
+        camera = self._camera(self.cameras[0])
+        if len(self.cameras) > 1:
+            self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
+        if not self.lights and not any(r[3].any() for r in self.mat_rows):
+            self.warn("the scene has no lights and no emissive materials; the image will be black")
+        n = len(self.tris)
+        tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
+        mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
+        table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
+                              np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats])
+        return Scene(
+            file=self.file, camera=camera, triangles=tris,
+            tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
+            tri_local=np.concatenate(self.tri_local) if n else np.zeros(0, np.int64),
+            tri_normals=np.concatenate(self.tri_normals) if n else np.zeros((0, 3, 3)),
+            instances=self.instances, materials=table, lights=self.lights, assets=self.assets, warnings=self.warnings,
+        )
+
+    def _add(self, inst: Instance, tris_world, normals_world, local_ids):
+        inst.first_tri = sum(len(t) for t in self.tris)
+        inst.n_tri = len(tris_world)
+        self.instances.append(inst)
+        self.tris.append(tris_world)
+        self.tri_normals.append(normals_world)
+        self.tri_local.append(local_ids.astype(np.int64))
+        self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
+
+    # -- camera ----------------------------------------------------------------------------
+    def _camera(self, prim) -> PerspectiveCamera:
+        from pxr import UsdGeom
+
+        cam = UsdGeom.Camera(prim)
+        proj = cam.GetProjectionAttr().Get(self.time)
+        if proj and proj != UsdGeom.Tokens.perspective:
+            raise self.err("SCENE_UNSUPPORTED", f"camera projection {proj!r} (only perspective)", prim.GetPath(), "projection")
+        fl = float(cam.GetFocalLengthAttr().Get(self.time) or 50.0)
+        ha = float(cam.GetHorizontalApertureAttr().Get(self.time) or 20.955)
+        va = float(cam.GetVerticalApertureAttr().Get(self.time) or 15.2908)
+        if fl <= 0 or ha <= 0 or va <= 0:
+            raise self.err("SCENE_INVALID", "focalLength and apertures must be > 0", prim.GetPath())
+        return PerspectiveCamera(_matrix(cam, self.time), fl, ha, va, str(prim.GetPath()))
+
+    # -- meshes and materials --------------------------------------------------------------
+    def _material(self, prim) -> int:
+        from pxr import UsdGeom, UsdShade
+
+        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        if not mat:
+            dc = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+            val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
+            color = tuple(np.asarray(val, np.float64).reshape(-1, 3).mean(0)) if val is not None and len(val) else (0.18,) * 3
+            key = ("display", color)
+            if key not in self.mat_index:
+                self.mat_index[key] = len(self.mat_rows)
+                self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
+            return self.mat_index[key]
+        mpath = str(mat.GetPath())
+        if mpath in self.mat_index:
+            return self.mat_index[mpath]
+        shader = None
+        src = mat.ComputeSurfaceSource()
+        if src and src[0]:
+            shader = src[0]
+        if shader is None:
+            raise self.err("SCENE_UNSUPPORTED", "material has no UsdPreviewSurface connected to outputs:surface", mpath)
+        sid = shader.GetIdAttr().Get()
+        if sid != "UsdPreviewSurface":
+            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; only UsdPreviewSurface "
+                           "is supported", mpath)
+        vals = dict(PREVIEW_DEFAULTS)
+        for inp in shader.GetInputs():
+            name = inp.GetBaseName()
+            if name not in PREVIEW_DEFAULTS:
+                self.warn(f"unknown UsdPreviewSurface input {name!r} ignored", shader.GetPath())
+                continue
+            if inp.HasConnectedSource():
+                self.warn(f"input {name!r} is connected (textures are not supported); its own value is used",
+                          shader.GetPath())
+            v = inp.Get(self.time)
+            if v is not None:
+                vals[name] = v
+        if float(vals["opacity"]) < 1.0:
+            self.warn("opacity < 1 is ignored (rendered opaque)", shader.GetPath())
+        if float(vals["clearcoat"]) > 0.0:
+            self.warn("clearcoat is ignored", shader.GetPath())
+        diffuse = np.clip(np.asarray(vals["diffuseColor"], np.float64), 0, 1)
+        emission = np.maximum(np.asarray(vals["emissiveColor"], np.float64), 0)
+        rough = float(np.clip(vals["roughness"], 0, 1))
+        if int(vals["useSpecularWorkflow"]):
+            f0 = np.clip(np.asarray(vals["specularColor"], np.float64), 0, 1)
+            kd = diffuse
+        else:
+            ior = float(vals["ior"])
+            m = float(np.clip(vals["metallic"], 0, 1))
+            f0s = ((1.0 - ior) / (1.0 + ior)) ** 2
+            f0 = (1.0 - m) * f0s + m * diffuse
+            kd = diffuse * (1.0 - m)
+        self.mat_index[mpath] = len(self.mat_rows)
+        self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath))
+        return self.mat_index[mpath]
+
+    def _mesh(self, prim):
+        from pxr import UsdGeom
+
+        mesh = UsdGeom.Mesh(prim)
+        path = str(prim.GetPath())
+        pts = mesh.GetPointsAttr().Get(self.time)
+        counts = mesh.GetFaceVertexCountsAttr().Get(self.time)
+        idx = mesh.GetFaceVertexIndicesAttr().Get(self.time)
+        if pts is None or counts is None or idx is None or len(pts) == 0 or len(counts) == 0:
+            self.warn("mesh without points or faces skipped", path)
+            return
+        pts = np.asarray(pts, np.float64).reshape(-1, 3)
+        counts = np.asarray(counts, np.int64)
+        idx = np.asarray(idx, np.int64)
+        if (counts < 3).any() or counts.sum() != len(idx) or idx.min() < 0 or idx.max() >= len(pts) or not np.isfinite(pts).all():
+            raise self.err("SCENE_INVALID", "mesh topology invalid (counts/indices/points)", path, "faceVertexIndices")
+        scheme = mesh.GetSubdivisionSchemeAttr().Get(self.time)
+        if scheme not in (None, UsdGeom.Tokens.none):
+            self.warn(f"subdivisionScheme {scheme!r}: rendered as its control cage", path)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        nt = counts - 2
+        face_of_tri = np.repeat(np.arange(len(counts)), nt)
+        k = np.arange(nt.sum()) - np.repeat(np.cumsum(nt) - nt, nt)
+        base = starts[face_of_tri]
+        corner = np.stack([base, base + k + 1, base + k + 2], 1)  # face-vertex slots
+        tri = idx[corner]
+        M = _matrix(mesh, self.time)
+        pw = pts @ M[:3, :3] + M[3, :3]
+        tris = pw[tri]
+        # shading normals
+        normals = None
+        nattr = mesh.GetNormalsAttr()
+        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
+        nvals, interp = None, None
+        if pv and pv.HasAuthoredValue():
+            nvals, interp = pv.ComputeFlattened(self.time), pv.GetInterpolation()
+        elif nattr and nattr.HasAuthoredValue():
+            nvals, interp = nattr.Get(self.time), mesh.GetNormalsInterpolation()
+        if nvals is not None and len(nvals):
+            nv = np.asarray(nvals, np.float64).reshape(-1, 3)
+            nlin = np.linalg.inv(M[:3, :3]).T  # row-vector convention: normals by the inverse transpose
+            if interp in ("vertex", "varying") and len(nv) == len(pts):
+                normals = nv[tri]
+            elif interp == "faceVarying" and len(nv) == len(idx):
+                normals = nv[corner]
+            elif interp == "uniform" and len(nv) == len(counts):
+                normals = np.repeat(nv[face_of_tri][:, None], 3, 1)
+            else:
+                self.warn(f"normals with interpolation {interp!r} and {len(nv)} values ignored", path)
+            if normals is not None:
+                normals = normals @ nlin
+                normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
+        if normals is None:
+            ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+            ng /= np.maximum(np.linalg.norm(ng, axis=-1, keepdims=True), 1e-300)
+            normals = np.repeat(ng[:, None], 3, 1)
+        ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        nn = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+        tol = 1e-9 * (1 + np.abs(pw).max())
+        planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
+        inst = Instance("mesh", path, 0, 0, M, material=self._material(prim), planar=planar)
+        self._add(inst, tris, normals, np.arange(len(tri)))
+
+    def _implicit(self, prim, tname):
+        import trimesh
+        from pxr import UsdGeom
+
+        if tname == "Sphere":
+            r = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time) or 1.0)
+            tm = trimesh.creation.icosphere(subdivisions=4, radius=r)
+            nrm = np.asarray(tm.vertex_normals, np.float64)
+        else:
+            s = float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time) or 2.0)
+            tm = trimesh.creation.box(extents=(s, s, s))
+            nrm = None
+        M = _matrix(UsdGeom.Xformable(prim), self.time)
+        pw = np.asarray(tm.vertices, np.float64) @ M[:3, :3] + M[3, :3]
+        faces = np.asarray(tm.faces, np.int64)
+        tris = pw[faces]
+        if nrm is not None:
+            n = (nrm @ np.linalg.inv(M[:3, :3]).T)[faces]
+        else:
+            ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+            n = np.repeat(ng[:, None], 3, 1)
+        n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+        self.warn(f"implicit {tname} tessellated into {len(faces)} triangles", prim.GetPath())
+        inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim))
+        self._add(inst, tris, n, np.arange(len(faces)))
+
+    # -- neural assets ---------------------------------------------------------------------
+    @staticmethod
+    def _reference_paths(prim) -> list:
+        out = []
+        for spec in prim.GetPrimStack():
+            for listop in (spec.referenceList, spec.payloadList):
+                items = list(listop.explicitItems) + list(listop.prependedItems) + list(listop.appendedItems)
+                for ref in items:
+                    if ref.assetPath:
+                        out.append(spec.layer.ComputeAbsolutePath(ref.assetPath))
+        return out
+
+    def _neural(self, prim):
+        from pxr import UsdGeom
+
+        from nasset_sdk.asset import Asset
+
+        path = str(prim.GetPath())
+        refs = self._reference_paths(prim)
+        if not refs:
+            raise self.err("SCENE_INVALID", "NeuralAsset prim does not reference an asset file", path)
+        file = Path(refs[0])
+        if not file.is_file():
+            raise self.err("SCENE_INVALID", f"referenced asset file not found: {refs[0]}", path)
+        key = str(file.resolve())
+        if key not in self.asset_index:
+            try:
+                asset = Asset.open(file, load="none")
+            except NassetError as exc:
+                raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
+            if asset.kind != "rna":
+                raise self.err("SCENE_UNSUPPORTED", f"asset kind {asset.kind!r}: this renderer integrates kind 'rna' so far",
+                               path)
+            if asset.variant != "surface":
+                raise self.err("SCENE_UNSUPPORTED", f"rna variant {asset.variant!r} (fiber rendering is not implemented; "
+                               "surface is)", path)
+            try:
+                geo = asset.geometry()
+            except NassetError as exc:
+                raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
+            nrm = None if geo.normals is None else np.asarray(geo.normals, np.float64)
+            self.asset_index[key] = len(self.assets)
+            self.assets.append(NeuralAssetData(file, asset, np.asarray(geo.points, np.float64),
+                                               np.asarray(geo.faces, np.int64), nrm))
+        ai = self.asset_index[key]
+        data = self.assets[ai]
+        data.prims.append(path)
+        M = _matrix(UsdGeom.Xformable(prim), self.time)
+        if abs(np.linalg.det(M[:3, :3])) < 1e-12:
+            raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
+        pw = data.points @ M[:3, :3] + M[3, :3]
+        tris = pw[data.faces]
+        ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+        ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+        inst = Instance("neural", path, 0, 0, M, asset=ai)
+        self._add(inst, tris, np.repeat(ng[:, None], 3, 1), np.arange(len(data.faces)))
+
+    # -- lights ----------------------------------------------------------------------------
+    def _light(self, prim, tname):
+        from pxr import UsdGeom, UsdLux
+
+        path = str(prim.GetPath())
+        if tname not in SUPPORTED_LIGHTS:
+            raise self.err("SCENE_UNSUPPORTED", f"light type {tname or 'untyped'} is not supported "
+                           f"(supported: {', '.join(SUPPORTED_LIGHTS)})", path)
+        known = _LIGHT_COMMON | _LIGHT_INPUTS[tname]
+        for attr in prim.GetAuthoredAttributes():
+            n = attr.GetName()
+            if n in known or n.startswith(_IGNORED_PREFIXES):
+                continue
+            self.warn(f"attribute {n!r} is not used by the renderer", path)
+        api = UsdLux.LightAPI(prim)
+        g = lambda a, d: (a.Get(self.time) if a and a.Get(self.time) is not None else d)  # noqa: E731
+        intensity = float(g(api.GetIntensityAttr(), 1.0))
+        exposure = float(g(api.GetExposureAttr(), 0.0))
+        color = np.asarray(g(api.GetColorAttr(), (1.0, 1.0, 1.0)), np.float64)
+        normalize = bool(g(api.GetNormalizeAttr(), False))
+        if bool(g(api.GetEnableColorTemperatureAttr(), False)):
+            self.warn("enableColorTemperature is ignored", path)
+        for a in ("inputs:diffuse", "inputs:specular"):
+            at = prim.GetAttribute(a)
+            if at and at.HasAuthoredValue() and float(at.Get(self.time)) != 1.0:
+                self.warn(f"{a} != 1 is ignored", path)
+        scale = intensity * 2.0 ** exposure * color
+        if not np.isfinite(scale).all() or (scale < 0).any():
+            raise self.err("SCENE_INVALID", "light intensity/color must be finite and >= 0", path, "inputs:intensity")
+        M = _matrix(UsdGeom.Xformable(prim), self.time)
+        if tname == "DistantLight":
+            angle = float(g(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
+            self.lights.append(DistantLight(M[2, :3], scale, angle, path))
+        elif tname == "SphereLight":
+            sl = UsdLux.SphereLight(prim)
+            r = float(g(sl.GetRadiusAttr(), 0.5))
+            as_point = bool(g(sl.GetTreatAsPointAttr(), False))
+            sc = float(np.cbrt(abs(np.linalg.det(M[:3, :3]))))
+            if r < 0:
+                raise self.err("SCENE_INVALID", "radius must be >= 0", path, "inputs:radius")
+            if r * sc == 0 or as_point:
+                self.lights.append(PointLight(M[3, :3], scale, path))
+            else:
+                rw = r * sc
+                L = scale / (4.0 * np.pi * rw * rw) if normalize else scale
+                self.lights.append(SphereLight(M[3, :3], rw, L, path))
+        elif tname == "RectLight":
+            rl = UsdLux.RectLight(prim)
+            w = float(g(rl.GetWidthAttr(), 1.0))
+            h = float(g(rl.GetHeightAttr(), 1.0))
+            tex = rl.GetTextureFileAttr().Get(self.time) if rl.GetTextureFileAttr() else None
+            if tex is not None and tex.path:
+                self.warn("RectLight texture:file is ignored", path)
+            ex, ey = w * M[0, :3], h * M[1, :3]
+            area = float(np.linalg.norm(np.cross(ex, ey)))
+            L = scale / area if normalize and area > 0 else scale
+            self.lights.append(RectLight(M[3, :3], ex, ey, L, path))
+        else:
+            dl = UsdLux.DomeLight(prim)
+            fmt = g(dl.GetTextureFormatAttr(), "automatic")
+            if fmt not in ("automatic", "latlong"):
+                raise self.err("SCENE_UNSUPPORTED", f"DomeLight texture:format {fmt!r} (only latlong)", path,
+                               "inputs:texture:format")
+            tex = dl.GetTextureFileAttr().Get(self.time)
+            image = None
+            if tex is not None and tex.path:
+                resolved = tex.resolvedPath or ""
+                if not resolved or not os.path.isfile(resolved):
+                    raise self.err("SCENE_INVALID", f"DomeLight texture not found: {tex.path}", path, "inputs:texture:file")
+                if not resolved.lower().endswith(".exr"):
+                    raise self.err("SCENE_UNSUPPORTED", f"DomeLight texture {tex.path}: only OpenEXR lat-long maps", path,
+                                   "inputs:texture:file")
+                from .film import read_exr
+
+                image = read_exr(resolved)
+                if not np.isfinite(image).all() or (image < 0).any():
+                    raise self.err("SCENE_INVALID", "DomeLight texture holds NaN/Inf or negative values", path,
+                                   "inputs:texture:file")
+            R = M[:3, :3]
+            u, _, vt = np.linalg.svd(R)
+            self.lights.append(DomeLight(scale, image, u @ vt, path))

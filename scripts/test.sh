@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Install into .venv and run the default test suite (long benchmarks are marked `slow` and skipped;
+# run them with: scripts/test.sh -m slow). Extra arguments go to pytest.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup.sh
+.venv/bin/ruff check .
+exec .venv/bin/python -m pytest -q -p no:cacheprovider "$@"

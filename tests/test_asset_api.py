@@ -1,0 +1,91 @@
+"""Writer and reader behaviour of nasset_sdk.asset that the corpus tests do not cover."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import nasset_sdk as ns
+from nasset_sdk.errors import CODES, NassetError, UsageError, error
+from nasset_sdk.examples import example_builder
+
+
+def test_every_code_has_category_and_spec_anchor():
+    for code, c in CODES.items():
+        assert c.code == code
+        assert "#" in c.spec or c.spec.endswith(".md")
+        assert isinstance(error(code, "x"), NassetError)
+
+
+def test_error_message_names_location():
+    exc = error("TENSOR_SHAPE", "bad", file="a.usdc", prim="/Asset/x", attribute="shape")
+    assert str(exc) == "[TENSOR_SHAPE] a.usdc:/Asset/x.shape: bad"
+    assert isinstance(exc, ns.AssetFormatError)
+    assert json.loads(json.dumps(exc.to_dict()))["attribute"] == "shape"
+
+
+def test_builder_rejects_bad_arguments(rng):
+    b = ns.AssetBuilder("rna")
+    with pytest.raises(UsageError):
+        b.component("bad name", required=True)
+    core = b.component("core", required=True)
+    with pytest.raises(UsageError):
+        core.add_tensor("t", np.ones(3), dtype="float64")
+    with pytest.raises(UsageError):
+        core.add_tensor("t", np.full(3, 1e6), dtype="float16")  # overflows fp16 to inf
+    with pytest.raises(UsageError):
+        b.write("/tmp/x.usdc")  # no geometry
+    with pytest.raises(ns.NassetError) as info:
+        ns.AssetBuilder("nope")
+    assert info.value.code == "KIND_UNKNOWN"
+    with pytest.raises(UsageError):
+        ns.AssetBuilder("rna", variant="volume")
+
+
+def test_builder_enforces_kind_contract(tmp_path, rng):
+    b = example_builder("rna", size="tiny")
+    core = b.components["core"][""]
+    core.add_tensor("triplane", np.zeros((2, 8, 8, 4)), dtype="float32")  # 2 planes, contract says 3
+    with pytest.raises(UsageError, match="TENSOR_CONTRACT"):
+        b.write(tmp_path / "a.usdc")
+    assert not (tmp_path / "a.usdc").exists()
+
+
+def test_open_errors(tmp_path):
+    with pytest.raises(ns.AssetReadError) as info:
+        ns.Asset.open(tmp_path / "missing.usdc")
+    assert info.value.code == "FILE_NOT_FOUND"
+
+
+def test_lazy_components_and_quality(tmp_path):
+    path = example_builder("rna", size="tiny", quality_variants=True).write(tmp_path / "q.usdc")
+    lazy = ns.Asset.open(path, load="none")
+    info = lazy.components()["core"]
+    assert not info.loaded and info.qualities == ("hq", "small") and info.quality == "small"
+    with pytest.raises(UsageError):
+        lazy.tensor("core", "triplane")
+    small = ns.Asset.open(path).tensor("core", "triplane")
+    hq = ns.Asset.open(path, quality="hq").tensor("core", "triplane")
+    assert small.shape[1] == 8 and hq.shape[1] == 128  # tiny preset R=8, hq preset R=128
+    with pytest.raises(UsageError):
+        ns.Asset.open(path, quality="ultra")
+    # selecting a quality does not edit the file
+    assert ns.Asset.open(path, load="none").components()["core"].quality == "small"
+
+
+def test_tensor_is_readonly_view(rna_asset_path):
+    t = ns.Asset.open(rna_asset_path).tensor("core", "triplane")
+    assert not t.flags.writeable
+    with pytest.raises(ValueError):
+        t[0, 0, 0, 0] = 1.0
+
+
+def test_usda_and_usd_extensions(tmp_path):
+    b = example_builder("rna", size="tiny")
+    for name in ("a.usda", "a.usd"):
+        ns.Asset.open(b.write(tmp_path / name)).tensor("core", "triplane")
+    assert (tmp_path / "a.usd").read_bytes()[:8] == b"PXR-USDC"  # .usd is written as crate
+    with pytest.raises(UsageError):
+        b.write(tmp_path / "a.txt")

@@ -1,0 +1,139 @@
+"""Bad input to ``nasset bake``: typed errors, backend fallback, interruption and resume."""
+
+from __future__ import annotations
+
+import types
+import warnings
+
+import pytest
+
+pytest.importorskip("mitsuba", reason="bake tests need mitsuba (pip install 'nasset-sdk[mitsuba]')")
+pytest.importorskip("torch", reason="bake tests need torch (pip install torch==2.13.0)")
+
+import converters.mitsuba as cm  # noqa: E402
+from converters.mitsuba import dataset as ds  # noqa: E402
+from converters.mitsuba.example_scene import write_example_scene  # noqa: E402
+from nasset_sdk.bake import bake  # noqa: E402
+from nasset_sdk.cli import main  # noqa: E402
+from nasset_sdk.errors import NassetError, SceneError, UsageError  # noqa: E402
+
+
+def _code(excinfo) -> str:
+    return excinfo.value.code
+
+
+@pytest.fixture(scope="module")
+def example_xml(tmp_path_factory):
+    return write_example_scene(tmp_path_factory.mktemp("scene"))
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(SceneError) as e:
+        bake(tmp_path / "nope.xml", ["a"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SCENE_MISSING"
+    assert not (tmp_path / "o.usdc").exists()
+
+
+def test_unknown_shape_id(example_xml, tmp_path):
+    with pytest.raises(SceneError) as e:
+        bake(example_xml, ["shell", "teapot"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SHAPE_UNKNOWN"
+    assert "teapot" in str(e.value) and "jelly" in str(e.value)  # names the known ids
+
+
+def test_primitive_shape_is_unsupported(tmp_path):
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="sphere" id="ball"/></scene>')
+    with pytest.raises(SceneError) as e:
+        bake(xml, ["ball"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SHAPE_UNSUPPORTED"
+
+
+def test_scene_mitsuba_cannot_load(tmp_path):
+    xml = tmp_path / "broken.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="no_such_plugin" id="x"/></scene>')
+    with pytest.raises(SceneError) as e:
+        bake(xml, ["x"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SCENE_LOAD"
+    xml.write_text("<scene version=")  # not even XML
+    with pytest.raises(SceneError) as e:
+        bake(xml, ["x"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SCENE_LOAD"
+
+
+def test_usage_errors(tmp_path):
+    with pytest.raises(UsageError):
+        bake(None, None, tmp_path / "o.usdc", size="huge", example=True, quiet=True)
+    with pytest.raises(UsageError):
+        bake(None, None, tmp_path / "o.png", size="tiny", example=True, quiet=True)
+    with pytest.raises(UsageError):
+        bake(None, None, tmp_path / "o.usdc", size="tiny", example=True, quiet=True, views=0)
+
+
+def test_cli_exit_codes(tmp_path, capsys):
+    rc = main(["bake", str(tmp_path / "missing.xml"), "--asset", "a", "-o", str(tmp_path / "o.usdc"), "--quiet"])
+    assert rc == 1
+    assert "CONVERT_SCENE_MISSING" in capsys.readouterr().err
+
+
+def test_llvm_missing_falls_back_to_scalar_with_warning(monkeypatch):
+    """load_mitsuba: when llvm_ad_rgb cannot be set, scalar_rgb is used and a RuntimeWarning says so."""
+    state = {"variant": None}
+
+    def set_variant(v):
+        if v == "llvm_ad_rgb":
+            raise ImportError("libLLVM not found")
+        state["variant"] = v
+
+    fake = types.SimpleNamespace(variant=lambda: state["variant"], set_variant=set_variant)
+    monkeypatch.setitem(__import__("sys").modules, "mitsuba", fake)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mi = cm.load_mitsuba()
+    assert mi.variant() == "scalar_rgb"
+    assert any("falling back" in str(w.message) for w in caught)
+
+
+def test_no_variant_at_all_is_typed(monkeypatch):
+    def set_variant(v):
+        raise ImportError("nothing works")
+
+    fake = types.SimpleNamespace(variant=lambda: None, set_variant=set_variant)
+    monkeypatch.setitem(__import__("sys").modules, "mitsuba", fake)
+    with pytest.raises(NassetError) as e:
+        cm.load_mitsuba()
+    assert _code(e) == "CONVERT_BACKEND"
+
+
+def test_interrupt_keeps_dataset_and_resume_finishes(tmp_path, monkeypatch):
+    """Ctrl-C while rendering: no asset file, the views so far stay; --resume renders only the rest."""
+    real = ds.render_view
+    calls = {"n": 0}
+
+    def flaky(*a, **k):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    out = tmp_path / "a.usdc"
+    work = tmp_path / "data"
+    monkeypatch.setattr(ds, "render_view", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        bake(None, None, out, size="tiny", example=True, quiet=True, resume=work, epochs=2)
+    assert not out.exists()
+    assert len(list((work / "train").glob("*.npz"))) == 2
+    assert not list(work.rglob("*.part.npz"))
+    calls["n"] = -100  # no more interrupts; count renders of the resumed run
+    summary = bake(None, None, out, size="tiny", example=True, quiet=True, resume=work, epochs=2)
+    assert out.exists()
+    assert calls["n"] == -100 + 6  # 8 views in all, 2 were kept
+    assert summary["views"] == 6
+
+
+def test_resume_with_other_settings_is_refused(tmp_path):
+    work = tmp_path / "data"
+    bake(None, None, tmp_path / "a.usdc", size="tiny", example=True, quiet=True, resume=work, epochs=1)
+    with pytest.raises(SceneError) as e:
+        bake(None, None, tmp_path / "b.usdc", size="tiny", example=True, quiet=True, resume=work, res=16, epochs=1)
+    assert _code(e) == "CONVERT_DATASET"

@@ -1,0 +1,137 @@
+"""Encodings: 1D grid, cube map (orientation, seams, corners), Fourier features, frames, projections, SH."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nasset_sdk.errors import UsageError
+from nasset_sdk.kinds.encodings import (
+    azimuthal_equidistant,
+    azimuthal_equidistant_inverse,
+    cube_face_uv,
+    cubemap,
+    fourier_features,
+    from_local,
+    grid_1d,
+    local_frame,
+    sh9,
+    spherical_coords,
+    to_local,
+)
+
+POLES = np.array([[0, 0, 1.0], [0, 0, -1.0], [0, 0, -0.0], [1e-20, 0, -1.0], [0, 1e-30, 1.0], [0, 0, 0.0], [np.nan, 0, 1.0],
+                  [1.0, 0, 0], [0, -1.0, 0]])
+
+
+def test_grid_1d_texel_centres_and_clamp():
+    g = np.arange(8, dtype=np.float32).reshape(4, 2)  # texel k holds (2k, 2k+1)
+    centres = (np.arange(4) + 0.5) / 4 * 2 - 1
+    np.testing.assert_allclose(grid_1d(g, centres), g)
+    np.testing.assert_allclose(grid_1d(g, [-1.0, 1.0, -5.0, 5.0]), g[[0, 3, 0, 3]])
+    mid = (centres[1] + centres[2]) / 2
+    np.testing.assert_allclose(grid_1d(g, [mid]), [[3.0, 4.0]])
+    assert np.isfinite(grid_1d(g, [np.nan, np.inf, -np.inf])).all()
+
+
+def test_cube_face_orientation_table():
+    face, s, t = cube_face_uv(np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1.0]]))
+    np.testing.assert_array_equal(face, [0, 1, 2, 3, 4, 5])
+    np.testing.assert_allclose(s, 0.5)
+    np.testing.assert_allclose(t, 0.5)
+    # +X: sc = -z, tc = -y ; +Y: sc = +x, tc = +z ; -Z: sc = -x, tc = -y
+    f, s, t = cube_face_uv(np.array([[1.0, 0.5, -0.5], [0.5, 1.0, 0.5], [0.5, 0.5, -1.0]]))
+    np.testing.assert_array_equal(f, [0, 2, 5])
+    np.testing.assert_allclose(s, [0.75, 0.75, 0.25])
+    np.testing.assert_allclose(t, [0.25, 0.75, 0.25])
+    # ties go to the lower axis
+    assert cube_face_uv(np.array([[1.0, 1.0, 1.0]]))[0][0] == 0
+
+
+def test_cubemap_constant_and_texel_centres(rng):
+    g = np.full((6, 4, 4, 3), 2.5, np.float32)
+    assert np.allclose(cubemap(g, rng.normal(size=(200, 3))), 2.5)
+    g = rng.normal(size=(6, 4, 4, 3)).astype(np.float32)
+    # centre of texel (face +Z, row 1, col 2): s = 2.5/4, t = 1.5/4 -> x = 2s - 1, -y = 2t - 1
+    d = np.array([[2 * 2.5 / 4 - 1, -(2 * 1.5 / 4 - 1), 1.0]])
+    np.testing.assert_allclose(cubemap(g, d)[0], g[4, 1, 2], rtol=1e-6)
+
+
+@pytest.mark.parametrize("res", [1, 2, 5])
+def test_cubemap_continuous_across_edges_and_corners(rng, res):
+    g = rng.normal(size=(6, res, res, 3)).astype(np.float32)
+    n = 3000
+    d = rng.uniform(-1, 1, (n, 3))
+    ax = rng.integers(0, 3, n)  # free axis along the edge
+    a = (ax + 1) % 3
+    b = (ax + 2) % 3
+    idx = np.arange(n)
+    d[idx, a] = np.sign(d[idx, a])
+    d[idx, b] = np.sign(d[idx, b])  # now on the edge between faces (a, b)
+    e1, e2 = d.copy(), d.copy()
+    e1[idx, a] *= 1 + 1e-9
+    e2[idx, b] *= 1 + 1e-9
+    assert np.abs(cubemap(g, e1) - cubemap(g, e2)).max() < 1e-5
+    corner = np.array([[1.0, -1.0, 1.0]])
+    vals = [cubemap(g, corner * (1 + 1e-9 * np.eye(3)[k]))[0] for k in range(3)]
+    assert np.abs(vals[0] - vals[1]).max() < 1e-5 and np.abs(vals[0] - vals[2]).max() < 1e-5
+
+
+def test_cubemap_finite_on_bad_directions(rng):
+    g = rng.normal(size=(6, 3, 3, 2)).astype(np.float32)
+    out = cubemap(g, np.array([[0, 0, 0.0], [np.nan, 1, 0], [np.inf, 0, 0], [1e-300, 0, 0]]))
+    assert np.isfinite(out).all()
+
+
+def test_fourier_features_formula(rng):
+    G = rng.normal(18, 1, (5, 3))
+    v = rng.random((7, 3))
+    out = fourier_features(G, v)
+    phase = 2 * np.pi * v @ G.T
+    np.testing.assert_allclose(out, np.concatenate([np.cos(phase), np.sin(phase)], 1), atol=1e-6)
+    with pytest.raises(UsageError):
+        fourier_features(G, rng.random((7, 2)))
+
+
+def test_local_frame_orthonormal_everywhere(rng):
+    n = np.vstack([rng.normal(size=(500, 3)), POLES])
+    t, b, nn = local_frame(n)
+    for u in (t, b, nn):
+        np.testing.assert_allclose(np.linalg.norm(u, axis=1), 1, atol=1e-12)
+    assert np.abs((t * b).sum(1)).max() < 1e-12 and np.abs((t * nn).sum(1)).max() < 1e-12
+    np.testing.assert_allclose(np.cross(t, b), nn, atol=1e-12)
+    w = rng.normal(size=(len(n), 3))
+    np.testing.assert_allclose(from_local(to_local(w, n), n), w, atol=1e-12)
+
+
+def test_spherical_coords_ranges_and_poles():
+    sc = spherical_coords(POLES)
+    assert np.isfinite(sc).all() and (sc[:, 0] >= 0).all() and (sc[:, 0] <= 1).all() and (np.abs(sc[:, 1]) <= 0.5).all()
+    np.testing.assert_allclose(sc[0], [0, 0])
+    np.testing.assert_allclose(sc[1], [1, 0])
+    np.testing.assert_allclose(spherical_coords(np.array([[0, 1.0, 0]]))[0], [0.5, 0.25])
+
+
+def test_azimuthal_equidistant_round_trip(rng):
+    n = np.vstack([rng.normal(size=(300, 3)), POLES[:5]])
+    w = rng.normal(size=(len(n), 3))
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    p = azimuthal_equidistant(w, n)
+    assert (np.hypot(p[:, 0], p[:, 1]) <= np.pi + 1e-12).all()
+    np.testing.assert_allclose(azimuthal_equidistant_inverse(p, n), w, atol=1e-9)
+    t, b, nn = local_frame(n)
+    np.testing.assert_allclose(azimuthal_equidistant(nn, n), 0, atol=1e-7)
+    assert np.isfinite(azimuthal_equidistant(-nn, n)).all()
+
+
+def test_sh9_orthonormal():
+    from stats import midpoints
+
+    z = midpoints(-1, 1, 200)
+    phi = midpoints(-np.pi, np.pi, 400)
+    zz, pp = np.meshgrid(z, phi, indexing="ij")
+    r = np.sqrt(1 - zz ** 2)
+    d = np.stack([r * np.cos(pp), r * np.sin(pp), zz], -1).reshape(-1, 3)
+    y = sh9(d)
+    gram = y.T @ y * (4 * np.pi / len(d))
+    np.testing.assert_allclose(gram, np.eye(9), atol=2e-4)

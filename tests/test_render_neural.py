@@ -1,0 +1,175 @@
+"""Neural-asset integration (rna) and bad-input handling of the reference renderer."""
+
+import numpy as np
+import pytest
+
+from nasset_sdk.errors import SceneError
+from reference_renderer import RenderSettings, load_scene, make_plan, render
+from reference_renderer.testscenes import SceneBuilder, constant_rna_asset, random_rna_asset
+
+TU, TS, E = 1.0, 0.25, 2.0
+
+
+def _rot_y(deg, t=(0, 0, 0)):
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    m = np.eye(4)
+    m[0, :3], m[2, :3], m[3, :3] = (c, 0, -s), (s, 0, c), t
+    return m
+
+
+def test_instanced_twice_matches_single_instances(tmp_path):
+    asset = random_rna_asset(tmp_path / "a.usdc", seed=3)
+    mats = {"A": _rot_y(30, (-0.8, 0, 0)), "B": _rot_y(-75, (0.8, 0.1, 0))}
+
+    def scene(names, fname):
+        b = SceneBuilder()
+        b.camera((0, 0.5, 4), (0, 0, 0), focal=35)
+        b.distant("Sun", (0.3, 1.0, 0.5), E)
+        for n in names:
+            b.asset(n, asset, mats[n], typed=(n == "A"))  # typed NeuralAsset and untyped def + reference
+        return load_scene(b.write(tmp_path / fname))
+
+    kw = dict(width=32, height=24, spp=1, max_depth=1)  # direct light only: deterministic given the seed
+    both = render(scene(["A", "B"], "ab.usda"), RenderSettings(**kw)).image
+    a = render(scene(["A"], "a.usda"), RenderSettings(**kw)).image
+    b = render(scene(["B"], "b.usda"), RenderSettings(**kw)).image
+    assert a.max() > 0 and b.max() > 0
+    np.testing.assert_allclose(both, a + b, atol=1e-5)
+
+
+def test_rigid_transform_invariance(tmp_path):
+    """Moving asset, light and camera together leaves the image unchanged (object-space evaluation)."""
+    asset = random_rna_asset(tmp_path / "a.usdc", seed=4)
+    g = _rot_y(50, (2.0, -1.0, 0.5))
+    from reference_renderer.testscenes import look_at
+
+    imgs = []
+    for k, m in enumerate((np.eye(4), g)):
+        b = SceneBuilder()
+        b.camera(None, None, matrix=look_at((0, 0.4, 3), (0, 0, 0)) @ m)
+        b.distant("Sun", np.array([0.4, 1.0, 0.2]) @ m[:3, :3], E)
+        b.asset("Obj", asset, _rot_y(20) @ m)
+        imgs.append(render(load_scene(b.write(tmp_path / f"s{k}.usda")), RenderSettings(width=24, height=24, spp=1)).image)
+    assert imgs[0].max() > 0
+    np.testing.assert_allclose(imgs[0], imgs[1], atol=2e-4 * imgs[0].max())
+
+
+def _constant_scene(tmp_path, occluder=False):
+    asset = constant_rna_asset(tmp_path / "c.usdc", unshadowed=(TU,) * 3, shadowed=(TS,) * 3)
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0), focal=60)
+    b.distant("Sun", (0, 1, 0), E)
+    b.asset("Obj", asset)
+    if occluder:
+        b.quad("Blocker", (0.35, 3.0, 0.3), 0.5, normal=(0, -1, 0), diffuse=(0, 0, 0))
+    return load_scene(b.write(tmp_path / ("occ.usda" if occluder else "c.usda")))
+
+
+def test_self_shadowing_picks_shadowed_output(tmp_path):
+    scene = _constant_scene(tmp_path)
+    img = render(scene, RenderSettings(width=40, height=40, spp=4)).image[..., 0]
+    # upper half of the sphere faces the light: T_unshadowed * E; lower half: the asset blocks it
+    assert np.allclose(img[12, 18:22], TU * E)
+    assert np.allclose(img[28, 18:22], TS * E)
+    vals = set(np.round(img[img > 0], 6))
+    assert {round(TU * E, 6), round(TS * E, 6)} <= vals
+
+
+def test_other_object_shadow_respected(tmp_path):
+    scene = _constant_scene(tmp_path, occluder=True)
+    plan = make_plan(scene, width=40, height=40, spp=4, max_depth=5, tile=64, batch=65536)
+    assert plan.instance_indirect.all()
+    img = render(scene, RenderSettings(width=40, height=40, spp=4)).image[..., 0]
+    assert np.allclose(img[12, 26:29], 0.0)  # upper right of the sphere, in the blocker's shadow
+    assert np.allclose(img[12, 12:15], TU * E)  # upper left, lit (blocker is black: no indirect light)
+    assert np.allclose(img[28, 18:22], TS * E)
+
+
+def test_plan_lone_asset(tmp_path):
+    scene = _constant_scene(tmp_path)
+    plan = make_plan(scene, width=8, height=8, spp=1, max_depth=5, tile=64, batch=65536)
+    assert not plan.instance_indirect.any()
+    text = plan.explain()
+    assert "indirect off" in text and "load ['core']" in text
+
+
+# -- bad input ---------------------------------------------------------------------------------
+def test_no_camera(tmp_path):
+    b = SceneBuilder()
+    b.quad("Floor", (0, 0, 0), 1.0)
+    with pytest.raises(SceneError) as e:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert e.value.code == "SCENE_INVALID" and "camera" in str(e.value)
+
+
+def test_unsupported_light(tmp_path):
+    from pxr import UsdLux
+
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    UsdLux.DiskLight.Define(b.stage, "/World/Disk")
+    with pytest.raises(SceneError) as e:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert e.value.code == "SCENE_UNSUPPORTED" and e.value.prim == "/World/Disk"
+
+
+def test_unsupported_material(tmp_path):
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.quad("Floor", (0, 0, 0), 1.0)
+    b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface").GetAttribute("info:id").Set("ND_standard_surface_surfaceshader")
+    with pytest.raises(SceneError) as e:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert e.value.code == "SCENE_UNSUPPORTED" and "/World/Looks/FloorMat" in str(e.value)
+
+
+def test_missing_asset(tmp_path):
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.asset("Obj", tmp_path / "nope.usdc")
+    with pytest.raises(SceneError) as e:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert e.value.prim == "/World/Obj" and "not found" in str(e.value)
+
+
+def test_invalid_asset(tmp_path):
+    from pxr import Sdf, Usd
+
+    asset = random_rna_asset(tmp_path / "a.usdc")
+    st = Usd.Stage.Open(str(asset))
+    st.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Set("99.0")
+    st.Save()
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.asset("Obj", asset)
+    with pytest.raises(SceneError) as e:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert e.value.code == "SCENE_INVALID" and e.value.prim == "/World/Obj" and "SPEC_VERSION" in str(e.value)
+    del Sdf
+
+
+def test_unknown_attribute_is_a_warning(tmp_path):
+    from pxr import Sdf
+
+    from reference_renderer import SceneWarning
+
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    lt = b.distant("Sun", (0, 1, 0))
+    lt.GetPrim().CreateAttribute("inputs:shaping:cone:angle", Sdf.ValueTypeNames.Float).Set(30.0)
+    with pytest.warns(SceneWarning, match="shaping"):
+        scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert any("shaping" in w for w in scene.warnings)
+
+
+def test_cli_render_asset_file(tmp_path):
+    from nasset_sdk.cli import main
+
+    asset = random_rna_asset(tmp_path / "a.usdc")
+    out = tmp_path / "o.exr"
+    rc = main(["render", str(asset), "-o", str(out), "--spp", "1", "--width", "16", "--quiet", "--explain",
+               "--png", str(tmp_path / "o.png"), "--variance", str(tmp_path / "v.exr")])
+    assert rc == 0 and out.stat().st_size > 0 and (tmp_path / "o.png").read_bytes()[:4] == b"\x89PNG"
+    from reference_renderer import read_exr
+
+    assert read_exr(out).shape == (16, 16, 3)

@@ -1,0 +1,127 @@
+"""chi² tests for every direction sampler of the reference renderer, and sample pdf == pdf()."""
+
+import numpy as np
+import pytest
+from render_stats import chi2_test
+
+from reference_renderer import bsdf, lights, sampling
+
+P_MIN = 1e-3  # reject the sampler when the fit is this unlikely
+
+
+def _report(name, p, dof):
+    print(f"chi2 {name}: p={p:.3g} dof={dof}")
+
+
+def test_cosine_hemisphere():
+    p, dof, integral = chi2_test(sampling.square_to_cosine_hemisphere, sampling.cosine_hemisphere_pdf)
+    _report("cosine", p, dof)
+    assert p > P_MIN and abs(integral - 1) < 1e-2
+
+
+def test_uniform_sphere_and_cone():
+    p, dof, _ = chi2_test(sampling.square_to_uniform_sphere, sampling.uniform_sphere_pdf)
+    assert p > P_MIN
+    cm = np.cos(0.6)
+    p, dof, integral = chi2_test(lambda u: sampling.square_to_uniform_cone(u, cm), lambda v: sampling.uniform_cone_pdf(v, cm))
+    _report("cone", p, dof)
+    assert p > P_MIN and abs(integral - 1) < 2e-2
+
+
+@pytest.mark.parametrize("alpha,theta", [(0.3, 0.4), (0.7, 1.1), (0.15, 0.9)])
+def test_ggx_visible_normals(alpha, theta):
+    wo = np.array([[np.sin(theta), 0.0, np.cos(theta)]])
+
+    def sample(u):
+        n = len(u)
+        h = bsdf.ggx_sample_vndf(np.repeat(wo, n, 0), np.full(n, alpha), u)
+        wi = bsdf.reflect(np.repeat(wo, n, 0), h)
+        wi[wi[:, 2] <= 0] = np.nan
+        return wi
+
+    def pdf(v):
+        return bsdf.ggx_reflect_pdf(np.repeat(wo, len(v), 0), v, np.full(len(v), alpha))
+
+    p, dof, _ = chi2_test(sample, pdf, n_theta=30, n_phi=60, sub=8)
+    _report(f"ggx a={alpha}", p, dof)
+    assert p > P_MIN
+
+
+def _material_table(kd, f0, alpha):
+    return bsdf.MaterialTable(np.array([kd]), np.array([f0]), np.array([alpha]), np.zeros((1, 3)), ["m"])
+
+
+def test_bsdf_mixture_sampling_and_pdf():
+    mt = _material_table([0.5, 0.4, 0.3], [0.3, 0.3, 0.3], 0.2)
+    wo = np.array([[0.5, 0.2, np.sqrt(1 - 0.29)]])
+    rng = np.random.default_rng(1)
+
+    def sample(u):
+        n = len(u)
+        wi, f, pdf = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), u)
+        wi[pdf <= 0] = np.nan
+        return wi
+
+    def pdf(v):
+        return bsdf.bsdf_eval(mt, np.zeros(len(v), int), np.repeat(wo, len(v), 0), v)[1]
+
+    p, dof, _ = chi2_test(sample, pdf, n_theta=30, n_phi=60)
+    _report("bsdf mixture", p, dof)
+    assert p > P_MIN
+    n = 1000
+    wi, f, pdf_s = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), rng.random((n, 2)))
+    f_e, pdf_e = bsdf.bsdf_eval(mt, np.zeros(n, int), np.repeat(wo, n, 0), wi)
+    np.testing.assert_allclose(pdf_s, pdf_e, rtol=1e-9)
+    np.testing.assert_allclose(f, f_e, rtol=1e-9)
+
+
+P0 = np.array([[0.3, -0.2, 0.1]])
+
+
+def _light_chi2(light, name, **kw):
+    def sample(u):
+        wi, dist, li, pdf = light.sample(np.repeat(P0, len(u), 0), u)
+        wi = wi.copy()
+        wi[pdf <= 0] = np.nan
+        return wi
+
+    def pdf(v):
+        return light.pdf(np.repeat(P0, len(v), 0), v)
+
+    p, dof, integral = chi2_test(sample, pdf, **kw)
+    _report(name, p, dof)
+    assert p > P_MIN
+    assert abs(integral - 1) < 3e-2
+    # the pdf a sample reports equals pdf() at that direction
+    rng = np.random.default_rng(5)
+    wi, _, _, pdf_s = light.sample(np.repeat(P0, 2000, 0), rng.random((2000, 2)))
+    ok = pdf_s > 0
+    np.testing.assert_allclose(pdf_s[ok], light.pdf(np.repeat(P0, ok.sum(), 0), wi[ok]), rtol=1e-6)
+
+
+def test_sphere_light_sampling():
+    _light_chi2(lights.SphereLight([1.5, 1.0, 2.0], 0.9, [1, 1, 1]), "sphere light", n_theta=40, n_phi=80)
+
+
+def test_rect_light_sampling():
+    _light_chi2(lights.RectLight([0.5, 1.2, 0.3], [0.0, 0.0, 1.5], [2.0, 0.0, 0.0], [1, 1, 1]), "rect light",
+                n_theta=30, n_phi=60, sub=48, n=60_000)
+
+
+def test_distant_light_cone_sampling():
+    _light_chi2(lights.DistantLight([0.2, 1.0, 0.3], [1, 1, 1], 40.0), "distant cone", n_theta=30, n_phi=60, sub=48,
+                n=60_000)
+
+
+def test_dome_importance_sampling():
+    rng = np.random.default_rng(3)
+    h, w = 16, 32
+    yy, xx = np.mgrid[0:h, 0:w]
+    img = 0.05 + np.exp(-((yy - 5) ** 2 + (xx - 20) ** 2) / 8.0)[..., None] * np.array([4.0, 3.0, 2.0])
+    img = img * rng.uniform(0.5, 1.5, (h, w, 1))
+    rot = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # 90 degrees about Y
+    dome = lights.DomeLight([1.0, 1.0, 1.0], img, rot)
+    _light_chi2(dome, "dome", n_theta=32, n_phi=64, sub=12)
+    # radiance returned with a sample equals the radiance seen along that direction
+    wi, _, li, _ = dome.sample(np.repeat(P0, 500, 0), rng.random((500, 2)))
+    np.testing.assert_allclose(li, dome.le_escaped(wi), rtol=1e-6)

@@ -1,0 +1,48 @@
+"""Every error code points at a spec paragraph that exists, and spec-internal links resolve."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from nasset_sdk.errors import CODES
+
+SPEC = Path(__file__).resolve().parent.parent / "spec"
+
+
+def _slug(heading: str) -> str:
+    """GitHub-style anchor of a markdown heading."""
+    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    text = re.sub(r"[^\w\- ]", "", text)
+    return text.replace(" ", "-")
+
+
+def _anchors(path: Path) -> set[str]:
+    return {_slug(m.group(1)) for m in re.finditer(r"^#{1,6}\s+(.+)$", path.read_text(), re.M)}
+
+
+@pytest.mark.parametrize("code", sorted(CODES))
+def test_code_spec_anchor_exists(code):
+    target = CODES[code].spec
+    file, _, anchor = target.partition("#")
+    path = SPEC / file
+    assert path.is_file(), f"{code}: spec file {file} missing"
+    if anchor:
+        assert anchor in _anchors(path), f"{code}: no heading for #{anchor} in {file}"
+
+
+def test_relative_links_in_spec_resolve():
+    bad = []
+    for md in SPEC.rglob("*.md"):
+        for link in re.findall(r"\]\(([^)\s]+)\)", md.read_text()):
+            if re.match(r"^[a-z]+:", link):
+                continue
+            file, _, anchor = link.partition("#")
+            target = (md.parent / file).resolve() if file else md
+            if not target.exists():
+                bad.append(f"{md.relative_to(SPEC)} -> {link}")
+            elif anchor and target.suffix == ".md" and anchor not in _anchors(target):
+                bad.append(f"{md.relative_to(SPEC)} -> {link} (anchor)")
+    assert not bad, bad
