@@ -2,6 +2,8 @@
 
 Model: three feature planes (XY, YZ, ZX) sampled bilinearly and summed, concatenated with
 (xn, n, wo, wi) and decoded by a ReLU MLP into two RGB transports (unshadowed, shadowed). The
+exported decoder starts with a parameter-free feature step (encoding "lobes": n.wi, n.wo, n.h,
+wo.wi and exp(k (n.h - 1)) for k in LOBE_SHARPNESS) computed from that same input row. The
 lookup is ``torch.nn.functional.grid_sample(align_corners=False, padding_mode="border")``, which
 is the format's ``encodings.grid_sample_2d`` (texel centres, edge clamp); ``check_parity``
 verifies it numerically against the SDK.
@@ -41,6 +43,11 @@ class TrainSettings:
     blur_end: float = 1.0
     blur_until: float = 0.2  # fraction of epochs
     init_std: float = 0.1
+    loss: str = "log"  # "log": L2 of log(1 + T) (paper); "rel": L2 relative to sg(prediction)
+    rel_eps: float = 0.01  # "rel": (pred - y)^2 / (sg(pred) + rel_eps)^2
+    encoding: str = "lobes"  # decoder-internal features of the fixed input row: "raw" or "lobes"
+    plane_res: int = 0  # triplane resolution R; 0: the preset's (nasset_sdk.kinds.rna.SIZES)
+    plane_channels: int = 0  # triplane channels C; 0: the preset's
     seed: int = 0
     device: str = "auto"
 
@@ -48,8 +55,8 @@ class TrainSettings:
 #: per-preset training defaults (the data defaults live in nasset_sdk.bake)
 TRAIN_PRESETS = {
     "tiny": dict(epochs=40, batch=1024),
-    "small": dict(epochs=40, batch=4096, plane_lr=3e-3),
-    "hq": dict(epochs=60, batch=8192, plane_lr=3e-3),
+    "small": dict(epochs=20, batch=4096, plane_lr=3e-3),
+    "hq": dict(epochs=40, batch=8192, plane_lr=3e-3),
 }
 
 
@@ -67,12 +74,43 @@ def _pick_device(torch, want: str):
     return torch.device("cuda" if torch.cuda.is_available() else "cpu")
 
 
-def build_model(size: str, *, init_std: float = 0.1, seed: int = 0):
-    """The rna surface model for a preset of ``nasset_sdk.kinds.rna.SIZES``."""
+#: sharpness k of the lobe features exp(k (n.h - 1)) (encoding "lobes")
+LOBE_SHARPNESS = (4.0, 16.0, 64.0)
+
+
+def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: int = 0, plane_channels: int = 0,
+                encoding: str = "lobes"):
+    """The rna surface model for a preset of ``nasset_sdk.kinds.rna.SIZES`` (MLP fixed by the preset;
+    the triplane's R and C may be overridden)."""
     torch = _torch()
     nn = torch.nn
     F = torch.nn.functional
     res, ch, layers, hidden = SIZES[size]
+    res, ch = plane_res or res, plane_channels or ch
+
+    class DirectionFeatures(nn.Module):
+        """Part of the exported decoder: appends angular features computed from the contract's input
+        row [zeta (C), xn, n, wo, wi] -- n.wi, n.wo, n.h, wo.wi and lobes exp(k (n.h - 1)), h the
+        half vector -- so the MLP need not build a highlight out of ReLUs of raw directions."""
+
+        def __init__(self, c: int) -> None:
+            super().__init__()
+            self.c = c
+            self.register_buffer("k", torch.tensor(LOBE_SHARPNESS))
+
+        def forward(self, x):
+            c = self.c
+            n, wo, wi = x[:, c + 3:c + 6], x[:, c + 6:c + 9], x[:, c + 9:c + 12]
+            h = wo + wi
+            h = h / torch.sqrt((h * h).sum(1, keepdim=True) + 1e-8)
+            nh = (n * h).sum(1, keepdim=True)
+            dots = torch.cat([(n * wi).sum(1, keepdim=True), (n * wo).sum(1, keepdim=True), nh,
+                              (wo * wi).sum(1, keepdim=True)], dim=1)
+            return torch.cat([x, dots, torch.exp(self.k * (nh - 1.0))], dim=1)
+
+    extra = {"raw": 0, "lobes": 4 + len(LOBE_SHARPNESS)}
+    if encoding not in extra:
+        raise ValueError(f"unknown encoding {encoding!r}")
 
     class RnaModel(nn.Module):
         def __init__(self) -> None:
@@ -80,8 +118,9 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0):
             g = torch.Generator().manual_seed(seed)
             # torch layout [plane, C, v, u]; exported as [plane, v, u, C]
             self.planes = nn.Parameter(torch.randn(3, ch, res, res, generator=g) * init_std)
-            widths = [ch + 12] + [hidden] * layers + [6]
-            mods = []
+            self.in_width = ch + 12
+            widths = [ch + 12 + extra[encoding]] + [hidden] * layers + [6]
+            mods = [DirectionFeatures(ch)] if encoding == "lobes" else []
             for i, (a, b) in enumerate(zip(widths[:-1], widths[1:], strict=False)):
                 mods.append(nn.Linear(a, b))
                 if i < len(widths) - 2:
@@ -151,6 +190,20 @@ def log_transport(p):
     return torch.log1p(torch.relu(p)) - torch.relu(-p)
 
 
+def loss_fn(pred, y, settings: TrainSettings):
+    """Training loss (spec/bake.md#training) of the visibility-selected prediction vs target y."""
+    torch = _torch()
+    y = y.clamp_min(0)
+    if settings.loss == "log":
+        return torch.mean((log_transport(pred) - torch.log1p(y)) ** 2)
+    if settings.loss == "rel":
+        w = 1.0 / (pred.detach().clamp_min(0) + settings.rel_eps) ** 2
+        return torch.mean(w * (pred - y) ** 2)
+    if settings.loss == "l2":
+        return torch.mean((pred - y) ** 2)
+    raise ValueError(f"unknown loss {settings.loss!r}")
+
+
 def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]:
     """(PSNR dB, linear MSE, peak): both normalised by the ground truth's 99.5th percentile and
     clipped to [0, 1] (a fixed exposure on a display), peak 1; over asset pixels only."""
@@ -209,7 +262,7 @@ def export_onnx(model) -> bytes:
     """The decoder MLP as ONNX (opset 17, input 'x' [N, C+12], output 'y' [N, 6], dynamic N)."""
     torch = _torch()
     dec = model.decoder.cpu().eval()
-    width = dec[0].in_features
+    width = model.in_width
     buf = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -224,8 +277,10 @@ def onnx_parity(model, onnx_bytes: bytes, n: int = 4096, seed: int = 0) -> float
     from nasset_sdk.networks import make_session
 
     dec = model.decoder.cpu().eval()
-    width = dec[0].in_features
+    width = model.in_width
     x = np.random.default_rng(seed).normal(0, 1, (n, width)).astype(np.float32)
+    for a in range(width - 9, width, 3):  # n, wo, wi are unit vectors (the SDK normalises them)
+        x[:, a:a + 3] /= np.maximum(np.linalg.norm(x[:, a:a + 3], axis=1, keepdims=True), 1e-6)
     with torch.no_grad():
         ref = dec(torch.from_numpy(x)).numpy()
     got = make_session(onnx_bytes).run(None, {"x": x})[0]
@@ -249,7 +304,8 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         raise error("CONVERT_TRAINING", "no training samples: no camera ray hit the asset")
     T = _tensors(torch, train_data, lo, hi, device)
     V = _tensors(torch, val_data, lo, hi, device)
-    model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed).to(device)
+    model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed, plane_res=settings.plane_res,
+                        plane_channels=settings.plane_channels, encoding=settings.encoding).to(device)
     opt = torch.optim.Adam([
         {"params": [model.planes], "lr": settings.plane_lr},
         {"params": model.decoder.parameters(), "lr": settings.lr},
@@ -277,7 +333,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
             idx = perm[s:s + settings.batch]
             y = model(T["xn"][idx], T["n"][idx], T["wo"][idx], T["wi"][idx], sigma)
             pred = torch.where(T["vis"][idx][:, None], y[:, :3], y[:, 3:])
-            loss = torch.mean((log_transport(pred) - torch.log1p(T["rgb"][idx].clamp_min(0))) ** 2)
+            loss = loss_fn(pred, T["rgb"][idx], settings)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

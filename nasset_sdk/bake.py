@@ -24,11 +24,13 @@ import numpy as np
 
 from .errors import UsageError, error
 
-#: data presets: (views, val_views, res, spp, val_spp, lights_per_view)
+#: data presets (converters.mitsuba.dataset.DataSettings fields). lights_per_view 0: every training
+#: pixel has its own random light; held-out views: one light per view, lower res, many more spp
+#: (their noise bounds the measurable PSNR; spec/bake.md#psnr). Measured in spec/bake.md#ablations.
 DATA_PRESETS = {
-    "tiny": dict(views=6, val_views=2, res=24, spp=8, val_spp=16, lights_per_view=4),
-    "small": dict(views=96, val_views=8, res=96, spp=64, val_spp=128, lights_per_view=32),
-    "hq": dict(views=200, val_views=16, res=160, spp=128, val_spp=256, lights_per_view=64),
+    "tiny": dict(views=6, val_views=2, res=24, spp=8, val_res=24, val_spp=64, lights_per_view=0),
+    "small": dict(views=96, val_views=8, res=96, spp=64, val_res=64, val_spp=1024, lights_per_view=0),
+    "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
 }
 
 
@@ -130,8 +132,8 @@ def bake(
         dset = replace(dset, views=int(views), val_views=max(1, int(views) // 8))
     if res is not None:
         dset = replace(dset, res=int(res))
-    if spp is not None:
-        dset = replace(dset, spp=int(spp), val_spp=2 * int(spp))
+    if spp is not None:  # training views only: the held-out reference keeps the preset's (low) noise
+        dset = replace(dset, spp=int(spp))
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
     renderer = ds.Renderer(mi, iso, dset)
     times["scene_s"] = time.perf_counter() - t

@@ -69,6 +69,28 @@ def _render_args(p):
     p.add_argument("--batch", type=int, default=65536, help="rays per wavefront batch")
     p.add_argument("--tile", type=int, default=64, help="tile edge in pixels")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--neupress-sampling", default="auto", choices=["auto", "dome", "lobe", "mis"],
+                   help="neupress: light sampling (dome), the sampling network's lobe, or both with MIS "
+                        "(auto: mis when the asset has the sampling component, else dome)")
+    p.add_argument("--prt", action="store_true", help="neupress: shade with the PRT component and the dome's SH projection")
+    p.add_argument("--8dna-sampling", dest="eightdna_sampling", default="mis", choices=["light", "flow", "mis"],
+                   help="8dna: emitter sampling, the asset's own sampling (GGX lobe, flow directions), or both with MIS")
+
+
+@verb("conformance", "run a renderer on the conformance cases and compare with the reference images (spec/conformance.md)",
+      "nasset_sdk.conformance:run")
+def _conformance_args(p):
+    p.add_argument("--renderer", default="nasset render {scene} -o {out} --spp {spp} --seed {seed} --width {width} --height {height} --quiet",
+                   help="command template, split like a shell command line; placeholders {scene} {out} {spp} {width} {height} "
+                   "{seed} (default: the reference renderer)")
+    p.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="run only these cases")
+    p.add_argument("--suite", default=None, metavar="DIR", help="cases folder (default: the checkout's tests/conformance/cases)")
+    p.add_argument("--workdir", default=None, metavar="DIR", help="where images, logs and error maps go (default: a new temp folder)")
+    p.add_argument("--seed", type=int, default=0, help="value of {seed} (default 0)")
+    p.add_argument("--spp-scale", type=int, default=1, metavar="K", help="render at K x the case's spp (tolerances unchanged)")
+    p.add_argument("--timeout", type=float, default=600.0, help="seconds per case before the render counts as failed")
+    p.add_argument("--list", action="store_true", help="list the cases and exit")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
 @verb("bake", "bake an object of a Mitsuba 3 scene into a neural asset (render data, train, export)", "nasset_sdk.bake:run")
@@ -91,6 +113,52 @@ def _bake_args(p):
     p.add_argument("--device", default="auto", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+@verb("view", "preview an asset shaded by its neural transport under one distant light (pyvista; PNG when headless)",
+      "nasset_sdk.view:run")
+def _view_args(p):
+    p.add_argument("file", help="asset file")
+    p.add_argument("--light-dir", nargs=3, type=float, default=[0.5, 0.8, 0.6], metavar=("X", "Y", "Z"),
+                   help="object-space direction from the asset towards the distant light (default 0.5 0.8 0.6)")
+    p.add_argument("--view-dir", nargs=3, type=float, default=[0.3, 0.35, 1.0], metavar=("X", "Y", "Z"),
+                   help="object-space direction from the asset towards the camera (default 0.3 0.35 1)")
+    p.add_argument("--png", default=None, help="write the picture to this PNG off-screen instead of opening a window "
+                   "(without a display the default is ./ASSET.view.png or ./ASSET.channelK.png)")
+    p.add_argument("--fallback", action="store_true", help="shade with the fallback UsdPreviewSurface colour (Lambertian)")
+    p.add_argument("--channel", type=int, default=None, metavar="K",
+                   help="show triplane channel K (rna, 8dna): planes XY, YZ, ZX side by side, colour-mapped")
+    p.add_argument("--size", nargs=2, type=int, default=[800, 600], metavar=("W", "H"), help="image size (default 800 600)")
+    p.add_argument("--per-pixel", action="store_true", help="ray-cast the mesh and evaluate at every pixel (default: per vertex)")
+    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops before the sRGB curve (default 0)")
+
+
+@verb("convert-scene", "convert a Mitsuba 3 scene (camera, lights, plain shapes) to USD, baked assets in place of their shapes",
+      "converters.mitsuba.usd_export:run")
+def _convert_scene_args(p):
+    p.add_argument("scene", help="Mitsuba 3 scene .xml")
+    p.add_argument("-o", "--output", required=True, help="output .usda / .usdc")
+    p.add_argument("--replace", action="append", default=None, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
+                   help="reference this baked asset in place of these shapes (repeatable; path stored relative to the output)")
+    p.add_argument("--no-usd-checks", action="store_true", help="skip OpenUSD's validators on the written stage")
+    p.add_argument("--json", action="store_true", help="print the report (prims, warnings, USD checks) as JSON")
+
+
+@verb("bench", "benchmarks: error-vs-time (Mitsuba path tracing vs the reference renderer with a baked asset)",
+      "converters.mitsuba.bench:run")
+def _bench_args(p):
+    p.add_argument("which", choices=["error-vs-time"], help="benchmark to run")
+    p.add_argument("-o", "--output", default="bench_error_vs_time", help="output folder (table JSON, plot PNG, scene)")
+    p.add_argument("--asset", default=None, help="baked asset of the example scene's shell+jelly (default: bake one)")
+    p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset when baking (default tiny)")
+    p.add_argument("--res", type=int, default=None, help="image width = height (default 128; 64 with --quick)")
+    p.add_argument("--gt-spp", type=int, default=None, help="ground-truth spp (default 4096; 1024 with --quick)")
+    p.add_argument("--mi-spp", default=None, help="Mitsuba spp list, e.g. 1,2,4,8,16,32,64,128")
+    p.add_argument("--nr-spp", default=None, help="reference-renderer spp list, e.g. 1,2,4,8,16,32")
+    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
+    p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
 
 
 @verb("schema-path", "print the folder to add to PXR_PLUGINPATH_NAME for hosts that start USD first", "nasset_sdk.plugin:run_schema_path")

@@ -86,6 +86,8 @@ CODES: dict[str, Code] = _codes(
     # validator
     ("USD_CHECK", "format", "an OpenUSD validator (the usdchecker engine) reported a problem", "validation.md#usd-checks"),
     ("CHECK_FAILED", "format", "a validation check could not complete on this input", "validation.md#report"),
+    # converters (scene conversion)
+    ("CONVERT_ASSET_REFERENCE", "scene", "a --replace asset file is missing or is not a neural asset", "bake.md#scene-conversion"),
 )
 
 

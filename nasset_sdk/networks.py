@@ -211,4 +211,6 @@ def make_session(data: bytes, *, intra_threads: int = 0, inter_threads: int = 1)
     opts.inter_op_num_threads = int(inter_threads)
     opts.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
     opts.log_severity_level = 3
+    # idle worker threads spinning compete with the caller's numpy work on small machines
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(bytes(data), sess_options=opts, providers=["CPUExecutionProvider"])

@@ -1,82 +1,192 @@
 """Benchmark (not a test): render throughput vs the bound set by onnxruntime and Embree.
 
-    python -m reference_renderer.bench [--size small] [--res 128] [--spp 8] [--threads 0]
+    python -m reference_renderer.bench [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
 
-Scene: one rna asset under a distant light (no other objects: NEE only). Prints camera samples
-per second, the decoder's raw onnxruntime throughput, Embree's raw ray throughput, the bound
-1 / (evals_per_sample / onnx_rate + rays_per_sample / embree_rate) and the ratio, and a time
-breakdown (trace / network / other).
+Scene: one rna asset under a distant light (no other objects: NEE only). For each onnxruntime
+thread setting, in one process and with that same setting throughout, it renders ``--repeat``
+times and measures
+
+* the decoder's raw onnxruntime throughput (the render's own session, random inputs, best over
+  a few batch sizes: the bound should be the best the runtime can do, not one unlucky size),
+* Embree's raw closest-hit throughput (rays at the asset, best over a few batch sizes),
+
+then prints camera samples/s (median), the bound
+1 / (evals_per_sample / onnx_rate + rays_per_sample / embree_rate), their ratio, where the render's
+time goes (trace = Embree calls and their conversions, onnx = decoder runs, triplane = feature
+lookups, encode = the rest of the network input, other = numpy path-tracing bookkeeping) and,
+with ``--profile N``, the N functions with the most own time in one profiled render.
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
+import io
+import pstats
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+BATCHES = (4096, 8192, 16384, 65536)
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--size", default="small")
-    ap.add_argument("--res", type=int, default=128)
-    ap.add_argument("--spp", type=int, default=8)
-    ap.add_argument("--threads", type=int, default=0)
-    ap.add_argument("--batch", type=int, default=65536)
-    a = ap.parse_args(argv)
-    from .accel import EmbreeBackend
-    from .integrator import RenderSettings, render
+
+class _TimedSession:
+    """Wraps an onnxruntime session; accumulates the wall time of ``run``."""
+
+    def __init__(self, session) -> None:
+        self.session, self.time = session, 0.0
+
+    def run(self, *args, **kw):
+        t = time.perf_counter()
+        try:
+            return self.session.run(*args, **kw)
+        finally:
+            self.time += time.perf_counter() - t
+
+    def __getattr__(self, name):
+        return getattr(self.session, name)
+
+
+def _best_rate(fn, n: int, min_time: float = 0.15, rounds: int = 3) -> float:
+    """Best items/s of fn() over a few timed rounds (each at least ``min_time`` seconds)."""
+    fn()  # warm up
+    best = 0.0
+    for _ in range(rounds):
+        reps, t0 = 0, time.perf_counter()
+        while True:
+            fn()
+            reps += 1
+            dt = time.perf_counter() - t0
+            if dt >= min_time:
+                break
+        best = max(best, reps * n / dt)
+    return best
+
+
+def _scene(size: str):
     from .scene import load_scene
     from .testscenes import SceneBuilder, random_rna_asset
 
     tmp = Path(tempfile.mkdtemp())
-    asset = random_rna_asset(tmp / "a.usdc", size=a.size)
+    asset = random_rna_asset(tmp / "a.usdc", size=size)
     b = SceneBuilder()
     b.camera((0, 0.3, 2.2), (0, 0, 0), focal=35)
     b.distant("Sun", (0.4, 1.0, 0.3), 3.0)
     b.asset("Obj", asset)
-    scene = load_scene(b.write(tmp / "bench.usda"))
-    settings = RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=a.threads, batch=a.batch)
-    render(scene, RenderSettings(spp=1, width=16, height=16, threads=a.threads))  # warm up
-    res = render(scene, settings)
-    st = res.stats
-    rate = st.camera_samples / st.time_total
-    # raw decoder throughput
+    return load_scene(b.write(tmp / "bench.usda"))
+
+
+def run_one(scene, a, threads: int) -> dict:
+    from nasset_sdk.kinds import rna
+
+    from .accel import EmbreeBackend
+    from .integrator import RenderSettings, prepare_assets, render
+    from .plan import make_plan
+
+    settings = RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch)
+    for data in scene.assets:
+        data.evaluator = None  # a fresh evaluator (and session) for this thread setting
+    width, height = scene.camera.default_resolution(settings.width, settings.height)
+    plan = make_plan(scene, width=width, height=height, spp=settings.spp, max_depth=settings.max_depth,
+                     tile=settings.tile, batch=settings.batch)
+    prepare_assets(scene, plan, settings)
     ev = scene.assets[0].evaluator
-    n = a.batch
-    width = ev.session.get_inputs()[0].shape[1]
-    x = np.random.default_rng(0).random((n, width)).astype(np.float32)
-    ev.session.run(None, {"x": x})
-    t = time.perf_counter()
-    reps = 5
-    for _ in range(reps):
-        ev.session.run(None, {"x": x})
-    onnx_rate = reps * n / (time.perf_counter() - t)
-    # raw embree throughput (closest hit, coherent-ish random rays at the asset)
+    timed = _TimedSession(ev.session)
+    ev.session = timed
+    tri_time = [0.0]
+    triplane = rna.triplane
+
+    def timed_triplane(*args):
+        t = time.perf_counter()
+        try:
+            return triplane(*args)
+        finally:
+            tri_time[0] += time.perf_counter() - t
+
+    render(scene, RenderSettings(spp=1, width=16, height=16, threads=threads))  # warm up
+    runs = []
+    rna.triplane = timed_triplane
+    try:
+        for _ in range(a.repeat):
+            timed.time, tri_time[0] = 0.0, 0.0
+            st = render(scene, settings).stats
+            runs.append((st.time_total, st.time["trace"], timed.time, tri_time[0], st.time["network"], st))
+    finally:
+        rna.triplane = triplane
+    runs.sort(key=lambda r: r[0])
+    total, trace, onnx_t, tri_t, net_t, st = runs[len(runs) // 2]  # the median run
+    out = dict(threads=threads, st=st, rate=st.camera_samples / total, total=total, trace=trace, onnx=onnx_t,
+               triplane=tri_t, encode=net_t - onnx_t - tri_t, other=total - trace - net_t,
+               rates=[r[5].camera_samples / r[0] for r in runs])
+    if a.profile:
+        pr = cProfile.Profile()
+        pr.enable()
+        render(scene, settings)
+        pr.disable()
+        s = io.StringIO()
+        pstats.Stats(pr, stream=s).sort_stats("tottime").print_stats(a.profile)
+        out["profile"] = s.getvalue()
+    ev.session = timed.session
+
+    # raw decoder throughput: the render's session (same thread setting), best batch size
+    width_in = ev.session.get_inputs()[0].shape[1]
+    rng = np.random.default_rng(0)
+    onnx_rates = {}
+    for n in BATCHES:
+        x = rng.random((n, width_in)).astype(np.float32)
+        onnx_rates[n] = _best_rate(lambda x=x: ev.session.run(None, {"x": x}), n)
+    # raw Embree throughput: closest hit, coherent-ish random rays at the asset, best batch size
     emb = EmbreeBackend(scene.triangles)
-    rng = np.random.default_rng(1)
-    o = np.tile([[0.0, 0.3, 2.2]], (n, 1))
-    d = rng.normal(0, 0.15, (n, 3)) + [0, -0.3, -2.2]
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    emb.closest(o, d, np.full(n, np.inf))
-    t = time.perf_counter()
-    for _ in range(reps):
-        emb.closest(o, d, np.full(n, np.inf))
-    ray_rate = reps * n / (time.perf_counter() - t)
-    evals_ps = st.network_evals / st.camera_samples
-    rays_ps = st.rays / st.camera_samples
-    bound = 1.0 / (evals_ps / onnx_rate + rays_ps / ray_rate)
-    print(f"scene: rna '{a.size}' asset, distant light, {a.res}x{a.res} x {a.spp} spp")
-    print(f"render:      {rate:12,.0f} camera samples/s  ({st.time_total:.2f} s)")
-    print(f"onnxruntime: {onnx_rate:12,.0f} decoder evals/s (batch {n})")
-    print(f"embree:      {ray_rate:12,.0f} rays/s")
-    print(f"per sample:  {evals_ps:.3f} network evals, {rays_ps:.3f} rays")
-    print(f"bound:       {bound:12,.0f} samples/s -> ratio {rate / bound:.2f}")
-    tt = st.time
-    print(f"time: trace {tt['trace']:.2f} s, network (incl. triplane encode) {tt['network']:.2f} s, "
-          f"other numpy {tt['other']:.2f} s")
+    emb_rates = {}
+    for n in BATCHES:
+        o = np.tile([[0.0, 0.3, 2.2]], (n, 1))
+        d = rng.normal(0, 0.15, (n, 3)) + [0, -0.3, -2.2]
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        emb_rates[n] = _best_rate(lambda o=o, d=d, n=n: emb.closest(o, d, np.full(n, np.inf)), n)
+    out.update(onnx_rates=onnx_rates, emb_rates=emb_rates)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", default="small")
+    ap.add_argument("--res", type=int, default=256)
+    ap.add_argument("--spp", type=int, default=8)
+    ap.add_argument("--threads", default="1,2", help="onnxruntime intra-op threads, a comma list (0: its default)")
+    ap.add_argument("--batch", type=int, default=65536)
+    ap.add_argument("--repeat", type=int, default=3, help="renders per setting (the median is reported)")
+    ap.add_argument("--profile", type=int, default=12, help="top entries of a profiled render (0: none)")
+    a = ap.parse_args(argv)
+    scene = _scene(a.size)
+    print(f"scene: rna '{a.size}' asset, distant light, {a.res}x{a.res} x {a.spp} spp "
+          f"(median of {a.repeat} renders per thread setting)")
+    for threads in [int(t) for t in a.threads.split(",")]:
+        r = run_one(scene, a, threads)
+        st = r["st"]
+        onnx_rate, ray_rate = max(r["onnx_rates"].values()), max(r["emb_rates"].values())
+        evals_ps = st.network_evals / st.camera_samples
+        rays_ps = st.rays / st.camera_samples
+        bound = 1.0 / (evals_ps / onnx_rate + rays_ps / ray_rate)
+        fmt = lambda d: ", ".join(f"{n}: {v / 1e6:.2f}M" for n, v in d.items())  # noqa: E731
+        print(f"\n== onnxruntime intra-op threads {threads} ==")
+        print(f"render:      {r['rate']:12,.0f} camera samples/s  ({r['total']:.3f} s; runs "
+              + ", ".join(f"{x:,.0f}" for x in sorted(r["rates"])) + ")")
+        print(f"onnxruntime: {onnx_rate:12,.0f} decoder evals/s (best; per batch {fmt(r['onnx_rates'])})")
+        print(f"embree:      {ray_rate:12,.0f} rays/s (best; per batch {fmt(r['emb_rates'])})")
+        print(f"per sample:  {evals_ps:.3f} network evals, {rays_ps:.3f} rays")
+        print(f"bound:       {bound:12,.0f} samples/s -> ratio {r['rate'] / bound:.2f}")
+        parts = [("trace", r["trace"]), ("onnx", r["onnx"]), ("triplane", r["triplane"]), ("encode", r["encode"]),
+                 ("other", r["other"])]
+        print("time:        " + ", ".join(f"{k} {v:.3f} s ({100 * v / r['total']:.0f}%)" for k, v in parts))
+        in_render = st.network_evals / max(r["onnx"], 1e-12), st.rays / max(r["trace"], 1e-12)
+        print(f"in render:   onnxruntime {in_render[0]:,.0f} evals/s, trace {in_render[1]:,.0f} rays/s (incl. conversions)")
+        if "profile" in r:
+            lines = r["profile"].strip().splitlines()
+            start = next((i for i, line in enumerate(lines) if line.lstrip().startswith("ncalls")), 0)
+            print("profile (own time, one render under cProfile):")
+            print("\n".join("  " + line for line in lines[start:]))
     return 0
 
 

@@ -21,10 +21,14 @@ class PerspectiveCamera:
     horizontal_aperture: float
     vertical_aperture: float
     prim: str = ""
+    resolution: tuple[int, int] | None = None  # from a UsdRender.Settings prim, if the stage has one
 
     def default_resolution(self, width: int | None, height: int | None) -> tuple[int, int]:
+        """Explicit sizes win; else the stage's render settings; else 256 wide at the aperture's aspect."""
         aspect = self.vertical_aperture / self.horizontal_aperture
         if width is None and height is None:
+            if self.resolution is not None:
+                return self.resolution
             width = 256
         if width is None:
             width = max(1, int(round(height / aspect)))

@@ -25,10 +25,13 @@ def run(args) -> int:
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     settings = RenderSettings(spp=args.spp, seed=args.seed, width=args.width, height=args.height, max_depth=args.max_depth,
-                              batch=args.batch, tile=args.tile, threads=args.threads, progress=not args.quiet)
+                              batch=args.batch, tile=args.tile, threads=args.threads, progress=not args.quiet,
+                              neupress_sampling=getattr(args, "neupress_sampling", "auto"), prt=bool(getattr(args, "prt", False)),
+                              eightdna_sampling=getattr(args, "eightdna_sampling", "mis"))
     width, height = scene.camera.default_resolution(args.width, args.height)
     plan = make_plan(scene, width=width, height=height, spp=args.spp, max_depth=args.max_depth, tile=args.tile,
-                     batch=args.batch)
+                     batch=args.batch, neupress_sampling=settings.neupress_sampling, prt=settings.prt,
+                     eightdna_sampling=settings.eightdna_sampling)
     if args.explain:
         print(plan.explain())
     prepare_assets(scene, plan, settings)

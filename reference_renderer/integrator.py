@@ -7,6 +7,7 @@ skip it, the rna branch picked by whether the asset itself blocks the direction.
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -41,6 +42,9 @@ class RenderSettings:
     rr_depth: int = 3
     progress: bool = False
     backend: str = "embree"
+    neupress_sampling: str = "auto"  # auto | dome | lobe | mis (spec/renderer.md#neupress)
+    prt: bool = False  # neupress PRT mode
+    eightdna_sampling: str = "mis"  # light | flow | mis (spec/renderer.md#8dna)
 
 
 @dataclass
@@ -65,6 +69,11 @@ class RenderResult:
     @property
     def variance(self):
         return self.film.variance()
+
+
+def _max3(a: np.ndarray) -> np.ndarray:
+    """a.max(1) for [n, 3] rows (elementwise maxima: much faster than a reduction over 3 items)."""
+    return np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
 
 
 def _unique(a: np.ndarray) -> np.ndarray:
@@ -96,6 +105,11 @@ class PathIntegrator:
         self.tri_ng = normalize(ng)
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
+        self.kind_shading = None  # neupress / 8dna instances (spec/renderer.md#neupress, #8dna); None: rna only
+        if any(data.asset.kind != "rna" for data in scene.assets):
+            from .neural_kinds import KindShading
+
+            self.kind_shading = KindShading(self)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
@@ -142,6 +156,7 @@ class PathIntegrator:
         ignore = np.full(n0, -1, np.int64)
         pend = None  # (mask, T_unshadowed/pdf, T_shadowed/pdf) of neural continuations
         lights = self.scene.lights
+        has_area = any(light.area for light in lights)
         depth = 0
         while len(idx):
             hits = self._trace(o, d, None, ignore)
@@ -150,7 +165,7 @@ class PathIntegrator:
                 beta[m] *= np.where(hits.self_hit[m][:, None], ts, tu)
             pend = None
             if depth >= self.s.rr_depth:
-                q = np.clip(beta.max(1), 0.05, 1.0)
+                q = np.clip(_max3(beta), 0.05, 1.0)
                 live = rng.random(len(idx)) < q
                 beta = beta / q[:, None]
                 sel = np.nonzero(live)[0]
@@ -160,29 +175,34 @@ class PathIntegrator:
                 if not len(idx):
                     break
             no_mis = np.zeros(len(idx), bool)
-            t_hit = hits.t.copy()
-            light_hit = np.full(len(idx), -1)
-            le_hit = np.zeros((len(idx), 3))
-            for k, light in enumerate(lights):
-                if light.area:
-                    tl, le = light.intersect(o, d)
-                    closer = tl < t_hit
-                    t_hit[closer] = tl[closer]
-                    light_hit[closer] = k
-                    le_hit[closer] = le[closer]
-            for k in _unique(light_hit[light_hit >= 0]):
-                m = light_hit == k
-                w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
-                L[idx[m]] += beta[m] * le_hit[m] * w[:, None]
-            esc = (hits.prim < 0) & (light_hit < 0)
+            if has_area:
+                t_hit = hits.t.copy()
+                light_hit = np.full(len(idx), -1)
+                le_hit = np.zeros((len(idx), 3))
+                for k, light in enumerate(lights):
+                    if light.area:
+                        tl, le = light.intersect(o, d)
+                        closer = tl < t_hit
+                        t_hit[closer] = tl[closer]
+                        light_hit[closer] = k
+                        le_hit[closer] = le[closer]
+                for k in _unique(light_hit[light_hit >= 0]):
+                    m = light_hit == k
+                    w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
+                    L[idx[m]] += beta[m] * le_hit[m] * w[:, None]
+                esc = (hits.prim < 0) & (light_hit < 0)
+                surf = (hits.prim >= 0) & (light_hit < 0)
+            else:  # no light has a shape: nothing but geometry can be hit
+                esc = hits.prim < 0
+                surf = ~esc
             if esc.any():
                 for k, light in enumerate(lights):
-                    if light.infinite:
+                    if light.infinite and not light.delta:  # a delta light is never reached by a ray
                         le = light.le_escaped(d[esc])
                         if le.any():
                             w = self._mis_light(k, prev_pdf[esc], specular[esc], o[esc], d[esc], no_mis[esc])
                             L[idx[esc]] += beta[esc] * le * w[:, None]
-            sel = np.nonzero((hits.prim >= 0) & (light_hit < 0))[0]
+            sel = np.nonzero(surf)[0]
             if not len(sel):
                 break
             idx, o, d, beta = idx[sel], o[sel], d[sel], beta[sel]
@@ -203,7 +223,10 @@ class PathIntegrator:
             if mesh.any():
                 new.append(self._mesh_vertex(np.nonzero(mesh)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
             if neural.any():
-                new.append(self._neural_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+                if self.kind_shading is None:
+                    new.append(self._neural_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+                else:
+                    new += self.kind_shading.vertices(neural, idx, x, d, beta, prim, bu, bv, inst, L, rng)
             new = [n for n in new if n is not None and len(n[0])]
             if not new:
                 break
@@ -214,6 +237,8 @@ class PathIntegrator:
             prev_pdf = np.concatenate([n[4] for n in new])
             ignore = np.concatenate([n[5] for n in new])
             specular = np.zeros(len(idx), bool)
+            if any(len(n) > 7 for n in new):  # neupress / 8dna continuations may carry MIS weight 1
+                specular = np.concatenate([n[7] if len(n) > 7 else np.zeros(len(n[0]), bool) for n in new])
             pm = [n[6] for n in new]
             if any(p is not None for p in pm):
                 mask = np.concatenate([np.zeros(len(n[0]), bool) if p is None else p[0] for n, p in zip(new, pm, strict=True)])
@@ -238,19 +263,19 @@ class PathIntegrator:
         wo_l = to_local(wo, t, b, ns)
         mat = self.inst_mat[inst]
         indirect = self.indirect[inst]
-        xo = x + ng * (self.eps * (1.0 + np.abs(x).max(1)))[:, None]
+        xo = x + ng * (self.eps * (1.0 + _max3(np.abs(x)) / self.accel.scale))[:, None]
         for k in self.nee:
             light = self.scene.lights[k]
             wi, dist, li, pdf = light.sample(x, rng.random((len(x), 2)))
             cos = dot(wi, ns)
-            ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (li.max(1) > 0)
+            ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (_max3(li) > 0)
             s = np.nonzero(ok)[0]
             if not len(s):
                 continue
             f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]))
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
-            nz = c.max(1) > 0
+            nz = _max3(c) > 0
             s, c = s[nz], c[nz]
             if not len(s):
                 continue
@@ -296,7 +321,7 @@ class PathIntegrator:
             ridx = idx
         n = len(x)
         ng = self.tri_ng[prim]
-        scale = (self.eps * (1.0 + np.abs(x).max(1)))[:, None]
+        scale = (self.eps * (1.0 + _max3(np.abs(x)) / self.accel.scale))[:, None]
         x_obj = self._to_object(x, inst, point=True)
         wo_obj = normalize(self._to_object(-d, inst))
         asset_id = self.inst_asset[inst]
@@ -317,7 +342,7 @@ class PathIntegrator:
         for k in self.nee:
             light = self.scene.lights[k]
             wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
-            ok = (pdf > 0) & (li.max(1) > 0)
+            ok = (pdf > 0) & (_max3(li) > 0)
             s = np.nonzero(ok)[0]
             if not len(s):
                 continue
@@ -354,6 +379,8 @@ class PathIntegrator:
         if len(ray):
             wi_obj = normalize(self._to_object(wi_all, inst[ray]))
             ray_asset = asset_id[ray]
+            # float32 once per hit point, then gathered per row (a point has a light and a continuation row)
+            x32, n32, wo32 = x_obj.astype(np.float32), n_obj.astype(np.float32), wo_obj.astype(np.float32)
             for a in _unique(ray_asset):
                 ev = self.scene.assets[a].evaluator
                 if len(assets) == 1:
@@ -362,8 +389,7 @@ class PathIntegrator:
                     m = ray_asset == a
                     rr, wi_m = ray[m], wi_obj[m]
                 t0 = time.perf_counter()
-                u_, s_ = ev.evaluate(x_obj[rr].astype(np.float32), n_obj[rr].astype(np.float32),
-                                     wo_obj[rr].astype(np.float32), wi_m.astype(np.float32))
+                u_, s_ = ev.evaluate(x32[rr], n32[rr], wo32[rr], wi_m.astype(np.float32))
                 self.stats.time["network"] += time.perf_counter() - t0
                 self.stats.network_evals += len(rr)
                 tu[m], ts[m] = u_, s_
@@ -390,7 +416,8 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     s = settings or RenderSettings()
     width, height = scene.camera.default_resolution(s.width, s.height)
     if plan is None:
-        plan = make_plan(scene, width=width, height=height, spp=s.spp, max_depth=s.max_depth, tile=s.tile, batch=s.batch)
+        plan = make_plan(scene, width=width, height=height, spp=s.spp, max_depth=s.max_depth, tile=s.tile, batch=s.batch,
+                         neupress_sampling=s.neupress_sampling, prt=s.prt, eightdna_sampling=s.eightdna_sampling)
     if load_components:
         prepare_assets(scene, plan, s)
     integ = PathIntegrator(scene, plan, s)
@@ -429,6 +456,23 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     return RenderResult(film, plan, st)
 
 
+def decoder_threads(threads: int) -> int:
+    """onnxruntime intra-op threads for ``RenderSettings.threads`` (0: automatic).
+
+    Automatic is onnxruntime's own default (one per core), except on machines with at most two
+    usable cores: there one thread is faster, because the render's numpy work between decoder runs
+    shares the cores with onnxruntime's spinning worker threads (measured with
+    ``python -m reference_renderer.bench --threads 1,2``: about 2x slower renders with 2 threads).
+    """
+    if threads > 0:
+        return int(threads)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on every platform
+        cores = os.cpu_count() or 1
+    return 1 if cores <= 2 else 0
+
+
 def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings) -> None:
     """Load what the plan needs of each asset and build its evaluator (once per file)."""
     from nasset_sdk.errors import NassetError, SceneError
@@ -439,7 +483,7 @@ def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings) -> None:
         loaded, _ = plan.components[str(data.path)]
         try:
             data.asset.load(loaded)
-            data.evaluator = data.asset.evaluator(intra_threads=settings.threads, batch=max(1024, settings.batch))
+            data.evaluator = data.asset.evaluator(intra_threads=decoder_threads(settings.threads), batch=max(1024, settings.batch))
         except NassetError as exc:
             raise SceneError("SCENE_INVALID", f"referenced asset {data.path} is invalid: {exc}", file=scene.file,
                              prim=data.prims[0] if data.prims else None) from None

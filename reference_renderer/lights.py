@@ -69,10 +69,12 @@ class DistantLight(Light):
         self.w = normalize(np.asarray(direction, np.float64)[None])[0]  # toward the light
         self.E = np.asarray(irradiance, np.float64)
         self.prim = prim
-        half = np.radians(max(float(angle_deg), 0.0)) * 0.5
-        self.delta = half <= 0.0
+        half = min(np.radians(max(float(angle_deg), 0.0)) * 0.5, np.pi)  # an apex angle >= 360 degrees: the whole sphere
+        one_minus_cos = 2.0 * np.sin(0.5 * half) ** 2  # 1 - cos(half) without cancellation in narrow cones
+        self.delta = half <= 0.0 or np.cos(half) >= 1.0  # a cone narrower than float64 directions resolve is a delta light
         if not self.delta:
             self.cos_max = float(np.cos(half))
+            self.cone_pdf = 1.0 / (2.0 * np.pi * one_minus_cos)
             self.L = self.E / (np.pi * np.sin(half) ** 2)
             self.t, self.b = (a[0] for a in frame(self.w[None]))
 
@@ -85,13 +87,13 @@ class DistantLight(Light):
             return np.broadcast_to(self.w, (n, 3)).copy(), np.full(n, INF), np.broadcast_to(self.E, (n, 3)).copy(), np.ones(n)
         loc = square_to_uniform_cone(u, self.cos_max)
         wi = loc[:, 0:1] * self.t + loc[:, 1:2] * self.b + loc[:, 2:3] * self.w
-        pdf = np.full(n, 1.0 / (2.0 * np.pi * (1.0 - self.cos_max)))
+        pdf = np.full(n, self.cone_pdf)
         return wi, np.full(n, INF), np.broadcast_to(self.L, (n, 3)).copy(), pdf
 
     def pdf(self, p, wi):
         if self.delta:
             return np.zeros(len(wi))
-        return np.where(wi @ self.w >= self.cos_max, 1.0 / (2.0 * np.pi * (1.0 - self.cos_max)), 0.0)
+        return np.where(wi @ self.w >= self.cos_max, self.cone_pdf, 0.0)
 
     def le_escaped(self, d):
         if self.delta:

@@ -10,6 +10,9 @@
   optional components (importance sampling networks, PRT, other quality levels) stay unloaded.
 * The rna decoder returns both branches from one evaluation; the branch is picked by the shadow
   ray, and light samples blocked by another object are not evaluated at all.
+* neupress: the ``sampling`` component is loaded only when the lobe technique is used
+  (``neupress_sampling`` lobe or mis), ``prt`` only in PRT mode. 8dna: ``core`` only.
+  (spec/renderer.md#neupress, spec/renderer.md#8dna)
 """
 
 from __future__ import annotations
@@ -18,7 +21,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lights import RectLight
+from nasset_sdk.errors import UsageError
+
+from .lights import DomeLight, RectLight
+
+NEUPRESS_SAMPLING = ("auto", "dome", "lobe", "mis")
+EIGHTDNA_SAMPLING = ("light", "flow", "mis")
 
 
 @dataclass
@@ -36,6 +44,7 @@ class RenderPlan:
     instance_notes: list
     components: dict = field(default_factory=dict)  # asset file -> (loaded, skipped)
     notes: list = field(default_factory=list)
+    asset_modes: list = field(default_factory=list)  # per scene.assets entry: kind-specific rendering choices
 
     def explain(self) -> str:
         lines = [f"render plan: {self.width}x{self.height}, {self.spp} spp, max depth {self.max_depth}",
@@ -52,7 +61,40 @@ class RenderPlan:
         return "\n".join(lines)
 
 
-def make_plan(scene, *, width, height, spp, max_depth, tile, batch) -> RenderPlan:
+def _asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, has_dome: bool) -> tuple[dict, list, str]:
+    """(mode, extra components to load, explain note) for one asset file."""
+    a = data.asset
+    present = a.components()
+    if a.kind == "neupress":
+        if prt:
+            if "prt" not in present:
+                raise UsageError(f"--prt: asset {data.path} has no 'prt' component")
+            if not has_dome:
+                raise UsageError("--prt needs a DomeLight in the scene (the PRT lighting is the dome's SH projection)")
+            return ({"kind": "neupress", "prt": True, "sampling": None, "lobe": False}, ["prt"],
+                    f"neupress {data.path.name}: PRT (SH2 transport . dome SH projection; other lights and shadow rays unused)")
+        mode = neupress_sampling
+        has_s = "sampling" in present
+        if mode == "auto":
+            mode = "mis" if has_s else "dome"
+        lobe = mode in ("lobe", "mis") and has_s
+        tech = "Gaussian lobe (sampling network)" if lobe else "uniform sphere"
+        what = {"dome": "light sampling only", "lobe": f"{tech} sampling only (delta lights light-sampled)",
+                "mis": f"light sampling + {tech} sampling, power heuristic"}[mode]
+        return ({"kind": "neupress", "prt": False, "sampling": mode, "lobe": lobe}, ["sampling"] if lobe else [],
+                f"neupress {data.path.name}: far-field transport, {what}; shadow rays ignore the asset (surface "
+                f"reflection: asset-visibility from the same ray)")
+    if a.kind == "8dna":
+        what = {"light": "emitter sampling only", "flow": "GGX lobe / flow direction sampling only (delta lights emitter-sampled)",
+                "mis": "emitter sampling + GGX lobe / flow direction sampling, power heuristic"}[eightdna_sampling]
+        return ({"kind": "8dna", "sampling": eightdna_sampling}, [],
+                f"8dna {data.path.name}: direct lobe at x_o + flow sample u_i (uniform channel), {what}; "
+                "continuation: direct lobe with probability P_d, else flow direction from u_i")
+    return {"kind": a.kind}, [], ""
+
+
+def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sampling: str = "auto", prt: bool = False,
+              eightdna_sampling: str = "mis") -> RenderPlan:
     lo, hi = scene.bounds
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     has_geo = len(scene.triangles) > 0
@@ -88,16 +130,26 @@ def make_plan(scene, *, width, height, spp, max_depth, tile, batch) -> RenderPla
                                                             else "lone planar mesh: NEE only")
             inst_notes.append(f"mesh {inst.prim} ({inst.n_tri} tris): {'indirect on' if indirect[i] else 'indirect off'}"
                               f" ({why})")
-    comps = {}
+    if neupress_sampling not in NEUPRESS_SAMPLING:
+        raise UsageError(f"neupress sampling must be one of {NEUPRESS_SAMPLING}, got {neupress_sampling!r}")
+    if eightdna_sampling not in EIGHTDNA_SAMPLING:
+        raise UsageError(f"8dna sampling must be one of {EIGHTDNA_SAMPLING}, got {eightdna_sampling!r}")
+    has_dome = any(isinstance(light, DomeLight) for light in scene.lights)
+    comps, modes, kind_notes = {}, [], []
     for data in scene.assets:
         a = data.asset
-        required = list(a.contract.required_components(a.variant))
+        mode, extra, note = _asset_mode(data, neupress_sampling, prt, eightdna_sampling, has_dome)
+        required = list(a.contract.required_components(a.variant)) + extra
         skipped = [n for n in a.components() if n not in required]
         comps[str(data.path)] = (required, skipped)
+        modes.append(mode)
+        if note:
+            kind_notes.append(note)
     spp_pass = max(1, min(spp, batch // max(1, tile * tile)))
     notes = []
-    if scene.assets:
+    if any(m["kind"] == "rna" for m in modes):
         notes.append("rna: one decoder evaluation yields both branches; shadow-ray visibility picks one; "
                      "light samples blocked by other objects are not evaluated")
+    notes += kind_notes
     return RenderPlan(width, height, spp, max_depth, tile, batch, spp_pass, light_nee, light_notes, indirect, inst_notes,
-                      comps, notes)
+                      comps, notes, modes)

@@ -248,7 +248,19 @@ class _Loader:
         va = float(cam.GetVerticalApertureAttr().Get(self.time) or 15.2908)
         if fl <= 0 or ha <= 0 or va <= 0:
             raise self.err("SCENE_INVALID", "focalLength and apertures must be > 0", prim.GetPath())
-        return PerspectiveCamera(_matrix(cam, self.time), fl, ha, va, str(prim.GetPath()))
+        return PerspectiveCamera(_matrix(cam, self.time), fl, ha, va, str(prim.GetPath()), self._render_resolution())
+
+    def _render_resolution(self) -> tuple[int, int] | None:
+        """Resolution of the stage's first UsdRender.Settings prim (None when absent or invalid)."""
+        from pxr import Usd, UsdRender
+
+        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
+            if prim.IsA(UsdRender.Settings):
+                res = UsdRender.Settings(prim).GetResolutionAttr().Get(self.time)
+                if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384:
+                    return int(res[0]), int(res[1])
+                self.warn(f"{prim.GetPath()}: resolution {res} ignored")
+        return None
 
     # -- meshes and materials --------------------------------------------------------------
     def _material(self, prim) -> int:
@@ -428,12 +440,12 @@ class _Loader:
                 asset = Asset.open(file, load="none")
             except NassetError as exc:
                 raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
-            if asset.kind != "rna":
-                raise self.err("SCENE_UNSUPPORTED", f"asset kind {asset.kind!r}: this renderer integrates kind 'rna' so far",
-                               path)
+            if asset.kind not in ("rna", "neupress", "8dna"):
+                raise self.err("SCENE_UNSUPPORTED", f"asset kind {asset.kind!r}: this renderer integrates kinds 'rna', "
+                               "'neupress' and '8dna'", path)
             if asset.variant != "surface":
-                raise self.err("SCENE_UNSUPPORTED", f"rna variant {asset.variant!r} (fiber rendering is not implemented; "
-                               "surface is)", path)
+                raise self.err("SCENE_UNSUPPORTED", f"{asset.kind} variant {asset.variant!r} (fiber rendering is not "
+                               "implemented; surface is)", path)
             try:
                 geo = asset.geometry()
             except NassetError as exc:

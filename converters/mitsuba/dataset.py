@@ -30,6 +30,9 @@ from . import CONVERTER_VERSION, is_jit
 
 FIELDS = ("x", "n", "wo", "wi", "vis", "rgb", "pix")
 
+#: lights per training view when per-pixel lights are unavailable (finite-angle light, scalar variant)
+FALLBACK_LIGHT_GROUPS = 32
+
 
 @dataclass(frozen=True)
 class DataSettings:
@@ -38,10 +41,12 @@ class DataSettings:
     res: int = 96
     spp: int = 64
     val_spp: int = 128
-    lights_per_view: int = 8
+    lights_per_view: int = 0  # 0: an independent random light per pixel; k > 0: k lights per view
     light_angle_deg: float = 0.0
     distance: float = 2.6  # camera distance in bounding-sphere radii
     upper_hemisphere: bool = False
+    val_res: int = 0  # held-out image size; 0: res
+    clamp: float = 10.0  # per-path-sample radiance clamp (1/sr); 0: none (spec/bake.md#clamp)
     max_depth: int = 24
     seed: int = 0
     chunk: int = 1 << 20  # rays (pixels x spp) per Mitsuba call
@@ -136,11 +141,16 @@ class Renderer:
         blocked = np.asarray(self.iso.geometry_scene.ray_test(shadow), bool)[:n]
         return ~blocked
 
-    def transport(self, o, d, spp: int, seed: int) -> np.ndarray:
-        """Mean radiance [N,3] over spp paths from the current light (set with iso.set_light)."""
+    def transport(self, o, d, spp: int, seed: int, wi=None) -> np.ndarray:
+        """Mean radiance [N,3] over spp paths. ``wi`` [N,3]: each pixel's own light direction (needs
+        ``iso.per_path_lights``); without it, the current light (set with iso.set_light)."""
         if not self.jit:
             return self._transport_scalar(o, d, spp, seed)
         mi = self.mi
+        lanes = wi is not None
+        if lanes and not self.iso.per_path_lights:
+            raise ValueError("per-pixel light directions need a delta light and a JIT variant")
+        scene = self.iso.lane_scene if lanes else self.iso.lit_scene
         n = len(o)
         out = np.zeros((n, 3), np.float64)
         per = max(1, self.s.chunk // max(spp, 1))
@@ -152,9 +162,16 @@ class Renderer:
             sampler = mi.load_dict({"type": "independent"})
             sampler.seed(int(seed * 7919 + s) & 0x7FFFFFFF, size)
             ray = mi.RayDifferential3f(self._ray(self._pad(oo, size), self._pad(dd, size)))
-            spec, _, _ = self.iso.integrator.sample(self.iso.lit_scene, sampler, ray, None, True)
+            if lanes:
+                # the table is padded too: its size is part of the kernel (a new size recompiles, ~2 s)
+                self.iso.set_light_table(self._pad(np.asarray(wi[s:e], np.float32), self._bucket(e - s)))
+                idx = np.repeat(np.arange(e - s, dtype=np.float32), spp)  # ray time = row of the table
+                ray.time = mi.Float(self._pad(idx, size))
+            spec, _, _ = self.iso.integrator.sample(scene, sampler, ray, None, True)
             L = self._np3(spec)[: len(oo)].astype(np.float64).reshape(e - s, spp, 3)
             L = np.nan_to_num(L, nan=0.0, posinf=0.0, neginf=0.0)
+            if self.s.clamp > 0:
+                L = np.minimum(L, self.s.clamp)
             out[s:e] = L.mean(axis=1)
         return out.astype(np.float32)
 
@@ -194,7 +211,8 @@ class Renderer:
             acc = np.zeros(3)
             for _ in range(spp):
                 spec, _, _ = self.iso.integrator.sample(self.iso.lit_scene, sampler, ray, None, True)
-                acc += np.nan_to_num(np.asarray(list(spec), np.float64))
+                v = np.nan_to_num(np.asarray(list(spec), np.float64))
+                acc += np.minimum(v, self.s.clamp) if self.s.clamp > 0 else v
                 sampler.advance()
             out[i] = acc / max(spp, 1)
         return out.astype(np.float32)
@@ -209,26 +227,34 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     dist = s.distance * radius
     eye = np.asarray(center, np.float64) + dist * cam_dir
     half_fov = float(np.arcsin(min(1.0 / max(s.distance, 1.0 + 1e-6), 0.999))) * 1.04
-    o, d = camera_rays(eye, np.asarray(center, np.float64), half_fov, s.res)
+    res = (s.val_res or s.res) if validation else s.res
+    o, d = camera_rays(eye, np.asarray(center, np.float64), half_fov, res)
     mask, x, n = renderer.hits(o, d)
     pix = np.nonzero(mask)[0]
     o, d, x, n = o[pix], d[pix], x[pix], n[pix]
-    k = 1 if validation else max(1, s.lights_per_view)
-    lights = _unit_sphere(rng, k, s.upper_hemisphere)
-    group = rng.integers(0, k, len(pix)) if k > 1 else np.zeros(len(pix), np.int64)
-    wi = lights[group].astype(np.float32)
-    vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
-    rgb = np.zeros((len(pix), 3), np.float32)
     spp = s.val_spp if validation else s.spp
-    for g in range(k):
-        sel = np.nonzero(group == g)[0]
-        if len(sel) == 0:
-            continue
-        renderer.iso.set_light(lights[g])
-        rgb[sel] = renderer.transport(o[sel], d[sel], spp, seed=hash((s.seed, split_seed, view_id, g)) & 0xFFFFFF)
+    seed = hash((s.seed, split_seed, view_id)) & 0xFFFFFF
+    per_pixel = not validation and s.lights_per_view == 0
+    if per_pixel and renderer.iso.per_path_lights:
+        wi = _unit_sphere(rng, len(pix), s.upper_hemisphere).astype(np.float32)
+        vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
+        rgb = renderer.transport(o, d, spp, seed=seed, wi=wi) if len(pix) else np.zeros((0, 3), np.float32)
+    else:
+        k = 1 if validation else (s.lights_per_view or FALLBACK_LIGHT_GROUPS)
+        lights = _unit_sphere(rng, k, s.upper_hemisphere)
+        group = rng.integers(0, k, len(pix)) if k > 1 else np.zeros(len(pix), np.int64)
+        wi = lights[group].astype(np.float32)
+        vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
+        rgb = np.zeros((len(pix), 3), np.float32)
+        for g in range(k):
+            sel = np.nonzero(group == g)[0]
+            if len(sel) == 0:
+                continue
+            renderer.iso.set_light(lights[g])
+            rgb[sel] = renderer.transport(o[sel], d[sel], spp, seed=hash((s.seed, split_seed, view_id, g)) & 0xFFFFFF)
     return {
         "x": x.astype(np.float32), "n": n.astype(np.float32), "wo": (-d).astype(np.float32), "wi": wi,
-        "vis": vis.astype(np.uint8), "rgb": rgb, "pix": pix.astype(np.int32), "res": np.int32(s.res),
+        "vis": vis.astype(np.uint8), "rgb": rgb, "pix": pix.astype(np.int32), "res": np.int32(res),
     }
 
 

@@ -6,10 +6,16 @@ objects: ``geometry`` (asset only; primary hits, AOVs and the visibility of the 
 asset) and ``lit`` (asset + one distant light of unit irradiance whose direction is updated per
 group of pixels).
 
-Distant light (spec/bake.md#light): ``angle_deg == 0`` is Mitsuba's ``directional`` emitter (a
-delta light, exact but unreachable from inside smooth dielectrics); ``angle_deg > 0`` is a far
-spherical area emitter subtending that angular radius, with radiance 1 / (pi sin^2 theta) so the
-irradiance at normal incidence is exactly 1.
+Distant light (spec/bake.md#light): ``angle_deg == 0`` is a delta directional light (exact but
+unreachable from inside smooth dielectrics); ``angle_deg > 0`` is a far spherical area emitter
+subtending that angular radius, with radiance 1 / (pi sin^2 theta) so the irradiance at normal
+incidence is exactly 1.
+
+Per-pixel lights (``angle_deg == 0``): a third scene, ``lane``, holds a directional emitter whose
+direction is looked up per path from a table, indexed by the ray's ``time`` (nothing in an
+isolated asset is animated, so time is free to carry it; every vertex of a path inherits it).
+One Mitsuba call then renders every pixel under its own light (the paper's per-pixel random
+light) at the cost of one light.
 """
 
 from __future__ import annotations
@@ -91,6 +97,70 @@ def blocks_delta_light(shapes) -> bool:
     return any(any(b in str(s.bsdf()) for b in DELTA_BLOCKING_BSDFS) for s in shapes)
 
 
+_LANE_PLUGIN = "nasset_lane_directional"
+_registered: set = set()
+
+
+def register_lane_emitter(mi) -> str:
+    """Register (once per variant) the per-path directional emitter; returns its plugin name."""
+    if mi.variant() in _registered:
+        return _LANE_PLUGIN
+    import drjit as dr
+
+    class LaneDirectional(mi.Emitter):
+        """Unit-irradiance delta directional light; direction = table[ray time] (see module doc)."""
+
+        def __init__(self, props) -> None:
+            mi.Emitter.__init__(self, props)
+            self.m_flags = mi.EmitterFlags.DeltaDirection | mi.EmitterFlags.Infinite
+            self.table = mi.Float([0.0, 0.0, 1.0])  # flattened [K, 3] directions towards the light
+            self.dist = 1e4
+
+        def set_scene(self, scene) -> None:
+            self.dist = 4.0 * max(float(dr.norm(scene.bbox().extents())), 1e-3)
+
+        def sample_direction(self, it, sample, active=True):
+            d = dr.gather(mi.Vector3f, self.table, mi.UInt32(it.time), active)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.p = it.p + d * self.dist
+            ds.n = -d
+            ds.time = it.time
+            ds.pdf = mi.Float(1.0)
+            ds.delta = mi.Bool(True)
+            ds.d = d
+            ds.dist = mi.Float(self.dist)
+            ds.emitter = mi.EmitterPtr(self)
+            return ds, mi.Spectrum(1.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            return mi.Float(0.0)
+
+        def eval_direction(self, it, ds, active=True):
+            return mi.Spectrum(0.0)
+
+        def eval(self, si, active=True):
+            return mi.Spectrum(0.0)
+
+        def sample_wavelengths(self, si, sample, active=True):
+            return mi.Spectrum(1.0), mi.Spectrum(1.0)
+
+        def bbox(self):
+            return mi.ScalarBoundingBox3f()
+
+        def traverse(self, callback) -> None:
+            pass
+
+        def parameters_changed(self, keys) -> None:
+            pass
+
+        def to_string(self) -> str:
+            return "LaneDirectional[]"
+
+    mi.register_emitter(_LANE_PLUGIN, lambda props: LaneDirectional(props))
+    _registered.add(mi.variant())
+    return _LANE_PLUGIN
+
+
 def _frame_to_world(mi, z: np.ndarray, origin: np.ndarray | None = None, scale: float = 1.0):
     z = np.asarray(z, np.float64)
     z = z / max(float(np.linalg.norm(z)), 1e-12)
@@ -117,6 +187,7 @@ class IsolatedAsset:
     max_depth: int = 24
     geometry_scene: object = field(init=False)
     lit_scene: object = field(init=False)
+    lane_scene: object = field(init=False, default=None)
     integrator: object = field(init=False)
 
     def __post_init__(self) -> None:
@@ -137,6 +208,9 @@ class IsolatedAsset:
             light = {"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": {"type": "rgb", "value": [1.0] * 3}}
         self.lit_scene = mi.load_dict({"type": "scene", **shapes, "light": light})
         self._params = mi.traverse(self.lit_scene)
+        if self.angle_deg == 0 and not mi.variant().startswith("scalar"):
+            plugin = register_lane_emitter(mi)
+            self.lane_scene = mi.load_dict({"type": "scene", **shapes, "light": {"type": plugin}})
         has_media = any(s.interior_medium() is not None or s.exterior_medium() is not None for s in self.shapes)
         self.integrator = mi.load_dict(
             {"type": "volpath" if has_media else "path", "max_depth": int(self.max_depth), "rr_depth": 8}
@@ -154,6 +228,17 @@ class IsolatedAsset:
         else:
             self._params["light.to_world"] = _frame_to_world(self.mi, -wi)
         self._params.update()
+
+
+    @property
+    def per_path_lights(self) -> bool:
+        """True when ``set_light_table`` + ray time can give every path its own light."""
+        return self.lane_scene is not None
+
+    def set_light_table(self, dirs: np.ndarray) -> None:
+        """Directions [K, 3] (unit, towards the light) that ray time k selects in ``lane_scene``."""
+        dirs = np.ascontiguousarray(np.asarray(dirs, np.float32).reshape(-1, 3))
+        self.lane_scene.emitters()[0].table = self.mi.Float(dirs.ravel())
 
 
 def bounding_sphere(geo: MeshGeometry) -> tuple[np.ndarray, float]:

@@ -34,7 +34,7 @@ def boundary_params(tensor) -> tuple[float, float]:
 
 def fresnel_dielectric(cos_i: np.ndarray, eta: float) -> np.ndarray:
     """Unpolarised Fresnel reflectance at |cos_i| for relative IOR eta (1 under total internal reflection)."""
-    c = np.clip(np.abs(np.asarray(cos_i, np.float64)), 0.0, 1.0)
+    c = np.clip(np.abs(np.nan_to_num(np.asarray(cos_i, np.float64), nan=0.0)), 0.0, 1.0)
     sin_t2 = (1.0 - c * c) / (eta * eta)
     tir = sin_t2 >= 1.0
     ct = np.sqrt(np.maximum(1.0 - sin_t2, 0.0))

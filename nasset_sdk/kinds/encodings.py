@@ -87,10 +87,20 @@ def safe_normalize(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Unit vectors [N,3]; zero, non-finite or denormal input becomes ``fallback``."""
     v = np.asarray(v, np.float64)
     v = np.where(np.isfinite(v), v, 0.0)
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    v, n = _norm_no_overflow(v)
     ok = n > 1e-20
     out = np.where(ok, v / np.where(ok, n, 1.0), np.asarray(fallback, np.float64))
     return out.astype(np.float32)
+
+
+def _norm_no_overflow(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(v, |v|) for finite v [..., 3]; rows whose norm overflows (|v_k| ~ 1e308) are first divided by max |v_k|."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    big = np.isinf(n)
+    if big.any():
+        v = np.where(big, v / np.where(big, np.abs(v).max(-1, keepdims=True), 1.0), v)
+        n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v, n
 
 
 # ----------------------------------------------------------------------------------------
@@ -101,7 +111,7 @@ def _unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """float64 unit vectors [N,3]; zero / non-finite input becomes ``fallback``."""
     v = np.atleast_2d(np.asarray(v, np.float64))
     v = np.where(np.isfinite(v), v, 0.0)
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    v, n = _norm_no_overflow(v)
     ok = n > 1e-20
     return np.where(ok, v / np.where(ok, n, 1.0), np.asarray(fallback, np.float64))
 
@@ -200,6 +210,7 @@ def fourier_features(G: np.ndarray, v: np.ndarray) -> np.ndarray:
 
         raise UsageError(f"fourier_features: G {G.shape} and v {v.shape} must be [M, n] and [N, n]")
     phase = 2.0 * np.pi * (v @ G.T)
+    phase[~np.isfinite(phase)] = 0.0  # v = +-inf or an overflowing product: no meaningful phase (as NaN: 0)
     return np.concatenate([np.cos(phase), np.sin(phase)], axis=1).astype(np.float32)
 
 

@@ -77,7 +77,7 @@ def _unit_into(out: np.ndarray, v: np.ndarray) -> None:
         n += v[:, 1] * v[:, 1]
         n += v[:, 2] * v[:, 2]
         np.sqrt(n, out=n)
-        if n.min(initial=np.inf) > 1e-20:
+        if n.min(initial=np.inf) > 1e-20 and n.max(initial=0.0) < np.inf:  # (an overflowing norm: safe_normalize rescales)
             np.divide(v, n[:, None], out=out, casting="unsafe")  # float64 quotient rounded to float32
             return
     out[:] = safe_normalize(v)

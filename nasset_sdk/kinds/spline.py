@@ -130,6 +130,9 @@ class RQSpline:
 # ----------------------------------------------------------------------------------------
 # 8DNA bounding-box cylindrical parameterisation (paper Eq. 9-10; spec/kinds/8dna.md#bbox)
 
+#: cap of the flow densities: exp(700) times the box Jacobian of a tiny box would overflow to inf
+PDF_MAX = 1e300
+
 #: |ds / dt| for t in [0, 1]^4 -> s = (2 t1 - 1, 2 pi t2 - pi, 2 t3 - 1, 2 pi t4 - pi)
 S_PER_T = 2.0 * 2.0 * np.pi * 2.0 * 2.0 * np.pi
 
@@ -302,7 +305,7 @@ class BoxFlow:
         z = self._latents(len(x), 4, rng, u)
         _, s, logp = self._walk(x, wo, ch, z=z)
         ui, wi, jac = self.box.to_rays(s)
-        return ui, wi, np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac
+        return ui, wi, np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
         """Density of (u_i, w_i) per unit box area and steradian, for one channel per row."""
@@ -310,7 +313,7 @@ class BoxFlow:
         ch = _channels(channel, len(x))
         s, jac = self.box.from_rays(ui, wi)
         _, _, logp = self._walk(x, wo, ch, t=self.box.t_from_s(s), s_prev=s)
-        return np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac
+        return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
 
     def pdf_rgb(self, x, wo, ui, wi) -> np.ndarray:
         """[N, 3]: :meth:`pdf` for each colour channel."""
@@ -323,7 +326,7 @@ class BoxFlow:
         ch = _channels(channel, len(x))
         s, jac = self.box.from_rays(ui, np.tile([0.0, 0.0, 1.0], (len(x), 1)))
         _, _, logp = self._walk(x, wo, ch, t=self.box.t_from_s(s), s_prev=s, steps=(1, 2))
-        return np.exp(np.minimum(logp, 700.0)) / (2.0 * 2.0 * np.pi) * jac
+        return np.minimum(np.exp(np.minimum(logp, 700.0)) / (2.0 * 2.0 * np.pi) * jac, PDF_MAX)
 
     def sample_direction(self, x, wo, ui, channel, rng=None, *, u=None):
         """Given u_i, draw w_i from p(w_i | u_i) (steps 3-4): (w_i [N,3], conditional pdf per steradian [N])."""

@@ -1,0 +1,378 @@
+"""``nasset bench error-vs-time``: Mitsuba path tracing vs the reference renderer with a baked asset.
+
+On the built-in example scene (spec/bake.md#the-example-scene), rendered through one camera at
+one resolution with the same lights:
+
+* **ground truth**: Mitsuba (``llvm_ad_rgb``, the scene's own ``volpath`` integrator) of the
+  original scene at ``--gt-spp`` samples per pixel, rendered in independent chunks;
+* **(a) Mitsuba**: the original scene at each of ``--mi-spp``;
+* **(b) neural**: the reference renderer on the scene converted by ``nasset convert-scene`` with
+  the asset's shapes replaced by the baked asset, at each of ``--nr-spp``.
+
+Error is the MSE over all pixels and channels against the ground truth (linear radiance), minus
+the ground truth's own noise (estimated from the disagreement of its two halves), so both curves
+measure their error against the converged image. Timing (``time.perf_counter``, wall clock)
+includes only rendering: for Mitsuba one ``mi.render`` call plus reading the image back, after a
+warm-up render at the same spp (so the JIT kernels are compiled and cached) -- scene loading and
+kernel compilation are excluded; for the reference renderer one ``render()`` call (plan, BVH
+build, all wavefronts, film) after the scene was loaded, the asset's networks opened
+(``prepare_assets``) and one warm-up render -- USD loading and onnxruntime session creation are
+excluded. Both renderers run in this process on the same machine, one after the other.
+
+Reported: the table (JSON), the plot (PNG), the **bias floor** (the MSE the neural render
+converges to: its last point's error minus its own estimated variance) and the **equal-error
+speedup** (Mitsuba's time to reach the neural render's error, from Mitsuba's fitted
+``MSE = V / spp`` line, divided by the neural render's time), at each neural point.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import UsageError
+
+QUICK = {"res": 64, "gt_spp": 1024, "mi_spp": "1,4,16,64", "nr_spp": "1,4,16"}
+PAPERS = ("Published figures: 8DNA renders volumetric assets roughly 2-20x faster than path tracing at 128 spp "
+          "(1.4-4x on fine-scale surface scattering; its Table 2); RNA reports 7x (Lego) to 60-200x (hair) against "
+          "4096-spp CPU path-traced references; NeuPreSS reports ~900x, but as 10000-spp path-tracing reference time "
+          "(~1850-2500 s) over 256-spp neural render time (~2-4 s), not at equal error.")
+
+
+def _ints(text: str, name: str) -> list[int]:
+    try:
+        vals = sorted({int(v) for v in str(text).split(",") if v.strip()})
+    except ValueError:
+        raise UsageError(f"--{name} must be a comma-separated list of integers, got {text!r}") from None
+    if not vals or vals[0] < 1:
+        raise UsageError(f"--{name} needs positive integers, got {text!r}")
+    return vals
+
+
+def _sensor(mi, scene, res: int):
+    """A box-filtered res x res perspective sensor with the scene camera's pose and horizontal field of view."""
+    sensor = scene.sensors()[0]
+    p = mi.traverse(sensor)
+    m = np.asarray(p["to_world"].matrix, np.float64).reshape(4, 4, -1)[:, :, 0]
+    return mi.load_dict({
+        "type": "perspective", "fov": float(np.asarray(p["x_fov"]).ravel()[0]), "fov_axis": "x",
+        "to_world": mi.ScalarTransform4f(m.tolist()),
+        "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": {"type": "independent"},
+    })
+
+
+def _mi_render(mi, scene, sensor, spp: int, seed: int) -> np.ndarray:
+    img = mi.render(scene, sensor=sensor, spp=int(spp), seed=int(seed))
+    return np.asarray(img, np.float64)[..., :3]
+
+
+def ground_truth(mi, scene, sensor, spp: int, chunk: int = 256, say=print) -> tuple[np.ndarray, float]:
+    """Mean of independent chunks (seeds 1000+); returns (image, estimated variance of its pixels' means)."""
+    n = max(2, math.ceil(spp / chunk))
+    per = max(1, spp // n)
+    imgs = []
+    t = time.perf_counter()
+    for k in range(n):
+        imgs.append(_mi_render(mi, scene, sensor, per, 1000 + k))
+        say(f"  ground truth chunk {k + 1}/{n} ({per} spp) {time.perf_counter() - t:.1f}s")
+    imgs = np.stack(imgs)
+    a, b = imgs[: n // 2].mean(0), imgs[n // 2: 2 * (n // 2)].mean(0)
+    var_gt = float(np.mean((a - b) ** 2) / 4.0)  # variance of the mean of both halves
+    return imgs.mean(0), var_gt
+
+
+def equal_error_speedup(mi_points: list[dict], nr_points: list[dict]) -> list[dict]:
+    """Mitsuba's fitted time to reach each neural point's error / the neural point's time.
+
+    Mitsuba is unbiased: MSE = V / spp, and its render time is affine in spp, time = a + c spp
+    (a: per-call cost -- kernel recording and launch -- that dominates small images). V is fitted
+    in log space, (a, c) by least squares with a >= 0, over the Mitsuba points. Errors at or below
+    zero (within the ground truth's noise) have no equal-error time.
+    """
+    ok = [p for p in mi_points if p["mse"] > 0]
+    if not ok:
+        return []
+    log_v = float(np.mean([math.log(p["mse"] * p["spp"]) for p in ok]))
+    spp = np.array([p["spp"] for p in mi_points], np.float64)
+    tm = np.array([p["time_s"] for p in mi_points], np.float64)
+    if len(spp) >= 2 and np.ptp(spp) > 0:
+        c, a = np.polyfit(spp, tm, 1)
+        if a < 0 or c <= 0:
+            a, c = 0.0, float(np.sum(tm * spp) / np.sum(spp * spp))
+    else:
+        a, c = 0.0, float(tm[0] / spp[0])
+    out = []
+    for p in nr_points:
+        if p["mse"] <= 0:
+            out.append({"spp": p["spp"], "mse": p["mse"], "mitsuba_spp": None, "mitsuba_time_s": None, "speedup": None})
+            continue
+        spp_eq = math.exp(log_v) / p["mse"]
+        t_eq = float(a + c * spp_eq)
+        out.append({"spp": p["spp"], "mse": p["mse"], "mitsuba_spp": spp_eq, "mitsuba_time_s": t_eq,
+                    "speedup": t_eq / p["time_s"]})
+    return out
+
+
+def plot(path: Path, mi_points, nr_points, floor, title: str) -> str:
+    """Log-log MSE vs time; matplotlib when installed, else a minimal built-in PNG plot. Returns the backend used."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        _plot_fallback(path, mi_points, nr_points)
+        return "builtin"
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=120)
+    for pts, label, mk in ((mi_points, "Mitsuba path tracing (original scene)", "o-"),
+                           (nr_points, "reference renderer + baked asset", "s-")):
+        good = [p for p in pts if p["mse"] > 0]
+        ax.loglog([p["time_s"] for p in good], [p["mse"] for p in good], mk, label=label)
+        for p in good:
+            ax.annotate(f"{p['spp']}", (p["time_s"], p["mse"]), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    if floor is not None and floor > 0:
+        ax.axhline(floor, color="gray", ls="--", lw=1, label=f"asset bias floor {floor:.2e}")
+    ax.set_xlabel("render time (s, wall clock)")
+    ax.set_ylabel("MSE vs ground truth")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return "matplotlib"
+
+
+def _plot_fallback(path: Path, mi_points, nr_points, size=(480, 360)) -> None:
+    from reference_renderer.film import write_png
+
+    w, h = size
+    img = np.full((h, w, 3), 255, np.uint8)
+    pts = [p for p in mi_points + nr_points if p["mse"] > 0 and p["time_s"] > 0]
+    if not pts:
+        write_png(path, img)
+        return
+    lx = np.log10([p["time_s"] for p in pts])
+    ly = np.log10([p["mse"] for p in pts])
+    x0, x1, y0, y1 = lx.min() - 0.1, lx.max() + 0.1, ly.min() - 0.1, ly.max() + 0.1
+    img[h - 20, 20:w - 10] = 0
+    img[10:h - 20, 20] = 0
+    for pts_i, color in ((mi_points, (30, 90, 200)), (nr_points, (220, 80, 20))):
+        for p in pts_i:
+            if p["mse"] <= 0 or p["time_s"] <= 0:
+                continue
+            x = int(20 + (math.log10(p["time_s"]) - x0) / (x1 - x0) * (w - 40))
+            y = int(h - 20 - (math.log10(p["mse"]) - y0) / (y1 - y0) * (h - 40))
+            img[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4] = color
+    write_png(path, img)
+
+
+def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 128, gt_spp: int = 4096,
+                        mi_spp=(1, 2, 4, 8, 16, 32, 64, 128), nr_spp=(1, 2, 4, 8, 16, 32), max_depth: int | None = None,
+                        seed: int = 0, quiet: bool = False) -> dict:
+    """Run the benchmark; writes ``error_vs_time.json`` and ``error_vs_time.png`` into ``out_dir``."""
+    from converters.mitsuba import load_mitsuba
+    from converters.mitsuba.example_scene import EXAMPLE_ASSET_IDS, write_example_scene
+    from converters.mitsuba.usd_export import convert_scene
+    from reference_renderer import RenderSettings, load_scene, render
+    from reference_renderer.integrator import prepare_assets
+    from reference_renderer.plan import make_plan
+    from reference_renderer.scene import SceneWarning
+
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if res < 4:
+        raise UsageError(f"--res must be >= 4, got {res}")
+    t_setup = time.perf_counter()
+    times: dict[str, float] = {}
+
+    # asset
+    if asset is None:
+        from nasset_sdk.bake import bake
+
+        asset = out / f"example_{size}.usdc"
+        if not asset.is_file():
+            say(f"baking the example scene ({size}) -> {asset}")
+            t = time.perf_counter()
+            bake(None, None, asset, size=size, example=True, quiet=quiet, seed=seed, summary_stream=sys.stderr)
+            times["bake_s"] = time.perf_counter() - t
+    asset = Path(asset)
+    if not asset.is_file():
+        raise UsageError(f"--asset {asset} does not exist")
+
+    # scenes
+    xml = write_example_scene(out / "scene")
+    converted = convert_scene(xml, out / "scene" / "scene_neural.usda",
+                              replace={sid: asset for sid in EXAMPLE_ASSET_IDS}, check_usd=False)
+    mi = load_mitsuba()
+    mi.set_log_level(mi.LogLevel.Error)
+    mscene = mi.load_file(str(xml))
+    sensor = _sensor(mi, mscene, res)
+    md = converted.integrator.get("max_depth", 24)
+    if max_depth is None:
+        max_depth = max(1, md - 1) if md and md > 0 else 24
+
+    # ground truth
+    say(f"ground truth: Mitsuba {mi.variant()} {gt_spp} spp at {res}x{res}")
+    t = time.perf_counter()
+    gt, var_gt = ground_truth(mi, mscene, sensor, gt_spp, say=say)
+    times["ground_truth_s"] = time.perf_counter() - t
+
+    # (a) Mitsuba
+    mi_points = []
+    for k, spp in enumerate(mi_spp):
+        _mi_render(mi, mscene, sensor, spp, 50_000 + k)  # warm-up: compile / fetch the kernels for this spp
+        t = time.perf_counter()
+        img = _mi_render(mi, mscene, sensor, spp, 10 + k)
+        dt = time.perf_counter() - t
+        mse = float(np.mean((img - gt) ** 2)) - var_gt
+        mi_points.append({"spp": spp, "time_s": dt, "mse": mse, "mse_raw": mse + var_gt})
+        say(f"  mitsuba {spp:5d} spp  {dt:8.3f}s  MSE {mse:.3e}")
+
+    # (b) reference renderer with the baked asset
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SceneWarning)
+        scene = load_scene(str(converted.output))
+    base = RenderSettings(spp=1, seed=seed, width=res, height=res, max_depth=max_depth)
+    plan = make_plan(scene, width=res, height=res, spp=1, max_depth=max_depth, tile=base.tile, batch=base.batch)
+    prepare_assets(scene, plan, base)
+    render(scene, base)  # warm-up (onnxruntime first-run allocations, Embree)
+    nr_points = []
+    for k, spp in enumerate(nr_spp):
+        s = RenderSettings(spp=spp, seed=seed + 100 + k, width=res, height=res, max_depth=max_depth)
+        t = time.perf_counter()
+        result = render(scene, s)
+        dt = time.perf_counter() - t
+        img = result.image
+        var_nr = float(result.variance.mean())
+        mse = float(np.mean((img - gt) ** 2)) - var_gt
+        nr_points.append({"spp": spp, "time_s": dt, "mse": mse, "mse_raw": mse + var_gt, "variance": var_nr,
+                          "network_evals": int(result.stats.network_evals), "rays": int(result.stats.rays)})
+        say(f"  neural  {spp:5d} spp  {dt:8.3f}s  MSE {mse:.3e}  (own variance {var_nr:.2e})")
+
+    last = nr_points[-1]
+    floor = last["mse"] - last["variance"]
+    speed = equal_error_speedup(mi_points, nr_points)
+    floor_eq = equal_error_speedup(mi_points, [{"spp": 0, "mse": floor, "time_s": 1.0}])
+    best = max((s for s in speed if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)
+    gt_mean = float(np.mean(gt))
+    report = {
+        "benchmark": "error-vs-time",
+        "scene": "built-in example (spec/bake.md#the-example-scene)",
+        "asset": str(asset),
+        "asset_provenance_size": _asset_size(asset),
+        "resolution": [res, res],
+        "mitsuba": {"version": mi.__version__, "variant": mi.variant(), "integrator": converted.integrator},
+        "reference_renderer": {"max_depth": max_depth},
+        "ground_truth": {"spp": gt_spp, "mean_radiance": gt_mean, "noise_variance": var_gt},
+        "mitsuba_points": mi_points,
+        "neural_points": nr_points,
+        "bias_floor_mse": floor,
+        "bias_floor_relative_rmse": math.sqrt(max(floor, 0.0)) / max(gt_mean, 1e-12),
+        "bias_floor_mitsuba_equivalent": None if not floor_eq or floor_eq[0]["mitsuba_spp"] is None else
+        {"spp": floor_eq[0]["mitsuba_spp"], "time_s": floor_eq[0]["mitsuba_time_s"]},
+        "equal_error": speed,
+        "best_equal_error_speedup": None if best is None else best["speedup"],
+        "timing_includes": {
+            "mitsuba": "one mi.render call + image readback, after a warm-up render at the same spp (no scene load, no JIT compile)",
+            "neural": "one reference_renderer.render call (plan, BVH build, wavefronts, network evaluations, film), after "
+                      "scene load, asset/onnxruntime session setup and one warm-up render",
+        },
+        "machine": _machine(),
+        "setup_times_s": {**{k: round(v, 2) for k, v in times.items()}, "total_s": round(time.perf_counter() - t_setup, 2)},
+        "papers": PAPERS,
+    }
+    (out / "error_vs_time.json").write_text(json.dumps(report, indent=2))
+    report["plot_backend"] = plot(out / "error_vs_time.png", mi_points, nr_points, floor,
+                                  f"example scene {res}x{res}, asset {asset.name}")
+    report["files"] = [str(out / "error_vs_time.json"), str(out / "error_vs_time.png")]
+    (out / "error_vs_time.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
+def _asset_size(path) -> str | None:
+    try:
+        from nasset_sdk.asset import Asset
+
+        return (Asset.open(path, load="none").provenance or {}).get("size")
+    except Exception:  # noqa: BLE001 - informative only
+        return None
+
+
+def _machine() -> dict:
+    import os
+    import platform
+
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count()
+    return {"cpu": platform.processor() or platform.machine(), "usable_cores": cores, "load_avg": list(os.getloadavg())}
+
+
+def summary_text(r: dict) -> str:
+    lines = [
+        f"error vs time, example scene at {r['resolution'][0]}x{r['resolution'][1]}, asset {r['asset']} "
+        f"(size {r['asset_provenance_size']}); ground truth Mitsuba {r['ground_truth']['spp']} spp "
+        f"(noise variance {r['ground_truth']['noise_variance']:.2e}, subtracted)",
+        f"{'':8s}{'spp':>6s} {'time s':>9s} {'MSE':>10s}",
+    ]
+    for name, pts in (("mitsuba", r["mitsuba_points"]), ("neural", r["neural_points"])):
+        for p in pts:
+            lines.append(f"{name:8s}{p['spp']:6d} {p['time_s']:9.3f} {p['mse']:10.3e}")
+    lines.append(f"asset bias floor: MSE {r['bias_floor_mse']:.3e} (relative RMSE {r['bias_floor_relative_rmse']:.1%} "
+                 f"of the mean radiance {r['ground_truth']['mean_radiance']:.3f})")
+    fe = r.get("bias_floor_mitsuba_equivalent")
+    if fe:
+        lines.append(f"  Mitsuba reaches the bias floor at about {fe['spp']:.1f} spp ({fe['time_s']:.3f}s): beyond that, "
+                     "more Mitsuba samples beat the asset at any time budget")
+    for s in r["equal_error"]:
+        if s["speedup"] is None:
+            lines.append(f"  neural {s['spp']:4d} spp: error within ground-truth noise; no equal-error point")
+        else:
+            lines.append(f"  neural {s['spp']:4d} spp: Mitsuba needs {s['mitsuba_spp']:.1f} spp / {s['mitsuba_time_s']:.3f}s "
+                         f"for the same MSE -> speedup {s['speedup']:.2f}x")
+    b = r["best_equal_error_speedup"]
+    lines.append(f"best equal-error speedup: {'n/a' if b is None else f'{b:.2f}x'}")
+    m = r["machine"]
+    lines.append(f"machine: {m['usable_cores']} usable cores, load average {m['load_avg'][0]:.2f} at the end (shared machines "
+                 "inflate both timings)")
+    lines.append(r["papers"])
+    lines.append(("Where we stand: " + (f"the best equal-error speedup here is {b:.2f}x. " if b is not None else "")) +
+                 "The neural render runs in a CPU numpy/onnxruntime wavefront path tracer "
+                 "(ray casting through Embree, a network evaluation per light sample at the asset) against Mitsuba's "
+                 "compiled LLVM kernels, and this asset (a rough-dielectric ball around a dense, bright homogeneous "
+                 "medium, albedo <= 0.92) is cheap for Mitsuba compared with the papers' scenes (thousands of "
+                 "scattering events per path); the asset replaces only the volumetric ball and the rough-plastic ring, a small "
+                 "part of the image, and its error cannot fall below the bias floor set by the bake's quality: the speedup "
+                 "shrinks toward 1x as the neural render's error approaches that floor, and below it there is none.")
+    lines.append("timing includes: mitsuba = " + r["timing_includes"]["mitsuba"] + "; neural = " + r["timing_includes"]["neural"])
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    """CLI entry: ``nasset bench error-vs-time ...``."""
+    if args.which != "error-vs-time":
+        raise UsageError(f"unknown benchmark {args.which!r} (error-vs-time)")
+    q = QUICK if args.quick else {}
+    res = args.res or q.get("res", 128)
+    report = bench_error_vs_time(
+        args.output, asset=args.asset, size=args.size, res=res, gt_spp=args.gt_spp or q.get("gt_spp", 4096),
+        mi_spp=_ints(args.mi_spp or q.get("mi_spp", "1,2,4,8,16,32,64,128"), "mi-spp"),
+        nr_spp=_ints(args.nr_spp or q.get("nr_spp", "1,2,4,8,16,32"), "nr-spp"),
+        max_depth=args.max_depth, seed=args.seed, quiet=args.json,
+    )
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(summary_text(report))
+        print("wrote " + ", ".join(report["files"]))
+    return 0

@@ -1,0 +1,456 @@
+"""Wavefront path tracer of spec/renderer.md on top of Mitsuba's ray tracing.
+
+Design: every path state lives in numpy arrays; each bounce builds one ``mi.Ray3f`` for the
+whole wavefront and calls ``scene.ray_intersect`` (Mitsuba/Embree-free BVH in the llvm variant).
+Rays that must ignore an asset instance re-trace past its hits (recording that they passed
+through it: the rna branch choice). Lights are sampled one by one (NEE on every light), area
+lights through Mitsuba's emitters; plain surfaces use the spec's UsdPreviewSurface BSDF in numpy
+(Mitsuba has no BSDF with that exact lobe); neural-asset vertices evaluate the asset's
+transport in batches through onnxruntime.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .lights import MitsubaLight, _p3, _v3
+
+FOUR_PI = 4.0 * np.pi
+INV_FOUR_PI = 1.0 / FOUR_PI
+
+
+def _norm(v):
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-30)
+
+
+def _dot(a, b):
+    return np.einsum("ij,ij->i", a, b)
+
+
+#: ray-offset scale: a few hundred float32 ulps of the hit's coordinates, plus a tiny fraction of
+#: the scene's size (set by PathTracer), so the offset tracks both far-from-origin and tiny scenes.
+_EPS_REL = 4e-6
+_EPS_SCENE = [1e-6]
+
+
+def _eps(p):
+    return _EPS_REL * np.max(np.abs(p), axis=1) + _EPS_SCENE[0]
+
+
+def power(a, b):
+    a2, b2 = a * a, b * b
+    return np.where(a2 + b2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
+
+
+class Tracer:
+    """Batch ray casting with optional per-ray ignored shape (and pass-through recording)."""
+
+    def __init__(self, mi, scene, shape_ids) -> None:
+        import drjit as dr
+
+        self.mi, self.dr, self.scene = mi, dr, scene
+        self.shape_ids = shape_ids  # registry id -> index into self.kinds
+        self.max_id = max(shape_ids) + 1 if shape_ids else 1
+        lut = np.full(self.max_id + 1, -1, np.int64)
+        for rid, idx in shape_ids.items():
+            lut[rid] = idx
+        self.lut = lut
+
+    def _cast(self, o, d, maxt):
+        mi, dr = self.mi, self.dr
+        ray = mi.Ray3f(_p3(mi, o), _v3(mi, d))
+        ray.maxt = mi.Float(np.ascontiguousarray(np.minimum(maxt, 3.0e38), np.float32))
+        si = self.scene.ray_intersect(ray, mi.RayFlags.Minimal, True)
+        valid = si.is_valid().numpy().astype(bool)
+        sid = dr.reinterpret_array(mi.UInt32, si.shape).numpy().astype(np.int64)
+        obj = np.where(valid, self.lut[np.clip(sid, 0, self.max_id)], -1)
+        t = si.t.numpy().astype(np.float64)
+        ng = si.n.numpy().T.astype(np.float64)
+        return valid & (obj >= 0), obj, t, si.prim_index.numpy().astype(np.int64), si.uv.numpy().T.astype(np.float64), ng
+
+    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64):
+        """-> dict(hit, obj, t, prim, b1, b2, passed).
+
+        ``ignore[i]``: object index ray i passes through, recording it in ``passed`` (-1: none);
+        ``transparent``: bool per object index, objects every ray passes through without record
+        (light shapes for shadow rays).
+        """
+        m = len(o)
+        o = np.array(o, np.float64)
+        d = np.asarray(d, np.float64)
+        maxt = np.full(m, np.inf) if maxt is None else np.array(maxt, np.float64)
+        ignore = np.full(m, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
+        res = {"hit": np.zeros(m, bool), "obj": np.full(m, -1, np.int64), "t": np.full(m, np.inf), "prim": np.zeros(m, np.int64),
+               "b1": np.zeros(m), "b2": np.zeros(m), "passed": np.zeros(m, bool)}
+        travelled = np.zeros(m)
+        todo = np.arange(m)
+        for _ in range(max_skips):
+            if len(todo) == 0:
+                break
+            hit, obj, t, prim, uv, ng = self._cast(o[todo], d[todo], maxt[todo] - travelled[todo])
+            through = hit & (obj == ignore[todo])
+            skip = through
+            if transparent is not None:
+                skip = skip | (hit & transparent[np.maximum(obj, 0)])
+            fin = ~skip
+            idx = todo[fin]
+            res["hit"][idx] = hit[fin]
+            res["obj"][idx] = np.where(hit[fin], obj[fin], -1)
+            res["t"][idx] = np.where(hit[fin], travelled[idx] + t[fin], np.inf)
+            res["prim"][idx] = prim[fin]
+            res["b1"][idx], res["b2"][idx] = uv[fin, 0], uv[fin, 1]
+            s = todo[skip]
+            res["passed"][todo[through]] = True
+            # continue from the far side of the skipped surface (offset along its normal)
+            hp = o[s] + d[s] * t[skip, None]
+            n = ng[skip]
+            side = np.where(np.einsum("ij,ij->i", n, d[s]) >= 0, 1.0, -1.0)[:, None]
+            o_new = hp + n * side * _eps(hp)[:, None]
+            travelled[s] += np.einsum("ij,ij->i", o_new - o[s], d[s])
+            o[s] = o_new
+            todo = s
+        res["p"] = np.asarray(o, np.float64)  # placeholder, recomputed by the caller from t
+        return res
+
+
+class Kind:
+    MESH, ASSET, LIGHT = 0, 1, 2
+
+
+class PathTracer:
+    def __init__(self, mi, scene, objects, lights, camera, *, max_depth=5, rr_depth=3, log=None) -> None:
+        """``objects``: list of dicts (kind, mesh/asset data, world triangles) indexed by Tracer object index."""
+        import drjit as dr
+
+        self.mi, self.scene, self.objects, self.lights, self.camera = mi, scene, objects, lights, camera
+        self.max_depth, self.rr_depth = int(max_depth), int(rr_depth)
+        ids = {}
+        by_name = {o["id"]: k for k, o in enumerate(objects)}
+        for sh in scene.shapes():
+            k = by_name.get(sh.id())
+            if k is not None:
+                ids[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0])] = k
+        self.tracer = Tracer(mi, scene, ids)
+        geo = [o_["bbox"] for o_ in objects if "bbox" in o_]
+        if geo:
+            lo = np.min([g[0] for g in geo], axis=0)
+            hi = np.max([g[1] for g in geo], axis=0)
+            _EPS_SCENE[0] = 1e-6 * max(float(np.linalg.norm(hi - lo)), 1e-30)
+        for lt in lights:
+            if isinstance(lt, MitsubaLight):
+                for em in scene.emitters():
+                    if em.id() == lt.key:
+                        lt.emitter = em
+                if lt.emitter is None:  # shape-attached emitters carry the shape's id
+                    for sh in scene.shapes():
+                        if sh.id() == lt.key and sh.emitter() is not None:
+                            lt.emitter = sh.emitter()
+        self.light_of_obj = {k: o["light"] for k, o in enumerate(objects) if o["kind"] == Kind.LIGHT}
+        reflective = [k for k, o in enumerate(objects) if o["kind"] != Kind.LIGHT]
+        # light shapes are seen by camera and continuation rays but do not block shadow rays
+        self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
+        self.n_reflective = len(reflective)
+        self.log = log
+
+    # -- geometry helpers -----------------------------------------------------------------------------
+
+    def _geo(self, obj, prim):
+        """World geometric normals of hits (obj, prim)."""
+        ng = np.zeros((len(obj), 3))
+        for k in np.unique(obj):
+            sel = obj == k
+            ng[sel] = self.objects[k]["face_normals"][prim[sel]]
+        return ng
+
+    def _continues(self, obj, depth):
+        cont = depth < self.max_depth
+        if self.n_reflective <= 1:
+            planar = np.array([self.objects[k].get("planar", False) for k in range(len(self.objects))] + [False])
+            cont &= ~planar[obj] & np.array([self.objects[k]["kind"] == Kind.MESH for k in range(len(self.objects))] + [False])[obj]
+        return cont
+
+    # -- BSDF (spec/renderer.md#materials) -------------------------------------------------------------
+
+    @staticmethod
+    def _ggx_terms(n, wo, wi, alpha):
+        h = _norm(wo + wi)
+        nh = np.clip(_dot(n, h), 0.0, 1.0)
+        a2 = alpha * alpha
+        den = nh * nh * (a2 - 1.0) + 1.0
+        dd = a2 / (np.pi * den * den)
+
+        def lam(c):
+            c = np.clip(np.abs(c), 1e-12, 1.0)
+            return (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
+
+        g2 = 1.0 / (1.0 + lam(_dot(n, wo)) + lam(_dot(n, wi)))
+        return h, nh, dd, g2
+
+    def bsdf_eval(self, mat, n, wo, wi):
+        """-> f * cos_i [m, 3] and pdf of bsdf_sample (solid angle)."""
+        co, ci = _dot(n, wo), _dot(n, wi)
+        ok = (co > 0) & (ci > 0)
+        val = mat["kd"] / np.pi * ci[:, None]
+        pdf = (1.0 - mat["ps"]) * np.maximum(ci, 0.0) / np.pi
+        if np.any(mat["spec"]):
+            h, nh, dd, g2 = self._ggx_terms(n, wo, wi, mat["alpha"])
+            oh = np.clip(_dot(wo, h), 0.0, 1.0)
+            f = mat["f0"] + (1.0 - mat["f0"]) * ((1.0 - oh) ** 5)[:, None]
+            spec = (dd * g2 / (4.0 * np.maximum(co, 1e-12)))[:, None] * f
+            val = val + np.where(mat["spec"][:, None], spec, 0.0)
+            pdf = pdf + mat["ps"] * dd * nh / (4.0 * np.maximum(np.abs(_dot(wo, h)), 1e-12))
+        return np.where(ok[:, None], val, 0.0), np.where(ok, pdf, 0.0)
+
+    def bsdf_sample(self, mat, n, wo, u, us):
+        t = _norm(np.cross(np.where(np.abs(n[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]]), n))
+        b = np.cross(n, t)
+        # cosine lobe
+        r = np.sqrt(u[:, 0])
+        ph = 2.0 * np.pi * u[:, 1]
+        z = np.sqrt(np.maximum(0.0, 1.0 - u[:, 0]))
+        wd = (r * np.cos(ph))[:, None] * t + (r * np.sin(ph))[:, None] * b + z[:, None] * n
+        # GGX D(h)(n.h) lobe
+        a2 = mat["alpha"] ** 2
+        tan2 = a2 * u[:, 0] / np.maximum(1.0 - u[:, 0], 1e-12)
+        ct = 1.0 / np.sqrt(1.0 + tan2)
+        st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
+        h = (st * np.cos(ph))[:, None] * t + (st * np.sin(ph))[:, None] * b + ct[:, None] * n
+        ws = 2.0 * _dot(wo, h)[:, None] * h - wo
+        pick_spec = us < mat["ps"]
+        wi = np.where(pick_spec[:, None], ws, wd)
+        fc, pdf = self.bsdf_eval(mat, n, wo, wi)
+        return _norm(wi), fc, pdf
+
+    def _materials(self, obj):
+        m = len(obj)
+        kd, f0, alpha, ps, spec = np.zeros((m, 3)), np.zeros((m, 3)), np.ones(m), np.zeros(m), np.zeros(m, bool)
+        for k in np.unique(obj):
+            sel = obj == k
+            mt = self.objects[k]["material"]
+            kd[sel], f0[sel], alpha[sel], spec[sel] = mt.kd, mt.f0, mt.alpha, mt.specular
+            if mt.specular:
+                a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
+                ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
+        return {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
+
+    # -- main loop ------------------------------------------------------------------------------------
+
+    def render(self, width, height, spp, seed, batch=1 << 17):
+        rng = np.random.default_rng(seed)
+        npix = width * height
+        total = npix * spp
+        acc = np.zeros((npix, 3))
+        for s in range(0, total, batch):
+            e = min(total, s + batch)
+            ids = np.arange(s, e)
+            pix = ids % npix
+            px = (pix % width) + rng.random(len(ids))
+            py = (pix // width) + rng.random(len(ids))
+            o, d = self.camera_rays(px, py, width, height)
+            contrib = self.radiance(o, d, rng)
+            np.add.at(acc, pix, contrib)
+        return (acc / spp).reshape(height, width, 3)
+
+    def camera_rays(self, px, py, width, height):
+        cam = self.camera
+        tan_h = 0.5 * cam.h_aperture / cam.focal
+        x = (2.0 * px / width - 1.0) * tan_h
+        y = (1.0 - 2.0 * py / height) * tan_h * (height / width)
+        dl = np.stack([x, y, -np.ones_like(x)], 1)
+        d = _norm(dl @ cam.to_world[:3, :3])
+        o = np.broadcast_to(cam.to_world[3, :3], d.shape).copy()
+        return o, d
+
+    def radiance(self, o, d, rng):
+        m = len(o)
+        L = np.zeros((m, 3))
+        idx = np.arange(m)
+        beta = np.ones((m, 3))
+        depth = np.zeros(m, np.int64)
+        prev_pdf = np.zeros(m)  # 0: camera ray (or weight-1 emission)
+        prev_p = o.copy()
+        ignore = np.full(m, -1, np.int64)
+        while len(idx):
+            tr = self.tracer.trace(o, d, ignore=ignore)
+            p = o + d * np.where(np.isfinite(tr["t"]), tr["t"], 0.0)[:, None]
+            # escaped: infinite lights
+            miss = ~tr["hit"]
+            if np.any(miss):
+                dm = d[miss]
+                le = np.zeros((int(miss.sum()), 3))
+                for lt in self.lights:
+                    if getattr(lt, "infinite", False):
+                        w = np.where(prev_pdf[miss] > 0, power(prev_pdf[miss], lt.pdf_dir(dm)), 1.0)
+                        le += lt.eval_dir(dm) * w[:, None]
+                np.add.at(L, idx[miss], beta[miss] * le)
+            obj = tr["obj"]
+            kinds = np.array([o_["kind"] for o_ in self.objects] + [-1])[obj]
+            # area lights hit
+            hl = kinds == Kind.LIGHT
+            if np.any(hl):
+                self._shape_light_hits(L, idx, hl, obj, o + d * np.maximum(tr["t"] - 10.0 * _eps(p), 0.0)[:, None], d, prev_pdf, prev_p, beta)
+            # plain meshes: emission
+            hm = kinds == Kind.MESH
+            if np.any(hm):
+                em = np.zeros((len(idx), 3))
+                for k in np.unique(obj[hm]):
+                    em[obj == k] = self.objects[k]["material"].emission
+                np.add.at(L, idx[hm], beta[hm] * em[hm])
+            surf = hm | (kinds == Kind.ASSET)
+            # compact to surface vertices
+            sel = np.nonzero(surf)[0]
+            if len(sel) == 0:
+                break
+            idx, o, d, beta, depth, obj = idx[sel], o[sel], d[sel], beta[sel], depth[sel] + 1, obj[sel]
+            p, prim, b1, b2 = p[sel], tr["prim"][sel], tr["b1"][sel], tr["b2"][sel]
+            ng = self._geo(obj, prim)
+            wo = -d
+            cont = self._continues(obj, depth)
+            is_asset = np.array([o_["kind"] == Kind.ASSET for o_ in self.objects])[obj]
+            new_d = np.zeros_like(d)
+            new_pdf = np.zeros(len(idx))
+            alive = np.zeros(len(idx), bool)
+            # plain surfaces
+            pm = np.nonzero(~is_asset)[0]
+            if len(pm):
+                nb, dn, pdfn, al = self._shade_mesh(L, idx[pm], p[pm], ng[pm], wo[pm], obj[pm], prim[pm], b1[pm], b2[pm], beta[pm], cont[pm], rng)
+                beta[pm], new_d[pm], new_pdf[pm], alive[pm] = nb, dn, pdfn, al
+            am = np.nonzero(is_asset)[0]
+            if len(am):
+                nb, dn, pdfn, al = self._shade_asset(L, idx[am], p[am], ng[am], wo[am], obj[am], prim[am], b1[am], b2[am], beta[am], cont[am], rng)
+                beta[am], new_d[am], new_pdf[am], alive[am] = nb, dn, pdfn, al
+            # Russian roulette
+            rr = alive & (depth >= self.rr_depth)
+            if np.any(rr):
+                q = np.clip(np.max(beta, axis=1), 0.05, 1.0)
+                surv = rng.random(len(idx)) < q
+                alive &= ~rr | surv
+                beta = np.where((rr & surv)[:, None], beta / q[:, None], beta)
+            alive &= np.any(beta > 0, axis=1)
+            k = np.nonzero(alive)[0]
+            side = np.sign(_dot(new_d[k], ng[k]))[:, None]
+            origin = p[k] + ng[k] * side * _eps(p[k])[:, None]
+            idx, beta, depth = idx[k], beta[k], depth[k]
+            prev_p = p[k]
+            o, d, prev_pdf = origin, new_d[k], new_pdf[k]
+            ignore = np.where(is_asset[k], obj[k], -1)
+        return L
+
+    def _shape_light_hits(self, L, idx, hl, obj, o, d, prev_pdf, prev_p, beta):
+        mi = self.mi
+        for k in np.unique(obj[hl]):
+            sel = np.nonzero(hl & (obj == k))[0]
+            lt = self.light_of_obj[k]
+            ray = mi.Ray3f(_p3(mi, o[sel]), _v3(mi, d[sel]))
+            si = self.scene.ray_intersect(ray)
+            le = np.asarray(lt.emitter.eval(si).numpy(), np.float64)
+            le = le.T if le.ndim == 2 else np.broadcast_to(le, (len(sel), 3))
+            w = np.ones(len(sel))
+            cam = prev_pdf[sel] <= 0
+            if np.any(~cam):
+                it = mi.Interaction3f()
+                it.p = _p3(mi, prev_p[sel])
+                it.t = mi.Float(np.zeros(len(sel), np.float32))
+                ds = mi.DirectionSample3f(self.scene, si, it)
+                pl = np.broadcast_to(np.asarray(lt.emitter.pdf_direction(it, ds).numpy(), np.float64), (len(sel),))
+                w = np.where(cam, 1.0, power(prev_pdf[sel], pl))
+            np.add.at(L, idx[sel], beta[sel] * le * w[:, None])
+
+    def _nee(self, p, ng, n_for_light, rng, ignore):
+        """Yield (wi, le/pdf, pdf_light, delta, visible, passed) per light (one sample of every light)."""
+        m = len(p)
+        for lt in self.lights:
+            u = rng.random((m, 2))
+            wi, dist, le, pdf = lt.sample(self.mi, p, n_for_light, u)
+            wi = _norm(wi)
+            valid = (pdf > 0) & np.any(le > 0, axis=1)
+            side = np.sign(_dot(wi, ng))[:, None]
+            side[side == 0] = 1.0
+            origin = p + ng * side * _eps(p)[:, None]
+            maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
+            vis = np.zeros(m, bool)
+            passed = np.zeros(m, bool)
+            v = np.nonzero(valid)[0]
+            if len(v):
+                tr = self.tracer.trace(origin[v], wi[v], maxt[v], None if ignore is None else ignore[v], transparent=self.light_shapes)
+                vis[v] = ~tr["hit"]
+                passed[v] = tr["passed"]
+            yield wi, le / np.maximum(pdf, 1e-300)[:, None] * valid[:, None], pdf, lt.delta, vis & valid, passed
+
+    def _shade_mesh(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
+        flip = _dot(ng, wo) < 0
+        ngf = np.where(flip[:, None], -ng, ng)
+        ns = np.zeros_like(ng)
+        for k in np.unique(obj):
+            sel = obj == k
+            cn = self.objects[k]["corner_normals"][prim[sel]]
+            ns[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * cn[:, 0] + b1[sel][:, None] * cn[:, 1] + b2[sel][:, None] * cn[:, 2]
+        ns = _norm(np.where(flip[:, None], -ns, ns))
+        n = np.where((_dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
+        mat = self._materials(obj)
+        for wi, lw, pl, delta, vis, _ in self._nee(p, ng, n, rng, None):
+            fc, pb = self.bsdf_eval(mat, n, wo, wi)
+            above = _dot(wi, ngf) > 0
+            fc = fc * above[:, None]
+            w = np.ones(len(p)) if delta else np.where(cont, power(pl, pb), 1.0)
+            c = beta * fc * lw * (w * vis)[:, None]
+            np.add.at(L, idx, c)
+        wi, fc, pdf = self.bsdf_sample(mat, n, wo, rng.random((len(p), 2)), rng.random(len(p)))
+        ok = cont & (pdf > 0) & (_dot(wi, ngf) > 0)
+        nb = np.where(ok[:, None], beta * fc / np.maximum(pdf, 1e-300)[:, None], 0.0)
+        return nb, wi, pdf, ok
+
+    def _shade_asset(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
+        m = len(p)
+        entries = []  # (wi, weight [m, 3], valid mask, shadowed branch)
+        for wi, lw, pl, delta, vis, passed in self._nee(p, ng, ng, rng, obj):
+            w = np.ones(m) if delta else np.where(cont, power(pl, INV_FOUR_PI), 1.0)
+            entries.append((wi, lw * w[:, None], vis, passed))
+        # continuation: uniform sphere
+        u = rng.random((m, 2))
+        z = 1.0 - 2.0 * u[:, 0]
+        s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        ph = 2.0 * np.pi * u[:, 1]
+        wc = np.stack([s * np.cos(ph), s * np.sin(ph), z], 1)
+        cidx = np.nonzero(cont)[0]
+        cpassed = np.zeros(m, bool)
+        if len(cidx):
+            side = np.sign(_dot(wc[cidx], ng[cidx]))[:, None]
+            origin = p[cidx] + ng[cidx] * side * _eps(p[cidx])[:, None]
+            tr = self.tracer.trace(origin, wc[cidx], None, obj[cidx])
+            cpassed[cidx] = tr["passed"]
+        entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
+        T = self._transport(entries, p, wo, obj, prim, b1, b2)
+        for (_, lw, vis, _), t in zip(entries[:-1], T[:-1], strict=True):
+            np.add.at(L, idx, beta * t * lw * vis[:, None])
+        nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
+        return nb, wc, np.full(m, INV_FOUR_PI), cont
+
+    def _transport(self, entries, p, wo, obj, prim, b1, b2):
+        """Evaluate T for every entry where its mask is set, grouped by asset file."""
+        m = len(p)
+        out = [np.zeros((m, 3)) for _ in entries]
+        for k in np.unique(obj):
+            sel = np.nonzero(obj == k)[0]
+            inst = self.objects[k]
+            asset, minv = inst["asset"], inst["m3_inv"]
+            x = (p[sel] - inst["to_world"][3, :3]) @ minv
+            n = asset.shading_normal(prim[sel], b1[sel], b2[sel])
+            wo_o = _norm(wo[sel] @ minv)
+            rows, where = [], []
+            for j, (wi, _, mask, passed) in enumerate(entries):
+                ms = sel[mask[sel]]
+                if len(ms) == 0:
+                    continue
+                loc = np.searchsorted(sel, ms)
+                rows.append((x[loc], n[loc], wo_o[loc], _norm(wi[ms] @ minv), passed[ms]))
+                where.append((j, ms))
+            if not rows:
+                continue
+            cat = [np.concatenate([r[c] for r in rows]) for c in range(5)]
+            t = asset.transport(*cat)
+            s = 0
+            for j, ms in where:
+                out[j][ms] = t[s:s + len(ms)]
+                s += len(ms)
+        return out

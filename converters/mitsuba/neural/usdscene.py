@@ -1,0 +1,331 @@
+"""USD scene -> plain description (spec/renderer.md#scene-input, #materials, #lights)."""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nasset_sdk.errors import SceneError
+
+_STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
+_LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DomeLight"}
+
+
+@dataclass
+class Material:
+    kd: np.ndarray
+    f0: np.ndarray
+    alpha: float
+    emission: np.ndarray
+    specular: bool  # the GGX lobe is present (always: Schlick F is non-zero at grazing angles even for F0 = 0)
+
+
+@dataclass
+class Mesh:
+    prim: str
+    points: np.ndarray  # world space [V, 3]
+    faces: np.ndarray  # [F, 3]
+    material: Material
+    corner_normals: np.ndarray | None = None  # [F, 3, 3] world shading normals at the triangle corners
+
+
+@dataclass
+class Light:
+    prim: str
+    type: str
+    radiance: np.ndarray  # intensity * 2^exposure * color (RGB)
+    to_world: np.ndarray  # 4x4 row-vector
+    angle: float = 0.0
+    radius: float = 0.0
+    width: float = 0.0
+    height: float = 0.0
+    normalize: bool = False
+    texture: np.ndarray | None = None  # [H, W, 3] lat-long
+
+
+@dataclass
+class AssetInstance:
+    prim: str
+    file: str
+    to_world: np.ndarray
+
+
+@dataclass
+class Camera:
+    prim: str
+    to_world: np.ndarray
+    focal: float
+    h_aperture: float
+    v_aperture: float
+
+    def resolution(self, width: int | None, height: int | None) -> tuple[int, int]:
+        aspect = self.v_aperture / self.h_aperture
+        if width is None and height is None:
+            width = 256
+        if width is None:
+            width = max(1, int(round(height / aspect)))
+        if height is None:
+            height = max(1, int(round(width * aspect)))
+        return int(width), int(height)
+
+
+@dataclass
+class SceneDesc:
+    path: str
+    camera: Camera
+    meshes: list[Mesh] = field(default_factory=list)
+    lights: list[Light] = field(default_factory=list)
+    assets: list[AssetInstance] = field(default_factory=list)
+
+
+def _m4(gf) -> np.ndarray:
+    return np.array([[gf[i][j] for j in range(4)] for i in range(4)], np.float64)
+
+
+def _input(shader, name, default):
+    inp = shader.GetInput(name)
+    if not inp:
+        return default
+    if inp.HasConnectedSource():
+        warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected; its texture is ignored (default used)", stacklevel=3)
+        return default
+    v = inp.Get()
+    return default if v is None else v
+
+
+def read_material(prim, path) -> Material:
+    from pxr import UsdShade
+
+    kd = np.array([0.18, 0.18, 0.18])
+    spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
+    emis = np.zeros(3)
+    mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+    if mat:
+        src = mat.ComputeSurfaceSource()
+        shader = src[0] if src and src[0] else None
+        if shader is None:
+            warnings.warn(f"{prim.GetPath()}: material {mat.GetPath()} has no surface shader; default UsdPreviewSurface used", stacklevel=2)
+        else:
+            sid = shader.GetIdAttr().Get()
+            if sid != "UsdPreviewSurface":
+                raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not UsdPreviewSurface", file=path, prim=str(shader.GetPath()))
+            kd = np.asarray(_input(shader, "diffuseColor", kd), np.float64)
+            spec = np.asarray(_input(shader, "specularColor", spec), np.float64)
+            rough = float(_input(shader, "roughness", rough))
+            metal = float(_input(shader, "metallic", metal))
+            use_spec = int(_input(shader, "useSpecularWorkflow", use_spec))
+            ior = float(_input(shader, "ior", ior))
+            emis = np.asarray(_input(shader, "emissiveColor", emis), np.float64)
+    if use_spec == 1:
+        k, f0 = kd.copy(), spec
+    else:
+        k = kd * (1.0 - metal)
+        r0 = ((1.0 - ior) / (1.0 + ior)) ** 2
+        f0 = r0 * (1.0 - metal) + kd * metal
+    return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True)
+
+
+def _asset_target(prim) -> str | None:
+    """File of the first reference/payload on ``prim`` with an asset path (resolved against its layer)."""
+    from pxr import Sdf
+
+    for spec in prim.GetPrimStack():
+        for key in ("references", "payload"):
+            if not spec.HasInfo(key):
+                continue
+            op = spec.GetInfo(key)
+            items = list(op.explicitItems) + list(op.prependedItems) + list(op.appendedItems) + list(op.addedItems)
+            for it in items:
+                if it.assetPath:
+                    return os.path.normpath(Sdf.ComputeAssetPathRelativeToLayer(spec.layer, it.assetPath))
+    return None
+
+
+def _asset_to_world(prim, cache) -> np.ndarray:
+    """Local-to-world of an asset prim. With its payload unloaded an untyped prim is not (yet) a
+    UsdGeom.Xformable, so UsdGeom's cache would ignore its xformOps: read them explicitly."""
+    from pxr import Usd, UsdGeom
+
+    xf = UsdGeom.Xformable(prim)
+    local = _m4(xf.GetLocalTransformation(Usd.TimeCode.Default()))
+    if xf.GetResetXformStack():
+        return local
+    return local @ _m4(cache.GetLocalToWorldTransform(prim.GetParent()))
+
+
+def _looks_like_asset(file: str) -> bool:
+    from pxr import Sdf
+
+    try:
+        layer = Sdf.Layer.FindOrOpen(file)
+    except Exception:
+        return False
+    if layer is None or not layer.defaultPrim:
+        return False
+    spec = layer.GetPrimAtPath("/" + layer.defaultPrim)
+    return spec is not None and spec.typeName == "NeuralAsset"
+
+
+def _read_exr(path: str, light_prim: str, scene: str) -> np.ndarray:
+    try:
+        import OpenEXR
+
+        with OpenEXR.File(path) as f:
+            ch = f.channels()
+            if "RGB" in ch:
+                img = np.asarray(ch["RGB"].pixels, np.float64)
+            else:
+                img = np.stack([np.asarray(ch[c].pixels, np.float64) for c in "RGB"], -1)
+    except Exception as exc:
+        raise SceneError("SCENE_INVALID", f"dome texture {path} cannot be read as RGB OpenEXR: {exc}", file=scene, prim=light_prim) from None
+    return img[..., :3]
+
+
+def read_scene(path: str) -> SceneDesc:
+    from pxr import Usd, UsdGeom, UsdLux
+
+    import nasset_sdk  # noqa: F401  (registers the codeless schema so NeuralAsset is a known type)
+
+    path = str(path)
+    if not os.path.exists(path):
+        raise SceneError("SCENE_INVALID", "scene file does not exist", file=path)
+    try:
+        stage = Usd.Stage.Open(path, Usd.Stage.LoadNone)
+    except Exception as exc:
+        raise SceneError("SCENE_INVALID", f"scene does not open: {str(exc).splitlines()[0][:200]}", file=path) from None
+    t = Usd.TimeCode.Default()
+    cache = UsdGeom.XformCache(t)
+    camera = None
+    meshes, lights, assets = [], [], []
+    # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
+    it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)))
+    for prim in it:
+        if prim.IsPseudoRoot():
+            continue
+        tn = prim.GetTypeName()
+        ppath = str(prim.GetPath())
+        if tn == "NeuralAsset" or (tn == "" and (prim.HasAuthoredReferences() or prim.HasAuthoredPayloads())):
+            file = _asset_target(prim)
+            if tn == "NeuralAsset" or (file and _looks_like_asset(file)):
+                it.PruneChildren()
+                if not file:
+                    raise SceneError("SCENE_INVALID", "NeuralAsset prim references no asset file", file=path, prim=ppath)
+                assets.append(AssetInstance(ppath, file, _asset_to_world(prim, cache)))
+                continue
+        if tn == "Camera":
+            if camera is None:
+                cam = UsdGeom.Camera(prim)
+                if cam.GetProjectionAttr().Get() not in (None, "perspective"):
+                    raise SceneError("SCENE_UNSUPPORTED", "only perspective cameras are supported", file=path, prim=ppath)
+                ha = float(cam.GetHorizontalApertureAttr().Get())
+                va = cam.GetVerticalApertureAttr().Get()
+                camera = Camera(ppath, _m4(cache.GetLocalToWorldTransform(prim)), float(cam.GetFocalLengthAttr().Get()), ha, float(va or ha))
+            continue
+        if tn in _LIGHTS:
+            lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path))
+            continue
+        if tn == "Mesh":
+            m = UsdGeom.Mesh(prim)
+            pts = np.asarray(m.GetPointsAttr().Get() or [], np.float64).reshape(-1, 3)
+            counts = np.asarray(m.GetFaceVertexCountsAttr().Get() or [], np.int64)
+            idx = np.asarray(m.GetFaceVertexIndicesAttr().Get() or [], np.int64)
+            if len(pts) == 0 or len(counts) == 0:
+                warnings.warn(f"{ppath}: empty mesh ignored", stacklevel=2)
+                continue
+            if counts.sum() != len(idx) or np.any(counts < 3) or idx.min() < 0 or idx.max() >= len(pts):
+                raise SceneError("SCENE_INVALID", "mesh topology is invalid", file=path, prim=ppath)
+            faces, corners, face_of = [], [], []
+            start = 0
+            for fi, c in enumerate(counts):  # fan triangulation
+                f = idx[start:start + c]
+                faces.extend([(f[0], f[k], f[k + 1]) for k in range(1, c - 1)])
+                corners.extend([(start, start + k, start + k + 1) for k in range(1, c - 1)])
+                face_of.extend([fi] * (c - 2))
+                start += c
+            mw = _m4(cache.GetLocalToWorldTransform(prim))
+            wp = pts @ mw[:3, :3] + mw[3, :3]
+            faces = np.asarray(faces, np.int64)
+            cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), np.asarray(face_of, np.int64), len(pts), len(idx), len(counts), mw)
+            meshes.append(Mesh(ppath, wp, faces, read_material(prim, path), cn))
+            continue
+        if tn in _STRUCTURAL:
+            continue
+        if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim):
+            raise SceneError("SCENE_UNSUPPORTED", f"prim type {tn!r} is not supported", file=path, prim=ppath)
+        warnings.warn(f"{ppath}: prim type {tn!r} ignored", stacklevel=2)
+    if camera is None:
+        raise SceneError("SCENE_INVALID", "the scene has no UsdGeom.Camera", file=path)
+    return SceneDesc(path, camera, meshes, lights, assets)
+
+
+def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw):
+    """Authored normals (primvars:normals, else normals) as world shading normals per triangle corner."""
+    from pxr import UsdGeom
+
+    pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
+    if pv and pv.HasAuthoredValue():
+        vals, interp = pv.ComputeFlattened(), pv.GetInterpolation()
+    else:
+        a = UsdGeom.Mesh(prim).GetNormalsAttr()
+        if not a or not a.HasAuthoredValue():
+            return None
+        vals, interp = a.Get(), UsdGeom.Mesh(prim).GetNormalsInterpolation()
+    if vals is None:
+        return None
+    v = np.asarray(vals, np.float64).reshape(-1, 3)
+    if interp in ("vertex", "varying") and len(v) == nv:
+        n = v[faces]
+    elif interp == "faceVarying" and len(v) == nidx:
+        n = v[corners]
+    elif interp == "uniform" and len(v) == nfaces:
+        n = np.repeat(v[face_of][:, None], 3, 1)
+    else:
+        warnings.warn(f"{prim.GetPath()}: normals with interpolation {interp!r} and {len(v)} values ignored", stacklevel=3)
+        return None
+    n = n @ np.linalg.inv(mw[:3, :3]).T
+    return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+
+
+def _read_light(prim, tn, mw, path) -> Light:
+    from pxr import Sdf
+
+    ppath = str(prim.GetPath())
+
+    def get(name, default):
+        a = prim.GetAttribute("inputs:" + name)
+        if not a:
+            a = prim.GetAttribute(name)
+        v = a.Get() if a else None
+        return default if v is None else v
+
+    rad = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)
+    if bool(get("enableColorTemperature", False)):
+        warnings.warn(f"{ppath}: colour temperature ignored", stacklevel=3)
+    lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
+    if tn == "DistantLight":
+        lt.angle = float(get("angle", 0.53))
+    elif tn == "SphereLight":
+        lt.radius = float(get("radius", 0.5))
+        if bool(get("treatAsPoint", False)):
+            lt.radius = 0.0
+    elif tn == "RectLight":
+        lt.width, lt.height = float(get("width", 1.0)), float(get("height", 1.0))
+        if get("texture:file", None):
+            raise SceneError("SCENE_UNSUPPORTED", "textured RectLight is not supported", file=path, prim=ppath)
+    elif tn == "DomeLight":
+        tex = get("texture:file", None)
+        fmt = str(get("texture:format", "automatic"))
+        if tex is not None and str(tex.path if isinstance(tex, Sdf.AssetPath) else tex):
+            if fmt not in ("automatic", "latlong"):
+                raise SceneError("SCENE_UNSUPPORTED", f"dome texture format {fmt!r} (latlong only)", file=path, prim=ppath)
+            resolved = tex.resolvedPath if isinstance(tex, Sdf.AssetPath) and tex.resolvedPath else None
+            if not resolved:
+                raw = tex.path if isinstance(tex, Sdf.AssetPath) else str(tex)
+                resolved = raw if os.path.isabs(raw) else os.path.join(os.path.dirname(os.path.abspath(path)), raw)
+            if not os.path.exists(resolved):
+                raise SceneError("SCENE_INVALID", f"dome texture {resolved} does not exist", file=path, prim=ppath)
+            lt.texture = _read_exr(resolved, ppath, path)
+    return lt

@@ -1,0 +1,774 @@
+"""``nasset convert-scene``: a Mitsuba 3 scene (camera, lights, plain shapes) -> a USD stage.
+
+The stage is what the reference renderer reads (spec/renderer.md#scene-input): one
+``UsdGeom.Camera``, ``UsdGeom.Mesh`` / ``UsdGeom.Sphere`` prims bound to ``UsdPreviewSurface``
+materials, ``UsdLux`` lights, and one NeuralAsset prim per ``--replace`` asset file, which takes
+the place of the shapes it was baked from. The mapping of every Mitsuba plugin, and what it
+loses, is written down in spec/bake.md#scene-conversion; everything not converted exactly is a
+warning (stderr, and the ``warnings`` list of ``--json``).
+
+Parsing: the scene is loaded by Mitsuba itself (``mi.load_file(..., optimize=False)``), so
+includes, ``<default>`` parameters, ``<ref>``s, transforms, named materials (``Au``) and mesh
+files are resolved exactly as Mitsuba resolves them; values are then read with ``mi.traverse``
+(world-space mesh vertices, ``to_world`` of analytic shapes, emitters and the sensor, BSDF
+parameters) and plugin classes from the objects' ``str()``. Nothing is re-implemented from the
+XML, so what is converted is what Mitsuba renders.
+
+Conventions (Mitsuba -> USD, both right-handed, scene units kept, +Y declared up, 1 unit = 1 m):
+
+* matrices are written in USD's row-vector form (``p_world = p_local M``, i.e. Mitsuba's
+  ``to_world`` transposed);
+* Mitsuba's camera looks down local +Z with local +X to the image's *left*; USD's looks down -Z
+  with +X right: the camera gets ``diag(-1, 1, -1)`` applied in its local frame;
+* ``directional``: ``to_world`` +Z is the direction light travels; a DistantLight's +Z points
+  toward the light, so +Z := -direction; ``intensity`` = irradiance, ``angle`` = 0 (delta);
+* ``rectangle`` area lights emit toward local +Z; a RectLight toward -Z: rotated 180 deg about X,
+  ``width`` = ``height`` = 2 (Mitsuba's rectangle spans [-1, 1]^2);
+* ``envmap``: Mitsuba looks up ``u = atan2(d.x, -d.z) / 2pi``, the renderer
+  ``u = 0.5 + atan2(d.x, -d.z) / 2pi`` (spec/renderer.md#lights): the dome is rotated 180 deg about
+  its local +Y before ``to_world``; the texture Mitsuba loaded is written as OpenEXR next to the
+  output; ``scale`` becomes ``intensity``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import UsageError, error
+
+#: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
+MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
+#: segments of the triangle fan written for a Mitsuba ``disk``
+DISK_SEGMENTS = 96
+#: focal length (mm) of the written camera; the apertures carry the field of view
+FOCAL_LENGTH_MM = 50.0
+
+_FLIP_CAMERA = np.diag([-1.0, 1.0, -1.0, 1.0])  # Mitsuba camera local -> USD camera local
+_FLIP_RECT = np.diag([1.0, -1.0, -1.0, 1.0])  # rotate 180 deg about X: RectLight -Z -> rectangle +Z
+_FLIP_DOME = np.diag([-1.0, 1.0, -1.0, 1.0])  # rotate 180 deg about Y: lat-long u shift by 1/2
+
+
+@dataclass
+class ConvertResult:
+    """What ``convert_scene`` wrote: the file, its prims (path -> what it came from) and the warnings."""
+
+    output: Path
+    prims: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+    replaced: dict = field(default_factory=dict)  # prim path -> {"asset": relative path, "shapes": [...]}
+    resolution: tuple = (0, 0)
+    integrator: dict = field(default_factory=dict)
+    textures: list = field(default_factory=list)
+    usd_checks: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {
+            "ok": True, "output": str(self.output), "prims": self.prims, "replaced": self.replaced,
+            "resolution": list(self.resolution), "integrator": self.integrator, "textures": self.textures,
+            "warnings": list(self.warnings), "usd_checks": self.usd_checks,
+        }
+
+
+# -- small helpers ------------------------------------------------------------------------------
+def _np(v) -> np.ndarray:
+    return np.asarray(v, np.float64)
+
+
+def _matrix(transform) -> np.ndarray:
+    """Mitsuba Transform4f (scalar or JIT) -> 4x4 float64 column-vector matrix."""
+    m = np.asarray(transform.matrix, np.float64)
+    return m.reshape(4, 4, -1)[:, :, 0] if m.size > 16 else m.reshape(4, 4)
+
+
+def _row(m_col: np.ndarray) -> np.ndarray:
+    """Column-vector (Mitsuba) -> row-vector (USD) matrix."""
+    return np.ascontiguousarray(m_col.T)
+
+
+def _class_name(obj) -> str:
+    s = str(obj)
+    return re.split(r"[\[:]", s, maxsplit=1)[0].strip().replace(" BSDF", "") if s else type(obj).__name__
+
+
+def _frame_row(z_axis, position=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Row-vector 4x4 whose local +Z maps to ``z_axis`` (unit), at ``position``."""
+    w = _np(z_axis)
+    w = w / max(float(np.linalg.norm(w)), 1e-300)
+    a = np.array([0.0, 1.0, 0.0]) if abs(w[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    t = np.cross(a, w)
+    t /= np.linalg.norm(t)
+    b = np.cross(w, t)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3], m[3, :3] = t, b, w, position
+    return m
+
+
+def fresnel_dielectric(cos_i: np.ndarray, eta: float) -> np.ndarray:
+    """Unpolarised Fresnel reflectance of a dielectric interface (incident from the outside)."""
+    cos_i = np.clip(cos_i, 0.0, 1.0)
+    sin2_t = (1.0 - cos_i ** 2) / (eta * eta)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
+    rs = (cos_i - eta * cos_t) / np.maximum(cos_i + eta * cos_t, 1e-300)
+    rp = (eta * cos_i - cos_t) / np.maximum(eta * cos_i + cos_t, 1e-300)
+    return np.where(tir, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
+def diffuse_fresnel(eta: float, n: int = 4096) -> float:
+    """Cosine-weighted hemispherical mean of the Fresnel reflectance (Mitsuba's ``fresnel_diffuse_reflectance``)."""
+    mu = (np.arange(n) + 0.5) / n
+    return float(np.sum(2.0 * mu * fresnel_dielectric(mu, eta)) / n)
+
+
+def plastic_diffuse_scale(eta: float, nonlinear_reflectance=None) -> float | np.ndarray:
+    """Factor turning Mitsuba's plastic ``diffuse_reflectance`` into a Lambertian albedo.
+
+    Mitsuba's (rough)plastic diffuse lobe is ``R / (1 - fdr_int) / eta^2 * t_i t_o / pi`` with
+    ``t = 1 - F``; with ``t`` replaced by its cosine-weighted mean ``1 - fdr_ext`` this is a
+    Lambertian lobe of albedo ``R * (1 - fdr_ext)^2 / (eta^2 (1 - fdr_int))``. ``nonlinear``
+    plastics divide by ``1 - R fdr_int`` instead (pass R as ``nonlinear_reflectance``).
+    """
+    fdr_ext = diffuse_fresnel(eta)
+    fdr_int = diffuse_fresnel(1.0 / eta)
+    den = 1.0 - (fdr_int if nonlinear_reflectance is None else np.asarray(nonlinear_reflectance) * fdr_int)
+    return (1.0 - fdr_ext) ** 2 / (eta * eta * den)
+
+
+class _Params:
+    """Reads Mitsuba parameter values by name, noting textures replaced by their mean."""
+
+    def __init__(self, mi, obj, prefix: str = "") -> None:
+        self.p = mi.traverse(obj)
+        self.prefix = prefix
+        self.textured: list[str] = []
+
+    def keys(self):
+        return [k[len(self.prefix):] for k in self.p.keys() if k.startswith(self.prefix)]
+
+    def has(self, name: str) -> bool:
+        k = self.prefix + name
+        return any(x in self.p for x in (k, k + ".value", k + ".data"))
+
+    def rgb(self, name: str, default=(0.0, 0.0, 0.0)) -> np.ndarray:
+        k = self.prefix + name
+        if k + ".value" in self.p:
+            v = _np(self.p[k + ".value"]).ravel()
+        elif k + ".data" in self.p:
+            data = _np(self.p[k + ".data"])
+            v = data.reshape(-1, data.shape[-1]).mean(0)
+            self.textured.append(name)
+        elif k in self.p:
+            v = _np(self.p[k]).ravel()
+        else:
+            return _np(default).copy()
+        if v.size == 1:
+            v = np.repeat(v, 3)
+        return v[:3].copy()
+
+    def scalar(self, name: str, default: float) -> float:
+        return float(self.rgb(name, (default,) * 3).mean())
+
+
+# -- the converter ------------------------------------------------------------------------------
+class _Converter:
+    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
+        from pxr import Usd, UsdGeom
+
+        self.mi, self.scene, self.scene_path, self.output = mi, scene, scene_path, output
+        self.replace = replace  # shape id -> asset Path
+        self.check_usd = check_usd
+        self.result = ConvertResult(output)
+        self.names: set[str] = set()
+        self.materials: dict = {}
+        self.layer_path = output
+        self.stage = Usd.Stage.CreateNew(str(output))
+        UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
+        world = UsdGeom.Xform.Define(self.stage, "/World")
+        self.stage.SetDefaultPrim(world.GetPrim())
+        for group in ("Geometry", "Lights", "Looks", "Assets"):
+            UsdGeom.Scope.Define(self.stage, f"/World/{group}")
+
+    # bookkeeping
+    def warn(self, msg: str) -> None:
+        self.result.warnings.append(msg)
+
+    def _name(self, parent: str, wanted: str) -> str:
+        from pxr import Tf
+
+        base = Tf.MakeValidIdentifier(wanted or "unnamed")
+        name, k = base, 1
+        while f"{parent}/{name}" in self.names:
+            k += 1
+            name = f"{base}_{k}"
+        path = f"{parent}/{name}"
+        self.names.add(path)
+        return path
+
+    def _xform(self, prim, row_matrix) -> None:
+        from pxr import Gf, UsdGeom
+
+        m = np.asarray(row_matrix, np.float64)
+        if np.allclose(m, np.eye(4), atol=0, rtol=0):
+            return
+        UsdGeom.Xformable(prim).AddTransformOp().Set(Gf.Matrix4d(*m.ravel().tolist()))
+
+    def record(self, path: str, what: str) -> None:
+        self.result.prims[path] = what
+
+    # -- camera -----------------------------------------------------------------------------
+    def camera(self) -> None:
+        from pxr import Gf, UsdGeom, UsdRender
+
+        sensors = list(self.scene.sensors())
+        if not sensors:
+            self.warn("the scene has no sensor: no camera written (the reference renderer needs one)")
+            return
+        if len(sensors) > 1:
+            self.warn(f"{len(sensors)} sensors: only the first is converted")
+        sensor = sensors[0]
+        cls = _class_name(sensor)
+        if cls not in ("PerspectiveCamera", "ThinLensCamera"):
+            self.warn(f"sensor {cls} is not a perspective camera: no camera written")
+            return
+        p = self.mi.traverse(sensor)
+        if cls == "ThinLensCamera":
+            self.warn("thinlens sensor: converted as a pinhole camera (no depth of field)")
+        film = sensor.film()
+        size = tuple(int(v) for v in film.size())
+        crop, off = tuple(int(v) for v in film.crop_size()), tuple(int(v) for v in film.crop_offset())
+        if crop != size or off != (0, 0):
+            self.warn(f"film crop window {crop} at {off} ignored (the full {size} film is described)")
+        filt = _class_name(film.rfilter()) if hasattr(film, "rfilter") else ""
+        if filt and filt != "BoxFilter":
+            self.warn(f"film reconstruction filter {filt}: the reference renderer uses a box filter")
+        for k in ("principal_point_offset_x", "principal_point_offset_y"):
+            if k in p and abs(float(_np(p[k]).ravel()[0])) > 0:
+                self.warn(f"{k} ignored")
+        x_fov = float(_np(p["x_fov"]).ravel()[0])
+        row = _FLIP_CAMERA @ _row(_matrix(p["to_world"]))
+        scale = np.linalg.norm(row[:3, :3], axis=1)
+        if not np.allclose(scale, 1.0, atol=1e-4):
+            self.warn(f"camera to_world has scale {scale.round(4).tolist()}: removed")
+            row[:3, :3] /= scale[:, None]
+        path = self._name("/World", sensor.id() or "Camera")
+        cam = UsdGeom.Camera.Define(self.stage, path)
+        ha = 2.0 * FOCAL_LENGTH_MM * math.tan(math.radians(x_fov) / 2.0)
+        cam.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+        cam.CreateFocalLengthAttr(FOCAL_LENGTH_MM)
+        cam.CreateHorizontalApertureAttr(ha)
+        cam.CreateVerticalApertureAttr(ha * size[1] / size[0])
+        near, far = float(_np(p["near_clip"]).ravel()[0]), float(_np(p["far_clip"]).ravel()[0])
+        cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
+        self._xform(cam.GetPrim(), row)
+        self.record(path, f"sensor {sensor.id() or '(unnamed)'} ({cls}, x_fov {x_fov:.4g} deg)")
+        self.result.resolution = size
+        # resolution: the standard place is a UsdRender.Settings prim (outside the defaultPrim)
+        settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")
+        settings.CreateResolutionAttr(Gf.Vec2i(*size))
+        settings.CreateCameraRel().SetTargets([path])
+        settings.CreatePixelAspectRatioAttr(1.0)
+
+    # -- integrator (recorded, not converted) -------------------------------------------------
+    def integrator(self) -> None:
+        integ = self.scene.integrator()
+        if integ is None:
+            return
+        text = str(integ)
+        cls = _class_name(integ)
+        info = {"type": cls}
+        m = re.search(r"max_depth\s*=\s*(-?\d+)", text)
+        if m:
+            md = int(m.group(1))
+            info["max_depth"] = md
+            info["renderer_max_depth"] = None if md < 0 else max(md - 1, 1)
+        self.result.integrator = info
+        if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
+            self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
+        if info.get("max_depth", -1) >= 0:
+            self.warn(f"integrator max_depth {info['max_depth']} is not stored in USD: render with "
+                      f"`nasset render --max-depth {info['renderer_max_depth']}` (it counts scattering vertices)")
+
+    # -- materials ----------------------------------------------------------------------------
+    def material(self, bsdf, shape_name: str, emission=None) -> str:
+        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id)."""
+        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)))
+        if key in self.materials:
+            return self.materials[key]
+        inputs, notes = self.map_bsdf(bsdf)
+        for n in notes:
+            self.warn(f"shape {shape_name}: {n}")
+        if emission is not None:
+            inputs["emissiveColor"] = tuple(float(x) for x in emission)
+        path = self._write_material(bsdf.id() or f"{shape_name}_bsdf", inputs)
+        self.record(path, f"bsdf {bsdf.id() or '(inline)'} ({_class_name(bsdf)})")
+        self.materials[key] = path
+        return path
+
+    def _write_material(self, name: str, inputs: dict) -> str:
+        from pxr import Gf, Sdf, UsdShade
+
+        path = self._name("/World/Looks", name)
+        mat = UsdShade.Material.Define(self.stage, path)
+        sh = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
+        sh.CreateIdAttr("UsdPreviewSurface")
+        types = {"diffuseColor": Sdf.ValueTypeNames.Color3f, "specularColor": Sdf.ValueTypeNames.Color3f,
+                 "emissiveColor": Sdf.ValueTypeNames.Color3f, "useSpecularWorkflow": Sdf.ValueTypeNames.Int,
+                 "roughness": Sdf.ValueTypeNames.Float, "metallic": Sdf.ValueTypeNames.Float,
+                 "ior": Sdf.ValueTypeNames.Float}
+        for k, v in inputs.items():
+            if types[k] == Sdf.ValueTypeNames.Color3f:
+                v = Gf.Vec3f(*(float(x) for x in v))
+            elif types[k] == Sdf.ValueTypeNames.Int:
+                v = int(v)
+            else:
+                v = float(v)
+            sh.CreateInput(k, types[k]).Set(v)
+        mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+        return path
+
+    def map_bsdf(self, bsdf) -> tuple[dict, list]:
+        """UsdPreviewSurface inputs for a Mitsuba BSDF and notes on what the mapping loses.
+
+        Returns ``({input: value}, [notes])``; the table is in spec/bake.md#scene-conversion.
+        """
+        mi = self.mi
+        notes: list[str] = []
+        cls = _class_name(bsdf)
+        text = str(bsdf)
+        prefix = ""
+        if cls == "TwoSided":
+            prefix = "brdf_0."
+            inner = re.search(r"brdf\[0\]\s*=\s*(\w+)", text)
+            if re.search(r"brdf\[1\]", text) and text.count("brdf[0]") and _two_sides_differ(text):
+                notes.append("twosided BSDF with different back side: the front BSDF is used on both sides")
+            cls = inner.group(1) if inner else "SmoothDiffuse"
+        elif "Dielectric" not in cls:
+            notes.append(f"{cls} is one-sided in Mitsuba (black from behind); the reference renderer shades both sides")
+        p = _Params(mi, bsdf, prefix)
+        spec_wf = {"useSpecularWorkflow": 1}
+        if cls == "SmoothDiffuse":
+            out = {**spec_wf, "diffuseColor": p.rgb("reflectance", (0.5,) * 3), "specularColor": (0.0, 0.0, 0.0),
+                   "roughness": 1.0}
+        elif cls in ("RoughPlastic", "SmoothPlastic"):
+            eta = p.scalar("eta", 1.49)
+            r = p.rgb("diffuse_reflectance", (0.5,) * 3)
+            nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", text))
+            kd = r * plastic_diffuse_scale(eta, r if nonlinear else None)
+            f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
+            if cls == "RoughPlastic":
+                alpha = p.scalar("alpha", 0.1)
+                rough = math.sqrt(max(alpha, 0.0))
+                if "beckmann" in text:
+                    notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
+            else:
+                rough = 0.0
+                notes.append("plastic: smooth specular approximated by GGX with the renderer's minimum roughness")
+            notes.append(f"{cls}: dielectric Fresnel (eta {eta:.3g}) approximated by Schlick F0 {f0.mean():.4f}; "
+                         f"diffuse_reflectance x {float(np.mean(kd / np.maximum(r, 1e-12))):.3f} for the coating's "
+                         "transmission (spec/bake.md#scene-conversion)")
+            out = {**spec_wf, "diffuseColor": np.clip(kd, 0, 1), "specularColor": np.clip(f0, 0, 1), "roughness": rough}
+        elif cls in ("SmoothConductor", "RoughConductor"):
+            eta, k = p.rgb("eta", (0.0,) * 3), p.rgb("k", (1.0,) * 3)
+            f0 = ((eta - 1.0) ** 2 + k * k) / np.maximum((eta + 1.0) ** 2 + k * k, 1e-12)
+            f0 = f0 * p.rgb("specular_reflectance", (1.0,) * 3)
+            if cls == "RoughConductor":
+                if p.has("alpha"):
+                    alpha = p.scalar("alpha", 0.1)
+                else:
+                    au, av = p.scalar("alpha_u", 0.1), p.scalar("alpha_v", 0.1)
+                    if abs(au - av) > 1e-6:
+                        notes.append(f"anisotropic roughness ({au:.3g}, {av:.3g}) replaced by their mean")
+                    alpha = 0.5 * (au + av)
+                rough = math.sqrt(max(alpha, 0.0))
+                if "beckmann" in text:
+                    notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
+            else:
+                rough = 0.0
+                notes.append("conductor: mirror approximated by GGX with the renderer's minimum roughness")
+            notes.append(f"{cls}: complex Fresnel approximated by Schlick with F0 {np.round(f0, 4).tolist()}")
+            out = {"useSpecularWorkflow": 0, "metallic": 1.0, "diffuseColor": np.clip(f0, 0, 1), "roughness": rough}
+        elif cls == "Principled":
+            spec = p.scalar("specular", 0.5)
+            s = math.sqrt(min(max(0.08 * spec, 0.0), 0.99))
+            out = {"useSpecularWorkflow": 0, "diffuseColor": p.rgb("base_color", (0.5,) * 3),
+                   "metallic": p.scalar("metallic", 0.0), "roughness": p.scalar("roughness", 0.5),
+                   "ior": (1.0 + s) / (1.0 - s)}
+            for lobe in ("clearcoat", "sheen", "spec_trans", "anisotropic", "flatness"):
+                if p.scalar(lobe, 0.0) > 0:
+                    notes.append(f"principled {lobe} ignored")
+        elif cls in ("SmoothDielectric", "RoughDielectric", "ThinDielectric"):
+            eta = p.scalar("eta", 1.5)
+            rough = math.sqrt(p.scalar("alpha", 0.0)) if cls == "RoughDielectric" else 0.0
+            f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+            notes.append(f"{cls} has no counterpart (UsdPreviewSurface transmission is not rendered): written as an "
+                         f"opaque black reflector with F0 {f0:.4f}; bake the object into a neural asset (--replace)")
+            out = {**spec_wf, "diffuseColor": (0.0, 0.0, 0.0), "specularColor": (f0,) * 3, "roughness": rough}
+        else:
+            notes.append(f"BSDF {cls} is not convertible: written as grey diffuse 0.5")
+            out = {**spec_wf, "diffuseColor": (0.5, 0.5, 0.5), "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
+        for t in p.textured:
+            notes.append(f"{cls}.{t} is a texture: replaced by its mean (textures are not converted)")
+        return out, notes
+
+    # -- shapes -------------------------------------------------------------------------------
+    def shapes(self) -> None:
+        for k, shape in enumerate(self.scene.shapes()):
+            sid = shape.id() or f"shape_{k}"
+            if shape.id() in self.replace:
+                continue
+            cls = _class_name(shape)
+            for med, side in ((shape.interior_medium(), "interior"), (shape.exterior_medium(), "exterior")):
+                if med is not None:
+                    self.warn(f"shape {sid}: {side} medium ({_class_name(med)}) ignored (no participating media in USD "
+                              "preview shading); bake the object into a neural asset (--replace)")
+            bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
+            if bsdf_cls == "Null":
+                self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped")
+                continue
+            emitter = shape.emitter()
+            if emitter is not None and cls in ("Rectangle", "Sphere"):
+                self._area_light(shape, sid, cls, emitter)
+                continue
+            emission = None
+            if emitter is not None:
+                emission = _Params(self.mi, emitter).rgb("radiance")
+                self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor (reached by BSDF rays only, "
+                          "both sides; Mitsuba emits from the front side)")
+            if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
+                self._mesh(shape, sid, cls, emission)
+            elif cls == "Rectangle":
+                pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+                self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
+                                 shape, cls, emission, local_to_world=True)
+            elif cls == "Disk":
+                a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
+                pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
+                faces = np.stack([np.zeros(DISK_SEGMENTS, int), 1 + np.arange(DISK_SEGMENTS),
+                                  1 + (np.arange(DISK_SEGMENTS) + 1) % DISK_SEGMENTS], 1)
+                self.warn(f"shape {sid}: disk tessellated into {DISK_SEGMENTS} triangles")
+                self._write_mesh(sid, pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), shape, cls, emission,
+                                 local_to_world=True)
+            elif cls == "Sphere":
+                self._sphere(shape, sid, emission)
+            else:
+                self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
+                          "are): skipped")
+
+    def _bind(self, prim, shape, sid, emission) -> None:
+        from pxr import UsdShade
+
+        mat_path = self.material(shape.bsdf(), sid, emission)
+        UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+
+    def _mesh(self, shape, sid, cls, emission) -> None:
+        p = self.mi.traverse(shape)
+        pts = _np(p["vertex_positions"]).reshape(-1, 3)
+        faces = np.asarray(p["faces"], np.int64).reshape(-1, 3)
+        nrm = _np(p["vertex_normals"]).reshape(-1, 3) if "vertex_normals" in p else None
+        if nrm is not None and nrm.shape != pts.shape:
+            nrm = None
+        self._write_mesh(sid, pts, faces, nrm, shape, cls, emission)
+
+    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False) -> None:
+        from pxr import UsdGeom, Vt
+
+        path = self._name("/World/Geometry", sid)
+        mesh = UsdGeom.Mesh.Define(self.stage, path)
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts, np.float32)))
+        faces = np.asarray(faces, np.int32)
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), faces.shape[1], np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(faces.ravel())))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        if normals is not None:
+            mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(normals, np.float32)))
+            mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        lo, hi = np.asarray(pts, np.float32).min(0), np.asarray(pts, np.float32).max(0)
+        mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi])))
+        if local_to_world:
+            self._xform(mesh.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
+        self._bind(mesh.GetPrim(), shape, sid, emission)
+        self.record(path, f"shape {sid} ({cls}, {len(faces)} faces)")
+
+    def _sphere(self, shape, sid, emission) -> None:
+        from pxr import Gf, UsdGeom
+
+        path = self._name("/World/Geometry", sid)
+        sph = UsdGeom.Sphere.Define(self.stage, path)
+        sph.CreateRadiusAttr(1.0)
+        sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
+        self._xform(sph.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
+        self._bind(sph.GetPrim(), shape, sid, emission)
+        self.record(path, f"shape {sid} (Sphere)")
+
+    # -- lights -------------------------------------------------------------------------------
+    def _light_common(self, light, rgb, prim_path: str, what: str) -> None:
+        from pxr import Gf
+
+        rgb = np.maximum(_np(rgb), 0.0)
+        peak = float(rgb.max())
+        light.CreateIntensityAttr(peak)
+        light.CreateExposureAttr(0.0)
+        light.CreateColorAttr(Gf.Vec3f(*(rgb / peak if peak > 0 else np.ones(3)).tolist()))
+        light.CreateNormalizeAttr(False)
+        self.record(prim_path, what)
+
+    def _area_light(self, shape, sid, cls, emitter) -> None:
+        from pxr import UsdLux
+
+        radiance = _Params(self.mi, emitter).rgb("radiance")
+        bsdf_params = _Params(self.mi, shape.bsdf())
+        if any(k.endswith("reflectance.value") and np.any(bsdf_params.rgb(k[: -len(".value")]) > 0) for k in bsdf_params.keys()):
+            self.warn(f"shape {sid}: the reflectance of the emitting {cls} is dropped (it becomes a light)")
+        m = _matrix(self.mi.traverse(shape)["to_world"])
+        path = self._name("/World/Lights", sid)
+        if cls == "Rectangle":
+            light = UsdLux.RectLight.Define(self.stage, path)
+            light.CreateWidthAttr(2.0)
+            light.CreateHeightAttr(2.0)
+            self._xform(light.GetPrim(), _FLIP_RECT @ _row(m))
+            self._light_common(light, radiance, path, f"area emitter on rectangle {sid}")
+        else:
+            scales = np.linalg.norm(m[:3, :3], axis=0)
+            if not np.allclose(scales, scales.mean(), rtol=1e-4):
+                self.warn(f"shape {sid}: non-uniformly scaled emitting sphere written with radius {scales.mean():.4g}")
+            light = UsdLux.SphereLight.Define(self.stage, path)
+            light.CreateRadiusAttr(float(scales.mean()))
+            light.CreateTreatAsPointAttr(False)
+            self._xform(light.GetPrim(), _frame_row([0.0, 0.0, 1.0], m[:3, 3]))
+            self._light_common(light, radiance, path, f"area emitter on sphere {sid}")
+
+    def lights(self) -> None:
+        from pxr import UsdLux
+
+        for k, em in enumerate(self.scene.emitters()):
+            cls = _class_name(em)
+            if cls == "AreaLight":
+                continue  # handled with its shape
+            eid = em.id() or f"emitter_{k}"
+            p = _Params(self.mi, em)
+            if cls == "DirectionalEmitter":
+                m = _matrix(p.p["to_world"])
+                path = self._name("/World/Lights", eid)
+                light = UsdLux.DistantLight.Define(self.stage, path)
+                light.CreateAngleAttr(0.0)
+                self._xform(light.GetPrim(), _frame_row(-m[:3, 2]))
+                self._light_common(light, p.rgb("irradiance"), path, f"emitter {eid} (directional)")
+            elif cls == "PointLight":
+                path = self._name("/World/Lights", eid)
+                light = UsdLux.SphereLight.Define(self.stage, path)
+                light.CreateRadiusAttr(0.0)
+                light.CreateTreatAsPointAttr(True)
+                self._xform(light.GetPrim(), _frame_row([0.0, 0.0, 1.0], _np(p.p["position"]).ravel()[:3]))
+                self._light_common(light, p.rgb("intensity"), path, f"emitter {eid} (point)")
+            elif cls == "SpotLight":
+                m = _matrix(p.p["to_world"])
+                path = self._name("/World/Lights", eid)
+                light = UsdLux.SphereLight.Define(self.stage, path)
+                light.CreateRadiusAttr(0.0)
+                light.CreateTreatAsPointAttr(True)
+                cutoff = p.scalar("cutoff_angle", 20.0)
+                beam = p.scalar("beam_width", cutoff * 0.75)
+                shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
+                shaping.CreateShapingConeAngleAttr(cutoff)
+                shaping.CreateShapingConeSoftnessAttr(float(np.clip((cutoff - beam) / max(cutoff, 1e-9), 0.0, 1.0)))
+                self._xform(light.GetPrim(), _FLIP_CAMERA @ _row(m))  # USD shaping emits along -Z
+                self._light_common(light, p.rgb("intensity"), path, f"emitter {eid} (spot, cutoff {cutoff:.3g} deg)")
+                self.warn(f"emitter {eid}: spot light written as a point light with UsdLux.ShapingAPI (cone {cutoff:.3g} "
+                          "deg); the reference renderer ignores shaping and renders it omnidirectional")
+                if p.textured:
+                    self.warn(f"emitter {eid}: spot texture ignored")
+            elif cls == "ConstantBackgroundEmitter":
+                path = self._name("/World/Lights", eid)
+                light = UsdLux.DomeLight.Define(self.stage, path)
+                self._light_common(light, p.rgb("radiance"), path, f"emitter {eid} (constant)")
+            elif cls == "EnvironmentMapEmitter":
+                self._envmap(em, eid, p)
+            else:
+                self.warn(f"emitter {eid}: {cls} is not convertible (directional, point, spot, area on "
+                          "rectangle/sphere, constant, envmap are): skipped")
+
+    def _envmap(self, em, eid, p) -> None:
+        from pxr import Gf, Sdf, UsdLux
+
+        from reference_renderer.film import write_exr
+
+        data = _np(p.p["data"])
+        if data.ndim != 3:
+            self.warn(f"emitter {eid}: envmap data of shape {data.shape} not understood: skipped")
+            return
+        image = data[:, 1:-1, :3] if data.shape[1] > 2 else data[..., :3]  # Mitsuba pads one wrap column per side
+        if image.shape[-1] == 1:
+            image = np.repeat(image, 3, -1)
+        tex_dir = self.output.parent / f"{self.output.stem}_textures"
+        tex_dir.mkdir(parents=True, exist_ok=True)
+        from pxr import Tf
+
+        tex = tex_dir / f"{Tf.MakeValidIdentifier(eid)}.exr"
+        write_exr(tex, image.astype(np.float32))
+        rel = tex.relative_to(self.output.parent).as_posix()
+        self.result.textures.append(str(tex))
+        path = self._name("/World/Lights", eid)
+        light = UsdLux.DomeLight.Define(self.stage, path)
+        light.CreateTextureFileAttr(Sdf.AssetPath(rel))
+        light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
+        m = _matrix(p.p["to_world"])
+        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
+        row = np.eye(4)
+        row[:3, :3] = rot.T
+        self._xform(light.GetPrim(), _FLIP_DOME @ row)
+        self._light_common(light, np.full(3, p.scalar("scale", 1.0)), path, f"emitter {eid} (envmap {image.shape[1]}x{image.shape[0]})")
+        light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
+        self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
+
+    # -- neural assets ------------------------------------------------------------------------
+    def assets(self) -> None:
+        by_file: dict[Path, list[str]] = {}
+        for sid, file in self.replace.items():
+            by_file.setdefault(file, []).append(sid)
+        for file, ids in by_file.items():
+            rel = _relpath(file, self.output.parent)
+            path = self._name("/World/Assets", "_".join(ids))
+            # untyped def: the type (NeuralAsset) comes from the referenced asset's root prim; no
+            # transform: asset object space == scene world space (spec/bake.md#stages)
+            prim = self.stage.DefinePrim(path)
+            prim.GetReferences().AddReference(rel)
+            self.result.replaced[path] = {"asset": rel, "shapes": list(ids)}
+            self.record(path, f"NeuralAsset {rel} in place of {', '.join(ids)}")
+
+    # -- driver -------------------------------------------------------------------------------
+    def run(self) -> ConvertResult:
+        from pxr import Gf
+
+        self.camera()
+        self.integrator()
+        self.lights()
+        self.shapes()
+        self.assets()
+        self.stage.GetRootLayer().customLayerData = {
+            "nasset:convertedFrom": {"scene": self.scene_path.name, "converter": "nasset convert-scene",
+                                     "mitsuba": self.mi.__version__, "integrator": dict(self.result.integrator),
+                                     "resolution": Gf.Vec2i(*self.result.resolution)},
+        }
+        self.stage.GetRootLayer().Save()
+        if self.check_usd:
+            self.result.usd_checks = usd_check(self.output)
+        return self.result
+
+
+def _two_sides_differ(text: str) -> bool:
+    m0 = re.search(r"brdf\[0\]\s*=(.*?)brdf\[1\]\s*=", text, re.S)
+    m1 = re.search(r"brdf\[1\]\s*=(.*)\]\s*$", text, re.S)
+    return bool(m0 and m1 and m0.group(1).strip().rstrip(",").strip() != m1.group(1).strip())
+
+
+def _relpath(file: Path, start: Path) -> str:
+    import os
+
+    rel = os.path.relpath(Path(file).resolve(), Path(start).resolve())
+    return rel.replace(os.sep, "/") if rel.startswith("..") else "./" + rel.replace(os.sep, "/")
+
+
+def usd_check(path) -> list[dict]:
+    """OpenUSD's validators (the usdchecker engine) over the written stage: [{severity, name, message, prim}]."""
+    from pxr import Usd, UsdValidation
+
+    from nasset_sdk.plugin import register_schema
+
+    register_schema()
+    stage = Usd.Stage.Open(str(path))
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    sev = {UsdValidation.ValidationErrorType.Error: "error", UsdValidation.ValidationErrorType.Warn: "warning"}
+    out = []
+    for err in context.Validate(stage):
+        prim = None
+        for site in err.GetSites():
+            if site.IsPrim():
+                prim = str(site.GetPrim().GetPath())
+            elif site.IsProperty():
+                prim = str(site.GetProperty().GetPath())
+            if prim:
+                break
+        out.append({"severity": sev.get(err.GetType(), "info"), "name": str(err.GetName()),
+                    "message": err.GetMessage().strip()[:300], "prim": prim})
+    return out
+
+
+def parse_replace(items) -> dict[str, Path]:
+    """``["ID[,ID...]=ASSET", ...]`` -> {shape id: asset path}; USAGE on malformed items."""
+    out: dict[str, Path] = {}
+    for item in items or []:
+        ids, sep, file = str(item).partition("=")
+        if not sep or not ids.strip() or not file.strip():
+            raise UsageError(f"--replace expects SHAPE_ID[,SHAPE_ID...]=ASSET.usdc, got {item!r}")
+        for sid in ids.split(","):
+            sid = sid.strip()
+            if not sid:
+                raise UsageError(f"--replace has an empty shape id in {item!r}")
+            if sid in out and out[sid] != Path(file.strip()):
+                raise UsageError(f"shape {sid!r} is replaced twice")
+            out[sid] = Path(file.strip())
+    return out
+
+
+def convert_scene(scene, output, *, replace=None, variant: str | None = None, check_usd: bool = True) -> ConvertResult:
+    """Convert a Mitsuba 3 XML scene to a USD stage (see the module docstring and spec/bake.md#scene-conversion).
+
+    ``replace``: {shape id: asset file} or ``["ID[,ID]=FILE", ...]``; those shapes are left out and a
+    NeuralAsset reference (path relative to ``output``) takes their place.
+    """
+    from converters.mitsuba import load_mitsuba
+    from reference_renderer.scene import is_asset_file
+
+    output = Path(output)
+    if output.suffix not in (".usda", ".usdc", ".usd"):
+        raise UsageError(f"output must end in .usda/.usdc/.usd, got {output.name!r}")
+    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    scene = Path(scene)
+    if not scene.is_file():
+        raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene))
+    mi = load_mitsuba(variant)
+    mi.set_log_level(mi.LogLevel.Error)
+    try:
+        mscene = mi.load_file(str(scene), optimize=False)
+    except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
+        first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
+        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(scene)) from None
+    ids = [s.id() for s in mscene.shapes() if s.id()]
+    for sid, file in rep.items():
+        if sid not in ids:
+            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(ids)}",
+                        file=str(scene))
+        if not file.is_file() or not is_asset_file(str(file)):
+            raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "
+                        "(defaultPrim of type NeuralAsset)", file=str(file))
+    output.parent.mkdir(parents=True, exist_ok=True)
+    if output.exists():
+        output.unlink()
+    return _Converter(mi, mscene, scene, output, rep, check_usd).run()
+
+
+def run(args) -> int:
+    """CLI entry: ``nasset convert-scene SCENE.xml -o SCENE.usda [--replace ID=ASSET ...] [--json]``."""
+    res = convert_scene(args.scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks)
+    for w in res.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    bad = [c for c in res.usd_checks if c["severity"] == "error"]
+    for c in res.usd_checks:
+        print(f"usd-check {c['severity']}: {c['name']} {c['prim'] or ''}: {c['message']}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(res.to_dict(), indent=2))
+    else:
+        print(f"wrote {res.output}: {len(res.prims)} prims, {len(res.replaced)} neural asset reference(s), "
+              f"{len(res.warnings)} warning(s)")
+        for path, what in res.prims.items():
+            print(f"  {path:40s} <- {what}")
+    return 1 if bad else 0

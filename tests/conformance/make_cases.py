@@ -1,0 +1,603 @@
+"""Generate the renderer conformance cases in tests/conformance/cases/ (spec/conformance.md).
+
+    python tests/conformance/make_cases.py                  # (re)generate every case
+    python tests/conformance/make_cases.py --cases NAME ..  # only these
+    python tests/conformance/make_cases.py --check          # verify the committed files
+
+Each case directory holds ``scene.usda`` (camera, lights, plain meshes, NeuralAsset prims that
+reference assets by relative path), the asset files it uses, ``reference.exr`` (the reference
+renderer at ``ref_spp``) and ``case.json`` (what to render, the metric, the tolerance and how it
+was measured). Everything but the reference image and the measured numbers is a deterministic
+function of this script; ``--check`` compares those bytes exactly, and checks the reference image
+statistically: a fresh render at the case's spp with an unused seed must be within tolerance.
+
+The tolerance of a case comes from measured Monte Carlo noise: the case is rendered ``NOISE_RUNS``
+times at its test spp with seeds 1..NOISE_RUNS, the metric of each image against the reference is
+recorded, and ``tolerance = TOL_FACTOR * max(max(e), mean(e) + 3 std(e))``.
+
+Adding a case is one entry in ``CASES``. Entries with ``pending=True`` use a kind or variant the
+reference renderer may not render yet: they are generated only when it accepts the scene.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+CASES_DIR = HERE / "cases"
+REF_SEED = 1_000_003  # reference image seed; never used by the noise runs (1..NOISE_RUNS) or tests (0, 9xx)
+NOISE_RUNS = 8
+TOL_FACTOR = 2.0
+CHECK_SEED = 977
+STATIC_KEYS = ("description", "spp", "width", "height", "metric", "block", "needs", "kinds", "ref_spp", "max_depth", "files")
+
+
+# -- matrices (row-vector convention: p_world = p @ M) ---------------------------------------
+def translate(x, y, z):
+    m = np.eye(4)
+    m[3, :3] = (x, y, z)
+    return m
+
+
+def scale(sx, sy, sz):
+    return np.diag([float(sx), float(sy), float(sz), 1.0])
+
+
+def rotate(axis, degrees):
+    a = np.asarray(axis, np.float64)
+    a = a / np.linalg.norm(a)
+    t = np.radians(degrees)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    r_col = np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * (k @ k)  # column-vector rotation
+    m = np.eye(4)
+    m[:3, :3] = r_col.T
+    return m
+
+
+def chain(*ms):
+    """Apply the matrices left to right (the first one is applied to the point first)."""
+    out = np.eye(4)
+    for m in ms:
+        out = out @ m
+    return out
+
+
+# -- assets --------------------------------------------------------------------------------
+def _rna_random(seed, *, dtype="float16"):
+    """Builder of a tiny rna surface asset with random networks (triplane stored as ``dtype``).
+
+    The decoder is a random 2 x 16 ReLU MLP whose last layer is scaled so that transports stay
+    in a plausible range (about 0.05 to 0.3 / sr, shadowed darker than unshadowed) while still
+    varying with position (triplane), normal and both directions.
+    """
+    from nasset_sdk.asset import AssetBuilder
+    from nasset_sdk.kinds.rna import _example_mesh
+    from nasset_sdk.networks import mlp_onnx
+
+    rng = np.random.default_rng(seed)
+    b = AssetBuilder("rna", variant="surface")
+    b.set_geometry(_example_mesh())
+    core = b.component("core", required=True, purpose="evaluation", quality=None)
+    res, ch, hidden = 8, 4, 16
+    core.add_tensor("triplane", rng.normal(0, 1.0, (3, res, res, ch)), dtype=dtype, layout="plane,v,u,channel")
+    widths = [ch + 12, hidden, hidden, 6]
+    ws = [rng.normal(0.0, np.sqrt(2.0 / a), (a, o)) for a, o in zip(widths[:-1], widths[1:], strict=True)]
+    bs = [rng.normal(0.0, 0.05, o) for o in widths[1:]]
+    ws[-1] *= 0.05
+    bs[-1] = np.array([0.16, 0.12, 0.08, 0.05, 0.05, 0.07]) + bs[-1] * 0.2
+    core.add_network("decoder", mlp_onnx([w.astype(np.float32) for w in ws], [x.astype(np.float32) for x in bs]))
+    b.provenance = {"generator": "random", "size": "tiny", "seed": int(seed)}
+    return b
+
+
+def asset_rand(path):
+    return _rna_random(11).write(path)
+
+
+def asset_rand_fp32(path):
+    return _rna_random(11, dtype="float32").write(path)
+
+
+def asset_const(path):
+    from reference_renderer.testscenes import constant_rna_asset
+
+    return constant_rna_asset(path, unshadowed=(0.30, 0.22, 0.12), shadowed=(0.05, 0.08, 0.11), subdivisions=2)
+
+
+def asset_quality(path):
+    """rna asset whose core has quality variants 'small' (default) and 'hq' (different networks)."""
+    b = _rna_random(21)
+    other = _rna_random(22)
+    b.components["core"] = {"small": b.components.pop("core")[""], "hq": other.components["core"][""]}
+    b.default_quality["core"] = "small"
+    return b.write(path)
+
+
+def asset_example(kind, variant="surface", seed=5):
+    """Factory for the SDK's random example asset of another kind (tiny preset)."""
+
+    def make(path):
+        from nasset_sdk.examples import example_builder
+
+        return example_builder(kind, variant=variant, size="tiny", seed=seed).write(path)
+
+    return make
+
+
+ASSETS: dict[str, Callable] = {
+    "rna_rand.usdc": asset_rand,
+    "rna_rand_fp32.usdc": asset_rand_fp32,
+    "rna_const.usdc": asset_const,
+    "rna_quality.usdc": asset_quality,
+    "neupress.usdc": asset_example("neupress"),
+    "8dna.usdc": asset_example("8dna"),
+}
+
+
+def env_map(path):
+    """A small asymmetric lat-long EXR: blue-ish sky gradient, warm ground, one bright 'sun' patch."""
+    from reference_renderer.film import write_exr
+
+    h, w = 16, 32
+    v = (np.arange(h) + 0.5) / h
+    u = (np.arange(w) + 0.5) / w
+    img = np.zeros((h, w, 3))
+    sky = v < 0.5
+    img[sky] = np.array([0.25, 0.35, 0.6]) * (1.2 - v[sky][:, None, None].mean())
+    img[~sky] = [0.20, 0.12, 0.06]
+    img += 0.15 * np.sin(2 * np.pi * u)[None, :, None] * np.array([1.0, 0.6, 0.2])  # azimuthal variation
+    img = np.maximum(img, 0.0)
+    img[3:5, 6:8] = [40.0, 32.0, 20.0]
+    write_exr(path, img)
+
+
+# -- scene building --------------------------------------------------------------------------
+class Ctx:
+    """What a case's ``build`` function gets: the SceneBuilder and helpers that copy assets in."""
+
+    def __init__(self, folder: Path) -> None:
+        from reference_renderer.testscenes import SceneBuilder
+
+        self.dir = folder
+        self.sb = SceneBuilder()
+        self.files: list[str] = []
+
+    def world(self, matrix):
+        """Transform of /World (everything in the scene inherits it)."""
+        self.sb._xform(self.sb.stage.GetPrimAtPath("/World"), matrix)
+
+    def asset_file(self, name):
+        if name not in self.files:
+            ASSETS[name](self.dir / name)
+            self.files.append(name)
+        return "./" + name
+
+    def asset(self, prim_name, name, matrix=None, *, typed=True, payload=False):
+        rel = self.asset_file(name)
+        if not payload:
+            return self.sb.asset(prim_name, rel, matrix, typed=typed)
+        prim = self.sb.stage.DefinePrim(f"/World/{prim_name}", "NeuralAsset" if typed else "")
+        prim.GetPayloads().AddPayload(rel)
+        if matrix is not None:
+            self.sb._xform(prim, matrix)
+        return prim
+
+    def floor(self, y=-0.5, size=6.0, **mat):
+        mat.setdefault("diffuse", (0.55, 0.55, 0.55))
+        return self.sb.quad("Floor", (0.0, y, 0.0), size, **mat)
+
+    def camera(self, eye=(0.0, 1.0, 3.2), target=(0.0, 0.0, 0.0), focal=35.0):
+        return self.sb.camera(eye, target, focal=focal)
+
+
+@dataclass
+class Case:
+    name: str
+    description: str
+    build: Callable[[Ctx], None]
+    spp: int = 64
+    width: int = 48
+    height: int = 48
+    block: int = 4
+    ref_spp: int = 2048
+    max_depth: int = 5
+    pending: bool = False  # kind/variant the reference renderer may not support yet
+    tags: list = field(default_factory=list)
+
+
+def _box(ctx, name, lo, hi, **mat):
+    """Axis-aligned box mesh (an ordinary occluder)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    return ctx.sb.mesh(name, c, faces, **mat)
+
+
+def b_distant(asset):
+    def build(ctx):
+        ctx.camera()
+        ctx.floor()
+        ctx.sb.distant("Sun", (0.5, 1.0, 0.35), 3.0)
+        ctx.asset("Asset", asset)
+
+    return build
+
+
+def b_distant_angle(ctx):
+    ctx.camera(eye=(0.3, 2.2, 3.0), target=(0.4, -0.2, 0.0))
+    ctx.floor()
+    ctx.sb.distant("Sun", (-0.7, 1.0, 0.25), 3.0, angle=30.0)
+    ctx.asset("Asset", "rna_const.usdc", translate(0.0, 0.6, 0.0))
+
+
+def b_sphere(ctx):
+    ctx.camera()
+    ctx.floor()
+    ctx.sb.sphere_light("Bulb", (1.0, 1.4, 0.9), 0.3, 40.0, color=(1.0, 0.9, 0.8))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_point(ctx):
+    from pxr import UsdLux
+
+    ctx.camera()
+    ctx.floor()
+    lt = ctx.sb.sphere_light("Point", (-1.0, 1.3, 1.0), 0.0, 10.0)
+    UsdLux.SphereLight(lt.GetPrim()).CreateTreatAsPointAttr(True)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_rect(ctx):
+    ctx.camera()
+    ctx.floor()
+    ctx.sb.rect_light("Panel", (0.4, 1.8, 0.8), 1.2, 0.8, (-0.2, -1.0, -0.4), 8.0)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_dome(ctx):
+    env_map(ctx.dir / "env.exr")
+    ctx.files.append("env.exr")
+    ctx.camera()
+    ctx.floor(diffuse=(0.4, 0.4, 0.4))
+    dome = ctx.sb.dome("Sky", 1.0, texture="./env.exr")
+    ctx.sb._xform(dome.GetPrim(), rotate((0, 1, 0), 25.0))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_self_shadow(ctx):
+    ctx.camera(eye=(0.0, 0.4, 2.2))
+    ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
+    ctx.asset("Asset", "rna_const.usdc")
+
+
+def b_shadow_on_asset(ctx):
+    ctx.camera(eye=(0.0, 1.2, 2.8))
+    ctx.floor()
+    ctx.sb.distant("Sun", (0.0, 1.0, 0.15), 3.0)
+    _box(ctx, "Blocker", (-0.9, 0.9, -0.6), (0.05, 0.95, 0.6), diffuse=(0.3, 0.3, 0.3))
+    ctx.asset("Asset", "rna_const.usdc")
+
+
+def b_asset_shadow(ctx):
+    ctx.camera(eye=(0.0, 3.2, 2.0), target=(0.6, -0.5, -0.4))
+    ctx.floor(diffuse=(0.7, 0.7, 0.7))
+    ctx.sb.distant("Sun", (-0.8, 0.45, 0.6), 3.0)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_instances(ctx):
+    ctx.camera(eye=(0.0, 1.7, 4.8), target=(0.0, -0.05, 0.0))
+    ctx.floor(y=-0.6, size=8.0)
+    ctx.sb.distant("Sun", (0.4, 1.0, 0.6), 3.0)
+    ctx.asset("Rotated", "rna_rand.usdc", chain(rotate((1, 1, 0), 70.0), translate(-1.15, 0.0, 0.0)))
+    ctx.asset("Stretched", "rna_rand.usdc", chain(scale(1.5, 0.55, 0.8), rotate((0, 1, 0), 35.0), translate(0.0, -0.3, 0.2)))
+    ctx.asset("Mirrored", "rna_rand.usdc", chain(scale(-1.0, 1.0, 1.0), rotate((0, 0, 1), 40.0), translate(1.15, 0.0, 0.0)))
+
+
+def b_instances_shadow(ctx):
+    ctx.camera(eye=(0.0, 0.8, 3.4))
+    ctx.floor()
+    ctx.sb.distant("Sun", (1.0, 0.35, 0.0), 3.0)
+    ctx.asset("Front", "rna_const.usdc", translate(0.75, 0.0, 0.0))
+    ctx.asset("Back", "rna_const.usdc", translate(-0.55, 0.0, 0.0))
+
+
+def b_grazing(ctx):
+    ctx.camera(eye=(0.0, 0.02, 3.5), target=(0.0, -0.05, 0.0), focal=50.0)
+    ctx.floor(y=-0.2, size=10.0)
+    ctx.sb.distant("Sun", (-1.0, 0.12, -0.3), 4.0)
+    ctx.asset("Asset", "rna_rand.usdc", chain(scale(1.6, 0.35, 1.6), rotate((0, 1, 0), 20.0), translate(0.0, -0.02, 0.0)))
+
+
+def b_far(ctx):
+    ctx.world(translate(700.0, 100.0, -700.0))
+    ctx.camera()
+    ctx.floor()
+    ctx.sb.distant("Sun", (0.5, 1.0, 0.35), 3.0)
+    ctx.asset("Asset", "rna_rand.usdc", rotate((0, 1, 0), 30.0), typed=False, payload=True)
+
+
+def b_scaled(s):
+    def build(ctx):
+        ctx.world(scale(s, s, s))
+        ctx.camera()
+        ctx.floor()
+        ctx.sb.distant("Sun", (0.5, 1.0, 0.35), 2.0, angle=4.0)
+        ctx.sb.rect_light("Panel", (-1.0, 1.5, 1.0), 0.8, 0.8, (0.6, -1.0, -0.5), 6.0)
+        ctx.asset("Asset", "rna_rand.usdc", rotate((1, 0, 0), 25.0))
+
+    return build
+
+
+def b_quality(ctx):
+    ctx.camera(eye=(0.0, 0.7, 2.0))
+    ctx.sb.distant("Sun", (0.4, 1.0, 0.8), 3.0)
+    ctx.asset("Asset", "rna_quality.usdc")
+
+
+def b_indirect(ctx):
+    ctx.camera(eye=(0.2, 1.0, 3.3), target=(0.0, 0.1, 0.0))
+    ctx.floor(diffuse=(0.5, 0.5, 0.5), metallic=0.0, roughness=0.3)
+    # the sun lights the upper part of a red wall; a blocker keeps it off the asset, whose light is
+    # the wall, the floor and an emissive quad (reached by continuation rays only)
+    ctx.sb.quad("Wall", (-1.1, 0.5, 0.0), 2.2, normal=(1.0, 0.0, 0.0), diffuse=(0.9, 0.15, 0.1))
+    ctx.sb.quad("Blocker", (0.9, 0.25, 0.0), 1.5, normal=(1.0, 0.0, 0.0), diffuse=(0.3, 0.3, 0.3))
+    ctx.sb.quad("Lamp", (0.3, 0.9, -1.2), 0.8, normal=(0.0, 0.0, 1.0), diffuse=(0.0, 0.0, 0.0), emission=(2.0, 2.0, 2.5))
+    ctx.sb.distant("Sun", (1.0, 0.5, 0.0), 4.0)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_other_kind(asset):
+    def build(ctx):
+        ctx.camera()
+        ctx.floor()
+        ctx.sb.distant("Sun", (0.5, 1.0, 0.35), 3.0)
+        ctx.asset("Asset", asset)
+
+    return build
+
+
+CASES = [
+    Case("rna_distant_fp16", "rna surface asset (fp16 triplane, random networks) on a floor under a delta DistantLight: "
+         "triplane lookup, decoder input order, both transport branches, shadow on the floor", b_distant("rna_rand.usdc")),
+    Case("rna_distant_fp32", "the same scene as rna_distant_fp16 with the triplane stored as float32", b_distant("rna_rand_fp32.usdc")),
+    Case("rna_distant_angle", "constant-transport asset floating above a floor under a DistantLight with angle 30 degrees: "
+         "sampled cone, soft terminator (per-sample branch choice) and a wide penumbra", b_distant_angle),
+    Case("rna_sphere_light", "SphereLight (radius 0.3): area light sampling at the asset, MIS with continuation rays", b_sphere),
+    Case("rna_point_light", "SphereLight with treatAsPoint: point light, inverse-square falloff, delta-light weight 1", b_point),
+    Case("rna_rect_light", "RectLight emitting toward its local -Z, tilted: one-sided emitter, area sampling", b_rect),
+    Case("rna_dome_exr", "DomeLight with an asymmetric lat-long OpenEXR texture, rotated 25 degrees about +Y: texture "
+         "orientation and importance sampling", b_dome),
+    Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "
+         "self-occlusion only (no other objects: next-event estimation only)", b_self_shadow),
+    Case("rna_shadow_on_asset", "a box between the light and the asset: light samples blocked by another object contribute 0 "
+         "(not the shadowed branch)", b_shadow_on_asset),
+    Case("rna_asset_shadow_on_floor", "low sun, camera looking down at the floor: the asset's triangles occlude shadow rays of "
+         "ordinary surfaces", b_asset_shadow),
+    Case("rna_instances_transforms", "three instances of one asset: rotated, non-uniformly scaled, mirrored (negative "
+         "determinant); points, directions and normals must be mapped to object space", b_instances, width=64),
+    Case("rna_instances_shadow", "two instances of the same asset, one shadowing the other: only the instance's own triangles "
+         "are ignored by its rays, so the other instance blocks (0), it does not pick the shadowed branch", b_instances_shadow),
+    Case("rna_grazing_view", "camera and light at grazing angles over a flattened, rotated instance", b_grazing),
+    Case("rna_far_from_origin", "the whole scene translated by (700, 100, -700); the asset is an untyped prim with a payload "
+         "arc", b_far),
+    Case("rna_scale_tiny", "the whole scene scaled by 1e-3 (DistantLight with angle + RectLight)", b_scaled(1e-3)),
+    Case("rna_scale_huge", "the whole scene scaled by 1e3 (DistantLight with angle + RectLight)", b_scaled(1e3)),
+    Case("rna_quality_variant", "asset whose required core has quality variants 'small' (default) and 'hq' with different "
+         "networks: the plan loads the default variant only", b_quality),
+    Case("rna_indirect", "asset lit mostly indirectly (red wall, emissive quad reached by continuation rays only, glossy "
+         "floor): continuation rays leaving the asset and their branch weights", b_indirect),
+    Case("neupress_distant", "neupress surface asset on a floor under a DistantLight; its optional components (importance "
+         "sampling, PRT) are not needed by the plan", b_other_kind("neupress.usdc"), spp=256),
+    Case("8dna_distant", "8dna surface asset on a floor under a DistantLight", b_other_kind("8dna.usdc")),
+]
+
+
+# -- metric ----------------------------------------------------------------------------------
+def metric(image, reference, block):
+    """Normalised RMSE of b x b block means (see nasset_sdk.conformance.rmse_normalised)."""
+    from nasset_sdk.conformance import rmse_normalised
+
+    return rmse_normalised(image, reference, block)
+
+
+# -- generation --------------------------------------------------------------------------------
+def needs_of(folder: Path, files) -> dict:
+    from nasset_sdk.asset import Asset
+
+    out = {}
+    for f in files:
+        if not f.endswith(".usdc"):
+            continue
+        a = Asset.open(folder / f, load="none")
+        comps = []
+        for n, c in a.components().items():
+            if c.required:
+                comps.append(f"{n} (quality '{c.quality}')" if c.qualities else n)
+        out[f] = {"kind": a.kind, "variant": a.variant, "components": comps,
+                  "not_needed": [n for n, c in a.components().items() if not c.required]}
+    return out
+
+
+def build_case(case: Case, folder: Path) -> dict:
+    """Write scene.usda and the assets of ``case`` into ``folder``; return the static part of case.json."""
+    folder.mkdir(parents=True, exist_ok=True)
+    ctx = Ctx(folder)
+    case.build(ctx)
+    ctx.sb.write(folder / "scene.usda")
+    needs = needs_of(folder, ctx.files)
+    kinds = sorted({f"{v['kind']}/{v['variant']}" for v in needs.values()})
+    return {
+        "description": case.description, "spp": case.spp, "width": case.width, "height": case.height,
+        "metric": "rmse_normalised", "block": case.block, "needs": needs, "kinds": kinds,
+        "ref_spp": case.ref_spp, "max_depth": case.max_depth, "files": sorted(["scene.usda"] + ctx.files),
+    }
+
+
+def render_ref(folder: Path, case: Case, spp: int, seed: int) -> np.ndarray:
+    import warnings
+
+    from reference_renderer import RenderSettings, load_scene, render
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(str(folder / "scene.usda"))
+    s = RenderSettings(spp=spp, seed=seed, width=case.width, height=case.height, max_depth=case.max_depth)
+    return render(scene, s).image
+
+
+def supported(folder: Path) -> str | None:
+    """None when the reference renderer loads the scene, else why not."""
+    import warnings
+
+    from nasset_sdk.errors import SceneError
+    from reference_renderer import load_scene
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            load_scene(str(folder / "scene.usda"))
+    except SceneError as exc:
+        return str(exc)
+    return None
+
+
+def generate(case: Case, log=print) -> bool:
+    from reference_renderer.film import write_exr
+
+    folder = CASES_DIR / case.name
+    tmp = Path(tempfile.mkdtemp(prefix=f"case-{case.name}-"))
+    try:
+        info = build_case(case, tmp)
+        why = supported(tmp)
+        if why is not None:
+            if case.pending:
+                log(f"{case.name}: pending, the reference renderer does not render it yet ({why.splitlines()[0][:120]})")
+                return False
+            raise RuntimeError(f"{case.name}: {why}")
+        t0 = time.perf_counter()
+        ref = render_ref(tmp, case, case.ref_spp, REF_SEED)
+        t_ref = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        errs = [metric(render_ref(tmp, case, case.spp, s), ref, case.block) for s in range(1, NOISE_RUNS + 1)]
+        t_noise = (time.perf_counter() - t0) / NOISE_RUNS
+        e = np.array(errs)
+        q = max(float(e.max()), float(e.mean() + 3 * e.std(ddof=1)))
+        tol = TOL_FACTOR * q
+        info["tolerance"] = round(tol, 6)
+        info["tolerance_derivation"] = {
+            "text": (f"reference: reference renderer, {case.ref_spp} spp, seed {REF_SEED}. Noise: {NOISE_RUNS} renders at the "
+                     f"test spp ({case.spp}) with seeds 1..{NOISE_RUNS}, metric against the reference each. tolerance = "
+                     f"{TOL_FACTOR} x max(max(e), mean(e) + 3 std(e)); the factor {TOL_FACTOR} leaves room for a renderer "
+                     f"with up to about {TOL_FACTOR ** 2:.0f}x the reference renderer's variance at the same spp."),
+            "noise_runs": NOISE_RUNS, "seeds": list(range(1, NOISE_RUNS + 1)), "errors": [round(float(x), 6) for x in e],
+            "mean": round(float(e.mean()), 6), "std": round(float(e.std(ddof=1)), 6), "max": round(float(e.max()), 6),
+            "bound": round(q, 6), "factor": TOL_FACTOR, "ref_seed": REF_SEED,
+            "reference_mean_radiance": round(float(ref.mean()), 6),
+            "seconds_per_test_render": round(t_noise, 2), "seconds_reference": round(t_ref, 1),
+        }
+        write_exr(tmp / "reference.exr", ref)
+        with open(tmp / "case.json", "w") as fh:
+            json.dump(info, fh, indent=2, sort_keys=True)
+            fh.write("\n")
+        if folder.exists():
+            shutil.rmtree(folder)
+        shutil.copytree(tmp, folder)
+        log(f"{case.name}: tolerance {tol:.4f} (noise mean {e.mean():.4f}, max {e.max():.4f}); "
+            f"reference {t_ref:.1f} s, test render {t_noise:.2f} s")
+        return True
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _digest(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def check(case: Case, log=print) -> list[str]:
+    """Problems of the committed case (empty when it is what this script makes)."""
+    from reference_renderer.film import read_exr
+
+    folder = CASES_DIR / case.name
+    tmp = Path(tempfile.mkdtemp(prefix=f"check-{case.name}-"))
+    try:
+        info = build_case(case, tmp)
+        if not folder.is_dir():
+            if case.pending and supported(tmp) is not None:
+                log(f"{case.name}: pending (not rendered by the reference renderer yet)")
+                return []
+            return [f"{case.name}: missing (run make_cases.py --cases {case.name})"]
+        problems = []
+        with open(folder / "case.json") as fh:
+            stored = json.load(fh)
+        for k in STATIC_KEYS:
+            if stored.get(k) != info.get(k):
+                problems.append(f"{case.name}: case.json '{k}' differs from what make_cases.py makes")
+        for f in info["files"]:
+            if not (folder / f).is_file() or _digest(folder / f) != _digest(tmp / f):
+                problems.append(f"{case.name}: {f} differs from what make_cases.py makes")
+        extra = {p.name for p in folder.iterdir()} - set(info["files"]) - {"case.json", "reference.exr"}
+        if extra:
+            problems.append(f"{case.name}: unexpected files {sorted(extra)}")
+        if not problems:
+            ref = read_exr(folder / "reference.exr")
+            e = metric(render_ref(folder, case, case.spp, CHECK_SEED), ref, case.block)
+            ok = e <= stored["tolerance"]
+            log(f"{case.name}: files ok; fresh render (seed {CHECK_SEED}) error {e:.4f} vs tolerance {stored['tolerance']:.4f}"
+                f" {'ok' if ok else 'FAIL'}")
+            if not ok:
+                problems.append(f"{case.name}: reference image is not what the reference renderer converges to "
+                                f"(error {e:.4f} > {stored['tolerance']:.4f})")
+        return problems
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", nargs="*", default=None, help="only these cases")
+    ap.add_argument("--check", action="store_true", help="verify the committed cases instead of writing them")
+    ap.add_argument("--list", action="store_true", help="list the cases and exit")
+    args = ap.parse_args(argv)
+    names = {c.name for c in CASES}
+    if args.cases:
+        unknown = set(args.cases) - names
+        if unknown:
+            ap.error(f"unknown cases: {sorted(unknown)}")
+    sel = [c for c in CASES if not args.cases or c.name in args.cases]
+    if args.list:
+        for c in sel:
+            print(f"{c.name}{' (pending)' if c.pending else ''}: {c.description}")
+        return 0
+    if args.check:
+        problems = []
+        for c in sel:
+            problems += check(c)
+        if not args.cases:
+            stray = sorted(p.name for p in CASES_DIR.iterdir() if p.is_dir() and p.name not in names) if CASES_DIR.is_dir() else []
+            problems += [f"{s}: a case folder make_cases.py does not make" for s in stray]
+        for p in problems:
+            print("FAIL", p)
+        print(f"{len(sel)} cases checked, {len(problems)} problems")
+        return 1 if problems else 0
+    CASES_DIR.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    for c in sel:
+        generate(c)
+    print(f"done in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,224 @@
+"""The reference renderer with one deliberate bug: checks that the conformance cases catch it.
+
+    python tests/conformance/mutants/render_mutant.py MUTANT SCENE OUT SPP WIDTH HEIGHT SEED
+    python tests/conformance/mutants/render_mutant.py --list
+
+Each mutant patches one thing in ``reference_renderer`` / the rna evaluator (in this process
+only), then renders like ``nasset render``. Used as a ``--renderer`` of ``nasset conformance``
+by tests/test_conformance.py.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+
+def _patch_evaluate(fn):
+    from nasset_sdk.kinds import rna
+
+    orig = rna.RnaEvaluator.evaluate
+
+    def evaluate(self, x, frame, wo, wi, h=None):
+        u, s = orig(self, x, frame, wo, wi, h)
+        return fn(u, s, frame, wi)
+
+    rna.RnaEvaluator.evaluate = evaluate
+
+
+def swap_branches():
+    """Shadowed and unshadowed outputs swapped (y[0:3] used where the asset blocks the shadow ray)."""
+    _patch_evaluate(lambda u, s, n, wi: (s, u))
+
+
+def cos_factor():
+    """Transport multiplied by cos(n, wi), as if T were a BRDF (light intensity off by a cosine)."""
+
+    def fn(u, s, n, wi):
+        nn = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        ww = wi / np.maximum(np.linalg.norm(wi, axis=1, keepdims=True), 1e-12)
+        c = np.maximum((nn * ww).sum(1), 0.0)[:, None].astype(np.float32)
+        return u * c, s * c
+
+    _patch_evaluate(fn)
+
+
+def world_directions():
+    """wo and wi handed to the network in world space (not mapped by the inverse linear part)."""
+    from reference_renderer.integrator import PathIntegrator
+
+    orig = PathIntegrator._to_object
+
+    def to_object(self, v, inst, point=False):
+        return orig(self, v, inst, point) if point else np.array(v, np.float64)
+
+    PathIntegrator._to_object = to_object
+
+
+def world_points():
+    """Hit points handed to the network in world space (no inverse instance transform)."""
+    from reference_renderer.integrator import PathIntegrator
+
+    orig = PathIntegrator._to_object
+
+    def to_object(self, v, inst, point=False):
+        return np.array(v, np.float64) if point else orig(self, v, inst, point)
+
+    PathIntegrator._to_object = to_object
+
+
+def triplane_uv_swapped():
+    """Triplane planes read with u and v swapped (YX, ZY, XZ instead of XY, YZ, ZX)."""
+    from nasset_sdk.kinds import encodings
+
+    encodings.TRIPLANE_AXES = ((1, 0), (2, 1), (0, 2))
+
+
+def triplane_planes_rotated():
+    """Triplane plane order wrong (planes read as YZ, ZX, XY)."""
+    from nasset_sdk.kinds import encodings
+
+    encodings.TRIPLANE_AXES = ((1, 2), (2, 0), (0, 1))
+
+
+def other_shadows_ignored():
+    """Light samples at an asset vertex are not blocked by other objects (only the self test)."""
+    from reference_renderer.integrator import PathIntegrator
+
+    orig = PathIntegrator._trace
+
+    def trace(self, o, d, tmax=None, ignore=None):
+        h = orig(self, o, d, tmax, ignore)
+        if tmax is not None and ignore is not None and sys._getframe(1).f_code.co_name == "_neural_vertex":
+            h.prim[:] = -1
+        return h
+
+    PathIntegrator._trace = trace
+
+
+def asset_casts_no_shadow():
+    """Shadow rays of ordinary surfaces pass through neural assets."""
+    from reference_renderer.accel import Accel
+    from reference_renderer.integrator import PathIntegrator
+
+    orig_init = PathIntegrator.__init__
+
+    def init(self, scene, plan, settings):
+        orig_init(self, scene, plan, settings)
+        keep = ~self.inst_neural[scene.tri_inst] if len(scene.tri_inst) else np.zeros(0, bool)
+        self._mesh_accel = Accel(scene.triangles[keep], scene.tri_inst[keep], backend=settings.backend)
+
+    def occluded(self, o, d, tmax):
+        return self._mesh_accel.occluded(o, d, tmax)
+
+    PathIntegrator.__init__ = init
+    PathIntegrator._occluded = occluded
+
+
+def other_instance_is_self():
+    """Rays leaving an instance skip every instance of the same asset file, not only its own triangles."""
+    from reference_renderer.integrator import PathIntegrator
+
+    orig_init = PathIntegrator.__init__
+    orig_trace = PathIntegrator._trace
+
+    def init(self, scene, plan, settings):
+        orig_init(self, scene, plan, settings)
+        first = {}
+        canon = np.arange(len(scene.instances))
+        for i, inst in enumerate(scene.instances):
+            if inst.kind == "neural":
+                canon[i] = first.setdefault(inst.asset, i)
+        self._canon = canon
+        self.accel.tri_inst = canon[self.accel.tri_inst]
+
+    def trace(self, o, d, tmax=None, ignore=None):
+        if ignore is not None:
+            ignore = np.where(ignore >= 0, self._canon[np.maximum(ignore, 0)], ignore)
+        return orig_trace(self, o, d, tmax, ignore)
+
+    PathIntegrator.__init__ = init
+    PathIntegrator._trace = trace
+
+
+def distant_angle_ignored():
+    """DistantLight angle ignored (always a delta light)."""
+    from reference_renderer import lights, scene
+
+    class Delta(lights.DistantLight):
+        def __init__(self, direction, irradiance, angle_deg, prim=""):
+            super().__init__(direction, irradiance, 0.0, prim)
+
+    scene.DistantLight = Delta
+
+
+def dome_mirrored():
+    """DomeLight lat-long map mirrored left-right (u -> 1 - u), consistently for lookup and sampling."""
+    from reference_renderer.lights import DomeLight
+
+    to_uv, to_dir = DomeLight.dir_to_uv, DomeLight.uv_to_dir
+    DomeLight.dir_to_uv = staticmethod(lambda d: to_uv(d * np.array([-1.0, 1.0, 1.0])))
+    DomeLight.uv_to_dir = staticmethod(lambda uv: (lambda r: (r[0] * np.array([-1.0, 1.0, 1.0]), r[1]))(to_dir(uv)))
+
+
+def no_asset_indirect():
+    """Rays never continue from a neural asset (next-event estimation only, even with other objects)."""
+    from reference_renderer import integrator, plan
+
+    orig = plan.make_plan
+
+    def make_plan(scene, **kw):
+        p = orig(scene, **kw)
+        for i, inst in enumerate(scene.instances):
+            if inst.kind == "neural":
+                p.instance_indirect[i] = False
+        return p
+
+    plan.make_plan = integrator.make_plan = make_plan  # (the render verb imports it from .plan when it runs)
+
+
+def mis_weights_one():
+    """Power-heuristic weights replaced by 1 (light samples and BSDF/continuation hits both counted)."""
+    from reference_renderer import integrator
+
+    integrator.power_heuristic = lambda a, b: np.ones(np.broadcast(a, b).shape)
+
+
+def quality_hq():
+    """The plan loads the 'hq' quality variant instead of the asset's default."""
+    from nasset_sdk.asset import Asset
+
+    orig = Asset.load
+
+    def load(self, which="required"):
+        if any(c.qualities and "hq" in c.qualities for c in self.components().values()):
+            self.select_quality("hq")
+        return orig(self, which)
+
+    Asset.load = load
+
+
+MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
+                                   triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
+                                   distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq)}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--list"]:
+        for k, f in MUTANTS.items():
+            print(f"{k}: {f.__doc__}")
+        return 0
+    if len(argv) != 7 or argv[0] not in MUTANTS:
+        print(__doc__, file=sys.stderr)
+        return 2
+    name, scene, out, spp, width, height, seed = argv
+    MUTANTS[name]()
+    from nasset_sdk.cli import main as nasset
+
+    return nasset(["render", scene, "-o", out, "--spp", spp, "--width", width, "--height", height, "--seed", seed, "--quiet"])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,44 @@
+"""Smoke test of ``nasset bench error-vs-time`` at toy scale (8x8; ~8 s), and the equal-error arithmetic.
+
+The smoke run uses conftest's tiny random-network rna asset in place of a bake (baking takes
+minutes): it exercises the whole pipeline (example scene, conversion with --replace, Mitsuba
+ground truth and curve, reference-renderer curve, table, plot) but its numbers mean nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from converters.mitsuba.bench import equal_error_speedup  # noqa: E402
+
+
+def test_equal_error_speedup_arithmetic():
+    # Mitsuba: MSE = 1 / spp, time = 0.1 + 0.01 spp; neural point at MSE 0.01 in 0.5 s -> Mitsuba 100 spp, 1.1 s
+    mi = [{"spp": s, "mse": 1.0 / s, "time_s": 0.1 + 0.01 * s} for s in (1, 4, 16, 64)]
+    nr = [{"spp": 1, "mse": 0.01, "time_s": 0.5}, {"spp": 2, "mse": -1e-9, "time_s": 1.0}]
+    out = equal_error_speedup(mi, nr)
+    assert out[0]["mitsuba_spp"] == pytest.approx(100.0)
+    assert out[0]["mitsuba_time_s"] == pytest.approx(1.1)
+    assert out[0]["speedup"] == pytest.approx(2.2)
+    assert out[1]["speedup"] is None  # within the ground truth's noise: no equal-error point
+
+
+def test_bench_smoke(tmp_path, rna_asset_path, capsys):
+    from nasset_sdk.cli import main
+
+    rc = main(["bench", "error-vs-time", "-o", str(tmp_path), "--asset", str(rna_asset_path), "--res", "8",
+               "--gt-spp", "16", "--mi-spp", "1,2", "--nr-spp", "1,2", "--max-depth", "2", "--json"])
+    assert rc == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [p["spp"] for p in report["mitsuba_points"]] == [1, 2]
+    assert [p["spp"] for p in report["neural_points"]] == [1, 2]
+    assert all(p["time_s"] > 0 and math.isfinite(p["mse"]) for p in report["mitsuba_points"] + report["neural_points"])
+    assert math.isfinite(report["bias_floor_mse"])
+    assert (tmp_path / "error_vs_time.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((tmp_path / "error_vs_time.json").read_text())["resolution"] == [8, 8]
+    assert (tmp_path / "scene" / "scene_neural.usda").is_file()
