@@ -55,7 +55,7 @@ class TrainSettings:
 #: per-preset training defaults (the data defaults live in nasset_sdk.bake)
 TRAIN_PRESETS = {
     "tiny": dict(epochs=40, batch=1024),
-    "small": dict(epochs=20, batch=4096, plane_lr=3e-3),
+    "small": dict(epochs=12, batch=1024, plane_lr=3e-3),
     "hq": dict(epochs=40, batch=8192, plane_lr=3e-3),
 }
 

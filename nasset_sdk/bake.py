@@ -28,7 +28,7 @@ from .errors import UsageError, error
 #: pixel has its own random light; held-out views: one light per view, lower res, many more spp
 #: (their noise bounds the measurable PSNR; spec/bake.md#psnr). Measured in spec/bake.md#ablations.
 DATA_PRESETS = {
-    "tiny": dict(views=6, val_views=2, res=24, spp=8, val_res=24, val_spp=64, lights_per_view=0),
+    "tiny": dict(views=16, val_views=2, res=24, spp=8, val_res=24, val_spp=64, lights_per_view=0),
     "small": dict(views=96, val_views=8, res=96, spp=64, val_res=64, val_spp=1024, lights_per_view=0),
     "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
 }
@@ -230,6 +230,7 @@ def bake(
         "train_samples": int(len(train_data["x"])),
         "val_samples": int(len(val_data["x"])),
         "views": dset.views, "val_views": dset.val_views, "res": dset.res, "spp": dset.spp,
+        "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp,
         "variant": mi.variant(), "device": result.device,
         "val_psnr_db": result.val["psnr_db"],
         "sdk_val_psnr_db": check["psnr_db"],
@@ -270,7 +271,8 @@ def _print_summary(s: dict, stream) -> None:
     lines = [
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB)",
         f"  mitsuba {s['variant']}, training on {s['device']}",
-        f"  dataset: {s['views']} + {s['val_views']} held-out views at {s['res']}^2, {s['spp']} spp -> "
+        f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
+        f"{s['val_res']}^2, {s['val_spp']} spp -> "
         f"{s['train_samples']} train / {s['val_samples']} held-out samples  (kept in {s['dataset_dir']})",
         f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",

@@ -136,8 +136,10 @@ def _view_args(p):
 @verb("convert-scene", "convert a Mitsuba 3 scene (camera, lights, plain shapes) to USD, baked assets in place of their shapes",
       "converters.mitsuba.usd_export:run")
 def _convert_scene_args(p):
-    p.add_argument("scene", help="Mitsuba 3 scene .xml")
+    p.add_argument("scene", nargs="?", help="Mitsuba 3 scene .xml (omit with --example)")
     p.add_argument("-o", "--output", required=True, help="output .usda / .usdc")
+    p.add_argument("--example", action="store_true",
+                   help="convert the built-in example scene (written to OUTPUT's folder as example_scene/scene.xml)")
     p.add_argument("--replace", action="append", default=None, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
                    help="reference this baked asset in place of these shapes (repeatable; path stored relative to the output)")
     p.add_argument("--no-usd-checks", action="store_true", help="skip OpenUSD's validators on the written stage")

@@ -194,7 +194,8 @@ def false_colour(x: np.ndarray) -> np.ndarray:
 def write_error_map(path, image: np.ndarray, reference: np.ndarray, zoom: int = 4) -> None:
     """PNG with three panels: reference, image (same tone mapping), false-colour |image - reference|
     (mean over channels) normalised by its 99th percentile."""
-    from reference_renderer.film import tonemap, write_png
+    from nasset_sdk.images import write_png
+    from reference_renderer.film import tonemap
 
     img = np.nan_to_num(np.asarray(image, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
     ref = np.asarray(reference, np.float64)

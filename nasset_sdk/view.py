@@ -35,14 +35,13 @@ imported lazily. Without a display (no ``DISPLAY``) the picture goes to a PNG fi
 from __future__ import annotations
 
 import os
-import struct
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 from .errors import UsageError
 from .geometry import CurvesGeometry, MeshGeometry
+from .images import write_png
 
 #: vertical field of view of the preview camera, degrees
 FOV_Y = 30.0
@@ -75,23 +74,6 @@ def tonemap(rgb, exposure: float = 0.0) -> np.ndarray:
     return np.clip(np.round(s * 255.0), 0, 255).astype(np.uint8)
 
 
-def write_png(path, rgb8: np.ndarray) -> Path:
-    """Write an [H, W, 3] uint8 image as an 8-bit RGB PNG."""
-    rgb8 = np.ascontiguousarray(rgb8, np.uint8)
-    h, w, _ = rgb8.shape
-    raw = b"".join(b"\x00" + rgb8[r].tobytes() for r in range(h))
-
-    def chunk(tag, data):
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-
-    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
-    path = Path(path)
-    path.write_bytes(png)
-    return path
-
-
-# viridis, 11 anchors (matplotlib's table sampled at 0, 0.1, ..., 1)
 _VIRIDIS = np.array([
     [0.267, 0.005, 0.329], [0.283, 0.141, 0.458], [0.254, 0.265, 0.530], [0.207, 0.372, 0.553], [0.164, 0.471, 0.558],
     [0.128, 0.567, 0.551], [0.135, 0.659, 0.518], [0.267, 0.749, 0.441], [0.478, 0.821, 0.318],

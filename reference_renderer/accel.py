@@ -120,13 +120,17 @@ class Accel:
             self.scale = 1.0
         self.eps = 1e-5 * max(self.scale, 1e-6)
 
-    def trace(self, o, d, tmax=None, ignore=None) -> Hits:
+    def trace(self, o, d, tmax=None, ignore=None, exempt=None) -> Hits:
         """Closest hit along each ray that is not on instance ``ignore[i]`` (-1: none).
 
-        ``self_hit`` is set where the ray passed through the ignored instance first.
+        ``self_hit`` is set where the ray passed through the ignored instance first. ``exempt``
+        ([n, 2] triangle index ranges [lo, hi), or None): ignored triangles in row i's range are
+        stepped over without setting ``self_hit`` (a fiber hit's own segment and its neighbours).
         """
         n = len(o)
         tmax = np.full(n, np.inf) if tmax is None else np.asarray(tmax, np.float64)
+        if exempt is not None:
+            return self._trace_exempt(o, d, tmax, ignore, np.asarray(exempt, np.int64))
         self.rays_cast += n
         t, prim, u, v = self.backend.closest(o, d, tmax)
         skip = None
@@ -163,6 +167,37 @@ class Accel:
             toff = toff[skip] + step
             oo = oo[skip] + d[idx[skip]] * step[:, None]
             idx = idx[skip]
+        return hits
+
+    def _trace_exempt(self, o, d, tmax, ignore, exempt) -> Hits:
+        """:meth:`trace` with per-row exempt triangle ranges (every ignored hit is stepped over;
+        only those outside the row's range set ``self_hit``)."""
+        n = len(o)
+        hits = Hits(n)
+        ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
+        idx = np.arange(n)
+        oo = np.asarray(o, np.float64)
+        toff = np.zeros(n)
+        for _ in range(MAX_SKIPS):
+            if not len(idx):
+                break
+            self.rays_cast += len(idx)
+            t, prim, u, v = self.backend.closest(oo, d[idx], tmax[idx] - toff)
+            ig = ignore[idx]
+            skip = (prim >= 0) & (ig >= 0) & (self.tri_inst[np.maximum(prim, 0)] == ig)
+            keep = ~skip
+            k = idx[keep]
+            hits.t[k] = t[keep] + toff[keep]
+            hits.prim[k] = prim[keep]
+            hits.u[k] = u[keep]
+            hits.v[k] = v[keep]
+            rows, ps = idx[skip], prim[skip]
+            counted = (ps < exempt[rows, 0]) | (ps >= exempt[rows, 1])
+            hits.self_hit[rows[counted]] = True
+            step = t[skip] + self.eps
+            toff = toff[skip] + step
+            oo = oo[skip] + d[rows] * step[:, None]
+            idx = rows
         return hits
 
     def occluded(self, o, d, tmax):

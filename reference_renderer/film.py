@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import struct
-import zlib
-
 import numpy as np
+
+from nasset_sdk.images import write_png  # noqa: F401  (re-exported: film output API)
 
 
 class Film:
@@ -78,15 +77,3 @@ def tonemap(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     return np.clip(np.round(s * 255.0), 0, 255).astype(np.uint8)
 
 
-def write_png(path, rgb8: np.ndarray) -> None:
-    """Write an [H, W, 3] uint8 image as PNG (zlib only)."""
-    h, w, _ = rgb8.shape
-    raw = b"".join(b"\x00" + rgb8[r].tobytes() for r in range(h))
-
-    def chunk(tag, data):
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
-
-    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
-    with open(path, "wb") as fh:
-        fh.write(png)

@@ -110,6 +110,13 @@ class PathIntegrator:
             from .neural_kinds import KindShading
 
             self.kind_shading = KindShading(self)
+        self.fibers = None  # rna fiber instances (spec/renderer.md#fibers); None: no fiber asset in the scene
+        self.inst_fiber = np.zeros(len(insts), bool)
+        if any(data.fiber is not None for data in scene.assets):
+            from .neural_fiber import FiberShading
+
+            self.fibers = FiberShading(self)
+            self.inst_fiber = np.array([i.kind == "neural" and scene.assets[i.asset].fiber is not None for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
@@ -129,9 +136,9 @@ class PathIntegrator:
             self.asset_corner_n.append(cn)
 
     # -- helpers ---------------------------------------------------------------------------
-    def _trace(self, o, d, tmax=None, ignore=None):
+    def _trace(self, o, d, tmax=None, ignore=None, exempt=None):
         with _Timer(self.stats, "trace"):
-            return self.accel.trace(o, d, tmax, ignore)
+            return self.accel.trace(o, d, tmax, ignore, exempt)
 
     def _occluded(self, o, d, tmax):
         with _Timer(self.stats, "trace"):
@@ -155,11 +162,12 @@ class PathIntegrator:
         specular = np.ones(n0, bool)  # camera rays: emitters seen directly, weight 1
         ignore = np.full(n0, -1, np.int64)
         pend = None  # (mask, T_unshadowed/pdf, T_shadowed/pdf) of neural continuations
+        exempt = None  # [n,2] triangle ranges that do not count as self hits (fiber continuations), or None
         lights = self.scene.lights
         has_area = any(light.area for light in lights)
         depth = 0
         while len(idx):
-            hits = self._trace(o, d, None, ignore)
+            hits = self._trace(o, d, None, ignore) if exempt is None else self._trace(o, d, None, ignore, exempt)
             if pend is not None:
                 m, tu, ts = pend
                 beta[m] *= np.where(hits.self_hit[m][:, None], ts, tu)
@@ -223,8 +231,14 @@ class PathIntegrator:
             if mesh.any():
                 new.append(self._mesh_vertex(np.nonzero(mesh)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
             if neural.any():
-                if self.kind_shading is None:
+                if self.kind_shading is None and self.fibers is None:
                     new.append(self._neural_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+                elif self.kind_shading is None:
+                    fib = neural & self.inst_fiber[inst]
+                    if (neural & ~fib).any():
+                        new.append(self._neural_vertex(np.nonzero(neural & ~fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+                    if fib.any():
+                        new.append(self.fibers.vertex(np.nonzero(fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
                 else:
                     new += self.kind_shading.vertices(neural, idx, x, d, beta, prim, bu, bv, inst, L, rng)
             new = [n for n in new if n is not None and len(n[0])]
@@ -237,6 +251,9 @@ class PathIntegrator:
             prev_pdf = np.concatenate([n[4] for n in new])
             ignore = np.concatenate([n[5] for n in new])
             specular = np.zeros(len(idx), bool)
+            exempt = None
+            if any(len(n) > 8 for n in new):  # fiber continuations: their own segments are not self hits
+                exempt = np.concatenate([n[8] if len(n) > 8 else np.full((len(n[0]), 2), -1, np.int64) for n in new])
             if any(len(n) > 7 for n in new):  # neupress / 8dna continuations may carry MIS weight 1
                 specular = np.concatenate([n[7] if len(n) > 7 else np.zeros(len(n[0]), bool) for n in new])
             pm = [n[6] for n in new]

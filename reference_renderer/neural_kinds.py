@@ -36,7 +36,9 @@ class KindShading:
         for a in np.unique(asset_id[neural]):
             r = np.nonzero(asset_id == a)[0]
             kind = self.asset_kind[a]
-            if kind == "rna":
+            if kind == "rna" and integ.scene.assets[a].fiber is not None:
+                out.append(integ.fibers.vertex(r, idx, x, d, beta, prim, bu, bv, inst, L, rng))
+            elif kind == "rna":
                 out.append(integ._neural_vertex(r, idx, x, d, beta, prim, bu, bv, inst, L, rng))
             else:
                 out.append(self.shaders[kind].vertex(r, idx, x, d, beta, prim, bu, bv, inst, L, rng, int(a), self.modes[a]))

@@ -57,6 +57,7 @@ class NeuralAssetData:
     normals: np.ndarray | None  # [V,3] object space or None
     evaluator: object = None
     prims: list = field(default_factory=list)
+    fiber: object = None  # neural_fiber.FiberTubes of an rna fiber asset (points/faces are then its prisms)
 
 
 @dataclass
@@ -115,12 +116,34 @@ def open_stage(path: str):
     if not p.is_file():
         raise SceneError("SCENE_INVALID", "scene file does not exist", file=str(p))
     try:
-        stage = Usd.Stage.Open(str(p))
+        stage = Usd.Stage.Open(str(p), Usd.Stage.LoadNone)
     except Tf.ErrorException as exc:
         raise SceneError("SCENE_INVALID", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
     if stage is None:
         raise SceneError("SCENE_INVALID", "USD cannot open it", file=str(p))
+    _load_scene_payloads(stage)
     return stage
+
+
+def _load_scene_payloads(stage) -> None:
+    """Load the scene's own payloads (a prim placed with a payload, spec/renderer.md#traversal), each
+    without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""
+    from pxr import Usd
+
+    pred = Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
+    for _ in range(32):  # payloads may bring further payloads; bounded against cycles
+        todo = []
+        it = iter(Usd.PrimRange(stage.GetPseudoRoot(), pred))
+        for prim in it:
+            if prim.GetTypeName() == "NeuralAsset":
+                it.PruneChildren()
+            elif prim.HasAuthoredPayloads() and not prim.IsLoaded():
+                todo.append(prim.GetPath())
+                it.PruneChildren()
+        if not todo:
+            return
+        for path in todo:
+            stage.Load(path, Usd.LoadWithoutDescendants)
 
 
 def is_asset_file(path: str) -> bool:
@@ -443,17 +466,24 @@ class _Loader:
             if asset.kind not in ("rna", "neupress", "8dna"):
                 raise self.err("SCENE_UNSUPPORTED", f"asset kind {asset.kind!r}: this renderer integrates kinds 'rna', "
                                "'neupress' and '8dna'", path)
-            if asset.variant != "surface":
-                raise self.err("SCENE_UNSUPPORTED", f"{asset.kind} variant {asset.variant!r} (fiber rendering is not "
-                               "implemented; surface is)", path)
+            fiber = asset.kind == "rna" and asset.variant == "fiber"
+            if asset.variant != "surface" and not fiber:
+                raise self.err("SCENE_UNSUPPORTED", f"{asset.kind} variant {asset.variant!r} (surface is rendered, and "
+                               "fiber for rna)", path)
             try:
                 geo = asset.geometry()
             except NassetError as exc:
                 raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
-            nrm = None if geo.normals is None else np.asarray(geo.normals, np.float64)
             self.asset_index[key] = len(self.assets)
-            self.assets.append(NeuralAssetData(file, asset, np.asarray(geo.points, np.float64),
-                                               np.asarray(geo.faces, np.int64), nrm))
+            if fiber:  # curves as closed prisms around each segment (spec/renderer.md#fibers)
+                from .neural_fiber import tessellate
+
+                tubes = tessellate(geo.points, geo.counts, geo.widths)
+                self.assets.append(NeuralAssetData(file, asset, tubes.points, tubes.faces, None, fiber=tubes))
+            else:
+                nrm = None if geo.normals is None else np.asarray(geo.normals, np.float64)
+                self.assets.append(NeuralAssetData(file, asset, np.asarray(geo.points, np.float64),
+                                                   np.asarray(geo.faces, np.int64), nrm))
         ai = self.asset_index[key]
         data = self.assets[ai]
         data.prims.append(path)

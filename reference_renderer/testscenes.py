@@ -185,3 +185,34 @@ def random_rna_asset(path, *, seed=0, size="tiny"):
     from nasset_sdk.examples import example_builder
 
     return example_builder("rna", size=size, seed=seed).write(path)
+
+
+def constant_rna_fiber_asset(path, curves, widths, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), h_probe=False):
+    """An rna fiber asset whose decoder returns constant transports (exact tests).
+
+    ``curves``: list of [k, 3] polylines; ``widths``: one width per curve or per point. With
+    ``h_probe`` the transports are affine in the network's h input instead: unshadowed
+    ``(1 + h, 1 - h, 1)``, shadowed ``(0.5 + 0.5 h, 0.5 - 0.5 h, 0.5)``."""
+    from nasset_sdk.asset import AssetBuilder
+    from nasset_sdk.geometry import CurvesGeometry
+    from nasset_sdk.networks import mlp_onnx
+
+    pts = np.concatenate([np.asarray(c, np.float64).reshape(-1, 3) for c in curves]).astype(np.float32)
+    counts = np.array([len(c) for c in curves], np.int32)
+    w = np.asarray(widths, np.float32).reshape(-1)
+    if w.size != len(pts):  # a scalar, or one width per curve
+        w = np.repeat(np.broadcast_to(w, (len(counts),)), counts).astype(np.float32)
+    b = AssetBuilder("rna", variant="fiber")
+    b.set_geometry(CurvesGeometry(pts, counts, w))
+    core = b.component("core", required=True, purpose="evaluation")
+    ch = 4
+    core.add_tensor("triplane", np.zeros((3, 8, 8, ch)), dtype="float16", layout="plane,v,u,channel")
+    weights = np.zeros((ch + 13, 6), np.float32)
+    if h_probe:
+        weights[ch + 6] = [1.0, -1.0, 0.0, 0.5, -0.5, 0.0]  # the h column of the fiber input row
+        bias = np.array([1.0, 1.0, 1.0, 0.5, 0.5, 0.5], np.float32)
+    else:
+        bias = np.array(list(unshadowed) + list(shadowed), np.float32)
+    core.add_network("decoder", mlp_onnx([weights], [bias]))
+    b.provenance = {"generator": "constant"}
+    return b.write(path)

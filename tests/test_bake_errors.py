@@ -13,7 +13,7 @@ pytest.importorskip("torch", reason="bake tests need torch (pip install torch==2
 import converters.mitsuba as cm  # noqa: E402
 from converters.mitsuba import dataset as ds  # noqa: E402
 from converters.mitsuba.example_scene import write_example_scene  # noqa: E402
-from nasset_sdk.bake import bake  # noqa: E402
+from nasset_sdk.bake import DATA_PRESETS, bake  # noqa: E402
 from nasset_sdk.cli import main  # noqa: E402
 from nasset_sdk.errors import NassetError, SceneError, UsageError  # noqa: E402
 
@@ -127,8 +127,9 @@ def test_interrupt_keeps_dataset_and_resume_finishes(tmp_path, monkeypatch):
     calls["n"] = -100  # no more interrupts; count renders of the resumed run
     summary = bake(None, None, out, size="tiny", example=True, quiet=True, resume=work, epochs=2)
     assert out.exists()
-    assert calls["n"] == -100 + 6  # 8 views in all, 2 were kept
-    assert summary["views"] == 6
+    tiny = DATA_PRESETS["tiny"]
+    assert calls["n"] == -100 + tiny["views"] + tiny["val_views"] - 2  # 2 views were kept
+    assert summary["views"] == tiny["views"]
 
 
 def test_resume_with_other_settings_is_refused(tmp_path):

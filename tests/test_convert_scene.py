@@ -321,6 +321,23 @@ def test_cli_json_and_exit_codes(simple_scene, tmp_path, capsys):
     assert main(["convert-scene", str(simple_scene), "-o", str(tmp_path / "c.usda"), "--replace", "zzz=a.usdc"]) == 1
     assert "CONVERT_SHAPE_UNKNOWN" in capsys.readouterr().err
     assert main(["convert-scene", str(simple_scene), "-o", str(tmp_path / "c.txt")]) == 2
+    assert main(["convert-scene", str(simple_scene), "--example", "-o", str(tmp_path / "c.usda")]) == 2
+    assert main(["convert-scene", "-o", str(tmp_path / "c.usda")]) == 2
+
+
+def test_cli_example_scene_with_asset(rna_asset_path, tmp_path, capsys):
+    from pxr import Usd
+
+    from nasset_sdk.cli import main
+
+    out = tmp_path / "ex" / "scene.usda"
+    out.parent.mkdir()
+    assert main(["convert-scene", "--example", "-o", str(out), "--replace", f"shell,jelly={rna_asset_path}", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (tmp_path / "ex" / "example_scene" / "scene.xml").is_file()
+    assert report["replaced"] and "/World/Geometry/ground" in report["prims"]
+    stage = Usd.Stage.Open(str(out))
+    assert [p.GetTypeName() for p in stage.Traverse() if p.GetTypeName() == "NeuralAsset"] == ["NeuralAsset"]
 
 
 # -- the converted scene renders like the original ----------------------------------------------------------

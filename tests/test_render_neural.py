@@ -173,3 +173,24 @@ def test_cli_render_asset_file(tmp_path):
     from reference_renderer import read_exr
 
     assert read_exr(out).shape == (16, 16, 3)
+
+
+def test_scene_stage_loads_scene_payloads_but_no_asset_components(tmp_path):
+    """spec/renderer.md#traversal: a prim placed with a payload is composed; asset components stay for the plan."""
+    from pxr import Sdf, Usd
+
+    from reference_renderer.scene import open_stage
+
+    asset = tmp_path / "a.usdc"
+    random_rna_asset(asset, seed=3)
+    scene = tmp_path / "s.usda"
+    stage = Usd.Stage.CreateNew(str(scene))
+    stage.DefinePrim("/World/Direct").GetReferences().AddReference("./a.usdc")
+    placed = stage.DefinePrim("/World/Placed")
+    placed.GetPayloads().AddPayload(Sdf.Payload("./a.usdc"))
+    stage.GetRootLayer().Save()
+    opened = open_stage(str(scene))
+    assert opened.GetPrimAtPath("/World/Placed").GetTypeName() == "NeuralAsset"  # the scene's payload was loaded
+    for root in ("/World/Direct", "/World/Placed"):
+        comp = opened.GetPrimAtPath(root + "/Components/core")
+        assert comp and not comp.IsLoaded()  # the asset's component payloads were not

@@ -20,7 +20,9 @@ def _slug(heading: str) -> str:
 
 
 def _anchors(path: Path) -> set[str]:
-    return {_slug(m.group(1)) for m in re.finditer(r"^#{1,6}\s+(.+)$", path.read_text(), re.M)}
+    """Heading anchors: an explicit ``{#id}`` at the end of a heading, else the GitHub slug."""
+    heads = re.findall(r"^#{1,6}\s+(.+)$", path.read_text(), re.M)
+    return {m.group(1) if (m := re.search(r"\{#([\w-]+)\}\s*$", h)) else _slug(h) for h in heads}
 
 
 @pytest.mark.parametrize("code", sorted(CODES))

@@ -151,7 +151,7 @@ def plot(path: Path, mi_points, nr_points, floor, title: str) -> str:
 
 
 def _plot_fallback(path: Path, mi_points, nr_points, size=(480, 360)) -> None:
-    from reference_renderer.film import write_png
+    from nasset_sdk.images import write_png
 
     w, h = size
     img = np.full((h, w, 3), 255, np.uint8)

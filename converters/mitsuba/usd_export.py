@@ -758,7 +758,14 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
 
 def run(args) -> int:
     """CLI entry: ``nasset convert-scene SCENE.xml -o SCENE.usda [--replace ID=ASSET ...] [--json]``."""
-    res = convert_scene(args.scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks)
+    scene = args.scene
+    if args.example == bool(scene):
+        raise UsageError("give a scene file or --example (not both)")
+    if args.example:
+        from .example_scene import write_example_scene
+
+        scene = write_example_scene(Path(args.output).resolve().parent / "example_scene")
+    res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks)
     for w in res.warnings:
         print(f"warning: {w}", file=sys.stderr)
     bad = [c for c in res.usd_checks if c["severity"] == "error"]

@@ -186,6 +186,20 @@ class KindContract:
         raise NotImplementedError
 
 
+def rows3(*arrays) -> list[np.ndarray]:
+    """Evaluator argument check: each array as float64 [N, 3], all with the same N (UsageError otherwise)."""
+    from ..errors import UsageError
+
+    out, n = [], None
+    for a in arrays:
+        a = np.atleast_2d(np.asarray(a, np.float64))
+        if a.ndim != 2 or a.shape[1] != 3 or (n is not None and len(a) != n):
+            raise UsageError("points and directions must be [N, 3] arrays of one N")
+        n = len(a)
+        out.append(a)
+    return out
+
+
 KINDS: dict[str, KindContract] = {}
 
 
@@ -207,13 +221,5 @@ def kind_ids() -> Iterable[str]:
     return sorted(KINDS)
 
 
-from . import rna  # noqa: E402,F401  (registers)
-
-try:  # kinds added by later modules register themselves the same way
-    from . import neupress  # noqa: F401
-except ImportError:  # pragma: no cover - module not written yet
-    pass
-try:
-    from . import eightdna  # noqa: F401
-except ImportError:  # pragma: no cover
-    pass
+# kind modules register themselves on import
+from . import eightdna, neupress, rna  # noqa: E402,F401

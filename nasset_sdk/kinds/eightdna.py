@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError
-from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind
+from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
 from .encodings import _unit64, cubemap, grid_1d, to_unit_box, triplane
 from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, cylindrical_to_direction
@@ -146,17 +146,6 @@ class EightDnaKind(KindContract):
         return EightDnaEvaluator(asset, **options)
 
 
-def _rows3(*arrays):
-    out, n = [], None
-    for a in arrays:
-        a = np.atleast_2d(np.asarray(a, np.float64))
-        if a.ndim != 2 or a.shape[1] != 3 or (n is not None and len(a) != n):
-            raise UsageError("points and directions must be [N, 3] arrays of one N")
-        n = len(a)
-        out.append(a)
-    return out
-
-
 class EightDnaEvaluator:
     """numpy + onnxruntime evaluation and sampling of an 8dna asset; object space throughout."""
 
@@ -182,7 +171,7 @@ class EightDnaEvaluator:
 
     def base_features(self, x, wo) -> np.ndarray:
         """[N, 2C + 6] = [triplane(xn), xn, cube_wo(w_o), w_o] (float32)."""
-        x, wo = _rows3(x, wo)
+        x, wo = rows3(x, wo)
         xn = to_unit_box(x, self.lo, self.hi)
         wo = _unit64(wo).astype(np.float32)
         return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo), wo], axis=1).astype(np.float32)
@@ -235,15 +224,15 @@ class EightDnaEvaluator:
     # -- direct lobe -----------------------------------------------------------------------
     def direct_eval(self, n, wo, wi) -> np.ndarray:
         """Cosine-weighted direct reflection f |n.wi| RGB [N,3] (grey)."""
-        n, wo, wi = _rows3(n, wo, wi)
+        n, wo, wi = rows3(n, wo, wi)
         return np.repeat(ggx_reflection(n, wo, wi, self.eta, self.alpha)[:, None], 3, axis=1).astype(np.float32)
 
     def direct_sample(self, n, wo, u2):
-        n, wo = _rows3(n, wo)
+        n, wo = rows3(n, wo)
         return ggx_sample(n, wo, u2, self.alpha)
 
     def direct_pdf(self, n, wo, wi) -> np.ndarray:
-        n, wo, wi = _rows3(n, wo, wi)
+        n, wo, wi = rows3(n, wo, wi)
         return ggx_pdf(n, wo, wi, self.alpha)
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError
-from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind
+from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_reflection
 from .encodings import _unit64, fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box
 
@@ -191,18 +191,6 @@ class NeupressKind(KindContract):
         return NeupressEvaluator(asset, **options)
 
 
-def _check3(*arrays):
-    n = None
-    out = []
-    for a in arrays:
-        a = np.atleast_2d(np.asarray(a, np.float64))
-        if a.ndim != 2 or a.shape[1] != 3 or (n is not None and len(a) != n):
-            raise UsageError("points and directions must be [N, 3] arrays of one N")
-        n = len(a)
-        out.append(a)
-    return out
-
-
 class NeupressEvaluator:
     """numpy + onnxruntime evaluation of a neupress asset; all vectors in object space."""
 
@@ -235,14 +223,14 @@ class NeupressEvaluator:
 
         ``n`` is not a network input (the paper's network sees x, wo, wi only); it is checked for shape
         so all neupress calls share arguments."""
-        x, n, wo, wi = _check3(x, n, wo, wi)
+        x, n, wo, wi = rows3(x, n, wo, wi)
         y = self._run(self.session, fourier_features(self.G, self.appearance_input(x, wo, wi)), 3)
         y = np.nan_to_num(y, nan=0.0, posinf=0.0, neginf=0.0)
         return np.maximum(y, 0.0)
 
     def surface_reflection(self, n, wo, wi) -> np.ndarray:
         """Analytic GGX rough-dielectric reflection f |n.wi| as RGB [N,3] (grey)."""
-        n, wo, wi = _check3(n, wo, wi)
+        n, wo, wi = rows3(n, wo, wi)
         f = ggx_reflection(n, wo, wi, self.eta, self.alpha).astype(np.float32)
         return np.repeat(f[:, None], 3, axis=1)
 
@@ -250,7 +238,7 @@ class NeupressEvaluator:
         """Lobe standard deviation [N] (radians in the projection plane), in [SIGMA_MIN, SIGMA_MAX]."""
         if not self.has_sampling:
             raise UsageError("component 'sampling' is not loaded; open with load=['core', 'sampling'] or 'all'")
-        x, wo = _check3(x, wo)
+        x, wo = rows3(x, wo)
         v = np.concatenate([to_unit_box(x, self.lo, self.hi), spherical_coords(wo)], axis=1)
         y = self._run(self.sigma_session, fourier_features(self.Gs, v), 1)[:, 0].astype(np.float64)
         y = np.nan_to_num(y, nan=0.0, posinf=np.log(SIGMA_MAX), neginf=np.log(SIGMA_MIN))
@@ -258,11 +246,11 @@ class NeupressEvaluator:
 
     def sample_lobe(self, x, n, wo, u2) -> tuple[np.ndarray, np.ndarray]:
         """wi [N,3] ~ Gaussian lobe around n with the network's sigma, and its pdf per steradian [N]."""
-        x, n, wo = _check3(x, n, wo)
+        x, n, wo = rows3(x, n, wo)
         return gaussian_lobe_sample(n, self.sigma(x, wo), u2)
 
     def lobe_pdf(self, x, n, wo, wi) -> np.ndarray:
-        x, n, wo, wi = _check3(x, n, wo, wi)
+        x, n, wo, wi = rows3(x, n, wo, wi)
         return gaussian_lobe_pdf(n, self.sigma(x, wo), wi)
 
     def prt_coefficients(self) -> np.ndarray:
@@ -285,7 +273,7 @@ class NeupressEvaluator:
         vertex = np.asarray(vertex, np.int64).reshape(-1)
         if (vertex < 0).any() or (vertex >= a.shape[0]).any():
             raise UsageError("vertex index out of range")
-        n, wo = _check3(n, wo)
+        n, wo = rows3(n, wo)
         loc = to_local(_unit64(wo), n)
         t_bins, p_bins = a.shape[1], a.shape[2]
         ti = np.clip(np.floor((1.0 - np.clip(loc[:, 2], 0.0, 1.0)) * t_bins), 0, t_bins - 1).astype(np.int64)

@@ -74,8 +74,9 @@ def chain(*ms):
 
 
 # -- assets --------------------------------------------------------------------------------
-def _rna_random(seed, *, dtype="float16"):
-    """Builder of a tiny rna surface asset with random networks (triplane stored as ``dtype``).
+def _rna_random(seed, *, dtype="float16", variant="surface"):
+    """Builder of a tiny rna asset with random networks (triplane stored as ``dtype``); variant
+    ``fiber`` uses :func:`_fiber_curves` as its geometry.
 
     The decoder is a random 2 x 16 ReLU MLP whose last layer is scaled so that transports stay
     in a plausible range (about 0.05 to 0.3 / sr, shadowed darker than unshadowed) while still
@@ -86,12 +87,12 @@ def _rna_random(seed, *, dtype="float16"):
     from nasset_sdk.networks import mlp_onnx
 
     rng = np.random.default_rng(seed)
-    b = AssetBuilder("rna", variant="surface")
-    b.set_geometry(_example_mesh())
+    b = AssetBuilder("rna", variant=variant)
+    b.set_geometry(_fiber_curves() if variant == "fiber" else _example_mesh())
     core = b.component("core", required=True, purpose="evaluation", quality=None)
     res, ch, hidden = 8, 4, 16
     core.add_tensor("triplane", rng.normal(0, 1.0, (3, res, res, ch)), dtype=dtype, layout="plane,v,u,channel")
-    widths = [ch + 12, hidden, hidden, 6]
+    widths = [ch + (13 if variant == "fiber" else 12), hidden, hidden, 6]
     ws = [rng.normal(0.0, np.sqrt(2.0 / a), (a, o)) for a, o in zip(widths[:-1], widths[1:], strict=True)]
     bs = [rng.normal(0.0, 0.05, o) for o in widths[1:]]
     ws[-1] *= 0.05
@@ -101,12 +102,31 @@ def _rna_random(seed, *, dtype="float16"):
     return b
 
 
+def _fiber_curves():
+    """A tuft of 14 wavy, tapered linear curves (6 segments each) standing on y = -0.5, 0.5 high."""
+    from nasset_sdk.geometry import CurvesGeometry
+
+    rng = np.random.default_rng(7)
+    n, seg = 14, 6
+    roots = rng.uniform(-0.35, 0.35, (n, 3)) * [1, 0, 1] + [0.0, -0.5, 0.0]
+    phase = rng.uniform(0, 2 * np.pi, n)[:, None, None]
+    t = np.linspace(0, 1, seg + 1)[None, :, None]
+    sway = 0.12 * t * np.concatenate([np.sin(5 * t + phase), 0 * phase + 0 * t, np.cos(4 * t + phase)], 2)
+    pts = (roots[:, None, :] + t * np.array([0.0, 1.0, 0.0]) + sway).reshape(-1, 3).astype(np.float32)
+    widths = np.tile(np.linspace(0.07, 0.035, seg + 1), n).astype(np.float32)
+    return CurvesGeometry(pts, np.full(n, seg + 1, np.int32), widths)
+
+
 def asset_rand(path):
     return _rna_random(11).write(path)
 
 
 def asset_rand_fp32(path):
     return _rna_random(11, dtype="float32").write(path)
+
+
+def asset_fiber(path):
+    return _rna_random(13, variant="fiber").write(path)
 
 
 def asset_const(path):
@@ -139,6 +159,7 @@ ASSETS: dict[str, Callable] = {
     "rna_rand.usdc": asset_rand,
     "rna_rand_fp32.usdc": asset_rand_fp32,
     "rna_const.usdc": asset_const,
+    "rna_fiber.usdc": asset_fiber,
     "rna_quality.usdc": asset_quality,
     "neupress.usdc": asset_example("neupress"),
     "8dna.usdc": asset_example("8dna"),
@@ -398,6 +419,9 @@ CASES = [
          "networks: the plan loads the default variant only", b_quality),
     Case("rna_indirect", "asset lit mostly indirectly (red wall, emissive quad reached by continuation rays only, glossy "
          "floor): continuation rays leaving the asset and their branch weights", b_indirect),
+    Case("rna_fiber_distant", "rna fiber asset (tuft of tapered linear curves, random networks) on a floor under a delta "
+         "DistantLight: curve tubes, tangent and h inputs, fibers shadowing fibers (shadowed branch), shadows on the floor",
+         b_distant("rna_fiber.usdc")),
     Case("neupress_distant", "neupress surface asset on a floor under a DistantLight; its optional components (importance "
          "sampling, PRT) are not needed by the plan", b_other_kind("neupress.usdc"), spp=256),
     Case("8dna_distant", "8dna surface asset on a floor under a DistantLight", b_other_kind("8dna.usdc")),

@@ -1,0 +1,201 @@
+"""rna fiber assets (spec/renderer.md#fibers): curve tubes for the triangle scene and the fiber vertex.
+
+Each linear segment of each curve becomes a closed prism of :data:`TUBE_SIDES` sides (two rings
+of vertices on the circles of radius width/2 at the segment's end points, in planes perpendicular
+to the segment, plus the two end caps). The prisms go into the renderer's single triangle scene
+like any asset triangles. At a hit the fiber quantities come from the segment's axis, not from
+the tessellation: the tangent t is the segment direction and h the signed offset of the ray from
+the axis (:func:`fiber_h`), both in object space.
+
+Rays leaving a fiber hit (shadow and continuation rays) start at the hit point and ignore the
+instance like surface rays do, but the triangles of the hit's own segment and of its neighbours
+in the same curve do not count as passing through the asset (the fiber's own cross-section is
+part of its transport, not a shadow); any other triangle of the instance picks the shadowed
+branch.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sampling import INV_4PI, normalize, power_heuristic, square_to_uniform_sphere
+
+#: sides of the prism built around each curve segment
+TUBE_SIDES = 8
+
+
+@dataclass
+class FiberTubes:
+    """Tessellated curves of one fiber asset, object space."""
+
+    points: np.ndarray  # [V,3] prism vertices
+    faces: np.ndarray  # [F,3]
+    tri_seg: np.ndarray  # [F] segment of each triangle
+    p0: np.ndarray  # [S,3] segment start
+    p1: np.ndarray  # [S,3] segment end
+    r0: np.ndarray  # [S] radius at p0 (width / 2)
+    r1: np.ndarray  # [S] radius at p1
+    exempt: np.ndarray  # [S,2] triangle range [lo, hi) of the segment and its neighbours in its curve
+
+
+def _unit_rows(v):
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return v / np.where(n > 0, n, 1.0)
+
+
+def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
+    """Closed ``sides``-gon prisms around every non-degenerate segment of linear curves."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    c = np.asarray(counts, np.int64)
+    r = 0.5 * np.asarray(widths, np.float64)
+    starts = np.concatenate([[0], np.cumsum(c)[:-1]])
+    # segments (i, i + 1) inside each curve, in curve order
+    a = np.concatenate([np.arange(s, s + n - 1) for s, n in zip(starts, c, strict=True)]) if len(c) else np.zeros(0, np.int64)
+    curve = np.repeat(np.arange(len(c)), c - 1)
+    p0, p1, r0, r1 = p[a], p[a + 1], r[a], r[a + 1]
+    seg_len = np.linalg.norm(p1 - p0, axis=1)
+    tiny = 1e-9 * (1.0 + float(np.abs(p).max(initial=0.0)))
+    live = seg_len > tiny  # zero-length segments get no triangles
+    t = _unit_rows(p1 - p0)
+    helper = np.where(np.abs(t[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    b1 = _unit_rows(np.cross(t, helper))
+    b2 = np.cross(t, b1)
+    ang = 2 * np.pi * np.arange(sides) / sides
+    ring = np.cos(ang)[None, :, None] * b1[:, None] + np.sin(ang)[None, :, None] * b2[:, None]  # [S,N,3]
+    verts = np.concatenate([p0[:, None] + r0[:, None, None] * ring, p1[:, None] + r1[:, None, None] * ring], 1)  # [S,2N,3]
+    k = np.arange(sides)
+    kn = (k + 1) % sides
+    side = np.concatenate([np.stack([k, kn, sides + kn], 1), np.stack([k, sides + kn, sides + k], 1)])
+    fan = np.arange(1, sides - 1)
+    cap0 = np.stack([np.zeros_like(fan), fan + 1, fan], 1)  # wound to face -t
+    cap1 = np.stack([np.full_like(fan, sides), sides + fan, sides + fan + 1], 1)  # wound to face +t
+    local = np.concatenate([side, cap0, cap1])  # [4N-4, 3] into one segment's 2N vertices
+    per = len(local)
+    n_seg = len(a)
+    live_ids = np.nonzero(live)[0]
+    faces = (live_ids[:, None, None] * 2 * sides + local[None]).reshape(-1, 3)
+    tri_seg = np.repeat(live_ids, per)
+    n_tri = np.where(live, per, 0)
+    first = np.concatenate([[0], np.cumsum(n_tri)])  # [S+1] first triangle of each segment
+    seg_first = np.concatenate([[0], np.cumsum(c - 1)])  # first segment of each curve
+    seg = np.arange(n_seg)
+    lo_seg = np.maximum(seg - 1, seg_first[curve])
+    hi_seg = np.minimum(seg + 1, seg_first[curve + 1] - 1)
+    exempt = np.stack([first[lo_seg], first[hi_seg + 1]], 1).astype(np.int64)
+    return FiberTubes(verts.reshape(-1, 3), faces.astype(np.int64), tri_seg.astype(np.int64), p0, p1, r0, r1, exempt)
+
+
+def fiber_frame(tubes: FiberTubes, seg, x_obj, wo_obj):
+    """(unit tangent t [n,3], h [n]) at object-space points x on segments ``seg``, seen along wo.
+
+    h = ((x - p0) . (t x wo)) / (|t x wo| r(s)), clamped to [-1, 1]; 0 where t x wo vanishes (the ray
+    runs along the axis). r(s) = r0 + s (r1 - r0), s = clamp((x - p0) . t / |p1 - p0|, 0, 1)."""
+    p0, p1 = tubes.p0[seg], tubes.p1[seg]
+    axis = p1 - p0
+    ln = np.linalg.norm(axis, axis=1)
+    t = axis / np.where(ln > 0, ln, 1.0)[:, None]
+    rel = x_obj - p0
+    s = np.clip((rel * t).sum(1) / np.where(ln > 0, ln, 1.0), 0.0, 1.0)
+    r = tubes.r0[seg] + s * (tubes.r1[seg] - tubes.r0[seg])
+    c = np.cross(t, wo_obj)
+    cl = np.linalg.norm(c, axis=1)
+    ok = (cl > 1e-9) & (r > 0)
+    h = np.where(ok, (rel * c).sum(1) / np.where(ok, cl * r, 1.0), 0.0)
+    return t, np.clip(h, -1.0, 1.0)
+
+
+class FiberShading:
+    """The rna fiber vertex of :class:`reference_renderer.integrator.PathIntegrator`."""
+
+    def __init__(self, integ) -> None:
+        self.integ = integ
+        scene = integ.scene
+        self.tubes = [data.fiber for data in scene.assets]
+        self.inst_first_tri = np.array([i.first_tri for i in scene.instances], np.int64)
+
+    def hit_frame(self, x_obj, wo_obj, prim, asset_id):
+        """(t, h, segment, exempt [n,2] world triangle ranges) of fiber hits on triangles ``prim``."""
+        integ = self.integ
+        n = len(prim)
+        local = integ.scene.tri_local[prim]
+        inst = integ.scene.tri_inst[prim]
+        t = np.zeros((n, 3))
+        h = np.zeros(n)
+        seg = np.zeros(n, np.int64)
+        exempt = np.zeros((n, 2), np.int64)
+        for a in np.unique(asset_id):
+            m = asset_id == a
+            tubes = self.tubes[a]
+            sg = tubes.tri_seg[local[m]]
+            t[m], h[m] = fiber_frame(tubes, sg, x_obj[m], wo_obj[m])
+            seg[m] = sg
+            exempt[m] = tubes.exempt[sg] + self.inst_first_tri[inst[m]][:, None]
+        return t, h, seg, exempt
+
+    def vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
+        integ = self.integ
+        x, d, beta, prim, inst, ridx = x[r], d[r], beta[r], prim[r], inst[r], idx[r]
+        n = len(x)
+        x_obj = integ._to_object(x, inst, point=True)
+        wo_obj = normalize(integ._to_object(-d, inst))
+        asset_id = integ.inst_asset[inst]
+        t_obj, h, _, exempt = self.hit_frame(x_obj, wo_obj, prim, asset_id)
+        indirect = integ.indirect[inst]
+        rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
+        for k in integ.nee:
+            light = integ.scene.lights[k]
+            wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
+            ok = (pdf > 0) & (np.maximum(np.maximum(li[:, 0], li[:, 1]), li[:, 2]) > 0)
+            s = np.nonzero(ok)[0]
+            if not len(s):
+                continue
+            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
+            hh = integ._trace(x[s], wi[s], tmax, inst[s], exempt[s])
+            free = hh.prim < 0
+            s = s[free]
+            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
+            rows_ray.append(s)
+            rows_wi.append(wi[s])
+            rows_w.append(li[s] * (w / pdf[s])[:, None])
+            rows_self.append(hh.self_hit[free])
+            rows_kind.append(np.zeros(len(s), bool))
+        cont = np.nonzero(indirect)[0]
+        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
+        rows_ray.append(cont)
+        rows_wi.append(wi_c)
+        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+        rows_self.append(np.zeros(len(cont), bool))
+        rows_kind.append(np.ones(len(cont), bool))
+        ray = np.concatenate(rows_ray)
+        wi_all = np.concatenate(rows_wi)
+        w_all = np.concatenate(rows_w)
+        self_all = np.concatenate(rows_self)
+        is_cont = np.concatenate(rows_kind)
+        tu = np.zeros((len(ray), 3))
+        ts = np.zeros((len(ray), 3))
+        if len(ray):
+            wi_obj = normalize(integ._to_object(wi_all, inst[ray]))
+            ray_asset = asset_id[ray]
+            x32, t32, wo32, h32 = (v.astype(np.float32) for v in (x_obj, t_obj, wo_obj, h))
+            for a in np.unique(ray_asset):
+                m = ray_asset == a
+                rr = ray[m]
+                t0 = time.perf_counter()
+                u_, s_ = integ.scene.assets[a].evaluator.evaluate(x32[rr], t32[rr], wo32[rr], wi_obj[m].astype(np.float32), h32[rr])
+                integ.stats.time["network"] += time.perf_counter() - t0
+                integ.stats.network_evals += len(rr)
+                tu[m], ts[m] = u_, s_
+        light_rows = ~is_cont
+        if light_rows.any():
+            lr = ray[light_rows]
+            tsel = np.where(self_all[light_rows][:, None], ts[light_rows], tu[light_rows])
+            np.add.at(L, ridx[lr], beta[lr] * tsel * w_all[light_rows])
+        if not len(cont):
+            return None
+        cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
+        mask = np.ones(len(cont), bool)
+        return (ridx[cont], x[cont], wi_c, beta[cont], np.full(len(cont), INV_4PI), inst[cont], (mask, cu, cs),
+                np.zeros(len(cont), bool), exempt[cont])
