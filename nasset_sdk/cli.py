@@ -106,7 +106,7 @@ def _bake_args(p):
     p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")
     p.add_argument("--res", type=int, default=None, help="image resolution per view")
     p.add_argument("--epochs", type=int, default=None)
-    p.add_argument("--spp", type=int, default=None, help="paths per pixel (held-out views: 2x)")
+    p.add_argument("--spp", type=int, default=None, help="paths per pixel of the training views (held-out views use the preset's val_spp)")
     p.add_argument("--light-angle", type=float, default=None,
                    help="angular radius of the distant light in degrees (0 = delta; default 0, or 5 behind smooth dielectrics)")
     p.add_argument("--seed", type=int, default=0)

@@ -109,9 +109,12 @@ def test_random_asset_agrees_with_reference(nr, tmp_path):
 
 
 def test_unsupported_kind_is_a_scene_error(nr, tmp_path):
-    from nasset_sdk.examples import example_builder
+    from pxr import Sdf
 
-    asset = example_builder("neupress", size="tiny", seed=0).write(tmp_path / "np.usda")
+    asset = constant_rna_asset(tmp_path / "odd.usda", unshadowed=(1, 1, 1), shadowed=(0, 0, 0))
+    layer = Sdf.Layer.FindOrOpen(str(asset))
+    layer.GetAttributeAtPath(f"/{layer.defaultPrim}.nasset:kind").default = "nosuchkind"
+    layer.Save()
     b = SceneBuilder()
     b.camera((0, 0, 3), (0, 0, 0))
     b.distant("Sun", (0, 1, 0), 1.0)
@@ -120,12 +123,51 @@ def test_unsupported_kind_is_a_scene_error(nr, tmp_path):
     with pytest.raises(SceneError) as info:
         nr.render(scene, 1, width=8, height=8)
     assert info.value.code == "SCENE_UNSUPPORTED"
-    assert "neupress" in str(info.value) and "/World/A" in str(info.value)
+    assert "nosuchkind" in str(info.value) and "/World/A" in str(info.value)
     # the CLI reports it on stderr with a non-zero exit status, writing nothing
     out = tmp_path / "out.exr"
     res = subprocess.run([sys.executable, "-m", "converters.mitsuba.neural_render", scene, str(out), "1", "--width", "8", "--height", "8"],
                          capture_output=True, text=True)
     assert res.returncode == 2 and "SCENE_UNSUPPORTED" in res.stderr and not out.exists()
+
+
+def test_fiber_tessellation_and_h():
+    """spec/renderer.md#fibers: 4N-4 triangles per live segment, exempt ranges of the segment and its
+    curve neighbours, h = offset of the ray line from the axis over r, signed along t x wo."""
+    from converters.mitsuba.neural.rna import TUBE_SIDES, fiber_tubes
+
+    pts = np.array([[0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 2, 0], [1, 0, 0], [2, 0, 0]], float)
+    verts, faces, tri_seg, p0, p1, r0, r1, exempt = fiber_tubes(pts, [4, 2], np.full(6, 0.2))
+    per = 4 * TUBE_SIDES - 4
+    assert len(faces) == 3 * per and list(np.unique(tri_seg)) == [0, 1, 3]  # segment 2 has zero length
+    assert exempt.tolist() == [[0, 2 * per], [0, 2 * per], [per, 2 * per], [2 * per, 3 * per]]
+    ring = verts.reshape(-1, 2 * TUBE_SIDES, 3)
+    assert np.allclose(np.linalg.norm(ring[0, :TUBE_SIDES] - pts[0], axis=1), 0.1)
+    # h: segment along +x, viewed from +z; the ray line at y offset q has h = -q / r (t x wo = x x z = -y)
+    from converters.mitsuba.neural.rna import RnaAsset
+
+    a = RnaAsset.__new__(RnaAsset)
+    a.tri_seg, a.seg_p0, a.seg_p1, a.seg_r0, a.seg_r1, a.seg_exempt = tri_seg, p0, p1, r0, r1, exempt
+    x = np.array([[1.5, 0.05, 0.08], [1.5, -0.1, 0.0], [1.2, 0.02, 5.0]])
+    wo = np.array([[0, 0, 1.0]] * 3)
+    t, h, ex = a.fiber_frame(np.full(3, 2 * per), x, wo)
+    assert np.allclose(t, [1, 0, 0]) and np.allclose(h, [-0.5, 1.0, -0.2]) and (ex == [2 * per, 3 * per]).all()
+
+
+def _conformance(cases):
+    from nasset_sdk.conformance import run_suite
+
+    tpl = f"{sys.executable} -m converters.mitsuba.neural_render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
+    rep = run_suite(tpl, cases=cases)
+    return {r["case"]: r for r in rep["cases"]}
+
+
+@pytest.mark.parametrize("case", ["rna_fiber_distant", "neupress_distant"])
+def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
+    """rna fiber (prisms, t and h inputs, exempt own segment) and neupress (Fourier features, GGX
+    boundary, lobe MIS, self-visibility) conformance cases through the command-template CLI (~15-20 s each)."""
+    row = _conformance([case])[case]
+    assert row["passed"], row
 
 
 def test_missing_camera_is_a_scene_error(nr, tmp_path):

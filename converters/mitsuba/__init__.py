@@ -13,7 +13,7 @@ import warnings
 from nasset_sdk.errors import error
 
 #: bumped when the data a bake produces changes meaning (stored in provenance and in dataset dirs).
-CONVERTER_VERSION = "0.1.0"
+CONVERTER_VERSION = "0.2.0"  # 0.2: per-pixel lights, path samples clamped at 10 /sr
 
 LLVM_CANDIDATES = (
     "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",

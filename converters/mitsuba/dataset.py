@@ -4,10 +4,12 @@ Per view: a pinhole camera on a sphere around the asset looks at its centre; one
 pixel *centre* (rays are generated here, so there is no pixel-filter jitter). For every pixel
 whose ray hits the asset we store the hit point x, the shading normal n, wo (towards the camera),
 a light direction wi, the binary visibility V of the light from x against the asset alone, and
-the transport T (radiance per unit irradiance, averaged over ``spp`` paths). Training views draw
-``lights_per_view`` random light directions and give each pixel one of them at random (the
-paper's per-pixel random lights, quantised to a few directions per view so that one light
-update serves many pixels); validation views use one fixed light per view.
+the transport T (radiance per unit irradiance, mean of ``spp`` path samples, each clamped at
+``clamp``). Training views give every pixel its own random light direction (the paper's choice;
+one Mitsuba call per view through the per-path emitter of ``scene.IsolatedAsset``), or, with
+``lights_per_view = k > 0`` or when that emitter is unavailable (finite-angle light, scalar
+variant), k random directions per view shared by random pixel groups. Validation views use one
+fixed light per view, at ``val_res`` and ``val_spp``.
 
 A dataset lives in a folder: ``meta.json`` (settings; a resume must match them) and one
 ``train/NNNN.npz`` / ``val/NNNN.npz`` per view, each written atomically, so an interrupted

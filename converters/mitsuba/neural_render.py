@@ -1,6 +1,6 @@
 """Neural assets rendered inside Mitsuba 3: a second, independent implementation of spec/renderer.md.
 
-    python -m converters.mitsuba.neural_render SCENE.usda OUT.exr SPP [--width W --height H --seed S --max-depth D]
+    python -m converters.mitsuba.neural_render SCENE.usda OUT.exr SPP [--width W --height H --seed S --max-depth D --neupress-sampling M]
 
 The USD scene becomes a Mitsuba scene (``mi.load_dict``): meshes and every neural-asset
 instance are ``mi.Mesh`` shapes in world space; point, delta distant, sphere and rectangle lights
@@ -23,9 +23,10 @@ import numpy as np
 from nasset_sdk.errors import NassetError, SceneError, error
 
 from . import is_jit, load_mitsuba
-from .neural.integrator import Kind, PathTracer
+from .neural import eightdna, neupress  # noqa: F401  (eightdna: importing it registers the 8dna shader)
+from .neural.integrator import ASSET_SHADERS, Kind, PathTracer
 from .neural.lights import build_lights
-from .neural.rna import RnaAsset
+from .neural.rna import KNOWN_KINDS, asset_kind
 from .neural.usdscene import read_scene
 
 INTEGRATOR = "nasset_path"
@@ -53,6 +54,16 @@ def _planar(pts, fn) -> bool:
         return True
     n0 = fn[0]
     return bool(np.all(np.abs(fn @ n0) > 1 - 1e-6) and np.all(np.abs((pts - pts[0]) @ n0) < 1e-6 * (1 + np.abs(pts).max())))
+
+
+def open_asset(path: str, threads: int = 0):
+    """Asset object of ``path`` through the shader registered for its kind (integrator.ASSET_SHADERS)."""
+    kind = asset_kind(path)
+    cls = ASSET_SHADERS.get(kind)
+    if cls is None:
+        what = "a kind this renderer does not implement" if kind in KNOWN_KINDS else "not a registered kind"
+        raise SceneError("SCENE_UNSUPPORTED", f"nasset:kind {kind!r} is {what} (supported: {', '.join(sorted(ASSET_SHADERS))})", file=path)
+    return cls.open(path, threads)
 
 
 def register(mi) -> None:
@@ -101,10 +112,10 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         cn = mesh.corner_normals if mesh.corner_normals is not None else np.repeat(fn[:, None], 3, 1)
         objects.append({"id": name, "kind": Kind.MESH, "material": mesh.material, "face_normals": fn, "corner_normals": cn,
                         "planar": _planar(mesh.points, fn), "prim": mesh.prim, "bbox": (mesh.points.min(0), mesh.points.max(0))})
-    cache: dict[str, RnaAsset] = {}
+    cache: dict = {}
     for j, inst in enumerate(desc.assets):
         try:
-            asset = cache.get(inst.file) or RnaAsset(inst.file, threads=threads)
+            asset = cache.get(inst.file) or open_asset(inst.file, threads)
         except SceneError as exc:
             raise SceneError(exc.code, f"{exc.message} (asset {exc.file})", file=scene_path, prim=inst.prim) from None
         cache[inst.file] = asset
@@ -167,7 +178,9 @@ def main(argv=None) -> int:
     ap.add_argument("--max-depth", type=int, default=5)
     ap.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto)")
     ap.add_argument("--batch", type=int, default=1 << 17, help="paths per wavefront")
+    ap.add_argument("--neupress-sampling", default="auto", choices=list(neupress.MODES), help="neupress techniques (spec/renderer.md#neupress)")
     args = ap.parse_args(argv)
+    neupress.SAMPLING[0] = args.neupress_sampling
     t0 = time.time()
     try:
         img = render(args.scene, args.spp, width=args.width, height=args.height, seed=args.seed, max_depth=args.max_depth,

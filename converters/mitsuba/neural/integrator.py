@@ -7,6 +7,13 @@ through it: the rna branch choice). Lights are sampled one by one (NEE on every 
 lights through Mitsuba's emitters; plain surfaces use the spec's UsdPreviewSurface BSDF in numpy
 (Mitsuba has no BSDF with that exact lobe); neural-asset vertices evaluate the asset's
 transport in batches through onnxruntime.
+
+Kinds plug in through :data:`ASSET_SHADERS` (kind -> shader class; ``register_shader(kind, cls)``):
+the CLI opens each asset file with ``cls.open(path, threads)`` (an object with ``kind``, ``fiber``,
+object-space ``points``, ``faces`` and ``face_normals``) and the tracer builds one ``cls(self)`` per
+kind present, calling its ``vertex(...)`` for every wavefront of hits on that kind's instances (see
+:class:`RnaShader` for the contract, :mod:`.neupress` for a second kind). A kind module registers
+itself at import; ``converters/mitsuba/neural_render.py`` imports it.
 """
 
 from __future__ import annotations
@@ -42,6 +49,13 @@ def power(a, b):
     return np.where(a2 + b2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
 
 
+def mis_weight(prev_pdf, light_pdf):
+    """Weight of emission reached by a continuation of pdf ``prev_pdf``: > 0 power heuristic against
+    the light's pdf; 0 weight 1 (camera rays, unsampled techniques); < 0 weight 0 (the light's
+    emission is counted by its light samples alone)."""
+    return np.where(prev_pdf > 0, power(np.maximum(prev_pdf, 0.0), light_pdf), np.where(prev_pdf < 0, 0.0, 1.0))
+
+
 class Tracer:
     """Batch ray casting with optional per-ray ignored shape (and pass-through recording)."""
 
@@ -68,10 +82,12 @@ class Tracer:
         ng = si.n.numpy().T.astype(np.float64)
         return valid & (obj >= 0), obj, t, si.prim_index.numpy().astype(np.int64), si.uv.numpy().T.astype(np.float64), ng
 
-    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64):
+    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None):
         """-> dict(hit, obj, t, prim, b1, b2, passed).
 
         ``ignore[i]``: object index ray i passes through, recording it in ``passed`` (-1: none);
+        ``exempt[i]``: triangle range [lo, hi) of the ignored object passed through without record
+        (a fiber hit's own segment and its neighbours: spec/renderer.md#fibers);
         ``transparent``: bool per object index, objects every ray passes through without record
         (light shapes for shadow rays).
         """
@@ -80,6 +96,7 @@ class Tracer:
         d = np.asarray(d, np.float64)
         maxt = np.full(m, np.inf) if maxt is None else np.array(maxt, np.float64)
         ignore = np.full(m, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
+        exempt = None if exempt is None else np.asarray(exempt, np.int64)
         res = {"hit": np.zeros(m, bool), "obj": np.full(m, -1, np.int64), "t": np.full(m, np.inf), "prim": np.zeros(m, np.int64),
                "b1": np.zeros(m), "b2": np.zeros(m), "passed": np.zeros(m, bool)}
         travelled = np.zeros(m)
@@ -90,6 +107,8 @@ class Tracer:
             hit, obj, t, prim, uv, ng = self._cast(o[todo], d[todo], maxt[todo] - travelled[todo])
             through = hit & (obj == ignore[todo])
             skip = through
+            if exempt is not None:
+                through = through & ~((prim >= exempt[todo, 0]) & (prim < exempt[todo, 1]))
             if transparent is not None:
                 skip = skip | (hit & transparent[np.maximum(obj, 0)])
             fin = ~skip
@@ -151,6 +170,8 @@ class PathTracer:
         self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
         self.n_reflective = len(reflective)
         self.log = log
+        kinds = {o_["asset"].kind for o_ in objects if o_["kind"] == Kind.ASSET}
+        self.shaders = {kd: ASSET_SHADERS[kd](self) for kd in sorted(kinds)}
 
     # -- geometry helpers -----------------------------------------------------------------------------
 
@@ -280,7 +301,7 @@ class PathTracer:
                 le = np.zeros((int(miss.sum()), 3))
                 for lt in self.lights:
                     if getattr(lt, "infinite", False):
-                        w = np.where(prev_pdf[miss] > 0, power(prev_pdf[miss], lt.pdf_dir(dm)), 1.0)
+                        w = mis_weight(prev_pdf[miss], lt.pdf_dir(dm))
                         le += lt.eval_dir(dm) * w[:, None]
                 np.add.at(L, idx[miss], beta[miss] * le)
             obj = tr["obj"]
@@ -315,10 +336,15 @@ class PathTracer:
             if len(pm):
                 nb, dn, pdfn, al = self._shade_mesh(L, idx[pm], p[pm], ng[pm], wo[pm], obj[pm], prim[pm], b1[pm], b2[pm], beta[pm], cont[pm], rng)
                 beta[pm], new_d[pm], new_pdf[pm], alive[pm] = nb, dn, pdfn, al
-            am = np.nonzero(is_asset)[0]
-            if len(am):
-                nb, dn, pdfn, al = self._shade_asset(L, idx[am], p[am], ng[am], wo[am], obj[am], prim[am], b1[am], b2[am], beta[am], cont[am], rng)
+            new_o = np.full_like(p, np.nan)  # NaN rows: the default offset origin below
+            akind = np.array([o_["asset"].kind if o_["kind"] == Kind.ASSET else "" for o_ in self.objects] + [""])[obj]
+            for kd in np.unique(akind[is_asset]):
+                am = np.nonzero(is_asset & (akind == kd))[0]
+                nb, dn, pdfn, al, no = self.shaders[kd].vertex(L, idx[am], p[am], ng[am], wo[am], obj[am], prim[am], b1[am], b2[am], beta[am],
+                                                               cont[am], depth[am], rng)
                 beta[am], new_d[am], new_pdf[am], alive[am] = nb, dn, pdfn, al
+                if no is not None:
+                    new_o[am] = no
             # Russian roulette
             rr = alive & (depth >= self.rr_depth)
             if np.any(rr):
@@ -330,8 +356,9 @@ class PathTracer:
             k = np.nonzero(alive)[0]
             side = np.sign(_dot(new_d[k], ng[k]))[:, None]
             origin = p[k] + ng[k] * side * _eps(p[k])[:, None]
+            origin = np.where(np.isnan(new_o[k]), origin, new_o[k])
             idx, beta, depth = idx[k], beta[k], depth[k]
-            prev_p = p[k]
+            prev_p = np.where(np.isnan(new_o[k]), p[k], new_o[k])  # light pdfs of MIS are taken from the ray origin
             o, d, prev_pdf = origin, new_d[k], new_pdf[k]
             ignore = np.where(is_asset[k], obj[k], -1)
         return L
@@ -346,14 +373,14 @@ class PathTracer:
             le = np.asarray(lt.emitter.eval(si).numpy(), np.float64)
             le = le.T if le.ndim == 2 else np.broadcast_to(le, (len(sel), 3))
             w = np.ones(len(sel))
-            cam = prev_pdf[sel] <= 0
+            cam = prev_pdf[sel] == 0
             if np.any(~cam):
                 it = mi.Interaction3f()
                 it.p = _p3(mi, prev_p[sel])
                 it.t = mi.Float(np.zeros(len(sel), np.float32))
                 ds = mi.DirectionSample3f(self.scene, si, it)
                 pl = np.broadcast_to(np.asarray(lt.emitter.pdf_direction(it, ds).numpy(), np.float64), (len(sel),))
-                w = np.where(cam, 1.0, power(prev_pdf[sel], pl))
+                w = np.where(cam, 1.0, mis_weight(prev_pdf[sel], pl))
             np.add.at(L, idx[sel], beta[sel] * le * w[:, None])
 
     def _nee(self, p, ng, n_for_light, rng, ignore):
@@ -400,10 +427,37 @@ class PathTracer:
         nb = np.where(ok[:, None], beta * fc / np.maximum(pdf, 1e-300)[:, None], 0.0)
         return nb, wi, pdf, ok
 
-    def _shade_asset(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
+
+class RnaShader:
+    """The rna vertex (spec/renderer.md#neural-assets; fibers: #fibers)."""
+
+    def __init__(self, pt: PathTracer) -> None:
+        self.pt = pt
+
+    @staticmethod
+    def open(path: str, threads: int = 0):
+        from .rna import RnaAsset
+
+        return RnaAsset(path, threads=threads)
+
+    def vertex(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, depth, rng):
+        """Shade asset vertices; -> (new beta, new direction, its pdf (see :func:`mis_weight`), alive, new origins or None)."""
+        fib = np.array([o_["kind"] == Kind.ASSET and o_["asset"].fiber for o_ in self.pt.objects] + [False])[obj]
+        if np.all(fib):
+            return self._fiber_vertex(L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, depth, rng)
+        if np.any(fib):  # both variants: shade each part, then merge
+            out = [np.zeros_like(beta), np.zeros_like(wo), np.zeros(len(p)), np.zeros(len(p), bool), np.full_like(p, np.nan)]
+            for part, fn in ((fib, self._fiber_vertex), (~fib, self.vertex)):
+                r = np.nonzero(part)[0]
+                res = fn(L, idx[r], p[r], ng[r], wo[r], obj[r], prim[r], b1[r], b2[r], beta[r], cont[r], depth[r], rng)
+                for j in range(4):
+                    out[j][r] = res[j]
+                if res[4] is not None:
+                    out[4][r] = res[4]
+            return tuple(out)
         m = len(p)
         entries = []  # (wi, weight [m, 3], valid mask, shadowed branch)
-        for wi, lw, pl, delta, vis, passed in self._nee(p, ng, ng, rng, obj):
+        for wi, lw, pl, delta, vis, passed in self.pt._nee(p, ng, ng, rng, obj):
             w = np.ones(m) if delta else np.where(cont, power(pl, INV_FOUR_PI), 1.0)
             entries.append((wi, lw * w[:, None], vis, passed))
         # continuation: uniform sphere
@@ -417,14 +471,14 @@ class PathTracer:
         if len(cidx):
             side = np.sign(_dot(wc[cidx], ng[cidx]))[:, None]
             origin = p[cidx] + ng[cidx] * side * _eps(p[cidx])[:, None]
-            tr = self.tracer.trace(origin, wc[cidx], None, obj[cidx])
+            tr = self.pt.tracer.trace(origin, wc[cidx], None, obj[cidx])
             cpassed[cidx] = tr["passed"]
         entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = self._transport(entries, p, wo, obj, prim, b1, b2)
         for (_, lw, vis, _), t in zip(entries[:-1], T[:-1], strict=True):
             np.add.at(L, idx, beta * t * lw * vis[:, None])
         nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
-        return nb, wc, np.full(m, INV_FOUR_PI), cont
+        return nb, wc, np.full(m, INV_FOUR_PI), cont, None
 
     def _transport(self, entries, p, wo, obj, prim, b1, b2):
         """Evaluate T for every entry where its mask is set, grouped by asset file."""
@@ -432,7 +486,7 @@ class PathTracer:
         out = [np.zeros((m, 3)) for _ in entries]
         for k in np.unique(obj):
             sel = np.nonzero(obj == k)[0]
-            inst = self.objects[k]
+            inst = self.pt.objects[k]
             asset, minv = inst["asset"], inst["m3_inv"]
             x = (p[sel] - inst["to_world"][3, :3]) @ minv
             n = asset.shading_normal(prim[sel], b1[sel], b2[sel])
@@ -454,3 +508,73 @@ class PathTracer:
                 out[j][ms] = t[s:s + len(ms)]
                 s += len(ms)
         return out
+
+    def _fiber_vertex(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, _depth, rng):
+        """Fiber hits: tangent and h inputs, rays from x itself, own segment and neighbours exempt."""
+        pt = self.pt
+        m = len(p)
+        t_o, h, wo_o, exempt = np.zeros((m, 3)), np.zeros(m), np.zeros((m, 3)), np.zeros((m, 2), np.int64)
+        for k in np.unique(obj):
+            sel = obj == k
+            inst = pt.objects[k]
+            minv = inst["m3_inv"]
+            x = (p[sel] - inst["to_world"][3, :3]) @ minv
+            wo_o[sel] = _norm(wo[sel] @ minv)
+            t_o[sel], h[sel], exempt[sel] = inst["asset"].fiber_frame(prim[sel], x, wo_o[sel])
+        rows = []  # (wi, weight [m, 3], valid, shadowed branch)
+        for lt in pt.lights:
+            u = rng.random((m, 2))
+            wi, dist, le, pdf = lt.sample(pt.mi, p, ng, u)
+            wi = _norm(wi)
+            valid = (pdf > 0) & np.any(le > 0, axis=1)
+            maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
+            vis, passed = np.zeros(m, bool), np.zeros(m, bool)
+            v = np.nonzero(valid)[0]
+            if len(v):
+                tr = pt.tracer.trace(p[v], wi[v], maxt[v], obj[v], transparent=pt.light_shapes, exempt=exempt[v])
+                vis[v], passed[v] = ~tr["hit"], tr["passed"]
+            w = np.ones(m) if lt.delta else np.where(cont, power(pdf, INV_FOUR_PI), 1.0)
+            rows.append((wi, le / np.maximum(pdf, 1e-300)[:, None] * (valid * w)[:, None], vis & valid, passed))
+        u = rng.random((m, 2))
+        z = 1.0 - 2.0 * u[:, 0]
+        sz = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+        ph = 2.0 * np.pi * u[:, 1]
+        wc = np.stack([sz * np.cos(ph), sz * np.sin(ph), z], 1)
+        cpassed = np.zeros(m, bool)
+        cidx = np.nonzero(cont)[0]
+        if len(cidx):
+            cpassed[cidx] = pt.tracer.trace(p[cidx], wc[cidx], None, obj[cidx], exempt=exempt[cidx])["passed"]
+        rows.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
+        T = [np.zeros((m, 3)) for _ in rows]
+        for k in np.unique(obj):
+            sel = np.nonzero(obj == k)[0]
+            inst = pt.objects[k]
+            x = (p[sel] - inst["to_world"][3, :3]) @ inst["m3_inv"]
+            cat = [sel[r[2][sel]] for r in rows]
+            allm = np.concatenate(cat)
+            if not len(allm):
+                continue
+            loc = np.concatenate([np.searchsorted(sel, ms) for ms in cat])
+            wis = np.concatenate([_norm(r[0][ms] @ inst["m3_inv"]) for r, ms in zip(rows, cat, strict=True)])
+            sh = np.concatenate([r[3][ms] for r, ms in zip(rows, cat, strict=True)])
+            val = inst["asset"].transport(x[loc], t_o[allm], wo_o[allm], wis, sh, h=h[allm])
+            s0 = 0
+            for j, ms in enumerate(cat):
+                T[j][ms] = val[s0:s0 + len(ms)]
+                s0 += len(ms)
+        for (_, lw, vis, _), t in zip(rows[:-1], T[:-1], strict=True):
+            np.add.at(L, idx, beta * t * lw * vis[:, None])
+        nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
+        return nb, wc, np.full(m, INV_FOUR_PI), cont, p.copy()
+
+
+#: kind -> shader class of the asset vertex. A shader class has ``open(path, threads)`` (static: the
+#: asset object, with ``kind``, object-space ``points``/``faces`` and ``face_normals``) and, built with
+#: the PathTracer, ``vertex(L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, depth, rng)`` returning
+#: (new beta, new direction, its pdf for :func:`mis_weight`, alive, new origins or None). Kind modules
+#: register with :func:`register_shader`.
+ASSET_SHADERS: dict[str, type] = {"rna": RnaShader}
+
+
+def register_shader(kind: str, cls: type) -> None:
+    ASSET_SHADERS[kind] = cls

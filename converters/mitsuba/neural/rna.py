@@ -1,7 +1,10 @@
 """Reading and evaluating an ``rna`` asset from the spec text alone.
 
-spec/format.md (root prim, components, tensors, networks), spec/kinds/rna.md (decoder row),
-spec/kinds/encodings.md (to_unit_box, safe_normalize, grid_sample_2d, triplane).
+spec/format.md (root prim, components, tensors, networks), spec/kinds/rna.md (decoder row, both
+variants), spec/kinds/encodings.md (to_unit_box, safe_normalize, grid_sample_2d, triplane),
+spec/renderer.md#fibers (the prism tessellation of ``fiber`` curves and the h input).
+
+:func:`open_root` and :func:`read_network` are the shared asset-file readers of every kind module.
 """
 
 from __future__ import annotations
@@ -14,8 +17,9 @@ import numpy as np
 
 from nasset_sdk.errors import SceneError
 
-SUPPORTED_KINDS = ("rna",)
 KNOWN_KINDS = ("rna", "neupress", "8dna")
+#: sides of the prism around each fiber segment (spec/renderer.md#fibers)
+TUBE_SIDES = 8
 
 
 def safe_normalize(v: np.ndarray) -> np.ndarray:
@@ -52,8 +56,147 @@ def triplane(planes: np.ndarray, xn: np.ndarray) -> np.ndarray:
     return grid_sample_2d(planes[0], x, y) + grid_sample_2d(planes[1], y, z) + grid_sample_2d(planes[2], z, x)
 
 
+def _fail(path, code, msg, prim=None):
+    return SceneError(code, msg, file=str(path), prim=prim)
+
+
+def open_root(path: str):
+    """(stage, root prim, attr(name) reader) of an asset file, checking existence, the NeuralAsset
+    default prim and the spec major version (spec/format.md)."""
+    from pxr import Usd
+
+    if not os.path.exists(path):
+        raise _fail(path, "SCENE_INVALID", "referenced asset file does not exist")
+    try:
+        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadNone)
+    except Exception as exc:  # pxr raises Tf errors
+        raise _fail(path, "SCENE_INVALID", f"asset does not open as a USD layer: {str(exc).splitlines()[0][:200]}") from None
+    root = stage.GetDefaultPrim()
+    if not root or root.GetTypeName() != "NeuralAsset":
+        raise _fail(path, "SCENE_INVALID", "asset has no NeuralAsset default prim")
+    rp = str(root.GetPath())
+
+    def attr(name):
+        a = root.GetAttribute(name)
+        if not a or not a.HasAuthoredValue():
+            raise _fail(path, "SCENE_INVALID", f"required attribute {name} is not authored", rp)
+        return a.Get()
+
+    version = str(attr("nasset:specVersion"))
+    if not re.fullmatch(r"[0-9]+\.[0-9]+", version) or int(version.split(".")[0]) != 0:
+        raise _fail(path, "SCENE_UNSUPPORTED", f"nasset:specVersion {version!r}: this renderer reads major 0", rp)
+    return stage, root, attr
+
+
+def asset_kind(path: str) -> str:
+    """``nasset:kind`` of an asset file (after the checks of :func:`open_root`)."""
+    stage, _, attr = open_root(path)  # keep the stage alive while reading
+    kind = str(attr("nasset:kind"))
+    del stage
+    return kind
+
+
+def read_tensor(path, comp, name, shape_check=None) -> np.ndarray:
+    """Tensor ``name`` of a loaded component prim as float64 array of its ``shape``."""
+    t = comp.GetChild(name)
+    if not t:
+        raise _fail(path, "SCENE_INVALID", f"component {comp.GetName()} lacks tensor {name}", str(comp.GetPath()))
+    shape = [int(v) for v in (t.GetAttribute("shape").Get() or [])]
+    vals = t.GetAttribute("values").Get()
+    if vals is None or len(vals) != int(np.prod(shape)) or (shape_check is not None and not shape_check(shape)):
+        raise _fail(path, "SCENE_INVALID", f"tensor {name} has shape {shape} / {0 if vals is None else len(vals)} values", str(t.GetPath()))
+    return np.asarray(vals, np.float32).reshape(shape).astype(np.float64)
+
+
+def read_network(path, comp, name, threads: int, in_width: int, out_width: int):
+    """(onnxruntime session, input name, output name) of network ``name``: sha256-checked bytes, io widths."""
+    dec = comp.GetChild(name)
+    if not dec:
+        raise _fail(path, "SCENE_INVALID", f"component {comp.GetName()} lacks network {name}", str(comp.GetPath()))
+    model = dec.GetAttribute("onnx:model").Get()
+    digest = dec.GetAttribute("onnx:sha256").Get()
+    if model is None or len(model) == 0:
+        raise _fail(path, "SCENE_INVALID", f"{name} has no onnx:model bytes", str(dec.GetPath()))
+    data = bytes(np.asarray(model, np.uint8).tobytes())
+    if not digest or hashlib.sha256(data).hexdigest() != str(digest).lower():
+        raise _fail(path, "SCENE_INVALID", f"{name} onnx:sha256 does not match the model bytes", str(dec.GetPath()))
+    import onnxruntime as ort
+
+    so = ort.SessionOptions()
+    so.intra_op_num_threads = int(threads)
+    so.log_severity_level = 3
+    try:
+        session = ort.InferenceSession(data, sess_options=so, providers=["CPUExecutionProvider"])
+    except Exception as exc:
+        raise _fail(path, "SCENE_INVALID", f"{name} does not load in onnxruntime: {str(exc)[:200]}", str(dec.GetPath())) from None
+    ins, outs = session.get_inputs(), session.get_outputs()
+    if len(ins) != 1 or len(outs) != 1 or ins[0].shape[-1] != in_width or outs[0].shape[-1] != out_width:
+        raise _fail(path, "SCENE_INVALID", f"{name} io does not match the kind contract (x: {in_width}, y: {out_width})", str(dec.GetPath()))
+    return session, ins[0].name, outs[0].name
+
+
+def read_triangles(path, geom, rp):
+    """(points, faces, vertex normals or None) of an asset's triangle Mesh ``Geometry``."""
+    from pxr import UsdGeom
+
+    if not geom or geom.GetTypeName() != "Mesh":
+        raise _fail(path, "SCENE_INVALID", "asset has no Mesh geometry", rp + "/Geometry")
+    mesh = UsdGeom.Mesh(geom)
+    pts = np.asarray(mesh.GetPointsAttr().Get(), np.float64).reshape(-1, 3)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), np.int64)
+    idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), np.int64)
+    if len(pts) == 0 or len(counts) == 0 or np.any(counts != 3) or len(idx) != 3 * len(counts) or idx.min() < 0 or idx.max() >= len(pts):
+        raise _fail(path, "SCENE_INVALID", "asset geometry is not a valid triangle mesh", str(geom.GetPath()))
+    nrm = mesh.GetNormalsAttr().Get()
+    normals = np.asarray(nrm, np.float64).reshape(-1, 3) if nrm is not None and len(nrm) == len(pts) else None
+    return pts, idx.reshape(-1, 3), normals
+
+
+def fiber_tubes(points, counts, widths, sides: int = TUBE_SIDES):
+    """spec/renderer.md#fibers: closed ``sides``-gon prisms around every non-degenerate segment.
+
+    -> (vertices [V,3], faces [F,3], tri_seg [F], p0, p1 [S,3], r0, r1 [S], exempt [S,2]); ``exempt``
+    is the triangle range [lo, hi) of a segment and its neighbours in the same curve."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    r = 0.5 * np.asarray(widths, np.float64)
+    seg_a, seg_first = [], [0]
+    start = 0
+    for c in counts:
+        seg_a.extend(range(start, start + int(c) - 1))
+        start += int(c)
+        seg_first.append(len(seg_a))
+    a = np.asarray(seg_a, np.int64)
+    p0, p1, r0, r1 = p[a], p[a + 1], r[a], r[a + 1]
+    live = np.linalg.norm(p1 - p0, axis=1) > 1e-9 * (1.0 + float(np.abs(p).max(initial=0.0)))
+    t = safe_normalize(p1 - p0)
+    helper = np.where(np.abs(t[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    b1 = safe_normalize(np.cross(t, helper))
+    b2 = np.cross(t, b1)
+    th = 2.0 * np.pi * np.arange(sides) / sides
+    ring = np.cos(th)[None, :, None] * b1[:, None] + np.sin(th)[None, :, None] * b2[:, None]
+    verts = np.concatenate([p0[:, None] + r0[:, None, None] * ring, p1[:, None] + r1[:, None, None] * ring], 1)
+    k = np.arange(sides)
+    kn = (k + 1) % sides
+    fan = np.arange(1, sides - 1)
+    local = np.concatenate([np.stack([k, kn, sides + kn], 1), np.stack([k, sides + kn, sides + k], 1),
+                            np.stack([np.zeros_like(fan), fan + 1, fan], 1), np.stack([np.full_like(fan, sides), sides + fan, sides + fan + 1], 1)])
+    ids = np.nonzero(live)[0]
+    faces = (ids[:, None, None] * 2 * sides + local[None]).reshape(-1, 3)
+    tri_seg = np.repeat(ids, len(local))
+    first = np.concatenate([[0], np.cumsum(np.where(live, len(local), 0))])
+    seg_first = np.asarray(seg_first, np.int64)
+    curve = np.repeat(np.arange(len(counts)), np.asarray(counts, np.int64) - 1)
+    seg = np.arange(len(a))
+    lo = np.maximum(seg - 1, seg_first[curve]) if len(a) else seg
+    hi = np.minimum(seg + 1, seg_first[curve + 1] - 1) if len(a) else seg
+    exempt = np.stack([first[lo], first[hi + 1]], 1).astype(np.int64) if len(a) else np.zeros((0, 2), np.int64)
+    return verts.reshape(-1, 3), faces.astype(np.int64), tri_seg.astype(np.int64), p0, p1, r0, r1, exempt
+
+
 class RnaAsset:
-    """One rna asset file: object-space triangles, encoding box, triplane and decoder session."""
+    """One rna asset file: object-space triangles (the mesh, or the fiber prisms), encoding box, triplane and decoder session."""
+
+    kind = "rna"
 
     def __init__(self, path: str, *, threads: int = 0) -> None:
         self.path = str(path)
@@ -63,94 +206,81 @@ class RnaAsset:
         return SceneError(code, msg, file=self.path, prim=prim)
 
     def _read(self, threads: int) -> None:
-        from pxr import Usd, UsdGeom
 
-        if not os.path.exists(self.path):
-            raise self._fail("SCENE_INVALID", "referenced asset file does not exist")
-        try:
-            stage = Usd.Stage.Open(self.path, Usd.Stage.LoadNone)
-        except Exception as exc:  # pxr raises Tf errors
-            raise self._fail("SCENE_INVALID", f"asset does not open as a USD layer: {str(exc).splitlines()[0][:200]}") from None
-        root = stage.GetDefaultPrim()
-        if not root or root.GetTypeName() != "NeuralAsset":
-            raise self._fail("SCENE_INVALID", "asset has no NeuralAsset default prim")
+        stage, root, attr = open_root(self.path)
         rp = str(root.GetPath())
-
-        def attr(name):
-            a = root.GetAttribute(name)
-            if not a or not a.HasAuthoredValue():
-                raise self._fail("SCENE_INVALID", f"required attribute {name} is not authored", rp)
-            return a.Get()
-
-        version = str(attr("nasset:specVersion"))
-        if not re.fullmatch(r"[0-9]+\.[0-9]+", version) or int(version.split(".")[0]) != 0:
-            raise self._fail("SCENE_UNSUPPORTED", f"nasset:specVersion {version!r}: this renderer reads major 0", rp)
         kind = str(attr("nasset:kind"))
-        if kind not in SUPPORTED_KINDS:
-            what = "a kind this renderer does not implement" if kind in KNOWN_KINDS else "not a registered kind"
-            raise self._fail("SCENE_UNSUPPORTED", f"nasset:kind {kind!r} is {what} (supported: {', '.join(SUPPORTED_KINDS)})", rp)
-        variant = str(attr("nasset:variant"))
-        if variant != "surface":
-            raise self._fail("SCENE_UNSUPPORTED", f"rna variant {variant!r} is not supported by this renderer (surface only)", rp)
+        if kind != "rna":
+            raise self._fail("SCENE_INVALID", f"nasset:kind {kind!r} is not rna", rp)
+        self.variant = str(attr("nasset:variant"))
+        if self.variant not in ("surface", "fiber"):
+            raise self._fail("SCENE_UNSUPPORTED", f"rna variant {self.variant!r} is not supported by this renderer (surface, fiber)", rp)
+        self.fiber = self.variant == "fiber"
         self.lo = np.asarray(attr("nasset:domainMin"), np.float32).astype(np.float64)
         self.hi = np.asarray(attr("nasset:domainMax"), np.float32).astype(np.float64)
         if not (np.all(np.isfinite(self.lo)) and np.all(np.isfinite(self.hi)) and np.all(self.hi > self.lo)):
             raise self._fail("SCENE_INVALID", "invalid encoding box", rp)
 
         geom = root.GetChild("Geometry")
-        if not geom or geom.GetTypeName() != "Mesh":
-            raise self._fail("SCENE_INVALID", "asset has no Mesh geometry", rp + "/Geometry")
-        mesh = UsdGeom.Mesh(geom)
-        pts = np.asarray(mesh.GetPointsAttr().Get(), np.float64).reshape(-1, 3)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), np.int64)
-        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), np.int64)
-        if len(pts) == 0 or len(counts) == 0 or np.any(counts != 3) or len(idx) != 3 * len(counts) or idx.min() < 0 or idx.max() >= len(pts):
-            raise self._fail("SCENE_INVALID", "asset geometry is not a valid triangle mesh", str(geom.GetPath()))
-        self.points = pts
-        self.faces = idx.reshape(-1, 3)
-        nrm = mesh.GetNormalsAttr().Get()
         self.normals = None
-        if nrm is not None and len(nrm) == len(pts):
-            self.normals = np.asarray(nrm, np.float64).reshape(-1, 3)
-        p0, p1, p2 = (pts[self.faces[:, k]] for k in range(3))
+        if self.fiber:
+            self._read_curves(geom, rp)
+        else:
+            self.points, self.faces, self.normals = read_triangles(self.path, geom, rp)
+        p0, p1, p2 = (self.points[self.faces[:, k]] for k in range(3))
         self.face_normals = safe_normalize(np.cross(p1 - p0, p2 - p0))
 
         core = stage.GetPrimAtPath(rp + "/Components/core")
         if not core:
             raise self._fail("SCENE_INVALID", "required component core is missing", rp + "/Components/core")
         stage.Load(core.GetPath())
-        tri = core.GetChild("triplane")
-        dec = core.GetChild("decoder")
-        if not tri or not dec:
-            raise self._fail("SCENE_INVALID", "component core lacks triplane or decoder", str(core.GetPath()))
-        shape = [int(s) for s in tri.GetAttribute("shape").Get()]
-        vals = tri.GetAttribute("values").Get()
-        if len(shape) != 4 or shape[0] != 3 or shape[1] != shape[2] or vals is None or len(vals) != int(np.prod(shape)):
-            raise self._fail("SCENE_INVALID", f"triplane shape {shape} does not match [3, R, R, C]", str(tri.GetPath()))
-        self.planes = np.asarray(vals, np.float32).reshape(shape).astype(np.float64)
-        self.channels = shape[3]
+        self.planes = read_tensor(self.path, core, "triplane", lambda sh: len(sh) == 4 and sh[0] == 3 and sh[1] == sh[2])
+        self.channels = self.planes.shape[3]
+        width = self.channels + (13 if self.fiber else 12)
+        self.session, self.input_name, self.output_name = read_network(self.path, core, "decoder", threads, width, 6)
 
-        model = dec.GetAttribute("onnx:model").Get()
-        digest = dec.GetAttribute("onnx:sha256").Get()
-        if model is None or len(model) == 0:
-            raise self._fail("SCENE_INVALID", "decoder has no onnx:model bytes", str(dec.GetPath()))
-        data = bytes(np.asarray(model, np.uint8).tobytes())
-        if not digest or hashlib.sha256(data).hexdigest() != str(digest).lower():
-            raise self._fail("SCENE_INVALID", "decoder onnx:sha256 does not match the model bytes", str(dec.GetPath()))
-        import onnxruntime as ort
+    def _read_curves(self, geom, rp) -> None:
+        """Linear BasisCurves -> prisms (spec/renderer.md#fibers)."""
+        from pxr import UsdGeom
 
-        so = ort.SessionOptions()
-        so.intra_op_num_threads = int(threads)
-        so.log_severity_level = 3
-        try:
-            self.session = ort.InferenceSession(data, sess_options=so, providers=["CPUExecutionProvider"])
-        except Exception as exc:
-            raise self._fail("SCENE_INVALID", f"decoder does not load in onnxruntime: {str(exc)[:200]}", str(dec.GetPath())) from None
-        ins, outs = self.session.get_inputs(), self.session.get_outputs()
-        if len(ins) != 1 or len(outs) != 1 or ins[0].shape[-1] != self.channels + 12 or outs[0].shape[-1] != 6:
-            msg = f"decoder io does not match the rna contract (x: C+12 = {self.channels + 12}, y: 6)"
-            raise self._fail("SCENE_INVALID", msg, str(dec.GetPath()))
-        self.input_name, self.output_name = ins[0].name, outs[0].name
+        if not geom or geom.GetTypeName() != "BasisCurves":
+            raise self._fail("SCENE_INVALID", "fiber asset has no BasisCurves geometry", rp + "/Geometry")
+        cv = UsdGeom.BasisCurves(geom)
+        gp = str(geom.GetPath())
+        if (cv.GetTypeAttr().Get() or "cubic") != "linear":
+            raise self._fail("SCENE_UNSUPPORTED", "fiber curves must be linear BasisCurves", gp)
+        pts = np.asarray(cv.GetPointsAttr().Get() or [], np.float64).reshape(-1, 3)
+        counts = np.asarray(cv.GetCurveVertexCountsAttr().Get() or [], np.int64)
+        widths = cv.GetWidthsAttr().Get()
+        if widths is None:
+            pv = UsdGeom.PrimvarsAPI(geom).GetPrimvar("widths")
+            widths = pv.ComputeFlattened() if pv and pv.HasAuthoredValue() else None
+        w = np.asarray(widths if widths is not None else [], np.float64).ravel()  # format.md#geometry: one width > 0 per point
+        if (len(pts) == 0 or len(counts) == 0 or np.any(counts < 2) or counts.sum() != len(pts) or len(w) != len(pts)
+                or not np.all(np.isfinite(pts)) or not np.all(np.isfinite(w)) or np.any(w <= 0)):
+            raise self._fail("SCENE_INVALID", "fiber curves are invalid (counts, points or per-vertex widths)", gp)
+        (self.points, self.faces, self.tri_seg, self.seg_p0, self.seg_p1, self.seg_r0, self.seg_r1,
+         self.seg_exempt) = fiber_tubes(pts, counts, w)
+        if len(self.faces) == 0:
+            raise self._fail("SCENE_INVALID", "fiber curves have no non-degenerate segment", gp)
+
+    # --- fibers -------------------------------------------------------------------------------------
+
+    def fiber_frame(self, prim: np.ndarray, x: np.ndarray, wo: np.ndarray):
+        """(tangent t [n,3], h [n], exempt triangle ranges [n,2]) at object-space hits on triangles ``prim``."""
+        seg = self.tri_seg[prim]
+        p0, p1 = self.seg_p0[seg], self.seg_p1[seg]
+        axis = p1 - p0
+        ln = np.linalg.norm(axis, axis=1)
+        t = axis / np.maximum(ln, 1e-300)[:, None]
+        rel = x - p0
+        s = np.clip(np.einsum("ij,ij->i", rel, t) / np.maximum(ln, 1e-300), 0.0, 1.0)
+        r = self.seg_r0[seg] + s * (self.seg_r1[seg] - self.seg_r0[seg])
+        c = np.cross(t, wo)
+        cl = np.linalg.norm(c, axis=1)
+        ok = (cl > 1e-9) & (r > 0)
+        h = np.where(ok, np.einsum("ij,ij->i", rel, c) / np.where(ok, cl * r, 1.0), 0.0)
+        return t, np.clip(h, -1.0, 1.0), self.seg_exempt[seg]
 
     # --- evaluation -------------------------------------------------------------------------------
 
@@ -166,14 +296,21 @@ class RnaAsset:
     def to_unit_box(self, x: np.ndarray) -> np.ndarray:
         return (2.0 * (x - self.lo) / np.maximum(self.hi - self.lo, 1e-30) - 1.0).astype(np.float32).astype(np.float64)
 
-    def transport(self, x: np.ndarray, n: np.ndarray, wo: np.ndarray, wi: np.ndarray, shadowed: np.ndarray, chunk: int = 65536) -> np.ndarray:
-        """RGB transport T (1/sr) for object-space inputs; ``shadowed`` picks y[3:6] over y[0:3]."""
+    def transport(self, x: np.ndarray, n: np.ndarray, wo: np.ndarray, wi: np.ndarray, shadowed: np.ndarray, h: np.ndarray | None = None,
+                  chunk: int = 65536) -> np.ndarray:
+        """RGB transport T (1/sr) for object-space inputs; ``shadowed`` picks y[3:6] over y[0:3].
+
+        Fiber variant: ``n`` is the tangent t and ``h`` the offset input (spec/kinds/rna.md)."""
         m = len(x)
         out = np.zeros((m, 3), np.float64)
         for s in range(0, m, chunk):
             e = min(m, s + chunk)
             xn = self.to_unit_box(x[s:e])
-            row = np.concatenate([triplane(self.planes, xn), xn, safe_normalize(n[s:e]), safe_normalize(wo[s:e]), safe_normalize(wi[s:e])], 1)
+            cols = [triplane(self.planes, xn), xn, safe_normalize(n[s:e])]
+            if self.fiber:
+                hh = np.zeros(e - s) if h is None else np.asarray(h[s:e], np.float64)
+                cols.append(np.clip(np.where(np.isnan(hh), 0.0, hh), -1.0, 1.0)[:, None])
+            row = np.concatenate([*cols, safe_normalize(wo[s:e]), safe_normalize(wi[s:e])], 1)
             y = self.session.run([self.output_name], {self.input_name: row.astype(np.float32)})[0].astype(np.float64)
             y = np.maximum(np.where(np.isfinite(y), y, 0.0), 0.0)
             out[s:e] = np.where(shadowed[s:e, None], y[:, 3:6], y[:, 0:3])
