@@ -49,6 +49,61 @@ def test_primitive_shape_is_unsupported(tmp_path):
     assert _code(e) == "CONVERT_SHAPE_UNSUPPORTED"
 
 
+def _ply_scene(tmp_path, points, faces):
+    import numpy as np
+
+    from converters.mitsuba.example_scene import write_ply
+
+    write_ply(tmp_path / "m.ply", np.asarray(points, np.float32), np.asarray(faces, np.int64))
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="ply" id="m"><string name="filename" value="m.ply"/></shape></scene>')
+    return xml
+
+
+def test_shape_without_area_is_unsupported(tmp_path):
+    xml = _ply_scene(tmp_path, [[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], [[0, 1, 2]])  # collinear triangle
+    with pytest.raises(SceneError) as e:
+        bake(xml, ["m"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SHAPE_UNSUPPORTED" and "no surface area" in str(e.value)
+    assert not (tmp_path / "o.usdc").exists()
+
+
+def test_closed_surface_check():
+    import numpy as np
+
+    from converters.mitsuba.scene import is_closed
+
+    tetra = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]])
+    assert is_closed(tetra) and not is_closed(tetra[:3])
+
+
+def test_open_shape_warning_from_geometry(tmp_path):
+    from converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
+
+    mi = cm.load_mitsuba()
+    xml = _ply_scene(tmp_path, [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    shapes = pick_shapes(load_scene(mi, xml), ["m"])
+    with pytest.warns(RuntimeWarning, match="closed surface"):
+        mesh_geometry(mi, shapes)
+
+
+def test_dataset_write_failure_is_typed(tmp_path, monkeypatch):
+    import numpy as np
+
+    obj = ds.DatasetDir.__new__(ds.DatasetDir)
+    obj.root = tmp_path
+    (tmp_path / "train").mkdir()
+
+    def full(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full)
+    with pytest.raises(SceneError) as e:
+        obj.save("train", 0, {"x": np.zeros(3)})
+    assert _code(e) == "CONVERT_DATASET" and "No space left" in str(e.value)
+    assert list((tmp_path / "train").iterdir()) == []
+
+
 def test_scene_mitsuba_cannot_load(tmp_path):
     xml = tmp_path / "broken.xml"
     xml.write_text('<scene version="3.0.0"><shape type="no_such_plugin" id="x"/></scene>')

@@ -314,8 +314,13 @@ class DatasetDir:
     def save(self, split: str, i: int, data: dict) -> None:
         p = self.path(split, i)
         tmp = p.with_name(p.stem + ".part.npz")
-        np.savez(tmp, **data)
-        os.replace(tmp, p)
+        try:
+            np.savez(tmp, **data)
+            os.replace(tmp, p)
+        except OSError as exc:  # disk full, read-only folder: earlier views stay for --resume
+            tmp.unlink(missing_ok=True)
+            raise error("CONVERT_DATASET", f"cannot write view {i} ({exc.strerror or exc}); the views already written "
+                        "are kept, --resume continues after freeing space", file=str(p)) from None
 
     def load(self, split: str, i: int) -> dict:
         p = self.path(split, i)

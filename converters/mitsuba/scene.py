@@ -21,6 +21,7 @@ light) at the cost of one light.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -85,7 +86,21 @@ def mesh_geometry(mi, shapes) -> MeshGeometry:
         np.concatenate(normals).astype(np.float32) if have_normals else None,
     )
     geo.validate()
+    tri = geo.points[geo.faces]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    if not np.isfinite(areas).all() or float(areas.sum()) <= 0.0:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes {[s.id() for s in shapes]} have no surface area")
+    if not is_closed(geo.faces):
+        warnings.warn(f"asset shapes {[s.id() for s in shapes]} do not form a closed surface: the asset is seen from "
+                      "both sides, and light can pass through its holes", RuntimeWarning, stacklevel=2)
     return geo
+
+
+def is_closed(faces: np.ndarray) -> bool:
+    """True when every undirected edge of the triangles [F,3] is shared by exactly two faces (a watertight mesh)."""
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    return bool((counts == 2).all())
 
 
 def bsdf_names(shapes) -> list[str]:
