@@ -331,6 +331,45 @@ class PathIntegrator:
             out[m] = o + M[3, :3] if point else o
         return out
 
+    def rna_sample_rows(self, x, inst, indirect, rng, shadow_origin):
+        """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
+        blocks it; ``self_hit`` says whether the asset itself does) and one uniform-sphere continuation where
+        ``indirect``. ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s.
+
+        Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their wi).
+        """
+        n = len(x)
+        rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
+        for k in self.nee:
+            light = self.scene.lights[k]
+            wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
+            ok = (pdf > 0) & (_max3(li) > 0)
+            s = np.nonzero(ok)[0]
+            if not len(s):
+                continue
+            full = len(s) == n
+            wi_s, dist_s, inst_s = (wi, dist, inst) if full else (wi[s], dist[s], inst[s])
+            origin, exempt = shadow_origin(s, wi_s)
+            tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * self.eps, np.inf)
+            h = self._trace(origin, wi_s, tmax, inst_s) if exempt is None else self._trace(origin, wi_s, tmax, inst_s, exempt)
+            free = h.prim < 0  # no other object in the way
+            s = s[free]
+            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
+            rows_ray.append(s)
+            rows_wi.append(wi[s])
+            rows_w.append(li[s] * (w / pdf[s])[:, None])
+            rows_self.append(h.self_hit[free])
+            rows_kind.append(np.zeros(len(s), bool))
+        cont = np.nonzero(indirect)[0]
+        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
+        rows_ray.append(cont)
+        rows_wi.append(wi_c)
+        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+        rows_self.append(np.zeros(len(cont), bool))
+        rows_kind.append(np.ones(len(cont), bool))
+        return (np.concatenate(rows_ray), np.concatenate(rows_wi), np.concatenate(rows_w), np.concatenate(rows_self),
+                np.concatenate(rows_kind), cont, wi_c)
+
     def _neural_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
         if len(r) != len(x):  # (all rows in a scene of neural assets only: no gathers)
             x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
@@ -355,42 +394,11 @@ class PathIntegrator:
                 cn = self.asset_corner_n[a][local[m]]
                 n_obj[m] = normalize(cn[:, 0] * w0[m][:, None] + cn[:, 1] * bu[m][:, None] + cn[:, 2] * bv[m][:, None])
         indirect = self.indirect[inst]
-        rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []  # kind 0 = light sample
-        for k in self.nee:
-            light = self.scene.lights[k]
-            wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
-            ok = (pdf > 0) & (_max3(li) > 0)
-            s = np.nonzero(ok)[0]
-            if not len(s):
-                continue
-            if len(s) == n:
-                ng_s, wi_s, x_s, scale_s, dist_s, inst_s = ng, wi, x, scale, dist, inst
-            else:
-                ng_s, wi_s, x_s, scale_s, dist_s, inst_s = ng[s], wi[s], x[s], scale[s], dist[s], inst[s]
-            side = np.sign(dot(ng_s, wi_s))[:, None]
-            origin = x_s + ng_s * side * scale_s
-            tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * self.eps, np.inf)
-            h = self._trace(origin, wi_s, tmax, inst_s)
-            free = h.prim < 0  # no other object in the way
-            s = s[free]
-            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
-            rows_ray.append(s)
-            rows_wi.append(wi[s])
-            rows_w.append(li[s] * (w / pdf[s])[:, None])
-            rows_self.append(h.self_hit[free])
-            rows_kind.append(np.zeros(len(s), bool))
-        cont = np.nonzero(indirect)[0]
-        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
-        rows_ray.append(cont)
-        rows_wi.append(wi_c)
-        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
-        rows_self.append(np.zeros(len(cont), bool))
-        rows_kind.append(np.ones(len(cont), bool))
-        ray = np.concatenate(rows_ray)
-        wi_all = np.concatenate(rows_wi)
-        w_all = np.concatenate(rows_w)
-        self_all = np.concatenate(rows_self)
-        is_cont = np.concatenate(rows_kind)
+        def shadow_origin(s, wi_s):  # offset along the geometric normal, to the side wi leaves
+            ng_s, x_s, scale_s = (ng, x, scale) if len(s) == n else (ng[s], x[s], scale[s])
+            return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
+
+        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = self.rna_sample_rows(x, inst, indirect, rng, shadow_origin)
         tu = np.zeros((len(ray), 3))
         ts = np.zeros((len(ray), 3))
         if len(ray):

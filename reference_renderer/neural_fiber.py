@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import INV_4PI, normalize, power_heuristic, square_to_uniform_sphere
+from .sampling import INV_4PI, normalize
 
 #: sides of the prism built around each curve segment
 TUBE_SIDES = 8
@@ -138,42 +138,14 @@ class FiberShading:
     def vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
         integ = self.integ
         x, d, beta, prim, inst, ridx = x[r], d[r], beta[r], prim[r], inst[r], idx[r]
-        n = len(x)
         x_obj = integ._to_object(x, inst, point=True)
         wo_obj = normalize(integ._to_object(-d, inst))
         asset_id = integ.inst_asset[inst]
         t_obj, h, _, exempt = self.hit_frame(x_obj, wo_obj, prim, asset_id)
         indirect = integ.indirect[inst]
-        rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
-        for k in integ.nee:
-            light = integ.scene.lights[k]
-            wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
-            ok = (pdf > 0) & (np.maximum(np.maximum(li[:, 0], li[:, 1]), li[:, 2]) > 0)
-            s = np.nonzero(ok)[0]
-            if not len(s):
-                continue
-            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            hh = integ._trace(x[s], wi[s], tmax, inst[s], exempt[s])
-            free = hh.prim < 0
-            s = s[free]
-            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
-            rows_ray.append(s)
-            rows_wi.append(wi[s])
-            rows_w.append(li[s] * (w / pdf[s])[:, None])
-            rows_self.append(hh.self_hit[free])
-            rows_kind.append(np.zeros(len(s), bool))
-        cont = np.nonzero(indirect)[0]
-        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
-        rows_ray.append(cont)
-        rows_wi.append(wi_c)
-        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
-        rows_self.append(np.zeros(len(cont), bool))
-        rows_kind.append(np.ones(len(cont), bool))
-        ray = np.concatenate(rows_ray)
-        wi_all = np.concatenate(rows_wi)
-        w_all = np.concatenate(rows_w)
-        self_all = np.concatenate(rows_self)
-        is_cont = np.concatenate(rows_kind)
+        # rays leave a fiber hit from the hit point itself; its own and neighbouring segments are exempt
+        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = integ.rna_sample_rows(
+            x, inst, indirect, rng, lambda s, wi_s: (x[s], exempt[s]))
         tu = np.zeros((len(ray), 3))
         ts = np.zeros((len(ray), 3))
         if len(ray):
