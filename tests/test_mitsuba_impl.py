@@ -177,3 +177,13 @@ def test_missing_camera_is_a_scene_error(nr, tmp_path):
     with pytest.raises(SceneError) as info:
         nr.render(scene, 1, width=8, height=8)
     assert info.value.code == "SCENE_INVALID"
+
+
+@pytest.mark.slow
+def test_whole_conformance_suite_passes(tmp_path):
+    """The second implementation passes every conformance case (about 80-150 s on 2 cores: run with -m slow)."""
+
+    from nasset_sdk.cli import main
+
+    template = f"{sys.executable} -m converters.mitsuba.neural_render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
+    assert main(["conformance", "--renderer", template, "--workdir", str(tmp_path), "--json"]) == 0
