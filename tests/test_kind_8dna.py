@@ -2,35 +2,16 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from memory_asset import MemoryAsset
 from stats import SIGNIFICANCE, chi2_test, midpoints
 
 from nasset_sdk.asset import Asset
 from nasset_sdk.errors import UsageError
 from nasset_sdk.kinds import get_kind
 from nasset_sdk.kinds.boundary import ggx_pdf, ggx_sample
-from nasset_sdk.networks import info_from_model, make_session
-
-
-class MemoryAsset:
-    """The builder's data behind the reader interface the evaluators use (float32-rounded domain, as stored)."""
-
-    def __init__(self, builder):
-        self.b = builder
-        self.variant = builder.variant
-        self.domain = tuple(np.asarray(d, np.float32).astype(np.float64) for d in builder.domain)
-
-    def tensor(self, comp, name):
-        return self.b.components[comp][""].tensors[name][0]
-
-    def session(self, comp, name, **kw):
-        return make_session(self.b.components[comp][""].networks[name])
-
-    def components(self):
-        return {c: SimpleNamespace(loaded=True) for c in self.b.components}
+from nasset_sdk.networks import info_from_model
 
 
 @pytest.fixture(scope="module")

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from memory_asset import MemoryAsset
 from stats import SIGNIFICANCE, chi2_test, midpoints
 
 from nasset_sdk.asset import Asset
@@ -13,23 +12,6 @@ from nasset_sdk.errors import UsageError
 from nasset_sdk.kinds import get_kind
 from nasset_sdk.kinds.encodings import from_local, local_frame, to_local
 from nasset_sdk.kinds.neupress import SIGMA_MAX, SIGMA_MIN, gaussian_lobe_pdf, gaussian_lobe_sample
-from nasset_sdk.networks import make_session
-
-
-class MemoryAsset:
-    def __init__(self, builder):
-        self.b = builder
-        self.variant = builder.variant
-        self.domain = tuple(np.asarray(d, np.float32).astype(np.float64) for d in builder.domain)
-
-    def tensor(self, comp, name):
-        return self.b.components[comp][""].tensors[name][0]
-
-    def session(self, comp, name, **kw):
-        return make_session(self.b.components[comp][""].networks[name])
-
-    def components(self):
-        return {c: SimpleNamespace(loaded=True) for c in self.b.components}
 
 
 @pytest.fixture(scope="module")
