@@ -53,6 +53,13 @@ def _example_args(p):
     p.add_argument("--quality-variants", action="store_true", help="store small and hq cores as a quality variant set")
 
 
+@verb("merge-quality", "combine assets baked at several presets into one asset with a quality variant set",
+      "nasset_sdk.quality:run")
+def _merge_quality_args(p):
+    p.add_argument("levels", nargs="+", metavar="LEVEL=ASSET", help="quality name and asset file; the first is the default")
+    p.add_argument("-o", "--output", required=True, help="output .usdc")
+
+
 @verb("render", "render a USD scene with the reference path tracer", "reference_renderer.cli:run")
 def _render_args(p):
     p.add_argument("scene", help="scene .usda/.usdc, or an asset file (rendered in a default studio scene)")
