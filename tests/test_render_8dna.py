@@ -3,12 +3,12 @@
 dome lights; the direct lobe alone matches a quadrature of the closed-form GGX reflection."""
 
 import numpy as np
+from render_stats import assert_renders_agree, render_finite
 
 from nasset_sdk.examples import example_builder
 from nasset_sdk.geometry import MeshGeometry
 from nasset_sdk.kinds.boundary import ggx_reflection
 from nasset_sdk.networks import mlp_onnx
-from reference_renderer import RenderSettings, load_scene, render
 from reference_renderer.film import write_exr
 from reference_renderer.testscenes import SceneBuilder
 
@@ -17,23 +17,11 @@ Z_PIXEL, PIXEL_FRACTION = 3.5, 0.08  # glossy (alpha 0.1) light sampling has hea
 
 
 def _render(path, **kw):
-    kw.setdefault("width", 16)
-    kw.setdefault("height", 16)
-    res = render(load_scene(path), RenderSettings(**kw))
-    assert np.isfinite(res.image).all() and np.isfinite(res.variance).all()
-    return res
+    return render_finite(path, **kw)
 
 
 def _agree(a, b):
-    ia, ib, va, vb = a.image, b.image, a.variance, b.variance
-    k = ia.shape[0] * ia.shape[1]
-    se = np.sqrt(va.sum((0, 1)) + vb.sum((0, 1))) / k
-    z = np.abs(ia.mean((0, 1)) - ib.mean((0, 1))) / np.maximum(se, 1e-12)
-    assert (z < Z_MEAN).all(), (ia.mean((0, 1)), ib.mean((0, 1)), z)
-    den = va + vb
-    m = den > 0
-    zp = np.abs(ia - ib)[m] / np.sqrt(den[m])
-    assert (zp > Z_PIXEL).mean() < PIXEL_FRACTION, (zp > Z_PIXEL).mean()
+    return assert_renders_agree(a, b, z_mean=Z_MEAN, z_pixel=Z_PIXEL, pixel_fraction=PIXEL_FRACTION)
 
 
 def _dome_tex(path, rows=32, cols=64):

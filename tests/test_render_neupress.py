@@ -3,6 +3,7 @@ PRT agrees with path mode under a dome of SH degree <= 2, and the plan loads onl
 
 import numpy as np
 import pytest
+from render_stats import assert_renders_agree, render_finite
 
 from nasset_sdk.asset import Asset
 from nasset_sdk.errors import UsageError
@@ -38,25 +39,11 @@ def _scene(tmp_path, asset, *, lights=True, dome_tex=None, name="s.usda"):
 
 
 def _render(path, **kw):
-    kw.setdefault("width", 16)
-    kw.setdefault("height", 16)
-    res = render(load_scene(path), RenderSettings(**kw))
-    assert np.isfinite(res.image).all() and np.isfinite(res.variance).all()
-    return res
+    return render_finite(path, **kw)
 
 
 def _agree(a, b):
-    """Means within Z_MEAN standard errors per channel; few pixels beyond Z_PIXEL."""
-    ia, ib, va, vb = a.image, b.image, a.variance, b.variance
-    k = ia.shape[0] * ia.shape[1]
-    se = np.sqrt(va.sum((0, 1)) + vb.sum((0, 1))) / k
-    z = np.abs(ia.mean((0, 1)) - ib.mean((0, 1))) / np.maximum(se, 1e-12)
-    assert (z < Z_MEAN).all(), (ia.mean((0, 1)), ib.mean((0, 1)), z)
-    den = va + vb
-    m = den > 0
-    zp = np.abs(ia - ib)[m] / np.sqrt(den[m])
-    assert (zp > Z_PIXEL).mean() < PIXEL_FRACTION, (zp > Z_PIXEL).mean()
-    return z
+    return assert_renders_agree(a, b, z_mean=Z_MEAN, z_pixel=Z_PIXEL, pixel_fraction=PIXEL_FRACTION)
 
 
 def test_sampling_strategies_converge_to_one_image(tmp_path):
