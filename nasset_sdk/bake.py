@@ -281,9 +281,36 @@ def _print_summary(s: dict, stream) -> None:
     print("\n".join(lines), file=stream)
 
 
+def baker_for(kind: str, scene, example: str | None):
+    """The bake function for a kind and a source: Mitsuba ``.xml`` (rna, neupress, 8dna) or Blender ``.blend`` (rna).
+
+    Every baker takes ``(scene, asset_ids, output, **options)`` and returns the summary dict."""
+    blender = (scene is not None and str(scene).lower().endswith(".blend")) or (example or "").startswith("blender")
+    if blender:
+        if kind != "rna":
+            raise UsageError(f"Blender scenes bake to kind rna only, not {kind!r}")
+        from converters.blender.bake import bake as blender_bake
+
+        return blender_bake
+    if kind == "neupress":
+        from converters.mitsuba.neupress_bake import bake as neupress_bake
+
+        return neupress_bake
+    if kind == "8dna":
+        from converters.mitsuba.eightdna_bake import bake as eightdna_bake
+
+        return eightdna_bake
+    if kind != "rna":
+        raise UsageError(f"unknown kind {kind!r}")
+    if example not in (None, "default"):
+        raise UsageError(f"unknown rna example {example!r} (default, blender-surface, blender-hair)")
+    return lambda scene, ids, out, example=None, **kw: bake(scene, ids, out, example=example is not None, **kw)
+
+
 def run(args) -> int:
     """CLI entry: see ``nasset bake --help``."""
-    summary = bake(
+    fn = baker_for(args.kind, args.scene, args.example)
+    summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
         seed=args.seed, device=args.device, quiet=args.quiet,

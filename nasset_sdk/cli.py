@@ -100,15 +100,18 @@ def _conformance_args(p):
     p.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
-@verb("bake", "bake an object of a Mitsuba 3 scene into a neural asset (render data, train, export)", "nasset_sdk.bake:run")
+@verb("bake", "bake an object of a Mitsuba 3 (.xml) or Blender (.blend) scene into a neural asset (render data, train, export)",
+      "nasset_sdk.bake:run")
 def _bake_args(p):
-    p.add_argument("scene", nargs="?", help="Mitsuba 3 scene .xml (omit with --example)")
-    p.add_argument("--asset", action="append", default=None, metavar="SHAPE_ID",
-                   help="id of a scene shape that belongs to the asset (repeat for several)")
-    p.add_argument("--kind", default="rna", choices=["rna"], help="asset kind to bake (rna)")
+    p.add_argument("scene", nargs="?", help="Mitsuba 3 scene .xml or Blender scene .blend (omit with --example)")
+    p.add_argument("--asset", action="append", default=None, metavar="ID",
+                   help="id of a scene shape (Mitsuba) or object name (Blender) that belongs to the asset (repeat for several)")
+    p.add_argument("--kind", default="rna", choices=["rna", "neupress", "8dna"], help="asset kind to bake (default rna)")
     p.add_argument("--size", default="small", choices=["tiny", "small", "hq"], help="preset (default small)")
     p.add_argument("-o", "--output", required=True, help="output asset .usdc")
-    p.add_argument("--example", action="store_true", help="bake the built-in example scene (no files needed)")
+    p.add_argument("--example", nargs="?", const="default", default=None, metavar="NAME",
+                   help="bake a built-in example scene (no files needed); NAME picks one where a kind has several "
+                        "(rna: default, blender-surface, blender-hair)")
     p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
     p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")
     p.add_argument("--res", type=int, default=None, help="image resolution per view")
