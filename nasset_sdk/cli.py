@@ -143,34 +143,54 @@ def _view_args(p):
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops before the sRGB curve (default 0)")
 
 
-@verb("convert-scene", "convert a Mitsuba 3 scene (camera, lights, plain shapes) to USD, baked assets in place of their shapes",
-      "converters.mitsuba.usd_export:run")
+@verb("convert-scene", "convert a Mitsuba 3 (.xml) or Blender (.blend) scene (camera, lights, plain shapes) to USD, "
+      "baked assets in place of their shapes", "nasset_sdk.cli:run_convert_scene")
 def _convert_scene_args(p):
-    p.add_argument("scene", nargs="?", help="Mitsuba 3 scene .xml (omit with --example)")
+    p.add_argument("scene", nargs="?", help="Mitsuba 3 scene .xml or Blender scene .blend (omit with --example)")
     p.add_argument("-o", "--output", required=True, help="output .usda / .usdc")
-    p.add_argument("--example", action="store_true",
-                   help="convert the built-in example scene (written to OUTPUT's folder as example_scene/scene.xml)")
+    p.add_argument("--example", nargs="?", const="default", default=None, metavar="NAME",
+                   help="convert a built-in example scene, written next to OUTPUT (default: the Mitsuba example; "
+                        "blender-surface, blender-hair: the Blender examples)")
     p.add_argument("--replace", action="append", default=None, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
                    help="reference this baked asset in place of these shapes (repeatable; path stored relative to the output)")
     p.add_argument("--no-usd-checks", action="store_true", help="skip OpenUSD's validators on the written stage")
     p.add_argument("--json", action="store_true", help="print the report (prims, warnings, USD checks) as JSON")
 
 
-@verb("bench", "benchmarks: error-vs-time (Mitsuba path tracing vs the reference renderer with a baked asset)",
-      "converters.mitsuba.bench:run")
+#: ``nasset bench NAME``: each benchmark module defines ``add_args(parser)`` and ``run(args) -> int``.
+BENCHES = {
+    "error-vs-time": ("rna: Mitsuba path tracing vs the reference renderer with a baked asset, error against time",
+                      "converters.mitsuba.bench"),
+    "neupress": ("neupress: the paper's Table 1 (path tracing, dome / lobe / MIS sampling, SH PRT) at equal spp and time",
+                 "converters.mitsuba.neupress_bench"),
+    "8dna": ("8dna: near-field light, 8D flow vs 6D far-field baseline vs path tracing (the paper's Tables 1-2)",
+             "converters.mitsuba.eightdna_bench"),
+    "blender": ("rna from Blender: Cycles path tracing vs the reference renderer, surface and hair examples, h ablation",
+                "converters.blender.bench"),
+}
+
+
+@verb("bench", "benchmarks against path-traced ground truth (nasset bench NAME --help)", "nasset_sdk.cli:run_bench")
 def _bench_args(p):
-    p.add_argument("which", choices=["error-vs-time"], help="benchmark to run")
-    p.add_argument("-o", "--output", default="bench_error_vs_time", help="output folder (table JSON, plot PNG, scene)")
-    p.add_argument("--asset", default=None, help="baked asset of the example scene's shell+jelly (default: bake one)")
-    p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset when baking (default tiny)")
-    p.add_argument("--res", type=int, default=None, help="image width = height (default 128; 64 with --quick)")
-    p.add_argument("--gt-spp", type=int, default=None, help="ground-truth spp (default 4096; 1024 with --quick)")
-    p.add_argument("--mi-spp", default=None, help="Mitsuba spp list, e.g. 1,2,4,8,16,32,64,128")
-    p.add_argument("--nr-spp", default=None, help="reference-renderer spp list, e.g. 1,2,4,8,16,32")
-    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
-    p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
+    sub = p.add_subparsers(dest="which", metavar="NAME", required=True)
+    for name, (help_text, module) in BENCHES.items():
+        _load(f"{module}:add_args")(sub.add_parser(name, help=help_text, description=help_text))
+
+
+def run_convert_scene(args) -> int:
+    """``nasset convert-scene``: Blender for ``.blend`` files and ``blender-*`` examples, Mitsuba otherwise."""
+    blender = (args.scene or "").lower().endswith(".blend") or (args.example or "").startswith("blender")
+    if not blender and args.example not in (None, "default"):
+        from .errors import UsageError
+
+        raise UsageError(f"unknown example {args.example!r} (default, blender-surface, blender-hair)")
+    module = "converters.blender.usd_export" if blender else "converters.mitsuba.usd_export"
+    return _load(f"{module}:run")(args)
+
+
+def run_bench(args) -> int:
+    """Run the benchmark module picked by ``args.which``."""
+    return _load(f"{BENCHES[args.which][1]}:run")(args)
 
 
 @verb("schema-path", "print the folder to add to PXR_PLUGINPATH_NAME for hosts that start USD first", "nasset_sdk.plugin:run_schema_path")

@@ -358,10 +358,23 @@ def summary_text(r: dict) -> str:
     return "\n".join(lines)
 
 
+def add_args(p) -> None:
+    """Options of ``nasset bench error-vs-time``."""
+    p.add_argument("-o", "--output", default="bench_error_vs_time", help="output folder (table JSON, plot PNG, scene)")
+    p.add_argument("--asset", default=None, help="baked asset of the example scene's shell+jelly (default: bake one)")
+    p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset when baking (default tiny)")
+    p.add_argument("--res", type=int, default=None, help="image width = height (default 128; 64 with --quick)")
+    p.add_argument("--gt-spp", type=int, default=None, help="ground-truth spp (default 4096; 1024 with --quick)")
+    p.add_argument("--mi-spp", default=None, help="Mitsuba spp list, e.g. 1,2,4,8,16,32,64,128")
+    p.add_argument("--nr-spp", default=None, help="reference-renderer spp list, e.g. 1,2,4,8,16,32")
+    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
+    p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
+
+
 def run(args) -> int:
     """CLI entry: ``nasset bench error-vs-time ...``."""
-    if args.which != "error-vs-time":
-        raise UsageError(f"unknown benchmark {args.which!r} (error-vs-time)")
     q = QUICK if args.quick else {}
     res = args.res or q.get("res", 128)
     report = bench_error_vs_time(

@@ -759,7 +759,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
 def run(args) -> int:
     """CLI entry: ``nasset convert-scene SCENE.xml -o SCENE.usda [--replace ID=ASSET ...] [--json]``."""
     scene = args.scene
-    if args.example == bool(scene):
+    if bool(args.example) == bool(scene):
         raise UsageError("give a scene file or --example (not both)")
     if args.example:
         from .example_scene import write_example_scene

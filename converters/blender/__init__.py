@@ -1,0 +1,1 @@
+"""Blender (bpy) converter: Cycles ground truth, rna surface and fiber bakes, scene conversion."""
