@@ -79,9 +79,11 @@ LOBE_SHARPNESS = (4.0, 16.0, 64.0)
 
 
 def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: int = 0, plane_channels: int = 0,
-                encoding: str = "lobes"):
-    """The rna surface model for a preset of ``nasset_sdk.kinds.rna.SIZES`` (MLP fixed by the preset;
-    the triplane's R and C may be overridden)."""
+                encoding: str = "lobes", fiber: bool = False):
+    """The rna model for a preset of ``nasset_sdk.kinds.rna.SIZES`` (MLP fixed by the preset;
+    the triplane's R and C may be overridden). ``fiber``: the fiber variant, whose frame input is
+    [t (3), h (1)] (``n`` passed as [N, 4]), with the azimuth cosine as an extra feature and lobes
+    exp(-k (t.h)^2) (spec/bake-blender.md#training)."""
     torch = _torch()
     nn = torch.nn
     F = torch.nn.functional
@@ -99,16 +101,20 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
             self.register_buffer("k", torch.tensor(LOBE_SHARPNESS))
 
         def forward(self, x):
-            c = self.c
-            n, wo, wi = x[:, c + 3:c + 6], x[:, c + 6:c + 9], x[:, c + 9:c + 12]
+            c, f = self.c, int(fiber)
+            n, wo, wi = x[:, c + 3:c + 6], x[:, c + 6 + f:c + 9 + f], x[:, c + 9 + f:c + 12 + f]
             h = wo + wi
             h = h / torch.sqrt((h * h).sum(1, keepdim=True) + 1e-8)
             nh = (n * h).sum(1, keepdim=True)
-            dots = torch.cat([(n * wi).sum(1, keepdim=True), (n * wo).sum(1, keepdim=True), nh,
-                              (wo * wi).sum(1, keepdim=True)], dim=1)
-            return torch.cat([x, dots, torch.exp(self.k * (nh - 1.0))], dim=1)
+            nwi, nwo = (n * wi).sum(1, keepdim=True), (n * wo).sum(1, keepdim=True)
+            dots = [nwi, nwo, nh, (wo * wi).sum(1, keepdim=True)]
+            if fiber:  # cos of the azimuth between wo and wi around the tangent (Marschner's phi)
+                a, b = wo - nwo * n, wi - nwi * n
+                dots.append((a * b).sum(1, keepdim=True) / torch.sqrt((a * a).sum(1, keepdim=True) * (b * b).sum(1, keepdim=True) + 1e-8))
+            lobes = torch.exp(-self.k * nh * nh) if fiber else torch.exp(self.k * (nh - 1.0))
+            return torch.cat([x, *dots, lobes], dim=1)
 
-    extra = {"raw": 0, "lobes": 4 + len(LOBE_SHARPNESS)}
+    extra = {"raw": 0, "lobes": 4 + int(fiber) + len(LOBE_SHARPNESS)}
     if encoding not in extra:
         raise ValueError(f"unknown encoding {encoding!r}")
 
@@ -118,8 +124,8 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
             g = torch.Generator().manual_seed(seed)
             # torch layout [plane, C, v, u]; exported as [plane, v, u, C]
             self.planes = nn.Parameter(torch.randn(3, ch, res, res, generator=g) * init_std)
-            self.in_width = ch + 12
-            widths = [ch + 12 + extra[encoding]] + [hidden] * layers + [6]
+            self.in_width = ch + 12 + int(fiber)
+            widths = [self.in_width + extra[encoding]] + [hidden] * layers + [6]
             mods = [DirectionFeatures(ch)] if encoding == "lobes" else []
             for i, (a, b) in enumerate(zip(widths[:-1], widths[1:], strict=False)):
                 mods.append(nn.Linear(a, b))
@@ -141,8 +147,8 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
             return f[:, :, 0, :].sum(0).transpose(0, 1)  # [N, C]
 
         def network_input(self, xn, n, wo, wi, sigma: float = 0.0):
-            return torch.cat([self.features(xn, sigma), xn, F.normalize(n, dim=1), F.normalize(wo, dim=1),
-                              F.normalize(wi, dim=1)], dim=1)
+            frame = [F.normalize(n[:, :3], dim=1), n[:, 3:4].clamp(-1.0, 1.0)] if fiber else [F.normalize(n, dim=1)]
+            return torch.cat([self.features(xn, sigma), xn, *frame, F.normalize(wo, dim=1), F.normalize(wi, dim=1)], dim=1)
 
         def forward(self, xn, n, wo, wi, sigma: float = 0.0):
             return self.decoder(self.network_input(xn, n, wo, wi, sigma))
@@ -242,8 +248,9 @@ def _tensors(torch, data: dict, lo, hi, device):
 
     xn = to_unit_box(data["x"], lo, hi)
     t = lambda a: torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)  # noqa: E731
+    frame = np.concatenate([data["n"], np.asarray(data["h"]).reshape(-1, 1)], 1) if "h" in data else data["n"]  # fiber: [t, h]
     return {
-        "xn": t(xn), "n": t(data["n"]), "wo": t(data["wo"]), "wi": t(data["wi"]),
+        "xn": t(xn), "n": t(frame), "wo": t(data["wo"]), "wi": t(data["wi"]),
         "vis": torch.as_tensor(np.asarray(data["vis"]).astype(bool), device=device), "rgb": t(data["rgb"]),
     }
 
@@ -305,7 +312,8 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     T = _tensors(torch, train_data, lo, hi, device)
     V = _tensors(torch, val_data, lo, hi, device)
     model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed, plane_res=settings.plane_res,
-                        plane_channels=settings.plane_channels, encoding=settings.encoding).to(device)
+                        plane_channels=settings.plane_channels, encoding=settings.encoding,
+                        fiber="h" in train_data).to(device)
     opt = torch.optim.Adam([
         {"params": [model.planes], "lr": settings.plane_lr},
         {"params": model.decoder.parameters(), "lr": settings.lr},

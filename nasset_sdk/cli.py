@@ -41,7 +41,8 @@ def _inspect_args(p):
     p.add_argument("--load", default="all", help="components to load: all, required, none (default all)")
 
 
-@verb("example", "write a built-in example asset of a kind (random networks until that kind's bake lands)", "nasset_sdk.examples:run")
+@verb("example", "write an example asset of any kind with random networks (format and renderer tests; real bakes: nasset bake --example)",
+      "nasset_sdk.examples:run")
 def _example_args(p):
     from .kinds import kind_ids
 
@@ -111,7 +112,7 @@ def _bake_args(p):
     p.add_argument("-o", "--output", required=True, help="output asset .usdc")
     p.add_argument("--example", nargs="?", const="default", default=None, metavar="NAME",
                    help="bake a built-in example scene (no files needed); NAME picks one where a kind has several "
-                        "(rna: default, blender-surface, blender-hair)")
+                        "(rna: default, blender-surface, blender-hair; neupress: default; 8dna: default, heterogeneous)")
     p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
     p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")
     p.add_argument("--res", type=int, default=None, help="image resolution per view")

@@ -158,8 +158,11 @@ def render(scene_path: str, spp: int, *, width: int | None = None, height: int |
     if spp < 1:
         raise SceneError("SCENE_INVALID", f"spp must be >= 1 (got {spp})", file=scene_path)
     mi, scene, integrator, _ = build(scene_path, width, height, max_depth=max_depth, threads=threads, batch=batch)
-    img = integrator.render(scene, scene.sensors()[0], seed, spp)
-    return np.asarray(img.numpy(), np.float32)
+    try:
+        img = integrator.render(scene, scene.sensors()[0], seed, spp)
+        return np.asarray(img.numpy(), np.float32)
+    finally:
+        _CONTEXTS.pop(integrator.context, None)  # release the scene's objects and sessions with the render
 
 
 def write_exr(path: str, img: np.ndarray) -> None:

@@ -1,0 +1,261 @@
+"""``nasset bake SCENE.blend --asset OBJECT --kind rna``: a Blender object -> an rna asset (spec/bake-blender.md).
+
+Stages (as the Mitsuba bake, nasset_sdk/bake.py): open the .blend (or generate an example) and
+export the asset's geometry -> render the dataset with Cycles (converters.blender.dataset) ->
+train (converters.train_rna, the one rna trainer; fibers add the h input) -> export (ONNX +
+float16 triplane through AssetBuilder, atomic) -> check (re-open the asset and evaluate it with
+the SDK on the held-out views). Meshes give variant ``surface``, hair (Curves objects, particle
+hair) variant ``fiber``. The dataset folder (``--resume DIR``, default ``OUTPUT.bake/``) is kept,
+so an interrupted bake continues at the first missing view or the last training checkpoint.
+
+Options: ``--views/--res/--spp/--epochs/--seed/--device`` as for Mitsuba; ``--light-angle`` is
+the sun's angular radius in degrees (default 0.5; the paper clamps instead, and so do we:
+direct 20, indirect 10). ``h_input=False`` (Python only; the benchmark's ablation) trains a fiber
+asset with h fixed to 0.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import UsageError, error
+
+#: data presets (converters.blender.dataset.DataSettings fields); one sun per view (Cycles has no
+#: per-pixel light), so presets use many small views to see many light directions
+DATA_PRESETS = {
+    "tiny": dict(views=24, val_views=2, res=32, spp=16, val_res=32, val_spp=128),
+    "small": dict(views=160, val_views=6, res=64, spp=64, val_res=64, val_spp=1024),
+    "hq": dict(views=400, val_views=12, res=96, spp=128, val_res=96, val_spp=2048),
+}
+DEFAULT_LIGHT_ANGLE = 0.5
+
+
+def _tqdm(**kw):
+    from tqdm.auto import tqdm
+
+    return tqdm(**kw)
+
+
+def bake(
+    scene, asset_ids, output, *, size: str = "small", example: str | None = None, resume=None, views=None, res=None,
+    epochs=None, spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False,
+    summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, **_ignored,
+) -> dict:
+    """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    from converters.train_rna import TRAIN_PRESETS, TorchCheckpoint, TrainSettings, _torch, train
+    from nasset_sdk.asset import AssetBuilder
+    from nasset_sdk.bake import _finite
+
+    from . import CONVERTER_VERSION, load_bpy
+    from . import dataset as ds
+    from . import scene as bsc
+
+    if size not in DATA_PRESETS:
+        raise UsageError(f"--size must be one of {sorted(DATA_PRESETS)}, got {size!r}")
+    for name, val in (("views", views), ("res", res), ("epochs", epochs), ("spp", spp)):
+        if val is not None and int(val) < 1:
+            raise UsageError(f"--{name} must be >= 1, got {val}")
+    if light_angle is not None and not (0.0 <= light_angle < 45.0):
+        raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
+    output = Path(output)
+    if output.suffix not in (".usdc", ".usda", ".usd"):
+        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
+    if example is not None and scene is not None:
+        raise UsageError("give a .blend scene or --example, not both")
+    work = Path(resume) if resume else output.with_name(output.name + ".bake")
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    times: dict[str, float] = {}
+    t_all = time.perf_counter()
+
+    # -- stage 1: scene ---------------------------------------------------------------------------
+    t = time.perf_counter()
+    _torch()
+    bpy = load_bpy()
+    work.mkdir(parents=True, exist_ok=True)
+    if example is not None:
+        from .examples import EXAMPLES, build_example
+
+        if example not in EXAMPLES:
+            raise UsageError(f"unknown Blender example {example!r} ({', '.join(EXAMPLES)})")
+        build_example(example)
+        asset_ids = list(asset_ids or EXAMPLES[example])
+        source_key, scene_label = f"example:{example}", f"example {example}"
+    else:
+        if scene is None:
+            raise UsageError("give a .blend scene or --example blender-surface|blender-hair")
+        bsc.open_blend(scene)
+        source_key, scene_label = ds.file_sha256(scene), str(scene)
+    objs = bsc.pick_objects(asset_ids or [], file=scene_label)
+    variant, geo, notes = bsc.asset_geometry(objs, file=scene_label)
+    for n in notes:
+        say(f"warning: {n}")
+    if variant != "fiber" and not h_input:
+        raise UsageError("h_input=False applies to fiber assets only")
+    center, radius = bsc.bounding_sphere(geo)
+    materials = bsc.material_names(objs)
+    bsc.isolate(objs)
+    dset = replace(ds.DataSettings(), **DATA_PRESETS[size], seed=seed,
+                   light_angle_deg=float(DEFAULT_LIGHT_ANGLE if light_angle is None else light_angle))
+    if views is not None:
+        dset = replace(dset, views=int(views), val_views=max(1, int(views) // 12))
+    if res is not None:
+        dset = replace(dset, res=int(res))
+    if spp is not None:
+        dset = replace(dset, spp=int(spp))
+    if lights_per_view != 1:
+        dset = replace(dset, lights_per_view=int(lights_per_view))
+    rig = ds.CyclesRig(dset, work, threads=threads)
+    caster = ds.Caster(variant, geo)
+    times["scene_s"] = time.perf_counter() - t
+
+    # -- stage 2: dataset -------------------------------------------------------------------------
+    t = time.perf_counter()
+    store = ds.DatasetDir(work)
+    meta = ds.settings_digest(source_key, asset_ids, variant, dset)
+    store.prepare(meta)
+    jobs = [("train", i) for i in range(dset.views)] + [("val", i) for i in range(dset.val_views)]
+    todo = [j for j in jobs if not store.has(*j)]
+    if len(todo) < len(jobs):
+        say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
+    try:
+        bar = _tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="cycles views", unit="view", disable=quiet)
+        for split, i in todo:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                data = ds.render_view(rig, caster, center, radius, i, validation=split == "val")
+            store.save(split, i, data)
+            bar.update(1)
+        bar.close()
+    except KeyboardInterrupt:
+        say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")
+        raise
+    finally:
+        rig.close()
+    fiber = variant == "fiber"
+    train_data = ds.load_split(store, "train", dset.views, fiber)
+    val_data = ds.load_split(store, "val", dset.val_views, fiber)
+    if fiber and not h_input:
+        train_data["h"] = np.zeros_like(train_data["h"])
+        val_data["h"] = np.zeros_like(val_data["h"])
+    times["dataset_s"] = time.perf_counter() - t
+    if len(val_data["x"]) == 0:
+        raise error("CONVERT_TRAINING", "no validation samples: no held-out camera ray hit the asset", file=scene_label)
+    disagree = (train_data["disagree"] + val_data["disagree"]) / max(1, train_data["covered"] + val_data["covered"])
+
+    # -- stage 3: train ---------------------------------------------------------------------------
+    t = time.perf_counter()
+    builder = AssetBuilder("rna", variant=variant)
+    builder.set_geometry(geo)
+    domain = builder.domain
+    tset = TrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
+    if epochs is not None:
+        tset = replace(tset, epochs=int(epochs))
+    ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
+                           {"data": meta, "train": tset.__dict__, "h_input": h_input,
+                            "domain": [list(map(float, d)) for d in domain]})
+    bar = _tqdm(total=tset.epochs, desc="train", unit="epoch", disable=quiet)
+    last = {"psnr": float("nan")}
+
+    def progress(epoch, loss, val_psnr):
+        if math.isfinite(val_psnr):
+            last["psnr"] = val_psnr
+        bar.n = epoch + 1
+        bar.set_postfix(loss=f"{loss:.3g}", val_psnr=f"{last['psnr']:.2f}")
+        bar.refresh()
+
+    try:
+        result = train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt)
+    except KeyboardInterrupt:
+        bar.close()
+        say(f"\ninterrupted; dataset and training state kept in {work} -- rerun with --resume {work}")
+        raise
+    bar.close()
+    times["train_s"] = time.perf_counter() - t
+
+    # -- stage 4: export --------------------------------------------------------------------------
+    t = time.perf_counter()
+    core = builder.component("core", required=True, purpose="evaluation", quality=None)
+    core.add_tensor("triplane", result.planes, dtype="float16", layout="plane,v,u,channel")
+    core.add_network("decoder", result.onnx)
+    prov = {
+        "generator": "nasset bake",
+        "converter": f"converters.blender {CONVERTER_VERSION}",
+        "converterVersion": CONVERTER_VERSION,
+        "source": {"renderer": f"blender {bpy.app.version_string} cycles (CPU)", "scene": scene_label,
+                   "source_key": source_key, "objects": list(asset_ids), "example": example,
+                   "materials": materials, "notes": notes},
+        "light": {"type": "distant-sphere" if dset.light_angle_deg > 0 else "directional",
+                  "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0,
+                  "clamp_direct": dset.clamp_direct, "clamp_indirect": dset.clamp_indirect},
+        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
+                 "mask_disagreement": disagree, "h_input": h_input},
+        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
+                     "final_loss": result.history[-1]["loss"] if result.history else None},
+        "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
+        "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
+        "size": size,
+        "timings_s": {k: round(v, 3) for k, v in times.items()},
+    }
+    builder.provenance = _finite(prov)
+    path = builder.write(output)
+    times["export_s"] = time.perf_counter() - t
+
+    # -- stage 5: check ---------------------------------------------------------------------------
+    t = time.perf_counter()
+    check = check_asset(path, val_data, result)
+    times["check_s"] = time.perf_counter() - t
+    times["total_s"] = time.perf_counter() - t_all
+    summary = {
+        "asset": str(path), "asset_bytes": path.stat().st_size, "dataset_dir": str(work), "variant": variant,
+        "objects": list(asset_ids), "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
+        "views": dset.views, "val_views": dset.val_views, "res": dset.res, "spp": dset.spp,
+        "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp, "renderer": f"cycles {bpy.app.version_string}",
+        "device": result.device, "h_input": h_input, "mask_disagreement": disagree,
+        "val_psnr_db": result.val["psnr_db"], "sdk_val_psnr_db": check["psnr_db"],
+        "sdk_vs_torch_max_abs": check["max_abs_diff"], "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
+        "times_s": {k: round(v, 2) for k, v in times.items()},
+    }
+    if not quiet:
+        _print_summary(summary, summary_stream or sys.stdout)
+    return summary
+
+
+def check_asset(path, val_data: dict, result) -> dict:
+    """Re-open the asset and evaluate it with the SDK on the held-out samples (surface or fiber)."""
+    from converters.train_rna import _tensors, _torch, display_psnr, predict, select_branch
+    from nasset_sdk.asset import Asset
+
+    asset = Asset.open(path)
+    asset.load("all")
+    ev = asset.evaluator()
+    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"], val_data.get("h"))
+    y_sdk = np.concatenate([un, sh], axis=1)
+    torch = _torch()
+    dev = next(result.model.parameters()).device
+    lo, hi = asset.domain
+    y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
+    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
+    psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
+    return {"psnr_db": psnr, "max_abs_diff": diff}
+
+
+def _print_summary(s: dict, stream) -> None:
+    t = s["times_s"]
+    lines = [
+        f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB, rna {s['variant']}{'' if s['h_input'] else ', h fixed to 0'})",
+        f"  {s['renderer']} ground truth, training on {s['device']}",
+        f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
+        f"{s['val_res']}^2, {s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples "
+        f"(mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
+        f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
+        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
+    ]
+    print("\n".join(lines), file=stream)

@@ -1,0 +1,300 @@
+"""Training data for the rna kind, rendered by Blender Cycles (spec/bake-blender.md#data).
+
+Per view: a square pinhole camera on a sphere of ``distance`` bounding radii around the asset
+looks at its centre; a sun lamp of angular radius ``light_angle_deg`` (Blender ``angle`` = twice
+that) and irradiance 1 W/m^2 shines from a random direction wi (one per view: Cycles has no
+per-pixel light, spec/bake-blender.md#deviations; ``lights_per_view = k`` renders a training view
+k times at spp // k with k suns and gives random pixel groups their own). The asset is rendered alone (every other object
+hidden, black world, transparent film) by Cycles on the CPU with a 0.01-pixel filter, so each
+pixel is point-sampled at its centre, with the paper's clamps (direct 20, indirect 10).
+
+The geometric inputs come from our own ray caster on the exported geometry (Embree, the
+reference renderer's :class:`reference_renderer.accel.Accel`, with fibers tessellated exactly
+as the renderer tessellates them), along the very pixel-centre rays of the Cycles camera: hit
+point x, shading normal n (surfaces; interpolated vertex normals) or tangent t and offset h
+(fibers; :func:`reference_renderer.neural_fiber.fiber_frame`), and the light visibility V from
+the hit against the asset alone, cast the way the renderer casts it. Pixels kept: our ray hits
+and Cycles' alpha is >= ``alpha_min`` (both agree the pixel centre is on the asset); the
+fraction of disagreeing pixels is recorded (``mask_disagreement``: silhouettes of curved
+geometry vs our tessellation).
+
+Folder layout, resume and atomic writes: ``converters.mitsuba.dataset.DatasetDir`` (same FIELDS;
+fibers add ``h``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from converters.mitsuba.dataset import DatasetDir, _unit_sphere, camera_rays  # noqa: F401 - re-exported
+
+from . import CONVERTER_VERSION, quiet_stdout, to_z_up
+
+FIELDS = ("x", "n", "wo", "wi", "vis", "rgb", "pix")
+FIBER_FIELDS = FIELDS + ("h",)
+
+
+@dataclass(frozen=True)
+class DataSettings:
+    views: int = 48
+    val_views: int = 4
+    res: int = 64
+    spp: int = 64
+    val_res: int = 0  # 0: res
+    val_spp: int = 512
+    light_angle_deg: float = 0.5  # angular radius of the sun (Blender angle = 2x)
+    distance: float = 2.6  # camera distance in bounding-sphere radii
+    upper_hemisphere: bool = False
+    clamp_direct: float = 20.0  # Cycles sample_clamp_direct (paper sec. 4.1)
+    clamp_indirect: float = 10.0  # Cycles sample_clamp_indirect
+    max_bounces: int = 32
+    alpha_min: float = 0.99
+    seed: int = 0
+    lights_per_view: int = 1  # k > 1: training views rendered k times (one sun each, spp // k samples), pixels split in k random groups
+
+
+class CyclesRig:
+    """The isolated asset in Cycles with our own camera and sun; renders RGBA views."""
+
+    def __init__(self, settings: DataSettings, workdir, threads: int = 0) -> None:
+        from . import load_bpy
+
+        bpy = self.bpy = load_bpy()
+        self.s = settings
+        sc = self.scene = bpy.context.scene
+        cam = bpy.data.cameras.new("nasset_camera")
+        cam.lens_unit = "FOV"
+        cam.sensor_fit = "HORIZONTAL"
+        self.cam = bpy.data.objects.new("nasset_camera", cam)
+        sc.collection.objects.link(self.cam)
+        sc.camera = self.cam
+        sun = bpy.data.lights.new("nasset_sun", "SUN")
+        sun.energy = 1.0  # irradiance, W/m^2
+        sun.angle = math.radians(2.0 * settings.light_angle_deg)
+        self.sun = bpy.data.objects.new("nasset_sun", sun)
+        sc.collection.objects.link(self.sun)
+        self.cam.hide_render = False
+        self.sun.hide_render = False
+        r = sc.render
+        r.engine = "CYCLES"
+        r.film_transparent = True
+        r.resolution_percentage = 100
+        r.use_persistent_data = True
+        r.image_settings.file_format = "OPEN_EXR"
+        r.image_settings.color_depth = "32"
+        r.image_settings.color_mode = "RGBA"
+        if threads:
+            r.threads_mode = "FIXED"
+            r.threads = int(threads)
+        c = sc.cycles
+        c.device = "CPU"
+        c.use_denoising = False
+        c.use_adaptive_sampling = False
+        c.filter_width = 0.01
+        c.sample_clamp_direct = settings.clamp_direct
+        c.sample_clamp_indirect = settings.clamp_indirect
+        c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = settings.max_bounces
+        c.volume_bounces = settings.max_bounces
+        c.transparent_max_bounces = settings.max_bounces
+        c.caustics_reflective = c.caustics_refractive = True
+        c.blur_glossy = 0.0
+        sc.view_settings.view_transform = "Standard"
+        self.tmp = Path(tempfile.mkdtemp(prefix="cycles_", dir=workdir))
+
+    def place_camera(self, eye, target, half_fov: float, res: int) -> None:
+        """Camera at eye (asset space, +Y up) looking at target, matching :func:`camera_rays`."""
+        from mathutils import Matrix
+
+        fwd = np.asarray(target, np.float64) - np.asarray(eye, np.float64)
+        fwd /= max(float(np.linalg.norm(fwd)), 1e-12)
+        up0 = np.array([0.0, 1.0, 0.0]) if abs(fwd[1]) < 0.95 else np.array([1.0, 0.0, 0.0])
+        right = np.cross(fwd, up0)
+        right /= max(float(np.linalg.norm(right)), 1e-12)
+        up = np.cross(right, fwd)
+        cols = to_z_up(np.stack([right, up, -fwd]))  # camera local X, Y, Z in Blender world
+        m = np.eye(4)
+        m[:3, :3] = cols.T
+        m[:3, 3] = to_z_up(np.asarray(eye, np.float64)[None])[0]
+        self.cam.matrix_world = Matrix(m.tolist())
+        self.cam.data.angle = 2.0 * half_fov
+        self.scene.render.resolution_x = self.scene.render.resolution_y = int(res)
+
+    def place_sun(self, wi) -> None:
+        """The sun shines from direction wi (asset space, unit, towards the light)."""
+        from mathutils import Vector
+
+        z = Vector(to_z_up(np.asarray(wi, np.float64)[None])[0].tolist())
+        self.sun.rotation_euler = z.to_track_quat("Z", "Y").to_euler()
+
+    def render(self, spp: int, seed: int) -> np.ndarray:
+        """RGBA [res, res, 4] float32, row 0 at the top."""
+        import OpenEXR
+
+        sc = self.scene
+        sc.cycles.samples = int(spp)
+        sc.cycles.seed = int(seed) & 0x7FFFFFFF
+        path = self.tmp / "view.exr"
+        sc.render.filepath = str(path)
+        with quiet_stdout():
+            self.bpy.ops.render.render(write_still=True)
+        with OpenEXR.File(str(path)) as f:
+            ch = f.parts[0].channels
+            img = np.asarray(ch["RGBA"].pixels, np.float32) if "RGBA" in ch else np.stack(
+                [np.asarray(ch[k].pixels, np.float32) for k in ("R", "G", "B", "A")], -1)
+        os.remove(path)
+        return np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
+
+    def close(self) -> None:
+        try:
+            os.rmdir(self.tmp)
+        except OSError:
+            pass
+
+
+class Caster:
+    """Primary hits and light visibility on the exported asset geometry (Embree)."""
+
+    def __init__(self, variant: str, geo) -> None:
+        from reference_renderer.accel import Accel
+
+        self.variant = variant
+        if variant == "fiber":
+            from reference_renderer.neural_fiber import tessellate
+
+            self.tubes = tessellate(geo.points, geo.counts, geo.widths)
+            tris = self.tubes.points[self.tubes.faces]
+        else:
+            self.faces = np.asarray(geo.faces, np.int64)
+            pts = np.asarray(geo.points, np.float64)
+            tris = pts[self.faces]
+            self.corner_n = np.asarray(geo.normals, np.float64)[self.faces]
+            e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+            ng = np.cross(e1, e2)
+            self.ng = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+        self.accel = Accel(tris, np.zeros(len(tris), np.int64))
+
+    def hits(self, o, d) -> dict:
+        """Rows that hit: {'pix', 'x', 'frame' (n or t), 'h' (fibers), 'prim'}."""
+        from reference_renderer.neural_fiber import fiber_frame
+
+        h = self.accel.trace(o, d)
+        hit = np.nonzero(h.prim >= 0)[0]
+        x = o[hit] + d[hit] * h.t[hit][:, None]
+        prim = h.prim[hit]
+        out = {"pix": hit, "x": x, "prim": prim}
+        if self.variant == "fiber":
+            seg = self.tubes.tri_seg[prim]
+            t, hh = fiber_frame(self.tubes, seg, x, -d[hit])
+            out.update(frame=t, h=hh, seg=seg)
+        else:
+            bu, bv = h.u[hit], h.v[hit]
+            cn = self.corner_n[prim]
+            n = cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None]
+            out["frame"] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        return out
+
+    def visibility(self, hit: dict, wi) -> np.ndarray:
+        """1 where wi is not blocked by the asset, cast as the reference renderer casts it
+        (spec/renderer.md#neural-vertex, #fibers)."""
+        x = hit["x"]
+        n = len(x)
+        if n == 0:
+            return np.zeros(0, bool)
+        wi = np.broadcast_to(np.asarray(wi, np.float64), (n, 3))
+        ignore = np.zeros(n, np.int64)
+        if self.variant == "fiber":
+            res = self.accel.trace(x, wi, ignore=ignore, exempt=self.tubes.exempt[hit["seg"]])
+        else:
+            ng = self.ng[hit["prim"]]
+            scale = self.accel.eps * (1.0 + np.max(np.abs(x), axis=1) / self.accel.scale)
+            o = x + ng * (np.sign((ng * wi).sum(1)) * scale)[:, None]
+            res = self.accel.trace(o, wi, ignore=ignore)
+        return ~res.self_hit
+
+
+def view_camera(s: DataSettings, center, radius: float, view_id: int, validation: bool):
+    """(rng, eye, half_fov, res) of a view; deterministic in (seed, split, view)."""
+    rng = np.random.default_rng([s.seed, 1 if validation else 0, view_id])
+    cam_dir = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+    eye = np.asarray(center, np.float64) + s.distance * radius * cam_dir
+    half_fov = float(np.arcsin(min(1.0 / max(s.distance, 1.0 + 1e-6), 0.999))) * 1.04
+    res = (s.val_res or s.res) if validation else s.res
+    return rng, eye, half_fov, res
+
+
+def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: int, *, validation: bool) -> dict:
+    """One view's samples (FIELDS, plus 'h' for fibers) and its statistics."""
+    s = rig.s
+    rng, eye, half_fov, res = view_camera(s, center, radius, view_id, validation)
+    o, d = camera_rays(eye, np.asarray(center, np.float64), half_fov, res)
+    hit = caster.hits(o, d)
+    wi = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+    rig.place_camera(eye, center, half_fov, res)
+    rig.place_sun(wi)
+    spp = s.val_spp if validation else s.spp
+    k = 1 if validation else max(1, int(s.lights_per_view))
+    rgba = rig.render(spp if k == 1 else max(1, spp // k), seed=hash((s.seed, int(validation), view_id)) & 0xFFFFFF).reshape(-1, 4)
+    wi_pix = np.repeat(wi[None], len(o), 0)
+    if k > 1:  # more light directions at the same sample budget: pixel group g takes render g's values
+        group = rng.integers(0, k, len(o))
+        for g in range(1, k):
+            wg = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+            rig.place_sun(wg)
+            sel = group == g
+            rgba[sel] = rig.render(max(1, spp // k), seed=hash((s.seed, int(validation), view_id, g)) & 0xFFFFFF).reshape(-1, 4)[sel]
+            wi_pix[sel] = wg
+    alpha = rgba[:, 3]
+    ours = np.zeros(len(o), bool)
+    ours[hit["pix"]] = True
+    theirs = alpha >= s.alpha_min
+    keep_rows = theirs[hit["pix"]]
+    disagree = int(np.count_nonzero(ours != (alpha > 0.5)))
+    pix = hit["pix"][keep_rows]
+    sel = {k: (v[keep_rows] if isinstance(v, np.ndarray) and len(v) == len(hit["pix"]) else v) for k, v in hit.items()}
+    vis = caster.visibility(sel, wi_pix[pix])
+    rgb = rgba[pix, :3] / np.maximum(alpha[pix], 1e-6)[:, None]
+    out = {
+        "x": sel["x"].astype(np.float32), "n": sel["frame"].astype(np.float32), "wo": (-d[pix]).astype(np.float32),
+        "wi": wi_pix[pix].astype(np.float32), "vis": vis.astype(np.uint8),
+        "rgb": np.maximum(rgb, 0.0).astype(np.float32), "pix": pix.astype(np.int32), "res": np.int32(res),
+        "disagree": np.int32(disagree), "covered": np.int32(int(np.count_nonzero(ours | (alpha > 0.5)))),
+    }
+    if caster.variant == "fiber":
+        out["h"] = sel["h"].astype(np.float32)
+    return out
+
+
+def settings_digest(source_key: str, object_names, variant: str, settings: DataSettings) -> dict:
+    """What a dataset folder must agree on to be resumed (source_key: the .blend's sha256 or the example name)."""
+    return {
+        "converter": f"blender {CONVERTER_VERSION}",
+        "source": source_key,
+        "objects": list(object_names),
+        "variant": variant,
+        "settings": asdict(settings),
+    }
+
+
+def file_sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def load_split(store: DatasetDir, split: str, count: int, fiber: bool) -> dict:
+    """All views of a split concatenated (FIELDS, 'h' for fibers) plus 'view' and the mask statistics."""
+    parts = [store.load(split, i) for i in range(count)]
+    out = {f: np.concatenate([p[f] for p in parts]) for f in (FIBER_FIELDS if fiber else FIELDS)}
+    out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
+    out["disagree"] = int(sum(int(p["disagree"]) for p in parts))
+    out["covered"] = int(sum(int(p["covered"]) for p in parts))
+    return out

@@ -1,0 +1,269 @@
+"""Open a .blend, pick the asset objects, export their geometry (spec/bake-blender.md#geometry).
+
+Geometry is taken from Blender's *evaluated* objects (modifiers applied, as Cycles renders them),
+in world space, converted to +Y up (:func:`converters.blender.to_y_up`); asset object space is
+that world space (like the Mitsuba bake). Meshes become triangles with smooth vertex normals
+(flat-shaded faces get their face normal); hair becomes linear curves with widths = 2 x radius:
+
+* new ``Curves`` objects (hair curves): the ``position`` and ``radius`` point attributes (radius
+  0.005 where the attribute is absent, Blender's default); non-poly curve types are sampled at
+  their control points (a warning);
+* particle hair on a mesh (``ParticleSystem`` of type HAIR): every strand's evaluated path points
+  (``co_hair``), widths from the particle settings' root/tip radius x radius scale, linear from root
+  to tip (Cycles' curve shape).
+
+An asset is all meshes (variant ``surface``) or all hair (variant ``fiber``); a mix is
+CONVERT_SHAPE_UNSUPPORTED.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import error
+from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
+
+from . import load_bpy, quiet_stdout, to_y_up
+
+#: Blender's default curve radius (m) where a Curves object has no ``radius`` attribute
+DEFAULT_RADIUS = 0.005
+
+
+def open_blend(path):
+    """Open a .blend file (replacing the session's data); CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD."""
+    bpy = load_bpy()
+    path = Path(path)
+    if not path.is_file():
+        raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(path))
+    try:
+        with quiet_stdout():
+            bpy.ops.wm.open_mainfile(filepath=str(path.resolve()), load_ui=False)
+    except Exception as exc:  # noqa: BLE001 - bpy raises RuntimeError for every load failure
+        msg = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
+        raise error("CONVERT_SCENE_LOAD", f"Blender cannot load the file: {msg}", file=str(path)) from None
+    return bpy.context.scene
+
+
+def pick_objects(names, *, file: str | None = None) -> list:
+    """The scene's objects with these names, in order; each must be a mesh, a hair Curves object or
+    a mesh carrying particle hair."""
+    bpy = load_bpy()
+    objs = bpy.context.scene.objects
+    have = sorted(o.name for o in objs if o.type in ("MESH", "CURVES"))
+    if not names:
+        raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset object name given; the scene has {have}", file=file)
+    out = []
+    for n in names:
+        ob = objs.get(n)
+        if ob is None:
+            raise error("CONVERT_SHAPE_UNKNOWN", f"no object named {n!r}; the scene has {have}", file=file)
+        if ob.type not in ("MESH", "CURVES"):
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r} is a {ob.type}, not a mesh or hair curves", file=file)
+        out.append(ob)
+    return out
+
+
+def has_particle_hair(ob) -> bool:
+    return ob.type == "MESH" and any(ps.settings.type == "HAIR" for ps in ob.particle_systems)
+
+
+def variant_of(objects, *, file: str | None = None) -> str:
+    """``surface`` for meshes, ``fiber`` for hair; a mix is CONVERT_SHAPE_UNSUPPORTED."""
+    kinds = {"fiber" if (o.type == "CURVES" or has_particle_hair(o)) else "surface" for o in objects}
+    if len(kinds) > 1:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", "an asset is either meshes or hair, not both: "
+                    f"{[o.name for o in objects]}", file=file)
+    return kinds.pop()
+
+
+def _mesh_world(ob, depsgraph):
+    """(points [V,3] world Blender, faces [F,3], vertex normals [V,3] world) of an evaluated mesh."""
+    ev = ob.evaluated_get(depsgraph)
+    me = ev.to_mesh()
+    try:
+        me.calc_loop_triangles()
+        nv, nt = len(me.vertices), len(me.loop_triangles)
+        co = np.empty(nv * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        tri = np.empty(nt * 3, np.int32)
+        me.loop_triangles.foreach_get("vertices", tri)
+        tri = tri.reshape(-1, 3)
+        smooth = np.empty(nt, bool)
+        me.loop_triangles.foreach_get("use_smooth", smooth)
+        vn = np.empty(nv * 3, np.float32)
+        me.vertices.foreach_get("normal", vn)
+        vn = vn.reshape(-1, 3).astype(np.float64)
+        tn = np.empty(nt * 3, np.float32)
+        me.loop_triangles.foreach_get("normal", tn)
+        tn = tn.reshape(-1, 3).astype(np.float64)
+    finally:
+        ev.to_mesh_clear()
+    M = np.array(ob.matrix_world, np.float64)
+    p = co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    nlin = np.linalg.inv(M[:3, :3]).T
+    if not smooth.all():  # flat faces: split their corners so they keep the face normal
+        flat = np.nonzero(~smooth)[0]
+        base = len(p)
+        extra = tri[flat].ravel()
+        p = np.concatenate([p, p[extra]])
+        vn = np.concatenate([vn, np.repeat(tn[flat], 3, axis=0)])
+        tri = tri.copy()
+        tri[flat] = base + np.arange(3 * len(flat)).reshape(-1, 3)
+    n = vn @ nlin.T
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return p, tri, n
+
+
+def mesh_geometry(objects) -> MeshGeometry:
+    """World-space (+Y up) triangles of the evaluated meshes, merged."""
+    bpy = load_bpy()
+    dg = bpy.context.evaluated_depsgraph_get()
+    pts, faces, normals, base = [], [], [], 0
+    for ob in objects:
+        p, f, n = _mesh_world(ob, dg)
+        pts.append(p)
+        faces.append(f + base)
+        normals.append(n)
+        base += len(p)
+    geo = MeshGeometry(to_y_up(np.concatenate(pts)).astype(np.float32), np.concatenate(faces).astype(np.int32),
+                       to_y_up(np.concatenate(normals)).astype(np.float32))
+    if len(geo.faces) == 0:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"objects {[o.name for o in objects]} have no faces")
+    return geo
+
+
+@dataclass
+class HairStrands:
+    """Blender-space strands: points [P,3] world, counts [C], radius [P] (m)."""
+
+    points: np.ndarray
+    counts: np.ndarray
+    radius: np.ndarray
+    notes: list
+
+
+def _curves_strands(ob, depsgraph) -> HairStrands:
+    ev = ob.evaluated_get(depsgraph)
+    cv = ev.data
+    n_pts, n_cur = len(cv.points), len(cv.curves)
+    pos = np.empty(n_pts * 3, np.float32)
+    cv.attributes["position"].data.foreach_get("vector", pos)
+    off = np.empty(n_cur + 1, np.int32)
+    cv.curve_offset_data.foreach_get("value", off)
+    if "radius" in cv.attributes:
+        rad = np.empty(n_pts, np.float32)
+        cv.attributes["radius"].data.foreach_get("value", rad)
+    else:
+        rad = np.full(n_pts, DEFAULT_RADIUS, np.float32)
+    notes = []
+    if "curve_type" in cv.attributes:
+        ct = np.empty(n_cur, np.int8)
+        cv.attributes["curve_type"].data.foreach_get("value", ct)
+        if (ct != 1).any():  # 1 = CURVE_TYPE_POLY
+            notes.append(f"{ob.name}: non-poly curves are stored as linear curves through their control points")
+    M = np.array(ob.matrix_world, np.float64)
+    scale = float(np.cbrt(abs(np.linalg.det(M[:3, :3]))))
+    p = pos.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
+    return HairStrands(p, np.diff(off).astype(np.int32), rad.astype(np.float64) * scale, notes)
+
+
+def _particle_strands(ob, depsgraph) -> HairStrands:
+    ev = ob.evaluated_get(depsgraph)
+    pts, counts, rad = [], [], []
+    for ps in ev.particle_systems:
+        st = ps.settings
+        if st.type != "HAIR":
+            continue
+        steps = 2 ** int(st.display_step) + 1
+        r_root = 0.5 * float(st.root_radius) * float(st.radius_scale)
+        r_tip = 0.5 * float(st.tip_radius) * float(st.radius_scale)
+        # Cycles' particle hair width: root/tip radius x radius scale (diameter convention in the UI is x2)
+        for i in range(len(ps.particles)):
+            strand = np.array([tuple(ps.co_hair(ev, particle_no=i, step=s)) for s in range(steps)], np.float64)
+            if len(strand) < 2 or not np.isfinite(strand).all():
+                continue
+            pts.append(strand)
+            counts.append(len(strand))
+            rad.append(r_root + (r_tip - r_root) * np.linspace(0.0, 1.0, len(strand)))
+    if not pts:
+        return HairStrands(np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros(0), [])
+    return HairStrands(np.concatenate(pts), np.array(counts, np.int32), np.concatenate(rad), [])
+
+
+def hair_strands(objects) -> HairStrands:
+    """All strands of the hair objects (Curves objects and particle hair), Blender world space."""
+    bpy = load_bpy()
+    dg = bpy.context.evaluated_depsgraph_get()
+    parts = []
+    for ob in objects:
+        parts.append(_curves_strands(ob, dg) if ob.type == "CURVES" else _particle_strands(ob, dg))
+    pts = np.concatenate([p.points for p in parts]) if parts else np.zeros((0, 3))
+    return HairStrands(pts, np.concatenate([p.counts for p in parts]).astype(np.int32),
+                       np.concatenate([p.radius for p in parts]), [n for p in parts for n in p.notes])
+
+
+def curves_geometry(objects) -> tuple[CurvesGeometry, list]:
+    """(CurvesGeometry in +Y-up world space with widths = 2 radius, notes). Degenerate strands are dropped."""
+    s = hair_strands(objects)
+    if len(s.counts) == 0:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"objects {[o.name for o in objects]} have no hair strands")
+    keep = s.counts >= 2
+    starts = np.concatenate([[0], np.cumsum(s.counts)[:-1]])
+    idx = np.concatenate([np.arange(a, a + c) for a, c, k in zip(starts, s.counts, keep, strict=True) if k])
+    widths = np.maximum(2.0 * s.radius[idx], 1e-6)
+    geo = CurvesGeometry(to_y_up(s.points[idx]).astype(np.float32), s.counts[keep].astype(np.int32), widths.astype(np.float32))
+    geo.validate()
+    return geo, s.notes
+
+
+def asset_geometry(objects, *, file: str | None = None):
+    """(variant, MeshGeometry | CurvesGeometry, notes) of the asset objects."""
+    variant = variant_of(objects, file=file)
+    if variant == "surface":
+        return variant, mesh_geometry(objects), []
+    geo, notes = curves_geometry(objects)
+    return variant, geo, notes
+
+
+def bounding_sphere(geo) -> tuple[np.ndarray, float]:
+    lo, hi = geo.bounds()
+    c = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
+    pts = np.asarray(geo.points, np.float64)
+    r = float(np.max(np.linalg.norm(pts - c, axis=1)))
+    if isinstance(geo, CurvesGeometry):
+        r += float(np.max(geo.widths)) * 0.5
+    return c, max(r, 1e-6)
+
+
+def material_names(objects) -> list[str]:
+    out = []
+    for ob in objects:
+        for slot in ob.material_slots:
+            if slot.material is not None and slot.material.name not in out:
+                out.append(slot.material.name)
+        for ps in getattr(ob, "particle_systems", []):
+            m = ps.settings.material_slot
+            if m and m not in out:
+                out.append(m)
+    return out
+
+
+def isolate(objects) -> None:
+    """Make only the asset objects renderable: every other object hidden from render (lights too),
+    particle emitters' own surfaces kept only when they are asset meshes; world black."""
+    bpy = load_bpy()
+    keep = {o.name for o in objects}
+    for ob in bpy.context.scene.objects:
+        ob.hide_render = ob.name not in keep
+    for ob in objects:
+        if has_particle_hair(ob):  # keep the hair, not the emitter mesh
+            ob.show_instancer_for_render = False
+    world = bpy.data.worlds.new("nasset_black")
+    if world.node_tree is None:
+        world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    bg.inputs["Strength"].default_value = 0.0
+    bpy.context.scene.world = world

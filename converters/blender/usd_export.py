@@ -1,0 +1,416 @@
+"""``nasset convert-scene SCENE.blend``: a Blender scene (camera, lights, plain meshes) -> a USD stage.
+
+The same stage layout as the Mitsuba converter (converters/mitsuba/usd_export.py, whose stage
+writer this reuses): ``/World/Geometry`` meshes bound to ``UsdPreviewSurface`` materials in
+``/World/Looks``, ``/World/Lights``, one camera, and one NeuralAsset reference per ``--replace
+OBJECT[,OBJECT]=ASSET`` in ``/World/Assets`` in place of those objects. The mapping table is in
+spec/bake-blender.md#scene-conversion; everything not converted exactly is a warning.
+
+Conventions: Blender world (+Z up) -> USD (+Y up) by :data:`converters.blender.Z_UP_TO_Y_UP`
+(meshes are written in world space; cameras and lights keep their local frames: Blender cameras,
+suns, spots and area lights look / emit down local -Z like USD's); Blender light units -> the
+renderer's: sun ``strength`` = irradiance (DistantLight intensity, ``angle`` = Blender's angular
+diameter); point/spot of power P and radius r -> SphereLight radiance P / (4 pi^2 r^2) (a point
+light of intensity P / (4 pi) W/sr when r = 0); area of power P and area A -> RectLight radiance
+P / (pi A); world Background colour x strength -> DomeLight (an Environment Texture becomes a
+lat-long OpenEXR with Blender's equirectangular orientation).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, _Converter, parse_replace, usd_check  # noqa: F401
+from nasset_sdk.errors import UsageError, error
+
+from . import Z_UP_TO_Y_UP
+
+_R4 = np.eye(4)
+_R4[:3, :3] = Z_UP_TO_Y_UP
+#: dome local axes (rows) in USD world that make the renderer's lat-long lookup equal Blender's
+#: equirectangular one (spec/bake-blender.md#scene-conversion)
+_DOME_ROWS = np.array([[0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+
+
+def _row(ob, *, unit: bool = True) -> np.ndarray:
+    """USD row-vector 4x4 of a Blender object's world matrix, in +Y-up space; scale removed when ``unit``."""
+    m = _R4 @ np.array(ob.matrix_world, np.float64)
+    if unit:
+        s = np.linalg.norm(m[:3, :3], axis=0)
+        m[:3, :3] /= np.where(s > 0, s, 1.0)[None, :]
+    return m.T
+
+
+def _socket(node, name, default):
+    s = node.inputs.get(name)
+    if s is None:
+        return default, False
+    v = s.default_value
+    try:
+        v = tuple(float(x) for x in v)
+    except TypeError:
+        v = float(v)
+    return v, bool(s.is_linked)
+
+
+class _BlenderConverter(_Converter):
+    def __init__(self, bpy, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
+        super().__init__(None, None, scene_path, output, replace, check_usd)
+        self.bpy = bpy
+        self.bscene = bpy.context.scene
+
+    # -- camera -----------------------------------------------------------------------------
+    def camera(self) -> None:
+        from pxr import Gf, UsdGeom, UsdRender
+
+        ob = self.bscene.camera
+        if ob is None:
+            self.warn("the scene has no active camera: no camera written (the reference renderer needs one)")
+            return
+        cam = ob.data
+        r = self.bscene.render
+        size = (int(r.resolution_x * r.resolution_percentage / 100), int(r.resolution_y * r.resolution_percentage / 100))
+        if cam.type != "PERSP":
+            self.warn(f"camera {ob.name}: {cam.type} projection is not converted (perspective only)")
+            return
+        if cam.dof.use_dof:
+            self.warn(f"camera {ob.name}: depth of field dropped (pinhole)")
+        if abs(cam.shift_x) > 0 or abs(cam.shift_y) > 0:
+            self.warn(f"camera {ob.name}: lens shift dropped")
+        horizontal = cam.sensor_fit == "HORIZONTAL" or (cam.sensor_fit == "AUTO" and size[0] >= size[1])
+        if horizontal:
+            x_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_x)
+        else:
+            y_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_y)
+            x_fov = 2.0 * math.atan(math.tan(y_fov / 2.0) * size[0] / size[1])
+        path = self._name("/World", ob.name)
+        c = UsdGeom.Camera.Define(self.stage, path)
+        ha = 2.0 * FOCAL_LENGTH_MM * math.tan(x_fov / 2.0)
+        c.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+        c.CreateFocalLengthAttr(FOCAL_LENGTH_MM)
+        c.CreateHorizontalApertureAttr(ha)
+        c.CreateVerticalApertureAttr(ha * size[1] / size[0])
+        c.CreateClippingRangeAttr(Gf.Vec2f(float(cam.clip_start), float(cam.clip_end)))
+        self._xform(c.GetPrim(), _row(ob))
+        self.record(path, f"camera {ob.name} (x_fov {math.degrees(x_fov):.4g} deg)")
+        self.result.resolution = size
+        settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")
+        settings.CreateResolutionAttr(Gf.Vec2i(*size))
+        settings.CreateCameraRel().SetTargets([path])
+        settings.CreatePixelAspectRatioAttr(1.0)
+
+    def integrator(self) -> None:
+        c = self.bscene.cycles
+        self.result.integrator = {"type": "cycles", "max_bounces": int(c.max_bounces), "samples": int(c.samples),
+                                  "renderer_max_depth": int(c.max_bounces)}
+
+    # -- lights -------------------------------------------------------------------------------
+    def lights(self) -> None:
+        from pxr import UsdLux
+
+        for ob in self.bscene.objects:
+            if ob.type != "LIGHT" or ob.hide_render:
+                continue
+            lt = ob.data
+            color = np.array(lt.color, np.float64)
+            path = self._name("/World/Lights", ob.name)
+            if lt.type == "SUN":
+                light = UsdLux.DistantLight.Define(self.stage, path)
+                light.CreateAngleAttr(math.degrees(float(lt.angle)))
+                self._xform(light.GetPrim(), _row(ob))
+                self._light_common(light, color * float(lt.energy), path, f"sun {ob.name} (angle {math.degrees(lt.angle):.3g} deg)")
+            elif lt.type in ("POINT", "SPOT"):
+                r = float(lt.shadow_soft_size)
+                light = UsdLux.SphereLight.Define(self.stage, path)
+                row = _row(ob)
+                scale = float(np.cbrt(abs(np.linalg.det(_row(ob, unit=False)[:3, :3]))))
+                if r * scale > 0:
+                    rw = r * scale
+                    light.CreateRadiusAttr(rw)
+                    light.CreateTreatAsPointAttr(False)
+                    value = color * float(lt.energy) / (4.0 * math.pi * math.pi * rw * rw)
+                else:
+                    light.CreateRadiusAttr(0.0)
+                    light.CreateTreatAsPointAttr(True)
+                    value = color * float(lt.energy) / (4.0 * math.pi)
+                self._xform(light.GetPrim(), row)
+                what = f"{lt.type.lower()} {ob.name} ({lt.energy:.4g} W, radius {r:.3g})"
+                if lt.type == "SPOT":
+                    cone = math.degrees(float(lt.spot_size)) / 2.0
+                    shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
+                    shaping.CreateShapingConeAngleAttr(cone)
+                    shaping.CreateShapingConeSoftnessAttr(float(lt.spot_blend))
+                    self.warn(f"light {ob.name}: spot written as a sphere light with UsdLux.ShapingAPI (cone {cone:.3g} deg); "
+                              "the reference renderer ignores shaping and renders it omnidirectional")
+                self._light_common(light, value, path, what)
+            elif lt.type == "AREA":
+                w = float(lt.size)
+                h = float(lt.size_y) if lt.shape in ("RECTANGLE", "ELLIPSE") else w
+                if lt.shape in ("DISK", "ELLIPSE"):
+                    k = math.sqrt(math.pi) / 2.0  # equal-area square side / diameter
+                    self.warn(f"light {ob.name}: {lt.shape.lower()} area light written as an equal-area rectangle")
+                    w, h = w * k, h * k
+                light = UsdLux.RectLight.Define(self.stage, path)
+                light.CreateWidthAttr(w)
+                light.CreateHeightAttr(h)
+                row = _row(ob, unit=False)
+                self._xform(light.GetPrim(), row)
+                sx, sy = np.linalg.norm(row[0, :3]), np.linalg.norm(row[1, :3])
+                area = w * h * sx * sy
+                if getattr(lt, "spread", math.pi) < math.pi - 1e-6:
+                    self.warn(f"light {ob.name}: area light spread dropped (Lambertian emission)")
+                self._light_common(light, color * float(lt.energy) / (math.pi * max(area, 1e-12)), path,
+                                   f"area {ob.name} ({lt.energy:.4g} W, {w:.3g} x {h:.3g})")
+            else:
+                self.warn(f"light {ob.name}: type {lt.type} is not convertible: skipped")
+        self.world()
+
+    def world(self) -> None:
+        from pxr import Gf, Sdf, UsdLux
+
+        world = self.bscene.world
+        if world is None or not world.node_tree:
+            if world is not None:
+                self.warn(f"world {world.name}: colour without a node tree written as a constant dome")
+                self._dome_constant(np.array(world.color, np.float64), world.name)
+            return
+        out = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+        link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
+        if link is None:
+            return
+        bg = link.from_node
+        if bg.bl_idname != "ShaderNodeBackground":
+            self.warn(f"world {world.name}: {bg.bl_idname} is not convertible (Background only): skipped")
+            return
+        strength, s_linked = _socket(bg, "Strength", 1.0)
+        if s_linked:
+            self.warn(f"world {world.name}: linked Strength dropped (1 used)")
+            strength = 1.0
+        col = bg.inputs["Color"]
+        if not col.is_linked:
+            rgb = np.array(col.default_value[:3], np.float64) * float(strength)
+            if rgb.max() > 0:
+                self._dome_constant(rgb, world.name)
+            return
+        src = col.links[0].from_node
+        if src.bl_idname != "ShaderNodeTexEnvironment" or src.image is None:
+            self.warn(f"world {world.name}: background colour from {src.bl_idname} dropped (constant colour or an "
+                      "Environment Texture are converted)")
+            return
+        if src.inputs["Vector"].is_linked:
+            self.warn(f"world {world.name}: the environment texture's vector input (mapping/rotation) is dropped")
+        if src.projection != "EQUIRECTANGULAR":
+            self.warn(f"world {world.name}: {src.projection} environment projection is not converted")
+            return
+        from pxr import Tf
+
+        from reference_renderer.film import write_exr
+
+        img = src.image
+        wid, hei = img.size
+        px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
+        tex_dir = self.output.parent / f"{self.output.stem}_textures"
+        tex_dir.mkdir(parents=True, exist_ok=True)
+        tex = tex_dir / f"{Tf.MakeValidIdentifier(world.name)}.exr"
+        write_exr(tex, np.nan_to_num(np.maximum(px, 0.0), nan=0.0, posinf=0.0))
+        self.result.textures.append(str(tex))
+        path = self._name("/World/Lights", world.name)
+        light = UsdLux.DomeLight.Define(self.stage, path)
+        light.CreateTextureFileAttr(Sdf.AssetPath(tex.relative_to(self.output.parent).as_posix()))
+        light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
+        self._xform(light.GetPrim(), _DOME_ROWS)
+        self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
+        light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
+        self.warn(f"world {world.name}: environment looked up with nearest texels by the reference renderer (Cycles: linear)")
+
+    def _dome_constant(self, rgb, name) -> None:
+        from pxr import UsdLux
+
+        path = self._name("/World/Lights", name)
+        light = UsdLux.DomeLight.Define(self.stage, path)
+        self._light_common(light, rgb, path, f"world {name} (constant colour)")
+
+    # -- materials ----------------------------------------------------------------------------
+    def blender_material(self, mat, ob_name: str) -> str:
+        key = ("blender", mat.name if mat is not None else None)
+        if key in self.materials:
+            return self.materials[key]
+        inputs, notes = map_material(mat)
+        for n in notes:
+            self.warn(f"object {ob_name}: {n}")
+        path = self._write_material(mat.name if mat is not None else "Default", inputs)
+        self.record(path, f"material {mat.name if mat is not None else '(none)'}")
+        self.materials[key] = path
+        return path
+
+    # -- geometry -----------------------------------------------------------------------------
+    def shapes(self) -> None:
+        from pxr import UsdGeom, UsdShade, Vt
+
+        from .scene import has_particle_hair, mesh_geometry
+
+        for ob in self.bscene.objects:
+            if ob.hide_render or ob.name in self.replace:
+                continue
+            if ob.type == "CURVES":
+                self.warn(f"object {ob.name}: hair curves outside an asset are dropped (bake them: --replace {ob.name}=ASSET)")
+                continue
+            if ob.type in ("CAMERA", "LIGHT", "EMPTY"):
+                continue
+            if ob.type != "MESH":
+                self.warn(f"object {ob.name}: {ob.type} is not convertible (meshes are): skipped")
+                continue
+            if has_particle_hair(ob):
+                self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
+            try:
+                geo = mesh_geometry([ob])
+            except Exception:  # noqa: BLE001 - an empty mesh
+                self.warn(f"object {ob.name}: no faces: skipped")
+                continue
+            path = self._name("/World/Geometry", ob.name)
+            mesh = UsdGeom.Mesh.Define(self.stage, path)
+            mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
+            mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
+            mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(geo.faces.ravel(), np.int32)))
+            mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.normals, np.float32)))
+            mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+            mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
+            mats = [s.material for s in ob.material_slots if s.material is not None]
+            if len(mats) > 1:
+                self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
+            mat_path = self.blender_material(mats[0] if mats else None, ob.name)
+            UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+            self.record(path, f"object {ob.name} (mesh, {len(geo.faces)} triangles)")
+
+    def run(self) -> ConvertResult:
+        from pxr import Gf
+
+        self.camera()
+        self.integrator()
+        self.lights()
+        self.shapes()
+        self.assets()
+        self.stage.GetRootLayer().customLayerData = {
+            "nasset:convertedFrom": {"scene": self.scene_path.name, "converter": "nasset convert-scene",
+                                     "blender": self.bpy.app.version_string, "integrator": dict(self.result.integrator),
+                                     "resolution": Gf.Vec2i(*self.result.resolution)},
+        }
+        self.stage.GetRootLayer().Save()
+        if self.check_usd:
+            self.result.usd_checks = usd_check(self.output)
+        return self.result
+
+
+#: Principled BSDF inputs that UsdPreviewSurface cannot carry: (input, "off" value)
+_DROPPED = (("Subsurface Weight", 0.0), ("Transmission Weight", 0.0), ("Coat Weight", 0.0), ("Sheen Weight", 0.0),
+            ("Anisotropic", 0.0), ("Emission Strength", 0.0), ("Thin Film Thickness", 0.0))
+
+
+def map_material(mat) -> tuple[dict, list]:
+    """UsdPreviewSurface inputs for a Blender material and notes on what the mapping loses."""
+    grey = {"diffuseColor": (0.8, 0.8, 0.8), "roughness": 0.5, "metallic": 0.0}
+    if mat is None:
+        return grey, ["no material: grey UsdPreviewSurface"]
+    if not mat.node_tree:
+        return {"diffuseColor": tuple(mat.diffuse_color[:3]), "roughness": float(mat.roughness),
+                "metallic": float(mat.metallic)}, [f"material {mat.name}: viewport colours used (no node tree)"]
+    out = next((n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return grey, [f"material {mat.name}: no surface shader, grey used"]
+    node = out.inputs["Surface"].links[0].from_node
+    notes = []
+    if node.bl_idname == "ShaderNodeBsdfDiffuse":
+        col, linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
+        notes += [f"material {mat.name}: linked Color dropped (its default used)"] if linked else []
+        return {"diffuseColor": col[:3], "roughness": 1.0, "metallic": 0.0, "useSpecularWorkflow": 1,
+                "specularColor": (0.0, 0.0, 0.0)}, notes
+    if node.bl_idname != "ShaderNodeBsdfPrincipled":
+        return grey, [f"material {mat.name}: {node.bl_idname} is not convertible (Principled BSDF, Diffuse BSDF are): grey"]
+    vals = {}
+    for name, default in (("Base Color", (0.8, 0.8, 0.8, 1.0)), ("Roughness", 0.5), ("Metallic", 0.0), ("IOR", 1.5),
+                          ("Specular IOR Level", 0.5), ("Alpha", 1.0), ("Normal", None)):
+        v, linked = _socket(node, name, default)
+        vals[name] = v
+        if linked:
+            notes.append(f"material {mat.name}: linked {name} dropped (its default value used)")
+    for name, off in _DROPPED:
+        v, linked = _socket(node, name, off)
+        if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
+            notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
+                         "bake the object into a neural asset)")
+    if isinstance(vals["Alpha"], float) and vals["Alpha"] < 1.0:
+        notes.append(f"material {mat.name}: Alpha {vals['Alpha']:.3g} dropped (opaque)")
+    inputs = {"diffuseColor": vals["Base Color"][:3], "roughness": float(vals["Roughness"]), "metallic": float(vals["Metallic"])}
+    level = float(vals["Specular IOR Level"])
+    if level <= 1e-6 and inputs["metallic"] <= 0.0:
+        inputs.update(useSpecularWorkflow=1, specularColor=(0.0, 0.0, 0.0))
+    else:
+        inputs["ior"] = float(vals["IOR"])
+        if abs(level - 0.5) > 1e-6:
+            notes.append(f"material {mat.name}: Specular IOR Level {level:.3g} dropped (0.5 assumed)")
+    return inputs, notes
+
+
+def _check_replace(bpy, rep: dict, file: str) -> None:
+    from reference_renderer.scene import is_asset_file
+
+    names = sorted(o.name for o in bpy.context.scene.objects)
+    for name, path in rep.items():
+        if name not in names:
+            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no object named {name!r}; the scene has {names}", file=file)
+        if not path.is_file() or not is_asset_file(str(path)):
+            raise error("CONVERT_ASSET_REFERENCE", f"--replace {name}: {path} is not an existing neural asset file "
+                        "(defaultPrim of type NeuralAsset)", file=str(path))
+
+
+def convert_scene(scene, output, *, replace=None, check_usd: bool = True, example: str | None = None) -> ConvertResult:
+    """Convert a .blend (or a built-in example, ``example``) to a USD stage (module docstring)."""
+    from . import load_bpy
+    from .scene import open_blend
+
+    output = Path(output)
+    if output.suffix not in (".usda", ".usdc", ".usd"):
+        raise UsageError(f"output must end in .usda/.usdc/.usd, got {output.name!r}")
+    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    bpy = load_bpy()
+    if example is not None:
+        from .examples import build_example
+
+        build_example(example)
+        label = Path(f"{example}.blend")
+    else:
+        open_blend(scene)
+        label = Path(scene)
+    bpy.context.view_layer.update()
+    _check_replace(bpy, rep, str(label))
+    output.parent.mkdir(parents=True, exist_ok=True)
+    if output.exists():
+        output.unlink()
+    return _BlenderConverter(bpy, label, output, rep, check_usd).run()
+
+
+def run(args) -> int:
+    """CLI entry: ``nasset convert-scene SCENE.blend -o SCENE.usda [--replace OBJ=ASSET ...] [--json]``."""
+    scene, example = args.scene, args.example
+    if bool(example) == bool(scene):
+        raise UsageError("give a .blend scene or --example blender-surface|blender-hair (not both)")
+    res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks, example=example)
+    for w in res.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    bad = [c for c in res.usd_checks if c["severity"] == "error"]
+    for c in res.usd_checks:
+        print(f"usd-check {c['severity']}: {c['name']} {c['prim'] or ''}: {c['message']}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(res.to_dict(), indent=2))
+    else:
+        print(f"wrote {res.output}: {len(res.prims)} prims, {len(res.replaced)} neural asset reference(s), "
+              f"{len(res.warnings)} warning(s)")
+        for path, what in res.prims.items():
+            print(f"  {path:40s} <- {what}")
+    return 1 if bad else 0

@@ -1,0 +1,330 @@
+"""``nasset bake --kind 8dna``: a Mitsuba scene's translucent object -> an 8dna asset (spec/bake-8dna.md).
+
+Stages: load scene (pick the asset's shapes, read the boundary BSDF for the analytic direct lobe)
+-> held-out tuples (path-traced once, kept in the work folder) -> train (online buffer of
+path-traced tuples regenerated as it is consumed, PyTorch) -> export (ONNX + tensors through
+AssetBuilder, written atomically) -> check (re-open the asset: SDK vs torch pdf / albedo parity on
+the held-out tuples, held-out NLL, ``nasset validate``). Each stage shows a progress bar; a summary
+closes the run.
+
+The work folder (``--resume DIR``, default ``OUTPUT.bake/``) keeps the held-out tuples and the
+training checkpoint (every 250 steps), so an interrupted bake continues at the last checkpoint.
+``--example`` bakes the built-in translucent example (``--example heterogeneous``: its grid-medium
+variant; converters/mitsuba/eightdna_example.py). Options of the rna bake that have no meaning here
+(``--views``, ``--res``, ``--light-angle``) raise a UsageError; ``--epochs N`` sets the number of
+optimisation steps and ``--spp N`` the online buffer size in thousands of tuples.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import UsageError, error
+
+#: sampler presets: held-out tuples, Russian-roulette start, depth cap
+SAMPLER_PRESETS = {
+    "tiny": dict(heldout=2048, rr_depth=4, max_depth=256),
+    "small": dict(heldout=16384, rr_depth=4, max_depth=1024),
+    "hq": dict(heldout=65536, rr_depth=8, max_depth=4096),
+}
+BAKE_VERSION = "8dna-0.1.0"
+
+
+def _tqdm(**kw):
+    from tqdm.auto import tqdm
+
+    return tqdm(**kw)
+
+
+def boundary_of(mi, shapes) -> tuple[float, float]:
+    """(eta, GGX alpha) of the asset's boundary BSDF (all shapes must share it); roughdielectric GGX or dielectric."""
+    found = set()
+    for s in shapes:
+        b = s.bsdf()
+        name = str(b).split("[")[0].strip()
+        p = mi.traverse(b)
+        keys = list(p.keys())
+        if name == "RoughDielectric":
+            if "ggx" not in str(b).lower():
+                raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: the 8dna direct lobe is GGX; the boundary uses "
+                            "a Beckmann distribution")
+            ak = next((k for k in keys if k.startswith("alpha")), None)
+            alpha = float(np.asarray(p[ak]).ravel()[0]) if ak else 0.1
+        elif name == "SmoothDielectric":
+            alpha = 1e-3
+        else:
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: boundary BSDF {name} is not a (rough) dielectric; the 8dna "
+                        "direct lobe stores a GGX rough dielectric (spec/kinds/8dna.md)")
+        eta = float(np.asarray(p["eta"]).ravel()[0]) if "eta" in keys else 1.5
+        found.add((round(eta, 6), round(alpha, 6)))
+    if len(found) != 1:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes have different boundaries {sorted(found)}; 8dna stores one")
+    return next(iter(found))
+
+
+class _Checkpoint:
+    """Torch training state (``weights_only`` load; no pickle code) keyed by the bake settings."""
+
+    def __init__(self, path: Path, key: dict) -> None:
+        self.path = path
+        self.key = json.dumps(key, sort_keys=True)
+
+    def load(self):
+        import torch
+
+        if not self.path.is_file():
+            return None
+        try:
+            state = torch.load(self.path, map_location="cpu", weights_only=True)
+        except Exception:  # noqa: BLE001 - a damaged checkpoint means starting over
+            return None
+        return state if state.get("key") == self.key else None
+
+    def save(self, state: dict) -> None:
+        import torch
+
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        torch.save({**state, "key": self.key}, tmp)
+        os.replace(tmp, self.path)
+
+
+def _save_npz(path: Path, data: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **data)
+    os.replace(tmp, path)
+
+
+def heldout_tuples(sampler, n: int, path: Path) -> dict:
+    """``n`` held-out tuples (separate seed), cached in ``path`` (.npz) for resumes."""
+    from .eightdna_sampler import FIELDS
+
+    if path.is_file():
+        with np.load(path, allow_pickle=False) as z:
+            if set(FIELDS) <= set(z.files) and len(z["beta"]) == n:
+                return {k: z[k] for k in FIELDS}
+    parts, have = [], 0
+    while have < n:
+        p = sampler.sample(max(2048, 3 * (n - have)))
+        parts.append(p)
+        have += len(p["beta"])
+    data = {k: np.concatenate([p[k] for p in parts])[:n] for k in FIELDS}
+    _save_npz(path, data)
+    return data
+
+
+def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
+    from . import scene as msc
+
+    if example is not None:
+        from .eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+        if example not in ("default", True, "heterogeneous"):
+            raise UsageError(f"unknown 8dna example {example!r} (default, heterogeneous)")
+        scene = write_example_scene(work / "example_scene", heterogeneous=example == "heterogeneous")
+        asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
+    if scene is None:
+        raise UsageError("give a scene file or --example")
+    scene = Path(scene)
+    mscene = msc.load_scene(mi, scene)
+    shapes = msc.pick_shapes(mscene, asset_ids or [], file=str(scene))
+    return scene, list(asset_ids), shapes
+
+
+def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=None, views=None, res=None, epochs=None,
+         spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False, summary_stream=None,
+         far_field: bool = False, **_ignored) -> dict:
+    """Run the whole 8dna bake; returns the summary dict (also stored in the asset's provenance).
+
+    ``far_field=True`` bakes the 6D far-field baseline instead (spec/bake-8dna.md#far-field): the same
+    asset layout, whose conditioners 3-4 ignore u_i (flows 1-2 untrained); only the benchmark uses it.
+    """
+    from converters.train_8dna import TRAIN_PRESETS, TrainSettings, _torch, heldout_nll, parity_with_sdk, train
+    from nasset_sdk.asset import AssetBuilder
+    from nasset_sdk.validate import validate_file
+
+    from . import CONVERTER_VERSION, load_mitsuba
+    from . import scene as msc
+    from .eightdna_sampler import OnlineBuffer, PathSampler
+
+    if size not in TRAIN_PRESETS:
+        raise UsageError(f"--size must be one of {sorted(TRAIN_PRESETS)}, got {size!r}")
+    for name, val in (("views", views), ("res", res), ("light-angle", light_angle)):
+        if val is not None:
+            raise UsageError(f"--{name} has no meaning for kind 8dna (forward path sampling needs no views or light; "
+                             "spec/bake-8dna.md#options)")
+    for name, val in (("epochs", epochs), ("spp", spp)):
+        if val is not None and int(val) < 1:
+            raise UsageError(f"--{name} must be >= 1, got {val}")
+    output = Path(output)
+    if output.suffix not in (".usdc", ".usda", ".usd"):
+        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
+    work = Path(resume) if resume else output.with_name(output.name + ".bake")
+    work.mkdir(parents=True, exist_ok=True)
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    times: dict[str, float] = {}
+    t_all = time.perf_counter()
+
+    # -- stage 1: scene -----------------------------------------------------------------------------
+    t = time.perf_counter()
+    _torch()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mi = load_mitsuba()
+    for w in caught:
+        say(f"warning: {w.message}")
+    if not mi.variant().startswith("llvm"):
+        raise error("CONVERT_BACKEND", f"the 8dna sampler needs a vectorised Mitsuba variant (llvm_ad_rgb), got {mi.variant()}")
+    mi.set_log_level(mi.LogLevel.Error)
+    scene, asset_ids, shapes = scene_shapes(mi, scene, asset_ids, example, work, say)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        geo = msc.mesh_geometry(mi, shapes)
+    for w in caught:
+        say(f"warning: {w.message}")
+    eta, alpha = boundary_of(mi, shapes)
+    builder = AssetBuilder("8dna", variant="surface")
+    builder.set_geometry(geo)
+    lo, hi = builder.domain
+    sp = SAMPLER_PRESETS[size]
+    tset = replace(TrainSettings(size=size, seed=seed, device=device, far_field=bool(far_field)), **TRAIN_PRESETS[size])
+    if epochs is not None:
+        tset = replace(tset, steps=int(epochs))
+    if spp is not None:
+        tset = replace(tset, buffer=int(spp) * 1000)
+    sampler = PathSampler(mi, shapes, lo, hi, rr_depth=sp["rr_depth"], max_depth=sp["max_depth"], seed=seed + 1)
+    held_sampler = PathSampler(mi, shapes, lo, hi, rr_depth=sp["rr_depth"], max_depth=sp["max_depth"], seed=seed + 7919)
+    times["scene_s"] = time.perf_counter() - t
+
+    # -- stage 2: held-out tuples --------------------------------------------------------------------
+    t = time.perf_counter()
+    from nasset_sdk.bake import _finite
+
+    scene_sha = __import__("hashlib").sha256(scene.read_bytes()).hexdigest()
+    key = {"scene_sha256": scene_sha, "shapes": asset_ids, "train": tset.__dict__, "sampler": sp, "version": BAKE_VERSION,
+           "domain": [list(map(float, lo)), list(map(float, hi))], "variant": mi.variant()}
+    say(f"held-out tuples: {sp['heldout']}")
+    held = heldout_tuples(held_sampler, sp["heldout"], work / f"heldout_{size}_{seed}.npz")
+    times["heldout_s"] = time.perf_counter() - t
+
+    # -- stage 3: train on the online buffer ---------------------------------------------------------
+    t = time.perf_counter()
+    fill = _tqdm(total=tset.buffer, desc="trace buffer", unit="tuple", disable=quiet, leave=False)
+
+    def fill_progress(have, total):
+        fill.total = total
+        fill.n = have
+        fill.refresh()
+
+    buffer = OnlineBuffer(sampler, tset.buffer, reuse=tset.reuse, progress=fill_progress)
+    bar = _tqdm(total=tset.steps, desc="train 6D far-field" if far_field else "train 8dna", unit="step", disable=quiet)
+
+    def progress(step, nll, l2):
+        bar.n = step
+        bar.set_postfix(nll=f"{nll:.3g}", albedo_l2=f"{l2:.3g}", refills=buffer.refreshes)
+        bar.refresh()
+
+    ckpt = _Checkpoint(work / ("train_state_farfield.pt" if far_field else "train_state.pt"), key)
+    try:
+        result = train(buffer, (lo, hi), tset, progress=progress, checkpoint=ckpt)
+    except KeyboardInterrupt:
+        bar.close()
+        fill.close()
+        say(f"\ninterrupted; training state kept in {work} -- rerun with --resume {work}")
+        raise
+    bar.close()
+    fill.close()
+    times["train_s"] = time.perf_counter() - t
+
+    # -- stage 4: export -----------------------------------------------------------------------------
+    t = time.perf_counter()
+    core = builder.component("core", required=True, purpose="evaluation", quality=None)
+    layouts = {"triplane": "plane,v,u,channel", "woCube": "face,t,s,channel", "s1Grid": "texel,channel",
+               "s3Grid": "texel,channel", "s12Cube": "face,t,s,channel", "splineMinimums": "parameter"}
+    for name, arr in result.tensors.items():
+        core.add_tensor(name, arr, dtype="float32", layout=layouts[name])
+    core.add_tensor("direct", np.array([eta, alpha], np.float32), dtype="float32", layout="parameter")
+    for name, data in result.networks.items():
+        core.add_network(name, data)
+    st = sampler.stats
+    prov = {
+        "generator": "nasset bake",
+        "converter": f"converters.mitsuba {CONVERTER_VERSION}",
+        "converterVersion": CONVERTER_VERSION,
+        "bake": BAKE_VERSION,
+        "model": "6D far-field baseline (conditioners 3-4 ignore u_i; flows 1-2 untrained)" if far_field else "8D",
+        "source": {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "scene": str(scene),
+                   "scene_sha256": scene_sha, "shapes": asset_ids, "example": example is not None,
+                   "bsdfs": msc.bsdf_names(shapes)},
+        "direct": {"eta": eta, "alpha": alpha},
+        "sampler": {**sp, "separate_direct": True, "tuples_traced": int(st["hits"]), "rays_started": int(st["started"]),
+                    "buffer_refreshes": int(result.refreshes), "mean_beta": None},
+        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
+                     "final_nll": result.history[-1]["nll"] if result.history else None,
+                     "final_albedo_l2": result.history[-1]["albedo_l2"] if result.history else None},
+        "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
+        "size": size,
+        "timings_s": {k: round(v, 3) for k, v in times.items()},
+    }
+    prov["sampler"]["mean_beta"] = [float(v) for v in held["beta"].mean(0)]
+    builder.provenance = _finite(prov)
+    path = builder.write(output)
+    times["export_s"] = time.perf_counter() - t
+
+    # -- stage 5: check the written asset ------------------------------------------------------------
+    t = time.perf_counter()
+    par = parity_with_sdk(result.model, path, {k: v[:2048] for k, v in held.items()}, far_field=far_field)
+    nll = heldout_nll(result.model, held, lo, hi, far_field=far_field)
+    rep = validate_file(path, probe=False)
+    if not rep.ok:
+        raise error("CONVERT_TRAINING", f"the written asset fails validation: {rep.format_text()[:400]}", file=str(path))
+    times["check_s"] = time.perf_counter() - t
+    times["total_s"] = time.perf_counter() - t_all
+    summary = {
+        "asset": str(path),
+        "kind": "8dna",
+        "model": prov["model"],
+        "asset_bytes": path.stat().st_size,
+        "work_dir": str(work),
+        "size": size,
+        "steps": tset.steps, "batch": tset.batch, "buffer": tset.buffer, "buffer_refreshes": result.refreshes,
+        "tuples_traced": int(st["hits"]), "heldout_tuples": int(len(held["beta"])),
+        "heldout_mean_beta": prov["sampler"]["mean_beta"],
+        "heldout_nll": nll,
+        "final_train_nll": prov["training"]["final_nll"],
+        "final_albedo_l2": prov["training"]["final_albedo_l2"],
+        "sdk_vs_torch": par,
+        "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
+        "validate": rep.counts,
+        "variant": mi.variant(), "device": result.device,
+        "times_s": {k: round(v, 2) for k, v in times.items()},
+    }
+    if not quiet:
+        _print_summary(summary, summary_stream or sys.stdout)
+    return _finite(summary)
+
+
+def _print_summary(s: dict, stream) -> None:
+    p = s["sdk_vs_torch"]
+    lines = [
+        f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB, {s['model']})",
+        f"  mitsuba {s['variant']} forward path sampler: {s['tuples_traced']} tuples traced, buffer {s['buffer']} x "
+        f"{s['buffer_refreshes']} fills; training on {s['device']}: {s['steps']} steps of {s['batch']}",
+        f"  held-out ({s['heldout_tuples']} tuples, kept in {s['work_dir']}): NLL {s['heldout_nll']:.3f} nats per unit beta, "
+        f"mean beta {', '.join(f'{v:.3f}' for v in s['heldout_mean_beta'])}",
+        f"  parity SDK vs torch: albedo max |diff| {p['albedo_max_abs']:.2e}, pdf max rel {p['pdf_max_rel']:.2e} "
+        f"(median {p['pdf_median_rel']:.1e}); ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
+        f"  validate: {s['validate']['error']} errors, {s['validate']['warning']} warnings",
+        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in s["times_s"].items()),
+    ]
+    print("\n".join(lines), file=stream)
+
+
+__all__ = ["bake", "boundary_of", "SAMPLER_PRESETS"]

@@ -1,0 +1,125 @@
+"""End-to-end Blender bakes: Cycles ground truth -> the rna trainer -> ONNX + tensors -> SDK and renderer.
+
+Tiny presets (each bake ~10 s on 2 cores). Needs bpy and torch (CI installs both); skipped without them.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
+torch = pytest.importorskip("torch", reason="bake tests need torch (pip install torch==2.13.0)")
+
+from converters.blender.bake import bake  # noqa: E402
+from converters.blender.dataset import DatasetDir, load_split  # noqa: E402
+from converters.train_rna import display_psnr  # noqa: E402
+from nasset_sdk.asset import Asset  # noqa: E402
+from nasset_sdk.errors import NassetError  # noqa: E402
+
+#: held-out display PSNR floors of the tiny bakes (spec/bake.md#psnr), seed 0. Measured 19.3 dB
+#: (surface) and 18.9 dB (hair) here; the floors leave ~4-5 dB for platform differences in Cycles'
+#: sampling and torch's summation order.
+FLOOR_DB = {"surface": 15.0, "fiber": 13.5}
+#: margin over the best constant colour (the held-out mean), a baseline computed independently of
+#: the model. Surface: measured +3.8 dB at tiny (19.3 vs 15.5 dB). Hair: the tiny preset (24 views = 24 sun
+#: directions, a 2 x 16 MLP) is barely better than a constant (measured +0.3 dB; 64 views and 60
+#: epochs: +1.2 dB): the test only requires it not to be clearly worse; hair quality is measured
+#: at the small preset in docs/bench-blender.md.
+BEAT_CONSTANT_DB = {"surface": 2.0, "fiber": -0.5}
+
+
+@pytest.fixture(scope="module", params=["blender-surface", "blender-hair"])
+def tiny(request, tmp_path_factory):
+    out = tmp_path_factory.mktemp("blender") / f"{request.param}.usdc"
+    summary = bake(None, None, out, size="tiny", example=request.param, quiet=True)
+    return request.param, out, summary
+
+
+def test_tiny_bake_end_to_end(tiny):
+    from nasset_sdk.validate import validate_file
+
+    example, out, s = tiny
+    variant = "fiber" if example == "blender-hair" else "surface"
+    assert s["variant"] == variant and out.stat().st_size == s["asset_bytes"]
+    report = validate_file(out)
+    assert report.ok, report.to_dict()
+    asset = Asset.open(out)
+    asset.load("all")
+    assert asset.kind == "rna" and asset.variant == variant
+    assert asset.provenance["source"]["example"] == example
+    assert asset.provenance["light"]["clamp_direct"] == 20.0 and asset.provenance["light"]["clamp_indirect"] == 10.0
+    # held-out quality: absolute floor and against the best constant colour
+    store = DatasetDir(s["dataset_dir"])
+    val = load_split(store, "val", s["val_views"], variant == "fiber")
+    const = np.broadcast_to(val["rgb"].mean(0), val["rgb"].shape)
+    base = display_psnr(const, val["rgb"])[0]
+    assert s["sdk_val_psnr_db"] >= FLOOR_DB[variant], s
+    assert s["sdk_val_psnr_db"] >= base + BEAT_CONSTANT_DB[variant], (s["sdk_val_psnr_db"], base)
+    assert abs(s["sdk_val_psnr_db"] - s["val_psnr_db"]) < 0.05 and s["sdk_vs_torch_max_abs"] < 1e-4
+    assert s["mask_disagreement"] < 0.1
+
+
+def test_tiny_bake_renders_in_the_converted_scene(tiny, tmp_path):
+    """convert-scene --replace puts the asset in the example scene; the reference renderer shades it."""
+    import warnings
+
+    from converters.blender.examples import EXAMPLES
+    from converters.blender.usd_export import convert_scene
+    from reference_renderer import RenderSettings, load_scene, render
+
+    example, out, _ = tiny
+    res = convert_scene(None, tmp_path / "scene.usda", replace={EXAMPLES[example][0]: out}, example=example)
+    assert not [c for c in res.usd_checks if c["severity"] == "error"], res.usd_checks
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(str(res.output))
+    r = render(scene, RenderSettings(spp=2, width=32, height=32, max_depth=3))
+    assert np.isfinite(r.image).all() and (r.image >= 0).all()
+    assert r.stats.network_evals > 0
+
+
+def test_resume_reuses_the_dataset(tiny, tmp_path):
+    example, out, s = tiny
+    if example != "blender-surface":
+        pytest.skip("one resume check is enough")
+    again = bake(None, None, tmp_path / "again.usdc", size="tiny", example=example, quiet=True, resume=s["dataset_dir"],
+                 epochs=2)
+    assert again["times_s"]["dataset_s"] < s["times_s"]["dataset_s"] + 5  # loads, does not re-render
+    assert again["train_samples"] == s["train_samples"]
+    meta = json.loads((DatasetDir(s["dataset_dir"]).root / "meta.json").read_text())
+    assert meta["variant"] == "surface" and meta["source"] == "example:blender-surface"
+    with pytest.raises(NassetError) as e:  # other settings, same folder
+        bake(None, None, tmp_path / "other.usdc", size="tiny", example=example, quiet=True, resume=s["dataset_dir"], res=20)
+    assert e.value.code == "CONVERT_DATASET"
+
+
+def test_bake_typed_errors(tmp_path):
+    with pytest.raises(NassetError) as e:
+        bake(tmp_path / "missing.blend", ["Monkey"], tmp_path / "a.usdc", size="tiny", quiet=True)
+    assert e.value.code == "CONVERT_SCENE_MISSING"
+    from converters.blender.examples import write_example_blend
+
+    blend = write_example_blend("blender-surface", tmp_path)
+    with pytest.raises(NassetError) as e:
+        bake(blend, ["NotThere"], tmp_path / "a.usdc", size="tiny", quiet=True)
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
+
+
+@pytest.mark.slow
+def test_bench_blender_quick_runs(tmp_path):
+    """``nasset bench blender`` end to end at toy sizes: report, plot, images, finite numbers."""
+    from converters.blender.bench import run_bench, summary_text
+
+    r = run_bench(tmp_path, size="tiny", res=32, gt_spp=64, cy_spp=[4, 16], nr_spp=[1, 4], max_depth=4, quiet=True)
+    assert (tmp_path / "blender_error_vs_time.png").stat().st_size > 1000
+    assert json.loads((tmp_path / "blender_error_vs_time.json").read_text())["benchmark"] == "blender error-vs-time"
+    for e in r["examples"]:
+        assert all(np.isfinite(p["mse"]) and p["time_s"] > 0 for p in e["cycles_points"] + e["neural_points"])
+        # Cycles converges: its error falls with spp (4x the samples, well under half the error)
+        assert e["cycles_points"][1]["mse_raw"] < 0.6 * e["cycles_points"][0]["mse_raw"]
+    a = r["h_ablation"]
+    assert np.isfinite(a["with_h"]["val_psnr_db"]) and np.isfinite(a["without_h"]["val_psnr_db"])
+    assert "h ablation" in summary_text(r)

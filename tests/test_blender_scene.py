@@ -1,0 +1,96 @@
+"""Blender scene access: examples, geometry export (meshes, hair curves, particle hair), typed errors.
+
+Needs Blender's Python module (``pip install bpy``, installed in CI); skipped without it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
+
+from converters.blender import Z_UP_TO_Y_UP, to_y_up, to_z_up  # noqa: E402
+from converters.blender import scene as bsc  # noqa: E402
+from converters.blender.examples import build_example, hair_strands, write_example_blend  # noqa: E402
+from nasset_sdk.errors import NassetError  # noqa: E402
+from nasset_sdk.geometry import CurvesGeometry, MeshGeometry  # noqa: E402
+
+
+def test_axis_conversion_is_a_rotation():
+    assert np.allclose(Z_UP_TO_Y_UP @ Z_UP_TO_Y_UP.T, np.eye(3)) and np.isclose(np.linalg.det(Z_UP_TO_Y_UP), 1.0)
+    assert np.allclose(to_y_up([[0.0, 0.0, 1.0]]), [[0.0, 1.0, 0.0]])  # Blender up -> USD up
+    v = np.random.default_rng(0).normal(size=(5, 3))
+    assert np.allclose(to_z_up(to_y_up(v)), v)
+
+
+def test_hair_example_exports_basis_curves_with_widths():
+    names = build_example("blender-hair")
+    objs = bsc.pick_objects(names)
+    variant, geo, notes = bsc.asset_geometry(objs)
+    assert variant == "fiber" and isinstance(geo, CurvesGeometry) and notes == []
+    pts, radius = hair_strands()  # the generator's own strands, Blender space
+    assert len(geo.counts) == 1000 and (geo.counts == 12).all()
+    assert np.allclose(geo.points, to_y_up(pts), atol=1e-5)
+    assert np.allclose(geo.widths, 2.0 * radius, rtol=1e-5)
+    lo, hi = geo.bounds()
+    assert lo[1] >= 0.0 - 1e-3 and hi[1] > 0.5  # +Y up: the tuft stands on the ground
+
+
+def test_surface_example_exports_smooth_triangles():
+    names = build_example("blender-surface")
+    variant, geo, _ = bsc.asset_geometry(bsc.pick_objects(names))
+    assert variant == "surface" and isinstance(geo, MeshGeometry)
+    geo.validate()
+    assert len(geo.faces) > 1000  # Suzanne with one subdivision level
+    assert np.allclose(np.linalg.norm(geo.normals, axis=1), 1.0, atol=1e-4)
+    # outward normals: the mean of n . (p - centroid) over vertices is clearly positive
+    c = geo.points.mean(0)
+    assert float(np.mean(np.sum(geo.normals * (geo.points - c), 1))) > 0.05
+
+
+def test_particle_hair_becomes_curves():
+    build_example("blender-surface")
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(0.0, 3.0, 0.0))
+    ob = bpy.context.active_object
+    ob.name = "Fur"
+    ob.modifiers.new("hair", type="PARTICLE_SYSTEM")
+    st = ob.particle_systems[0].settings
+    st.type = "HAIR"
+    st.count = 40
+    st.hair_length = 0.2
+    st.root_radius, st.tip_radius, st.radius_scale = 1.0, 0.5, 0.004
+    bpy.context.view_layer.update()
+    variant, geo, _ = bsc.asset_geometry([ob])
+    assert variant == "fiber" and len(geo.counts) == 40 and (geo.counts >= 2).all()
+    first = np.concatenate([[0], np.cumsum(geo.counts)[:-1]])
+    length = [np.linalg.norm(np.diff(geo.points[a:a + n], axis=0), axis=1).sum() for a, n in zip(first, geo.counts, strict=True)]
+    assert np.allclose(length, 0.2, rtol=0.05)  # strands of the requested length
+    assert np.isclose(geo.widths[first].mean(), 0.004, rtol=1e-3)  # root width = root radius x scale
+    assert geo.widths[first + geo.counts - 1].mean() < geo.widths[first].mean()
+
+
+def test_mixed_mesh_and_hair_is_rejected():
+    build_example("blender-hair")
+    with pytest.raises(NassetError) as e:
+        bsc.asset_geometry(bsc.pick_objects(["Hair", "Scalp"]))
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED"
+
+
+def test_missing_blend_and_unknown_object(tmp_path):
+    with pytest.raises(NassetError) as e:
+        bsc.open_blend(tmp_path / "nope.blend")
+    assert e.value.code == "CONVERT_SCENE_MISSING" and "nope.blend" in str(e.value)
+    bad = tmp_path / "bad.blend"
+    bad.write_bytes(b"not a blend file")
+    with pytest.raises(NassetError) as e:
+        bsc.open_blend(bad)
+    assert e.value.code == "CONVERT_SCENE_LOAD"
+    path = write_example_blend("blender-surface", tmp_path)
+    bsc.open_blend(path)
+    with pytest.raises(NassetError) as e:
+        bsc.pick_objects(["Nobody"], file=str(path))
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
+    with pytest.raises(NassetError) as e:
+        bsc.pick_objects(["Camera"], file=str(path))
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED"
