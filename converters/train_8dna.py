@@ -298,16 +298,9 @@ def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=
                             {"params": list(model.albedo.parameters()) + list(model.flows.parameters()), "lr": settings.lr}])
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(settings.steps, 1), eta_min=0.05 * settings.lr)
     steps = (3, 4) if settings.far_field else (1, 2, 3, 4)
-    history: list = []
-    start = 0
-    if checkpoint is not None:
-        state = checkpoint.load()
-        if state:
-            model.load_state_dict(state["model"])
-            opt.load_state_dict(state["opt"])
-            sched.load_state_dict(state["sched"])
-            history = list(state.get("history", []))
-            start = int(state["step"])
+    state = checkpoint.restore(model, opt, sched) if checkpoint is not None else None
+    history: list = list(state.get("history", [])) if state else []
+    start = int(state["step"]) if state else 0
     acc = [0.0, 0.0, 0]
     for step in range(start, settings.steps):
         model.train()

@@ -215,11 +215,8 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=step, gamma=0.5)
     history: list = []
     start = 0
-    state = checkpoint.load() if checkpoint is not None else None
+    state = checkpoint.restore(model, opt, sched) if checkpoint is not None else None
     if state is not None:
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["opt"])
-        sched.load_state_dict(state["sched"])
         G = state["G"].numpy()
         history = list(state.get("history", []))
         start = int(state["epoch"]) + 1

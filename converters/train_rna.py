@@ -320,16 +320,9 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     ])
     step = max(1, int(round(settings.decay_every * settings.epochs)))
     sched = torch.optim.lr_scheduler.StepLR(opt, step_size=step, gamma=0.5)
-    history: list = []
-    start = 0
-    if checkpoint is not None:
-        state = checkpoint.load()
-        if state:
-            model.load_state_dict(state["model"])
-            opt.load_state_dict(state["opt"])
-            sched.load_state_dict(state["sched"])
-            history = list(state.get("history", []))
-            start = int(state["epoch"])
+    state = checkpoint.restore(model, opt, sched) if checkpoint is not None else None
+    history: list = list(state.get("history", [])) if state else []
+    start = int(state["epoch"]) if state else 0
     n = len(T["xn"])
     g = torch.Generator(device="cpu").manual_seed(settings.seed)
     for epoch in range(start, settings.epochs):
@@ -412,6 +405,15 @@ class TorchCheckpoint:
         if state.get("key") != json.dumps(self.key, sort_keys=True):
             return None
         return state
+
+    def restore(self, model, opt, sched) -> dict | None:
+        """Put a matching checkpoint's model, optimiser and scheduler state back; returns it (None: start fresh)."""
+        state = self.load()
+        if state:
+            model.load_state_dict(state["model"])
+            opt.load_state_dict(state["opt"])
+            sched.load_state_dict(state["sched"])
+        return state or None
 
     def save(self, state: dict) -> None:
         import json

@@ -47,13 +47,24 @@ def _finite(v):
         return {k: _finite(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
         return [_finite(x) for x in v]
+    if isinstance(v, (np.floating, np.integer)):
+        return _finite(v.item())
     return v
 
 
-def _tqdm(**kw):
-    from tqdm.auto import tqdm
+def check_options(size: str, presets, output, **counts) -> Path:
+    """Argument checks every baker shares: a known preset, counts >= 1 where given, an asset file name.
 
-    return tqdm(**kw)
+    Returns ``output`` as a Path; raises UsageError."""
+    if size not in presets:
+        raise UsageError(f"--size must be one of {sorted(presets)}, got {size!r}")
+    for name, val in counts.items():
+        if val is not None and int(val) < 1:
+            raise UsageError(f"--{name} must be >= 1, got {val}")
+    output = Path(output)
+    if output.suffix not in (".usdc", ".usda", ".usd"):
+        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
+    return output
 
 
 def bake(
@@ -76,6 +87,7 @@ def bake(
     summary_stream=None,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    from converters.bake_stages import render_views, train_with_progress
     from converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from converters.mitsuba import dataset as ds
     from converters.mitsuba import scene as msc
@@ -83,16 +95,9 @@ def bake(
 
     from .asset import AssetBuilder
 
-    if size not in DATA_PRESETS:
-        raise UsageError(f"--size must be one of {sorted(DATA_PRESETS)}, got {size!r}")
-    for name, val in (("views", views), ("res", res), ("epochs", epochs), ("spp", spp)):
-        if val is not None and int(val) < 1:
-            raise UsageError(f"--{name} must be >= 1, got {val}")
+    output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
-    output = Path(output)
-    if output.suffix not in (".usdc", ".usda", ".usd"):
-        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
@@ -143,20 +148,9 @@ def bake(
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(scene, asset_ids, dset, mi.variant())
     store.prepare(meta)
-    jobs = [("train", i) for i in range(dset.views)] + [("val", i) for i in range(dset.val_views)]
-    todo = [j for j in jobs if not store.has(*j)]
-    if len(todo) < len(jobs):
-        say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
-    try:
-        bar = _tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="render views", unit="view", disable=quiet)
-        for split, i in todo:
-            data = ds.render_view(renderer, center, radius, i, validation=split == "val")
-            store.save(split, i, data)
-            bar.update(1)
-        bar.close()
-    except KeyboardInterrupt:
-        say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")
-        raise
+    render_views(store, dset.views, dset.val_views,
+                 lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val"),
+                 desc="render views", work=work, quiet=quiet, say=say)
     train_data = store.load_split("train", dset.views)
     val_data = store.load_split("val", dset.val_views)
     times["dataset_s"] = time.perf_counter() - t
@@ -173,23 +167,9 @@ def bake(
         tset = replace(tset, epochs=int(epochs))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
-    bar = _tqdm(total=tset.epochs, desc="train", unit="epoch", disable=quiet)
-    last = {"psnr": float("nan")}
-
-    def progress(epoch, loss, val_psnr):
-        if math.isfinite(val_psnr):
-            last["psnr"] = val_psnr
-        bar.n = epoch + 1
-        bar.set_postfix(loss=f"{loss:.3g}", val_psnr=f"{last['psnr']:.2f}")
-        bar.refresh()
-
-    try:
-        result = train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt)
-    except KeyboardInterrupt:
-        bar.close()
-        say(f"\ninterrupted; dataset and training state kept in {work} -- rerun with --resume {work}")
-        raise
-    bar.close()
+    result = train_with_progress(
+        lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
+        total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)
     times["train_s"] = time.perf_counter() - t
 
     # -- stage 4: export --------------------------------------------------------------------------

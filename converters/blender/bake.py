@@ -16,7 +16,6 @@ asset with h fixed to 0.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 import warnings
@@ -37,36 +36,24 @@ DATA_PRESETS = {
 DEFAULT_LIGHT_ANGLE = 0.5
 
 
-def _tqdm(**kw):
-    from tqdm.auto import tqdm
-
-    return tqdm(**kw)
-
-
 def bake(
     scene, asset_ids, output, *, size: str = "small", example: str | None = None, resume=None, views=None, res=None,
     epochs=None, spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False,
     summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, **_ignored,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    from converters.bake_stages import render_views, train_with_progress
     from converters.train_rna import TRAIN_PRESETS, TorchCheckpoint, TrainSettings, _torch, train
     from nasset_sdk.asset import AssetBuilder
-    from nasset_sdk.bake import _finite
+    from nasset_sdk.bake import _finite, check_options
 
     from . import CONVERTER_VERSION, load_bpy
     from . import dataset as ds
     from . import scene as bsc
 
-    if size not in DATA_PRESETS:
-        raise UsageError(f"--size must be one of {sorted(DATA_PRESETS)}, got {size!r}")
-    for name, val in (("views", views), ("res", res), ("epochs", epochs), ("spp", spp)):
-        if val is not None and int(val) < 1:
-            raise UsageError(f"--{name} must be >= 1, got {val}")
+    output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
-    output = Path(output)
-    if output.suffix not in (".usdc", ".usda", ".usd"):
-        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
     if example is not None and scene is not None:
         raise UsageError("give a .blend scene or --example, not both")
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
@@ -120,22 +107,13 @@ def bake(
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(source_key, asset_ids, variant, dset)
     store.prepare(meta)
-    jobs = [("train", i) for i in range(dset.views)] + [("val", i) for i in range(dset.val_views)]
-    todo = [j for j in jobs if not store.has(*j)]
-    if len(todo) < len(jobs):
-        say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
+    def render_one(split, i):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return ds.render_view(rig, caster, center, radius, i, validation=split == "val")
+
     try:
-        bar = _tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="cycles views", unit="view", disable=quiet)
-        for split, i in todo:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                data = ds.render_view(rig, caster, center, radius, i, validation=split == "val")
-            store.save(split, i, data)
-            bar.update(1)
-        bar.close()
-    except KeyboardInterrupt:
-        say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")
-        raise
+        render_views(store, dset.views, dset.val_views, render_one, desc="cycles views", work=work, quiet=quiet, say=say)
     finally:
         rig.close()
     fiber = variant == "fiber"
@@ -160,23 +138,9 @@ def bake(
     ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
                            {"data": meta, "train": tset.__dict__, "h_input": h_input,
                             "domain": [list(map(float, d)) for d in domain]})
-    bar = _tqdm(total=tset.epochs, desc="train", unit="epoch", disable=quiet)
-    last = {"psnr": float("nan")}
-
-    def progress(epoch, loss, val_psnr):
-        if math.isfinite(val_psnr):
-            last["psnr"] = val_psnr
-        bar.n = epoch + 1
-        bar.set_postfix(loss=f"{loss:.3g}", val_psnr=f"{last['psnr']:.2f}")
-        bar.refresh()
-
-    try:
-        result = train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt)
-    except KeyboardInterrupt:
-        bar.close()
-        say(f"\ninterrupted; dataset and training state kept in {work} -- rerun with --resume {work}")
-        raise
-    bar.close()
+    result = train_with_progress(
+        lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
+        total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)
     times["train_s"] = time.perf_counter() - t
 
     # -- stage 4: export --------------------------------------------------------------------------

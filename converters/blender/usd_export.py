@@ -18,14 +18,12 @@ lat-long OpenEXR with Blender's equirectangular orientation).
 
 from __future__ import annotations
 
-import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, _Converter, parse_replace, usd_check  # noqa: F401
+from converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, _Converter, parse_replace, report, usd_check  # noqa: F401
 from nasset_sdk.errors import UsageError, error
 
 from . import Z_UP_TO_Y_UP
@@ -401,16 +399,4 @@ def run(args) -> int:
     if bool(example) == bool(scene):
         raise UsageError("give a .blend scene or --example blender-surface|blender-hair (not both)")
     res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks, example=example)
-    for w in res.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    bad = [c for c in res.usd_checks if c["severity"] == "error"]
-    for c in res.usd_checks:
-        print(f"usd-check {c['severity']}: {c['name']} {c['prim'] or ''}: {c['message']}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(res.to_dict(), indent=2))
-    else:
-        print(f"wrote {res.output}: {len(res.prims)} prims, {len(res.replaced)} neural asset reference(s), "
-              f"{len(res.warnings)} warning(s)")
-        for path, what in res.prims.items():
-            print(f"  {path:40s} <- {what}")
-    return 1 if bad else 0
+    return report(res, as_json=args.json)

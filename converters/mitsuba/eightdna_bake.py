@@ -17,7 +17,6 @@ optimisation steps and ``--spp N`` the online buffer size in thousands of tuples
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -27,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from converters.bake_stages import progress_bar
+from nasset_sdk.bake import _finite, check_options
 from nasset_sdk.errors import UsageError, error
 
 #: sampler presets: held-out tuples, Russian-roulette start, depth cap
@@ -36,12 +37,6 @@ SAMPLER_PRESETS = {
     "hq": dict(heldout=65536, rr_depth=8, max_depth=4096),
 }
 BAKE_VERSION = "8dna-0.1.0"
-
-
-def _tqdm(**kw):
-    from tqdm.auto import tqdm
-
-    return tqdm(**kw)
 
 
 def boundary_of(mi, shapes) -> tuple[float, float]:
@@ -68,32 +63,6 @@ def boundary_of(mi, shapes) -> tuple[float, float]:
     if len(found) != 1:
         raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes have different boundaries {sorted(found)}; 8dna stores one")
     return next(iter(found))
-
-
-class _Checkpoint:
-    """Torch training state (``weights_only`` load; no pickle code) keyed by the bake settings."""
-
-    def __init__(self, path: Path, key: dict) -> None:
-        self.path = path
-        self.key = json.dumps(key, sort_keys=True)
-
-    def load(self):
-        import torch
-
-        if not self.path.is_file():
-            return None
-        try:
-            state = torch.load(self.path, map_location="cpu", weights_only=True)
-        except Exception:  # noqa: BLE001 - a damaged checkpoint means starting over
-            return None
-        return state if state.get("key") == self.key else None
-
-    def save(self, state: dict) -> None:
-        import torch
-
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        torch.save({**state, "key": self.key}, tmp)
-        os.replace(tmp, self.path)
 
 
 def _save_npz(path: Path, data: dict) -> None:
@@ -147,6 +116,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     asset layout, whose conditioners 3-4 ignore u_i (flows 1-2 untrained); only the benchmark uses it.
     """
     from converters.train_8dna import TRAIN_PRESETS, TrainSettings, _torch, heldout_nll, parity_with_sdk, train
+    from converters.train_rna import TorchCheckpoint
     from nasset_sdk.asset import AssetBuilder
     from nasset_sdk.validate import validate_file
 
@@ -154,18 +124,11 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     from . import scene as msc
     from .eightdna_sampler import OnlineBuffer, PathSampler
 
-    if size not in TRAIN_PRESETS:
-        raise UsageError(f"--size must be one of {sorted(TRAIN_PRESETS)}, got {size!r}")
+    output = check_options(size, TRAIN_PRESETS, output, epochs=epochs, spp=spp)
     for name, val in (("views", views), ("res", res), ("light-angle", light_angle)):
         if val is not None:
             raise UsageError(f"--{name} has no meaning for kind 8dna (forward path sampling needs no views or light; "
                              "spec/bake-8dna.md#options)")
-    for name, val in (("epochs", epochs), ("spp", spp)):
-        if val is not None and int(val) < 1:
-            raise UsageError(f"--{name} must be >= 1, got {val}")
-    output = Path(output)
-    if output.suffix not in (".usdc", ".usda", ".usd"):
-        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     work.mkdir(parents=True, exist_ok=True)
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
@@ -205,7 +168,6 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
 
     # -- stage 2: held-out tuples --------------------------------------------------------------------
     t = time.perf_counter()
-    from nasset_sdk.bake import _finite
 
     scene_sha = __import__("hashlib").sha256(scene.read_bytes()).hexdigest()
     key = {"scene_sha256": scene_sha, "shapes": asset_ids, "train": tset.__dict__, "sampler": sp, "version": BAKE_VERSION,
@@ -216,7 +178,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
 
     # -- stage 3: train on the online buffer ---------------------------------------------------------
     t = time.perf_counter()
-    fill = _tqdm(total=tset.buffer, desc="trace buffer", unit="tuple", disable=quiet, leave=False)
+    fill = progress_bar(total=tset.buffer, desc="trace buffer", unit="tuple", disable=quiet, leave=False)
 
     def fill_progress(have, total):
         fill.total = total
@@ -224,14 +186,14 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         fill.refresh()
 
     buffer = OnlineBuffer(sampler, tset.buffer, reuse=tset.reuse, progress=fill_progress)
-    bar = _tqdm(total=tset.steps, desc="train 6D far-field" if far_field else "train 8dna", unit="step", disable=quiet)
+    bar = progress_bar(total=tset.steps, desc="train 6D far-field" if far_field else "train 8dna", unit="step", disable=quiet)
 
     def progress(step, nll, l2):
         bar.n = step
         bar.set_postfix(nll=f"{nll:.3g}", albedo_l2=f"{l2:.3g}", refills=buffer.refreshes)
         bar.refresh()
 
-    ckpt = _Checkpoint(work / ("train_state_farfield.pt" if far_field else "train_state.pt"), key)
+    ckpt = TorchCheckpoint(work / ("train_state_farfield.pt" if far_field else "train_state.pt"), key)
     try:
         result = train(buffer, (lo, hi), tset, progress=progress, checkpoint=ckpt)
     except KeyboardInterrupt:

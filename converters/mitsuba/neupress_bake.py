@@ -13,7 +13,6 @@ written atomically.
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 import warnings
@@ -22,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk.bake import _finite, check_options
 from nasset_sdk.errors import UsageError, error
 
 #: data presets (neupress_data.NeupressDataSettings fields); measured in spec/bake-neupress.md
@@ -31,24 +31,6 @@ DATA_PRESETS = {
     "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
 }
 EXAMPLES = ("default",)
-
-
-def _finite(v):
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _finite(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_finite(x) for x in v]
-    if isinstance(v, (np.floating, np.integer)):
-        return _finite(v.item())
-    return v
-
-
-def _tqdm(**kw):
-    from tqdm.auto import tqdm
-
-    return tqdm(**kw)
 
 
 def bake(
@@ -73,6 +55,7 @@ def bake(
     """Run the whole neupress bake; returns the summary dict (also stored in the asset's provenance).
 
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
+    from converters.bake_stages import progress_bar, render_views, train_with_progress
     from converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from converters.mitsuba import dataset as ds
     from converters.mitsuba import neupress_data as nd
@@ -91,20 +74,13 @@ def bake(
     )
     from nasset_sdk.asset import AssetBuilder
 
-    if size not in DATA_PRESETS:
-        raise UsageError(f"--size must be one of {sorted(DATA_PRESETS)}, got {size!r}")
-    for name, val in (("views", views), ("res", res), ("epochs", epochs), ("spp", spp)):
-        if val is not None and int(val) < 1:
-            raise UsageError(f"--{name} must be >= 1, got {val}")
+    output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
     if light_angle not in (None, 0, 0.0):
         raise UsageError("--light-angle is not used by neupress bakes (delta lights through a rough boundary); leave it unset")
     if example is True:
         example = "default"
     if example not in (None, False) and example not in EXAMPLES:
         raise UsageError(f"unknown neupress example {example!r} ({', '.join(EXAMPLES)})")
-    output = Path(output)
-    if output.suffix not in (".usdc", ".usda", ".usd"):
-        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
@@ -152,19 +128,9 @@ def bake(
     store = ds.DatasetDir(work)
     meta = {**ds.settings_digest(scene, asset_ids, dset, mi.variant()), "kind": "neupress"}
     store.prepare(meta)
-    jobs = [("train", i) for i in range(dset.views)] + [("val", i) for i in range(dset.val_views)]
-    todo = [j for j in jobs if not store.has(*j)]
-    if len(todo) < len(jobs):
-        say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
-    try:
-        bar = _tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc="render views", unit="view", disable=quiet)
-        for split, i in todo:
-            store.save(split, i, nd.render_view(renderer, center, radius, i, validation=split == "val"))
-            bar.update(1)
-        bar.close()
-    except KeyboardInterrupt:
-        say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")
-        raise
+    render_views(store, dset.views, dset.val_views,
+                 lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val"),
+                 desc="render views", work=work, quiet=quiet, say=say)
     train_data = nd.load_split(store, "train", dset.views)
     val_data = nd.load_split(store, "val", dset.val_views)
     times["dataset_s"] = time.perf_counter() - t
@@ -181,27 +147,13 @@ def bake(
         tset = replace(tset, epochs=int(epochs))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
-    bar = _tqdm(total=tset.epochs, desc="train appearance", unit="epoch", disable=quiet)
-    last = {"psnr": float("nan")}
-
-    def progress(epoch, loss, val_psnr):
-        if math.isfinite(val_psnr):
-            last["psnr"] = val_psnr
-        bar.n = epoch + 1
-        bar.set_postfix(loss=f"{loss:.3g}", val_psnr=f"{last['psnr']:.2f}")
-        bar.refresh()
-
-    try:
-        app = train_appearance(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt)
-    except KeyboardInterrupt:
-        bar.close()
-        say(f"\ninterrupted; dataset and training state kept in {work} -- rerun with --resume {work}")
-        raise
-    bar.close()
+    app = train_with_progress(
+        lambda progress: train_appearance(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
+        total=tset.epochs, desc="train appearance", work=work, quiet=quiet, say=say)
     times["train_appearance_s"] = time.perf_counter() - t
 
     t = time.perf_counter()
-    bar = _tqdm(total=tset.sampling_epochs, desc="train sampling (KL)", unit="epoch", disable=quiet)
+    bar = progress_bar(total=tset.sampling_epochs, desc="train sampling (KL)", unit="epoch", disable=quiet)
 
     def sprog(epoch, kl):
         bar.n = epoch + 1
@@ -214,7 +166,7 @@ def bake(
 
     t = time.perf_counter()
     normals = vertex_normals(geo)
-    bar = _tqdm(total=len(geo.points), desc="SH PRT", unit="vertex", disable=quiet)
+    bar = progress_bar(total=len(geo.points), desc="SH PRT", unit="vertex", disable=quiet)
 
     def pprog(done):
         bar.n = done

@@ -756,6 +756,23 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     return _Converter(mi, mscene, scene, output, rep, check_usd).run()
 
 
+def report(res: "ConvertResult", *, as_json: bool) -> int:
+    """Print a conversion's warnings, USD check findings and result (or JSON); exit code 1 on USD check errors."""
+    for w in res.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    bad = [c for c in res.usd_checks if c["severity"] == "error"]
+    for c in res.usd_checks:
+        print(f"usd-check {c['severity']}: {c['name']} {c['prim'] or ''}: {c['message']}", file=sys.stderr)
+    if as_json:
+        print(json.dumps(res.to_dict(), indent=2))
+    else:
+        print(f"wrote {res.output}: {len(res.prims)} prims, {len(res.replaced)} neural asset reference(s), "
+              f"{len(res.warnings)} warning(s)")
+        for path, what in res.prims.items():
+            print(f"  {path:40s} <- {what}")
+    return 1 if bad else 0
+
+
 def run(args) -> int:
     """CLI entry: ``nasset convert-scene SCENE.xml -o SCENE.usda [--replace ID=ASSET ...] [--json]``."""
     scene = args.scene
@@ -766,16 +783,4 @@ def run(args) -> int:
 
         scene = write_example_scene(Path(args.output).resolve().parent / "example_scene")
     res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks)
-    for w in res.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    bad = [c for c in res.usd_checks if c["severity"] == "error"]
-    for c in res.usd_checks:
-        print(f"usd-check {c['severity']}: {c['name']} {c['prim'] or ''}: {c['message']}", file=sys.stderr)
-    if args.json:
-        print(json.dumps(res.to_dict(), indent=2))
-    else:
-        print(f"wrote {res.output}: {len(res.prims)} prims, {len(res.replaced)} neural asset reference(s), "
-              f"{len(res.warnings)} warning(s)")
-        for path, what in res.prims.items():
-            print(f"  {path:40s} <- {what}")
-    return 1 if bad else 0
+    return report(res, as_json=args.json)
