@@ -224,23 +224,20 @@ def bake(
 
 
 def check_asset(path, val_data: dict, result) -> dict:
-    """Re-open the asset and evaluate it with the SDK on the held-out samples."""
-    from converters.train_rna import _torch, display_psnr, predict, select_branch
+    """Re-open the asset and evaluate it with the SDK on the held-out samples (rna surface, or fiber with ``h``)."""
+    from converters.train_rna import _tensors, _torch, display_psnr, predict, select_branch
 
     from .asset import Asset
-    from .kinds.encodings import to_unit_box
 
     asset = Asset.open(path)
     asset.load("all")
     ev = asset.evaluator()
-    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"])
+    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"], val_data.get("h"))
     y_sdk = np.concatenate([un, sh], axis=1)
     torch = _torch()
     dev = next(result.model.parameters()).device
     lo, hi = asset.domain
-    T = {k: torch.as_tensor(np.ascontiguousarray(v, np.float32), device=dev) for k, v in
-         {"xn": to_unit_box(val_data["x"], lo, hi), "n": val_data["n"], "wo": val_data["wo"], "wi": val_data["wi"]}.items()}
-    y_torch = np.maximum(predict(result.model, T), 0.0)
+    y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
     diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
     psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
     return {"psnr_db": psnr, "max_abs_diff": diff}

@@ -45,7 +45,7 @@ def bake(
     from converters.bake_stages import render_views, train_with_progress
     from converters.train_rna import TRAIN_PRESETS, TorchCheckpoint, TrainSettings, _torch, train
     from nasset_sdk.asset import AssetBuilder
-    from nasset_sdk.bake import _finite, check_options
+    from nasset_sdk.bake import _finite, check_asset, check_options
 
     from . import CONVERTER_VERSION, load_bpy
     from . import dataset as ds
@@ -189,25 +189,6 @@ def bake(
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
     return summary
-
-
-def check_asset(path, val_data: dict, result) -> dict:
-    """Re-open the asset and evaluate it with the SDK on the held-out samples (surface or fiber)."""
-    from converters.train_rna import _tensors, _torch, display_psnr, predict, select_branch
-    from nasset_sdk.asset import Asset
-
-    asset = Asset.open(path)
-    asset.load("all")
-    ev = asset.evaluator()
-    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"], val_data.get("h"))
-    y_sdk = np.concatenate([un, sh], axis=1)
-    torch = _torch()
-    dev = next(result.model.parameters()).device
-    lo, hi = asset.domain
-    y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
-    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
-    psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
-    return {"psnr_db": psnr, "max_abs_diff": diff}
 
 
 def _print_summary(s: dict, stream) -> None:

@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from converters.mitsuba.bench import _machine
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
@@ -498,17 +499,6 @@ def _prov(path) -> dict | None:
                 "steps": (p.get("training") or {}).get("steps"), "train_s": (p.get("timings_s") or {}).get("train_s")}
     except Exception:  # noqa: BLE001 - informative only
         return None
-
-
-def _machine() -> dict:
-    import os
-    import platform
-
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count()
-    return {"cpu": platform.processor() or platform.machine(), "usable_cores": cores, "load_avg": list(os.getloadavg())}
 
 
 def _tonemap(img, scale):
