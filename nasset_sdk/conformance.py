@@ -1,7 +1,7 @@
 """``nasset conformance``: run a renderer on the conformance cases and compare with the references.
 
-The cases live in the repository's ``tests/conformance/cases/<case>/`` (scene.usda, assets,
-reference.exr, case.json); spec/conformance.md describes the suite, the metric, the tolerances
+The cases are package data of the SDK, ``nasset_sdk/conformance_cases/<case>/`` (scene.usda, assets,
+reference.exr, case.json), so the suite runs from an installed wheel; spec/conformance.md describes the suite, the metric, the tolerances
 and the command-template contract. Any renderer can be checked: ``--renderer`` is a command
 template with ``{scene} {out} {spp} {width} {height} {seed}`` placeholders, split like a shell
 command line (no shell runs it). Exit code 0 when every case passes, 1 otherwise.
@@ -26,6 +26,8 @@ from .errors import UsageError
 DEFAULT_RENDERER = "nasset render {scene} -o {out} --spp {spp} --seed {seed} --width {width} --height {height} --quiet"
 PLACEHOLDERS = ("scene", "out", "spp", "width", "height", "seed")
 SUITE_ENV = "NASSET_CONFORMANCE_SUITE"
+#: the suite shipped with the SDK (package data)
+CASES_DIR = Path(__file__).resolve().parent / "conformance_cases"
 
 
 # -- metric ------------------------------------------------------------------------------------
@@ -58,24 +60,22 @@ METRICS = {"rmse_normalised": rmse_normalised}
 
 # -- suite ---------------------------------------------------------------------------------------
 def find_suite(suite: str | os.PathLike | None = None) -> Path:
-    """The cases folder: ``suite``, else $NASSET_CONFORMANCE_SUITE, else the checkout this module
-    runs from, else ./tests/conformance/cases."""
+    """The cases folder: ``suite``, else $NASSET_CONFORMANCE_SUITE, else the cases installed with this package."""
     candidates = []
     if suite:
         candidates.append(Path(suite))
     elif os.environ.get(SUITE_ENV):
         candidates.append(Path(os.environ[SUITE_ENV]))
     else:
-        candidates += [Path(__file__).resolve().parents[1] / "tests" / "conformance" / "cases",
-                       Path.cwd() / "tests" / "conformance" / "cases"]
+        candidates.append(CASES_DIR)
     for c in candidates:
         if c.is_dir() and (c / "case.json").is_file():  # a single case folder
             return c
         if c.is_dir() and any((p / "case.json").is_file() for p in c.iterdir() if p.is_dir()):
             return c
-        if c.is_dir() and (c / "cases").is_dir():  # tests/conformance itself
+        if c.is_dir() and (c / "cases").is_dir():  # a folder holding cases/
             return c / "cases"
-    raise UsageError("no conformance cases found; they live in the repository's tests/conformance/cases "
+    raise UsageError(f"no conformance cases found; they are installed in {CASES_DIR} "
                      f"(pass --suite DIR or set {SUITE_ENV}); looked in: {', '.join(map(str, candidates))}")
 
 
@@ -122,7 +122,7 @@ def format_command(template: str, **values) -> list[str]:
 
 def run_case(case: dict, template: str, workdir: Path, *, seed: int = 0, timeout: float = 600.0, spp_scale: int = 1) -> dict:
     """Render one case with the command template and compare; returns the case's report row."""
-    from reference_renderer.film import read_exr
+    from .images import read_exr
 
     name = case["name"]
     out_dir = Path(workdir) / name
@@ -194,8 +194,7 @@ def false_colour(x: np.ndarray) -> np.ndarray:
 def write_error_map(path, image: np.ndarray, reference: np.ndarray, zoom: int = 4) -> None:
     """PNG with three panels: reference, image (same tone mapping), false-colour |image - reference|
     (mean over channels) normalised by its 99th percentile."""
-    from nasset_sdk.images import write_png
-    from reference_renderer.film import tonemap
+    from .images import tonemap, write_png
 
     img = np.nan_to_num(np.asarray(image, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
     ref = np.asarray(reference, np.float64)

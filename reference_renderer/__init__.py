@@ -1,6 +1,6 @@
 """Reference renderer: numpy + onnxruntime wavefront path tracer for USD scenes with neural assets.
 
-    from reference_renderer import load_scene, render, RenderSettings
+    from nasset_reference_renderer import load_scene, render, RenderSettings
     result = render(load_scene("scene.usda"), RenderSettings(spp=64))
     result.image  # [H, W, 3] float64 radiance
 

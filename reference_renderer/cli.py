@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+from nasset_sdk.cli import Verb
 from nasset_sdk.errors import UsageError
 
 
@@ -47,3 +48,30 @@ def run(args) -> int:
               f"{st.camera_samples / max(st.time_total, 1e-9):,.0f} camera samples/s, {st.rays:,} rays, "
               f"{st.network_evals:,} network evaluations")
     return 0
+
+
+def add_args(p) -> None:
+    p.add_argument("scene", help="scene .usda/.usdc, or an asset file (rendered in a default studio scene)")
+    p.add_argument("-o", "--output", required=True, help="output .exr")
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--width", type=int, default=None)
+    p.add_argument("--height", type=int, default=None)
+    p.add_argument("--max-depth", type=int, default=5)
+    p.add_argument("--png", default=None, help="also write a tone-mapped PNG preview")
+    p.add_argument("--variance", default=None, help="also write a per-pixel variance EXR")
+    p.add_argument("--explain", action="store_true", help="print the render plan")
+    p.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto)")
+    p.add_argument("--batch", type=int, default=65536, help="rays per wavefront batch")
+    p.add_argument("--tile", type=int, default=64, help="tile edge in pixels")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--neupress-sampling", default="auto", choices=["auto", "dome", "lobe", "mis"],
+                   help="neupress: light sampling (dome), the sampling network's lobe, or both with MIS "
+                        "(auto: mis when the asset has the sampling component, else dome)")
+    p.add_argument("--prt", action="store_true", help="neupress: shade with the PRT component and the dome's SH projection")
+    p.add_argument("--8dna-sampling", dest="eightdna_sampling", default="mis", choices=["light", "flow", "mis"],
+                   help="8dna: emitter sampling, the asset's own sampling (GGX lobe, flow directions), or both with MIS")
+
+
+#: ``nasset render`` (entry point ``nasset.verbs``)
+VERB = Verb("render a USD scene with the reference path tracer", add_args, "nasset_reference_renderer.cli:run")

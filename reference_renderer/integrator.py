@@ -437,7 +437,7 @@ class PathIntegrator:
 
 def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | None = None,
            load_components: bool = True) -> RenderResult:
-    """Render ``scene`` (from :func:`reference_renderer.scene.load_scene`)."""
+    """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`)."""
     s = settings or RenderSettings()
     width, height = scene.camera.default_resolution(s.width, s.height)
     if plan is None:
@@ -487,7 +487,7 @@ def decoder_threads(threads: int) -> int:
     Automatic is onnxruntime's own default (one per core), except on machines with at most two
     usable cores: there one thread is faster, because the render's numpy work between decoder runs
     shares the cores with onnxruntime's spinning worker threads (measured with
-    ``python -m reference_renderer.bench --threads 1,2``: about 2x slower renders with 2 threads).
+    ``python -m nasset_benchmarks.renderer_throughput --threads 1,2``: about 2x slower renders with 2 threads).
     """
     if threads > 0:
         return int(threads)

@@ -25,7 +25,7 @@ import numpy as np
 
 from nasset_sdk.kinds.boundary import fresnel_dielectric
 
-from .neural_common import Frames, _max3, gather_hit
+from .neural_common import Frames, gather_hit, max3
 from .sampling import dot, power_heuristic
 
 P_DIRECT_MIN, P_DIRECT_MAX = 0.05, 0.95
@@ -92,7 +92,7 @@ class EightdnaShader:
             wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
             wi_obj, jac = fr.dir_to_object(wi, h.inst)
             f = ev.direct_eval(h.n_obj, h.wo_obj, wi_obj)[:, 0].astype(np.float64) * jac
-            s = np.nonzero((pdf > 0) & (_max3(li) > 0) & (f > 0) & (dot(wi, ngf) > 0))[0]
+            s = np.nonzero((pdf > 0) & (max3(li) > 0) & (f > 0) & (dot(wi, ngf) > 0))[0]
             if not len(s):
                 continue
             if light.delta or smode == "light":
@@ -125,7 +125,7 @@ class EightdnaShader:
                 continue
             wl, dist, li, pl = light.sample(u_w, rng.random((n, 2)))
             wl_obj, jac = fr.dir_to_object(wl, h.inst)
-            s = np.nonzero((pl > 0) & (_max3(li) > 0) & (p_u > 0) & (dot(n_u, wl_obj) > 0))[0]
+            s = np.nonzero((pl > 0) & (max3(li) > 0) & (p_u > 0) & (dot(n_u, wl_obj) > 0))[0]
             if not len(s):
                 continue
             tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)

@@ -35,14 +35,14 @@ class Hit:
         return len(self.x)
 
 
-def _max3(a):
+def max3(a):
     return np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
 
 
 def gather_hit(integ, r, idx, x, d, beta, prim, bu, bv, inst, asset: int) -> Hit:
     x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
     ng = integ.tri_ng[prim]
-    scale = (integ.eps * (1.0 + _max3(np.abs(x)) / integ.accel.scale))[:, None]
+    scale = (integ.eps * (1.0 + max3(np.abs(x)) / integ.accel.scale))[:, None]
     x_obj = integ._to_object(x, inst, point=True)
     wo_obj = normalize(integ._to_object(-d, inst))
     local = integ.scene.tri_local[prim]

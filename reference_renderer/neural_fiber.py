@@ -108,7 +108,7 @@ def fiber_frame(tubes: FiberTubes, seg, x_obj, wo_obj):
 
 
 class FiberShading:
-    """The rna fiber vertex of :class:`reference_renderer.integrator.PathIntegrator`."""
+    """The rna fiber vertex of :class:`nasset_reference_renderer.integrator.PathIntegrator`."""
 
     def __init__(self, integ) -> None:
         self.integ = integ

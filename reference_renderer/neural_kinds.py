@@ -1,6 +1,6 @@
 """Per-kind dispatch of neural-asset shading vertices (rna, neupress, 8dna).
 
-Used by :class:`reference_renderer.integrator.PathIntegrator` only when the scene holds an asset of
+Used by :class:`nasset_reference_renderer.integrator.PathIntegrator` only when the scene holds an asset of
 a kind other than rna; scenes of rna assets keep the integrator's own single-call path.
 """
 
@@ -13,14 +13,14 @@ class KindShading:
     def __init__(self, integ) -> None:
         from .neural_8dna import EightdnaShader
         from .neural_neupress import NeupressShader
-        from .plan import _asset_mode
+        from .plan import asset_mode
 
         self.integ = integ
         scene = integ.scene
         modes = list(integ.plan.asset_modes)
         has_dome = any(type(light).__name__ == "DomeLight" for light in scene.lights)
         for data in scene.assets[len(modes):]:  # a plan built without kind modes: the defaults
-            modes.append(_asset_mode(data, "auto", False, "mis", has_dome)[0])
+            modes.append(asset_mode(data, "auto", False, "mis", has_dome)[0])
         self.modes = modes
         self.asset_kind = np.array([data.asset.kind for data in scene.assets])
         self.shaders = {}

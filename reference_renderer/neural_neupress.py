@@ -25,7 +25,7 @@ from nasset_sdk.kinds.encodings import sh9
 from nasset_sdk.kinds.neupress import gaussian_lobe_pdf, gaussian_lobe_sample
 
 from .lights import DomeLight
-from .neural_common import Frames, _max3, gather_hit
+from .neural_common import Frames, gather_hit, max3
 from .sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
 
 
@@ -125,7 +125,7 @@ class NeupressShader:
             if smode == "lobe" and not light.delta:  # reached by the lobe samples instead
                 continue
             wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
-            s = np.nonzero((pdf > 0) & (_max3(li) > 0))[0]
+            s = np.nonzero((pdf > 0) & (max3(li) > 0))[0]
             if not len(s):
                 continue
             side = np.sign(dot(h.ng[s], wi[s]))[:, None]

@@ -61,7 +61,7 @@ class RenderPlan:
         return "\n".join(lines)
 
 
-def _asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, has_dome: bool) -> tuple[dict, list, str]:
+def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, has_dome: bool) -> tuple[dict, list, str]:
     """(mode, extra components to load, explain note) for one asset file."""
     a = data.asset
     present = a.components()
@@ -138,7 +138,7 @@ def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sam
     comps, modes, kind_notes = {}, [], []
     for data in scene.assets:
         a = data.asset
-        mode, extra, note = _asset_mode(data, neupress_sampling, prt, eightdna_sampling, has_dome)
+        mode, extra, note = asset_mode(data, neupress_sampling, prt, eightdna_sampling, has_dome)
         required = list(a.contract.required_components(a.variant)) + extra
         skipped = [n for n in a.components() if n not in required]
         comps[str(data.path)] = (required, skipped)

@@ -76,7 +76,7 @@ def mean_and_stderr(image, variance, mask=None):
 
 def render_finite(path, **settings):
     """Render a scene file (default 16x16) and check image and variance are finite."""
-    from reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer import RenderSettings, load_scene, render
 
     settings.setdefault("width", 16)
     settings.setdefault("height", 16)

@@ -12,7 +12,7 @@ pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
 pytest.importorskip("pxr")
 
-from converters.train_8dna import rqs_inverse_logdet, taps_cubemap, taps_grid1d, taps_triplane  # noqa: E402
+from nasset_bakers.train.eightdna import rqs_inverse_logdet, taps_cubemap, taps_grid1d, taps_triplane  # noqa: E402
 from nasset_sdk.kinds.encodings import cubemap, grid_1d, triplane  # noqa: E402
 from nasset_sdk.kinds.spline import RQSpline  # noqa: E402
 
@@ -64,7 +64,7 @@ def test_torch_spline_equals_sdk_spline_and_is_finite_at_knots(rng):
 def _sphere_scene(mi, folder, *, albedo=1.0, sigma_t=6.0, bsdf=None):
     import trimesh
 
-    from converters.mitsuba.example_scene import write_ply
+    from nasset_converters.mitsuba.examples import write_ply
 
     m = trimesh.creation.icosphere(subdivisions=3, radius=0.2)
     write_ply(folder / "ball.ply", m.vertices, m.faces, np.asarray(m.vertex_normals))
@@ -79,7 +79,7 @@ def _sphere_scene(mi, folder, *, albedo=1.0, sigma_t=6.0, bsdf=None):
 
 @pytest.fixture(scope="module")
 def mi():
-    from converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import load_mitsuba
 
     m = load_mitsuba()
     m.set_log_level(m.LogLevel.Error)
@@ -87,7 +87,7 @@ def mi():
 
 
 def test_sampler_tuples_finite_on_sphere_and_box(mi, tmp_path):
-    from converters.mitsuba.eightdna_sampler import PathSampler
+    from nasset_converters.mitsuba.eightdna_sampler import PathSampler
 
     shapes = _sphere_scene(mi, tmp_path, albedo=0.9)
     lo, hi = np.full(3, -0.205), np.full(3, 0.205)
@@ -116,7 +116,7 @@ def test_sampler_tuples_finite_on_sphere_and_box(mi, tmp_path):
 def test_sampler_furnace_conserves_throughput(mi, tmp_path):
     """White, non-absorbing ball behind a smooth dielectric: every path leaves, E[beta] = 1 (Russian roulette is unbiased);
     with the direct lobe separated, E[beta] drops by the mean Fresnel reflectance of the first hit."""
-    from converters.mitsuba.eightdna_sampler import PathSampler
+    from nasset_converters.mitsuba.eightdna_sampler import PathSampler
 
     shapes = _sphere_scene(mi, tmp_path, albedo=1.0, sigma_t=6.0)
     lo, hi = np.full(3, -0.205), np.full(3, 0.205)
@@ -138,7 +138,7 @@ def test_sampler_throughput_equals_mitsuba_volpath_under_uniform_light(mi, tmp_p
     grid medium behind a rough dielectric."""
     import drjit as dr
 
-    from converters.mitsuba.eightdna_sampler import PathSampler
+    from nasset_converters.mitsuba.eightdna_sampler import PathSampler
 
     albedo = {"type": "rgb", "value": [0.95, 0.8, 0.6]}
     if heterogeneous:
@@ -177,7 +177,7 @@ def test_sampler_throughput_equals_mitsuba_volpath_under_uniform_light(mi, tmp_p
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    from converters.mitsuba.eightdna_bake import bake
+    from nasset_bakers.mitsuba.eightdna import bake
 
     out = tmp_path_factory.mktemp("bake8") / "blob.usdc"
     summary = bake(None, None, out, size="tiny", example="default", epochs=25, spp=6, quiet=True)
@@ -199,10 +199,10 @@ def test_tiny_bake_validates_and_matches_torch(tiny):
 def test_tiny_bake_renders_finite_in_reference_renderer(tiny, tmp_path):
     import warnings
 
-    from converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
-    from converters.mitsuba.usd_export import convert_scene
-    from reference_renderer import RenderSettings, load_scene, render
-    from reference_renderer.scene import SceneWarning
+    from nasset_converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
+    from nasset_converters.mitsuba.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer.scene import SceneWarning
 
     xml = write_example_scene(tmp_path / "scene", res=12)
     conv = convert_scene(xml, tmp_path / "scene" / "neural.usda", replace={i: tiny[0] for i in EXAMPLE_ASSET_IDS}, check_usd=False)
@@ -215,8 +215,8 @@ def test_tiny_bake_renders_finite_in_reference_renderer(tiny, tmp_path):
 
 def test_bench_renderer_finite_for_both_models(tiny, mi, tmp_path):
     """Bench renderer on the tiny asset: finite, non-negative, and the asset is lit."""
-    from converters.mitsuba.eightdna_bench import NearFieldRenderer, SphereLight
-    from converters.mitsuba.eightdna_example import CAMERA, LIGHT_CENTER, LIGHT_RADIANCE, LIGHT_RADIUS, write_example_scene
+    from nasset_benchmarks.eightdna import NearFieldRenderer, SphereLight
+    from nasset_converters.mitsuba.eightdna_example import CAMERA, LIGHT_CENTER, LIGHT_RADIANCE, LIGHT_RADIUS, write_example_scene
     from nasset_sdk.asset import Asset
 
     xml = write_example_scene(tmp_path / "s", res=8)
@@ -231,7 +231,7 @@ def test_bench_renderer_finite_for_both_models(tiny, mi, tmp_path):
 
 def test_rerun_resumes_from_checkpoint(tiny):
     """A second bake with the same settings and work folder loads the finished training state: no new steps, same asset."""
-    from converters.mitsuba.eightdna_bake import bake
+    from nasset_bakers.mitsuba.eightdna import bake
     from nasset_sdk.asset import Asset
 
     path, first = tiny
@@ -248,7 +248,7 @@ def test_rerun_resumes_from_checkpoint(tiny):
 @pytest.mark.slow
 def test_heterogeneous_example_bakes_and_validates(tmp_path):
     """The grid-medium variant of the example goes through the whole bake (a few steps) to a valid asset."""
-    from converters.mitsuba.eightdna_bake import bake
+    from nasset_bakers.mitsuba.eightdna import bake
 
     s = bake(None, None, tmp_path / "het.usdc", size="tiny", example="heterogeneous", epochs=4, spp=2, quiet=True)
     assert s["validate"]["error"] == 0 and s["tuples_traced"] > 0
@@ -256,7 +256,7 @@ def test_heterogeneous_example_bakes_and_validates(tmp_path):
 
 
 def test_bake_rejects_meaningless_options_and_unsupported_boundaries(mi, tmp_path):
-    from converters.mitsuba.eightdna_bake import bake, boundary_of
+    from nasset_bakers.mitsuba.eightdna import bake, boundary_of
     from nasset_sdk.errors import NassetError, UsageError
 
     with pytest.raises(UsageError, match="views"):

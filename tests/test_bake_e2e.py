@@ -15,10 +15,10 @@ import pytest
 mi = pytest.importorskip("mitsuba", reason="bake tests need mitsuba (pip install 'nasset-sdk[mitsuba]')")
 torch = pytest.importorskip("torch", reason="bake tests need torch (pip install torch==2.13.0)")
 
-from converters.mitsuba.dataset import DatasetDir  # noqa: E402
-from converters.train_rna import build_model, display_psnr, select_branch  # noqa: E402
+from nasset_bakers.mitsuba.rna import bake  # noqa: E402
+from nasset_bakers.train.rna import build_model, display_psnr, select_branch  # noqa: E402
+from nasset_converters.mitsuba.dataset import DatasetDir  # noqa: E402
 from nasset_sdk.asset import Asset  # noqa: E402
-from nasset_sdk.bake import bake  # noqa: E402
 from nasset_sdk.kinds.encodings import to_unit_box, triplane  # noqa: E402
 
 #: held-out PSNR floor for the tiny bake of the example scene (display PSNR, spec/bake.md#psnr).

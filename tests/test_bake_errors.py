@@ -10,10 +10,10 @@ import pytest
 pytest.importorskip("mitsuba", reason="bake tests need mitsuba (pip install 'nasset-sdk[mitsuba]')")
 pytest.importorskip("torch", reason="bake tests need torch (pip install torch==2.13.0)")
 
-import converters.mitsuba as cm  # noqa: E402
-from converters.mitsuba import dataset as ds  # noqa: E402
-from converters.mitsuba.example_scene import write_example_scene  # noqa: E402
-from nasset_sdk.bake import DATA_PRESETS, bake  # noqa: E402
+import nasset_converters.mitsuba as cm  # noqa: E402
+from nasset_bakers.mitsuba.rna import DATA_PRESETS, bake  # noqa: E402
+from nasset_converters.mitsuba import dataset as ds  # noqa: E402
+from nasset_converters.mitsuba.examples import write_example_scene  # noqa: E402
 from nasset_sdk.cli import main  # noqa: E402
 from nasset_sdk.errors import NassetError, SceneError, UsageError  # noqa: E402
 
@@ -52,7 +52,7 @@ def test_primitive_shape_is_unsupported(tmp_path):
 def _ply_scene(tmp_path, points, faces):
     import numpy as np
 
-    from converters.mitsuba.example_scene import write_ply
+    from nasset_converters.mitsuba.examples import write_ply
 
     write_ply(tmp_path / "m.ply", np.asarray(points, np.float32), np.asarray(faces, np.int64))
     xml = tmp_path / "s.xml"
@@ -71,14 +71,14 @@ def test_shape_without_area_is_unsupported(tmp_path):
 def test_closed_surface_check():
     import numpy as np
 
-    from converters.mitsuba.scene import is_closed
+    from nasset_converters.mitsuba.scene import is_closed
 
     tetra = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]])
     assert is_closed(tetra) and not is_closed(tetra[:3])
 
 
 def test_open_shape_warning_from_geometry(tmp_path):
-    from converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
+    from nasset_converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
 
     mi = cm.load_mitsuba()
     xml = _ply_scene(tmp_path, [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])

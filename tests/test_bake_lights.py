@@ -8,10 +8,10 @@ import pytest
 
 pytest.importorskip("mitsuba", reason="bake tests need mitsuba (pip install 'nasset-sdk[mitsuba]')")
 
-from converters.mitsuba import dataset as ds  # noqa: E402
-from converters.mitsuba import load_mitsuba  # noqa: E402
-from converters.mitsuba import scene as msc  # noqa: E402
-from converters.mitsuba.example_scene import EXAMPLE_ASSET_IDS, write_example_scene  # noqa: E402
+from nasset_converters.mitsuba import dataset as ds  # noqa: E402
+from nasset_converters.mitsuba import load_mitsuba  # noqa: E402
+from nasset_converters.mitsuba import scene as msc  # noqa: E402
+from nasset_converters.mitsuba.examples import EXAMPLE_ASSET_IDS, write_example_scene  # noqa: E402
 
 
 @pytest.fixture(scope="module")

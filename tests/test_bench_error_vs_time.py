@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("mitsuba")
 
-from converters.mitsuba.bench import equal_error_speedup  # noqa: E402
+from nasset_benchmarks.error_vs_time import equal_error_speedup  # noqa: E402
 
 
 def test_equal_error_speedup_arithmetic():

@@ -12,8 +12,8 @@ from nasset_sdk.errors import NassetError
 
 def test_missing_bpy_is_a_typed_error(monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "bpy", None)  # makes `import bpy` raise ImportError
-    from converters.blender import load_bpy
-    from converters.blender.usd_export import convert_scene
+    from nasset_converters.blender import load_bpy
+    from nasset_converters.blender.usd_export import convert_scene
 
     with pytest.raises(NassetError) as e:
         load_bpy()
@@ -26,7 +26,7 @@ def test_missing_bpy_is_a_typed_error(monkeypatch, tmp_path):
 def test_bench_cli_help_does_not_import_heavy_modules():
     import argparse
 
-    from converters.blender import bench
+    from nasset_benchmarks import blender as bench
 
     p = argparse.ArgumentParser()
     bench.add_args(p)

@@ -13,9 +13,9 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 torch = pytest.importorskip("torch", reason="bake tests need torch (pip install torch==2.13.0)")
 
-from converters.blender.bake import bake  # noqa: E402
-from converters.blender.dataset import DatasetDir, load_split  # noqa: E402
-from converters.train_rna import display_psnr  # noqa: E402
+from nasset_bakers.blender.rna import bake  # noqa: E402
+from nasset_bakers.train.rna import display_psnr  # noqa: E402
+from nasset_converters.blender.dataset import DatasetDir, load_split  # noqa: E402
 from nasset_sdk.asset import Asset  # noqa: E402
 from nasset_sdk.errors import NassetError  # noqa: E402
 
@@ -66,9 +66,9 @@ def test_tiny_bake_renders_in_the_converted_scene(tiny, tmp_path):
     """convert-scene --replace puts the asset in the example scene; the reference renderer shades it."""
     import warnings
 
-    from converters.blender.examples import EXAMPLES
-    from converters.blender.usd_export import convert_scene
-    from reference_renderer import RenderSettings, load_scene, render
+    from nasset_converters.blender.examples import EXAMPLES
+    from nasset_converters.blender.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
 
     example, out, _ = tiny
     res = convert_scene(None, tmp_path / "scene.usda", replace={EXAMPLES[example][0]: out}, example=example)
@@ -100,7 +100,7 @@ def test_bake_typed_errors(tmp_path):
     with pytest.raises(NassetError) as e:
         bake(tmp_path / "missing.blend", ["Monkey"], tmp_path / "a.usdc", size="tiny", quiet=True)
     assert e.value.code == "CONVERT_SCENE_MISSING"
-    from converters.blender.examples import write_example_blend
+    from nasset_converters.blender.examples import write_example_blend
 
     blend = write_example_blend("blender-surface", tmp_path)
     with pytest.raises(NassetError) as e:
@@ -111,7 +111,7 @@ def test_bake_typed_errors(tmp_path):
 @pytest.mark.slow
 def test_bench_blender_quick_runs(tmp_path):
     """``nasset bench blender`` end to end at toy sizes: report, plot, images, finite numbers."""
-    from converters.blender.bench import run_bench, summary_text
+    from nasset_benchmarks.blender import run_bench, summary_text
 
     r = run_bench(tmp_path, size="tiny", res=32, gt_spp=64, cy_spp=[4, 16], nr_spp=[1, 4], max_depth=4, quiet=True)
     assert (tmp_path / "blender_error_vs_time.png").stat().st_size > 1000

@@ -12,8 +12,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 
-from converters.blender.examples import build_example, write_example_blend  # noqa: E402
-from converters.blender.usd_export import _DOME_ROWS, convert_scene, map_material  # noqa: E402
+from nasset_converters.blender.examples import build_example, write_example_blend  # noqa: E402
+from nasset_converters.blender.usd_export import _DOME_ROWS, convert_scene, map_material  # noqa: E402
 from nasset_sdk.errors import NassetError  # noqa: E402
 
 
@@ -99,7 +99,7 @@ def test_point_spot_lights_and_materials(tmp_path):
 def test_dome_rotation_maps_blender_equirect_to_renderer_latlong():
     """A Blender world direction D (Z up) has equirect u = atan2(D.y, -D.x)/2pi + 1/2 and image row
     v = acos(D.z)/pi from the top; the renderer's lookup through the written dome rotation agrees."""
-    from reference_renderer.lights import DomeLight
+    from nasset_reference_renderer.lights import DomeLight
 
     rng = np.random.default_rng(3)
     D = rng.normal(size=(64, 3))

@@ -12,9 +12,9 @@ import pytest
 
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 
-from converters.blender import dataset as bds  # noqa: E402
-from converters.blender import scene as bsc  # noqa: E402
-from converters.blender.examples import build_example  # noqa: E402
+from nasset_converters.blender import dataset as bds  # noqa: E402
+from nasset_converters.blender import scene as bsc  # noqa: E402
+from nasset_converters.blender.examples import build_example  # noqa: E402
 
 
 def _diffuse_quad(albedo: float):

@@ -10,9 +10,9 @@ import pytest
 
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 
-from converters.blender import Z_UP_TO_Y_UP, to_y_up, to_z_up  # noqa: E402
-from converters.blender import scene as bsc  # noqa: E402
-from converters.blender.examples import build_example, hair_strands, write_example_blend  # noqa: E402
+from nasset_converters.blender import Z_UP_TO_Y_UP, to_y_up, to_z_up  # noqa: E402
+from nasset_converters.blender import scene as bsc  # noqa: E402
+from nasset_converters.blender.examples import build_example, hair_strands, write_example_blend  # noqa: E402
 from nasset_sdk.errors import NassetError  # noqa: E402
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry  # noqa: E402
 

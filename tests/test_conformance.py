@@ -17,7 +17,7 @@ from nasset_sdk.cli import main as nasset
 from nasset_sdk.errors import UsageError
 
 HERE = Path(__file__).resolve().parent
-SUITE = HERE / "conformance" / "cases"
+SUITE = cf.CASES_DIR
 MUTANT = HERE / "conformance" / "mutants" / "render_mutant.py"
 CASES = sorted(p.name for p in SUITE.iterdir() if (p / "case.json").is_file())
 
@@ -119,7 +119,7 @@ def test_broken_renderers_fail_cleanly(tmp_path, capsys):
     out = capsys.readouterr().out
     assert rc == 1 and "ERROR" in out and "status 3" in out
     # writes an image of the wrong size
-    writer = ("import sys, numpy as np; from reference_renderer.film import write_exr; "
+    writer = ("import sys, numpy as np; from nasset_reference_renderer.film import write_exr; "
               "write_exr(sys.argv[1], np.ones((5, 7, 3)))")
     report = cf.run_suite(f"{py} -c '{writer}' {{out}}", suite=SUITE, cases=[case], workdir=tmp_path / "b")
     assert report["cases"][0]["status"] == "error" and "7x5" in report["cases"][0]["message"]

@@ -17,7 +17,7 @@ import pytest
 
 pytest.importorskip("mitsuba")
 
-from converters.mitsuba.usd_export import convert_scene, fresnel_dielectric, plastic_diffuse_scale  # noqa: E402
+from nasset_converters.mitsuba.usd_export import convert_scene, fresnel_dielectric, plastic_diffuse_scale  # noqa: E402
 from nasset_sdk.errors import NassetError  # noqa: E402
 
 ALL_XML = """<scene version="3.0.0">
@@ -65,7 +65,7 @@ def _env_image(h=8, w=16):
 def _write_assets(folder: Path) -> None:
     import trimesh
 
-    from reference_renderer.film import write_exr
+    from nasset_reference_renderer.film import write_exr
 
     trimesh.creation.box().export(folder / "box.ply")
     (folder / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
@@ -172,7 +172,7 @@ def test_lights(converted):
 def test_envmap_texture_written_and_referenced(converted):
     from pxr import UsdLux
 
-    from reference_renderer.film import read_exr
+    from nasset_reference_renderer.film import read_exr
 
     res, stage, _ = converted
     dome = UsdLux.DomeLight(stage.GetPrimAtPath("/World/Lights/env"))
@@ -268,7 +268,7 @@ def test_replace_writes_relative_neural_asset_reference(simple_scene, rna_asset_
 
     from pxr import Usd
 
-    from reference_renderer import load_scene
+    from nasset_reference_renderer import load_scene
 
     asset = tmp_path / "assets" / "obj.usdc"
     asset.parent.mkdir()
@@ -362,7 +362,7 @@ ENVMAP = ('<emitter type="envmap" id="sky"><string name="filename" value="sky.ex
 
 
 def _sky_exr(path):
-    from reference_renderer.film import write_exr
+    from nasset_reference_renderer.film import write_exr
 
     h, w = 32, 64
     v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
@@ -372,9 +372,9 @@ def _sky_exr(path):
 
 def _match(tmp_path, shell_bsdf, sky, spp=128):
     """(Mitsuba image, second Mitsuba image, reference-renderer result) of the same scene at 32x32."""
-    from converters.mitsuba import load_mitsuba
-    from converters.mitsuba.example_scene import example_meshes, write_ply
-    from reference_renderer import RenderSettings, load_scene, render
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.examples import example_meshes, write_ply
+    from nasset_reference_renderer import RenderSettings, load_scene, render
 
     shell = dict(example_meshes())["shell"]
     write_ply(tmp_path / "shell.ply", shell.vertices, shell.faces, shell.vertex_normals)
@@ -421,7 +421,7 @@ def test_converted_scene_matches_mitsuba(tmp_path, case, bsdf, sky, mean_tol, ra
 
 
 def test_renderer_takes_resolution_from_render_settings(converted):
-    from reference_renderer import load_scene
+    from nasset_reference_renderer import load_scene
 
     res, _, _ = converted
     camera = load_scene(str(res.output)).camera

@@ -16,9 +16,9 @@ import pytest
 pytest.importorskip("mitsuba")
 pytest.importorskip("onnxruntime")
 
-from converters.mitsuba import is_jit, load_mitsuba  # noqa: E402
+from nasset_converters.mitsuba import is_jit, load_mitsuba  # noqa: E402
+from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_asset, random_rna_asset  # noqa: E402
 from nasset_sdk.errors import SceneError  # noqa: E402
-from reference_renderer.testscenes import SceneBuilder, constant_rna_asset, random_rna_asset  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,7 @@ def nr():
         pytest.skip(f"mitsuba unusable: {exc}")
     if not is_jit(mi):
         pytest.skip("needs the llvm_ad_rgb variant")
-    from converters.mitsuba import neural_render
+    from nasset_mitsuba_renderer import render as neural_render
 
     return neural_render
 
@@ -126,7 +126,7 @@ def test_unsupported_kind_is_a_scene_error(nr, tmp_path):
     assert "nosuchkind" in str(info.value) and "/World/A" in str(info.value)
     # the CLI reports it on stderr with a non-zero exit status, writing nothing
     out = tmp_path / "out.exr"
-    res = subprocess.run([sys.executable, "-m", "converters.mitsuba.neural_render", scene, str(out), "1", "--width", "8", "--height", "8"],
+    res = subprocess.run([sys.executable, "-m", "nasset_mitsuba_renderer.render", scene, str(out), "1", "--width", "8", "--height", "8"],
                          capture_output=True, text=True)
     assert res.returncode == 2 and "SCENE_UNSUPPORTED" in res.stderr and not out.exists()
 
@@ -134,7 +134,7 @@ def test_unsupported_kind_is_a_scene_error(nr, tmp_path):
 def test_fiber_tessellation_and_h():
     """spec/renderer.md#fibers: 4N-4 triangles per live segment, exempt ranges of the segment and its
     curve neighbours, h = offset of the ray line from the axis over r, signed along t x wo."""
-    from converters.mitsuba.neural.rna import TUBE_SIDES, fiber_tubes
+    from nasset_mitsuba_renderer.rna import TUBE_SIDES, fiber_tubes
 
     pts = np.array([[0, 0, 0], [0, 1, 0], [0, 2, 0], [0, 2, 0], [1, 0, 0], [2, 0, 0]], float)
     verts, faces, tri_seg, p0, p1, r0, r1, exempt = fiber_tubes(pts, [4, 2], np.full(6, 0.2))
@@ -144,7 +144,7 @@ def test_fiber_tessellation_and_h():
     ring = verts.reshape(-1, 2 * TUBE_SIDES, 3)
     assert np.allclose(np.linalg.norm(ring[0, :TUBE_SIDES] - pts[0], axis=1), 0.1)
     # h: segment along +x, viewed from +z; the ray line at y offset q has h = -q / r (t x wo = x x z = -y)
-    from converters.mitsuba.neural.rna import RnaAsset
+    from nasset_mitsuba_renderer.rna import RnaAsset
 
     a = RnaAsset.__new__(RnaAsset)
     a.tri_seg, a.seg_p0, a.seg_p1, a.seg_r0, a.seg_r1, a.seg_exempt = tri_seg, p0, p1, r0, r1, exempt
@@ -157,7 +157,7 @@ def test_fiber_tessellation_and_h():
 def _conformance(cases):
     from nasset_sdk.conformance import run_suite
 
-    tpl = f"{sys.executable} -m converters.mitsuba.neural_render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
+    tpl = f"{sys.executable} -m nasset_mitsuba_renderer.render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
     rep = run_suite(tpl, cases=cases)
     return {r["case"]: r for r in rep["cases"]}
 
@@ -185,5 +185,5 @@ def test_whole_conformance_suite_passes(tmp_path):
 
     from nasset_sdk.cli import main
 
-    template = f"{sys.executable} -m converters.mitsuba.neural_render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
+    template = f"{sys.executable} -m nasset_mitsuba_renderer.render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
     assert main(["conformance", "--renderer", template, "--workdir", str(tmp_path), "--json"]) == 0

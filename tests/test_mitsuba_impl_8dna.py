@@ -1,4 +1,4 @@
-"""The 8dna kind of the second implementation (converters/mitsuba/neural/eightdna.py).
+"""The 8dna kind of the second implementation (mitsuba_renderer/eightdna.py).
 
 Its rational-quadratic spline is written from spec/kinds/8dna.md#spline alone, so these tests check
 the equations themselves: inverse(forward(z)) = z, log|dz/dt| = -log(dt/dz), and the density
@@ -19,7 +19,7 @@ pytest.importorskip("mitsuba")
 pytest.importorskip("onnxruntime")
 pytest.importorskip("pxr")
 
-from converters.mitsuba.neural.eightdna import Spline, box_jacobian, box_point, cubemap  # noqa: E402
+from nasset_mitsuba_renderer.eightdna import Spline, box_jacobian, box_point, cubemap  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -52,7 +52,7 @@ def test_spline_inverse_and_normalisation(k, mins):
 def test_flow_pdf_integrates_to_one(tmp_path):
     """E[1 / p(u, w)] over flow samples = measure of (box surface) x (sphere) when p integrates to 1
     (the pdf is recomputed from the sampled u_i, w_i: inverse spline, Jacobian J(u))."""
-    from converters.mitsuba.neural.eightdna import EightDnaAsset
+    from nasset_mitsuba_renderer.eightdna import EightDnaAsset
     from nasset_sdk.examples import example_builder
 
     a = EightDnaAsset(example_builder("8dna", size="tiny", seed=0).write(tmp_path / "a.usda"))
@@ -102,7 +102,7 @@ def test_cubemap_is_continuous_across_seams():
 
 
 def test_8dna_conformance_case_via_cli(tmp_path):
-    tpl = f"{sys.executable} -m converters.mitsuba.neural_render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
+    tpl = f"{sys.executable} -m nasset_mitsuba_renderer.render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
     res = subprocess.run([sys.executable, "-m", "nasset_sdk.cli", "conformance", "--renderer", tpl, "--cases", "8dna_distant", "--json",
                           "--workdir", str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     report = json.loads(res.stdout)

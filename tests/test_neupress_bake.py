@@ -17,7 +17,7 @@ pytest.importorskip("torch")
 
 @pytest.fixture(scope="module")
 def baked(tmp_path_factory):
-    from converters.mitsuba.neupress_bake import bake
+    from nasset_bakers.mitsuba.neupress import bake
 
     out = tmp_path_factory.mktemp("npbake") / "np_tiny.usdc"
     # tiny networks, a little more data than the tiny preset (~19 k samples) so the held-out floor is meaningful
@@ -46,8 +46,8 @@ def test_held_out_error_beats_constant_predictor(baked):
     input-independent predictor (the training mean, computed here from the dataset): it has learned something of
     the dependence on x_o, w_o, w_i that transfers to unseen views. (A higher floor is not justified for the tiny
     networks: the held-out references' own noise is a large part of their variance, spec/bake-neupress.md.)"""
-    from converters.mitsuba import dataset as ds
-    from converters.mitsuba import neupress_data as nd
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba import neupress_dataset as nd
 
     path, s = baked
     store = ds.DatasetDir(s["dataset_dir"])
@@ -64,7 +64,7 @@ def test_held_out_error_beats_constant_predictor(baked):
 def test_prt_equals_independent_quadrature_of_the_sdk_network(baked):
     """a_k(x_v, w_o bin) recomputed here through the SDK evaluator (onnxruntime) on the same Fibonacci directions,
     at the bin centre the SDK's bin lookup maps back to the same bin."""
-    from converters.train_neupress import TRAIN_PRESETS, fibonacci_sphere, vertex_normals
+    from nasset_bakers.train.neupress import TRAIN_PRESETS, fibonacci_sphere, vertex_normals
 
     path, _ = baked
     asset = Asset.open(path, load="all")
@@ -139,8 +139,8 @@ def test_baked_asset_stable_at_poles_grazing_and_sigma_extremes(baked):
 
 
 def test_renders_finite_and_dome_render_skips_optional_components(baked, tmp_path):
-    from reference_renderer import RenderSettings, load_scene, render
-    from reference_renderer.testscenes import SceneBuilder
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer.testscenes import SceneBuilder
 
     path, _ = baked
     b = SceneBuilder()
@@ -165,7 +165,7 @@ def test_renders_finite_and_dome_render_skips_optional_components(baked, tmp_pat
 
 
 def test_typed_errors(tmp_path):
-    from converters.mitsuba.neupress_bake import bake
+    from nasset_bakers.mitsuba.neupress import bake
 
     out = tmp_path / "a.usdc"
     with pytest.raises(UsageError):
@@ -191,8 +191,8 @@ def test_typed_errors(tmp_path):
 def test_boundary_must_be_a_ggx_rough_dielectric_with_a_medium(tmp_path, bsdf, code_part):
     import trimesh
 
-    from converters.mitsuba.example_scene import write_ply
-    from converters.mitsuba.neupress_bake import bake
+    from nasset_bakers.mitsuba.neupress import bake
+    from nasset_converters.mitsuba.examples import write_ply
 
     ball = trimesh.creation.icosphere(subdivisions=1)
     write_ply(tmp_path / "ball.ply", ball.vertices, ball.faces)
@@ -212,10 +212,10 @@ def test_subsurface_plus_analytic_reflection_equals_full_volpath():
     equals Mitsuba's full volpath radiance of the same pixels under the same directional light (z-test)."""
     import drjit as dr  # noqa: F401
 
-    from converters.mitsuba import load_mitsuba
-    from converters.mitsuba import neupress_data as nd
-    from converters.mitsuba import scene as msc
-    from converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import neupress_dataset as nd
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
     from nasset_sdk.kinds.boundary import ggx_reflection
 
     mi = load_mitsuba()
@@ -258,7 +258,7 @@ def test_subsurface_plus_analytic_reflection_equals_full_volpath():
 
 def test_bench_metrics():
     """SSIM / FLIP of the benchmark: 1 / 0 for identical images, monotone in added noise."""
-    from converters.mitsuba.neupress_bench import flip, ssim
+    from nasset_benchmarks.neupress import flip, ssim
 
     rng = np.random.default_rng(0)
     y, x = np.mgrid[0:48, 0:48] / 48.0
@@ -273,7 +273,7 @@ def test_bench_metrics():
 def test_resume_reuses_dataset_and_training_state(baked, tmp_path):
     """A second bake with the same settings and --resume on the first one's folder renders nothing new and continues
     from the stored training state: the appearance network comes out identical."""
-    from converters.mitsuba.neupress_bake import bake
+    from nasset_bakers.mitsuba.neupress import bake
 
     path, s = baked
     again = bake(None, None, tmp_path / "again.usdc", size="tiny", example="default", quiet=True, views=32, res=32, spp=16,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from reference_renderer.accel import Accel, EmbreeBackend, NumpyBackend
+from nasset_reference_renderer.accel import Accel, EmbreeBackend, NumpyBackend
 
 EDGE = 1e-4  # barycentric margin below which float32 and float64 may legitimately disagree
 T_REL = 1e-4  # relative distance agreement for the same hit

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from render_stats import mean_and_stderr
 
-from reference_renderer import RenderSettings, load_scene, render
-from reference_renderer.testscenes import SceneBuilder
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.testscenes import SceneBuilder
 
 SIGMA = 5.0
 

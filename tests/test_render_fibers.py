@@ -8,11 +8,11 @@ import warnings
 import numpy as np
 import pytest
 
-from reference_renderer import RenderSettings, load_scene, render
-from reference_renderer.integrator import PathIntegrator
-from reference_renderer.neural_fiber import TUBE_SIDES, fiber_frame, tessellate
-from reference_renderer.plan import make_plan
-from reference_renderer.testscenes import SceneBuilder, constant_rna_fiber_asset
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.integrator import PathIntegrator
+from nasset_reference_renderer.neural_fiber import TUBE_SIDES, fiber_frame, tessellate
+from nasset_reference_renderer.plan import make_plan
+from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_fiber_asset
 
 UNSH, SH = (1.0, 0.5, 0.25), (0.1, 0.2, 0.3)
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from nasset_reference_renderer import RenderSettings, load_scene, make_plan, render
+from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_asset, random_rna_asset
 from nasset_sdk.errors import SceneError
-from reference_renderer import RenderSettings, load_scene, make_plan, render
-from reference_renderer.testscenes import SceneBuilder, constant_rna_asset, random_rna_asset
 
 TU, TS, E = 1.0, 0.25, 2.0
 
@@ -41,7 +41,7 @@ def test_rigid_transform_invariance(tmp_path):
     """Moving asset, light and camera together leaves the image unchanged (object-space evaluation)."""
     asset = random_rna_asset(tmp_path / "a.usdc", seed=4)
     g = _rot_y(50, (2.0, -1.0, 0.5))
-    from reference_renderer.testscenes import look_at
+    from nasset_reference_renderer.testscenes import look_at
 
     imgs = []
     for k, m in enumerate((np.eye(4), g)):
@@ -151,7 +151,7 @@ def test_invalid_asset(tmp_path):
 def test_unknown_attribute_is_a_warning(tmp_path):
     from pxr import Sdf
 
-    from reference_renderer import SceneWarning
+    from nasset_reference_renderer import SceneWarning
 
     b = SceneBuilder()
     b.camera((0, 0, 3), (0, 0, 0))
@@ -170,7 +170,7 @@ def test_cli_render_asset_file(tmp_path):
     rc = main(["render", str(asset), "-o", str(out), "--spp", "1", "--width", "16", "--quiet", "--explain",
                "--png", str(tmp_path / "o.png"), "--variance", str(tmp_path / "v.exr")])
     assert rc == 0 and out.stat().st_size > 0 and (tmp_path / "o.png").read_bytes()[:4] == b"\x89PNG"
-    from reference_renderer import read_exr
+    from nasset_reference_renderer import read_exr
 
     assert read_exr(out).shape == (16, 16, 3)
 
@@ -179,7 +179,7 @@ def test_scene_stage_loads_scene_payloads_but_no_asset_components(tmp_path):
     """spec/renderer.md#traversal: a prim placed with a payload is composed; asset components stay for the plan."""
     from pxr import Sdf, Usd
 
-    from reference_renderer.scene import open_stage
+    from nasset_reference_renderer.scene import open_stage
 
     asset = tmp_path / "a.usdc"
     random_rna_asset(asset, seed=3)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from render_stats import chi2_test
 
-from reference_renderer import bsdf, lights, sampling
+from nasset_reference_renderer import bsdf, lights, sampling
 
 P_MIN = 1e-3  # reject the sampler when the fit is this unlikely
 

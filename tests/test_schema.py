@@ -115,7 +115,8 @@ def test_provenance_json_schema_is_packaged_data():
 def wheel(tmp_path_factory) -> Path:
     """Build the wheel from a clean copy of the sources (no stale build/ folder can help it)."""
     src = tmp_path_factory.mktemp("src")
-    for item in ("pyproject.toml", "README.md", "nasset_sdk", "schemas", "reference_renderer", "converters"):
+    for item in ("pyproject.toml", "README.md", "nasset_sdk", "schemas", "reference_renderer", "mitsuba_renderer", "converters", "bakers",
+                 "benchmarks"):
         if (REPO / item).is_dir():
             shutil.copytree(REPO / item, src / item, ignore=shutil.ignore_patterns("__pycache__"))
         elif (REPO / item).is_file():

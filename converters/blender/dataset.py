@@ -9,16 +9,16 @@ hidden, black world, transparent film) by Cycles on the CPU with a 0.01-pixel fi
 pixel is point-sampled at its centre, with the paper's clamps (direct 20, indirect 10).
 
 The geometric inputs come from our own ray caster on the exported geometry (Embree, the
-reference renderer's :class:`reference_renderer.accel.Accel`, with fibers tessellated exactly
+reference renderer's :class:`nasset_reference_renderer.accel.Accel`, with fibers tessellated exactly
 as the renderer tessellates them), along the very pixel-centre rays of the Cycles camera: hit
 point x, shading normal n (surfaces; interpolated vertex normals) or tangent t and offset h
-(fibers; :func:`reference_renderer.neural_fiber.fiber_frame`), and the light visibility V from
+(fibers; :func:`nasset_reference_renderer.neural_fiber.fiber_frame`), and the light visibility V from
 the hit against the asset alone, cast the way the renderer casts it. Pixels kept: our ray hits
 and Cycles' alpha is >= ``alpha_min`` (both agree the pixel centre is on the asset); the
 fraction of disagreeing pixels is recorded (``mask_disagreement``: silhouettes of curved
 geometry vs our tessellation).
 
-Folder layout, resume and atomic writes: ``converters.mitsuba.dataset.DatasetDir`` (same FIELDS;
+Folder layout, resume and atomic writes: ``nasset_converters.mitsuba.dataset.DatasetDir`` (same FIELDS;
 fibers add ``h``).
 """
 
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from converters.mitsuba.dataset import DatasetDir, _unit_sphere, camera_rays  # noqa: F401 - re-exported
+from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, unit_sphere  # noqa: F401 - re-exported
 
 from . import CONVERTER_VERSION, quiet_stdout, to_z_up
 
@@ -162,11 +162,11 @@ class Caster:
     """Primary hits and light visibility on the exported asset geometry (Embree)."""
 
     def __init__(self, variant: str, geo) -> None:
-        from reference_renderer.accel import Accel
+        from nasset_reference_renderer.accel import Accel
 
         self.variant = variant
         if variant == "fiber":
-            from reference_renderer.neural_fiber import tessellate
+            from nasset_reference_renderer.neural_fiber import tessellate
 
             self.tubes = tessellate(geo.points, geo.counts, geo.widths)
             tris = self.tubes.points[self.tubes.faces]
@@ -182,7 +182,7 @@ class Caster:
 
     def hits(self, o, d) -> dict:
         """Rows that hit: {'pix', 'x', 'frame' (n or t), 'h' (fibers), 'prim'}."""
-        from reference_renderer.neural_fiber import fiber_frame
+        from nasset_reference_renderer.neural_fiber import fiber_frame
 
         h = self.accel.trace(o, d)
         hit = np.nonzero(h.prim >= 0)[0]
@@ -222,7 +222,7 @@ class Caster:
 def view_camera(s: DataSettings, center, radius: float, view_id: int, validation: bool):
     """(rng, eye, half_fov, res) of a view; deterministic in (seed, split, view)."""
     rng = np.random.default_rng([s.seed, 1 if validation else 0, view_id])
-    cam_dir = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+    cam_dir = unit_sphere(rng, 1, s.upper_hemisphere)[0]
     eye = np.asarray(center, np.float64) + s.distance * radius * cam_dir
     half_fov = float(np.arcsin(min(1.0 / max(s.distance, 1.0 + 1e-6), 0.999))) * 1.04
     res = (s.val_res or s.res) if validation else s.res
@@ -235,7 +235,7 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
     rng, eye, half_fov, res = view_camera(s, center, radius, view_id, validation)
     o, d = camera_rays(eye, np.asarray(center, np.float64), half_fov, res)
     hit = caster.hits(o, d)
-    wi = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+    wi = unit_sphere(rng, 1, s.upper_hemisphere)[0]
     rig.place_camera(eye, center, half_fov, res)
     rig.place_sun(wi)
     spp = s.val_spp if validation else s.spp
@@ -245,7 +245,7 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
     if k > 1:  # more light directions at the same sample budget: pixel group g takes render g's values
         group = rng.integers(0, k, len(o))
         for g in range(1, k):
-            wg = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+            wg = unit_sphere(rng, 1, s.upper_hemisphere)[0]
             rig.place_sun(wg)
             sel = group == g
             rgba[sel] = rig.render(max(1, spp // k), seed=hash((s.seed, int(validation), view_id, g)) & 0xFFFFFF).reshape(-1, 4)[sel]

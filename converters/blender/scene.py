@@ -1,7 +1,7 @@
 """Open a .blend, pick the asset objects, export their geometry (spec/bake-blender.md#geometry).
 
 Geometry is taken from Blender's *evaluated* objects (modifiers applied, as Cycles renders them),
-in world space, converted to +Y up (:func:`converters.blender.to_y_up`); asset object space is
+in world space, converted to +Y up (:func:`nasset_converters.blender.to_y_up`); asset object space is
 that world space (like the Mitsuba bake). Meshes become triangles with smooth vertex normals
 (flat-shaded faces get their face normal); hair becomes linear curves with widths = 2 x radius:
 

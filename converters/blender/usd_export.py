@@ -6,7 +6,7 @@ writer this reuses): ``/World/Geometry`` meshes bound to ``UsdPreviewSurface`` m
 OBJECT[,OBJECT]=ASSET`` in ``/World/Assets`` in place of those objects. The mapping table is in
 spec/bake-blender.md#scene-conversion; everything not converted exactly is a warning.
 
-Conventions: Blender world (+Z up) -> USD (+Y up) by :data:`converters.blender.Z_UP_TO_Y_UP`
+Conventions: Blender world (+Z up) -> USD (+Y up) by :data:`nasset_converters.blender.Z_UP_TO_Y_UP`
 (meshes are written in world space; cameras and lights keep their local frames: Blender cameras,
 suns, spots and area lights look / emit down local -Z like USD's); Blender light units -> the
 renderer's: sun ``strength`` = irradiance (DistantLight intensity, ``angle`` = Blender's angular
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, _Converter, parse_replace, report, usd_check  # noqa: F401
+from nasset_converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, StageConverter, parse_replace, report, usd_check  # noqa: F401
 from nasset_sdk.errors import UsageError, error
 
 from . import Z_UP_TO_Y_UP
@@ -56,7 +56,7 @@ def _socket(node, name, default):
     return v, bool(s.is_linked)
 
 
-class _BlenderConverter(_Converter):
+class _BlenderConverter(StageConverter):
     def __init__(self, bpy, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
         super().__init__(None, None, scene_path, output, replace, check_usd)
         self.bpy = bpy
@@ -207,7 +207,7 @@ class _BlenderConverter(_Converter):
             return
         from pxr import Tf
 
-        from reference_renderer.film import write_exr
+        from nasset_reference_renderer.film import write_exr
 
         img = src.image
         wid, hei = img.size
@@ -356,7 +356,7 @@ def map_material(mat) -> tuple[dict, list]:
 
 
 def _check_replace(bpy, rep: dict, file: str) -> None:
-    from reference_renderer.scene import is_asset_file
+    from nasset_reference_renderer.scene import is_asset_file
 
     names = sorted(o.name for o in bpy.context.scene.objects)
     for name, path in rep.items():

@@ -54,7 +54,7 @@ class DataSettings:
     chunk: int = 1 << 20  # rays (pixels x spp) per Mitsuba call
 
 
-def _unit_sphere(rng, n: int, upper: bool) -> np.ndarray:
+def unit_sphere(rng, n: int, upper: bool) -> np.ndarray:
     v = rng.normal(size=(n, 3))
     v /= np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
     if upper:
@@ -225,7 +225,7 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     s = renderer.s
     split_seed = 1 if validation else 0
     rng = np.random.default_rng([s.seed, split_seed, view_id])
-    cam_dir = _unit_sphere(rng, 1, s.upper_hemisphere)[0]
+    cam_dir = unit_sphere(rng, 1, s.upper_hemisphere)[0]
     dist = s.distance * radius
     eye = np.asarray(center, np.float64) + dist * cam_dir
     half_fov = float(np.arcsin(min(1.0 / max(s.distance, 1.0 + 1e-6), 0.999))) * 1.04
@@ -238,12 +238,12 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     seed = hash((s.seed, split_seed, view_id)) & 0xFFFFFF
     per_pixel = not validation and s.lights_per_view == 0
     if per_pixel and renderer.iso.per_path_lights:
-        wi = _unit_sphere(rng, len(pix), s.upper_hemisphere).astype(np.float32)
+        wi = unit_sphere(rng, len(pix), s.upper_hemisphere).astype(np.float32)
         vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
         rgb = renderer.transport(o, d, spp, seed=seed, wi=wi) if len(pix) else np.zeros((0, 3), np.float32)
     else:
         k = 1 if validation else (s.lights_per_view or FALLBACK_LIGHT_GROUPS)
-        lights = _unit_sphere(rng, k, s.upper_hemisphere)
+        lights = unit_sphere(rng, k, s.upper_hemisphere)
         group = rng.integers(0, k, len(pix)) if k > 1 else np.zeros(len(pix), np.int64)
         wi = lights[group].astype(np.float32)
         vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)

@@ -137,7 +137,7 @@ def example_meshes(size: str = "small"):
 
 def write_example_scene(folder: str | Path, size: str = "small", *, max_depth: int = 64) -> Path:
     """Write ``scene.xml``, its meshes, medium grids and env map into ``folder``; returns the XML path."""
-    from reference_renderer.film import write_exr
+    from nasset_reference_renderer.film import write_exr
 
     from . import load_mitsuba
 

@@ -177,7 +177,7 @@ class _Params:
 
 
 # -- the converter ------------------------------------------------------------------------------
-class _Converter:
+class StageConverter:
     def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
         from pxr import Usd, UsdGeom
 
@@ -598,7 +598,7 @@ class _Converter:
     def _envmap(self, em, eid, p) -> None:
         from pxr import Gf, Sdf, UsdLux
 
-        from reference_renderer.film import write_exr
+        from nasset_reference_renderer.film import write_exr
 
         data = _np(p.p["data"])
         if data.ndim != 3:
@@ -725,8 +725,8 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     ``replace``: {shape id: asset file} or ``["ID[,ID]=FILE", ...]``; those shapes are left out and a
     NeuralAsset reference (path relative to ``output``) takes their place.
     """
-    from converters.mitsuba import load_mitsuba
-    from reference_renderer.scene import is_asset_file
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_reference_renderer.scene import is_asset_file
 
     output = Path(output)
     if output.suffix not in (".usda", ".usdc", ".usd"):
@@ -753,7 +753,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     output.parent.mkdir(parents=True, exist_ok=True)
     if output.exists():
         output.unlink()
-    return _Converter(mi, mscene, scene, output, rep, check_usd).run()
+    return StageConverter(mi, mscene, scene, output, rep, check_usd).run()
 
 
 def report(res: "ConvertResult", *, as_json: bool) -> int:

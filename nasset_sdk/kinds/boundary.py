@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .encodings import _unit64, from_local
+from .encodings import from_local, unit64
 
 ALPHA_MIN = 1e-4
 _EPS = 1e-12
@@ -59,7 +59,7 @@ def ggx_lambda(cos_t: np.ndarray, alpha: float) -> np.ndarray:
 
 
 def _dots(n, wo, wi):
-    n, wo, wi = _unit64(n), _unit64(wo), _unit64(wi)
+    n, wo, wi = unit64(n), unit64(wo), unit64(wi)
     h = wo + wi
     hl = np.linalg.norm(h, axis=1, keepdims=True)
     h = np.where(hl > 1e-12, h / np.maximum(hl, 1e-12), n)
@@ -94,7 +94,7 @@ def ggx_sample(n, wo, u2, alpha: float) -> tuple[np.ndarray, np.ndarray]:
     sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
     phi = 2.0 * np.pi * u2[:, 1]
     h = from_local(np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=1), n)
-    wo = _unit64(wo)
+    wo = unit64(wo)
     wi = 2.0 * (wo * h).sum(1, keepdims=True) * h - wo
-    wi = _unit64(wi)
+    wi = unit64(wi)
     return wi, ggx_pdf(n, wo, wi, alpha)

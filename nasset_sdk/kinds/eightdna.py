@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import UsageError
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
-from .encodings import _unit64, cubemap, grid_1d, to_unit_box, triplane
+from .encodings import cubemap, grid_1d, to_unit_box, triplane, unit64
 from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, cylindrical_to_direction
 
 #: preset -> (triplane R, channels C, cube Q (w_o and s12), 1D grid L, spline bins K,
@@ -113,7 +113,7 @@ class EightDnaKind(KindContract):
         from ..asset import AssetBuilder
         from ..geometry import MeshGeometry
         from ..networks import random_mlp
-        from .rna import _example_mesh
+        from .rna import example_mesh
 
         if variant not in self.variants:
             raise UsageError(f"8dna has no variant {variant!r}")
@@ -122,7 +122,7 @@ class EightDnaKind(KindContract):
         r, c, q, ln, k, f_layers, f_width, a_layers, a_width = SIZES[size]
         b = AssetBuilder("8dna", variant=variant)
         if geometry is None:
-            geometry = _example_mesh()
+            geometry = example_mesh()
         if not isinstance(geometry, MeshGeometry):
             geometry = MeshGeometry.from_trimesh(geometry)
         b.set_geometry(geometry)
@@ -173,7 +173,7 @@ class EightDnaEvaluator:
         """[N, 2C + 6] = [triplane(xn), xn, cube_wo(w_o), w_o] (float32)."""
         x, wo = rows3(x, wo)
         xn = to_unit_box(x, self.lo, self.hi)
-        wo = _unit64(wo).astype(np.float32)
+        wo = unit64(wo).astype(np.float32)
         return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo), wo], axis=1).astype(np.float32)
 
     def flow_input(self, j: int, base: np.ndarray, s_prev: np.ndarray) -> np.ndarray:

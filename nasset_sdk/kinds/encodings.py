@@ -107,7 +107,7 @@ def _norm_no_overflow(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # frames and direction parameterisations (spec/kinds/encodings.md#frames)
 
 
-def _unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
+def unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """float64 unit vectors [N,3]; zero / non-finite input becomes ``fallback``."""
     v = np.atleast_2d(np.asarray(v, np.float64))
     v = np.where(np.isfinite(v), v, 0.0)
@@ -123,7 +123,7 @@ def local_frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = (1 + sign n_x^2 a, sign c, -sign n_x), b = (c, sign + n_y^2 a, -n_y). No singularity:
     |sign + n_z| >= 1. Zero or non-finite normals become +Z. Returns float64.
     """
-    n = _unit64(n)
+    n = unit64(n)
     x, y, z = n[:, 0], n[:, 1], n[:, 2]
     sign = np.copysign(1.0, z)
     a = -1.0 / (sign + z)
@@ -153,7 +153,7 @@ def spherical_coords(w: np.ndarray) -> np.ndarray:
     theta_hat = acos(clamp(w_z, -1, 1)) / pi in [0, 1], phi_hat = atan2(w_y, w_x) / (2 pi) in [-1/2, 1/2].
     At the poles atan2(0, 0) = 0. float32.
     """
-    w = _unit64(w)
+    w = unit64(w)
     theta = np.arccos(np.clip(w[:, 2], -1.0, 1.0))
     phi = np.arctan2(w[:, 1], w[:, 0])
     return np.stack([theta / np.pi, phi / (2.0 * np.pi)], axis=1).astype(np.float32)
@@ -165,7 +165,7 @@ def azimuthal_equidistant(w: np.ndarray, n: np.ndarray) -> np.ndarray:
     With (l_x, l_y, l_z) = to_local(w, n): r = acos(clamp(l_z, -1, 1)) in [0, pi], phi = atan2(l_y, l_x),
     p = r (cos phi, sin phi). The antipode -n maps to the circle r = pi (phi = 0 there).
     """
-    loc = to_local(_unit64(w), n)
+    loc = to_local(unit64(w), n)
     r = np.arccos(np.clip(loc[:, 2], -1.0, 1.0))
     phi = np.arctan2(loc[:, 1], loc[:, 0])
     return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
@@ -187,7 +187,7 @@ def azimuthal_equidistant_inverse(p: np.ndarray, n: np.ndarray) -> np.ndarray:
 def sh9(w: np.ndarray) -> np.ndarray:
     """Real spherical harmonics Y_l^m, l <= 2, of unit directions [N,3] -> [N,9] in the order
     (0,0), (1,-1), (1,0), (1,1), (2,-2), (2,-1), (2,0), (2,1), (2,2) (spec/kinds/encodings.md#sh)."""
-    w = _unit64(w)
+    w = unit64(w)
     x, y, z = w[:, 0], w[:, 1], w[:, 2]
     return np.stack([
         np.full_like(x, 0.282094791773878),
@@ -251,7 +251,7 @@ def cube_face_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     The major axis is argmax |d_k| (ties go to the lower axis index), face = 2 axis + (d_axis < 0);
     s = (sc / |ma| + 1) / 2, t = (tc / |ma| + 1) / 2 with sc, tc from :data:`CUBE_FACES`.
     """
-    d = _unit64(d)
+    d = unit64(d)
     ad = np.abs(d)
     axis = np.argmax(ad, axis=1)
     neg = np.take_along_axis(d, axis[:, None], 1)[:, 0] < 0
@@ -265,7 +265,7 @@ def cube_face_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return face, s, t
 
 
-def _cube_face_dir(face: np.ndarray, sc: np.ndarray, tc: np.ndarray) -> np.ndarray:
+def cube_face_dir(face: np.ndarray, sc: np.ndarray, tc: np.ndarray) -> np.ndarray:
     """Point on the plane of ``face`` at face coordinates (sc, tc) in [-1-, 1+] -> 3D direction (not unit)."""
     d = np.zeros((len(face), 3), np.float64)
     for f, (ax, sg, (sa, ss), (ta, ts)) in enumerate(CUBE_FACES):
@@ -309,7 +309,7 @@ def cubemap(grid: np.ndarray, d: np.ndarray) -> np.ndarray:
         if out_of.any():
             sc = 2.0 * (i[out_of] + 0.5) / r - 1.0
             tc = 2.0 * (j[out_of] + 0.5) / r - 1.0
-            f2, s2, t2 = cube_face_uv(_cube_face_dir(face[out_of], sc, tc))
+            f2, s2, t2 = cube_face_uv(cube_face_dir(face[out_of], sc, tc))
             f[out_of] = f2
             i = i.copy()
             j = j.copy()

@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import UsageError
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_reflection
-from .encodings import _unit64, fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box
+from .encodings import fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box, unit64
 
 #: preset -> (M appearance frequencies, hidden layers, hidden width, Ms sampling frequencies,
 #:            sampling hidden widths, PRT theta bins, PRT phi bins)
@@ -58,8 +58,8 @@ def gaussian_lobe_pdf(n, sigma, wi) -> np.ndarray:
     r = acos(n . wi), pdf = exp(-r^2 / (2 sigma^2)) / (2 pi sigma^2 Z) * r / sin r,
     with r / sin r = 1 + r^2 / 6 for r < 1e-4 and r / max(sin r, 1e-7) otherwise (finite at wi = -n).
     """
-    n = _unit64(n)
-    wi = _unit64(wi)
+    n = unit64(n)
+    wi = unit64(wi)
     s = _sigma(sigma, len(n))
     c = np.clip((n * wi).sum(1), -1.0, 1.0)
     r = np.arccos(c)
@@ -73,7 +73,7 @@ def gaussian_lobe_sample(n, sigma, u2) -> tuple[np.ndarray, np.ndarray]:
     r = sigma sqrt(-2 log1p(u1 expm1(-pi^2 / (2 sigma^2)))) (clamped to pi), phi = 2 pi u2,
     wi = cos r n + sin r (cos phi t + sin phi b) with (t, b, n) = encodings.local_frame(n).
     """
-    n = _unit64(n)
+    n = unit64(n)
     u2 = np.clip(np.nan_to_num(np.asarray(u2, np.float64)), 0.0, 1.0 - 1e-16)
     if u2.shape != (len(n), 2):
         raise UsageError(f"u2 must be [N, 2], got {u2.shape}")
@@ -84,7 +84,7 @@ def gaussian_lobe_sample(n, sigma, u2) -> tuple[np.ndarray, np.ndarray]:
     phi = 2.0 * np.pi * u2[:, 1]
     sr = np.sin(r)
     wi = from_local(np.stack([sr * np.cos(phi), sr * np.sin(phi), np.cos(r)], axis=1), n)
-    wi = _unit64(wi)
+    wi = unit64(wi)
     return wi, gaussian_lobe_pdf(n, s, wi)
 
 
@@ -161,7 +161,7 @@ class NeupressKind(KindContract):
         from ..asset import AssetBuilder
         from ..geometry import MeshGeometry
         from ..networks import random_mlp
-        from .rna import _example_mesh
+        from .rna import example_mesh
 
         if variant not in self.variants:
             raise UsageError(f"neupress has no variant {variant!r}")
@@ -170,7 +170,7 @@ class NeupressKind(KindContract):
         m, layers, hidden, ms, s_hidden, nt, nphi = SIZES[size]
         b = AssetBuilder("neupress", variant=variant)
         if geometry is None:
-            geometry = _example_mesh()
+            geometry = example_mesh()
         if not isinstance(geometry, MeshGeometry):
             geometry = MeshGeometry.from_trimesh(geometry)
         b.set_geometry(geometry)
@@ -274,7 +274,7 @@ class NeupressEvaluator:
         if (vertex < 0).any() or (vertex >= a.shape[0]).any():
             raise UsageError("vertex index out of range")
         n, wo = rows3(n, wo)
-        loc = to_local(_unit64(wo), n)
+        loc = to_local(unit64(wo), n)
         t_bins, p_bins = a.shape[1], a.shape[2]
         ti = np.clip(np.floor((1.0 - np.clip(loc[:, 2], 0.0, 1.0)) * t_bins), 0, t_bins - 1).astype(np.int64)
         pi_ = np.clip(np.floor((np.arctan2(loc[:, 1], loc[:, 0]) + np.pi) / (2 * np.pi) * p_bins), 0, p_bins - 1).astype(np.int64)

@@ -48,7 +48,7 @@ class RnaKind(KindContract):
         res, ch, layers, hidden = SIZES[size]
         b = AssetBuilder("rna", variant=variant)
         if geometry is None:
-            geometry = _example_curves(rng) if variant == "fiber" else _example_mesh()
+            geometry = _example_curves(rng) if variant == "fiber" else example_mesh()
         if not isinstance(geometry, (MeshGeometry, CurvesGeometry)):
             geometry = MeshGeometry.from_trimesh(geometry)
         b.set_geometry(geometry)
@@ -124,7 +124,7 @@ class RnaEvaluator:
         return out[:, :3], out[:, 3:]
 
 
-def _example_mesh():
+def example_mesh():
     import trimesh
 
     from ..geometry import MeshGeometry

@@ -147,9 +147,9 @@ def cylindrical_to_direction(z: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 def direction_to_cylindrical(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit-normalised d [N,3] (zero -> +Z) -> (z in [-1, 1], phi = atan2(d_y, d_x) in [-pi, pi])."""
-    from .encodings import _unit64
+    from .encodings import unit64
 
-    d = _unit64(d)
+    d = unit64(d)
     return np.clip(d[:, 2], -1.0, 1.0), np.arctan2(d[:, 1], d[:, 0])
 
 
@@ -198,9 +198,9 @@ class BoxParam:
 
     def from_rays(self, u: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u_i, w_i) -> (s [N,4], jacobian [N]); u_i is taken as the box point in direction u_i - c."""
-        from .encodings import _unit64
+        from .encodings import unit64
 
-        d = _unit64(np.asarray(u, np.float64) - self.center)
+        d = unit64(np.asarray(u, np.float64) - self.center)
         z1, p1 = direction_to_cylindrical(d)
         z3, p3 = direction_to_cylindrical(w)
         _, jac = self.jacobian(d)
@@ -209,11 +209,11 @@ class BoxParam:
 
 def surface_pdf(pdf_box: np.ndarray, n_x: np.ndarray, n_u: np.ndarray, w: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     """Eq. 9: density per unit area at the asset surface x_i: pdf_box |n_x . w| / max(|n_u . w|, eps)."""
-    from .encodings import _unit64
+    from .encodings import unit64
 
-    w = _unit64(w)
-    num = np.abs((_unit64(n_x) * w).sum(1))
-    den = np.maximum(np.abs((_unit64(n_u) * w).sum(1)), eps)
+    w = unit64(w)
+    num = np.abs((unit64(n_x) * w).sum(1))
+    den = np.maximum(np.abs((unit64(n_u) * w).sum(1)), eps)
     return np.asarray(pdf_box, np.float64) * num / den
 
 

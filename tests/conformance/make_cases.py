@@ -1,4 +1,4 @@
-"""Generate the renderer conformance cases in tests/conformance/cases/ (spec/conformance.md).
+"""Generate the renderer conformance cases in nasset_sdk/conformance_cases/ (spec/conformance.md).
 
     python tests/conformance/make_cases.py                  # (re)generate every case
     python tests/conformance/make_cases.py --cases NAME ..  # only these
@@ -34,8 +34,8 @@ from typing import Callable
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-CASES_DIR = HERE / "cases"
+from nasset_sdk.conformance import CASES_DIR
+
 REF_SEED = 1_000_003  # reference image seed; never used by the noise runs (1..NOISE_RUNS) or tests (0, 9xx)
 NOISE_RUNS = 8
 TOL_FACTOR = 2.0
@@ -83,12 +83,12 @@ def _rna_random(seed, *, dtype="float16", variant="surface"):
     varying with position (triplane), normal and both directions.
     """
     from nasset_sdk.asset import AssetBuilder
-    from nasset_sdk.kinds.rna import _example_mesh
+    from nasset_sdk.kinds.rna import example_mesh
     from nasset_sdk.networks import mlp_onnx
 
     rng = np.random.default_rng(seed)
     b = AssetBuilder("rna", variant=variant)
-    b.set_geometry(_fiber_curves() if variant == "fiber" else _example_mesh())
+    b.set_geometry(_fiber_curves() if variant == "fiber" else example_mesh())
     core = b.component("core", required=True, purpose="evaluation", quality=None)
     res, ch, hidden = 8, 4, 16
     core.add_tensor("triplane", rng.normal(0, 1.0, (3, res, res, ch)), dtype=dtype, layout="plane,v,u,channel")
@@ -130,7 +130,7 @@ def asset_fiber(path):
 
 
 def asset_const(path):
-    from reference_renderer.testscenes import constant_rna_asset
+    from nasset_reference_renderer.testscenes import constant_rna_asset
 
     return constant_rna_asset(path, unshadowed=(0.30, 0.22, 0.12), shadowed=(0.05, 0.08, 0.11), subdivisions=2)
 
@@ -168,7 +168,7 @@ ASSETS: dict[str, Callable] = {
 
 def env_map(path):
     """A small asymmetric lat-long EXR: blue-ish sky gradient, warm ground, one bright 'sun' patch."""
-    from reference_renderer.film import write_exr
+    from nasset_reference_renderer.film import write_exr
 
     h, w = 16, 32
     v = (np.arange(h) + 0.5) / h
@@ -188,7 +188,7 @@ class Ctx:
     """What a case's ``build`` function gets: the SceneBuilder and helpers that copy assets in."""
 
     def __init__(self, folder: Path) -> None:
-        from reference_renderer.testscenes import SceneBuilder
+        from nasset_reference_renderer.testscenes import SceneBuilder
 
         self.dir = folder
         self.sb = SceneBuilder()
@@ -472,7 +472,7 @@ def build_case(case: Case, folder: Path) -> dict:
 def render_ref(folder: Path, case: Case, spp: int, seed: int) -> np.ndarray:
     import warnings
 
-    from reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer import RenderSettings, load_scene, render
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -485,8 +485,8 @@ def supported(folder: Path) -> str | None:
     """None when the reference renderer loads the scene, else why not."""
     import warnings
 
+    from nasset_reference_renderer import load_scene
     from nasset_sdk.errors import SceneError
-    from reference_renderer import load_scene
 
     try:
         with warnings.catch_warnings():
@@ -498,7 +498,7 @@ def supported(folder: Path) -> str | None:
 
 
 def generate(case: Case, log=print) -> bool:
-    from reference_renderer.film import write_exr
+    from nasset_reference_renderer.film import write_exr
 
     folder = CASES_DIR / case.name
     tmp = Path(tempfile.mkdtemp(prefix=f"case-{case.name}-"))
@@ -586,7 +586,7 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def check(case: Case, log=print) -> list[str]:
     """Problems of the committed case (empty when it is what this script makes)."""
-    from reference_renderer.film import read_exr
+    from nasset_reference_renderer.film import read_exr
 
     folder = CASES_DIR / case.name
     tmp = Path(tempfile.mkdtemp(prefix=f"check-{case.name}-"))

@@ -179,7 +179,7 @@ def test_azimuthal_equidistant_round_trip(counts, w, n):
     counts.add("encodings.azimuthal_equidistant_inverse", m)
     assert np.isfinite(back).all()
     np.testing.assert_allclose(np.linalg.norm(back, axis=1), 1.0, atol=1e-12)
-    wu = E._unit64(w)
+    wu = E.unit64(w)
     far = np.hypot(p[:, 0], p[:, 1]) < np.pi - 1e-6  # away from the antipode circle (phi undefined there)
     np.testing.assert_allclose(back[far], wu[far], atol=1e-6)
 
@@ -311,10 +311,10 @@ def test_boxparam_rays(counts, d, w, scale, aspect):
     np.testing.assert_allclose(np.linalg.norm(w2, axis=1), 1.0, atol=1e-12)
     rel = np.abs(u2 - box.center) / box.half
     np.testing.assert_allclose(rel.max(1), 1.0, rtol=1e-9)  # on the box surface
-    u_box = box.project(E._unit64(u - box.center))[0] + box.center  # u itself, or the +Z face point for u = centre
+    u_box = box.project(E.unit64(u - box.center))[0] + box.center  # u itself, or the +Z face point for u = centre
     np.testing.assert_allclose(u2, u_box, atol=1e-9 * box.half.max())
     # the Jacobian |n_u . u| / |u|^3 jumps across box edges (n_u changes there): compare off the edges
-    ratio = np.sort(box.half / np.maximum(np.abs(E._unit64(u - box.center)), 1e-300), axis=1)
+    ratio = np.sort(box.half / np.maximum(np.abs(E.unit64(u - box.center)), 1e-300), axis=1)
     off_edge = ratio[:, 1] > ratio[:, 0] * (1 + 1e-6)
     np.testing.assert_allclose(jac2[off_edge], jac[off_edge], rtol=1e-9)
 
@@ -469,9 +469,9 @@ def _write(kind, path, *, seed=5, scale=None, fp16_extreme=False):
     geometry = None
     if scale is not None:
         from nasset_sdk.geometry import MeshGeometry
-        from nasset_sdk.kinds.rna import _example_mesh
+        from nasset_sdk.kinds.rna import example_mesh
 
-        g = _example_mesh()
+        g = example_mesh()
         geometry = MeshGeometry((np.asarray(g.points, np.float64) * scale).astype(np.float32), g.faces, g.normals)
     b = get_kind(kind).build_random(rng, size="tiny", geometry=geometry)
     if fp16_extreme:

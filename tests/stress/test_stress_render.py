@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reference_renderer import RenderSettings, load_scene, render, write_exr
-from reference_renderer.testscenes import SceneBuilder, random_rna_asset
+from nasset_reference_renderer import RenderSettings, load_scene, render, write_exr
+from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 

@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from stress_inputs import TINY, finite_all, unit_interval
 
-from reference_renderer import bsdf as RB
-from reference_renderer import lights as RL
-from reference_renderer import sampling as RS
+from nasset_reference_renderer import bsdf as RB
+from nasset_reference_renderer import lights as RL
+from nasset_reference_renderer import sampling as RS
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 

@@ -3,7 +3,7 @@
     python tests/conformance/mutants/render_mutant.py MUTANT SCENE OUT SPP WIDTH HEIGHT SEED
     python tests/conformance/mutants/render_mutant.py --list
 
-Each mutant patches one thing in ``reference_renderer`` / the rna evaluator (in this process
+Each mutant patches one thing in ``nasset_reference_renderer`` / the rna evaluator (in this process
 only), then renders like ``nasset render``. Used as a ``--renderer`` of ``nasset conformance``
 by tests/test_conformance.py.
 """
@@ -46,7 +46,7 @@ def cos_factor():
 
 def world_directions():
     """wo and wi handed to the network in world space (not mapped by the inverse linear part)."""
-    from reference_renderer.integrator import PathIntegrator
+    from nasset_reference_renderer.integrator import PathIntegrator
 
     orig = PathIntegrator._to_object
 
@@ -58,7 +58,7 @@ def world_directions():
 
 def world_points():
     """Hit points handed to the network in world space (no inverse instance transform)."""
-    from reference_renderer.integrator import PathIntegrator
+    from nasset_reference_renderer.integrator import PathIntegrator
 
     orig = PathIntegrator._to_object
 
@@ -84,7 +84,7 @@ def triplane_planes_rotated():
 
 def other_shadows_ignored():
     """Light samples at an asset vertex are not blocked by other objects (only the self test)."""
-    from reference_renderer.integrator import PathIntegrator
+    from nasset_reference_renderer.integrator import PathIntegrator
 
     orig = PathIntegrator._trace
 
@@ -99,8 +99,8 @@ def other_shadows_ignored():
 
 def asset_casts_no_shadow():
     """Shadow rays of ordinary surfaces pass through neural assets."""
-    from reference_renderer.accel import Accel
-    from reference_renderer.integrator import PathIntegrator
+    from nasset_reference_renderer.accel import Accel
+    from nasset_reference_renderer.integrator import PathIntegrator
 
     orig_init = PathIntegrator.__init__
 
@@ -118,7 +118,7 @@ def asset_casts_no_shadow():
 
 def other_instance_is_self():
     """Rays leaving an instance skip every instance of the same asset file, not only its own triangles."""
-    from reference_renderer.integrator import PathIntegrator
+    from nasset_reference_renderer.integrator import PathIntegrator
 
     orig_init = PathIntegrator.__init__
     orig_trace = PathIntegrator._trace
@@ -144,7 +144,7 @@ def other_instance_is_self():
 
 def distant_angle_ignored():
     """DistantLight angle ignored (always a delta light)."""
-    from reference_renderer import lights, scene
+    from nasset_reference_renderer import lights, scene
 
     class Delta(lights.DistantLight):
         def __init__(self, direction, irradiance, angle_deg, prim=""):
@@ -155,7 +155,7 @@ def distant_angle_ignored():
 
 def dome_mirrored():
     """DomeLight lat-long map mirrored left-right (u -> 1 - u), consistently for lookup and sampling."""
-    from reference_renderer.lights import DomeLight
+    from nasset_reference_renderer.lights import DomeLight
 
     to_uv, to_dir = DomeLight.dir_to_uv, DomeLight.uv_to_dir
     DomeLight.dir_to_uv = staticmethod(lambda d: to_uv(d * np.array([-1.0, 1.0, 1.0])))
@@ -164,7 +164,7 @@ def dome_mirrored():
 
 def no_asset_indirect():
     """Rays never continue from a neural asset (next-event estimation only, even with other objects)."""
-    from reference_renderer import integrator, plan
+    from nasset_reference_renderer import integrator, plan
 
     orig = plan.make_plan
 
@@ -180,7 +180,7 @@ def no_asset_indirect():
 
 def mis_weights_one():
     """Power-heuristic weights replaced by 1 (light samples and BSDF/continuation hits both counted)."""
-    from reference_renderer import integrator
+    from nasset_reference_renderer import integrator
 
     integrator.power_heuristic = lambda a, b: np.ones(np.broadcast(a, b).shape)
 

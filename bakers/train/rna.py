@@ -30,6 +30,8 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
+from .common import display_psnr, pick_device, require_torch
+
 
 @dataclass(frozen=True)
 class TrainSettings:
@@ -52,26 +54,12 @@ class TrainSettings:
     device: str = "auto"
 
 
-#: per-preset training defaults (the data defaults live in nasset_sdk.bake)
+#: per-preset training defaults (the data defaults live in nasset_bakers.mitsuba.rna)
 TRAIN_PRESETS = {
     "tiny": dict(epochs=40, batch=1024),
     "small": dict(epochs=12, batch=1024, plane_lr=3e-3),
     "hq": dict(epochs=40, batch=8192, plane_lr=3e-3),
 }
-
-
-def _torch():
-    try:
-        import torch
-    except ImportError as exc:
-        raise error("CONVERT_BACKEND", f"torch is not installed ({exc}); pip install 'nasset-sdk[train]'") from None
-    return torch
-
-
-def _pick_device(torch, want: str):
-    if want != "auto":
-        return torch.device(want)
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
 
 
 #: sharpness k of the lobe features exp(k (n.h - 1)) (encoding "lobes")
@@ -84,7 +72,7 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
     the triplane's R and C may be overridden). ``fiber``: the fiber variant, whose frame input is
     [t (3), h (1)] (``n`` passed as [N, 4]), with the azimuth cosine as an extra feature and lobes
     exp(-k (t.h)^2) (spec/bake-blender.md#training)."""
-    torch = _torch()
+    torch = require_torch()
     nn = torch.nn
     F = torch.nn.functional
     res, ch, layers, hidden = SIZES[size]
@@ -162,7 +150,7 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
 
 def blur_planes(planes, sigma: float):
     """Separable Gaussian blur of [3, C, R, R] planes with edge-replicate padding; sigma in texels."""
-    torch = _torch()
+    torch = require_torch()
     F = torch.nn.functional
     if sigma <= 1e-3:
         return planes
@@ -192,13 +180,13 @@ def blur_sigma(settings: TrainSettings, epoch: int) -> float:
 
 def log_transport(p):
     """log(1 + p) for p >= 0, continued linearly below 0 so that negative outputs are pushed up."""
-    torch = _torch()
+    torch = require_torch()
     return torch.log1p(torch.relu(p)) - torch.relu(-p)
 
 
 def loss_fn(pred, y, settings: TrainSettings):
     """Training loss (spec/bake.md#training) of the visibility-selected prediction vs target y."""
-    torch = _torch()
+    torch = require_torch()
     y = y.clamp_min(0)
     if settings.loss == "log":
         return torch.mean((log_transport(pred) - torch.log1p(y)) ** 2)
@@ -208,21 +196,6 @@ def loss_fn(pred, y, settings: TrainSettings):
     if settings.loss == "l2":
         return torch.mean((pred - y) ** 2)
     raise ValueError(f"unknown loss {settings.loss!r}")
-
-
-def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]:
-    """(PSNR dB, linear MSE, peak): both normalised by the ground truth's 99.5th percentile and
-    clipped to [0, 1] (a fixed exposure on a display), peak 1; over asset pixels only."""
-    gt = np.asarray(gt, np.float64)
-    pred = np.asarray(pred, np.float64)
-    mse_lin = float(np.mean((pred - gt) ** 2)) if gt.size else float("nan")
-    peak = float(np.percentile(gt, 99.5)) if gt.size else 0.0
-    if peak <= 0 or not np.isfinite(peak):
-        return float("nan"), mse_lin, peak
-    a = np.clip(pred / peak, 0.0, 1.0)
-    b = np.clip(gt / peak, 0.0, 1.0)
-    mse = float(np.mean((a - b) ** 2))
-    return (10.0 * math.log10(1.0 / max(mse, 1e-20))), mse_lin, peak
 
 
 def select_branch(y: np.ndarray, vis: np.ndarray) -> np.ndarray:
@@ -256,7 +229,7 @@ def _tensors(torch, data: dict, lo, hi, device):
 
 
 def predict(model, T: dict, batch: int = 65536, sigma: float = 0.0) -> np.ndarray:
-    torch = _torch()
+    torch = require_torch()
     out = []
     with torch.no_grad():
         for s in range(0, len(T["xn"]), batch):
@@ -267,7 +240,7 @@ def predict(model, T: dict, batch: int = 65536, sigma: float = 0.0) -> np.ndarra
 
 def export_onnx(model) -> bytes:
     """The decoder MLP as ONNX (opset 17, input 'x' [N, C+12], output 'y' [N, 6], dynamic N)."""
-    torch = _torch()
+    torch = require_torch()
     dec = model.decoder.cpu().eval()
     width = model.in_width
     buf = io.BytesIO()
@@ -280,7 +253,7 @@ def export_onnx(model) -> bytes:
 
 def onnx_parity(model, onnx_bytes: bytes, n: int = 4096, seed: int = 0) -> float:
     """Max |onnxruntime - torch| of the decoder on random inputs."""
-    torch = _torch()
+    torch = require_torch()
     from nasset_sdk.networks import make_session
 
     dec = model.decoder.cpu().eval()
@@ -300,12 +273,12 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
 
     ``checkpoint``: optional object with ``load() -> dict|None`` and ``save(dict)`` (resume).
     """
-    torch = _torch()
+    torch = require_torch()
     from nasset_sdk.networks import check_model_bytes
 
     t0 = time.perf_counter()
     torch.manual_seed(settings.seed)
-    device = _pick_device(torch, settings.device)
+    device = pick_device(torch, settings.device)
     lo, hi = domain
     if len(train_data["x"]) == 0:
         raise error("CONVERT_TRAINING", "no training samples: no camera ray hit the asset")
@@ -384,42 +357,19 @@ def settings_dict(settings: TrainSettings) -> dict:
     return asdict(settings)
 
 
-class TorchCheckpoint:
-    """Training state in the dataset folder; read back with ``weights_only=True`` (no pickle code)."""
+def check_asset(path, val_data: dict, result) -> dict:
+    """Re-open the asset and evaluate it with the SDK on the held-out samples (rna surface, or fiber with ``h``)."""
+    from nasset_sdk.asset import Asset
 
-    def __init__(self, path, key: dict) -> None:
-        self.path = path
-        self.key = key
-
-    def load(self):
-        import json
-        import os
-
-        torch = _torch()
-        if not os.path.exists(self.path):
-            return None
-        try:
-            state = torch.load(self.path, map_location="cpu", weights_only=True)
-        except Exception:
-            return None
-        if state.get("key") != json.dumps(self.key, sort_keys=True):
-            return None
-        return state
-
-    def restore(self, model, opt, sched) -> dict | None:
-        """Put a matching checkpoint's model, optimiser and scheduler state back; returns it (None: start fresh)."""
-        state = self.load()
-        if state:
-            model.load_state_dict(state["model"])
-            opt.load_state_dict(state["opt"])
-            sched.load_state_dict(state["sched"])
-        return state or None
-
-    def save(self, state: dict) -> None:
-        import json
-        import os
-
-        torch = _torch()
-        tmp = str(self.path) + ".part"
-        torch.save({**state, "key": json.dumps(self.key, sort_keys=True)}, tmp)
-        os.replace(tmp, self.path)
+    asset = Asset.open(path)
+    asset.load("all")
+    ev = asset.evaluator()
+    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"], val_data.get("h"))
+    y_sdk = np.concatenate([un, sh], axis=1)
+    torch = require_torch()
+    dev = next(result.model.parameters()).device
+    lo, hi = asset.domain
+    y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
+    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
+    psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
+    return {"psnr_db": psnr, "max_abs_diff": diff}

@@ -1,4 +1,5 @@
-"""Stages every baker shares: rendering the views of a resumable dataset, and training with a progress bar.
+"""Stages every baker shares: option checks, rendering the views of a resumable dataset, training with a
+progress bar, and provenance made JSON-safe.
 
 Both keep what is done on Ctrl-C (views on disk, the training checkpoint) and say how to resume.
 """
@@ -8,6 +9,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 from typing import Callable
+
+import numpy as np
+
+from nasset_sdk.errors import UsageError
 
 
 def progress_bar(**kw):
@@ -56,3 +61,31 @@ def train_with_progress(run: Callable[[Callable], object], *, total: int, desc: 
         raise
     finally:
         bar.close()
+
+
+def finite(v):
+    """``v`` with non-finite floats replaced by None, numpy scalars by Python ones, tuples by lists (JSON-safe)."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [finite(x) for x in v]
+    if isinstance(v, (np.floating, np.integer)):
+        return finite(v.item())
+    return v
+
+
+def check_options(size: str, presets, output, **counts) -> Path:
+    """Argument checks every baker shares: a known preset, counts >= 1 where given, an asset file name.
+
+    Returns ``output`` as a Path; raises UsageError."""
+    if size not in presets:
+        raise UsageError(f"--size must be one of {sorted(presets)}, got {size!r}")
+    for name, val in counts.items():
+        if val is not None and int(val) < 1:
+            raise UsageError(f"--{name} must be >= 1, got {val}")
+    output = Path(output)
+    if output.suffix not in (".usdc", ".usda", ".usd"):
+        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
+    return output

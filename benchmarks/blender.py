@@ -9,7 +9,7 @@ tuft), rendered through the example's camera at ``--res`` with all its lights (s
 * **(b) neural**: the reference renderer on the scene converted by ``nasset convert-scene`` with
   the asset object replaced by the baked asset, at each of ``--nr-spp``.
 
-Error and timing follow the Mitsuba error-vs-time benchmark (converters/mitsuba/bench.py): MSE
+Error and timing follow the Mitsuba error-vs-time benchmark (benchmarks/error_vs_time.py): MSE
 over all pixels and channels minus the ground truth's own noise; Cycles time is one
 ``bpy.ops.render.render`` plus reading the EXR back, after a warm-up render at the same spp with
 persistent data on (scene sync and BVH build excluded); neural time is one ``render()`` after
@@ -65,7 +65,7 @@ def _cycles_setup(bpy, res: int, max_bounces: int = 32) -> None:
 def _cycles_render(bpy, path: Path, spp: int, seed: int) -> np.ndarray:
     import OpenEXR
 
-    from . import quiet_stdout
+    from nasset_converters.blender import quiet_stdout
 
     sc = bpy.context.scene
     sc.cycles.samples = int(spp)
@@ -103,16 +103,15 @@ def _png(path: Path, img: np.ndarray, peak: float) -> None:
 def bench_example(out: Path, example: str, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_depth: int,
                   seed: int, say, asset=None) -> dict:
     """One example's error-vs-time curves; writes its images next to the report."""
-    from converters.mitsuba.bench import equal_error_speedup
-    from reference_renderer import RenderSettings, load_scene, render
-    from reference_renderer.integrator import prepare_assets
-    from reference_renderer.plan import make_plan
-    from reference_renderer.scene import SceneWarning
-
-    from . import load_bpy
-    from .bake import bake
-    from .examples import EXAMPLES, build_example
-    from .usd_export import convert_scene
+    from nasset_bakers.blender.rna import bake
+    from nasset_benchmarks.common import equal_error_speedup
+    from nasset_converters.blender import load_bpy
+    from nasset_converters.blender.examples import EXAMPLES, build_example
+    from nasset_converters.blender.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer.integrator import prepare_assets
+    from nasset_reference_renderer.plan import make_plan
+    from nasset_reference_renderer.scene import SceneWarning
 
     bpy = load_bpy()
     times = {}
@@ -174,7 +173,7 @@ def bench_example(out: Path, example: str, *, size: str, res: int, gt_spp: int, 
     floor = last["mse"] - last["variance"]
     speed = equal_error_speedup(cy_points, nr_points)
     best = max((s for s in speed if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)
-    from converters.train_rna import display_psnr
+    from nasset_bakers.train.rna import display_psnr
 
     return {
         "example": example, "asset": str(asset), "resolution": [res, res],
@@ -209,7 +208,7 @@ def interpolated_speedup(cy_points: list[dict], nr_points: list[dict]) -> list[d
 
 def h_ablation(out: Path, *, size: str, seed: int, say) -> dict:
     """Hair asset with and without h on one Cycles dataset: held-out PSNR both ways."""
-    from .bake import bake
+    from nasset_bakers.blender.rna import bake
 
     res = {}
     work = out / f"blender-hair_{size}.usdc.bake"  # the benchmark's own hair dataset (and with-h training state)
@@ -254,7 +253,7 @@ def plot(path: Path, reports: list) -> None:
 
 def run_bench(out_dir, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_depth: int = 8, seed: int = 0,
               examples=("blender-surface", "blender-hair"), ablation: bool = True, quiet: bool = False) -> dict:
-    from converters.mitsuba.bench import _machine
+    from nasset_benchmarks.common import machine
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
@@ -267,7 +266,7 @@ def run_bench(out_dir, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_
     report = {
         "benchmark": "blender error-vs-time", "size": size, "examples": reports,
         "h_ablation": h_ablation(out, size=size, seed=seed, say=say) if ablation else None,
-        "reference_renderer": {"max_depth": max_depth}, "paper": PAPER, "machine": _machine(),
+        "reference_renderer": {"max_depth": max_depth}, "paper": PAPER, "machine": machine(),
         "total_s": round(time.perf_counter() - t0, 1),
         "timing_includes": {
             "cycles": "one bpy.ops.render.render (CPU, persistent data) + EXR readback, after a warm-up at the same spp",
@@ -327,9 +326,8 @@ def add_args(p) -> None:
 
 def run(args) -> int:
     """CLI entry: ``nasset bench blender ...``."""
-    from converters.mitsuba.bench import _ints
-
-    from .examples import EXAMPLES
+    from nasset_benchmarks.common import ints
+    from nasset_converters.blender.examples import EXAMPLES
 
     d = QUICK if args.quick else FULL
     examples = [e.strip() for e in str(args.examples).split(",") if e.strip()]
@@ -338,7 +336,7 @@ def run(args) -> int:
             raise UsageError(f"--examples: unknown example {e!r} ({', '.join(EXAMPLES)})")
     report = run_bench(
         args.output, size=args.size or d["size"], res=args.res or d["res"], gt_spp=args.gt_spp or d["gt_spp"],
-        cy_spp=_ints(args.cy_spp or d["cy_spp"], "cy-spp"), nr_spp=_ints(args.nr_spp or d["nr_spp"], "nr-spp"),
+        cy_spp=ints(args.cy_spp or d["cy_spp"], "cy-spp"), nr_spp=ints(args.nr_spp or d["nr_spp"], "nr-spp"),
         max_depth=args.max_depth, seed=args.seed, examples=examples, ablation=not args.no_ablation, quiet=args.json)
     if args.json:
         print(json.dumps(report, indent=2))

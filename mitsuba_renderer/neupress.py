@@ -15,7 +15,7 @@ import numpy as np
 
 from nasset_sdk.errors import SceneError
 
-from .integrator import INV_FOUR_PI, _dot, _eps, _norm, power, register_shader
+from .integrator import INV_FOUR_PI, dot, normalized, power, ray_eps, register_shader
 from .rna import open_root, read_network, read_tensor, read_triangles, safe_normalize
 
 #: sampling mode of every neupress vertex (set by the CLI's --neupress-sampling)
@@ -52,7 +52,7 @@ def lobe_pdf(n: np.ndarray, sigma: np.ndarray, wi: np.ndarray) -> np.ndarray:
     """neupress.md#lobe: truncated planar Gaussian in the azimuthal-equidistant plane, per steradian."""
     n, wi = safe_normalize(n), safe_normalize(wi)
     z = -np.expm1(-np.pi ** 2 / (2.0 * sigma ** 2))
-    r = np.arccos(np.clip(_dot(n, wi), -1.0, 1.0))
+    r = np.arccos(np.clip(dot(n, wi), -1.0, 1.0))
     jac = np.where(r < 1e-4, 1.0 + r * r / 6.0, r / np.maximum(np.sin(r), 1e-7))
     return np.exp(-r * r / (2.0 * sigma ** 2)) / (2.0 * np.pi * sigma ** 2 * z) * jac
 
@@ -71,13 +71,13 @@ def ggx_reflection(n, wo, wi, eta: float, alpha: float) -> np.ndarray:
     s = wo + wi
     ln = np.linalg.norm(s, axis=1, keepdims=True)
     h = np.where(ln > 1e-12, s / np.maximum(ln, 1e-300), n)
-    c = np.abs(_dot(wo, h))
+    c = np.abs(dot(wo, h))
     st2 = (1.0 - c * c) / eta ** 2
     ct = np.sqrt(np.maximum(0.0, 1.0 - st2))
     rs = (c - eta * ct) / np.maximum(c + eta * ct, 1e-12)
     rp = (eta * c - ct) / np.maximum(eta * c + ct, 1e-12)
     f = np.where(st2 >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
-    nh = _dot(n, h)
+    nh = dot(n, h)
     a2 = alpha * alpha
     d = np.where(nh > 0, a2 / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2), 0.0)
 
@@ -85,7 +85,7 @@ def ggx_reflection(n, wo, wi, eta: float, alpha: float) -> np.ndarray:
         cc = np.clip(np.abs(cc), 1e-12, 1.0)
         return (np.sqrt(cc * cc + a2 * (1.0 - cc * cc)) / cc - 1.0) * 0.5
 
-    no, ni = _dot(n, wo), _dot(n, wi)
+    no, ni = dot(n, wo), dot(n, wi)
     g2 = 1.0 / (1.0 + lam(no) + lam(ni))
     val = np.where((no > 0) & (ni > 0), f * d * g2 / (4.0 * np.maximum(no, 1e-12)), 0.0)
     return np.repeat(val[:, None], 3, 1)
@@ -202,7 +202,7 @@ class NeupressShader:
         mode, lobe = self._mode(asset)
         m = len(p)
         x = (p - inst["to_world"][3, :3]) @ B
-        wo_o = _norm(wo @ B)
+        wo_o = normalized(wo @ B)
         n_o = asset.shading_normal(prim, b1, b2)
         indirect = pt.n_reflective > 1
         cont = (depth < pt.max_depth) & (indirect or mode != "dome")
@@ -221,13 +221,13 @@ class NeupressShader:
             if mode == "lobe" and not lt.delta:
                 continue
             wi, dist, le, pdf = lt.sample(pt.mi, p, ng, rng.random((m, 2)))
-            wi = _norm(wi)
+            wi = normalized(wi)
             s = np.nonzero((pdf > 0) & np.any(le > 0, axis=1))[0]
             if not len(s):
                 continue
-            side = np.sign(_dot(wi[s], ng[s]))[:, None]
+            side = np.sign(dot(wi[s], ng[s]))[:, None]
             side[side == 0] = 1.0
-            origin = p[s] + ng[s] * side * _eps(p[s])[:, None]
+            origin = p[s] + ng[s] * side * ray_eps(p[s])[:, None]
             maxt = np.where(np.isfinite(dist[s]), dist[s] * (1.0 - 1e-3), np.inf)
             tr = pt.tracer.trace(origin, wi[s], maxt, np.full(len(s), k), transparent=pt.light_shapes)
             free = ~tr["hit"]
@@ -244,7 +244,7 @@ class NeupressShader:
         c = np.nonzero(cont)[0]
         u = rng.random((len(c), 2))
         if lobe:
-            wc = _norm(lobe_sample(n_o[c], sigma[c], u) @ np.linalg.inv(B))
+            wc = normalized(lobe_sample(n_o[c], sigma[c], u) @ np.linalg.inv(B))
         else:
             z = 1.0 - 2.0 * u[:, 0]
             sz = np.sqrt(np.maximum(0.0, 1.0 - z * z))
@@ -267,9 +267,9 @@ class NeupressShader:
             t = S[:n_nee] + np.where(np.concatenate(selfh)[:, None], 0.0, fr[:n_nee])
             np.add.at(L, idx[lr], beta[lr] * t * np.concatenate(wgt))
         if len(c):
-            side = np.sign(_dot(wc, ng[c]))[:, None]
+            side = np.sign(dot(wc, ng[c]))[:, None]
             side[side == 0] = 1.0
-            origin = p[c] + ng[c] * side * _eps(p[c])[:, None]
+            origin = p[c] + ng[c] * side * ray_eps(p[c])[:, None]
             passed = pt.tracer.trace(origin, wc, None, np.full(len(c), k))["passed"]
             t = S[n_nee:] + np.where(passed[:, None], 0.0, fr[n_nee:])
             nb[c] = beta[c] * t / np.maximum(pc, 1e-300)[:, None]

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from converters.bake_stages import progress_bar
-from nasset_sdk.bake import _finite, check_options
+from nasset_bakers.registry import register_baker
+from nasset_bakers.stages import check_options, finite, progress_bar
 from nasset_sdk.errors import UsageError, error
 
 #: sampler presets: held-out tuples, Russian-roulette start, depth cap
@@ -73,7 +73,7 @@ def _save_npz(path: Path, data: dict) -> None:
 
 def heldout_tuples(sampler, n: int, path: Path) -> dict:
     """``n`` held-out tuples (separate seed), cached in ``path`` (.npz) for resumes."""
-    from .eightdna_sampler import FIELDS
+    from nasset_converters.mitsuba.eightdna_sampler import FIELDS
 
     if path.is_file():
         with np.load(path, allow_pickle=False) as z:
@@ -90,10 +90,10 @@ def heldout_tuples(sampler, n: int, path: Path) -> dict:
 
 
 def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
-    from . import scene as msc
+    from nasset_converters.mitsuba import scene as msc
 
     if example is not None:
-        from .eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
+        from nasset_converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
 
         if example not in ("default", True, "heterogeneous"):
             raise UsageError(f"unknown 8dna example {example!r} (default, heterogeneous)")
@@ -115,14 +115,13 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     ``far_field=True`` bakes the 6D far-field baseline instead (spec/bake-8dna.md#far-field): the same
     asset layout, whose conditioners 3-4 ignore u_i (flows 1-2 untrained); only the benchmark uses it.
     """
-    from converters.train_8dna import TRAIN_PRESETS, TrainSettings, _torch, heldout_nll, parity_with_sdk, train
-    from converters.train_rna import TorchCheckpoint
+    from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, heldout_nll, parity_with_sdk, train
+    from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_converters.mitsuba.eightdna_sampler import OnlineBuffer, PathSampler
     from nasset_sdk.asset import AssetBuilder
     from nasset_sdk.validate import validate_file
-
-    from . import CONVERTER_VERSION, load_mitsuba
-    from . import scene as msc
-    from .eightdna_sampler import OnlineBuffer, PathSampler
 
     output = check_options(size, TRAIN_PRESETS, output, epochs=epochs, spp=spp)
     for name, val in (("views", views), ("res", res), ("light-angle", light_angle)):
@@ -137,7 +136,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
 
     # -- stage 1: scene -----------------------------------------------------------------------------
     t = time.perf_counter()
-    _torch()
+    require_torch()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mi = load_mitsuba()
@@ -228,7 +227,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         "direct": {"eta": eta, "alpha": alpha},
         "sampler": {**sp, "separate_direct": True, "tuples_traced": int(st["hits"]), "rays_started": int(st["started"]),
                     "buffer_refreshes": int(result.refreshes), "mean_beta": None},
-        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
+        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_nll": result.history[-1]["nll"] if result.history else None,
                      "final_albedo_l2": result.history[-1]["albedo_l2"] if result.history else None},
         "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
@@ -236,7 +235,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         "timings_s": {k: round(v, 3) for k, v in times.items()},
     }
     prov["sampler"]["mean_beta"] = [float(v) for v in held["beta"].mean(0)]
-    builder.provenance = _finite(prov)
+    builder.provenance = finite(prov)
     path = builder.write(output)
     times["export_s"] = time.perf_counter() - t
 
@@ -270,7 +269,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     }
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
-    return _finite(summary)
+    return finite(summary)
 
 
 def _print_summary(s: dict, stream) -> None:
@@ -290,3 +289,6 @@ def _print_summary(s: dict, stream) -> None:
 
 
 __all__ = ["bake", "boundary_of", "SAMPLER_PRESETS"]
+
+
+register_baker("mitsuba", "8dna", bake)

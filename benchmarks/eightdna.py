@@ -24,7 +24,7 @@ channel-mixture densities (as reference_renderer/neural_8dna.py). Far-field: the
 of every entry point is taken as the radiance arriving at x_o (the 6D assumption): light sample at
 x_o and flow direction w_i ~ p6^c(w_i | x_o, w_o), power heuristic, no self-occlusion test (the 6D
 transport already integrates the asset's self-shadowing over entry points). Both models run through
-the same code, so their times compare; the 8D path also renders through ``reference_renderer``
+the same code, so their times compare; the 8D path also renders through ``nasset_reference_renderer``
 (``--reference-renderer``) as a cross-check of the asset in the project's renderer.
 """
 
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from converters.mitsuba.bench import _machine
+from nasset_benchmarks.common import machine
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
@@ -323,9 +323,9 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
                seed: int = 0, reference_renderer_spp: int = 0, reference_npz=None, converged_spp: int = 0,
                example: str = "default", quiet: bool = False) -> dict:
     """Run the benchmark; writes ``bench_8dna.json``, ``bench_8dna.md`` and ``8dna_*.png`` into ``out_dir``."""
-    from . import load_mitsuba
-    from .eightdna_bake import bake
-    from .eightdna_example import CAMERA, EXAMPLE_ASSET_IDS, LIGHT_CENTER, LIGHT_RADIANCE, LIGHT_RADIUS, write_example_scene
+    from nasset_bakers.mitsuba.eightdna import bake
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.eightdna_example import CAMERA, EXAMPLE_ASSET_IDS, LIGHT_CENTER, LIGHT_RADIANCE, LIGHT_RADIUS, write_example_scene
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
@@ -444,7 +444,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
         "timing_includes": {"path tracing": "one mi.render call + readback, after a warm-up render at the same spp",
                             "neural": "one NearFieldRenderer.render call (Mitsuba ray casts, numpy shading, onnxruntime "
                                       "networks), after asset load, session creation and a warm-up render"},
-        "machine": _machine(),
+        "machine": machine(),
         "setup_times_s": {**{k: round(v, 2) for k, v in setup.items()}, "total_s": round(time.perf_counter() - t_all, 2)},
         "bake_summaries": bakes or None,
         "paper": PAPER,
@@ -460,16 +460,15 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
 
 
 def _reference_renderer(out, xml, asset, res, spp, seed, say) -> dict:
-    """The 8D asset through reference_renderer (USD scene from the Mitsuba XML via convert-scene)."""
+    """The 8D asset through nasset_reference_renderer (USD scene from the Mitsuba XML via convert-scene)."""
     import warnings
 
-    from reference_renderer import RenderSettings, load_scene, render
-    from reference_renderer.integrator import prepare_assets
-    from reference_renderer.plan import make_plan
-    from reference_renderer.scene import SceneWarning
-
-    from .eightdna_example import EXAMPLE_ASSET_IDS
-    from .usd_export import convert_scene
+    from nasset_converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS
+    from nasset_converters.mitsuba.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer.integrator import prepare_assets
+    from nasset_reference_renderer.plan import make_plan
+    from nasset_reference_renderer.scene import SceneWarning
 
     conv = convert_scene(xml, out / "scene" / "scene_neural.usda", replace={sid: asset for sid in EXAMPLE_ASSET_IDS},
                          check_usd=False)

@@ -1,6 +1,6 @@
 """Neural assets rendered inside Mitsuba 3: a second, independent implementation of spec/renderer.md.
 
-    python -m converters.mitsuba.neural_render SCENE.usda OUT.exr SPP [--width W --height H --seed S --max-depth D --neupress-sampling M]
+    python -m nasset_mitsuba_renderer.render SCENE.usda OUT.exr SPP [--width W --height H --seed S --max-depth D --neupress-sampling M]
 
 The USD scene becomes a Mitsuba scene (``mi.load_dict``): meshes and every neural-asset
 instance are ``mi.Mesh`` shapes in world space; point, delta distant, sphere and rectangle lights
@@ -8,7 +8,7 @@ are Mitsuba emitters; a ``perspective`` sensor mirrors the USD camera. The integ
 ``nasset_path`` (a Python ``mi.SamplingIntegrator`` registered with ``mi.register_integrator``)
 renders it as wavefronts: numpy path state, Mitsuba ray casts on whole batches, Mitsuba emitter
 sampling and evaluation, the neural transport evaluated per batch with onnxruntime. See
-``converters/mitsuba/neural/`` for the pieces and spec/conformance-notes.md for the readings of the
+``mitsuba_renderer/`` for the pieces and spec/conformance-notes.md for the readings of the
 spec this implementation made.
 """
 
@@ -22,12 +22,12 @@ import numpy as np
 
 from nasset_sdk.errors import NassetError, SceneError, error
 
-from . import is_jit, load_mitsuba
-from .neural import eightdna, neupress  # noqa: F401  (eightdna: importing it registers the 8dna shader)
-from .neural.integrator import ASSET_SHADERS, Kind, PathTracer
-from .neural.lights import build_lights
-from .neural.rna import KNOWN_KINDS, asset_kind
-from .neural.usdscene import read_scene
+from . import eightdna, neupress  # noqa: F401  (eightdna: importing it registers the 8dna shader)
+from .integrator import ASSET_SHADERS, Kind, PathTracer
+from .lights import build_lights
+from .loader import is_jit, load_mitsuba
+from .rna import KNOWN_KINDS, asset_kind
+from .usdscene import read_scene
 
 INTEGRATOR = "nasset_path"
 _CONTEXTS: dict[str, dict] = {}
@@ -171,7 +171,7 @@ def write_exr(path: str, img: np.ndarray) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m converters.mitsuba.neural_render", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m nasset_mitsuba_renderer.render", description=__doc__.splitlines()[0])
     ap.add_argument("scene")
     ap.add_argument("output")
     ap.add_argument("spp", type=int)

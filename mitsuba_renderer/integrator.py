@@ -13,24 +13,24 @@ the CLI opens each asset file with ``cls.open(path, threads)`` (an object with `
 object-space ``points``, ``faces`` and ``face_normals``) and the tracer builds one ``cls(self)`` per
 kind present, calling its ``vertex(...)`` for every wavefront of hits on that kind's instances (see
 :class:`RnaShader` for the contract, :mod:`.neupress` for a second kind). A kind module registers
-itself at import; ``converters/mitsuba/neural_render.py`` imports it.
+itself at import; ``mitsuba_renderer/render.py`` imports it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .lights import MitsubaLight, _p3, _v3
+from .lights import MitsubaLight, p3, v3
 
 FOUR_PI = 4.0 * np.pi
 INV_FOUR_PI = 1.0 / FOUR_PI
 
 
-def _norm(v):
+def normalized(v):
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-30)
 
 
-def _dot(a, b):
+def dot(a, b):
     return np.einsum("ij,ij->i", a, b)
 
 
@@ -40,7 +40,7 @@ _EPS_REL = 4e-6
 _EPS_SCENE = [1e-6]
 
 
-def _eps(p):
+def ray_eps(p):
     return _EPS_REL * np.max(np.abs(p), axis=1) + _EPS_SCENE[0]
 
 
@@ -72,7 +72,7 @@ class Tracer:
 
     def _cast(self, o, d, maxt):
         mi, dr = self.mi, self.dr
-        ray = mi.Ray3f(_p3(mi, o), _v3(mi, d))
+        ray = mi.Ray3f(p3(mi, o), v3(mi, d))
         ray.maxt = mi.Float(np.ascontiguousarray(np.minimum(maxt, 3.0e38), np.float32))
         si = self.scene.ray_intersect(ray, mi.RayFlags.Minimal, True)
         valid = si.is_valid().numpy().astype(bool)
@@ -124,7 +124,7 @@ class Tracer:
             hp = o[s] + d[s] * t[skip, None]
             n = ng[skip]
             side = np.where(np.einsum("ij,ij->i", n, d[s]) >= 0, 1.0, -1.0)[:, None]
-            o_new = hp + n * side * _eps(hp)[:, None]
+            o_new = hp + n * side * ray_eps(hp)[:, None]
             travelled[s] += np.einsum("ij,ij->i", o_new - o[s], d[s])
             o[s] = o_new
             todo = s
@@ -194,8 +194,8 @@ class PathTracer:
 
     @staticmethod
     def _ggx_terms(n, wo, wi, alpha):
-        h = _norm(wo + wi)
-        nh = np.clip(_dot(n, h), 0.0, 1.0)
+        h = normalized(wo + wi)
+        nh = np.clip(dot(n, h), 0.0, 1.0)
         a2 = alpha * alpha
         den = nh * nh * (a2 - 1.0) + 1.0
         dd = a2 / (np.pi * den * den)
@@ -204,26 +204,26 @@ class PathTracer:
             c = np.clip(np.abs(c), 1e-12, 1.0)
             return (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
 
-        g2 = 1.0 / (1.0 + lam(_dot(n, wo)) + lam(_dot(n, wi)))
+        g2 = 1.0 / (1.0 + lam(dot(n, wo)) + lam(dot(n, wi)))
         return h, nh, dd, g2
 
     def bsdf_eval(self, mat, n, wo, wi):
         """-> f * cos_i [m, 3] and pdf of bsdf_sample (solid angle)."""
-        co, ci = _dot(n, wo), _dot(n, wi)
+        co, ci = dot(n, wo), dot(n, wi)
         ok = (co > 0) & (ci > 0)
         val = mat["kd"] / np.pi * ci[:, None]
         pdf = (1.0 - mat["ps"]) * np.maximum(ci, 0.0) / np.pi
         if np.any(mat["spec"]):
             h, nh, dd, g2 = self._ggx_terms(n, wo, wi, mat["alpha"])
-            oh = np.clip(_dot(wo, h), 0.0, 1.0)
+            oh = np.clip(dot(wo, h), 0.0, 1.0)
             f = mat["f0"] + (1.0 - mat["f0"]) * ((1.0 - oh) ** 5)[:, None]
             spec = (dd * g2 / (4.0 * np.maximum(co, 1e-12)))[:, None] * f
             val = val + np.where(mat["spec"][:, None], spec, 0.0)
-            pdf = pdf + mat["ps"] * dd * nh / (4.0 * np.maximum(np.abs(_dot(wo, h)), 1e-12))
+            pdf = pdf + mat["ps"] * dd * nh / (4.0 * np.maximum(np.abs(dot(wo, h)), 1e-12))
         return np.where(ok[:, None], val, 0.0), np.where(ok, pdf, 0.0)
 
     def bsdf_sample(self, mat, n, wo, u, us):
-        t = _norm(np.cross(np.where(np.abs(n[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]]), n))
+        t = normalized(np.cross(np.where(np.abs(n[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]]), n))
         b = np.cross(n, t)
         # cosine lobe
         r = np.sqrt(u[:, 0])
@@ -236,11 +236,11 @@ class PathTracer:
         ct = 1.0 / np.sqrt(1.0 + tan2)
         st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
         h = (st * np.cos(ph))[:, None] * t + (st * np.sin(ph))[:, None] * b + ct[:, None] * n
-        ws = 2.0 * _dot(wo, h)[:, None] * h - wo
+        ws = 2.0 * dot(wo, h)[:, None] * h - wo
         pick_spec = us < mat["ps"]
         wi = np.where(pick_spec[:, None], ws, wd)
         fc, pdf = self.bsdf_eval(mat, n, wo, wi)
-        return _norm(wi), fc, pdf
+        return normalized(wi), fc, pdf
 
     def _materials(self, obj):
         m = len(obj)
@@ -278,7 +278,7 @@ class PathTracer:
         x = (2.0 * px / width - 1.0) * tan_h
         y = (1.0 - 2.0 * py / height) * tan_h * (height / width)
         dl = np.stack([x, y, -np.ones_like(x)], 1)
-        d = _norm(dl @ cam.to_world[:3, :3])
+        d = normalized(dl @ cam.to_world[:3, :3])
         o = np.broadcast_to(cam.to_world[3, :3], d.shape).copy()
         return o, d
 
@@ -309,7 +309,7 @@ class PathTracer:
             # area lights hit
             hl = kinds == Kind.LIGHT
             if np.any(hl):
-                self._shape_light_hits(L, idx, hl, obj, o + d * np.maximum(tr["t"] - 10.0 * _eps(p), 0.0)[:, None], d, prev_pdf, prev_p, beta)
+                self._shape_light_hits(L, idx, hl, obj, o + d * np.maximum(tr["t"] - 10.0 * ray_eps(p), 0.0)[:, None], d, prev_pdf, prev_p, beta)
             # plain meshes: emission
             hm = kinds == Kind.MESH
             if np.any(hm):
@@ -354,8 +354,8 @@ class PathTracer:
                 beta = np.where((rr & surv)[:, None], beta / q[:, None], beta)
             alive &= np.any(beta > 0, axis=1)
             k = np.nonzero(alive)[0]
-            side = np.sign(_dot(new_d[k], ng[k]))[:, None]
-            origin = p[k] + ng[k] * side * _eps(p[k])[:, None]
+            side = np.sign(dot(new_d[k], ng[k]))[:, None]
+            origin = p[k] + ng[k] * side * ray_eps(p[k])[:, None]
             origin = np.where(np.isnan(new_o[k]), origin, new_o[k])
             idx, beta, depth = idx[k], beta[k], depth[k]
             prev_p = np.where(np.isnan(new_o[k]), p[k], new_o[k])  # light pdfs of MIS are taken from the ray origin
@@ -368,7 +368,7 @@ class PathTracer:
         for k in np.unique(obj[hl]):
             sel = np.nonzero(hl & (obj == k))[0]
             lt = self.light_of_obj[k]
-            ray = mi.Ray3f(_p3(mi, o[sel]), _v3(mi, d[sel]))
+            ray = mi.Ray3f(p3(mi, o[sel]), v3(mi, d[sel]))
             si = self.scene.ray_intersect(ray)
             le = np.asarray(lt.emitter.eval(si).numpy(), np.float64)
             le = le.T if le.ndim == 2 else np.broadcast_to(le, (len(sel), 3))
@@ -376,7 +376,7 @@ class PathTracer:
             cam = prev_pdf[sel] == 0
             if np.any(~cam):
                 it = mi.Interaction3f()
-                it.p = _p3(mi, prev_p[sel])
+                it.p = p3(mi, prev_p[sel])
                 it.t = mi.Float(np.zeros(len(sel), np.float32))
                 ds = mi.DirectionSample3f(self.scene, si, it)
                 pl = np.broadcast_to(np.asarray(lt.emitter.pdf_direction(it, ds).numpy(), np.float64), (len(sel),))
@@ -389,11 +389,11 @@ class PathTracer:
         for lt in self.lights:
             u = rng.random((m, 2))
             wi, dist, le, pdf = lt.sample(self.mi, p, n_for_light, u)
-            wi = _norm(wi)
+            wi = normalized(wi)
             valid = (pdf > 0) & np.any(le > 0, axis=1)
-            side = np.sign(_dot(wi, ng))[:, None]
+            side = np.sign(dot(wi, ng))[:, None]
             side[side == 0] = 1.0
-            origin = p + ng * side * _eps(p)[:, None]
+            origin = p + ng * side * ray_eps(p)[:, None]
             maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
             vis = np.zeros(m, bool)
             passed = np.zeros(m, bool)
@@ -405,25 +405,25 @@ class PathTracer:
             yield wi, le / np.maximum(pdf, 1e-300)[:, None] * valid[:, None], pdf, lt.delta, vis & valid, passed
 
     def _shade_mesh(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
-        flip = _dot(ng, wo) < 0
+        flip = dot(ng, wo) < 0
         ngf = np.where(flip[:, None], -ng, ng)
         ns = np.zeros_like(ng)
         for k in np.unique(obj):
             sel = obj == k
             cn = self.objects[k]["corner_normals"][prim[sel]]
             ns[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * cn[:, 0] + b1[sel][:, None] * cn[:, 1] + b2[sel][:, None] * cn[:, 2]
-        ns = _norm(np.where(flip[:, None], -ns, ns))
-        n = np.where((_dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
+        ns = normalized(np.where(flip[:, None], -ns, ns))
+        n = np.where((dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
         mat = self._materials(obj)
         for wi, lw, pl, delta, vis, _ in self._nee(p, ng, n, rng, None):
             fc, pb = self.bsdf_eval(mat, n, wo, wi)
-            above = _dot(wi, ngf) > 0
+            above = dot(wi, ngf) > 0
             fc = fc * above[:, None]
             w = np.ones(len(p)) if delta else np.where(cont, power(pl, pb), 1.0)
             c = beta * fc * lw * (w * vis)[:, None]
             np.add.at(L, idx, c)
         wi, fc, pdf = self.bsdf_sample(mat, n, wo, rng.random((len(p), 2)), rng.random(len(p)))
-        ok = cont & (pdf > 0) & (_dot(wi, ngf) > 0)
+        ok = cont & (pdf > 0) & (dot(wi, ngf) > 0)
         nb = np.where(ok[:, None], beta * fc / np.maximum(pdf, 1e-300)[:, None], 0.0)
         return nb, wi, pdf, ok
 
@@ -469,8 +469,8 @@ class RnaShader:
         cidx = np.nonzero(cont)[0]
         cpassed = np.zeros(m, bool)
         if len(cidx):
-            side = np.sign(_dot(wc[cidx], ng[cidx]))[:, None]
-            origin = p[cidx] + ng[cidx] * side * _eps(p[cidx])[:, None]
+            side = np.sign(dot(wc[cidx], ng[cidx]))[:, None]
+            origin = p[cidx] + ng[cidx] * side * ray_eps(p[cidx])[:, None]
             tr = self.pt.tracer.trace(origin, wc[cidx], None, obj[cidx])
             cpassed[cidx] = tr["passed"]
         entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
@@ -490,14 +490,14 @@ class RnaShader:
             asset, minv = inst["asset"], inst["m3_inv"]
             x = (p[sel] - inst["to_world"][3, :3]) @ minv
             n = asset.shading_normal(prim[sel], b1[sel], b2[sel])
-            wo_o = _norm(wo[sel] @ minv)
+            wo_o = normalized(wo[sel] @ minv)
             rows, where = [], []
             for j, (wi, _, mask, passed) in enumerate(entries):
                 ms = sel[mask[sel]]
                 if len(ms) == 0:
                     continue
                 loc = np.searchsorted(sel, ms)
-                rows.append((x[loc], n[loc], wo_o[loc], _norm(wi[ms] @ minv), passed[ms]))
+                rows.append((x[loc], n[loc], wo_o[loc], normalized(wi[ms] @ minv), passed[ms]))
                 where.append((j, ms))
             if not rows:
                 continue
@@ -519,13 +519,13 @@ class RnaShader:
             inst = pt.objects[k]
             minv = inst["m3_inv"]
             x = (p[sel] - inst["to_world"][3, :3]) @ minv
-            wo_o[sel] = _norm(wo[sel] @ minv)
+            wo_o[sel] = normalized(wo[sel] @ minv)
             t_o[sel], h[sel], exempt[sel] = inst["asset"].fiber_frame(prim[sel], x, wo_o[sel])
         rows = []  # (wi, weight [m, 3], valid, shadowed branch)
         for lt in pt.lights:
             u = rng.random((m, 2))
             wi, dist, le, pdf = lt.sample(pt.mi, p, ng, u)
-            wi = _norm(wi)
+            wi = normalized(wi)
             valid = (pdf > 0) & np.any(le > 0, axis=1)
             maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
             vis, passed = np.zeros(m, bool), np.zeros(m, bool)
@@ -555,7 +555,7 @@ class RnaShader:
             if not len(allm):
                 continue
             loc = np.concatenate([np.searchsorted(sel, ms) for ms in cat])
-            wis = np.concatenate([_norm(r[0][ms] @ inst["m3_inv"]) for r, ms in zip(rows, cat, strict=True)])
+            wis = np.concatenate([normalized(r[0][ms] @ inst["m3_inv"]) for r, ms in zip(rows, cat, strict=True)])
             sh = np.concatenate([r[3][ms] for r, ms in zip(rows, cat, strict=True)])
             val = inst["asset"].transport(x[loc], t_o[allm], wo_o[allm], wis, sh, h=h[allm])
             s0 = 0

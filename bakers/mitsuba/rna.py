@@ -12,19 +12,17 @@ The asset file is written atomically: an interrupted bake never leaves a half-wr
 
 from __future__ import annotations
 
-import json
-import math
 import sys
 import time
 import warnings
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
+from nasset_bakers.registry import register_baker
+from nasset_bakers.stages import check_options, finite
+from nasset_sdk.errors import UsageError, error
 
-from .errors import UsageError, error
-
-#: data presets (converters.mitsuba.dataset.DataSettings fields). lights_per_view 0: every training
+#: data presets (nasset_converters.mitsuba.dataset.DataSettings fields). lights_per_view 0: every training
 #: pixel has its own random light; held-out views: one light per view, lower res, many more spp
 #: (their noise bounds the measurable PSNR; spec/bake.md#psnr). Measured in spec/bake.md#ablations.
 DATA_PRESETS = {
@@ -35,36 +33,9 @@ DATA_PRESETS = {
 
 
 #: default angular radius (deg) of the distant light for assets behind smooth dielectrics: measured
-#: (converters/mitsuba/light_study.py, spec/bake.md#light) 5 deg costs +5 % bias and 2.2x the
+#: (benchmarks/light_study.py, spec/bake.md#light) 5 deg costs +5 % bias and 2.2x the
 #: per-pixel noise of a rough boundary under a delta light; 2 deg: +2 % but 7.6x the noise.
 SMOOTH_DIELECTRIC_LIGHT_ANGLE = 5.0
-
-
-def _finite(v):
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _finite(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_finite(x) for x in v]
-    if isinstance(v, (np.floating, np.integer)):
-        return _finite(v.item())
-    return v
-
-
-def check_options(size: str, presets, output, **counts) -> Path:
-    """Argument checks every baker shares: a known preset, counts >= 1 where given, an asset file name.
-
-    Returns ``output`` as a Path; raises UsageError."""
-    if size not in presets:
-        raise UsageError(f"--size must be one of {sorted(presets)}, got {size!r}")
-    for name, val in counts.items():
-        if val is not None and int(val) < 1:
-            raise UsageError(f"--{name} must be >= 1, got {val}")
-    output = Path(output)
-    if output.suffix not in (".usdc", ".usda", ".usd"):
-        raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
-    return output
 
 
 def bake(
@@ -87,13 +58,13 @@ def bake(
     summary_stream=None,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
-    from converters.bake_stages import render_views, train_with_progress
-    from converters.mitsuba import CONVERTER_VERSION, load_mitsuba
-    from converters.mitsuba import dataset as ds
-    from converters.mitsuba import scene as msc
-    from converters.train_rna import TRAIN_PRESETS, TorchCheckpoint, TrainSettings, _torch, train
-
-    from .asset import AssetBuilder
+    from nasset_bakers.stages import render_views, train_with_progress
+    from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
+    from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_sdk.asset import AssetBuilder
 
     output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
@@ -105,7 +76,7 @@ def bake(
 
     # -- stage 1: scene ---------------------------------------------------------------------------
     t = time.perf_counter()
-    _torch()  # fail early (typed) when torch is missing, before minutes of rendering
+    require_torch()  # fail early (typed) when torch is missing, before minutes of rendering
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mi = load_mitsuba(variant)
@@ -113,7 +84,7 @@ def bake(
         say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
     if example:
-        from converters.mitsuba.example_scene import EXAMPLE_ASSET_IDS, write_example_scene
+        from nasset_converters.mitsuba.examples import EXAMPLE_ASSET_IDS, write_example_scene
 
         scene = write_example_scene(work / "example_scene")
         asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
@@ -187,14 +158,14 @@ def bake(
         "light": {"type": "directional" if dset.light_angle_deg == 0 else "distant-sphere",
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"]))},
-        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
+        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
         "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
         "size": size,
         "timings_s": {k: round(v, 3) for k, v in times.items()},
     }
-    builder.provenance = _finite(prov)
+    builder.provenance = finite(prov)
     path = builder.write(output)
     times["export_s"] = time.perf_counter() - t
 
@@ -223,26 +194,6 @@ def bake(
     return summary
 
 
-def check_asset(path, val_data: dict, result) -> dict:
-    """Re-open the asset and evaluate it with the SDK on the held-out samples (rna surface, or fiber with ``h``)."""
-    from converters.train_rna import _tensors, _torch, display_psnr, predict, select_branch
-
-    from .asset import Asset
-
-    asset = Asset.open(path)
-    asset.load("all")
-    ev = asset.evaluator()
-    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"], val_data.get("h"))
-    y_sdk = np.concatenate([un, sh], axis=1)
-    torch = _torch()
-    dev = next(result.model.parameters()).device
-    lo, hi = asset.domain
-    y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
-    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
-    psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
-    return {"psnr_db": psnr, "max_abs_diff": diff}
-
-
 def _print_summary(s: dict, stream) -> None:
     t = s["times_s"]
     lines = [
@@ -258,41 +209,11 @@ def _print_summary(s: dict, stream) -> None:
     print("\n".join(lines), file=stream)
 
 
-def baker_for(kind: str, scene, example: str | None):
-    """The bake function for a kind and a source: Mitsuba ``.xml`` (rna, neupress, 8dna) or Blender ``.blend`` (rna).
-
-    Every baker takes ``(scene, asset_ids, output, **options)`` and returns the summary dict."""
-    blender = (scene is not None and str(scene).lower().endswith(".blend")) or (example or "").startswith("blender")
-    if blender:
-        if kind != "rna":
-            raise UsageError(f"Blender scenes bake to kind rna only, not {kind!r}")
-        from converters.blender.bake import bake as blender_bake
-
-        return blender_bake
-    if kind == "neupress":
-        from converters.mitsuba.neupress_bake import bake as neupress_bake
-
-        return neupress_bake
-    if kind == "8dna":
-        from converters.mitsuba.eightdna_bake import bake as eightdna_bake
-
-        return eightdna_bake
-    if kind != "rna":
-        raise UsageError(f"unknown kind {kind!r}")
+def bake_named_example(scene, asset_ids, output, *, example: str | None = None, **options) -> dict:
+    """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna has one example: default)."""
     if example not in (None, "default"):
         raise UsageError(f"unknown rna example {example!r} (default, blender-surface, blender-hair)")
-    return lambda scene, ids, out, example=None, **kw: bake(scene, ids, out, example=example is not None, **kw)
+    return bake(scene, asset_ids, output, example=example is not None, **options)
 
 
-def run(args) -> int:
-    """CLI entry: see ``nasset bake --help``."""
-    fn = baker_for(args.kind, args.scene, args.example)
-    summary = fn(
-        args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
-        views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
-        seed=args.seed, device=args.device, quiet=args.quiet,
-        summary_stream=sys.stderr if getattr(args, "json", False) else sys.stdout,
-    )
-    if getattr(args, "json", False):
-        print(json.dumps(_finite(summary), indent=2))
-    return 0
+register_baker("mitsuba", "rna", bake_named_example)

@@ -29,7 +29,7 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
-from .dataset import _unit_sphere, camera_rays
+from .dataset import camera_rays, unit_sphere
 
 FIELDS = ("x", "n", "wo", "wi", "rgb", "pix")
 
@@ -175,7 +175,7 @@ def render_view(renderer: SubsurfaceRenderer, center, radius, view_id: int, *, v
     s = renderer.s
     split_seed = 1 if validation else 0
     rng = np.random.default_rng([s.seed, split_seed, view_id, 77])
-    cam_dir = _unit_sphere(rng, 1, False)[0]
+    cam_dir = unit_sphere(rng, 1, False)[0]
     eye = np.asarray(center, np.float64) + s.distance * radius * cam_dir
     half_fov = float(np.arcsin(min(1.0 / max(s.distance, 1.0 + 1e-6), 0.999))) * 1.04
     res = s.val_res if validation else s.res
@@ -184,9 +184,9 @@ def render_view(renderer: SubsurfaceRenderer, center, radius, view_id: int, *, v
     pix = np.nonzero(mask)[0]
     o, d, x, n = o[pix], d[pix], x[pix], n[pix]
     if validation:  # one light for the whole view
-        wi = np.repeat(_unit_sphere(rng, 1, False), len(pix), axis=0).astype(np.float32)
+        wi = np.repeat(unit_sphere(rng, 1, False), len(pix), axis=0).astype(np.float32)
     else:  # the full sphere, an independent direction per pixel
-        wi = _unit_sphere(rng, len(pix), False).astype(np.float32)
+        wi = unit_sphere(rng, len(pix), False).astype(np.float32)
     spp = s.val_spp if validation else s.spp
     seed = (s.seed * 1_000_003 + split_seed * 10_007 + view_id) & 0xFFFFFF
     rgb = renderer.transport(o, d, wi, spp, seed) if len(pix) else np.zeros((0, 3), np.float32)

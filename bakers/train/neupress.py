@@ -33,7 +33,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .train_rna import TorchCheckpoint, _pick_device, _torch, display_psnr
+from .common import TorchCheckpoint, display_psnr, pick_device, require_torch
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
            "prt_coefficients", "appearance_inputs", "sampling_inputs", "export_skip_mlp", "export_mlp"]
@@ -100,7 +100,7 @@ def skip_layout(layers: int) -> list[tuple[int, int]]:
 
 def build_skip_mlp(in_width: int, hidden: int, layers: int, out: int):
     """ReLU MLP with ``layers`` hidden layers and alternate-layer skips, in mlp_onnx's layout."""
-    torch = _torch()
+    torch = require_torch()
     nn = torch.nn
     skips = skip_layout(layers)
     skip_src = {d: s for s, d in skips}
@@ -135,7 +135,7 @@ def build_skip_mlp(in_width: int, hidden: int, layers: int, out: int):
 
 
 def build_mlp(widths):
-    torch = _torch()
+    torch = require_torch()
     mods = []
     for i, (a, b) in enumerate(zip(widths[:-1], widths[1:], strict=True)):
         mods.append(torch.nn.Linear(a, b))
@@ -177,7 +177,7 @@ class AppearanceResult:
 
 def predict_appearance(model, G: np.ndarray, v: np.ndarray, batch: int = 65536) -> np.ndarray:
     """Raw network output [N, 3] (no clamp) for inputs v [N, 7]."""
-    torch = _torch()
+    torch = require_torch()
     dev = next(model.parameters()).device
     G64 = torch.as_tensor(np.asarray(G, np.float64), device=dev)
     out = []
@@ -196,13 +196,13 @@ def _psnr(pred, gt) -> float:
 def train_appearance(train_data: dict, val_data: dict, domain, settings: NeupressTrainSettings, *, progress=None,
                      checkpoint=None) -> AppearanceResult:
     """Fit S; ``progress(epoch, loss, val_psnr)`` per epoch; ``checkpoint`` (TorchCheckpoint) resumes."""
-    torch = _torch()
+    torch = require_torch()
     t0 = time.perf_counter()
     m, layers, hidden, *_ = SIZES[settings.size]
     rng = np.random.default_rng(settings.seed)
     G = rng.normal(settings.fourier_mean, settings.fourier_std, (m, 7)).astype(np.float32)
     torch.manual_seed(settings.seed)
-    dev = _pick_device(torch, settings.device)
+    dev = pick_device(torch, settings.device)
     lo, hi = domain
     v = appearance_inputs(train_data["x"], train_data["wo"], train_data["wi"], lo, hi)
     y = np.asarray(train_data["rgb"], np.float32)
@@ -310,7 +310,7 @@ def lobe_log_q(torch, log_sigma, r2):
 
 def train_sampling(app, records: dict, domain, settings: NeupressTrainSettings, *, progress=None) -> SamplingResult:
     """Fit log sigma(x, wo) by the KL loss against :func:`binned_targets` of ``records`` (x, n, wo)."""
-    torch = _torch()
+    torch = require_torch()
     t0 = time.perf_counter()
     _, _, _, ms, s_hidden, *_ = SIZES[settings.size]
     lo, hi = domain
@@ -361,7 +361,7 @@ def train_sampling(app, records: dict, domain, settings: NeupressTrainSettings, 
 
 
 def predict_log_sigma(model, Gs, v5: np.ndarray) -> np.ndarray:
-    torch = _torch()
+    torch = require_torch()
     with torch.no_grad():
         return model(_features(torch, torch.as_tensor(np.asarray(Gs, np.float64)),
                                torch.as_tensor(np.ascontiguousarray(v5, np.float32))))[:, 0].numpy()

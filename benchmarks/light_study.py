@@ -1,6 +1,6 @@
 """Bias and noise of the finite-angle distant light vs the delta light (spec/bake.md#light).
 
-    python -m converters.mitsuba.light_study [--spp 256] [--res 16]
+    python -m nasset_benchmarks.light_study [--spp 256] [--res 16]
 
 A sphere (radius 0.5, icosphere mesh) around a homogeneous medium (albedo 0.9, sigma_t 4) with a
 rough (alpha 0.2) and a smooth dielectric boundary (IOR 1.5), lit head-on from the camera side
@@ -16,9 +16,9 @@ import json
 
 import numpy as np
 
-from . import load_mitsuba
-from .dataset import DataSettings, Renderer, camera_rays
-from .scene import IsolatedAsset
+from nasset_converters.mitsuba import load_mitsuba
+from nasset_converters.mitsuba.dataset import DataSettings, Renderer, camera_rays
+from nasset_converters.mitsuba.scene import IsolatedAsset
 
 
 def _sphere_shape(mi, bsdf: dict):

@@ -1,7 +1,7 @@
 """Second implementation of spec/renderer.md: neural assets rendered inside Mitsuba 3.
 
 Written from the specification text (spec/format.md, spec/kinds/rna.md, spec/kinds/neupress.md, spec/kinds/encodings.md,
-spec/renderer.md) and independent of ``nasset_sdk``'s evaluators and of ``reference_renderer``:
+spec/renderer.md) and independent of ``nasset_sdk``'s evaluators and of ``nasset_reference_renderer``:
 
 - :mod:`.usdscene` reads the USD scene (camera, meshes + UsdPreviewSurface, UsdLux lights,
   NeuralAsset prims);
@@ -19,5 +19,5 @@ spec/renderer.md) and independent of ``nasset_sdk``'s evaluators and of ``refere
   in numpy, neural transport batched through onnxruntime); per-kind shaders plug in through its
   ``ASSET_SHADERS`` registry.
 
-The CLI is ``python -m converters.mitsuba.neural_render``.
+The CLI is ``python -m nasset_mitsuba_renderer.render``.
 """

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 1024, "mi_spp": "1,4,16,64", "nr_spp": "1,4,16"}
@@ -45,146 +46,17 @@ PAPERS = ("Published figures: 8DNA renders volumetric assets roughly 2-20x faste
           "(~1850-2500 s) over 256-spp neural render time (~2-4 s), not at equal error.")
 
 
-def _ints(text: str, name: str) -> list[int]:
-    try:
-        vals = sorted({int(v) for v in str(text).split(",") if v.strip()})
-    except ValueError:
-        raise UsageError(f"--{name} must be a comma-separated list of integers, got {text!r}") from None
-    if not vals or vals[0] < 1:
-        raise UsageError(f"--{name} needs positive integers, got {text!r}")
-    return vals
-
-
-def _sensor(mi, scene, res: int):
-    """A box-filtered res x res perspective sensor with the scene camera's pose and horizontal field of view."""
-    sensor = scene.sensors()[0]
-    p = mi.traverse(sensor)
-    m = np.asarray(p["to_world"].matrix, np.float64).reshape(4, 4, -1)[:, :, 0]
-    return mi.load_dict({
-        "type": "perspective", "fov": float(np.asarray(p["x_fov"]).ravel()[0]), "fov_axis": "x",
-        "to_world": mi.ScalarTransform4f(m.tolist()),
-        "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-        "sampler": {"type": "independent"},
-    })
-
-
-def _mi_render(mi, scene, sensor, spp: int, seed: int) -> np.ndarray:
-    img = mi.render(scene, sensor=sensor, spp=int(spp), seed=int(seed))
-    return np.asarray(img, np.float64)[..., :3]
-
-
-def ground_truth(mi, scene, sensor, spp: int, chunk: int = 256, say=print) -> tuple[np.ndarray, float]:
-    """Mean of independent chunks (seeds 1000+); returns (image, estimated variance of its pixels' means)."""
-    n = max(2, math.ceil(spp / chunk))
-    per = max(1, spp // n)
-    imgs = []
-    t = time.perf_counter()
-    for k in range(n):
-        imgs.append(_mi_render(mi, scene, sensor, per, 1000 + k))
-        say(f"  ground truth chunk {k + 1}/{n} ({per} spp) {time.perf_counter() - t:.1f}s")
-    imgs = np.stack(imgs)
-    a, b = imgs[: n // 2].mean(0), imgs[n // 2: 2 * (n // 2)].mean(0)
-    var_gt = float(np.mean((a - b) ** 2) / 4.0)  # variance of the mean of both halves
-    return imgs.mean(0), var_gt
-
-
-def equal_error_speedup(mi_points: list[dict], nr_points: list[dict]) -> list[dict]:
-    """Mitsuba's fitted time to reach each neural point's error / the neural point's time.
-
-    Mitsuba is unbiased: MSE = V / spp, and its render time is affine in spp, time = a + c spp
-    (a: per-call cost -- kernel recording and launch -- that dominates small images). V is fitted
-    in log space, (a, c) by least squares with a >= 0, over the Mitsuba points. Errors at or below
-    zero (within the ground truth's noise) have no equal-error time.
-    """
-    ok = [p for p in mi_points if p["mse"] > 0]
-    if not ok:
-        return []
-    log_v = float(np.mean([math.log(p["mse"] * p["spp"]) for p in ok]))
-    spp = np.array([p["spp"] for p in mi_points], np.float64)
-    tm = np.array([p["time_s"] for p in mi_points], np.float64)
-    if len(spp) >= 2 and np.ptp(spp) > 0:
-        c, a = np.polyfit(spp, tm, 1)
-        if a < 0 or c <= 0:
-            a, c = 0.0, float(np.sum(tm * spp) / np.sum(spp * spp))
-    else:
-        a, c = 0.0, float(tm[0] / spp[0])
-    out = []
-    for p in nr_points:
-        if p["mse"] <= 0:
-            out.append({"spp": p["spp"], "mse": p["mse"], "mitsuba_spp": None, "mitsuba_time_s": None, "speedup": None})
-            continue
-        spp_eq = math.exp(log_v) / p["mse"]
-        t_eq = float(a + c * spp_eq)
-        out.append({"spp": p["spp"], "mse": p["mse"], "mitsuba_spp": spp_eq, "mitsuba_time_s": t_eq,
-                    "speedup": t_eq / p["time_s"]})
-    return out
-
-
-def plot(path: Path, mi_points, nr_points, floor, title: str) -> str:
-    """Log-log MSE vs time; matplotlib when installed, else a minimal built-in PNG plot. Returns the backend used."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        _plot_fallback(path, mi_points, nr_points)
-        return "builtin"
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=120)
-    for pts, label, mk in ((mi_points, "Mitsuba path tracing (original scene)", "o-"),
-                           (nr_points, "reference renderer + baked asset", "s-")):
-        good = [p for p in pts if p["mse"] > 0]
-        ax.loglog([p["time_s"] for p in good], [p["mse"] for p in good], mk, label=label)
-        for p in good:
-            ax.annotate(f"{p['spp']}", (p["time_s"], p["mse"]), textcoords="offset points", xytext=(4, 4), fontsize=7)
-    if floor is not None and floor > 0:
-        ax.axhline(floor, color="gray", ls="--", lw=1, label=f"asset bias floor {floor:.2e}")
-    ax.set_xlabel("render time (s, wall clock)")
-    ax.set_ylabel("MSE vs ground truth")
-    ax.set_title(title, fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return "matplotlib"
-
-
-def _plot_fallback(path: Path, mi_points, nr_points, size=(480, 360)) -> None:
-    from nasset_sdk.images import write_png
-
-    w, h = size
-    img = np.full((h, w, 3), 255, np.uint8)
-    pts = [p for p in mi_points + nr_points if p["mse"] > 0 and p["time_s"] > 0]
-    if not pts:
-        write_png(path, img)
-        return
-    lx = np.log10([p["time_s"] for p in pts])
-    ly = np.log10([p["mse"] for p in pts])
-    x0, x1, y0, y1 = lx.min() - 0.1, lx.max() + 0.1, ly.min() - 0.1, ly.max() + 0.1
-    img[h - 20, 20:w - 10] = 0
-    img[10:h - 20, 20] = 0
-    for pts_i, color in ((mi_points, (30, 90, 200)), (nr_points, (220, 80, 20))):
-        for p in pts_i:
-            if p["mse"] <= 0 or p["time_s"] <= 0:
-                continue
-            x = int(20 + (math.log10(p["time_s"]) - x0) / (x1 - x0) * (w - 40))
-            y = int(h - 20 - (math.log10(p["mse"]) - y0) / (y1 - y0) * (h - 40))
-            img[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4] = color
-    write_png(path, img)
-
-
 def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 128, gt_spp: int = 4096,
                         mi_spp=(1, 2, 4, 8, 16, 32, 64, 128), nr_spp=(1, 2, 4, 8, 16, 32), max_depth: int | None = None,
                         seed: int = 0, quiet: bool = False) -> dict:
     """Run the benchmark; writes ``error_vs_time.json`` and ``error_vs_time.png`` into ``out_dir``."""
-    from converters.mitsuba import load_mitsuba
-    from converters.mitsuba.example_scene import EXAMPLE_ASSET_IDS, write_example_scene
-    from converters.mitsuba.usd_export import convert_scene
-    from reference_renderer import RenderSettings, load_scene, render
-    from reference_renderer.integrator import prepare_assets
-    from reference_renderer.plan import make_plan
-    from reference_renderer.scene import SceneWarning
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.examples import EXAMPLE_ASSET_IDS, write_example_scene
+    from nasset_converters.mitsuba.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer.integrator import prepare_assets
+    from nasset_reference_renderer.plan import make_plan
+    from nasset_reference_renderer.scene import SceneWarning
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
@@ -196,7 +68,7 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
 
     # asset
     if asset is None:
-        from nasset_sdk.bake import bake
+        from nasset_bakers.mitsuba.rna import bake
 
         asset = out / f"example_{size}.usdc"
         if not asset.is_file():
@@ -215,7 +87,7 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
     mi = load_mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
     mscene = mi.load_file(str(xml))
-    sensor = _sensor(mi, mscene, res)
+    sensor = mi_sensor(mi, mscene, res)
     md = converted.integrator.get("max_depth", 24)
     if max_depth is None:
         max_depth = max(1, md - 1) if md and md > 0 else 24
@@ -229,9 +101,9 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
     # (a) Mitsuba
     mi_points = []
     for k, spp in enumerate(mi_spp):
-        _mi_render(mi, mscene, sensor, spp, 50_000 + k)  # warm-up: compile / fetch the kernels for this spp
+        mi_render(mi, mscene, sensor, spp, 50_000 + k)  # warm-up: compile / fetch the kernels for this spp
         t = time.perf_counter()
-        img = _mi_render(mi, mscene, sensor, spp, 10 + k)
+        img = mi_render(mi, mscene, sensor, spp, 10 + k)
         dt = time.perf_counter() - t
         mse = float(np.mean((img - gt) ** 2)) - var_gt
         mi_points.append({"spp": spp, "time_s": dt, "mse": mse, "mse_raw": mse + var_gt})
@@ -286,7 +158,7 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
             "neural": "one reference_renderer.render call (plan, BVH build, wavefronts, network evaluations, film), after "
                       "scene load, asset/onnxruntime session setup and one warm-up render",
         },
-        "machine": _machine(),
+        "machine": machine(),
         "setup_times_s": {**{k: round(v, 2) for k, v in times.items()}, "total_s": round(time.perf_counter() - t_setup, 2)},
         "papers": PAPERS,
     }
@@ -305,17 +177,6 @@ def _asset_size(path) -> str | None:
         return (Asset.open(path, load="none").provenance or {}).get("size")
     except Exception:  # noqa: BLE001 - informative only
         return None
-
-
-def _machine() -> dict:
-    import os
-    import platform
-
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:
-        cores = os.cpu_count()
-    return {"cpu": platform.processor() or platform.machine(), "usable_cores": cores, "load_avg": list(os.getloadavg())}
 
 
 def summary_text(r: dict) -> str:
@@ -379,8 +240,8 @@ def run(args) -> int:
     res = args.res or q.get("res", 128)
     report = bench_error_vs_time(
         args.output, asset=args.asset, size=args.size, res=res, gt_spp=args.gt_spp or q.get("gt_spp", 4096),
-        mi_spp=_ints(args.mi_spp or q.get("mi_spp", "1,2,4,8,16,32,64,128"), "mi-spp"),
-        nr_spp=_ints(args.nr_spp or q.get("nr_spp", "1,2,4,8,16,32"), "nr-spp"),
+        mi_spp=ints(args.mi_spp or q.get("mi_spp", "1,2,4,8,16,32,64,128"), "mi-spp"),
+        nr_spp=ints(args.nr_spp or q.get("nr_spp", "1,2,4,8,16,32"), "nr-spp"),
         max_depth=args.max_depth, seed=args.seed, quiet=args.json,
     )
     if args.json:

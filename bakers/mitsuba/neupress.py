@@ -1,7 +1,7 @@
 """``nasset bake --kind neupress``: a Mitsuba 3 translucent object -> a neupress asset (spec/bake-neupress.md).
 
 Stages (each with a progress bar): scene (load, pick the asset's shapes, find its rough-dielectric
-boundary) -> dataset (subsurface-only ground truth, ``neupress_data``) -> train (appearance network,
+boundary) -> dataset (subsurface-only ground truth, ``neupress_dataset``) -> train (appearance network,
 then the sampling network against it, then the SH PRT coefficients from it; ``train_neupress``) ->
 export (ONNX + tensors through AssetBuilder: components ``core``, ``sampling``, ``prt``) -> check
 (re-open the written asset and evaluate it with the SDK on the held-out views).
@@ -21,10 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.bake import _finite, check_options
+from nasset_bakers.registry import register_baker
+from nasset_bakers.stages import check_options, finite
 from nasset_sdk.errors import UsageError, error
 
-#: data presets (neupress_data.NeupressDataSettings fields); measured in spec/bake-neupress.md
+#: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
 DATA_PRESETS = {
     "tiny": dict(views=12, val_views=2, res=24, spp=8, val_res=24, val_spp=128),
     "small": dict(views=160, val_views=6, res=64, spp=32, val_res=64, val_spp=1024),
@@ -55,16 +56,12 @@ def bake(
     """Run the whole neupress bake; returns the summary dict (also stored in the asset's provenance).
 
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
-    from converters.bake_stages import progress_bar, render_views, train_with_progress
-    from converters.mitsuba import CONVERTER_VERSION, load_mitsuba
-    from converters.mitsuba import dataset as ds
-    from converters.mitsuba import neupress_data as nd
-    from converters.mitsuba import scene as msc
-    from converters.train_neupress import (
+    from nasset_bakers.stages import progress_bar, render_views, train_with_progress
+    from nasset_bakers.train.common import require_torch
+    from nasset_bakers.train.neupress import (
         TRAIN_PRESETS,
         NeupressTrainSettings,
         TorchCheckpoint,
-        _torch,
         export_mlp,
         export_skip_mlp,
         prt_coefficients,
@@ -72,6 +69,10 @@ def bake(
         train_sampling,
         vertex_normals,
     )
+    from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba import neupress_dataset as nd
+    from nasset_converters.mitsuba import scene as msc
     from nasset_sdk.asset import AssetBuilder
 
     output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
@@ -88,7 +89,7 @@ def bake(
 
     # -- stage 1: scene ---------------------------------------------------------------------------
     t = time.perf_counter()
-    torch = _torch()
+    torch = require_torch()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         mi = load_mitsuba(variant)
@@ -96,7 +97,7 @@ def bake(
         say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
     if example:
-        from converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
+        from nasset_converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
 
         scene = write_example_scene(work / "example_scene", size)
         asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
@@ -209,7 +210,7 @@ def bake(
         "size": size,
         "timings_s": {k: round(v, 3) for k, v in times.items()},
     }
-    builder.provenance = _finite(prov)
+    builder.provenance = finite(prov)
     path = builder.write(output)
     times["export_s"] = time.perf_counter() - t
 
@@ -241,13 +242,13 @@ def bake(
     }
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
-    return _finite(summary)
+    return finite(summary)
 
 
 def check_asset(path, val_data: dict, app, samp, sh) -> dict:
     """Re-open the asset with the SDK: held-out PSNR, SDK vs torch on the held-out samples, sigma and PRT round trips."""
-    from converters.train_neupress import appearance_inputs, predict_appearance, predict_log_sigma, sampling_inputs
-    from converters.train_rna import display_psnr
+    from nasset_bakers.train.common import display_psnr
+    from nasset_bakers.train.neupress import appearance_inputs, predict_appearance, predict_log_sigma, sampling_inputs
     from nasset_sdk.asset import Asset
 
     asset = Asset.open(path)
@@ -289,3 +290,6 @@ def _print_summary(s: dict, stream) -> None:
         "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
     ]
     print("\n".join(lines), file=stream)
+
+
+register_baker("mitsuba", "neupress", bake)

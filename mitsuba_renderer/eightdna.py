@@ -16,7 +16,7 @@ import numpy as np
 
 from nasset_sdk.errors import SceneError
 
-from .integrator import _eps, register_shader
+from .integrator import ray_eps, register_shader
 from .rna import safe_normalize, triplane
 
 TWO_PI = 2.0 * np.pi
@@ -576,7 +576,7 @@ class EightDnaShader:
             q = rd[ok]
             if len(q):
                 wq = wg[ok]
-                origin = p[q] + ng[q] * view_side[q, None] * _eps(p[q])[:, None]
+                origin = p[q] + ng[q] * view_side[q, None] * ray_eps(p[q])[:, None]
                 passed = pt.tracer.trace(origin, wq, ignore=np.full(len(q), k))["passed"]
                 q, wq, sel = q[~passed], wq[~passed], np.nonzero(ok)[0][~passed]
                 nb[q] = beta[q] * (fg[sel] / (pd_choice[q] * pdg[sel]))[:, None]

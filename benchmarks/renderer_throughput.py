@@ -1,6 +1,6 @@
 """Benchmark (not a test): render throughput vs the bound set by onnxruntime and Embree.
 
-    python -m reference_renderer.bench [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
+    python -m nasset_benchmarks.renderer_throughput [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
 
 Scene: one rna asset under a distant light (no other objects: NEE only). For each onnxruntime
 thread setting, in one process and with that same setting throughout, it renders ``--repeat``
@@ -66,8 +66,8 @@ def _best_rate(fn, n: int, min_time: float = 0.15, rounds: int = 3) -> float:
 
 
 def _scene(size: str):
-    from .scene import load_scene
-    from .testscenes import SceneBuilder, random_rna_asset
+    from nasset_reference_renderer.scene import load_scene
+    from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset
 
     tmp = Path(tempfile.mkdtemp())
     asset = random_rna_asset(tmp / "a.usdc", size=size)
@@ -79,11 +79,10 @@ def _scene(size: str):
 
 
 def run_one(scene, a, threads: int) -> dict:
+    from nasset_reference_renderer.accel import EmbreeBackend
+    from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render
+    from nasset_reference_renderer.plan import make_plan
     from nasset_sdk.kinds import rna
-
-    from .accel import EmbreeBackend
-    from .integrator import RenderSettings, prepare_assets, render
-    from .plan import make_plan
 
     settings = RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch)
     for data in scene.assets:

@@ -1,8 +1,8 @@
 """``nasset bake SCENE.blend --asset OBJECT --kind rna``: a Blender object -> an rna asset (spec/bake-blender.md).
 
-Stages (as the Mitsuba bake, nasset_sdk/bake.py): open the .blend (or generate an example) and
-export the asset's geometry -> render the dataset with Cycles (converters.blender.dataset) ->
-train (converters.train_rna, the one rna trainer; fibers add the h input) -> export (ONNX +
+Stages (as the Mitsuba bake, bakers/mitsuba/rna.py): open the .blend (or generate an example) and
+export the asset's geometry -> render the dataset with Cycles (nasset_converters.blender.dataset) ->
+train (nasset_bakers.train.rna, the one rna trainer; fibers add the h input) -> export (ONNX +
 float16 triplane through AssetBuilder, atomic) -> check (re-open the asset and evaluate it with
 the SDK on the held-out views). Meshes give variant ``surface``, hair (Curves objects, particle
 hair) variant ``fiber``. The dataset folder (``--resume DIR``, default ``OUTPUT.bake/``) is kept,
@@ -24,9 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_bakers.registry import register_baker
 from nasset_sdk.errors import UsageError, error
 
-#: data presets (converters.blender.dataset.DataSettings fields); one sun per view (Cycles has no
+#: data presets (nasset_converters.blender.dataset.DataSettings fields); one sun per view (Cycles has no
 #: per-pixel light), so presets use many small views to see many light directions
 DATA_PRESETS = {
     "tiny": dict(views=24, val_views=2, res=32, spp=16, val_res=32, val_spp=128),
@@ -42,14 +43,13 @@ def bake(
     summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, **_ignored,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
-    from converters.bake_stages import render_views, train_with_progress
-    from converters.train_rna import TRAIN_PRESETS, TorchCheckpoint, TrainSettings, _torch, train
+    from nasset_bakers.stages import check_options, finite, render_views, train_with_progress
+    from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
+    from nasset_converters.blender import CONVERTER_VERSION, load_bpy
+    from nasset_converters.blender import dataset as ds
+    from nasset_converters.blender import scene as bsc
     from nasset_sdk.asset import AssetBuilder
-    from nasset_sdk.bake import _finite, check_asset, check_options
-
-    from . import CONVERTER_VERSION, load_bpy
-    from . import dataset as ds
-    from . import scene as bsc
 
     output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
@@ -63,11 +63,11 @@ def bake(
 
     # -- stage 1: scene ---------------------------------------------------------------------------
     t = time.perf_counter()
-    _torch()
+    require_torch()
     bpy = load_bpy()
     work.mkdir(parents=True, exist_ok=True)
     if example is not None:
-        from .examples import EXAMPLES, build_example
+        from nasset_converters.blender.examples import EXAMPLES, build_example
 
         if example not in EXAMPLES:
             raise UsageError(f"unknown Blender example {example!r} ({', '.join(EXAMPLES)})")
@@ -160,14 +160,14 @@ def bake(
                   "clamp_direct": dset.clamp_direct, "clamp_indirect": dset.clamp_indirect},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
                  "mask_disagreement": disagree, "h_input": h_input},
-        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
+        "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
         "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
         "size": size,
         "timings_s": {k: round(v, 3) for k, v in times.items()},
     }
-    builder.provenance = _finite(prov)
+    builder.provenance = finite(prov)
     path = builder.write(output)
     times["export_s"] = time.perf_counter() - t
 
@@ -204,3 +204,6 @@ def _print_summary(s: dict, stream) -> None:
         "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
     ]
     print("\n".join(lines), file=stream)
+
+
+register_baker("blender", "rna", bake)

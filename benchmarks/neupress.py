@@ -19,7 +19,7 @@ the bytes a dome-sampling render reads from the asset against a PRT render (chil
 ``USDC_USE_PREAD=1``, ``rchar`` of /proc/self/io).
 
 Timing (wall clock, best of ``--repeat`` identical renders) covers rendering only: one ``mi.render`` +
-readback for Mitsuba (JIT kernels compiled in a warm-up render at that spp), one ``reference_renderer.render``
+readback for Mitsuba (JIT kernels compiled in a warm-up render at that spp), one ``nasset_reference_renderer.render``
 call (plan, BVH, wavefronts, networks, film) after scene load
 and asset/session setup for the neural methods. Both run in this process, one after the other.
 """
@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_benchmarks.common import ints
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 256, "spp": "1,4,16", "equal_spp": 4}
@@ -46,16 +47,6 @@ _MODES = {"network + dome": dict(neupress_sampling="dome"), "network + lobe": di
           "network + MIS": dict(neupress_sampling="mis"), "SH PRT": dict(prt=True)}
 PAPER = ("NeuPreSS Table 1 (RTX GPU, 256 spp neural vs 10000 spp path tracing): path tracing ~1850-2500 s; network with lobe "
          "sampling ~2-4 s; storage of the networks 0.2-1.3 MB against 16-500 MB of volume data.")
-
-
-def _ints(text: str, name: str) -> list[int]:
-    try:
-        vals = sorted({int(v) for v in str(text).split(",") if v.strip()})
-    except ValueError:
-        raise UsageError(f"--{name} must be a comma-separated list of integers, got {text!r}") from None
-    if not vals or vals[0] < 1:
-        raise UsageError(f"--{name} needs positive integers, got {text!r}")
-    return vals
 
 
 # ----------------------------------------------------------------------------------------
@@ -105,10 +96,10 @@ def metrics(img: np.ndarray, gt: np.ndarray, var_gt: float) -> dict:
 _CHILD = r'''
 import json, sys, warnings
 import onnx, onnxruntime, embreex  # noqa  imported up front: only the asset's bytes are counted below
-import nasset_sdk.kinds.neupress, nasset_sdk.networks, reference_renderer.neural_neupress  # noqa
-from reference_renderer import RenderSettings, load_scene, render
-from reference_renderer.integrator import prepare_assets
-from reference_renderer.plan import make_plan
+import nasset_sdk.kinds.neupress, nasset_sdk.networks, nasset_reference_renderer.neural_neupress  # noqa
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.integrator import prepare_assets
+from nasset_reference_renderer.plan import make_plan
 def rchar():
     with open("/proc/self/io") as fh:
         return int(next(l for l in fh if l.startswith("rchar")).split()[1])
@@ -148,13 +139,13 @@ def lazy_loading(scene_usd: Path) -> dict:
 def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, gt_spp: int = 2048, spp=(1, 2, 4, 8, 16, 32),
                    equal_spp: int = 16, max_depth: int = 16, repeat: int = 2, seed: int = 0, quiet: bool = False) -> dict:
     """Run the benchmark; writes neupress_table.{json,md}, neupress_error_vs_time.png, neupress_images.png into out_dir."""
-    from converters.mitsuba import load_mitsuba
-    from converters.mitsuba.bench import _machine, _mi_render, _sensor, ground_truth
-    from converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
-    from converters.mitsuba.usd_export import convert_scene
+    from nasset_benchmarks.common import ground_truth, machine, mi_render, mi_sensor
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
+    from nasset_converters.mitsuba.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from nasset_reference_renderer.scene import SceneWarning
     from nasset_sdk.asset import Asset
-    from reference_renderer import RenderSettings, load_scene, render
-    from reference_renderer.scene import SceneWarning
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
@@ -165,7 +156,7 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
     setup: dict[str, float] = {}
 
     if asset is None:
-        from converters.mitsuba.neupress_bake import bake
+        from nasset_bakers.mitsuba.neupress import bake
 
         asset = out / f"neupress_example_{size}.usdc"
         if not asset.is_file():
@@ -187,7 +178,7 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
     mi = load_mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
     mscene = mi.load_file(str(xml))
-    sensor = _sensor(mi, mscene, res)
+    sensor = mi_sensor(mi, mscene, res)
 
     say(f"ground truth: Mitsuba {mi.variant()} {gt_spp} spp at {res}x{res}")
     t = time.perf_counter()
@@ -214,12 +205,12 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
     def render_method(method: str, n: int, sd: int) -> tuple[np.ndarray, float]:
         if method == "path tracing":
             if n not in warmed:  # JIT kernels are specialised per spp: compile outside the timing
-                _mi_render(mi, mscene, sensor, n, 50_000 + n)
+                mi_render(mi, mscene, sensor, n, 50_000 + n)
                 warmed.add(n)
             best = math.inf
             for _ in range(repeat):  # best of ``repeat``: the least disturbed by other load on the machine
                 t0 = time.perf_counter()
-                img = _mi_render(mi, mscene, sensor, n, sd)
+                img = mi_render(mi, mscene, sensor, n, sd)
                 best = min(best, time.perf_counter() - t0)
             return img, best
         if method not in scenes:  # one scene per method: each loads only what its plan needs
@@ -301,7 +292,7 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
             "neural": "one reference_renderer.render call (plan, BVH, wavefronts, network evaluations, film) after scene "
                       "load, asset/onnxruntime setup and a warm-up render",
         },
-        "machine": _machine(),
+        "machine": machine(),
         "setup_times_s": {**{k: round(v, 2) for k, v in setup.items()}, "total_s": round(time.perf_counter() - t_setup, 2)},
         "paper": PAPER,
         "bake": {k: prov.get(k) for k in ("timings_s", "validation", "size")},
@@ -403,7 +394,7 @@ def run(args) -> int:
         raise UsageError(f"--equal-spp must be >= 1, got {args.equal_spp}")
     report = bench_neupress(
         args.output, asset=args.asset, size=args.size if args.asset or not args.quick else "tiny",
-        res=args.res or d["res"], gt_spp=args.gt_spp or d["gt_spp"], spp=_ints(args.spp or d["spp"], "spp"),
+        res=args.res or d["res"], gt_spp=args.gt_spp or d["gt_spp"], spp=ints(args.spp or d["spp"], "spp"),
         equal_spp=args.equal_spp or d["equal_spp"], max_depth=args.max_depth, repeat=max(1, args.repeat), seed=args.seed,
         quiet=args.json,
     )

@@ -25,12 +25,12 @@ def _norm(v):
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-30)
 
 
-def _v3(mi, a):
+def v3(mi, a):
     a = np.ascontiguousarray(a, np.float32)
     return mi.Vector3f(a[:, 0], a[:, 1], a[:, 2])
 
 
-def _p3(mi, a):
+def p3(mi, a):
     a = np.ascontiguousarray(a, np.float32)
     return mi.Point3f(a[:, 0], a[:, 1], a[:, 2])
 
@@ -54,8 +54,8 @@ class MitsubaLight:
     def sample(self, mi, p, n, u):
         m = len(p)
         it = mi.Interaction3f()
-        it.p = _p3(mi, p)
-        it.n = _v3(mi, n)
+        it.p = p3(mi, p)
+        it.n = v3(mi, n)
         it.t = mi.Float(np.zeros(m, np.float32))
         it.time = mi.Float(np.zeros(m, np.float32))
         uu = np.ascontiguousarray(u, np.float32)

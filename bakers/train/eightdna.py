@@ -11,7 +11,7 @@ cube-map seam re-projection, corner averaging), then ``sum_T grid[idx] * w`` in 
 the SDK's (Durkan et al.) in torch; training needs only the inverse direction (pdf of given t).
 
 Losses (paper Eq. 6-8), summed over colour channels c, on tuples (x_o, w_o, u_i, w_i, beta) from
-:mod:`converters.mitsuba.eightdna_sampler`: L_p = -mean(beta^c log p^c_t(t)) (the constant Jacobians
+:mod:`nasset_converters.mitsuba.eightdna_sampler`: L_p = -mean(beta^c log p^c_t(t)) (the constant Jacobians
 1/16 pi^2 and J(u_i) do not depend on the weights and are dropped) and L_alpha = mean((alpha^c - beta^c)^2).
 
 ``far_field=True`` trains the 6D far-field baseline with the same machinery: the u_i inputs are replaced
@@ -29,8 +29,10 @@ import numpy as np
 
 from nasset_sdk.errors import error
 from nasset_sdk.kinds.eightdna import FLOWS, SIZES
-from nasset_sdk.kinds.encodings import TRIPLANE_AXES, _cube_face_dir, cube_face_uv, to_unit_box
+from nasset_sdk.kinds.encodings import TRIPLANE_AXES, cube_face_dir, cube_face_uv, to_unit_box
 from nasset_sdk.kinds.spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, S_PER_T, BoxParam, cylindrical_to_direction
+
+from .common import require_torch
 
 
 @dataclass(frozen=True)
@@ -48,21 +50,13 @@ class TrainSettings:
     device: str = "auto"
 
 
-#: per-preset training defaults (the sampler defaults live in converters.mitsuba.eightdna_bake)
+#: per-preset training defaults (the sampler defaults live in nasset_bakers.mitsuba.eightdna)
 TRAIN_PRESETS = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
     "small": dict(steps=1200, batch=2048, buffer=1 << 18, reuse=2),
     "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
 }
 MINIMUMS = (MIN_BIN_WIDTH, MIN_BIN_HEIGHT, MIN_DERIVATIVE)
-
-
-def _torch():
-    try:
-        import torch
-    except ImportError as exc:
-        raise error("CONVERT_BACKEND", f"torch is not installed ({exc}); pip install 'nasset-sdk[train]'") from None
-    return torch
 
 
 # ----------------------------------------------------------------------------------------
@@ -119,7 +113,7 @@ def taps_cubemap(d: np.ndarray, r: int) -> tuple[np.ndarray, np.ndarray]:
         if out.any():
             sc = 2.0 * (i[out] + 0.5) / r - 1.0
             tc = 2.0 * (j[out] + 0.5) / r - 1.0
-            f2, s2, t2 = cube_face_uv(_cube_face_dir(face[out], sc, tc))
+            f2, s2, t2 = cube_face_uv(cube_face_dir(face[out], sc, tc))
             f[out] = f2
             i, j = i.copy(), j.copy()
             i[out] = np.minimum(np.floor(s2 * r).astype(np.int64), r - 1)
@@ -200,7 +194,7 @@ def rqs_inverse_logdet(torch, raw, y, k: int, mins=MINIMUMS):
 
 
 def build_model(size: str, *, init_std: float = 0.05, seed: int = 0):
-    torch = _torch()
+    torch = require_torch()
     nn = torch.nn
     r, c, q, ln, k, f_layers, f_width, a_layers, a_width = SIZES[size]
     g_width = 3 * (3 * k + 1)
@@ -288,7 +282,7 @@ class TrainResult:
 
 def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=None) -> TrainResult:
     """Fit the model on tuples from ``buffer`` (an OnlineBuffer); ``progress(step, nll, l2)`` is called every 10 steps."""
-    torch = _torch()
+    torch = require_torch()
     t0 = time.perf_counter()
     device = torch.device(settings.device if settings.device != "auto" else ("cuda" if torch.cuda.is_available() else "cpu"))
     lo, hi = domain
@@ -364,7 +358,7 @@ def export(model) -> tuple[dict, dict]:
 
 def onnx_parity(model, networks: dict, n: int = 2048, seed: int = 0) -> float:
     """Max |onnxruntime - torch| over the five MLPs on random inputs."""
-    torch = _torch()
+    torch = require_torch()
     from nasset_sdk.networks import make_session
 
     rng = np.random.default_rng(seed)
@@ -382,7 +376,7 @@ def onnx_parity(model, networks: dict, n: int = 2048, seed: int = 0) -> float:
 
 def torch_eval(model, batch: dict, lo, hi, *, far_field: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(alpha [N,3], pdf [N,3] per unit box area and steradian) of the torch model on numpy tuples."""
-    torch = _torch()
+    torch = require_torch()
     p = prepare(batch, lo, hi, model.size, far_field=far_field)
     B = to_torch(torch, p, next(model.parameters()).device)
     with torch.no_grad():
@@ -418,7 +412,7 @@ def parity_with_sdk(model, asset_path, batch: dict, *, far_field: bool = False) 
 
 def heldout_nll(model, batch: dict, lo, hi, *, far_field: bool = False) -> float:
     """Held-out beta-weighted negative log-likelihood per unit of beta (nats, in t-space; lower is better)."""
-    torch = _torch()
+    torch = require_torch()
     B = to_torch(torch, prepare(batch, lo, hi, model.size, far_field=far_field), next(model.parameters()).device)
     with torch.no_grad():
         _, logp = model(B, (3, 4) if far_field else (1, 2, 3, 4))

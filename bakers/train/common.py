@@ -1,0 +1,80 @@
+"""What the trainers share: torch loaded on demand (typed error when missing), the device choice,
+the resumable training checkpoint and the held-out PSNR every bake reports (spec/bake.md#psnr)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nasset_sdk.errors import error
+
+
+def require_torch():
+    try:
+        import torch
+    except ImportError as exc:
+        raise error("CONVERT_BACKEND", f"torch is not installed ({exc}); pip install 'nasset-sdk[train]'") from None
+    return torch
+
+
+def pick_device(torch, want: str):
+    if want != "auto":
+        return torch.device(want)
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]:
+    """(PSNR dB, linear MSE, peak): both normalised by the ground truth's 99.5th percentile and
+    clipped to [0, 1] (a fixed exposure on a display), peak 1; over asset pixels only."""
+    gt = np.asarray(gt, np.float64)
+    pred = np.asarray(pred, np.float64)
+    mse_lin = float(np.mean((pred - gt) ** 2)) if gt.size else float("nan")
+    peak = float(np.percentile(gt, 99.5)) if gt.size else 0.0
+    if peak <= 0 or not np.isfinite(peak):
+        return float("nan"), mse_lin, peak
+    a = np.clip(pred / peak, 0.0, 1.0)
+    b = np.clip(gt / peak, 0.0, 1.0)
+    mse = float(np.mean((a - b) ** 2))
+    return (10.0 * math.log10(1.0 / max(mse, 1e-20))), mse_lin, peak
+
+
+class TorchCheckpoint:
+    """Training state in the dataset folder; read back with ``weights_only=True`` (no pickle code)."""
+
+    def __init__(self, path, key: dict) -> None:
+        self.path = path
+        self.key = key
+
+    def load(self):
+        import json
+        import os
+
+        torch = require_torch()
+        if not os.path.exists(self.path):
+            return None
+        try:
+            state = torch.load(self.path, map_location="cpu", weights_only=True)
+        except Exception:
+            return None
+        if state.get("key") != json.dumps(self.key, sort_keys=True):
+            return None
+        return state
+
+    def restore(self, model, opt, sched) -> dict | None:
+        """Put a matching checkpoint's model, optimiser and scheduler state back; returns it (None: start fresh)."""
+        state = self.load()
+        if state:
+            model.load_state_dict(state["model"])
+            opt.load_state_dict(state["opt"])
+            sched.load_state_dict(state["sched"])
+        return state or None
+
+    def save(self, state: dict) -> None:
+        import json
+        import os
+
+        torch = require_torch()
+        tmp = str(self.path) + ".part"
+        torch.save({**state, "key": json.dumps(self.key, sort_keys=True)}, tmp)
+        os.replace(tmp, self.path)
