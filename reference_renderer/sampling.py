@@ -1,7 +1,7 @@
 """Warping functions, frames, discrete distributions and MIS weights (vectorised over rows).
 
 Every ``square_to_*`` maps uniform numbers in [0,1)^2 to directions and has a matching
-``*_pdf`` in solid angle; ``tests/test_render_samplers.py`` checks each pair with a chi² test.
+``*_pdf`` in solid angle; ``tests/renderer/test_render_samplers.py`` checks each pair with a chi² test.
 """
 
 from __future__ import annotations

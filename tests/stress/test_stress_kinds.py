@@ -12,7 +12,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from stress_inputs import (
+
+from nasset_sdk.asset import Asset
+from nasset_sdk.kinds import boundary as B
+from nasset_sdk.kinds import encodings as E
+from nasset_sdk.kinds import get_kind
+from nasset_sdk.kinds import neupress as NP
+from nasset_sdk.kinds import spline as S
+from tests.stress.stress_inputs import (
     EDGE_DIRS,
     F16_MAX,
     F16_SUB,
@@ -23,13 +30,6 @@ from stress_inputs import (
     rows,
     unit_interval,
 )
-
-from nasset_sdk.asset import Asset
-from nasset_sdk.kinds import boundary as B
-from nasset_sdk.kinds import encodings as E
-from nasset_sdk.kinds import get_kind
-from nasset_sdk.kinds import neupress as NP
-from nasset_sdk.kinds import spline as S
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")  # overflow warnings of adversarial inputs are expected
 

@@ -12,11 +12,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from stress_inputs import TINY, finite_all, unit_interval
 
 from nasset_reference_renderer import bsdf as RB
 from nasset_reference_renderer import lights as RL
 from nasset_reference_renderer import sampling as RS
+from tests.stress.stress_inputs import TINY, finite_all, unit_interval
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
 

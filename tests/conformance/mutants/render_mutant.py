@@ -5,7 +5,7 @@
 
 Each mutant patches one thing in ``nasset_reference_renderer`` / the rna evaluator (in this process
 only), then renders like ``nasset render``. Used as a ``--renderer`` of ``nasset conformance``
-by tests/test_conformance.py.
+by tests/renderer/test_conformance.py.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from stats import SIGNIFICANCE, chi2_test
+
+from tests.stats import SIGNIFICANCE, chi2_test
 
 pytest.importorskip("mitsuba")
 pytest.importorskip("torch")

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from memory_asset import MemoryAsset
-from stats import SIGNIFICANCE, chi2_test, midpoints
 
 from nasset_sdk.asset import Asset
 from nasset_sdk.errors import UsageError
 from nasset_sdk.kinds import get_kind
 from nasset_sdk.kinds.boundary import ggx_pdf, ggx_sample
 from nasset_sdk.networks import info_from_model
+from tests.sdk.memory_asset import MemoryAsset
+from tests.stats import SIGNIFICANCE, chi2_test, midpoints
 
 
 @pytest.fixture(scope="module")

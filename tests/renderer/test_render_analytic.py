@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
-from render_stats import mean_and_stderr
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
 from nasset_reference_renderer.testscenes import SceneBuilder
+from tests.renderer.render_stats import mean_and_stderr
 
 SIGMA = 5.0
 

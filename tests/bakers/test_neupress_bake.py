@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from stats import SIGNIFICANCE, chi2_test
 
 from nasset_sdk.asset import Asset
 from nasset_sdk.errors import NassetError, UsageError
 from nasset_sdk.kinds.encodings import from_local, sh9, to_local
+from tests.stats import SIGNIFICANCE, chi2_test
 
 pytest.importorskip("mitsuba")
 pytest.importorskip("torch")

@@ -15,7 +15,7 @@ import pytest
 import nasset_sdk  # noqa: F401  (registers the schema)
 from nasset_sdk.plugin import schema_dir
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SCHEMAS = REPO / "schemas"
 TYPES = {"NeuralAsset": "NassetNeuralAsset", "NeuralComponent": "NassetNeuralComponent",
          "NeuralTensor": "NassetNeuralTensor", "NeuralNetwork": "NassetNeuralNetwork"}

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from stats import midpoints
 
 from nasset_sdk.errors import UsageError
 from nasset_sdk.kinds.spline import S_PER_T, BoxFlow, BoxParam, RQSpline, surface_pdf
+from tests.stats import midpoints
 
 
 def _splines(rng, n=2000, k=8, scale=2.0):

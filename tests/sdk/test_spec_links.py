@@ -9,7 +9,7 @@ import pytest
 
 from nasset_sdk.errors import CODES
 
-SPEC = Path(__file__).resolve().parent.parent / "spec"
+SPEC = Path(__file__).resolve().parents[2] / "spec"
 
 
 def _slug(heading: str) -> str:

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from memory_asset import MemoryAsset
-from stats import SIGNIFICANCE, chi2_test, midpoints
 
 from nasset_sdk.asset import Asset
 from nasset_sdk.errors import UsageError
 from nasset_sdk.kinds import get_kind
 from nasset_sdk.kinds.encodings import from_local, local_frame, to_local
 from nasset_sdk.kinds.neupress import SIGMA_MAX, SIGMA_MIN, gaussian_lobe_pdf, gaussian_lobe_sample
+from tests.sdk.memory_asset import MemoryAsset
+from tests.stats import SIGNIFICANCE, chi2_test, midpoints
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,6 @@
 dome lights; the direct lobe alone matches a quadrature of the closed-form GGX reflection."""
 
 import numpy as np
-from render_stats import assert_renders_agree, render_finite
 
 from nasset_reference_renderer.film import write_exr
 from nasset_reference_renderer.testscenes import SceneBuilder
@@ -11,6 +10,7 @@ from nasset_sdk.examples import example_builder
 from nasset_sdk.geometry import MeshGeometry
 from nasset_sdk.kinds.boundary import ggx_reflection
 from nasset_sdk.networks import mlp_onnx
+from tests.renderer.render_stats import assert_renders_agree, render_finite
 
 Z_MEAN = 4.5
 Z_PIXEL, PIXEL_FRACTION = 3.5, 0.08  # glossy (alpha 0.1) light sampling has heavy-tailed pixels

@@ -125,7 +125,7 @@ def test_azimuthal_equidistant_round_trip(rng):
 
 
 def test_sh9_orthonormal():
-    from stats import midpoints
+    from tests.stats import midpoints
 
     z = midpoints(-1, 1, 200)
     phi = midpoints(-np.pi, np.pi, 400)

@@ -3,7 +3,6 @@ PRT agrees with path mode under a dome of SH degree <= 2, and the plan loads onl
 
 import numpy as np
 import pytest
-from render_stats import assert_renders_agree, render_finite
 
 from nasset_reference_renderer import RenderSettings, load_scene, make_plan, render
 from nasset_reference_renderer.film import write_exr
@@ -12,6 +11,7 @@ from nasset_sdk.asset import Asset
 from nasset_sdk.errors import UsageError
 from nasset_sdk.examples import example_builder
 from nasset_sdk.kinds.encodings import sh9
+from tests.renderer.render_stats import assert_renders_agree, render_finite
 
 Z_MEAN = 4.5  # |difference of image means| / its standard error, per channel
 Z_PIXEL, PIXEL_FRACTION = 3.5, 0.05  # at most 5 % of pixels may differ by more than 3.5 sigma

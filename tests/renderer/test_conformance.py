@@ -16,7 +16,7 @@ from nasset_sdk import conformance as cf
 from nasset_sdk.cli import main as nasset
 from nasset_sdk.errors import UsageError
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # tests/
 SUITE = cf.CASES_DIR
 MUTANT = HERE / "conformance" / "mutants" / "render_mutant.py"
 CASES = sorted(p.name for p in SUITE.iterdir() if (p / "case.json").is_file())
@@ -136,11 +136,8 @@ def test_broken_renderers_fail_cleanly(tmp_path, capsys):
 
 
 def test_generator_reproduces_committed_files():
-    sys.path.insert(0, str(HERE / "conformance"))
-    try:
-        import make_cases
-    finally:
-        sys.path.pop(0)
+    from tests.conformance import make_cases
+
     assert sorted(c.name for c in make_cases.CASES if (SUITE / c.name).is_dir()) == CASES
     by_name = {c.name: c for c in make_cases.CASES}
     for name in ("rna_self_shadow", "rna_dome_exr"):

@@ -21,7 +21,7 @@ pytest.importorskip("pxr")
 
 from nasset_mitsuba_renderer.eightdna import Spline, box_jacobian, box_point, cubemap  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("k,mins", [(4, (0.01, 0.02, 0.001)), (16, (0.0, 0.0, 1e-3)), (32, (0.03, 0.001, 0.5))])

@@ -14,10 +14,9 @@ import nasset_sdk
 from nasset_sdk.errors import CODES, NassetError
 from nasset_sdk.examples import example_builder
 from nasset_sdk.validate import RULES, path_escapes, validate_file
+from tests.corpus.make_corpus import make_corpus
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE / "corpus"))
-from make_corpus import make_corpus  # noqa: E402
+HERE = Path(__file__).resolve().parents[1]  # tests/
 
 RAW = {"garbage_bytes", "empty_file", "truncated_half", "truncated_header", "crate_magic_only", "crate_section_flip",
        "usda_syntax_error", "usda_as_usdc_bytes", "missing_file"}
