@@ -119,7 +119,7 @@ def write_example_scene(folder: str | Path, *, light: bool = True, res: int = 12
 
     ``heterogeneous``: the medium is a grid (``media/density.vol``, :func:`density_grid` times sigma_t) instead of
     homogeneous."""
-    from .example_scene import write_ply
+    from .examples import write_ply
 
     folder = Path(folder)
     (folder / "meshes").mkdir(parents=True, exist_ok=True)

@@ -21,7 +21,7 @@ import numpy as np
 
 from nasset_sdk.errors import UsageError
 
-from .example_scene import write_ply
+from .examples import write_ply
 
 #: shape ids that form the asset; the first is the refractive boundary (the asset's surface)
 EXAMPLE_ASSET_IDS = ("boundary", "inner")

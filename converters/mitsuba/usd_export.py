@@ -779,7 +779,7 @@ def run(args) -> int:
     if bool(args.example) == bool(scene):
         raise UsageError("give a scene file or --example (not both)")
     if args.example:
-        from .example_scene import write_example_scene
+        from .examples import write_example_scene
 
         scene = write_example_scene(Path(args.output).resolve().parent / "example_scene")
     res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks)
