@@ -20,7 +20,7 @@ grid-medium variant of the example. Variance: Mitsuba's from two independent ren
 sphere light, nothing else): camera ray -> asset hit x_o -> analytic direct lobe (light sample + GGX
 sample, power heuristic) + the neural transport. 8D: one channel c uniform, (u_i, w_i) ~ p^c from the
 flow, then at u_i the power heuristic between a light sample and the flow direction, against the
-channel-mixture densities (as reference_renderer/neural_8dna.py). Far-field: the incident radiance
+channel-mixture densities (as reference_renderer/shaders/eightdna.py). Far-field: the incident radiance
 of every entry point is taken as the radiance arriving at x_o (the 6D assumption): light sample at
 x_o and flow direction w_i ~ p6^c(w_i | x_o, w_o), power heuristic, no self-occlusion test (the 6D
 transport already integrates the asset's self-shadowing over entry points). Both models run through

@@ -96,7 +96,7 @@ def metrics(img: np.ndarray, gt: np.ndarray, var_gt: float) -> dict:
 _CHILD = r'''
 import json, sys, warnings
 import onnx, onnxruntime, embreex  # noqa  imported up front: only the asset's bytes are counted below
-import nasset_sdk.kinds.neupress, nasset_sdk.networks, nasset_reference_renderer.neural_neupress  # noqa
+import nasset_sdk.kinds.neupress, nasset_sdk.networks, nasset_reference_renderer.shaders.neupress  # noqa
 from nasset_reference_renderer import RenderSettings, load_scene, render
 from nasset_reference_renderer.integrator import prepare_assets
 from nasset_reference_renderer.plan import make_plan

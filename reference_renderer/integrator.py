@@ -107,13 +107,13 @@ class PathIntegrator:
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.kind_shading = None  # neupress / 8dna instances (spec/renderer.md#neupress, #8dna); None: rna only
         if any(data.asset.kind != "rna" for data in scene.assets):
-            from .neural_kinds import KindShading
+            from .shaders import KindShading
 
             self.kind_shading = KindShading(self)
         self.fibers = None  # rna fiber instances (spec/renderer.md#fibers); None: no fiber asset in the scene
         self.inst_fiber = np.zeros(len(insts), bool)
         if any(data.fiber is not None for data in scene.assets):
-            from .neural_fiber import FiberShading
+            from .shaders.rna_fiber import FiberShading
 
             self.fibers = FiberShading(self)
             self.inst_fiber = np.array([i.kind == "neural" and scene.assets[i.asset].fiber is not None for i in insts], bool)
@@ -136,11 +136,11 @@ class PathIntegrator:
             self.asset_corner_n.append(cn)
 
     # -- helpers ---------------------------------------------------------------------------
-    def _trace(self, o, d, tmax=None, ignore=None, exempt=None):
+    def trace(self, o, d, tmax=None, ignore=None, exempt=None):
         with _Timer(self.stats, "trace"):
             return self.accel.trace(o, d, tmax, ignore, exempt)
 
-    def _occluded(self, o, d, tmax):
+    def occluded(self, o, d, tmax):
         with _Timer(self.stats, "trace"):
             return self.accel.occluded(o, d, tmax)
 
@@ -167,7 +167,7 @@ class PathIntegrator:
         has_area = any(light.area for light in lights)
         depth = 0
         while len(idx):
-            hits = self._trace(o, d, None, ignore) if exempt is None else self._trace(o, d, None, ignore, exempt)
+            hits = self.trace(o, d, None, ignore) if exempt is None else self.trace(o, d, None, ignore, exempt)
             if pend is not None:
                 m, tu, ts = pend
                 beta[m] *= np.where(hits.self_hit[m][:, None], ts, tu)
@@ -232,11 +232,11 @@ class PathIntegrator:
                 new.append(self._mesh_vertex(np.nonzero(mesh)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
             if neural.any():
                 if self.kind_shading is None and self.fibers is None:
-                    new.append(self._neural_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+                    new.append(self.rna_surface_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
                 elif self.kind_shading is None:
                     fib = neural & self.inst_fiber[inst]
                     if (neural & ~fib).any():
-                        new.append(self._neural_vertex(np.nonzero(neural & ~fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
+                        new.append(self.rna_surface_vertex(np.nonzero(neural & ~fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
                     if fib.any():
                         new.append(self.fibers.vertex(np.nonzero(fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
                 else:
@@ -297,7 +297,7 @@ class PathIntegrator:
             if not len(s):
                 continue
             tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * self.eps, np.inf)
-            vis = ~self._occluded(xo[s], wi[s], tmax)
+            vis = ~self.occluded(xo[s], wi[s], tmax)
             L[ridx[s[vis]]] += c[vis]  # s holds each ray once: no repeated indices
         cont = np.nonzero(indirect)[0]
         if not len(cont):
@@ -310,7 +310,7 @@ class PathIntegrator:
         return ridx[c], xo[c], wi[ok], nb, pdf[ok], np.full(len(c), -1, np.int64), None
 
     # -- neural assets ---------------------------------------------------------------------
-    def _to_object(self, v, inst, point=False):
+    def to_object(self, v, inst, point=False):
         """Rows of v [n,3] in the object space of instance inst[i] (row vectors times to_object).
 
         The same per-row product as einsum("ij,ijk->ik", v, M[inst]) but one matrix per instance
@@ -351,7 +351,7 @@ class PathIntegrator:
             wi_s, dist_s, inst_s = (wi, dist, inst) if full else (wi[s], dist[s], inst[s])
             origin, exempt = shadow_origin(s, wi_s)
             tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * self.eps, np.inf)
-            h = self._trace(origin, wi_s, tmax, inst_s) if exempt is None else self._trace(origin, wi_s, tmax, inst_s, exempt)
+            h = self.trace(origin, wi_s, tmax, inst_s) if exempt is None else self.trace(origin, wi_s, tmax, inst_s, exempt)
             free = h.prim < 0  # no other object in the way
             s = s[free]
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
@@ -370,7 +370,7 @@ class PathIntegrator:
         return (np.concatenate(rows_ray), np.concatenate(rows_wi), np.concatenate(rows_w), np.concatenate(rows_self),
                 np.concatenate(rows_kind), cont, wi_c)
 
-    def _neural_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
+    def rna_surface_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
         if len(r) != len(x):  # (all rows in a scene of neural assets only: no gathers)
             x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
         else:
@@ -378,8 +378,8 @@ class PathIntegrator:
         n = len(x)
         ng = self.tri_ng[prim]
         scale = (self.eps * (1.0 + _max3(np.abs(x)) / self.accel.scale))[:, None]
-        x_obj = self._to_object(x, inst, point=True)
-        wo_obj = normalize(self._to_object(-d, inst))
+        x_obj = self.to_object(x, inst, point=True)
+        wo_obj = normalize(self.to_object(-d, inst))
         asset_id = self.inst_asset[inst]
         local = self.scene.tri_local[prim]
         assets = _unique(asset_id)
@@ -402,7 +402,7 @@ class PathIntegrator:
         tu = np.zeros((len(ray), 3))
         ts = np.zeros((len(ray), 3))
         if len(ray):
-            wi_obj = normalize(self._to_object(wi_all, inst[ray]))
+            wi_obj = normalize(self.to_object(wi_all, inst[ray]))
             ray_asset = asset_id[ray]
             # float32 once per hit point, then gathered per row (a point has a light and a continuation row)
             x32, n32, wo32 = x_obj.astype(np.float32), n_obj.astype(np.float32), wo_obj.astype(np.float32)

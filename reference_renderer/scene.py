@@ -57,7 +57,7 @@ class NeuralAssetData:
     normals: np.ndarray | None  # [V,3] object space or None
     evaluator: object = None
     prims: list = field(default_factory=list)
-    fiber: object = None  # neural_fiber.FiberTubes of an rna fiber asset (points/faces are then its prisms)
+    fiber: object = None  # shaders.rna_fiber.FiberTubes of an rna fiber asset (points/faces are then its prisms)
 
 
 @dataclass
@@ -476,7 +476,7 @@ class _Loader:
                 raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
             self.asset_index[key] = len(self.assets)
             if fiber:  # curves as closed prisms around each segment (spec/renderer.md#fibers)
-                from .neural_fiber import tessellate
+                from .shaders.rna_fiber import tessellate
 
                 tubes = tessellate(geo.points, geo.counts, geo.widths)
                 self.assets.append(NeuralAssetData(file, asset, tubes.points, tubes.faces, None, fiber=tubes))

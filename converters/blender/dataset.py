@@ -12,7 +12,7 @@ The geometric inputs come from our own ray caster on the exported geometry (Embr
 reference renderer's :class:`nasset_reference_renderer.accel.Accel`, with fibers tessellated exactly
 as the renderer tessellates them), along the very pixel-centre rays of the Cycles camera: hit
 point x, shading normal n (surfaces; interpolated vertex normals) or tangent t and offset h
-(fibers; :func:`nasset_reference_renderer.neural_fiber.fiber_frame`), and the light visibility V from
+(fibers; :func:`nasset_reference_renderer.shaders.rna_fiber.fiber_frame`), and the light visibility V from
 the hit against the asset alone, cast the way the renderer casts it. Pixels kept: our ray hits
 and Cycles' alpha is >= ``alpha_min`` (both agree the pixel centre is on the asset); the
 fraction of disagreeing pixels is recorded (``mask_disagreement``: silhouettes of curved
@@ -166,7 +166,7 @@ class Caster:
 
         self.variant = variant
         if variant == "fiber":
-            from nasset_reference_renderer.neural_fiber import tessellate
+            from nasset_reference_renderer.shaders.rna_fiber import tessellate
 
             self.tubes = tessellate(geo.points, geo.counts, geo.widths)
             tris = self.tubes.points[self.tubes.faces]
@@ -182,7 +182,7 @@ class Caster:
 
     def hits(self, o, d) -> dict:
         """Rows that hit: {'pix', 'x', 'frame' (n or t), 'h' (fibers), 'prim'}."""
-        from nasset_reference_renderer.neural_fiber import fiber_frame
+        from nasset_reference_renderer.shaders.rna_fiber import fiber_frame
 
         h = self.accel.trace(o, d)
         hit = np.nonzero(h.prim >= 0)[0]

@@ -10,8 +10,8 @@ import pytest
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
 from nasset_reference_renderer.integrator import PathIntegrator
-from nasset_reference_renderer.neural_fiber import TUBE_SIDES, fiber_frame, tessellate
 from nasset_reference_renderer.plan import make_plan
+from nasset_reference_renderer.shaders.rna_fiber import TUBE_SIDES, fiber_frame, tessellate
 from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_fiber_asset
 
 UNSH, SH = (1.0, 0.5, 0.25), (0.1, 0.2, 0.3)
@@ -40,8 +40,8 @@ def _fiber_hits(path, o, d):
     m = hits.prim >= 0
     x = o[m] + d[m] * hits.t[m][:, None]
     inst = scene.tri_inst[hits.prim[m]]
-    x_obj = integ._to_object(x, inst, point=True)
-    wo_obj = integ._to_object(-d[m], inst)
+    x_obj = integ.to_object(x, inst, point=True)
+    wo_obj = integ.to_object(-d[m], inst)
     wo_obj /= np.linalg.norm(wo_obj, axis=1, keepdims=True)
     t, h, _, _ = integ.fibers.hit_frame(x_obj, wo_obj, hits.prim[m], integ.inst_asset[inst])
     return m, t, h

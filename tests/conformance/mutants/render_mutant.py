@@ -48,24 +48,24 @@ def world_directions():
     """wo and wi handed to the network in world space (not mapped by the inverse linear part)."""
     from nasset_reference_renderer.integrator import PathIntegrator
 
-    orig = PathIntegrator._to_object
+    orig = PathIntegrator.to_object
 
     def to_object(self, v, inst, point=False):
         return orig(self, v, inst, point) if point else np.array(v, np.float64)
 
-    PathIntegrator._to_object = to_object
+    PathIntegrator.to_object = to_object
 
 
 def world_points():
     """Hit points handed to the network in world space (no inverse instance transform)."""
     from nasset_reference_renderer.integrator import PathIntegrator
 
-    orig = PathIntegrator._to_object
+    orig = PathIntegrator.to_object
 
     def to_object(self, v, inst, point=False):
         return np.array(v, np.float64) if point else orig(self, v, inst, point)
 
-    PathIntegrator._to_object = to_object
+    PathIntegrator.to_object = to_object
 
 
 def triplane_uv_swapped():
@@ -86,7 +86,7 @@ def other_shadows_ignored():
     """Light samples at an asset vertex are not blocked by other objects (only the self test)."""
     from nasset_reference_renderer.integrator import PathIntegrator
 
-    orig = PathIntegrator._trace
+    orig = PathIntegrator.trace
 
     def trace(self, o, d, tmax=None, ignore=None):
         h = orig(self, o, d, tmax, ignore)
@@ -94,7 +94,7 @@ def other_shadows_ignored():
             h.prim[:] = -1
         return h
 
-    PathIntegrator._trace = trace
+    PathIntegrator.trace = trace
 
 
 def asset_casts_no_shadow():
@@ -113,7 +113,7 @@ def asset_casts_no_shadow():
         return self._mesh_accel.occluded(o, d, tmax)
 
     PathIntegrator.__init__ = init
-    PathIntegrator._occluded = occluded
+    PathIntegrator.occluded = occluded
 
 
 def other_instance_is_self():
@@ -121,7 +121,7 @@ def other_instance_is_self():
     from nasset_reference_renderer.integrator import PathIntegrator
 
     orig_init = PathIntegrator.__init__
-    orig_trace = PathIntegrator._trace
+    orig_trace = PathIntegrator.trace
 
     def init(self, scene, plan, settings):
         orig_init(self, scene, plan, settings)
@@ -139,7 +139,7 @@ def other_instance_is_self():
         return orig_trace(self, o, d, tmax, ignore)
 
     PathIntegrator.__init__ = init
-    PathIntegrator._trace = trace
+    PathIntegrator.trace = trace
 
 
 def distant_angle_ignored():

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import normalize
+from ..sampling import normalize
 
 
 @dataclass
@@ -43,8 +43,8 @@ def gather_hit(integ, r, idx, x, d, beta, prim, bu, bv, inst, asset: int) -> Hit
     x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
     ng = integ.tri_ng[prim]
     scale = (integ.eps * (1.0 + max3(np.abs(x)) / integ.accel.scale))[:, None]
-    x_obj = integ._to_object(x, inst, point=True)
-    wo_obj = normalize(integ._to_object(-d, inst))
+    x_obj = integ.to_object(x, inst, point=True)
+    wo_obj = normalize(integ.to_object(-d, inst))
     local = integ.scene.tri_local[prim]
     cn = integ.asset_corner_n[asset][local]
     w0 = 1 - bu - bv

@@ -25,8 +25,9 @@ import numpy as np
 
 from nasset_sdk.kinds.boundary import fresnel_dielectric
 
-from .neural_common import Frames, gather_hit, max3
-from .sampling import dot, power_heuristic
+from ..sampling import dot, power_heuristic
+from .common import Frames, gather_hit, max3
+from .registry import register_shader
 
 P_DIRECT_MIN, P_DIRECT_MAX = 0.05, 0.95
 
@@ -62,7 +63,7 @@ class EightdnaShader:
 
     def _backtrace_ok(self, u_w, w_w, inst) -> np.ndarray:
         """The ray from u_i along -w_i reaches this instance first (the configuration receives light)."""
-        hh = self.integ._trace(u_w, -w_w, None, None)
+        hh = self.integ.trace(u_w, -w_w, None, None)
         ok = hh.prim >= 0
         ok[ok] = self.integ.scene.tri_inst[hh.prim[ok]] == inst[ok]
         return ok
@@ -101,7 +102,7 @@ class EightdnaShader:
                 pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj[s]) * jac[s]
                 w = np.where(cont_on[s], power_heuristic(pdf[s], pb), 1.0)
             tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            vis = ~integ._occluded(x_off[s], wi[s], tmax)
+            vis = ~integ.occluded(x_off[s], wi[s], tmax)
             s, w = s[vis], w[vis]
             np.add.at(L, h.ridx[s], h.beta[s] * li[s] * (f[s] * w / pdf[s])[:, None])
 
@@ -129,7 +130,7 @@ class EightdnaShader:
             if not len(s):
                 continue
             tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            free = integ._trace(u_w[s], wl[s], tmax, h.inst[s]).prim < 0
+            free = integ.trace(u_w[s], wl[s], tmax, h.inst[s]).prim < 0
             s = s[free]
             s = s[self._backtrace_ok(u_w[s], wl[s], h.inst[s])]
             q_rows.append(s)
@@ -196,3 +197,6 @@ class EightdnaShader:
         inst_all = np.concatenate([h.inst[fn], h.inst[dn]]).astype(np.int64)
         beta_all = np.concatenate([h.beta[fn], h.beta[dn]])
         return ridx, origin, dirs, beta_all, prev, inst_all, (np.ones(m, bool), tu, ts), specular
+
+
+register_shader("8dna")(EightdnaShader)

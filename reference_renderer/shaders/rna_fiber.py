@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import INV_4PI, normalize
+from ..sampling import INV_4PI, normalize
+from .registry import register_shader
 
 #: sides of the prism built around each curve segment
 TUBE_SIDES = 8
@@ -108,7 +109,7 @@ def fiber_frame(tubes: FiberTubes, seg, x_obj, wo_obj):
 
 
 class FiberShading:
-    """The rna fiber vertex of :class:`nasset_reference_renderer.integrator.PathIntegrator`."""
+    """The rna fiber vertex of :class:`nasset_reference_renderer.integrator.PathIntegrator` (a :class:`~.Shader`)."""
 
     def __init__(self, integ) -> None:
         self.integ = integ
@@ -135,11 +136,11 @@ class FiberShading:
             exempt[m] = tubes.exempt[sg] + self.inst_first_tri[inst[m]][:, None]
         return t, h, seg, exempt
 
-    def vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
+    def vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng, asset: int | None = None, mode: dict | None = None):
         integ = self.integ
         x, d, beta, prim, inst, ridx = x[r], d[r], beta[r], prim[r], inst[r], idx[r]
-        x_obj = integ._to_object(x, inst, point=True)
-        wo_obj = normalize(integ._to_object(-d, inst))
+        x_obj = integ.to_object(x, inst, point=True)
+        wo_obj = normalize(integ.to_object(-d, inst))
         asset_id = integ.inst_asset[inst]
         t_obj, h, _, exempt = self.hit_frame(x_obj, wo_obj, prim, asset_id)
         indirect = integ.indirect[inst]
@@ -149,7 +150,7 @@ class FiberShading:
         tu = np.zeros((len(ray), 3))
         ts = np.zeros((len(ray), 3))
         if len(ray):
-            wi_obj = normalize(integ._to_object(wi_all, inst[ray]))
+            wi_obj = normalize(integ.to_object(wi_all, inst[ray]))
             ray_asset = asset_id[ray]
             x32, t32, wo32, h32 = (v.astype(np.float32) for v in (x_obj, t_obj, wo_obj, h))
             for a in np.unique(ray_asset):
@@ -171,3 +172,6 @@ class FiberShading:
         mask = np.ones(len(cont), bool)
         return (ridx[cont], x[cont], wi_c, beta[cont], np.full(len(cont), INV_4PI), inst[cont], (mask, cu, cs),
                 np.zeros(len(cont), bool), exempt[cont])
+
+
+register_shader("rna", "fiber")(FiberShading)

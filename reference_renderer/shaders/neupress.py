@@ -24,9 +24,10 @@ import numpy as np
 from nasset_sdk.kinds.encodings import sh9
 from nasset_sdk.kinds.neupress import gaussian_lobe_pdf, gaussian_lobe_sample
 
-from .lights import DomeLight
-from .neural_common import Frames, gather_hit, max3
-from .sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
+from ..lights import DomeLight
+from ..sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
+from .common import Frames, gather_hit, max3
+from .registry import register_shader
 
 
 def dome_sh_world(lights, min_rows: int = 128):
@@ -131,7 +132,7 @@ class NeupressShader:
             side = np.sign(dot(h.ng[s], wi[s]))[:, None]
             origin = h.x[s] + h.ng[s] * side * h.scale[s]
             tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            hh = integ._trace(origin, wi[s], tmax, h.inst[s])
+            hh = integ.trace(origin, wi[s], tmax, h.inst[s])
             free = hh.prim < 0
             s = s[free]
             wi_obj, jac = self.frames.dir_to_object(wi[s], h.inst[s])
@@ -182,3 +183,6 @@ class NeupressShader:
         prev = p_c if smode == "mis" else np.zeros(len(c))  # dome: lights reached get weight 0 (light-sampled)
         specular = np.full(len(c), smode == "lobe")  # lobe only: lights reached get weight 1
         return (h.ridx[c], origin, wc, h.beta[c], prev, h.inst[c].astype(np.int64), (np.ones(len(c), bool), tu, ts), specular)
+
+
+register_shader("neupress")(NeupressShader)
