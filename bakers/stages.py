@@ -89,3 +89,20 @@ def check_options(size: str, presets, output, **counts) -> Path:
     if output.suffix not in (".usdc", ".usda", ".usd"):
         raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
     return output
+
+
+# -- summary lines every baker prints ---------------------------------------------------------------
+def dataset_line(s: dict) -> str:
+    """``  dataset: V views at R^2, S spp + H held-out at ... -> N train / M held-out samples`` of a summary dict."""
+    return (f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
+            f"{s['val_res']}^2, {s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples")
+
+
+def psnr_line(s: dict, label: str = "held-out PSNR") -> str:
+    """The held-out PSNR of the trained model (torch) and of the written asset (SDK evaluator)."""
+    return f"  {label}: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)"
+
+
+def times_line(times: dict) -> str:
+    """``  time: scene 1.2s, dataset 3.4s, ...`` from ``{"scene_s": 1.2, ...}``."""
+    return "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in times.items())

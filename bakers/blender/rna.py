@@ -24,16 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
+from nasset_bakers.stages import dataset_line, psnr_line, times_line
 from nasset_sdk.errors import UsageError, error
 
-#: data presets (nasset_converters.blender.dataset.DataSettings fields); one sun per view (Cycles has no
-#: per-pixel light), so presets use many small views to see many light directions
-DATA_PRESETS = {
-    "tiny": dict(views=24, val_views=2, res=32, spp=16, val_res=32, val_spp=128),
-    "small": dict(views=160, val_views=6, res=64, spp=64, val_res=64, val_spp=1024),
-    "hq": dict(views=400, val_views=12, res=96, spp=128, val_res=96, val_spp=2048),
-}
+DATA_PRESETS = presets.RNA_BLENDER_DATA  # the table lives in nasset_bakers/presets.py
 DEFAULT_LIGHT_ANGLE = 0.5
 
 
@@ -196,12 +192,10 @@ def _print_summary(s: dict, stream) -> None:
     lines = [
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB, rna {s['variant']}{'' if s['h_input'] else ', h fixed to 0'})",
         f"  {s['renderer']} ground truth, training on {s['device']}",
-        f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
-        f"{s['val_res']}^2, {s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples "
-        f"(mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
-        f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        dataset_line(s) + f" (mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
+        psnr_line(s),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
-        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
+        times_line(t),
     ]
     print("\n".join(lines), file=stream)
 

@@ -26,16 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, finite, progress_bar
+from nasset_bakers.stages import check_options, finite, progress_bar, times_line
 from nasset_sdk.errors import UsageError, error
 
-#: sampler presets: held-out tuples, Russian-roulette start, depth cap
-SAMPLER_PRESETS = {
-    "tiny": dict(heldout=2048, rr_depth=4, max_depth=256),
-    "small": dict(heldout=16384, rr_depth=4, max_depth=1024),
-    "hq": dict(heldout=65536, rr_depth=8, max_depth=4096),
-}
+SAMPLER_PRESETS = presets.EIGHTDNA_MITSUBA_SAMPLER  # the table lives in nasset_bakers/presets.py
 BAKE_VERSION = "8dna-0.1.0"
 
 
@@ -283,7 +279,7 @@ def _print_summary(s: dict, stream) -> None:
         f"  parity SDK vs torch: albedo max |diff| {p['albedo_max_abs']:.2e}, pdf max rel {p['pdf_max_rel']:.2e} "
         f"(median {p['pdf_median_rel']:.1e}); ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         f"  validate: {s['validate']['error']} errors, {s['validate']['warning']} warnings",
-        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in s["times_s"].items()),
+        times_line(s["times_s"]),
     ]
     print("\n".join(lines), file=stream)
 

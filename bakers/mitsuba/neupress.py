@@ -21,16 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, finite
+from nasset_bakers.stages import check_options, dataset_line, finite, psnr_line, times_line
 from nasset_sdk.errors import UsageError, error
 
-#: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
-DATA_PRESETS = {
-    "tiny": dict(views=12, val_views=2, res=24, spp=8, val_res=24, val_spp=128),
-    "small": dict(views=160, val_views=6, res=64, spp=32, val_res=64, val_spp=1024),
-    "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
-}
+DATA_PRESETS = presets.NEUPRESS_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
 EXAMPLES = ("default",)
 
 
@@ -62,6 +58,7 @@ def bake(
         TRAIN_PRESETS,
         NeupressTrainSettings,
         TorchCheckpoint,
+        check_asset,
         export_mlp,
         export_skip_mlp,
         prt_coefficients,
@@ -245,34 +242,6 @@ def bake(
     return finite(summary)
 
 
-def check_asset(path, val_data: dict, app, samp, sh) -> dict:
-    """Re-open the asset with the SDK: held-out PSNR, SDK vs torch on the held-out samples, sigma and PRT round trips."""
-    from nasset_bakers.train.common import display_psnr
-    from nasset_bakers.train.neupress import appearance_inputs, predict_appearance, predict_log_sigma, sampling_inputs
-    from nasset_sdk.asset import Asset
-
-    asset = Asset.open(path)
-    asset.load("all")
-    ev = asset.evaluator()
-    lo, hi = asset.domain
-    y_sdk = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"])
-    y_torch = np.maximum(predict_appearance(app.model, app.G, appearance_inputs(val_data["x"], val_data["wo"], val_data["wi"],
-                                                                                  lo, hi)), 0.0)
-    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
-    k = min(4096, len(val_data["x"]))
-    s_sdk = np.log(ev.sigma(val_data["x"][:k], val_data["wo"][:k]))
-    s_torch = np.clip(predict_log_sigma(samp.model, samp.G, sampling_inputs(val_data["x"][:k], val_data["wo"][:k], lo, hi)),
-                      np.log(1e-3), np.log(1e3))
-    prt = ev.prt_coefficients()
-    comp = {name: int(sum(r.nbytes for r in asset.tensor_refs(name).values())
-                      + sum(len(asset.network_bytes(name, n)) for n in asset.network_refs(name)))
-            for name in asset.components()}
-    return {"psnr_db": display_psnr(y_sdk, val_data["rgb"])[0], "max_abs_diff": diff,
-            "sigma_max_abs_log_diff": float(np.max(np.abs(s_sdk - s_torch))) if k else 0.0,
-            "prt_max_abs": float(np.max(np.abs(prt - sh.astype(np.float16).astype(np.float32)))),
-            "component_bytes": comp}
-
-
 def _print_summary(s: dict, stream) -> None:
     t = s["times_s"]
     cb = s["component_bytes"]
@@ -280,14 +249,13 @@ def _print_summary(s: dict, stream) -> None:
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB: " + ", ".join(f"{k} {v / 1024:.1f} KiB" for k, v in cb.items()) + ")",
         f"  mitsuba {s['variant']}, training on {s['device']}; boundary eta {s['boundary']['eta']:.3f}, "
         f"alpha {s['boundary']['alpha']:.3f}",
-        f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at {s['val_res']}^2, "
-        f"{s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples  (kept in {s['dataset_dir']})",
-        f"  held-out PSNR (subsurface S): {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        dataset_line(s) + f"  (kept in {s['dataset_dir']})",
+        psnr_line(s, "held-out PSNR (subsurface S)"),
         f"  sampling lobe KL: {s['sampling_kl_nats']:.3f} nats (uniform {s['sampling_kl_uniform_nats']:.3f}, "
         f"best single sigma per record {s['sampling_kl_best_sigma_nats']:.3f})",
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; log sigma {s['sigma_sdk_vs_torch_max_abs_log']:.2e}; "
         f"PRT round trip {s['prt_roundtrip_max_abs']:.1e}",
-        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
+        times_line(t),
     ]
     print("\n".join(lines), file=stream)
 

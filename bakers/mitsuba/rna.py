@@ -18,18 +18,12 @@ import warnings
 from dataclasses import replace
 from pathlib import Path
 
+from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, finite
+from nasset_bakers.stages import check_options, dataset_line, finite, psnr_line, times_line
 from nasset_sdk.errors import UsageError, error
 
-#: data presets (nasset_converters.mitsuba.dataset.DataSettings fields). lights_per_view 0: every training
-#: pixel has its own random light; held-out views: one light per view, lower res, many more spp
-#: (their noise bounds the measurable PSNR; spec/bake.md#psnr). Measured in spec/bake.md#ablations.
-DATA_PRESETS = {
-    "tiny": dict(views=16, val_views=2, res=24, spp=8, val_res=24, val_spp=64, lights_per_view=0),
-    "small": dict(views=96, val_views=8, res=96, spp=64, val_res=64, val_spp=1024, lights_per_view=0),
-    "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
-}
+DATA_PRESETS = presets.RNA_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
 
 
 #: default angular radius (deg) of the distant light for assets behind smooth dielectrics: measured
@@ -199,12 +193,10 @@ def _print_summary(s: dict, stream) -> None:
     lines = [
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB)",
         f"  mitsuba {s['variant']}, training on {s['device']}",
-        f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
-        f"{s['val_res']}^2, {s['val_spp']} spp -> "
-        f"{s['train_samples']} train / {s['val_samples']} held-out samples  (kept in {s['dataset_dir']})",
-        f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        dataset_line(s) + f"  (kept in {s['dataset_dir']})",
+        psnr_line(s),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
-        "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
+        times_line(t),
     ]
     print("\n".join(lines), file=stream)
 

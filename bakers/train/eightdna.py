@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from nasset_bakers import presets
 from nasset_sdk.errors import error
 from nasset_sdk.kinds.eightdna import FLOWS, SIZES
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES, cube_face_dir, cube_face_uv, to_unit_box
@@ -50,12 +51,7 @@ class TrainSettings:
     device: str = "auto"
 
 
-#: per-preset training defaults (the sampler defaults live in nasset_bakers.mitsuba.eightdna)
-TRAIN_PRESETS = {
-    "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
-    "small": dict(steps=1200, batch=2048, buffer=1 << 18, reuse=2),
-    "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
-}
+TRAIN_PRESETS = presets.EIGHTDNA_TRAIN  # the table lives in nasset_bakers/presets.py
 MINIMUMS = (MIN_BIN_WIDTH, MIN_BIN_HEIGHT, MIN_DERIVATIVE)
 
 

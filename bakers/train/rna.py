@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from nasset_bakers import presets
 from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
@@ -54,12 +55,7 @@ class TrainSettings:
     device: str = "auto"
 
 
-#: per-preset training defaults (the data defaults live in nasset_bakers.mitsuba.rna)
-TRAIN_PRESETS = {
-    "tiny": dict(epochs=40, batch=1024),
-    "small": dict(epochs=12, batch=1024, plane_lr=3e-3),
-    "hq": dict(epochs=40, batch=8192, plane_lr=3e-3),
-}
+TRAIN_PRESETS = presets.RNA_TRAIN  # the table lives in nasset_bakers/presets.py
 
 
 #: sharpness k of the lobe features exp(k (n.h - 1)) (encoding "lobes")

@@ -1,0 +1,79 @@
+"""Every bake preset in one place: ``--size`` (tiny, small, hq) picks one row of each table of its baker.
+
+A baker's preset has three parts: what it renders or samples (``DATA``, per source and kind), how it
+trains (``TRAIN``, per kind) and the network shapes, which are the kind's own
+(``nasset_sdk.kinds.<kind>.SIZES``, shared with ``nasset example``). :func:`preset` returns the three.
+"""
+
+from __future__ import annotations
+
+from nasset_sdk.kinds import eightdna, neupress, rna
+
+SIZES = ("tiny", "small", "hq")
+
+# -- data ----------------------------------------------------------------------------------------
+#: data presets (nasset_converters.mitsuba.dataset.DataSettings fields). lights_per_view 0: every training
+#: pixel has its own random light; held-out views: one light per view, lower res, many more spp
+#: (their noise bounds the measurable PSNR; spec/bake.md#psnr). Measured in spec/bake.md#ablations.
+RNA_MITSUBA_DATA = {
+    "tiny": dict(views=16, val_views=2, res=24, spp=8, val_res=24, val_spp=64, lights_per_view=0),
+    "small": dict(views=96, val_views=8, res=96, spp=64, val_res=64, val_spp=1024, lights_per_view=0),
+    "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
+}
+
+#: data presets (nasset_converters.blender.dataset.DataSettings fields); one sun per view (Cycles has no
+#: per-pixel light), so presets use many small views to see many light directions
+RNA_BLENDER_DATA = {
+    "tiny": dict(views=24, val_views=2, res=32, spp=16, val_res=32, val_spp=128),
+    "small": dict(views=160, val_views=6, res=64, spp=64, val_res=64, val_spp=1024),
+    "hq": dict(views=400, val_views=12, res=96, spp=128, val_res=96, val_spp=2048),
+}
+
+#: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
+NEUPRESS_MITSUBA_DATA = {
+    "tiny": dict(views=12, val_views=2, res=24, spp=8, val_res=24, val_spp=128),
+    "small": dict(views=160, val_views=6, res=64, spp=32, val_res=64, val_spp=1024),
+    "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
+}
+
+#: sampler presets: held-out tuples, Russian-roulette start, depth cap
+EIGHTDNA_MITSUBA_SAMPLER = {
+    "tiny": dict(heldout=2048, rr_depth=4, max_depth=256),
+    "small": dict(heldout=16384, rr_depth=4, max_depth=1024),
+    "hq": dict(heldout=65536, rr_depth=8, max_depth=4096),
+}
+
+
+# -- training ------------------------------------------------------------------------------------
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.rna.SIZES)
+RNA_TRAIN = {
+    "tiny": dict(epochs=40, batch=1024),
+    "small": dict(epochs=12, batch=1024, plane_lr=3e-3),
+    "hq": dict(epochs=40, batch=8192, plane_lr=3e-3),
+}
+
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.neupress.SIZES)
+NEUPRESS_TRAIN = {
+    "tiny": dict(epochs=30, batch=512, sampling_epochs=15, sampling_samples=1024, sampling_bins=12, prt_dirs=64),
+    "small": dict(epochs=12, batch=2048, sampling_epochs=30, sampling_samples=4096, sampling_bins=16, prt_dirs=256),
+    "hq": dict(epochs=80, batch=4096, sampling_epochs=40, sampling_samples=16384, sampling_bins=24, prt_dirs=1024),
+}
+
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES)
+EIGHTDNA_TRAIN = {
+    "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
+    "small": dict(steps=1200, batch=2048, buffer=1 << 18, reuse=2),
+    "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
+}
+
+
+#: (source, kind) -> data table; kind -> training table; kind -> network shapes
+DATA = {("mitsuba", "rna"): RNA_MITSUBA_DATA, ("blender", "rna"): RNA_BLENDER_DATA,
+        ("mitsuba", "neupress"): NEUPRESS_MITSUBA_DATA, ("mitsuba", "8dna"): EIGHTDNA_MITSUBA_SAMPLER}
+TRAIN = {"rna": RNA_TRAIN, "neupress": NEUPRESS_TRAIN, "8dna": EIGHTDNA_TRAIN}
+NETWORK = {"rna": rna.SIZES, "neupress": neupress.SIZES, "8dna": eightdna.SIZES}
+
+
+def preset(source: str, kind: str, size: str) -> dict:
+    """The three parts of one preset: ``{"data": ..., "train": ..., "network": ...}`` (KeyError when unknown)."""
+    return {"data": DATA[(source, kind)][size], "train": TRAIN[kind][size], "network": NETWORK[kind][size]}
