@@ -26,7 +26,7 @@ import numpy as np
 from . import limits
 from .errors import UsageError, error
 from .geometry import CurvesGeometry, MeshGeometry
-from .networks import NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
+from .networks import CheckedSession, NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
 from .plugin import register_schema
 
 ROOT = "/Asset"
@@ -246,9 +246,10 @@ def atomic_export(layer, target: Path) -> None:
     target = Path(target)
     if not target.parent.is_dir():
         raise error("WRITE_FAILED", "target folder does not exist", file=str(target))
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=target.parent)
-    os.close(fd)
+    tmp = None
     try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=target.parent)
+        os.close(fd)
         fmt_args = {"format": "usdc"} if target.suffix == ".usd" else {}
         if not layer.Export(tmp, args=fmt_args):
             raise error("WRITE_FAILED", "USD could not export the layer", file=str(target))
@@ -262,8 +263,10 @@ def atomic_export(layer, target: Path) -> None:
             os.close(dir_fd)
     except OSError as exc:
         raise error("WRITE_FAILED", f"{exc.strerror or exc}", file=str(target)) from None
+    except RuntimeError as exc:  # pxr.Tf.ErrorException from the export
+        raise error("WRITE_FAILED", f"USD could not export the layer: {str(exc).strip()[-200:]}", file=str(target)) from None
     finally:
-        if os.path.exists(tmp):
+        if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)
 
 
@@ -282,7 +285,15 @@ class TensorRef:
 
     @property
     def nbytes(self) -> int:
-        return int(np.prod(self.shape)) * (2 if self.dtype == "float16" else 4)
+        return shape_count(self.shape) * (2 if self.dtype == "float16" else 4)
+
+
+def shape_count(shape) -> int:
+    """Number of elements of ``shape`` as an exact Python int (``np.prod`` wraps int64 on overflow)."""
+    count = 1
+    for d in shape:
+        count *= int(d)
+    return count
 
 
 @dataclass(frozen=True)
@@ -336,6 +347,8 @@ class Asset:
         register_schema()
         from pxr import Tf, Usd
 
+        from .paths import open_checked_stage
+
         p = Path(path)
         if not p.is_file():
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
@@ -344,7 +357,8 @@ class Asset:
 
             ensure_readable(p)
         try:
-            stage = Usd.Stage.Open(str(p), Usd.Stage.LoadNone)
+            # every sublayer / reference / payload / clip / asset path is checked before anything composes
+            stage = open_checked_stage(p, Usd.Stage.LoadNone)
         except Tf.ErrorException as exc:
             raise error("FILE_UNREADABLE", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
         if stage is None:
@@ -376,7 +390,7 @@ class Asset:
         from .kinds import KINDS
 
         version = self._attr(self.root, "nasset:specVersion", code="SPEC_VERSION")
-        m = re.fullmatch(r"(\d+)\.(\d+)", str(version))
+        m = re.fullmatch(r"([0-9]+)\.([0-9]+)", str(version), re.ASCII)
         if not m or int(m.group(1)) != limits.SUPPORTED_MAJOR:
             raise error("SPEC_VERSION", f"specVersion {version!r} not readable by this SDK (major {limits.SUPPORTED_MAJOR})",
                         **self._loc(ROOT, "nasset:specVersion"))
@@ -515,7 +529,9 @@ class Asset:
         if shape is None or len(shape) == 0 or len(shape) > limits.MAX_TENSOR_RANK or any(int(s) < 0 for s in shape):
             raise error("TENSOR_SHAPE", f"shape {list(shape) if shape is not None else None} malformed", **self._loc(path, "shape"))
         shape = tuple(int(s) for s in shape)
-        count = int(np.prod(shape, dtype=np.int64))
+        count = shape_count(shape)  # Python ints: np.prod wraps at 2**63
+        if count == 0:
+            raise error("TENSOR_SHAPE", f"shape {shape} has a zero dimension; a tensor holds data", **self._loc(path, "shape"))
         if count > limits.MAX_TENSOR_ELEMENTS:
             raise error("TENSOR_TOO_LARGE", f"shape {shape} has {count} elements > {limits.MAX_TENSOR_ELEMENTS}", **self._loc(path, "shape"))
         raw = values_attr.Get()
@@ -548,11 +564,13 @@ class Asset:
         key = (component, name, intra_threads, inter_threads)
         if key not in self._sessions:
             data = self.network_bytes(component, name)
+            loc = self._loc(f"{COMPONENTS}/{component}/{name}", "onnx:model")
             try:
-                self._sessions[key] = make_session(data, intra_threads=intra_threads, inter_threads=inter_threads)
+                session = make_session(data, intra_threads=intra_threads, inter_threads=inter_threads)
             except Exception as exc:
-                raise error("NETWORK_RUNTIME", f"onnxruntime cannot load it: {str(exc)[:200]}",
-                            **self._loc(f"{COMPONENTS}/{component}/{name}", "onnx:model")) from None
+                raise error("NETWORK_RUNTIME", f"onnxruntime cannot load it: {str(exc)[:200]}", **loc) from None
+            # evaluation failures become typed NETWORK_RUNTIME errors naming this network
+            self._sessions[key] = CheckedSession(session, self.network_refs(component)[name].info, **loc)
         return self._sessions[key]
 
     # -- geometry --------------------------------------------------------------------------

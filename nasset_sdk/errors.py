@@ -88,6 +88,22 @@ CODES: dict[str, Code] = _codes(
     ("CHECK_FAILED", "format", "a validation check could not complete on this input", "validation.md#report"),
     # converters (scene conversion)
     ("CONVERT_ASSET_REFERENCE", "scene", "a --replace asset file is missing or is not a neural asset", "bake.md#scene-conversion"),
+    # layer content (spec/security.md)
+    ("LAYER_EXTERNAL", "format", "the asset has a sublayer, value clips, or a reference or payload to another file", "format.md#files"),
+    ("VARIANT_SET_UNEXPECTED", "security", "a variant set other than a component's quality variant set", "security.md#layer-content"),
+    ("TIME_SAMPLES", "format", "an attribute carries time samples", "security.md#layer-content"),
+    ("ARRAY_TOO_LARGE", "security", "a geometry or other array is above the format bound, or reading it exceeds the memory bound",
+     "security.md#bounds"),
+    # networks (allow-list and runtime probe)
+    ("NETWORK_OP_FORBIDDEN", "security", "the model uses an operator, attribute, input or construct outside the network allow-list",
+     "security.md#networks"),
+    ("NETWORK_SHAPE", "security", "shape inference cannot prove every value to be [N, fixed width] with N the batch", "security.md#networks"),
+    ("NETWORK_OUTPUT", "format", "on probe inputs the outputs are non-finite, above the magnitude bound or depend on other rows",
+     "security.md#networks"),
+    # rendering limits (spec/renderer.md#limits)
+    ("GEOMETRY_SCALE", "format", "geometry coordinates above the bound, or the geometry too small for its position to render in float32",
+     "security.md#bounds"),
+    ("IMAGE_INVALID", "read", "an image the renderer reads (dome texture) is corrupt, unsupported or above the size bound", "renderer.md#limits"),
 )
 
 

@@ -1,17 +1,69 @@
-"""Image files: EXR (OpenEXR) read / write, the ACES tone curve, and 8-bit PNG output with the standard
-library only (zlib), for previews, plots and error maps."""
+"""Image files: EXR (OpenEXR) read / write with bounded headers, the ACES tone curve, 8-bit PNG with the
+standard library only (zlib), the finite-float32 guard every image writer applies, and atomic writes with
+typed errors (previews, plots, error maps, renders)."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import struct
+import tempfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 
+from .errors import error
 
-def write_png(path, rgb8: np.ndarray) -> Path:
-    """Write an [H, W, 3] uint8 image as an 8-bit RGB PNG (filter type 0 on every row); returns the path."""
+#: Largest magnitude any float image file holds: float32 max (spec/renderer.md#limits).
+IMAGE_VALUE_MAX = float(np.finfo(np.float32).max)
+#: Image files read (dome / environment textures): side, pixels and pixels x channels, checked on the
+#: header before any decoder sees the file (spec/renderer.md#limits).
+MAX_TEXTURE_SIDE = 1 << 15
+MAX_TEXTURE_PIXELS = 1 << 26
+MAX_TEXTURE_VALUES = 1 << 28  # pixels x channels (1 GiB as float32)
+
+
+def finite_float32(image) -> np.ndarray:
+    """``image`` as a contiguous float32 array with NaN -> 0 and every value clamped to
+    [-IMAGE_VALUE_MAX, IMAGE_VALUE_MAX], so no Inf/NaN ever reaches a file (same shape)."""
+    a = np.asarray(image, np.float64)
+    a = np.nan_to_num(a, nan=0.0, posinf=IMAGE_VALUE_MAX, neginf=-IMAGE_VALUE_MAX)
+    return np.ascontiguousarray(np.clip(a, -IMAGE_VALUE_MAX, IMAGE_VALUE_MAX), np.float32)
+
+
+@contextlib.contextmanager
+def atomic_output(path, what: str = "image"):
+    """Yield a temporary path beside ``path``; on success it is renamed over ``path``.
+
+    Any failure (missing or unwritable folder, full disk, the writer raising) leaves ``path``
+    untouched and raises ``WRITE_FAILED`` naming the file; the temporary file is removed.
+    """
+    target = Path(path)
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=target.parent)
+        os.close(fd)
+        os.chmod(tmp, 0o666 & ~_umask())  # the permissions a plain open() would give
+        yield tmp
+        os.replace(tmp, target)
+        tmp = None
+    except (OSError, RuntimeError, ValueError) as exc:  # OpenEXR reports I/O failures as RuntimeError
+        detail = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc).strip().splitlines()[-1][:200]
+        raise error("WRITE_FAILED", f"cannot write the {what}: {detail}", file=str(target)) from None
+    finally:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def png_bytes(rgb8: np.ndarray) -> bytes:
+    """An [H, W, 3] uint8 image as 8-bit RGB PNG bytes (filter type 0 on every row)."""
     rgb8 = np.ascontiguousarray(rgb8, np.uint8)
     h, w, _ = rgb8.shape
     raw = b"".join(b"\x00" + rgb8[r].tobytes() for r in range(h))
@@ -20,38 +72,119 @@ def write_png(path, rgb8: np.ndarray) -> Path:
         return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
-    png += chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+    return png + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+
+
+def write_png(path, rgb8: np.ndarray) -> Path:
+    """Write an [H, W, 3] uint8 image as an 8-bit RGB PNG atomically; returns the path (``WRITE_FAILED`` on failure)."""
     path = Path(path)
-    path.write_bytes(png)
+    data = png_bytes(rgb8)
+    with atomic_output(path, "PNG") as tmp:
+        Path(tmp).write_bytes(data)
     return path
 
 
 def write_exr(path, image: np.ndarray) -> None:
+    """Write [H, W, 3] as float32 RGB OpenEXR atomically; values pass :func:`finite_float32` (``WRITE_FAILED``)."""
     import OpenEXR
 
-    img = np.ascontiguousarray(np.asarray(image, np.float32))
+    img = finite_float32(image)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    OpenEXR.File(header, {"RGB": img}).write(str(path))
+    with atomic_output(path, "OpenEXR image") as tmp:
+        OpenEXR.File(header, {"RGB": img}).write(tmp)
+
+
+def exr_header_size(path) -> tuple[int, int, int]:
+    """(width, height, channels) from an OpenEXR file's header, read with bounded reads before any
+    decoder sees the file. ``IMAGE_INVALID`` for a file that is not a single-part scanline/tiled EXR."""
+    def bad(msg):
+        return error("IMAGE_INVALID", msg, file=str(path))
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)  # attribute headers are small; 64 KiB holds any sane one
+    except OSError as exc:
+        raise bad(f"cannot read it: {exc.strerror or exc}") from None
+    if len(head) < 8 or head[:4] != b"\x76\x2f\x31\x01":
+        raise bad("not an OpenEXR file (magic number)")
+    flags = struct.unpack("<I", head[4:8])[0]
+    if flags & 0xFF != 2 or flags & (0x800 | 0x1000):  # version 2; no deep data, no multi-part
+        raise bad(f"unsupported OpenEXR version/flags 0x{flags:x} (single-part scanline or tiled images only)")
+    pos, window, channels = 8, None, None
+    while True:
+        end = head.find(b"\0", pos)
+        if end < 0:
+            raise bad("header truncated or larger than 64 KiB")
+        name = head[pos:end]
+        if not name:
+            break
+        tend = head.find(b"\0", end + 1)
+        if tend < 0 or tend + 5 > len(head):
+            raise bad("header truncated")
+        size = struct.unpack("<i", head[tend + 1:tend + 5])[0]
+        vstart = tend + 5
+        if size < 0 or vstart + size > len(head):
+            raise bad(f"header attribute {name[:64]!r} has an invalid size {size}")
+        value = head[vstart:vstart + size]
+        if name == b"dataWindow":
+            if size != 16:
+                raise bad("dataWindow is not a box2i")
+            window = struct.unpack("<4i", value)
+        elif name == b"channels":
+            channels = sum(1 for _ in _chlist_names(value))
+        pos = vstart + size
+    if window is None or channels is None:
+        raise bad("header lacks dataWindow or channels")
+    x0, y0, x1, y1 = window
+    w, h = x1 - x0 + 1, y1 - y0 + 1
+    return w, h, channels
+
+
+def _chlist_names(value: bytes):
+    pos = 0
+    while pos < len(value) and value[pos] != 0:
+        end = value.find(b"\0", pos)
+        if end < 0:
+            return
+        yield value[pos:end]
+        pos = end + 1 + 16
 
 
 def read_exr(path) -> np.ndarray:
-    """[H, W, 3] float32 RGB (a single-channel image is repeated; alpha is dropped)."""
+    """[H, W, 3] float32 RGB (a single-channel image is repeated; alpha is dropped).
+
+    The header is checked first (:func:`exr_header_size`): each side 1 .. MAX_TEXTURE_SIDE, at most
+    MAX_TEXTURE_PIXELS pixels and MAX_TEXTURE_VALUES values; a corrupt file is ``IMAGE_INVALID``.
+    """
     import OpenEXR
 
-    with OpenEXR.File(str(path), separate_channels=True) as f:
-        ch = f.channels()
-        if all(k in ch for k in "RGB"):
-            return np.stack([np.asarray(ch[k].pixels, np.float32) for k in "RGB"], -1)
-        if "Y" in ch:
-            y = np.asarray(ch["Y"].pixels, np.float32)
-            return np.stack([y, y, y], -1)
-        first = np.asarray(next(iter(ch.values())).pixels, np.float32)
-        return np.stack([first] * 3, -1)
+    w, h, nch = exr_header_size(path)
+    if not (1 <= w <= MAX_TEXTURE_SIDE and 1 <= h <= MAX_TEXTURE_SIDE) or w * h > MAX_TEXTURE_PIXELS \
+            or not 1 <= nch or w * h * nch > MAX_TEXTURE_VALUES:
+        raise error("IMAGE_INVALID", f"image of {w} x {h} pixels and {nch} channels is outside the bounds (each side 1 .. "
+                    f"{MAX_TEXTURE_SIDE}, at most {MAX_TEXTURE_PIXELS} pixels and {MAX_TEXTURE_VALUES} values)", file=str(path))
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            ch = f.channels()
+            if all(k in ch for k in "RGB"):
+                img = np.stack([np.asarray(ch[k].pixels, np.float32) for k in "RGB"], -1)
+            elif "Y" in ch:
+                y = np.asarray(ch["Y"].pixels, np.float32)
+                img = np.stack([y, y, y], -1)
+            else:
+                first = np.asarray(next(iter(ch.values())).pixels, np.float32)
+                img = np.stack([first] * 3, -1)
+    except (RuntimeError, OSError, ValueError, TypeError, StopIteration) as exc:  # OpenEXR's own errors are RuntimeError
+        detail = str(exc).strip().splitlines()[-1][:200] if str(exc).strip() else type(exc).__name__
+        raise error("IMAGE_INVALID", f"cannot decode the OpenEXR image: {detail}", file=str(path)) from None
+    if img.ndim != 3 or img.shape[:2] != (h, w):
+        raise error("IMAGE_INVALID", f"decoded pixels {img.shape} differ from the header's {w} x {h}", file=str(path))
+    return img
 
 
 def tonemap(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     """ACES filmic curve (Narkowicz fit) then sRGB encoding -> uint8."""
-    x = np.maximum(np.nan_to_num(np.asarray(image, np.float64)), 0.0) * 2.0 ** exposure * 0.6
+    x = np.maximum(finite_float32(image).astype(np.float64), 0.0) * float(np.clip(2.0 ** np.clip(exposure, -200, 200), 0, 1e60)) * 0.6
     y = np.clip((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
     s = np.where(y <= 0.0031308, 12.92 * y, 1.055 * np.power(y, 1 / 2.4) - 0.055)
     return np.clip(np.round(s * 255.0), 0, 255).astype(np.uint8)

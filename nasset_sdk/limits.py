@@ -11,3 +11,37 @@ OPSET_MIN = 13
 OPSET_MAX = 21
 ALLOWED_OP_DOMAINS = ("", "ai.onnx")
 TENSOR_DTYPES = ("float16", "float32")
+#: Geometry arrays (spec/security.md#bounds), checked on declared lengths before values are used.
+MAX_GEOMETRY_POINTS = 1 << 24  # 16.8 M points / normals / widths (192 MiB as float3)
+MAX_GEOMETRY_FACES = 1 << 25  # 33.5 M triangles: faceVertexCounts; faceVertexIndices <= 3x this
+MAX_ARRAY_ELEMENTS = 1 << 24  # any other array-valued field (extent, names, ...)
+#: Reading a file may decode at most this many array bytes beyond DECODE_RATIO x its size (crate compresses
+#: integer and float arrays: a 34 KB file can otherwise decode to GBs).
+DECODE_BASE_BYTES = 64 << 20
+DECODE_RATIO = 16
+_ARRAY_BOUNDS = {
+    "points": MAX_GEOMETRY_POINTS, "normals": MAX_GEOMETRY_POINTS, "widths": MAX_GEOMETRY_POINTS,
+    "curveVertexCounts": MAX_GEOMETRY_POINTS, "faceVertexCounts": MAX_GEOMETRY_FACES, "faceVertexIndices": 3 * MAX_GEOMETRY_FACES,
+    "values": MAX_TENSOR_ELEMENTS, "shape": MAX_TENSOR_RANK, "onnx:model": MAX_NETWORK_BYTES,
+}
+
+
+def array_bound(name: str, field: str = "default") -> int:
+    """Most elements an array-valued field named ``name`` may hold."""
+    if field != "default" and field != "timeSamples":
+        return MAX_ARRAY_ELEMENTS
+    return _ARRAY_BOUNDS.get(name, MAX_ARRAY_ELEMENTS)
+
+
+def decoded_bound(file_bytes: int) -> int:
+    """Most array bytes a file of ``file_bytes`` may decode to."""
+    return DECODE_BASE_BYTES + DECODE_RATIO * int(file_bytes)
+MAX_NETWORK_NODES = 4096
+#: A network output magnitude above this on the validator's probe inputs is rejected (NETWORK_OUTPUT).
+MAX_NETWORK_OUTPUT = 1e8
+#: Geometry (object space) that float32 ray casting resolves (GEOMETRY_SCALE, spec/security.md#bounds):
+#: |coordinate| <= MAX_GEOMETRY_COORDINATE, bounding-box diagonal >= MIN_GEOMETRY_SIZE and
+#: >= MIN_GEOMETRY_SIZE_RATIO x the largest |coordinate|.
+MAX_GEOMETRY_COORDINATE = 1e10
+MIN_GEOMETRY_SIZE = 1e-8
+MIN_GEOMETRY_SIZE_RATIO = 1e-3

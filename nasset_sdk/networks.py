@@ -106,12 +106,74 @@ def _dim_value(d) -> int | None:
     return int(d.dim_value) if d.HasField("dim_value") else None
 
 
+#: Operators a network may use (default domain; spec/security.md#networks). Each keeps output row i a
+#: function of input row i alone and every shape independent of input values, given the attribute and
+#: input rules of :func:`check_graph`. Elementwise ops broadcast; the rest are checked per op below.
+ELEMENTWISE_OPS = frozenset({
+    "Identity", "Relu", "LeakyRelu", "PRelu", "Elu", "Selu", "Celu", "Sigmoid", "HardSigmoid", "HardSwish", "Tanh",
+    "Softplus", "Softsign", "Mish", "Gelu", "Erf", "Exp", "Log", "Sqrt", "Abs", "Neg", "Reciprocal", "Sin", "Cos",
+    "Add", "Sub", "Mul", "Div", "Pow", "Max", "Min", "Sum", "Mean", "Clip", "Cast",
+})
+ROW_OPS = frozenset({
+    "Gemm", "MatMul", "Concat", "Split", "Slice", "ReduceSum", "ReduceMean", "ReduceMax", "ReduceMin", "ReduceL2",
+    "Softmax", "LogSoftmax", "LayerNormalization", "Constant",
+})
+ALLOWED_OPS = ELEMENTWISE_OPS | ROW_OPS
+#: The symbolic batch dimension given to every graph input before shape inference.
+BATCH_DIM = "nasset_batch"
+#: Elements of any value computed from constants only (bounds broadcasting of two large constants).
+MAX_STATIC_ELEMENTS = 1 << 24
+
+
+def _tensor_places(model):
+    """Every TensorProto in the model: (where, tensor, sparse). Sparse tensors yield their values and indices.
+
+    Covers graph initializers and sparse initializers, node attributes t / tensors / sparse_tensor /
+    sparse_tensors, subgraphs g / graphs recursively, local function bodies and training_info graphs.
+    """
+    def of_sparse(s, where):
+        yield f"{where} (values)", s.values, True
+        yield f"{where} (indices)", s.indices, True
+
+    def of_nodes(nodes, where):
+        for node in nodes:
+            for attr in node.attribute:
+                at = f"{where}/{node.op_type} {node.name!r} attribute {attr.name!r}"
+                if attr.HasField("t"):
+                    yield at, attr.t, False
+                for t in attr.tensors:
+                    yield at, t, False
+                if attr.HasField("sparse_tensor"):
+                    yield from of_sparse(attr.sparse_tensor, at)
+                for sp in attr.sparse_tensors:
+                    yield from of_sparse(sp, at)
+                if attr.HasField("g"):
+                    yield from of_graph(attr.g, at)
+                for g in attr.graphs:
+                    yield from of_graph(g, at)
+
+    def of_graph(graph, where):
+        for t in graph.initializer:
+            yield f"{where} initializer", t, False
+        for sp in graph.sparse_initializer:
+            yield from of_sparse(sp, f"{where} sparse initializer")
+        yield from of_nodes(graph.node, where)
+
+    yield from of_graph(model.graph, "graph")
+    for f in model.functions:
+        yield from of_nodes(f.node, f"function {f.name!r}")
+    for i, ti in enumerate(model.training_info):
+        yield from of_graph(ti.initialization, f"training_info[{i}].initialization")
+        yield from of_graph(ti.algorithm, f"training_info[{i}].algorithm")
+
+
 def check_model_bytes(data: bytes, declared: NetworkInfo | None = None, **loc):
     """Parse and check untrusted ONNX bytes; return the ModelProto or raise a typed error.
 
-    Checks (spec/security.md#networks): size bound, parse, no external data, only default
-    operator domains, opset in range and equal to the declaration, onnx.checker, I/O names and
-    widths equal to ``declared``.
+    Checks (spec/security.md#networks): size bound, parse, no external data anywhere, no sparse
+    tensors, only default operator domains, opset in range and equal to the declaration, onnx.checker,
+    I/O names and widths equal to ``declared`` with a symbolic batch axis, then :func:`check_graph`
+    (operator allow-list, attribute rules, shapes [N, fixed width] throughout).
     """
     import onnx
     from onnx import TensorProto
@@ -126,21 +188,16 @@ def check_model_bytes(data: bytes, declared: NetworkInfo | None = None, **loc):
     if not model.HasField("graph") or not model.graph.node:
         raise error("NETWORK_PARSE", "model has no graph nodes", **loc)
 
-    def tensors_of(graph):
-        yield from graph.initializer
-        for node in graph.node:
-            for attr in node.attribute:
-                if attr.HasField("t"):
-                    yield attr.t
-                yield from attr.tensors
-                if attr.HasField("g"):
-                    yield from tensors_of(attr.g)
-                for g in attr.graphs:
-                    yield from tensors_of(g)
-
-    for t in tensors_of(model.graph):
+    sparse_at = None
+    for where, t, sparse in _tensor_places(model):
         if t.data_location == TensorProto.EXTERNAL or len(t.external_data):
-            raise error("NETWORK_EXTERNAL_DATA", f"tensor {t.name!r} references external data", **loc)
+            raise error("NETWORK_EXTERNAL_DATA", f"tensor {t.name!r} in {where} references external data", **loc)
+        if sparse and sparse_at is None:
+            sparse_at = where
+    if sparse_at is not None:
+        raise error("NETWORK_OP_FORBIDDEN", f"sparse tensor in {sparse_at}: the format has no sparse tensors", **loc)
+    if len(model.training_info):
+        raise error("NETWORK_OP_FORBIDDEN", "model carries training_info graphs", **loc)
     domains = {o.domain for o in model.opset_import}
     domains |= {n.domain for n in model.graph.node}
     bad = sorted(d for d in domains if d not in limits.ALLOWED_OP_DOMAINS)
@@ -152,6 +209,8 @@ def check_model_bytes(data: bytes, declared: NetworkInfo | None = None, **loc):
         raise error("NETWORK_OPSET", f"opset {opset} outside [{limits.OPSET_MIN}, {limits.OPSET_MAX}]", **loc)
     if declared is not None and declared.opset != opset:
         raise error("NETWORK_OPSET", f"model opset {opset} differs from declared onnx:opset {declared.opset}", **loc)
+    if len(model.graph.node) > limits.MAX_NETWORK_NODES:
+        raise error("NETWORK_TOO_LARGE", f"graph has {len(model.graph.node)} nodes, bound {limits.MAX_NETWORK_NODES}", **loc)
     try:
         onnx.checker.check_model(model)
     except Exception as exc:
@@ -159,10 +218,14 @@ def check_model_bytes(data: bytes, declared: NetworkInfo | None = None, **loc):
     init_names = {t.name for t in model.graph.initializer}
     inputs = [v for v in model.graph.input if v.name not in init_names]
     outputs = list(model.graph.output)
+    if not inputs or not outputs:
+        raise error("NETWORK_IO", "model needs at least one input and one output", **loc)
     for v in inputs + outputs:
         tt = v.type.tensor_type
         if tt.elem_type != TensorProto.FLOAT or len(tt.shape.dim) != 2:
             raise error("NETWORK_IO", f"{v.name!r} must be float32 of rank 2 [N, width]", **loc)
+        if tt.shape.dim[0].HasField("dim_value"):
+            raise error("NETWORK_IO", f"{v.name!r} has a fixed batch axis ({tt.shape.dim[0].dim_value}); axis 0 must be symbolic", **loc)
         width = _dim_value(tt.shape.dim[1])
         if width is None or not 1 <= width <= limits.MAX_NETWORK_WIDTH:
             raise error("NETWORK_IO", f"{v.name!r} width must be fixed, in [1, {limits.MAX_NETWORK_WIDTH}]; got {width}", **loc)
@@ -177,7 +240,150 @@ def check_model_bytes(data: bytes, declared: NetworkInfo | None = None, **loc):
         if w_in != declared.input_widths or w_out != declared.output_widths:
             raise error("NETWORK_IO", f"model widths {w_in}->{w_out} differ from declared "
                         f"{declared.input_widths}->{declared.output_widths}", **loc)
+    check_graph(model, **loc)
     return model
+
+
+def _static_sources(graph) -> dict:
+    """Name -> TensorProto or Constant AttributeProto of every initializer and Constant output."""
+    out: dict = {t.name: t for t in graph.initializer}
+    for node in graph.node:
+        if node.op_type == "Constant" and node.output and len(node.attribute) == 1:
+            out[node.output[0]] = node.attribute[0]
+    return out
+
+
+def _static_value(src, **loc) -> np.ndarray:
+    """The numpy value of a constant source (raises NETWORK_PARSE for an undecodable tensor)."""
+    from onnx import AttributeProto, helper, numpy_helper
+
+    try:
+        if isinstance(src, AttributeProto):
+            return numpy_helper.to_array(src.t) if src.name == "value" else np.asarray(helper.get_attribute_value(src))
+        return numpy_helper.to_array(src)
+    except Exception as exc:  # inconsistent raw_data length and the like
+        raise error("NETWORK_PARSE", f"constant tensor cannot be decoded ({type(exc).__name__})", **loc) from None
+
+
+def check_graph(model, **loc) -> None:
+    """Operator allow-list, attribute/input rules and shape inference (spec/security.md#networks).
+
+    Raises ``NETWORK_OP_FORBIDDEN`` for an operator, attribute or input outside the rules and
+    ``NETWORK_SHAPE`` unless shape inference proves every value computed from the inputs to be
+    [N, w] (N the batch, w fixed in [1, MAX_NETWORK_WIDTH]) and every constant to be small and fixed.
+    """
+    from onnx import TensorProto
+
+    graph = model.graph
+    static = _static_sources(graph)
+    forbid = lambda node, why: error("NETWORK_OP_FORBIDDEN", f"{node.op_type} node {node.name!r}: {why}", **loc)  # noqa: E731
+
+    def need_static(node, i, what):
+        name = node.input[i] if len(node.input) > i else ""
+        if name and name not in static:
+            raise forbid(node, f"{what} must be an initializer or a Constant, not a computed value")
+        return _static_value(static[name], **loc) if name else None
+
+    def axes_ok(node, axes, what):
+        if axes is None or np.size(axes) == 0 or not set(np.asarray(axes).reshape(-1).tolist()) <= {1, -1}:
+            raise forbid(node, f"{what} must be axis 1 (the width); got {None if axes is None else np.asarray(axes).tolist()}")
+
+    for node in graph.node:
+        op = node.op_type
+        if op not in ALLOWED_OPS:
+            raise forbid(node, f"operator not in the allow-list of an MLP network ({', '.join(sorted(ALLOWED_OPS))})")
+        attrs = {a.name: a for a in node.attribute}
+        ival = lambda name, default: int(attrs[name].i) if name in attrs else default  # noqa: B023, E731
+        if op == "Constant":
+            kinds = set(attrs) - {"value", "value_float", "value_floats", "value_int", "value_ints"}
+            if kinds:
+                raise forbid(node, f"attribute {sorted(kinds)[0]!r} is not allowed (dense numeric constants only)")
+        elif op == "Gemm":
+            if ival("transA", 0) != 0:
+                raise forbid(node, "transA must be 0 (the batch stays on axis 0)")
+            for name in ("alpha", "beta"):
+                if name in attrs and not np.isfinite(attrs[name].f):
+                    raise forbid(node, f"{name} must be finite")
+            need_static(node, 1, "B")
+            need_static(node, 2, "C")
+        elif op == "MatMul":
+            need_static(node, 1, "B")
+        elif op in ("Concat", "Softmax", "LogSoftmax", "LayerNormalization", "Split"):
+            axes_ok(node, [ival("axis", 1 if op == "Concat" else (0 if op == "Split" else -1))], "axis")
+            if op == "LayerNormalization":
+                need_static(node, 1, "Scale")
+                need_static(node, 2, "B")
+            if op == "Split":
+                need_static(node, 1, "split")
+        elif op == "Slice":
+            if len(node.input) < 4 or not node.input[3]:
+                raise forbid(node, "axes must be given (without them Slice cuts the batch axis)")
+            for i, what in ((1, "starts"), (2, "ends"), (4, "steps")):
+                need_static(node, i, what)
+            axes_ok(node, need_static(node, 3, "axes"), "axes")
+        elif op.startswith("Reduce"):
+            if "axes" in attrs:
+                axes = list(attrs["axes"].ints)
+            else:
+                axes = need_static(node, 1, "axes")
+            axes_ok(node, axes, "axes")
+            if ival("keepdims", 1) != 1:
+                raise forbid(node, "keepdims must be 1 (values stay [N, width])")
+        elif op == "Clip":
+            need_static(node, 1, "min")
+            need_static(node, 2, "max")
+        elif op == "Cast" and ival("to", 0) != TensorProto.FLOAT:
+            raise forbid(node, "Cast may only produce float32")
+    _check_shapes(model, **loc)
+
+
+def _check_shapes(model, **loc) -> None:
+    """Strict shape inference with the batch axis symbolic: values from inputs are [N, w], constants fixed."""
+    import onnx
+
+    m = onnx.ModelProto()
+    m.CopyFrom(model)
+    del m.graph.value_info[:]  # inferred here, never taken from the file
+    init_names = {t.name for t in m.graph.initializer}
+    row = {v.name for v in m.graph.input if v.name not in init_names}
+    for v in [*(v for v in m.graph.input if v.name in row), *m.graph.output]:
+        d0 = v.type.tensor_type.shape.dim[0]
+        d0.Clear()
+        d0.dim_param = BATCH_DIM
+    try:
+        inferred = onnx.shape_inference.infer_shapes(m, check_type=True, strict_mode=True, data_prop=True)
+    except Exception as exc:
+        raise error("NETWORK_SHAPE", f"shape inference fails: {(str(exc).strip().splitlines() or ['?'])[0][:200]}", **loc) from None
+    types = {v.name: v.type for v in [*inferred.graph.input, *inferred.graph.value_info, *inferred.graph.output]}
+
+    def dims(name):
+        t = types.get(name)
+        if t is None or not t.HasField("tensor_type") or not t.tensor_type.HasField("shape"):
+            return None
+        return [(d.dim_value if d.HasField("dim_value") else (d.dim_param or None)) for d in t.tensor_type.shape.dim]
+
+    for node in m.graph.node:
+        from_input = any(i in row for i in node.input if i)
+        for out in node.output:
+            if not out:
+                continue
+            shape = dims(out)
+            if from_input:
+                row.add(out)
+                ok = (shape is not None and len(shape) == 2 and shape[0] == BATCH_DIM and isinstance(shape[1], int)
+                      and 1 <= shape[1] <= limits.MAX_NETWORK_WIDTH)
+                if not ok:
+                    raise error("NETWORK_SHAPE", f"{node.op_type} output {out!r} has shape {shape}; values computed from the "
+                                f"inputs must be [N, w], w fixed in [1, {limits.MAX_NETWORK_WIDTH}]", **loc)
+            else:
+                ok = (shape is not None and len(shape) <= 2 and all(isinstance(d, int) for d in shape)
+                      and float(np.prod(shape, dtype=np.float64)) <= MAX_STATIC_ELEMENTS)
+                if not ok:
+                    raise error("NETWORK_SHAPE", f"{node.op_type} output {out!r} (constant) has shape {shape}; constants "
+                                f"must be fixed, rank <= 2, at most {MAX_STATIC_ELEMENTS} elements", **loc)
+    for v in model.graph.output:
+        if v.name not in row:
+            raise error("NETWORK_SHAPE", f"output {v.name!r} does not depend on the inputs", **loc)
 
 
 def info_from_model(data: bytes) -> NetworkInfo:
@@ -214,3 +420,33 @@ def make_session(data: bytes, *, intra_threads: int = 0, inter_threads: int = 1)
     # idle worker threads spinning compete with the caller's numpy work on small machines
     opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(bytes(data), sess_options=opts, providers=["CPUExecutionProvider"])
+
+
+class CheckedSession:
+    """An onnxruntime session whose failures are typed: ``run`` raises ``NETWORK_RUNTIME`` naming the
+    network (file, prim, attribute) for any runtime exception or an output that is not [n, declared width].
+    Other attributes (``get_inputs``, ``get_outputs``, ...) are the wrapped session's."""
+
+    def __init__(self, session, info: NetworkInfo | None = None, **loc) -> None:
+        self.session = session
+        self.info = info
+        self.loc = loc
+
+    def run(self, output_names, input_feed, run_options=None):
+        try:
+            outs = self.session.run(output_names, input_feed, run_options)
+        except Exception as exc:  # onnxruntime raises its own exception types
+            raise error("NETWORK_RUNTIME", f"onnxruntime failed to evaluate it: {(str(exc).strip() or type(exc).__name__)[:200]}",
+                        **self.loc) from None
+        if self.info is not None and input_feed:
+            rows = len(next(iter(input_feed.values())))
+            names = list(output_names) if output_names else list(self.info.output_names)
+            widths = dict(zip(self.info.output_names, self.info.output_widths, strict=True))
+            for name, out in zip(names, outs, strict=False):
+                if np.shape(out) != (rows, widths.get(name, -1)):
+                    raise error("NETWORK_RUNTIME", f"output {name!r} has shape {np.shape(out)} for {rows} rows, "
+                                f"declared [n, {widths.get(name)}]", **self.loc)
+        return outs
+
+    def __getattr__(self, name):
+        return getattr(self.session, name)

@@ -2,34 +2,82 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 from nasset_sdk.cli import Verb
 from nasset_sdk.errors import UsageError
 
 
+def input_files(scene) -> list[str]:
+    """Real paths of the files a render reads: the scene (or lone asset) and every referenced asset file."""
+    files = {os.path.realpath(scene.file)} if scene.file and os.path.exists(scene.file) else set()
+    files |= {os.path.realpath(str(a.path)) for a in scene.assets}
+    return sorted(files)
+
+
+def check_outputs(outputs: dict[str, str | None], inputs: list[str]) -> None:
+    """``USAGE`` error when an output path is an input file (same file, through links too) or two outputs coincide."""
+    seen: dict[str, str] = {}
+    for opt, out in outputs.items():
+        if not out:
+            continue
+        real = os.path.realpath(out)
+        for src in inputs:
+            same = real == src
+            if not same and os.path.exists(out):
+                try:
+                    same = os.path.samefile(out, src)
+                except OSError:
+                    same = False
+            if same:
+                raise UsageError(f"{opt} {out} would overwrite the input file {src}", file=out)
+        if real in seen:
+            raise UsageError(f"{opt} and {seen[real]} name the same file {out}", file=out)
+        seen[real] = opt
+
+
+def check_writable(outputs: dict[str, str | None]) -> None:
+    """``WRITE_FAILED`` before rendering when an output's folder is missing or not writable."""
+    from nasset_sdk.errors import error
+
+    for opt, out in outputs.items():
+        if not out:
+            continue
+        folder = os.path.dirname(os.path.abspath(out))
+        if not os.path.isdir(folder):
+            raise error("WRITE_FAILED", f"{opt}: the output folder {folder} does not exist", file=out)
+        if not os.access(folder, os.W_OK | os.X_OK) or os.path.isdir(out):
+            raise error("WRITE_FAILED", f"{opt}: cannot write {out} (folder not writable, or the path is a folder)", file=out)
+
+
 def run(args) -> int:
     import warnings
 
-    from .film import tonemap, write_exr, write_png
-    from .integrator import RenderSettings, prepare_assets, render
+    from .film import check_image_size, tonemap, write_exr, write_png
+    from .integrator import RenderSettings, check_settings, prepare_assets, render
     from .plan import make_plan
     from .scene import SceneWarning, load_scene
 
-    if args.spp < 1 or args.max_depth < 1 or args.batch < 1 or args.tile < 1 or args.threads < 0:
-        raise UsageError("--spp, --max-depth, --batch and --tile must be >= 1; --threads >= 0")
     if not str(args.output).lower().endswith(".exr"):
         raise UsageError(f"output must be an .exr file: {args.output}")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", SceneWarning)
-        scene = load_scene(args.scene)
-    for w in scene.warnings:
-        print(f"warning: {w}", file=sys.stderr)
     settings = RenderSettings(spp=args.spp, seed=args.seed, width=args.width, height=args.height, max_depth=args.max_depth,
                               batch=args.batch, tile=args.tile, threads=args.threads, progress=not args.quiet,
                               neupress_sampling=getattr(args, "neupress_sampling", "auto"), prt=bool(getattr(args, "prt", False)),
                               eightdna_sampling=getattr(args, "eightdna_sampling", "mis"))
-    width, height = scene.camera.default_resolution(args.width, args.height)
+    check_settings(settings, min_depth=1)
+    # sizes given on the command line are checked before the scene is read; the final size again below
+    check_image_size(1 if args.width is None else args.width, 1 if args.height is None else args.height, args.spp)
+    outputs = {"-o": args.output, "--png": args.png, "--variance": args.variance}
+    check_writable(outputs)
+    check_outputs(outputs, [os.path.realpath(args.scene)] if os.path.exists(args.scene) else [])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SceneWarning)
+        scene = load_scene(args.scene)
+    check_outputs(outputs, input_files(scene))
+    for w in scene.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    width, height = check_image_size(*scene.camera.default_resolution(args.width, args.height), args.spp)
     plan = make_plan(scene, width=width, height=height, spp=args.spp, max_depth=args.max_depth, tile=args.tile,
                      batch=args.batch, neupress_sampling=settings.neupress_sampling, prt=settings.prt,
                      eightdna_sampling=settings.eightdna_sampling)

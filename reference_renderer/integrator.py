@@ -13,9 +13,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nasset_sdk.errors import UsageError
+
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
-from .film import Film
+from .film import Film, check_image_size
 from .plan import RenderPlan, make_plan
 from .sampling import (
     INV_4PI,
@@ -439,7 +441,8 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
            load_components: bool = True) -> RenderResult:
     """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`)."""
     s = settings or RenderSettings()
-    width, height = scene.camera.default_resolution(s.width, s.height)
+    check_settings(s)
+    width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
     if plan is None:
         plan = make_plan(scene, width=width, height=height, spp=s.spp, max_depth=s.max_depth, tile=s.tile, batch=s.batch,
                          neupress_sampling=s.neupress_sampling, prt=s.prt, eightdna_sampling=s.eightdna_sampling)
@@ -479,6 +482,21 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     st.rays = integ.accel.rays_cast
     st.time["other"] = st.time_total - st.time["trace"] - st.time["network"]
     return RenderResult(film, plan, st)
+
+
+#: Bounds of the other render settings (spec/renderer.md#limits); image size and spp: film.check_image_size.
+MAX_DEPTH = 1024
+MAX_BATCH = 1 << 24
+MAX_TILE = 1 << 16
+MAX_THREADS = 1024
+
+
+def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
+    """``USAGE`` error unless max_depth (min_depth ..), batch, tile and threads are integers within their bounds."""
+    for name, value, lo, hi in (("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("batch", s.batch, 1, MAX_BATCH),
+                                ("tile", s.tile, 1, MAX_TILE), ("threads", s.threads, 0, MAX_THREADS)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+            raise UsageError(f"{name} = {value!r} outside {lo} .. {hi} (--{name.replace('_', '-')})")
 
 
 def decoder_threads(threads: int) -> int:

@@ -16,11 +16,21 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import NassetError, SceneError
+from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
+from .film import MAX_IMAGE_PIXELS
 from .lights import DistantLight, DomeLight, Light, PointLight, RectLight, SphereLight
+
+#: Bounds the renderer checks on scene values (spec/renderer.md#limits).
+MAX_TRANSFORM = 1e15  # |entry| of a world transform
+MAX_WORLD_COORDINATE = 1e12  # |world coordinate| of any triangle vertex or the camera (float32 ray casting)
+MIN_ASSET_SIZE = 1e-9  # world bounding-box diagonal of a NeuralAsset instance, absolute ...
+MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ray offset 1e-5 S)
+CAMERA_RATIO = (1e-6, 1e6)  # horizontalAperture / focalLength and verticalAperture / horizontalAperture
+MAX_LIGHT_EXPOSURE = 1000.0  # stops
+MAX_LIGHT_SCALE = 1e30  # intensity * 2^exposure * color, per channel
 
 
 class SceneWarning(UserWarning):
@@ -112,9 +122,16 @@ def open_stage(path: str):
     from nasset_sdk.plugin import register_schema
 
     register_schema()
+    from nasset_sdk.paths import check_layer_tree, ensure_regular_file, problems_error
+
     p = Path(path)
     if not p.is_file():
         raise SceneError("SCENE_INVALID", "scene file does not exist", file=str(p))
+    ensure_regular_file(p, code="SCENE_INVALID")
+    # the scene and every layer it reaches are checked before anything composes (spec/security.md#paths)
+    problems = check_layer_tree(p, scene=True)
+    if problems:
+        raise problems_error(problems, p, code="SCENE_INVALID")
     try:
         stage = Usd.Stage.Open(str(p), Usd.Stage.LoadNone)
     except Tf.ErrorException as exc:
@@ -150,6 +167,8 @@ def is_asset_file(path: str) -> bool:
     """True when ``path`` is a neural asset itself (defaultPrim of type NeuralAsset)."""
     from pxr import Sdf
 
+    if not os.path.isfile(str(path)):  # regular files only (stat): a pipe or device is never opened
+        return False  # never open a pipe or device, even alone; open_stage reports it
     try:
         layer = Sdf.Layer.FindOrOpen(str(path))
     except Exception:  # noqa: BLE001 - an unreadable file is not an asset; open_stage reports it
@@ -196,7 +215,16 @@ class _Loader:
         self.cameras: list = []
 
     def err(self, code, msg, prim=None, attribute=None):
-        return SceneError(code, msg, file=self.file, prim=None if prim is None else str(prim), attribute=attribute)
+        return error(code, msg, file=self.file, prim=None if prim is None else str(prim), attribute=attribute)
+
+    def matrix(self, xformable) -> np.ndarray:
+        """The prim's world transform (4x4, row vectors); ``SCENE_INVALID`` when it is not finite or exceeds
+        MAX_TRANSFORM (a NaN transform would otherwise pass every later test and render nothing)."""
+        M = _matrix(xformable, self.time)
+        if not np.isfinite(M).all() or np.abs(M).max() > MAX_TRANSFORM:
+            raise self.err("SCENE_INVALID", f"world transform is not finite or has an entry above {MAX_TRANSFORM:g}",
+                           xformable.GetPrim().GetPath(), "xformOpOrder")
+        return M
 
     def warn(self, msg, prim=None):
         _warn(self.warnings, f"{self.file}:{prim}: {msg}" if prim else f"{self.file}: {msg}")
@@ -238,6 +266,7 @@ class _Loader:
             self.warn("the scene has no lights and no emissive materials; the image will be black")
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
+        self._check_world_bounds(tris)
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats])
@@ -248,6 +277,29 @@ class _Loader:
             tri_normals=np.concatenate(self.tri_normals) if n else np.zeros((0, 3, 3)),
             instances=self.instances, materials=table, lights=self.lights, assets=self.assets, warnings=self.warnings,
         )
+
+    def _check_world_bounds(self, tris: np.ndarray) -> None:
+        """``SCENE_INVALID`` for a world coordinate above MAX_WORLD_COORDINATE, or a NeuralAsset instance whose world
+        bounding-box diagonal is below MIN_ASSET_SIZE or MIN_ASSET_SIZE_RATIO x the scene scale S (it would vanish
+        in float32 ray casting or under the ray offsets, spec/renderer.md#limits)."""
+        if not len(tris):
+            return
+        for inst in self.instances:
+            t = tris[inst.first_tri:inst.first_tri + inst.n_tri]
+            if len(t) and np.abs(t).max() > MAX_WORLD_COORDINATE:
+                raise self.err("SCENE_INVALID", f"world coordinates up to {np.abs(t).max():.3g} exceed the bound "
+                               f"{MAX_WORLD_COORDINATE:g} (float32 ray casting)", inst.prim, "xformOpOrder")
+        p = tris.reshape(-1, 3)
+        scene_scale = float(np.abs(p).max() + (p.max(0) - p.min(0)).max())  # S of spec/renderer.md#ray-offsets
+        for inst in self.instances:
+            if inst.kind != "neural" or not inst.n_tri:
+                continue
+            t = tris[inst.first_tri:inst.first_tri + inst.n_tri].reshape(-1, 3)
+            diag = float(np.linalg.norm(t.max(0) - t.min(0)))
+            if diag < MIN_ASSET_SIZE or diag < MIN_ASSET_SIZE_RATIO * scene_scale:
+                raise self.err("SCENE_INVALID", f"the asset's world size {diag:.3g} is below {MIN_ASSET_SIZE:g} or "
+                               f"{MIN_ASSET_SIZE_RATIO:g} x the scene scale {scene_scale:.3g}: it would not render", inst.prim,
+                               "xformOpOrder")
 
     def _add(self, inst: Instance, tris_world, normals_world, local_ids):
         inst.first_tri = sum(len(t) for t in self.tris)
@@ -266,12 +318,29 @@ class _Loader:
         proj = cam.GetProjectionAttr().Get(self.time)
         if proj and proj != UsdGeom.Tokens.perspective:
             raise self.err("SCENE_UNSUPPORTED", f"camera projection {proj!r} (only perspective)", prim.GetPath(), "projection")
-        fl = float(cam.GetFocalLengthAttr().Get(self.time) or 50.0)
-        ha = float(cam.GetHorizontalApertureAttr().Get(self.time) or 20.955)
-        va = float(cam.GetVerticalApertureAttr().Get(self.time) or 15.2908)
-        if fl <= 0 or ha <= 0 or va <= 0:
-            raise self.err("SCENE_INVALID", "focalLength and apertures must be > 0", prim.GetPath())
-        return PerspectiveCamera(_matrix(cam, self.time), fl, ha, va, str(prim.GetPath()), self._render_resolution())
+        vals = {}
+        for name, attr, fallback in (("focalLength", cam.GetFocalLengthAttr(), 50.0),
+                                     ("horizontalAperture", cam.GetHorizontalApertureAttr(), 20.955),
+                                     ("verticalAperture", cam.GetVerticalApertureAttr(), 15.2908)):
+            v = attr.Get(self.time) if attr else None  # None only when nothing is authored: the schema fallback
+            v = fallback if v is None else float(v)
+            if not (np.isfinite(v) and v > 0):
+                raise self.err("SCENE_INVALID", f"camera {name} = {v!r} must be finite and > 0", prim.GetPath(), name)
+            vals[name] = v
+        fl, ha, va = vals["focalLength"], vals["horizontalAperture"], vals["verticalAperture"]
+        if not CAMERA_RATIO[0] <= ha / fl <= CAMERA_RATIO[1]:
+            raise self.err("SCENE_INVALID", f"horizontalAperture / focalLength = {ha / fl:.3g} outside {CAMERA_RATIO[0]:g} .. "
+                           f"{CAMERA_RATIO[1]:g} (field of view too narrow or too wide to trace)", prim.GetPath(), "focalLength")
+        if not CAMERA_RATIO[0] <= va / ha <= CAMERA_RATIO[1]:
+            raise self.err("SCENE_INVALID", f"verticalAperture / horizontalAperture = {va / ha:.3g} outside {CAMERA_RATIO[0]:g} .. "
+                           f"{CAMERA_RATIO[1]:g}", prim.GetPath(), "verticalAperture")
+        M = self.matrix(cam)
+        if abs(np.linalg.det(M[:3, :3])) < 1e-12:
+            raise self.err("SCENE_INVALID", "camera transform is singular", prim.GetPath(), "xformOpOrder")
+        if np.abs(M[3, :3]).max() > MAX_WORLD_COORDINATE:
+            raise self.err("SCENE_INVALID", f"camera position {M[3, :3].tolist()} beyond |coordinate| <= {MAX_WORLD_COORDINATE:g}",
+                           prim.GetPath(), "xformOpOrder")
+        return PerspectiveCamera(M, fl, ha, va, str(prim.GetPath()), self._render_resolution())
 
     def _render_resolution(self) -> tuple[int, int] | None:
         """Resolution of the stage's first UsdRender.Settings prim (None when absent or invalid)."""
@@ -280,7 +349,7 @@ class _Loader:
         for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
             if prim.IsA(UsdRender.Settings):
                 res = UsdRender.Settings(prim).GetResolutionAttr().Get(self.time)
-                if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384:
+                if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
                     return int(res[0]), int(res[1])
                 self.warn(f"{prim.GetPath()}: resolution {res} ignored")
         return None
@@ -370,7 +439,7 @@ class _Loader:
         base = starts[face_of_tri]
         corner = np.stack([base, base + k + 1, base + k + 2], 1)  # face-vertex slots
         tri = idx[corner]
-        M = _matrix(mesh, self.time)
+        M = self.matrix(mesh)
         pw = pts @ M[:3, :3] + M[3, :3]
         tris = pw[tri]
         # shading normals
@@ -419,7 +488,7 @@ class _Loader:
             s = float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time) or 2.0)
             tm = trimesh.creation.box(extents=(s, s, s))
             nrm = None
-        M = _matrix(UsdGeom.Xformable(prim), self.time)
+        M = self.matrix(UsdGeom.Xformable(prim))
         pw = np.asarray(tm.vertices, np.float64) @ M[:3, :3] + M[3, :3]
         faces = np.asarray(tm.faces, np.int64)
         tris = pw[faces]
@@ -487,7 +556,7 @@ class _Loader:
         ai = self.asset_index[key]
         data = self.assets[ai]
         data.prims.append(path)
-        M = _matrix(UsdGeom.Xformable(prim), self.time)
+        M = self.matrix(UsdGeom.Xformable(prim))
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
         pw = data.points @ M[:3, :3] + M[3, :3]
@@ -516,6 +585,9 @@ class _Loader:
         intensity = float(g(api.GetIntensityAttr(), 1.0))
         exposure = float(g(api.GetExposureAttr(), 0.0))
         color = np.asarray(g(api.GetColorAttr(), (1.0, 1.0, 1.0)), np.float64)
+        if not (np.isfinite(exposure) and abs(exposure) <= MAX_LIGHT_EXPOSURE):
+            raise self.err("SCENE_INVALID", f"exposure {exposure!r} must be finite with |exposure| <= {MAX_LIGHT_EXPOSURE:g} stops",
+                           path, "inputs:exposure")
         normalize = bool(g(api.GetNormalizeAttr(), False))
         if bool(g(api.GetEnableColorTemperatureAttr(), False)):
             self.warn("enableColorTemperature is ignored", path)
@@ -523,10 +595,17 @@ class _Loader:
             at = prim.GetAttribute(a)
             if at and at.HasAuthoredValue() and float(at.Get(self.time)) != 1.0:
                 self.warn(f"{a} != 1 is ignored", path)
-        scale = intensity * 2.0 ** exposure * color
-        if not np.isfinite(scale).all() or (scale < 0).any():
-            raise self.err("SCENE_INVALID", "light intensity/color must be finite and >= 0", path, "inputs:intensity")
-        M = _matrix(UsdGeom.Xformable(prim), self.time)
+        with np.errstate(over="ignore", invalid="ignore"):
+            scale = np.float64(intensity) * np.exp2(np.float64(exposure)) * color
+        if not np.isfinite(scale).all() or (scale < 0).any() or scale.max(initial=0.0) > MAX_LIGHT_SCALE:
+            raise self.err("SCENE_INVALID", f"intensity * 2^exposure * color = {scale.tolist()} must be finite, >= 0 and <= "
+                           f"{MAX_LIGHT_SCALE:g}", path, "inputs:intensity")
+        for name in ("inputs:angle", "inputs:radius", "inputs:width", "inputs:height"):
+            at = prim.GetAttribute(name)
+            v = at.Get(self.time) if at and at.HasAuthoredValue() else None
+            if v is not None and not np.isfinite(float(v)):
+                raise self.err("SCENE_INVALID", f"{name} = {v!r} must be finite", path, name)
+        M = self.matrix(UsdGeom.Xformable(prim))
         if tname == "DistantLight":
             angle = float(g(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
             self.lights.append(DistantLight(M[2, :3], scale, angle, path))
@@ -571,7 +650,11 @@ class _Loader:
                                    "inputs:texture:file")
                 from .film import read_exr
 
-                image = read_exr(resolved)
+                try:
+                    image = read_exr(resolved)
+                except NassetError as exc:
+                    raise self.err("IMAGE_INVALID", f"DomeLight texture {resolved}: {exc.message}", path,
+                                   "inputs:texture:file") from None
                 if not np.isfinite(image).all() or (image < 0).any():
                     raise self.err("SCENE_INVALID", "DomeLight texture holds NaN/Inf or negative values", path,
                                    "inputs:texture:file")

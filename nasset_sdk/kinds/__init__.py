@@ -146,6 +146,11 @@ class KindContract:
             out += self.value_findings(variant, present, get_tensor, prim_of)
         return out
 
+    def probe_unit_columns(self, variant: str, component: str, network: str, input_name: str, width: int) -> tuple[int, ...]:
+        """First columns of the 3-wide unit-direction blocks of a network input (the validator's
+        runtime probe draws unit vectors there, uniform [-1, 1] elsewhere). Default: none."""
+        return ()
+
     def value_findings(self, variant, present, get_tensor, prim_of) -> list[Finding]:
         """Kind-specific checks on tensor values (e.g. monotone spline knots). Default: none."""
         return []

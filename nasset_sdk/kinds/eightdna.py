@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import UsageError
+from ..errors import UsageError, error
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
 from .encodings import cubemap, grid_1d, to_unit_box, triplane, unit64
@@ -142,6 +142,14 @@ class EightDnaKind(KindContract):
         b.provenance = {"generator": "random", "size": size}
         return b
 
+    def probe_unit_columns(self, variant, component, network, input_name, width):
+        """w_o of the base features and d12 of flow3 / flow4 (module docstring)."""
+        k, extra = {"albedo": (2, 6), "flow1": (2, 6), "flow2": (3, 7), "flow3": (3, 9), "flow4": (4, 10)}.get(network, (0, 0))
+        if not k or (width - extra) % k or width < extra:
+            return ()
+        c = (width - extra) // k
+        return (2 * c + 3,) + ((3 * c + 6,) if network in ("flow3", "flow4") else ())
+
     def evaluator(self, asset, **options):
         return EightDnaEvaluator(asset, **options)
 
@@ -156,6 +164,7 @@ class EightDnaEvaluator:
         self.planes, self.wo_cube, self.s12_cube = t("triplane"), t("woCube"), t("s12Cube")
         self.s1_grid, self.s3_grid = t("s1Grid"), t("s3Grid")
         mins = np.asarray(asset.tensor("core", "splineMinimums"), np.float64).reshape(-1)
+        self._check_splines(asset, mins)
         self.eta, self.alpha = boundary_params(asset.tensor("core", "direct"))
         self.albedo_session = asset.session("core", "albedo", intra_threads=intra_threads)
         self.flow_sessions = [asset.session("core", n, intra_threads=intra_threads) for n in FLOWS]
@@ -163,6 +172,25 @@ class EightDnaEvaluator:
         self.box = BoxParam(self.lo, self.hi)
         self.flow = BoxFlow(self.box, self._conditioner, context=self.base_features,
                             min_bin_width=mins[0], min_bin_height=mins[1], min_derivative=mins[2])
+
+    @staticmethod
+    def _check_splines(asset, mins: np.ndarray) -> None:
+        """``KIND_CONTRACT`` (naming the tensor or network) for spline minimums or flow widths no spline accepts.
+
+        The asset's data, not the caller, is at fault: the contract check of ``value_findings``, as a typed error."""
+        refs = asset.network_refs("core")
+        widths = {name: int(refs[name].info.output_widths[0]) for name in FLOWS if name in refs}
+        ks = {name: spline_bins(g) for name, g in widths.items()}
+        for name, k in ks.items():
+            if k is None:
+                raise error("KIND_CONTRACT", f"flow output width {widths[name]} is not 3 (3K + 1) for an integer K >= 1",
+                            file=str(asset.path), prim=refs[name].prim_path, attribute="onnx:outputWidths")
+        k = max(ks.values(), default=1)
+        if mins.shape != (3,) or not (np.isfinite(mins).all() and 0 <= mins[0] * k < 1 and 0 <= mins[1] * k < 1 and mins[2] > 0):
+            prim = asset.tensor_refs("core")["splineMinimums"].prim_path if "splineMinimums" in asset.tensor_refs("core") else None
+            raise error("KIND_CONTRACT", f"spline minimums {tuple(mins.tolist())} make knots non-monotone or derivatives "
+                        f"non-positive for K={k} (need 0 <= K m_w < 1, 0 <= K m_h < 1, m_d > 0)", file=str(asset.path),
+                        prim=prim, attribute="values")
 
     def _run(self, session, x: np.ndarray) -> np.ndarray:
         outs = [session.run(None, {session.get_inputs()[0].name: x[s:s + self.batch]})[0]

@@ -59,6 +59,12 @@ class RnaKind(KindContract):
         b.provenance = {"generator": "random", "size": size}
         return b
 
+    def probe_unit_columns(self, variant, component, network, input_name, width):
+        """n (or t), wo, wi of the decoder input (module docstring)."""
+        f = 0 if variant == "surface" else 1
+        c = width - 12 - f
+        return (c + 3, c + 6 + f, c + 9 + f) if component == "core" and c >= 0 else ()
+
     def evaluator(self, asset, **options):
         return RnaEvaluator(asset, **options)
 

@@ -13,14 +13,17 @@ from .rules import RULE_BY_CODE, RULES, Rule, Validation, path_escapes
 
 
 def validate_file(path: str | os.PathLike, *, usd_checks: bool = False, probe: bool = True,
-                  probe_timeout: float | None = None) -> Report:
+                  probe_timeout: float | None = None, network_probe_timeout: float | None = None) -> Report:
     """Validate an asset file; never raises for a malformed file, every problem is a finding.
 
     ``probe`` first opens the file in a child process (nasset_sdk.safeopen) so a corrupted crate
     that crashes usd-core yields FILE_UNREADABLE instead of killing this process; turn it off only
     for files this process wrote. ``usd_checks`` adds OpenUSD's own validators (USD_CHECK).
+    ``network_probe_timeout`` bounds the child that runs every network (nasset_sdk.netprobe).
     """
     kw = {} if probe_timeout is None else {"probe_timeout": float(probe_timeout)}
+    if network_probe_timeout is not None:
+        kw["network_probe_timeout"] = float(network_probe_timeout)
     return Validation(os.fspath(path), usd_checks=usd_checks, probe=probe, **kw).run()
 
 

@@ -13,12 +13,13 @@ import json
 import math
 import re
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 import numpy as np
 
 from .. import limits
 from ..errors import CODES, NassetError
+from ..paths import path_escapes  # noqa: F401 - re-exported: nasset_sdk.validate.path_escapes
 from .report import Finding, Report
 
 
@@ -65,16 +66,32 @@ RULES: tuple[Rule, ...] = (
     Rule("NETWORK_CUSTOM_DOMAIN", "error", "the model uses only the default operator domain and no local functions"),
     Rule("NETWORK_OPSET", "error", "the default-domain opset is within [OPSET_MIN, OPSET_MAX] and equals onnx:opset"),
     Rule("NETWORK_IO", "error", "input/output names and widths equal the declaration and the kind contract"),
-    Rule("NETWORK_RUNTIME", "error", "onnxruntime loads the model and a batch of zeros yields the declared output widths"),
+    Rule("NETWORK_RUNTIME", "error",
+         "onnxruntime loads and runs the model at batch sizes 1, 7 and 256 within the probe's time and memory bound, "
+         "with outputs [n, declared width]"),
+    Rule("NETWORK_OP_FORBIDDEN", "error",
+         "only allow-listed operators, with row-preserving attributes and constant parameters; no sparse tensors"),
+    Rule("NETWORK_SHAPE", "error", "shape inference proves every value computed from the inputs to be [N, fixed width]"),
+    Rule("NETWORK_OUTPUT", "error",
+         "on probe inputs every output is finite, within MAX_NETWORK_OUTPUT in magnitude, and each row depends on its own input row only"),
     Rule("KIND_CONTRACT", "error", "kind-specific constraints hold (values, nasset:required flags)"),
     Rule("GEOMETRY_MISSING", "error", "/Asset/Geometry exists with the type the variant needs (Mesh or BasisCurves)"),
     Rule("GEOMETRY_INVALID", "error", "points finite; triangle counts; indices in range; curve counts and widths valid"),
     Rule("GEOMETRY_DEGENERATE", "error", "at least one face has non-zero area / one curve non-zero length"),
     Rule("GEOMETRY_NORMALS", "error", "normals, when authored, are per vertex and unit length (|n| within 1e-3 of 1)"),
+    Rule("GEOMETRY_SCALE", "error", "|coordinates| <= MAX_GEOMETRY_COORDINATE; bounding-box diagonal >= MIN_GEOMETRY_SIZE and "
+         ">= MIN_GEOMETRY_SIZE_RATIO x the largest |coordinate|"),
     Rule("EXTENT_MISMATCH", "error", "the geometry's extent is authored and equals its bounds (widths included for curves)"),
     Rule("DOMAIN_INVALID", "error", "the encoding box is authored, finite, non-empty and contains the geometry"),
     Rule("ASSET_PATH_ESCAPES", "error",
-         "no asset path (attribute value, metadata, reference, payload, sublayer) is absolute, a URL, an expression or leaves the package"),
+         "no asset path (sublayer, reference, payload, clip, attribute value, metadata, time sample; every variant) is absolute, "
+         "a URL, an expression, a bare search path, malformed, or resolves (Ar, then realpath) outside the package or to a "
+         "non-regular file"),
+    Rule("LAYER_EXTERNAL", "error", "the asset is one layer: no sublayers, no references or payloads to other files, no value clips"),
+    Rule("VARIANT_SET_UNEXPECTED", "error", "no variant set other than a component's 'quality' set (none on other prims, none nested)"),
+    Rule("TIME_SAMPLES", "error", "no attribute carries time samples"),
+    Rule("ARRAY_TOO_LARGE", "error",
+         "geometry and other arrays are within the format bounds, and reading the file stays within its memory bound"),
     Rule("METADATA_MISSING", "error", "nasset:provenance is authored and has the required keys specVersion, kind and generator"),
     Rule("METADATA_INVALID", "error", "nasset:provenance is a JSON object whose specVersion and kind equal the root's"),
     Rule("FALLBACK_MISSING", "warning", "the geometry is bound to a material whose surface is a UsdPreviewSurface"),
@@ -85,62 +102,9 @@ RULE_BY_CODE: dict[str, Rule] = {r.code: r for r in RULES}
 PROVENANCE_REQUIRED = ("specVersion", "kind", "generator")
 NORMAL_TOLERANCE = 1e-3
 PROBE_TIMEOUT_S = 120.0
+NETWORK_PROBE_TIMEOUT_S = 30.0
 
 _NASSET_TYPES = ("NeuralAsset", "NeuralComponent", "NeuralTensor", "NeuralNetwork")
-_SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
-
-
-def path_escapes(asset_path: str) -> str | None:
-    """Why ``asset_path`` leaves the package, or None when it is a package-relative path."""
-    s = str(asset_path)
-    if not s:
-        return None
-    if s.startswith("`"):
-        return "is a variable expression"
-    if "\\" in s:
-        s = s.replace("\\", "/")
-    if s.startswith("/"):
-        return "is absolute"
-    if _SCHEME.match(s):
-        return "is a URL or drive path"
-    if s.startswith("~"):
-        return "is relative to a home folder"
-    depth = 0
-    for part in PurePosixPath(s.split("[", 1)[0]).parts:  # package-relative 'a.usdz[inner.png]'
-        if part == "..":
-            depth -= 1
-            if depth < 0:
-                return "leaves the asset's folder with '..'"
-        elif part not in (".", ""):
-            depth += 1
-    return None
-
-
-def _asset_strings(value):
-    """Every asset path inside a metadata / attribute value (recursively)."""
-    from pxr import Sdf
-
-    if value is None:
-        return
-    if isinstance(value, Sdf.AssetPath):
-        yield value.path
-    elif isinstance(value, (Sdf.Reference, Sdf.Payload)):
-        yield value.assetPath
-    elif isinstance(value, (Sdf.ReferenceListOp, Sdf.PayloadListOp)):
-        for items in (value.explicitItems, value.addedItems, value.prependedItems, value.appendedItems,
-                      value.deletedItems, value.orderedItems):
-            for item in items:
-                yield item.assetPath
-    elif isinstance(value, dict):
-        for v in value.values():
-            yield from _asset_strings(v)
-    elif isinstance(value, (str, bytes, int, float, bool)):
-        return
-    elif type(value).__name__ == "AssetPathArray" or isinstance(value, (list, tuple)):
-        for v in value:
-            yield from _asset_strings(v)
-
-
 class _Abort(Exception):
     """Stop the run: later checks need what failed."""
 
@@ -149,7 +113,7 @@ class Validation:
     """One validation run over one file; :func:`validate_file` is the entry point."""
 
     def __init__(self, path: str, *, usd_checks: bool = False, probe: bool = True,
-                 probe_timeout: float = PROBE_TIMEOUT_S) -> None:
+                 probe_timeout: float = PROBE_TIMEOUT_S, network_probe_timeout: float = NETWORK_PROBE_TIMEOUT_S) -> None:
         self.path = Path(path)
         self.report = Report(str(path))
         self.usd_checks = usd_checks
@@ -163,6 +127,8 @@ class Validation:
         self.domain = None
         self.components: dict = {}
         self.checked = {"components": [], "tensors": 0, "networks": 0}
+        self._net_jobs: dict = {}  # probe key -> (ProbeJob, [(prim path, message suffix)])
+        self.network_probe_timeout = network_probe_timeout
 
     # -- reporting -------------------------------------------------------------------------
     def emit(self, code: str, message: str, prim=None, attribute=None, severity: str | None = None) -> None:
@@ -188,12 +154,14 @@ class Validation:
             self._guard(self._open)
             if self.layer is not None:
                 self._guard(self._asset_paths)
+                self._guard(self._layer_content)
                 self._guard(self._compose)
             if self.stage is not None:
                 if self._guard(self._header) and self.kind is not None:
                     self._guard(self._schema_types)
                     self._guard(self._payload_layout)
                     self._guard(self._components)
+                    self._guard(self._network_probe)
                     self._guard(self._geometry)
                     self._guard(self._metadata)
                     self._guard(self._fallback)
@@ -213,8 +181,11 @@ class Validation:
         from ..safeopen import probe
 
         register_schema()
-        if not self.path.is_file():
+        if not self.path.exists():
             self.emit("FILE_NOT_FOUND", "no such file")
+            raise _Abort
+        if not self.path.is_file() or self.path.is_fifo():
+            self.emit("FILE_UNREADABLE", "not a regular file (named pipe, device, socket or folder)")
             raise _Abort
         if self.path.stat().st_size == 0:
             self.emit("FILE_UNREADABLE", "the file is empty")
@@ -223,7 +194,7 @@ class Validation:
             result = probe(self.path, level="full", timeout=self.probe_timeout)
             self.checked["probe_s"] = round(result.seconds, 3)
             if not result.ok:
-                self.emit("FILE_UNREADABLE", result.message())
+                self.emit(result.code, result.message(), "/" if result.code != "FILE_UNREADABLE" else None)
                 raise _Abort
         try:
             # a layer already open in this process may hold edits: read the file as it is on disk
@@ -240,61 +211,69 @@ class Validation:
         self.layer = layer
 
     def _asset_paths(self) -> None:
-        """Scan the root layer before composing it: arcs that escape are stripped, never followed."""
-        from pxr import Sdf
+        """Check every asset path of the root layer before composing it (spec/security.md#paths).
+
+        Escaping paths are ASSET_PATH_ESCAPES; any sublayer, external reference / payload or value
+        clip is LAYER_EXTERNAL (an asset is one self-contained layer). The stage is then composed
+        from a copy without them, so the validator never opens another file.
+        """
+        from ..paths import ARC_KINDS, layer_asset_paths, scan_layer, strip_external
 
         layer = self.layer
-        bad_arcs: list = []
-        for i, sub in enumerate(layer.subLayerPaths):
-            why = path_escapes(sub)
-            if why:
-                self.emit("ASSET_PATH_ESCAPES", f"sublayer {sub!r} {why}", "/", "subLayers")
-                bad_arcs.append(("sublayer", i))
+        problems, _ = scan_layer(layer, self.path.resolve().parent, anchor=str(self.path.resolve()))
+        for p in problems:
+            self.emit("ASSET_PATH_ESCAPES", p.message(), p.prim, p.field if p.kind == "asset" else None)
+        external = [(kind, s, prim) for kind, s, prim, _ in layer_asset_paths(layer) if kind in ARC_KINDS and s]
+        for kind, s, prim in external:
+            self.emit("LAYER_EXTERNAL", f"{kind} {s!r}: an asset is one self-contained layer (no sublayers, external "
+                      "references, payloads or value clips)", prim, "subLayers" if kind == "sublayer" else None)
+        if external:
+            self.layer = strip_external(layer)
+
+    def _layer_content(self) -> None:
+        """Variant sets, quality variant contents and time samples, read from the layer's specs (spec/security.md#layer-content)."""
+        from pxr import Sdf
+
+        from ..asset import COMPONENTS, QUALITY_SET
+
+        layer = self.layer
+        timed: list = []
+        vsets: list = []
+        extra: list = []
 
         def visit(spec_path):
-            spec = layer.GetObjectAtPath(spec_path)
-            if spec is None:
-                return
-            prim = spec_path.GetPrimPath() if not spec_path.IsAbsoluteRootPath() else Sdf.Path("/")
-            attribute = spec_path.name if spec_path.IsPropertyPath() else None
-            for key in spec.ListInfoKeys():
-                if key in ("subLayers",):
-                    continue
-                try:
-                    value = spec.GetInfo(key)
-                except Exception:  # noqa: BLE001 - unreadable field: the probe already read it once
-                    continue
-                for s in _asset_strings(value):
-                    why = path_escapes(s)
-                    if why:
-                        where = f"{key} " if key not in ("default",) else ""
-                        self.emit("ASSET_PATH_ESCAPES", f"{where}asset path {s!r} {why}", str(prim.StripAllVariantSelections()), attribute)
-                        if key in ("references", "payload"):
-                            bad_arcs.append((key, spec_path))
             if spec_path.IsPropertyPath():
-                for t in layer.ListTimeSamplesForPath(spec_path):
-                    for s in _asset_strings(layer.QueryTimeSample(spec_path, t)):
-                        why = path_escapes(s)
-                        if why:
-                            self.emit("ASSET_PATH_ESCAPES", f"time sample {t}: asset path {s!r} {why}",
-                                      str(prim.StripAllVariantSelections()), attribute)
+                if layer.GetNumTimeSamplesForPath(spec_path):
+                    timed.append(spec_path)
+                return
+            spec = layer.GetObjectAtPath(spec_path)
+            if spec is not None and type(spec).__name__ == "VariantSpec":
+                spec = spec.primSpec  # sets nested inside a variant
+            if spec is None or not hasattr(spec, "variantSets"):
+                return
+            is_component = (not spec_path.ContainsPrimVariantSelection()
+                            and str(spec_path.GetParentPath()) == COMPONENTS)
+            for name in spec.variantSets.keys():
+                if not (is_component and name == QUALITY_SET):
+                    if not is_component:
+                        vsets.append((spec_path, name))
+                    continue
+                for vname, variant in spec.variantSets[name].variants.items():
+                    inner = variant.primSpec
+                    if inner.nameChildren or inner.properties:
+                        extra.append((spec_path, vname, [c.name for c in inner.nameChildren] + [p.name for p in inner.properties]))
 
         layer.Traverse(Sdf.Path.absoluteRootPath, visit)
-        if bad_arcs:  # compose a copy without the escaping arcs so nothing outside is opened
-            copy = Sdf.Layer.CreateAnonymous(".usda")
-            copy.TransferContent(layer)
-            copy.subLayerPaths.clear()
-            for key, spec_path in bad_arcs:
-                if key == "sublayer":
-                    continue
-                spec = copy.GetObjectAtPath(spec_path)
-                if spec is None:
-                    continue
-                if key == "references":
-                    spec.referenceList.ClearEdits()
-                else:
-                    spec.payloadList.ClearEdits()
-            self.layer = copy
+        for spec_path in timed:
+            prim = spec_path.GetPrimPath().StripAllVariantSelections()
+            n = layer.GetNumTimeSamplesForPath(spec_path)
+            self.emit("TIME_SAMPLES", f"{n} time samples; every attribute of an asset is a default value", prim, spec_path.name)
+        for spec_path, name in vsets:
+            where = " inside a variant" if spec_path.ContainsPrimVariantSelection() else ""
+            self.emit("VARIANT_SET_UNEXPECTED", f"variant set {name!r}{where}: only a component's {QUALITY_SET!r} variant set is allowed",
+                      spec_path.GetPrimPath().StripAllVariantSelections())
+        for spec_path, vname, names in extra:
+            self.emit("QUALITY_VARIANT", f"quality variant {vname!r} authors {names} besides its payload", spec_path)
 
     def _compose(self) -> None:
         from pxr import Usd
@@ -325,7 +304,7 @@ class Validation:
             return
         root = default
         version = self._authored(root, "nasset:specVersion")
-        m = re.fullmatch(r"(\d+)\.(\d+)", str(version)) if isinstance(version, str) else None
+        m = re.fullmatch(r"([0-9]+)\.([0-9]+)", version, re.ASCII) if isinstance(version, str) else None
         if version is None:
             self.emit("SPEC_VERSION", "nasset:specVersion is not authored", ROOT, "nasset:specVersion")
         elif not m or int(m.group(1)) != limits.SUPPORTED_MAJOR:
@@ -529,8 +508,6 @@ class Validation:
 
     def _read_component(self, prim, quality):
         """Read and check every tensor and network of a loaded component; return contract inputs."""
-        from ..networks import make_session
-
         suffix = f" (quality {quality!r})" if quality else ""
         name = prim.GetName()
         tensors: dict = {}
@@ -592,17 +569,37 @@ class Validation:
                 except NassetError as exc:
                     self.emit(exc.code, exc.message + suffix, exc.prim, exc.attribute)
                     continue
-                try:
-                    session = make_session(data, intra_threads=1)
-                    feeds = {n: np.zeros((2, int(w)), np.float32) for n, w in zip(info.input_names, info.input_widths, strict=True)}
-                    outs = session.run(list(info.output_names), feeds)
-                    got = tuple(int(o.shape[-1]) if getattr(o, "ndim", 0) == 2 else -1 for o in outs)
-                    if got != tuple(info.output_widths):
-                        self.emit("NETWORK_RUNTIME", f"outputs have widths {got}, declared {tuple(info.output_widths)}" + suffix,
-                                  path, "onnx:outputWidths")
-                except Exception as exc:  # onnxruntime raises its own exception types
-                    self.emit("NETWORK_RUNTIME", f"onnxruntime cannot run it: {str(exc).strip()[:200]}" + suffix, path, "onnx:model")
+                self._queue_network_probe(name, child.GetName(), data, info, path, suffix)
         return (tensors, networks), values, ok
+
+    def _queue_network_probe(self, component, network, data, info, path, suffix) -> None:
+        """Remember a network that passed the static checks for the runtime probe (one child per file)."""
+        from ..netprobe import ProbeJob
+        from ..networks import sha256_hex
+
+        key = f"{sha256_hex(data)}:{info.input_names}:{info.input_widths}:{info.output_names}:{info.output_widths}"
+        if key not in self._net_jobs:
+            units = tuple(self.asset.contract.probe_unit_columns(self.variant, component, network, n, int(w))
+                          for n, w in zip(info.input_names, info.input_widths, strict=True))
+            self._net_jobs[key] = (ProbeJob(key, data, tuple(info.input_names), tuple(int(w) for w in info.input_widths),
+                                            tuple(info.output_names), tuple(int(w) for w in info.output_widths), units), [])
+        self._net_jobs[key][1].append((path, suffix))
+
+    def _network_probe(self) -> None:
+        """Run every queued network under the runtime probe's time and memory bound (spec/security.md#networks)."""
+        import time
+
+        from ..netprobe import probe_networks
+
+        if not self._net_jobs:
+            return
+        t0 = time.perf_counter()
+        found = probe_networks([job for job, _ in self._net_jobs.values()], timeout=self.network_probe_timeout)
+        self.checked["network_probe_s"] = round(time.perf_counter() - t0, 3)
+        for key, (_, sites) in self._net_jobs.items():
+            for code, message in found.get(key, []):
+                for path, suffix in sites:
+                    self.emit(code, message + suffix, path, "onnx:model")
 
     # -- geometry --------------------------------------------------------------------------
     def _geometry(self) -> None:
@@ -635,6 +632,12 @@ class Validation:
             if not (seg[seg_mask] > 1e-12 * scale).any():
                 self.emit("GEOMETRY_DEGENERATE", "every curve has zero length", GEOMETRY, "points")
             lo, hi = (np.asarray(b, np.float64) for b in geo.bounds())
+        reach = float(max(np.abs(lo).max(), np.abs(hi).max()))
+        diag = float(np.linalg.norm(hi - lo))
+        if reach > limits.MAX_GEOMETRY_COORDINATE or diag < limits.MIN_GEOMETRY_SIZE or diag < limits.MIN_GEOMETRY_SIZE_RATIO * reach:
+            self.emit("GEOMETRY_SCALE", f"bounding box {[lo.tolist(), hi.tolist()]} (diagonal {diag:.3g}): coordinates must stay within "
+                      f"{limits.MAX_GEOMETRY_COORDINATE:g} and the diagonal be >= {limits.MIN_GEOMETRY_SIZE:g} and >= "
+                      f"{limits.MIN_GEOMETRY_SIZE_RATIO:g} x the largest |coordinate|", GEOMETRY, "points")
         scale = max(float(np.max(hi - lo)), 1e-12)
         tol = 1e-5 * scale + 1e-7
         extent = prim.GetAttribute("extent").Get() if prim.GetAttribute("extent").HasAuthoredValue() else None

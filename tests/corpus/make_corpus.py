@@ -1,4 +1,4 @@
-"""Deterministic bad-input corpus for the validator: ``python tests/corpus/make_corpus.py OUT_DIR``.
+"""Deterministic bad-input corpus for the validator: ``python -m tests.corpus.make_corpus OUT_DIR``.
 
 Each case starts from a valid example asset (nasset_sdk.examples.example_builder), is mutated
 with the Sdf/Usd API (ONNX models with onnx.helper) and written to OUT_DIR; :func:`make_corpus`
@@ -17,10 +17,18 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Case:
+    """One hostile input. ``code``: what the validator must report (with ``severity``); None for a valid
+    input that must open, evaluate and render with finite output. ``scene``: ``path`` is a scene to
+    render (not an asset) and ``code`` the typed error the render must raise (tests/test_hostile_corpus.py).
+    ``probe``: the check the case targets runs in the validator's crash probe child (decoded array sizes),
+    so fast in-process validation (``probe=False``) cannot see it; validate it as ``nasset validate`` does."""
+
     name: str
     path: Path
-    code: str
+    code: str | None
     severity: str = "error"
+    scene: bool = False
+    probe: bool = False
 
 
 PAY = "/_NassetPayloads"
@@ -253,11 +261,37 @@ def make_corpus(out_dir: str | Path) -> list[Case]:
 
     edit("network_io_width_contract", "NETWORK_IO", contract_width)
 
-    def runtime(s, l):
-        _set_model(s, DEC, _gemm_model(dec_in, 6, w_rows=dec_in + 5))  # Gemm weights do not fit the input
-        s.GetPrimAtPath(DEC).GetAttribute("onnx:opset").Set(17)
+    def with_model(blob, opset=17):
+        def fn(s, l):
+            _set_model(s, DEC, blob)
+            s.GetPrimAtPath(DEC).GetAttribute("onnx:opset").Set(opset)
+        return fn
 
-    edit("network_runtime_fails", "NETWORK_RUNTIME", runtime)
+    # Gemm weights that do not fit the input: strict shape inference refuses it before any runtime
+    edit("network_shape_weights_misfit", "NETWORK_SHAPE", with_model(_gemm_model(dec_in, 6, w_rows=dec_in + 5)))
+    # statically fine, but onnxruntime refuses the attribute value when it runs the node
+    gelu = onnx.ModelProto()
+    gelu.ParseFromString(_gemm_model(dec_in, 6, out_name="h", opset=20))
+    gelu.graph.node.append(helper.make_node("Gelu", ["h"], ["y"], approximate="cubic"))
+    gelu.graph.output[0].name = "y"
+    edit("network_runtime_fails", "NETWORK_RUNTIME", with_model(gelu.SerializeToString(), 20))
+    # the sparse-initializer hole of issue 13 class 1 (inline here; external data in gen_networks.py)
+    sparse = onnx.ModelProto()
+    sparse.ParseFromString(_gemm_model(dec_in, 6))
+    w_dense = sparse.graph.initializer[0]
+    sparse.graph.sparse_initializer.append(helper.make_sparse_tensor(
+        numpy_helper.from_array(np.ones(1, np.float32), "W"), numpy_helper.from_array(np.zeros(1, np.int64), "W_i"), list(w_dense.dims)))
+    del sparse.graph.initializer[0]
+    edit("network_sparse_initializer", "NETWORK_OP_FORBIDDEN", with_model(sparse.SerializeToString()))
+    reshape = _model([helper.make_node("Gemm", ["x", "W", "B"], ["h"]), helper.make_node("Reshape", ["h", "s"], ["y"])],
+                     [_io("x", dec_in)], [_io("y", 6)],
+                     [numpy_helper.from_array(np.zeros((dec_in, 6), np.float32), "W"), numpy_helper.from_array(np.zeros(6, np.float32), "B"),
+                      numpy_helper.from_array(np.array([-1, 6], np.int64), "s")])
+    edit("network_op_forbidden", "NETWORK_OP_FORBIDDEN", with_model(reshape))
+    huge = onnx.ModelProto()
+    huge.ParseFromString(_gemm_model(dec_in, 6))
+    huge.graph.initializer[1].CopyFrom(numpy_helper.from_array(np.full(6, 3e38, np.float32), "B"))  # outputs near float max
+    edit("network_output_huge", "NETWORK_OUTPUT", with_model(huge.SerializeToString()))
     del numpy_helper
 
     # -- asset paths ------------------------------------------------------------------------
@@ -303,6 +337,8 @@ def make_corpus(out_dir: str | Path) -> list[Case]:
     edit("face_counts_quads", "GEOMETRY_INVALID", mesh_attr("faceVertexCounts", lambda a: Vt.IntArray.FromNumpy(np.full(len(a), 4, np.int32))))
     edit("degenerate_mesh", "GEOMETRY_DEGENERATE",
          mesh_attr("faceVertexIndices", lambda a: Vt.IntArray.FromNumpy(np.repeat(a.reshape(-1, 3)[:, :1], 3, axis=1).reshape(-1).astype(np.int32))))
+    edit("geometry_scale_tiny", "GEOMETRY_SCALE", mesh_attr("points", lambda a: Vt.Vec3fArray.FromNumpy((a * 1e-30).astype(np.float32))))
+    edit("geometry_scale_far", "GEOMETRY_SCALE", mesh_attr("points", lambda a: Vt.Vec3fArray.FromNumpy((a + 1e7).astype(np.float32))))
     edit("normals_not_unit", "GEOMETRY_NORMALS", mesh_attr("normals", lambda a: Vt.Vec3fArray.FromNumpy((a * 2.0).astype(np.float32))))
     edit("normals_wrong_count", "GEOMETRY_NORMALS", mesh_attr("normals", lambda a: Vt.Vec3fArray.FromNumpy(a[:-3].astype(np.float32))))
     edit("extent_wrong", "EXTENT_MISMATCH",
