@@ -267,7 +267,7 @@ def scan_layer(layer, package: str | os.PathLike, *, scene: bool = False,
     for kind, s, prim, field in layer_asset_paths(layer):
         if not s:
             continue
-        why = scene_path_problem(s, kind) if scene else path_problem(s)
+        why = scene_path_problem(s, kind, anchor) if scene else path_problem(s)
         if why is None:
             why = _scene_resolve_problem(s, anchor) if scene else resolve_problem(s, anchor, package)
         if why:
@@ -277,8 +277,12 @@ def scan_layer(layer, package: str | os.PathLike, *, scene: bool = False,
     return problems, follow
 
 
-def scene_path_problem(asset_path: str, kind: str) -> str | None:
-    """Text check for a scene layer: local files anywhere, but no URL, expression, home, search path or non-USD layer."""
+def scene_path_problem(asset_path: str, kind: str, anchor: str | os.PathLike | None = None) -> str | None:
+    """Text check for a scene layer: local files anywhere, but no URL, expression, home, search path or non-USD layer.
+
+    A bare relative path (``textures/a.exr``, as DCC tools write) is accepted when that file exists
+    next to the scene layer ``anchor``: USD's resolver then finds it there and never consults its
+    search paths."""
     s = str(asset_path)
     if s.startswith("`"):
         return "is a variable expression"
@@ -290,7 +294,9 @@ def scene_path_problem(asset_path: str, kind: str) -> str | None:
     if t.startswith("~"):
         return "is relative to a home folder"
     if not (t.startswith("/") or t.startswith("./") or t.startswith("../")):
-        return "is a bare search-path form; anchor it with './'"
+        beside = os.path.join(os.path.dirname(os.fspath(anchor)), outer_file(t)) if anchor else ""
+        if not (beside and os.path.isfile(beside)):
+            return "is a bare search-path form not found next to the scene layer; anchor it with './'"
     if kind in ARC_KINDS and not outer_file(t).lower().endswith(USD_LAYER_SUFFIXES):
         return f"is not a USD layer ({', '.join(USD_LAYER_SUFFIXES)})"
     return None

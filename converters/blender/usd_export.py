@@ -219,7 +219,7 @@ class _BlenderConverter(StageConverter):
         self.result.textures.append(str(tex))
         path = self._name("/World/Lights", world.name)
         light = UsdLux.DomeLight.Define(self.stage, path)
-        light.CreateTextureFileAttr(Sdf.AssetPath(tex.relative_to(self.output.parent).as_posix()))
+        light.CreateTextureFileAttr(Sdf.AssetPath("./" + tex.relative_to(self.output.parent).as_posix()))  # anchored
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
         self._xform(light.GetPrim(), _DOME_ROWS)
         self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")

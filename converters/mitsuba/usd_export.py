@@ -613,7 +613,7 @@ class StageConverter:
 
         tex = tex_dir / f"{Tf.MakeValidIdentifier(eid)}.exr"
         write_exr(tex, image.astype(np.float32))
-        rel = tex.relative_to(self.output.parent).as_posix()
+        rel = "./" + tex.relative_to(self.output.parent).as_posix()  # anchored: never a search-path lookup
         self.result.textures.append(str(tex))
         path = self._name("/World/Lights", eid)
         light = UsdLux.DomeLight.Define(self.stage, path)

@@ -406,6 +406,6 @@ def test_corrupted_asset_is_caught_by_validate(tiny, tmp_path):
     # evaluating the corrupted flow raises a typed error instead of producing NaN or crashing
     a = Asset.open(bad_knots)
     a.load("all")
-    ev = a.evaluator()
     with pytest.raises(NassetError):
+        ev = a.evaluator()
         ev.sample(np.zeros((4, 3)), np.ones((4, 3)), 0, np.random.default_rng(0))

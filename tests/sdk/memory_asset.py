@@ -6,7 +6,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from nasset_sdk.networks import make_session
+from nasset_sdk.asset import NetworkRef
+from nasset_sdk.networks import info_from_model, make_session
 
 
 class MemoryAsset:
@@ -22,6 +23,15 @@ class MemoryAsset:
 
     def session(self, comp, name, **kw):
         return make_session(self.b.components[comp][""].networks[name])
+
+    path = "<memory>"
+
+    def network_refs(self, comp):
+        nets = self.b.components[comp][""].networks
+        return {n: NetworkRef(comp, n, f"/_NassetPayloads/{comp}/{n}", info_from_model(blob)) for n, blob in nets.items()}
+
+    def tensor_refs(self, comp):
+        return {n: SimpleNamespace(prim_path=f"/_NassetPayloads/{comp}/{n}") for n in self.b.components[comp][""].tensors}
 
     def components(self):
         return {c: SimpleNamespace(loaded=True) for c in self.b.components}
