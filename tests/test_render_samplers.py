@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 from render_stats import chi2_test
+from stats import SIGNIFICANCE
 
 from reference_renderer import bsdf, lights, sampling
 
-P_MIN = 1e-3  # reject the sampler when the fit is this unlikely
+P_MIN = SIGNIFICANCE  # reject the sampler when the fit is this unlikely
 
 
 def _report(name, p, dof):
