@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     for s in range(a.seeds):
         os.environ["NASSET_STAT_SEED"] = str(s)
         stats.RECORD.clear()
-        pytest.main(["-q", "-p", "no:cacheprovider", "--no-header", "-o", "addopts=", "-x", "--tb=line", *a.tests])
+        pytest.main(["-q", "-p", "no:cacheprovider", "--no-header", "-o", "addopts=", "--tb=line", *a.tests])
         seen: dict[str, int] = defaultdict(int)
         for test, p in stats.RECORD:
             seen[test] += 1

@@ -42,13 +42,10 @@ def tiny_bake(tmp_path_factory):
 def test_tiny_bake_writes_valid_asset(tiny_bake):
     out, summary = tiny_bake
     assert out.exists() and summary["asset_bytes"] == out.stat().st_size
-    try:
-        from nasset_sdk.validate import validate_file
-    except ImportError:  # the validator lands separately; Asset.open below still checks the layout
-        validate_file = None
-    if validate_file is not None:
-        report = validate_file(out)
-        assert report.ok, report.to_dict()
+    from nasset_sdk.validate import validate_file
+
+    report = validate_file(out)
+    assert report.ok, report.to_dict()
     asset = Asset.open(out)
     asset.load("all")
     assert asset.kind == "rna" and asset.variant == "surface"
