@@ -7,7 +7,6 @@ from render_stats import assert_renders_agree, render_finite
 
 from nasset_sdk.examples import example_builder
 from nasset_sdk.geometry import MeshGeometry
-from nasset_sdk.kinds.boundary import ggx_reflection
 from nasset_sdk.networks import mlp_onnx
 from reference_renderer.film import write_exr
 from reference_renderer.testscenes import SceneBuilder
@@ -66,11 +65,17 @@ def _direct_only_asset(tmp_path, eta=1.5, alpha=0.1):
 
 
 def _albedo_normal_incidence(eta, alpha, n=400_000):
-    """rho(n) = integral f_r |n.wi| dwi at w_o = n (azimuthally symmetric): 2 pi integral f(theta) sin(theta) dtheta."""
+    """rho(n) = integral f_r |n.wi| dwi at w_o = n (azimuthally symmetric): 2 pi integral f(theta) sin(theta) dtheta,
+    with the GGX reflection of spec/kinds/encodings.md#ggx written out here (not the SDK's ggx_reflection):
+    f |n.wi| = F(wo.h) D(h) G2(wo, wi) / (4 |n.wo|), h = (wo + wi) / |wo + wi|; at wo = n: n.h = wo.h = cos(theta / 2),
+    Lambda(n) = 0, G2 = 1 / (1 + Lambda(wi)), Lambda = (sqrt(1 + alpha^2 tan^2 theta) - 1) / 2."""
     theta = (np.arange(n) + 0.5) / n * (np.pi / 2)
-    wi = np.stack([np.sin(theta), np.zeros(n), np.cos(theta)], 1)
-    nz = np.tile([0.0, 0.0, 1.0], (n, 1))
-    f = ggx_reflection(nz, nz, wi, eta, alpha)
+    c = np.cos(theta / 2)
+    d = alpha ** 2 / (np.pi * (c * c * (alpha ** 2 - 1) + 1) ** 2)
+    ct = np.sqrt(1 - (1 - c * c) / eta ** 2)
+    fresnel = 0.5 * (((c - eta * ct) / (c + eta * ct)) ** 2 + ((eta * c - ct) / (eta * c + ct)) ** 2)
+    g2 = 1 / (1 + (np.sqrt(1 + alpha ** 2 * np.tan(theta) ** 2) - 1) / 2)
+    f = fresnel * d * g2 / 4
     return 2 * np.pi * (f * np.sin(theta)).sum() * (np.pi / 2) / n
 
 
