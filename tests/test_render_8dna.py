@@ -12,7 +12,11 @@ from reference_renderer.film import write_exr
 from reference_renderer.testscenes import SceneBuilder
 
 Z_MEAN = 4.5
-Z_PIXEL, PIXEL_FRACTION = 3.5, 0.08  # glossy (alpha 0.1) light sampling has heavy-tailed pixels
+#: glossy (alpha 0.1) light sampling has heavy-tailed pixels: their 48-spp variance estimates are unreliable, so far more
+#: pixels lie beyond 3.5 sigma than a Gaussian gives (measured 0.2-4.9 %). Beyond 6 sigma: 6 of 6864 pixel values over
+#: 4 seeds x 3 comparisons (8.7e-4); PIXEL_NULL_RATE is that rate's 99.9 % upper bound, and the test allows the binomial
+#: 1e-6 upper quantile of exceedances at that rate (about 2 % of pixels, 12 of ~570).
+Z_PIXEL, PIXEL_NULL_RATE = 6.0, 3e-3
 
 
 def _render(path, **kw):
@@ -20,7 +24,7 @@ def _render(path, **kw):
 
 
 def _agree(a, b):
-    return assert_renders_agree(a, b, z_mean=Z_MEAN, z_pixel=Z_PIXEL, pixel_fraction=PIXEL_FRACTION)
+    return assert_renders_agree(a, b, z_mean=Z_MEAN, z_pixel=Z_PIXEL, pixel_null_rate=PIXEL_NULL_RATE)
 
 
 def _dome_tex(path, rows=32, cols=64):
