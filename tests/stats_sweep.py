@@ -74,6 +74,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--report", type=Path, help="only print the summary of a .partial.json written by a sweep")
     ap.add_argument("tests", nargs="*", default=CHI2_TESTS)
     a = ap.parse_args(argv)
 
@@ -85,7 +86,9 @@ def main(argv=None) -> int:
     os.chdir(HERE.parent)
     _memoise_expected_side(stats)
     per_test: dict[str, list[float]] = defaultdict(list)
-    for s in range(a.seeds):
+    if a.report:
+        per_test.update(json.loads(a.report.read_text())["p"])
+    for s in range(0 if a.report else a.seeds):
         os.environ["NASSET_STAT_SEED"] = str(s)
         stats.RECORD.clear()
         pytest.main(["-q", "-p", "no:cacheprovider", "--no-header", "-o", "addopts=", "--tb=line", *a.tests])
@@ -94,6 +97,8 @@ def main(argv=None) -> int:
             seen[test] += 1
             per_test[f"{test}#{seen[test]}" if seen[test] > 1 else test].append(p)
         print(f"seed {s}: {len(stats.RECORD)} chi-squared statistics", file=sys.stderr, flush=True)
+        if a.json:  # the p-values so far, after every seed (a long sweep can be stopped and still reported)
+            a.json.with_suffix(".partial.json").write_text(json.dumps({"seeds_done": s + 1, "p": per_test}))
     rows = {}
     for test, ps in sorted(per_test.items()):
         ps_a = np.array(ps)
