@@ -1,31 +1,50 @@
-"""Statistical helpers for sampler tests: one Pearson chi-squared goodness-of-fit test, and its
-domain for direction samplers on the sphere (the idea of Mitsuba's ChiSquareTest).
+"""Statistical helpers for sampler tests: a Pearson chi-squared goodness-of-fit test.
 
 Usage: bin the samples (``observed`` counts), integrate the pdf over the same bins (``expected``
 probabilities), and call :func:`chi2_test`. Bins whose expected count is below ``min_expected``
 (5, the usual validity rule of the chi-squared approximation) are pooled, smallest first, into one
 bin; if the pool itself stays below ``min_expected`` it is merged with the next-smallest bin.
-A sample falling in a bin of zero expected probability fails the test outright (p = 0) unless
-``strict_zero=False``.
+A sample falling in a bin of zero expected probability fails the test outright (p = 0).
 Tests use the significance level :data:`SIGNIFICANCE`: a correct sampler fails one seed with that
 probability, and the seeds are fixed, so results are reproducible.
+
+:func:`sphere_chi2` is the direction-sampler form (bins on the sphere, expected counts by quadrature of the
+pdf); it checks that its quadrature is accurate enough for the sample count (see :data:`MAX_QUADRATURE_SHIFT`).
+``tests/stats_sweep.py`` reruns every chi-squared test of the default suite over many seeds
+(:func:`stat_seed` shifts every fixed seed by ``NASSET_STAT_SEED``) and checks the p-values are uniform.
 """
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from scipy import stats
 
-SIGNIFICANCE = 0.01
+#: per-test significance level. The default suite holds about 45 chi-squared tests and a similar number of
+#: z-tests at >= 4.5 sigma (two-sided 6.8e-6); 1e-6 per chi-squared test keeps the chance that a correct
+#: implementation fails some statistical test of one run at about 1e-4 (the seeds are fixed, so a run either
+#: passes or fails every time: this is the chance that the fixed seeds are unlucky). Real bugs give p << 1e-20
+#: at these sample counts.
+SIGNIFICANCE = 1e-6
+#: largest allowed non-centrality n * sum (dp^2 / p) of the chi-squared statistic caused by quadrature error in the
+#: expected bin probabilities (estimated as the change between the quadrature and one at half the resolution).
+#: Under the null the statistic has standard deviation sqrt(2 dof) >= 10 here; a shift of 2 moves p-values a little.
+MAX_QUADRATURE_SHIFT = 2.0
+#: p-values of every chi-squared test of this process, (test id, p): read by the seed sweep.
+RECORD: list[tuple[str, float]] = []
 
 
-def chi2_test(observed, expected_prob, *, min_expected: float = 5.0, normalize: bool = True, strict_zero: bool = True):
+def stat_seed(base: int) -> int:
+    """A test's fixed seed, shifted by the environment variable NASSET_STAT_SEED (0 by default; the seed sweep sets it)."""
+    return int(base) + int(os.environ.get("NASSET_STAT_SEED", "0")) * 1000003
+
+
+def chi2_test(observed, expected_prob, *, min_expected: float = 5.0, normalize: bool = True):
     """(statistic, degrees of freedom, p-value) of observed counts against expected bin probabilities.
 
     With ``normalize`` the probabilities are rescaled to sum to 1 (quadrature leaves a small deficit;
-    tests check the integral separately). With ``strict_zero`` a sample in a bin of zero expected
-    probability fails the test; without, such bins join the pool of small bins (for expectations from
-    a quadrature that can miss a sliver of the support, as at the rim of a cone).
+    tests check the integral separately).
     """
     obs = np.asarray(observed, np.float64).reshape(-1)
     p = np.asarray(expected_prob, np.float64).reshape(-1)
@@ -36,7 +55,7 @@ def chi2_test(observed, expected_prob, *, min_expected: float = 5.0, normalize: 
     n = obs.sum()
     if normalize:
         p = p / p.sum()
-    if strict_zero and (obs[p <= 0] > 0).any():
+    if (obs[p <= 0] > 0).any():
         return np.inf, 0, 0.0
     exp = p * n
     order = np.argsort(exp)
@@ -53,12 +72,9 @@ def chi2_test(observed, expected_prob, *, min_expected: float = 5.0, normalize: 
     if dof < 1:
         return 0.0, 0, 1.0
     stat = float(((obs_s - exp_s) ** 2 / exp_s).sum())
-    return stat, dof, float(stats.chi2.sf(stat, dof))
-
-
-def midpoints(lo: float, hi: float, n: int) -> np.ndarray:
-    """n midpoint-rule nodes on [lo, hi]."""
-    return lo + (np.arange(n) + 0.5) * (hi - lo) / n
+    pval = float(stats.chi2.sf(stat, dof))
+    RECORD.append((os.environ.get("PYTEST_CURRENT_TEST", "?").split(" ")[0], pval))
+    return stat, dof, pval
 
 
 def _sphere_bin(v, n_theta, n_phi):
@@ -69,30 +85,73 @@ def _sphere_bin(v, n_theta, n_phi):
     return it * n_phi + ip
 
 
-def direction_chi2_test(sample_fn, pdf_fn, *, n=200_000, n_theta=20, n_phi=40, sub=8, seed=0, min_expected=5.0):
-    """:func:`chi2_test` of a direction sampler against its pdf; returns (p_value, dof, pdf_integral).
+def _sphere_bin_prob(pdf_fn, n_theta, n_phi, bins, sub):
+    """Probability of the (z, phi) bins ``bins``: midpoint rule on sub x sub nodes per bin (equal solid-angle cells)."""
+    it, ip = np.divmod(np.asarray(bins), n_phi)
+    g = (np.arange(sub) + 0.5) / sub
+    z = 1 - 2 * (it[:, None, None] + g[None, :, None]) / n_theta
+    phi = 2 * np.pi * (ip[:, None, None] + g[None, None, :]) / n_phi
+    z, phi = np.broadcast_arrays(z, phi)
+    r = np.sqrt(np.maximum(0, 1 - z ** 2))
+    out = np.empty(len(it))
+    step = max(1, 2_000_000 // (sub * sub))
+    for k in range(0, len(it), step):
+        sl = slice(k, k + step)
+        dirs = np.stack([r[sl] * np.cos(phi[sl]), r[sl] * np.sin(phi[sl]), z[sl]], -1).reshape(-1, 3)
+        out[sl] = pdf_fn(dirs).reshape(-1, sub * sub).sum(1)
+    return out * (4 * np.pi / (n_theta * n_phi * sub * sub))
 
-    Directions are binned on the sphere by (cos theta, phi), equal solid-angle cells; each bin's
-    expected probability is the pdf integrated over the bin (midpoint rule on a ``sub`` x ``sub`` finer
-    grid). ``sample_fn(u [N,2]) -> dirs [N,3]`` (rows with NaN or zero length = failed samples, which
-    count against the pdf's mass); ``pdf_fn(dirs) -> pdf [N]`` in solid angle."""
-    rng = np.random.default_rng(seed)
+
+def sphere_bin_probabilities(pdf_fn, n_theta, n_phi, sub, n, max_sub=256):
+    """Bin probabilities accurate enough for ``n`` samples: the midpoint rule at ``sub`` x ``sub`` nodes per bin,
+    refined (doubling ``sub``) in the bins that dominate the difference to the rule at half the resolution, until
+    the difference could shift the statistic by less than :data:`MAX_QUADRATURE_SHIFT` (a discontinuous pdf, e.g.
+    a light's cone edge, needs more nodes near its edge). Returns (probabilities, estimated shift)."""
+    bins = np.arange(n_theta * n_phi)
+    prob = _sphere_bin_prob(pdf_fn, n_theta, n_phi, bins, sub)
+    coarse = _sphere_bin_prob(pdf_fn, n_theta, n_phi, bins, max(sub // 2, 1))
+    subs = np.full(len(bins), sub)
+    while True:
+        contrib = n * np.where(prob > 0, (prob - coarse) ** 2 / np.where(prob > 0, prob, 1), 0.0)
+        shift = float(contrib.sum())
+        if shift < MAX_QUADRATURE_SHIFT or subs.max() >= max_sub:
+            return prob, shift
+        order = np.argsort(contrib)[::-1]
+        top = order[: int(np.searchsorted(np.cumsum(contrib[order]), 0.99 * shift)) + 1]
+        coarse[top] = prob[top]
+        for sb in np.unique(subs[top]):
+            sel = top[subs[top] == sb]
+            prob[sel] = _sphere_bin_prob(pdf_fn, n_theta, n_phi, sel, 2 * sb)
+            subs[sel] = 2 * sb
+
+
+def sphere_chi2(sample_fn, pdf_fn, *, n=200_000, n_theta=20, n_phi=40, sub=16, seed=0, min_expected=5.0):
+    """chi-squared test of a direction sampler: (p_value, dof, pdf_integral).
+
+    ``sample_fn(u [N,2]) -> dirs [N,3]`` (rows with NaN or zero length = failed samples); ``pdf_fn(dirs) -> pdf [N]``
+    per steradian. Bins are equal solid-angle (z, phi) cells; their probabilities are the pdf integrated by the
+    midpoint rule on ``sub`` x ``sub`` nodes per bin, refined where needed (:func:`sphere_bin_probabilities`); if even
+    the finest rule could shift the statistic by more than :data:`MAX_QUADRATURE_SHIFT`, the test itself is wrong
+    and fails with an AssertionError naming ``sub``.
+    """
+    rng = np.random.default_rng(stat_seed(seed))
     v = sample_fn(rng.random((n, 2)))
     ok = np.isfinite(v).all(1) & (np.linalg.norm(v, axis=1) > 0.5)
     obs = np.bincount(_sphere_bin(v[ok], n_theta, n_phi), minlength=n_theta * n_phi).astype(float)
-    ft, fp = n_theta * sub, n_phi * sub
-    z = 1 - (np.arange(ft) + 0.5) / ft * 2
-    phi = (np.arange(fp) + 0.5) / fp * 2 * np.pi
-    zz, pp = np.meshgrid(z, phi, indexing="ij")
-    r = np.sqrt(np.maximum(0, 1 - zz ** 2))
-    dirs = np.stack([r * np.cos(pp), r * np.sin(pp), zz], -1).reshape(-1, 3)
-    d_omega = 4 * np.pi / (ft * fp)
-    pdf = pdf_fn(dirs).reshape(ft, fp)
-    integral = float(pdf.sum() * d_omega)
-    prob = (pdf.reshape(n_theta, sub, n_phi, sub).sum((1, 3)) * d_omega).ravel()
-    # failed samples: one more bin holding the pdf's missing mass (never pooled away from it)
+    prob, shift = sphere_bin_probabilities(pdf_fn, n_theta, n_phi, sub, n)
+    # a bin the pdf's support only grazes can get no node with pdf > 0: integrate such bins that hold samples finely
+    # (a few at most; a sample where the pdf really is 0 still fails the test)
+    grazed = np.nonzero((obs > 0) & (prob <= 0))[0][:16]
+    prob[grazed] = _sphere_bin_prob(pdf_fn, n_theta, n_phi, grazed, 1024)
+    integral = float(prob.sum())
+    assert shift < MAX_QUADRATURE_SHIFT, f"expected-count quadrature too coarse (sub={sub}): shift {shift:.3g}"
+    # one more bin for failed samples (e.g. a reflection below the horizon), of probability 1 - integral
     obs = np.append(obs, n - ok.sum())
-    prob = np.append(prob, max(1.0 - prob.sum(), 0.0))
-    _, dof, p = chi2_test(obs, prob, min_expected=min_expected, normalize=False, strict_zero=False)
-    return p, dof, integral
+    prob = np.append(prob, max(0.0, 1.0 - integral))
+    _, dof, pval = chi2_test(obs, prob, min_expected=min_expected)
+    return pval, dof, integral
 
+
+def midpoints(lo: float, hi: float, n: int) -> np.ndarray:
+    """n midpoint-rule nodes on [lo, hi]."""
+    return lo + (np.arange(n) + 0.5) * (hi - lo) / n

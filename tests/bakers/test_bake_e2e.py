@@ -30,6 +30,9 @@ TINY_PSNR_FLOOR_DB = 14.5
 #: (tiny) and ~4e-6 (small; the decoder's exp lobe features amplify float32 rounding) -- both use
 #: the stored float16 planes widened to float32; 1e-4 allows for BLAS/threading order.
 PARITY_TOL = 1e-4
+#: margin over the best constant colour (held-out mean) on the same held-out pixels; measured +1.9 dB
+#: (18.8 vs 16.9 dB); about half of it is required.
+BEAT_CONSTANT_DB = 1.0
 
 
 @pytest.fixture(scope="module")
@@ -42,13 +45,10 @@ def tiny_bake(tmp_path_factory):
 def test_tiny_bake_writes_valid_asset(tiny_bake):
     out, summary = tiny_bake
     assert out.exists() and summary["asset_bytes"] == out.stat().st_size
-    try:
-        from nasset_sdk.validate import validate_file
-    except ImportError:  # the validator lands separately; Asset.open below still checks the layout
-        validate_file = None
-    if validate_file is not None:
-        report = validate_file(out)
-        assert report.ok, report.to_dict()
+    from nasset_sdk.validate import validate_file
+
+    report = validate_file(out)
+    assert report.ok, report.to_dict()
     asset = Asset.open(out)
     asset.load("all")
     assert asset.kind == "rna" and asset.variant == "surface"
@@ -76,6 +76,10 @@ def test_tiny_bake_sdk_evaluation_on_held_out_views(tiny_bake):
     psnr, mse, peak = display_psnr(select_branch(y, val["vis"]), val["rgb"])
     assert peak > 0 and math.isfinite(mse)
     assert psnr > TINY_PSNR_FLOOR_DB, f"held-out PSNR {psnr:.2f} dB below floor {TINY_PSNR_FLOOR_DB}"
+    # the best constant colour (the held-out mean), a baseline independent of the model
+    base = display_psnr(np.broadcast_to(val["rgb"].mean(0), val["rgb"].shape), val["rgb"])[0]
+    print(f"\nrna tiny bake: held-out {psnr:.2f} dB, constant colour {base:.2f} dB")
+    assert psnr >= base + BEAT_CONSTANT_DB, (psnr, base)
     assert summary["sdk_vs_torch_max_abs"] < PARITY_TOL
     assert abs(summary["sdk_val_psnr_db"] - psnr) < 1e-3
 

@@ -25,16 +25,19 @@ from nasset_sdk.errors import NassetError  # noqa: E402
 FLOOR_DB = {"surface": 15.0, "fiber": 13.5}
 #: margin over the best constant colour (the held-out mean), a baseline computed independently of
 #: the model. Surface: measured +3.8 dB at tiny (19.3 vs 15.5 dB). Hair: the tiny preset (24 views = 24 sun
-#: directions, a 2 x 16 MLP) is barely better than a constant (measured +0.3 dB; 64 views and 60
-#: epochs: +1.2 dB): the test only requires it not to be clearly worse; hair quality is measured
-#: at the small preset in docs/bench-blender.md.
-BEAT_CONSTANT_DB = {"surface": 2.0, "fiber": -0.5}
+#: directions, a 2 x 16 MLP) is barely better than a constant (measured +0.3 dB), so the test bakes it with
+#: 64 views and 60 epochs (MORE; measured +1.7 dB, 21.1 vs 19.4 dB) and requires a real margin.
+BEAT_CONSTANT_DB = {"surface": 2.0, "fiber": 0.5}
+
+
+#: the hair bake gets more sun directions and epochs than the tiny preset (24 views, which barely beat a constant)
+MORE = {"blender-hair": dict(views=64, epochs=60)}
 
 
 @pytest.fixture(scope="module", params=["blender-surface", "blender-hair"])
 def tiny(request, tmp_path_factory):
     out = tmp_path_factory.mktemp("blender") / f"{request.param}.usdc"
-    summary = bake(None, None, out, size="tiny", example=request.param, quiet=True)
+    summary = bake(None, None, out, size="tiny", example=request.param, quiet=True, **MORE.get(request.param, {}))
     return request.param, out, summary
 
 
@@ -57,6 +60,7 @@ def test_tiny_bake_end_to_end(tiny):
     const = np.broadcast_to(val["rgb"].mean(0), val["rgb"].shape)
     base = display_psnr(const, val["rgb"])[0]
     assert s["sdk_val_psnr_db"] >= FLOOR_DB[variant], s
+    print(f"\n{example}: held-out {s['sdk_val_psnr_db']:.2f} dB, constant colour {base:.2f} dB")
     assert s["sdk_val_psnr_db"] >= base + BEAT_CONSTANT_DB[variant], (s["sdk_val_psnr_db"], base)
     assert abs(s["sdk_val_psnr_db"] - s["val_psnr_db"]) < 0.05 and s["sdk_vs_torch_max_abs"] < 1e-4
     assert s["mask_disagreement"] < 0.1
@@ -81,13 +85,16 @@ def test_tiny_bake_renders_in_the_converted_scene(tiny, tmp_path):
     assert r.stats.network_evals > 0
 
 
-def test_resume_reuses_the_dataset(tiny, tmp_path):
+def test_resume_reuses_the_dataset(tiny, tmp_path, monkeypatch):
+    from tests.bakers.bake_counting import count_rendered_views
+
     example, out, s = tiny
     if example != "blender-surface":
         pytest.skip("one resume check is enough")
+    rendered = count_rendered_views(monkeypatch)
     again = bake(None, None, tmp_path / "again.usdc", size="tiny", example=example, quiet=True, resume=s["dataset_dir"],
                  epochs=2)
-    assert again["times_s"]["dataset_s"] < s["times_s"]["dataset_s"] + 5  # loads, does not re-render
+    assert rendered == [], f"the resumed bake rendered {len(rendered)} views again"  # loads, does not re-render
     assert again["train_samples"] == s["train_samples"]
     meta = json.loads((DatasetDir(s["dataset_dir"]).root / "meta.json").read_text())
     assert meta["variant"] == "surface" and meta["source"] == "example:blender-surface"

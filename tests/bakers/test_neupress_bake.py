@@ -270,14 +270,17 @@ def test_bench_metrics():
     assert 0.0 < flip(img, np.clip(small, 0, None)) < flip(img, np.clip(big, 0, None))
 
 
-def test_resume_reuses_dataset_and_training_state(baked, tmp_path):
+def test_resume_reuses_dataset_and_training_state(baked, tmp_path, monkeypatch):
     """A second bake with the same settings and --resume on the first one's folder renders nothing new and continues
     from the stored training state: the appearance network comes out identical."""
     from nasset_bakers.mitsuba.neupress import bake
+    from tests.bakers.bake_counting import count_rendered_views
 
     path, s = baked
+    rendered = count_rendered_views(monkeypatch)
     again = bake(None, None, tmp_path / "again.usdc", size="tiny", example="default", quiet=True, views=32, res=32, spp=16,
                  resume=s["dataset_dir"])
+    assert rendered == [], f"the resumed bake rendered {len(rendered)} views again"
     assert again["train_samples"] == s["train_samples"] and again["val_psnr_db"] == s["val_psnr_db"]
     a = Asset.open(path).evaluator()
     b = Asset.open(again["asset"]).evaluator()

@@ -99,6 +99,26 @@ def test_cubemap_is_continuous_across_seams():
     step = rng.normal(size=d.shape) * 1e-7
     a, b = cubemap(grid, d), cubemap(grid, d + step)
     assert np.max(np.abs(a - b)) < 1e-4
+    # every pair straddles a seam: both sides of each of the 12 cube edges (axis i = +-1, axis j = +-(1 -+ eps)), and
+    # the 8 corners approached from each of their 3 faces
+    eps, m = 1e-7, 2000
+    for i in range(3):
+        for j in range(3):
+            if i == j:
+                continue
+            k = 3 - i - j
+            for si in (-1.0, 1.0):
+                for sj in (-1.0, 1.0):
+                    p, q = np.zeros((m, 3)), np.zeros((m, 3))
+                    p[:, i], p[:, j] = si, sj * (1 - eps)  # on face i, just before the edge
+                    q[:, i], q[:, j] = si * (1 - eps), sj  # on face j, just past it
+                    p[:, k] = q[:, k] = rng.uniform(-1, 1, m)
+                    np.testing.assert_allclose(cubemap(grid, p), cubemap(grid, q), atol=1e-4, err_msg=f"edge {i}{j} {si} {sj}")
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], np.float64)
+    for c in corners:
+        near = np.array([c * np.where(np.arange(3) == f, 1.0, 1 - eps) for f in range(3)])
+        vals = cubemap(grid, near)
+        assert np.ptp(vals, axis=0).max() < 1e-4, c
 
 
 def test_8dna_conformance_case_via_cli(tmp_path):

@@ -8,12 +8,15 @@ from nasset_reference_renderer.film import write_exr
 from nasset_reference_renderer.testscenes import SceneBuilder
 from nasset_sdk.examples import example_builder
 from nasset_sdk.geometry import MeshGeometry
-from nasset_sdk.kinds.boundary import ggx_reflection
 from nasset_sdk.networks import mlp_onnx
 from tests.renderer.render_stats import assert_renders_agree, render_finite
 
 Z_MEAN = 4.5
-Z_PIXEL, PIXEL_FRACTION = 3.5, 0.08  # glossy (alpha 0.1) light sampling has heavy-tailed pixels
+#: glossy (alpha 0.1) light sampling has heavy-tailed pixels: their 48-spp variance estimates are unreliable, so far more
+#: pixels lie beyond 3.5 sigma than a Gaussian gives (measured 0.2-4.9 %). Beyond 6 sigma: 6 of 6864 pixel values over
+#: 4 seeds x 3 comparisons (8.7e-4); PIXEL_NULL_RATE is that rate's 99.9 % upper bound, and the test allows the binomial
+#: 1e-6 upper quantile of exceedances at that rate (about 2 % of pixels, 12 of ~570).
+Z_PIXEL, PIXEL_NULL_RATE = 6.0, 3e-3
 
 
 def _render(path, **kw):
@@ -21,7 +24,7 @@ def _render(path, **kw):
 
 
 def _agree(a, b):
-    return assert_renders_agree(a, b, z_mean=Z_MEAN, z_pixel=Z_PIXEL, pixel_fraction=PIXEL_FRACTION)
+    return assert_renders_agree(a, b, z_mean=Z_MEAN, z_pixel=Z_PIXEL, pixel_null_rate=PIXEL_NULL_RATE)
 
 
 def _dome_tex(path, rows=32, cols=64):
@@ -66,11 +69,17 @@ def _direct_only_asset(tmp_path, eta=1.5, alpha=0.1):
 
 
 def _albedo_normal_incidence(eta, alpha, n=400_000):
-    """rho(n) = integral f_r |n.wi| dwi at w_o = n (azimuthally symmetric): 2 pi integral f(theta) sin(theta) dtheta."""
+    """rho(n) = integral f_r |n.wi| dwi at w_o = n (azimuthally symmetric): 2 pi integral f(theta) sin(theta) dtheta,
+    with the GGX reflection of spec/kinds/encodings.md#ggx written out here (not the SDK's ggx_reflection):
+    f |n.wi| = F(wo.h) D(h) G2(wo, wi) / (4 |n.wo|), h = (wo + wi) / |wo + wi|; at wo = n: n.h = wo.h = cos(theta / 2),
+    Lambda(n) = 0, G2 = 1 / (1 + Lambda(wi)), Lambda = (sqrt(1 + alpha^2 tan^2 theta) - 1) / 2."""
     theta = (np.arange(n) + 0.5) / n * (np.pi / 2)
-    wi = np.stack([np.sin(theta), np.zeros(n), np.cos(theta)], 1)
-    nz = np.tile([0.0, 0.0, 1.0], (n, 1))
-    f = ggx_reflection(nz, nz, wi, eta, alpha)
+    c = np.cos(theta / 2)
+    d = alpha ** 2 / (np.pi * (c * c * (alpha ** 2 - 1) + 1) ** 2)
+    ct = np.sqrt(1 - (1 - c * c) / eta ** 2)
+    fresnel = 0.5 * (((c - eta * ct) / (c + eta * ct)) ** 2 + ((eta * c - ct) / (eta * c + ct)) ** 2)
+    g2 = 1 / (1 + (np.sqrt(1 + alpha ** 2 * np.tan(theta) ** 2) - 1) / 2)
+    f = fresnel * d * g2 / 4
     return 2 * np.pi * (f * np.sin(theta)).sum() * (np.pi / 2) / n
 
 

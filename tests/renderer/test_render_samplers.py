@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from nasset_reference_renderer import bsdf, lights, sampling
-from tests.stats import direction_chi2_test
+from tests.stats import SIGNIFICANCE, sphere_chi2
 
-P_MIN = 1e-3  # reject the sampler when the fit is this unlikely
+P_MIN = SIGNIFICANCE  # reject the sampler when the fit is this unlikely
 
 
 def _report(name, p, dof):
@@ -14,16 +14,16 @@ def _report(name, p, dof):
 
 
 def test_cosine_hemisphere():
-    p, dof, integral = direction_chi2_test(sampling.square_to_cosine_hemisphere, sampling.cosine_hemisphere_pdf)
+    p, dof, integral = sphere_chi2(sampling.square_to_cosine_hemisphere, sampling.cosine_hemisphere_pdf)
     _report("cosine", p, dof)
     assert p > P_MIN and abs(integral - 1) < 1e-2
 
 
 def test_uniform_sphere_and_cone():
-    p, dof, _ = direction_chi2_test(sampling.square_to_uniform_sphere, sampling.uniform_sphere_pdf)
+    p, dof, _ = sphere_chi2(sampling.square_to_uniform_sphere, sampling.uniform_sphere_pdf)
     assert p > P_MIN
     cm = np.cos(0.6)
-    p, dof, integral = direction_chi2_test(lambda u: sampling.square_to_uniform_cone(u, cm), lambda v: sampling.uniform_cone_pdf(v, cm))
+    p, dof, integral = sphere_chi2(lambda u: sampling.square_to_uniform_cone(u, cm), lambda v: sampling.uniform_cone_pdf(v, cm))
     _report("cone", p, dof)
     assert p > P_MIN and abs(integral - 1) < 2e-2
 
@@ -42,7 +42,7 @@ def test_ggx_visible_normals(alpha, theta):
     def pdf(v):
         return bsdf.ggx_reflect_pdf(np.repeat(wo, len(v), 0), v, np.full(len(v), alpha))
 
-    p, dof, _ = direction_chi2_test(sample, pdf, n_theta=30, n_phi=60, sub=8)
+    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60, sub=8)
     _report(f"ggx a={alpha}", p, dof)
     assert p > P_MIN
 
@@ -65,7 +65,7 @@ def test_bsdf_mixture_sampling_and_pdf():
     def pdf(v):
         return bsdf.bsdf_eval(mt, np.zeros(len(v), int), np.repeat(wo, len(v), 0), v)[1]
 
-    p, dof, _ = direction_chi2_test(sample, pdf, n_theta=30, n_phi=60)
+    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60)
     _report("bsdf mixture", p, dof)
     assert p > P_MIN
     n = 1000
@@ -88,7 +88,7 @@ def _light_chi2(light, name, **kw):
     def pdf(v):
         return light.pdf(np.repeat(P0, len(v), 0), v)
 
-    p, dof, integral = direction_chi2_test(sample, pdf, **kw)
+    p, dof, integral = sphere_chi2(sample, pdf, **kw)
     _report(name, p, dof)
     assert p > P_MIN
     assert abs(integral - 1) < 3e-2

@@ -137,7 +137,8 @@ def test_direction_conditional_integrates_to_one_and_matches_samples(ev, rng, wh
     p = ev.pdf_direction(xq, wq, uu, w, 1)
     total = (p * dw).sum()
     # midpoint rule on 256 x 512 (z, phi) nodes; measured error 5.7e-3 at 64 x 128, 1.1e-3 at 128 x 256,
-    # 1.0e-4 at 256 x 512, 1.6e-5 at 512 x 1024 (pole_top)
+    # 1.0e-4 at 256 x 512, 1.6e-5 at 512 x 1024 (pole_top). The seed sweep (tests/stats_sweep.py) finds sampled u_i
+    # (random) where the conditional integrates to 0.68 ... 1.015 (8 of 50 seeds): an open normalisation problem
     assert abs(total - 1) < 1e-3, total
     expected = np.bincount(_sphere_bin(w, nz, nphi), weights=p * dw, minlength=nz * nphi)
     wi, pdf = ev.sample_direction(x, wo, np.tile(u0, (n, 1)), 1, rng)

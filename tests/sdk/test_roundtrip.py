@@ -89,14 +89,17 @@ def test_killed_writer_never_leaves_a_partial_target(tmp_path):
         if proc.poll() is not None:
             break
         time.sleep(0.0005)
+    writing = proc.poll() is None and any(p.name.startswith(".a.tmp-") for p in tmp_path.iterdir())
     proc.send_signal(signal.SIGKILL)
     proc.wait()
+    assert writing, "the kill did not land while the writer was writing its temporary file"
     data = target.read_bytes()
     if data != before:  # the rename happened before the kill: then it is the complete new asset
         from nasset_sdk.validate import validate_file
 
         assert validate_file(target).ok
     leftovers = [p.name for p in tmp_path.iterdir() if p.name != "a.usdc"]
+    assert data != before or leftovers, "killed before the rename, yet no temporary file is left: the kill missed the write"
     # a SIGKILLed writer cannot remove its temporary: it is a hidden sibling, never the target
     assert all(n.startswith(".a.tmp-") for n in leftovers), leftovers
 

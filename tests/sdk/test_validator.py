@@ -137,7 +137,7 @@ def test_cli_dump_rules():
     rows = json.loads(r.stdout)
     assert [row["code"] for row in rows] == [rule.code for rule in RULES]
     for row in rows:
-        assert row["code"] in CODES and row["severity"] in ("error", "warning", "info") and "#" in row["spec"] or row["spec"].endswith(".md")
+        assert row["code"] in CODES and row["severity"] in ("error", "warning", "info") and ("#" in row["spec"] or row["spec"].endswith(".md"))
     text = _cli("--dump-rules")
     assert text.returncode == 0 and "ASSET_PATH_ESCAPES" in text.stdout
 

@@ -90,6 +90,21 @@ def test_fiber_self_shadow_ignores_its_own_segments(assets):
     assert shadowed.shape == (len(geo.points),)
     pts, faces, owner = view.tube_mesh(geo)
     assert faces.max() < len(pts) and owner.shape == (len(faces), 2)
+    # two straight parallel fibres along z, B at x = 0.3 (width 0.05): a straight fibre never shadows itself, at any
+    # light direction (its own tube, around every vertex, is skipped); light towards +x: B shadows A's inner vertices
+    # (the end vertices graze B's tube ends), A never shadows B; towards -x the other way round
+    from nasset_sdk.geometry import CurvesGeometry
+
+    z = np.linspace(-0.5, 0.5, 6)
+    two = CurvesGeometry(np.concatenate([np.stack([0 * z, 0 * z, z], 1), np.stack([0 * z + 0.3, 0 * z, z], 1)]),
+                         np.array([6, 6]), np.full(12, 0.05))
+    a, b = np.arange(12) < 6, np.arange(12) >= 6
+    inner = np.isin(np.arange(12) % 6, [1, 2, 3, 4])
+    for light in ((0, 1.0, 0), (0, 0.6, 0.8), (0, 0, 1.0)):
+        assert not view.self_shadow_vertices(two, light).any(), light
+    for light, front, back in (((1.0, 0, 0), b, a), ((-1.0, 0, 0), a, b)):
+        shadowed = view.self_shadow_vertices(two, light)
+        assert shadowed[back & inner].all() and not shadowed[front].any(), (light, shadowed)
 
 
 def test_triplane_channel_image_shape(assets):

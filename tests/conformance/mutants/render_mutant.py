@@ -199,9 +199,58 @@ def quality_hq():
     Asset.load = load
 
 
+# -- neupress, 8dna, rna fiber --------------------------------------------------------------------------------------
+def neupress_wi_flipped():
+    """neupress: the subsurface network evaluated at -w_i (w_i taken as the direction light travels, not towards it)."""
+    from nasset_sdk.kinds.neupress import NeupressEvaluator
+
+    orig = NeupressEvaluator.evaluate
+    NeupressEvaluator.evaluate = lambda self, x, n, wo, wi: orig(self, x, n, wo, -np.asarray(wi))
+
+
+def neupress_reflection_dropped():
+    """neupress: the analytic rough-dielectric surface reflection left out (subsurface part only)."""
+    from nasset_sdk.kinds.neupress import NeupressEvaluator
+
+    orig = NeupressEvaluator.surface_reflection
+    NeupressEvaluator.surface_reflection = lambda self, n, wo, wi: 0.0 * orig(self, n, wo, wi)
+
+
+def eightdna_pdf_scale():
+    """8dna: the flow's joint density left in t-space units (per unit t^4) instead of per unit box area and steradian:
+    too large by the 4 pi of the direction measure (its position marginal unchanged)."""
+    from nasset_sdk.kinds.eightdna import EightDnaEvaluator
+
+    orig = EightDnaEvaluator.pdf
+    EightDnaEvaluator.pdf = lambda self, *a, **k: 4 * np.pi * orig(self, *a, **k)
+
+
+def eightdna_direction_flipped():
+    """8dna: the flow's density evaluated at -w_i (direction convention flipped)."""
+    from nasset_sdk.kinds.eightdna import EightDnaEvaluator
+
+    orig = EightDnaEvaluator.pdf
+    EightDnaEvaluator.pdf = lambda self, x, wo, ui, wi, ch: orig(self, x, wo, ui, -np.asarray(wi), ch)
+
+
+def fiber_h_sign():
+    """rna fiber: the cross-fiber offset h handed to the network with the wrong sign."""
+    from nasset_reference_renderer.shaders import rna_fiber as neural_fiber
+
+    orig = neural_fiber.fiber_frame
+
+    def fiber_frame(tubes, seg, x_obj, wo_obj):
+        t, h = orig(tubes, seg, x_obj, wo_obj)
+        return t, -h
+
+    neural_fiber.fiber_frame = fiber_frame
+
+
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
-                                   distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq)}
+                                   distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq,
+                                   neupress_wi_flipped, neupress_reflection_dropped, eightdna_pdf_scale, eightdna_direction_flipped,
+                                   fiber_h_sign)}
 
 
 def main(argv=None) -> int:
