@@ -22,18 +22,25 @@ An asset is **valid** when no finding has severity `error`. Exit status: 0 valid
 ## Procedure
 
 1. The file is opened first in a child process with a time limit and an address-space limit
-   (`nasset_sdk.safeopen`, level `full`: every field of every spec read, the stage composed with all
-   payloads). usd-core's crate reader can crash (SIGSEGV) or allocate without bound on corrupted
-   files; a probe that crashes, times out or fails gives `FILE_UNREADABLE` and nothing else is checked.
-2. The root layer is scanned for asset paths (sublayers, references, payloads, every asset-valued
-   attribute, time sample and metadata value) **before** it is composed; arcs that escape the package
-   are reported and stripped, never followed.
+   (`nasset_sdk.safeopen`, level `full`: every field of every spec read, each array's length and the
+   total decoded array size checked against the bounds, then the stage composed with all payloads
+   from a copy of the layer without any arc to another file). usd-core's crate reader can crash
+   (SIGSEGV) or allocate without bound on corrupted files; a probe that crashes, times out or fails
+   gives `FILE_UNREADABLE` (`ARRAY_TOO_LARGE` for arrays over their bounds or a probe out of memory)
+   and nothing else is checked.
+2. The root layer alone is scanned (`nasset_sdk.paths`) for asset paths (sublayers, references,
+   payloads, value clips, every asset-valued attribute, time sample and metadata value), each checked
+   by its text and by where it resolves, **before** anything is composed; layer content rules (no
+   arc to another file, no variant set but `quality`, no time samples) are checked from the specs.
+   Arcs to other files are reported and stripped, never followed.
 3. The stage is composed with nothing loaded; the header is checked; then **every** component is loaded,
    each quality variant in turn (selected in the session layer, the file is not edited), so optional
    components and non-default qualities are checked as well as the default ones.
-4. Tensors are read in full (NaN/Inf), networks are parsed, checked with `onnx.checker`, loaded in
-   onnxruntime and run on a batch of zeros; the kind contract (`KindContract.findings`) is applied to the
-   default configuration and to each alternative quality.
+4. Tensors are read in full (NaN/Inf); networks are parsed, checked with `onnx.checker`, the operator
+   allow-list and strict shape inference; then all networks of the asset run in one bounded child
+   process (`nasset_sdk.netprobe`) on realistic inputs at several batch sizes (output widths, finite
+   and bounded outputs, rows independent); the kind contract (`KindContract.findings`) is applied to
+   the default configuration and to each alternative quality.
 
 ## Definitions used by the rules
 
