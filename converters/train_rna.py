@@ -225,6 +225,16 @@ def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]
     return (10.0 * math.log10(1.0 / max(mse, 1e-20))), mse_lin, peak
 
 
+def held_out_accuracy(pred: np.ndarray, val_data: dict) -> dict | None:
+    """Figures of spec/accuracy.md#metrics of held-out predictions [N, 3] against the unclamped two-half
+    reference (``rgb_a``, ``rgb_b``); None for datasets without halves."""
+    from nasset_sdk.metrics import accuracy
+
+    if "rgb_a" not in val_data or not len(pred):
+        return None
+    return accuracy(pred, val_data["rgb_a"], val_data["rgb_b"], flip=False).to_dict()
+
+
 def select_branch(y: np.ndarray, vis: np.ndarray) -> np.ndarray:
     """Pick unshadowed (vis=1) or shadowed (vis=0) RGB from [N,6] outputs."""
     v = np.asarray(vis).astype(bool)[:, None]
@@ -368,6 +378,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     yv = np.maximum(predict(model, V), 0.0)
     pv = select_branch(yv, val_data["vis"])
     psnr, mse_lin, peak = display_psnr(pv, val_data["rgb"])
+    acc = held_out_accuracy(pv, val_data)
     log_mse = float(np.mean((np.log1p(pv) - np.log1p(np.maximum(val_data["rgb"], 0))) ** 2)) if len(pv) else float("nan")
     onnx_bytes = export_onnx(model)
     check_model_bytes(onnx_bytes)
@@ -375,7 +386,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     model.to(device)
     return TrainResult(
         model=model, planes=planes16, onnx=onnx_bytes, history=history,
-        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv))},
+        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv)), "accuracy": acc},
         onnx_max_abs_diff=diff, seconds=train_s, device=str(device),
     )
 

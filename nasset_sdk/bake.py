@@ -85,8 +85,13 @@ def bake(
     quiet: bool = False,
     variant: str | None = None,
     summary_stream=None,
+    clamp: float | None = None,
+    loss: str | None = None,
 ) -> dict:
-    """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
+
+    ``clamp``: per-path-sample clamp of the training targets (default 0: none; the energy it removes
+    is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings')."""
     from converters.bake_stages import render_views, train_with_progress
     from converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from converters.mitsuba import dataset as ds
@@ -139,6 +144,10 @@ def bake(
         dset = replace(dset, res=int(res))
     if spp is not None:  # training views only: the held-out reference keeps the preset's (low) noise
         dset = replace(dset, spp=int(spp))
+    if clamp is not None:
+        if not clamp >= 0:
+            raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
+        dset = replace(dset, clamp=float(clamp))
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
     renderer = ds.Renderer(mi, iso, dset)
     times["scene_s"] = time.perf_counter() - t
@@ -165,6 +174,8 @@ def bake(
     tset = TrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
+    if loss is not None:
+        tset = replace(tset, loss=str(loss))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
     result = train_with_progress(
@@ -186,7 +197,8 @@ def bake(
                    "bsdfs": msc.bsdf_names(shapes)},
         "light": {"type": "directional" if dset.light_angle_deg == 0 else "distant-sphere",
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
-        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"]))},
+        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
+                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
@@ -213,6 +225,9 @@ def bake(
         "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp,
         "variant": mi.variant(), "device": result.device,
         "val_psnr_db": result.val["psnr_db"],
+        "val_accuracy": result.val.get("accuracy"),
+        "sdk_val_accuracy": check.get("accuracy"),
+        "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
         "sdk_val_psnr_db": check["psnr_db"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
@@ -239,8 +254,29 @@ def check_asset(path, val_data: dict, result) -> dict:
     lo, hi = asset.domain
     y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
     diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
+    from converters.train_rna import held_out_accuracy
+
     psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
-    return {"psnr_db": psnr, "max_abs_diff": diff}
+    return {"psnr_db": psnr, "max_abs_diff": diff, "accuracy": held_out_accuracy(select_branch(y_sdk, val_data["vis"]), val_data)}
+
+
+def clamp_removed(train_data: dict) -> dict | None:
+    """Share of the training targets' energy per channel that the clamp removed (None: not recorded)."""
+    if "energy" not in train_data:
+        return None
+    e = np.asarray(train_data["energy"], np.float64)
+    r = np.asarray(train_data["clamp_removed"], np.float64)
+    return {"fraction": [float(x) for x in r / np.where(e > 0, e, np.nan)], "energy": [float(x) for x in e]}
+
+
+def accuracy_lines(acc: dict | None, label: str = "held-out (unclamped reference)") -> list[str]:
+    """Summary lines of a spec/accuracy.md#metrics dict: energy per channel, PSNR and its ceiling."""
+    if not acc:
+        return []
+    e = "/".join(f"{100 * r:.1f}" for r in acc["energy_ratio"])
+    se = "/".join(f"{100 * r:.1f}" for r in acc["energy_se"])
+    return [f"  {label}: energy {e} % (RGB, +-{se}), PSNR {acc['psnr_db']:.2f} dB, "
+            f"ceiling {acc['ceiling_db']:.2f} dB -> claimed {acc['claimed_psnr']}"]
 
 
 def _print_summary(s: dict, stream) -> None:
@@ -251,7 +287,10 @@ def _print_summary(s: dict, stream) -> None:
         f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
         f"{s['val_res']}^2, {s['val_spp']} spp -> "
         f"{s['train_samples']} train / {s['val_samples']} held-out samples  (kept in {s['dataset_dir']})",
-        f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        *accuracy_lines(s.get("sdk_val_accuracy")),
+        f"  held-out display PSNR (99.5th pct, clipped): {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        *([f"  training clamp {s['clamp']} /sr removed " + "/".join(f"{100 * f:.1f}" for f in s['clamp_removed']['fraction'])
+           + " % of the targets' energy (RGB)"] if s.get("clamp") and s.get("clamp_removed") else []),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
     ]

@@ -168,6 +168,8 @@ BENCHES = {
              "converters.mitsuba.eightdna_bench"),
     "blender": ("rna from Blender: Cycles path tracing vs the reference renderer, surface and hair examples, h ablation",
                 "converters.blender.bench"),
+    "accuracy": ("a baked asset in its own Mitsuba scene against unclamped two-half ground truth: energy, PSNR with "
+                 "the noise ceiling, FLIP over the object's pixels", "converters.mitsuba.accuracy_bench"),
 }
 
 

@@ -88,6 +88,9 @@ CODES: dict[str, Code] = _codes(
     ("CHECK_FAILED", "format", "a validation check could not complete on this input", "validation.md#report"),
     # converters (scene conversion)
     ("CONVERT_ASSET_REFERENCE", "scene", "a --replace asset file is missing or is not a neural asset", "bake.md#scene-conversion"),
+    # benchmarks (in-scene accuracy)
+    ("BENCH_ASSET_MISMATCH", "scene", "a --replace asset was not baked from the shapes it replaces", "accuracy.md#errors"),
+    ("BENCH_ASSET_KIND", "scene", "a --replace asset's kind or variant cannot stand in for the replaced shapes", "accuracy.md#errors"),
 )
 
 

@@ -13,7 +13,7 @@ import warnings
 from nasset_sdk.errors import error
 
 #: bumped when the data a bake produces changes meaning (stored in provenance and in dataset dirs).
-CONVERTER_VERSION = "0.2.0"  # 0.2: per-pixel lights, path samples clamped at 10 /sr
+CONVERTER_VERSION = "0.3.0"  # 0.3: no clamp by default, held-out references unclamped in two halves
 
 LLVM_CANDIDATES = (
     "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
