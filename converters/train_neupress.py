@@ -33,7 +33,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .train_rna import TorchCheckpoint, _pick_device, _torch, display_psnr
+from .train_rna import TorchCheckpoint, _pick_device, _torch, display_psnr, held_out_accuracy
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
            "prt_coefficients", "appearance_inputs", "sampling_inputs", "export_skip_mlp", "export_mlp"]
@@ -255,7 +255,8 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
     psnr, mse, peak = display_psnr(np.maximum(pred, 0.0), val_data["rgb"])
     val = {"psnr_db": psnr, "mse": mse, "peak": peak, "samples": int(len(v_val)),
            "mean_gt": float(np.mean(val_data["rgb"])) if len(v_val) else float("nan"),
-           "mean_pred": float(np.mean(np.maximum(pred, 0.0))) if len(v_val) else float("nan")}
+           "mean_pred": float(np.mean(np.maximum(pred, 0.0))) if len(v_val) else float("nan"),
+           "accuracy": held_out_accuracy(np.maximum(pred, 0.0), val_data)}
     return AppearanceResult(model, G, history, val, time.perf_counter() - t0, str(dev))
 
 

@@ -8,8 +8,11 @@ lookup is ``torch.nn.functional.grid_sample(align_corners=False, padding_mode="b
 is the format's ``encodings.grid_sample_2d`` (texel centres, edge clamp); ``check_parity``
 verifies it numerically against the SDK.
 
-Loss: L2 between log(1 + T) of prediction and ground truth, only on the output matching the
-sample's light visibility. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
+Loss: plain L2 on linear T (default; unbiased for noisy, heavy-tailed targets: its minimiser is the
+targets' mean, spec/accuracy.md#loss), only on the output matching the sample's light visibility.
+``loss = "log"`` (the paper's L2 of log(1 + T)) is biased on noisy targets (its minimiser is
+exp(E log(1 + y)) - 1 < E[y]) and kept for ablations; ``"rel"`` is L2 relative to the detached
+prediction (Noise2Noise), also unbiased. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
 to 1 texel over the first 20 % of epochs, then kept at 1 texel; the exported planes are the
 blurred planes the decoder was trained with. Adam, learning rate halved every 20 % of epochs.
 
@@ -43,7 +46,7 @@ class TrainSettings:
     blur_end: float = 1.0
     blur_until: float = 0.2  # fraction of epochs
     init_std: float = 0.1
-    loss: str = "log"  # "log": L2 of log(1 + T) (paper); "rel": L2 relative to sg(prediction)
+    loss: str = "l2"  # "l2": L2 of T (unbiased); "log": L2 of log(1 + T) (paper; biased on noisy targets); "rel": L2 / sg(pred)^2
     rel_eps: float = 0.01  # "rel": (pred - y)^2 / (sg(pred) + rel_eps)^2
     encoding: str = "lobes"  # decoder-internal features of the fixed input row: "raw" or "lobes"
     plane_res: int = 0  # triplane resolution R; 0: the preset's (nasset_sdk.kinds.rna.SIZES)

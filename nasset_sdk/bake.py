@@ -73,7 +73,7 @@ def bake(
     output: str | Path,
     *,
     size: str = "small",
-    example: bool = False,
+    example: bool | str = False,
     resume: str | Path | None = None,
     views: int | None = None,
     res: int | None = None,
@@ -117,7 +117,12 @@ def bake(
     for w in caught:
         say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
-    if example:
+    if example == "high-albedo":
+        from converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+        scene = write_example_scene(work / "example_scene")
+        asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
+    elif example:
         from converters.mitsuba.example_scene import EXAMPLE_ASSET_IDS, write_example_scene
 
         scene = write_example_scene(work / "example_scene")
@@ -148,6 +153,11 @@ def bake(
         if not clamp >= 0:
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
         dset = replace(dset, clamp=float(clamp))
+    from converters.mitsuba.high_albedo_example import scene_max_depth
+
+    md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
+    if md is not None and (md < 0 or md > dset.max_depth):
+        dset = replace(dset, max_depth=md if md > 0 else 1024)
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
     renderer = ds.Renderer(mi, iso, dset)
     times["scene_s"] = time.perf_counter() - t
@@ -193,7 +203,7 @@ def bake(
         "converter": f"converters.mitsuba {CONVERTER_VERSION}",
         "converterVersion": CONVERTER_VERSION,
         "source": {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "scene": str(scene),
-                   "scene_sha256": meta["scene_sha256"], "shapes": list(asset_ids), "example": bool(example),
+                   "scene_sha256": meta["scene_sha256"], "shapes": list(asset_ids), "example": example if isinstance(example, str) else bool(example),
                    "bsdfs": msc.bsdf_names(shapes)},
         "light": {"type": "directional" if dset.light_angle_deg == 0 else "distant-sphere",
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
@@ -318,9 +328,9 @@ def baker_for(kind: str, scene, example: str | None):
         return eightdna_bake
     if kind != "rna":
         raise UsageError(f"unknown kind {kind!r}")
-    if example not in (None, "default"):
-        raise UsageError(f"unknown rna example {example!r} (default, blender-surface, blender-hair)")
-    return lambda scene, ids, out, example=None, **kw: bake(scene, ids, out, example=example is not None, **kw)
+    if example not in (None, "default", "high-albedo"):
+        raise UsageError(f"unknown rna example {example!r} (default, high-albedo, blender-surface, blender-hair)")
+    return lambda scene, ids, out, example=None, **kw: bake(scene, ids, out, example=example or False, **kw)
 
 
 def run(args) -> int:
@@ -330,6 +340,7 @@ def run(args) -> int:
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
         seed=args.seed, device=args.device, quiet=args.quiet,
+        **({"clamp": args.clamp} if getattr(args, "clamp", None) is not None else {}),
         summary_stream=sys.stderr if getattr(args, "json", False) else sys.stdout,
     )
     if getattr(args, "json", False):

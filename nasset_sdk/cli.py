@@ -112,7 +112,8 @@ def _bake_args(p):
     p.add_argument("-o", "--output", required=True, help="output asset .usdc")
     p.add_argument("--example", nargs="?", const="default", default=None, metavar="NAME",
                    help="bake a built-in example scene (no files needed); NAME picks one where a kind has several "
-                        "(rna: default, blender-surface, blender-hair; neupress: default; 8dna: default, heterogeneous)")
+                        "(rna: default, high-albedo, blender-surface, blender-hair; neupress: default, high-albedo; "
+                        "8dna: default, heterogeneous)")
     p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
     p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")
     p.add_argument("--res", type=int, default=None, help="image resolution per view")
@@ -120,6 +121,9 @@ def _bake_args(p):
     p.add_argument("--spp", type=int, default=None, help="paths per pixel of the training views (held-out views use the preset's val_spp)")
     p.add_argument("--light-angle", type=float, default=None,
                    help="angular radius of the distant light in degrees (0 = delta; default 0, or 5 behind smooth dielectrics)")
+    p.add_argument("--clamp", type=float, default=None, metavar="C",
+                   help="clamp training path samples at C /sr (Mitsuba rna, neupress; default 0: none; the energy removed "
+                        "is measured and stored, spec/accuracy.md)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")

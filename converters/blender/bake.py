@@ -183,6 +183,7 @@ def bake(
         "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp, "renderer": f"cycles {bpy.app.version_string}",
         "device": result.device, "h_input": h_input, "mask_disagreement": disagree,
         "val_psnr_db": result.val["psnr_db"], "sdk_val_psnr_db": check["psnr_db"],
+        "val_accuracy": result.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "sdk_vs_torch_max_abs": check["max_abs_diff"], "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
         "times_s": {k: round(v, 2) for k, v in times.items()},
     }
@@ -192,6 +193,8 @@ def bake(
 
 
 def _print_summary(s: dict, stream) -> None:
+    from nasset_sdk.bake import accuracy_lines
+
     t = s["times_s"]
     lines = [
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB, rna {s['variant']}{'' if s['h_input'] else ', h fixed to 0'})",
@@ -199,7 +202,8 @@ def _print_summary(s: dict, stream) -> None:
         f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
         f"{s['val_res']}^2, {s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples "
         f"(mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
-        f"  held-out PSNR: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        *accuracy_lines(s.get("sdk_val_accuracy")),
+        f"  held-out display PSNR (99.5th pct, clipped): {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in t.items()),
     ]

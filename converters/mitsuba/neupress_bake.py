@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.bake import _finite, check_options
+from nasset_sdk.bake import _finite, accuracy_lines, check_options, clamp_removed
 from nasset_sdk.errors import UsageError, error
 
 #: data presets (neupress_data.NeupressDataSettings fields); measured in spec/bake-neupress.md
@@ -30,7 +30,7 @@ DATA_PRESETS = {
     "small": dict(views=160, val_views=6, res=64, spp=32, val_res=64, val_spp=1024),
     "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
 }
-EXAMPLES = ("default",)
+EXAMPLES = ("default", "high-albedo")
 
 
 def bake(
@@ -51,8 +51,11 @@ def bake(
     quiet: bool = False,
     variant: str | None = None,
     summary_stream=None,
+    clamp: float | None = None,
 ) -> dict:
     """Run the whole neupress bake; returns the summary dict (also stored in the asset's provenance).
+
+    ``clamp``: per-path-sample clamp of the training targets (default 0: none; removed energy stored).
 
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
     from converters.bake_stages import progress_bar, render_views, train_with_progress
@@ -95,7 +98,9 @@ def bake(
     for w in caught:
         say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
-    if example:
+    if example == "high-albedo":
+        from converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
+    elif example:
         from converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
 
         scene = write_example_scene(work / "example_scene", size)
@@ -119,6 +124,15 @@ def bake(
         dset = replace(dset, res=int(res))
     if spp is not None:
         dset = replace(dset, spp=int(spp))
+    if clamp is not None:
+        if not clamp >= 0:
+            raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
+        dset = replace(dset, clamp=float(clamp))
+    from converters.mitsuba.high_albedo_example import scene_max_depth
+
+    md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
+    if md is not None and (md < 0 or md > dset.max_depth):
+        dset = replace(dset, max_depth=md if md > 0 else 1024)
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth)
     renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
     times["scene_s"] = time.perf_counter() - t
@@ -201,7 +215,8 @@ def bake(
         "ground_truth": {"quantity": "subsurface only: first boundary vertex samples the transmission lobe "
                                      "(spec/bake-neupress.md#data)",
                          "light": {"type": "directional", "irradiance": 1.0, "directions": "uniform full sphere, per pixel"}},
-        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"]))},
+        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
+                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
         "training": {**tset.__dict__, "device": app.device, "framework": f"torch {torch.__version__}",
                      "final_loss": app.history[-1]["loss"] if app.history else None,
                      "sampling_kl": samp.kl, "sampling_kl_uniform": samp.kl_uniform, "sampling_kl_best_sigma": samp.kl_best},
@@ -233,6 +248,8 @@ def bake(
         "val_psnr_db": app.val["psnr_db"],
         "val_mse": app.val["mse"],
         "sdk_val_psnr_db": check["psnr_db"],
+        "val_accuracy": app.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
+        "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "sigma_sdk_vs_torch_max_abs_log": check["sigma_max_abs_log_diff"],
         "prt_roundtrip_max_abs": check["prt_max_abs"],
@@ -247,7 +264,7 @@ def bake(
 def check_asset(path, val_data: dict, app, samp, sh) -> dict:
     """Re-open the asset with the SDK: held-out PSNR, SDK vs torch on the held-out samples, sigma and PRT round trips."""
     from converters.train_neupress import appearance_inputs, predict_appearance, predict_log_sigma, sampling_inputs
-    from converters.train_rna import display_psnr
+    from converters.train_rna import display_psnr, held_out_accuracy
     from nasset_sdk.asset import Asset
 
     asset = Asset.open(path)
@@ -267,6 +284,7 @@ def check_asset(path, val_data: dict, app, samp, sh) -> dict:
                       + sum(len(asset.network_bytes(name, n)) for n in asset.network_refs(name)))
             for name in asset.components()}
     return {"psnr_db": display_psnr(y_sdk, val_data["rgb"])[0], "max_abs_diff": diff,
+            "accuracy": held_out_accuracy(y_sdk, val_data),
             "sigma_max_abs_log_diff": float(np.max(np.abs(s_sdk - s_torch))) if k else 0.0,
             "prt_max_abs": float(np.max(np.abs(prt - sh.astype(np.float16).astype(np.float32)))),
             "component_bytes": comp}
@@ -281,7 +299,11 @@ def _print_summary(s: dict, stream) -> None:
         f"alpha {s['boundary']['alpha']:.3f}",
         f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at {s['val_res']}^2, "
         f"{s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples  (kept in {s['dataset_dir']})",
-        f"  held-out PSNR (subsurface S): {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        *accuracy_lines(s.get("sdk_val_accuracy"), "held-out subsurface S (unclamped reference)"),
+        f"  held-out display PSNR (subsurface S; 99.5th pct, clipped): {s['val_psnr_db']:.2f} dB (torch), "
+        f"{s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)",
+        *([f"  training clamp {s['clamp']} /sr removed " + "/".join(f"{100 * f:.1f}" for f in s['clamp_removed']['fraction'])
+           + " % of the targets' energy (RGB)"] if s.get("clamp") and s.get("clamp_removed") else []),
         f"  sampling lobe KL: {s['sampling_kl_nats']:.3f} nats (uniform {s['sampling_kl_uniform_nats']:.3f}, "
         f"best single sigma per record {s['sampling_kl_best_sigma_nats']:.3f})",
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; log sigma {s['sigma_sdk_vs_torch_max_abs_log']:.2e}; "
