@@ -6,8 +6,9 @@ Mitsuba reference, over the pebble's pixels (mask from Mitsuba).
 
 Bound (tiny preset: 8^2 x 4 triplane, 2 x 16 decoder, 16 views of 24^2 at 8 spp): every channel's
 energy within ENERGY_BOUNDS of Mitsuba's. Measured (seed 0, 48 px, reference 1024 spp, estimate 16 spp):
-67 / 80 / 67 %. The pre-accuracy bake (clamp 10 /sr, log(1 + T) loss) scores 40 / 58 / 43 % and
-fails it (``test_old_clamped_bake_misses_the_bound``, slow). The issue's target for the *small*
+72.8 / 89.5 / 70.2 % (+-2.0 / 2.1 / 1.4). The pre-accuracy bake (clamp 10 /sr, which removed 15 / 14 / 13 %
+of the training targets' energy, and the log(1 + T) loss) scores 51.1 / 70.4 / 53.4 % and fails it
+(``test_old_clamped_bake_misses_the_bound``, slow). The issue's target for the *small*
 preset is +-3 %; tiny is a smoke-size model and far from it (spec/accuracy.md#ablation).
 """
 

@@ -1,6 +1,6 @@
 """The built-in high-albedo translucent example (``nasset bake --kind rna|neupress --example high-albedo``).
 
-A pebble (ellipsoid mesh) with a rough dielectric boundary (GGX alpha 0.15, IOR 1.5) around a
+A pebble (ellipsoid mesh) with a rough dielectric boundary (GGX, alpha 0.15, IOR 1.5) around a
 homogeneous medium of single-scattering albedo >= 0.99 in every channel (sigma_t 25 per unit), on a
 diffuse ground under a sun (directional) and a constant sky, rendered with ``volpath`` max_depth 128.
 Long random walks under a rough boundary reached by next-event estimation only: the case where path
@@ -47,6 +47,7 @@ _XML = """<scene version="3.0.0">
     <shape type="ply" id="pebble">
         <string name="filename" value="meshes/pebble.ply"/>
         <bsdf type="roughdielectric">
+            <string name="distribution" value="ggx"/>
             <float name="alpha" value="0.15"/>
             <float name="int_ior" value="1.5"/>
             <float name="ext_ior" value="1.0"/>

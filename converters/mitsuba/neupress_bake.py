@@ -102,7 +102,7 @@ def bake(
         from converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
     elif example:
         from converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
-
+    if example:
         scene = write_example_scene(work / "example_scene", size)
         asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
     if scene is None:
