@@ -336,6 +336,9 @@ def baker_for(kind: str, scene, example: str | None):
 def run(args) -> int:
     """CLI entry: see ``nasset bake --help``."""
     fn = baker_for(args.kind, args.scene, args.example)
+    if getattr(args, "clamp", None) is not None and (args.kind == "8dna" or str(args.scene or "").lower().endswith(".blend")
+                                                     or str(args.example or "").startswith("blender")):
+        raise UsageError("--clamp applies to Mitsuba rna and neupress bakes only")
     summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
