@@ -106,3 +106,30 @@ def psnr_line(s: dict, label: str = "held-out PSNR") -> str:
 def times_line(times: dict) -> str:
     """``  time: scene 1.2s, dataset 3.4s, ...`` from ``{"scene_s": 1.2, ...}``."""
     return "  time: " + ", ".join(f"{k[:-2]} {v:.1f}s" for k, v in times.items())
+
+
+def clamp_removed(train_data: dict) -> dict | None:
+    """Share of the training targets' energy per channel that the clamp removed (None: not recorded)."""
+    if "energy" not in train_data:
+        return None
+    e = np.asarray(train_data["energy"], np.float64)
+    r = np.asarray(train_data["clamp_removed"], np.float64)
+    return {"fraction": [float(x) for x in r / np.where(e > 0, e, np.nan)], "energy": [float(x) for x in e]}
+
+
+def accuracy_lines(acc: dict | None, label: str = "held-out (unclamped reference)") -> list[str]:
+    """Summary lines of a spec/accuracy.md#metrics dict: energy per channel, PSNR and its ceiling."""
+    if not acc:
+        return []
+    e = "/".join(f"{100 * r:.1f}" for r in acc["energy_ratio"])
+    se = "/".join(f"{100 * r:.1f}" for r in acc["energy_se"])
+    return [f"  {label}: energy {e} % (RGB, +-{se}), PSNR {acc['psnr_db']:.2f} dB, "
+            f"ceiling {acc['ceiling_db']:.2f} dB -> claimed {acc['claimed_psnr']}"]
+
+
+def clamp_lines(s: dict) -> list[str]:
+    """The training clamp and the share of the targets' energy it removed, when a bake clamped."""
+    if not (s.get("clamp") and s.get("clamp_removed")):
+        return []
+    return [f"  training clamp {s['clamp']} /sr removed " + "/".join(f"{100 * f:.1f}" for f in s["clamp_removed"]["fraction"])
+            + " % of the targets' energy (RGB)"]

@@ -14,6 +14,8 @@ BENCHES = {
              "nasset_benchmarks.eightdna"),
     "blender": ("rna from Blender: Cycles path tracing vs the reference renderer, surface and hair examples, h ablation",
                 "nasset_benchmarks.blender"),
+    "accuracy": ("a baked asset in its own Mitsuba scene against unclamped two-half ground truth: energy, PSNR with "
+                 "the noise ceiling, FLIP over the object's pixels", "nasset_benchmarks.accuracy"),
 }
 
 

@@ -104,6 +104,9 @@ CODES: dict[str, Code] = _codes(
     ("GEOMETRY_SCALE", "format", "geometry coordinates above the bound, or the geometry too small for its position to render in float32",
      "security.md#bounds"),
     ("IMAGE_INVALID", "read", "an image the renderer reads (dome texture) is corrupt, unsupported or above the size bound", "renderer.md#limits"),
+    # benchmarks (in-scene accuracy)
+    ("BENCH_ASSET_MISMATCH", "scene", "a --replace asset was not baked from the shapes it replaces", "accuracy.md#errors"),
+    ("BENCH_ASSET_KIND", "scene", "a --replace asset's kind or variant cannot stand in for the replaced shapes", "accuracy.md#errors"),
 )
 
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import dataset_line, psnr_line, times_line
+from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, times_line
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.RNA_BLENDER_DATA  # the table lives in nasset_bakers/presets.py
@@ -179,6 +179,7 @@ def bake(
         "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp, "renderer": f"cycles {bpy.app.version_string}",
         "device": result.device, "h_input": h_input, "mask_disagreement": disagree,
         "val_psnr_db": result.val["psnr_db"], "sdk_val_psnr_db": check["psnr_db"],
+        "val_accuracy": result.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "sdk_vs_torch_max_abs": check["max_abs_diff"], "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
         "times_s": {k: round(v, 2) for k, v in times.items()},
     }
@@ -193,7 +194,8 @@ def _print_summary(s: dict, stream) -> None:
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB, rna {s['variant']}{'' if s['h_input'] else ', h fixed to 0'})",
         f"  {s['renderer']} ground truth, training on {s['device']}",
         dataset_line(s) + f" (mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
-        psnr_line(s),
+        *accuracy_lines(s.get("sdk_val_accuracy")),
+        psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
     ]

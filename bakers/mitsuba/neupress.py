@@ -23,11 +23,11 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, dataset_line, finite, psnr_line, times_line
+from nasset_bakers.stages import accuracy_lines, check_options, clamp_lines, clamp_removed, dataset_line, finite, psnr_line, times_line
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.NEUPRESS_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
-EXAMPLES = ("default",)
+EXAMPLES = ("default", "high-albedo")
 
 
 def bake(
@@ -48,8 +48,11 @@ def bake(
     quiet: bool = False,
     variant: str | None = None,
     summary_stream=None,
+    clamp: float | None = None,
 ) -> dict:
     """Run the whole neupress bake; returns the summary dict (also stored in the asset's provenance).
+
+    ``clamp``: per-path-sample clamp of the training targets (default 0: none; removed energy stored).
 
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
     from nasset_bakers.stages import progress_bar, render_views, train_with_progress
@@ -93,9 +96,11 @@ def bake(
     for w in caught:
         say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
-    if example:
+    if example == "high-albedo":
+        from nasset_converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
+    elif example:
         from nasset_converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
-
+    if example:
         scene = write_example_scene(work / "example_scene", size)
         asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
     if scene is None:
@@ -117,6 +122,15 @@ def bake(
         dset = replace(dset, res=int(res))
     if spp is not None:
         dset = replace(dset, spp=int(spp))
+    if clamp is not None:
+        if not clamp >= 0:
+            raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
+        dset = replace(dset, clamp=float(clamp))
+    from nasset_converters.mitsuba.high_albedo_example import scene_max_depth
+
+    md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
+    if md is not None and (md < 0 or md > dset.max_depth):
+        dset = replace(dset, max_depth=md if md > 0 else 1024)
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth)
     renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
     times["scene_s"] = time.perf_counter() - t
@@ -199,7 +213,8 @@ def bake(
         "ground_truth": {"quantity": "subsurface only: first boundary vertex samples the transmission lobe "
                                      "(spec/bake-neupress.md#data)",
                          "light": {"type": "directional", "irradiance": 1.0, "directions": "uniform full sphere, per pixel"}},
-        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"]))},
+        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
+                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
         "training": {**tset.__dict__, "device": app.device, "framework": f"torch {torch.__version__}",
                      "final_loss": app.history[-1]["loss"] if app.history else None,
                      "sampling_kl": samp.kl, "sampling_kl_uniform": samp.kl_uniform, "sampling_kl_best_sigma": samp.kl_best},
@@ -231,6 +246,8 @@ def bake(
         "val_psnr_db": app.val["psnr_db"],
         "val_mse": app.val["mse"],
         "sdk_val_psnr_db": check["psnr_db"],
+        "val_accuracy": app.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
+        "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "sigma_sdk_vs_torch_max_abs_log": check["sigma_max_abs_log_diff"],
         "prt_roundtrip_max_abs": check["prt_max_abs"],
@@ -250,7 +267,9 @@ def _print_summary(s: dict, stream) -> None:
         f"  mitsuba {s['variant']}, training on {s['device']}; boundary eta {s['boundary']['eta']:.3f}, "
         f"alpha {s['boundary']['alpha']:.3f}",
         dataset_line(s) + f"  (kept in {s['dataset_dir']})",
-        psnr_line(s, "held-out PSNR (subsurface S)"),
+        *accuracy_lines(s.get("sdk_val_accuracy"), "held-out subsurface S (unclamped reference)"),
+        psnr_line(s, "held-out display PSNR (subsurface S; 99.5th pct, clipped)"),
+        *clamp_lines(s),
         f"  sampling lobe KL: {s['sampling_kl_nats']:.3f} nats (uniform {s['sampling_kl_uniform_nats']:.3f}, "
         f"best single sigma per record {s['sampling_kl_best_sigma_nats']:.3f})",
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; log sigma {s['sigma_sdk_vs_torch_max_abs_log']:.2e}; "

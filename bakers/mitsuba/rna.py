@@ -20,7 +20,7 @@ from pathlib import Path
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, dataset_line, finite, psnr_line, times_line
+from nasset_bakers.stages import accuracy_lines, check_options, clamp_lines, clamp_removed, dataset_line, finite, psnr_line, times_line
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.RNA_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
@@ -38,7 +38,7 @@ def bake(
     output: str | Path,
     *,
     size: str = "small",
-    example: bool = False,
+    example: bool | str = False,
     resume: str | Path | None = None,
     views: int | None = None,
     res: int | None = None,
@@ -50,8 +50,13 @@ def bake(
     quiet: bool = False,
     variant: str | None = None,
     summary_stream=None,
+    clamp: float | None = None,
+    loss: str | None = None,
 ) -> dict:
-    """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
+
+    ``clamp``: per-path-sample clamp of the training targets (default 0: none; the energy it removes
+    is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings')."""
     from nasset_bakers.stages import render_views, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
@@ -77,7 +82,12 @@ def bake(
     for w in caught:
         say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
-    if example:
+    if example == "high-albedo":
+        from nasset_converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+        scene = write_example_scene(work / "example_scene")
+        asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
+    elif example:
         from nasset_converters.mitsuba.examples import EXAMPLE_ASSET_IDS, write_example_scene
 
         scene = write_example_scene(work / "example_scene")
@@ -104,6 +114,15 @@ def bake(
         dset = replace(dset, res=int(res))
     if spp is not None:  # training views only: the held-out reference keeps the preset's (low) noise
         dset = replace(dset, spp=int(spp))
+    if clamp is not None:
+        if not clamp >= 0:
+            raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
+        dset = replace(dset, clamp=float(clamp))
+    from nasset_converters.mitsuba.high_albedo_example import scene_max_depth
+
+    md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
+    if md is not None and (md < 0 or md > dset.max_depth):
+        dset = replace(dset, max_depth=md if md > 0 else 1024)
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
     renderer = ds.Renderer(mi, iso, dset)
     times["scene_s"] = time.perf_counter() - t
@@ -130,6 +149,8 @@ def bake(
     tset = TrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
+    if loss is not None:
+        tset = replace(tset, loss=str(loss))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
     result = train_with_progress(
@@ -147,11 +168,12 @@ def bake(
         "converter": f"converters.mitsuba {CONVERTER_VERSION}",
         "converterVersion": CONVERTER_VERSION,
         "source": {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "scene": str(scene),
-                   "scene_sha256": meta["scene_sha256"], "shapes": list(asset_ids), "example": bool(example),
+                   "scene_sha256": meta["scene_sha256"], "shapes": list(asset_ids), "example": example if isinstance(example, str) else bool(example),
                    "bsdfs": msc.bsdf_names(shapes)},
         "light": {"type": "directional" if dset.light_angle_deg == 0 else "distant-sphere",
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
-        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"]))},
+        "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
+                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
@@ -178,6 +200,9 @@ def bake(
         "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp,
         "variant": mi.variant(), "device": result.device,
         "val_psnr_db": result.val["psnr_db"],
+        "val_accuracy": result.val.get("accuracy"),
+        "sdk_val_accuracy": check.get("accuracy"),
+        "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
         "sdk_val_psnr_db": check["psnr_db"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
@@ -194,7 +219,9 @@ def _print_summary(s: dict, stream) -> None:
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB)",
         f"  mitsuba {s['variant']}, training on {s['device']}",
         dataset_line(s) + f"  (kept in {s['dataset_dir']})",
-        psnr_line(s),
+        *accuracy_lines(s.get("sdk_val_accuracy")),
+        psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
+        *clamp_lines(s),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
     ]
@@ -202,10 +229,10 @@ def _print_summary(s: dict, stream) -> None:
 
 
 def bake_named_example(scene, asset_ids, output, *, example: str | None = None, **options) -> dict:
-    """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna has one example: default)."""
-    if example not in (None, "default"):
-        raise UsageError(f"unknown rna example {example!r} (default, blender-surface, blender-hair)")
-    return bake(scene, asset_ids, output, example=example is not None, **options)
+    """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna: default, high-albedo)."""
+    if example not in (None, "default", "high-albedo"):
+        raise UsageError(f"unknown rna example {example!r} (default, high-albedo, blender-surface, blender-hair)")
+    return bake(scene, asset_ids, output, example=example or False, **options)
 
 
 register_baker("mitsuba", "rna", bake_named_example)

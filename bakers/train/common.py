@@ -78,3 +78,13 @@ class TorchCheckpoint:
         tmp = str(self.path) + ".part"
         torch.save({**state, "key": json.dumps(self.key, sort_keys=True)}, tmp)
         os.replace(tmp, self.path)
+
+
+def held_out_accuracy(pred: np.ndarray, val_data: dict) -> dict | None:
+    """Figures of spec/accuracy.md#metrics of held-out predictions [N, 3] against the unclamped two-half
+    reference (``rgb_a``, ``rgb_b``); None for datasets without halves."""
+    from nasset_sdk.metrics import accuracy
+
+    if "rgb_a" not in val_data or not len(pred):
+        return None
+    return accuracy(pred, val_data["rgb_a"], val_data["rgb_b"], flip=False).to_dict()

@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import TorchCheckpoint, display_psnr, pick_device, require_torch
+from .common import TorchCheckpoint, display_psnr, held_out_accuracy, pick_device, require_torch
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
            "prt_coefficients", "appearance_inputs", "sampling_inputs", "export_skip_mlp", "export_mlp", "check_asset"]
@@ -251,7 +251,8 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
     psnr, mse, peak = display_psnr(np.maximum(pred, 0.0), val_data["rgb"])
     val = {"psnr_db": psnr, "mse": mse, "peak": peak, "samples": int(len(v_val)),
            "mean_gt": float(np.mean(val_data["rgb"])) if len(v_val) else float("nan"),
-           "mean_pred": float(np.mean(np.maximum(pred, 0.0))) if len(v_val) else float("nan")}
+           "mean_pred": float(np.mean(np.maximum(pred, 0.0))) if len(v_val) else float("nan"),
+           "accuracy": held_out_accuracy(np.maximum(pred, 0.0), val_data)}
     return AppearanceResult(model, G, history, val, time.perf_counter() - t0, str(dev))
 
 
@@ -449,6 +450,7 @@ def check_asset(path, val_data: dict, app, samp, sh) -> dict:
                       + sum(len(asset.network_bytes(name, n)) for n in asset.network_refs(name)))
             for name in asset.components()}
     return {"psnr_db": display_psnr(y_sdk, val_data["rgb"])[0], "max_abs_diff": diff,
+            "accuracy": held_out_accuracy(y_sdk, val_data),
             "sigma_max_abs_log_diff": float(np.max(np.abs(s_sdk - s_torch))) if k else 0.0,
             "prt_max_abs": float(np.max(np.abs(prt - sh.astype(np.float16).astype(np.float32)))),
             "component_bytes": comp}

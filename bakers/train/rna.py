@@ -8,8 +8,11 @@ lookup is ``torch.nn.functional.grid_sample(align_corners=False, padding_mode="b
 is the format's ``encodings.grid_sample_2d`` (texel centres, edge clamp); ``check_parity``
 verifies it numerically against the SDK.
 
-Loss: L2 between log(1 + T) of prediction and ground truth, only on the output matching the
-sample's light visibility. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
+Loss: plain L2 on linear T (default; unbiased for noisy, heavy-tailed targets: its minimiser is the
+targets' mean, spec/accuracy.md#loss), only on the output matching the sample's light visibility.
+``loss = "log"`` (the paper's L2 of log(1 + T)) is biased on noisy targets (its minimiser is
+exp(E log(1 + y)) - 1 < E[y]) and kept for ablations; ``"rel"`` is L2 relative to the detached
+prediction (Noise2Noise), also unbiased. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
 to 1 texel over the first 20 % of epochs, then kept at 1 texel; the exported planes are the
 blurred planes the decoder was trained with. Adam, learning rate halved every 20 % of epochs.
 
@@ -31,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import display_psnr, pick_device, require_torch
+from .common import display_psnr, held_out_accuracy, pick_device, require_torch
 
 
 @dataclass(frozen=True)
@@ -46,7 +49,7 @@ class TrainSettings:
     blur_end: float = 1.0
     blur_until: float = 0.2  # fraction of epochs
     init_std: float = 0.1
-    loss: str = "log"  # "log": L2 of log(1 + T) (paper); "rel": L2 relative to sg(prediction)
+    loss: str = "l2"  # "l2": L2 of T (unbiased); "log": L2 of log(1 + T) (paper; biased on noisy targets); "rel": L2 / sg(pred)^2
     rel_eps: float = 0.01  # "rel": (pred - y)^2 / (sg(pred) + rel_eps)^2
     encoding: str = "lobes"  # decoder-internal features of the fixed input row: "raw" or "lobes"
     plane_res: int = 0  # triplane resolution R; 0: the preset's (nasset_sdk.kinds.rna.SIZES)
@@ -337,6 +340,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     yv = np.maximum(predict(model, V), 0.0)
     pv = select_branch(yv, val_data["vis"])
     psnr, mse_lin, peak = display_psnr(pv, val_data["rgb"])
+    acc = held_out_accuracy(pv, val_data)
     log_mse = float(np.mean((np.log1p(pv) - np.log1p(np.maximum(val_data["rgb"], 0))) ** 2)) if len(pv) else float("nan")
     onnx_bytes = export_onnx(model)
     check_model_bytes(onnx_bytes)
@@ -344,7 +348,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     model.to(device)
     return TrainResult(
         model=model, planes=planes16, onnx=onnx_bytes, history=history,
-        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv))},
+        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv)), "accuracy": acc},
         onnx_max_abs_diff=diff, seconds=train_s, device=str(device),
     )
 
@@ -368,4 +372,4 @@ def check_asset(path, val_data: dict, result) -> dict:
     y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
     diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
     psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
-    return {"psnr_db": psnr, "max_abs_diff": diff}
+    return {"psnr_db": psnr, "max_abs_diff": diff, "accuracy": held_out_accuracy(select_branch(y_sdk, val_data["vis"]), val_data)}

@@ -6,7 +6,9 @@ that) and irradiance 1 W/m^2 shines from a random direction wi (one per view: Cy
 per-pixel light, spec/bake-blender.md#deviations; ``lights_per_view = k`` renders a training view
 k times at spp // k with k suns and gives random pixel groups their own). The asset is rendered alone (every other object
 hidden, black world, transparent film) by Cycles on the CPU with a 0.01-pixel filter, so each
-pixel is point-sampled at its centre, with the paper's clamps (direct 20, indirect 10).
+pixel is point-sampled at its centre, with the paper's clamps (direct 20, indirect 10) for training
+views; held-out views are unclamped, rendered as two independent halves (``rgb_a``, ``rgb_b``; the
+alpha of their mean divides both) so their own noise is measured (spec/accuracy.md#metrics).
 
 The geometric inputs come from our own ray caster on the exported geometry (Embree, the
 reference renderer's :class:`nasset_reference_renderer.accel.Accel`, with fibers tessellated exactly
@@ -240,7 +242,19 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
     rig.place_sun(wi)
     spp = s.val_spp if validation else s.spp
     k = 1 if validation else max(1, int(s.lights_per_view))
-    rgba = rig.render(spp if k == 1 else max(1, spp // k), seed=hash((s.seed, int(validation), view_id)) & 0xFFFFFF).reshape(-1, 4)
+    vseed = hash((s.seed, int(validation), view_id)) & 0xFFFFFF
+    halves = None
+    if validation:  # held-out: unclamped, two independent halves (spec/accuracy.md#metrics)
+        c = rig.scene.cycles
+        saved = (c.sample_clamp_direct, c.sample_clamp_indirect)
+        c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+        try:
+            halves = [rig.render(max(1, spp // 2), seed=hs).reshape(-1, 4) for hs in (vseed, vseed ^ 0x800000)]
+        finally:
+            c.sample_clamp_direct, c.sample_clamp_indirect = saved
+        rgba = 0.5 * (halves[0] + halves[1])
+    else:
+        rgba = rig.render(spp if k == 1 else max(1, spp // k), seed=vseed).reshape(-1, 4)
     wi_pix = np.repeat(wi[None], len(o), 0)
     if k > 1:  # more light directions at the same sample budget: pixel group g takes render g's values
         group = rng.integers(0, k, len(o))
@@ -268,6 +282,9 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
     }
     if caster.variant == "fiber":
         out["h"] = sel["h"].astype(np.float32)
+    if halves is not None:
+        for name, hv in zip(("rgb_a", "rgb_b"), halves, strict=True):
+            out[name] = np.maximum(hv[pix, :3] / np.maximum(alpha[pix], 1e-6)[:, None], 0.0).astype(np.float32)
     return out
 
 
@@ -294,6 +311,9 @@ def load_split(store: DatasetDir, split: str, count: int, fiber: bool) -> dict:
     """All views of a split concatenated (FIELDS, 'h' for fibers) plus 'view' and the mask statistics."""
     parts = [store.load(split, i) for i in range(count)]
     out = {f: np.concatenate([p[f] for p in parts]) for f in (FIBER_FIELDS if fiber else FIELDS)}
+    for f in ("rgb_a", "rgb_b"):  # held-out halves (spec/accuracy.md#metrics)
+        if parts and all(f in p for p in parts):
+            out[f] = np.concatenate([p[f] for p in parts])
     out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
     out["disagree"] = int(sum(int(p["disagree"]) for p in parts))
     out["covered"] = int(sum(int(p["covered"]) for p in parts))

@@ -5,11 +5,14 @@ pixel *centre* (rays are generated here, so there is no pixel-filter jitter). Fo
 whose ray hits the asset we store the hit point x, the shading normal n, wo (towards the camera),
 a light direction wi, the binary visibility V of the light from x against the asset alone, and
 the transport T (radiance per unit irradiance, mean of ``spp`` path samples, each clamped at
-``clamp``). Training views give every pixel its own random light direction (the paper's choice;
+``clamp``, default 0: none). Training views give every pixel its own random light direction (the paper's choice;
 one Mitsuba call per view through the per-path emitter of ``scene.IsolatedAsset``), or, with
 ``lights_per_view = k > 0`` or when that emitter is unavailable (finite-angle light, scalar
 variant), k random directions per view shared by random pixel groups. Validation views use one
-fixed light per view, at ``val_res`` and ``val_spp``.
+fixed light per view, at ``val_res`` and ``val_spp``, **never clamped**, in two independent halves
+(``rgb_a``, ``rgb_b``, each ``val_spp / 2`` paths; ``rgb`` is their mean) so the reference's own noise
+is measured (spec/accuracy.md#metrics). Training views store the energy a clamp removed
+(``clamp_removed`` and ``energy``, per channel, summed over the view's pixel means).
 
 A dataset lives in a folder: ``meta.json`` (settings; a resume must match them) and one
 ``train/NNNN.npz`` / ``val/NNNN.npz`` per view, each written atomically, so an interrupted
@@ -48,7 +51,7 @@ class DataSettings:
     distance: float = 2.6  # camera distance in bounding-sphere radii
     upper_hemisphere: bool = False
     val_res: int = 0  # held-out image size; 0: res
-    clamp: float = 10.0  # per-path-sample radiance clamp (1/sr); 0: none (spec/bake.md#clamp)
+    clamp: float = 0.0  # per-path-sample radiance clamp (1/sr) of training views; 0: none (spec/bake.md#clamp)
     max_depth: int = 24
     seed: int = 0
     chunk: int = 1 << 20  # rays (pixels x spp) per Mitsuba call
@@ -143,11 +146,14 @@ class Renderer:
         blocked = np.asarray(self.iso.geometry_scene.ray_test(shadow), bool)[:n]
         return ~blocked
 
-    def transport(self, o, d, spp: int, seed: int, wi=None) -> np.ndarray:
+    def transport(self, o, d, spp: int, seed: int, wi=None, *, clamp: float | None = None, stats: dict | None = None) -> np.ndarray:
         """Mean radiance [N,3] over spp paths. ``wi`` [N,3]: each pixel's own light direction (needs
-        ``iso.per_path_lights``); without it, the current light (set with iso.set_light)."""
+        ``iso.per_path_lights``); without it, the current light (set with iso.set_light). ``clamp``:
+        per-path-sample clamp (default the settings'); ``stats``: a dict whose ``removed`` and
+        ``energy`` [3] accumulate the pixel means' energy the clamp removed and the unclamped energy."""
+        clamp = self.s.clamp if clamp is None else clamp
         if not self.jit:
-            return self._transport_scalar(o, d, spp, seed)
+            return self._transport_scalar(o, d, spp, seed, clamp, stats)
         mi = self.mi
         lanes = wi is not None
         if lanes and not self.iso.per_path_lights:
@@ -172,9 +178,11 @@ class Renderer:
             spec, _, _ = self.iso.integrator.sample(scene, sampler, ray, None, True)
             L = self._np3(spec)[: len(oo)].astype(np.float64).reshape(e - s, spp, 3)
             L = np.nan_to_num(L, nan=0.0, posinf=0.0, neginf=0.0)
-            if self.s.clamp > 0:
-                L = np.minimum(L, self.s.clamp)
+            raw = L.mean(axis=1)
+            if clamp > 0:
+                L = np.minimum(L, clamp)
             out[s:e] = L.mean(axis=1)
+            account_clamp(stats, raw, out[s:e])
         return out.astype(np.float32)
 
     # -- scalar fallback (slow: one ray per call) ----------------------------------------------
@@ -203,21 +211,36 @@ class Renderer:
             out[i] = not self.iso.geometry_scene.ray_test(si.spawn_ray(mi.Vector3f(*map(float, wi[i]))))
         return out
 
-    def _transport_scalar(self, o, d, spp, seed):
+    def _transport_scalar(self, o, d, spp, seed, clamp, stats=None):
         mi = self.mi
         sampler = mi.load_dict({"type": "independent"})
         out = np.zeros((len(o), 3), np.float64)
         for i in range(len(o)):
             sampler.seed(int(seed * 7919 + i) & 0x7FFFFFFF)
             ray = mi.RayDifferential3f(self._sray(o[i], d[i]))
-            acc = np.zeros(3)
+            acc, acc_raw = np.zeros(3), np.zeros(3)
             for _ in range(spp):
                 spec, _, _ = self.iso.integrator.sample(self.iso.lit_scene, sampler, ray, None, True)
                 v = np.nan_to_num(np.asarray(list(spec), np.float64))
-                acc += np.minimum(v, self.s.clamp) if self.s.clamp > 0 else v
+                acc += np.minimum(v, clamp) if clamp > 0 else v
+                acc_raw += v
                 sampler.advance()
             out[i] = acc / max(spp, 1)
+            account_clamp(stats, acc_raw[None] / max(spp, 1), out[i:i + 1])
         return out.astype(np.float32)
+
+
+def account_clamp(stats: dict | None, raw: np.ndarray, kept: np.ndarray) -> None:
+    """Accumulate the unclamped energy and the energy a clamp removed (pixel means, per channel)."""
+    if stats is None:
+        return
+    stats["energy"] = stats.get("energy", np.zeros(3)) + raw.sum(0)
+    stats["removed"] = stats.get("removed", np.zeros(3)) + (raw - kept).sum(0)
+
+
+def half_seeds(seed: int) -> tuple[int, int]:
+    """Seeds of a held-out view's two independent halves (disjoint sampler streams)."""
+    return seed, seed ^ 0x800000  # seeds are < 2**24: bit 23 differs
 
 
 def render_view(renderer: Renderer, center, radius, view_id: int, *, validation: bool) -> dict:
@@ -237,10 +260,12 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     spp = s.val_spp if validation else s.spp
     seed = hash((s.seed, split_seed, view_id)) & 0xFFFFFF
     per_pixel = not validation and s.lights_per_view == 0
+    stats: dict = {}
+    halves = None
     if per_pixel and renderer.iso.per_path_lights:
         wi = unit_sphere(rng, len(pix), s.upper_hemisphere).astype(np.float32)
         vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
-        rgb = renderer.transport(o, d, spp, seed=seed, wi=wi) if len(pix) else np.zeros((0, 3), np.float32)
+        rgb = renderer.transport(o, d, spp, seed=seed, wi=wi, stats=stats) if len(pix) else np.zeros((0, 3), np.float32)
     else:
         k = 1 if validation else (s.lights_per_view or FALLBACK_LIGHT_GROUPS)
         lights = unit_sphere(rng, k, s.upper_hemisphere)
@@ -248,16 +273,29 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
         wi = lights[group].astype(np.float32)
         vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
         rgb = np.zeros((len(pix), 3), np.float32)
+        halves = [np.zeros((len(pix), 3), np.float32), np.zeros((len(pix), 3), np.float32)] if validation else None
         for g in range(k):
             sel = np.nonzero(group == g)[0]
             if len(sel) == 0:
                 continue
             renderer.iso.set_light(lights[g])
-            rgb[sel] = renderer.transport(o[sel], d[sel], spp, seed=hash((s.seed, split_seed, view_id, g)) & 0xFFFFFF)
-    return {
+            gseed = hash((s.seed, split_seed, view_id, g)) & 0xFFFFFF
+            if validation:  # unclamped, two independent halves (spec/accuracy.md#metrics)
+                for h, hs in enumerate(half_seeds(gseed)):
+                    halves[h][sel] = renderer.transport(o[sel], d[sel], max(1, spp // 2), seed=hs, clamp=0.0)
+                rgb[sel] = 0.5 * (halves[0][sel] + halves[1][sel])
+            else:
+                rgb[sel] = renderer.transport(o[sel], d[sel], spp, seed=gseed, stats=stats)
+    out = {
         "x": x.astype(np.float32), "n": n.astype(np.float32), "wo": (-d).astype(np.float32), "wi": wi,
         "vis": vis.astype(np.uint8), "rgb": rgb, "pix": pix.astype(np.int32), "res": np.int32(res),
     }
+    if halves is not None:
+        out["rgb_a"], out["rgb_b"] = halves
+    else:
+        out["energy"] = np.asarray(stats.get("energy", np.zeros(3)), np.float64)
+        out["clamp_removed"] = np.asarray(stats.get("removed", np.zeros(3)), np.float64)
+    return out
 
 
 def settings_digest(scene_path: Path, shape_ids, settings: DataSettings, variant: str) -> dict:
@@ -334,5 +372,11 @@ class DatasetDir:
         """All views of a split concatenated (FIELDS) plus 'view' [M] view index."""
         parts = [self.load(split, i) for i in range(count)]
         out = {f: np.concatenate([p[f] for p in parts]) for f in FIELDS}
+        for f in ("rgb_a", "rgb_b"):  # held-out halves (spec/accuracy.md#metrics)
+            if parts and all(f in p for p in parts):
+                out[f] = np.concatenate([p[f] for p in parts])
+        for f in ("energy", "clamp_removed"):  # per-view sums: totals over the split
+            if parts and all(f in p for p in parts):
+                out[f] = np.sum([p[f] for p in parts], axis=0)
         out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
         return out

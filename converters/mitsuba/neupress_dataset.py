@@ -15,7 +15,9 @@ objects, internal reflections and refraction out (with next-event estimation thr
 boundary) are all ordinary path tracing. The excluded external reflection is the analytic GGX term the
 asset stores (``core/boundary``). Light directions are uniform over the **full sphere**, an independent
 one per pixel (the per-path directional emitter of ``scene.IsolatedAsset``). Held-out views use one
-light per view at more samples per pixel.
+light per view at more samples per pixel, **unclamped**, in two independent halves (``rgb_a``,
+``rgb_b``; ``rgb`` their mean; spec/accuracy.md#metrics). Training targets are unclamped by default;
+with a clamp, each training view records the energy it removed (``energy``, ``clamp_removed``).
 
 Storage: ``DatasetDir`` folders (``meta.json`` + one atomic ``.npz`` per view), so an interrupted bake
 resumes at the first missing view.
@@ -29,7 +31,7 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
-from .dataset import camera_rays, unit_sphere
+from .dataset import account_clamp, camera_rays, half_seeds, unit_sphere
 
 FIELDS = ("x", "n", "wo", "wi", "rgb", "pix")
 
@@ -43,7 +45,7 @@ class NeupressDataSettings:
     val_res: int = 48
     val_spp: int = 512
     distance: float = 2.6  # camera distance in bounding-sphere radii
-    clamp: float = 10.0  # per-path-sample radiance clamp (1/sr); 0: none
+    clamp: float = 0.0  # per-path-sample radiance clamp (1/sr) of training views; 0: none (spec/accuracy.md)
     max_depth: int = 64
     seed: int = 0
     chunk: int = 1 << 19  # rays (pixels x spp) per Mitsuba call
@@ -135,9 +137,11 @@ class SubsurfaceRenderer:
         dr.eval(valid, si.p, si.sh_frame.n)
         return np.asarray(valid, bool)[:n], self._np3(si.p)[:n].astype(np.float32), self._np3(si.sh_frame.n)[:n].astype(np.float32)
 
-    def transport(self, o, d, wi, spp: int, seed: int) -> np.ndarray:
-        """Mean subsurface-only radiance [N,3] over ``spp`` paths per pixel; ``wi`` [N,3] each pixel's light."""
+    def transport(self, o, d, wi, spp: int, seed: int, *, clamp: float | None = None, stats: dict | None = None) -> np.ndarray:
+        """Mean subsurface-only radiance [N,3] over ``spp`` paths per pixel; ``wi`` [N,3] each pixel's light.
+        ``clamp``: per-path-sample clamp (default the settings'); ``stats`` accumulates the energy it removed."""
         mi = self.mi
+        clamp = self.s.clamp if clamp is None else clamp
         scene = self.iso.lane_scene
         n = len(o)
         out = np.zeros((n, 3), np.float64)
@@ -163,10 +167,12 @@ class SubsurfaceRenderer:
             inner = si.spawn_ray(si.to_world(bs.wo))
             spec, _, _ = self.iso.integrator.sample(scene, sampler, mi.RayDifferential3f(inner), self.medium, active)
             L = self._np3(spec * weight)[:m].astype(np.float64).reshape(e - s, spp, 3)
-            L = np.nan_to_num(L, nan=0.0, posinf=0.0, neginf=0.0)
-            if self.s.clamp > 0:
-                L = np.minimum(L, self.s.clamp)
-            out[s:e] = np.maximum(L, 0.0).mean(axis=1)
+            L = np.maximum(np.nan_to_num(L, nan=0.0, posinf=0.0, neginf=0.0), 0.0)
+            raw = L.mean(axis=1)
+            if clamp > 0:
+                L = np.minimum(L, clamp)
+            out[s:e] = L.mean(axis=1)
+            account_clamp(stats, raw, out[s:e])
         return out.astype(np.float32)
 
 
@@ -189,9 +195,19 @@ def render_view(renderer: SubsurfaceRenderer, center, radius, view_id: int, *, v
         wi = unit_sphere(rng, len(pix), False).astype(np.float32)
     spp = s.val_spp if validation else s.spp
     seed = (s.seed * 1_000_003 + split_seed * 10_007 + view_id) & 0xFFFFFF
-    rgb = renderer.transport(o, d, wi, spp, seed) if len(pix) else np.zeros((0, 3), np.float32)
+    extra: dict = {}
+    if not len(pix):
+        rgb = np.zeros((0, 3), np.float32)
+        extra = {"rgb_a": rgb, "rgb_b": rgb} if validation else {"energy": np.zeros(3), "clamp_removed": np.zeros(3)}
+    elif validation:  # unclamped, two independent halves (spec/accuracy.md#metrics)
+        a, b = (renderer.transport(o, d, wi, max(1, spp // 2), hs, clamp=0.0) for hs in half_seeds(seed))
+        rgb, extra = 0.5 * (a + b), {"rgb_a": a, "rgb_b": b}
+    else:
+        stats: dict = {}
+        rgb = renderer.transport(o, d, wi, spp, seed, stats=stats)
+        extra = {"energy": np.asarray(stats.get("energy", np.zeros(3))), "clamp_removed": np.asarray(stats.get("removed", np.zeros(3)))}
     return {"x": x, "n": n, "wo": (-d).astype(np.float32), "wi": wi, "rgb": rgb, "pix": pix.astype(np.int32),
-            "res": np.int32(res)}
+            "res": np.int32(res), **extra}
 
 
 def load_split(store, split: str, count: int) -> dict:
@@ -201,5 +217,11 @@ def load_split(store, split: str, count: int) -> dict:
     if missing:
         raise error("CONVERT_DATASET", f"view files lack {missing}: not a neupress dataset", file=str(store.root))
     out = {f: np.concatenate([p[f] for p in parts]) for f in FIELDS}
+    for f in ("rgb_a", "rgb_b"):  # held-out halves (spec/accuracy.md#metrics)
+        if parts and all(f in p for p in parts):
+            out[f] = np.concatenate([p[f] for p in parts])
+    for f in ("energy", "clamp_removed"):  # per-view sums: totals over the split
+        if parts and all(f in p for p in parts):
+            out[f] = np.sum([p[f] for p in parts], axis=0)
     out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
     return out

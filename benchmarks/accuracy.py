@@ -1,0 +1,420 @@
+"""``nasset bench accuracy``: a baked asset in its own scene against unbiased Mitsuba ground truth.
+
+spec/accuracy.md#in-scene-accuracy. For a Mitsuba 3 scene and ``--replace ID[,ID]=ASSET``:
+
+* **reference**: the original scene rendered by Mitsuba (``llvm_ad_rgb``, the scene's own
+  integrator, no clamp) at ``--spp`` in two independent halves (disjoint seeds), each the mean of
+  chunks of at most ``CHUNK_SPP`` samples;
+* **estimate**: the scene converted by ``nasset convert-scene --replace`` (the asset in place of the
+  shapes) rendered by the reference renderer at ``--nr-spp``, its own variance of the mean kept;
+* **mask**: the asset's pixels *from the source renderer*: Mitsuba's own camera rays (the scene
+  sensor's ``sample_ray`` at ``MASK_SUBSAMPLES``² stratified positions per pixel) intersected with
+  the original scene; a sub-sample counts when the first shape it hits is one of the replaced
+  shapes; a pixel belongs to the mask when at least half of its sub-samples do;
+* **figures** (nasset_sdk.metrics, spec/accuracy.md#metrics): per-channel energy ratio with its
+  standard error, PSNR with the reference's noise ceiling, bias-corrected MSE, HDR-FLIP, over the
+  mask (and, for context, over the whole image).
+
+Writes ``reference.exr`` (+ ``reference_a.exr``, ``reference_b.exr``), ``neural.exr``,
+``reference.png``, ``neural.png``, ``mask.png``, ``error.png`` (relative error over the mask,
+blue = too dark, red = too bright), ``flip.png`` when FLIP is available, ``accuracy.json`` and
+``accuracy.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import UsageError, error
+
+#: samples per Mitsuba render call (bounds memory; the halves are means of such chunks)
+CHUNK_SPP = 256
+#: stratified sub-samples per pixel side for the mask
+MASK_SUBSAMPLES = 4
+QUICK = {"res": 48, "spp": 512, "nr_spp": 16}
+DEFAULT = {"res": 128, "spp": 8192, "nr_spp": 64}
+#: tolerance on the asset's bounding box against the replaced shapes' (fraction of the box diagonal)
+BOX_TOLERANCE = 0.05
+
+
+def _say(quiet: bool):
+    return (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+
+
+def _bar(total: int, desc: str, quiet: bool):
+    try:
+        from tqdm import tqdm
+
+        return tqdm(total=total, desc=desc, unit="spp", disable=quiet, file=sys.stderr)
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        class _Null:
+            def update(self, n):
+                pass
+
+            def close(self):
+                pass
+
+        return _Null()
+
+
+def sensor_for(mi, scene, width: int):
+    """A box-filtered perspective sensor with the scene camera's pose, horizontal field of view and aspect."""
+    sensor = scene.sensors()[0]
+    p = mi.traverse(sensor)
+    m = np.asarray(p["to_world"].matrix, np.float64).reshape(4, 4, -1)[:, :, 0]
+    fw, fh = (int(v) for v in sensor.film().size())
+    height = max(1, int(round(width * fh / max(fw, 1))))
+    return mi.load_dict({
+        "type": "perspective", "fov": float(np.asarray(p["x_fov"]).ravel()[0]), "fov_axis": "x",
+        "to_world": mi.ScalarTransform4f(m.tolist()),
+        "film": {"type": "hdrfilm", "width": int(width), "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": {"type": "independent"},
+    }), (height, int(width))
+
+
+def render_halves(mi, scene, sensor, spp: int, seed: int = 0, quiet: bool = False):
+    """Two independent unclamped Mitsuba renders of ``spp // 2`` samples each (seeds disjoint)."""
+    half = max(1, spp // 2)
+    bar = _bar(2 * half, "mitsuba reference", quiet)
+    out = []
+    for h in range(2):
+        acc, done, k = None, 0, 0
+        while done < half:
+            n = min(CHUNK_SPP, half - done)
+            img = np.asarray(mi.render(scene, sensor=sensor, spp=int(n), seed=int(1_000_003 * (2 * seed + h) + k)), np.float64)[..., :3]
+            img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
+            acc = img * n if acc is None else acc + img * n
+            done += n
+            k += 1
+            bar.update(n)
+        out.append(acc / done)
+    bar.close()
+    return out[0], out[1], half
+
+
+def scene_digest(scene_file) -> str:
+    """sha256 of the scene XML and of the files it names (``filename`` values), for reusing a reference."""
+    import hashlib
+    import re
+
+    path = Path(scene_file)
+    h = hashlib.sha256()
+    text = path.read_bytes()
+    h.update(text)
+    for name in sorted(set(re.findall(rb'name="filename"\s+value="([^"]+)"', text))):
+        f = path.parent / name.decode("utf-8", "replace")
+        h.update(name)
+        if f.is_file():
+            h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def cached_reference(out: Path, key: dict):
+    """(a, b) from an earlier run in ``out`` with the same key (scene digest, size, spp, seed, Mitsuba), else None."""
+    from nasset_reference_renderer.film import read_exr
+
+    kp = out / "reference_key.json"
+    try:
+        if json.loads(kp.read_text()) != key:
+            return None
+        return (read_exr(out / "reference_a.exr").astype(np.float64), read_exr(out / "reference_b.exr").astype(np.float64))
+    except (OSError, ValueError, RuntimeError):
+        return None
+
+
+def object_mask(mi, scene, sensor, shape_ids, shape_hw, sub: int = MASK_SUBSAMPLES) -> np.ndarray:
+    """Fraction [H, W] of each pixel's stratified camera sub-samples whose first hit is one of the shapes."""
+    import drjit as dr
+
+    h, w = shape_hw
+    targets = [s for s in scene.shapes() if s.id() in set(shape_ids)]
+    cov = np.zeros(h * w * sub * sub, np.float32)
+    if not targets:
+        return cov.reshape(h, w, -1).mean(-1)
+    if not hasattr(dr, "arange") or not str(mi.variant()).startswith(("llvm", "cuda")):
+        raise error("CONVERT_BACKEND", "the object mask needs a JIT Mitsuba variant (llvm_ad_rgb)")
+    idx = dr.arange(mi.UInt32, h * w * sub * sub)
+    pix, s = idx // (sub * sub), idx % (sub * sub)
+    px, py = mi.Float(pix % w), mi.Float(pix // w)
+    pos = mi.Point2f((px + (mi.Float(s % sub) + 0.5) / sub) / w, (py + (mi.Float(s // sub) + 0.5) / sub) / h)
+    ray, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    hit = mi.Bool(False)
+    for t in targets:
+        hit |= si.shape == mi.ShapePtr(t)
+    cov = np.asarray(hit, np.float32)
+    return cov.reshape(h, w, sub * sub).mean(-1)
+
+
+def _shape_bounds(mi, shapes) -> np.ndarray:
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for s in shapes:
+        b = s.bbox()
+        lo = np.minimum(lo, np.asarray(list(b.min), np.float64))
+        hi = np.maximum(hi, np.asarray(list(b.max), np.float64))
+    return np.stack([lo, hi])
+
+
+def _is_curve(shape) -> bool:
+    return "curve" in str(shape).split("[")[0].lower()
+
+
+def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[dict]:
+    """Per distinct asset file: {asset, ids, kind, variant}; typed errors when scene and asset do not match.
+
+    BENCH_ASSET_MISMATCH: an id the asset was not baked from (its bounding box differs from the
+    replaced shapes' by more than BOX_TOLERANCE of the diagonal). BENCH_ASSET_KIND: a fiber asset
+    for mesh shapes (or a surface asset for curves), or a neupress asset for shapes without a
+    dielectric boundary (neupress carries subsurface transport behind a rough dielectric)."""
+    from nasset_sdk.asset import Asset
+
+    by_id = {s.id(): s for s in scene.shapes() if s.id()}
+    groups: dict[Path, list[str]] = {}
+    for sid, file in replace.items():
+        if sid not in by_id:
+            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(by_id)}", file=scene_file)
+        groups.setdefault(Path(file), []).append(sid)
+    out = []
+    for file, ids in groups.items():
+        if not file.is_file():
+            raise error("CONVERT_ASSET_REFERENCE", f"--replace {','.join(ids)}: {file} does not exist", file=str(file))
+        try:
+            asset = Asset.open(file, load="none")
+        except Exception as exc:  # noqa: BLE001 - any unreadable asset is the same user error here
+            raise error("CONVERT_ASSET_REFERENCE", f"--replace {','.join(ids)}: {file} is not a readable neural asset "
+                        f"({getattr(exc, 'code', type(exc).__name__)})", file=str(file)) from None
+        shapes = [by_id[i] for i in ids]
+        curves = [i for i, s in zip(ids, shapes, strict=True) if _is_curve(s)]
+        if asset.variant == "fiber" and len(curves) != len(ids):
+            raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} fiber asset but "
+                        f"{sorted(set(ids) - set(curves))} are surfaces", file=str(file))
+        if asset.variant != "fiber" and curves:
+            raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} {asset.variant} asset but {curves} are curves "
+                        "(they need a fiber asset)", file=str(file))
+        if asset.kind == "neupress":
+            plain = [i for i, s in zip(ids, shapes, strict=True) if "dielectric" not in str(s.bsdf()).split("[")[0].lower()]
+            if plain:
+                raise error("BENCH_ASSET_KIND", f"{file.name} is a neupress asset (subsurface behind a rough dielectric) but "
+                            f"{plain} have no dielectric boundary", file=str(file))
+        geo = asset.geometry()
+        a = np.stack([geo.points.min(0), geo.points.max(0)]).astype(np.float64)
+        b = _shape_bounds(mi, shapes)
+        diag = float(np.linalg.norm(b[1] - b[0])) or 1.0
+        off = float(np.abs(a - b).max()) / diag
+        if off > BOX_TOLERANCE:
+            src = (asset.provenance or {}).get("source", {}).get("shapes")
+            raise error("BENCH_ASSET_MISMATCH", f"{file.name} was not baked from {ids}: its bounds differ from theirs by "
+                        f"{100 * off:.0f} % of the diagonal" + (f" (it was baked from {src})" if src else ""), file=str(file))
+        out.append({"asset": str(file), "ids": ids, "kind": asset.kind, "variant": asset.variant, "bounds_offset": off})
+    return out
+
+
+def _png(path: Path, img: np.ndarray, exposure: float = 0.0) -> None:
+    from nasset_reference_renderer.film import tonemap
+    from nasset_sdk.images import write_png
+
+    write_png(path, tonemap(img, exposure))
+
+
+def error_map(est, ref, mask) -> np.ndarray:
+    """uint8 [H, W, 3]: relative luminance error over the mask (blue: too dark, red: too bright; +-50 % saturates)."""
+    lum = lambda x: x @ np.array([0.2126, 0.7152, 0.0722])  # noqa: E731
+    r, e = lum(ref), lum(est)
+    floor = 0.02 * max(float(np.percentile(r[mask], 99.5)) if mask.any() else 1.0, 1e-6)
+    rel = np.clip((e - r) / np.maximum(r, floor) / 0.5, -1.0, 1.0)
+    out = np.full(r.shape + (3,), 40, np.float64)
+    m = mask
+    out[m, 0] = 255 * np.maximum(rel[m], 0) + 255 * (1 - np.abs(rel[m])) * 0.9
+    out[m, 1] = 255 * (1 - np.abs(rel[m])) * 0.9
+    out[m, 2] = 255 * np.maximum(-rel[m], 0) + 255 * (1 - np.abs(rel[m])) * 0.9
+    return np.clip(np.nan_to_num(out), 0, 255).astype(np.uint8)
+
+
+def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8192, nr_spp: int = 64,
+                   max_depth: int | None = None, seed: int = 0, quiet: bool = False) -> dict:
+    """Run the benchmark (module docstring); returns the report dict (also written as JSON + markdown)."""
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.scene import load_scene
+    from nasset_converters.mitsuba.usd_export import convert_scene, parse_replace
+    from nasset_sdk.metrics import accuracy, flip_map
+
+    say = _say(quiet)
+    for name, v in (("res", res), ("spp", spp), ("nr-spp", nr_spp)):
+        if int(v) < (8 if name == "res" else 2 if name == "spp" else 1):
+            raise UsageError(f"--{name} too small: {v}")
+    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    if not rep:
+        raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    times: dict[str, float] = {}
+    t0 = time.perf_counter()
+    mi = load_mitsuba()  # CONVERT_BACKEND when mitsuba is missing
+    mi.set_log_level(mi.LogLevel.Error)
+    mscene = load_scene(mi, scene_file)
+    fits = check_asset_fits(mi, mscene, rep, scene_file=str(scene_file))
+    converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
+    md = converted.integrator.get("max_depth", 24)
+    if max_depth is None:
+        max_depth = max(1, md - 1) if md and md > 0 else 24
+    sensor, hw = sensor_for(mi, mscene, res)
+    times["setup_s"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    key = {"scene_sha256": scene_digest(scene_file), "size": list(hw), "spp": int(spp), "seed": int(seed),
+           "mitsuba": f"{mi.__version__} {mi.variant()}", "chunk": CHUNK_SPP}
+    cached = cached_reference(out, key)
+    if cached is not None and cached[0].shape[:2] == tuple(hw):
+        say(f"reference: reusing {out / 'reference_a.exr'} and reference_b.exr (same scene, size, spp, seed)")
+        (a, b), half = cached, max(1, spp // 2)
+    else:
+        say(f"reference: Mitsuba {mi.variant()} {spp} spp at {hw[1]}x{hw[0]} in two halves, unclamped")
+        a, b, half = render_halves(mi, mscene, sensor, spp, seed=seed, quiet=quiet)
+        (out / "reference_key.json").unlink(missing_ok=True)
+    times["reference_s"] = time.perf_counter() - t
+    cov = object_mask(mi, mscene, sensor, list(rep), hw)
+    mask = cov >= 0.5
+    if not mask.any():
+        raise error("BENCH_ASSET_MISMATCH", f"the replaced shapes {sorted(rep)} cover no pixel of the camera's view",
+                    file=str(scene_file))
+
+    t = time.perf_counter()
+    say(f"estimate: reference renderer {nr_spp} spp, max_depth {max_depth}")
+    from nasset_reference_renderer import RenderSettings, render
+    from nasset_reference_renderer import load_scene as load_usd
+    from nasset_reference_renderer.scene import SceneWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SceneWarning)
+        uscene = load_usd(str(converted.output))
+    result = render(uscene, RenderSettings(spp=int(nr_spp), seed=seed + 7, width=hw[1], height=hw[0], max_depth=max_depth,
+                                           progress=not quiet))
+    est = np.nan_to_num(np.asarray(result.image, np.float64)[..., :3])
+    est_var = np.nan_to_num(np.asarray(result.variance, np.float64)[..., :3])
+    times["estimate_s"] = time.perf_counter() - t
+
+    obj = accuracy(est, a, b, mask, est_var=est_var)
+    full = accuracy(est, a, b, None, est_var=est_var, flip=False)
+    ref = 0.5 * (a + b)
+    from nasset_reference_renderer.film import write_exr
+
+    files = []
+    for name, img in (("reference", ref), ("reference_a", a), ("reference_b", b), ("neural", est)):
+        write_exr(out / f"{name}.exr", img.astype(np.float32))
+        files.append(str(out / f"{name}.exr"))
+    _png(out / "reference.png", ref)
+    _png(out / "neural.png", est)
+    from nasset_sdk.images import write_png as png8
+
+    png8(out / "mask.png", np.repeat((mask * 255).astype(np.uint8)[..., None], 3, -1))
+    png8(out / "error.png", error_map(est, ref, mask))
+    files += [str(out / n) for n in ("reference.png", "neural.png", "mask.png", "error.png")]
+    fmap = flip_map(est, ref)
+    if fmap is not None:
+        v = np.clip(np.nan_to_num(fmap), 0, 1)
+        png8(out / "flip.png", np.stack([255 * v, 255 * v * v, 255 * (1 - v) * v], -1).astype(np.uint8))
+        files.append(str(out / "flip.png"))
+    (out / "reference_key.json").write_text(json.dumps(key))
+    times["total_s"] = time.perf_counter() - t0
+    report = {
+        "benchmark": "accuracy",
+        "scene": str(scene_file),
+        "replaced": fits,
+        "resolution": [hw[1], hw[0]],
+        "reference": {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "spp": 2 * half,
+                      "halves": 2, "spp_per_half": half, "clamp": None,
+                      "reused": cached is not None, "integrator": converted.integrator},
+        "estimate": {"renderer": "reference_renderer", "spp": int(nr_spp), "max_depth": int(max_depth)},
+        "mask": {"source": "mitsuba camera rays, first hit", "subsamples": MASK_SUBSAMPLES ** 2, "threshold": 0.5,
+                 "pixels": int(mask.sum())},
+        "object": obj.to_dict(),
+        "image": full.to_dict(),
+        "files": files + [str(out / "accuracy.json"), str(out / "accuracy.md")],
+        "times_s": {k: round(v, 2) for k, v in times.items()},
+        "definitions": "spec/accuracy.md#metrics",
+    }
+    (out / "accuracy.json").write_text(json.dumps(report, indent=2))
+    (out / "accuracy.md").write_text(markdown(report))
+    return report
+
+
+def markdown(r: dict) -> str:
+    o, f = r["object"], r["image"]
+
+    def row(name, a):
+        e = " / ".join(f"{100 * x:.1f}" for x in a["energy_ratio"])
+        se = " / ".join(f"{100 * x:.1f}" for x in a["energy_se"])
+        fl = "—" if a.get("flip") is None else f"{a['flip']:.3f}"
+        return (f"| {name} | {a['pixels']} | {e} (± {se}) | {a['psnr_db']:.2f} | {a['ceiling_db']:.2f} | "
+                f"{a['claimed_psnr']} | {fl} |")
+
+    ref = r["reference"]
+    replaced = ", ".join(",".join(x["ids"]) + " = " + Path(x["asset"]).name + f" ({x['kind']} {x['variant']})" for x in r["replaced"])
+    lines = [
+        f"# In-scene accuracy: {Path(r['scene']).name}",
+        "",
+        f"Replaced: {replaced}. "
+        f"Reference: Mitsuba {ref['variant']}, {ref['spp']} spp in two independent halves, unclamped; estimate: "
+        f"reference renderer, {r['estimate']['spp']} spp; {r['resolution'][0]}×{r['resolution'][1]}. "
+        "Definitions: spec/accuracy.md#metrics.",
+        "",
+        "| region | pixels | energy % of reference (R / G / B) | PSNR dB | ceiling dB | claimed | FLIP |",
+        "|---|---|---|---|---|---|---|",
+        row("object (mask from Mitsuba)", o),
+        row("whole image", f),
+        "",
+        "Images: reference.png, neural.png, mask.png, error.png (relative luminance error over the mask; blue too dark, "
+        "red too bright, ±50 % saturates)" + (", flip.png" if any(x.endswith("flip.png") for x in r["files"]) else "") + ".",
+        "",
+        "Times: " + ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in r["times_s"].items()) + ".",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def summary_text(r: dict) -> str:
+    from nasset_sdk.metrics import Accuracy
+
+    o = r["object"]
+    a = Accuracy(**{k: v for k, v in o.items() if k in Accuracy.__dataclass_fields__})
+    return (f"in-scene accuracy over the object ({o['pixels']} pixels, mask from Mitsuba): {a.line()}\n"
+            f"reference: {r['reference']['spp']} spp unclamped in two halves; estimate {r['estimate']['spp']} spp\n"
+            "wrote " + ", ".join(r["files"]))
+
+
+def add_args(p) -> None:
+    """Options of ``nasset bench accuracy``."""
+    p.add_argument("scene", help="Mitsuba 3 scene .xml (the original, with the shapes the asset was baked from)")
+    p.add_argument("--replace", action="append", required=True, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
+                   help="the baked asset in place of these shapes (repeatable)")
+    p.add_argument("-o", "--output", default="bench_accuracy", help="output folder (images, JSON, markdown, converted scene)")
+    p.add_argument("--spp", type=int, default=None, help=f"Mitsuba reference spp, both halves together (default {DEFAULT['spp']}; "
+                   f"{QUICK['spp']} with --quick)")
+    p.add_argument("--nr-spp", type=int, default=None, help=f"reference-renderer spp (default {DEFAULT['nr_spp']}; {QUICK['nr_spp']} with --quick)")
+    p.add_argument("--res", type=int, default=None, help=f"image width (default {DEFAULT['res']}; {QUICK['res']} with --quick); "
+                   "height keeps the scene's aspect")
+    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
+    p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
+
+
+def run(args) -> int:
+    """CLI entry: ``nasset bench accuracy ...``."""
+    d = QUICK if args.quick else DEFAULT
+    report = bench_accuracy(args.scene, args.replace, args.output, res=args.res or d["res"], spp=args.spp or d["spp"],
+                            nr_spp=args.nr_spp or d["nr_spp"], max_depth=args.max_depth, seed=args.seed, quiet=args.json)
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(summary_text(report))
+    return 0
+
+

@@ -1,0 +1,185 @@
+"""Accuracy of an image (or of a set of samples) against an unbiased reference given in two halves.
+
+Normative definitions: spec/accuracy.md#metrics. numpy only (FLIP through the optional
+``flip-evaluator`` package, when installed).
+
+The reference is two *independent, unbiased* estimates ``a`` and ``b`` of the same converged image
+(two renders with different seeds, no clamp). Their mean ``r = (a + b) / 2`` is the reference; their
+disagreement measures the reference's own noise: for independent a, b with the same mean and
+per-pixel variance s^2, ``E[(a - b)^2] = 2 s^2`` and ``Var(r) = s^2 / 2``, so
+
+    v = mean over the mask of (a - b)^2 / 4
+
+is an unbiased estimate of the mean noise variance of ``r``. Everything is computed over the
+pixels (samples) of ``mask`` and all channels:
+
+* **energy ratio** per channel ``sum(est) / sum(r)``; its standard error from the reference's
+  (and optionally the estimate's) per-pixel variance, pixels taken as independent.
+* **PSNR** ``10 log10(peak^2 / MSE)``, ``MSE = mean (est - r)^2``, linear radiance, no clipping;
+  ``peak`` = the 99.5th percentile of ``r`` over the mask (all channels), unless given.
+* **ceiling** ``10 log10(peak^2 / v)``: the PSNR an exact image scores in expectation against
+  this reference. No figure above it can be claimed.
+* **bias-corrected MSE** ``MSE - v`` (minus the estimate's own variance when given) and its PSNR;
+  when it is not significantly above 0 (``< 2`` standard errors) the estimate is **at the
+  ceiling**, and the claimed PSNR is "at the ceiling" rather than a number.
+* **FLIP** (HDR-FLIP of ``est`` against ``r``, mean over the mask) when ``flip-evaluator`` is
+  importable and the inputs are images; else None.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .errors import UsageError
+
+#: percentile of the reference (over the mask, all channels) used as the PSNR peak
+PEAK_PERCENTILE = 99.5
+#: a bias-corrected MSE within this many standard errors of 0 is "at the ceiling"
+CEILING_SIGMAS = 2.0
+
+
+@dataclass
+class Accuracy:
+    """Figures of one estimate against a two-half reference (see the module docstring)."""
+
+    pixels: int
+    energy_ratio: list  # per channel: sum(est) / sum(ref)
+    energy_error: list  # per channel: ratio - 1
+    energy_se: list  # per channel: standard error of the ratio
+    peak: float
+    mse: float
+    ref_noise_var: float  # v: the reference's own noise variance (mean over mask and channels)
+    mse_corrected: float  # mse - v - est_var
+    mse_corrected_se: float
+    psnr_db: float  # against the mean-of-halves reference, raw
+    ceiling_db: float  # the PSNR an exact image would score against this reference
+    psnr_corrected_db: float | None  # from the bias-corrected MSE; None at the ceiling
+    at_ceiling: bool
+    flip: float | None = None
+    notes: list = field(default_factory=list)
+
+    def claimed_psnr(self) -> str:
+        """The PSNR one may state: a number, or "at the ceiling (C dB)"."""
+        if self.at_ceiling or self.psnr_corrected_db is None:
+            return f"at the ceiling ({self.ceiling_db:.1f} dB)"
+        return f"{min(self.psnr_db, self.ceiling_db):.1f} dB"
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["claimed_psnr"] = self.claimed_psnr()
+        return {k: _finite(v) for k, v in d.items()}
+
+    def line(self) -> str:
+        """One human-readable line: energy per channel, PSNR with the ceiling, FLIP."""
+        e = "/".join(f"{100 * r:.1f}" for r in self.energy_ratio)
+        se = "/".join(f"{100 * s:.1f}" for s in self.energy_se)
+        f = "" if self.flip is None else f", FLIP {self.flip:.3f}"
+        return (f"energy {e} % of the reference (RGB, +-{se}), PSNR {self.psnr_db:.1f} dB "
+                f"(ceiling {self.ceiling_db:.1f} dB; claimed {self.claimed_psnr()}){f}")
+
+
+def _finite(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, list):
+        return [_finite(x) for x in v]
+    return v
+
+
+def _as3(x, name: str) -> np.ndarray:
+    a = np.asarray(x, np.float64)
+    if a.ndim < 2 or a.shape[-1] != 3:
+        raise UsageError(f"{name} must have 3 channels in its last axis, got shape {a.shape}")
+    return a
+
+
+def _psnr(peak: float, mse: float) -> float:
+    if not (peak > 0 and math.isfinite(peak)):
+        return float("nan")
+    return 10.0 * math.log10(peak * peak / max(mse, 1e-30))
+
+
+def noise_variance(a, b, mask=None) -> float:
+    """v = mean((a - b)^2) / 4 over the mask: the mean noise variance of (a + b) / 2."""
+    a, b = _as3(a, "a"), _as3(b, "b")
+    m = np.ones(a.shape[:-1], bool) if mask is None else np.asarray(mask, bool)
+    d = (a[m] - b[m]) ** 2
+    return float(d.mean() / 4.0) if d.size else float("nan")
+
+
+def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None = None, flip: bool = True) -> Accuracy:
+    """Figures of ``est`` against the reference given as two independent unbiased halves.
+
+    ``est``, ``ref_a``, ``ref_b``: [..., 3] linear radiance of the same shape (images [H, W, 3] or
+    samples [N, 3]); ``mask``: bool [...] (default all); ``est_var``: optional per-pixel-channel
+    variance of ``est``'s own mean (a Monte Carlo estimate), subtracted from the MSE and added to
+    the energy standard error; ``peak``: PSNR peak (default: the reference's 99.5th percentile
+    over the mask). Non-finite values in any input are a UsageError (never silently dropped)."""
+    est, a, b = _as3(est, "est"), _as3(ref_a, "ref_a"), _as3(ref_b, "ref_b")
+    if not (est.shape == a.shape == b.shape):
+        raise UsageError(f"est, ref_a, ref_b shapes differ: {est.shape}, {a.shape}, {b.shape}")
+    m = np.ones(est.shape[:-1], bool) if mask is None else np.asarray(mask, bool)
+    if m.shape != est.shape[:-1]:
+        raise UsageError(f"mask shape {m.shape} does not match images {est.shape[:-1]}")
+    e, aa, bb = est[m], a[m], b[m]
+    ev = None if est_var is None else np.broadcast_to(np.asarray(est_var, np.float64), est.shape)[m]
+    for name, x in (("est", e), ("ref_a", aa), ("ref_b", bb)) + ((("est_var", ev),) if ev is not None else ()):
+        if not np.isfinite(x).all():
+            raise UsageError(f"{name} has non-finite values inside the mask")
+    n = int(m.sum())
+    if n == 0:
+        raise UsageError("the mask selects no pixels")
+    r = 0.5 * (aa + bb)
+    d2 = (aa - bb) ** 2
+    pix_var = d2 / 4.0  # per pixel-channel estimate of Var(r)
+    s_ref, s_est = r.sum(0), e.sum(0)
+    ratio = s_est / np.where(s_ref != 0, s_ref, np.nan)
+    # delta method: Var(S_est / S_ref) ~ (Var S_est + ratio^2 Var S_ref) / S_ref^2
+    var_ratio = (pix_var.sum(0) * ratio ** 2 + (ev.sum(0) if ev is not None else 0.0)) / np.where(s_ref != 0, s_ref, np.nan) ** 2
+    pk = float(np.percentile(r, PEAK_PERCENTILE)) if peak is None else float(peak)
+    err2 = (e - r) ** 2
+    mse = float(err2.mean())
+    v = float(pix_var.mean())
+    q = err2 - pix_var - (ev if ev is not None else 0.0)
+    mse_c = float(q.mean())
+    se = float(q.std(ddof=1) / math.sqrt(q.size)) if q.size > 1 else float("inf")
+    at_ceiling = mse_c < CEILING_SIGMAS * se
+    notes = []
+    if not (pk > 0):
+        notes.append("the reference is black over the mask: PSNR undefined")
+    out = Accuracy(
+        pixels=n, energy_ratio=[float(x) for x in ratio], energy_error=[float(x - 1.0) for x in ratio],
+        energy_se=[float(math.sqrt(max(x, 0.0))) for x in var_ratio], peak=pk, mse=mse, ref_noise_var=v,
+        mse_corrected=mse_c, mse_corrected_se=se, psnr_db=_psnr(pk, mse), ceiling_db=_psnr(pk, v),
+        psnr_corrected_db=None if at_ceiling else _psnr(pk, mse_c), at_ceiling=bool(at_ceiling), notes=notes,
+    )
+    if flip and est.ndim == 3 and est.shape[0] >= 8 and est.shape[1] >= 8:
+        out.flip = flip_mean(est, 0.5 * (a + b), m)
+    return out
+
+
+def flip_map(est, ref):
+    """HDR-FLIP error map [H, W] of ``est`` against ``ref`` (linear images), or None without flip-evaluator."""
+    try:
+        import flip_evaluator
+    except ImportError:
+        return None
+    ref = np.ascontiguousarray(np.maximum(np.nan_to_num(np.asarray(ref, np.float32)), 0.0))
+    est = np.ascontiguousarray(np.maximum(np.nan_to_num(np.asarray(est, np.float32)), 0.0))
+    if float(ref.max()) <= 0.0:
+        return None
+    fmap, _, _ = flip_evaluator.evaluate(ref, est, "HDR", inputsRGB=False, applyMagma=False, computeMeanError=False)
+    fmap = np.asarray(fmap, np.float64)
+    return fmap[..., 0] if fmap.ndim == 3 else fmap
+
+
+def flip_mean(est, ref, mask=None) -> float | None:
+    """Mean HDR-FLIP over the mask (None without flip-evaluator or for a black reference)."""
+    fmap = flip_map(est, ref)
+    if fmap is None:
+        return None
+    m = np.ones(fmap.shape, bool) if mask is None else np.asarray(mask, bool)
+    return float(fmap[m].mean()) if m.any() else None

@@ -1,0 +1,115 @@
+"""``nasset bench accuracy`` (spec/accuracy.md#in-scene-accuracy): typed errors on bad input, and a tiny run.
+
+The assets here have random networks (nasset_sdk.examples) with the geometry of the example
+scene's shapes, so no training is needed; the figures of a real bake are tested in
+tests/test_high_albedo.py.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from nasset_sdk.errors import NassetError  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    from nasset_converters.mitsuba.examples import write_example_scene
+
+    return write_example_scene(tmp_path_factory.mktemp("acc_scene"))
+
+
+def _asset(tmp_path, scene, ids, kind="rna", variant="surface", name="a.usdc"):
+    """A random-network asset whose geometry is these shapes of the scene (as a bake would store it)."""
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_sdk.examples import example_builder
+
+    mi = load_mitsuba()
+    sc = msc.load_scene(mi, scene)
+    b = example_builder(kind, variant=variant, size="tiny", seed=2)
+    if variant == "surface":
+        b.set_geometry(msc.mesh_geometry(mi, msc.pick_shapes(sc, ids)))
+    return b.write(tmp_path / name)
+
+
+def _run(scene, replace, out, **kw):
+    from nasset_benchmarks.accuracy import bench_accuracy
+
+    return bench_accuracy(scene, replace, out, quiet=True, **kw)
+
+
+def test_wrong_id_is_unknown_shape(scene, tmp_path):
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"shel,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "shell" in str(e.value)
+
+
+def test_asset_of_another_object_is_a_mismatch(scene, tmp_path):
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "BENCH_ASSET_MISMATCH"
+    b = _asset(tmp_path, scene, ["jelly"], name="b.usdc")
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"shell={b}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "BENCH_ASSET_MISMATCH"
+
+
+def test_asset_of_another_kind(scene, tmp_path):
+    fiber = _asset(tmp_path, scene, [], variant="fiber", name="f.usdc")
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"shell,jelly={fiber}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "BENCH_ASSET_KIND" and "fiber" in str(e.value)
+    neu = _asset(tmp_path, scene, ["shell"], kind="neupress", name="n.usdc")
+    with pytest.raises(NassetError) as e:  # the shell is rough plastic: no dielectric boundary for neupress
+        _run(scene, [f"shell={neu}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "BENCH_ASSET_KIND" and "dielectric" in str(e.value)
+
+
+def test_missing_source_renderer(scene, tmp_path, monkeypatch):
+    import sys
+
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # import mitsuba -> ImportError
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"shell,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_BACKEND" and "mitsuba" in str(e.value)
+
+
+def test_missing_asset_file(scene, tmp_path):
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"jelly={tmp_path / 'nope.usdc'}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_ASSET_REFERENCE"
+
+
+def test_cli_exit_code_and_json_error(scene, tmp_path):
+    from nasset_sdk.cli import main
+
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    assert main(["bench", "accuracy", str(scene), "--replace", f"jelly={a}", "-o", str(tmp_path / "o"), "--quick", "--json"]) == 1
+
+
+def test_tiny_run_writes_images_and_report(scene, tmp_path):
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    out = tmp_path / "bench"
+    r = _run(scene, [f"shell,jelly={a}"], out, res=24, spp=16, nr_spp=2)
+    for name in ("reference.exr", "reference_a.exr", "reference_b.exr", "neural.exr", "reference.png", "neural.png",
+                 "mask.png", "error.png", "accuracy.json", "accuracy.md"):
+        assert (out / name).is_file(), name
+    o = r["object"]
+    assert r["mask"]["pixels"] == o["pixels"] > 10
+    assert len(o["energy_ratio"]) == 3 and all(np.isfinite(o["energy_ratio"]))
+    assert o["ceiling_db"] > 0 and "ceiling" in (out / "accuracy.md").read_text()
+    assert json.loads((out / "accuracy.json").read_text())["reference"]["halves"] == 2
+    # the mask comes from Mitsuba: the object's pixels, not the ground around it
+    from nasset_reference_renderer.film import read_exr
+
+    ref = read_exr(out / "reference.exr")
+    assert ref.shape[:2] == (24, 24) and np.isfinite(ref).all()
