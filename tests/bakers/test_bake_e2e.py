@@ -30,9 +30,11 @@ TINY_PSNR_FLOOR_DB = 14.5
 #: (tiny) and ~4e-6 (small; the decoder's exp lobe features amplify float32 rounding) -- both use
 #: the stored float16 planes widened to float32; 1e-4 allows for BLAS/threading order.
 PARITY_TOL = 1e-4
-#: margin over the best constant colour (held-out mean) on the same held-out pixels; measured +1.9 dB
-#: (18.8 vs 16.9 dB); about half of it is required.
-BEAT_CONSTANT_DB = 1.0
+#: margin over the best constant colour (held-out mean) on the same held-out pixels. Measured +1.9 dB
+#: (18.8 vs 16.9) with clamped held-out references and the log loss; +0.65 dB (17.8 vs 17.2) since the
+#: held-out references are unclamped (their noise caps both scores, spec/accuracy.md) and the loss is
+#: plain L2. About half of the current margin is required: a model that learned nothing scores <= 0.
+BEAT_CONSTANT_DB = 0.3
 
 
 @pytest.fixture(scope="module")
