@@ -1,8 +1,7 @@
 """Wavefront unidirectional path tracer with next-event estimation and MIS (power heuristic).
 
-All rays of a batch advance together as arrays, one bounce per loop iteration. Neural assets
-follow spec/renderer.md#neural-assets: transport T evaluated at the hit, rays leaving the asset
-skip it, the rna branch picked by whether the asset itself blocks the direction.
+All rays of a batch advance together as arrays, one bounce per loop iteration. Hits on neural
+assets are shaded by :mod:`nasset_reference_renderer.shaders` (spec/renderer.md#neural-assets).
 """
 
 from __future__ import annotations
@@ -19,16 +18,9 @@ from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
 from .film import Film, check_image_size
 from .plan import RenderPlan, make_plan
-from .sampling import (
-    INV_4PI,
-    dot,
-    frame,
-    normalize,
-    power_heuristic,
-    square_to_uniform_sphere,
-    to_local,
-    to_world,
-)
+from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
+from .shaders import NeuralShading
+from .shaders.common import max3, unique
 
 
 @dataclass
@@ -73,18 +65,6 @@ class RenderResult:
         return self.film.variance()
 
 
-def _max3(a: np.ndarray) -> np.ndarray:
-    """a.max(1) for [n, 3] rows (elementwise maxima: much faster than a reduction over 3 items)."""
-    return np.maximum(np.maximum(a[:, 0], a[:, 1]), a[:, 2])
-
-
-def _unique(a: np.ndarray) -> np.ndarray:
-    """np.unique, with a quick path for the common single-value array."""
-    if len(a) and (a == a[0]).all():
-        return a[:1].copy()
-    return np.unique(a)
-
-
 class _Timer:
     def __init__(self, stats, key):
         self.stats, self.key = stats, key
@@ -107,18 +87,6 @@ class PathIntegrator:
         self.tri_ng = normalize(ng)
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
-        self.kind_shading = None  # neupress / 8dna instances (spec/renderer.md#neupress, #8dna); None: rna only
-        if any(data.asset.kind != "rna" for data in scene.assets):
-            from .shaders import KindShading
-
-            self.kind_shading = KindShading(self)
-        self.fibers = None  # rna fiber instances (spec/renderer.md#fibers); None: no fiber asset in the scene
-        self.inst_fiber = np.zeros(len(insts), bool)
-        if any(data.fiber is not None for data in scene.assets):
-            from .shaders.rna_fiber import FiberShading
-
-            self.fibers = FiberShading(self)
-            self.inst_fiber = np.array([i.kind == "neural" and scene.assets[i.asset].fiber is not None for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
@@ -136,6 +104,7 @@ class PathIntegrator:
                 n = normalize(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
                 cn = np.repeat(n[:, None], 3, 1)
             self.asset_corner_n.append(cn)
+        self.shading = NeuralShading(self)  # the shaders of the scene's neural assets
 
     # -- helpers ---------------------------------------------------------------------------
     def trace(self, o, d, tmax=None, ignore=None, exempt=None):
@@ -175,7 +144,7 @@ class PathIntegrator:
                 beta[m] *= np.where(hits.self_hit[m][:, None], ts, tu)
             pend = None
             if depth >= self.s.rr_depth:
-                q = np.clip(_max3(beta), 0.05, 1.0)
+                q = np.clip(max3(beta), 0.05, 1.0)
                 live = rng.random(len(idx)) < q
                 beta = beta / q[:, None]
                 sel = np.nonzero(live)[0]
@@ -196,7 +165,7 @@ class PathIntegrator:
                         t_hit[closer] = tl[closer]
                         light_hit[closer] = k
                         le_hit[closer] = le[closer]
-                for k in _unique(light_hit[light_hit >= 0]):
+                for k in unique(light_hit[light_hit >= 0]):
                     m = light_hit == k
                     w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
                     L[idx[m]] += beta[m] * le_hit[m] * w[:, None]
@@ -233,16 +202,7 @@ class PathIntegrator:
             if mesh.any():
                 new.append(self._mesh_vertex(np.nonzero(mesh)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
             if neural.any():
-                if self.kind_shading is None and self.fibers is None:
-                    new.append(self.rna_surface_vertex(np.nonzero(neural)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
-                elif self.kind_shading is None:
-                    fib = neural & self.inst_fiber[inst]
-                    if (neural & ~fib).any():
-                        new.append(self.rna_surface_vertex(np.nonzero(neural & ~fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
-                    if fib.any():
-                        new.append(self.fibers.vertex(np.nonzero(fib)[0], idx, x, d, beta, prim, bu, bv, inst, L, rng))
-                else:
-                    new += self.kind_shading.vertices(neural, idx, x, d, beta, prim, bu, bv, inst, L, rng)
+                new += self.shading.vertices(neural, idx, x, d, beta, prim, bu, bv, inst, L, rng)
             new = [n for n in new if n is not None and len(n[0])]
             if not new:
                 break
@@ -282,19 +242,19 @@ class PathIntegrator:
         wo_l = to_local(wo, t, b, ns)
         mat = self.inst_mat[inst]
         indirect = self.indirect[inst]
-        xo = x + ng * (self.eps * (1.0 + _max3(np.abs(x)) / self.accel.scale))[:, None]
+        xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
         for k in self.nee:
             light = self.scene.lights[k]
             wi, dist, li, pdf = light.sample(x, rng.random((len(x), 2)))
             cos = dot(wi, ns)
-            ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (_max3(li) > 0)
+            ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (max3(li) > 0)
             s = np.nonzero(ok)[0]
             if not len(s):
                 continue
             f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]))
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
-            nz = _max3(c) > 0
+            nz = max3(c) > 0
             s, c = s[nz], c[nz]
             if not len(s):
                 continue
@@ -318,7 +278,7 @@ class PathIntegrator:
         The same per-row product as einsum("ij,ijk->ik", v, M[inst]) but one matrix per instance
         present instead of a gathered [n,4,4] array.
         """
-        ids = _unique(inst)
+        ids = unique(inst)
         if len(ids) == 1:
             M = self.inst_to_obj[ids[0]]
             out = np.einsum("ij,jk->ik", v, M[:3, :3])
@@ -332,109 +292,6 @@ class PathIntegrator:
             o = np.einsum("ij,jk->ik", v[m], M[:3, :3])
             out[m] = o + M[3, :3] if point else o
         return out
-
-    def rna_sample_rows(self, x, inst, indirect, rng, shadow_origin):
-        """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
-        blocks it; ``self_hit`` says whether the asset itself does) and one uniform-sphere continuation where
-        ``indirect``. ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s.
-
-        Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their wi).
-        """
-        n = len(x)
-        rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
-        for k in self.nee:
-            light = self.scene.lights[k]
-            wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
-            ok = (pdf > 0) & (_max3(li) > 0)
-            s = np.nonzero(ok)[0]
-            if not len(s):
-                continue
-            full = len(s) == n
-            wi_s, dist_s, inst_s = (wi, dist, inst) if full else (wi[s], dist[s], inst[s])
-            origin, exempt = shadow_origin(s, wi_s)
-            tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * self.eps, np.inf)
-            h = self.trace(origin, wi_s, tmax, inst_s) if exempt is None else self.trace(origin, wi_s, tmax, inst_s, exempt)
-            free = h.prim < 0  # no other object in the way
-            s = s[free]
-            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
-            rows_ray.append(s)
-            rows_wi.append(wi[s])
-            rows_w.append(li[s] * (w / pdf[s])[:, None])
-            rows_self.append(h.self_hit[free])
-            rows_kind.append(np.zeros(len(s), bool))
-        cont = np.nonzero(indirect)[0]
-        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
-        rows_ray.append(cont)
-        rows_wi.append(wi_c)
-        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
-        rows_self.append(np.zeros(len(cont), bool))
-        rows_kind.append(np.ones(len(cont), bool))
-        return (np.concatenate(rows_ray), np.concatenate(rows_wi), np.concatenate(rows_w), np.concatenate(rows_self),
-                np.concatenate(rows_kind), cont, wi_c)
-
-    def rna_surface_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
-        if len(r) != len(x):  # (all rows in a scene of neural assets only: no gathers)
-            x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
-        else:
-            ridx = idx
-        n = len(x)
-        ng = self.tri_ng[prim]
-        scale = (self.eps * (1.0 + _max3(np.abs(x)) / self.accel.scale))[:, None]
-        x_obj = self.to_object(x, inst, point=True)
-        wo_obj = normalize(self.to_object(-d, inst))
-        asset_id = self.inst_asset[inst]
-        local = self.scene.tri_local[prim]
-        assets = _unique(asset_id)
-        w0 = 1 - bu - bv
-        if len(assets) == 1:
-            cn = self.asset_corner_n[assets[0]][local]
-            n_obj = normalize(cn[:, 0] * w0[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
-        else:
-            n_obj = np.zeros((n, 3))
-            for a in assets:
-                m = asset_id == a
-                cn = self.asset_corner_n[a][local[m]]
-                n_obj[m] = normalize(cn[:, 0] * w0[m][:, None] + cn[:, 1] * bu[m][:, None] + cn[:, 2] * bv[m][:, None])
-        indirect = self.indirect[inst]
-        def shadow_origin(s, wi_s):  # offset along the geometric normal, to the side wi leaves
-            ng_s, x_s, scale_s = (ng, x, scale) if len(s) == n else (ng[s], x[s], scale[s])
-            return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
-
-        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = self.rna_sample_rows(x, inst, indirect, rng, shadow_origin)
-        tu = np.zeros((len(ray), 3))
-        ts = np.zeros((len(ray), 3))
-        if len(ray):
-            wi_obj = normalize(self.to_object(wi_all, inst[ray]))
-            ray_asset = asset_id[ray]
-            # float32 once per hit point, then gathered per row (a point has a light and a continuation row)
-            x32, n32, wo32 = x_obj.astype(np.float32), n_obj.astype(np.float32), wo_obj.astype(np.float32)
-            for a in _unique(ray_asset):
-                ev = self.scene.assets[a].evaluator
-                if len(assets) == 1:
-                    m, rr, wi_m = slice(None), ray, wi_obj
-                else:
-                    m = ray_asset == a
-                    rr, wi_m = ray[m], wi_obj[m]
-                t0 = time.perf_counter()
-                u_, s_ = ev.evaluate(x32[rr], n32[rr], wo32[rr], wi_m.astype(np.float32))
-                self.stats.time["network"] += time.perf_counter() - t0
-                self.stats.network_evals += len(rr)
-                tu[m], ts[m] = u_, s_
-        light_rows = ~is_cont
-        if light_rows.any():
-            lr = ray[light_rows]
-            tsel = np.where(self_all[light_rows][:, None], ts[light_rows], tu[light_rows])
-            c = beta[lr] * tsel * w_all[light_rows]
-            if len(self.nee) == 1:  # one row per ray: plain indexed add (np.add.at only for repeats)
-                L[ridx[lr]] += c
-            else:
-                np.add.at(L, ridx[lr], c)
-        if not len(cont):
-            return None
-        cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
-        origin = x[cont] + ng[cont] * np.sign(dot(ng[cont], wi_c))[:, None] * scale[cont]
-        mask = np.ones(len(cont), bool)
-        return ridx[cont], origin, wi_c, beta[cont], np.full(len(cont), INV_4PI), inst[cont], (mask, cu, cs)
 
 
 def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | None = None,

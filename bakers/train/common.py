@@ -1,5 +1,6 @@
 """What the trainers share: torch loaded on demand (typed error when missing), the device choice,
-the resumable training checkpoint and the held-out PSNR every bake reports (spec/bake.md#psnr)."""
+the resumable training checkpoint, the held-out PSNR every bake reports (spec/bake.md#psnr) and the
+check of the written asset against torch."""
 
 from __future__ import annotations
 
@@ -88,3 +89,28 @@ def held_out_accuracy(pred: np.ndarray, val_data: dict) -> dict | None:
     if "rgb_a" not in val_data or not len(pred):
         return None
     return accuracy(pred, val_data["rgb_a"], val_data["rgb_b"], flip=False).to_dict()
+
+
+def reopen_asset(path):
+    """(asset, evaluator) of the written asset, re-opened with the SDK and fully loaded."""
+    from nasset_sdk.asset import Asset
+
+    asset = Asset.open(path)
+    asset.load("all")
+    return asset, asset.evaluator()
+
+
+def check_against_torch(path, val_data: dict, sdk_eval, torch_eval, shown=None) -> tuple[dict, object, object]:
+    """Re-open the written asset with the SDK, evaluate it on the held-out samples and compare with torch.
+
+    ``sdk_eval(ev) -> y_sdk`` and ``torch_eval(lo, hi) -> y_torch`` ([N, k], clamped at 0 here) give the two
+    predictions; ``shown(y_sdk) -> [N, 3]`` the radiance compared with ``val_data["rgb"]`` (default: y_sdk).
+    Returns ({psnr_db, max_abs_diff, accuracy}, asset, evaluator) for kind-specific further checks.
+    """
+    asset, ev = reopen_asset(path)
+    y_sdk = sdk_eval(ev)
+    lo, hi = asset.domain
+    y_torch = np.maximum(torch_eval(lo, hi), 0.0)
+    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
+    y = y_sdk if shown is None else shown(y_sdk)
+    return {"psnr_db": display_psnr(y, val_data["rgb"])[0], "max_abs_diff": diff, "accuracy": held_out_accuracy(y, val_data)}, asset, ev

@@ -33,7 +33,7 @@ from nasset_sdk.kinds.eightdna import FLOWS, SIZES
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES, cube_face_dir, cube_face_uv, to_unit_box
 from nasset_sdk.kinds.spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, S_PER_T, BoxParam, cylindrical_to_direction
 
-from .common import require_torch
+from .common import reopen_asset, require_torch
 
 
 @dataclass(frozen=True)
@@ -386,11 +386,7 @@ def torch_eval(model, batch: dict, lo, hi, *, far_field: bool = False) -> tuple[
 
 def parity_with_sdk(model, asset_path, batch: dict, *, far_field: bool = False) -> dict:
     """Torch vs the SDK evaluator (numpy + onnxruntime) of the written asset on held-out tuples."""
-    from nasset_sdk.asset import Asset
-
-    asset = Asset.open(asset_path)
-    asset.load("all")
-    ev = asset.evaluator()
+    asset, ev = reopen_asset(asset_path)
     lo, hi = asset.domain
     a_t, p_t = torch_eval(model, batch, lo, hi, far_field=far_field)
     a_s = ev.albedo(batch["xo"], batch["wo"]).astype(np.float64)

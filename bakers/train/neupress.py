@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import TorchCheckpoint, display_psnr, held_out_accuracy, pick_device, require_torch
+from .common import TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, pick_device, require_torch
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
            "prt_coefficients", "appearance_inputs", "sampling_inputs", "export_skip_mlp", "export_mlp", "check_asset"]
@@ -431,26 +431,20 @@ def settings_dict(settings: NeupressTrainSettings) -> dict:
 
 def check_asset(path, val_data: dict, app, samp, sh) -> dict:
     """Re-open the asset with the SDK: held-out PSNR, SDK vs torch on the held-out samples, sigma and PRT round trips."""
-    from nasset_sdk.asset import Asset
-
-    asset = Asset.open(path)
-    asset.load("all")
-    ev = asset.evaluator()
+    v = val_data
+    check, asset, ev = check_against_torch(
+        path, v, lambda ev: ev.evaluate(v["x"], v["n"], v["wo"], v["wi"]),
+        lambda lo, hi: predict_appearance(app.model, app.G, appearance_inputs(v["x"], v["wo"], v["wi"], lo, hi)))
     lo, hi = asset.domain
-    y_sdk = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"])
-    y_torch = np.maximum(predict_appearance(app.model, app.G, appearance_inputs(val_data["x"], val_data["wo"], val_data["wi"],
-                                                                                  lo, hi)), 0.0)
-    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
-    k = min(4096, len(val_data["x"]))
-    s_sdk = np.log(ev.sigma(val_data["x"][:k], val_data["wo"][:k]))
-    s_torch = np.clip(predict_log_sigma(samp.model, samp.G, sampling_inputs(val_data["x"][:k], val_data["wo"][:k], lo, hi)),
+    k = min(4096, len(v["x"]))
+    s_sdk = np.log(ev.sigma(v["x"][:k], v["wo"][:k]))
+    s_torch = np.clip(predict_log_sigma(samp.model, samp.G, sampling_inputs(v["x"][:k], v["wo"][:k], lo, hi)),
                       np.log(1e-3), np.log(1e3))
     prt = ev.prt_coefficients()
     comp = {name: int(sum(r.nbytes for r in asset.tensor_refs(name).values())
                       + sum(len(asset.network_bytes(name, n)) for n in asset.network_refs(name)))
             for name in asset.components()}
-    return {"psnr_db": display_psnr(y_sdk, val_data["rgb"])[0], "max_abs_diff": diff,
-            "accuracy": held_out_accuracy(y_sdk, val_data),
+    return {**check,
             "sigma_max_abs_log_diff": float(np.max(np.abs(s_sdk - s_torch))) if k else 0.0,
             "prt_max_abs": float(np.max(np.abs(prt - sh.astype(np.float16).astype(np.float32)))),
             "component_bytes": comp}

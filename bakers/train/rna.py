@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import display_psnr, held_out_accuracy, pick_device, require_torch
+from .common import check_against_torch, display_psnr, held_out_accuracy, pick_device, require_torch
 
 
 @dataclass(frozen=True)
@@ -359,17 +359,10 @@ def settings_dict(settings: TrainSettings) -> dict:
 
 def check_asset(path, val_data: dict, result) -> dict:
     """Re-open the asset and evaluate it with the SDK on the held-out samples (rna surface, or fiber with ``h``)."""
-    from nasset_sdk.asset import Asset
-
-    asset = Asset.open(path)
-    asset.load("all")
-    ev = asset.evaluator()
-    un, sh = ev.evaluate(val_data["x"], val_data["n"], val_data["wo"], val_data["wi"], val_data.get("h"))
-    y_sdk = np.concatenate([un, sh], axis=1)
-    torch = require_torch()
     dev = next(result.model.parameters()).device
-    lo, hi = asset.domain
-    y_torch = np.maximum(predict(result.model, _tensors(torch, val_data, lo, hi, dev)), 0.0)
-    diff = float(np.max(np.abs(y_sdk - y_torch))) if len(y_sdk) else 0.0
-    psnr = display_psnr(select_branch(y_sdk, val_data["vis"]), val_data["rgb"])[0]
-    return {"psnr_db": psnr, "max_abs_diff": diff, "accuracy": held_out_accuracy(select_branch(y_sdk, val_data["vis"]), val_data)}
+    v = val_data
+    check, _, _ = check_against_torch(
+        path, v, lambda ev: np.concatenate(ev.evaluate(v["x"], v["n"], v["wo"], v["wi"], v.get("h")), axis=1),
+        lambda lo, hi: predict(result.model, _tensors(require_torch(), v, lo, hi, dev)),
+        lambda y: select_branch(y, v["vis"]))
+    return check

@@ -32,7 +32,7 @@ _R4 = np.eye(4)
 _R4[:3, :3] = Z_UP_TO_Y_UP
 #: dome local axes (rows) in USD world that make the renderer's lat-long lookup equal Blender's
 #: equirectangular one (spec/bake-blender.md#scene-conversion)
-_DOME_ROWS = np.array([[0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+DOME_ROWS = np.array([[0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
 def _row(ob, *, unit: bool = True) -> np.ndarray:
@@ -221,7 +221,7 @@ class _BlenderConverter(StageConverter):
         light = UsdLux.DomeLight.Define(self.stage, path)
         light.CreateTextureFileAttr(Sdf.AssetPath("./" + tex.relative_to(self.output.parent).as_posix()))  # anchored
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
-        self._xform(light.GetPrim(), _DOME_ROWS)
+        self._xform(light.GetPrim(), DOME_ROWS)
         self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
         self.warn(f"world {world.name}: environment looked up with nearest texels by the reference renderer (Cycles: linear)")

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..sampling import INV_4PI, normalize
 from .registry import register_shader
+from .rna_surface import rna_sample_rows
 
 #: sides of the prism built around each curve segment
 TUBE_SIDES = 8
@@ -145,8 +146,8 @@ class FiberShading:
         t_obj, h, _, exempt = self.hit_frame(x_obj, wo_obj, prim, asset_id)
         indirect = integ.indirect[inst]
         # rays leave a fiber hit from the hit point itself; its own and neighbouring segments are exempt
-        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = integ.rna_sample_rows(
-            x, inst, indirect, rng, lambda s, wi_s: (x[s], exempt[s]))
+        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = rna_sample_rows(
+            integ, x, inst, indirect, rng, lambda s, wi_s: (x[s], exempt[s]))
         tu = np.zeros((len(ray), 3))
         ts = np.zeros((len(ray), 3))
         if len(ray):

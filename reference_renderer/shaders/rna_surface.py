@@ -1,13 +1,60 @@
 """Shading vertex of rna surface assets (spec/renderer.md#neural-assets).
 
-The vertex itself is :meth:`nasset_reference_renderer.integrator.PathIntegrator.rna_surface_vertex`: scenes
-holding only rna assets call it directly, in one batch over every rna instance; this shader puts it
-behind the common interface for scenes that mix kinds.
+Transport T is evaluated at the hit; the light-sample rows pick T_shadowed or T_unshadowed by whether
+the asset itself blocks the direction, and the continuation carries both until its ray is traced.
+Scenes holding only rna assets shade every rna surface instance in one call
+(:class:`nasset_reference_renderer.shaders.NeuralShading`).
 """
 
 from __future__ import annotations
 
+import time
+
+import numpy as np
+
+from ..sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
+from .common import max3, unique
 from .registry import register_shader
+
+
+def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
+    """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
+    blocks it; ``self_hit`` says whether the asset itself does) and one uniform-sphere continuation where
+    ``indirect``. ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s.
+
+    Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their wi).
+    """
+    n = len(x)
+    rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
+    for k in integ.nee:
+        light = integ.scene.lights[k]
+        wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
+        ok = (pdf > 0) & (max3(li) > 0)
+        s = np.nonzero(ok)[0]
+        if not len(s):
+            continue
+        full = len(s) == n
+        wi_s, dist_s, inst_s = (wi, dist, inst) if full else (wi[s], dist[s], inst[s])
+        origin, exempt = shadow_origin(s, wi_s)
+        tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * integ.eps, np.inf)
+        h = integ.trace(origin, wi_s, tmax, inst_s) if exempt is None else integ.trace(origin, wi_s, tmax, inst_s, exempt)
+        free = h.prim < 0  # no other object in the way
+        s = s[free]
+        w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
+        rows_ray.append(s)
+        rows_wi.append(wi[s])
+        rows_w.append(li[s] * (w / pdf[s])[:, None])
+        rows_self.append(h.self_hit[free])
+        rows_kind.append(np.zeros(len(s), bool))
+    cont = np.nonzero(indirect)[0]
+    wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
+    rows_ray.append(cont)
+    rows_wi.append(wi_c)
+    rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+    rows_self.append(np.zeros(len(cont), bool))
+    rows_kind.append(np.ones(len(cont), bool))
+    return (np.concatenate(rows_ray), np.concatenate(rows_wi), np.concatenate(rows_w), np.concatenate(rows_self),
+            np.concatenate(rows_kind), cont, wi_c)
 
 
 @register_shader("rna", "surface")
@@ -16,4 +63,66 @@ class RnaSurfaceShader:
         self.integ = integ
 
     def vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng, asset: int | None = None, mode: dict | None = None):
-        return self.integ.rna_surface_vertex(r, idx, x, d, beta, prim, bu, bv, inst, L, rng)
+        integ = self.integ
+        if len(r) != len(x):  # (all rows in a scene of neural assets only: no gathers)
+            x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
+        else:
+            ridx = idx
+        n = len(x)
+        ng = integ.tri_ng[prim]
+        scale = (integ.eps * (1.0 + max3(np.abs(x)) / integ.accel.scale))[:, None]
+        x_obj = integ.to_object(x, inst, point=True)
+        wo_obj = normalize(integ.to_object(-d, inst))
+        asset_id = integ.inst_asset[inst]
+        local = integ.scene.tri_local[prim]
+        assets = unique(asset_id)
+        w0 = 1 - bu - bv
+        if len(assets) == 1:
+            cn = integ.asset_corner_n[assets[0]][local]
+            n_obj = normalize(cn[:, 0] * w0[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
+        else:
+            n_obj = np.zeros((n, 3))
+            for a in assets:
+                m = asset_id == a
+                cn = integ.asset_corner_n[a][local[m]]
+                n_obj[m] = normalize(cn[:, 0] * w0[m][:, None] + cn[:, 1] * bu[m][:, None] + cn[:, 2] * bv[m][:, None])
+        indirect = integ.indirect[inst]
+        def shadow_origin(s, wi_s):  # offset along the geometric normal, to the side wi leaves
+            ng_s, x_s, scale_s = (ng, x, scale) if len(s) == n else (ng[s], x[s], scale[s])
+            return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
+
+        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin)
+        tu = np.zeros((len(ray), 3))
+        ts = np.zeros((len(ray), 3))
+        if len(ray):
+            wi_obj = normalize(integ.to_object(wi_all, inst[ray]))
+            ray_asset = asset_id[ray]
+            # float32 once per hit point, then gathered per row (a point has a light and a continuation row)
+            x32, n32, wo32 = x_obj.astype(np.float32), n_obj.astype(np.float32), wo_obj.astype(np.float32)
+            for a in unique(ray_asset):
+                ev = integ.scene.assets[a].evaluator
+                if len(assets) == 1:
+                    m, rr, wi_m = slice(None), ray, wi_obj
+                else:
+                    m = ray_asset == a
+                    rr, wi_m = ray[m], wi_obj[m]
+                t0 = time.perf_counter()
+                u_, s_ = ev.evaluate(x32[rr], n32[rr], wo32[rr], wi_m.astype(np.float32))
+                integ.stats.time["network"] += time.perf_counter() - t0
+                integ.stats.network_evals += len(rr)
+                tu[m], ts[m] = u_, s_
+        light_rows = ~is_cont
+        if light_rows.any():
+            lr = ray[light_rows]
+            tsel = np.where(self_all[light_rows][:, None], ts[light_rows], tu[light_rows])
+            c = beta[lr] * tsel * w_all[light_rows]
+            if len(integ.nee) == 1:  # one row per ray: plain indexed add (np.add.at only for repeats)
+                L[ridx[lr]] += c
+            else:
+                np.add.at(L, ridx[lr], c)
+        if not len(cont):
+            return None
+        cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
+        origin = x[cont] + ng[cont] * np.sign(dot(ng[cont], wi_c))[:, None] * scale[cont]
+        mask = np.ones(len(cont), bool)
+        return ridx[cont], origin, wi_c, beta[cont], np.full(len(cont), INV_4PI), inst[cont], (mask, cu, cs)

@@ -13,7 +13,7 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 
 from nasset_converters.blender.examples import build_example, write_example_blend  # noqa: E402
-from nasset_converters.blender.usd_export import _DOME_ROWS, convert_scene, map_material  # noqa: E402
+from nasset_converters.blender.usd_export import DOME_ROWS, convert_scene, map_material  # noqa: E402
 from nasset_sdk.errors import NassetError  # noqa: E402
 
 
@@ -107,7 +107,7 @@ def test_dome_rotation_maps_blender_equirect_to_renderer_latlong():
     u_b = np.mod(np.arctan2(D[:, 1], -D[:, 0]) / (2 * np.pi) + 0.5, 1.0)
     v_b = np.arccos(D[:, 2]) / np.pi
     d_world = np.stack([D[:, 0], D[:, 2], -D[:, 1]], 1)
-    R = _DOME_ROWS[:3, :3]
+    R = DOME_ROWS[:3, :3]
     uv = DomeLight.dir_to_uv(d_world @ np.linalg.inv(R))
     du = np.abs(uv[:, 0] - u_b)
     assert np.all(np.minimum(du, 1 - du) < 1e-9) and np.allclose(uv[:, 1], v_b)

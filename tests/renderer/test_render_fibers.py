@@ -43,7 +43,7 @@ def _fiber_hits(path, o, d):
     x_obj = integ.to_object(x, inst, point=True)
     wo_obj = integ.to_object(-d[m], inst)
     wo_obj /= np.linalg.norm(wo_obj, axis=1, keepdims=True)
-    t, h, _, _ = integ.fibers.hit_frame(x_obj, wo_obj, hits.prim[m], integ.inst_asset[inst])
+    t, h, _, _ = integ.shading.fibers.hit_frame(x_obj, wo_obj, hits.prim[m], integ.inst_asset[inst])
     return m, t, h
 
 
