@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, unit_sphere  # noqa: F401 - re-exported
+from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, concat_views, unit_sphere  # noqa: F401 - re-exported
 
 from . import CONVERTER_VERSION, quiet_stdout, to_z_up
 
@@ -310,11 +310,7 @@ def file_sha256(path) -> str:
 def load_split(store: DatasetDir, split: str, count: int, fiber: bool) -> dict:
     """All views of a split concatenated (FIELDS, 'h' for fibers) plus 'view' and the mask statistics."""
     parts = [store.load(split, i) for i in range(count)]
-    out = {f: np.concatenate([p[f] for p in parts]) for f in (FIBER_FIELDS if fiber else FIELDS)}
-    for f in ("rgb_a", "rgb_b"):  # held-out halves (spec/accuracy.md#metrics)
-        if parts and all(f in p for p in parts):
-            out[f] = np.concatenate([p[f] for p in parts])
-    out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
+    out = concat_views(parts, FIBER_FIELDS if fiber else FIELDS)
     out["disagree"] = int(sum(int(p["disagree"]) for p in parts))
     out["covered"] = int(sum(int(p["covered"]) for p in parts))
     return out

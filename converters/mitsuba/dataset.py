@@ -238,6 +238,21 @@ def account_clamp(stats: dict | None, raw: np.ndarray, kept: np.ndarray) -> None
     stats["removed"] = stats.get("removed", np.zeros(3)) + (raw - kept).sum(0)
 
 
+def concat_views(parts: list[dict], fields) -> dict:
+    """Per-view arrays of one split joined: ``fields`` concatenated (all required), the held-out halves
+    ``rgb_a``/``rgb_b`` concatenated and the per-view sums ``energy``/``clamp_removed`` added up where
+    every view has them (spec/accuracy.md#metrics), plus 'view' [M] each sample's view index."""
+    out = {f: np.concatenate([p[f] for p in parts]) for f in fields}
+    for f in ("rgb_a", "rgb_b"):
+        if parts and all(f in p for p in parts):
+            out[f] = np.concatenate([p[f] for p in parts])
+    for f in ("energy", "clamp_removed"):
+        if parts and all(f in p for p in parts):
+            out[f] = np.sum([p[f] for p in parts], axis=0)
+    out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
+    return out
+
+
 def half_seeds(seed: int) -> tuple[int, int]:
     """Seeds of a held-out view's two independent halves (disjoint sampler streams)."""
     return seed, seed ^ 0x800000  # seeds are < 2**24: bit 23 differs
@@ -370,13 +385,4 @@ class DatasetDir:
 
     def load_split(self, split: str, count: int) -> dict:
         """All views of a split concatenated (FIELDS) plus 'view' [M] view index."""
-        parts = [self.load(split, i) for i in range(count)]
-        out = {f: np.concatenate([p[f] for p in parts]) for f in FIELDS}
-        for f in ("rgb_a", "rgb_b"):  # held-out halves (spec/accuracy.md#metrics)
-            if parts and all(f in p for p in parts):
-                out[f] = np.concatenate([p[f] for p in parts])
-        for f in ("energy", "clamp_removed"):  # per-view sums: totals over the split
-            if parts and all(f in p for p in parts):
-                out[f] = np.sum([p[f] for p in parts], axis=0)
-        out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
-        return out
+        return concat_views([self.load(split, i) for i in range(count)], FIELDS)

@@ -31,7 +31,7 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
-from .dataset import account_clamp, camera_rays, half_seeds, unit_sphere
+from .dataset import account_clamp, camera_rays, concat_views, half_seeds, unit_sphere
 
 FIELDS = ("x", "n", "wo", "wi", "rgb", "pix")
 
@@ -216,12 +216,4 @@ def load_split(store, split: str, count: int) -> dict:
     missing = [f for f in FIELDS if parts and f not in parts[0]]
     if missing:
         raise error("CONVERT_DATASET", f"view files lack {missing}: not a neupress dataset", file=str(store.root))
-    out = {f: np.concatenate([p[f] for p in parts]) for f in FIELDS}
-    for f in ("rgb_a", "rgb_b"):  # held-out halves (spec/accuracy.md#metrics)
-        if parts and all(f in p for p in parts):
-            out[f] = np.concatenate([p[f] for p in parts])
-    for f in ("energy", "clamp_removed"):  # per-view sums: totals over the split
-        if parts and all(f in p for p in parts):
-            out[f] = np.sum([p[f] for p in parts], axis=0)
-    out["view"] = np.concatenate([np.full(len(p["pix"]), i, np.int32) for i, p in enumerate(parts)])
-    return out
+    return concat_views(parts, FIELDS)
