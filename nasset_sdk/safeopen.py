@@ -165,31 +165,18 @@ def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFA
     max_as = ADDRESS_SPACE_BASE + 4 * size
     env = dict(os.environ)
     env.setdefault("PXR_WORK_THREAD_LIMIT", "1")
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-c", _CHILD, str(p), level],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-            env=env, preexec_fn=_limit_child(max_as), start_new_session=True,
-        )
-    except OSError as exc:
-        return ProbeResult(False, "spawn-failed", str(exc), None, time.perf_counter() - t0)
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        _kill_group(proc)
-        proc.communicate()
-        return ProbeResult(False, "timeout", f"{timeout:g} s", None, time.perf_counter() - t0)
-    except BaseException:  # KeyboardInterrupt, SystemExit from a signal handler: never leave the child running
-        _kill_group(proc)
-        raise
-    seconds = time.perf_counter() - t0
-    if _out_of_memory(proc.returncode, err):
-        return ProbeResult(False, "memory", f"{max_as >> 20} MiB", proc.returncode, seconds, "ARRAY_TOO_LARGE")
+    run = run_bounded([sys.executable, "-c", _CHILD, str(p), level], max_as=max_as, timeout=timeout, env=env)
+    if run.status == "spawn-failed":
+        return ProbeResult(False, "spawn-failed", run.stderr.decode("utf-8", "replace"), None, run.seconds)
+    if run.status == "timeout":
+        return ProbeResult(False, "timeout", f"{timeout:g} s", None, run.seconds)
+    out, err, seconds = run.stdout, run.stderr, run.seconds
+    if _out_of_memory(run.returncode, err):
+        return ProbeResult(False, "memory", f"{max_as >> 20} MiB", run.returncode, seconds, "ARRAY_TOO_LARGE")
     text = out.decode("utf-8", "replace")
     marker = text.rfind("@@probe@@")
-    if proc.returncode != 0 or marker < 0:
-        rc = proc.returncode
+    if run.returncode != 0 or marker < 0:
+        rc = run.returncode
         if rc is not None and rc < 0:
             try:
                 detail = signal.Signals(-rc).name
@@ -202,9 +189,9 @@ def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFA
     try:
         result = json.loads(text[marker + len("@@probe@@"):].strip().splitlines()[0])
     except (ValueError, IndexError):
-        return ProbeResult(False, "crashed", "unreadable probe output", proc.returncode, seconds)
+        return ProbeResult(False, "crashed", "unreadable probe output", run.returncode, seconds)
     return ProbeResult(bool(result.get("ok")), "ok" if result.get("ok") else "error", str(result.get("detail", "")),
-                       proc.returncode, seconds, str(result.get("code") or "FILE_UNREADABLE"))
+                       run.returncode, seconds, str(result.get("code") or "FILE_UNREADABLE"))
 
 
 def _kill_group(proc) -> None:
@@ -255,7 +242,8 @@ class ChildRun:
 
 def run_bounded(argv: list[str], *, stdin: bytes = b"", max_as: int, timeout: float, env: dict | None = None) -> ChildRun:
     """Run ``argv`` in its own session under RLIMIT_AS ``max_as`` bytes and a wall clock ``timeout``;
-    the whole process group is killed on timeout. Never raises for what the child does."""
+    the whole process group is killed on timeout, and when this process is interrupted (the child also
+    dies with its parent: PR_SET_PDEATHSIG). Never raises for what the child does."""
     t0 = time.perf_counter()
     try:
         proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -265,12 +253,12 @@ def run_bounded(argv: list[str], *, stdin: bytes = b"", max_as: int, timeout: fl
     try:
         out, err = proc.communicate(stdin, timeout=timeout)
     except subprocess.TimeoutExpired:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except OSError:  # pragma: no cover - already gone
-            proc.kill()
+        _kill_group(proc)
         out, err = proc.communicate()
         return ChildRun("timeout", None, out, err, time.perf_counter() - t0)
+    except BaseException:  # KeyboardInterrupt, SystemExit from a signal handler: never leave the child running
+        _kill_group(proc)
+        raise
     rc = proc.returncode
     status = "ok" if rc == 0 else ("crashed" if rc < 0 else "failed")
     return ChildRun(status, rc, out, err, time.perf_counter() - t0)
