@@ -9,21 +9,12 @@ import pytest
 pytest.importorskip("mitsuba", reason="bake tests need mitsuba (pip install 'nasset-sdk[mitsuba]')")
 
 from nasset_converters.mitsuba import dataset as ds  # noqa: E402
-from nasset_converters.mitsuba import load_mitsuba  # noqa: E402
-from nasset_converters.mitsuba import scene as msc  # noqa: E402
-from nasset_converters.mitsuba.examples import EXAMPLE_ASSET_IDS, write_example_scene  # noqa: E402
+from tests.mitsuba_example import isolated_example  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
-    mi = load_mitsuba()
-    if mi.variant().startswith("scalar"):
-        pytest.skip("per-pixel lights need a JIT variant")
-    mi.set_log_level(mi.LogLevel.Error)
-    xml = write_example_scene(tmp_path_factory.mktemp("scene"))
-    shapes = msc.pick_shapes(msc.load_scene(mi, xml), list(EXAMPLE_ASSET_IDS))
-    center, radius = msc.bounding_sphere(msc.mesh_geometry(mi, shapes))
-    iso = msc.IsolatedAsset(mi, shapes, center, radius)
+    mi, iso, center, radius = isolated_example(tmp_path_factory.mktemp("scene"))
     assert iso.per_path_lights
     r = ds.Renderer(mi, iso, ds.DataSettings(res=32, clamp=0.0))
     eye = center + 2.6 * radius * np.array([0.4, 0.6, 0.7]) / np.linalg.norm([0.4, 0.6, 0.7])
