@@ -97,12 +97,16 @@ def _merge_quality_args(p):
     p.add_argument("-o", "--output", required=True, help="output .usdc")
 
 
-@verb("conformance", "run a renderer on the conformance cases and compare with the reference images (spec/conformance.md)",
+@verb("conformance", "run a renderer on the conformance cases and compare with the reference images, or an evaluator on the "
+      "evaluator test vectors (spec/conformance.md, spec/evaluator-vectors.md)",
       "nasset_sdk.conformance:run")
 def _conformance_args(p):
     p.add_argument("--renderer", default="nasset render {scene} -o {out} --spp {spp} --seed {seed} --width {width} --height {height} --quiet",
                    help="command template, split like a shell command line; placeholders {scene} {out} {spp} {width} {height} "
                    "{seed} (default: the reference renderer)")
+    p.add_argument("--evaluator", default=None, metavar="CMD",
+                   help="check an evaluator on the evaluator test vectors instead of rendering (spec/evaluator-vectors.md): "
+                   "command template with placeholders {asset} {input} {output}; 'sdk' runs the SDK's own evaluators")
     p.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="run only these cases")
     p.add_argument("--suite", default=None, metavar="DIR", help="cases folder (default: the cases installed with nasset_sdk)")
     p.add_argument("--workdir", default=None, metavar="DIR", help="where images, logs and error maps go (default: a new temp folder)")

@@ -100,21 +100,21 @@ def load_cases(suite: Path, names=None) -> list[dict]:
 
 
 # -- renderer command ----------------------------------------------------------------------------
-def format_command(template: str, **values) -> list[str]:
-    """Split ``template`` like a POSIX shell and substitute the placeholders in every argument."""
+def format_command(template: str, *, option: str = "--renderer", placeholders=PLACEHOLDERS, **values) -> list[str]:
+    """Split ``template`` (the value of ``option``) like a POSIX shell and substitute the placeholders in every argument."""
     try:
         argv = shlex.split(template)
     except ValueError as exc:
-        raise UsageError(f"--renderer: cannot split the command template: {exc}") from None
+        raise UsageError(f"{option}: cannot split the command template: {exc}") from None
     if not argv:
-        raise UsageError("--renderer: empty command template")
+        raise UsageError(f"{option}: empty command template")
     out = []
     for a in argv:
         try:
             out.append(a.format_map({k: str(v) for k, v in values.items()}))
         except (KeyError, IndexError, ValueError) as exc:
-            raise UsageError(f"--renderer: bad placeholder in {a!r} ({exc}); known: "
-                             + ", ".join("{" + p + "}" for p in PLACEHOLDERS)) from None
+            raise UsageError(f"{option}: bad placeholder in {a!r} ({exc}); known: "
+                             + ", ".join("{" + p + "}" for p in placeholders)) from None
     if out[0] == "nasset" and shutil.which("nasset") is None:  # not on PATH (e.g. a venv not activated)
         out = [sys.executable, "-m", "nasset_sdk.cli"] + out[1:]
     return out
@@ -248,7 +248,11 @@ def format_table(report: dict) -> str:
 
 
 def run(args) -> int:
-    """CLI: nasset conformance."""
+    """CLI: nasset conformance (``--evaluator``: the evaluator test vectors instead of images)."""
+    if getattr(args, "evaluator", None):
+        from .conformance_evaluator import run as run_vectors
+
+        return run_vectors(args)
     if args.spp_scale < 1 or args.timeout <= 0:
         raise UsageError("--spp-scale must be >= 1 and --timeout > 0")
     if args.list:
