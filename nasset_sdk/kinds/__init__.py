@@ -45,6 +45,9 @@ class Finding:
     message: str
     prim: str | None = None
     attribute: str | None = None
+    #: None: the rule's severity; "warning" for content this contract version does not know
+    #: (readers ignore it, spec/kinds/README.md#undeclared)
+    severity: str | None = None
 
 
 _SYMBOL = re.compile(r"^[A-Za-z_]\w*$")
@@ -136,13 +139,15 @@ class KindContract:
                     want = _eval_dim(expr, env)
                     if want is not None and want != got:
                         out.append(Finding("NETWORK_IO", f"{name!r} width {got} != {expr} = {want}", prim_of(cname, nname), "onnx:inputWidths"))
-            for extra in tensors.keys() - spec.tensors.keys():
-                out.append(Finding("TENSOR_CONTRACT", f"tensor {extra!r} not in the {self.id} contract", prim_of(cname, extra)))
-            for extra in networks.keys() - spec.networks.keys():
-                out.append(Finding("NETWORK_IO", f"network {extra!r} not in the {self.id} contract", prim_of(cname, extra)))
+            for extra in sorted(tensors.keys() - spec.tensors.keys()):
+                out.append(Finding("TENSOR_CONTRACT", f"tensor {extra!r} not in the {self.id} contract (readers ignore it)",
+                                   prim_of(cname, extra), severity="warning"))
+            for extra in sorted(networks.keys() - spec.networks.keys()):
+                out.append(Finding("NETWORK_IO", f"network {extra!r} not in the {self.id} contract (readers ignore it)",
+                                   prim_of(cname, extra), severity="warning"))
         for cname in present.keys() - specs.keys():
             out.append(Finding("COMPONENT_UNKNOWN", f"component {cname!r} not declared by kind {self.id}", prim_of(cname)))
-        if get_tensor is not None and not any(f.code in ("TENSOR_CONTRACT", "TENSOR_MISSING") for f in out):
+        if get_tensor is not None and not any(f.code in ("TENSOR_CONTRACT", "TENSOR_MISSING") and f.severity is None for f in out):
             out += self.value_findings(variant, present, get_tensor, prim_of)
         return out
 

@@ -57,7 +57,7 @@ RULES: tuple[Rule, ...] = (
     Rule("TENSOR_SHAPE", "error", "shape is authored, rank 1..8, non-negative, and its product equals len(values)"),
     Rule("TENSOR_TOO_LARGE", "error", "a tensor declares at most MAX_TENSOR_ELEMENTS elements"),
     Rule("TENSOR_NONFINITE", "error", "no tensor value is NaN or Inf (fp16 overflow included)"),
-    Rule("TENSOR_CONTRACT", "error", "tensor ranks and dimensions match the kind contract; no undeclared tensors"),
+    Rule("TENSOR_CONTRACT", "error", "tensor ranks and dimensions match the kind contract; an undeclared tensor is a warning"),
     Rule("NETWORK_MISSING", "error", "every network the kind requires is present with model bytes"),
     Rule("NETWORK_TOO_LARGE", "error", "model bytes are within MAX_NETWORK_BYTES"),
     Rule("NETWORK_DIGEST", "error", "onnx:sha256 equals the sha256 of onnx:model"),
@@ -495,7 +495,7 @@ class Validation:
 
         def add(findings, suffix=""):
             for f in findings:
-                self.emit(f.code, f.message + suffix, f.prim, f.attribute)
+                self.emit(f.code, f.message + suffix, f.prim, f.attribute, severity=f.severity)
 
         getter = (lambda c, n: default_tensors[(c, n)]) if default_ok else None
         add(contract.findings(self.variant, default_present, getter, prim_of))
