@@ -95,7 +95,8 @@ def safe_normalize(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
 
 def _norm_no_overflow(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(v, |v|) for finite v [..., 3]; rows whose norm overflows (|v_k| ~ 1e308) are first divided by max |v_k|."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    with np.errstate(over="ignore"):  # an overflowing norm is expected here and rescaled below
+        n = np.linalg.norm(v, axis=-1, keepdims=True)
     big = np.isinf(n)
     if big.any():
         v = np.where(big, v / np.where(big, np.abs(v).max(-1, keepdims=True), 1.0), v)

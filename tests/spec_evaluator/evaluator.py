@@ -341,7 +341,138 @@ def eightdna(a: AssetFile, q: str, args: dict) -> dict:
     if q == "direct_sample":
         wi, pdf = ggx_sample(args["n"], args["wo"], args["u"], alpha)
         return {"wi": wi, "pdf": pdf}
-    return {}  # the flow (pdf, sample) is not implemented here
+    return _flow(a, q, args)
+
+
+# -- 8dna flow (8dna.md#bbox, #spline, #flow) ------------------------------------------------------------------
+TINY = 1e-300
+
+
+def _softmax(v):
+    e = np.exp(v - v.max(1, keepdims=True))
+    return e / e.sum(1, keepdims=True)
+
+
+class Spline:
+    """8dna.md#spline for one row per query; widths and heights are the knot differences."""
+
+    def __init__(self, g, mins) -> None:
+        g = np.nan_to_num(g.astype(np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
+        k = (g.shape[1] - 1) // 3
+        mw, mh, md = mins
+        self.x = self._knots(mw + (1 - k * mw) * _softmax(g[:, :k]))
+        self.y = self._knots(mh + (1 - k * mh) * _softmax(g[:, k:2 * k]))
+        self.d = md + np.maximum(g[:, 2 * k:], 0) + np.log1p(np.exp(-np.abs(g[:, 2 * k:])))
+
+    @staticmethod
+    def _knots(sizes):
+        kn = np.concatenate([np.zeros((len(sizes), 1)), np.cumsum(sizes, 1)], 1)
+        kn[:, -1] = 1.0
+        return kn
+
+    def _bin(self, knots, v):
+        k = (v[:, None] >= knots[:, 1:-1]).sum(1)
+        r = np.arange(len(v))
+        w = np.maximum(self.x[r, k + 1] - self.x[r, k], TINY)
+        h = np.maximum(self.y[r, k + 1] - self.y[r, k], TINY)
+        return self.x[r, k], self.y[r, k], w, h, self.d[r, k], self.d[r, k + 1]
+
+    @staticmethod
+    def _dtdz(xi, s, d0, d1):
+        t = xi * (1 - xi)
+        den = np.maximum(s + (d1 + d0 - 2 * s) * t, TINY)
+        return s * s * (d1 * xi * xi + 2 * s * t + d0 * (1 - xi) ** 2) / (den * den), den
+
+    def forward(self, z):
+        """(t, log dt/dz)"""
+        z = np.clip(np.nan_to_num(z), 0, 1)
+        x0, y0, w, h, d0, d1 = self._bin(self.x, z)
+        s = h / w
+        xi = np.clip((z - x0) / w, 0, 1)
+        dtdz, den = self._dtdz(xi, s, d0, d1)
+        t = y0 + h * (s * xi * xi + d0 * xi * (1 - xi)) / den
+        return np.clip(t, 0, 1), np.log(np.maximum(dtdz, TINY))
+
+    def inverse_log_dz(self, t):
+        """log |dz/dt|"""
+        t = np.clip(np.nan_to_num(t), 0, 1)
+        x0, y0, w, h, d0, d1 = self._bin(self.y, t)
+        s = h / w
+        dy = t - y0
+        delta = d1 + d0 - 2 * s
+        a = h * (s - d0) + dy * delta
+        b = h * d0 - dy * delta
+        c = -s * dy
+        den = -b - np.sqrt(np.maximum(b * b - 4 * a * c, 0))
+        xi = np.clip(np.where(den < -TINY, 2 * c / np.where(den < -TINY, den, -1.0), 0.0), 0, 1)
+        return -np.log(np.maximum(self._dtdz(xi, s, d0, d1)[0], TINY))
+
+
+def _cyl(z, phi):
+    z = np.clip(z, -1, 1)
+    r = np.sqrt(np.maximum(1 - z * z, 0))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+
+
+def _box_point(a: AssetFile, d):
+    """u = c + tau d and J = e_k* / tau^3 for unit d (8dna.md#bbox)."""
+    c, e = (a.lo + a.hi) / 2, (a.hi - a.lo) / 2
+    ad = np.abs(d)
+    ratio = np.where(ad > TINY, e / np.maximum(ad, TINY), np.inf)
+    k = np.argmin(ratio, 1)
+    tau = ratio[np.arange(len(d)), k]
+    return c + d * tau[:, None], e[k] / np.maximum(tau, TINY) ** 3
+
+
+def _flow_input(a: AssetFile, j, base, s):
+    parts = [base]
+    if j == 2:
+        parts += [grid_1d(a.tensor("core", "s1Grid"), s[:, 0]), s[:, :1]]
+    elif j >= 3:
+        d12 = _cyl(s[:, 0], s[:, 1])
+        parts += [cubemap(a.tensor("core", "s12Cube"), d12), d12]
+        if j == 4:
+            parts += [grid_1d(a.tensor("core", "s3Grid"), s[:, 2]), s[:, 2:3]]
+    return np.concatenate([np.asarray(p, F32) for p in parts], 1)
+
+
+def _spline(a: AssetFile, j, base, s, ch):
+    g = a.run("core", f"flow{j}", _flow_input(a, j, base, s)).astype(np.float64)
+    p = g.shape[1] // 3
+    rows = np.take_along_axis(g, ch[:, None] * p + np.arange(p)[None], 1)
+    return Spline(rows, a.tensor("core", "splineMinimums").astype(np.float64))
+
+
+def _s_of_t(t, j):
+    return 2 * t - 1 if j in (1, 3) else 2 * math.pi * t - math.pi
+
+
+def _flow(a: AssetFile, q: str, args: dict) -> dict:
+    base = eightdna(a, "albedo", {"x": args["x"], "wo": args["wo"]})["input"]
+    ch = np.asarray(args["channel"], np.int64)
+    n = len(ch)
+    s = np.zeros((n, 4))
+    logp = np.zeros(n)
+    if q == "sample":
+        z = np.clip(np.asarray(args["u"], np.float64), 0, 1)
+        for j in range(1, 5):
+            t, ld = _spline(a, j, base, s, ch).forward(z[:, j - 1])
+            s[:, j - 1] = _s_of_t(t, j)
+            logp -= ld
+        ui, jac = _box_point(a, _cyl(s[:, 0], s[:, 1]))
+        wi = _cyl(s[:, 2], s[:, 3])
+    else:
+        d = safe_normalize(np.asarray(args["ui"], np.float64) - (a.lo + a.hi) / 2)
+        w = safe_normalize(args["wi"])
+        given = np.stack([np.clip(d[:, 2], -1, 1), np.arctan2(d[:, 1], d[:, 0]), np.clip(w[:, 2], -1, 1), np.arctan2(w[:, 1], w[:, 0])], 1)
+        t = np.clip(np.stack([(given[:, 0] + 1) / 2, (given[:, 1] + math.pi) / (2 * math.pi),
+                              (given[:, 2] + 1) / 2, (given[:, 3] + math.pi) / (2 * math.pi)], 1), 0, 1)
+        for j in range(1, 5):
+            logp += _spline(a, j, base, s, ch).inverse_log_dz(t[:, j - 1])
+            s[:, j - 1] = given[:, j - 1]
+        _, jac = _box_point(a, d)
+    pdf = np.exp(logp) / (16 * math.pi ** 2) * jac
+    return {"pdf": pdf} if q == "pdf" else {"ui": ui, "wi": wi, "pdf": pdf}
 
 
 KINDS = {"rna": rna, "neupress": neupress, "8dna": eightdna}
