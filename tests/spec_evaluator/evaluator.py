@@ -471,7 +471,7 @@ def _flow(a: AssetFile, q: str, args: dict) -> dict:
             logp += _spline(a, j, base, s, ch).inverse_log_dz(t[:, j - 1])
             s[:, j - 1] = given[:, j - 1]
         _, jac = _box_point(a, d)
-    pdf = np.exp(logp) / (16 * math.pi ** 2) * jac
+    pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / (16 * math.pi ** 2) * jac, 1e300)
     return {"pdf": pdf} if q == "pdf" else {"ui": ui, "wi": wi, "pdf": pdf}
 
 
