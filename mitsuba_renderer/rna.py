@@ -23,9 +23,15 @@ TUBE_SIDES = 8
 
 
 def safe_normalize(v: np.ndarray) -> np.ndarray:
-    """encodings.md#normalize: non-finite -> 0; |v| <= 1e-20 -> (0, 0, 1)."""
+    """encodings.md#normalize: non-finite -> 0; a length that overflows is recomputed after dividing by
+    max |v_k|; |v| <= 1e-20 -> (0, 0, 1)."""
     v = np.where(np.isfinite(v), v, 0.0).astype(np.float64)
-    n = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
+    with np.errstate(over="ignore"):
+        n = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
+    big = np.isinf(n[..., 0])
+    if big.any():
+        v[big] /= np.abs(v[big]).max(-1, keepdims=True)
+        n[big] = np.sqrt(np.sum(v[big] * v[big], axis=-1, keepdims=True))
     out = v / np.maximum(n, 1e-300)
     small = n[..., 0] <= 1e-20
     out[small] = (0.0, 0.0, 1.0)
