@@ -171,6 +171,18 @@ def tolerance(query: str, output: str) -> tuple[float, float]:
     return TOLERANCES.get((query, output), DEFAULT_TOLERANCE)
 
 
+def _subnormal_corners(builder) -> None:
+    """float16 subnormals (2^-24 .. 4 2^-24, and -3e-6) in the corner texels that the box-corner queries read."""
+    core = builder.components["core"][""]
+    if "triplane" not in core.tensors:
+        return
+    arr, dtype, layout = core.tensors["triplane"]
+    arr = np.array(arr, np.float64)
+    arr[0, 0, 0, :] = 2.0 ** -24 * np.arange(1, arr.shape[-1] + 1)
+    arr[1, -1, -1, :] = -3e-6
+    core.add_tensor("triplane", arr, dtype=dtype, layout=layout)
+
+
 def generate(out_dir, names=None) -> list[Path]:
     """Write every case (or ``names``) into ``out_dir/<case>/``; returns the case folders."""
     import trimesh
@@ -192,7 +204,9 @@ def generate(out_dir, names=None) -> list[Path]:
         geometry = None if variant == "fiber" else MeshGeometry.from_trimesh(trimesh.creation.icosahedron())
         folder = out_dir / name
         folder.mkdir(parents=True, exist_ok=True)
-        get_kind(kind_id).build_random(rng, variant=variant, size="tiny", geometry=geometry).write(folder / "asset.usdc")
+        builder = get_kind(kind_id).build_random(rng, variant=variant, size="tiny", geometry=geometry)
+        _subnormal_corners(builder)
+        builder.write(folder / "asset.usdc")
         os.chmod(folder / "asset.usdc", 0o644)
         asset = Asset.open(folder / "asset.usdc", load="all")
         inputs = make_queries(kind_id, variant, queries, asset, rng)
