@@ -35,7 +35,7 @@ def fourier_features(g: np.ndarray, v: np.ndarray) -> np.ndarray:
 def spherical_coords(w: np.ndarray) -> np.ndarray:
     """encodings.md#spherical: (acos(z)/π, atan2(y, x)/2π) of safe-normalised w."""
     w = safe_normalize(w)
-    return np.stack([np.arccos(np.clip(w[:, 2], -1.0, 1.0)) / np.pi, np.arctan2(w[:, 1], w[:, 0]) / (2.0 * np.pi)], 1)
+    return np.stack([np.arccos(np.clip(w[:, 2], -1.0, 1.0)) / np.pi, np.arctan2(w[:, 1], w[:, 0]) / (2.0 * np.pi)], 1).astype(np.float32)
 
 
 def local_frame(n: np.ndarray):
