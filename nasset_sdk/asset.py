@@ -102,13 +102,21 @@ class AssetBuilder:
         pad = float(padding) * max(float(np.max(hi - lo)), 1e-12)
         self.domain = (lo - pad, hi + pad)
 
-    def component(self, name: str, *, required: bool, purpose: str = "", quality: str | None = None) -> ComponentData:
-        """Get or create a component (one quality variant of it when ``quality`` is given)."""
+    def component(self, name: str, *, required: bool | None = None, purpose: str = "", quality: str | None = None) -> ComponentData:
+        """Get or create a component (one quality variant of it when ``quality`` is given).
+
+        ``required`` may be left out to get a level that exists (e.g. to edit one from :meth:`from_asset`)."""
         _check_name("component", name)
         if quality is not None:
             _check_name("quality", quality)
-        levels = self.components.setdefault(name, {})
         key = quality or ""
+        if required is None:
+            if key not in self.components.get(name, {}):
+                have = {n: sorted(levels) for n, levels in self.components.items()}
+                raise UsageError(f"component {name!r}{' quality ' + repr(quality) if quality else ''} does not exist "
+                                 f"(have {have}); pass required= to create it")
+            return self.components[name][key]
+        levels = self.components.setdefault(name, {})
         if levels and (("" in levels) != (key == "")):
             raise UsageError(f"component {name!r} mixes quality variants with a plain version")
         if key not in levels:
