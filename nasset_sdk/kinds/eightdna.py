@@ -265,8 +265,8 @@ class EightDnaEvaluator(Evaluator):
         flow with stratified latents (the same for every call); only box faces the light enters count."""
         x, wo, wi = rows3(x, wo, wi)
         n, m = len(x), self.light_samples
-        strata = (np.arange(m) + 0.5) / m  # position latents: a 1D stratification of t1, a rotated t2
-        lat = np.stack([strata, (strata * 0.6180339887498949 + 0.5) % 1.0, np.full(m, 0.5), np.full(m, 0.5)], axis=1)
+        i = np.arange(m)  # position latents: a rank-1 lattice, t1 stratified, t2 the golden-ratio sequence
+        lat = np.stack([(i + 0.5) / m, (i * 0.6180339887498949 + 0.5) % 1.0, np.full(m, 0.5), np.full(m, 0.5)], axis=1)
         xr, wor, wir = (np.repeat(a, m, axis=0) for a in (x, wo, unit64(wi)))
         latr = np.tile(lat, (n, 1))
         out = np.zeros((n, 3))
