@@ -182,6 +182,7 @@ def optimize(src: str | os.PathLike, dst: str | os.PathLike, opts: OptimizeOptio
     asset = Asset.open(src, load="all", probe=True)
     b = AssetBuilder.from_asset(asset)
     _apply(b, opts, where)
+    b.provenance["optimize"] = {"dtype": opts.dtype, "drop": list(opts.drop), "keepQuality": list(opts.keep_quality)}
     b.write(dst)
     before, after = Asset.open(src), Asset.open(dst)
     report = {

@@ -104,7 +104,7 @@ def test_8dna_distant_density_matches_uniform_box_quadrature(assets):
     m = 20000
     for r in range(3):
         u, nu, area = _box_faces(lo, hi, m, rng)
-        rep = lambda a, k: np.repeat(a[r:r + 1], k, 0)  # noqa: E731
+        rep = lambda a, k, r=r: np.repeat(a[r:r + 1], k, 0)  # noqa: E731
         gate = (nu * wi[r]).sum(1) > 0
         for c in range(3):
             p = ev.pdf(rep(q.x, m), rep(q.wo, m), u, rep(wi, m), np.full(m, c)) * gate * area
