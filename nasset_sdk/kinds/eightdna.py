@@ -164,7 +164,8 @@ class EightDnaEvaluator(Evaluator):
 
     def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536, light_samples: int = 16) -> None:
         if not isinstance(light_samples, int) or not 1 <= light_samples <= 4096:
-            raise UsageError(f"light_samples must be an int in 1 .. 4096, got {light_samples!r}", file=str(asset.path))
+            raise UsageError(f"light_samples must be an int in 1 .. 4096, got {light_samples!r}",
+                             file=str(getattr(asset, "path", "")) or None)
         self.light_samples = light_samples
         self.asset = asset
         self.lo, self.hi = asset.domain
@@ -264,20 +265,24 @@ class EightDnaEvaluator(Evaluator):
         of a distant light is alpha * this. Monte Carlo over ``light_samples`` positions u drawn from the
         flow with stratified latents (the same for every call); only box faces the light enters count."""
         x, wo, wi = rows3(x, wo, wi)
+        wi = unit64(wi)
         n, m = len(x), self.light_samples
         i = np.arange(m)  # position latents: a rank-1 lattice, t1 stratified, t2 the golden-ratio sequence
         lat = np.stack([(i + 0.5) / m, (i * 0.6180339887498949 + 0.5) % 1.0, np.full(m, 0.5), np.full(m, 0.5)], axis=1)
-        xr, wor, wir = (np.repeat(a, m, axis=0) for a in (x, wo, unit64(wi)))
-        latr = np.tile(lat, (n, 1))
         out = np.zeros((n, 3))
-        for c in range(3):
-            ch = np.full(n * m, c)
-            ui, _, _ = self.sample(xr, wor, ch, u=latr)
-            rel = (ui - self.box.center) / self.box.half
-            axis = np.argmax(np.abs(rel), axis=1)
-            enters = np.sign(np.take_along_axis(rel, axis[:, None], 1)[:, 0]) * np.take_along_axis(wir, axis[:, None], 1)[:, 0] > 0
-            p = self.pdf_direction(xr, wor, ui, wir, ch) * enters
-            out[:, c] = p.reshape(n, m).mean(axis=1)
+        step = max(1, self.batch // m)  # query rows per pass: bounded flow batches whatever N
+        for s in range(0, n, step):
+            k = min(n, s + step) - s
+            xr, wor, wir = (np.repeat(a[s:s + k], m, axis=0) for a in (x, wo, wi))
+            latr = np.tile(lat, (k, 1))
+            for c in range(3):
+                ch = np.full(k * m, c)
+                ui, _, _ = self.sample(xr, wor, ch, u=latr)
+                rel = (ui - self.box.center) / self.box.half
+                axis = np.argmax(np.abs(rel), axis=1)[:, None]
+                enters = np.sign(np.take_along_axis(rel, axis, 1)[:, 0]) * np.take_along_axis(wir, axis, 1)[:, 0] > 0
+                p = self.pdf_direction(xr, wor, ui, wir, ch) * enters
+                out[s:s + k, c] = p.reshape(k, m).mean(axis=1)
         return out
 
     def _radiance(self, q: Query) -> np.ndarray:

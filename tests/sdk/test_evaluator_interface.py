@@ -40,6 +40,9 @@ def test_radiance_shape_dtype_and_keyword_form(assets, kind, variant):
     # one row evaluated alone equals the same row of the batch
     one = ev.radiance(ns.Query(q.x[5:6], q.n[5:6], q.wo[5:6], q.wi[5:6]))
     np.testing.assert_allclose(one, rgb[5:6], rtol=1e-6, atol=1e-7)
+    if kind == "8dna":  # split into passes of 4 query rows (batch // light_samples): the same numbers
+        chunked = ns.Asset.open(assets[kind, variant]).evaluator(light_samples=4, batch=16).radiance(q)
+        np.testing.assert_allclose(chunked, rgb, rtol=1e-6, atol=1e-9)
 
 
 def test_rna_radiance_picks_the_branch_named_by_shadowed(assets):
