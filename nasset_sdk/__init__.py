@@ -17,12 +17,13 @@ from .errors import (  # noqa: E402
 )
 from .geometry import CurvesGeometry, MeshGeometry  # noqa: E402
 from .kinds import KINDS, get_kind  # noqa: E402
+from .kinds.query import Evaluator, Query  # noqa: E402
 from .limits import SPEC_VERSION  # noqa: E402
 
 __version__ = "0.1.0"
 
 __all__ = [
     "Asset", "AssetBuilder", "CODES", "KINDS", "SPEC_VERSION", "AssetFormatError", "AssetReadError",
-    "AssetSecurityError", "AssetWriteError", "CurvesGeometry", "MeshGeometry", "NassetError",
-    "SceneError", "UsageError", "get_kind", "register_schema",
+    "AssetSecurityError", "AssetWriteError", "CurvesGeometry", "Evaluator", "MeshGeometry", "NassetError",
+    "Query", "SceneError", "UsageError", "get_kind", "register_schema",
 ]

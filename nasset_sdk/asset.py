@@ -102,19 +102,71 @@ class AssetBuilder:
         pad = float(padding) * max(float(np.max(hi - lo)), 1e-12)
         self.domain = (lo - pad, hi + pad)
 
-    def component(self, name: str, *, required: bool, purpose: str = "", quality: str | None = None) -> ComponentData:
-        """Get or create a component (one quality variant of it when ``quality`` is given)."""
+    def component(self, name: str, *, required: bool | None = None, purpose: str = "", quality: str | None = None) -> ComponentData:
+        """Get or create a component (one quality variant of it when ``quality`` is given).
+
+        ``required`` may be left out to get a level that exists (e.g. to edit one from :meth:`from_asset`)."""
         _check_name("component", name)
         if quality is not None:
             _check_name("quality", quality)
-        levels = self.components.setdefault(name, {})
         key = quality or ""
+        if required is None:
+            if key not in self.components.get(name, {}):
+                have = {n: sorted(levels) for n, levels in self.components.items()}
+                raise UsageError(f"component {name!r}{' quality ' + repr(quality) if quality else ''} does not exist "
+                                 f"(have {have}); pass required= to create it")
+            return self.components[name][key]
+        levels = self.components.setdefault(name, {})
         if levels and (("" in levels) != (key == "")):
             raise UsageError(f"component {name!r} mixes quality variants with a plain version")
         if key not in levels:
             levels[key] = ComponentData(required=required, purpose=purpose)
             self.default_quality.setdefault(name, key)
         return levels[key]
+
+    @classmethod
+    def from_asset(cls, asset: "Asset") -> "AssetBuilder":
+        """A builder holding all of ``asset``, to edit and :meth:`write` again (spec/format.md#editing).
+
+        Copies kind, variant, geometry, encoding domain, metersPerUnit, fallback material, provenance and
+        every component at every quality level (tensors in their stored dtype and layout, network bytes),
+        with the file's default quality selections. Loads all components of ``asset``; its session-layer
+        quality selections are left as they were."""
+        if not isinstance(asset, Asset):
+            raise UsageError(f"from_asset takes an opened nasset_sdk.Asset, got {type(asset).__name__}")
+        b = cls(asset.kind, variant=asset.variant)
+        geo = asset.geometry()
+        geo.validate()
+        b.geometry = geo
+        b.domain = (np.array(asset.domain[0], np.float64), np.array(asset.domain[1], np.float64))
+        b.meters_per_unit = float(asset.stage.GetMetadata("metersPerUnit") or 1.0)
+        shader = asset.stage.GetPrimAtPath(FALLBACK + "/PreviewSurface")
+        color = shader.GetAttribute("inputs:diffuseColor").Get() if shader else None
+        roughness = shader.GetAttribute("inputs:roughness").Get() if shader else None
+        if color is not None:
+            b.fallback_color = tuple(float(c) for c in color)
+        if roughness is not None:
+            b.fallback_roughness = float(roughness)
+        b.provenance = {k: v for k, v in asset.provenance.items() if k not in ("specVersion", "kind")}
+        asset.load("all")
+        root_layer = asset.stage.GetRootLayer()
+        for cname, info in asset.components().items():
+            if not info.qualities:
+                b.components[cname] = {"": read_component(asset, cname)}
+                b.default_quality[cname] = ""
+                continue
+            spec = root_layer.GetPrimAtPath(info.prim_path)
+            default = (spec.variantSelections.get(QUALITY_SET) if spec else None) or info.quality
+            levels = {}
+            try:
+                for q in info.qualities:
+                    asset.select_quality({cname: q})
+                    levels[q] = read_component(asset, cname)
+            finally:
+                asset.select_quality({cname: info.quality})
+            b.components[cname] = levels
+            b.default_quality[cname] = default
+        return b
 
     # -- writing ---------------------------------------------------------------------------
     def build_layer(self):
@@ -272,6 +324,18 @@ def atomic_export(layer, target: Path) -> None:
 
 # ----------------------------------------------------------------------------------------
 # reading
+
+
+def read_component(asset: "Asset", name: str) -> ComponentData:
+    """The loaded component ``name`` of ``asset`` (its selected quality level) as ComponentData:
+    tensors in their stored dtype and layout, network bytes after the digest and security checks."""
+    info = asset.components()[name]
+    data = ComponentData(required=info.required, purpose=info.purpose)
+    for tname, ref in asset.tensor_refs(name).items():
+        data.add_tensor(tname, asset.tensor(name, tname), dtype=ref.dtype, layout=ref.layout)
+    for nname in asset.network_refs(name):
+        data.add_network(nname, asset.network_bytes(name, nname))
+    return data
 
 
 @dataclass(frozen=True)

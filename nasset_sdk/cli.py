@@ -97,6 +97,23 @@ def _merge_quality_args(p):
     p.add_argument("-o", "--output", required=True, help="output .usdc")
 
 
+@verb("optimize", "rewrite an asset smaller (fp16/fp32 tensors, fewer components or quality levels) and report size "
+      "and accuracy change", "nasset_sdk.optimize:run")
+def _optimize_args(p):
+    from .optimize import QUERY_ROWS
+
+    p.add_argument("file", help="input asset (.usdc)")
+    p.add_argument("-o", "--output", required=True, help="output asset (.usdc), another file than the input")
+    p.add_argument("--dtype", choices=["float16", "float32"], default=None, help="re-encode every tensor (default: keep each one's)")
+    p.add_argument("--drop", action="append", metavar="COMPONENT", help="drop an optional component (repeat or comma-separate)")
+    p.add_argument("--keep-quality", action="append", metavar="LEVEL",
+                   help="keep only these quality levels (repeat or comma-separate); one left: stored without a variant set")
+    p.add_argument("--samples", type=int, default=QUERY_ROWS, help=f"rows of the fixed random query set (default {QUERY_ROWS})")
+    p.add_argument("--no-preview", action="store_true", help="skip the preview-render PSNR")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    # reserved: --portable (add the portable ONNX evaluation graph component) once the spec defines it
+
+
 @verb("conformance", "run a renderer on the conformance cases and compare with the reference images, or an evaluator on the "
       "evaluator test vectors (spec/conformance.md, spec/evaluator-vectors.md)",
       "nasset_sdk.conformance:run")

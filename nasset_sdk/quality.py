@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .asset import FALLBACK, Asset, AssetBuilder
+from .asset import Asset, AssetBuilder, read_component
 from .errors import UsageError
 from .geometry import MeshGeometry
 
@@ -36,25 +36,12 @@ def merge_quality(levels: dict[str, str | os.PathLike], output: str | os.PathLik
             np.array_equal(getattr(g, f), getattr(geo, f)) for f in (("faces",) if isinstance(geo, MeshGeometry) else ("counts", "widths")))
         if not same or not all(np.array_equal(x, y) for x, y in zip(a.domain, first.domain, strict=True)):
             raise UsageError(f"level {q!r} has other geometry or another encoding domain than level {names[0]!r}", **where)
-    b = AssetBuilder(first.kind, variant=first.variant)
-    b.set_geometry(geo)
-    b.domain = first.domain
-    b.meters_per_unit = float(first.stage.GetMetadata("metersPerUnit") or 1.0)
-    shader = first.stage.GetPrimAtPath(FALLBACK + "/PreviewSurface")
-    for attr, field in (("inputs:diffuseColor", "fallback_color"), ("inputs:roughness", "fallback_roughness")):
-        value = shader.GetAttribute(attr).Get() if shader else None
-        if value is not None:
-            setattr(b, field, tuple(value) if field == "fallback_color" else float(value))
-    b.provenance = {k: v for k, v in first.provenance.items() if k not in ("specVersion", "kind")}
+    b = AssetBuilder.from_asset(first)
     b.provenance["qualityLevels"] = {q: a.provenance for q, a in assets.items()}
     for cname, info in first.components().items():
-        sources = assets.items() if info.required else [(None, first)]
-        for q, a in sources:
-            data = b.component(cname, required=info.required, purpose=info.purpose, quality=q)
-            for tname, ref in a.tensor_refs(cname).items():
-                data.add_tensor(tname, a.tensor(cname, tname), dtype=ref.dtype, layout=ref.layout)
-            for nname in a.network_refs(cname):
-                data.add_network(nname, a.network_bytes(cname, nname))
+        if info.required:  # optional components stay as the first input has them
+            b.components[cname] = {q: read_component(a, cname) for q, a in assets.items()}
+            b.default_quality[cname] = names[0]
     return b.write(output)
 
 

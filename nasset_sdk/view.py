@@ -13,8 +13,9 @@ Shading per kind (linear radiance, RGB):
 - rna: L = E T(x, n, w_o, w_i), T the unshadowed branch unless a shadow ray from x towards w_i hits
   the asset's own triangles (then the shadowed branch). Fibers use the tangent as the frame, h = 0,
   and shadow rays against a tube mesh around the curves.
-- neupress: L = E (S(x, w_o, w_i) + f_r(n, w_o, w_i) |n.w_i|): subsurface network plus the analytic
-  boundary reflection.
+- neupress: L = E (S(x, w_o, w_i) + f_r(n, w_o, w_i) |n.w_i| V): subsurface network plus the analytic
+  boundary reflection, V = 0 where self-shadowed (as the renderer does).
+- rna and neupress go through the shared evaluator interface (``Evaluator.radiance``, spec/kinds/README.md).
 - 8dna: the albedo network alpha(x, w_o) as colour (unitless; the light direction does not enter).
 - ``fallback``: the bound UsdPreviewSurface diffuseColor rho as a Lambertian surface, L = rho max(n.w_i, 0)
   (fibers: rho sin(t, w_i), the Kajiya-Kay diffuse term), zero where self-shadowed.
@@ -42,6 +43,7 @@ import numpy as np
 from .errors import UsageError
 from .geometry import CurvesGeometry, MeshGeometry
 from .images import write_png
+from .kinds.query import Query
 
 #: vertical field of view of the preview camera, degrees
 FOV_Y = 30.0
@@ -299,16 +301,11 @@ def shade_points(asset, x, frame, wo, light_dir, shadowed, *, evaluator=None, fa
         rgb = fallback_color(asset)[None] * (cos * ~shadowed)[:, None] * irradiance / np.pi
         return rgb.astype(np.float32)
     ev = evaluator if evaluator is not None else asset.evaluator()
-    if asset.kind == "rna":
-        h = np.zeros(n, np.float32) if asset.variant == "fiber" else None
-        t_u, t_s = ev.evaluate(x, frame, wo, wi, h)
-        rgb = np.where(shadowed[:, None], t_s, t_u) * irradiance
-    elif asset.kind == "neupress":
-        rgb = (ev.evaluate(x, frame, wo, wi) + ev.surface_reflection(frame, wo, wi)) * irradiance
-    elif asset.kind == "8dna":
+    if asset.kind == "8dna":  # the distant-light radiance integrates the flow per point: too slow per pixel
         rgb = ev.albedo(x, wo)
-    else:  # pragma: no cover - every registered kind is handled above
-        raise UsageError(f"no preview shading for kind {asset.kind!r}")
+    else:
+        h = np.zeros(n) if asset.variant == "fiber" else None
+        rgb = ev.radiance(Query(x, frame, wo, wi, shadowed=shadowed, h=h)) * irradiance
     rgb = np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
     return np.maximum(rgb, 0.0).astype(np.float32)
 

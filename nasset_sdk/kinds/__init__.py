@@ -201,10 +201,12 @@ def rows3(*arrays) -> list[np.ndarray]:
     from ..errors import UsageError
 
     out, n = [], None
-    for a in arrays:
+    for i, a in enumerate(arrays):
         a = np.atleast_2d(np.asarray(a, np.float64))
         if a.ndim != 2 or a.shape[1] != 3 or (n is not None and len(a) != n):
-            raise UsageError("points and directions must be [N, 3] arrays of one N")
+            shapes = ", ".join(str(tuple(np.shape(b))) for b in arrays)
+            raise UsageError(f"points and directions must be [N, 3] arrays of one N; argument {i + 1} of {len(arrays)} "
+                             f"is {tuple(np.shape(arrays[i]))} (all: {shapes})")
         n = len(a)
         out.append(a)
     return out

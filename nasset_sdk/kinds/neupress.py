@@ -22,6 +22,7 @@ from ..errors import UsageError
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_reflection
 from .encodings import fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box, unit64
+from .query import Evaluator, Query
 
 #: preset -> (M appearance frequencies, hidden layers, hidden width, Ms sampling frequencies,
 #:            sampling hidden widths, PRT theta bins, PRT phi bins)
@@ -191,8 +192,11 @@ class NeupressKind(KindContract):
         return NeupressEvaluator(asset, **options)
 
 
-class NeupressEvaluator:
-    """numpy + onnxruntime evaluation of a neupress asset; all vectors in object space."""
+class NeupressEvaluator(Evaluator):
+    """numpy + onnxruntime evaluation of a neupress asset; all vectors in object space.
+
+    :meth:`radiance` (the interface every kind shares) is S + f_r |n.w_i| (the reflection zeroed where
+    ``Query.shadowed``); :meth:`evaluate` is the subsurface term S alone."""
 
     def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536) -> None:
         self.asset = asset
@@ -227,6 +231,10 @@ class NeupressEvaluator:
         y = self._run(self.session, fourier_features(self.G, self.appearance_input(x, wo, wi)), 3)
         y = np.nan_to_num(y, nan=0.0, posinf=0.0, neginf=0.0)
         return np.maximum(y, 0.0)
+
+    def _radiance(self, q: Query) -> np.ndarray:
+        self._no_h(q)
+        return self.evaluate(q.x, q.n, q.wo, q.wi) + self.surface_reflection(q.n, q.wo, q.wi) * ~q.shadowed[:, None]
 
     def surface_reflection(self, n, wo, wi) -> np.ndarray:
         """Analytic GGX rough-dielectric reflection f |n.wi| as RGB [N,3] (grey)."""

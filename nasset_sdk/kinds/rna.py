@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import UsageError
 from . import ComponentSpec, KindContract, NetworkSpec, TensorSpec, register_kind
 from .encodings import safe_normalize, to_unit_box, triplane
+from .query import Evaluator, Query, check_shapes
 
 SIZES = {  # preset -> (triplane resolution, channels, hidden layers, hidden width)
     "tiny": (8, 4, 2, 16),
@@ -89,8 +91,11 @@ def _unit_into(out: np.ndarray, v: np.ndarray) -> None:
     out[:] = safe_normalize(v)
 
 
-class RnaEvaluator:
-    """Evaluates an rna asset's transport; all directions and points in object space."""
+class RnaEvaluator(Evaluator):
+    """Evaluates an rna asset's transport; all directions and points in object space.
+
+    :meth:`radiance` (the interface every kind shares) picks the branch by ``Query.shadowed``;
+    :meth:`evaluate` returns both branches."""
 
     def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536) -> None:
         self.asset = asset
@@ -116,8 +121,13 @@ class RnaEvaluator:
         return inp
 
     def evaluate(self, x, frame, wo, wi, h=None) -> tuple[np.ndarray, np.ndarray]:
-        """Transport (unshadowed [N,3], shadowed [N,3]), clamped to finite values >= 0."""
-        n = len(x)
+        """Transport (unshadowed [N,3], shadowed [N,3]) in 1/sr, clamped to finite values >= 0.
+
+        x, frame (normal, or fiber tangent), wo, wi: [N, 3] object space; h [N] (fiber, default 0)."""
+        file = str(getattr(self.asset, "path", "")) or None
+        n = check_shapes(file, x=x, frame=frame, wo=wo, wi=wi)
+        if h is not None and np.shape(h) != (n,):
+            raise UsageError(f"argument 'h': expected shape [N] with N = {n}, got {tuple(np.shape(h))}", file=file)
         out = np.empty((n, 6), np.float32)
         step = max(1, min(self.batch, CHUNK))
         for s in range(0, n, step):
@@ -128,6 +138,12 @@ class RnaEvaluator:
         out[~np.isfinite(out)] = 0.0
         np.maximum(out, 0.0, out=out)
         return out[:, :3], out[:, 3:]
+
+    def _radiance(self, q: Query) -> np.ndarray:
+        if q.h is not None and not self.fiber:
+            self._no_h(q)
+        unshadowed, shadowed = self.evaluate(q.x, q.n, q.wo, q.wi, q.h)
+        return np.where(q.shadowed[:, None], shadowed, unshadowed)
 
 
 def example_mesh():
