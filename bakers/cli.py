@@ -17,7 +17,7 @@ def add_args(p) -> None:
     p.add_argument("-o", "--output", required=True, help="output asset .usdc")
     p.add_argument("--example", nargs="?", const="default", default=None, metavar="NAME",
                    help="bake a built-in example scene (no files needed); NAME picks one where a kind has several "
-                        "(rna: default, high-albedo, blender-surface, blender-hair; neupress: default, high-albedo; "
+                        "(rna: default, high-albedo, blender-surface, blender-hair, blender-hair-dense; neupress: default, high-albedo; "
                         "8dna: default, heterogeneous)")
     p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
     p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")
@@ -27,8 +27,8 @@ def add_args(p) -> None:
     p.add_argument("--light-angle", type=float, default=None,
                    help="angular radius of the distant light in degrees (0 = delta; default 0, or 5 behind smooth dielectrics)")
     p.add_argument("--clamp", type=float, default=None, metavar="C",
-                   help="clamp training path samples at C /sr (Mitsuba rna, neupress; default 0: none; the energy removed "
-                        "is measured and stored, spec/accuracy.md)")
+                   help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
+                        "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
@@ -43,9 +43,8 @@ def run(args) -> int:
     from .stages import finite
 
     fn = baker_for(args.kind, args.scene, args.example)
-    if getattr(args, "clamp", None) is not None and (args.kind == "8dna" or str(args.scene or "").lower().endswith(".blend")
-                                                     or str(args.example or "").startswith("blender")):
-        raise UsageError("--clamp applies to Mitsuba rna and neupress bakes only")
+    if getattr(args, "clamp", None) is not None and args.kind == "8dna":
+        raise UsageError("--clamp applies to rna and neupress bakes only")
     summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,

@@ -1,4 +1,4 @@
-"""``nasset bench accuracy``: a baked asset in its own scene against unbiased Mitsuba ground truth.
+"""``nasset bench accuracy``: a baked asset in its own scene against unbiased ground truth from the source renderer.
 
 spec/accuracy.md#in-scene-accuracy. For a Mitsuba 3 scene and ``--replace ID[,ID]=ASSET``:
 
@@ -15,6 +15,12 @@ spec/accuracy.md#in-scene-accuracy. For a Mitsuba 3 scene and ``--replace ID[,ID
   standard error, PSNR with the reference's noise ceiling, bias-corrected MSE, HDR-FLIP, over the
   mask (and, for context, over the whole image).
 
+For a Blender ``.blend`` and ``--replace OBJECT=ASSET`` the same, with Cycles (CPU, box filter,
+no clamps, 32 bounces) rendering the reference halves through the scene's camera, and the mask
+from Cycles: the film's alpha on a transparent film with every other object a holdout
+(``MASK_SUBSAMPLES``² samples per pixel), i.e. the fraction of the pixel's camera samples whose
+first visible surface is one of the replaced objects. The reference renderer's depth defaults to 32.
+
 Writes ``reference.exr`` (+ ``reference_a.exr``, ``reference_b.exr``), ``neural.exr``,
 ``reference.png``, ``neural.png``, ``mask.png``, ``error.png`` (relative error over the mask,
 blue = too dark, red = too bright), ``flip.png`` when FLIP is available, ``accuracy.json`` and
@@ -27,6 +33,7 @@ import json
 import sys
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -237,37 +244,38 @@ def error_map(est, ref, mask) -> np.ndarray:
     return np.clip(np.nan_to_num(out), 0, 255).astype(np.uint8)
 
 
-def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8192, nr_spp: int = 64,
-                   max_depth: int | None = None, seed: int = 0, quiet: bool = False) -> dict:
-    """Run the benchmark (module docstring); returns the report dict (also written as JSON + markdown)."""
+@dataclass
+class SourceReference:
+    """What a source renderer gives the benchmark: the reference in two halves, the asset's pixel
+    coverage, the converted scene and the descriptions that go into the report."""
+
+    a: np.ndarray  # [H, W, 3] first half (mean of spp_per_half samples)
+    b: np.ndarray  # [H, W, 3] second half, independent seeds
+    half: int  # samples per half
+    coverage: np.ndarray  # [H, W] fraction of the pixel's camera samples whose first hit is the asset's shapes
+    fits: list  # check_asset_fits / blender_asset_fits rows
+    converted: Path  # the converted USD scene with the assets in place
+    max_depth: int  # default reference-renderer depth matching the source integrator
+    reference: dict  # report["reference"]
+    mask_source: str
+    reused: bool = False
+    cache_key: dict | None = None  # written as reference_key.json once the halves are on disk
+
+
+def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, seed: int, quiet: bool, say) -> SourceReference:
+    """The Mitsuba side: check the assets fit, convert, render the reference halves (reusing a cached
+    pair for the same scene, size, spp and seed) and the object mask from Mitsuba's camera rays."""
     from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba.scene import load_scene
-    from nasset_converters.mitsuba.usd_export import convert_scene, parse_replace
-    from nasset_sdk.metrics import accuracy, flip_map
+    from nasset_converters.mitsuba.usd_export import convert_scene
 
-    say = _say(quiet)
-    for name, v in (("res", res), ("spp", spp), ("nr-spp", nr_spp)):
-        if int(v) < (8 if name == "res" else 2 if name == "spp" else 1):
-            raise UsageError(f"--{name} too small: {v}")
-    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
-    if not rep:
-        raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    times: dict[str, float] = {}
-    t0 = time.perf_counter()
     mi = load_mitsuba()  # CONVERT_BACKEND when mitsuba is missing
     mi.set_log_level(mi.LogLevel.Error)
     mscene = load_scene(mi, scene_file)
     fits = check_asset_fits(mi, mscene, rep, scene_file=str(scene_file))
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
     md = converted.integrator.get("max_depth", 24)
-    if max_depth is None:
-        max_depth = max(1, md - 1) if md and md > 0 else 24
     sensor, hw = sensor_for(mi, mscene, res)
-    times["setup_s"] = time.perf_counter() - t0
-
-    t = time.perf_counter()
     key = {"scene_sha256": scene_digest(scene_file), "size": list(hw), "spp": int(spp), "seed": int(seed),
            "mitsuba": f"{mi.__version__} {mi.variant()}", "chunk": CHUNK_SPP}
     cached = cached_reference(out, key)
@@ -278,9 +286,111 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
         say(f"reference: Mitsuba {mi.variant()} {spp} spp at {hw[1]}x{hw[0]} in two halves, unclamped")
         a, b, half = render_halves(mi, mscene, sensor, spp, seed=seed, quiet=quiet)
         (out / "reference_key.json").unlink(missing_ok=True)
-    times["reference_s"] = time.perf_counter() - t
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
-    mask = cov >= 0.5
+    return SourceReference(
+        a, b, half, cov, fits, Path(converted.output), max(1, md - 1) if md and md > 0 else 24,
+        {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator},
+        "mitsuba camera rays, first hit", reused=cached is not None, cache_key=key)
+
+
+def blender_asset_fits(rep: dict, *, scene_file: str = "") -> list[dict]:
+    """As check_asset_fits, for the objects of the open .blend (the geometry the Blender bake exports)."""
+    from nasset_converters.blender import scene as bsc
+    from nasset_sdk.asset import Asset
+
+    groups: dict[Path, list[str]] = {}
+    for name, file in rep.items():
+        groups.setdefault(Path(file), []).append(name)
+    out = []
+    for file, ids in groups.items():
+        asset = Asset.open(file, load="none")
+        variant, geo, _ = bsc.asset_geometry(bsc.pick_objects(ids, file=scene_file), file=scene_file)
+        if asset.variant != variant:
+            raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} {asset.variant} asset but {ids} need a "
+                        f"{variant} asset", file=str(file))
+        pts = np.asarray(asset.geometry().points, np.float64)
+        src = np.asarray(geo.points, np.float64)
+        a, b = np.stack([pts.min(0), pts.max(0)]), np.stack([src.min(0), src.max(0)])
+        off = float(np.abs(a - b).max()) / (float(np.linalg.norm(b[1] - b[0])) or 1.0)
+        if off > BOX_TOLERANCE:
+            raise error("BENCH_ASSET_MISMATCH", f"{file.name} was not baked from {ids}: its bounds differ from theirs by "
+                        f"{100 * off:.0f} % of the diagonal", file=str(file))
+        out.append({"asset": str(file), "ids": ids, "kind": asset.kind, "variant": asset.variant, "bounds_offset": off})
+    return out
+
+
+def blender_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, seed: int, quiet: bool, say) -> SourceReference:
+    """The Blender side: convert, check the assets fit, render the unclamped Cycles reference halves
+    through the scene's camera (its aspect kept) and the object coverage from Cycles itself."""
+    from nasset_converters.blender import load_bpy
+    from nasset_converters.blender import scene as bsc
+    from nasset_converters.blender.cycles import object_coverage, render_cycles, setup_cycles
+    from nasset_converters.blender.usd_export import convert_scene
+
+    bpy = load_bpy()  # CONVERT_BACKEND when bpy is missing
+    converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
+    bsc.open_blend(scene_file)
+    fits = blender_asset_fits(rep, scene_file=str(scene_file))
+    w, h = converted.resolution
+    height = max(1, int(round(res * h / max(w, 1))))
+    max_bounces = 32
+    setup_cycles(bpy, res, height, max_bounces=max_bounces)
+    say(f"reference: Cycles {spp} spp at {res}x{height} in two halves, unclamped")
+    half = max(1, spp // 2)
+    bar = _bar(2 * half, "cycles reference", quiet)
+    exr = out / "cycles_chunk.exr"
+    halves = []
+    for part in range(2):
+        acc, done, k = None, 0, 0
+        while done < half:
+            n = min(CHUNK_SPP, half - done)
+            img = render_cycles(bpy, exr, n, seed=1_000_003 * (2 * seed + part) + k)
+            acc = img * n if acc is None else acc + img * n
+            done, k = done + n, k + 1
+            bar.update(n)
+        halves.append(acc / done)
+    bar.close()
+    cov = object_coverage(bpy, bsc.pick_objects(list(rep), file=str(scene_file)), exr, spp=MASK_SUBSAMPLES ** 2)
+    exr.unlink(missing_ok=True)
+    return SourceReference(
+        halves[0], halves[1], half, cov, fits, Path(converted.output), max_bounces,
+        {"renderer": f"cycles {bpy.app.version_string}", "variant": "CPU", "integrator": {"max_bounces": max_bounces}},
+        "cycles film alpha with every other object a holdout")
+
+
+def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8192, nr_spp: int = 64,
+                   max_depth: int | None = None, seed: int = 0, quiet: bool = False) -> dict:
+    """Run the benchmark (module docstring); returns the report dict (also written as JSON + markdown).
+    ``scene_file``: a Mitsuba 3 .xml or a Blender .blend (the source renderer follows the suffix)."""
+    from nasset_sdk.metrics import accuracy, flip_map
+
+    say = _say(quiet)
+    for name, v in (("res", res), ("spp", spp), ("nr-spp", nr_spp)):
+        if int(v) < (8 if name == "res" else 2 if name == "spp" else 1):
+            raise UsageError(f"--{name} too small: {v}")
+    suffix = Path(str(scene_file)).suffix.lower()
+    sources = {".xml": mitsuba_reference, ".blend": blender_reference}
+    if suffix not in sources:
+        raise UsageError(f"the scene must be a Mitsuba 3 .xml or a Blender .blend file, got {Path(str(scene_file)).name!r}")
+    if not Path(scene_file).is_file():
+        raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene_file))
+    if suffix == ".xml":
+        from nasset_converters.mitsuba.usd_export import parse_replace
+    else:
+        from nasset_converters.blender.usd_export import parse_replace
+    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    if not rep:
+        raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    times: dict[str, float] = {}
+    t0 = time.perf_counter()
+    src = sources[suffix](scene_file, rep, out, res=res, spp=spp, seed=seed, quiet=quiet, say=say)
+    times["reference_s"] = time.perf_counter() - t0
+    a, b, half = src.a, src.b, src.half
+    hw = a.shape[:2]
+    max_depth = src.max_depth if max_depth is None else max_depth
+    mask = src.coverage >= 0.5
     if not mask.any():
         raise error("BENCH_ASSET_MISMATCH", f"the replaced shapes {sorted(rep)} cover no pixel of the camera's view",
                     file=str(scene_file))
@@ -293,7 +403,7 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SceneWarning)
-        uscene = load_usd(str(converted.output))
+        uscene = load_usd(str(src.converted))
     result = render(uscene, RenderSettings(spp=int(nr_spp), seed=seed + 7, width=hw[1], height=hw[0], max_depth=max_depth,
                                            progress=not quiet))
     est = np.nan_to_num(np.asarray(result.image, np.float64)[..., :3])
@@ -321,18 +431,18 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
         v = np.clip(np.nan_to_num(fmap), 0, 1)
         png8(out / "flip.png", np.stack([255 * v, 255 * v * v, 255 * (1 - v) * v], -1).astype(np.uint8))
         files.append(str(out / "flip.png"))
-    (out / "reference_key.json").write_text(json.dumps(key))
+    if src.cache_key is not None:
+        (out / "reference_key.json").write_text(json.dumps(src.cache_key))
     times["total_s"] = time.perf_counter() - t0
     report = {
         "benchmark": "accuracy",
         "scene": str(scene_file),
-        "replaced": fits,
+        "replaced": src.fits,
         "resolution": [hw[1], hw[0]],
-        "reference": {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "spp": 2 * half,
-                      "halves": 2, "spp_per_half": half, "clamp": None,
-                      "reused": cached is not None, "integrator": converted.integrator},
+        "reference": {**src.reference, "spp": 2 * half, "halves": 2, "spp_per_half": half, "clamp": None,
+                      "reused": src.reused},
         "estimate": {"renderer": "reference_renderer", "spp": int(nr_spp), "max_depth": int(max_depth)},
-        "mask": {"source": "mitsuba camera rays, first hit", "subsamples": MASK_SUBSAMPLES ** 2, "threshold": 0.5,
+        "mask": {"source": src.mask_source, "subsamples": MASK_SUBSAMPLES ** 2, "threshold": 0.5,
                  "pixels": int(mask.sum())},
         "object": obj.to_dict(),
         "image": full.to_dict(),
@@ -361,13 +471,13 @@ def markdown(r: dict) -> str:
         f"# In-scene accuracy: {Path(r['scene']).name}",
         "",
         f"Replaced: {replaced}. "
-        f"Reference: Mitsuba {ref['variant']}, {ref['spp']} spp in two independent halves, unclamped; estimate: "
+        f"Reference: {ref['renderer']} ({ref['variant']}), {ref['spp']} spp in two independent halves, unclamped; estimate: "
         f"reference renderer, {r['estimate']['spp']} spp; {r['resolution'][0]}×{r['resolution'][1]}. "
         "Definitions: spec/accuracy.md#metrics.",
         "",
         "| region | pixels | energy % of reference (R / G / B) | PSNR dB | ceiling dB | claimed | FLIP |",
         "|---|---|---|---|---|---|---|",
-        row("object (mask from Mitsuba)", o),
+        row("object (mask from the source renderer)", o),
         row("whole image", f),
         "",
         "Images: reference.png, neural.png, mask.png, error.png (relative luminance error over the mask; blue too dark, "
@@ -384,23 +494,24 @@ def summary_text(r: dict) -> str:
 
     o = r["object"]
     a = Accuracy(**{k: v for k, v in o.items() if k in Accuracy.__dataclass_fields__})
-    return (f"in-scene accuracy over the object ({o['pixels']} pixels, mask from Mitsuba): {a.line()}\n"
+    return (f"in-scene accuracy over the object ({o['pixels']} pixels, mask from {r['reference']['renderer']}): {a.line()}\n"
             f"reference: {r['reference']['spp']} spp unclamped in two halves; estimate {r['estimate']['spp']} spp\n"
             "wrote " + ", ".join(r["files"]))
 
 
 def add_args(p) -> None:
     """Options of ``nasset bench accuracy``."""
-    p.add_argument("scene", help="Mitsuba 3 scene .xml (the original, with the shapes the asset was baked from)")
+    p.add_argument("scene", help="Mitsuba 3 scene .xml or Blender .blend (the original, with the shapes or objects the "
+                   "asset was baked from); the reference is rendered by that scene's own renderer")
     p.add_argument("--replace", action="append", required=True, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
-                   help="the baked asset in place of these shapes (repeatable)")
+                   help="the baked asset in place of these shapes (Mitsuba ids) or objects (Blender names); repeatable")
     p.add_argument("-o", "--output", default="bench_accuracy", help="output folder (images, JSON, markdown, converted scene)")
     p.add_argument("--spp", type=int, default=None, help=f"Mitsuba reference spp, both halves together (default {DEFAULT['spp']}; "
                    f"{QUICK['spp']} with --quick)")
     p.add_argument("--nr-spp", type=int, default=None, help=f"reference-renderer spp (default {DEFAULT['nr_spp']}; {QUICK['nr_spp']} with --quick)")
     p.add_argument("--res", type=int, default=None, help=f"image width (default {DEFAULT['res']}; {QUICK['res']} with --quick); "
                    "height keeps the scene's aspect")
-    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
+    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1; Blender: 32)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")

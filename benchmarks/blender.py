@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_converters.blender.cycles import render_cycles, setup_cycles
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 1024, "cy_spp": "4,16,64", "nr_spp": "1,4,16", "size": "tiny"}
@@ -39,58 +40,18 @@ FULL = {"res": 128, "gt_spp": 4096, "cy_spp": "4,16,64,256", "nr_spp": "1,4,16,6
 PAPER = "RNA (sec. 6.3) reports 7x on the Lego (1024^2, Cycles 4096 spp 247 s vs 16 spp 34 s) and 60x on the blonde hair."
 
 
-def _cycles_setup(bpy, res: int, max_bounces: int = 32) -> None:
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    sc.render.resolution_x = sc.render.resolution_y = int(res)
-    sc.render.resolution_percentage = 100
-    sc.render.use_persistent_data = True
-    sc.render.film_transparent = False
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
-    sc.render.image_settings.color_mode = "RGB"
-    sc.view_settings.view_transform = "Standard"
-    c = sc.cycles
-    c.device = "CPU"
-    c.use_denoising = False
-    c.use_adaptive_sampling = False
-    c.pixel_filter_type = "BOX"
-    c.filter_width = 1.0
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = max_bounces
-    c.transparent_max_bounces = max_bounces
-
-
-def _cycles_render(bpy, path: Path, spp: int, seed: int) -> np.ndarray:
-    import OpenEXR
-
-    from nasset_converters.blender import quiet_stdout
-
-    sc = bpy.context.scene
-    sc.cycles.samples = int(spp)
-    sc.cycles.seed = int(seed)
-    sc.render.filepath = str(path)
-    with quiet_stdout():
-        bpy.ops.render.render(write_still=True)
-    with OpenEXR.File(str(path)) as f:
-        ch = f.parts[0].channels
-        img = np.asarray(ch["RGB"].pixels, np.float64) if "RGB" in ch else np.stack(
-            [np.asarray(ch[k].pixels, np.float64) for k in ("R", "G", "B")], -1)
-    return np.nan_to_num(img[..., :3], nan=0.0, posinf=0.0, neginf=0.0)
-
-
 def _ground_truth(bpy, path, spp: int, chunk: int = 256, say=print):
+    """Cycles ground truth in independent chunks: (mean [H,W,3], noise variance of the mean, half a, half b)."""
     n = max(2, math.ceil(spp / chunk))
     per = max(1, spp // n)
     imgs = []
     t = time.perf_counter()
     for k in range(n):
-        imgs.append(_cycles_render(bpy, path, per, 1000 + k))
+        imgs.append(render_cycles(bpy, path, per, 1000 + k))
         say(f"  ground truth chunk {k + 1}/{n} ({per} spp) {time.perf_counter() - t:.1f}s")
     imgs = np.stack(imgs)
     a, b = imgs[: n // 2].mean(0), imgs[n // 2: 2 * (n // 2)].mean(0)
-    return imgs.mean(0), float(np.mean((a - b) ** 2) / 4.0)
+    return imgs.mean(0), float(np.mean((a - b) ** 2) / 4.0), a, b
 
 
 def _png(path: Path, img: np.ndarray, peak: float) -> None:
@@ -127,18 +88,18 @@ def bench_example(out: Path, example: str, *, size: str, res: int, gt_spp: int, 
     scene_usd = out / f"{example}_neural.usda"
     convert_scene(None, scene_usd, replace={EXAMPLES[example][0]: asset}, check_usd=False, example=example)
     build_example(example)
-    _cycles_setup(bpy, res)
+    setup_cycles(bpy, res)
     exr = out / f"{example}_cycles.exr"
     say(f"{example}: ground truth Cycles {gt_spp} spp at {res}x{res}")
     t = time.perf_counter()
-    gt, var_gt = _ground_truth(bpy, exr, gt_spp, say=say)
+    gt, var_gt, gt_a, gt_b = _ground_truth(bpy, exr, gt_spp, say=say)
     times["ground_truth_s"] = time.perf_counter() - t
     cy_points = []
     low = None
     for k, spp in enumerate(cy_spp):
-        _cycles_render(bpy, exr, spp, 50_000 + k)  # warm-up (persistent data: sync and BVH kept)
+        render_cycles(bpy, exr, spp, 50_000 + k)  # warm-up (persistent data: sync and BVH kept)
         t = time.perf_counter()
-        img = _cycles_render(bpy, exr, spp, 10 + k)
+        img = render_cycles(bpy, exr, spp, 10 + k)
         dt = time.perf_counter() - t
         mse = float(np.mean((img - gt) ** 2)) - var_gt
         cy_points.append({"spp": spp, "time_s": dt, "mse": mse, "mse_raw": mse + var_gt})
@@ -161,6 +122,7 @@ def bench_example(out: Path, example: str, *, size: str, res: int, gt_spp: int, 
         result = render(scene, s)
         dt = time.perf_counter() - t
         nimg = result.image[..., :3]
+        nvar = result.variance[..., :3]
         var_nr = float(result.variance.mean())
         mse = float(np.mean((nimg - gt) ** 2)) - var_gt
         nr_points.append({"spp": spp, "time_s": dt, "mse": mse, "mse_raw": mse + var_gt, "variance": var_nr,
@@ -173,14 +135,15 @@ def bench_example(out: Path, example: str, *, size: str, res: int, gt_spp: int, 
     floor = last["mse"] - last["variance"]
     speed = equal_error_speedup(cy_points, nr_points)
     best = max((s for s in speed if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)
-    from nasset_bakers.train.rna import display_psnr
+    from nasset_sdk.metrics import accuracy
 
+    acc = accuracy(nimg, gt_a, gt_b, None, est_var=nvar, flip=False)
     return {
         "example": example, "asset": str(asset), "resolution": [res, res],
         "ground_truth": {"spp": gt_spp, "mean_radiance": float(gt.mean()), "noise_variance": var_gt},
         "cycles_points": cy_points, "neural_points": nr_points, "bias_floor_mse": floor,
         "bias_floor_relative_rmse": math.sqrt(max(floor, 0.0)) / max(float(gt.mean()), 1e-12),
-        "neural_image_psnr_db": display_psnr(nimg, gt)[0],
+        "neural_image_accuracy": acc.to_dict(),  # whole image, unclamped two-half ground truth (spec/accuracy.md#metrics)
         "equal_error": speed, "best_equal_error_speedup": None if best is None else best["speedup"],
         "interpolated_speedup": interpolated_speedup(cy_points, nr_points),
         "setup_times_s": {k: round(v, 2) for k, v in times.items()},
@@ -278,6 +241,11 @@ def run_bench(out_dir, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_
     return report
 
 
+def _accuracy_line(a: dict) -> str:
+    e = "/".join(f"{100 * x:.1f}" for x in a["energy_ratio"])
+    return f"energy {e} % (RGB), PSNR {a['psnr_db']:.2f} dB, ground-truth noise ceiling {a['ceiling_db']:.2f} dB"
+
+
 def summary_text(r: dict) -> str:
     lines = []
     for e in r["examples"]:
@@ -287,7 +255,7 @@ def summary_text(r: dict) -> str:
             for p in pts:
                 lines.append(f"  {name:7s}{p['spp']:6d} spp {p['time_s']:9.3f}s  MSE {p['mse']:.3e}")
         lines.append(f"  asset bias floor MSE {e['bias_floor_mse']:.3e} (relative RMSE {e['bias_floor_relative_rmse']:.1%}); "
-                     f"neural image PSNR {e['neural_image_psnr_db']:.2f} dB")
+                     f"neural image (whole, highest spp): {_accuracy_line(e['neural_image_accuracy'])}")
         for s in e["equal_error"]:
             if s["speedup"] is None:
                 lines.append(f"  neural {s['spp']:4d} spp: no equal-error point (error within ground-truth noise)")

@@ -9,8 +9,10 @@ hair) variant ``fiber``. The dataset folder (``--resume DIR``, default ``OUTPUT.
 so an interrupted bake continues at the first missing view or the last training checkpoint.
 
 Options: ``--views/--res/--spp/--epochs/--seed/--device`` as for Mitsuba; ``--light-angle`` is
-the sun's angular radius in degrees (default 0.5; the paper clamps instead, and so do we:
-direct 20, indirect 10). ``h_input=False`` (Python only; the benchmark's ablation) trains a fiber
+the sun's angular radius in degrees (default 0.5). ``clamp``: Cycles' per-sample clamp of the
+training views, direct and indirect alike (default 0: none; the paper clamps at 20 / 10, which
+throws away the long paths of light materials, spec/bake.md#clamp; Cycles does not report what a
+clamp removed, so the provenance says it was not measured). ``h_input=False`` (Python only; the benchmark's ablation) trains a fiber
 asset with h fixed to 0.
 """
 
@@ -36,7 +38,8 @@ DEFAULT_LIGHT_ANGLE = 0.5
 def bake(
     scene, asset_ids, output, *, size: str = "small", example: str | None = None, resume=None, views=None, res=None,
     epochs=None, spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False,
-    summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, **_ignored,
+    summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, clamp: float | None = None,
+    **_ignored,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
     from nasset_bakers.stages import check_options, finite, render_views, train_with_progress
@@ -72,7 +75,7 @@ def bake(
         source_key, scene_label = f"example:{example}", f"example {example}"
     else:
         if scene is None:
-            raise UsageError("give a .blend scene or --example blender-surface|blender-hair")
+            raise UsageError("give a .blend scene or --example blender-surface|blender-hair|blender-hair-dense")
         bsc.open_blend(scene)
         source_key, scene_label = ds.file_sha256(scene), str(scene)
     objs = bsc.pick_objects(asset_ids or [], file=scene_label)
@@ -94,6 +97,10 @@ def bake(
         dset = replace(dset, spp=int(spp))
     if lights_per_view != 1:
         dset = replace(dset, lights_per_view=int(lights_per_view))
+    if clamp is not None:
+        if not clamp >= 0:
+            raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
+        dset = replace(dset, clamp_direct=float(clamp), clamp_indirect=float(clamp))
     rig = ds.CyclesRig(dset, work, threads=threads)
     caster = ds.Caster(variant, geo)
     times["scene_s"] = time.perf_counter() - t
@@ -153,7 +160,8 @@ def bake(
                    "materials": materials, "notes": notes},
         "light": {"type": "distant-sphere" if dset.light_angle_deg > 0 else "directional",
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0,
-                  "clamp_direct": dset.clamp_direct, "clamp_indirect": dset.clamp_indirect},
+                  "clamp_direct": dset.clamp_direct, "clamp_indirect": dset.clamp_indirect,
+                  "clamp_removed": None if (dset.clamp_direct or dset.clamp_indirect) else 0.0},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
                  "mask_disagreement": disagree, "h_input": h_input},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",

@@ -231,7 +231,7 @@ def _print_summary(s: dict, stream) -> None:
 def bake_named_example(scene, asset_ids, output, *, example: str | None = None, **options) -> dict:
     """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna: default, high-albedo)."""
     if example not in (None, "default", "high-albedo"):
-        raise UsageError(f"unknown rna example {example!r} (default, high-albedo, blender-surface, blender-hair)")
+        raise UsageError(f"unknown rna example {example!r} (default, high-albedo, blender-surface, blender-hair, blender-hair-dense)")
     return bake(scene, asset_ids, output, example=example or False, **options)
 
 

@@ -6,7 +6,7 @@ that) and irradiance 1 W/m^2 shines from a random direction wi (one per view: Cy
 per-pixel light, spec/bake-blender.md#deviations; ``lights_per_view = k`` renders a training view
 k times at spp // k with k suns and gives random pixel groups their own). The asset is rendered alone (every other object
 hidden, black world, transparent film) by Cycles on the CPU with a 0.01-pixel filter, so each
-pixel is point-sampled at its centre, with the paper's clamps (direct 20, indirect 10) for training
+pixel is point-sampled at its centre, unclamped (Cycles' sample clamps off by default; ``--clamp C`` sets both) for training
 views; held-out views are unclamped, rendered as two independent halves (``rgb_a``, ``rgb_b``; the
 alpha of their mean divides both) so their own noise is measured (spec/accuracy.md#metrics).
 
@@ -54,8 +54,8 @@ class DataSettings:
     light_angle_deg: float = 0.5  # angular radius of the sun (Blender angle = 2x)
     distance: float = 2.6  # camera distance in bounding-sphere radii
     upper_hemisphere: bool = False
-    clamp_direct: float = 20.0  # Cycles sample_clamp_direct (paper sec. 4.1)
-    clamp_indirect: float = 10.0  # Cycles sample_clamp_indirect
+    clamp_direct: float = 0.0  # Cycles sample_clamp_direct; 0: none (the paper's 20 throws energy away, spec/bake.md#clamp)
+    clamp_indirect: float = 0.0  # Cycles sample_clamp_indirect; 0: none (the paper's 10)
     max_bounces: int = 32
     alpha_min: float = 0.99
     seed: int = 0

@@ -7,6 +7,9 @@
   points, 6 mm wide at the root tapering to 3 mm, about 0.45 m long) with the Principled Hair
   BSDF (Chiang, melanin parametrisation, blond), rooted on a dark ``Scalp`` sphere of radius
   0.25 m that stays plain geometry.
+* ``blender-hair-dense``: the same head of hair as a realistic light one (object ``Hair``, 20 000
+  poly strands x 16 points, 1.6 mm wide at the root tapering to 0.8 mm, melanin 0.1: light blond,
+  where multiple scattering between fibres carries much of the look).
 
 Both scenes have a camera, a sun (the key light), a rectangular area light (fill) and a uniform
 grey world, so ``nasset convert-scene`` has each kind of thing to convert. Nothing here is a
@@ -22,7 +25,7 @@ import numpy as np
 
 from nasset_sdk.errors import UsageError
 
-EXAMPLES = {"blender-surface": ["Monkey"], "blender-hair": ["Hair"]}
+EXAMPLES = {"blender-surface": ["Monkey"], "blender-hair": ["Hair"], "blender-hair-dense": ["Hair"]}
 #: scene render resolution of the examples (the benchmark renders at its own --res)
 RESOLUTION = 128
 
@@ -37,7 +40,7 @@ def _principled(bpy, name: str, **inputs):
     return mat
 
 
-def _hair_material(bpy):
+def _hair_material(bpy, melanin: float = 0.25):
     mat = bpy.data.materials.new("BlondHair")
     if mat.node_tree is None:  # Blender < 5 creates materials without nodes
         mat.use_nodes = True
@@ -48,7 +51,7 @@ def _hair_material(bpy):
     out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
     hb = nt.nodes.new("ShaderNodeBsdfHairPrincipled")
     hb.parametrization = "MELANIN"
-    hb.inputs["Melanin"].default_value = 0.25
+    hb.inputs["Melanin"].default_value = melanin
     hb.inputs["Melanin Redness"].default_value = 0.6
     hb.inputs["Roughness"].default_value = 0.3
     hb.inputs["Radial Roughness"].default_value = 0.4
@@ -125,9 +128,11 @@ def _surface(bpy) -> None:
     _stage(bpy, ground_z=0.0, cam_eye=(1.6, -2.6, 1.6), cam_target=(0.0, 0.0, 0.5))
 
 
-def hair_strands(n: int = 1000, k: int = 12, seed: int = 7, scalp: float = 0.25, length: float = 0.45):
+def hair_strands(n: int = 1000, k: int = 12, seed: int = 7, scalp: float = 0.25, length: float = 0.45,
+                 root_radius: float = 0.003):
     """(points [n*k,3] Blender space, radius [n*k]) of the example tuft: roots on the upper half of
-    a sphere of radius ``scalp`` at z = scalp, strands growing outward and drooping under gravity."""
+    a sphere of radius ``scalp`` at z = scalp, strands growing outward and drooping under gravity;
+    radius ``root_radius`` (m) at the root, half of it at the tip."""
     rng = np.random.default_rng(seed)
     d = rng.normal(size=(n, 3))
     d[:, 2] = np.abs(d[:, 2]) + 0.3
@@ -139,14 +144,13 @@ def hair_strands(n: int = 1000, k: int = 12, seed: int = 7, scalp: float = 0.25,
     wiggle = 0.03 * np.sin(9.0 * t + rng.uniform(0, 6.28, (n, 1, 1))) * np.cross(d, [0.0, 0.0, 1.0])[:, None, :]
     pts = roots[:, None, :] + ln * t * d[:, None, :] - np.array([0.0, 0.0, 0.5]) * (ln * t) ** 2 + wiggle
     pts[..., 2] = np.maximum(pts[..., 2], 0.01)
-    radius = np.full((n, k), 0.003) * (1.0 - 0.5 * t[..., 0])
+    radius = np.full((n, k), root_radius) * (1.0 - 0.5 * t[..., 0])
     return pts.reshape(-1, 3), radius.reshape(-1)
 
 
-def _hair(bpy) -> None:
+def _hair(bpy, n: int = 1000, k: int = 12, root_radius: float = 0.003, melanin: float = 0.25) -> None:
     sc = bpy.context.scene
-    n, k = 1000, 12
-    pts, radius = hair_strands(n, k)
+    pts, radius = hair_strands(n, k, root_radius=root_radius)
     curves = bpy.data.hair_curves.new("Hair")
     curves.add_curves([k] * n)
     curves.attributes["position"].data.foreach_set("vector", pts.astype(np.float32).ravel())
@@ -155,7 +159,7 @@ def _hair(bpy) -> None:
     r.data.foreach_set("value", radius.astype(np.float32))
     ob = bpy.data.objects.new("Hair", curves)
     sc.collection.objects.link(ob)
-    ob.data.materials.append(_hair_material(bpy))
+    ob.data.materials.append(_hair_material(bpy, melanin))
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.245, location=(0.0, 0.0, 0.25), segments=32, ring_count=16)
     scalp = bpy.context.active_object
     scalp.name = "Scalp"
@@ -163,6 +167,10 @@ def _hair(bpy) -> None:
     scalp.data.materials.append(_principled(bpy, "ScalpBrown", **{"Base Color": (0.25, 0.15, 0.1, 1.0), "Roughness": 0.8}))
     _stage(bpy, ground_z=0.0, cam_eye=(1.4, -2.2, 1.3), cam_target=(0.0, 0.0, 0.35))
     sc.cycles_curves.shape = "THICK"
+
+
+def _dense_hair(bpy) -> None:
+    _hair(bpy, n=20_000, k=16, root_radius=0.0008, melanin=0.1)
 
 
 def build_example(name: str) -> list[str]:
@@ -174,7 +182,7 @@ def build_example(name: str) -> list[str]:
     bpy = load_bpy()
     with quiet_stdout():
         bpy.ops.wm.read_factory_settings(use_empty=True)
-        {"blender-surface": _surface, "blender-hair": _hair}[name](bpy)
+        {"blender-surface": _surface, "blender-hair": _hair, "blender-hair-dense": _dense_hair}[name](bpy)
     bpy.context.view_layer.update()  # world matrices of the objects placed above
     return list(EXAMPLES[name])
 

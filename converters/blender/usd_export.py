@@ -397,6 +397,6 @@ def run(args) -> int:
     """CLI entry: ``nasset convert-scene SCENE.blend -o SCENE.usda [--replace OBJ=ASSET ...] [--json]``."""
     scene, example = args.scene, args.example
     if bool(example) == bool(scene):
-        raise UsageError("give a .blend scene or --example blender-surface|blender-hair (not both)")
+        raise UsageError("give a .blend scene or --example blender-surface|blender-hair|blender-hair-dense (not both)")
     res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks, example=example)
     return report(res, as_json=args.json)

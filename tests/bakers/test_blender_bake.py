@@ -53,7 +53,7 @@ def test_tiny_bake_end_to_end(tiny):
     asset.load("all")
     assert asset.kind == "rna" and asset.variant == variant
     assert asset.provenance["source"]["example"] == example
-    assert asset.provenance["light"]["clamp_direct"] == 20.0 and asset.provenance["light"]["clamp_indirect"] == 10.0
+    assert asset.provenance["light"]["clamp_direct"] == 0.0 and asset.provenance["light"]["clamp_indirect"] == 0.0  # no clamp by default
     # held-out quality: absolute floor and against the best constant colour
     store = DatasetDir(s["dataset_dir"])
     val = load_split(store, "val", s["val_views"], variant == "fiber")
@@ -127,6 +127,8 @@ def test_bench_blender_quick_runs(tmp_path):
         assert all(np.isfinite(p["mse"]) and p["time_s"] > 0 for p in e["cycles_points"] + e["neural_points"])
         # Cycles converges: its error falls with spp (4x the samples, well under half the error)
         assert e["cycles_points"][1]["mse_raw"] < 0.6 * e["cycles_points"][0]["mse_raw"]
+        acc = e["neural_image_accuracy"]  # against unclamped two-half ground truth, with its noise ceiling
+        assert acc["ceiling_db"] > 0 and all(np.isfinite(acc["energy_ratio"]))
     a = r["h_ablation"]
     assert np.isfinite(a["with_h"]["val_psnr_db"]) and np.isfinite(a["without_h"]["val_psnr_db"])
-    assert "h ablation" in summary_text(r)
+    assert "h ablation" in summary_text(r) and "noise ceiling" in summary_text(r)

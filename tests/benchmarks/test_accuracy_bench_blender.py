@@ -1,0 +1,106 @@
+"""``nasset bench accuracy SCENE.blend`` (spec/accuracy.md#in-scene-accuracy): the Cycles side.
+
+The assets have random networks (nasset_sdk.examples) with the geometry the Blender bake exports
+for the example objects, so no training is needed. The mask Cycles gives is checked against the
+reference renderer's own camera rays on the converted scene (an independent intersector).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
+
+from nasset_sdk.errors import NassetError  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def blend(tmp_path_factory):
+    """The built-in Blender surface example saved as a .blend, as a user would have it."""
+    from nasset_converters.blender.examples import write_example_blend
+
+    return write_example_blend("blender-surface", tmp_path_factory.mktemp("acc_blend"))
+
+
+def _asset(tmp_path, blend, names, *, variant="surface", name="a.usdc", shift=0.0):
+    """A random-network asset with the geometry of these objects (as the Blender bake exports it)."""
+    from nasset_converters.blender import scene as bsc
+    from nasset_sdk.examples import example_builder
+
+    bsc.open_blend(blend)
+    b = example_builder("rna", variant=variant, size="tiny", seed=3)
+    if variant == "surface":
+        _, geo, _ = bsc.asset_geometry(bsc.pick_objects(names))
+        geo.points = np.asarray(geo.points) + np.float32(shift)
+        b.set_geometry(geo)
+    return b.write(tmp_path / name)
+
+
+def _run(blend, replace, out, **kw):
+    from nasset_benchmarks.accuracy import bench_accuracy
+
+    return bench_accuracy(blend, replace, out, quiet=True, **kw)
+
+
+def test_unknown_object_and_wrong_variant_and_mismatch(blend, tmp_path):
+    a = _asset(tmp_path, blend, ["Monkey"])
+    with pytest.raises(NassetError) as e:
+        _run(blend, [f"Monkee={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
+    fiber = _asset(tmp_path, blend, [], variant="fiber", name="f.usdc")
+    with pytest.raises(NassetError) as e:
+        _run(blend, [f"Monkey={fiber}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "BENCH_ASSET_KIND" and "fiber" in str(e.value)
+    moved = _asset(tmp_path, blend, ["Monkey"], name="m.usdc", shift=0.5)
+    with pytest.raises(NassetError) as e:
+        _run(blend, [f"Monkey={moved}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "BENCH_ASSET_MISMATCH"
+
+
+def test_unknown_scene_type_and_missing_file(tmp_path):
+    with pytest.raises(NassetError) as e:
+        _run(tmp_path / "scene.obj", ["a=b.usdc"], tmp_path / "o")
+    assert e.value.code == "USAGE"
+    with pytest.raises(NassetError) as e:
+        _run(tmp_path / "nope.blend", ["a=b.usdc"], tmp_path / "o")
+    assert e.value.code == "CONVERT_SCENE_MISSING"
+
+
+def _renderer_coverage(usd_path, hw, sub: int = 4) -> np.ndarray:
+    """Fraction [H, W] of stratified camera rays whose first hit is a neural asset, by the reference renderer's intersector."""
+    import warnings
+
+    from nasset_reference_renderer import load_scene
+    from nasset_reference_renderer.accel import Accel
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = load_scene(str(usd_path))
+    h, w = hw
+    j, i = np.meshgrid(np.arange(w), np.arange(h))
+    s = (np.arange(sub) + 0.5) / sub
+    px = (j[..., None, None] + s[None, None, None, :]).repeat(sub, 2).reshape(-1)
+    py = (i[..., None, None] + s[None, None, :, None]).repeat(sub, 3).reshape(-1)
+    o, d = sc.camera.generate_rays(px, py, w, h)
+    hits = Accel(sc.triangles, sc.tri_inst).trace(o, d)
+    neural = np.array([inst.kind == "neural" for inst in sc.instances])
+    hit = (hits.prim >= 0) & neural[sc.tri_inst[np.maximum(hits.prim, 0)]]
+    return hit.reshape(h, w, sub * sub).mean(-1)
+
+
+def test_tiny_run_mask_from_cycles_matches_the_geometry(blend, tmp_path):
+    a = _asset(tmp_path, blend, ["Monkey"])
+    out = tmp_path / "bench"
+    r = _run(blend, [f"Monkey={a}"], out, res=32, spp=8, nr_spp=1)
+    assert r["reference"]["renderer"].startswith("cycles") and r["reference"]["halves"] == 2
+    for name in ("reference_a.exr", "reference_b.exr", "neural.exr", "mask.png", "error.png", "accuracy.md"):
+        assert (out / name).is_file(), name
+    o = r["object"]
+    assert o["pixels"] == r["mask"]["pixels"] > 20 and all(np.isfinite(o["energy_ratio"]))
+    from PIL import Image
+
+    mask = np.asarray(Image.open(out / "mask.png"))[..., 0] > 127
+    ours = _renderer_coverage(out / "scene_neural.usda", mask.shape) >= 0.5
+    iou = (mask & ours).sum() / max((mask | ours).sum(), 1)
+    assert iou > 0.85, iou  # a flipped, shifted or inverted mask gives far less
