@@ -88,6 +88,7 @@ class PathIntegrator:
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
+        self.inst_one_sided = np.array([i.one_sided for i in insts], bool)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
         self.indirect = plan.instance_indirect
@@ -232,6 +233,9 @@ class PathIntegrator:
         x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
         wo = -d
         ng = self.tri_ng[prim]
+        front = ~self.inst_one_sided[inst] | (dot(ng, wo) > 0)  # one-sided surfaces are black from the back
+        if not front.all():
+            x, d, beta, prim, bu, bv, inst, ridx, wo, ng = (a[front] for a in (x, d, beta, prim, bu, bv, inst, ridx, wo, ng))
         cn = self.scene.tri_normals[prim]
         ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
         flip = dot(ng, wo) < 0
@@ -241,6 +245,11 @@ class PathIntegrator:
         t, b = frame(ns)
         wo_l = to_local(wo, t, b, ns)
         mat = self.inst_mat[inst]
+        kd = f0 = None
+        if self.mt.textured:
+            cst = self.scene.tri_st[prim]
+            st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+            kd, f0 = self.mt.lookup(mat, st)
         indirect = self.indirect[inst]
         xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
         for k in self.nee:
@@ -251,7 +260,8 @@ class PathIntegrator:
             s = np.nonzero(ok)[0]
             if not len(s):
                 continue
-            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]))
+            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]),
+                                *((None, None) if kd is None else (kd[s], f0[s])))
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
             nz = max3(c) > 0
@@ -264,7 +274,8 @@ class PathIntegrator:
         cont = np.nonzero(indirect)[0]
         if not len(cont):
             return None
-        wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)))
+        wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)),
+                                   *((None, None) if kd is None else (kd[cont], f0[cont])))
         wi = to_world(wi_l, t[cont], b[cont], ns[cont])
         ok = (pdf > 0) & (wi_l[:, 2] > 0) & (dot(wi, ng[cont]) > 0)
         c = cont[ok]

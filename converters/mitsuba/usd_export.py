@@ -47,6 +47,8 @@ from nasset_sdk.errors import UsageError, error
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
 #: segments of the triangle fan written for a Mitsuba ``disk``
 DISK_SEGMENTS = 96
+#: latitude rings of the mesh written for a textured Mitsuba ``sphere`` (twice as many longitude segments)
+SPHERE_RINGS = 48
 #: focal length (mm) of the written camera; the apertures carry the field of view
 FOCAL_LENGTH_MM = 50.0
 
@@ -141,13 +143,39 @@ def plastic_diffuse_scale(eta: float, nonlinear_reflectance=None) -> float | np.
     return (1.0 - fdr_ext) ** 2 / (eta * eta * den)
 
 
+def texel_values(data, raw: bool) -> np.ndarray:
+    """A Mitsuba bitmap's stored texels [H, W, C] -> linear float64 [H, W, 3].
+
+    8-bit data is what the file held: divided by 255 and, unless the texture is ``raw``, decoded from
+    sRGB (as Mitsuba decodes it on lookup); float data is already linear. One channel is repeated.
+    """
+    from nasset_reference_renderer.textures import srgb_to_linear
+
+    a = np.asarray(data)
+    img = a.astype(np.float64)
+    if a.dtype == np.uint8:
+        img = img / 255.0 if raw else srgb_to_linear(img / 255.0)
+    img = img.reshape(img.shape[0], img.shape[1], -1)
+    return np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
+
+
+@dataclass
+class TextureMap:
+    """A converted bitmap: linear texels [H, W, 3] (BSDF-specific per-texel factors applied) and where it came from."""
+
+    image: np.ndarray
+    what: str
+
+
 class _Params:
-    """Reads Mitsuba parameter values by name, noting textures replaced by their mean."""
+    """Reads Mitsuba parameter values by name: bitmaps kept as :class:`TextureMap`, other textures by their mean."""
 
     def __init__(self, mi, obj, prefix: str = "") -> None:
         self.p = mi.traverse(obj)
+        self.obj = obj
         self.prefix = prefix
-        self.textured: list[str] = []
+        self.textured: list[str] = []  # procedural textures replaced by their mean
+        self.bitmaps: dict[str, TextureMap] = {}
 
     def keys(self):
         return [k[len(self.prefix):] for k in self.p.keys() if k.startswith(self.prefix)]
@@ -156,21 +184,54 @@ class _Params:
         k = self.prefix + name
         return any(x in self.p for x in (k, k + ".value", k + ".data"))
 
+    def bitmap(self, name: str) -> np.ndarray | None:
+        """Linear texels [H, W, 3] of a bitmap texture parameter (None for anything else)."""
+        k = self.prefix + name
+        if k + ".data" not in self.p:
+            return None
+        text = str(self.obj)
+        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*[=:]\s*BitmapTexture\[", text)
+        flag = re.search(r"raw\s*=\s*(\d)", text[at.end():]) if at else None
+        return texel_values(self.p[k + ".data"], bool(flag and flag.group(1) == "1"))
+
+    def uv_transform(self, name: str) -> np.ndarray | None:
+        """The texture's ``to_uv`` 3x3 matrix, or None when it is the identity (or absent)."""
+        k = self.prefix + name + ".to_uv"
+        if k not in self.p:
+            return None
+        m = np.asarray(self.p[k].matrix, np.float64).reshape(3, 3)
+        return None if np.allclose(m, np.eye(3)) else m
+
     def rgb(self, name: str, default=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Constant colour [3] of a parameter; a bitmap gives its linear mean, a procedural texture the mean of
+        its constant colours (noted in ``textured``)."""
         k = self.prefix + name
         if k + ".value" in self.p:
             v = _np(self.p[k + ".value"]).ravel()
         elif k + ".data" in self.p:
-            data = _np(self.p[k + ".data"])
-            v = data.reshape(-1, data.shape[-1]).mean(0)
-            self.textured.append(name)
+            v = self.bitmap(name).reshape(-1, 3).mean(0)
         elif k in self.p:
             v = _np(self.p[k]).ravel()
         else:
-            return _np(default).copy()
+            nested = [x for x in self.p.keys() if x.startswith(k + ".") and x.endswith(".value")]
+            if not nested:
+                return _np(default).copy()
+            # a procedural texture (checkerboard, ...): the mean of its constant colours, each linear
+            v = np.mean([np.resize(_np(self.p[x]).ravel(), 3) for x in nested], axis=0)
+            self.textured.append(name)
         if v.size == 1:
             v = np.repeat(v, 3)
         return v[:3].copy()
+
+    def texture_or_rgb(self, name: str, default, what: str, per_texel=None):
+        """A :class:`TextureMap` for a bitmap parameter (texels through ``per_texel``), else its colour [3]
+        (through ``per_texel`` too)."""
+        f = per_texel or (lambda c: c)
+        img = self.bitmap(name)
+        if img is None:
+            return f(self.rgb(name, default))
+        self.bitmaps[name] = TextureMap(f(img), what)
+        return self.bitmaps[name]
 
     def scalar(self, name: str, default: float) -> float:
         return float(self.rgb(name, (default,) * 3).mean())
@@ -187,6 +248,7 @@ class StageConverter:
         self.result = ConvertResult(output)
         self.names: set[str] = set()
         self.materials: dict = {}
+        self.textured_materials: set[str] = set()
         self.layer_path = output
         self.stage = Usd.Stage.CreateNew(str(output))
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
@@ -324,6 +386,9 @@ class StageConverter:
                  "roughness": Sdf.ValueTypeNames.Float, "metallic": Sdf.ValueTypeNames.Float,
                  "ior": Sdf.ValueTypeNames.Float}
         for k, v in inputs.items():
+            if isinstance(v, TextureMap):
+                self._texture_input(path, sh, k, v)
+                continue
             if types[k] == Sdf.ValueTypeNames.Color3f:
                 v = Gf.Vec3f(*(float(x) for x in v))
             elif types[k] == Sdf.ValueTypeNames.Int:
@@ -333,6 +398,32 @@ class StageConverter:
             sh.CreateInput(k, types[k]).Set(v)
         mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
         return path
+
+    def _texture_input(self, mat_path: str, surface, name: str, tex: TextureMap) -> None:
+        """Write ``tex`` as OpenEXR (linear) beside the output and connect ``name`` of ``surface`` to a
+        ``UsdUVTexture`` reading primvar ``st`` (spec/bake.md#scene-conversion)."""
+        from pxr import Sdf, UsdShade
+
+        from nasset_sdk.images import write_exr
+
+        tex_dir = self.output.parent / f"{self.output.stem}_textures"
+        tex_dir.mkdir(parents=True, exist_ok=True)
+        file = tex_dir / f"{mat_path.rsplit('/', 1)[-1]}_{name}.exr"
+        write_exr(file, tex.image.astype(np.float32))
+        self.result.textures.append(str(file))
+        reader = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_st")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        node = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_texture")
+        node.CreateIdAttr("UsdUVTexture")
+        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("./" + file.relative_to(self.output.parent).as_posix()))
+        node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        for w in ("wrapS", "wrapT"):
+            node.CreateInput(w, Sdf.ValueTypeNames.Token).Set("repeat")
+        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        node.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+        surface.CreateInput(name, Sdf.ValueTypeNames.Color3f).ConnectToSource(node.ConnectableAPI(), "rgb")
+        self.textured_materials.add(mat_path)
 
     def map_bsdf(self, bsdf) -> tuple[dict, list]:
         """UsdPreviewSurface inputs for a Mitsuba BSDF and notes on what the mapping loses.
@@ -350,18 +441,18 @@ class StageConverter:
             if re.search(r"brdf\[1\]", text) and text.count("brdf[0]") and _two_sides_differ(text):
                 notes.append("twosided BSDF with different back side: the front BSDF is used on both sides")
             cls = inner.group(1) if inner else "SmoothDiffuse"
-        elif "Dielectric" not in cls:
-            notes.append(f"{cls} is one-sided in Mitsuba (black from behind); the reference renderer shades both sides")
         p = _Params(mi, bsdf, prefix)
         spec_wf = {"useSpecularWorkflow": 1}
         if cls == "SmoothDiffuse":
-            out = {**spec_wf, "diffuseColor": p.rgb("reflectance", (0.5,) * 3), "specularColor": (0.0, 0.0, 0.0),
-                   "roughness": 1.0}
+            out = {**spec_wf, "diffuseColor": p.texture_or_rgb("reflectance", (0.5,) * 3, "diffuse reflectance"),
+                   "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
         elif cls in ("RoughPlastic", "SmoothPlastic"):
             eta = p.scalar("eta", 1.49)
             r = p.rgb("diffuse_reflectance", (0.5,) * 3)
             nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", text))
             kd = r * plastic_diffuse_scale(eta, r if nonlinear else None)
+            diffuse = p.texture_or_rgb("diffuse_reflectance", (0.5,) * 3, "plastic diffuse reflectance",
+                                       lambda c: np.clip(c * plastic_diffuse_scale(eta, c if nonlinear else None), 0, 1))
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
             if cls == "RoughPlastic":
                 alpha = p.scalar("alpha", 0.1)
@@ -374,7 +465,7 @@ class StageConverter:
             notes.append(f"{cls}: dielectric Fresnel (eta {eta:.3g}) approximated by Schlick F0 {f0.mean():.4f}; "
                          f"diffuse_reflectance x {float(np.mean(kd / np.maximum(r, 1e-12))):.3f} for the coating's "
                          "transmission (spec/bake.md#scene-conversion)")
-            out = {**spec_wf, "diffuseColor": np.clip(kd, 0, 1), "specularColor": np.clip(f0, 0, 1), "roughness": rough}
+            out = {**spec_wf, "diffuseColor": diffuse, "specularColor": np.clip(f0, 0, 1), "roughness": rough}
         elif cls in ("SmoothConductor", "RoughConductor"):
             eta, k = p.rgb("eta", (0.0,) * 3), p.rgb("k", (1.0,) * 3)
             f0 = ((eta - 1.0) ** 2 + k * k) / np.maximum((eta + 1.0) ** 2 + k * k, 1e-12)
@@ -398,7 +489,7 @@ class StageConverter:
         elif cls == "Principled":
             spec = p.scalar("specular", 0.5)
             s = math.sqrt(min(max(0.08 * spec, 0.0), 0.99))
-            out = {"useSpecularWorkflow": 0, "diffuseColor": p.rgb("base_color", (0.5,) * 3),
+            out = {"useSpecularWorkflow": 0, "diffuseColor": p.texture_or_rgb("base_color", (0.5,) * 3, "principled base_color"),
                    "metallic": p.scalar("metallic", 0.0), "roughness": p.scalar("roughness", 0.5),
                    "ior": (1.0 + s) / (1.0 - s)}
             for lobe in ("clearcoat", "sheen", "spec_trans", "anisotropic", "flatness"):
@@ -415,7 +506,18 @@ class StageConverter:
             notes.append(f"BSDF {cls} is not convertible: written as grey diffuse 0.5")
             out = {**spec_wf, "diffuseColor": (0.5, 0.5, 0.5), "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
         for t in p.textured:
-            notes.append(f"{cls}.{t} is a texture: replaced by its mean (textures are not converted)")
+            notes.append(f"{cls}.{t} is a procedural texture: replaced by the mean of its colours (linear)")
+        converted = {id(v) for v in out.values()}
+        for t, tm in p.bitmaps.items():
+            if id(tm) not in converted:
+                continue
+            if p.uv_transform(t) is not None:
+                notes.append(f"{cls}.{t}: texture to_uv transform ignored")
+        for k in p.p.keys():
+            name = k[len(prefix):-len(".data")] if k.startswith(prefix) and k.endswith(".data") else None
+            if name and name not in p.bitmaps:
+                notes.append(f"{cls}.{name} is a bitmap texture on a parameter that is not converted as a texture: "
+                             "replaced by its linear mean")
         return out, notes
 
     # -- shapes -------------------------------------------------------------------------------
@@ -446,8 +548,9 @@ class StageConverter:
                 self._mesh(shape, sid, cls, emission)
             elif cls == "Rectangle":
                 pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+                uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
                 self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
-                                 shape, cls, emission, local_to_world=True)
+                                 shape, cls, emission, local_to_world=True, uv=uv)
             elif cls == "Disk":
                 a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
                 pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
@@ -462,11 +565,17 @@ class StageConverter:
                 self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
                           "are): skipped")
 
-    def _bind(self, prim, shape, sid, emission) -> None:
+    def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade
 
         mat_path = self.material(shape.bsdf(), sid, emission)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+        return mat_path
+
+    def _one_sided(self, gprim, shape) -> None:
+        """Author ``doubleSided = false`` for a one-sided BSDF (black from behind in Mitsuba and in the renderer)."""
+        if _is_one_sided(shape.bsdf()):
+            gprim.CreateDoubleSidedAttr(False)
 
     def _mesh(self, shape, sid, cls, emission) -> None:
         p = self.mi.traverse(shape)
@@ -475,10 +584,15 @@ class StageConverter:
         nrm = _np(p["vertex_normals"]).reshape(-1, 3) if "vertex_normals" in p else None
         if nrm is not None and nrm.shape != pts.shape:
             nrm = None
-        self._write_mesh(sid, pts, faces, nrm, shape, cls, emission)
+        uv = _np(p["vertex_texcoords"]).reshape(-1, 2) if "vertex_texcoords" in p else None
+        if uv is not None and len(uv) != len(pts):
+            uv = None
+        self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
 
-    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False) -> None:
-        from pxr import UsdGeom, Vt
+    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False, uv=None) -> None:
+        """A UsdGeom.Mesh; ``uv`` [V, 2] in Mitsuba's convention (v = 0 at the image's top row) becomes the
+        vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
+        from pxr import Sdf, UsdGeom, Vt
 
         path = self._name("/World/Geometry", sid)
         mesh = UsdGeom.Mesh.Define(self.stage, path)
@@ -492,20 +606,44 @@ class StageConverter:
             mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         lo, hi = np.asarray(pts, np.float32).min(0), np.asarray(pts, np.float32).max(0)
         mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi])))
+        if uv is not None:
+            st = np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1)
+            pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+            pv.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(st, np.float32)))
         if local_to_world:
             self._xform(mesh.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
-        self._bind(mesh.GetPrim(), shape, sid, emission)
+        mat = self._bind(mesh.GetPrim(), shape, sid, emission)
+        if mat in self.textured_materials and uv is None:
+            self.warn(f"shape {sid}: textured material but the {cls} has no texture coordinates: the texture's corner "
+                      "texel is used")
+        self._one_sided(mesh, shape)
         self.record(path, f"shape {sid} ({cls}, {len(faces)} faces)")
 
     def _sphere(self, shape, sid, emission) -> None:
         from pxr import Gf, UsdGeom
 
+        if self.material(shape.bsdf(), sid, emission) in self.textured_materials:
+            # textured: a latitude-longitude mesh carrying Mitsuba's sphere parameterisation
+            # u = phi / 2pi, v = theta / pi (local +Z pole), in the sphere's local frame
+            theta = np.linspace(0.0, np.pi, SPHERE_RINGS + 1)
+            phi = np.linspace(0.0, 2.0 * np.pi, 2 * SPHERE_RINGS + 1)
+            th, ph = np.meshgrid(theta, phi, indexing="ij")
+            pts = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
+            uv = np.stack([ph / (2.0 * np.pi), th / np.pi], -1).reshape(-1, 2)
+            cols = 2 * SPHERE_RINGS + 1
+            i, j = np.meshgrid(np.arange(SPHERE_RINGS), np.arange(2 * SPHERE_RINGS), indexing="ij")
+            a, b = (i * cols + j).ravel(), (i * cols + j + 1).ravel()
+            c, d = a + cols, b + cols
+            faces = np.concatenate([np.stack([a, c, d], 1)[i.ravel() < SPHERE_RINGS - 1], np.stack([a, d, b], 1)[i.ravel() > 0]])
+            self._write_mesh(sid, pts, faces, pts.copy(), shape, "Sphere", emission, local_to_world=True, uv=uv)
+            return
         path = self._name("/World/Geometry", sid)
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
         self._xform(sph.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
         self._bind(sph.GetPrim(), shape, sid, emission)
+        self._one_sided(sph, shape)
         self.record(path, f"shape {sid} (Sphere)")
 
     # -- lights -------------------------------------------------------------------------------
@@ -661,6 +799,14 @@ class StageConverter:
         if self.check_usd:
             self.result.usd_checks = usd_check(self.output)
         return self.result
+
+
+def _is_one_sided(bsdf) -> bool:
+    """True for a BSDF that Mitsuba shades on its front side only (not twosided, not a dielectric, not null)."""
+    if bsdf is None:
+        return False
+    cls = _class_name(bsdf)
+    return cls not in ("TwoSided", "Null") and "Dielectric" not in cls
 
 
 def _two_sides_differ(text: str) -> bool:

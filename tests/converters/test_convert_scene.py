@@ -223,8 +223,18 @@ def test_shapes_and_materials(converted):
     assert (pr["metallic"], pr["roughness"]) == (pytest.approx(0.2), pytest.approx(0.3))
     assert ((pr["ior"] - 1) / (pr["ior"] + 1)) ** 2 == pytest.approx(0.04, rel=1e-4)  # specular 0.5 -> F0 0.04
 
-    tri = _shader_inputs(stage, _bound(stage, "/World/Geometry/tri"))
-    np.testing.assert_allclose(tri["diffuseColor"], _env_image().reshape(-1, 3).mean(0), rtol=1e-5)
+    # a float bitmap becomes a UsdUVTexture on an OpenEXR file holding the same (linear) texels
+    from pxr import UsdShade
+
+    from nasset_sdk.images import read_exr
+
+    surf = UsdShade.Shader(stage.GetPrimAtPath(_bound(stage, "/World/Geometry/tri") + "/PreviewSurface"))
+    node = UsdShade.Shader(surf.GetInput("diffuseColor").GetConnectedSource()[0].GetPrim())
+    assert node.GetIdAttr().Get() == "UsdUVTexture" and node.GetInput("sourceColorSpace").Get() == "raw"
+    np.testing.assert_allclose(read_exr(node.GetInput("file").Get().resolvedPath), _env_image(), rtol=1e-6)
+    reader = UsdShade.Shader(node.GetInput("st").GetConnectedSource()[0].GetPrim())
+    assert reader.GetIdAttr().Get() == "UsdPrimvarReader_float2" and reader.GetInput("varname").Get() == "st"
+    assert not UsdGeom.Mesh(stage.GetPrimAtPath("/World/Geometry/tri")).GetDoubleSidedAttr().Get()  # one-sided diffuse
 
 
 def _plastic_scale_by_quadrature(eta, n=200_000):
@@ -246,7 +256,7 @@ def test_unsupported_elements_warn(converted):
     res, _, _ = converted
     text = "\n".join(res.warnings)
     for needle in ("cyl: Cylinder is not convertible", "glass: interior medium", "SmoothDielectric has no counterpart",
-                   "reflectance is a texture", "reference renderer ignores shaping", "max_depth 6",
+                   "textured material but the OBJMesh has no texture coordinates", "reference renderer ignores shaping", "max_depth 6",
                    "nearest texels"):
         assert needle in text, needle
 
