@@ -9,7 +9,9 @@ multiplied by ``color * 2^exposure``):
   uniformly in the cone; angle 0 is a delta light. Light arrives from the prim's +Z axis.
 * SphereLight: radiance L = intensity from a sphere of ``radius`` (sampled by the cone it
   subtends); radius 0 (or ``treatAsPoint``) is a point light of radiant intensity I = intensity
-  (E = I / d^2).
+  (E = I / d^2). With ``UsdLux.ShapingAPI`` a point light is a spot (spec/renderer.md#spot-lights):
+  I(w) = intensity * falloff(theta), theta the angle between w and the prim's -Z axis, falloff 1 up
+  to the beam angle cone * (1 - softness), linear in theta down to 0 at the cone angle.
 * RectLight: radiance L = intensity from a ``width`` x ``height`` rectangle in the local XY
   plane, emitting toward local -Z only; sampled uniformly by area.
 * DomeLight: radiance L(d) = intensity * texture(d) (or constant without a texture).
@@ -101,22 +103,41 @@ class DistantLight(Light):
         return np.where((d @ self.w >= self.cos_max)[:, None], self.L, 0.0)
 
 
+def spot_falloff(cos_theta: np.ndarray, cone_deg: float, softness: float) -> np.ndarray:
+    """Spot falloff [N] at cos(theta) [N] from the spot axis (Mitsuba's ``spot``): 1 inside the beam angle
+    ``cone * (1 - softness)``, then linear in theta to 0 at ``cone`` (degrees, half-angle); 0 beyond."""
+    cutoff = np.radians(np.clip(cone_deg, 0.0, 180.0))
+    beam = cutoff * (1.0 - float(np.clip(softness, 0.0, 1.0)))
+    theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))
+    ramp = (cutoff - theta) / max(cutoff - beam, 1e-12)
+    return np.where(theta <= beam, 1.0, np.where(theta < cutoff, np.clip(ramp, 0.0, 1.0), 0.0))
+
+
 class PointLight(Light):
     delta = True
 
-    def __init__(self, position, intensity, prim: str = "") -> None:
+    def __init__(self, position, intensity, prim: str = "", *, axis=None, cone_deg: float = 180.0,
+                 softness: float = 0.0) -> None:
+        """``axis`` [3]: the direction the spot emits along (None: omnidirectional); ``cone_deg``, ``softness``
+        as in :func:`spot_falloff`."""
         self.c = np.asarray(position, np.float64)
         self.I = np.asarray(intensity, np.float64)
         self.prim = prim
+        self.axis = None if axis is None or cone_deg >= 180.0 else normalize(np.asarray(axis, np.float64)[None])[0]
+        self.cone_deg, self.softness = float(cone_deg), float(softness)
 
     def power_is_zero(self):
-        return not (self.I > 0).any()
+        return not (self.I > 0).any() or (self.axis is not None and self.cone_deg <= 0.0)
 
     def sample(self, p, u):
         v = self.c - p
         d2 = np.maximum(dot(v, v), 1e-300)
         dist = np.sqrt(d2)
-        return v / dist[:, None], dist, self.I / d2[:, None], np.ones(len(p))
+        wi = v / dist[:, None]
+        li = self.I / d2[:, None]
+        if self.axis is not None:
+            li = li * spot_falloff(-(wi @ self.axis), self.cone_deg, self.softness)[:, None]
+        return wi, dist, li, np.ones(len(p))
 
 
 class SphereLight(Light):

@@ -46,6 +46,7 @@ PREVIEW_DEFAULTS = {
     "displacement": 0.0, "occlusion": 1.0, "opacityMode": None,
 }
 _LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:normalize",
+                 "inputs:shaping:cone:angle", "inputs:shaping:cone:softness",
                  "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular"}
 _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
@@ -697,6 +698,25 @@ class _Loader:
         self._add(inst, tris, np.repeat(ng[:, None], 3, 1), np.arange(len(data.faces)))
 
     # -- lights ----------------------------------------------------------------------------
+    def _shaping(self, prim, M) -> dict:
+        """Spot parameters of a point light with ``UsdLux.ShapingAPI`` (spec/renderer.md#spot-lights): the axis is
+        the prim's -Z, ``shaping:cone:angle`` the half-angle (degrees), ``shaping:cone:softness`` in [0, 1]."""
+        from pxr import UsdLux
+
+        if not prim.HasAPI(UsdLux.ShapingAPI):
+            return {}
+        api = UsdLux.ShapingAPI(prim)
+        get = lambda a, d: (a.Get(self.time) if a and a.Get(self.time) is not None else d)  # noqa: E731
+        cone, soft = float(get(api.GetShapingConeAngleAttr(), 90.0)), float(get(api.GetShapingConeSoftnessAttr(), 0.0))
+        if not (np.isfinite(cone) and np.isfinite(soft)):
+            raise self.err("SCENE_INVALID", "shaping:cone:angle and softness must be finite", prim.GetPath(),
+                           "inputs:shaping:cone:angle")
+        for a in ("inputs:shaping:focus", "inputs:shaping:ies:file"):
+            at = prim.GetAttribute(a)
+            if at and at.HasAuthoredValue():
+                self.warn(f"{a} is ignored", prim.GetPath())
+        return {"axis": -M[2, :3], "cone_deg": cone, "softness": soft}
+
     def _light(self, prim, tname):
         from pxr import UsdGeom, UsdLux
 
@@ -736,6 +756,10 @@ class _Loader:
             if v is not None and not np.isfinite(float(v)):
                 raise self.err("SCENE_INVALID", f"{name} = {v!r} must be finite", path, name)
         M = self.matrix(UsdGeom.Xformable(prim))
+        if prim.HasAPI(UsdLux.ShapingAPI) and not (tname == "SphereLight" and (
+                bool(g(UsdLux.SphereLight(prim).GetTreatAsPointAttr(), False)) or not g(UsdLux.SphereLight(prim).GetRadiusAttr(), 0.5))):
+            self.warn("UsdLux.ShapingAPI is only applied to point lights (SphereLight with treatAsPoint or radius 0): "
+                      "ignored", path)
         if tname == "DistantLight":
             angle = float(g(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
             self.lights.append(DistantLight(M[2, :3], scale, angle, path))
@@ -747,7 +771,7 @@ class _Loader:
             if r < 0:
                 raise self.err("SCENE_INVALID", "radius must be >= 0", path, "inputs:radius")
             if r * sc == 0 or as_point:
-                self.lights.append(PointLight(M[3, :3], scale, path))
+                self.lights.append(PointLight(M[3, :3], scale, path, **self._shaping(prim, M)))
             else:
                 rw = r * sc
                 L = scale / (4.0 * np.pi * rw * rw) if normalize else scale

@@ -76,6 +76,19 @@ def _sidedness(folder: Path, size: int) -> str:
             + SUN + SKY + "</scene>")
 
 
+def _spot(folder: Path, size: int) -> str:
+    spot = ('<emitter type="spot" id="spot"><transform name="to_world"><lookat origin="0.5, 1.8, 0.4" target="-0.2, 0, 0" '
+            'up="0, 1, 0"/></transform><rgb name="intensity" value="12, 11, 9"/><float name="cutoff_angle" value="22"/>'
+            '<float name="beam_width" value="15"/></emitter>\n')
+    point = ('<emitter type="point" id="bulb"><point name="position" x="-1.2" y="1.0" z="0.8"/>'
+             '<rgb name="intensity" value="0.6, 0.7, 1.0"/></emitter>\n')
+    return (HEADER.format(depth=4, origin="0, 2.2, 3.0", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="-0.2"/><float name="radius" value="0.3"/>\n'
+              ' <bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.6, 0.3"/></bsdf></shape>\n'
+            + spot + point + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -87,6 +100,7 @@ class FidelityScene:
 
 SCENES = {
     "textures": FidelityScene("textures", _textures, "8-bit sRGB PNG bitmaps on a floor (diffuse) and a sphere (principled)"),
+    "spot": FidelityScene("spot", _spot, "spot light (cutoff 22 deg, beam 15 deg) and a point light over a floor and a ball"),
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; a twosided one"),
 }
 

@@ -719,8 +719,6 @@ class StageConverter:
                 shaping.CreateShapingConeSoftnessAttr(float(np.clip((cutoff - beam) / max(cutoff, 1e-9), 0.0, 1.0)))
                 self._xform(light.GetPrim(), _FLIP_CAMERA @ _row(m))  # USD shaping emits along -Z
                 self._light_common(light, p.rgb("intensity"), path, f"emitter {eid} (spot, cutoff {cutoff:.3g} deg)")
-                self.warn(f"emitter {eid}: spot light written as a point light with UsdLux.ShapingAPI (cone {cutoff:.3g} "
-                          "deg); the reference renderer ignores shaping and renders it omnidirectional")
                 if p.textured:
                     self.warn(f"emitter {eid}: spot texture ignored")
             elif cls == "ConstantBackgroundEmitter":

@@ -103,3 +103,46 @@ def test_one_sided_surface_is_black_from_behind(tmp_path, authored, normal_up, l
     b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
     img = render(load_scene(b.write(tmp_path / "s.usda")), RenderSettings(spp=1, width=4, height=4, max_depth=2)).image
     assert (img.mean() > 0.1) == lit, img.mean()
+
+
+def test_spot_falloff_hand_values():
+    from nasset_reference_renderer.lights import spot_falloff
+
+    c = np.cos(np.radians([0.0, 14.9, 18.5, 21.9, 22.1, 90.0]))
+    # cone 22 deg, softness 7/22: beam 15 deg, then linear in angle to 0 at 22 deg (Mitsuba's spot)
+    np.testing.assert_allclose(spot_falloff(c, 22.0, 7.0 / 22.0), [1, 1, 0.5, 0.1 / 7, 0, 0], atol=1e-9)
+
+
+def test_spot_light_lights_its_cone_only(tmp_path):
+    from pxr import UsdLux
+
+    h, a, intensity, cone, soft = 2.0, 0.5, 4.0, 20.0, 0.25
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=14)
+    b.quad("Floor", (0, 0, 0), 6.0, diffuse=(a, a, a), specular=(0, 0, 0), roughness=1.0)
+    lt = b.sphere_light("Spot", (0, h, 0), 0.0, intensity)
+    lt.CreateTreatAsPointAttr(True)
+    from pxr import Gf, UsdGeom
+
+    op = UsdGeom.Xformable(lt.GetPrim()).GetOrderedXformOps()[0]  # local -Z -> world down
+    op.Set(Gf.Matrix4d(1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, h, 0, 1))
+    shaping = UsdLux.ShapingAPI.Apply(lt.GetPrim())
+    shaping.CreateShapingConeAngleAttr(cone)
+    shaping.CreateShapingConeSoftnessAttr(soft)
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    w = 32
+    img = render(scene, RenderSettings(spp=32, width=w, height=w, max_depth=1)).image.reshape(-1, 3)[:, 0]
+    ys, xs = np.mgrid[0:w, 0:w]
+    o, d = scene.camera.generate_rays(xs.ravel() + 0.5, ys.ravel() + 0.5, w, w)
+    hit = o + d * (-o[:, 1] / d[:, 1])[:, None]
+    theta = np.degrees(np.arctan(np.hypot(hit[:, 0], hit[:, 2]) / h))
+    cos = np.cos(np.radians(theta))
+    full = a / np.pi * intensity * cos ** 3 / h ** 2  # E = I cos / d^2 with d = h / cos
+    beam = cone * (1 - soft)
+    inner, outer = theta < beam - 3.5, theta > cone + 3.5  # pixel footprints span up to ~3.4 degrees here
+    assert inner.sum() > 10 and outer.sum() > 10
+    np.testing.assert_allclose(img[inner], full[inner], rtol=1e-2)  # pixel-footprint means of a concave cos^3: a bit low
+    assert np.all(img[outer] == 0.0)
+    ramp = (theta > beam + 1.7) & (theta < cone - 1.7)
+    # in the ramp single pixels straddle its ends: compare the mean over the ramp's pixels
+    assert img[ramp].mean() == pytest.approx((full[ramp] * (cone - theta[ramp]) / (cone - beam)).mean(), rel=0.05)
