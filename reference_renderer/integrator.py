@@ -16,7 +16,7 @@ from nasset_sdk.errors import UsageError
 
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
-from .film import Film, check_image_size
+from .film import Film, check_image_size, pixel_offsets
 from .plan import RenderPlan, make_plan
 from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading
@@ -29,7 +29,7 @@ class RenderSettings:
     seed: int = 0
     width: int | None = None
     height: int | None = None
-    max_depth: int = 5
+    max_depth: int | None = None  # None: the scene's nasset:maxDepth (-1: MAX_DEPTH), else DEFAULT_MAX_DEPTH
     batch: int = 65536
     tile: int = 64
     threads: int = 0
@@ -308,7 +308,7 @@ class PathIntegrator:
 def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | None = None,
            load_components: bool = True) -> RenderResult:
     """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`)."""
-    s = settings or RenderSettings()
+    s = resolve_settings(settings or RenderSettings(), scene)
     check_settings(s)
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
     if plan is None:
@@ -319,6 +319,8 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     integ = PathIntegrator(scene, plan, s)
     film = Film(width, height)
     tile = max(1, s.tile)
+    rs = scene.render_settings
+    filt = (rs.get("pixel_filter", "box"), rs.get("pixel_filter_stddev", 0.5))
     tiles = [(x0, y0) for y0 in range(0, height, tile) for x0 in range(0, width, tile)]
     passes = [(p0, min(s.spp, p0 + plan.spp_per_pass)) for p0 in range(0, s.spp, plan.spp_per_pass)]
     bar = None
@@ -334,7 +336,7 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
         for pi, (p0, p1) in enumerate(passes):
             rng = np.random.default_rng([s.seed, ti, pi])
             pix = np.tile(pix_tile, p1 - p0)
-            jit = rng.random((len(pix), 2))
+            jit = pixel_offsets(rng, len(pix), *filt)
             px = (pix % width) + jit[:, 0]
             py = (pix // width) + jit[:, 1]
             o, d = scene.camera.generate_rays(px, py, width, height)
@@ -352,6 +354,20 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     return RenderResult(film, plan, st)
 
 
+DEFAULT_MAX_DEPTH = 5
+
+
+def resolve_settings(s: RenderSettings, scene) -> RenderSettings:
+    """``s`` with ``max_depth`` filled in when it is None: the scene's ``nasset:maxDepth`` (-1: unbounded, i.e.
+    MAX_DEPTH with Russian roulette), else DEFAULT_MAX_DEPTH."""
+    import dataclasses
+
+    if s.max_depth is not None:
+        return s
+    md = getattr(scene, "render_settings", {}).get("max_depth")
+    return dataclasses.replace(s, max_depth=DEFAULT_MAX_DEPTH if md is None else (MAX_DEPTH if md < 0 else max(int(md), 1)))
+
+
 #: Bounds of the other render settings (spec/renderer.md#limits); image size and spp: film.check_image_size.
 MAX_DEPTH = 1024
 MAX_BATCH = 1 << 24
@@ -363,6 +379,8 @@ def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
     """``USAGE`` error unless max_depth (min_depth ..), batch, tile and threads are integers within their bounds."""
     for name, value, lo, hi in (("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("batch", s.batch, 1, MAX_BATCH),
                                 ("tile", s.tile, 1, MAX_TILE), ("threads", s.threads, 0, MAX_THREADS)):
+        if name == "max_depth" and value is None:
+            continue  # filled in from the scene by resolve_settings
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
             raise UsageError(f"{name} = {value!r} outside {lo} .. {hi} (--{name.replace('_', '-')})")
 

@@ -20,7 +20,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
-from .film import MAX_IMAGE_PIXELS
+from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .lights import DistantLight, DomeLight, Light, PointLight, RectLight, SphereLight
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
@@ -102,6 +102,7 @@ class Scene:
     assets: list
     warnings: list = field(default_factory=list)
     tri_st: np.ndarray | None = None  # [F,3,2] texture coordinates at the corners (zeros where a mesh has none)
+    render_settings: dict = field(default_factory=dict)  # nasset:* values of the UsdRender.Settings prim (spec/renderer.md#render-settings)
 
     @property
     def bounds(self):
@@ -284,6 +285,7 @@ class _Loader:
             tri_normals=np.concatenate(self.tri_normals) if n else np.zeros((0, 3, 3)),
             instances=self.instances, materials=table, lights=self.lights, assets=self.assets, warnings=self.warnings,
             tri_st=np.concatenate(self.tri_st) if n else np.zeros((0, 3, 2)),
+            render_settings=self._render_settings(),
         )
 
     def _check_world_bounds(self, tris: np.ndarray) -> None:
@@ -362,6 +364,30 @@ class _Loader:
                     return int(res[0]), int(res[1])
                 self.warn(f"{prim.GetPath()}: resolution {res} ignored")
         return None
+
+    def _render_settings(self) -> dict:
+        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
+        ``nasset:pixelFilterStddev`` (pixels) of the first UsdRender.Settings prim; invalid values are warned and dropped."""
+        from pxr import Usd, UsdRender
+
+        out: dict = {}
+        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
+            if not prim.IsA(UsdRender.Settings):
+                continue
+            for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
+                                  ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
+                                  ("nasset:pixelFilterStddev", "pixel_filter_stddev",
+                                   lambda v: isinstance(v, float) and 0.0 < v <= MAX_FILTER_STDDEV)):
+                attr = prim.GetAttribute(name)
+                v = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+                if v is None:
+                    continue
+                if ok(v):
+                    out[key] = str(v) if key == "pixel_filter" else v
+                else:
+                    self.warn(f"{name} = {v!r} ignored", prim.GetPath())
+            break
+        return out
 
     # -- meshes and materials --------------------------------------------------------------
     def _material(self, prim) -> int:

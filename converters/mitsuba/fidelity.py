@@ -6,7 +6,12 @@ the converted stage, at the same size and sample count, and reports
 
 * ``ratio``: mean of the reference renderer's image / mean of Mitsuba's (seed 1), per channel;
 * ``psnr``: PSNR of the reference renderer's image against Mitsuba's (seed 1);
-* ``psnr_seed``: PSNR of Mitsuba seed 2 against seed 1, the ceiling set by noise alone.
+* ``psnr_seed``: PSNR of Mitsuba seed 2 against seed 1, the ceiling set by Mitsuba's noise alone;
+* ``noise_ratio``: MSE(reference renderer, Mitsuba) / (the MSE that the two images' noise alone explains:
+  half the MSE of the two Mitsuba seeds plus the reference renderer's own variance of the pixel mean).
+  About 1 for a faithful conversion; bias and misplaced structure raise it. It separates conversion
+  errors from the reference renderer simply being noisier than Mitsuba at equal spp (which lowers
+  ``psnr`` below ``psnr_seed`` without any conversion error).
 
 PSNR uses the peak ``max`` of Mitsuba's seed-1 image: ``10 log10(peak^2 / MSE)``. A faithful conversion
 has ratio 1 (within noise) and ``psnr`` close to ``psnr_seed`` (both images carry the same amount
@@ -28,9 +33,10 @@ HEADER = """<scene version="3.0.0">
 <integrator type="path"><integer name="max_depth" value="{depth}"/></integrator>
 <sensor type="perspective"><float name="fov" value="40"/>
  <transform name="to_world"><lookat origin="{origin}" target="0, 0.3, 0" up="0, 1, 0"/></transform>
- <film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/><rfilter type="box"/></film>
+ <film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/>{rfilter}</film>
 </sensor>
 """
+BOX = '<rfilter type="box"/>'
 FLOOR = """<shape type="rectangle" id="floor"><transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
  {bsdf}</shape>
 """
@@ -54,7 +60,7 @@ def _checker_png(path: Path, colors, n: int = 64, squares: int = 8) -> None:
 def _textures(folder: Path, size: int) -> str:
     _checker_png(folder / "floor.png", [(230, 200, 120), (60, 90, 160)])
     _checker_png(folder / "ball.png", [(250, 70, 40), (240, 240, 230)], squares=6)
-    return (HEADER.format(depth=4, origin="0.9, 1.5, 2.6", size=size)
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0.9, 1.5, 2.6", size=size)
             + FLOOR.format(bsdf='<bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
                                 '<string name="filename" value="floor.png"/></texture></bsdf>')
             + '<shape type="sphere" id="ball"><point name="center" x="0" y="0.45" z="0"/><float name="radius" value="0.45"/>\n'
@@ -68,7 +74,7 @@ def _sidedness(folder: Path, size: int) -> str:
     panel = ('<shape type="rectangle" id="{id}"><transform name="to_world"><scale value="0.5"/><rotate y="1" angle="{a}"/>'
              '<translate x="{x}" y="0.6"/></transform><bsdf type="{t}">{inner}</bsdf></shape>\n')
     diffuse = '<rgb name="reflectance" value="0.8, 0.5, 0.2"/>'
-    return (HEADER.format(depth=4, origin="0, 1.2, 2.8", size=size)
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.2, 2.8", size=size)
             + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
             + panel.format(id="front", a=20, x=-0.6, t="diffuse", inner=diffuse)
             + panel.format(id="back", a=200, x=0.6, t="diffuse", inner=diffuse)
@@ -82,11 +88,30 @@ def _spot(folder: Path, size: int) -> str:
             '<float name="beam_width" value="15"/></emitter>\n')
     point = ('<emitter type="point" id="bulb"><point name="position" x="-1.2" y="1.0" z="0.8"/>'
              '<rgb name="intensity" value="0.6, 0.7, 1.0"/></emitter>\n')
-    return (HEADER.format(depth=4, origin="0, 2.2, 3.0", size=size)
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 2.2, 3.0", size=size)
             + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>')
             + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="-0.2"/><float name="radius" value="0.3"/>\n'
               ' <bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.6, 0.3"/></bsdf></shape>\n'
             + spot + point + "</scene>")
+
+
+def _defaults(folder: Path, size: int) -> str:
+    # Mitsuba's defaults: unbounded path length (max_depth -1) and the Gaussian reconstruction filter (no rfilter
+    # element), in an open-fronted box of bright walls where long paths carry much of the light
+    def wall(wid, rotate, translate, rgb):
+        return (f'<shape type="rectangle" id="{wid}"><transform name="to_world">{rotate}<translate {translate}/>'
+                f'</transform><bsdf type="diffuse"><rgb name="reflectance" value="{rgb}"/></bsdf></shape>\n')
+
+    white = "0.9, 0.9, 0.88"
+    return (HEADER.format(depth=-1, rfilter="", origin="0, 1, 3.2", size=size).replace('target="0, 0.3, 0"', 'target="0, 1, 0"')
+            + wall("floor", '<rotate x="1" angle="-90"/>', 'y="0"', white)
+            + wall("ceiling", '<rotate x="1" angle="90"/>', 'y="2"', white)
+            + wall("back", "", 'y="1" z="-1"', white)
+            + wall("left", '<rotate y="1" angle="90"/>', 'x="-1" y="1"', "0.9, 0.3, 0.25")
+            + wall("right", '<rotate y="1" angle="-90"/>', 'x="1" y="1"', "0.3, 0.9, 0.3")
+            + '<emitter type="point" id="bulb"><point name="position" x="0" y="1.6" z="0"/>'
+              '<rgb name="intensity" value="3, 3, 3"/></emitter>\n'
+            + "</scene>")
 
 
 @dataclass
@@ -101,6 +126,8 @@ class FidelityScene:
 SCENES = {
     "textures": FidelityScene("textures", _textures, "8-bit sRGB PNG bitmaps on a floor (diffuse) and a sphere (principled)"),
     "spot": FidelityScene("spot", _spot, "spot light (cutoff 22 deg, beam 15 deg) and a point light over a floor and a ball"),
+    "defaults": FidelityScene("defaults", _defaults, "Mitsuba defaults: max_depth -1 (unbounded) and the Gaussian "
+                              "reconstruction filter, bright diffuse walls"),
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; a twosided one"),
 }
 
@@ -134,19 +161,23 @@ def measure(name: str, folder, *, size: int = 32, spp: int = 64) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         usd = load_scene(str(res.output))
-    depth = res.integrator.get("renderer_max_depth") or 5
-    out = render(usd, RenderSettings(spp=spp, width=size, height=size, max_depth=depth, seed=5)).image
+    result = render(usd, RenderSettings(spp=spp, width=size, height=size, seed=5))  # depth, filter: from the stage
+    out = result.image
     ratio = out.reshape(-1, 3).mean(0) / np.maximum(a.reshape(-1, 3).mean(0), 1e-30)
-    return {"ratio": ratio.tolist(), "psnr": psnr(out, a), "psnr_seed": psnr(b, a), "warnings": list(res.warnings),
-            "images": (a, b, out)}
+    noise = float(np.mean((a - b) ** 2)) / 2.0 + float(np.mean(result.variance))
+    noise_ratio = float(np.mean((out - a) ** 2)) / max(noise, 1e-300)
+    return {"ratio": ratio.tolist(), "psnr": psnr(out, a), "psnr_seed": psnr(b, a), "noise_ratio": noise_ratio,
+            "warnings": list(res.warnings), "images": (a, b, out)}
 
 
 def table(results: dict) -> str:
     """Markdown table of ``measure`` results keyed by scene name."""
-    rows = ["| scene | what | ratio R / G / B | PSNR (dB) | Mitsuba seed-to-seed PSNR (dB) |", "|---|---|---|---|---|"]
+    rows = ["| scene | what | ratio R / G / B | PSNR (dB) | Mitsuba seed-to-seed PSNR (dB) | MSE / noise |",
+            "|---|---|---|---|---|---|"]
     for name, r in results.items():
         ratio = " / ".join(f"{x:.3f}" for x in r["ratio"])
-        rows.append(f"| {name} | {SCENES[name].what} | {ratio} | {r['psnr']:.1f} | {r['psnr_seed']:.1f} |")
+        rows.append(f"| {name} | {SCENES[name].what} | {ratio} | {r['psnr']:.1f} | {r['psnr_seed']:.1f} | "
+                    f"{r['noise_ratio']:.2f} |")
     return "\n".join(rows) + "\n"
 
 
@@ -164,7 +195,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.scenes:
             results[name] = measure(name, Path(tmp) / name, size=args.size, spp=args.spp)
-            print(name, {k: v for k, v in results[name].items() if k in ("ratio", "psnr", "psnr_seed")}, flush=True)
+            print(name, {k: v for k, v in results[name].items() if k in ("ratio", "psnr", "psnr_seed", "noise_ratio")},
+                  flush=True)
     from nasset_sdk.images import atomic_output
 
     text = (f"# Conversion fidelity (Mitsuba -> convert-scene -> nasset render)\n\nGenerated by "

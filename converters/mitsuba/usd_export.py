@@ -287,7 +287,7 @@ class StageConverter:
 
     # -- camera -----------------------------------------------------------------------------
     def camera(self) -> None:
-        from pxr import Gf, UsdGeom, UsdRender
+        from pxr import Gf, Sdf, UsdGeom, UsdRender
 
         sensors = list(self.scene.sensors())
         if not sensors:
@@ -308,9 +308,13 @@ class StageConverter:
         crop, off = tuple(int(v) for v in film.crop_size()), tuple(int(v) for v in film.crop_offset())
         if crop != size or off != (0, 0):
             self.warn(f"film crop window {crop} at {off} ignored (the full {size} film is described)")
-        filt = _class_name(film.rfilter()) if hasattr(film, "rfilter") else ""
-        if filt and filt != "BoxFilter":
-            self.warn(f"film reconstruction filter {filt}: the reference renderer uses a box filter")
+        filt = str(film.rfilter()) if hasattr(film, "rfilter") else ""
+        pixel_filter = ("box", None)
+        if filt.startswith("GaussianFilter"):
+            m = re.search(r"stddev\s*=\s*([0-9.eE+-]+)", filt)
+            pixel_filter = ("gaussian", float(m.group(1)) if m else 0.5)
+        elif filt and not filt.startswith("BoxFilter"):
+            self.warn(f"film reconstruction filter {_class_name(film.rfilter())}: written as a box filter")
         for k in ("principal_point_offset_x", "principal_point_offset_y"):
             if k in p and abs(float(_np(p[k]).ravel()[0])) > 0:
                 self.warn(f"{k} ignored")
@@ -337,6 +341,10 @@ class StageConverter:
         settings.CreateResolutionAttr(Gf.Vec2i(*size))
         settings.CreateCameraRel().SetTargets([path])
         settings.CreatePixelAspectRatioAttr(1.0)
+        prim = settings.GetPrim()
+        prim.CreateAttribute("nasset:pixelFilter", Sdf.ValueTypeNames.Token, custom=True).Set(pixel_filter[0])
+        if pixel_filter[1] is not None:
+            prim.CreateAttribute("nasset:pixelFilterStddev", Sdf.ValueTypeNames.Float, custom=True).Set(pixel_filter[1])
 
     # -- integrator (recorded, not converted) -------------------------------------------------
     def integrator(self) -> None:
@@ -349,14 +357,20 @@ class StageConverter:
         m = re.search(r"max_depth\s*=\s*(-?\d+)", text)
         if m:
             md = int(m.group(1))
+            md = -1 if md >= 2 ** 31 else md  # -1 (unbounded) prints as uint32 max
             info["max_depth"] = md
-            info["renderer_max_depth"] = None if md < 0 else max(md - 1, 1)
+            info["renderer_max_depth"] = -1 if md < 0 else max(md - 1, 1)
+            from pxr import Sdf, UsdRender
+
+            # the renderer counts scattering vertices, Mitsuba path segments (spec/bake.md#scene-conversion)
+            settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")
+            settings.GetPrim().CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(
+                info["renderer_max_depth"])
+            if md == 0:
+                self.warn("integrator max_depth 0 (black image) written as renderer depth 1")
         self.result.integrator = info
         if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
-        if info.get("max_depth", -1) >= 0:
-            self.warn(f"integrator max_depth {info['max_depth']} is not stored in USD: render with "
-                      f"`nasset render --max-depth {info['renderer_max_depth']}` (it counts scattering vertices)")
 
     # -- materials ----------------------------------------------------------------------------
     def material(self, bsdf, shape_name: str, emission=None) -> str:

@@ -2,8 +2,11 @@
 by the reference renderer, at 32x32 and 64 spp (the full-size table is docs/conversion-fidelity.md).
 
 Bounds: the mean within 3 % per channel (2 % is the target at full size; at 32x32 x 64 spp the
-means of the two Mitsuba seeds differ by up to ~1 %) and a PSNR within 3 dB of Mitsuba's own
-seed-to-seed PSNR.
+means of the two Mitsuba seeds differ by up to ~1 %), and the MSE against Mitsuba at most 1.4x what
+the two images' noise explains (measured 1.00-1.15 for these scenes; a PSNR alone would also charge
+the reference renderer's higher noise at equal spp to the conversion). Measured on the code before
+these conversions: textures ratio ~2 (8-bit values unscaled), spot ~4.5 (cone ignored), sidedness
+(back faces lit), defaults 0.90 (depth 5 instead of unbounded): each fails.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from nasset_converters.mitsuba.fidelity import SCENES, measure, psnr  # noqa: E4
 def test_converted_scene_renders_like_mitsuba(tmp_path, name):
     r = measure(name, tmp_path, size=32, spp=64)
     assert np.all(np.abs(np.asarray(r["ratio"]) - 1.0) < 0.03), (name, r["ratio"])
-    assert r["psnr"] > r["psnr_seed"] - 3.0, (name, r["psnr"], r["psnr_seed"])
+    assert r["noise_ratio"] < 1.4, (name, r["noise_ratio"], r["psnr"], r["psnr_seed"])
 
 
 def test_psnr_against_hand_value():

@@ -131,6 +131,38 @@ def test_camera(converted):
     assert right @ expect / np.linalg.norm(expect) > 0.999  # image right = forward x up, not mirrored
     settings = UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings"))
     assert tuple(settings.GetResolutionAttr().Get()) == (64, 32)
+    # the integrator's depth where the renderer reads it: Mitsuba max_depth 6 counts segments, the renderer vertices
+    assert settings.GetPrim().GetAttribute("nasset:maxDepth").Get() == 5
+    assert settings.GetPrim().GetAttribute("nasset:pixelFilter").Get() == "box"
+
+
+@pytest.mark.parametrize("integrator, rfilter, depth, filt", [
+    ('<integrator type="path"><integer name="max_depth" value="-1"/></integrator>', "", -1, ("gaussian", 0.5)),
+    ('<integrator type="path"/>', '<rfilter type="gaussian"><float name="stddev" value="0.7"/></rfilter>', -1,
+     ("gaussian", 0.7)),
+    ('<integrator type="path"><integer name="max_depth" value="3"/></integrator>', '<rfilter type="box"/>', 2, ("box", None)),
+])
+def test_render_settings_carry_depth_and_filter(tmp_path, integrator, rfilter, depth, filt):
+    from pxr import Usd
+
+    from nasset_reference_renderer import load_scene
+    from nasset_reference_renderer.integrator import MAX_DEPTH, RenderSettings, resolve_settings
+
+    xml = tmp_path / "s.xml"
+    xml.write_text(f"""<scene version="3.0.0">{integrator}<sensor type="perspective"><film type="hdrfilm">
+        <integer name="width" value="8"/><integer name="height" value="8"/>{rfilter}</film></sensor>
+        <shape type="sphere"/><emitter type="constant"/></scene>""")
+    res = convert_scene(xml, tmp_path / "s.usda", check_usd=False)
+    stage = Usd.Stage.Open(str(res.output))
+    prim = stage.GetPrimAtPath("/Render/Settings")
+    assert prim.GetAttribute("nasset:maxDepth").Get() == depth
+    assert (prim.GetAttribute("nasset:pixelFilter").Get(), prim.GetAttribute("nasset:pixelFilterStddev").Get()) == \
+        (filt[0], pytest.approx(filt[1]) if filt[1] else None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(str(res.output))
+    assert resolve_settings(RenderSettings(), scene).max_depth == (MAX_DEPTH if depth < 0 else depth)
+    assert resolve_settings(RenderSettings(max_depth=7), scene).max_depth == 7  # an explicit depth wins
 
 
 def test_lights(converted):
@@ -256,8 +288,7 @@ def test_unsupported_elements_warn(converted):
     res, _, _ = converted
     text = "\n".join(res.warnings)
     for needle in ("cyl: Cylinder is not convertible", "glass: interior medium", "SmoothDielectric has no counterpart",
-                   "textured material but the OBJMesh has no texture coordinates", "reference renderer ignores shaping", "max_depth 6",
-                   "nearest texels"):
+                   "textured material but the OBJMesh has no texture coordinates", "nearest texels"):
         assert needle in text, needle
 
 
@@ -414,8 +445,7 @@ def _match(tmp_path, shell_bsdf, sky, spp=128):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         usd = load_scene(str(res.output))
-    depth = res.integrator["renderer_max_depth"]
-    out = render(usd, RenderSettings(spp=spp, width=32, height=32, max_depth=depth, seed=5))
+    out = render(usd, RenderSettings(spp=spp, width=32, height=32, seed=5))  # depth from the stage's render settings
     return a, b, out
 
 
