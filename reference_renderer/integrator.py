@@ -89,6 +89,7 @@ class PathIntegrator:
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_one_sided = np.array([i.one_sided for i in insts], bool)
+        self.inst_back_mat = np.array([i.back_material for i in insts], np.int64)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
         self.indirect = plan.instance_indirect
@@ -233,9 +234,11 @@ class PathIntegrator:
         x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
         wo = -d
         ng = self.tri_ng[prim]
-        front = ~self.inst_one_sided[inst] | (dot(ng, wo) > 0)  # one-sided surfaces are black from the back
+        seen_front = dot(ng, wo) > 0
+        front = ~self.inst_one_sided[inst] | seen_front  # one-sided surfaces are black from the back
         if not front.all():
-            x, d, beta, prim, bu, bv, inst, ridx, wo, ng = (a[front] for a in (x, d, beta, prim, bu, bv, inst, ridx, wo, ng))
+            x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front = (
+                a[front] for a in (x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front))
         cn = self.scene.tri_normals[prim]
         ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
         flip = dot(ng, wo) < 0
@@ -245,6 +248,8 @@ class PathIntegrator:
         t, b = frame(ns)
         wo_l = to_local(wo, t, b, ns)
         mat = self.inst_mat[inst]
+        back_mat = self.inst_back_mat[inst]
+        mat = np.where(~seen_front & (back_mat >= 0), back_mat, mat)  # a two-sided material's back side
         kd = f0 = None
         if self.mt.textured:
             cst = self.scene.tri_st[prim]

@@ -83,6 +83,7 @@ class Instance:
     material: int = -1
     planar: bool = False
     one_sided: bool = False  # doubleSided authored false: black seen from the back (spec/renderer.md#sidedness)
+    back_material: int = -1  # nasset:backMaterial: the material seen from the back (-1: the bound one)
 
     def __post_init__(self):
         self.to_object = np.linalg.inv(self.to_world)
@@ -403,6 +404,23 @@ class _Loader:
                 self.mat_index[key] = len(self.mat_rows)
                 self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
             return self.mat_index[key]
+        return self._material_of(mat)
+
+    def _back_material(self, prim) -> int:
+        """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
+        from pxr import UsdShade
+
+        rel = prim.GetRelationship("nasset:backMaterial")
+        targets = rel.GetForwardedTargets() if rel else []
+        if not targets:
+            return -1
+        mat = UsdShade.Material(self.stage.GetPrimAtPath(targets[0]))
+        if not mat:
+            raise self.err("SCENE_INVALID", f"nasset:backMaterial target {targets[0]} is not a Material", prim.GetPath(),
+                           "nasset:backMaterial")
+        return self._material_of(mat)
+
+    def _material_of(self, mat) -> int:
         mpath = str(mat.GetPath())
         if mpath in self.mat_index:
             return self.mat_index[mpath]
@@ -620,11 +638,13 @@ class _Loader:
         nn = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
         tol = 1e-9 * (1 + np.abs(pw).max())
         planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
-        mat = self._material(prim)
-        tex = self.mat_rows[mat][5] if len(self.mat_rows[mat]) > 5 else None
+        mat, back = self._material(prim), self._back_material(prim)
+        tex = next((self.mat_rows[m][5] for m in (mat, back) if m >= 0 and len(self.mat_rows[m]) > 5
+                    and self.mat_rows[m][5] is not None), None)
         st = None if tex is None else self._primvar_st(prim, tex.varname, tri, corner, face_of_tri, len(pts), len(counts),
                                                        len(idx))
-        inst = Instance("mesh", path, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh))
+        inst = Instance("mesh", path, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
+                        back_material=back)
         self._add(inst, tris, normals, np.arange(len(tri)), st)
 
     def _one_sided(self, gprim) -> bool:
@@ -656,7 +676,7 @@ class _Loader:
         n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
         self.warn(f"implicit {tname} tessellated into {len(faces)} triangles", prim.GetPath())
         inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim),
-                        one_sided=self._one_sided(UsdGeom.Gprim(prim)))
+                        one_sided=self._one_sided(UsdGeom.Gprim(prim)), back_material=self._back_material(prim))
         self._add(inst, tris, n, np.arange(len(faces)))
 
     # -- neural assets ---------------------------------------------------------------------

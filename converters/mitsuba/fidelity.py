@@ -70,7 +70,8 @@ def _textures(folder: Path, size: int) -> str:
 
 
 def _sidedness(folder: Path, size: int) -> str:
-    # a one-sided diffuse panel seen from behind (black in Mitsuba) in front of a two-sided one
+    # one-sided diffuse panels seen from the front and from behind (black in Mitsuba), a twosided one, and a
+    # twosided one with a different back BSDF seen from behind
     panel = ('<shape type="rectangle" id="{id}"><transform name="to_world"><scale value="0.5"/><rotate y="1" angle="{a}"/>'
              '<translate x="{x}" y="0.6"/></transform><bsdf type="{t}">{inner}</bsdf></shape>\n')
     diffuse = '<rgb name="reflectance" value="0.8, 0.5, 0.2"/>'
@@ -79,6 +80,8 @@ def _sidedness(folder: Path, size: int) -> str:
             + panel.format(id="front", a=20, x=-0.6, t="diffuse", inner=diffuse)
             + panel.format(id="back", a=200, x=0.6, t="diffuse", inner=diffuse)
             + panel.format(id="both", a=160, x=0.0, t="twosided", inner=f'<bsdf type="diffuse">{diffuse}</bsdf>')
+            + panel.format(id="two", a=180, x=0.0, t="twosided", inner=f'<bsdf type="diffuse">{diffuse}</bsdf><bsdf type="diffuse">'
+                           '<rgb name="reflectance" value="0.2, 0.4, 0.9"/></bsdf>').replace('y="0.6"', 'y="1.3"')
             + SUN + SKY + "</scene>")
 
 
@@ -114,6 +117,27 @@ def _defaults(folder: Path, size: int) -> str:
             + "</scene>")
 
 
+def _wrappers(folder: Path, size: int) -> str:
+    from nasset_sdk.images import write_png
+
+    write_png(folder / "flat.png", np.full((4, 4, 3), (128, 128, 255), np.uint8))  # tangent-space +Z: the mesh normal
+    diffuse = '<bsdf type="diffuse"><rgb name="reflectance" value="{}"/></bsdf>'
+
+    def ball(bid, x, bsdf):
+        return (f'<shape type="sphere" id="{bid}"><point name="center" x="{x}" y="0.3" z="0"/><float name="radius" '
+                f'value="0.3"/>{bsdf}</shape>\n')
+
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.4, 2.8", size=size)
+            + FLOOR.format(bsdf='<bsdf type="blendbsdf"><float name="weight" value="0.3"/>' + diffuse.format("0.8, 0.2, 0.1")
+                           + diffuse.format("0.1, 0.3, 0.8") + "</bsdf>")
+            + ball("normal", -0.7, '<bsdf type="normalmap"><texture type="bitmap" name="normalmap"><string name="filename" '
+                   'value="flat.png"/><boolean name="raw" value="true"/></texture>' + diffuse.format("0.7, 0.7, 0.2") + "</bsdf>")
+            + ball("bump", 0.0, '<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="flat.png"/>'
+                   '<boolean name="raw" value="true"/></texture>' + diffuse.format("0.2, 0.7, 0.7") + "</bsdf>")
+            + ball("mask", 0.7, '<bsdf type="mask"><float name="opacity" value="1"/>' + diffuse.format("0.7, 0.2, 0.7") + "</bsdf>")
+            + SUN + SKY + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -128,6 +152,8 @@ SCENES = {
     "spot": FidelityScene("spot", _spot, "spot light (cutoff 22 deg, beam 15 deg) and a point light over a floor and a ball"),
     "defaults": FidelityScene("defaults", _defaults, "Mitsuba defaults: max_depth -1 (unbounded) and the Gaussian "
                               "reconstruction filter, bright diffuse walls"),
+    "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (flat), "
+                              "mask (opaque) around diffuse BSDFs"),
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; a twosided one"),
 }
 

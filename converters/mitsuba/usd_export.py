@@ -373,17 +373,17 @@ class StageConverter:
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
 
     # -- materials ----------------------------------------------------------------------------
-    def material(self, bsdf, shape_name: str, emission=None) -> str:
-        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id)."""
-        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)))
+    def material(self, bsdf, shape_name: str, emission=None, back: bool = False) -> str:
+        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id); ``back``: a twosided BSDF's back."""
+        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)), back)
         if key in self.materials:
             return self.materials[key]
-        inputs, notes = self.map_bsdf(bsdf)
+        inputs, notes = self.map_bsdf(bsdf, back=back)
         for n in notes:
             self.warn(f"shape {shape_name}: {n}")
         if emission is not None:
             inputs["emissiveColor"] = tuple(float(x) for x in emission)
-        path = self._write_material(bsdf.id() or f"{shape_name}_bsdf", inputs)
+        path = self._write_material((bsdf.id() or f"{shape_name}_bsdf") + ("_back" if back else ""), inputs)
         self.record(path, f"bsdf {bsdf.id() or '(inline)'} ({_class_name(bsdf)})")
         self.materials[key] = path
         return path
@@ -398,7 +398,7 @@ class StageConverter:
         types = {"diffuseColor": Sdf.ValueTypeNames.Color3f, "specularColor": Sdf.ValueTypeNames.Color3f,
                  "emissiveColor": Sdf.ValueTypeNames.Color3f, "useSpecularWorkflow": Sdf.ValueTypeNames.Int,
                  "roughness": Sdf.ValueTypeNames.Float, "metallic": Sdf.ValueTypeNames.Float,
-                 "ior": Sdf.ValueTypeNames.Float}
+                 "ior": Sdf.ValueTypeNames.Float, "opacity": Sdf.ValueTypeNames.Float}
         for k, v in inputs.items():
             if isinstance(v, TextureMap):
                 self._texture_input(path, sh, k, v)
@@ -439,22 +439,41 @@ class StageConverter:
         surface.CreateInput(name, Sdf.ValueTypeNames.Color3f).ConnectToSource(node.ConnectableAPI(), "rgb")
         self.textured_materials.add(mat_path)
 
-    def map_bsdf(self, bsdf) -> tuple[dict, list]:
+    def map_bsdf(self, bsdf, prefix: str = "", cls: str | None = None, back: bool = False) -> tuple[dict, list]:
         """UsdPreviewSurface inputs for a Mitsuba BSDF and notes on what the mapping loses.
 
-        Returns ``({input: value}, [notes])``; the table is in spec/bake.md#scene-conversion.
+        Returns ``({input: value}, [notes])``; the table is in spec/bake.md#scene-conversion. Wrappers
+        (``twosided``, ``normalmap``, ``bumpmap``, ``mask``, ``blendbsdf``) recurse into their nested BSDFs,
+        whose parameters carry ``prefix``; ``back`` maps a twosided BSDF's back side.
         """
         mi = self.mi
         notes: list[str] = []
-        cls = _class_name(bsdf)
+        cls = cls or _class_name(bsdf)
         text = str(bsdf)
-        prefix = ""
         if cls == "TwoSided":
-            prefix = "brdf_0."
-            inner = re.search(r"brdf\[0\]\s*=\s*(\w+)", text)
-            if re.search(r"brdf\[1\]", text) and text.count("brdf[0]") and _two_sides_differ(text):
-                notes.append("twosided BSDF with different back side: the front BSDF is used on both sides")
-            cls = inner.group(1) if inner else "SmoothDiffuse"
+            k = 1 if back and _two_sides_differ(text) else 0
+            inner = re.search(rf"brdf\[{k}\]\s*=\s*(\w+)", text)
+            return self.map_bsdf(bsdf, f"{prefix}brdf_{k}.", inner.group(1) if inner else "SmoothDiffuse")
+        if cls in WRAPPERS:
+            inner = re.search(r"nested_bsdf\s*=\s*(\w+)", text)
+            out, notes = self.map_bsdf(bsdf, f"{prefix}nested_bsdf.", inner.group(1) if inner else "SmoothDiffuse")
+            if cls == "Mask":
+                opacity = _Params(mi, bsdf, prefix).scalar("opacity", 1.0)
+                out["opacity"] = opacity
+                if opacity < 1.0:
+                    notes.append(f"mask: opacity {opacity:.3g} written to UsdPreviewSurface opacity (the reference "
+                                 "renderer renders it opaque)")
+            else:
+                notes.append(f"{cls}: the nested BSDF is converted, its {WRAPPERS[cls]} is dropped (the reference "
+                             "renderer shades with the mesh normals)")
+            return out, notes
+        if cls == "BlendBSDF":
+            w = float(np.clip(_Params(mi, bsdf, prefix).scalar("weight", 0.5), 0.0, 1.0))
+            c0, c1 = (re.search(rf"nested_bsdf\[{k}\]\s*=\s*(\w+)", text) for k in (0, 1))
+            a, na = self.map_bsdf(bsdf, f"{prefix}bsdf_0.", c0.group(1) if c0 else "SmoothDiffuse")
+            b, nb = self.map_bsdf(bsdf, f"{prefix}bsdf_1.", c1.group(1) if c1 else "SmoothDiffuse")
+            out, how = blend_inputs(a, b, w)
+            return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"]
         p = _Params(mi, bsdf, prefix)
         spec_wf = {"useSpecularWorkflow": 1}
         if cls == "SmoothDiffuse":
@@ -517,8 +536,12 @@ class StageConverter:
                          f"opaque black reflector with F0 {f0:.4f}; bake the object into a neural asset (--replace)")
             out = {**spec_wf, "diffuseColor": (0.0, 0.0, 0.0), "specularColor": (f0,) * 3, "roughness": rough}
         else:
-            notes.append(f"BSDF {cls} is not convertible: written as grey diffuse 0.5")
-            out = {**spec_wf, "diffuseColor": (0.5, 0.5, 0.5), "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
+            color = next((p.rgb(k) for k in ("reflectance", "diffuse_reflectance", "base_color", "albedo")
+                          if p.has(k)), None)
+            notes.append(f"BSDF {cls} is not convertible: written as diffuse with "
+                         + ("its reflectance" if color is not None else "grey 0.5 (it has no reflectance to keep)"))
+            out = {**spec_wf, "diffuseColor": (0.5, 0.5, 0.5) if color is None else np.clip(color, 0, 1),
+                   "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
         for t in p.textured:
             notes.append(f"{cls}.{t} is a procedural texture: replaced by the mean of its colours (linear)")
         converted = {id(v) for v in out.values()}
@@ -584,6 +607,10 @@ class StageConverter:
 
         mat_path = self.material(shape.bsdf(), sid, emission)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+        if _class_name(shape.bsdf()) == "TwoSided" and _two_sides_differ(str(shape.bsdf())):
+            # the back side's own material (spec/renderer.md#sidedness): no USD schema names one
+            back = self.material(shape.bsdf(), sid, emission, back=True)
+            prim.CreateRelationship("nasset:backMaterial", custom=True).SetTargets([back])
         return mat_path
 
     def _one_sided(self, gprim, shape) -> None:
@@ -813,12 +840,43 @@ class StageConverter:
         return self.result
 
 
+#: wrapper BSDFs with one nested BSDF -> what of them is not converted (``mask`` keeps its opacity)
+WRAPPERS = {"NormalMap": "normal map", "BumpMap": "bump map", "Mask": "nothing"}
+
+
+def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
+    """UsdPreviewSurface inputs of ``(1 - w) a + w b`` and how it was made.
+
+    Same workflow: every input blended linearly (colours, textures texel by texel or with the other's
+    constant, roughness), an approximation of the blended lobes. Different workflows: the dominant one."""
+    if a.get("useSpecularWorkflow") != b.get("useSpecularWorkflow"):
+        return (dict(b) if w > 0.5 else dict(a)), "BSDFs of different UsdPreviewSurface workflows: the heavier one is kept"
+    out = {}
+    for k in dict.fromkeys([*a, *b]):
+        if k == "useSpecularWorkflow":
+            out[k] = a[k]
+            continue
+        va, vb = a.get(k, b.get(k)), b.get(k, a.get(k))
+        if isinstance(va, TextureMap) or isinstance(vb, TextureMap):
+            ia = va.image if isinstance(va, TextureMap) else np.asarray(va, np.float64)
+            ib = vb.image if isinstance(vb, TextureMap) else np.asarray(vb, np.float64)
+            if isinstance(va, TextureMap) and isinstance(vb, TextureMap) and ia.shape != ib.shape:
+                ib = ib.reshape(-1, 3).mean(0)  # different resolutions: the second by its mean
+            what = va.what if isinstance(va, TextureMap) else vb.what
+            out[k] = TextureMap((1.0 - w) * ia + w * ib, f"blend of {what}")
+        else:
+            out[k] = (1.0 - w) * np.asarray(va, np.float64) + w * np.asarray(vb, np.float64)
+            if np.ndim(out[k]) == 0:
+                out[k] = float(out[k])
+    return out, "parameters blended linearly (an approximation of the blended lobes)"
+
+
 def _is_one_sided(bsdf) -> bool:
     """True for a BSDF that Mitsuba shades on its front side only (not twosided, not a dielectric, not null)."""
     if bsdf is None:
         return False
     cls = _class_name(bsdf)
-    return cls not in ("TwoSided", "Null") and "Dielectric" not in cls
+    return cls != "Null" and "Dielectric" not in cls and "TwoSided" not in str(bsdf)
 
 
 def _two_sides_differ(text: str) -> bool:
