@@ -138,6 +138,21 @@ def _wrappers(folder: Path, size: int) -> str:
             + SUN + SKY + "</scene>")
 
 
+def _instances(folder: Path, size: int) -> str:
+    group = ('<shape type="shapegroup" id="group">\n'
+             ' <shape type="sphere" id="head"><point name="center" x="0" y="0.45" z="0"/><float name="radius" value="0.15"/>'
+             '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.3, 0.1"/></bsdf></shape>\n'
+             ' <shape type="cube" id="body"><transform name="to_world"><scale x="0.15" y="0.15" z="0.15"/><translate y="0.15"/>'
+             '</transform><bsdf type="roughplastic"><rgb name="diffuse_reflectance" value="0.2, 0.5, 0.8"/></bsdf></shape>\n'
+             '</shape>\n')
+    inst = ('<shape type="instance" id="{id}"><ref id="group"/><transform name="to_world"><rotate y="1" angle="{a}"/>'
+            '<translate x="{x}" z="{z}"/></transform></shape>\n')
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.4, 2.8", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + group + inst.format(id="a", a=0, x=-0.7, z=0) + inst.format(id="b", a=30, x=0, z=-0.3)
+            + inst.format(id="c", a=60, x=0.7, z=0.2) + SUN + SKY + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -154,6 +169,7 @@ SCENES = {
                               "reconstruction filter, bright diffuse walls"),
     "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (flat), "
                               "mask (opaque) around diffuse BSDFs"),
+    "instances": FidelityScene("instances", _instances, "shapegroup (sphere + cube) placed by three instances"),
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; a twosided one"),
 }
 

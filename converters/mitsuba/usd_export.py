@@ -249,6 +249,8 @@ class StageConverter:
         self.names: set[str] = set()
         self.materials: dict = {}
         self.textured_materials: set[str] = set()
+        self.prototypes: dict[str, str] = {}  # shapegroup name -> class prim path
+        self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
         self.stage = Usd.Stage.CreateNew(str(output))
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
@@ -375,7 +377,8 @@ class StageConverter:
     # -- materials ----------------------------------------------------------------------------
     def material(self, bsdf, shape_name: str, emission=None, back: bool = False) -> str:
         """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id); ``back``: a twosided BSDF's back."""
-        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)), back)
+        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)), back,
+               self.looks_root)
         if key in self.materials:
             return self.materials[key]
         inputs, notes = self.map_bsdf(bsdf, back=back)
@@ -391,7 +394,7 @@ class StageConverter:
     def _write_material(self, name: str, inputs: dict) -> str:
         from pxr import Gf, Sdf, UsdShade
 
-        path = self._name("/World/Looks", name)
+        path = self._name(self.looks_root, name)
         mat = UsdShade.Material.Define(self.stage, path)
         sh = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
         sh.CreateIdAttr("UsdPreviewSurface")
@@ -563,44 +566,87 @@ class StageConverter:
             sid = shape.id() or f"shape_{k}"
             if shape.id() in self.replace:
                 continue
-            cls = _class_name(shape)
-            for med, side in ((shape.interior_medium(), "interior"), (shape.exterior_medium(), "exterior")):
-                if med is not None:
-                    self.warn(f"shape {sid}: {side} medium ({_class_name(med)}) ignored (no participating media in USD "
-                              "preview shading); bake the object into a neural asset (--replace)")
-            bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
-            if bsdf_cls == "Null":
-                self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped")
-                continue
-            emitter = shape.emitter()
-            if emitter is not None and cls in ("Rectangle", "Sphere"):
-                self._area_light(shape, sid, cls, emitter)
-                continue
-            emission = None
-            if emitter is not None:
-                emission = _Params(self.mi, emitter).rgb("radiance")
-                self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor (reached by BSDF rays only, "
-                          "both sides; Mitsuba emits from the front side)")
-            if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
-                self._mesh(shape, sid, cls, emission)
-            elif cls == "Rectangle":
-                pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
-                uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
-                self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
-                                 shape, cls, emission, local_to_world=True, uv=uv)
-            elif cls == "Disk":
-                a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
-                pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
-                faces = np.stack([np.zeros(DISK_SEGMENTS, int), 1 + np.arange(DISK_SEGMENTS),
-                                  1 + (np.arange(DISK_SEGMENTS) + 1) % DISK_SEGMENTS], 1)
-                self.warn(f"shape {sid}: disk tessellated into {DISK_SEGMENTS} triangles")
-                self._write_mesh(sid, pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), shape, cls, emission,
-                                 local_to_world=True)
-            elif cls == "Sphere":
-                self._sphere(shape, sid, emission)
-            else:
-                self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
-                          "are): skipped")
+            self._shape(shape, sid)
+
+    def _instance(self, shape, sid) -> None:
+        """An ``instance`` of a ``shapegroup``: an instanceable Xform referencing the group's prototype, a class prim
+        ``/Prototypes/GROUP`` holding the group's shapes and their materials (written once)."""
+        from pxr import Sdf
+
+        m = re.search(r'name\s*=\s*"([^"]*)"', str(shape))
+        group = m.group(1) if m else ""
+        proto = self.prototypes.get(group)
+        if proto is None:
+            params = self.mi.traverse(self.scene)
+            children = {}
+            for key in params.keys():
+                parts = key.split(".")
+                if len(parts) == 3 and parts[0] == group and parts[2] == "silhouette_sampling_weight":
+                    children[parts[1]] = params.properties[key][2]
+            from pxr import Tf
+
+            proto = f"/Prototypes/{Tf.MakeValidIdentifier(group or 'group')}"
+            self.stage.CreateClassPrim("/Prototypes")  # abstract: never rendered itself, only through instances
+            self.stage.CreateClassPrim(proto)
+            saved = (self.geometry_root, self.looks_root)
+            self.geometry_root, self.looks_root = proto, f"{proto}/Looks"
+            try:
+                for cid, child in children.items():
+                    self._shape(child, cid)
+            finally:
+                self.geometry_root, self.looks_root = saved
+            self.prototypes[group] = proto
+            self.record(proto, f"shapegroup {group} ({len(children)} shapes)")
+        path = self._name(self.geometry_root, sid)
+        prim = self.stage.DefinePrim(path, "Xform")
+        prim.GetReferences().AddInternalReference(Sdf.Path(proto))
+        prim.SetInstanceable(True)
+        self._xform(prim, _row(_matrix(self.mi.traverse(shape)["to_world"])))
+        self.record(path, f"instance {sid} of shapegroup {group}")
+
+    def _shape(self, shape, sid) -> None:
+        """Write one Mitsuba shape under ``geometry_root`` (the table in spec/bake.md#scene-conversion)."""
+        cls = _class_name(shape)
+        if cls == "Instance":
+            self._instance(shape, sid)
+            return
+        for med, side in ((shape.interior_medium(), "interior"), (shape.exterior_medium(), "exterior")):
+            if med is not None:
+                self.warn(f"shape {sid}: {side} medium ({_class_name(med)}) ignored (no participating media in USD "
+                          "preview shading); bake the object into a neural asset (--replace)")
+        bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
+        if bsdf_cls == "Null":
+            self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped")
+            return
+        emitter = shape.emitter()
+        if emitter is not None and cls in ("Rectangle", "Sphere"):
+            self._area_light(shape, sid, cls, emitter)
+            return
+        emission = None
+        if emitter is not None:
+            emission = _Params(self.mi, emitter).rgb("radiance")
+            self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor (reached by BSDF rays only, "
+                      "both sides; Mitsuba emits from the front side)")
+        if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
+            self._mesh(shape, sid, cls, emission)
+        elif cls == "Rectangle":
+            pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+            uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
+            self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
+                             shape, cls, emission, local_to_world=True, uv=uv)
+        elif cls == "Disk":
+            a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
+            pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
+            faces = np.stack([np.zeros(DISK_SEGMENTS, int), 1 + np.arange(DISK_SEGMENTS),
+                              1 + (np.arange(DISK_SEGMENTS) + 1) % DISK_SEGMENTS], 1)
+            self.warn(f"shape {sid}: disk tessellated into {DISK_SEGMENTS} triangles")
+            self._write_mesh(sid, pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), shape, cls, emission,
+                             local_to_world=True)
+        elif cls == "Sphere":
+            self._sphere(shape, sid, emission)
+        else:
+            self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
+                      "are): skipped")
 
     def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade
@@ -635,7 +681,7 @@ class StageConverter:
         vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
         from pxr import Sdf, UsdGeom, Vt
 
-        path = self._name("/World/Geometry", sid)
+        path = self._name(self.geometry_root, sid)
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts, np.float32)))
         faces = np.asarray(faces, np.int32)
@@ -678,7 +724,7 @@ class StageConverter:
             faces = np.concatenate([np.stack([a, c, d], 1)[i.ravel() < SPHERE_RINGS - 1], np.stack([a, d, b], 1)[i.ravel() > 0]])
             self._write_mesh(sid, pts, faces, pts.copy(), shape, "Sphere", emission, local_to_world=True, uv=uv)
             return
-        path = self._name("/World/Geometry", sid)
+        path = self._name(self.geometry_root, sid)
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
