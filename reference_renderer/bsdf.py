@@ -6,7 +6,8 @@ Model (spec/renderer.md#materials), in a local frame where the shading normal is
 
 kd = diffuseColor * (1 - metallic); F is Schlick with F0 = specularColor (specular workflow)
 or lerp(((1-ior)/(1+ior))^2, diffuseColor, metallic); alpha = max(roughness^2, 1e-3);
-G2 is the height-correlated Smith term. Both sides of a surface are front faces.
+G2 is the height-correlated Smith term. Both sides of a surface are front faces unless the prim is
+one-sided (spec/renderer.md#sidedness, handled by the integrator).
 Specular directions are drawn from the distribution of visible normals (Heitz 2018).
 """
 

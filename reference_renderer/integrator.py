@@ -195,7 +195,7 @@ class PathIntegrator:
             neural = self.inst_neural[inst]
             mesh = ~neural
             if mesh.any():
-                em = mesh & self.emissive[self.inst_mat[inst]]
+                em = mesh & self.emissive[self.inst_mat[inst]] & (~self.inst_one_sided[inst] | (dot(self.tri_ng[prim], d) < 0))
                 if em.any():
                     L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]]
             if depth >= self.s.max_depth:

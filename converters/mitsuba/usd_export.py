@@ -625,8 +625,8 @@ class StageConverter:
         emission = None
         if emitter is not None:
             emission = _Params(self.mi, emitter).rgb("radiance")
-            self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor (reached by BSDF rays only, "
-                      "both sides; Mitsuba emits from the front side)")
+            self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor: the reference renderer does "
+                      "not light-sample emissive meshes (reached by BSDF rays only): right mean, more noise")
         if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
             self._mesh(shape, sid, cls, emission)
         elif cls == "Rectangle":
