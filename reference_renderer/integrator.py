@@ -17,6 +17,7 @@ from nasset_sdk.errors import UsageError
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
 from .film import Film, check_image_size, pixel_offsets
+from .lights import MeshLight
 from .plan import RenderPlan, make_plan
 from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading
@@ -95,6 +96,10 @@ class PathIntegrator:
         self.indirect = plan.instance_indirect
         self.mt = scene.materials
         self.emissive = self.mt.emission.max(1) > 0
+        self.inst_light = np.full(len(insts), -1, np.int64)  # instance -> index of its MeshLight
+        for k, light in enumerate(scene.lights):
+            if isinstance(light, MeshLight):
+                self.inst_light[light.instance] = k
         self.nee = [k for k, on in enumerate(plan.light_nee) if on]
         # object-space corner normals of each asset's triangles
         self.asset_corner_n = []
@@ -124,6 +129,15 @@ class PathIntegrator:
             return np.ones(len(d))
         w = power_heuristic(prev_pdf, light.pdf(o, d))
         return np.where(specular | no_mis, 1.0, w)
+
+    def _mesh_light_mis(self, inst, prev_pdf, specular, o, d):
+        """MIS weights [n] of emission reached on mesh instances ``inst`` [n] (1 where the mesh is no light)."""
+        w = np.ones(len(inst))
+        k_of = self.inst_light[inst]
+        for k in unique(k_of[k_of >= 0]):
+            m = k_of == k
+            w[m] = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], np.zeros(int(m.sum()), bool))
+        return w
 
     # -- main loop -------------------------------------------------------------------------
     def radiance(self, o, d, rng) -> np.ndarray:
@@ -186,6 +200,7 @@ class PathIntegrator:
             sel = np.nonzero(surf)[0]
             if not len(sel):
                 break
+            hit_pdf, hit_specular = prev_pdf[sel], specular[sel]
             idx, o, d, beta = idx[sel], o[sel], d[sel], beta[sel]
             prim = hits.prim[sel]
             bu, bv = hits.u[sel], hits.v[sel]
@@ -197,7 +212,8 @@ class PathIntegrator:
             if mesh.any():
                 em = mesh & self.emissive[self.inst_mat[inst]] & (~self.inst_one_sided[inst] | (dot(self.tri_ng[prim], d) < 0))
                 if em.any():
-                    L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]]
+                    w = self._mesh_light_mis(inst[em], hit_pdf[em], hit_specular[em], o[em], d[em])
+                    L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]] * w[:, None]
             if depth >= self.s.max_depth:
                 break
             new = []

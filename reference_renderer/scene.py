@@ -21,7 +21,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
-from .lights import DistantLight, DomeLight, Light, PointLight, RectLight, SphereLight
+from .lights import MAX_MESH_LIGHT_TRIANGLES, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -272,6 +272,7 @@ class _Loader:
             self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
             self.warn("the scene has no lights and no emissive materials; the image will be black")
+        self._mesh_lights()
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
         self._check_world_bounds(tris)
@@ -288,6 +289,19 @@ class _Loader:
             tri_st=np.concatenate(self.tri_st) if n else np.zeros((0, 3, 2)),
             render_settings=self._render_settings(),
         )
+
+    def _mesh_lights(self) -> None:
+        """A MeshLight for every emissive mesh instance of at most MAX_MESH_LIGHT_TRIANGLES triangles
+        (spec/renderer.md#mesh-lights); larger ones stay reachable by BSDF rays only, with a warning."""
+        for i, inst in enumerate(self.instances):
+            if inst.kind != "mesh" or inst.material < 0 or not self.mat_rows[inst.material][3].any():
+                continue
+            if inst.n_tri > MAX_MESH_LIGHT_TRIANGLES:
+                self.warn(f"emissive mesh of {inst.n_tri} triangles (> {MAX_MESH_LIGHT_TRIANGLES}) is not light-sampled: "
+                          "reached by BSDF rays only", inst.prim)
+                continue
+            self.lights.append(MeshLight(self.tris[i], self.mat_rows[inst.material][3], one_sided=inst.one_sided,
+                                         instance=i, prim=inst.prim))
 
     def _check_world_bounds(self, tris: np.ndarray) -> None:
         """``SCENE_INVALID`` for a world coordinate above MAX_WORLD_COORDINATE, or a NeuralAsset instance whose world

@@ -173,7 +173,6 @@ class FidelityScene:
     write: object
     what: str
     unsupported: str = ""  # why the conversion does not render like Mitsuba; "" when it does
-    warning: str = ""  # text of the conversion warning that says so
 
 
 SCENES = {
@@ -184,9 +183,8 @@ SCENES = {
     "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (flat), "
                               "mask (opaque) around diffuse BSDFs"),
     "instances": FidelityScene("instances", _instances, "shapegroup (sphere + cube) placed by three instances"),
-    "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "area emitter on an OBJ quad",
-                                  unsupported="not light-sampled by the reference renderer: right mean, much noisier",
-                                  warning="does not light-sample emissive meshes"),
+    "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "area emitter on an OBJ quad (a mesh light: "
+                                  "light-sampled with MIS)"),
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; a twosided one"),
 }
 

@@ -624,9 +624,14 @@ class StageConverter:
             return
         emission = None
         if emitter is not None:
+            from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
+
             emission = _Params(self.mi, emitter).rgb("radiance")
-            self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor: the reference renderer does "
-                      "not light-sample emissive meshes (reached by BSDF rays only): right mean, more noise")
+            n_tri = int(np.asarray(self.mi.traverse(shape)["faces"]).size // 3) if "faces" in self.mi.traverse(shape) else 0
+            if n_tri > MAX_MESH_LIGHT_TRIANGLES:
+                self.warn(f"shape {sid}: area emitter on a {cls} of {n_tri} triangles written as emissiveColor: the "
+                          f"reference renderer light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} "
+                          "triangles only; this one is reached by BSDF rays only: right mean, more noise")
         if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
             self._mesh(shape, sid, cls, emission)
         elif cls == "Rectangle":
