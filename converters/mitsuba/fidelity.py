@@ -165,6 +165,23 @@ def _mesh_emitter(folder: Path, size: int) -> str:
             + "</scene>")
 
 
+def _envmap(folder: Path, size: int) -> str:
+    # a coarse, high-contrast lat-long map seen directly behind the objects: its interpolation shows
+    from nasset_sdk.images import write_exr
+
+    h, w = 8, 16
+    v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    img = np.stack([0.2 + 1.5 * ((np.floor(u * 4) + np.floor(v * 2)) % 2), 0.3 + u, 0.2 + 0.8 * (1 - v)], -1)
+    write_exr(folder / "sky.exr", img.astype(np.float32))
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 0.9, 2.6", size=size).replace('target="0, 0.3, 0"', 'target="0, 0.6, 0"')
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0" y="0.4" z="0"/><float name="radius" value="0.4"/>'
+              '<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf></shape>\n'
+            + '<emitter type="envmap" id="sky"><string name="filename" value="sky.exr"/><transform name="to_world">'
+              '<rotate y="1" angle="40"/></transform></emitter>\n'
+            + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -185,6 +202,7 @@ SCENES = {
     "instances": FidelityScene("instances", _instances, "shapegroup (sphere + cube) placed by three instances"),
     "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "area emitter on an OBJ quad (a mesh light: "
                                   "light-sampled with MIS)"),
+    "envmap": FidelityScene("envmap", _envmap, "coarse high-contrast envmap (16 x 8) seen behind a ball, rotated 40 deg"),
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; a twosided one"),
 }
 

@@ -47,6 +47,10 @@ from nasset_sdk.errors import UsageError, error
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
 #: segments of the triangle fan written for a Mitsuba ``disk``
 DISK_SEGMENTS = 96
+#: an envmap is written at up to this many times its resolution (resampled with Mitsuba's own lookup), as
+#: long as the written map stays within ENVMAP_MAX_PIXELS
+ENVMAP_UPSAMPLE = 8
+ENVMAP_MAX_PIXELS = 1 << 22
 #: latitude rings of the mesh written for a textured Mitsuba ``sphere`` (twice as many longitude segments)
 SPHERE_RINGS = 48
 #: focal length (mm) of the written camera; the apertures carry the field of view
@@ -835,6 +839,15 @@ class StageConverter:
         image = data[:, 1:-1, :3] if data.shape[1] > 2 else data[..., :3]  # Mitsuba pads one wrap column per side
         if image.shape[-1] == 1:
             image = np.repeat(image, 3, -1)
+        m = _matrix(p.p["to_world"])
+        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
+        row = np.eye(4)
+        row[:3, :3] = rot.T
+        resampled = self._envmap_resampled(em, image.shape[:2], (_FLIP_DOME @ row)[:3, :3], p.scalar("scale", 1.0))
+        if resampled is None:
+            self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
+        else:
+            image = resampled
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         from pxr import Tf
@@ -847,14 +860,31 @@ class StageConverter:
         light = UsdLux.DomeLight.Define(self.stage, path)
         light.CreateTextureFileAttr(Sdf.AssetPath(rel))
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
-        m = _matrix(p.p["to_world"])
-        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
-        row = np.eye(4)
-        row[:3, :3] = rot.T
         self._xform(light.GetPrim(), _FLIP_DOME @ row)
         self._light_common(light, np.full(3, p.scalar("scale", 1.0)), path, f"emitter {eid} (envmap {image.shape[1]}x{image.shape[0]})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
-        self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
+
+    def _envmap_resampled(self, em, hw, rotation, scale: float) -> np.ndarray | None:
+        """Mitsuba's own (bilinear) envmap radiance / ``scale`` at the texel centres of a lat-long map of
+        up to ENVMAP_UPSAMPLE x the size ``hw``, in the renderer's convention (spec/renderer.md#lights) for a dome
+        whose local-to-world rotation is ``rotation`` (3x3, rows): the renderer's nearest-texel lookup then
+        follows Mitsuba's interpolation. None where it cannot be evaluated (scalar variants, size bounds)."""
+        mi = self.mi
+        f = ENVMAP_UPSAMPLE
+        while f > 1 and hw[0] * hw[1] * f * f > ENVMAP_MAX_PIXELS:
+            f //= 2
+        h, w = hw[0] * f, hw[1] * f
+        if mi.variant().startswith("scalar") or h * w > ENVMAP_MAX_PIXELS or scale <= 0:
+            return None
+        v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+        phi, theta = (u.ravel() - 0.5) * 2.0 * np.pi, v.ravel() * np.pi
+        local = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], 1)
+        d = local @ rotation  # world direction the renderer looks up at each texel
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d.T).astype(np.float32))  # the emitter sees the ray arriving along d
+        val = em.eval(si)
+        rgb = np.stack([np.asarray(val[c], np.float64).ravel() for c in range(3)], 1)
+        return (rgb.reshape(h, w, 3) / scale).astype(np.float32)
 
     # -- neural assets ------------------------------------------------------------------------
     def assets(self) -> None:
