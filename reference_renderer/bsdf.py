@@ -99,7 +99,6 @@ class MaterialTable:
     emission: np.ndarray  # [M,3]
     names: list
     textures: list = field(default_factory=list)  # [M] TexturedDiffuse | None (empty: none textured)
-    one_sided: np.ndarray | None = None  # [M] bool: black seen from the back (doubleSided = false)
 
     @property
     def p_spec(self) -> np.ndarray:

@@ -46,11 +46,10 @@ PREVIEW_DEFAULTS = {
     "displacement": 0.0, "occlusion": 1.0, "opacityMode": None,
 }
 _LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:normalize",
-                 "inputs:shaping:cone:angle", "inputs:shaping:cone:softness",
                  "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular"}
 _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
-    "SphereLight": {"inputs:radius", "treatAsPoint"},
+    "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness"},
     "RectLight": {"inputs:width", "inputs:height"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
 }
