@@ -169,6 +169,7 @@ class TextureMap:
 
     image: np.ndarray
     what: str
+    scale_bias: tuple | None = None  # UsdUVTexture (scale, bias) float4s, e.g. a tangent-space normal map's 2, -1
 
 
 class _Params:
@@ -442,9 +443,15 @@ class StageConverter:
         for w in ("wrapS", "wrapT"):
             node.CreateInput(w, Sdf.ValueTypeNames.Token).Set("repeat")
         node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        if tex.scale_bias is not None:
+            from pxr import Gf
+
+            node.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[0]))
+            node.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[1]))
         node.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
-        surface.CreateInput(name, Sdf.ValueTypeNames.Color3f).ConnectToSource(node.ConnectableAPI(), "rgb")
-        self.textured_materials.add(mat_path)
+        kind = Sdf.ValueTypeNames.Normal3f if name == "normal" else Sdf.ValueTypeNames.Color3f
+        surface.CreateInput(name, kind).ConnectToSource(node.ConnectableAPI(), "rgb")
+        self.textured_materials.add(mat_path)  # its prims need texture coordinates
 
     def map_bsdf(self, bsdf, prefix: str = "", cls: str | None = None, back: bool = False) -> tuple[dict, list]:
         """UsdPreviewSurface inputs for a Mitsuba BSDF and notes on what the mapping loses.
@@ -470,6 +477,11 @@ class StageConverter:
                 if opacity < 1.0:
                     notes.append(f"mask: opacity {opacity:.3g} written to UsdPreviewSurface opacity (the reference "
                                  "renderer renders it opaque)")
+            elif cls == "NormalMap" and (img := _Params(mi, bsdf, prefix).bitmap("normalmap")) is not None:
+                # tangent-space normals stored as (n + 1) / 2, as UsdPreviewSurface's normal input expects them
+                out["normal"] = TextureMap(img, "normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))
+                notes.append("normalmap: written to UsdPreviewSurface normal (texture); the reference renderer ignores "
+                             "it and shades with the mesh normals")
             else:
                 notes.append(f"{cls}: the nested BSDF is converted, its {WRAPPERS[cls]} is dropped (the reference "
                              "renderer shades with the mesh normals)")
