@@ -146,3 +146,19 @@ def test_spot_light_lights_its_cone_only(tmp_path):
     ramp = (theta > beam + 1.7) & (theta < cone - 1.7)
     # in the ramp single pixels straddle its ends: compare the mean over the ramp's pixels
     assert img[ramp].mean() == pytest.approx((full[ramp] * (cone - theta[ramp]) / (cone - beam)).mean(), rel=0.05)
+
+
+@pytest.mark.parametrize("file, code", [("https://example.com/t.exr", "SCENE_INVALID"), ("./bad.exr", "IMAGE_INVALID")])
+def test_texture_files_are_checked_like_other_asset_paths(tmp_path, file, code):
+    from pxr import Sdf, Usd, UsdShade
+
+    from nasset_sdk.errors import NassetError
+
+    path, _ = _textured_quad_scene(tmp_path, "raw")
+    (tmp_path / "bad.exr").write_bytes(b"not an OpenEXR file")
+    stage = Usd.Stage.Open(path)
+    UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/tex")).GetInput("file").Set(Sdf.AssetPath(file))
+    stage.GetRootLayer().Save()
+    with pytest.raises(NassetError) as exc:
+        load_scene(path)
+    assert exc.value.code == code, exc.value
