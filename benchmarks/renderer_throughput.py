@@ -80,11 +80,11 @@ def _scene(size: str):
 
 def run_one(scene, a, threads: int) -> dict:
     from nasset_reference_renderer.accel import EmbreeBackend
-    from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render
+    from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render, resolve_settings
     from nasset_reference_renderer.plan import make_plan
     from nasset_sdk.kinds import rna
 
-    settings = RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch)
+    settings = resolve_settings(RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch), scene)
     for data in scene.assets:
         data.evaluator = None  # a fresh evaluator (and session) for this thread setting
     width, height = scene.camera.default_resolution(settings.width, settings.height)

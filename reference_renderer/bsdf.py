@@ -6,13 +6,14 @@ Model (spec/renderer.md#materials), in a local frame where the shading normal is
 
 kd = diffuseColor * (1 - metallic); F is Schlick with F0 = specularColor (specular workflow)
 or lerp(((1-ior)/(1+ior))^2, diffuseColor, metallic); alpha = max(roughness^2, 1e-3);
-G2 is the height-correlated Smith term. Both sides of a surface are front faces.
+G2 is the height-correlated Smith term. Both sides of a surface are front faces unless the prim is
+one-sided (spec/renderer.md#sidedness, handled by the integrator).
 Specular directions are drawn from the distribution of visible normals (Heitz 2018).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -76,34 +77,61 @@ def reflect(w, h):
 
 
 # -- material table -------------------------------------------------------------------------
+def spec_probability(kd: np.ndarray, f0: np.ndarray) -> np.ndarray:
+    """Probability [N] of sampling the specular lobe for diffuse colours kd [N,3] and F0 [N,3]."""
+    sd = luminance(kd)
+    ss = luminance(f0 + (1.0 - f0) * 0.1)
+    ss = np.where(f0.max(-1) > 0, ss, 0.0)
+    tot = sd + ss
+    p = np.where(tot > 0, ss / np.where(tot > 0, tot, 1.0), 0.0)
+    both = (sd > 0) & (ss > 0)
+    return np.where(both, np.clip(p, 0.1, 0.9), p)
+
+
 @dataclass
 class MaterialTable:
-    """Per-material constants, indexed by material id."""
+    """Per-material constants, indexed by material id; ``textures[m]`` (a
+    :class:`~nasset_reference_renderer.textures.TexturedDiffuse` or None) replaces kd and F0 per hit."""
 
     kd: np.ndarray  # [M,3]
     f0: np.ndarray  # [M,3]
     alpha: np.ndarray  # [M]
     emission: np.ndarray  # [M,3]
     names: list
+    textures: list = field(default_factory=list)  # [M] TexturedDiffuse | None (empty: none textured)
 
     @property
     def p_spec(self) -> np.ndarray:
         """Probability of sampling the specular lobe."""
-        sd = luminance(self.kd)
-        ss = luminance(self.f0 + (1.0 - self.f0) * 0.1)
-        ss = np.where(self.f0.max(1) > 0, ss, 0.0)
-        tot = sd + ss
-        p = np.where(tot > 0, ss / np.where(tot > 0, tot, 1.0), 0.0)
-        both = (sd > 0) & (ss > 0)
-        return np.where(both, np.clip(p, 0.1, 0.9), p)
+        return spec_probability(self.kd, self.f0)
 
     def has_specular(self, m):
         return self.f0[m].max(-1) > 0
 
+    @property
+    def textured(self) -> bool:
+        return any(t is not None for t in self.textures)
 
-def bsdf_eval(mt: MaterialTable, m, wo, wi):
-    """f(wo, wi) [N,3] and pdf(wi) [N] for local-frame directions (normal = +Z)."""
-    kd, f0, alpha, ps = mt.kd[m], mt.f0[m], mt.alpha[m], mt.p_spec[m]
+    def lookup(self, m: np.ndarray, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(kd [N,3], F0 [N,3]) of materials m [N] at texture coordinates st [N,2] (constants where untextured)."""
+        kd, f0 = self.kd[m].copy(), self.f0[m].copy()
+        for k, tex in enumerate(self.textures):
+            if tex is None:
+                continue
+            sel = m == k
+            if sel.any():
+                kd[sel], f0[sel] = tex.lookup(st[sel])
+        return kd, f0
+
+
+def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None):
+    """f(wo, wi) [N,3] and pdf(wi) [N] for local-frame directions (normal = +Z).
+
+    ``kd``, ``f0`` [N,3] override the materials' constants (textured materials, :meth:`MaterialTable.lookup`).
+    """
+    kd = mt.kd[m] if kd is None else kd
+    f0 = mt.f0[m] if f0 is None else f0
+    alpha, ps = mt.alpha[m], spec_probability(kd, f0)
     ok = (wo[:, 2] > 0) & (wi[:, 2] > 0)
     h = normalize(wo + wi)
     d = ggx_d(h, alpha)
@@ -117,13 +145,15 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi):
     return f, np.where(ok, pdf, 0.0)
 
 
-def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u):
-    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample."""
-    alpha, ps = mt.alpha[m], mt.p_spec[m]
+def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None):
+    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample (``kd``, ``f0`` as in bsdf_eval)."""
+    kd = mt.kd[m] if kd is None else kd
+    f0 = mt.f0[m] if f0 is None else f0
+    alpha, ps = mt.alpha[m], spec_probability(kd, f0)
     spec = u_lobe < ps
     wi = square_to_cosine_hemisphere(u)
     if spec.any():
         h = ggx_sample_vndf(wo[spec], alpha[spec], u[spec])
         wi[spec] = reflect(wo[spec], h)
-    f, pdf = bsdf_eval(mt, m, wo, wi)
+    f, pdf = bsdf_eval(mt, m, wo, wi, kd, f0)
     return wi, f, pdf

@@ -55,7 +55,7 @@ def run(args) -> int:
     import warnings
 
     from .film import check_image_size, tonemap, write_exr, write_png
-    from .integrator import RenderSettings, check_settings, prepare_assets, render
+    from .integrator import RenderSettings, check_settings, prepare_assets, render, resolve_settings
     from .plan import make_plan
     from .scene import SceneWarning, load_scene
 
@@ -75,10 +75,11 @@ def run(args) -> int:
         warnings.simplefilter("ignore", SceneWarning)
         scene = load_scene(args.scene)
     check_outputs(outputs, input_files(scene))
+    settings = resolve_settings(settings, scene)
     for w in scene.warnings:
         print(f"warning: {w}", file=sys.stderr)
     width, height = check_image_size(*scene.camera.default_resolution(args.width, args.height), args.spp)
-    plan = make_plan(scene, width=width, height=height, spp=args.spp, max_depth=args.max_depth, tile=args.tile,
+    plan = make_plan(scene, width=width, height=height, spp=args.spp, max_depth=settings.max_depth, tile=args.tile,
                      batch=args.batch, neupress_sampling=settings.neupress_sampling, prt=settings.prt,
                      eightdna_sampling=settings.eightdna_sampling)
     if args.explain:
@@ -105,7 +106,8 @@ def add_args(p) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--width", type=int, default=None)
     p.add_argument("--height", type=int, default=None)
-    p.add_argument("--max-depth", type=int, default=5)
+    p.add_argument("--max-depth", type=int, default=None,
+                   help="scattering vertices per path (default: the scene's nasset:maxDepth render setting, else 5)")
     p.add_argument("--png", default=None, help="also write a tone-mapped PNG preview")
     p.add_argument("--variance", default=None, help="also write a per-pixel variance EXR")
     p.add_argument("--explain", action="store_true", help="print the render plan")

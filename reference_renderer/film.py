@@ -41,6 +41,28 @@ def check_image_size(width, height, spp=None) -> tuple[int, int]:
     return w, h
 
 
+#: Pixel filters (spec/renderer.md#render-settings): ``box`` (uniform over the pixel) or a truncated
+#: Gaussian of standard deviation ``stddev`` pixels (Mitsuba's ``gaussian``: radius 4 stddev), applied by
+#: drawing each camera sample's offset from the filter (filter importance sampling, every weight 1).
+PIXEL_FILTERS = ("box", "gaussian")
+MAX_FILTER_STDDEV = 8.0
+
+
+def pixel_offsets(rng, n: int, kind: str = "box", stddev: float = 0.5) -> np.ndarray:
+    """Offsets [n, 2] (pixels) of camera samples from their pixel's corner, distributed as the pixel filter.
+
+    Gaussian: per axis the density ``exp(-x^2 / 2s^2) - exp(-r^2 / 2s^2)`` on |x| < r = 4 s around the
+    pixel centre (separable, Mitsuba's ``gaussian``), sampled by inverting its tabulated CDF."""
+    if kind == "box":
+        return rng.random((n, 2))
+    r = 4.0 * stddev
+    x = np.linspace(-r, r, 4097)
+    f = np.maximum(np.exp(-x * x / (2 * stddev * stddev)) - np.exp(-r * r / (2 * stddev * stddev)), 0.0)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(x))])
+    cdf /= cdf[-1]
+    return 0.5 + np.interp(rng.random((n, 2)), cdf, x)
+
+
 def clamp_radiance(value: np.ndarray) -> np.ndarray:
     """Camera-sample radiance [n, 3] in float64 with NaN -> 0 and |value| <= SAMPLE_RADIANCE_MAX."""
     v = np.asarray(value, np.float64)

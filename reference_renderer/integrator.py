@@ -16,7 +16,8 @@ from nasset_sdk.errors import UsageError
 
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
-from .film import Film, check_image_size
+from .film import Film, check_image_size, pixel_offsets
+from .lights import MeshLight
 from .plan import RenderPlan, make_plan
 from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading
@@ -29,7 +30,7 @@ class RenderSettings:
     seed: int = 0
     width: int | None = None
     height: int | None = None
-    max_depth: int = 5
+    max_depth: int | None = None  # None: the scene's nasset:maxDepth (-1: MAX_DEPTH), else DEFAULT_MAX_DEPTH
     batch: int = 65536
     tile: int = 64
     threads: int = 0
@@ -88,11 +89,17 @@ class PathIntegrator:
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
+        self.inst_one_sided = np.array([i.one_sided for i in insts], bool)
+        self.inst_back_mat = np.array([i.back_material for i in insts], np.int64)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
         self.indirect = plan.instance_indirect
         self.mt = scene.materials
         self.emissive = self.mt.emission.max(1) > 0
+        self.inst_light = np.full(len(insts), -1, np.int64)  # instance -> index of its MeshLight
+        for k, light in enumerate(scene.lights):
+            if isinstance(light, MeshLight):
+                self.inst_light[light.instance] = k
         self.nee = [k for k, on in enumerate(plan.light_nee) if on]
         # object-space corner normals of each asset's triangles
         self.asset_corner_n = []
@@ -122,6 +129,15 @@ class PathIntegrator:
             return np.ones(len(d))
         w = power_heuristic(prev_pdf, light.pdf(o, d))
         return np.where(specular | no_mis, 1.0, w)
+
+    def _mesh_light_mis(self, inst, prev_pdf, specular, o, d):
+        """MIS weights [n] of emission reached on mesh instances ``inst`` [n] (1 where the mesh is no light)."""
+        w = np.ones(len(inst))
+        k_of = self.inst_light[inst]
+        for k in unique(k_of[k_of >= 0]):
+            m = k_of == k
+            w[m] = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], np.zeros(int(m.sum()), bool))
+        return w
 
     # -- main loop -------------------------------------------------------------------------
     def radiance(self, o, d, rng) -> np.ndarray:
@@ -184,6 +200,7 @@ class PathIntegrator:
             sel = np.nonzero(surf)[0]
             if not len(sel):
                 break
+            hit_pdf, hit_specular = prev_pdf[sel], specular[sel]
             idx, o, d, beta = idx[sel], o[sel], d[sel], beta[sel]
             prim = hits.prim[sel]
             bu, bv = hits.u[sel], hits.v[sel]
@@ -193,9 +210,10 @@ class PathIntegrator:
             neural = self.inst_neural[inst]
             mesh = ~neural
             if mesh.any():
-                em = mesh & self.emissive[self.inst_mat[inst]]
+                em = mesh & self.emissive[self.inst_mat[inst]] & (~self.inst_one_sided[inst] | (dot(self.tri_ng[prim], d) < 0))
                 if em.any():
-                    L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]]
+                    w = self._mesh_light_mis(inst[em], hit_pdf[em], hit_specular[em], o[em], d[em])
+                    L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]] * w[:, None]
             if depth >= self.s.max_depth:
                 break
             new = []
@@ -232,6 +250,11 @@ class PathIntegrator:
         x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
         wo = -d
         ng = self.tri_ng[prim]
+        seen_front = dot(ng, wo) > 0
+        front = ~self.inst_one_sided[inst] | seen_front  # one-sided surfaces are black from the back
+        if not front.all():
+            x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front = (
+                a[front] for a in (x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front))
         cn = self.scene.tri_normals[prim]
         ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
         flip = dot(ng, wo) < 0
@@ -241,6 +264,13 @@ class PathIntegrator:
         t, b = frame(ns)
         wo_l = to_local(wo, t, b, ns)
         mat = self.inst_mat[inst]
+        back_mat = self.inst_back_mat[inst]
+        mat = np.where(~seen_front & (back_mat >= 0), back_mat, mat)  # a two-sided material's back side
+        kd = f0 = None
+        if self.mt.textured:
+            cst = self.scene.tri_st[prim]
+            st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+            kd, f0 = self.mt.lookup(mat, st)
         indirect = self.indirect[inst]
         xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
         for k in self.nee:
@@ -251,7 +281,8 @@ class PathIntegrator:
             s = np.nonzero(ok)[0]
             if not len(s):
                 continue
-            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]))
+            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]),
+                                *((None, None) if kd is None else (kd[s], f0[s])))
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
             nz = max3(c) > 0
@@ -264,7 +295,8 @@ class PathIntegrator:
         cont = np.nonzero(indirect)[0]
         if not len(cont):
             return None
-        wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)))
+        wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)),
+                                   *((None, None) if kd is None else (kd[cont], f0[cont])))
         wi = to_world(wi_l, t[cont], b[cont], ns[cont])
         ok = (pdf > 0) & (wi_l[:, 2] > 0) & (dot(wi, ng[cont]) > 0)
         c = cont[ok]
@@ -297,7 +329,7 @@ class PathIntegrator:
 def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | None = None,
            load_components: bool = True) -> RenderResult:
     """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`)."""
-    s = settings or RenderSettings()
+    s = resolve_settings(settings or RenderSettings(), scene)
     check_settings(s)
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
     if plan is None:
@@ -308,6 +340,8 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     integ = PathIntegrator(scene, plan, s)
     film = Film(width, height)
     tile = max(1, s.tile)
+    rs = scene.render_settings
+    filt = (rs.get("pixel_filter", "box"), rs.get("pixel_filter_stddev", 0.5))
     tiles = [(x0, y0) for y0 in range(0, height, tile) for x0 in range(0, width, tile)]
     passes = [(p0, min(s.spp, p0 + plan.spp_per_pass)) for p0 in range(0, s.spp, plan.spp_per_pass)]
     bar = None
@@ -323,7 +357,7 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
         for pi, (p0, p1) in enumerate(passes):
             rng = np.random.default_rng([s.seed, ti, pi])
             pix = np.tile(pix_tile, p1 - p0)
-            jit = rng.random((len(pix), 2))
+            jit = pixel_offsets(rng, len(pix), *filt)
             px = (pix % width) + jit[:, 0]
             py = (pix // width) + jit[:, 1]
             o, d = scene.camera.generate_rays(px, py, width, height)
@@ -341,6 +375,20 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     return RenderResult(film, plan, st)
 
 
+DEFAULT_MAX_DEPTH = 5
+
+
+def resolve_settings(s: RenderSettings, scene) -> RenderSettings:
+    """``s`` with ``max_depth`` filled in when it is None: the scene's ``nasset:maxDepth`` (-1: unbounded, i.e.
+    MAX_DEPTH with Russian roulette), else DEFAULT_MAX_DEPTH."""
+    import dataclasses
+
+    if s.max_depth is not None:
+        return s
+    md = getattr(scene, "render_settings", {}).get("max_depth")
+    return dataclasses.replace(s, max_depth=DEFAULT_MAX_DEPTH if md is None else (MAX_DEPTH if md < 0 else max(int(md), 1)))
+
+
 #: Bounds of the other render settings (spec/renderer.md#limits); image size and spp: film.check_image_size.
 MAX_DEPTH = 1024
 MAX_BATCH = 1 << 24
@@ -352,6 +400,8 @@ def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
     """``USAGE`` error unless max_depth (min_depth ..), batch, tile and threads are integers within their bounds."""
     for name, value, lo, hi in (("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("batch", s.batch, 1, MAX_BATCH),
                                 ("tile", s.tile, 1, MAX_TILE), ("threads", s.threads, 0, MAX_THREADS)):
+        if name == "max_depth" and value is None:
+            continue  # filled in from the scene by resolve_settings
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
             raise UsageError(f"{name} = {value!r} outside {lo} .. {hi} (--{name.replace('_', '-')})")
 

@@ -9,7 +9,9 @@ multiplied by ``color * 2^exposure``):
   uniformly in the cone; angle 0 is a delta light. Light arrives from the prim's +Z axis.
 * SphereLight: radiance L = intensity from a sphere of ``radius`` (sampled by the cone it
   subtends); radius 0 (or ``treatAsPoint``) is a point light of radiant intensity I = intensity
-  (E = I / d^2).
+  (E = I / d^2). With ``UsdLux.ShapingAPI`` a point light is a spot (spec/renderer.md#spot-lights):
+  I(w) = intensity * falloff(theta), theta the angle between w and the prim's -Z axis, falloff 1 up
+  to the beam angle cone * (1 - softness), linear in theta down to 0 at the cone angle.
 * RectLight: radiance L = intensity from a ``width`` x ``height`` rectangle in the local XY
   plane, emitting toward local -Z only; sampled uniformly by area.
 * DomeLight: radiance L(d) = intensity * texture(d) (or constant without a texture).
@@ -101,22 +103,41 @@ class DistantLight(Light):
         return np.where((d @ self.w >= self.cos_max)[:, None], self.L, 0.0)
 
 
+def spot_falloff(cos_theta: np.ndarray, cone_deg: float, softness: float) -> np.ndarray:
+    """Spot falloff [N] at cos(theta) [N] from the spot axis (Mitsuba's ``spot``): 1 inside the beam angle
+    ``cone * (1 - softness)``, then linear in theta to 0 at ``cone`` (degrees, half-angle); 0 beyond."""
+    cutoff = np.radians(np.clip(cone_deg, 0.0, 180.0))
+    beam = cutoff * (1.0 - float(np.clip(softness, 0.0, 1.0)))
+    theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))
+    ramp = (cutoff - theta) / max(cutoff - beam, 1e-12)
+    return np.where(theta <= beam, 1.0, np.where(theta < cutoff, np.clip(ramp, 0.0, 1.0), 0.0))
+
+
 class PointLight(Light):
     delta = True
 
-    def __init__(self, position, intensity, prim: str = "") -> None:
+    def __init__(self, position, intensity, prim: str = "", *, axis=None, cone_deg: float = 180.0,
+                 softness: float = 0.0) -> None:
+        """``axis`` [3]: the direction the spot emits along (None: omnidirectional); ``cone_deg``, ``softness``
+        as in :func:`spot_falloff`."""
         self.c = np.asarray(position, np.float64)
         self.I = np.asarray(intensity, np.float64)
         self.prim = prim
+        self.axis = None if axis is None or cone_deg >= 180.0 else normalize(np.asarray(axis, np.float64)[None])[0]
+        self.cone_deg, self.softness = float(cone_deg), float(softness)
 
     def power_is_zero(self):
-        return not (self.I > 0).any()
+        return not (self.I > 0).any() or (self.axis is not None and self.cone_deg <= 0.0)
 
     def sample(self, p, u):
         v = self.c - p
         d2 = np.maximum(dot(v, v), 1e-300)
         dist = np.sqrt(d2)
-        return v / dist[:, None], dist, self.I / d2[:, None], np.ones(len(p))
+        wi = v / dist[:, None]
+        li = self.I / d2[:, None]
+        if self.axis is not None:
+            li = li * spot_falloff(-(wi @ self.axis), self.cone_deg, self.softness)[:, None]
+        return wi, dist, li, np.ones(len(p))
 
 
 class SphereLight(Light):
@@ -218,6 +239,75 @@ class RectLight(Light):
     def intersect(self, o, d):
         t = self._hit(o, d)
         return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+
+
+#: Emissive meshes with at most this many triangles are sampled as lights (``MeshLight.pdf`` tests each triangle).
+MAX_MESH_LIGHT_TRIANGLES = 64
+
+
+class MeshLight(Light):
+    """An emissive mesh instance sampled as a light (spec/renderer.md#mesh-lights): uniform by area over its
+    world triangles [T,3,3]; radiance ``L`` from the front side (winding normal) or both sides.
+
+    Its triangles are ordinary geometry (rays hit them through the scene's accelerator; ``area`` is
+    False); ``pdf(p, wi)`` intersects them itself, so it is meant for small emitters
+    (MAX_MESH_LIGHT_TRIANGLES)."""
+
+    def __init__(self, triangles, radiance, *, one_sided: bool, instance: int, prim: str = "") -> None:
+        self.tri = np.asarray(triangles, np.float64)
+        self.L = np.asarray(radiance, np.float64)
+        self.one_sided, self.instance, self.prim = bool(one_sided), int(instance), prim
+        cr = np.cross(self.tri[:, 1] - self.tri[:, 0], self.tri[:, 2] - self.tri[:, 0])
+        areas = 0.5 * np.linalg.norm(cr, axis=1)
+        self.n = cr / np.maximum(2.0 * areas, 1e-300)[:, None]
+        self.area_total = float(areas.sum())
+        self.cdf = np.cumsum(areas) / max(self.area_total, 1e-300)
+
+    def power_is_zero(self):
+        return not (self.L > 0).any() or not self.area_total > 0
+
+    def _emitted(self, n, wi):
+        """|cos| at the light toward -wi (0 from behind a one-sided light)."""
+        c = -dot(n, wi)
+        return np.maximum(c, 0.0) if self.one_sided else np.abs(c)
+
+    def sample(self, p, u):
+        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), len(self.tri) - 1)
+        lo = np.concatenate([[0.0], self.cdf[:-1]])[k]
+        u0 = np.clip((u[:, 0] * self.cdf[-1] - lo) / np.maximum(self.cdf[k] - lo, 1e-300), 0.0, 1.0)  # reuse u[:, 0]
+        su = np.sqrt(u0)
+        b1, b2 = 1.0 - su, u[:, 1] * su
+        t = self.tri[k]
+        q = t[:, 0] * (1.0 - b1 - b2)[:, None] + t[:, 1] * b1[:, None] + t[:, 2] * b2[:, None]
+        v = q - p
+        d2 = np.maximum(dot(v, v), 1e-300)
+        dist = np.sqrt(d2)
+        wi = v / dist[:, None]
+        cos = self._emitted(self.n[k], wi)
+        ok = cos > 0
+        pdf = np.where(ok, d2 / (self.area_total * np.maximum(cos, 1e-300)), 0.0)
+        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+
+    def pdf(self, p, wi):
+        """Solid-angle pdf of ``sample`` for direction wi from p: the nearest of its triangles along the ray."""
+        t_best = np.full(len(p), INF)
+        cos_best = np.zeros(len(p))
+        for k in range(len(self.tri)):  # Moller-Trumbore, one triangle against every row
+            v0, e1, e2 = self.tri[k, 0], self.tri[k, 1] - self.tri[k, 0], self.tri[k, 2] - self.tri[k, 0]
+            pv = np.cross(wi, e2)
+            det = pv @ e1
+            ok = np.abs(det) > 1e-300
+            inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+            tv = p - v0
+            bu = dot(tv, np.broadcast_to(pv, tv.shape) if pv.ndim == 1 else pv) * inv
+            qv = np.cross(tv, e1)
+            bv = (wi * qv).sum(1) * inv
+            tt = (qv @ e2) * inv
+            hit = ok & (bu >= 0) & (bv >= 0) & (bu + bv <= 1) & (tt > 0) & (tt < t_best)
+            t_best = np.where(hit, tt, t_best)
+            cos_best = np.where(hit, self._emitted(np.broadcast_to(self.n[k], wi.shape), wi), cos_best)
+        ok = np.isfinite(t_best) & (cos_best > 0)
+        return np.where(ok, t_best ** 2 / (self.area_total * np.maximum(cos_best, 1e-300)), 0.0)
 
 
 class DomeLight(Light):

@@ -20,8 +20,9 @@ from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
-from .film import MAX_IMAGE_PIXELS
-from .lights import DistantLight, DomeLight, Light, PointLight, RectLight, SphereLight
+from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
+from .lights import MAX_MESH_LIGHT_TRIANGLES, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
+from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
@@ -48,7 +49,7 @@ _LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:
                  "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular"}
 _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
-    "SphereLight": {"inputs:radius", "treatAsPoint"},
+    "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness"},
     "RectLight": {"inputs:width", "inputs:height"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
 }
@@ -80,6 +81,8 @@ class Instance:
     asset: int = -1  # index into Scene.assets
     material: int = -1
     planar: bool = False
+    one_sided: bool = False  # doubleSided authored false: black seen from the back (spec/renderer.md#sidedness)
+    back_material: int = -1  # nasset:backMaterial: the material seen from the back (-1: the bound one)
 
     def __post_init__(self):
         self.to_object = np.linalg.inv(self.to_world)
@@ -98,6 +101,8 @@ class Scene:
     lights: list
     assets: list
     warnings: list = field(default_factory=list)
+    tri_st: np.ndarray | None = None  # [F,3,2] texture coordinates at the corners (zeros where a mesh has none)
+    render_settings: dict = field(default_factory=dict)  # nasset:* values of the UsdRender.Settings prim (spec/renderer.md#render-settings)
 
     @property
     def bounds(self):
@@ -206,9 +211,11 @@ class _Loader:
         self.tri_local: list = []
         self.tri_normals: list = []
         self.tri_inst: list = []
+        self.tri_st: list = []
         self.instances: list[Instance] = []
         self.mat_rows: list = []
         self.mat_index: dict = {}
+        self.images: dict = {}  # resolved texture file -> [H, W, 3] image
         self.lights: list[Light] = []
         self.assets: list[NeuralAssetData] = []
         self.asset_index: dict = {}
@@ -264,19 +271,36 @@ class _Loader:
             self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
             self.warn("the scene has no lights and no emissive materials; the image will be black")
+        self._mesh_lights()
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
         self._check_world_bounds(tris)
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
-                              np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats])
+                              np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
+                              textures=[m[5] if len(m) > 5 else None for m in mats])
         return Scene(
             file=self.file, camera=camera, triangles=tris,
             tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
             tri_local=np.concatenate(self.tri_local) if n else np.zeros(0, np.int64),
             tri_normals=np.concatenate(self.tri_normals) if n else np.zeros((0, 3, 3)),
             instances=self.instances, materials=table, lights=self.lights, assets=self.assets, warnings=self.warnings,
+            tri_st=np.concatenate(self.tri_st) if n else np.zeros((0, 3, 2)),
+            render_settings=self._render_settings(),
         )
+
+    def _mesh_lights(self) -> None:
+        """A MeshLight for every emissive mesh instance of at most MAX_MESH_LIGHT_TRIANGLES triangles
+        (spec/renderer.md#mesh-lights); larger ones stay reachable by BSDF rays only, with a warning."""
+        for i, inst in enumerate(self.instances):
+            if inst.kind != "mesh" or inst.material < 0 or not self.mat_rows[inst.material][3].any():
+                continue
+            if inst.n_tri > MAX_MESH_LIGHT_TRIANGLES:
+                self.warn(f"emissive mesh of {inst.n_tri} triangles (> {MAX_MESH_LIGHT_TRIANGLES}) is not light-sampled: "
+                          "reached by BSDF rays only", inst.prim)
+                continue
+            self.lights.append(MeshLight(self.tris[i], self.mat_rows[inst.material][3], one_sided=inst.one_sided,
+                                         instance=i, prim=inst.prim))
 
     def _check_world_bounds(self, tris: np.ndarray) -> None:
         """``SCENE_INVALID`` for a world coordinate above MAX_WORLD_COORDINATE, or a NeuralAsset instance whose world
@@ -301,12 +325,13 @@ class _Loader:
                                f"{MIN_ASSET_SIZE_RATIO:g} x the scene scale {scene_scale:.3g}: it would not render", inst.prim,
                                "xformOpOrder")
 
-    def _add(self, inst: Instance, tris_world, normals_world, local_ids):
+    def _add(self, inst: Instance, tris_world, normals_world, local_ids, st=None):
         inst.first_tri = sum(len(t) for t in self.tris)
         inst.n_tri = len(tris_world)
         self.instances.append(inst)
         self.tris.append(tris_world)
         self.tri_normals.append(normals_world)
+        self.tri_st.append(np.zeros((len(tris_world), 3, 2)) if st is None else st)
         self.tri_local.append(local_ids.astype(np.int64))
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
@@ -354,6 +379,30 @@ class _Loader:
                 self.warn(f"{prim.GetPath()}: resolution {res} ignored")
         return None
 
+    def _render_settings(self) -> dict:
+        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
+        ``nasset:pixelFilterStddev`` (pixels) of the first UsdRender.Settings prim; invalid values are warned and dropped."""
+        from pxr import Usd, UsdRender
+
+        out: dict = {}
+        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
+            if not prim.IsA(UsdRender.Settings):
+                continue
+            for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
+                                  ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
+                                  ("nasset:pixelFilterStddev", "pixel_filter_stddev",
+                                   lambda v: isinstance(v, float) and 0.0 < v <= MAX_FILTER_STDDEV)):
+                attr = prim.GetAttribute(name)
+                v = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
+                if v is None:
+                    continue
+                if ok(v):
+                    out[key] = str(v) if key == "pixel_filter" else v
+                else:
+                    self.warn(f"{name} = {v!r} ignored", prim.GetPath())
+            break
+        return out
+
     # -- meshes and materials --------------------------------------------------------------
     def _material(self, prim) -> int:
         from pxr import UsdGeom, UsdShade
@@ -368,6 +417,23 @@ class _Loader:
                 self.mat_index[key] = len(self.mat_rows)
                 self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
             return self.mat_index[key]
+        return self._material_of(mat)
+
+    def _back_material(self, prim) -> int:
+        """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
+        from pxr import UsdShade
+
+        rel = prim.GetRelationship("nasset:backMaterial")
+        targets = rel.GetForwardedTargets() if rel else []
+        if not targets:
+            return -1
+        mat = UsdShade.Material(self.stage.GetPrimAtPath(targets[0]))
+        if not mat:
+            raise self.err("SCENE_INVALID", f"nasset:backMaterial target {targets[0]} is not a Material", prim.GetPath(),
+                           "nasset:backMaterial")
+        return self._material_of(mat)
+
+    def _material_of(self, mat) -> int:
         mpath = str(mat.GetPath())
         if mpath in self.mat_index:
             return self.mat_index[mpath]
@@ -382,14 +448,18 @@ class _Loader:
             raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; only UsdPreviewSurface "
                            "is supported", mpath)
         vals = dict(PREVIEW_DEFAULTS)
+        texture = None
         for inp in shader.GetInputs():
             name = inp.GetBaseName()
             if name not in PREVIEW_DEFAULTS:
                 self.warn(f"unknown UsdPreviewSurface input {name!r} ignored", shader.GetPath())
                 continue
             if inp.HasConnectedSource():
-                self.warn(f"input {name!r} is connected (textures are not supported); its own value is used",
-                          shader.GetPath())
+                if name == "diffuseColor":
+                    texture = self._uv_texture(inp, shader.GetPath())
+                else:
+                    self.warn(f"input {name!r} is connected (only diffuseColor textures are rendered); its own value "
+                              "is used", shader.GetPath())
             v = inp.Get(self.time)
             if v is not None:
                 vals[name] = v
@@ -409,9 +479,117 @@ class _Loader:
             f0s = ((1.0 - ior) / (1.0 + ior)) ** 2
             f0 = (1.0 - m) * f0s + m * diffuse
             kd = diffuse * (1.0 - m)
+        textured = None
+        if texture is not None:
+            tex, varname = texture
+            if int(vals["useSpecularWorkflow"]):
+                textured = TexturedDiffuse(tex, varname, 1.0, f0, 0.0)
+            else:
+                textured = TexturedDiffuse(tex, varname, 1.0 - m, np.full(3, (1.0 - m) * f0s), m)
+            kd, f0 = textured.kd_weight * np.clip(tex.mean, 0, 1), textured.f0_base + textured.f0_weight * np.clip(tex.mean, 0, 1)
         self.mat_index[mpath] = len(self.mat_rows)
-        self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath))
+        self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath, textured))
         return self.mat_index[mpath]
+
+    def _uv_texture(self, inp, where):
+        """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
+        value is then used): a ``UsdUVTexture``'s ``rgb`` output whose ``st`` reads a ``UsdPrimvarReader_float2``."""
+        from pxr import UsdShade
+
+        src = inp.GetConnectedSource()
+        node = UsdShade.Shader(src[0].GetPrim()) if src and src[0] else None
+        nid = node.GetIdAttr().Get() if node else None
+        if nid != "UsdUVTexture" or str(src[1]) != "rgb":
+            self.warn(f"input {inp.GetBaseName()!r} is connected to {nid!r} output {str(src[1]) if src else None!r} (only a "
+                      "UsdUVTexture's rgb output is rendered); its own value is used", where)
+            return None
+        tpath = node.GetPath()
+
+        def value(name, default):
+            i = node.GetInput(name)
+            v = i.Get(self.time) if i else None
+            return default if v is None else v
+
+        asset = value("file", None)
+        if asset is None or not asset.path:
+            self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
+            return None
+        resolved = asset.resolvedPath or ""
+        if not resolved.lower().endswith(".exr"):
+            self.warn(f"texture {asset.path}: only OpenEXR textures are read; the connected input's own value is used",
+                      tpath)
+            return None
+        if resolved not in self.images:  # one decode per file
+            self.images[resolved] = self._read_image(asset, tpath, "inputs:file", "UsdUVTexture texture")
+        image = self.images[resolved]
+        space = str(value("sourceColorSpace", "auto"))
+        if space == "sRGB":
+            image = srgb_to_linear(image)
+        elif space not in ("auto", "raw"):
+            self.warn(f"sourceColorSpace {space!r} read as raw (linear)", tpath)
+        wraps = []
+        for name in ("wrapS", "wrapT"):
+            mode = str(value(name, "useMetadata"))
+            if mode == "useMetadata":
+                mode = "black"  # OpenEXR carries no wrap metadata: UsdUVTexture's rule then gives black
+            if mode not in WRAP_MODES:
+                self.warn(f"{name} {mode!r} unknown: black", tpath)
+                mode = "black"
+            wraps.append(mode)
+        scale = np.asarray(value("scale", (1.0, 1.0, 1.0, 1.0)), np.float64)[:3]
+        bias = np.asarray(value("bias", (0.0, 0.0, 0.0, 0.0)), np.float64)[:3]
+        if not (np.isfinite(scale).all() and np.isfinite(bias).all()):
+            raise self.err("SCENE_INVALID", "UsdUVTexture scale / bias must be finite", tpath, "inputs:scale")
+        varname = "st"
+        st = node.GetInput("st")
+        reader = st.GetConnectedSource() if st and st.HasConnectedSource() else None
+        rnode = UsdShade.Shader(reader[0].GetPrim()) if reader and reader[0] else None
+        if rnode and rnode.GetIdAttr().Get() == "UsdPrimvarReader_float2":
+            vi = rnode.GetInput("varname")
+            varname = str((vi.Get(self.time) if vi else None) or "st")
+        else:
+            self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2; primvar 'st' is used", tpath)
+        return ImageTexture(image, wraps[0], wraps[1], scale, bias, str(tpath)), varname
+
+    def _read_image(self, asset, prim, attribute: str, what: str) -> np.ndarray:
+        """[H, W, 3] float32 from an OpenEXR file named by an asset-path value (resolved by USD; the scene's
+        paths were checked when it was opened): ``SCENE_INVALID`` when missing or not finite and >= 0,
+        ``SCENE_UNSUPPORTED`` for another format, ``IMAGE_INVALID`` beyond the image bounds."""
+        from .film import read_exr
+
+        resolved = asset.resolvedPath or ""
+        if not resolved or not os.path.isfile(resolved):
+            raise self.err("SCENE_INVALID", f"{what} not found: {asset.path}", prim, attribute)
+        if not resolved.lower().endswith(".exr"):
+            raise self.err("SCENE_UNSUPPORTED", f"{what} {asset.path}: only OpenEXR images", prim, attribute)
+        try:
+            image = read_exr(resolved)
+        except NassetError as exc:
+            raise self.err("IMAGE_INVALID", f"{what} {resolved}: {exc.message}", prim, attribute) from None
+        if not np.isfinite(image).all() or (image < 0).any():
+            raise self.err("SCENE_INVALID", f"{what} holds NaN/Inf or negative values", prim, attribute)
+        return image
+
+    def _primvar_st(self, prim, varname: str, tri, corner, face_of_tri, n_points, n_faces, n_corners):
+        """Texture coordinates [T,3,2] of the triangles from primvar ``varname`` (zeros, with a warning, when unusable)."""
+        from pxr import UsdGeom
+
+        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(varname)
+        vals = pv.ComputeFlattened(self.time) if pv and pv.HasAuthoredValue() else None
+        st = np.asarray(vals, np.float64).reshape(-1, 2) if vals is not None and len(vals) else None
+        interp = pv.GetInterpolation() if pv else None
+        if st is not None and np.isfinite(st).all():
+            if interp in ("vertex", "varying") and len(st) == n_points:
+                return st[tri]
+            if interp == "faceVarying" and len(st) == n_corners:
+                return st[corner]
+            if interp == "uniform" and len(st) == n_faces:
+                return np.repeat(st[face_of_tri][:, None], 3, 1)
+            if interp == "constant" and len(st) == 1:
+                return np.broadcast_to(st[0], (len(tri), 3, 2)).copy()
+        self.warn(f"textured material but no usable primvar {varname!r} (float2, finite, vertex / faceVarying / uniform / "
+                  "constant): texture coordinates (0, 0)", prim.GetPath())
+        return None
 
     def _mesh(self, prim):
         from pxr import UsdGeom
@@ -473,8 +651,19 @@ class _Loader:
         nn = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
         tol = 1e-9 * (1 + np.abs(pw).max())
         planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
-        inst = Instance("mesh", path, 0, 0, M, material=self._material(prim), planar=planar)
-        self._add(inst, tris, normals, np.arange(len(tri)))
+        mat, back = self._material(prim), self._back_material(prim)
+        tex = next((self.mat_rows[m][5] for m in (mat, back) if m >= 0 and len(self.mat_rows[m]) > 5
+                    and self.mat_rows[m][5] is not None), None)
+        st = None if tex is None else self._primvar_st(prim, tex.varname, tri, corner, face_of_tri, len(pts), len(counts),
+                                                       len(idx))
+        inst = Instance("mesh", path, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
+                        back_material=back)
+        self._add(inst, tris, normals, np.arange(len(tri)), st)
+
+    def _one_sided(self, gprim) -> bool:
+        """True when ``doubleSided`` is authored false (spec/renderer.md#sidedness); unauthored keeps both sides."""
+        attr = gprim.GetDoubleSidedAttr()
+        return bool(attr and attr.HasAuthoredValue() and not attr.Get(self.time))
 
     def _implicit(self, prim, tname):
         import trimesh
@@ -499,7 +688,8 @@ class _Loader:
             n = np.repeat(ng[:, None], 3, 1)
         n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
         self.warn(f"implicit {tname} tessellated into {len(faces)} triangles", prim.GetPath())
-        inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim))
+        inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim),
+                        one_sided=self._one_sided(UsdGeom.Gprim(prim)), back_material=self._back_material(prim))
         self._add(inst, tris, n, np.arange(len(faces)))
 
     # -- neural assets ---------------------------------------------------------------------
@@ -567,6 +757,25 @@ class _Loader:
         self._add(inst, tris, np.repeat(ng[:, None], 3, 1), np.arange(len(data.faces)))
 
     # -- lights ----------------------------------------------------------------------------
+    def _shaping(self, prim, M) -> dict:
+        """Spot parameters of a point light with ``UsdLux.ShapingAPI`` (spec/renderer.md#spot-lights): the axis is
+        the prim's -Z, ``shaping:cone:angle`` the half-angle (degrees), ``shaping:cone:softness`` in [0, 1]."""
+        from pxr import UsdLux
+
+        if not prim.HasAPI(UsdLux.ShapingAPI):
+            return {}
+        api = UsdLux.ShapingAPI(prim)
+        get = lambda a, d: (a.Get(self.time) if a and a.Get(self.time) is not None else d)  # noqa: E731
+        cone, soft = float(get(api.GetShapingConeAngleAttr(), 90.0)), float(get(api.GetShapingConeSoftnessAttr(), 0.0))
+        if not (np.isfinite(cone) and np.isfinite(soft)):
+            raise self.err("SCENE_INVALID", "shaping:cone:angle and softness must be finite", prim.GetPath(),
+                           "inputs:shaping:cone:angle")
+        for a in ("inputs:shaping:focus", "inputs:shaping:ies:file"):
+            at = prim.GetAttribute(a)
+            if at and at.HasAuthoredValue():
+                self.warn(f"{a} is ignored", prim.GetPath())
+        return {"axis": -M[2, :3], "cone_deg": cone, "softness": soft}
+
     def _light(self, prim, tname):
         from pxr import UsdGeom, UsdLux
 
@@ -606,6 +815,10 @@ class _Loader:
             if v is not None and not np.isfinite(float(v)):
                 raise self.err("SCENE_INVALID", f"{name} = {v!r} must be finite", path, name)
         M = self.matrix(UsdGeom.Xformable(prim))
+        if prim.HasAPI(UsdLux.ShapingAPI) and not (tname == "SphereLight" and (
+                bool(g(UsdLux.SphereLight(prim).GetTreatAsPointAttr(), False)) or not g(UsdLux.SphereLight(prim).GetRadiusAttr(), 0.5))):
+            self.warn("UsdLux.ShapingAPI is only applied to point lights (SphereLight with treatAsPoint or radius 0): "
+                      "ignored", path)
         if tname == "DistantLight":
             angle = float(g(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
             self.lights.append(DistantLight(M[2, :3], scale, angle, path))
@@ -617,7 +830,7 @@ class _Loader:
             if r < 0:
                 raise self.err("SCENE_INVALID", "radius must be >= 0", path, "inputs:radius")
             if r * sc == 0 or as_point:
-                self.lights.append(PointLight(M[3, :3], scale, path))
+                self.lights.append(PointLight(M[3, :3], scale, path, **self._shaping(prim, M)))
             else:
                 rw = r * sc
                 L = scale / (4.0 * np.pi * rw * rw) if normalize else scale
@@ -642,22 +855,7 @@ class _Loader:
             tex = dl.GetTextureFileAttr().Get(self.time)
             image = None
             if tex is not None and tex.path:
-                resolved = tex.resolvedPath or ""
-                if not resolved or not os.path.isfile(resolved):
-                    raise self.err("SCENE_INVALID", f"DomeLight texture not found: {tex.path}", path, "inputs:texture:file")
-                if not resolved.lower().endswith(".exr"):
-                    raise self.err("SCENE_UNSUPPORTED", f"DomeLight texture {tex.path}: only OpenEXR lat-long maps", path,
-                                   "inputs:texture:file")
-                from .film import read_exr
-
-                try:
-                    image = read_exr(resolved)
-                except NassetError as exc:
-                    raise self.err("IMAGE_INVALID", f"DomeLight texture {resolved}: {exc.message}", path,
-                                   "inputs:texture:file") from None
-                if not np.isfinite(image).all() or (image < 0).any():
-                    raise self.err("SCENE_INVALID", "DomeLight texture holds NaN/Inf or negative values", path,
-                                   "inputs:texture:file")
+                image = self._read_image(tex, path, "inputs:texture:file", "DomeLight texture")
             R = M[:3, :3]
             u, _, vt = np.linalg.svd(R)
             self.lights.append(DomeLight(scale, image, u @ vt, path))

@@ -47,6 +47,12 @@ from nasset_sdk.errors import UsageError, error
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
 #: segments of the triangle fan written for a Mitsuba ``disk``
 DISK_SEGMENTS = 96
+#: an envmap is written at up to this many times its resolution (resampled with Mitsuba's own lookup), as
+#: long as the written map stays within ENVMAP_MAX_PIXELS
+ENVMAP_UPSAMPLE = 8
+ENVMAP_MAX_PIXELS = 1 << 22
+#: latitude rings of the mesh written for a textured Mitsuba ``sphere`` (twice as many longitude segments)
+SPHERE_RINGS = 48
 #: focal length (mm) of the written camera; the apertures carry the field of view
 FOCAL_LENGTH_MM = 50.0
 
@@ -141,13 +147,40 @@ def plastic_diffuse_scale(eta: float, nonlinear_reflectance=None) -> float | np.
     return (1.0 - fdr_ext) ** 2 / (eta * eta * den)
 
 
+def texel_values(data, raw: bool) -> np.ndarray:
+    """A Mitsuba bitmap's stored texels [H, W, C] -> linear float64 [H, W, 3].
+
+    8-bit data is what the file held: divided by 255 and, unless the texture is ``raw``, decoded from
+    sRGB (as Mitsuba decodes it on lookup); float data is already linear. One channel is repeated.
+    """
+    from nasset_reference_renderer.textures import srgb_to_linear
+
+    a = np.asarray(data)
+    img = a.astype(np.float64)
+    if a.dtype == np.uint8:
+        img = img / 255.0 if raw else srgb_to_linear(img / 255.0)
+    img = img.reshape(img.shape[0], img.shape[1], -1)
+    return np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
+
+
+@dataclass
+class TextureMap:
+    """A converted bitmap: linear texels [H, W, 3] (BSDF-specific per-texel factors applied) and where it came from."""
+
+    image: np.ndarray
+    what: str
+    scale_bias: tuple | None = None  # UsdUVTexture (scale, bias) float4s, e.g. a tangent-space normal map's 2, -1
+
+
 class _Params:
-    """Reads Mitsuba parameter values by name, noting textures replaced by their mean."""
+    """Reads Mitsuba parameter values by name: bitmaps kept as :class:`TextureMap`, other textures by their mean."""
 
     def __init__(self, mi, obj, prefix: str = "") -> None:
         self.p = mi.traverse(obj)
+        self.obj = obj
         self.prefix = prefix
-        self.textured: list[str] = []
+        self.textured: list[str] = []  # procedural textures replaced by their mean
+        self.bitmaps: dict[str, TextureMap] = {}
 
     def keys(self):
         return [k[len(self.prefix):] for k in self.p.keys() if k.startswith(self.prefix)]
@@ -156,21 +189,54 @@ class _Params:
         k = self.prefix + name
         return any(x in self.p for x in (k, k + ".value", k + ".data"))
 
+    def bitmap(self, name: str) -> np.ndarray | None:
+        """Linear texels [H, W, 3] of a bitmap texture parameter (None for anything else)."""
+        k = self.prefix + name
+        if k + ".data" not in self.p:
+            return None
+        text = str(self.obj)
+        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*[=:]\s*BitmapTexture\[", text)
+        flag = re.search(r"raw\s*=\s*(\d)", text[at.end():]) if at else None
+        return texel_values(self.p[k + ".data"], bool(flag and flag.group(1) == "1"))
+
+    def uv_transform(self, name: str) -> np.ndarray | None:
+        """The texture's ``to_uv`` 3x3 matrix, or None when it is the identity (or absent)."""
+        k = self.prefix + name + ".to_uv"
+        if k not in self.p:
+            return None
+        m = np.asarray(self.p[k].matrix, np.float64).reshape(3, 3)
+        return None if np.allclose(m, np.eye(3)) else m
+
     def rgb(self, name: str, default=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Constant colour [3] of a parameter; a bitmap gives its linear mean, a procedural texture the mean of
+        its constant colours (noted in ``textured``)."""
         k = self.prefix + name
         if k + ".value" in self.p:
             v = _np(self.p[k + ".value"]).ravel()
         elif k + ".data" in self.p:
-            data = _np(self.p[k + ".data"])
-            v = data.reshape(-1, data.shape[-1]).mean(0)
-            self.textured.append(name)
+            v = self.bitmap(name).reshape(-1, 3).mean(0)
         elif k in self.p:
             v = _np(self.p[k]).ravel()
         else:
-            return _np(default).copy()
+            nested = [x for x in self.p.keys() if x.startswith(k + ".") and x.endswith(".value")]
+            if not nested:
+                return _np(default).copy()
+            # a procedural texture (checkerboard, ...): the mean of its constant colours, each linear
+            v = np.mean([np.resize(_np(self.p[x]).ravel(), 3) for x in nested], axis=0)
+            self.textured.append(name)
         if v.size == 1:
             v = np.repeat(v, 3)
         return v[:3].copy()
+
+    def texture_or_rgb(self, name: str, default, what: str, per_texel=None):
+        """A :class:`TextureMap` for a bitmap parameter (texels through ``per_texel``), else its colour [3]
+        (through ``per_texel`` too)."""
+        f = per_texel or (lambda c: c)
+        img = self.bitmap(name)
+        if img is None:
+            return f(self.rgb(name, default))
+        self.bitmaps[name] = TextureMap(f(img), what)
+        return self.bitmaps[name]
 
     def scalar(self, name: str, default: float) -> float:
         return float(self.rgb(name, (default,) * 3).mean())
@@ -187,6 +253,9 @@ class StageConverter:
         self.result = ConvertResult(output)
         self.names: set[str] = set()
         self.materials: dict = {}
+        self.textured_materials: set[str] = set()
+        self.prototypes: dict[str, str] = {}  # shapegroup name -> class prim path
+        self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
         self.stage = Usd.Stage.CreateNew(str(output))
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
@@ -225,7 +294,7 @@ class StageConverter:
 
     # -- camera -----------------------------------------------------------------------------
     def camera(self) -> None:
-        from pxr import Gf, UsdGeom, UsdRender
+        from pxr import Gf, Sdf, UsdGeom, UsdRender
 
         sensors = list(self.scene.sensors())
         if not sensors:
@@ -246,9 +315,13 @@ class StageConverter:
         crop, off = tuple(int(v) for v in film.crop_size()), tuple(int(v) for v in film.crop_offset())
         if crop != size or off != (0, 0):
             self.warn(f"film crop window {crop} at {off} ignored (the full {size} film is described)")
-        filt = _class_name(film.rfilter()) if hasattr(film, "rfilter") else ""
-        if filt and filt != "BoxFilter":
-            self.warn(f"film reconstruction filter {filt}: the reference renderer uses a box filter")
+        filt = str(film.rfilter()) if hasattr(film, "rfilter") else ""
+        pixel_filter = ("box", None)
+        if filt.startswith("GaussianFilter"):
+            m = re.search(r"stddev\s*=\s*([0-9.eE+-]+)", filt)
+            pixel_filter = ("gaussian", float(m.group(1)) if m else 0.5)
+        elif filt and not filt.startswith("BoxFilter"):
+            self.warn(f"film reconstruction filter {_class_name(film.rfilter())}: written as a box filter")
         for k in ("principal_point_offset_x", "principal_point_offset_y"):
             if k in p and abs(float(_np(p[k]).ravel()[0])) > 0:
                 self.warn(f"{k} ignored")
@@ -275,6 +348,10 @@ class StageConverter:
         settings.CreateResolutionAttr(Gf.Vec2i(*size))
         settings.CreateCameraRel().SetTargets([path])
         settings.CreatePixelAspectRatioAttr(1.0)
+        prim = settings.GetPrim()
+        prim.CreateAttribute("nasset:pixelFilter", Sdf.ValueTypeNames.Token, custom=True).Set(pixel_filter[0])
+        if pixel_filter[1] is not None:
+            prim.CreateAttribute("nasset:pixelFilterStddev", Sdf.ValueTypeNames.Float, custom=True).Set(pixel_filter[1])
 
     # -- integrator (recorded, not converted) -------------------------------------------------
     def integrator(self) -> None:
@@ -287,27 +364,34 @@ class StageConverter:
         m = re.search(r"max_depth\s*=\s*(-?\d+)", text)
         if m:
             md = int(m.group(1))
+            md = -1 if md >= 2 ** 31 else md  # -1 (unbounded) prints as uint32 max
             info["max_depth"] = md
-            info["renderer_max_depth"] = None if md < 0 else max(md - 1, 1)
+            info["renderer_max_depth"] = -1 if md < 0 else max(md - 1, 1)
+            from pxr import Sdf, UsdRender
+
+            # the renderer counts scattering vertices, Mitsuba path segments (spec/bake.md#scene-conversion)
+            settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")
+            settings.GetPrim().CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(
+                info["renderer_max_depth"])
+            if md == 0:
+                self.warn("integrator max_depth 0 (black image) written as renderer depth 1")
         self.result.integrator = info
         if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
-        if info.get("max_depth", -1) >= 0:
-            self.warn(f"integrator max_depth {info['max_depth']} is not stored in USD: render with "
-                      f"`nasset render --max-depth {info['renderer_max_depth']}` (it counts scattering vertices)")
 
     # -- materials ----------------------------------------------------------------------------
-    def material(self, bsdf, shape_name: str, emission=None) -> str:
-        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id)."""
-        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)))
+    def material(self, bsdf, shape_name: str, emission=None, back: bool = False) -> str:
+        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id); ``back``: a twosided BSDF's back."""
+        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)), back,
+               self.looks_root)
         if key in self.materials:
             return self.materials[key]
-        inputs, notes = self.map_bsdf(bsdf)
+        inputs, notes = self.map_bsdf(bsdf, back=back)
         for n in notes:
             self.warn(f"shape {shape_name}: {n}")
         if emission is not None:
             inputs["emissiveColor"] = tuple(float(x) for x in emission)
-        path = self._write_material(bsdf.id() or f"{shape_name}_bsdf", inputs)
+        path = self._write_material((bsdf.id() or f"{shape_name}_bsdf") + ("_back" if back else ""), inputs)
         self.record(path, f"bsdf {bsdf.id() or '(inline)'} ({_class_name(bsdf)})")
         self.materials[key] = path
         return path
@@ -315,15 +399,18 @@ class StageConverter:
     def _write_material(self, name: str, inputs: dict) -> str:
         from pxr import Gf, Sdf, UsdShade
 
-        path = self._name("/World/Looks", name)
+        path = self._name(self.looks_root, name)
         mat = UsdShade.Material.Define(self.stage, path)
         sh = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
         sh.CreateIdAttr("UsdPreviewSurface")
         types = {"diffuseColor": Sdf.ValueTypeNames.Color3f, "specularColor": Sdf.ValueTypeNames.Color3f,
                  "emissiveColor": Sdf.ValueTypeNames.Color3f, "useSpecularWorkflow": Sdf.ValueTypeNames.Int,
                  "roughness": Sdf.ValueTypeNames.Float, "metallic": Sdf.ValueTypeNames.Float,
-                 "ior": Sdf.ValueTypeNames.Float}
+                 "ior": Sdf.ValueTypeNames.Float, "opacity": Sdf.ValueTypeNames.Float}
         for k, v in inputs.items():
+            if isinstance(v, TextureMap):
+                self._texture_input(path, sh, k, v)
+                continue
             if types[k] == Sdf.ValueTypeNames.Color3f:
                 v = Gf.Vec3f(*(float(x) for x in v))
             elif types[k] == Sdf.ValueTypeNames.Int:
@@ -334,34 +421,90 @@ class StageConverter:
         mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
         return path
 
-    def map_bsdf(self, bsdf) -> tuple[dict, list]:
+    def _texture_input(self, mat_path: str, surface, name: str, tex: TextureMap) -> None:
+        """Write ``tex`` as OpenEXR (linear) beside the output and connect ``name`` of ``surface`` to a
+        ``UsdUVTexture`` reading primvar ``st`` (spec/bake.md#scene-conversion)."""
+        from pxr import Sdf, UsdShade
+
+        from nasset_sdk.images import write_exr
+
+        tex_dir = self.output.parent / f"{self.output.stem}_textures"
+        tex_dir.mkdir(parents=True, exist_ok=True)
+        file = tex_dir / f"{mat_path.rsplit('/', 1)[-1]}_{name}.exr"
+        write_exr(file, tex.image.astype(np.float32))
+        self.result.textures.append(str(file))
+        reader = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_st")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        node = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_texture")
+        node.CreateIdAttr("UsdUVTexture")
+        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("./" + file.relative_to(self.output.parent).as_posix()))
+        node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        for w in ("wrapS", "wrapT"):
+            node.CreateInput(w, Sdf.ValueTypeNames.Token).Set("repeat")
+        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        if tex.scale_bias is not None:
+            from pxr import Gf
+
+            node.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[0]))
+            node.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[1]))
+        node.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+        kind = Sdf.ValueTypeNames.Normal3f if name == "normal" else Sdf.ValueTypeNames.Color3f
+        surface.CreateInput(name, kind).ConnectToSource(node.ConnectableAPI(), "rgb")
+        self.textured_materials.add(mat_path)  # its prims need texture coordinates
+
+    def map_bsdf(self, bsdf, prefix: str = "", cls: str | None = None, back: bool = False) -> tuple[dict, list]:
         """UsdPreviewSurface inputs for a Mitsuba BSDF and notes on what the mapping loses.
 
-        Returns ``({input: value}, [notes])``; the table is in spec/bake.md#scene-conversion.
+        Returns ``({input: value}, [notes])``; the table is in spec/bake.md#scene-conversion. Wrappers
+        (``twosided``, ``normalmap``, ``bumpmap``, ``mask``, ``blendbsdf``) recurse into their nested BSDFs,
+        whose parameters carry ``prefix``; ``back`` maps a twosided BSDF's back side.
         """
         mi = self.mi
         notes: list[str] = []
-        cls = _class_name(bsdf)
+        cls = cls or _class_name(bsdf)
         text = str(bsdf)
-        prefix = ""
         if cls == "TwoSided":
-            prefix = "brdf_0."
-            inner = re.search(r"brdf\[0\]\s*=\s*(\w+)", text)
-            if re.search(r"brdf\[1\]", text) and text.count("brdf[0]") and _two_sides_differ(text):
-                notes.append("twosided BSDF with different back side: the front BSDF is used on both sides")
-            cls = inner.group(1) if inner else "SmoothDiffuse"
-        elif "Dielectric" not in cls:
-            notes.append(f"{cls} is one-sided in Mitsuba (black from behind); the reference renderer shades both sides")
+            k = 1 if back and _two_sides_differ(text) else 0
+            inner = re.search(rf"brdf\[{k}\]\s*=\s*(\w+)", text)
+            return self.map_bsdf(bsdf, f"{prefix}brdf_{k}.", inner.group(1) if inner else "SmoothDiffuse")
+        if cls in WRAPPERS:
+            inner = re.search(r"nested_bsdf\s*=\s*(\w+)", text)
+            out, notes = self.map_bsdf(bsdf, f"{prefix}nested_bsdf.", inner.group(1) if inner else "SmoothDiffuse")
+            if cls == "Mask":
+                opacity = _Params(mi, bsdf, prefix).scalar("opacity", 1.0)
+                out["opacity"] = opacity
+                if opacity < 1.0:
+                    notes.append(f"mask: opacity {opacity:.3g} written to UsdPreviewSurface opacity (the reference "
+                                 "renderer renders it opaque)")
+            elif cls == "NormalMap" and (img := _Params(mi, bsdf, prefix).bitmap("normalmap")) is not None:
+                # tangent-space normals stored as (n + 1) / 2, as UsdPreviewSurface's normal input expects them
+                out["normal"] = TextureMap(img, "normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))
+                notes.append("normalmap: written to UsdPreviewSurface normal (texture); the reference renderer ignores "
+                             "it and shades with the mesh normals")
+            else:
+                notes.append(f"{cls}: the nested BSDF is converted, its {WRAPPERS[cls]} is dropped (the reference "
+                             "renderer shades with the mesh normals)")
+            return out, notes
+        if cls == "BlendBSDF":
+            w = float(np.clip(_Params(mi, bsdf, prefix).scalar("weight", 0.5), 0.0, 1.0))
+            c0, c1 = (re.search(rf"nested_bsdf\[{k}\]\s*=\s*(\w+)", text) for k in (0, 1))
+            a, na = self.map_bsdf(bsdf, f"{prefix}bsdf_0.", c0.group(1) if c0 else "SmoothDiffuse")
+            b, nb = self.map_bsdf(bsdf, f"{prefix}bsdf_1.", c1.group(1) if c1 else "SmoothDiffuse")
+            out, how = blend_inputs(a, b, w)
+            return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"]
         p = _Params(mi, bsdf, prefix)
         spec_wf = {"useSpecularWorkflow": 1}
         if cls == "SmoothDiffuse":
-            out = {**spec_wf, "diffuseColor": p.rgb("reflectance", (0.5,) * 3), "specularColor": (0.0, 0.0, 0.0),
-                   "roughness": 1.0}
+            out = {**spec_wf, "diffuseColor": p.texture_or_rgb("reflectance", (0.5,) * 3, "diffuse reflectance"),
+                   "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
         elif cls in ("RoughPlastic", "SmoothPlastic"):
             eta = p.scalar("eta", 1.49)
             r = p.rgb("diffuse_reflectance", (0.5,) * 3)
             nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", text))
             kd = r * plastic_diffuse_scale(eta, r if nonlinear else None)
+            diffuse = p.texture_or_rgb("diffuse_reflectance", (0.5,) * 3, "plastic diffuse reflectance",
+                                       lambda c: np.clip(c * plastic_diffuse_scale(eta, c if nonlinear else None), 0, 1))
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
             if cls == "RoughPlastic":
                 alpha = p.scalar("alpha", 0.1)
@@ -374,7 +517,7 @@ class StageConverter:
             notes.append(f"{cls}: dielectric Fresnel (eta {eta:.3g}) approximated by Schlick F0 {f0.mean():.4f}; "
                          f"diffuse_reflectance x {float(np.mean(kd / np.maximum(r, 1e-12))):.3f} for the coating's "
                          "transmission (spec/bake.md#scene-conversion)")
-            out = {**spec_wf, "diffuseColor": np.clip(kd, 0, 1), "specularColor": np.clip(f0, 0, 1), "roughness": rough}
+            out = {**spec_wf, "diffuseColor": diffuse, "specularColor": np.clip(f0, 0, 1), "roughness": rough}
         elif cls in ("SmoothConductor", "RoughConductor"):
             eta, k = p.rgb("eta", (0.0,) * 3), p.rgb("k", (1.0,) * 3)
             f0 = ((eta - 1.0) ** 2 + k * k) / np.maximum((eta + 1.0) ** 2 + k * k, 1e-12)
@@ -398,7 +541,7 @@ class StageConverter:
         elif cls == "Principled":
             spec = p.scalar("specular", 0.5)
             s = math.sqrt(min(max(0.08 * spec, 0.0), 0.99))
-            out = {"useSpecularWorkflow": 0, "diffuseColor": p.rgb("base_color", (0.5,) * 3),
+            out = {"useSpecularWorkflow": 0, "diffuseColor": p.texture_or_rgb("base_color", (0.5,) * 3, "principled base_color"),
                    "metallic": p.scalar("metallic", 0.0), "roughness": p.scalar("roughness", 0.5),
                    "ior": (1.0 + s) / (1.0 - s)}
             for lobe in ("clearcoat", "sheen", "spec_trans", "anisotropic", "flatness"):
@@ -412,10 +555,25 @@ class StageConverter:
                          f"opaque black reflector with F0 {f0:.4f}; bake the object into a neural asset (--replace)")
             out = {**spec_wf, "diffuseColor": (0.0, 0.0, 0.0), "specularColor": (f0,) * 3, "roughness": rough}
         else:
-            notes.append(f"BSDF {cls} is not convertible: written as grey diffuse 0.5")
-            out = {**spec_wf, "diffuseColor": (0.5, 0.5, 0.5), "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
+            color = next((p.rgb(k) for k in ("reflectance", "diffuse_reflectance", "base_color", "albedo")
+                          if p.has(k)), None)
+            notes.append(f"BSDF {cls} is not convertible: written as diffuse with "
+                         + ("its reflectance" if color is not None else "grey 0.5 (it has no reflectance to keep)"))
+            out = {**spec_wf, "diffuseColor": (0.5, 0.5, 0.5) if color is None else np.clip(color, 0, 1),
+                   "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
         for t in p.textured:
-            notes.append(f"{cls}.{t} is a texture: replaced by its mean (textures are not converted)")
+            notes.append(f"{cls}.{t} is a procedural texture: replaced by the mean of its colours (linear)")
+        converted = {id(v) for v in out.values()}
+        for t, tm in p.bitmaps.items():
+            if id(tm) not in converted:
+                continue
+            if p.uv_transform(t) is not None:
+                notes.append(f"{cls}.{t}: texture to_uv transform ignored")
+        for k in p.p.keys():
+            name = k[len(prefix):-len(".data")] if k.startswith(prefix) and k.endswith(".data") else None
+            if name and name not in p.bitmaps:
+                notes.append(f"{cls}.{name} is a bitmap texture on a parameter that is not converted as a texture: "
+                             "replaced by its linear mean")
         return out, notes
 
     # -- shapes -------------------------------------------------------------------------------
@@ -424,49 +582,108 @@ class StageConverter:
             sid = shape.id() or f"shape_{k}"
             if shape.id() in self.replace:
                 continue
-            cls = _class_name(shape)
-            for med, side in ((shape.interior_medium(), "interior"), (shape.exterior_medium(), "exterior")):
-                if med is not None:
-                    self.warn(f"shape {sid}: {side} medium ({_class_name(med)}) ignored (no participating media in USD "
-                              "preview shading); bake the object into a neural asset (--replace)")
-            bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
-            if bsdf_cls == "Null":
-                self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped")
-                continue
-            emitter = shape.emitter()
-            if emitter is not None and cls in ("Rectangle", "Sphere"):
-                self._area_light(shape, sid, cls, emitter)
-                continue
-            emission = None
-            if emitter is not None:
-                emission = _Params(self.mi, emitter).rgb("radiance")
-                self.warn(f"shape {sid}: area emitter on a {cls} written as emissiveColor (reached by BSDF rays only, "
-                          "both sides; Mitsuba emits from the front side)")
-            if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
-                self._mesh(shape, sid, cls, emission)
-            elif cls == "Rectangle":
-                pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
-                self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
-                                 shape, cls, emission, local_to_world=True)
-            elif cls == "Disk":
-                a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
-                pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
-                faces = np.stack([np.zeros(DISK_SEGMENTS, int), 1 + np.arange(DISK_SEGMENTS),
-                                  1 + (np.arange(DISK_SEGMENTS) + 1) % DISK_SEGMENTS], 1)
-                self.warn(f"shape {sid}: disk tessellated into {DISK_SEGMENTS} triangles")
-                self._write_mesh(sid, pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), shape, cls, emission,
-                                 local_to_world=True)
-            elif cls == "Sphere":
-                self._sphere(shape, sid, emission)
-            else:
-                self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
-                          "are): skipped")
+            self._shape(shape, sid)
 
-    def _bind(self, prim, shape, sid, emission) -> None:
+    def _instance(self, shape, sid) -> None:
+        """An ``instance`` of a ``shapegroup``: an instanceable Xform referencing the group's prototype, a class prim
+        ``/Prototypes/GROUP`` holding the group's shapes and their materials (written once)."""
+        from pxr import Sdf
+
+        m = re.search(r'name\s*=\s*"([^"]*)"', str(shape))
+        group = m.group(1) if m else ""
+        proto = self.prototypes.get(group)
+        if proto is None:
+            params = self.mi.traverse(self.scene)
+            children = {}
+            for key in params.keys():
+                parts = key.split(".")
+                if len(parts) == 3 and parts[0] == group and parts[2] == "silhouette_sampling_weight":
+                    children[parts[1]] = params.properties[key][2]
+            from pxr import Tf
+
+            proto = f"/Prototypes/{Tf.MakeValidIdentifier(group or 'group')}"
+            self.stage.CreateClassPrim("/Prototypes")  # abstract: never rendered itself, only through instances
+            self.stage.CreateClassPrim(proto)
+            saved = (self.geometry_root, self.looks_root)
+            self.geometry_root, self.looks_root = proto, f"{proto}/Looks"
+            try:
+                for cid, child in children.items():
+                    self._shape(child, cid)
+            finally:
+                self.geometry_root, self.looks_root = saved
+            self.prototypes[group] = proto
+            self.record(proto, f"shapegroup {group} ({len(children)} shapes)")
+        path = self._name(self.geometry_root, sid)
+        prim = self.stage.DefinePrim(path, "Xform")
+        prim.GetReferences().AddInternalReference(Sdf.Path(proto))
+        prim.SetInstanceable(True)
+        self._xform(prim, _row(_matrix(self.mi.traverse(shape)["to_world"])))
+        self.record(path, f"instance {sid} of shapegroup {group}")
+
+    def _shape(self, shape, sid) -> None:
+        """Write one Mitsuba shape under ``geometry_root`` (the table in spec/bake.md#scene-conversion)."""
+        cls = _class_name(shape)
+        if cls == "Instance":
+            self._instance(shape, sid)
+            return
+        for med, side in ((shape.interior_medium(), "interior"), (shape.exterior_medium(), "exterior")):
+            if med is not None:
+                self.warn(f"shape {sid}: {side} medium ({_class_name(med)}) ignored (no participating media in USD "
+                          "preview shading); bake the object into a neural asset (--replace)")
+        bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
+        if bsdf_cls == "Null":
+            self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped")
+            return
+        emitter = shape.emitter()
+        if emitter is not None and cls in ("Rectangle", "Sphere"):
+            self._area_light(shape, sid, cls, emitter)
+            return
+        emission = None
+        if emitter is not None:
+            from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
+
+            emission = _Params(self.mi, emitter).rgb("radiance")
+            n_tri = int(np.asarray(self.mi.traverse(shape)["faces"]).size // 3) if "faces" in self.mi.traverse(shape) else 0
+            if n_tri > MAX_MESH_LIGHT_TRIANGLES:
+                self.warn(f"shape {sid}: area emitter on a {cls} of {n_tri} triangles written as emissiveColor: the "
+                          f"reference renderer light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} "
+                          "triangles only; this one is reached by BSDF rays only: right mean, more noise")
+        if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
+            self._mesh(shape, sid, cls, emission)
+        elif cls == "Rectangle":
+            pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+            uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
+            self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
+                             shape, cls, emission, local_to_world=True, uv=uv)
+        elif cls == "Disk":
+            a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
+            pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
+            faces = np.stack([np.zeros(DISK_SEGMENTS, int), 1 + np.arange(DISK_SEGMENTS),
+                              1 + (np.arange(DISK_SEGMENTS) + 1) % DISK_SEGMENTS], 1)
+            self.warn(f"shape {sid}: disk tessellated into {DISK_SEGMENTS} triangles")
+            self._write_mesh(sid, pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), shape, cls, emission,
+                             local_to_world=True)
+        elif cls == "Sphere":
+            self._sphere(shape, sid, emission)
+        else:
+            self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
+                      "are): skipped")
+
+    def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade
 
         mat_path = self.material(shape.bsdf(), sid, emission)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+        if _class_name(shape.bsdf()) == "TwoSided" and _two_sides_differ(str(shape.bsdf())):
+            # the back side's own material (spec/renderer.md#sidedness): no USD schema names one
+            back = self.material(shape.bsdf(), sid, emission, back=True)
+            prim.CreateRelationship("nasset:backMaterial", custom=True).SetTargets([back])
+        return mat_path
+
+    def _one_sided(self, gprim, shape) -> None:
+        """Author ``doubleSided = false`` for a one-sided BSDF (black from behind in Mitsuba and in the renderer)."""
+        if _is_one_sided(shape.bsdf()):
+            gprim.CreateDoubleSidedAttr(False)
 
     def _mesh(self, shape, sid, cls, emission) -> None:
         p = self.mi.traverse(shape)
@@ -475,12 +692,17 @@ class StageConverter:
         nrm = _np(p["vertex_normals"]).reshape(-1, 3) if "vertex_normals" in p else None
         if nrm is not None and nrm.shape != pts.shape:
             nrm = None
-        self._write_mesh(sid, pts, faces, nrm, shape, cls, emission)
+        uv = _np(p["vertex_texcoords"]).reshape(-1, 2) if "vertex_texcoords" in p else None
+        if uv is not None and len(uv) != len(pts):
+            uv = None
+        self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
 
-    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False) -> None:
-        from pxr import UsdGeom, Vt
+    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False, uv=None) -> None:
+        """A UsdGeom.Mesh; ``uv`` [V, 2] in Mitsuba's convention (v = 0 at the image's top row) becomes the
+        vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
+        from pxr import Sdf, UsdGeom, Vt
 
-        path = self._name("/World/Geometry", sid)
+        path = self._name(self.geometry_root, sid)
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts, np.float32)))
         faces = np.asarray(faces, np.int32)
@@ -492,20 +714,44 @@ class StageConverter:
             mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         lo, hi = np.asarray(pts, np.float32).min(0), np.asarray(pts, np.float32).max(0)
         mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi])))
+        if uv is not None:
+            st = np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1)
+            pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+            pv.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(st, np.float32)))
         if local_to_world:
             self._xform(mesh.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
-        self._bind(mesh.GetPrim(), shape, sid, emission)
+        mat = self._bind(mesh.GetPrim(), shape, sid, emission)
+        if mat in self.textured_materials and uv is None:
+            self.warn(f"shape {sid}: textured material but the {cls} has no texture coordinates: the texture's corner "
+                      "texel is used")
+        self._one_sided(mesh, shape)
         self.record(path, f"shape {sid} ({cls}, {len(faces)} faces)")
 
     def _sphere(self, shape, sid, emission) -> None:
         from pxr import Gf, UsdGeom
 
-        path = self._name("/World/Geometry", sid)
+        if self.material(shape.bsdf(), sid, emission) in self.textured_materials:
+            # textured: a latitude-longitude mesh carrying Mitsuba's sphere parameterisation
+            # u = phi / 2pi, v = theta / pi (local +Z pole), in the sphere's local frame
+            theta = np.linspace(0.0, np.pi, SPHERE_RINGS + 1)
+            phi = np.linspace(0.0, 2.0 * np.pi, 2 * SPHERE_RINGS + 1)
+            th, ph = np.meshgrid(theta, phi, indexing="ij")
+            pts = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
+            uv = np.stack([ph / (2.0 * np.pi), th / np.pi], -1).reshape(-1, 2)
+            cols = 2 * SPHERE_RINGS + 1
+            i, j = np.meshgrid(np.arange(SPHERE_RINGS), np.arange(2 * SPHERE_RINGS), indexing="ij")
+            a, b = (i * cols + j).ravel(), (i * cols + j + 1).ravel()
+            c, d = a + cols, b + cols
+            faces = np.concatenate([np.stack([a, c, d], 1)[i.ravel() < SPHERE_RINGS - 1], np.stack([a, d, b], 1)[i.ravel() > 0]])
+            self._write_mesh(sid, pts, faces, pts.copy(), shape, "Sphere", emission, local_to_world=True, uv=uv)
+            return
+        path = self._name(self.geometry_root, sid)
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
         self._xform(sph.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
         self._bind(sph.GetPrim(), shape, sid, emission)
+        self._one_sided(sph, shape)
         self.record(path, f"shape {sid} (Sphere)")
 
     # -- lights -------------------------------------------------------------------------------
@@ -581,8 +827,6 @@ class StageConverter:
                 shaping.CreateShapingConeSoftnessAttr(float(np.clip((cutoff - beam) / max(cutoff, 1e-9), 0.0, 1.0)))
                 self._xform(light.GetPrim(), _FLIP_CAMERA @ _row(m))  # USD shaping emits along -Z
                 self._light_common(light, p.rgb("intensity"), path, f"emitter {eid} (spot, cutoff {cutoff:.3g} deg)")
-                self.warn(f"emitter {eid}: spot light written as a point light with UsdLux.ShapingAPI (cone {cutoff:.3g} "
-                          "deg); the reference renderer ignores shaping and renders it omnidirectional")
                 if p.textured:
                     self.warn(f"emitter {eid}: spot texture ignored")
             elif cls == "ConstantBackgroundEmitter":
@@ -607,6 +851,15 @@ class StageConverter:
         image = data[:, 1:-1, :3] if data.shape[1] > 2 else data[..., :3]  # Mitsuba pads one wrap column per side
         if image.shape[-1] == 1:
             image = np.repeat(image, 3, -1)
+        m = _matrix(p.p["to_world"])
+        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
+        row = np.eye(4)
+        row[:3, :3] = rot.T
+        resampled = self._envmap_resampled(em, image.shape[:2], (_FLIP_DOME @ row)[:3, :3], p.scalar("scale", 1.0))
+        if resampled is None:
+            self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
+        else:
+            image = resampled
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         from pxr import Tf
@@ -619,14 +872,31 @@ class StageConverter:
         light = UsdLux.DomeLight.Define(self.stage, path)
         light.CreateTextureFileAttr(Sdf.AssetPath(rel))
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
-        m = _matrix(p.p["to_world"])
-        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
-        row = np.eye(4)
-        row[:3, :3] = rot.T
         self._xform(light.GetPrim(), _FLIP_DOME @ row)
         self._light_common(light, np.full(3, p.scalar("scale", 1.0)), path, f"emitter {eid} (envmap {image.shape[1]}x{image.shape[0]})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
-        self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
+
+    def _envmap_resampled(self, em, hw, rotation, scale: float) -> np.ndarray | None:
+        """Mitsuba's own (bilinear) envmap radiance / ``scale`` at the texel centres of a lat-long map of
+        up to ENVMAP_UPSAMPLE x the size ``hw``, in the renderer's convention (spec/renderer.md#lights) for a dome
+        whose local-to-world rotation is ``rotation`` (3x3, rows): the renderer's nearest-texel lookup then
+        follows Mitsuba's interpolation. None where it cannot be evaluated (scalar variants, size bounds)."""
+        mi = self.mi
+        f = ENVMAP_UPSAMPLE
+        while f > 1 and hw[0] * hw[1] * f * f > ENVMAP_MAX_PIXELS:
+            f //= 2
+        h, w = hw[0] * f, hw[1] * f
+        if mi.variant().startswith("scalar") or h * w > ENVMAP_MAX_PIXELS or scale <= 0:
+            return None
+        v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+        phi, theta = (u.ravel() - 0.5) * 2.0 * np.pi, v.ravel() * np.pi
+        local = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], 1)
+        d = local @ rotation  # world direction the renderer looks up at each texel
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d.T).astype(np.float32))  # the emitter sees the ray arriving along d
+        val = em.eval(si)
+        rgb = np.stack([np.asarray(val[c], np.float64).ravel() for c in range(3)], 1)
+        return (rgb.reshape(h, w, 3) / scale).astype(np.float32)
 
     # -- neural assets ------------------------------------------------------------------------
     def assets(self) -> None:
@@ -661,6 +931,45 @@ class StageConverter:
         if self.check_usd:
             self.result.usd_checks = usd_check(self.output)
         return self.result
+
+
+#: wrapper BSDFs with one nested BSDF -> what of them is not converted (``mask`` keeps its opacity)
+WRAPPERS = {"NormalMap": "normal map", "BumpMap": "bump map", "Mask": "nothing"}
+
+
+def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
+    """UsdPreviewSurface inputs of ``(1 - w) a + w b`` and how it was made.
+
+    Same workflow: every input blended linearly (colours, textures texel by texel or with the other's
+    constant, roughness), an approximation of the blended lobes. Different workflows: the dominant one."""
+    if a.get("useSpecularWorkflow") != b.get("useSpecularWorkflow"):
+        return (dict(b) if w > 0.5 else dict(a)), "BSDFs of different UsdPreviewSurface workflows: the heavier one is kept"
+    out = {}
+    for k in dict.fromkeys([*a, *b]):
+        if k == "useSpecularWorkflow":
+            out[k] = a[k]
+            continue
+        va, vb = a.get(k, b.get(k)), b.get(k, a.get(k))
+        if isinstance(va, TextureMap) or isinstance(vb, TextureMap):
+            ia = va.image if isinstance(va, TextureMap) else np.asarray(va, np.float64)
+            ib = vb.image if isinstance(vb, TextureMap) else np.asarray(vb, np.float64)
+            if isinstance(va, TextureMap) and isinstance(vb, TextureMap) and ia.shape != ib.shape:
+                ib = ib.reshape(-1, 3).mean(0)  # different resolutions: the second by its mean
+            what = va.what if isinstance(va, TextureMap) else vb.what
+            out[k] = TextureMap((1.0 - w) * ia + w * ib, f"blend of {what}")
+        else:
+            out[k] = (1.0 - w) * np.asarray(va, np.float64) + w * np.asarray(vb, np.float64)
+            if np.ndim(out[k]) == 0:
+                out[k] = float(out[k])
+    return out, "parameters blended linearly (an approximation of the blended lobes)"
+
+
+def _is_one_sided(bsdf) -> bool:
+    """True for a BSDF that Mitsuba shades on its front side only (not twosided, not a dielectric, not null)."""
+    if bsdf is None:
+        return False
+    cls = _class_name(bsdf)
+    return cls != "Null" and "Dielectric" not in cls and "TwoSided" not in str(bsdf)
 
 
 def _two_sides_differ(text: str) -> bool:

@@ -1,0 +1,308 @@
+"""Conversion fidelity: small Mitsuba scenes rendered by Mitsuba and, after ``convert-scene``, by the reference renderer.
+
+Each scene (``SCENES``) is a Mitsuba XML written by code, with the files it needs. ``measure`` renders
+it twice with Mitsuba (``llvm_ad_rgb``, seeds 1 and 2) and once with the reference renderer from
+the converted stage, at the same size and sample count, and reports
+
+* ``ratio``: mean of the reference renderer's image / mean of Mitsuba's (seed 1), per channel;
+* ``psnr``: PSNR of the reference renderer's image against Mitsuba's (seed 1);
+* ``psnr_seed``: PSNR of Mitsuba seed 2 against seed 1, the ceiling set by Mitsuba's noise alone;
+* ``noise_ratio``: MSE(reference renderer, Mitsuba) / (the MSE that the two images' noise alone explains:
+  half the MSE of the two Mitsuba seeds plus the reference renderer's own variance of the pixel mean).
+  About 1 for a faithful conversion; bias and misplaced structure raise it. It separates conversion
+  errors from the reference renderer simply being noisier than Mitsuba at equal spp (which lowers
+  ``psnr`` below ``psnr_seed`` without any conversion error).
+
+PSNR uses the peak ``max`` of Mitsuba's seed-1 image: ``10 log10(peak^2 / MSE)``. A faithful conversion
+has ratio 1 (within noise) and ``psnr`` close to ``psnr_seed`` (both images carry the same amount
+of noise). ``python -m nasset_converters.mitsuba.fidelity`` writes the table at full size into
+docs/conversion-fidelity.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+HEADER = """<scene version="3.0.0">
+<integrator type="path"><integer name="max_depth" value="{depth}"/></integrator>
+<sensor type="perspective"><float name="fov" value="40"/>
+ <transform name="to_world"><lookat origin="{origin}" target="0, 0.3, 0" up="0, 1, 0"/></transform>
+ <film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/>{rfilter}</film>
+</sensor>
+"""
+BOX = '<rfilter type="box"/>'
+FLOOR = """<shape type="rectangle" id="floor"><transform name="to_world"><rotate x="1" angle="-90"/><scale value="2"/></transform>
+ {bsdf}</shape>
+"""
+SUN = ('<emitter type="directional" id="sun"><vector name="direction" value="-0.4, -0.8, -0.45"/>'
+       '<rgb name="irradiance" value="2.5, 2.4, 2.2"/></emitter>\n')
+SKY = '<emitter type="constant" id="sky"><rgb name="radiance" value="0.3, 0.35, 0.45"/></emitter>\n'
+
+
+def _checker_png(path: Path, colors, n: int = 64, squares: int = 8) -> None:
+    """An 8-bit sRGB PNG of a ``squares`` x ``squares`` checkerboard of two colours (uint8 triples), with a
+    gradient on one axis so that flips and offsets show."""
+    from nasset_sdk.images import write_png
+
+    y, x = np.mgrid[0:n, 0:n]
+    sq = ((x * squares // n) + (y * squares // n)) % 2
+    img = np.where(sq[..., None] == 0, np.asarray(colors[0], np.float64), np.asarray(colors[1], np.float64))
+    img = img * (0.55 + 0.45 * (y / (n - 1)))[..., None]  # darker toward the top row
+    write_png(path, np.clip(np.round(img), 0, 255).astype(np.uint8))
+
+
+def _textures(folder: Path, size: int) -> str:
+    _checker_png(folder / "floor.png", [(230, 200, 120), (60, 90, 160)])
+    _checker_png(folder / "ball.png", [(250, 70, 40), (240, 240, 230)], squares=6)
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0.9, 1.5, 2.6", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+                                '<string name="filename" value="floor.png"/></texture></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0" y="0.45" z="0"/><float name="radius" value="0.45"/>\n'
+              ' <bsdf type="principled"><texture type="bitmap" name="base_color"><string name="filename" value="ball.png"/>'
+              '</texture><float name="roughness" value="0.6"/></bsdf></shape>\n'
+            + SUN + SKY + "</scene>")
+
+
+def _sidedness(folder: Path, size: int) -> str:
+    # one-sided diffuse panels seen from the front and from behind (black in Mitsuba), a twosided one, and a
+    # twosided one with a different back BSDF seen from behind
+    panel = ('<shape type="rectangle" id="{id}"><transform name="to_world"><scale value="0.5"/><rotate y="1" angle="{a}"/>'
+             '<translate x="{x}" y="0.6"/></transform><bsdf type="{t}">{inner}</bsdf></shape>\n')
+    diffuse = '<rgb name="reflectance" value="0.8, 0.5, 0.2"/>'
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.2, 2.8", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + panel.format(id="front", a=20, x=-0.6, t="diffuse", inner=diffuse)
+            + panel.format(id="back", a=200, x=0.6, t="diffuse", inner=diffuse)
+            + panel.format(id="both", a=160, x=0.0, t="twosided", inner=f'<bsdf type="diffuse">{diffuse}</bsdf>')
+            + panel.format(id="two", a=180, x=0.0, t="twosided", inner=f'<bsdf type="diffuse">{diffuse}</bsdf><bsdf type="diffuse">'
+                           '<rgb name="reflectance" value="0.2, 0.4, 0.9"/></bsdf>').replace('y="0.6"', 'y="1.3"')
+            + SUN + SKY + "</scene>")
+
+
+def _spot(folder: Path, size: int) -> str:
+    spot = ('<emitter type="spot" id="spot"><transform name="to_world"><lookat origin="0.5, 1.8, 0.4" target="-0.2, 0, 0" '
+            'up="0, 1, 0"/></transform><rgb name="intensity" value="12, 11, 9"/><float name="cutoff_angle" value="22"/>'
+            '<float name="beam_width" value="15"/></emitter>\n')
+    point = ('<emitter type="point" id="bulb"><point name="position" x="-1.2" y="1.0" z="0.8"/>'
+             '<rgb name="intensity" value="0.6, 0.7, 1.0"/></emitter>\n')
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 2.2, 3.0", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="-0.2"/><float name="radius" value="0.3"/>\n'
+              ' <bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.6, 0.3"/></bsdf></shape>\n'
+            + spot + point + "</scene>")
+
+
+def _defaults(folder: Path, size: int) -> str:
+    # Mitsuba's defaults: unbounded path length (max_depth -1) and the Gaussian reconstruction filter (no rfilter
+    # element), in an open-fronted box of bright walls where long paths carry much of the light
+    def wall(wid, rotate, translate, rgb):
+        return (f'<shape type="rectangle" id="{wid}"><transform name="to_world">{rotate}<translate {translate}/>'
+                f'</transform><bsdf type="diffuse"><rgb name="reflectance" value="{rgb}"/></bsdf></shape>\n')
+
+    white = "0.9, 0.9, 0.88"
+    return (HEADER.format(depth=-1, rfilter="", origin="0, 1, 3.2", size=size).replace('target="0, 0.3, 0"', 'target="0, 1, 0"')
+            + wall("floor", '<rotate x="1" angle="-90"/>', 'y="0"', white)
+            + wall("ceiling", '<rotate x="1" angle="90"/>', 'y="2"', white)
+            + wall("back", "", 'y="1" z="-1"', white)
+            + wall("left", '<rotate y="1" angle="90"/>', 'x="-1" y="1"', "0.9, 0.3, 0.25")
+            + wall("right", '<rotate y="1" angle="-90"/>', 'x="1" y="1"', "0.3, 0.9, 0.3")
+            + '<emitter type="point" id="bulb"><point name="position" x="0" y="1.6" z="0"/>'
+              '<rgb name="intensity" value="3, 3, 3"/></emitter>\n'
+            + "</scene>")
+
+
+def _wrappers(folder: Path, size: int) -> str:
+    from nasset_sdk.images import write_png
+
+    write_png(folder / "flat.png", np.full((4, 4, 3), (128, 128, 255), np.uint8))  # tangent-space +Z: the mesh normal
+    diffuse = '<bsdf type="diffuse"><rgb name="reflectance" value="{}"/></bsdf>'
+
+    def ball(bid, x, bsdf):
+        return (f'<shape type="sphere" id="{bid}"><point name="center" x="{x}" y="0.3" z="0"/><float name="radius" '
+                f'value="0.3"/>{bsdf}</shape>\n')
+
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.4, 2.8", size=size)
+            + FLOOR.format(bsdf='<bsdf type="blendbsdf"><float name="weight" value="0.3"/>' + diffuse.format("0.8, 0.2, 0.1")
+                           + diffuse.format("0.1, 0.3, 0.8") + "</bsdf>")
+            + ball("normal", -0.7, '<bsdf type="normalmap"><texture type="bitmap" name="normalmap"><string name="filename" '
+                   'value="flat.png"/><boolean name="raw" value="true"/></texture>' + diffuse.format("0.7, 0.7, 0.2") + "</bsdf>")
+            + ball("bump", 0.0, '<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="flat.png"/>'
+                   '<boolean name="raw" value="true"/></texture>' + diffuse.format("0.2, 0.7, 0.7") + "</bsdf>")
+            + ball("mask", 0.7, '<bsdf type="mask"><float name="opacity" value="1"/>' + diffuse.format("0.7, 0.2, 0.7") + "</bsdf>")
+            + SUN + SKY + "</scene>")
+
+
+def _instances(folder: Path, size: int) -> str:
+    group = ('<shape type="shapegroup" id="group">\n'
+             ' <shape type="sphere" id="head"><point name="center" x="0" y="0.45" z="0"/><float name="radius" value="0.15"/>'
+             '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.3, 0.1"/></bsdf></shape>\n'
+             ' <shape type="cube" id="body"><transform name="to_world"><scale x="0.15" y="0.15" z="0.15"/><translate y="0.15"/>'
+             '</transform><bsdf type="roughplastic"><rgb name="diffuse_reflectance" value="0.2, 0.5, 0.8"/></bsdf></shape>\n'
+             '</shape>\n')
+    inst = ('<shape type="instance" id="{id}"><ref id="group"/><transform name="to_world"><rotate y="1" angle="{a}"/>'
+            '<translate x="{x}" z="{z}"/></transform></shape>\n')
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.4, 2.8", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + group + inst.format(id="a", a=0, x=-0.7, z=0) + inst.format(id="b", a=30, x=0, z=-0.3)
+            + inst.format(id="c", a=60, x=0.7, z=0.2) + SUN + SKY + "</scene>")
+
+
+def _mesh_emitter(folder: Path, size: int) -> str:
+    # an area emitter on an OBJ quad facing down (front side only, as Mitsuba emits), above a floor and a ball
+    (folder / "panel.obj").write_text("v -0.4 1.6 -0.4\nv 0.4 1.6 -0.4\nv 0.4 1.6 0.4\nv -0.4 1.6 0.4\nf 1 2 3 4\n")
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.2, 2.8", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0.2" y="0.3" z="0"/><float name="radius" value="0.3"/>'
+              '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.4, 0.2"/></bsdf></shape>\n'
+            + '<shape type="obj" id="panel"><string name="filename" value="panel.obj"/>'
+              '<emitter type="area"><rgb name="radiance" value="6, 6, 5"/></emitter></shape>\n'
+            + "</scene>")
+
+
+def _envmap(folder: Path, size: int) -> str:
+    # a coarse, high-contrast lat-long map seen directly behind the objects: its interpolation shows
+    from nasset_sdk.images import write_exr
+
+    h, w = 8, 16
+    v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    img = np.stack([0.2 + 1.5 * ((np.floor(u * 4) + np.floor(v * 2)) % 2), 0.3 + u, 0.2 + 0.8 * (1 - v)], -1)
+    write_exr(folder / "sky.exr", img.astype(np.float32))
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 0.9, 2.6", size=size).replace('target="0, 0.3, 0"', 'target="0, 0.6, 0"')
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0" y="0.4" z="0"/><float name="radius" value="0.4"/>'
+              '<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.7, 0.7"/></bsdf></shape>\n'
+            + '<emitter type="envmap" id="sky"><string name="filename" value="sky.exr"/><transform name="to_world">'
+              '<rotate y="1" angle="40"/></transform></emitter>\n'
+            + "</scene>")
+
+
+@dataclass
+class FidelityScene:
+    """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
+
+    name: str
+    write: object
+    what: str
+    unsupported: str = ""  # why the conversion does not render like Mitsuba; "" when it does
+
+
+SCENES = {
+    "textures": FidelityScene("textures", _textures, "8-bit sRGB PNG bitmaps on a floor (diffuse) and a sphere (principled)"),
+    "spot": FidelityScene("spot", _spot, "spot light (cutoff 22 deg, beam 15 deg) and a point light over a floor and a ball"),
+    "defaults": FidelityScene("defaults", _defaults, "Mitsuba defaults: max_depth -1 (unbounded) and the Gaussian "
+                              "reconstruction filter, bright diffuse walls"),
+    "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (flat), "
+                              "mask (opaque) around diffuse BSDFs"),
+    "instances": FidelityScene("instances", _instances, "shapegroup (sphere + cube) placed by three instances"),
+    "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "area emitter on an OBJ quad (a mesh light: "
+                                  "light-sampled with MIS)"),
+    "envmap": FidelityScene("envmap", _envmap, "coarse high-contrast envmap (16 x 8) seen behind a ball, rotated 40 deg"),
+    "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; twosided "
+                               "panels, one with a different back BSDF"),
+}
+
+
+def psnr(img: np.ndarray, ref: np.ndarray) -> float:
+    """PSNR (dB) of ``img`` against ``ref`` (both [H, W, 3]) with peak ``max(ref)``; inf for identical images."""
+    mse = float(np.mean((np.asarray(img, np.float64) - ref) ** 2))
+    peak = float(np.max(ref))
+    return math.inf if mse <= 0 else 10.0 * math.log10(max(peak, 1e-30) ** 2 / mse)
+
+
+def measure(name: str, folder, *, size: int = 32, spp: int = 64) -> dict:
+    """Render scene ``name`` with Mitsuba (two seeds) and converted with the reference renderer (module docstring).
+
+    Returns {"ratio": [3], "psnr", "psnr_seed", "warnings": [...], "images": (mitsuba1, mitsuba2, nasset)}.
+    """
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    from . import load_mitsuba
+    from .usd_export import convert_scene
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    xml = folder / f"{name}.xml"
+    xml.write_text(SCENES[name].write(folder, size))
+    mi = load_mitsuba()
+    scene = mi.load_file(str(xml))
+    a = np.asarray(mi.render(scene, spp=spp, seed=1), np.float64)[..., :3]
+    b = np.asarray(mi.render(scene, spp=spp, seed=2), np.float64)[..., :3]
+    res = convert_scene(xml, folder / f"{name}.usda", check_usd=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        usd = load_scene(str(res.output))
+    result = render(usd, RenderSettings(spp=spp, width=size, height=size, seed=5))  # depth, filter: from the stage
+    out = result.image
+    ratio = out.reshape(-1, 3).mean(0) / np.maximum(a.reshape(-1, 3).mean(0), 1e-30)
+    noise = float(np.mean((a - b) ** 2)) / 2.0 + float(np.mean(result.variance))
+    noise_ratio = float(np.mean((out - a) ** 2)) / max(noise, 1e-300)
+    return {"ratio": ratio.tolist(), "psnr": psnr(out, a), "psnr_seed": psnr(b, a), "noise_ratio": noise_ratio,
+            "warnings": list(res.warnings), "images": (a, b, out)}
+
+
+def table(results: dict) -> str:
+    """Markdown table of ``measure`` results keyed by scene name."""
+    rows = ["| scene | what | ratio R / G / B | PSNR (dB) | Mitsuba seed-to-seed PSNR (dB) | MSE / noise |",
+            "|---|---|---|---|---|---|"]
+    for name, r in results.items():
+        ratio = " / ".join(f"{x:.3f}" for x in r["ratio"])
+        what = SCENES[name].what + (f" (**unsupported**: {SCENES[name].unsupported})" if SCENES[name].unsupported else "")
+        rows.append(f"| {name} | {what} | {ratio} | {r['psnr']:.1f} | {r['psnr_seed']:.1f} | {r['noise_ratio']:.2f} |")
+    return "\n".join(rows) + "\n"
+
+
+NOTES = """
+- *ratio*: mean of the reference renderer's image over Mitsuba's (seed 1), per channel. *PSNR*: against
+  Mitsuba seed 1, peak = its maximum; the seed-to-seed PSNR (Mitsuba seed 2 against seed 1) is the
+  ceiling set by Mitsuba's noise. *MSE / noise*: the MSE against Mitsuba over what the two images'
+  noise explains (half Mitsuba's seed-to-seed MSE plus the reference renderer's variance of the
+  pixel mean); about 1 when the conversion is faithful.
+- A PSNR below the seed-to-seed PSNR with MSE / noise near 1 is the reference renderer being noisier
+  than Mitsuba at equal spp, not a conversion error (defaults: Gaussian filter drawn by importance
+  sampling, and Russian roulette from depth 3).
+- Residuals: mesh_emitter is 0.9 % dark with MSE / noise 1.7 (the renderer's light-sampled and
+  BSDF-only estimates agree within 0.3 %, so the difference is in the scene, likely the tessellated
+  ball next to the emitter); envmap keeps MSE / noise 1.7 from the resampled map (8x, nearest texels)
+  against Mitsuba's bilinear lookup.
+- Before these conversions the issue measured (ratio, PSNR vs seed-to-seed): 8-bit textures 1.8-2.0
+  (10.2 vs 35.4 dB), spot 4.5-5.3 (9.4 vs 37.2), instances dropped 1.07-1.19 (24.5 vs 42.0),
+  one-sided back faces 0.88-2.01 (15.9 vs 36.4), mesh emitter 1.02 (24.3 vs 37.6).
+"""
+
+
+def main(argv=None) -> int:
+    """Measure every scene and write the table (``--out``, default docs/conversion-fidelity.md)."""
+    import tempfile
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="docs/conversion-fidelity.md")
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument("--scenes", nargs="*", default=list(SCENES))
+    args = ap.parse_args(argv)
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.scenes:
+            results[name] = measure(name, Path(tmp) / name, size=args.size, spp=args.spp)
+            print(name, {k: v for k, v in results[name].items() if k in ("ratio", "psnr", "psnr_seed", "noise_ratio")},
+                  flush=True)
+    from nasset_sdk.images import atomic_output
+
+    text = (f"# Conversion fidelity (Mitsuba -> convert-scene -> nasset render)\n\nGenerated by "
+            f"`python -m nasset_converters.mitsuba.fidelity --size {args.size} --spp {args.spp}` ({args.size} x "
+            f"{args.size} pixels, {args.spp} spp for both renderers); scenes and measures are defined in "
+            "`converters/mitsuba/fidelity.py`, and `tests/converters/test_conversion_fidelity.py` runs them at "
+            "32 x 32, 64 spp.\n\n" + table(results) + NOTES)
+    with atomic_output(args.out, "fidelity table") as tmp:
+        Path(tmp).write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

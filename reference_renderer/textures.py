@@ -1,0 +1,92 @@
+"""Image textures of UsdPreviewSurface inputs: ``UsdUVTexture`` read through ``UsdPrimvarReader_float2``.
+
+Lookup (spec/renderer.md#textures): texture coordinates ``st`` [N, 2] with ``st = (0, 0)`` at the
+image's bottom-left corner (USD's convention; image row 0 is the top), bilinear filtering between
+texel centres, ``wrapS`` / ``wrapT`` in {repeat, mirror, clamp, black}, then ``rgb * scale + bias``.
+Texels are linear radiometric values: an ``sRGB`` source colour space is decoded on load.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+WRAP_MODES = ("repeat", "mirror", "clamp", "black")
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """The sRGB electro-optical transfer function (IEC 61966-2-1), element-wise on values in [0, 1]."""
+    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _wrap(i: np.ndarray, n: int, mode: str) -> tuple[np.ndarray, np.ndarray]:
+    """Texel indices [N] (any integers) -> (indices inside 0 .. n-1, valid mask) under a wrap mode."""
+    if mode == "repeat":
+        return np.mod(i, n), np.ones(i.shape, bool)
+    if mode == "mirror":
+        k = np.mod(i, 2 * n)
+        return np.where(k < n, k, 2 * n - 1 - k), np.ones(i.shape, bool)
+    inside = (i >= 0) & (i < n)
+    return np.clip(i, 0, n - 1), inside if mode == "black" else np.ones(i.shape, bool)
+
+
+@dataclass
+class ImageTexture:
+    """A linear RGB image [H, W, 3] with its wrap modes and affine colour ``rgb * scale + bias``."""
+
+    image: np.ndarray
+    wrap_s: str = "repeat"
+    wrap_t: str = "repeat"
+    scale: np.ndarray = None  # [3]
+    bias: np.ndarray = None  # [3]
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        self.image = np.ascontiguousarray(self.image, np.float64)
+        self.scale = np.ones(3) if self.scale is None else np.asarray(self.scale, np.float64)
+        self.bias = np.zeros(3) if self.bias is None else np.asarray(self.bias, np.float64)
+
+    @property
+    def mean(self) -> np.ndarray:
+        """Mean colour [3] over the image (after scale and bias)."""
+        return self.image.reshape(-1, 3).mean(0) * self.scale + self.bias
+
+    def sample(self, st: np.ndarray) -> np.ndarray:
+        """Bilinear lookup at texture coordinates ``st`` [N, 2] -> colours [N, 3]."""
+        h, w = self.image.shape[:2]
+        st = np.nan_to_num(np.asarray(st, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        st = np.clip(st, -1e6, 1e6)  # floor() below stays an exact integer
+        x = st[:, 0] * w - 0.5
+        y = (1.0 - st[:, 1]) * h - 0.5
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+        out = np.zeros((len(st), 3))
+        for dy, wy in ((0, 1.0 - fy), (1, fy)):
+            yi, yok = _wrap(y0 + dy, h, self.wrap_t)
+            for dx, wx in ((0, 1.0 - fx), (1, fx)):
+                xi, xok = _wrap(x0 + dx, w, self.wrap_s)
+                out += np.where((yok & xok)[:, None], self.image[yi, xi], 0.0) * (wx * wy)
+        return out * self.scale + self.bias
+
+
+@dataclass
+class TexturedDiffuse:
+    """A material whose ``diffuseColor`` is a texture: ``kd = c * kd_weight``, ``F0 = f0_base + c * f0_weight``.
+
+    ``c`` [N, 3] is the texture's colour clamped to [0, 1]; the weights carry the metallic workflow
+    (``kd_weight = 1 - metallic``, ``f0_weight = metallic``) or the specular one (1 and 0).
+    """
+
+    texture: ImageTexture
+    varname: str
+    kd_weight: float
+    f0_base: np.ndarray  # [3]
+    f0_weight: float
+
+    def lookup(self, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(kd [N, 3], F0 [N, 3]) at texture coordinates ``st`` [N, 2]."""
+        c = np.clip(self.texture.sample(st), 0.0, 1.0)
+        return c * self.kd_weight, self.f0_base + c * self.f0_weight

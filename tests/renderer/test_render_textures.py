@@ -1,0 +1,164 @@
+"""Image textures (UsdUVTexture through UsdPrimvarReader_float2) and one-sided surfaces (doubleSided = false)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.testscenes import SceneBuilder
+from nasset_reference_renderer.textures import ImageTexture, srgb_to_linear
+from nasset_sdk.images import write_exr
+
+
+def test_srgb_decode_matches_the_standard_formula():
+    # IEC 61966-2-1 values: 0.5 -> 0.214041, 0.04045 (the knee) -> 0.04045 / 12.92, 1 -> 1
+    np.testing.assert_allclose(srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])),
+                               [0.0, 0.04045 / 12.92, 0.2140411, 1.0], rtol=1e-6)
+
+
+def test_bilinear_lookup_reproduces_a_linear_image_and_wraps():
+    h, w = 6, 8
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    img = np.stack([x, y, 2 * x + 3 * y], -1)  # linear in the texel indices
+    tex = ImageTexture(img, "repeat", "repeat")
+    rng = np.random.default_rng(1)
+    # st whose texel coordinates stay between texel centres (no wrap involved)
+    px, py = rng.uniform(0, w - 1, 200), rng.uniform(0, h - 1, 200)
+    st = np.stack([(px + 0.5) / w, 1.0 - (py + 0.5) / h], 1)  # t = 0 is the bottom row
+    np.testing.assert_allclose(tex.sample(st), np.stack([px, py, 2 * px + 3 * py], 1), atol=1e-9)
+    np.testing.assert_allclose(tex.sample(st + [3.0, -2.0]), tex.sample(st), atol=1e-9)  # repeat is periodic
+    mirror = ImageTexture(img, "mirror", "mirror")
+    np.testing.assert_allclose(mirror.sample(np.array([[-0.2, 0.4]])), mirror.sample(np.array([[0.2, 0.4]])), atol=1e-9)
+    black = ImageTexture(img + 1.0, "black", "black")
+    assert np.all(black.sample(np.array([[-0.5, 0.5], [0.5, 1.5]])) == 0.0)
+    clamp = ImageTexture(img, "clamp", "clamp")
+    np.testing.assert_allclose(clamp.sample(np.array([[5.0, 0.5]]))[0, 0], w - 1)
+    scaled = ImageTexture(img, scale=[2, 2, 2], bias=[1, 1, 1])
+    np.testing.assert_allclose(scaled.sample(st), 2 * tex.sample(st) + 1, atol=1e-9)
+
+
+def _textured_quad_scene(tmp_path, space: str):
+    """A 4 x 4 floor under a distant light, seen from above; its diffuseColor is a 2 x 1 texture (left texel 0.5,
+    right texel (0.9, 0.2, 0.1)) with clamp wrap, st running 0 .. 1 across the floor."""
+    from pxr import Sdf, UsdGeom, UsdShade
+
+    write_exr(tmp_path / "t.exr", np.array([[[0.5, 0.5, 0.5], [0.9, 0.2, 0.1]]], np.float32))
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=14)  # the floor fills the view, with a margin
+    quad = b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0, 0, 0), specular=(0, 0, 0), roughness=1.0)
+    pts = np.asarray(quad.GetPointsAttr().Get())
+    b.distant("Sun", (0.3, 1.0, 0.2), 2.0)
+    st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    UsdGeom.PrimvarsAPI(quad).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
+    surf = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface"))
+    reader = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/st")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    node = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/tex")
+    node.CreateIdAttr("UsdUVTexture")
+    node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./t.exr")
+    node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
+    for k in ("wrapS", "wrapT"):
+        node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("clamp")
+    node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+    surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(node.ConnectableAPI(), "rgb")
+    return b.write(tmp_path / "s.usda"), pts
+
+
+@pytest.mark.parametrize("space, left, right", [("raw", 0.5, (0.9, 0.2, 0.1)),
+                                                ("sRGB", 0.2140411, (0.787412, 0.0331048, 0.0100228))])
+def test_textured_floor_shows_each_texel_where_its_st_falls(tmp_path, space, left, right):
+    path, pts = _textured_quad_scene(tmp_path, space)
+    scene = load_scene(path)
+    assert scene.materials.textured
+    w = h = 24
+    img = render(scene, RenderSettings(spp=4, width=w, height=h, max_depth=1)).image
+    # s of each pixel centre from the camera ray's hit on the floor plane y = 0 (independent of the renderer's lookup)
+    ys, xs = np.mgrid[0:h, 0:w]
+    o, d = scene.camera.generate_rays(xs.ravel() + 0.5, ys.ravel() + 0.5, w, h)
+    hit = o + d * (-o[:, 1] / d[:, 1])[:, None]
+    e0, e1 = pts[1] - pts[0], pts[3] - pts[0]
+    s = (hit - pts[0]) @ e0 / (e0 @ e0)
+    t = (hit - pts[0]) @ e1 / (e1 @ e1)
+    light = np.array([0.3, 1.0, 0.2]) / np.linalg.norm([0.3, 1.0, 0.2])
+    shade = 2.0 * light[1] / np.pi  # E cos / pi
+    px = img.reshape(-1, 3)
+    # pixel footprints on the floor (one pixel is ~0.04 in s) and away from the blend between the texel centres
+    inside = (t > 0.06) & (t < 0.94)
+    lo, hi = inside & (s > 0.06) & (s < 0.18), inside & (s > 0.82) & (s < 0.94)
+    assert lo.sum() > 20 and hi.sum() > 20
+    np.testing.assert_allclose(px[lo], np.full((lo.sum(), 3), left * shade), rtol=2e-3)
+    np.testing.assert_allclose(px[hi], np.tile(np.asarray(right) * shade, (hi.sum(), 1)), rtol=2e-3)
+
+
+@pytest.mark.parametrize("authored, normal_up, lit", [(None, False, True), (False, False, False), (False, True, True),
+                                                      (True, False, True)])
+def test_one_sided_surface_is_black_from_behind(tmp_path, authored, normal_up, lit):
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=200)
+    quad = b.quad("Floor", (0, 0, 0), 4.0, normal=(0, 1, 0) if normal_up else (0, -1, 0), diffuse=(0.5, 0.5, 0.5))
+    if authored is not None:
+        quad.CreateDoubleSidedAttr(authored)
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    img = render(load_scene(b.write(tmp_path / "s.usda")), RenderSettings(spp=1, width=4, height=4, max_depth=2)).image
+    assert (img.mean() > 0.1) == lit, img.mean()
+
+
+def test_spot_falloff_hand_values():
+    from nasset_reference_renderer.lights import spot_falloff
+
+    c = np.cos(np.radians([0.0, 14.9, 18.5, 21.9, 22.1, 90.0]))
+    # cone 22 deg, softness 7/22: beam 15 deg, then linear in angle to 0 at 22 deg (Mitsuba's spot)
+    np.testing.assert_allclose(spot_falloff(c, 22.0, 7.0 / 22.0), [1, 1, 0.5, 0.1 / 7, 0, 0], atol=1e-9)
+
+
+def test_spot_light_lights_its_cone_only(tmp_path):
+    from pxr import UsdLux
+
+    h, a, intensity, cone, soft = 2.0, 0.5, 4.0, 20.0, 0.25
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=14)
+    b.quad("Floor", (0, 0, 0), 6.0, diffuse=(a, a, a), specular=(0, 0, 0), roughness=1.0)
+    lt = b.sphere_light("Spot", (0, h, 0), 0.0, intensity)
+    lt.CreateTreatAsPointAttr(True)
+    from pxr import Gf, UsdGeom
+
+    op = UsdGeom.Xformable(lt.GetPrim()).GetOrderedXformOps()[0]  # local -Z -> world down
+    op.Set(Gf.Matrix4d(1, 0, 0, 0, 0, 0, -1, 0, 0, 1, 0, 0, 0, h, 0, 1))
+    shaping = UsdLux.ShapingAPI.Apply(lt.GetPrim())
+    shaping.CreateShapingConeAngleAttr(cone)
+    shaping.CreateShapingConeSoftnessAttr(soft)
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    w = 32
+    img = render(scene, RenderSettings(spp=32, width=w, height=w, max_depth=1)).image.reshape(-1, 3)[:, 0]
+    ys, xs = np.mgrid[0:w, 0:w]
+    o, d = scene.camera.generate_rays(xs.ravel() + 0.5, ys.ravel() + 0.5, w, w)
+    hit = o + d * (-o[:, 1] / d[:, 1])[:, None]
+    theta = np.degrees(np.arctan(np.hypot(hit[:, 0], hit[:, 2]) / h))
+    cos = np.cos(np.radians(theta))
+    full = a / np.pi * intensity * cos ** 3 / h ** 2  # E = I cos / d^2 with d = h / cos
+    beam = cone * (1 - soft)
+    inner, outer = theta < beam - 3.5, theta > cone + 3.5  # pixel footprints span up to ~3.4 degrees here
+    assert inner.sum() > 10 and outer.sum() > 10
+    np.testing.assert_allclose(img[inner], full[inner], rtol=1e-2)  # pixel-footprint means of a concave cos^3: a bit low
+    assert np.all(img[outer] == 0.0)
+    ramp = (theta > beam + 1.7) & (theta < cone - 1.7)
+    # in the ramp single pixels straddle its ends: compare the mean over the ramp's pixels
+    assert img[ramp].mean() == pytest.approx((full[ramp] * (cone - theta[ramp]) / (cone - beam)).mean(), rel=0.05)
+
+
+@pytest.mark.parametrize("file, code", [("https://example.com/t.exr", "SCENE_INVALID"), ("./bad.exr", "IMAGE_INVALID")])
+def test_texture_files_are_checked_like_other_asset_paths(tmp_path, file, code):
+    from pxr import Sdf, Usd, UsdShade
+
+    from nasset_sdk.errors import NassetError
+
+    path, _ = _textured_quad_scene(tmp_path, "raw")
+    (tmp_path / "bad.exr").write_bytes(b"not an OpenEXR file")
+    stage = Usd.Stage.Open(path)
+    UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/tex")).GetInput("file").Set(Sdf.AssetPath(file))
+    stage.GetRootLayer().Save()
+    with pytest.raises(NassetError) as exc:
+        load_scene(path)
+    assert exc.value.code == code, exc.value
