@@ -347,10 +347,10 @@ class Asset:
         register_schema()
         from pxr import Tf, Usd
 
-        from .paths import open_checked_stage
+        from .paths import open_checked_stage, outer_file
 
         p = Path(path)
-        if not p.is_file():
+        if not os.path.isfile(outer_file(str(p))):  # a file, or a layer inside a package: 'scene.usdz[a.usdc]'
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
         if probe:
             from .safeopen import ensure_readable
@@ -363,11 +363,18 @@ class Asset:
             raise error("FILE_UNREADABLE", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
         if stage is None:
             raise error("FILE_UNREADABLE", "USD cannot open it", file=str(p))
+        return cls.from_stage(p, stage, load=load, quality=quality)
+
+    @classmethod
+    def from_stage(cls, path: Path, stage, *, load: str | Iterable[str] = "required",
+                   quality: dict[str, str] | str | None = None) -> "Asset":
+        """An asset read from an opened ``stage`` whose default prim is its root (``path`` names it in messages);
+        the header is checked as in :meth:`open`, whose file and path checks the caller is responsible for."""
         default = stage.GetDefaultPrim()
         if not default or default.GetTypeName() != "NeuralAsset" or str(default.GetPath()) != ROOT:
-            raise error("ROOT_MISSING", f"defaultPrim must be a NeuralAsset at {ROOT}", file=str(p),
+            raise error("ROOT_MISSING", f"defaultPrim must be a NeuralAsset at {ROOT}", file=str(path),
                         prim=str(default.GetPath()) if default else None)
-        asset = cls(p, stage)
+        asset = cls(Path(path), stage)
         asset._check_header()
         if quality is not None:
             asset.select_quality(quality)
