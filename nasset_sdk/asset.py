@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
@@ -242,20 +241,20 @@ class AssetBuilder:
 
 
 def atomic_export(layer, target: Path) -> None:
-    """Export an Sdf layer to ``target`` via temp file + fsync + rename."""
+    """Export an Sdf layer to ``target`` via temp file + fsync + rename (:func:`~nasset_sdk.images.atomic_output`:
+    the file gets the permissions the process umask gives, as with a plain ``open``)."""
+    from .images import atomic_output
+
     target = Path(target)
     if not target.parent.is_dir():
         raise error("WRITE_FAILED", "target folder does not exist", file=str(target))
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=target.parent)
-        os.close(fd)
-        fmt_args = {"format": "usdc"} if target.suffix == ".usd" else {}
+    fmt_args = {"format": "usdc"} if target.suffix == ".usd" else {}
+    with atomic_output(target, "USD layer") as tmp:
         if not layer.Export(tmp, args=fmt_args):
-            raise error("WRITE_FAILED", "USD could not export the layer", file=str(target))
+            raise OSError("USD could not export the layer")
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
-        os.replace(tmp, target)
+    try:
         dir_fd = os.open(target.parent, os.O_RDONLY)
         try:
             os.fsync(dir_fd)
@@ -263,11 +262,6 @@ def atomic_export(layer, target: Path) -> None:
             os.close(dir_fd)
     except OSError as exc:
         raise error("WRITE_FAILED", f"{exc.strerror or exc}", file=str(target)) from None
-    except RuntimeError as exc:  # pxr.Tf.ErrorException from the export
-        raise error("WRITE_FAILED", f"USD could not export the layer: {str(exc).strip()[-200:]}", file=str(target)) from None
-    finally:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 # ----------------------------------------------------------------------------------------

@@ -195,6 +195,9 @@ class _Tracer:
     """Embree closest-hit queries over one triangle soup."""
 
     def __init__(self, points: np.ndarray, faces: np.ndarray) -> None:
+        from .extras import require_extras
+
+        require_extras("view", purpose="the per-pixel view")
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
