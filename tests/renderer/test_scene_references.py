@@ -142,3 +142,14 @@ def test_plain_usd_keeps_the_transform_of_the_recommended_pattern(reference):
     # the trap the recommended pattern avoids: an untyped prim is not Xformable for USD without the schema
     untyped = _plain_usd_center(_scene(folder, "./a.usdc", typed=False, name="plain_untyped.usda"))
     assert np.allclose(untyped, 0.0, atol=1e-6)
+
+
+def test_cli_search_path_flag(reference, tmp_path, capsys):
+    from nasset_sdk.cli import main
+
+    folder, _ = reference
+    scene = _scene(tmp_path, "a.usdc", name="bare_cli.usda")
+    out = tmp_path / "o.exr"
+    argv = ["render", str(scene), "-o", str(out), "--spp", "1", "--width", "8", "--height", "8", "--quiet"]
+    assert main(argv) == 1 and "[SCENE_INVALID]" in capsys.readouterr().err and not out.exists()
+    assert main(argv + ["--search-path", str(folder)]) == 0 and out.is_file()
