@@ -197,7 +197,7 @@ class _Tracer:
     def __init__(self, points: np.ndarray, faces: np.ndarray) -> None:
         from .extras import require_extras
 
-        require_extras("view", purpose="the per-pixel view")
+        require_extras("render", purpose="the per-pixel view (Embree ray casting)")
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
