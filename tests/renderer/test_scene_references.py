@@ -153,3 +153,26 @@ def test_cli_search_path_flag(reference, tmp_path, capsys):
     argv = ["render", str(scene), "-o", str(out), "--spp", "1", "--width", "8", "--height", "8", "--quiet"]
     assert main(argv) == 1 and "[SCENE_INVALID]" in capsys.readouterr().err and not out.exists()
     assert main(argv + ["--search-path", str(folder)]) == 0 and out.is_file()
+
+
+def test_search_path_asset_keeps_its_own_package(tmp_path, monkeypatch):
+    """An asset found through a search path is checked in the folder the resolver found it in (its package), not the
+    working folder: its in-package path renders, a path leaving that folder is refused."""
+    from pxr import Sdf
+
+    lib, shots = tmp_path / "lib", tmp_path / "shots"
+    lib.mkdir()
+    shots.mkdir()
+    (lib / "notes.txt").write_text("in the package")
+    (tmp_path / "outside.txt").write_text("outside")
+    for name, value in (("ok.usdc", "./notes.txt"), ("bad.usdc", str(tmp_path / "outside.txt"))):
+        constant_rna_asset(lib / name)
+        layer = Sdf.Layer.FindOrOpen(str(lib / name))
+        attr = Sdf.AttributeSpec(layer.GetPrimAtPath("/Asset"), "notes", Sdf.ValueTypeNames.Asset)
+        attr.default = Sdf.AssetPath(value)
+        layer.Save()
+    monkeypatch.chdir(shots)
+    assert _image(_scene(shots, "ok.usdc", name="ok.usda"), search_paths=[lib]).max() > 0
+    with pytest.raises(SceneError) as exc:
+        load_scene(_scene(shots, "bad.usdc", name="bad.usda"), search_paths=[lib])
+    assert exc.value.code == "SCENE_INVALID" and "outside.txt" in str(exc.value)
