@@ -37,12 +37,19 @@ def add_args(p) -> None:
 
 def run(args) -> int:
     """CLI entry: see ``nasset bake --help``."""
-    from nasset_sdk.errors import UsageError
+    from pathlib import Path
+
+    from nasset_sdk.errors import UsageError, error
+    from nasset_sdk.extras import require_extras
 
     from . import baker_for
+    from .registry import source_of
     from .stages import finite
 
     fn = baker_for(args.kind, args.scene, args.example)
+    if args.scene is not None and not Path(args.scene).is_file():  # before the extras: a typo is not a missing package
+        raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(args.scene))
+    require_extras("train", source_of(args.scene, args.example), purpose="nasset bake")
     if getattr(args, "clamp", None) is not None and args.kind == "8dna":
         raise UsageError("--clamp applies to rna and neupress bakes only")
     summary = fn(

@@ -27,6 +27,9 @@ def add_args(p) -> None:
 
 def run(args) -> int:
     """Run the benchmark module picked by ``args.which``."""
+    from nasset_sdk.extras import require_extras
+
+    require_extras("render", "bench", purpose="nasset bench")
     return load_target(f"{BENCHES[args.which][1]}:run")(args)
 
 

@@ -300,7 +300,9 @@ class EightDnaAsset:
     def _read(self, threads):
         from pxr import Usd, UsdGeom
 
-        if not os.path.exists(self.path):
+        from nasset_sdk.paths import outer_file
+
+        if not os.path.exists(outer_file(str(self.path))):  # a file, or a layer inside a usdz package
             raise self._fail("SCENE_INVALID", "referenced asset file does not exist")
         try:
             stage = Usd.Stage.Open(self.path, Usd.Stage.LoadNone)

@@ -71,7 +71,9 @@ def open_root(path: str):
     default prim and the spec major version (spec/format.md)."""
     from pxr import Usd
 
-    if not os.path.exists(path):
+    from nasset_sdk.paths import outer_file
+
+    if not os.path.exists(outer_file(str(path))):  # a file, or a layer inside a usdz package
         raise _fail(path, "SCENE_INVALID", "referenced asset file does not exist")
     try:
         stage = Usd.Stage.Open(str(path), Usd.Stage.LoadNone)

@@ -188,6 +188,7 @@ def read_scene(path: str) -> SceneDesc:
     from pxr import Usd, UsdGeom, UsdLux
 
     import nasset_sdk  # noqa: F401  (registers the codeless schema so NeuralAsset is a known type)
+    from nasset_sdk.references import asset_source
 
     path = str(path)
     if not os.path.exists(path):
@@ -207,9 +208,13 @@ def read_scene(path: str) -> SceneDesc:
             continue
         tn = prim.GetTypeName()
         ppath = str(prim.GetPath())
-        if tn == "NeuralAsset" or (tn == "" and (prim.HasAuthoredReferences() or prim.HasAuthoredPayloads())):
-            file = _asset_target(prim)
-            if tn == "NeuralAsset" or (file and _looks_like_asset(file)):
+        source = asset_source(prim)  # the asset's root reached through composition, whatever the prim's type
+        if source is not None or tn == "NeuralAsset" or (tn == "" and (prim.HasAuthoredReferences() or prim.HasAuthoredPayloads())):
+            if source is not None and source.embedded:
+                raise SceneError("SCENE_UNSUPPORTED", "an asset embedded in a flattened scene (render it with nasset render, "
+                                 "or reference the asset file)", file=path, prim=ppath)
+            file = source.layer if source is not None else _asset_target(prim)
+            if source is not None or tn == "NeuralAsset" or (file and _looks_like_asset(file)):
                 it.PruneChildren()
                 if not file:
                     raise SceneError("SCENE_INVALID", "NeuralAsset prim references no asset file", file=path, prim=ppath)

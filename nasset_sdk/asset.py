@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
@@ -294,20 +293,20 @@ class AssetBuilder:
 
 
 def atomic_export(layer, target: Path) -> None:
-    """Export an Sdf layer to ``target`` via temp file + fsync + rename."""
+    """Export an Sdf layer to ``target`` via temp file + fsync + rename (:func:`~nasset_sdk.images.atomic_output`:
+    the file gets the permissions the process umask gives, as with a plain ``open``)."""
+    from .images import atomic_output
+
     target = Path(target)
     if not target.parent.is_dir():
         raise error("WRITE_FAILED", "target folder does not exist", file=str(target))
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=target.parent)
-        os.close(fd)
-        fmt_args = {"format": "usdc"} if target.suffix == ".usd" else {}
+    fmt_args = {"format": "usdc"} if target.suffix == ".usd" else {}
+    with atomic_output(target, "USD layer") as tmp:
         if not layer.Export(tmp, args=fmt_args):
-            raise error("WRITE_FAILED", "USD could not export the layer", file=str(target))
+            raise OSError("USD could not export the layer")
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
-        os.replace(tmp, target)
+    try:
         dir_fd = os.open(target.parent, os.O_RDONLY)
         try:
             os.fsync(dir_fd)
@@ -315,11 +314,6 @@ def atomic_export(layer, target: Path) -> None:
             os.close(dir_fd)
     except OSError as exc:
         raise error("WRITE_FAILED", f"{exc.strerror or exc}", file=str(target)) from None
-    except RuntimeError as exc:  # pxr.Tf.ErrorException from the export
-        raise error("WRITE_FAILED", f"USD could not export the layer: {str(exc).strip()[-200:]}", file=str(target)) from None
-    finally:
-        if tmp is not None and os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 # ----------------------------------------------------------------------------------------
@@ -411,10 +405,10 @@ class Asset:
         register_schema()
         from pxr import Tf, Usd
 
-        from .paths import open_checked_stage
+        from .paths import open_checked_stage, outer_file
 
         p = Path(path)
-        if not p.is_file():
+        if not os.path.isfile(outer_file(str(p))):  # a file, or a layer inside a package: 'scene.usdz[a.usdc]'
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
         if probe:
             from .safeopen import ensure_readable
@@ -427,11 +421,18 @@ class Asset:
             raise error("FILE_UNREADABLE", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
         if stage is None:
             raise error("FILE_UNREADABLE", "USD cannot open it", file=str(p))
+        return cls.from_stage(p, stage, load=load, quality=quality)
+
+    @classmethod
+    def from_stage(cls, path: Path, stage, *, load: str | Iterable[str] = "required",
+                   quality: dict[str, str] | str | None = None) -> "Asset":
+        """An asset read from an opened ``stage`` whose default prim is its root (``path`` names it in messages);
+        the header is checked as in :meth:`open`, whose file and path checks the caller is responsible for."""
         default = stage.GetDefaultPrim()
         if not default or default.GetTypeName() != "NeuralAsset" or str(default.GetPath()) != ROOT:
-            raise error("ROOT_MISSING", f"defaultPrim must be a NeuralAsset at {ROOT}", file=str(p),
+            raise error("ROOT_MISSING", f"defaultPrim must be a NeuralAsset at {ROOT}", file=str(path),
                         prim=str(default.GetPath()) if default else None)
-        asset = cls(p, stage)
+        asset = cls(Path(path), stage)
         asset._check_header()
         if quality is not None:
             asset.select_quality(quality)

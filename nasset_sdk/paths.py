@@ -295,11 +295,21 @@ def scene_path_problem(asset_path: str, kind: str, anchor: str | os.PathLike | N
         return "is relative to a home folder"
     if not (t.startswith("/") or t.startswith("./") or t.startswith("../")):
         beside = os.path.join(os.path.dirname(os.fspath(anchor)), outer_file(t)) if anchor else ""
-        if not (beside and os.path.isfile(beside)):
-            return "is a bare search-path form not found next to the scene layer; anchor it with './'"
+        if not (beside and os.path.isfile(beside)) and not (anchor and _resolves_to_file(s, anchor)):
+            return "is a bare search-path form that the resolver (search paths, context) does not find; anchor it with './'"
     if kind in ARC_KINDS and not outer_file(t).lower().endswith(USD_LAYER_SUFFIXES):
         return f"is not a USD layer ({', '.join(USD_LAYER_SUFFIXES)})"
     return None
+
+
+def _resolves_to_file(asset_path: str, anchor) -> bool:
+    """True when Ar (with the bound resolver context: search paths, a studio resolver) resolves ``asset_path``
+    authored in the layer ``anchor`` to an existing local file."""
+    from pxr import Ar
+
+    resolver = Ar.GetResolver()
+    resolved = str(resolver.Resolve(resolver.CreateIdentifier(asset_path, Ar.ResolvedPath(os.fspath(anchor)))))
+    return bool(resolved) and os.path.isfile(outer_file(resolved))
 
 
 def _scene_resolve_problem(asset_path: str, anchor: str) -> str | None:
@@ -345,8 +355,8 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
         if layer is None:
             continue
         asset_layer = _is_asset_layer(layer)
-        if package is None and (asset_layer or not scene):
-            package = os.path.dirname(os.path.realpath(outer_file(identifier)))
+        if package is None and (asset_layer or not scene):  # where Ar found it (a search path too)
+            package = os.path.dirname(os.path.realpath(outer_file(layer.realPath or identifier)))
         found, follow = scan_layer(layer, package or "/", scene=scene and package is None)
         problems.extend(found)
         queue.extend((f, package) for f in follow)
@@ -364,7 +374,7 @@ def problems_error(problems: list[PathProblem], file: str | os.PathLike, *, code
 
 def ensure_regular_file(path: str | os.PathLike, *, code: str = "FILE_NOT_FOUND"):
     """Raise unless ``path`` is an existing regular file (checked with stat, never opened)."""
-    p = os.fspath(path)
+    p = outer_file(os.fspath(path))  # a layer inside a package is checked by its package file
     if not os.path.exists(p):
         raise error(code, "no such file", file=p)
     why = _not_regular(p)

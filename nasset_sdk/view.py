@@ -197,6 +197,9 @@ class _Tracer:
     """Embree closest-hit queries over one triangle soup."""
 
     def __init__(self, points: np.ndarray, faces: np.ndarray) -> None:
+        from .extras import require_extras
+
+        require_extras("render", purpose="the per-pixel view (Embree ray casting)")
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 

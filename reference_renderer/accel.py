@@ -35,6 +35,9 @@ class _Backend:
 
 class EmbreeBackend(_Backend):
     def __init__(self, triangles: np.ndarray) -> None:
+        from nasset_sdk.extras import require_extras
+
+        require_extras("render", purpose="ray casting with Embree")
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 

@@ -54,6 +54,9 @@ def check_writable(outputs: dict[str, str | None]) -> None:
 def run(args) -> int:
     import warnings
 
+    from nasset_sdk.extras import require_extras
+
+    require_extras("render", purpose="nasset render")
     from .film import check_image_size, tonemap, write_exr, write_png
     from .integrator import RenderSettings, check_settings, prepare_assets, render, resolve_settings
     from .plan import make_plan
@@ -73,7 +76,7 @@ def run(args) -> int:
     check_outputs(outputs, [os.path.realpath(args.scene)] if os.path.exists(args.scene) else [])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SceneWarning)
-        scene = load_scene(args.scene)
+        scene = load_scene(args.scene, search_paths=getattr(args, "search_path", None))
     check_outputs(outputs, input_files(scene))
     settings = resolve_settings(settings, scene)
     for w in scene.warnings:
@@ -108,6 +111,9 @@ def add_args(p) -> None:
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--max-depth", type=int, default=None,
                    help="scattering vertices per path (default: the scene's nasset:maxDepth render setting, else 5)")
+    p.add_argument("--search-path", action="append", default=None, metavar="DIR",
+                   help="folder where USD's resolver looks up bare asset paths of the scene (repeatable; "
+                        "PXR_AR_DEFAULT_SEARCH_PATH works too)")
     p.add_argument("--png", default=None, help="also write a tone-mapped PNG preview")
     p.add_argument("--variance", default=None, help="also write a per-pixel variance EXR")
     p.add_argument("--explain", action="store_true", help="print the render plan")

@@ -1,10 +1,11 @@
 """USD stage -> renderer arrays: camera, triangles with instance/material ids, lights, assets.
 
-Neural assets are found by prim type ``NeuralAsset`` (a ``def NeuralAsset`` or an untyped
-``def`` that references an asset file); their subtree is not traversed further (the asset's own
-Geometry and fallback material are for tools without neural support). Each distinct asset file
-is opened once (components are loaded later, by the plan); every referencing prim is an
-instance with its own transform.
+Neural assets are found by what composition brings to a prim (nasset_sdk.references): the asset's
+root, whatever the referencing prim's type (``def Xform`` is the recommended pattern; untyped and
+``def NeuralAsset`` prims work too), also inside usdz packages, through search paths and in
+flattened scenes. Their subtree is not traversed further (the asset's own Geometry and fallback
+material are for tools without neural support). Each distinct asset is opened once (components
+are loaded later, by the plan); every referencing prim is an instance with its own transform.
 """
 
 from __future__ import annotations
@@ -121,8 +122,10 @@ def _warn(scene_warnings: list, message: str) -> None:
     warnings.warn(message, SceneWarning, stacklevel=3)
 
 
-def open_stage(path: str):
-    from pxr import Tf, Usd
+def open_stage(path: str, context=None):
+    """Open a scene file after checking every layer it reaches; ``context``: an Ar resolver context
+    (nasset_sdk.references.resolver_context) bound while checking and composing."""
+    from pxr import Ar, Tf, Usd
 
     from nasset_sdk.plugin import register_schema
 
@@ -134,11 +137,13 @@ def open_stage(path: str):
         raise SceneError("SCENE_INVALID", "scene file does not exist", file=str(p))
     ensure_regular_file(p, code="SCENE_INVALID")
     # the scene and every layer it reaches are checked before anything composes (spec/security.md#paths)
-    problems = check_layer_tree(p, scene=True)
+    context = context if context is not None else Ar.GetResolver().CreateDefaultContextForAsset(str(p))
+    with Ar.ResolverContextBinder(context):
+        problems = check_layer_tree(p, scene=True)
     if problems:
         raise problems_error(problems, p, code="SCENE_INVALID")
     try:
-        stage = Usd.Stage.Open(str(p), Usd.Stage.LoadNone)
+        stage = Usd.Stage.Open(str(p), context, Usd.Stage.LoadNone)
     except Tf.ErrorException as exc:
         raise SceneError("SCENE_INVALID", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
     if stage is None:
@@ -152,12 +157,14 @@ def _load_scene_payloads(stage) -> None:
     without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""
     from pxr import Usd
 
+    from nasset_sdk.references import asset_source
+
     pred = Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
     for _ in range(32):  # payloads may bring further payloads; bounded against cycles
         todo = []
         it = iter(Usd.PrimRange(stage.GetPseudoRoot(), pred))
         for prim in it:
-            if prim.GetTypeName() == "NeuralAsset":
+            if prim.GetTypeName() == "NeuralAsset" or asset_source(prim) is not None:
                 it.PruneChildren()
             elif prim.HasAuthoredPayloads() and not prim.IsLoaded():
                 todo.append(prim.GetPath())
@@ -184,9 +191,13 @@ def is_asset_file(path: str) -> bool:
     return spec is not None and spec.typeName == "NeuralAsset"
 
 
-def load_scene(source, *, time=None) -> Scene:
-    """Load a scene from a path or an opened ``Usd.Stage``."""
-    from pxr import Usd
+def load_scene(source, *, time=None, search_paths=None) -> Scene:
+    """Load a scene from a path or an opened ``Usd.Stage`` (which keeps its own resolver context).
+
+    ``search_paths``: folders where USD's resolver looks up bare asset paths (``chair.usdc``) of a scene file."""
+    from pxr import Ar, Usd
+
+    from nasset_sdk.references import resolver_context
 
     if isinstance(source, (str, os.PathLike)):
         if is_asset_file(str(source)):
@@ -195,12 +206,13 @@ def load_scene(source, *, time=None) -> Scene:
             stage = studio_stage(str(source))
             file = str(source)
         else:
-            stage = open_stage(str(source))
+            stage = open_stage(str(source), resolver_context(search_paths))
             file = str(source)
     else:
         stage = source
         file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
-    return _Loader(stage, file, Usd.TimeCode.Default() if time is None else time).load()
+    with Ar.ResolverContextBinder(stage.GetPathResolverContext()):
+        return _Loader(stage, file, Usd.TimeCode.Default() if time is None else time).load()
 
 
 class _Loader:
@@ -240,6 +252,8 @@ class _Loader:
     def load(self) -> Scene:
         from pxr import Usd, UsdGeom, UsdLux
 
+        from nasset_sdk.references import asset_source
+
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
@@ -250,8 +264,9 @@ class _Loader:
                     it.PruneChildren()
                     continue
             tname = str(prim.GetTypeName())
-            if tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
-                self._neural(prim)
+            source = asset_source(prim)
+            if source is not None or tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
+                self._neural(prim, source)
                 it.PruneChildren()
             elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
                 self._light(prim, tname)
@@ -594,8 +609,15 @@ class _Loader:
     def _mesh(self, prim):
         from pxr import UsdGeom
 
+        from nasset_sdk.references import fallback_owner
+
         mesh = UsdGeom.Mesh(prim)
         path = str(prim.GetPath())
+        owner = fallback_owner(prim)
+        if owner:
+            self.warn(f"renders the grey fallback mesh of the neural asset {owner} as an ordinary mesh: the prim "
+                      "reaches the asset's geometry without its root; reference the asset file's default prim "
+                      "(spec/format.md#referencing-an-asset)", path)
         pts = mesh.GetPointsAttr().Get(self.time)
         counts = mesh.GetFaceVertexCountsAttr().Get(self.time)
         idx = mesh.GetFaceVertexIndicesAttr().Get(self.time)
@@ -704,22 +726,22 @@ class _Loader:
                         out.append(spec.layer.ComputeAbsolutePath(ref.assetPath))
         return out
 
-    def _neural(self, prim):
+    def _neural(self, prim, source):
         from pxr import UsdGeom
 
-        from nasset_sdk.asset import Asset
+        from nasset_sdk.references import open_source
 
         path = str(prim.GetPath())
-        refs = self._reference_paths(prim)
-        if not refs:
-            raise self.err("SCENE_INVALID", "NeuralAsset prim does not reference an asset file", path)
-        file = Path(refs[0])
-        if not file.is_file():
-            raise self.err("SCENE_INVALID", f"referenced asset file not found: {refs[0]}", path)
-        key = str(file.resolve())
+        if source is None:
+            refs = self._reference_paths(prim)
+            if not refs:
+                raise self.err("SCENE_INVALID", "NeuralAsset prim does not reference an asset file", path)
+            raise self.err("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {refs[0]}", path)
+        file = Path(source.display)
+        key = source.display if "[" in source.display or source.embedded else os.path.realpath(source.layer)
         if key not in self.asset_index:
             try:
-                asset = Asset.open(file, load="none")
+                asset = open_source(source, load="none")
             except NassetError as exc:
                 raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
             if asset.kind not in ("rna", "neupress", "8dna"):

@@ -149,8 +149,11 @@ class SceneBuilder:
             lt.CreateTextureFileAttr(Sdf.AssetPath(str(texture)))
         return lt
 
-    def asset(self, name, file, matrix=None, *, typed=True):
-        prim = self.stage.DefinePrim(f"/World/{name}", "NeuralAsset" if typed else "")
+    def asset(self, name, file, matrix=None, *, typed: bool | str = True):
+        """A prim referencing the asset ``file``; ``typed``: True (``def NeuralAsset``), False (untyped ``def``) or a
+        type name (``"Xform"``: the recommended pattern, spec/format.md#referencing-an-asset)."""
+        type_name = typed if isinstance(typed, str) else ("NeuralAsset" if typed else "")
+        prim = self.stage.DefinePrim(f"/World/{name}", type_name)
         prim.GetReferences().AddReference(str(file))
         if matrix is not None:
             self._xform(prim, matrix)

@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Create .venv (Python 3.11) and install nasset with the extras in NASSET_EXTRAS
-# (default: dev,train,mitsuba,view,blender). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
+# (default: dev,render,bench,train,mitsuba,view,blender). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
 # when it is missing and apt-get is usable. Idempotent. Used by scripts/example.sh and scripts/test.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-EXTRAS=${NASSET_EXTRAS:-dev,train,mitsuba,view,blender}
+EXTRAS=${NASSET_EXTRAS:-dev,render,bench,train,mitsuba,view,blender}
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 "$PY" -c 'import sys; sys.exit(0 if sys.version_info[:2] >= (3, 11) else 1)' \
@@ -24,5 +24,8 @@ fi
 # torch is pinned to the local CPU wheel (an unpinned torch pulls GBs of CUDA packages)
 .venv/bin/python -m pip install -q -e ".[${EXTRAS}]" 2> >(grep -v '^WARNING: Location' >&2) \
   || { echo "setup: pip install failed" >&2; exit 1; }
-.venv/bin/python -c 'import nasset_sdk, embreex, onnxruntime, OpenEXR' \
+.venv/bin/python -c 'import sys, nasset_sdk, onnxruntime, OpenEXR
+from nasset_sdk.extras import missing_packages
+missing = missing_packages(*sys.argv[1].split(","))
+sys.exit(f"missing: {missing}" if missing else 0)' "$EXTRAS" \
   || { echo "setup: install incomplete" >&2; exit 1; }

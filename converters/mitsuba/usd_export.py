@@ -906,9 +906,10 @@ class StageConverter:
         for file, ids in by_file.items():
             rel = _relpath(file, self.output.parent)
             path = self._name("/World/Assets", "_".join(ids))
-            # untyped def: the type (NeuralAsset) comes from the referenced asset's root prim; no
-            # transform: asset object space == scene world space (spec/bake.md#stages)
-            prim = self.stage.DefinePrim(path)
+            # def Xform referencing the asset's default prim (spec/format.md#referencing-an-asset): USD tools
+            # without the nasset schema keep its transform; renderers find the asset's root through
+            # composition. No transform: asset object space == scene world space (spec/bake.md#stages)
+            prim = self.stage.DefinePrim(path, "Xform")
             prim.GetReferences().AddReference(rel)
             self.result.replaced[path] = {"asset": rel, "shapes": list(ids)}
             self.record(path, f"NeuralAsset {rel} in place of {', '.join(ids)}")
@@ -1087,9 +1088,21 @@ def run(args) -> int:
     scene = args.scene
     if bool(args.example) == bool(scene):
         raise UsageError("give a scene file or --example (not both)")
-    if args.example:
-        from .examples import write_example_scene
+    if not args.example:
+        return report(convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks), as_json=args.json)
+    import shutil
 
-        scene = write_example_scene(Path(args.output).resolve().parent / "example_scene")
-    res = convert_scene(scene, args.output, replace=args.replace, check_usd=not args.no_usd_checks)
+    from .examples import write_example_scene
+
+    parent = Path(args.output).resolve().parent
+    if not parent.is_dir():
+        raise error("WRITE_FAILED", "the output folder does not exist", file=str(args.output))
+    folder = parent / "example_scene"
+    created = not folder.exists()
+    try:
+        res = convert_scene(write_example_scene(folder), args.output, replace=args.replace, check_usd=not args.no_usd_checks)
+    except BaseException:
+        if created:  # a failed conversion leaves nothing behind in the output folder
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
     return report(res, as_json=args.json)

@@ -44,9 +44,12 @@ class RnaKind(KindContract):
 
     def build_random(self, rng, *, variant="surface", size="small", geometry=None):
         from ..asset import AssetBuilder
+        from ..errors import UsageError
         from ..geometry import CurvesGeometry, MeshGeometry
         from ..networks import random_mlp
 
+        if size not in SIZES:
+            raise UsageError(f"size must be one of {sorted(SIZES)}")
         res, ch, layers, hidden = SIZES[size]
         b = AssetBuilder("rna", variant=variant)
         if geometry is None:

@@ -43,6 +43,8 @@ RULES: tuple[Rule, ...] = (
          "the file opens as a USD layer in a guarded child process, then in-process, and the stage composes"),
     Rule("ROOT_MISSING", "error", "defaultPrim is /Asset and its type is NeuralAsset"),
     Rule("SPEC_VERSION", "error", "nasset:specVersion is authored, MAJOR.MINOR, with a MAJOR this SDK reads"),
+    Rule("SPEC_VERSION_NEWER", "warning",
+         "nasset:specVersion's MINOR is at most the one this SDK implements (content of a newer minor is not validated)"),
     Rule("KIND_UNKNOWN", "error", "nasset:kind is authored and names a registered kind"),
     Rule("VARIANT_UNKNOWN", "error", "nasset:variant is authored and one the kind allows"),
     Rule("SCHEMA_TYPE", "error",
@@ -312,6 +314,10 @@ class Validation:
                       ROOT, "nasset:specVersion")
         else:
             self.report.spec_version = version
+            known = int(limits.SPEC_VERSION.split(".")[1])
+            if int(m.group(2)) > known:  # readable (format.md#versioning), but this validator knows nothing newer
+                self.emit("SPEC_VERSION_NEWER", f"specVersion {version!r} is newer than {limits.SPEC_VERSION}, the version this "
+                          "SDK implements: what that minor adds is not checked", ROOT, "nasset:specVersion")
         kind = self._authored(root, "nasset:kind")
         if kind is None or str(kind) not in KINDS:
             self.emit("KIND_UNKNOWN", f"kind {kind!r} is not one of {sorted(KINDS)}", ROOT, "nasset:kind")

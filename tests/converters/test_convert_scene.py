@@ -341,7 +341,10 @@ def test_replace_writes_relative_neural_asset_reference(simple_scene, rna_asset_
     assert list(res.replaced.values()) == [{"asset": "../assets/obj.usdc", "shapes": ["obj", "obj2"]}]
     stage = Usd.Stage.Open(str(out))
     prim = stage.GetPrimAtPath("/World/Assets/obj_obj2")
-    assert prim.GetTypeName() == "NeuralAsset"  # composed from the referenced asset's root prim
+    assert prim.GetTypeName() == "Xform"  # the recommended pattern: plain USD tools keep its transform
+    from nasset_sdk.references import asset_source
+
+    assert asset_source(prim).layer == str(asset)  # the asset's root reached through composition
     refs = prim.GetPrimStack()[0].referenceList.prependedItems
     assert [r.assetPath for r in refs] == ["../assets/obj.usdc"]
     assert not stage.GetPrimAtPath("/World/Geometry/obj") and not stage.GetPrimAtPath("/World/Geometry/obj2")
@@ -400,7 +403,9 @@ def test_cli_example_scene_with_asset(rna_asset_path, tmp_path, capsys):
     assert (tmp_path / "ex" / "example_scene" / "scene.xml").is_file()
     assert report["replaced"] and "/World/Geometry/ground" in report["prims"]
     stage = Usd.Stage.Open(str(out))
-    assert [p.GetTypeName() for p in stage.Traverse() if p.GetTypeName() == "NeuralAsset"] == ["NeuralAsset"]
+    from nasset_sdk.references import asset_source
+
+    assert [p.GetTypeName() for p in stage.Traverse() if asset_source(p)] == ["Xform"]
 
 
 # -- the converted scene renders like the original ----------------------------------------------------------

@@ -137,6 +137,8 @@ def make_corpus(out_dir: str | Path) -> list[Case]:
     edit("root_wrong_type", "ROOT_MISSING", lambda s, l: s.GetPrimAtPath("/Asset").SetTypeName("Xform"))
     edit("spec_version_major", "SPEC_VERSION", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Set("1.0"))
     edit("spec_version_garbage", "SPEC_VERSION", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Set("v0"))
+    edit("spec_version_newer_minor", "SPEC_VERSION_NEWER",
+         lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Set("0.7"), severity="warning")
     edit("spec_version_missing", "SPEC_VERSION", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Clear())
     edit("kind_unknown", "KIND_UNKNOWN", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:kind").Set("gaussians"))
     edit("variant_unknown", "VARIANT_UNKNOWN", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:variant").Set("volume"))

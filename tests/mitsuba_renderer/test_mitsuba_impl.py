@@ -63,6 +63,33 @@ def test_constant_asset_closed_form(nr, tmp_path, lit_from_camera):
     assert cover[0, 0, 0] == 0.0  # background: no dome
 
 
+@pytest.mark.parametrize("how", ["Xform", "usdz"])
+def test_asset_found_through_composition(nr, tmp_path, how):
+    """The asset's root reached through composition (spec/format.md#referencing-an-asset): a ``def Xform`` reference,
+    and the same scene packaged as usdz, render as the untyped reference does."""
+    from pxr import UsdUtils
+
+    constant_rna_asset(tmp_path / "const.usdc", unshadowed=(1.0, 0.5, 0.25), shadowed=(0.1, 0.2, 0.3))
+
+    def scene(typed, name):
+        b = SceneBuilder()
+        b.camera((0, 0, 3), (0, 0, 0))
+        b.distant("Sun", (0, 0, 1), 2.5)
+        m = np.eye(4)
+        m[3, :3] = (0.4, 0.0, 0.0)
+        b.asset("A", "./const.usdc", m, typed=typed)
+        return b.write(tmp_path / name)
+
+    ref = nr.render(scene(False, "untyped.usda"), 1, width=16, height=16, seed=3)
+    path = scene("Xform", "xform.usda")
+    if how == "usdz":
+        assert UsdUtils.CreateNewUsdzPackage(path, str(tmp_path / "scene.usdz"))
+        path = tmp_path / "scene.usdz"
+    img = nr.render(str(path), 1, width=16, height=16, seed=3)
+    assert ref.max() > 0 and np.abs(ref[:, :8]).sum() < np.abs(ref[:, 8:]).sum()  # shifted right: the transform applies
+    np.testing.assert_allclose(img, ref, atol=1e-6)
+
+
 def _blocks(img, b):
     h, w = img.shape[0] // b, img.shape[1] // b
     return img[: h * b, : w * b].reshape(h, b, w, b, 3).mean((1, 3))
