@@ -36,26 +36,39 @@ def merge_quality(levels: dict[str, str | os.PathLike], output: str | os.PathLik
             np.array_equal(getattr(g, f), getattr(geo, f)) for f in (("faces",) if isinstance(geo, MeshGeometry) else ("counts", "widths")))
         if not same or not all(np.array_equal(x, y) for x, y in zip(a.domain, first.domain, strict=True)):
             raise UsageError(f"level {q!r} has other geometry or another encoding domain than level {names[0]!r}", **where)
-    b = AssetBuilder(first.kind, variant=first.variant)
-    b.set_geometry(geo)
-    b.domain = first.domain
-    b.meters_per_unit = float(first.stage.GetMetadata("metersPerUnit") or 1.0)
-    shader = first.stage.GetPrimAtPath(FALLBACK + "/PreviewSurface")
-    for attr, field in (("inputs:diffuseColor", "fallback_color"), ("inputs:roughness", "fallback_roughness")):
-        value = shader.GetAttribute(attr).Get() if shader else None
-        if value is not None:
-            setattr(b, field, tuple(value) if field == "fallback_color" else float(value))
-    b.provenance = {k: v for k, v in first.provenance.items() if k not in ("specVersion", "kind")}
+    b = builder_like(first)
     b.provenance["qualityLevels"] = {q: a.provenance for q, a in assets.items()}
     for cname, info in first.components().items():
         sources = assets.items() if info.required else [(None, first)]
         for q, a in sources:
-            data = b.component(cname, required=info.required, purpose=info.purpose, quality=q)
-            for tname, ref in a.tensor_refs(cname).items():
-                data.add_tensor(tname, a.tensor(cname, tname), dtype=ref.dtype, layout=ref.layout)
-            for nname in a.network_refs(cname):
-                data.add_network(nname, a.network_bytes(cname, nname))
+            copy_component(b, a, cname, info, quality=q)
     return b.write(output)
+
+
+def builder_like(asset) -> AssetBuilder:
+    """An AssetBuilder with the kind, variant, geometry, encoding domain, units, fallback material and
+    provenance (less the keys the writer sets) of an opened asset, and no components."""
+    b = AssetBuilder(asset.kind, variant=asset.variant)
+    b.set_geometry(asset.geometry())
+    b.domain = asset.domain
+    b.meters_per_unit = float(asset.stage.GetMetadata("metersPerUnit") or 1.0)
+    shader = asset.stage.GetPrimAtPath(FALLBACK + "/PreviewSurface")
+    for attr, field in (("inputs:diffuseColor", "fallback_color"), ("inputs:roughness", "fallback_roughness")):
+        value = shader.GetAttribute(attr).Get() if shader else None
+        if value is not None:
+            setattr(b, field, tuple(value) if field == "fallback_color" else float(value))
+    b.provenance = {k: v for k, v in asset.provenance.items() if k not in ("specVersion", "kind")}
+    return b
+
+
+def copy_component(builder: AssetBuilder, asset, name: str, info, *, quality: str | None = None) -> None:
+    """Copy the loaded component ``name`` (its ComponentInfo ``info``) of ``asset`` into ``builder``,
+    tensors with their stored dtype and layout, networks byte for byte."""
+    data = builder.component(name, required=info.required, purpose=info.purpose, quality=quality)
+    for tname, ref in asset.tensor_refs(name).items():
+        data.add_tensor(tname, asset.tensor(name, tname), dtype=ref.dtype, layout=ref.layout)
+    for nname in asset.network_refs(name):
+        data.add_network(nname, asset.network_bytes(name, nname))
 
 
 def run(args) -> int:
