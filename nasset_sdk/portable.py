@@ -170,9 +170,12 @@ class _Graph:
         return self.op("Concat", theta, phi, axis=1)
 
     def fourier(self, G: np.ndarray, v: str) -> str:
-        """[cos(2 pi G v), sin(2 pi G v)] of v [N, n] with G [M, n] -> [N, 2M]; non-finite v or phase -> phase 0."""
+        """[cos(2 pi G v), sin(2 pi G v)] of v [N, n] with G [M, n] -> [N, 2M]. As nan_to_num in the evaluator:
+        NaN -> 0 and +-Inf -> the largest finite value (whose products overflow), then non-finite phase -> 0."""
         G = np.asarray(G, np.float64)
-        phase = self.op("MatMul", self.finite_or(v, 0.0), self.const((2.0 * np.pi * G).T))
+        big = np.finfo(np.float32).max
+        v = self.op("Clip", self.nan_to(v, 0.0), self.const(np.float32(-big)), self.const(np.float32(big)))
+        phase = self.op("MatMul", v, self.const((2.0 * np.pi * G).T))
         phase = self.finite_or(phase, 0.0)
         return self.op("Concat", self.op("Cos", phase), self.op("Sin", phase), axis=1)
 
