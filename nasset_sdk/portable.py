@@ -27,6 +27,9 @@ COMPONENT = "portable"
 MAX_TABLE_ROWS = 1 << 24
 #: queries :func:`add_portable` draws to measure parity with the kind's evaluator
 PARITY_QUERIES = 4096
+#: rows per onnxruntime call of :class:`PortableEvaluator`: the graphs' many [rows, w] temporaries stay in
+#: cache (measured ~2.5x faster per row than 65536-row calls on a 2-core machine); results do not depend on it
+CHUNK = 2048
 
 
 class _Graph:
@@ -413,7 +416,8 @@ class PortableEvaluator:
             rows = len(a)
             feed[name] = a
         names = [o.name for o in s.get_outputs()]
-        return dict(zip(names, s.run(None, feed), strict=True))
+        parts = [s.run(None, {k: v[i:i + CHUNK] for k, v in feed.items()}) for i in range(0, max(rows, 1), CHUNK)]
+        return {name: np.concatenate([p[j] for p in parts]) for j, name in enumerate(names)}
 
 
 def write_model(path: str | os.PathLike, blob: bytes) -> Path:
