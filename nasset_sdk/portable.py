@@ -422,17 +422,8 @@ class PortableEvaluator:
 
 def write_model(path: str | os.PathLike, blob: bytes) -> Path:
     """Write model bytes to ``path`` atomically (temp + rename), e.g. for a host that loads .onnx files."""
-    import tempfile
+    from .images import atomic_output
 
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.tmp-", dir=target.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(blob)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return target
+    with atomic_output(path, "ONNX model") as tmp:
+        Path(tmp).write_bytes(blob)
+    return Path(path)
