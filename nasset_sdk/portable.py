@@ -290,7 +290,7 @@ def _kind_entry(asset):
 
 def build_portable(asset) -> dict[str, bytes]:
     """Portable graphs of an asset opened with its ``core`` loaded: network name -> ONNX model bytes
-    (inputs and outputs per spec/kinds/<kind>.md#portable)."""
+    (inputs and outputs per spec/kinds/<kind>.md#component-portable)."""
     return _kind_entry(asset)[0](asset)
 
 
