@@ -148,6 +148,55 @@ class _Graph:
             out = f if out is None else self.op("Add", out, f)
         return out
 
+    def cubemap(self, grid: np.ndarray, d: str) -> str:
+        """Seam-safe bilinear cube-map lookup of grid [6, Q, Q, C] at unit directions d [N,3] -> [N, C]
+        (spec/kinds/encodings.md#cubemap). The taps outside a face are re-projected once, here: an extended
+        table [6 (Q+2)^2, C] holds every face's texels bordered by the texels the re-projection reads (and,
+        at the four corners, the mean of the three adjacent taps), so the graph does a plain bilinear lookup
+        in it. Face choice: the largest |d_k|, ties to the lower axis; the face is negative when d_k < 0."""
+        from .kinds.encodings import CUBE_FACES
+
+        ext = cube_extended_table(grid)
+        q = grid.shape[1]
+        c = grid.shape[-1]
+        e = q + 2
+        if 6 * e * e > MAX_TABLE_ROWS:
+            raise UsageError(f"cube map [6, {q}, {q}, {c}] is too large for float32 texel indices")
+        table = self.const(ext.reshape(6 * e * e, c))
+        a = self.op("Abs", d)
+        ax, ay, az = self.col(a, 0), self.col(a, 1), self.col(a, 2)
+        is_x = self.op("And", self.op("Not", self.op("Less", ax, ay)), self.op("Not", self.op("Less", ax, az)))
+        is_y = self.op("And", self.op("Not", is_x), self.op("Not", self.op("Less", ay, az)))
+        pick = lambda vx, vy, vz: self.op("Where", is_x, vx, self.op("Where", is_y, vy, vz))  # noqa: E731
+        dk = pick(self.col(d, 0), self.col(d, 1), self.col(d, 2))
+        ma = self.op("Max", pick(ax, ay, az), self.const(np.float32(1e-30)))
+        axis = pick(self.const(np.float32(0.0)), self.const(np.float32(1.0)), self.const(np.float32(2.0)))
+        neg = self.op("Cast", self.op("Less", dk, self.const(np.float32(0.0))), to=1)  # 1 = FLOAT
+        face = self.op("Add", self.op("Mul", axis, self.const(np.float32(2.0))), neg)
+        onehot = self.op("Cast", self.op("Equal", face, self.const(np.arange(6, dtype=np.float32).reshape(1, 6))), to=1)
+        ms, mt = np.zeros((3, 6)), np.zeros((3, 6))
+        for f, (_, _, (sa, ss), (ta, ts)) in enumerate(CUBE_FACES):
+            ms[sa, f], mt[ta, f] = ss, ts
+        ones6 = self.const(np.ones((6, 1)))
+        sc = self.op("MatMul", self.op("Mul", onehot, self.op("MatMul", d, self.const(ms))), ones6)
+        tc = self.op("MatMul", self.op("Mul", onehot, self.op("MatMul", d, self.const(mt))), ones6)
+
+        def coord(v):  # (i0 + 1 as float, fraction) on the extended face
+            st = self.op("Mul", self.op("Add", self.op("Div", v, ma), self.const(np.float32(1.0))), self.const(np.float32(0.5)))
+            st = self.op("Clip", st, self.const(np.float32(0.0)), self.const(np.float32(1.0)))
+            fs = self.op("Sub", self.op("Mul", st, self.const(np.float32(q))), self.const(np.float32(0.5)))
+            i0 = self.op("Floor", fs)
+            return self.op("Add", i0, self.const(np.float32(1.0))), self.op("Sub", fs, i0)
+
+        i1, a_s = coord(sc)
+        j1, a_t = coord(tc)
+        row = self.op("Add", self.op("Add", self.op("Mul", face, self.const(np.float32(e * e))),
+                                     self.op("Mul", j1, self.const(np.float32(e)))), i1)
+        tap = lambda off: self.rows(table, self.op("Add", row, self.const(np.float32(off))), c)  # noqa: E731
+        top = self.lerp(tap(0), tap(1), a_s)
+        bot = self.lerp(tap(e), tap(e + 1), a_s)
+        return self.lerp(top, bot, a_t)
+
     def atan2(self, y: str, x: str, y_neg: str, x_neg: str) -> str:
         """atan2(y, x) [N,1] in [-pi, pi] with the signed-zero conventions of C's atan2, given the sign bits
         ``y_neg``, ``x_neg`` (bool [N,1]) of y and x (octant reduction around Atan on [0, 1], so no
@@ -232,6 +281,35 @@ class _Graph:
         return model.SerializeToString()
 
 
+def cube_extended_table(grid: np.ndarray) -> np.ndarray:
+    """[6, Q+2, Q+2, C] float32: entry (f, j + 1, i + 1) is the value the SDK's cube-map lookup reads for tap
+    (i, j) of face f, i, j in [-1, Q]: the texel itself inside the face, the re-projected texel across an edge,
+    and the mean of the three adjacent taps beyond a corner (spec/kinds/encodings.md#cubemap)."""
+    from .kinds.encodings import cube_face_dir, cube_face_uv
+
+    g = np.asarray(grid, np.float32)
+    q = g.shape[1]
+    e = q + 2
+    ext = np.zeros((6, e, e, g.shape[-1]), np.float64)
+    ext[:, 1:-1, 1:-1] = g
+    idx = np.arange(-1, q + 1)
+    jj, ii = np.meshgrid(idx, idx, indexing="ij")
+    edge = ((ii < 0) | (ii >= q)) ^ ((jj < 0) | (jj >= q))
+    for f in range(6):
+        i, j = ii[edge], jj[edge]
+        sc = 2.0 * (i + 0.5) / q - 1.0
+        tc = 2.0 * (j + 0.5) / q - 1.0
+        f2, s2, t2 = cube_face_uv(cube_face_dir(np.full(len(i), f), sc, tc))
+        i2 = np.minimum(np.floor(s2 * q).astype(np.int64), q - 1)
+        j2 = np.minimum(np.floor(t2 * q).astype(np.int64), q - 1)
+        ext[f, j + 1, i + 1] = g[f2, j2, i2]
+    for ci, cj in ((0, 0), (e - 1, 0), (0, e - 1), (e - 1, e - 1)):
+        di = 1 if ci == 0 else -1
+        dj = 1 if cj == 0 else -1
+        ext[:, cj, ci] = (ext[:, cj, ci + di] + ext[:, cj + dj, ci] + ext[:, cj + dj, ci + di]) / 3.0
+    return ext.astype(np.float32)
+
+
 def _opset(asset, component: str, network: str) -> int:
     return int(asset.network_refs(component)[network].info.opset)
 
@@ -266,6 +344,23 @@ def _neupress_graphs(asset) -> dict[str, bytes]:
     return {"appearance": g.model({"x": 3, "wo": 3, "wi": 3}, outputs, _opset(asset, "core", "appearance"), "neupress_portable")}
 
 
+def _eightdna_graphs(asset) -> dict[str, bytes]:
+    g = _Graph()
+    lo, hi = asset.domain
+    xn = g.unit_box("x", lo, hi)
+    wo = g.unit("wo")
+    base = g.op("Concat", g.triplane(asset.tensor("core", "triplane"), xn), xn, g.cubemap(asset.tensor("core", "woCube"), wo), wo,
+                axis=1)
+    (y,) = g.inline(asset.network_bytes("core", "albedo"), {"x": base})
+    # the evaluator: NaN -> 0, +-Inf -> +-1e30, then max(0, y)
+    y = g.op("Relu", g.op("Clip", g.nan_to(y, 0.0), g.const(np.float32(-1e30)), g.const(np.float32(1e30))))
+    return {"albedo": g.model({"x": 3, "wo": 3}, {"albedo": (y, 3)}, _opset(asset, "core", "albedo"), "eightdna_albedo_portable")}
+
+
+def _eightdna_reference(asset, q: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {"albedo": asset.evaluator().albedo(q["x"], q["wo"])}
+
+
 def _rna_reference(asset, q: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     ev = asset.evaluator()
     un, sh = ev.evaluate(q["x"], q["frame"], q["wo"], q["wi"], q["h"][:, 0] if "h" in q else None)
@@ -276,9 +371,10 @@ def _neupress_reference(asset, q: dict[str, np.ndarray]) -> dict[str, np.ndarray
     return {"transport": asset.evaluator().evaluate(q["x"], np.tile([[0.0, 0.0, 1.0]], (len(q["x"]), 1)), q["wo"], q["wi"])}
 
 
-#: kind -> (graph builder, reference call with the same named queries); 8dna has no portable graph yet
-#: (its cube-map seams and spline flow are not expressed in ONNX here)
-BUILDERS = {"rna": (_rna_graphs, _rna_reference), "neupress": (_neupress_graphs, _neupress_reference)}
+#: kind -> (graph builder, reference call with the same named queries). 8dna: the albedo only; its spline
+#: flow (sampling, pdf) is not expressed in ONNX here
+BUILDERS = {"rna": (_rna_graphs, _rna_reference), "neupress": (_neupress_graphs, _neupress_reference),
+            "8dna": (_eightdna_graphs, _eightdna_reference)}
 
 
 def _kind_entry(asset):
@@ -301,8 +397,9 @@ def reference_outputs(asset, queries: dict[str, np.ndarray]) -> dict[str, np.nda
 
 def random_queries(asset, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Named float32 queries [n, w] for the portable graph of ``asset``: points in and slightly beyond the
-    encoding box (a quarter on texel borders and box faces), unit directions (a quarter grazing: within
-    1e-3 of the plane z = 0 of ``frame`` or exactly on a pole), fibre offsets in [-1.2, 1.2]."""
+    encoding box (rna: a quarter on texel borders and box faces), unit directions (a quarter grazing: within
+    1e-3 of the plane z = 0 of ``frame``, half of those w_o exactly on a pole, -0 components included; 8dna:
+    another quarter of w_o within 1e-3 of cube-map edges and corners), fibre offsets in [-1.2, 1.2]."""
     lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
     t = rng.uniform(-1.05, 1.05, (n, 3))
     k = n // 4
@@ -322,7 +419,13 @@ def random_queries(asset, n: int, rng: np.random.Generator) -> dict[str, np.ndar
         wi[:k, 2] = rng.uniform(-1e-3, 1e-3, k)  # grazing with respect to the frame (0, 0, 1) below
         frame[:k] = [0.0, 0.0, 1.0]
         wo[:k // 2] = rng.choice([-1.0, 1.0], (k // 2, 1)) * np.array([0.0, 0.0, 1.0])  # poles of spherical_coords
-    q = {"x": x, "wo": wo, "wi": wi}
+    if asset.kind == "8dna" and k:  # w_o near cube-map edges and corners (taps re-projected across faces)
+        corner = rng.choice([-1.0, 1.0], (k, 3)) * (1.0 + rng.uniform(-1e-3, 1e-3, (k, 3)))
+        corner[: k // 2, 0] *= rng.uniform(0.0, 1.0, k // 2)  # half on an edge only
+        wo[-k:] = corner / np.linalg.norm(corner, axis=1, keepdims=True)
+    q = {"x": x, "wo": wo}
+    if asset.kind != "8dna":
+        q["wi"] = wi
     if asset.kind == "rna":
         q["frame"] = frame
         if asset.variant == "fiber":

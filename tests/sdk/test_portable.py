@@ -1,6 +1,7 @@
 """Portable evaluation graphs (spec/format.md#portable-evaluation-graphs): the graph written by
-``add_portable`` reproduces the kind's numpy + onnxruntime evaluator on random queries, texel borders,
-box faces, poles, grazing and non-finite input; the written asset validates; the allow-list admits
+``add_portable`` reproduces the kind's numpy + onnxruntime evaluator (rna, neupress; 8dna's albedo) on
+random queries, texel borders, box faces, poles, grazing directions, cube-map edges and corners and
+non-finite input; the written asset validates; the allow-list admits
 the graph's operators only under their row rules."""
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from nasset_sdk.validate import validate_file
 #: by the decoder's Lipschitz constant (~10 for these random MLPs). neupress: the Fourier phase
 #: 2 pi G v (|G v| up to ~130 cycles) is rounded to float32 in the graph, float64 in the evaluator:
 #: ~1e-5 cycle = 6e-5 rad per feature.
-ATOL = {"rna": 1e-4, "neupress": 1e-3}
+ATOL = {"rna": 1e-4, "neupress": 1e-3, "8dna": 1e-4}
 N = 2048
 
 
@@ -44,7 +45,7 @@ def _nonfinite_rows(q: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return q
 
 
-CASES = [("rna", "surface"), ("rna", "fiber"), ("neupress", "surface")]
+CASES = [("rna", "surface"), ("rna", "fiber"), ("neupress", "surface"), ("8dna", "surface")]
 
 
 @pytest.mark.parametrize("kind,variant", CASES)
@@ -61,7 +62,11 @@ def test_portable_graph_matches_the_evaluator(tmp_path, kind, variant):
         t = ((q["x"] - lo) / (hi - lo) * 2 - 1 + 1) * 0.5 * r
         assert np.isclose(t, np.round(t), atol=1e-4).any(axis=1).mean() > 0.2
         assert (np.abs(q["x"] - lo) < 1e-6).any() or (np.abs(q["x"] - hi) < 1e-6).any()
-    assert (np.abs(q["wi"][:, 2]) < 1e-3).mean() > 0.2
+    if kind == "8dna":  # w_o on cube-map edges: two components of equal magnitude, the largest
+        a = np.sort(np.abs(q["wo"]), axis=1)
+        assert (a[:, 2] - a[:, 1] < 2e-3 * a[:, 2]).mean() > 0.2
+    else:
+        assert (np.abs(q["wi"][:, 2]) < 1e-3).mean() > 0.2
     got = ev.run(name, **q)
     want = portable.reference_outputs(asset, q)
     assert set(got) == set(want)
@@ -96,9 +101,9 @@ def test_portable_asset_validates_and_keeps_its_content(tmp_path):
 
 
 def test_portable_refusals(tmp_path):
-    src = tmp_path / "e.usdc"
-    example_builder("8dna", size="tiny", seed=1).write(src)
-    with pytest.raises(UsageError, match="no portable evaluation graph"):
+    src = tmp_path / "q.usdc"
+    example_builder("rna", size="tiny", seed=1, quality_variants=True).write(src)
+    with pytest.raises(UsageError, match="quality variants"):
         portable.add_portable(src, tmp_path / "out.usdc")
     plain = tmp_path / "plain.usdc"
     example_builder("rna", size="tiny", seed=1).write(plain)
