@@ -50,7 +50,7 @@ def run_host(node: str, blob: bytes, queries: dict[str, np.ndarray], work: Path)
     return {name: np.fromfile(work / "out" / f"{name}.bin", "<f4").reshape(shape) for name, shape in shapes.items()}
 
 
-@pytest.mark.parametrize("kind,variant", [("rna", "fiber"), ("neupress", "surface")])
+@pytest.mark.parametrize("kind,variant", [("rna", "fiber"), ("neupress", "surface"), ("8dna", "surface")])
 def test_node_host_matches_the_evaluator(tmp_path, kind, variant):
     node = host_or_skip()
     src = tmp_path / "a.usdc"
