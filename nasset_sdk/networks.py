@@ -2,7 +2,8 @@
 
 The format's networks are MLP-only graphs of standard operators with float32 inputs and
 outputs of shape [N, width] (spec/format.md#networks). Everything else (encodings, spline
-math) is done by the SDK in numpy.
+math) is done by the SDK in numpy; the optional portable graphs (nasset_sdk.portable) repeat a
+network with its encodings using the same allow-list.
 """
 
 from __future__ import annotations
