@@ -111,7 +111,9 @@ def _optimize_args(p):
     p.add_argument("--samples", type=int, default=QUERY_ROWS, help=f"rows of the fixed random query set (default {QUERY_ROWS})")
     p.add_argument("--no-preview", action="store_true", help="skip the preview-render PSNR")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    # reserved: --portable (add the portable ONNX evaluation graph component) once the spec defines it
+    p.add_argument("--portable", action="store_true",
+                   help="add the portable evaluation graphs (one ONNX graph per network with its encodings, for hosts "
+                        "without Python; spec/format.md#portable-evaluation-graphs)")
 
 
 @verb("conformance", "run a renderer on the conformance cases and compare with the reference images, or an evaluator on the "

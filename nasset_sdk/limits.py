@@ -1,6 +1,6 @@
 """Bounds applied to untrusted assets (spec/security.md#bounds) and the version this SDK writes."""
 
-SPEC_VERSION = "0.1"
+SPEC_VERSION = "0.2"
 #: MAJOR versions this SDK reads; any MINOR of a known MAJOR is read (spec/format.md#versioning).
 SUPPORTED_MAJOR = 0
 MAX_TENSOR_ELEMENTS = 1 << 27  # 134 M elements (256 MiB at fp16)

@@ -2,7 +2,8 @@
 
 The format's networks are MLP-only graphs of standard operators with float32 inputs and
 outputs of shape [N, width] (spec/format.md#networks). Everything else (encodings, spline
-math) is done by the SDK in numpy.
+math) is done by the SDK in numpy; the optional portable graphs (nasset_sdk.portable) repeat a
+network with its encodings using the same allow-list.
 """
 
 from __future__ import annotations
@@ -113,10 +114,12 @@ ELEMENTWISE_OPS = frozenset({
     "Identity", "Relu", "LeakyRelu", "PRelu", "Elu", "Selu", "Celu", "Sigmoid", "HardSigmoid", "HardSwish", "Tanh",
     "Softplus", "Softsign", "Mish", "Gelu", "Erf", "Exp", "Log", "Sqrt", "Abs", "Neg", "Reciprocal", "Sin", "Cos",
     "Add", "Sub", "Mul", "Div", "Pow", "Max", "Min", "Sum", "Mean", "Clip", "Cast",
+    # the portable evaluation graph's encodings (spec/format.md#portable): texel and angle arithmetic
+    "Floor", "Atan", "IsNaN", "IsInf", "Where", "Less", "Greater", "Equal", "And", "Or", "Not",
 })
 ROW_OPS = frozenset({
     "Gemm", "MatMul", "Concat", "Split", "Slice", "ReduceSum", "ReduceMean", "ReduceMax", "ReduceMin", "ReduceL2",
-    "Softmax", "LogSoftmax", "LayerNormalization", "Constant",
+    "Softmax", "LogSoftmax", "LayerNormalization", "Constant", "GatherElements",
 })
 ALLOWED_OPS = ELEMENTWISE_OPS | ROW_OPS
 #: The symbolic batch dimension given to every graph input before shape inference.
@@ -332,8 +335,14 @@ def check_graph(model, **loc) -> None:
         elif op == "Clip":
             need_static(node, 1, "min")
             need_static(node, 2, "max")
-        elif op == "Cast" and ival("to", 0) != TensorProto.FLOAT:
-            raise forbid(node, "Cast may only produce float32")
+        elif op == "Cast" and ival("to", 0) not in (TensorProto.FLOAT, TensorProto.INT64):
+            raise forbid(node, "Cast may only produce float32 or int64 (texel indices)")
+        elif op == "GatherElements":
+            # out[i, j] = data[indices[i, j], j]: row i reads row i of the indices and a constant table only
+            if ival("axis", 0) != 0:
+                raise forbid(node, "axis must be 0 (rows of a constant table)")
+            if not node.input or node.input[0] not in static:
+                raise forbid(node, "data must be an initializer or a Constant (a lookup table), not a computed value")
     _check_shapes(model, **loc)
 
 

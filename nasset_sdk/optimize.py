@@ -5,10 +5,10 @@ Passes, applied in this order to an :meth:`AssetBuilder.from_asset` copy:
 1. ``drop``: remove optional components (a required one is a usage error);
 2. ``keep_quality``: keep only the named quality levels of every component that has quality variants
    (one level left: stored as a plain component; the old default, if kept, stays the default);
-3. ``dtype``: re-encode every tensor as float16 or float32.
-
-(A ``portable`` pass, adding the portable ONNX evaluation graph component, belongs after 3 once that
-component is in the spec.)
+3. ``dtype``: re-encode every tensor as float16 or float32;
+4. ``portable``: add (or rebuild) the optional ``portable`` component, the evaluation graphs any
+   onnxruntime host can run (nasset_sdk.portable, spec/format.md#portable-evaluation-graphs), built
+   from the tensors as passes 1-3 left them; its parity with the evaluator goes into the report.
 
 The report compares the two files: sizes, tensor bytes, and the accuracy change of the shared
 evaluator interface (:meth:`Evaluator.radiance`) on a fixed random query set, plus the PSNR of a small
@@ -47,6 +47,7 @@ class OptimizeOptions:
     samples: int = QUERY_ROWS
     preview: bool = True
     probe: bool = True  # open the input in a child process first (nasset_sdk.safeopen); off only for files this process wrote
+    portable: bool = False  # add the portable evaluation graphs (pass 4)
 
 
 def query_set(asset: Asset, rows: int = QUERY_ROWS, seed: int = QUERY_SEED) -> Query:
@@ -184,8 +185,14 @@ def optimize(src: str | os.PathLike, dst: str | os.PathLike, opts: OptimizeOptio
     asset = Asset.open(src, load="all", probe=opts.probe)
     b = AssetBuilder.from_asset(asset)
     _apply(b, opts, where)
-    b.provenance["optimize"] = {"dtype": opts.dtype, "drop": list(opts.drop), "keepQuality": list(opts.keep_quality)}
+    b.provenance["optimize"] = {"dtype": opts.dtype, "drop": list(opts.drop), "keepQuality": list(opts.keep_quality),
+                                "portable": opts.portable}
     b.write(dst)
+    portable = None
+    if opts.portable:
+        from .portable import add_portable
+
+        portable = add_portable(dst, dst)["graphs"]
     before, after = Asset.open(src), Asset.open(dst)
     report = {
         "input": str(src), "output": str(dst), "kind": asset.kind, "variant": asset.variant,
@@ -194,6 +201,7 @@ def optimize(src: str | os.PathLike, dst: str | os.PathLike, opts: OptimizeOptio
         "tensor_bytes_default": {"before": _tensor_bytes(src), "after": _tensor_bytes(dst)},
         "components": {"before": sorted(asset.components()), "after": sorted(after.components())},
         "accuracy": compare(before, after, samples=opts.samples, preview=opts.preview),
+        "portable": portable,
     }
     return report
 
@@ -208,6 +216,10 @@ def format_report(r: dict) -> str:
         f"  radiance diff max {acc['max_abs_diff']:.3g}, mean {acc['mean_abs_diff']:.3g} /sr over {acc['query_rows']} "
         f"fixed random queries (mean radiance {acc['mean_radiance']:.3g} /sr)",
     ]
+    for name, g in (r.get("portable") or {}).items():
+        worst = max(v["max_abs"] for v in g["parity"].values())
+        lines.append(f"  portable graph {name}: {g['bytes']:,d} B, {g['nodes']} nodes, opset {g['opset']}; "
+                     f"max |difference| to the evaluator {worst:.2g}")
     if acc.get("preview_identical"):
         lines.append(f"  preview render {acc['preview_size']}x{acc['preview_size']}: identical")
     elif acc["preview_psnr_db"] is not None:
@@ -223,7 +235,7 @@ def _names(values) -> tuple[str, ...]:
 def run(args) -> int:
     """CLI: nasset optimize A.usdc -o B.usdc [--dtype float16|float32] [--drop C] [--keep-quality Q] [--json]."""
     opts = OptimizeOptions(dtype=args.dtype, drop=_names(args.drop), keep_quality=_names(args.keep_quality),
-                           samples=args.samples, preview=not args.no_preview)
+                           samples=args.samples, preview=not args.no_preview, portable=args.portable)
     report = optimize(args.file, args.output, opts)
     print(json.dumps({"ok": True, **report}, indent=2) if args.json else format_report(report))
     return 0

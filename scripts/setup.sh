@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Create .venv (Python 3.11) and install nasset with the extras in NASSET_EXTRAS
 # (default: dev,render,bench,train,mitsuba,view,blender). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
-# when it is missing and apt-get is usable. Idempotent. Used by scripts/example.sh and scripts/test.sh.
+# when it is missing and apt-get is usable, and the Node.js host of the portable evaluation graph
+# (tools/portable-host: onnxruntime-web from npm, pinned by its package-lock.json, into its ignored
+# node_modules; Debian's nodejs + npm when node is missing). Idempotent. Used by scripts/example.sh and scripts/test.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 EXTRAS=${NASSET_EXTRAS:-dev,render,bench,train,mitsuba,view,blender}
@@ -29,3 +31,21 @@ from nasset_sdk.extras import missing_packages
 missing = missing_packages(*sys.argv[1].split(","))
 sys.exit(f"missing: {missing}" if missing else 0)' "$EXTRAS" \
   || { echo "setup: install incomplete" >&2; exit 1; }
+
+# Node.js host of the portable evaluation graph (tests/sdk/test_portable_host.py; docs/interop.md)
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    echo "setup: installing nodejs and npm (portable graph host)"
+    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq nodejs npm >/dev/null \
+      || echo "setup: WARNING nodejs/npm not installed; the portable host test fails in CI" >&2
+  else
+    echo "setup: WARNING node/npm missing and apt-get unusable; the portable host test skips outside CI" >&2
+  fi
+fi
+HOST=tools/portable-host
+if command -v npm >/dev/null 2>&1 && { [ ! -d "$HOST/node_modules/onnxruntime-web" ] \
+     || [ "$HOST/package-lock.json" -nt "$HOST/node_modules/.package-lock.json" ]; }; then
+  # --ignore-scripts: no install scripts run; the host needs only the packages' JavaScript and WASM files
+  (cd "$HOST" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error >/dev/null) \
+    || { echo "setup: npm ci in $HOST failed" >&2; exit 1; }
+fi

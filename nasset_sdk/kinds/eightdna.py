@@ -76,7 +76,13 @@ class EightDnaKind(KindContract):
                     "flow3": NetworkSpec((("x", "3*C+9"),), (("g", "G"),), "spline parameters of s3 | s1, s2"),
                     "flow4": NetworkSpec((("x", "4*C+10"),), (("g", "G"),), "spline parameters of s4 | s1, s2, s3"),
                 },
-            )
+            ),
+            "portable": ComponentSpec(
+                required=False,
+                purpose="portable-evaluation",
+                networks={"albedo": NetworkSpec((("x", "3"), ("wo", "3")), (("albedo", "3"),),
+                                                "the albedo MLP with its encodings: raw queries to clamped albedo")},
+            ),
         }
 
     def value_findings(self, variant, present, get_tensor, prim_of) -> list[Finding]:
@@ -144,7 +150,9 @@ class EightDnaKind(KindContract):
         return b
 
     def probe_unit_columns(self, variant, component, network, input_name, width):
-        """w_o of the base features and d12 of flow3 / flow4 (module docstring)."""
+        """w_o of the base features and d12 of flow3 / flow4 (module docstring); the portable graph's wo."""
+        if component == "portable":
+            return (0,) if input_name == "wo" else ()
         k, extra = {"albedo": (2, 6), "flow1": (2, 6), "flow2": (3, 7), "flow3": (3, 9), "flow4": (4, 10)}.get(network, (0, 0))
         if not k or (width - extra) % k or width < extra:
             return ()

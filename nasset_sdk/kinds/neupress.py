@@ -141,6 +141,12 @@ class NeupressKind(KindContract):
                 tensors={"sh": TensorSpec(("V", "T", "P", "9", "3"), "vertex,theta_o,phi_o,sh,rgb",
                                           "degree-2 SH transport coefficients per vertex and local w_o bin")},
             ),
+            "portable": ComponentSpec(
+                required=False,
+                purpose="portable-evaluation",
+                networks={"appearance": NetworkSpec((("x", "3"), ("wo", "3"), ("wi", "3")), (("transport", "3"),),
+                                                    "the appearance MLP with its encodings: raw queries to clamped transport")},
+            ),
         }
 
     def value_findings(self, variant, present, get_tensor, prim_of) -> list[Finding]:

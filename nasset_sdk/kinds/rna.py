@@ -39,7 +39,15 @@ class RnaKind(KindContract):
                 purpose="evaluation",
                 tensors={"triplane": TensorSpec(("3", "R", "R", "C"), "plane,v,u,channel", "feature planes XY, YZ, ZX")},
                 networks={"decoder": NetworkSpec((("x", width),), (("y", "6"),), "transport MLP, unshadowed RGB then shadowed RGB")},
-            )
+            ),
+            "portable": ComponentSpec(
+                required=False,
+                purpose="portable-evaluation",
+                networks={"decoder": NetworkSpec(
+                    (("x", "3"), ("frame", "3"), ("wo", "3"), ("wi", "3")) + ((("h", "1"),) if variant == "fiber" else ()),
+                    (("unshadowed", "3"), ("shadowed", "3")),
+                    "the decoder with its encodings: raw queries to clamped transports (nasset_sdk.portable)")},
+            ),
         }
 
     def build_random(self, rng, *, variant="surface", size="small", geometry=None):
@@ -65,7 +73,9 @@ class RnaKind(KindContract):
         return b
 
     def probe_unit_columns(self, variant, component, network, input_name, width):
-        """n (or t), wo, wi of the decoder input (module docstring)."""
+        """n (or t), wo, wi of the decoder input (module docstring); the portable graph's direction inputs."""
+        if component == "portable":
+            return (0,) if input_name in ("frame", "wo", "wi") else ()
         f = 0 if variant == "surface" else 1
         c = width - 12 - f
         return (c + 3, c + 6 + f, c + 9 + f) if component == "core" and c >= 0 else ()

@@ -99,3 +99,20 @@ def test_bad_input_exit_codes(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["optimize", "--help"])
     assert e.value.code == 0 and "--keep-quality" in capsys.readouterr().out
+
+
+def test_portable_pass_adds_graphs_that_match_the_evaluator(tmp_path):
+    """``nasset optimize --portable``: the component is added and its graph reproduces the evaluator of the optimized file."""
+    from nasset_sdk.asset import Asset
+    from nasset_sdk.portable import PortableEvaluator, random_queries, reference_outputs
+
+    src = example_builder("rna", size="tiny", seed=4).write(tmp_path / "a.usdc")
+    out = tmp_path / "b.usdc"
+    assert main(["optimize", str(src), "-o", str(out), "--dtype", "float16", "--portable", "--no-preview", "--json"]) == 0
+    assert Asset.open(out, load="none").provenance["optimize"]["portable"] is True
+    a = Asset.open(out, load="all")
+    assert "portable" in a.components() and not a.components()["portable"].required
+    q = random_queries(a, 512, np.random.default_rng(1))
+    got = PortableEvaluator(a).run("decoder", **q)
+    for name, ref in reference_outputs(a, q).items():
+        np.testing.assert_allclose(got[name], ref, atol=2e-4, rtol=1e-3)

@@ -202,8 +202,9 @@ def test_unauthored_spec_version_is_rejected_despite_fallback(tmp_path):
     path = tmp_path / "a.usda"
     example_builder("rna", size="tiny").write(path)
     text = path.read_text()
-    assert 'string nasset:specVersion = "0.1"' in text
-    path.write_text(text.replace('string nasset:specVersion = "0.1"\n', ""))
+    authored = f'string nasset:specVersion = "{ns.limits.SPEC_VERSION}"\n'
+    assert authored in text
+    path.write_text(text.replace(authored, ""))
     with pytest.raises(ns.AssetFormatError) as info:
         ns.Asset.open(path)
     assert info.value.code == "SPEC_VERSION"

@@ -91,7 +91,7 @@ FUZZ_BUDGET_S = 30.0
 _UNARY = ["Relu", "LeakyRelu", "Sigmoid", "Tanh", "Softplus", "Exp", "Abs", "Neg", "Sin", "Cos", "Sqrt", "Log", "Erf", "Elu",
           "Selu", "HardSigmoid", "Softsign", "Reciprocal", "Identity"]
 _BINARY = ["Add", "Sub", "Mul", "Div", "Max", "Min", "Pow"]
-_OUTSIDE = ["Transpose", "Reshape", "Flatten", "Shape", "Tile", "Expand", "CumSum", "Hardmax", "Floor", "Dropout", "Gather"]
+_OUTSIDE = ["Transpose", "Reshape", "Flatten", "Shape", "Tile", "Expand", "CumSum", "Hardmax", "Ceil", "Dropout", "Gather"]
 
 
 def _random_graph(rng: np.random.Generator):
