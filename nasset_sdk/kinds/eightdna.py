@@ -27,8 +27,7 @@ from ..networks import CheckedSession, make_session, split_first_layer
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
 from .encodings import cubemap, grid_1d, to_unit_box, triplane, unit64
-from .spline import (MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, FlowSample, cylindrical_to_direction,
-                     finite64)
+from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, FlowSample, cylindrical_to_direction, finite64
 
 #: preset -> (triplane R, channels C, cube Q (w_o and s12), 1D grid L, spline bins K,
 #:            flow hidden layers, flow width, albedo hidden layers, albedo width)
