@@ -181,6 +181,7 @@ def _wrap_sessions(ev) -> list[_TimedSession]:
     ev.albedo_session = wrap(ev.albedo_session)
     ev.flow_sessions = [wrap(s) for s in ev.flow_sessions]
     if getattr(ev, "tails", None) is not None:
+        ev.head = wrap(ev.head)
         ev.tails = [(wrap(s), names) for s, names in ev.tails]
     return timed
 

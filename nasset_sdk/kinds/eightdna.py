@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError, error
-from ..networks import CheckedSession, make_session, split_first_layer
+from ..networks import CheckedSession, make_session, mlp_onnx, split_first_layer
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
 from .encodings import cubemap, grid_1d, to_unit_box, triplane, unit64
@@ -162,12 +162,22 @@ class FlowContext:
 
     def __init__(self, base: np.ndarray, pre: list[np.ndarray] | None) -> None:
         self.base, self.pre = base, pre
+        self.s12: tuple[np.ndarray, np.ndarray] | None = None  # (s1, s2 [N, 2], their s12 cube columns [N, C + 3])
 
     def __len__(self) -> int:
         return len(self.base)
 
     def take(self, rows: np.ndarray) -> "FlowContext":
-        return FlowContext(self.base[rows], None if self.pre is None else [p[rows] for p in self.pre])
+        out = FlowContext(self.base[rows], None if self.pre is None else [p[rows] for p in self.pre])
+        if self.s12 is not None:
+            out.s12 = (self.s12[0][rows], self.s12[1][rows])
+        return out
+
+    def s12_columns(self, s12: np.ndarray, compute) -> np.ndarray:
+        """Conditioners 3 and 4 read the same s12 cube columns: computed once per (s1, s2) of these rows."""
+        if self.s12 is None or not np.array_equal(self.s12[0], s12):
+            self.s12 = (np.array(s12), compute(s12))
+        return self.s12[1]
 
 
 class EightDnaEvaluator:
@@ -197,7 +207,7 @@ class EightDnaEvaluator:
     def _split_flows(self, asset, intra_threads: int) -> None:
         """Head matrix [2C+6, sum W1_j] + bias and the four tail sessions; None (whole networks) if any
         flow network does not start with a plain affine layer over its input."""
-        self.head_weight = self.head_bias = self.tails = None
+        self.head_weight = self.head_bias = self.head = self.tails = None
         base_width = self.planes.shape[-1] + self.wo_cube.shape[-1] + 6
         refs = asset.network_refs("core")
         splits = [split_first_layer(asset.network_bytes("core", n), base_width) for n in FLOWS]
@@ -215,6 +225,9 @@ class EightDnaEvaluator:
         self.head_weight = np.concatenate([sp.head_weight for sp in splits], axis=1)
         self.head_bias = np.concatenate([sp.bias for sp in splits])
         self.head_cols = np.cumsum([0] + [sp.head_weight.shape[1] for sp in splits])
+        # one affine layer, run by onnxruntime under the render's thread setting like the other networks
+        self.head = make_session(mlp_onnx([self.head_weight], [self.head_bias], output_name="pre", name="flow_heads"),
+                                 intra_threads=intra_threads)
         self.tails = tails
 
     @staticmethod
@@ -238,10 +251,14 @@ class EightDnaEvaluator:
 
     def _run(self, session, feed: dict[str, np.ndarray]) -> np.ndarray:
         """Session output 0 [N, width] as float64 (NaN -> 0, +-inf -> +-1e30), in row batches of ``batch``."""
+        return finite64(self._run32(session, feed))
+
+    def _run32(self, session, feed: dict[str, np.ndarray]) -> np.ndarray:
+        """Session output 0 [N, width] as the runtime returns it (float32), in row batches of ``batch``."""
         n = len(next(iter(feed.values())))
         outs = [session.run(None, {k: v[s:s + self.batch] for k, v in feed.items()})[0]
                 for s in range(0, n, self.batch)] or [np.zeros((0, session.get_outputs()[0].shape[1]), np.float32)]
-        return finite64(outs[0] if len(outs) == 1 else np.concatenate(outs, axis=0))
+        return outs[0] if len(outs) == 1 else np.concatenate(outs, axis=0)
 
     def base_features(self, x, wo) -> np.ndarray:
         """[N, 2C + 6] = [triplane(xn), xn, cube_wo(w_o), w_o] (float32)."""
@@ -255,16 +272,22 @@ class EightDnaEvaluator:
         base = self.base_features(x, wo)
         if self.tails is None:
             return FlowContext(base, None)
-        h = base @ self.head_weight + self.head_bias
+        h = self._run32(self.head, {"x": base})
         return FlowContext(base, [h[:, a:b] for a, b in zip(self.head_cols[:-1], self.head_cols[1:], strict=True)])
 
-    def flow_extra(self, j: int, s_prev: np.ndarray) -> np.ndarray:
-        """The columns of conditioner j (2..4) after the base features, from s^1..s^{j-1} [N, j-1] (float32)."""
+    def _s12_columns(self, s12: np.ndarray) -> np.ndarray:
+        """[cube_s12(d12), d12] [N, C + 3] (float32) for s12 = (s1, s2) [N, 2]."""
+        d12 = cylindrical_to_direction(s12[:, 0], s12[:, 1])
+        return np.concatenate([cubemap(self.s12_cube, d12), d12.astype(np.float32)], axis=1)
+
+    def flow_extra(self, j: int, s_prev: np.ndarray, ctx: FlowContext | None = None) -> np.ndarray:
+        """The columns of conditioner j (2..4) after the base features, from s^1..s^{j-1} [N, j-1] (float32).
+        With ``ctx``, the s12 cube columns are shared between conditioners 3 and 4 of its rows."""
         if j == 2:
             parts = [grid_1d(self.s1_grid, s_prev[:, 0]), s_prev[:, :1]]
         else:
-            d12 = cylindrical_to_direction(s_prev[:, 0], s_prev[:, 1])
-            parts = [cubemap(self.s12_cube, d12), d12]
+            s12 = s_prev[:, :2]
+            parts = [self._s12_columns(s12) if ctx is None else ctx.s12_columns(s12, self._s12_columns)]
             if j == 4:
                 parts += [grid_1d(self.s3_grid, s_prev[:, 2]), s_prev[:, 2:3]]
         return np.concatenate([np.asarray(p, np.float32) for p in parts], axis=1)
@@ -276,12 +299,13 @@ class EightDnaEvaluator:
     def _conditioner(self, j: int, ctx: FlowContext, s_prev: np.ndarray) -> np.ndarray:
         if ctx.pre is None or self.tails is None:
             session = self.flow_sessions[j - 1]
-            return self._run(session, {session.get_inputs()[0].name: self.flow_input(j, ctx.base, s_prev)})
+            x = ctx.base if j == 1 else np.concatenate([ctx.base, self.flow_extra(j, s_prev, ctx)], axis=1)
+            return self._run32(session, {session.get_inputs()[0].name: x})
         session, names = self.tails[j - 1]
         feed = {names[0]: ctx.pre[j - 1]}
         if j > 1:
-            feed[names[1]] = self.flow_extra(j, s_prev)
-        return self._run(session, feed)
+            feed[names[1]] = self.flow_extra(j, s_prev, ctx)
+        return self._run32(session, feed)  # the spline reads NaN / inf as the spec says (finite64)
 
     # -- indirect transport ----------------------------------------------------------------
     def albedo(self, x, wo, *, context: FlowContext | None = None) -> np.ndarray:

@@ -79,16 +79,18 @@ class RQSpline:
         if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
         raw = finite64(raw)
-        # widths and heights in one pass: [N, 2, K] softmax along the bins, then the knots
-        a = raw[:, :2 * k].reshape(len(raw), 2, k)
-        e = np.exp(a - a.max(axis=-1, keepdims=True))
-        e /= np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
+        # widths and heights in one pass: [N, 2, K] softmax along the bins, then the knots (in place)
+        e = raw[:, :2 * k].reshape(len(raw), 2, k)
+        e = e - e.max(axis=-1, keepdims=True)
+        np.exp(e, out=e)
         m = np.array([[min_bin_width], [min_bin_height]])
-        sizes = m + (1 - m * k) * e
-        knots = np.zeros((len(raw), 2, k + 1))
-        np.cumsum(sizes, axis=-1, out=knots[:, :, 1:])
+        e *= (1 - m * k) / np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
+        e += m
+        knots = np.empty((2, len(raw), k + 1))  # x and y knots, each contiguous [N, K+1] (flat gathers)
+        knots[:, :, 0] = 0.0
+        np.cumsum(e, axis=-1, out=knots.transpose(1, 0, 2)[:, :, 1:])
         knots[:, :, -1] = 1.0
-        return cls(knots[:, 0], knots[:, 1], d_raw=raw[:, 2 * k:], d_min=min_derivative)
+        return cls(knots[0], knots[1], d_raw=np.ascontiguousarray(raw[:, 2 * k:]), d_min=min_derivative)
 
     @classmethod
     def from_raw_rgb(cls, raw: np.ndarray, **minimums) -> "RQSpline":
@@ -111,25 +113,28 @@ class RQSpline:
         # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}
         return (v[:, None] >= knots[:, 1:-1]).sum(axis=1)
 
-    def _gather(self, k: np.ndarray):
-        i = np.arange(len(k)) * self.xk.shape[1] + k  # flat indices of (row, k) in the [N, K+1] knot arrays
-        xk, yk = np.ravel(self.xk), np.ravel(self.yk)
+    def _gather(self, k: np.ndarray, rows: np.ndarray | None = None):
+        """Bin k's (x_k, y_k, w_k, h_k, d_k, d_{k+1}) of each row (of rows [M] of the batch if given)."""
+        r = np.arange(len(k)) if rows is None else rows
+        i = r * self.xk.shape[1] + k  # flat indices of (row, k) in the [N, K+1] knot arrays
+        xk, yk = self.xk.reshape(-1), self.yk.reshape(-1)
         x0, y0 = xk[i], yk[i]
         w = xk[i + 1] - x0
         h = yk[i + 1] - y0
         if self._dk is None:
-            dr = np.ravel(self.d_raw)
+            dr = self.d_raw.reshape(-1)
             d0, d1 = self.d_min + _softplus(dr[i]), self.d_min + _softplus(dr[i + 1])
         else:
-            dk = np.ravel(self._dk)
+            dk = self._dk.reshape(-1)
             d0, d1 = dk[i], dk[i + 1]
         return x0, y0, np.maximum(w, _TINY), np.maximum(h, _TINY), d0, d1
 
-    def forward(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0)."""
+    def forward(self, z: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0); with ``rows`` [M], z [M]
+        goes through the splines of those rows."""
         z = np.clip(np.nan_to_num(np.asarray(z, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
-        k = self._bin(self.xk, z)
-        x0, y0, w, h, d0, d1 = self._gather(k)
+        k = self._bin(self.xk if rows is None else self.xk[rows], z)
+        x0, y0, w, h, d0, d1 = self._gather(k, rows)
         s = h / w
         xi = np.clip((z - x0) / w, 0.0, 1.0)
         t = xi * (1 - xi)
@@ -319,7 +324,7 @@ class BoxFlow:
                              min_derivative=float(min_derivative))
 
     def _raw(self, j: int, ctx, s_prev, n: int) -> np.ndarray:
-        raw = np.asarray(self.conditioner(j, ctx, s_prev), np.float64)
+        raw = np.asarray(self.conditioner(j, ctx, s_prev))  # float64 in the spline (RQSpline.from_raw)
         if raw.ndim != 2 or raw.shape[1] % 3 or len(raw) != n:
             raise UsageError(f"conditioner {j} returned shape {raw.shape}; expected [N, 3 (3K+1)]")
         return raw
@@ -404,7 +409,7 @@ class BoxFlow:
                 tj, ld = self._channel_spline(raw, ch).forward(z[:, 3])
             else:  # all channels: their position densities and the step-3 splines are kept
                 spl = self._splines_rgb(raw)
-                tj, ld = spl.rows(own).forward(z[:, j - 1])
+                tj, ld = spl.forward(z[:, j - 1], own)
                 if j <= 2:
                     log_pos += self._log_inverse_rgb(spl, tj)
                 else:
