@@ -99,12 +99,6 @@ class RQSpline:
         raw = np.asarray(raw)
         return cls.from_raw(raw.reshape(3 * len(raw), raw.shape[1] // 3), **minimums)
 
-    def rows(self, idx: np.ndarray) -> "RQSpline":
-        """The splines of rows idx [M]."""
-        if self._dk is None:
-            return RQSpline(self.xk[idx], self.yk[idx], d_raw=self.d_raw[idx], d_min=self.d_min)
-        return RQSpline(self.xk[idx], self.yk[idx], self._dk[idx])
-
     @property
     def bins(self) -> int:
         return self.xk.shape[1] - 1
@@ -296,7 +290,7 @@ class FlowSample:
     s: np.ndarray  # [N, 4] box parameters of the sample
     log_position: np.ndarray  # [N, 3] per channel: log density of (t1, t2) (steps 1-2)
     jac: np.ndarray  # [N] |n_u . u| / |u|^3
-    spline3: "RQSpline"  # step-3 splines of all channels (row 3 n + c): conditioner 3 depends on s1, s2 only
+    raw3: np.ndarray  # [N, 3 (3K+1)] conditioner-3 output: it depends on s1, s2 only
 
     def pdf_position_rgb(self) -> np.ndarray:
         """[N, 3]: marginal density of u_i per unit box area, per channel (:meth:`BoxFlow.pdf_position`)."""
@@ -402,23 +396,21 @@ class BoxFlow:
         ctx = self.context(x, wo) if context is None else context
         s, logp, log_pos = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 3))
         own = 3 * np.arange(n) + ch  # the sampled channel's rows among all-channel splines
-        spline3 = None
+        raw3 = None
         for j in (1, 2, 3, 4):
             raw = self._raw(j, ctx, s[:, : j - 1], n)
-            if j == 4:  # later densities re-run conditioner 4 for new w_i: only the sampled channel here
-                tj, ld = self._channel_spline(raw, ch).forward(z[:, 3])
-            else:  # all channels: their position densities and the step-3 splines are kept
+            if j <= 2:  # all channels: the position densities p^k(u_i)
                 spl = self._splines_rgb(raw)
                 tj, ld = spl.forward(z[:, j - 1], own)
-                if j <= 2:
-                    log_pos += self._log_inverse_rgb(spl, tj)
-                else:
-                    spline3 = spl
+                log_pos += self._log_inverse_rgb(spl, tj)
+            else:  # the sampled channel; pdf_rgb_at builds the other channels' splines of the rows it needs
+                tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
+                raw3 = raw if j == 3 else raw3
             logp -= ld
             s[:, j - 1] = self.box.s_from_t_dim(j, tj)
         ui, wi, jac = self.box.to_rays(s)
         pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
-        return FlowSample(ui, wi, pdf, ctx, s, log_pos, jac, spline3)
+        return FlowSample(ui, wi, pdf, ctx, s, log_pos, jac, raw3)
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
@@ -432,7 +424,7 @@ class BoxFlow:
         t3, t4 = np.clip((z3 + 1) / 2, 0.0, 1.0), np.clip((p3 + np.pi) / (2 * np.pi), 0.0, 1.0)
         s_prev = np.concatenate([fs.s[rows, :2], z3[:, None]], axis=1)
         spl4 = self._splines_rgb(self._raw(4, take_rows(fs.ctx, rows), s_prev, len(rows)))
-        spl3 = fs.spline3.rows((3 * rows[:, None] + np.arange(3)).reshape(-1))
+        spl3 = self._splines_rgb(fs.raw3[rows])
         logp = fs.log_position[rows] + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
