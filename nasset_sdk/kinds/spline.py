@@ -418,6 +418,8 @@ class BoxFlow:
         wi = np.asarray(wi, np.float64).reshape(-1, 3)
         if len(wi) != len(rows):
             raise UsageError(f"w_i {wi.shape} must have one row per index ({len(rows)})")
+        if len(rows) and (rows.min() < 0 or rows.max() >= len(fs.s)):
+            raise UsageError(f"rows must index the {len(fs.s)} rows of the flow sample")
         if not len(rows):
             return np.zeros((0, 3))
         z3, p3 = direction_to_cylindrical(wi)

@@ -171,3 +171,15 @@ def test_split_first_layer_declines_other_graphs(rng):
     w = [rng.normal(size=(6, 8)).astype(np.float32), rng.normal(size=(14, 3)).astype(np.float32)]
     data = mlp_onnx(w, [np.zeros(8, np.float32), np.zeros(3, np.float32)], skips=[(0, 1)])
     assert split_first_layer(data, 4) is None
+
+
+def test_pdf_rgb_at_rejects_rows_outside_the_sample(small, rng):
+    from nasset_sdk.errors import UsageError
+
+    _, ev, _ = small
+    x, wo = _queries(ev, rng, 4)
+    fs = ev.sample_state(x, wo, 0, u=rng.random((4, 4)))
+    with pytest.raises(UsageError):
+        ev.pdf_rgb_at(fs, [0, 4], np.tile([0.0, 0.0, 1.0], (2, 1)))
+    with pytest.raises(UsageError):
+        ev.pdf_rgb_at(fs, [0], np.tile([0.0, 0.0, 1.0], (2, 1)))
