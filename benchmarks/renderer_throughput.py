@@ -1,6 +1,7 @@
 """Benchmark (not a test): render throughput vs the bound set by onnxruntime and Embree.
 
     python -m nasset_benchmarks.renderer_throughput [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
+    python -m nasset_benchmarks.renderer_throughput --scene 8dna-near [--size small] [--res 128] [--spp 2]
 
 Scene: one rna asset under a distant light (no other objects: NEE only). For each onnxruntime
 thread setting, in one process and with that same setting throughout, it renders ``--repeat``
@@ -15,6 +16,11 @@ then prints camera samples/s (median), the bound
 time goes (trace = Embree calls and their conversions, onnx = decoder runs, triplane = feature
 lookups, encode = the rest of the network input, other = numpy path-tracing bookkeeping) and,
 with ``--profile N``, the N functions with the most own time in one profiled render.
+
+``--scene 8dna-near`` (:func:`eightdna_near_field`): one 8dna example asset lit by a small sphere
+light at about one box size (near field: light samples at x_o and at every flow sample u_i). It prints
+camera samples/s (median), onnxruntime calls and network rows per camera sample and the time split
+(trace, onnx, network = the rest of the evaluator: encodings and spline math, other).
 """
 
 from __future__ import annotations
@@ -36,14 +42,16 @@ class _TimedSession:
     """Wraps an onnxruntime session; accumulates the wall time of ``run``."""
 
     def __init__(self, session) -> None:
-        self.session, self.time = session, 0.0
+        self.session, self.time, self.calls, self.rows = session, 0.0, 0, 0
 
-    def run(self, *args, **kw):
+    def run(self, output_names, input_feed, *args, **kw):
         t = time.perf_counter()
         try:
-            return self.session.run(*args, **kw)
+            return self.session.run(output_names, input_feed, *args, **kw)
         finally:
             self.time += time.perf_counter() - t
+            self.calls += 1
+            self.rows += len(next(iter(input_feed.values()))) if input_feed else 0
 
     def __getattr__(self, name):
         return getattr(self.session, name)
@@ -148,8 +156,80 @@ def run_one(scene, a, threads: int) -> dict:
     return out
 
 
+def _eightdna_scene(size: str):
+    from nasset_reference_renderer.scene import load_scene
+    from nasset_reference_renderer.testscenes import SceneBuilder
+    from nasset_sdk.examples import example_builder
+
+    tmp = Path(tempfile.mkdtemp())
+    asset = example_builder("8dna", size=size, seed=0).write(tmp / "e.usdc")
+    b = SceneBuilder()
+    b.camera((0, 0.4, 3.0), (0, 0, 0), focal=55)
+    b.sphere_light("Bulb", (0.9, 0.9, 0.8), 0.35, 8.0)  # near field: about one box size from the asset
+    b.asset("Obj", asset)
+    return load_scene(b.write(tmp / "bench8.usda"))
+
+
+def _wrap_sessions(ev) -> list[_TimedSession]:
+    """Replace every onnxruntime session the 8dna evaluator runs by a timed one; returns them."""
+    timed = []
+
+    def wrap(s):
+        timed.append(_TimedSession(s))
+        return timed[-1]
+
+    ev.albedo_session = wrap(ev.albedo_session)
+    ev.flow_sessions = [wrap(s) for s in ev.flow_sessions]
+    if getattr(ev, "tails", None) is not None:
+        ev.head = wrap(ev.head)
+        ev.tails = [(wrap(s), names) for s, names in ev.tails]
+    return timed
+
+
+def eightdna_near_field(a, threads: int) -> dict:
+    """Render the 8dna near-field scene ``a.repeat`` times; the median run's rates and time split."""
+    from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render
+    from nasset_reference_renderer.plan import make_plan
+
+    scene = _eightdna_scene(a.size)
+    settings = RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch)
+    width, height = scene.camera.default_resolution(settings.width, settings.height)
+    plan = make_plan(scene, width=width, height=height, spp=settings.spp, max_depth=settings.max_depth,
+                     tile=settings.tile, batch=settings.batch)
+    prepare_assets(scene, plan, settings)
+    timed = _wrap_sessions(scene.assets[0].evaluator)
+    render(scene, RenderSettings(spp=1, width=16, height=16, threads=threads))  # warm up
+    runs = []
+    for _ in range(a.repeat):
+        for t in timed:
+            t.time, t.calls, t.rows = 0.0, 0, 0
+        st = render(scene, settings).stats
+        onnx_t = sum(t.time for t in timed)
+        runs.append(dict(total=st.time_total, trace=st.time["trace"], onnx=onnx_t, network=st.time["network"] - onnx_t,
+                         other=st.time_total - st.time["trace"] - st.time["network"], st=st,
+                         calls=sum(t.calls for t in timed), rows=sum(t.rows for t in timed)))
+    runs.sort(key=lambda r: r["total"])
+    out = runs[len(runs) // 2]
+    out["rate"] = out["st"].camera_samples / out["total"]
+    out["rates"] = [r["st"].camera_samples / r["total"] for r in runs]
+    return out
+
+
+def _print_eightdna(a, threads: int) -> None:
+    r = eightdna_near_field(a, threads)
+    n = r["st"].camera_samples
+    print(f"\n== 8dna near field, onnxruntime intra-op threads {threads} ==")
+    print(f"render:      {r['rate']:12,.0f} camera samples/s  ({r['total']:.3f} s; runs "
+          + ", ".join(f"{x:,.0f}" for x in sorted(r["rates"])) + ")")
+    print(f"per sample:  {r['calls'] / n:.4f} onnxruntime calls, {r['rows'] / n:.2f} network rows, "
+          f"{r['st'].rays / n:.3f} rays")
+    parts = [(k, r[k]) for k in ("trace", "onnx", "network", "other")]
+    print("time:        " + ", ".join(f"{k} {v:.3f} s ({100 * v / r['total']:.0f}%)" for k, v in parts))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
+    ap.add_argument("--scene", default="rna", choices=("rna", "8dna-near"))
     ap.add_argument("--size", default="small")
     ap.add_argument("--res", type=int, default=256)
     ap.add_argument("--spp", type=int, default=8)
@@ -158,6 +238,12 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="renders per setting (the median is reported)")
     ap.add_argument("--profile", type=int, default=12, help="top entries of a profiled render (0: none)")
     a = ap.parse_args(argv)
+    if a.scene == "8dna-near":
+        print(f"scene: 8dna '{a.size}' example asset, sphere light in the near field, {a.res}x{a.res} x {a.spp} spp "
+              f"(median of {a.repeat} renders per thread setting)")
+        for threads in [int(t) for t in a.threads.split(",")]:
+            _print_eightdna(a, threads)
+        return 0
     scene = _scene(a.size)
     print(f"scene: rna '{a.size}' asset, distant light, {a.res}x{a.res} x {a.spp} spp "
           f"(median of {a.repeat} renders per thread setting)")

@@ -417,6 +417,94 @@ def parameter_count(data: bytes) -> int:
     return int(sum(int(np.prod(t.dims)) for t in model.graph.initializer))
 
 
+@dataclass(frozen=True)
+class FirstLayerSplit:
+    """An MLP whose first affine layer is split by input columns: ``x @ W + b`` with
+    ``x = [head (H), rest]`` becomes ``(head @ head_weight + bias) + rest @ W_rest``.
+
+    ``head_weight`` [H, W1] and ``bias`` [W1] (float32) are applied by the caller, so several
+    networks that read the same head columns share one matrix product; ``tail`` is an ONNX model
+    with inputs ``tail_inputs[0]`` [N, W1] (that pre-activation) and, if the network has columns after
+    the head, ``tail_inputs[1]`` [N, in - H], and the original outputs."""
+
+    head_weight: np.ndarray
+    bias: np.ndarray
+    tail: bytes
+    rest_width: int
+    tail_inputs: tuple[str, ...]
+
+
+def split_first_layer(data: bytes, head: int) -> FirstLayerSplit | None:
+    """Split a checked single-input network at input column ``head`` (see :class:`FirstLayerSplit`).
+
+    None when the graph does not start with one affine layer that alone reads the input (a Gemm
+    with transA = 0 or a MatMul, with a constant weight): callers then run the whole network."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    model = onnx.ModelProto()
+    model.ParseFromString(bytes(data))
+    g = model.graph
+    if len(g.input) != 1:
+        return None
+    x = g.input[0].name
+    users = [n for n in g.node if x in n.input]
+    if len(users) != 1 or users[0].op_type not in ("Gemm", "MatMul") or users[0].input[0] != x:
+        return None
+    first = users[0]
+    static = _static_sources(g)
+    if len(first.input) < 2 or first.input[1] not in static:
+        return None
+    attrs = {a.name: helper.get_attribute_value(a) for a in first.attribute}
+    if attrs.get("transA", 0):
+        return None
+    w = np.asarray(_static_value(static[first.input[1]]), np.float32)
+    if w.ndim != 2:
+        return None
+    if attrs.get("transB", 0):
+        w = w.T
+    w = w * np.float32(attrs.get("alpha", 1.0))
+    bias = np.zeros(w.shape[1], np.float32)
+    if first.op_type == "Gemm" and len(first.input) > 2 and first.input[2]:
+        if first.input[2] not in static:
+            return None
+        c = np.asarray(_static_value(static[first.input[2]]), np.float32) * np.float32(attrs.get("beta", 1.0))
+        if c.size not in (1, w.shape[1]):
+            return None
+        bias = np.broadcast_to(c.reshape(-1), (w.shape[1],)).astype(np.float32)
+    if not 0 < head <= w.shape[0]:
+        return None
+    rest = w.shape[0] - head
+    taken = {t.name for t in g.initializer} | {o for n in g.node for o in n.output} | {x}
+    pre, xe, wr, mm = (_fresh(stem, taken) for stem in ("split_pre", "split_rest", "split_rest_weight", "split_rest_mm"))
+    nodes = []
+    inputs = [helper.make_tensor_value_info(pre, onnx.TensorProto.FLOAT, ["N", w.shape[1]])]
+    inits = [t for t in g.initializer]
+    if rest:
+        inputs.append(helper.make_tensor_value_info(xe, onnx.TensorProto.FLOAT, ["N", rest]))
+        inits.append(numpy_helper.from_array(np.ascontiguousarray(w[head:]), wr))
+        nodes += [helper.make_node("MatMul", [xe, wr], [mm]), helper.make_node("Add", [pre, mm], [first.output[0]])]
+    else:
+        nodes.append(helper.make_node("Identity", [pre], [first.output[0]]))
+    nodes += [n for n in g.node if n is not first]
+    used = {i for n in nodes for i in n.input}
+    graph = helper.make_graph(nodes, g.name + "_tail", inputs, list(g.output), [t for t in inits if t.name in used])
+    tail = helper.make_model(graph, opset_imports=list(model.opset_import), producer_name="nasset_sdk")
+    tail.ir_version = model.ir_version
+    return FirstLayerSplit(np.ascontiguousarray(w[:head]), bias, tail.SerializeToString(), rest,
+                           (pre, xe) if rest else (pre,))
+
+
+def _fresh(stem: str, taken: set[str]) -> str:
+    """stem, or stem_1, stem_2, ...: the first not in ``taken`` (which it joins)."""
+    name, i = stem, 0
+    while name in taken:
+        i += 1
+        name = f"{stem}_{i}"
+    taken.add(name)
+    return name
+
+
 def make_session(data: bytes, *, intra_threads: int = 0, inter_threads: int = 1):
     """An onnxruntime CPU session; ``intra_threads=0`` lets onnxruntime choose."""
     import onnxruntime as ort

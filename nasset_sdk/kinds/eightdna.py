@@ -23,11 +23,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError, error
+from ..networks import CheckedSession, make_session, mlp_onnx, split_first_layer
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
 from .encodings import cubemap, grid_1d, to_unit_box, triplane, unit64
 from .query import Evaluator, Query
-from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, cylindrical_to_direction
+from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, FlowSample, cylindrical_to_direction, finite64
 
 #: preset -> (triplane R, channels C, cube Q (w_o and s12), 1D grid L, spline bins K,
 #:            flow hidden layers, flow width, albedo hidden layers, albedo width)
@@ -163,8 +164,37 @@ class EightDnaKind(KindContract):
         return EightDnaEvaluator(asset, **options)
 
 
+class FlowContext:
+    """Per-row conditioning of the flow: base features [N, 2C+6] (float32) and, where the flow networks'
+    first layers are split (:func:`~nasset_sdk.networks.split_first_layer`), their base-column
+    pre-activations, one [N, W1_j] block per conditioner j = 1..4 (else None)."""
+
+    def __init__(self, base: np.ndarray, pre: list[np.ndarray] | None) -> None:
+        self.base, self.pre = base, pre
+        self.s12: tuple[np.ndarray, np.ndarray] | None = None  # (s1, s2 [N, 2], their s12 cube columns [N, C + 3])
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def take(self, rows: np.ndarray) -> "FlowContext":
+        out = FlowContext(self.base[rows], None if self.pre is None else [p[rows] for p in self.pre])
+        if self.s12 is not None:
+            out.s12 = (self.s12[0][rows], self.s12[1][rows])
+        return out
+
+    def s12_columns(self, s12: np.ndarray, compute) -> np.ndarray:
+        """Conditioners 3 and 4 read the same s12 cube columns: computed once per (s1, s2) of these rows."""
+        if self.s12 is None or not np.array_equal(self.s12[0], s12):
+            self.s12 = (np.array(s12), compute(s12))
+        return self.s12[1]
+
+
 class EightDnaEvaluator(Evaluator):
     """numpy + onnxruntime evaluation and sampling of an 8dna asset; object space throughout.
+
+    The four conditioners read the same base features first: at load time each flow network's first
+    layer is split into its base columns and the rest (no format change), so one matrix product per
+    batch of rows serves all four and each conditioner call computes only the rest.
 
     :meth:`radiance` (the interface every kind shares) answers for a distant light: the direct lobe
     plus the flow's density of w_i marginalised over u_i, estimated with ``light_samples`` stratified
@@ -185,10 +215,40 @@ class EightDnaEvaluator(Evaluator):
         self.eta, self.alpha = boundary_params(asset.tensor("core", "direct"))
         self.albedo_session = asset.session("core", "albedo", intra_threads=intra_threads)
         self.flow_sessions = [asset.session("core", n, intra_threads=intra_threads) for n in FLOWS]
+        self._split_flows(asset, intra_threads)
         self.batch = int(batch)
         self.box = BoxParam(self.lo, self.hi)
-        self.flow = BoxFlow(self.box, self._conditioner, context=self.base_features,
+        self.flow = BoxFlow(self.box, self._conditioner, context=self.context,
                             min_bin_width=mins[0], min_bin_height=mins[1], min_derivative=mins[2])
+
+    def _split_flows(self, asset, intra_threads: int) -> None:
+        """Head matrix [2C+6, sum W1_j] + bias and the four tail sessions; None (whole networks) if any
+        flow network does not start with a plain affine layer over its input."""
+        self.head_weight = self.head_bias = self.head = self.tails = None
+        base_width = self.planes.shape[-1] + self.wo_cube.shape[-1] + 6
+        refs = asset.network_refs("core")
+        try:
+            splits = [split_first_layer(asset.network_bytes("core", n), base_width) for n in FLOWS]
+        except Exception:  # any graph the splitter cannot read runs whole, which is always correct
+            return
+        if not all(sp is not None and sp.rest_width == refs[n].info.input_widths[0] - base_width
+                   for sp, n in zip(splits, FLOWS, strict=True)):
+            return
+        tails = []
+        for sp, name in zip(splits, FLOWS, strict=True):
+            loc = dict(file=str(asset.path), prim=refs[name].prim_path, attribute="onnx:model")
+            try:
+                session = make_session(sp.tail, intra_threads=intra_threads)
+            except Exception:  # a graph onnxruntime accepts whole but not split: run it whole
+                return
+            tails.append((CheckedSession(session, refs[name].info, **loc), sp.tail_inputs))
+        self.head_weight = np.concatenate([sp.head_weight for sp in splits], axis=1)
+        self.head_bias = np.concatenate([sp.bias for sp in splits])
+        self.head_cols = np.cumsum([0] + [sp.head_weight.shape[1] for sp in splits])
+        # one affine layer, run by onnxruntime under the render's thread setting like the other networks
+        self.head = make_session(mlp_onnx([self.head_weight], [self.head_bias], output_name="pre", name="flow_heads"),
+                                 intra_threads=intra_threads)
+        self.tails = tails
 
     @staticmethod
     def _check_splines(asset, mins: np.ndarray) -> None:
@@ -209,10 +269,16 @@ class EightDnaEvaluator(Evaluator):
                         f"non-positive for K={k} (need 0 <= K m_w < 1, 0 <= K m_h < 1, m_d > 0)", file=str(asset.path),
                         prim=prim, attribute="values")
 
-    def _run(self, session, x: np.ndarray) -> np.ndarray:
-        outs = [session.run(None, {session.get_inputs()[0].name: x[s:s + self.batch]})[0]
-                for s in range(0, len(x), self.batch)] or [np.zeros((0, session.get_outputs()[0].shape[1]), np.float32)]
-        return np.nan_to_num(np.concatenate(outs, axis=0).astype(np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
+    def _run(self, session, feed: dict[str, np.ndarray]) -> np.ndarray:
+        """Session output 0 [N, width] as float64 (NaN -> 0, +-inf -> +-1e30), in row batches of ``batch``."""
+        return finite64(self._run32(session, feed))
+
+    def _run32(self, session, feed: dict[str, np.ndarray]) -> np.ndarray:
+        """Session output 0 [N, width] as the runtime returns it (float32), in row batches of ``batch``."""
+        n = len(next(iter(feed.values())))
+        outs = [session.run(None, {k: v[s:s + self.batch] for k, v in feed.items()})[0]
+                for s in range(0, n, self.batch)] or [np.zeros((0, session.get_outputs()[0].shape[1]), np.float32)]
+        return outs[0] if len(outs) == 1 else np.concatenate(outs, axis=0)
 
     def base_features(self, x, wo) -> np.ndarray:
         """[N, 2C + 6] = [triplane(xn), xn, cube_wo(w_o), w_o] (float32)."""
@@ -221,30 +287,64 @@ class EightDnaEvaluator(Evaluator):
         wo = unit64(wo).astype(np.float32)
         return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo), wo], axis=1).astype(np.float32)
 
-    def flow_input(self, j: int, base: np.ndarray, s_prev: np.ndarray) -> np.ndarray:
-        """Input of conditioner j (1..4) given base features and s^1..s^{j-1} [N, j-1]."""
-        parts = [base]
+    def context(self, x, wo) -> FlowContext:
+        """Base features of (x_o [N,3], w_o [N,3]) and the flows' shared first-layer products."""
+        base = self.base_features(x, wo)
+        if self.tails is None:
+            return FlowContext(base, None)
+        h = self._run32(self.head, {"x": base})
+        return FlowContext(base, [h[:, a:b] for a, b in zip(self.head_cols[:-1], self.head_cols[1:], strict=True)])
+
+    def _s12_columns(self, s12: np.ndarray) -> np.ndarray:
+        """[cube_s12(d12), d12] [N, C + 3] (float32) for s12 = (s1, s2) [N, 2]."""
+        d12 = cylindrical_to_direction(s12[:, 0], s12[:, 1])
+        return np.concatenate([cubemap(self.s12_cube, d12), d12.astype(np.float32)], axis=1)
+
+    def flow_extra(self, j: int, s_prev: np.ndarray, ctx: FlowContext | None = None) -> np.ndarray:
+        """The columns of conditioner j (2..4) after the base features, from s^1..s^{j-1} [N, j-1] (float32).
+        With ``ctx``, the s12 cube columns are shared between conditioners 3 and 4 of its rows."""
         if j == 2:
-            parts += [grid_1d(self.s1_grid, s_prev[:, 0]), s_prev[:, :1]]
-        elif j >= 3:
-            d12 = cylindrical_to_direction(s_prev[:, 0], s_prev[:, 1])
-            parts += [cubemap(self.s12_cube, d12), d12]
+            parts = [grid_1d(self.s1_grid, s_prev[:, 0]), s_prev[:, :1]]
+        else:
+            s12 = s_prev[:, :2]
+            parts = [self._s12_columns(s12) if ctx is None else ctx.s12_columns(s12, self._s12_columns)]
             if j == 4:
                 parts += [grid_1d(self.s3_grid, s_prev[:, 2]), s_prev[:, 2:3]]
         return np.concatenate([np.asarray(p, np.float32) for p in parts], axis=1)
 
-    def _conditioner(self, j: int, base: np.ndarray, s_prev: np.ndarray) -> np.ndarray:
-        return self._run(self.flow_sessions[j - 1], self.flow_input(j, base, s_prev))
+    def flow_input(self, j: int, base: np.ndarray, s_prev: np.ndarray) -> np.ndarray:
+        """Input of conditioner j (1..4) given base features and s^1..s^{j-1} [N, j-1]."""
+        return base if j == 1 else np.concatenate([base, self.flow_extra(j, s_prev)], axis=1)
+
+    def _conditioner(self, j: int, ctx: FlowContext, s_prev: np.ndarray) -> np.ndarray:
+        if ctx.pre is None or self.tails is None:
+            session = self.flow_sessions[j - 1]
+            x = ctx.base if j == 1 else np.concatenate([ctx.base, self.flow_extra(j, s_prev, ctx)], axis=1)
+            return self._run32(session, {session.get_inputs()[0].name: x})
+        session, names = self.tails[j - 1]
+        feed = {names[0]: ctx.pre[j - 1]}
+        if j > 1:
+            feed[names[1]] = self.flow_extra(j, s_prev, ctx)
+        return self._run32(session, feed)  # the spline reads NaN / inf as the spec says (finite64)
 
     # -- indirect transport ----------------------------------------------------------------
-    def albedo(self, x, wo) -> np.ndarray:
-        """alpha(x_o, w_o) RGB [N,3], clamped to finite values >= 0."""
-        y = self._run(self.albedo_session, self.base_features(x, wo))
+    def albedo(self, x, wo, *, context: FlowContext | None = None) -> np.ndarray:
+        """alpha(x_o, w_o) RGB [N,3], clamped to finite values >= 0 (``context``: :meth:`context` of x, wo)."""
+        base = (context if context is not None else self.context(x, wo)).base
+        y = self._run(self.albedo_session, {self.albedo_session.get_inputs()[0].name: base})
         return np.maximum(np.nan_to_num(y, posinf=0.0, neginf=0.0), 0.0).astype(np.float32)
 
     def sample(self, x, wo, channel, rng=None, *, u=None):
         """(u_i [N,3], w_i [N,3], pdf [N]) ~ p^channel(u_i, w_i | x_o, w_o); pdf per box area and steradian."""
         return self.flow.sample(x, wo, channel, rng, u=u)
+
+    def sample_state(self, x, wo, channel, rng=None, *, u=None, context: FlowContext | None = None) -> FlowSample:
+        """:meth:`sample` keeping what later densities at the same u_i reuse (:meth:`pdf_rgb_at`)."""
+        return self.flow.sample_state(x, wo, channel, rng, u=u, context=context)
+
+    def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
+        """p^k(u_i, w_i | x_o, w_o) [M, 3] for rows of a :meth:`sample_state` (its u_i) and new w_i [M, 3]."""
+        return self.flow.pdf_rgb_at(fs, rows, wi)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
         """p^channel(u_i, w_i | x_o, w_o) [N] per unit box area at u_i and steradian at w_i."""

@@ -34,31 +34,38 @@ MIN_DERIVATIVE = 1e-3
 _TINY = 1e-300
 
 
-def _softmax(a: np.ndarray) -> np.ndarray:
-    a = np.nan_to_num(np.asarray(a, np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
-    a = a - a.max(axis=-1, keepdims=True)
-    e = np.exp(a)
-    return e / np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
+def finite64(a) -> np.ndarray:
+    """float64 copy of a with NaN -> 0, +-inf -> +-1e30: ``np.nan_to_num``'s result, one pass when all are finite."""
+    a = np.array(a, np.float64)
+    if np.isfinite(a).all():
+        return a
+    return np.nan_to_num(a, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
 
 
 def _softplus(a: np.ndarray) -> np.ndarray:
-    a = np.nan_to_num(np.asarray(a, np.float64), nan=0.0, posinf=1e30, neginf=-1e30)
+    """log(1 + e^a) for finite a, without overflow."""
     return np.maximum(a, 0.0) + np.log1p(np.exp(-np.abs(a)))
 
 
-def _knots(sizes: np.ndarray) -> np.ndarray:
-    cum = np.concatenate([np.zeros((len(sizes), 1)), np.cumsum(sizes, axis=1)], axis=1)
-    cum[:, -1] = 1.0
-    return cum
-
-
-@dataclass
 class RQSpline:
-    """A batch of monotone rational-quadratic splines on [0, 1] (one per row)."""
+    """A batch of monotone rational-quadratic splines on [0, 1] (one per row).
 
-    xk: np.ndarray  # [N, K+1] input knots, xk[:, 0] = 0, xk[:, K] = 1
-    yk: np.ndarray  # [N, K+1] output knots
-    dk: np.ndarray  # [N, K+1] derivatives at the knots, > 0
+    xk [N, K+1] input knots (xk[:, 0] = 0, xk[:, K] = 1), yk [N, K+1] output knots, dk [N, K+1]
+    derivatives at the knots (> 0). :meth:`from_raw` keeps the derivatives unnormalised (``d_raw``,
+    ``d_min``) and applies softplus only to the two knots of each evaluated bin."""
+
+    def __init__(self, xk: np.ndarray, yk: np.ndarray, dk: np.ndarray | None = None, *, d_raw: np.ndarray | None = None,
+                 d_min: float = MIN_DERIVATIVE) -> None:
+        if (dk is None) == (d_raw is None):
+            raise UsageError("give the knot derivatives dk or their unnormalised values d_raw, not both")
+        self.xk, self.yk, self._dk, self.d_raw, self.d_min = xk, yk, dk, d_raw, float(d_min)
+
+    @property
+    def dk(self) -> np.ndarray:
+        """[N, K+1] derivatives at the knots."""
+        if self._dk is None:
+            self._dk = self.d_min + _softplus(self.d_raw)
+        return self._dk
 
     @classmethod
     def from_raw(cls, raw: np.ndarray, *, min_bin_width: float = MIN_BIN_WIDTH, min_bin_height: float = MIN_BIN_HEIGHT,
@@ -71,10 +78,26 @@ class RQSpline:
         k = (p - 1) // 3
         if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
-        w = min_bin_width + (1 - min_bin_width * k) * _softmax(raw[:, :k])
-        h = min_bin_height + (1 - min_bin_height * k) * _softmax(raw[:, k:2 * k])
-        d = min_derivative + _softplus(raw[:, 2 * k:])
-        return cls(_knots(w), _knots(h), d)
+        raw = finite64(raw)
+        # widths and heights in one pass: [N, 2, K] softmax along the bins, then the knots (in place)
+        e = raw[:, :2 * k].reshape(len(raw), 2, k)
+        e = e - e.max(axis=-1, keepdims=True)
+        np.exp(e, out=e)
+        m = np.array([[min_bin_width], [min_bin_height]])
+        e *= (1 - m * k) / np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
+        e += m
+        knots = np.empty((2, len(raw), k + 1))  # x and y knots, each contiguous [N, K+1] (flat gathers)
+        knots[:, :, 0] = 0.0
+        np.cumsum(e, axis=-1, out=knots.transpose(1, 0, 2)[:, :, 1:])
+        knots[:, :, -1] = 1.0
+        return cls(knots[0], knots[1], d_raw=np.ascontiguousarray(raw[:, 2 * k:]), d_min=min_derivative)
+
+    @classmethod
+    def from_raw_rgb(cls, raw: np.ndarray, **minimums) -> "RQSpline":
+        """Splines of all three channels of raw [N, 3 (3K+1)] (channel-major columns): row 3 n + c is
+        channel c of row n."""
+        raw = np.asarray(raw)
+        return cls.from_raw(raw.reshape(3 * len(raw), raw.shape[1] // 3), **minimums)
 
     @property
     def bins(self) -> int:
@@ -84,18 +107,28 @@ class RQSpline:
         # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}
         return (v[:, None] >= knots[:, 1:-1]).sum(axis=1)
 
-    def _gather(self, k: np.ndarray):
-        r = np.arange(len(k))
-        xk, yk, dk = self.xk, self.yk, self.dk
-        w = xk[r, k + 1] - xk[r, k]
-        h = yk[r, k + 1] - yk[r, k]
-        return xk[r, k], yk[r, k], np.maximum(w, _TINY), np.maximum(h, _TINY), dk[r, k], dk[r, k + 1]
+    def _gather(self, k: np.ndarray, rows: np.ndarray | None = None):
+        """Bin k's (x_k, y_k, w_k, h_k, d_k, d_{k+1}) of each row (of rows [M] of the batch if given)."""
+        r = np.arange(len(k)) if rows is None else rows
+        i = r * self.xk.shape[1] + k  # flat indices of (row, k) in the [N, K+1] knot arrays
+        xk, yk = self.xk.reshape(-1), self.yk.reshape(-1)
+        x0, y0 = xk[i], yk[i]
+        w = xk[i + 1] - x0
+        h = yk[i + 1] - y0
+        if self._dk is None:
+            dr = self.d_raw.reshape(-1)
+            d0, d1 = self.d_min + _softplus(dr[i]), self.d_min + _softplus(dr[i + 1])
+        else:
+            dk = self._dk.reshape(-1)
+            d0, d1 = dk[i], dk[i + 1]
+        return x0, y0, np.maximum(w, _TINY), np.maximum(h, _TINY), d0, d1
 
-    def forward(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0)."""
+    def forward(self, z: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0); with ``rows`` [M], z [M]
+        goes through the splines of those rows."""
         z = np.clip(np.nan_to_num(np.asarray(z, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
-        k = self._bin(self.xk, z)
-        x0, y0, w, h, d0, d1 = self._gather(k)
+        k = self._bin(self.xk if rows is None else self.xk[rows], z)
+        x0, y0, w, h, d0, d1 = self._gather(k, rows)
         s = h / w
         xi = np.clip((z - x0) / w, 0.0, 1.0)
         t = xi * (1 - xi)
@@ -183,6 +216,11 @@ class BoxParam:
         t = np.asarray(t, np.float64)
         return np.stack([2 * t[:, 0] - 1, 2 * np.pi * t[:, 1] - np.pi, 2 * t[:, 2] - 1, 2 * np.pi * t[:, 3] - np.pi], axis=1)
 
+    @staticmethod
+    def s_from_t_dim(j: int, t: np.ndarray) -> np.ndarray:
+        """Dimension j (1..4) of :meth:`s_from_t` for t_j [N]."""
+        return 2 * t - 1 if j in (1, 3) else 2 * np.pi * t - np.pi
+
     def t_from_s(self, s: np.ndarray) -> np.ndarray:
         s = np.asarray(s, np.float64)
         t = np.stack([(s[:, 0] + 1) / 2, (s[:, 1] + np.pi) / (2 * np.pi),
@@ -231,6 +269,34 @@ def _channels(channel, n: int) -> np.ndarray:
     return c.astype(np.int64)
 
 
+def take_rows(ctx, rows):
+    """Rows of a flow context: its ``take(rows)``, each member of a tuple, or the array's rows."""
+    if hasattr(ctx, "take") and not isinstance(ctx, np.ndarray):
+        return ctx.take(rows)
+    if isinstance(ctx, tuple):
+        return tuple(np.asarray(a)[rows] for a in ctx)
+    return np.asarray(ctx)[rows]
+
+
+@dataclass
+class FlowSample:
+    """One flow sample per row (:meth:`BoxFlow.sample_state`) and what densities at its u_i reuse:
+    conditioners 1-3 do not depend on w_i, so p^k(u_i, w_i) for any new w_i needs only conditioner 4."""
+
+    ui: np.ndarray  # [N, 3] object-space point on the box
+    wi: np.ndarray  # [N, 3] unit direction
+    pdf: np.ndarray  # [N] density of the sampled channel, per box area and steradian
+    ctx: object  # the flow context of the rows
+    s: np.ndarray  # [N, 4] box parameters of the sample
+    log_position: np.ndarray  # [N, 3] per channel: log density of (t1, t2) (steps 1-2)
+    jac: np.ndarray  # [N] |n_u . u| / |u|^3
+    raw3: np.ndarray  # [N, 3 (3K+1)] conditioner-3 output: it depends on s1, s2 only
+
+    def pdf_position_rgb(self) -> np.ndarray:
+        """[N, 3]: marginal density of u_i per unit box area, per channel (:meth:`BoxFlow.pdf_position`)."""
+        return np.minimum(np.exp(np.minimum(self.log_position, 700.0)) / (2.0 * 2.0 * np.pi) * self.jac[:, None], PDF_MAX)
+
+
 class BoxFlow:
     """p(u_i, w_i | x_o, w_o) per colour channel: an autoregressive spline flow over t in [0, 1]^4.
 
@@ -251,13 +317,26 @@ class BoxFlow:
         self.minimums = dict(min_bin_width=float(min_bin_width), min_bin_height=float(min_bin_height),
                              min_derivative=float(min_derivative))
 
-    def _spline(self, j: int, ctx, s_prev, ch: np.ndarray) -> RQSpline:
-        raw = np.asarray(self.conditioner(j, ctx, s_prev), np.float64)
-        if raw.ndim != 2 or raw.shape[1] % 3 or len(raw) != len(ch):
+    def _raw(self, j: int, ctx, s_prev, n: int) -> np.ndarray:
+        raw = np.asarray(self.conditioner(j, ctx, s_prev))  # float64 in the spline (RQSpline.from_raw)
+        if raw.ndim != 2 or raw.shape[1] % 3 or len(raw) != n:
             raise UsageError(f"conditioner {j} returned shape {raw.shape}; expected [N, 3 (3K+1)]")
+        return raw
+
+    def _channel_spline(self, raw: np.ndarray, ch: np.ndarray) -> RQSpline:
         p = raw.shape[1] // 3
-        cols = ch[:, None] * p + np.arange(p)[None, :]
-        return RQSpline.from_raw(np.take_along_axis(raw, cols, 1), **self.minimums)
+        return RQSpline.from_raw(raw.reshape(len(raw), 3, p)[np.arange(len(raw)), ch], **self.minimums)
+
+    def _spline(self, j: int, ctx, s_prev, ch: np.ndarray) -> RQSpline:
+        return self._channel_spline(self._raw(j, ctx, s_prev, len(ch)), ch)
+
+    def _splines_rgb(self, raw: np.ndarray) -> RQSpline:
+        return RQSpline.from_raw_rgb(raw, **self.minimums)
+
+    @staticmethod
+    def _log_inverse_rgb(spl: RQSpline, t: np.ndarray) -> np.ndarray:
+        """[N, 3]: log|d rqs^-1 / dt| at t [N] of all-channel splines spl (row 3 n + c)."""
+        return spl.inverse(np.repeat(t, 3))[1].reshape(-1, 3)
 
     def _walk(self, x, wo, ch, *, t=None, z=None, steps=(1, 2, 3, 4), s_prev=None):
         """Run steps in order; forward from latents z or inverse from values t. Returns (t, s, logp)."""
@@ -276,7 +355,7 @@ class BoxFlow:
                 tj = np.clip(t_out[:, j - 1], 0.0, 1.0)
                 logp += ld
             t_out[:, j - 1] = tj
-            s[:, j - 1] = self.box.s_from_t(np.tile(tj[:, None], (1, 4)))[:, j - 1]
+            s[:, j - 1] = self.box.s_from_t_dim(j, tj)
         return t_out, s, logp
 
     @staticmethod
@@ -306,6 +385,50 @@ class BoxFlow:
         _, s, logp = self._walk(x, wo, ch, z=z)
         ui, wi, jac = self.box.to_rays(s)
         return ui, wi, np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
+
+    def sample_state(self, x, wo, channel, rng=None, *, u=None, context=None) -> FlowSample:
+        """:meth:`sample` plus the per-channel position densities and the conditioner outputs that
+        :meth:`pdf_rgb_at` reuses; ``context`` is ``self.context(x, wo)`` if the caller has it."""
+        x, wo = self._prep(x, wo)
+        n = len(x)
+        ch = _channels(channel, n)
+        z = self._latents(n, 4, rng, u)
+        ctx = self.context(x, wo) if context is None else context
+        s, logp, log_pos = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 3))
+        own = 3 * np.arange(n) + ch  # the sampled channel's rows among all-channel splines
+        raw3 = None
+        for j in (1, 2, 3, 4):
+            raw = self._raw(j, ctx, s[:, : j - 1], n)
+            if j <= 2:  # all channels: the position densities p^k(u_i)
+                spl = self._splines_rgb(raw)
+                tj, ld = spl.forward(z[:, j - 1], own)
+                log_pos += self._log_inverse_rgb(spl, tj)
+            else:  # the sampled channel; pdf_rgb_at builds the other channels' splines of the rows it needs
+                tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
+                raw3 = raw if j == 3 else raw3
+            logp -= ld
+            s[:, j - 1] = self.box.s_from_t_dim(j, tj)
+        ui, wi, jac = self.box.to_rays(s)
+        pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
+        return FlowSample(ui, wi, pdf, ctx, s, log_pos, jac, raw3)
+
+    def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
+        """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        wi = np.asarray(wi, np.float64).reshape(-1, 3)
+        if len(wi) != len(rows):
+            raise UsageError(f"w_i {wi.shape} must have one row per index ({len(rows)})")
+        if len(rows) and (rows.min() < 0 or rows.max() >= len(fs.s)):
+            raise UsageError(f"rows must index the {len(fs.s)} rows of the flow sample")
+        if not len(rows):
+            return np.zeros((0, 3))
+        z3, p3 = direction_to_cylindrical(wi)
+        t3, t4 = np.clip((z3 + 1) / 2, 0.0, 1.0), np.clip((p3 + np.pi) / (2 * np.pi), 0.0, 1.0)
+        s_prev = np.concatenate([fs.s[rows, :2], z3[:, None]], axis=1)
+        spl4 = self._splines_rgb(self._raw(4, take_rows(fs.ctx, rows), s_prev, len(rows)))
+        spl3 = self._splines_rgb(fs.raw3[rows])
+        logp = fs.log_position[rows] + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
+        return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
         """Density of (u_i, w_i) per unit box area and steradian, for one channel per row."""

@@ -44,23 +44,6 @@ class EightdnaShader:
         self.integ = integ
         self.frames = Frames(integ.scene)
 
-    # -- flow helpers: one conditioner pass for all three channels (rows tiled 3x) ------------
-    @staticmethod
-    def _tile3(*arrays):
-        return [np.concatenate([a, a, a]) for a in arrays]
-
-    def _pdf_rgb(self, ev, x, wo, u, w) -> np.ndarray:
-        n = len(x)
-        if not n:
-            return np.zeros((0, 3))
-        ch = np.repeat(np.arange(3), n)
-        return ev.pdf(*self._tile3(x, wo, u, w), ch).reshape(3, n).T
-
-    def _pdf_position_mean(self, ev, x, wo, u) -> np.ndarray:
-        n = len(x)
-        ch = np.repeat(np.arange(3), n)
-        return ev.pdf_position(*self._tile3(x, wo, u), ch).reshape(3, n).mean(0)
-
     def _backtrace_ok(self, u_w, w_w, inst) -> np.ndarray:
         """The ray from u_i along -w_i reaches this instance first (the configuration receives light)."""
         hh = self.integ.trace(u_w, -w_w, None, None)
@@ -77,7 +60,8 @@ class EightdnaShader:
         smode = mode["sampling"]
         cont_on = integ.indirect[h.inst] | (smode != "light")
         t0 = time.perf_counter()
-        alpha = ev.albedo(h.x_obj, h.wo_obj).astype(np.float64)
+        ctx = ev.context(h.x_obj, h.wo_obj)  # shared by the albedo and all flow evaluations of these hits
+        alpha = ev.albedo(h.x_obj, h.wo_obj, context=ctx).astype(np.float64)
         integ.stats.time["network"] += time.perf_counter() - t0
         cos_o = dot(h.n_obj, h.wo_obj)
         p_d = direct_probability(np.where(cos_o > 0, fresnel_dielectric(cos_o, ev.eta), 0.0), alpha)
@@ -109,8 +93,9 @@ class EightdnaShader:
         # 2. neural: (u_i, w_i) ~ p^c, c uniform
         ch = rng.integers(0, 3, n)
         t0 = time.perf_counter()
-        u_obj, wf_obj, _ = ev.sample(h.x_obj, h.wo_obj, ch, u=rng.random((n, 4)))
-        p_u = self._pdf_position_mean(ev, h.x_obj, h.wo_obj, u_obj)
+        fs = ev.sample_state(h.x_obj, h.wo_obj, ch, u=rng.random((n, 4)), context=ctx)
+        u_obj, wf_obj = fs.ui, fs.wi
+        p_u = fs.pdf_position_rgb().mean(1)
         integ.stats.time["network"] += time.perf_counter() - t0
         rel = u_obj - ev.box.center
         _, _, axis = ev.box.project(rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-300))
@@ -149,9 +134,9 @@ class EightdnaShader:
         q_w.append(wf_obj_f)
         rows = np.concatenate(q_rows)
         t0 = time.perf_counter()
-        P = self._pdf_rgb(ev, h.x_obj[rows], h.wo_obj[rows], u_obj[rows], np.concatenate(q_w))
+        P = ev.pdf_rgb_at(fs, rows, np.concatenate(q_w))  # conditioners 1-3 of the sample serve these rows
         integ.stats.time["network"] += time.perf_counter() - t0
-        integ.stats.network_evals += n * 7 + 12 * len(rows)
+        integ.stats.network_evals += n * 5 + len(rows)  # albedo + 4 conditioners per hit, conditioner 4 per row
         q = P.mean(1)
         o = 0
         for s, (delta, li, pl, jac) in zip(q_rows[:-1], nee_info, strict=True):

@@ -24,6 +24,9 @@ class MemoryAsset:
     def session(self, comp, name, **kw):
         return make_session(self.b.components[comp][""].networks[name])
 
+    def network_bytes(self, comp, name):
+        return self.b.components[comp][""].networks[name]
+
     path = "<memory>"
 
     def network_refs(self, comp):

@@ -368,6 +368,16 @@ def test_boxflow_sample_matches_pdf(counts, u, scale, aspect, channel):
     pp = flow.pdf_position(x, wo, ui, channel)
     counts.add("spline.BoxFlow.pdf_position", n)
     assert np.isfinite(pp).all() and (pp > 0).all()
+    # the reused-conditioner path: same sample, same densities
+    fs = flow.sample_state(x, wo, channel, u=u)
+    counts.add("spline.BoxFlow.sample_state", n)
+    prgb = flow.pdf_rgb_at(fs, np.arange(n), wd)
+    counts.add("spline.BoxFlow.pdf_rgb_at", n)
+    assert finite_all(fs.ui, fs.wi, fs.pdf, fs.pdf_position_rgb(), prgb) and (prgb > 0).all()
+    np.testing.assert_array_equal(fs.ui, ui)
+    np.testing.assert_allclose(fs.pdf, pdf, rtol=1e-12)
+    np.testing.assert_allclose(fs.pdf_position_rgb()[inner, channel], pp[inner], rtol=1e-6)
+    np.testing.assert_allclose(prgb[inner, channel], (pp * pd2)[inner], rtol=1e-6)
 
 
 @SLOW
@@ -386,6 +396,11 @@ def test_boxflow_adversarial_parameters(counts, u, wi, scale):
     p2 = flow.pdf(x[:m], wo[:m], ui[:m], wi[:m], 0)
     counts.add("spline.BoxFlow.pdf", m)
     assert np.isfinite(p2).all() and (p2 >= 0).all()
+    fs = flow.sample_state(x, wo, np.arange(n) % 3, u=u)
+    counts.add("spline.BoxFlow.sample_state", n)
+    prgb = flow.pdf_rgb_at(fs, np.arange(m), wi[:m])
+    counts.add("spline.BoxFlow.pdf_rgb_at", m)
+    assert finite_all(fs.ui, fs.wi, fs.pdf, fs.pdf_position_rgb(), prgb) and (prgb >= 0).all()
 
 
 # ----------------------------------------------------------------------------------------

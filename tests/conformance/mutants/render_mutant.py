@@ -221,16 +221,18 @@ def eightdna_pdf_scale():
     too large by the 4 pi of the direction measure (its position marginal unchanged)."""
     from nasset_sdk.kinds.eightdna import EightDnaEvaluator
 
-    orig = EightDnaEvaluator.pdf
+    orig, orig_at = EightDnaEvaluator.pdf, EightDnaEvaluator.pdf_rgb_at
     EightDnaEvaluator.pdf = lambda self, *a, **k: 4 * np.pi * orig(self, *a, **k)
+    EightDnaEvaluator.pdf_rgb_at = lambda self, *a, **k: 4 * np.pi * orig_at(self, *a, **k)
 
 
 def eightdna_direction_flipped():
     """8dna: the flow's density evaluated at -w_i (direction convention flipped)."""
     from nasset_sdk.kinds.eightdna import EightDnaEvaluator
 
-    orig = EightDnaEvaluator.pdf
+    orig, orig_at = EightDnaEvaluator.pdf, EightDnaEvaluator.pdf_rgb_at
     EightDnaEvaluator.pdf = lambda self, x, wo, ui, wi, ch: orig(self, x, wo, ui, -np.asarray(wi), ch)
+    EightDnaEvaluator.pdf_rgb_at = lambda self, fs, rows, wi: orig_at(self, fs, rows, -np.asarray(wi))
 
 
 def fiber_h_sign():
