@@ -42,10 +42,15 @@ def render_views(store, views: int, val_views: int, render_one, *, desc: str, wo
             if not isinstance(render_one, ViewSource):
                 raise UsageError("this bake's views cannot be rendered by workers (no ViewSource)")
             return render_views_on_cluster(store, todo, render_one, workers=workers, address=cluster, bar=bar, say=say)
-        fn = render_one.build() if isinstance(render_one, ViewSource) else render_one
-        for split, i in todo:
-            store.save(split, i, fn(split, i))
-            bar.update(1)
+        built = isinstance(render_one, ViewSource)
+        fn = render_one.build() if built else render_one
+        try:
+            for split, i in todo:
+                store.save(split, i, fn(split, i))
+                bar.update(1)
+        finally:
+            if built and hasattr(fn, "close"):
+                fn.close()
         return None
     except KeyboardInterrupt:
         say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")

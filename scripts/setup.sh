@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # Create .venv (Python 3.11) and install nasset with the extras in NASSET_EXTRAS
-# (default: dev,train,mitsuba,view,blender). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
+# (default: dev,train,mitsuba,view,blender,cluster). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
 # when it is missing and apt-get is usable. Idempotent. Used by scripts/example.sh and scripts/test.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-EXTRAS=${NASSET_EXTRAS:-dev,train,mitsuba,view,blender}
+EXTRAS=${NASSET_EXTRAS:-dev,train,mitsuba,view,blender,cluster}
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 "$PY" -c 'import sys; sys.exit(0 if sys.version_info[:2] >= (3, 11) else 1)' \

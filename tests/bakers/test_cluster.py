@@ -136,6 +136,41 @@ def test_a_killed_worker_views_are_rendered_again(ray_local, source, one_process
     assert not list(store.root.rglob("*.part.npz"))  # nothing half-written
 
 
+def _neupress_source(tmp_path):
+    from nasset_bakers.presets import NEUPRESS_MITSUBA_DATA
+    from nasset_converters.mitsuba import neupress_dataset as nd
+    from nasset_converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+    scene = write_example_scene(tmp_path / "scene", "tiny")
+    dset = replace(nd.NeupressDataSettings(), **NEUPRESS_MITSUBA_DATA["tiny"], seed=1)
+    dset = replace(dset, views=VIEWS, val_views=VAL_VIEWS, res=12, val_res=12, spp=4, val_spp=8)
+    return cluster.ViewSource("nasset_bakers.mitsuba.neupress:view_renderer",
+                              {"scene": scene, "asset_ids": list(EXAMPLE_ASSET_IDS), "dset": dset, "variant": None})
+
+
+def _blender_source(tmp_path):
+    pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
+    from nasset_bakers.presets import RNA_BLENDER_DATA
+    from nasset_converters.blender import dataset as bds
+
+    dset = replace(bds.DataSettings(), **RNA_BLENDER_DATA["tiny"], seed=2)
+    dset = replace(dset, views=VIEWS, val_views=VAL_VIEWS, res=12, val_res=12, spp=4, val_spp=8)
+    return cluster.ViewSource("nasset_bakers.blender.rna:view_renderer",
+                              {"scene": None, "example": "blender-surface", "asset_ids": ["Monkey"], "dset": dset,
+                               "work": str(tmp_path), "threads": 1})
+
+
+@pytest.mark.parametrize("make", [_neupress_source, _blender_source], ids=["neupress", "blender"])
+def test_other_bakers_views_on_workers(ray_local, make, tmp_path):
+    """The neupress (Mitsuba) and rna (Cycles) view factories: two workers write what one process writes."""
+    src = make(tmp_path)
+    here, _ = _render(tmp_path, "here", src)
+    there, summary = _render(tmp_path, "there", src, workers=2)
+    _same(here, there)
+    assert sum(w["views"] for w in summary.values()) == VIEWS + VAL_VIEWS
+    assert not list(tmp_path.glob("cycles_*"))  # workers removed their Cycles temporary folders
+
+
 def test_missing_ray_is_one_clear_message(monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)
     with pytest.raises(NassetError) as e:
