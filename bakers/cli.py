@@ -29,6 +29,10 @@ def add_args(p) -> None:
     p.add_argument("--clamp", type=float, default=None, metavar="C",
                    help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
                         "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="render the views on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
+    p.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="the Ray cluster to use with --workers (default: a local one on this machine)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", help="torch device (default: cuda if available, else cpu)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
@@ -57,6 +61,7 @@ def run(args) -> int:
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
         seed=args.seed, device=args.device, quiet=args.quiet,
         **({"clamp": args.clamp} if getattr(args, "clamp", None) is not None else {}),
+        **({"workers": args.workers, "cluster": args.cluster} if args.workers is not None or args.cluster else {}),
         summary_stream=sys.stderr if getattr(args, "json", False) else sys.stdout,
     )
     if getattr(args, "json", False):

@@ -22,23 +22,48 @@ def progress_bar(**kw):
     return tqdm(**kw)
 
 
-def render_views(store, views: int, val_views: int, render_one: Callable[[str, int], dict], *, desc: str,
-                 work: Path, quiet: bool, say: Callable[..., None]) -> None:
-    """Render and save every training and held-out view ``store`` lacks; ``render_one(split, i)`` -> arrays."""
+def render_views(store, views: int, val_views: int, render_one, *, desc: str, work: Path, quiet: bool,
+                 say: Callable[..., None], workers: int | None = None, cluster: str | None = None) -> dict | None:
+    """Render and save every training and held-out view ``store`` lacks.
+
+    ``render_one``: ``(split, i) -> dict of arrays``, or a :class:`nasset_bakers.cluster.ViewSource`
+    that builds one. With ``workers`` the views are rendered by that many Ray workers (``cluster``:
+    the address of an existing cluster; default a local one), each building ``render_one`` from the
+    ViewSource once; returns the per-worker summary then (None in one process)."""
+    from nasset_bakers.cluster import ViewSource, render_views_on_cluster
+
     jobs = [("train", i) for i in range(views)] + [("val", i) for i in range(val_views)]
     todo = [j for j in jobs if not store.has(*j)]
     if len(todo) < len(jobs):
         say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
     bar = progress_bar(total=len(jobs), initial=len(jobs) - len(todo), desc=desc, unit="view", disable=quiet)
     try:
-        for split, i in todo:
-            store.save(split, i, render_one(split, i))
-            bar.update(1)
+        if workers is not None:
+            if not isinstance(render_one, ViewSource):
+                raise UsageError("this bake's views cannot be rendered by workers (no ViewSource)")
+            return render_views_on_cluster(store, todo, render_one, workers=workers, address=cluster, bar=bar, say=say)
+        built = isinstance(render_one, ViewSource)
+        fn = render_one.build() if built else render_one
+        try:
+            for split, i in todo:
+                store.save(split, i, fn(split, i))
+                bar.update(1)
+        finally:
+            if built and hasattr(fn, "close"):
+                fn.close()
+        return None
     except KeyboardInterrupt:
         say(f"\ninterrupted; the dataset so far is kept in {work} -- rerun with --resume {work}")
         raise
     finally:
         bar.close()
+
+
+def worker_lines(summary: dict | None) -> list[str]:
+    """Summary lines of a cluster view stage: views and seconds per worker."""
+    if not summary:
+        return []
+    return ["  workers: " + ", ".join(f"pid {pid} {w['views']} views in {w['seconds']:.1f}s" for pid, w in sorted(summary.items()))]
 
 
 def train_with_progress(run: Callable[[Callable], object], *, total: int, desc: str, work: Path, quiet: bool,

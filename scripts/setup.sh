@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Create .venv (Python 3.11) and install nasset with the extras in NASSET_EXTRAS
-# (default: dev,render,bench,train,mitsuba,view,blender). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
+# (default: dev,render,bench,train,mitsuba,view,blender,cluster). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
 # when it is missing and apt-get is usable, and the Node.js host of the portable evaluation graph
 # (tools/portable-host: onnxruntime-web from npm, pinned by its package-lock.json, into its ignored
 # node_modules; Debian's nodejs + npm when node is missing). Idempotent. Used by scripts/example.sh and scripts/test.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-EXTRAS=${NASSET_EXTRAS:-dev,render,bench,train,mitsuba,view,blender}
+EXTRAS=${NASSET_EXTRAS:-dev,render,bench,train,mitsuba,view,blender,cluster}
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 "$PY" -c 'import sys; sys.exit(0 if sys.version_info[:2] >= (3, 11) else 1)' \

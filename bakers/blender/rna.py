@@ -28,7 +28,7 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, times_line
+from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, times_line, worker_lines
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.RNA_BLENDER_DATA  # the table lives in nasset_bakers/presets.py
@@ -39,9 +39,11 @@ def bake(
     scene, asset_ids, output, *, size: str = "small", example: str | None = None, resume=None, views=None, res=None,
     epochs=None, spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False,
     summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, clamp: float | None = None,
-    **_ignored,
+    workers: int | None = None, cluster: str | None = None, **_ignored,
 ) -> dict:
-    """Run the whole bake; returns the summary dict (also stored in the asset's provenance)."""
+    """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
+    ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster), one Cycles thread each."""
+    from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import check_options, finite, render_views, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
@@ -51,6 +53,7 @@ def bake(
     from nasset_sdk.asset import AssetBuilder
 
     output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
+    check_workers(workers, cluster)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
     if example is not None and scene is not None:
@@ -101,8 +104,12 @@ def bake(
         if not clamp >= 0:
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
         dset = replace(dset, clamp_direct=float(clamp), clamp_indirect=float(clamp))
-    rig = ds.CyclesRig(dset, work, threads=threads)
-    caster = ds.Caster(variant, geo)
+    if workers is None:
+        views_from = _view_renderer(variant, geo, center, radius, dset, work, threads)
+    else:  # each worker opens the scene itself
+        views_from = ViewSource("nasset_bakers.blender.rna:view_renderer", {
+            "scene": None if example is not None else str(scene), "example": example, "asset_ids": list(asset_ids),
+            "dset": dset, "work": str(work), "threads": threads or 1})
     times["scene_s"] = time.perf_counter() - t
 
     # -- stage 2: dataset -------------------------------------------------------------------------
@@ -110,15 +117,12 @@ def bake(
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(source_key, asset_ids, variant, dset)
     store.prepare(meta)
-    def render_one(split, i):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return ds.render_view(rig, caster, center, radius, i, validation=split == "val")
-
     try:
-        render_views(store, dset.views, dset.val_views, render_one, desc="cycles views", work=work, quiet=quiet, say=say)
+        per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="cycles views", work=work,
+                                  quiet=quiet, say=say, workers=workers, cluster=cluster)
     finally:
-        rig.close()
+        if workers is None:
+            views_from.close()
     fiber = variant == "fiber"
     train_data = ds.load_split(store, "train", dset.views, fiber)
     val_data = ds.load_split(store, "val", dset.val_views, fiber)
@@ -190,6 +194,7 @@ def bake(
         "val_accuracy": result.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "sdk_vs_torch_max_abs": check["max_abs_diff"], "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
         "times_s": {k: round(v, 2) for k, v in times.items()},
+        "workers": per_worker,
     }
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
@@ -206,8 +211,44 @@ def _print_summary(s: dict, stream) -> None:
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
+        *worker_lines(s.get("workers")),
     ]
     print("\n".join(lines), file=stream)
 
 
 register_baker("blender", "rna", bake)
+
+
+def _view_renderer(variant, geo, center, radius, dset, work, threads: int = 0):
+    """``render_one(split, i)`` of the dataset stage (Cycles on the isolated objects); ``.close()`` removes its temporary files."""
+    from nasset_converters.blender import dataset as ds
+
+    rig = ds.CyclesRig(dset, work, threads=threads)
+    caster = ds.Caster(variant, geo)
+
+    def render_one(split, i):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return ds.render_view(rig, caster, center, radius, i, validation=split == "val")
+
+    render_one.close = rig.close
+    return render_one
+
+
+def view_renderer(scene, example, asset_ids, dset, work, threads: int = 1):
+    """``render_one(split, i)`` built from the .blend or the example (a cluster worker's copy of stage 1)."""
+    from nasset_converters.blender import load_bpy
+    from nasset_converters.blender import scene as bsc
+
+    load_bpy()
+    if example is not None:
+        from nasset_converters.blender.examples import build_example
+
+        build_example(example)
+    else:
+        bsc.open_blend(scene)
+    objs = bsc.pick_objects(asset_ids, file=str(scene or example))
+    variant, geo, _ = bsc.asset_geometry(objs, file=str(scene or example))
+    center, radius = bsc.bounding_sphere(geo)
+    bsc.isolate(objs)
+    return _view_renderer(variant, geo, center, radius, dset, work, threads)

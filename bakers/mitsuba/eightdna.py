@@ -105,12 +105,16 @@ def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
 
 def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=None, views=None, res=None, epochs=None,
          spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False, summary_stream=None,
-         far_field: bool = False, **_ignored) -> dict:
+         far_field: bool = False, workers: int | None = None, cluster: str | None = None, **_ignored) -> dict:
     """Run the whole 8dna bake; returns the summary dict (also stored in the asset's provenance).
+
+    ``workers``/``cluster``: refused (UsageError) -- the 8dna sampler stage runs in this process only.
 
     ``far_field=True`` bakes the 6D far-field baseline instead (spec/bake-8dna.md#far-field): the same
     asset layout, whose conditioners 3-4 ignore u_i (flows 1-2 untrained); only the benchmark uses it.
     """
+    if workers is not None or cluster:
+        raise UsageError("--workers/--cluster: the 8dna forward-sample stage runs in one process (not on Ray workers yet)")
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, heldout_nll, parity_with_sdk, train
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba

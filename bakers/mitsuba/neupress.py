@@ -23,7 +23,17 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import accuracy_lines, check_options, clamp_lines, clamp_removed, dataset_line, finite, psnr_line, times_line
+from nasset_bakers.stages import (
+    accuracy_lines,
+    check_options,
+    clamp_lines,
+    clamp_removed,
+    dataset_line,
+    finite,
+    psnr_line,
+    times_line,
+    worker_lines,
+)
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.NEUPRESS_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
@@ -49,12 +59,16 @@ def bake(
     variant: str | None = None,
     summary_stream=None,
     clamp: float | None = None,
+    workers: int | None = None,
+    cluster: str | None = None,
 ) -> dict:
     """Run the whole neupress bake; returns the summary dict (also stored in the asset's provenance).
 
     ``clamp``: per-path-sample clamp of the training targets (default 0: none; removed energy stored).
+    ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster).
 
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
+    from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import progress_bar, render_views, train_with_progress
     from nasset_bakers.train.common import require_torch
     from nasset_bakers.train.neupress import (
@@ -76,6 +90,7 @@ def bake(
     from nasset_sdk.asset import AssetBuilder
 
     output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
+    check_workers(workers, cluster)
     if light_angle not in (None, 0, 0.0):
         raise UsageError("--light-angle is not used by neupress bakes (delta lights through a rough boundary); leave it unset")
     if example is True:
@@ -131,8 +146,11 @@ def bake(
     md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
     if md is not None and (md < 0 or md > dset.max_depth):
         dset = replace(dset, max_depth=md if md > 0 else 1024)
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth)
-    renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
+    if workers is None:
+        views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
+    else:  # each worker loads the scene itself
+        views_from = ViewSource("nasset_bakers.mitsuba.neupress:view_renderer",
+                                {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant()})
     times["scene_s"] = time.perf_counter() - t
 
     # -- stage 2: dataset -------------------------------------------------------------------------
@@ -140,9 +158,8 @@ def bake(
     store = ds.DatasetDir(work)
     meta = {**ds.settings_digest(scene, asset_ids, dset, mi.variant()), "kind": "neupress"}
     store.prepare(meta)
-    render_views(store, dset.views, dset.val_views,
-                 lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val"),
-                 desc="render views", work=work, quiet=quiet, say=say)
+    per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="render views", work=work, quiet=quiet,
+                              say=say, workers=workers, cluster=cluster)
     train_data = nd.load_split(store, "train", dset.views)
     val_data = nd.load_split(store, "val", dset.val_views)
     times["dataset_s"] = time.perf_counter() - t
@@ -253,6 +270,7 @@ def bake(
         "prt_roundtrip_max_abs": check["prt_max_abs"],
         "sampling_kl_nats": samp.kl, "sampling_kl_uniform_nats": samp.kl_uniform, "sampling_kl_best_sigma_nats": samp.kl_best,
         "times_s": {k: round(v, 2) for k, v in times.items()},
+        "workers": per_worker,
     }
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
@@ -275,8 +293,37 @@ def _print_summary(s: dict, stream) -> None:
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; log sigma {s['sigma_sdk_vs_torch_max_abs_log']:.2e}; "
         f"PRT round trip {s['prt_roundtrip_max_abs']:.1e}",
         times_line(t),
+        *worker_lines(s.get("workers")),
     ]
     print("\n".join(lines), file=stream)
 
 
 register_baker("mitsuba", "neupress", bake)
+
+
+def _view_renderer(mi, shapes, bshapes, center, radius, dset):
+    """``render_one(split, i)`` of the dataset stage: the shapes isolated, subsurface transport behind the boundary."""
+    from nasset_converters.mitsuba import neupress_dataset as nd
+    from nasset_converters.mitsuba import scene as msc
+
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth)
+    renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
+    return lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val")
+
+
+def view_renderer(scene, asset_ids, dset, variant=None):
+    """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1)."""
+    import warnings
+
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import neupress_dataset as nd
+    from nasset_converters.mitsuba import scene as msc
+
+    mi = load_mitsuba(variant)
+    mi.set_log_level(mi.LogLevel.Error)
+    shapes = msc.pick_shapes(msc.load_scene(mi, scene), asset_ids, file=str(scene))
+    bshapes, _, _ = nd.boundary_of(mi, shapes, file=str(scene))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the driver already reported them
+        center, radius = msc.bounding_sphere(msc.mesh_geometry(mi, bshapes))
+    return _view_renderer(mi, shapes, bshapes, center, radius, dset)

@@ -20,7 +20,17 @@ from pathlib import Path
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import accuracy_lines, check_options, clamp_lines, clamp_removed, dataset_line, finite, psnr_line, times_line
+from nasset_bakers.stages import (
+    accuracy_lines,
+    check_options,
+    clamp_lines,
+    clamp_removed,
+    dataset_line,
+    finite,
+    psnr_line,
+    times_line,
+    worker_lines,
+)
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.RNA_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
@@ -52,11 +62,15 @@ def bake(
     summary_stream=None,
     clamp: float | None = None,
     loss: str | None = None,
+    workers: int | None = None,
+    cluster: str | None = None,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
 
     ``clamp``: per-path-sample clamp of the training targets (default 0: none; the energy it removes
-    is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings')."""
+    is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings');
+    ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster)."""
+    from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import render_views, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
@@ -66,6 +80,7 @@ def bake(
     from nasset_sdk.asset import AssetBuilder
 
     output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
+    check_workers(workers, cluster)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
@@ -123,8 +138,11 @@ def bake(
     md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
     if md is not None and (md < 0 or md > dset.max_depth):
         dset = replace(dset, max_depth=md if md > 0 else 1024)
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
-    renderer = ds.Renderer(mi, iso, dset)
+    if workers is None:
+        views_from = _view_renderer(mi, shapes, center, radius, dset)
+    else:  # each worker loads the scene itself
+        views_from = ViewSource("nasset_bakers.mitsuba.rna:view_renderer",
+                                {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant()})
     times["scene_s"] = time.perf_counter() - t
 
     # -- stage 2: dataset -------------------------------------------------------------------------
@@ -132,9 +150,8 @@ def bake(
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(scene, asset_ids, dset, mi.variant())
     store.prepare(meta)
-    render_views(store, dset.views, dset.val_views,
-                 lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val"),
-                 desc="render views", work=work, quiet=quiet, say=say)
+    per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="render views", work=work, quiet=quiet,
+                              say=say, workers=workers, cluster=cluster)
     train_data = store.load_split("train", dset.views)
     val_data = store.load_split("val", dset.val_views)
     times["dataset_s"] = time.perf_counter() - t
@@ -207,6 +224,7 @@ def bake(
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
         "times_s": {k: round(v, 2) for k, v in times.items()},
+        "workers": per_worker,
     }
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
@@ -224,8 +242,31 @@ def _print_summary(s: dict, stream) -> None:
         *clamp_lines(s),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
+        *worker_lines(s.get("workers")),
     ]
     print("\n".join(lines), file=stream)
+
+
+def _view_renderer(mi, shapes, center, radius, dset):
+    """``render_one(split, i)`` of the dataset stage: the shapes isolated under the bake's light."""
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba import scene as msc
+
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
+    renderer = ds.Renderer(mi, iso, dset)
+    return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
+
+
+def view_renderer(scene, asset_ids, dset, variant=None):
+    """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1)."""
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import scene as msc
+
+    mi = load_mitsuba(variant)
+    mi.set_log_level(mi.LogLevel.Error)
+    shapes = msc.pick_shapes(msc.load_scene(mi, scene), asset_ids, file=str(scene))
+    center, radius = msc.bounding_sphere(msc.mesh_geometry(mi, shapes))
+    return _view_renderer(mi, shapes, center, radius, dset)
 
 
 def bake_named_example(scene, asset_ids, output, *, example: str | None = None, **options) -> dict:
