@@ -16,6 +16,8 @@ BENCHES = {
                 "nasset_benchmarks.blender"),
     "accuracy": ("a baked asset in its own Mitsuba scene against unclamped two-half ground truth: energy, PSNR with "
                  "the noise ceiling, FLIP over the object's pixels", "nasset_benchmarks.accuracy"),
+    "cluster": ("the view stage of a bake in one process and on 1 and N local Ray workers (times, ratios, equal datasets)",
+                "nasset_benchmarks.cluster"),
 }
 
 

@@ -69,7 +69,8 @@ def answer(asset_path, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     from .asset import Asset
 
     asset = Asset.open(asset_path, load="all")
-    ev = asset.evaluator()
+    # 8dna: the stored flow networks run whole (the render-time fused first layer sums in another order)
+    ev = asset.evaluator(**({"fuse_first_layer": False} if asset.kind == "8dna" else {}))
     by_query: dict[str, dict] = {}
     for key, arr in inputs.items():
         q, _, arg = key.partition(".")

@@ -200,7 +200,8 @@ class EightDnaEvaluator(Evaluator):
     plus the flow's density of w_i marginalised over u_i, estimated with ``light_samples`` stratified
     positions per row (fixed latents: deterministic)."""
 
-    def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536, light_samples: int = 16) -> None:
+    def __init__(self, asset, *, intra_threads: int = 0, batch: int = 65536, light_samples: int = 16,
+                 fuse_first_layer: bool = True) -> None:
         if not isinstance(light_samples, int) or not 1 <= light_samples <= 4096:
             raise UsageError(f"light_samples must be an int in 1 .. 4096, got {light_samples!r}",
                              file=str(getattr(asset, "path", "")) or None)
@@ -215,7 +216,9 @@ class EightDnaEvaluator(Evaluator):
         self.eta, self.alpha = boundary_params(asset.tensor("core", "direct"))
         self.albedo_session = asset.session("core", "albedo", intra_threads=intra_threads)
         self.flow_sessions = [asset.session("core", n, intra_threads=intra_threads) for n in FLOWS]
-        self._split_flows(asset, intra_threads)
+        self.head_weight = self.head_bias = self.head = self.tails = None
+        if fuse_first_layer:  # off: every flow network runs whole, as stored (the evaluator vectors' exact tier)
+            self._split_flows(asset, intra_threads)
         self.batch = int(batch)
         self.box = BoxParam(self.lo, self.hi)
         self.flow = BoxFlow(self.box, self._conditioner, context=self.context,
