@@ -47,6 +47,8 @@ def require_ray(local: bool = True):
     single-machine mode; set before Ray is first imported)."""
     if local and "ray" not in sys.modules:
         os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+        # Ray runs its workers at nice 15; a bake's workers are its main work, as in one process
+        os.environ.setdefault("RAY_worker_niceness", "0")
     try:
         import ray
     except ImportError:
