@@ -79,14 +79,15 @@ class _Timer:
 class PathIntegrator:
     def __init__(self, scene, plan: RenderPlan, settings: RenderSettings) -> None:
         self.scene, self.plan, self.s = scene, plan, settings
-        self.accel = Accel(scene.triangles, scene.tri_inst, backend=settings.backend)
+        insts = scene.instances
+        self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
+        # rays ignore neural instances only: those get acceleration structures of their own
+        self.accel = Accel(scene.triangles, scene.tri_inst, backend=settings.backend, separate=self.inst_neural)
         self.eps = self.accel.eps
         self.stats = RenderStats()
         tri = scene.triangles
         ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) if len(tri) else np.zeros((0, 3))
         self.tri_ng = normalize(ng)
-        insts = scene.instances
-        self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_asset = np.array([i.asset for i in insts], np.int64)
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))

@@ -118,6 +118,7 @@ def asset_casts_no_shadow():
 
 def other_instance_is_self():
     """Rays leaving an instance skip every instance of the same asset file, not only its own triangles."""
+    from nasset_reference_renderer.accel import Accel
     from nasset_reference_renderer.integrator import PathIntegrator
 
     orig_init = PathIntegrator.__init__
@@ -131,7 +132,7 @@ def other_instance_is_self():
             if inst.kind == "neural":
                 canon[i] = first.setdefault(inst.asset, i)
         self._canon = canon
-        self.accel.tri_inst = canon[self.accel.tri_inst]
+        self.accel = Accel(scene.triangles, canon[scene.tri_inst], backend=settings.backend, separate=self.inst_neural)
 
     def trace(self, o, d, tmax=None, ignore=None):
         if ignore is not None:
