@@ -48,6 +48,8 @@ class EmbreeBackend(_Backend):
         if len(triangles):
             TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
         self.empty = len(triangles) == 0
+        if not self.empty:  # Embree builds its BVH at the first query: build it now, with the scene setup
+            self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=1)
 
     def closest(self, o, d, tmax):
         n = len(o)

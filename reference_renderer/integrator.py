@@ -95,10 +95,12 @@ class PathIntegrator:
         self.mt = scene.materials
         self.emissive = self.mt.emission.max(1) > 0
         self.nee = [k for k, on in enumerate(plan.light_nee) if on]
-        # object-space corner normals of each asset's triangles
+        # object-space corner normals of each asset's triangles (None for fibers: shaded from the curve axis)
         self.asset_corner_n = []
         for data in scene.assets:
-            if data.normals is not None:
+            if data.fiber is not None:
+                cn = None
+            elif data.normals is not None:
                 cn = data.normals[data.faces]
             else:
                 p = data.points[data.faces]
