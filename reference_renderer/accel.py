@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from nasset_sdk.errors import UsageError
+
 #: bound on the exempt triangles a ray leaving a fiber hit steps over (three convex prisms: at most
 #: six crossings, doubled for hits at shared edges and the ray's start on its own prism)
 MAX_EXEMPT_STEPS = 16
@@ -121,7 +123,8 @@ class _Part:
     def __init__(self, ids, triangles, inst, make) -> None:
         self.ids = ids
         self.inst = inst  # the instance held alone, or -1 for the rest of the scene
-        tri = triangles[ids]
+        contiguous = len(ids) and ids[-1] - ids[0] + 1 == len(ids)  # a scene instance: a view, no copy
+        tri = triangles[ids[0]:ids[-1] + 1] if contiguous else triangles[ids]
         self.backend = make(tri)
         p = tri.reshape(-1, 3)
         self.lo, self.hi = (p.min(0), p.max(0)) if len(p) else (np.zeros(3), -np.ones(3))
@@ -143,7 +146,7 @@ class Accel:
     """Closest-hit and shadow queries with per-ray 'ignore this instance'.
 
     ``separate`` [n_instances] bool: instances that rays may ignore (each gets its own structure);
-    None: every instance. Ignoring an instance that is not separate is a ``ValueError``.
+    None: every instance. Ignoring an instance that is not separate is a ``USAGE`` error.
     """
 
     def __init__(self, triangles: np.ndarray, tri_inst: np.ndarray, *, backend: str = "embree",
@@ -202,7 +205,7 @@ class Accel:
         tmax = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,))
         ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
         if np.any(ignore >= len(self.inst_part)) or np.any(self.inst_part[ignore[ignore >= 0]] < 0):
-            raise ValueError("trace: ignored instance has no structure of its own (Accel separate=...)")
+            raise UsageError("Accel.trace: an ignored instance has no acceleration structure of its own (Accel separate=...)")
         hits = Hits(n)
         all_rows = np.arange(n)
         for part in self.parts:

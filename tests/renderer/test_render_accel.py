@@ -235,3 +235,14 @@ def test_fiber_rays_cost_constant_embree_calls():
     _, p_b2, s_b2, _ = _brute_trace(tri, tri_inst, x, wi, tmax2, ignore, exempt)
     h2 = acc.trace(x, wi, tmax2, ignore, exempt)
     assert ((h2.self_hit == s_b2) & (h2.prim == p_b2)).mean() > 0.98
+
+
+def test_ignoring_a_merged_instance_is_a_usage_error():
+    from nasset_sdk.errors import UsageError
+
+    tri, tri_inst = _scene()
+    acc = Accel(tri, tri_inst, separate=np.array([True, False, False, False]))
+    o, d, tmax = _rays(4, 5)
+    acc.trace(o, d, tmax, np.array([0, -1, 0, -1]))  # instance 0 has its own structure
+    with pytest.raises(UsageError, match="acceleration structure"):
+        acc.trace(o, d, tmax, np.array([0, 1, -1, -1]))
