@@ -214,12 +214,14 @@ class Accel:
         if len(own):
             lim = np.minimum(tmax, hits.t)
             part_of = self.inst_part[ignore[own]]
+            exempt = None if exempt is None else np.asarray(exempt, np.int64)
+            stepping = np.zeros(len(own), bool) if exempt is None else exempt[own, 0] < exempt[own, 1]
             for p in np.unique(part_of):
-                rows = own[part_of == p]
-                if exempt is None:
-                    hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, lim, rows)
-                else:
-                    hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, lim, rows, np.asarray(exempt, np.int64))
+                rows = own[(part_of == p) & ~stepping]  # nothing exempt: one occlusion query
+                hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, lim, rows)
+                rows = own[(part_of == p) & stepping]
+                if len(rows):
+                    hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, lim, rows, exempt)
         return hits
 
     def _occluded_in(self, part, o, d, tmax, rows) -> np.ndarray:

@@ -214,7 +214,8 @@ def test_fiber_rays_cost_constant_embree_calls():
     assert m.mean() > 0.5
     x = o0[m] + d0[m] * h0.t[m][:, None]
     seg = tubes.tri_seg[h0.prim[m]]
-    exempt = tubes.exempt[seg]
+    exempt = tubes.exempt[seg].copy()
+    exempt[::7] = -1  # rows with nothing exempt (surface rows in a batch of mixed kinds)
     wi = rng.normal(size=(len(x), 3))
     wi[: len(x) // 2, 2] = -np.abs(wi[: len(x) // 2, 2])  # half of them straight through the tuft
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
