@@ -203,8 +203,8 @@ def main_hair(a) -> int:
         mem = tessellation_bytes(scene)
         r = run_hair(scene, a)
         print(f"{'hair over a floor' if floor else 'hair alone (NEE only)'}: {r['rate']:,.0f} camera samples/s, "
-              f"{r['rays']:.2f} rays/sample, trace {r['trace']:.2f} of {r['total']:.2f} s, setup (scene arrays, "
-              f"Embree input) {r['setup']:.2f} s")
+              f"{r['rays']:.2f} rays/sample, trace {r['trace']:.2f} of {r['total']:.2f} s, setup (plan, integrator "
+              f"arrays, Embree build) {r['setup']:.2f} s")
         del scene
     print(f"tessellation: {mem['triangles']:,} triangles, {mem['tri_per_segment']:.0f} per segment, "
           f"{mem['bytes_per_segment']:,.0f} B per segment in renderer arrays; peak RSS "
