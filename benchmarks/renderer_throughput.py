@@ -2,6 +2,7 @@
 
     python -m nasset_benchmarks.renderer_throughput [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
     python -m nasset_benchmarks.renderer_throughput --scene 8dna-near [--size small] [--res 128] [--spp 2]
+    python -m nasset_benchmarks.renderer_throughput --hair [--strands 20000] [--segments 4] [--res 128] [--spp 4]
 
 Scene: one rna asset under a distant light (no other objects: NEE only). For each onnxruntime
 thread setting, in one process and with that same setting throughout, it renders ``--repeat``
@@ -188,11 +189,11 @@ def _wrap_sessions(ev) -> list[_TimedSession]:
 
 def eightdna_near_field(a, threads: int) -> dict:
     """Render the 8dna near-field scene ``a.repeat`` times; the median run's rates and time split."""
-    from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render
+    from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render, resolve_settings
     from nasset_reference_renderer.plan import make_plan
 
     scene = _eightdna_scene(a.size)
-    settings = RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch)
+    settings = resolve_settings(RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch), scene)
     width, height = scene.camera.default_resolution(settings.width, settings.height)
     plan = make_plan(scene, width=width, height=height, spp=settings.spp, max_depth=settings.max_depth,
                      tile=settings.tile, batch=settings.batch)
@@ -227,6 +228,69 @@ def _print_eightdna(a, threads: int) -> None:
     print("time:        " + ", ".join(f"{k} {v:.3f} s ({100 * v / r['total']:.0f}%)" for k, v in parts))
 
 
+# -- dense hair: geometry queries whose cost does not grow with the fibres a ray crosses --------------------------
+def hair_scene(n_strands: int, segments: int, floor: bool):
+    """A synthetic rna fiber asset (random networks, :func:`dense_hair_curves`) under a distant light,
+    optionally over a floor (then hair vertices also trace continuation rays)."""
+    import warnings
+
+    from nasset_reference_renderer.scene import load_scene
+    from nasset_reference_renderer.testscenes import SceneBuilder, dense_hair_curves, random_rna_fiber_asset
+
+    tmp = Path(tempfile.mkdtemp())
+    asset = random_rna_fiber_asset(tmp / "hair.usdc", dense_hair_curves(n_strands, segments), seed=3)
+    b = SceneBuilder()
+    b.camera((0, 0.2, 2.0), (0, 0.1, 0), focal=35)
+    b.distant("Sun", (0.4, 1.0, 0.3), 3.0)
+    if floor:
+        b.quad("Floor", (0, -0.6, 0), 4.0)
+    b.asset("Hair", asset)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no fallback material warnings
+        return load_scene(b.write(tmp / "hair.usda"))
+
+
+def run_hair(scene, a) -> dict:
+    """One timed render of a hair scene (after a warm-up): samples/s, rays per sample, setup and trace time."""
+    from nasset_reference_renderer.integrator import RenderSettings, render
+
+    render(scene, RenderSettings(spp=1, width=8, height=8, threads=1))  # loads and compiles the decoder
+    t0 = time.perf_counter()
+    st = render(scene, RenderSettings(spp=a.spp, width=a.res, height=a.res * 3 // 4, threads=1, batch=a.batch)).stats
+    wall = time.perf_counter() - t0
+    return dict(rate=st.camera_samples / st.time_total, rays=st.rays / st.camera_samples, total=st.time_total,
+                trace=st.time["trace"], setup=wall - st.time_total, samples=st.camera_samples)
+
+
+def tessellation_bytes(scene) -> dict:
+    """Bytes per fiber segment the renderer holds for the scene's fibre prisms (numpy arrays; Embree's own
+    copy as float32 triangles, without its BVH nodes)."""
+    segs = sum(len(data.fiber.p0) for data in scene.assets if data.fiber is not None)
+    n_tri = len(scene.triangles)
+    per_tri = (scene.triangles.itemsize * 9 + scene.tri_normals.itemsize * 9 + scene.tri_inst.itemsize
+               + scene.tri_local.itemsize + 8 * 3 + 4 * 9)  # + integrator face normals, Embree float32 copy
+    return dict(segments=segs, triangles=n_tri, tri_per_segment=n_tri / max(segs, 1), bytes_per_segment=per_tri * n_tri / max(segs, 1))
+
+
+def main_hair(a) -> int:
+    import resource
+
+    print(f"dense hair: {a.strands} strands x {a.segments} segments, {a.res}x{a.res * 3 // 4} x {a.spp} spp, "
+          "onnxruntime 1 thread")
+    for floor in (False, True):
+        scene = hair_scene(a.strands, a.segments, floor)
+        mem = tessellation_bytes(scene)
+        r = run_hair(scene, a)
+        print(f"{'hair over a floor' if floor else 'hair alone (NEE only)'}: {r['rate']:,.0f} camera samples/s, "
+              f"{r['rays']:.2f} rays/sample, trace {r['trace']:.2f} of {r['total']:.2f} s, setup (plan, integrator "
+              f"arrays, Embree build) {r['setup']:.2f} s")
+        del scene
+    print(f"tessellation: {mem['triangles']:,} triangles, {mem['tri_per_segment']:.0f} per segment, "
+          f"{mem['bytes_per_segment']:,.0f} B per segment in renderer arrays; peak RSS "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scene", default="rna", choices=("rna", "8dna-near"))
@@ -237,6 +301,9 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=65536)
     ap.add_argument("--repeat", type=int, default=3, help="renders per setting (the median is reported)")
     ap.add_argument("--profile", type=int, default=12, help="top entries of a profiled render (0: none)")
+    ap.add_argument("--hair", action="store_true", help="dense-hair scenes instead (see main_hair)")
+    ap.add_argument("--strands", type=int, default=20000)
+    ap.add_argument("--segments", type=int, default=4)
     a = ap.parse_args(argv)
     if a.scene == "8dna-near":
         print(f"scene: 8dna '{a.size}' example asset, sphere light in the near field, {a.res}x{a.res} x {a.spp} spp "
@@ -244,6 +311,8 @@ def main(argv=None) -> int:
         for threads in [int(t) for t in a.threads.split(",")]:
             _print_eightdna(a, threads)
         return 0
+    if a.hair:
+        return main_hair(a)
     scene = _scene(a.size)
     print(f"scene: rna '{a.size}' asset, distant light, {a.res}x{a.res} x {a.spp} spp "
           f"(median of {a.repeat} renders per thread setting)")

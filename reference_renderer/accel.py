@@ -1,15 +1,23 @@
-"""Ray casting: one Embree scene over every triangle, plus a slow numpy reference.
+"""Ray casting: Embree scenes (one per separately queried instance, one for the rest), plus a slow numpy reference.
 
-Each triangle carries the id of the instance it belongs to (``tri_inst``), so rays leaving a
-neural asset can skip that asset (:meth:`Accel.trace`) and report whether they passed through
-it (the asset's self-occlusion, which picks the rna shadowed/unshadowed branch).
+Each triangle carries the id of the instance it belongs to (``tri_inst``). Instances that rays may
+ignore (neural assets) get an acceleration structure of their own, so a ray leaving an asset finds
+its closest hit on everything else by querying the other structures, and whether it passed through
+the asset (the asset's self-occlusion, which picks the rna shadowed/unshadowed branch) by one
+occlusion query on the asset's own structure: a ray costs a fixed number of Embree calls however
+many of the asset's triangles (fibres) it crosses. Structures whose bounding box a ray misses are
+not queried for it.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-MAX_SKIPS = 64
+from nasset_sdk.errors import UsageError
+
+#: bound on the exempt triangles a ray leaving a fiber hit steps over (three convex prisms: at most
+#: six crossings, doubled for hits at shared edges and the ray's start on its own prism)
+MAX_EXEMPT_STEPS = 16
 
 
 class Hits:
@@ -45,6 +53,8 @@ class EmbreeBackend(_Backend):
         if len(triangles):
             TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
         self.empty = len(triangles) == 0
+        if not self.empty:  # Embree builds its BVH at the first query: build it now, with the scene setup
+            self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=1)
 
     def closest(self, o, d, tmax):
         n = len(o)
@@ -108,13 +118,63 @@ class NumpyBackend(_Backend):
         return t_best, prim, ub, vb
 
 
-class Accel:
-    """Closest-hit and shadow queries with per-ray 'ignore this instance'."""
+class _Part:
+    """One acceleration structure: the triangles ``ids`` [k] (global indices) and their bounding box."""
 
-    def __init__(self, triangles: np.ndarray, tri_inst: np.ndarray, *, backend: str = "embree") -> None:
+    __slots__ = ("ids", "backend", "lo", "hi", "inst")
+
+    def __init__(self, ids, triangles, inst, make) -> None:
+        self.ids = ids
+        self.inst = inst  # the instance held alone, or -1 for the rest of the scene
+        contiguous = len(ids) and ids[-1] - ids[0] + 1 == len(ids)  # a scene instance: a view, no copy
+        tri = triangles[ids[0]:ids[-1] + 1] if contiguous else triangles[ids]
+        self.backend = make(tri)
+        p = tri.reshape(-1, 3)
+        self.lo, self.hi = (p.min(0), p.max(0)) if len(p) else (np.zeros(3), -np.ones(3))
+
+    def rows_hitting_box(self, o, d, tmax, rows):
+        """Subset of ``rows`` whose ray segment [0, tmax] meets the bounding box (slab test; padded)."""
+        pad = 1e-6 * (1.0 + np.abs(self.hi).max() + np.abs(self.lo).max())
+        oo, dd = o[rows], d[rows]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / np.where(dd == 0.0, 1e-300, dd)
+            ta = (self.lo - pad - oo) * inv
+            tb = (self.hi + pad - oo) * inv
+        t0 = np.nanmax(np.minimum(ta, tb), 1)
+        t1 = np.nanmin(np.maximum(ta, tb), 1)
+        return rows[(t0 <= t1) & (t1 >= 0.0) & (t0 <= tmax[rows])]
+
+
+class Accel:
+    """Closest-hit and shadow queries with per-ray 'ignore this instance'.
+
+    ``separate`` [n_instances] bool: instances that rays may ignore (each gets its own structure);
+    None: every instance. Ignoring an instance that is not separate is a ``USAGE`` error.
+    """
+
+    def __init__(self, triangles: np.ndarray, tri_inst: np.ndarray, *, backend: str = "embree",
+                 separate: np.ndarray | None = None) -> None:
         self.triangles = np.asarray(triangles, np.float64)
         self.tri_inst = np.asarray(tri_inst, np.int64)
-        self.backend = EmbreeBackend(self.triangles) if backend == "embree" else NumpyBackend(self.triangles)
+        make = EmbreeBackend if backend == "embree" else NumpyBackend
+        n_inst = int(self.tri_inst.max()) + 1 if len(self.tri_inst) else 0
+        sep = np.ones(n_inst, bool) if separate is None else np.asarray(separate, bool)[:n_inst]
+        self.parts: list[_Part] = []
+        self.inst_part = np.full(max(n_inst, len(sep)), -1, np.int64)
+        order = np.argsort(self.tri_inst, kind="stable")
+        bounds = np.searchsorted(self.tri_inst[order], np.arange(n_inst + 1))
+        rest = []
+        for i in range(n_inst):
+            ids = order[bounds[i]:bounds[i + 1]]
+            if not len(ids):
+                continue
+            if sep[i]:
+                self.inst_part[i] = len(self.parts)
+                self.parts.append(_Part(ids, self.triangles, i, make))
+            else:
+                rest.append(ids)
+        if rest:
+            self.parts.append(_Part(np.concatenate(rest), self.triangles, -1, make))
         self.rays_cast = 0
         if len(self.triangles):
             ext = self.triangles.reshape(-1, 3)
@@ -123,86 +183,93 @@ class Accel:
             self.scale = 1.0
         self.eps = 1e-5 * max(self.scale, 1e-6)
 
+    def _closest_in(self, part, o, d, tmax, rows, hits) -> None:
+        """Update ``hits`` rows with closer hits on ``part`` (rays limited to the current closest hit)."""
+        lim = np.minimum(tmax, hits.t)
+        rows = part.rows_hitting_box(o, d, lim, rows)
+        if not len(rows):
+            return
+        self.rays_cast += len(rows)
+        t, prim, u, v = part.backend.closest(o[rows], d[rows], lim[rows])
+        better = (prim >= 0) & (t < hits.t[rows])
+        r = rows[better]
+        hits.t[r], hits.prim[r], hits.u[r], hits.v[r] = t[better], part.ids[prim[better]], u[better], v[better]
+
     def trace(self, o, d, tmax=None, ignore=None, exempt=None) -> Hits:
         """Closest hit along each ray that is not on instance ``ignore[i]`` (-1: none).
 
-        ``self_hit`` is set where the ray passed through the ignored instance first. ``exempt``
-        ([n, 2] triangle index ranges [lo, hi), or None): ignored triangles in row i's range are
-        stepped over without setting ``self_hit`` (a fiber hit's own segment and its neighbours).
+        ``self_hit`` is set where the ray passed through the ignored instance before that hit (or
+        before tmax). ``exempt`` ([n, 2] triangle index ranges [lo, hi), or None): ignored triangles in
+        row i's range do not set ``self_hit`` (a fiber hit's own segment and its neighbours).
         """
+        o = np.asarray(o, np.float64)
+        d = np.asarray(d, np.float64)
         n = len(o)
-        tmax = np.full(n, np.inf) if tmax is None else np.asarray(tmax, np.float64)
-        if exempt is not None:
-            return self._trace_exempt(o, d, tmax, ignore, np.asarray(exempt, np.int64))
-        self.rays_cast += n
-        t, prim, u, v = self.backend.closest(o, d, tmax)
-        skip = None
-        if ignore is not None:
-            skip = (prim >= 0) & (ignore >= 0)
-            skip[skip] = self.tri_inst[prim[skip]] == ignore[skip]
-        hits = Hits.__new__(Hits)
-        hits.t, hits.prim, hits.u, hits.v = t, prim, u, v
-        hits.self_hit = np.zeros(n, bool) if skip is None else skip.copy()
-        if skip is None or not hits.self_hit.any():
-            return hits
-        # rays that hit the ignored instance: step past it and cast again (hits keep the
-        # first-round values elsewhere; the skipped rows are reset to a miss, then filled)
-        idx = np.nonzero(skip)[0]
-        t_s = t[idx]
-        t[idx], prim[idx], u[idx], v[idx] = np.inf, -1, 0.0, 0.0
-        step = t_s + self.eps
-        toff = step
-        oo = o[idx] + d[idx] * step[:, None]
-        for _ in range(MAX_SKIPS - 1):
-            self.rays_cast += len(idx)
-            t2, prim2, u2, v2 = self.backend.closest(oo, d[idx], tmax[idx] - toff)
-            ig = ignore[idx]
-            skip = (prim2 >= 0) & (ig >= 0) & (self.tri_inst[np.maximum(prim2, 0)] == ig)
-            keep = ~skip
-            k = idx[keep]
-            hits.t[k] = t2[keep] + toff[keep]
-            hits.prim[k] = prim2[keep]
-            hits.u[k] = u2[keep]
-            hits.v[k] = v2[keep]
-            if not skip.any():
-                break
-            step = t2[skip] + self.eps
-            toff = toff[skip] + step
-            oo = oo[skip] + d[idx[skip]] * step[:, None]
-            idx = idx[skip]
+        tmax = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,))
+        ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
+        if np.any(ignore >= len(self.inst_part)) or np.any(self.inst_part[ignore[ignore >= 0]] < 0):
+            raise UsageError("Accel.trace: an ignored instance has no acceleration structure of its own (Accel separate=...)")
+        hits = Hits(n)
+        all_rows = np.arange(n)
+        for part in self.parts:
+            self._closest_in(part, o, d, tmax, all_rows if part.inst < 0 else np.nonzero(ignore != part.inst)[0], hits)
+        own = np.nonzero(ignore >= 0)[0]
+        if len(own):
+            lim = np.minimum(tmax, hits.t)
+            part_of = self.inst_part[ignore[own]]
+            exempt = None if exempt is None else np.asarray(exempt, np.int64)
+            stepping = np.zeros(len(own), bool) if exempt is None else exempt[own, 0] < exempt[own, 1]
+            for p in np.unique(part_of):
+                rows = own[(part_of == p) & ~stepping]  # nothing exempt: one occlusion query
+                hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, lim, rows)
+                rows = own[(part_of == p) & stepping]
+                if len(rows):
+                    hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, lim, rows, exempt)
         return hits
 
-    def _trace_exempt(self, o, d, tmax, ignore, exempt) -> Hits:
-        """:meth:`trace` with per-row exempt triangle ranges (every ignored hit is stepped over;
-        only those outside the row's range set ``self_hit``)."""
-        n = len(o)
-        hits = Hits(n)
-        ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
-        idx = np.arange(n)
-        oo = np.asarray(o, np.float64)
-        toff = np.zeros(n)
-        for _ in range(MAX_SKIPS):
-            if not len(idx):
+    def _occluded_in(self, part, o, d, tmax, rows) -> np.ndarray:
+        """[len(rows)] bool: any triangle of ``part`` on the ray segment [0, tmax]."""
+        out = np.zeros(len(rows), bool)
+        sel = part.rows_hitting_box(o, d, tmax, rows)
+        if len(sel):
+            self.rays_cast += len(sel)
+            occ = part.backend.occluded(o[sel], d[sel], tmax[sel])
+            out[np.searchsorted(rows, sel)] = occ
+        return out
+
+    def _passes_outside(self, part, o, d, tmax, rows, exempt) -> np.ndarray:
+        """[len(rows)] bool: a triangle of ``part`` outside row i's exempt range lies on [0, tmax].
+
+        Exempt hits are stepped over (at most :data:`MAX_EXEMPT_STEPS` per ray); only rays whose
+        nearest hit was exempt are cast again."""
+        out = np.zeros(len(rows), bool)
+        sel = part.rows_hitting_box(o, d, tmax, rows)
+        pos = np.searchsorted(rows, sel)
+        oo, toff = o[sel], np.zeros(len(sel))
+        for _ in range(MAX_EXEMPT_STEPS):
+            if not len(sel):
                 break
-            self.rays_cast += len(idx)
-            t, prim, u, v = self.backend.closest(oo, d[idx], tmax[idx] - toff)
-            ig = ignore[idx]
-            skip = (prim >= 0) & (ig >= 0) & (self.tri_inst[np.maximum(prim, 0)] == ig)
-            keep = ~skip
-            k = idx[keep]
-            hits.t[k] = t[keep] + toff[keep]
-            hits.prim[k] = prim[keep]
-            hits.u[k] = u[keep]
-            hits.v[k] = v[keep]
-            rows, ps = idx[skip], prim[skip]
-            counted = (ps < exempt[rows, 0]) | (ps >= exempt[rows, 1])
-            hits.self_hit[rows[counted]] = True
-            step = t[skip] + self.eps
-            toff = toff[skip] + step
-            oo = oo[skip] + d[rows] * step[:, None]
-            idx = rows
-        return hits
+            self.rays_cast += len(sel)
+            t, prim, _, _ = part.backend.closest(oo, d[sel], tmax[sel] - toff)
+            hit = prim >= 0
+            g = np.where(hit, part.ids[np.maximum(prim, 0)], -1)
+            ex = hit & (g >= exempt[sel, 0]) & (g < exempt[sel, 1])
+            out[pos[hit & ~ex]] = True
+            step = t[ex] + self.eps
+            sel, pos = sel[ex], pos[ex]
+            toff = toff[ex] + step
+            oo = oo[ex] + d[sel] * step[:, None]
+        return out
 
     def occluded(self, o, d, tmax):
-        self.rays_cast += len(o)
-        return self.backend.occluded(o, d, tmax)
+        """[n] bool: any triangle on the ray segment [0, tmax] (no instance ignored)."""
+        o = np.asarray(o, np.float64)
+        d = np.asarray(d, np.float64)
+        tmax = np.broadcast_to(np.asarray(tmax, np.float64), (len(o),))
+        out = np.zeros(len(o), bool)
+        for part in self.parts:
+            rows = np.nonzero(~out)[0]
+            if not len(rows):
+                break
+            out[rows] = self._occluded_in(part, o, d, tmax, rows)
+        return out

@@ -80,14 +80,15 @@ class _Timer:
 class PathIntegrator:
     def __init__(self, scene, plan: RenderPlan, settings: RenderSettings) -> None:
         self.scene, self.plan, self.s = scene, plan, settings
-        self.accel = Accel(scene.triangles, scene.tri_inst, backend=settings.backend)
+        insts = scene.instances
+        self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
+        # rays ignore neural instances only: those get acceleration structures of their own
+        self.accel = Accel(scene.triangles, scene.tri_inst, backend=settings.backend, separate=self.inst_neural)
         self.eps = self.accel.eps
         self.stats = RenderStats()
         tri = scene.triangles
         ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) if len(tri) else np.zeros((0, 3))
         self.tri_ng = normalize(ng)
-        insts = scene.instances
-        self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_one_sided = np.array([i.one_sided for i in insts], bool)
         self.inst_back_mat = np.array([i.back_material for i in insts], np.int64)
@@ -101,10 +102,12 @@ class PathIntegrator:
             if isinstance(light, MeshLight):
                 self.inst_light[light.instance] = k
         self.nee = [k for k, on in enumerate(plan.light_nee) if on]
-        # object-space corner normals of each asset's triangles
+        # object-space corner normals of each asset's triangles (None for fibers: shaded from the curve axis)
         self.asset_corner_n = []
         for data in scene.assets:
-            if data.normals is not None:
+            if data.fiber is not None:
+                cn = None
+            elif data.normals is not None:
                 cn = data.normals[data.faces]
             else:
                 p = data.points[data.faces]

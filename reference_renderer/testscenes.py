@@ -219,3 +219,34 @@ def constant_rna_fiber_asset(path, curves, widths, *, unshadowed=(1.0, 1.0, 1.0)
     core.add_network("decoder", mlp_onnx([weights], [bias]))
     b.provenance = {"generator": "constant"}
     return b.write(path)
+
+
+def dense_hair_curves(n_strands: int = 20000, segments: int = 4, *, seed: int = 0, radius: float = 0.3,
+                      length: float = 0.45, width: float = 0.004):
+    """A dense synthetic hair cut: ``n_strands`` linear curves of ``segments`` segments each (CurvesGeometry).
+
+    Roots are uniform on the upper half of a sphere of ``radius`` around the origin; each strand leaves
+    its root along the normal and bends down under a parabolic droop, ``length`` long (scene units),
+    tapering from ``width`` to ``width / 3``. Every ray through the cut crosses many fibres.
+    """
+    from nasset_sdk.geometry import CurvesGeometry
+
+    rng = np.random.default_rng(seed)
+    n = rng.normal(size=(n_strands, 3))
+    n[:, 1] = np.abs(n[:, 1])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    t = np.linspace(0.0, 1.0, segments + 1)[None, :, None]
+    droop = np.array([0.0, -1.0, 0.0]) * (0.8 * length * t**2)
+    jitter = rng.normal(0.0, 0.03 * length, (n_strands, 1, 3)) * t
+    pts = radius * n[:, None] + length * t * n[:, None] + droop + jitter
+    widths = np.tile(width * np.linspace(1.0, 1.0 / 3.0, segments + 1), n_strands)
+    return CurvesGeometry(pts.reshape(-1, 3).astype(np.float32), np.full(n_strands, segments + 1, np.int32),
+                          widths.astype(np.float32))
+
+
+def random_rna_fiber_asset(path, geometry, *, seed: int = 0, size: str = "tiny"):
+    """An rna fiber asset with random networks on the given CurvesGeometry (throughput and query tests)."""
+    from nasset_sdk.kinds import get_kind
+
+    b = get_kind("rna").build_random(np.random.default_rng(seed), variant="fiber", size=size, geometry=geometry)
+    return b.write(path)

@@ -74,9 +74,9 @@ def chain(*ms):
 
 
 # -- assets --------------------------------------------------------------------------------
-def _rna_random(seed, *, dtype="float16", variant="surface"):
+def _rna_random(seed, *, dtype="float16", variant="surface", curves=None):
     """Builder of a tiny rna asset with random networks (triplane stored as ``dtype``); variant
-    ``fiber`` uses :func:`_fiber_curves` as its geometry.
+    ``fiber`` uses ``curves`` (default :func:`_fiber_curves`) as its geometry.
 
     The decoder is a random 2 x 16 ReLU MLP whose last layer is scaled so that transports stay
     in a plausible range (about 0.05 to 0.3 / sr, shadowed darker than unshadowed) while still
@@ -88,7 +88,7 @@ def _rna_random(seed, *, dtype="float16", variant="surface"):
 
     rng = np.random.default_rng(seed)
     b = AssetBuilder("rna", variant=variant)
-    b.set_geometry(_fiber_curves() if variant == "fiber" else example_mesh())
+    b.set_geometry((curves or _fiber_curves()) if variant == "fiber" else example_mesh())
     core = b.component("core", required=True, purpose="evaluation", quality=None)
     res, ch, hidden = 8, 4, 16
     core.add_tensor("triplane", rng.normal(0, 1.0, (3, res, res, ch)), dtype=dtype, layout="plane,v,u,channel")
@@ -129,6 +129,14 @@ def asset_fiber(path):
     return _rna_random(13, variant="fiber").write(path)
 
 
+def asset_fiber_dense(path):
+    """1200 strands of 3 segments packed around a small sphere: rays cross tens of fibres."""
+    from nasset_reference_renderer.testscenes import dense_hair_curves
+
+    curves = dense_hair_curves(1200, 3, seed=5, radius=0.12, length=0.35, width=0.012)
+    return _rna_random(17, variant="fiber", curves=curves).write(path)
+
+
 def asset_const(path):
     from nasset_reference_renderer.testscenes import constant_rna_asset
 
@@ -160,6 +168,7 @@ ASSETS: dict[str, Callable] = {
     "rna_rand_fp32.usdc": asset_rand_fp32,
     "rna_const.usdc": asset_const,
     "rna_fiber.usdc": asset_fiber,
+    "rna_fiber_dense.usdc": asset_fiber_dense,
     "rna_quality.usdc": asset_quality,
     "neupress.usdc": asset_example("neupress"),
     "8dna.usdc": asset_example("8dna"),
@@ -422,6 +431,9 @@ CASES = [
     Case("rna_fiber_distant", "rna fiber asset (tuft of tapered linear curves, random networks) on a floor under a delta "
          "DistantLight: curve tubes, tangent and h inputs, fibers shadowing fibers (shadowed branch), shadows on the floor",
          b_distant("rna_fiber.usdc")),
+    Case("rna_fiber_dense", "dense rna fiber asset (1200 drooping strands around a small sphere) on a floor under a delta "
+         "DistantLight: shadow and continuation rays cross tens of fibres of their own asset (shadowed branch however "
+         "many are crossed; own and neighbouring segments exempt), fibres shadowing the floor", b_distant("rna_fiber_dense.usdc")),
     Case("neupress_distant", "neupress surface asset on a floor under a DistantLight; its optional components (importance "
          "sampling, PRT) are not needed by the plan", b_other_kind("neupress.usdc"), spp=256),
     Case("8dna_distant", "8dna surface asset on a floor under a DistantLight", b_other_kind("8dna.usdc")),

@@ -39,6 +39,7 @@ MUTANT_CASES = {
     "quality_hq": ["rna_quality_variant"],
     "eightdna_pdf_scale": ["8dna_distant"],
     "eightdna_direction_flipped": ["8dna_distant"],
+    "fiber_exempt_stops_search": ["rna_fiber_dense"],
 }
 #: mutants the cases cannot catch at their spp (measured error vs tolerance): neupress_wi_flipped 0.238 vs 0.353,
 #: neupress_reflection_dropped 0.170 vs 0.353 (neupress_distant's 256-spp noise is 0.07-0.14), fiber_h_sign 0.025 vs

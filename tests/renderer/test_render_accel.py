@@ -131,5 +131,119 @@ def test_trace_with_ignore_matches_numpy():
     np.testing.assert_allclose(h_e.t[both], h_n.t[both], rtol=T_REL, atol=T_REL)
     assert not np.any(tri_inst[h_e.prim[h_e.prim >= 0]] == ignore[h_e.prim >= 0])  # never reports the ignored instance
     h0 = a_e.trace(o, d, tmax)  # without ignore: plain closest hits
-    np.testing.assert_array_equal(h0.prim, a_e.backend.closest(o, d, tmax)[1])
+    np.testing.assert_array_equal(h0.prim, EmbreeBackend(tri).closest(o, d, tmax)[1])
     assert not h0.self_hit.any()
+
+
+# -- queries whose cost does not grow with the asset triangles a ray crosses ----------------------------------
+def _brute_trace(tri, tri_inst, o, d, tmax, ignore, exempt=None, chunk=1 << 21):
+    """float64 brute force of Accel.trace's contract: (t, prim, self_hit, crossed) where crossed counts the
+    ignored instance's triangles along the whole ray (how much of the asset the ray passes through)."""
+    n, m = len(o), len(tri)
+    p0, e1, e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    t_out, p_out = np.full(n, np.inf), np.full(n, -1, np.int64)
+    self_out, crossed = np.zeros(n, bool), np.zeros(n, np.int64)
+    step = max(1, chunk // m)
+    for s in range(0, n, step):
+        sl = slice(s, s + step)
+        dd, tv = d[sl, None, :], o[sl, None, :] - p0[None]
+        pv = np.cross(dd, e2[None])
+        det = np.einsum("rmk,mk->rm", pv, e1)
+        inv = 1.0 / np.where(det == 0, np.inf, det)
+        u = np.einsum("rmk,rmk->rm", tv, pv) * inv
+        qv = np.cross(tv, e1[None])
+        v = np.einsum("rmk,rmk->rm", dd, qv) * inv
+        t = np.einsum("rmk,mk->rm", qv, e2) * inv
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+        own = tri_inst[None, :] == ignore[sl, None]
+        t_other = np.where(hit & ~own & (t <= tmax[sl, None]), t, np.inf)
+        k = np.argmin(t_other, 1)
+        tb = t_other[np.arange(len(k)), k]
+        t_out[sl], p_out[sl] = tb, np.where(np.isfinite(tb), k, -1)
+        counted = own & hit
+        crossed[sl] = counted.sum(1)
+        if exempt is not None:
+            ids = np.arange(m)[None, :]
+            counted &= (ids < exempt[sl, 0:1]) | (ids >= exempt[sl, 1:2])
+        self_out[sl] = (counted & (t < np.minimum(tmax[sl], tb)[:, None])).any(1)
+    return t_out, p_out, self_out, crossed
+
+
+def _hair_scene():
+    """A dense tuft (400 strands x 3 segments as fiber prisms, instance 0) over a floor (instance 1)."""
+    from nasset_reference_renderer.shaders.rna_fiber import tessellate
+    from nasset_reference_renderer.testscenes import dense_hair_curves
+
+    g = dense_hair_curves(400, 3, seed=2, radius=0.1, length=0.2, width=0.02)
+    tubes = tessellate(g.points, g.counts, g.widths)
+    floor = np.array([[[-1, -0.5, -1], [1, -0.5, -1], [1, -0.5, 1]], [[-1, -0.5, -1], [1, -0.5, 1], [-1, -0.5, 1]]], float)
+    tri = np.concatenate([tubes.points[tubes.faces], floor])
+    tri_inst = np.concatenate([np.zeros(len(tubes.faces), np.int64), np.ones(2, np.int64)])
+    return tri, tri_inst, tubes
+
+
+def test_trace_matches_brute_force_on_random_scene():
+    """closest hit past the ignored instance and self_hit, against an independent float64 brute force."""
+    tri, tri_inst = _scene()
+    o, d, tmax = _rays(1500, 8)
+    ignore = np.random.default_rng(9).integers(-1, 4, len(o))
+    t_b, p_b, s_b, _ = _brute_trace(tri, tri_inst, o, d, tmax, ignore)
+    assert s_b.mean() > 0.05 and (p_b >= 0).mean() > 0.3  # both answers well represented
+    for backend in ("embree", "numpy"):
+        h = Accel(tri, tri_inst, backend=backend).trace(o, d, tmax, ignore)
+        same = (h.prim == p_b) & (h.self_hit == s_b)
+        assert same.mean() > 0.99, backend
+        both = same & (p_b >= 0)
+        np.testing.assert_allclose(h.t[both], t_b[both], rtol=T_REL, atol=T_REL)
+
+
+def test_fiber_rays_cost_constant_embree_calls():
+    """Rays leaving fiber hits (exempt ranges of their segment and neighbours) through a dense tuft: the same
+    hits and self_hit flags as brute force, at a fixed number of Embree rays each although they cross many
+    fibre triangles."""
+    tri, tri_inst, tubes = _hair_scene()
+    rng = np.random.default_rng(4)
+    n = 600
+    # camera-like rays at the tuft, their first fiber hits, then random directions from there
+    o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
+    d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
+    d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]))
+    h0 = acc.trace(o0, d0)
+    m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
+    assert m.mean() > 0.5
+    x = o0[m] + d0[m] * h0.t[m][:, None]
+    seg = tubes.tri_seg[h0.prim[m]]
+    exempt = tubes.exempt[seg].copy()
+    exempt[::7] = -1  # rows with nothing exempt (surface rows in a batch of mixed kinds)
+    wi = rng.normal(size=(len(x), 3))
+    wi[: len(x) // 2, 2] = -np.abs(wi[: len(x) // 2, 2])  # half of them straight through the tuft
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    tmax = np.full(len(x), np.inf)
+    ignore = np.zeros(len(x), np.int64)
+    t_b, p_b, s_b, crossed = _brute_trace(tri, tri_inst, x, wi, tmax, ignore, exempt)
+    assert s_b.mean() > 0.3 and (~s_b).mean() > 0.05 and (p_b >= 0).any()
+    heavy = crossed >= 20  # rays crossing at least 10 fibres (20 triangles)
+    assert heavy.sum() >= 50
+    h = acc.trace(x, wi, tmax, ignore, exempt)
+    acc.rays_cast = 0
+    acc.trace(x[heavy], wi[heavy], tmax[heavy], ignore[heavy], exempt[heavy])
+    assert acc.rays_cast / heavy.sum() <= 3.0  # floor (closest) + tuft (occlusion, exempt steps)
+    same = (h.prim == p_b) & (h.self_hit == s_b)
+    assert same.mean() > 0.98, np.nonzero(~same)[0][:10]
+    # shadow-ray form: limited by tmax, the floor never hit
+    tmax2 = np.full(len(x), 0.2)
+    _, p_b2, s_b2, _ = _brute_trace(tri, tri_inst, x, wi, tmax2, ignore, exempt)
+    h2 = acc.trace(x, wi, tmax2, ignore, exempt)
+    assert ((h2.self_hit == s_b2) & (h2.prim == p_b2)).mean() > 0.98
+
+
+def test_ignoring_a_merged_instance_is_a_usage_error():
+    from nasset_sdk.errors import UsageError
+
+    tri, tri_inst = _scene()
+    acc = Accel(tri, tri_inst, separate=np.array([True, False, False, False]))
+    o, d, tmax = _rays(4, 5)
+    acc.trace(o, d, tmax, np.array([0, -1, 0, -1]))  # instance 0 has its own structure
+    with pytest.raises(UsageError, match="acceleration structure"):
+        acc.trace(o, d, tmax, np.array([0, 1, -1, -1]))

@@ -118,6 +118,7 @@ def asset_casts_no_shadow():
 
 def other_instance_is_self():
     """Rays leaving an instance skip every instance of the same asset file, not only its own triangles."""
+    from nasset_reference_renderer.accel import Accel
     from nasset_reference_renderer.integrator import PathIntegrator
 
     orig_init = PathIntegrator.__init__
@@ -131,7 +132,7 @@ def other_instance_is_self():
             if inst.kind == "neural":
                 canon[i] = first.setdefault(inst.asset, i)
         self._canon = canon
-        self.accel.tri_inst = canon[self.accel.tri_inst]
+        self.accel = Accel(scene.triangles, canon[scene.tri_inst], backend=settings.backend, separate=self.inst_neural)
 
     def trace(self, o, d, tmax=None, ignore=None):
         if ignore is not None:
@@ -248,11 +249,19 @@ def fiber_h_sign():
     neural_fiber.fiber_frame = fiber_frame
 
 
+def fiber_exempt_stops_search():
+    """rna fiber: a ray leaving a fiber whose first asset triangle is exempt (its own segment or a neighbour's)
+    stops looking for the asset there, so fibres further along never pick the shadowed branch."""
+    from nasset_reference_renderer import accel
+
+    accel.MAX_EXEMPT_STEPS = 1
+
+
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, eightdna_pdf_scale, eightdna_direction_flipped,
-                                   fiber_h_sign)}
+                                   fiber_h_sign, fiber_exempt_stops_search)}
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,20 @@
+"""The dense-hair benchmark of benchmarks/renderer_throughput.py runs, and its counts are consistent (a smoke
+test: that a ray's Embree calls do not grow with the fibres it crosses is tested in
+tests/renderer/test_render_accel.py, on rays that cross many)."""
+
+import argparse
+
+import numpy as np
+
+from nasset_benchmarks.renderer_throughput import hair_scene, run_hair, tessellation_bytes
+
+
+def test_hair_benchmark_small():
+    scene = hair_scene(300, 3, floor=False)
+    mem = tessellation_bytes(scene)
+    assert mem["segments"] == 300 * 3 and mem["triangles"] == 28 * 300 * 3  # 2N + 2 (N - 2) triangles, N = 8
+    r = run_hair(scene, argparse.Namespace(spp=1, res=24, batch=65536))
+    assert r["samples"] == 24 * 18
+    assert np.isfinite([r["rate"], r["rays"], r["setup"]]).all() and r["rate"] > 0
+    # camera ray (one query where it meets the hair's box) + one branch test per hair hit (+ exempt steps)
+    assert 0 < r["rays"] <= 3.0
