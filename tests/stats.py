@@ -125,7 +125,8 @@ def sphere_bin_probabilities(pdf_fn, n_theta, n_phi, sub, n, max_sub=256):
             subs[sel] = 2 * sb
 
 
-def sphere_chi2(sample_fn, pdf_fn, *, n=200_000, n_theta=20, n_phi=40, sub=16, seed=0, min_expected=5.0):
+def sphere_chi2(sample_fn, pdf_fn, *, n=200_000, n_theta=20, n_phi=40, sub=16, seed=0, min_expected=5.0,
+                pdf_total: float | None = None):
     """chi-squared test of a direction sampler: (p_value, dof, pdf_integral).
 
     ``sample_fn(u [N,2]) -> dirs [N,3]`` (rows with NaN or zero length = failed samples); ``pdf_fn(dirs) -> pdf [N]``
@@ -133,6 +134,10 @@ def sphere_chi2(sample_fn, pdf_fn, *, n=200_000, n_theta=20, n_phi=40, sub=16, s
     midpoint rule on ``sub`` x ``sub`` nodes per bin, refined where needed (:func:`sphere_bin_probabilities`); if even
     the finest rule could shift the statistic by more than :data:`MAX_QUADRATURE_SHIFT`, the test itself is wrong
     and fails with an AssertionError naming ``sub``.
+
+    Failed samples form one more bin of probability 1 - integral. ``pdf_total`` is the pdf's exact integral when it is
+    known (1 for a sampler that never fails, e.g. a light's): that bin then gets 1 - pdf_total, not the quadrature's
+    deficit (which would expect a few failed samples that a correct sampler never produces and pull p-values low).
     """
     rng = np.random.default_rng(stat_seed(seed))
     v = sample_fn(rng.random((n, 2)))
@@ -147,7 +152,7 @@ def sphere_chi2(sample_fn, pdf_fn, *, n=200_000, n_theta=20, n_phi=40, sub=16, s
     assert shift < MAX_QUADRATURE_SHIFT, f"expected-count quadrature too coarse (sub={sub}): shift {shift:.3g}"
     # one more bin for failed samples (e.g. a reflection below the horizon), of probability 1 - integral
     obs = np.append(obs, n - ok.sum())
-    prob = np.append(prob, max(0.0, 1.0 - integral))
+    prob = np.append(prob, max(0.0, 1.0 - (integral if pdf_total is None else pdf_total)))
     _, dof, pval = chi2_test(obs, prob, min_expected=min_expected)
     return pval, dof, integral
 
