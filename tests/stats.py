@@ -10,6 +10,8 @@ probability, and the seeds are fixed, so results are reproducible.
 
 :func:`sphere_chi2` is the direction-sampler form (bins on the sphere, expected counts by quadrature of the
 pdf); it checks that its quadrature is accurate enough for the sample count (see :data:`MAX_QUADRATURE_SHIFT`).
+:func:`adaptive_quad` / :func:`adaptive_quad_2d` integrate a pdf over bins by adaptive Gauss-Legendre, for pdfs
+whose narrow peaks a fixed midpoint rule misses (the 8dna spline flow).
 ``tests/stats_sweep.py`` reruns every chi-squared test of the default suite over many seeds
 (:func:`stat_seed` shifts every fixed seed by ``NASSET_STAT_SEED``) and checks the p-values are uniform.
 """
