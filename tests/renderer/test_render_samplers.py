@@ -14,16 +14,17 @@ def _report(name, p, dof):
 
 
 def test_cosine_hemisphere():
-    p, dof, integral = sphere_chi2(sampling.square_to_cosine_hemisphere, sampling.cosine_hemisphere_pdf)
+    p, dof, integral = sphere_chi2(sampling.square_to_cosine_hemisphere, sampling.cosine_hemisphere_pdf, pdf_total=1.0)
     _report("cosine", p, dof)
     assert p > P_MIN and abs(integral - 1) < 1e-2
 
 
 def test_uniform_sphere_and_cone():
-    p, dof, _ = sphere_chi2(sampling.square_to_uniform_sphere, sampling.uniform_sphere_pdf)
+    p, dof, _ = sphere_chi2(sampling.square_to_uniform_sphere, sampling.uniform_sphere_pdf, pdf_total=1.0)
     assert p > P_MIN
     cm = np.cos(0.6)
-    p, dof, integral = sphere_chi2(lambda u: sampling.square_to_uniform_cone(u, cm), lambda v: sampling.uniform_cone_pdf(v, cm))
+    p, dof, integral = sphere_chi2(lambda u: sampling.square_to_uniform_cone(u, cm), lambda v: sampling.uniform_cone_pdf(v, cm),
+                                   pdf_total=1.0)
     _report("cone", p, dof)
     assert p > P_MIN and abs(integral - 1) < 2e-2
 
@@ -88,7 +89,7 @@ def _light_chi2(light, name, **kw):
     def pdf(v):
         return light.pdf(np.repeat(P0, len(v), 0), v)
 
-    p, dof, integral = sphere_chi2(sample, pdf, **kw)
+    p, dof, integral = sphere_chi2(sample, pdf, pdf_total=1.0, **kw)  # a light sample never fails
     _report(name, p, dof)
     assert p > P_MIN
     assert abs(integral - 1) < 3e-2

@@ -154,3 +154,23 @@ def test_spec_validation_table_up_to_date():
     from nasset_sdk.validate.specdoc import render
 
     assert (HERE.parent / "spec" / "validation.md").read_text() == render(), "run: python -m nasset_sdk.validate.specdoc"
+
+
+def test_usd_checks_report_openusd_validator_errors(tmp_path):
+    """USD_CHECK: a material binding without MaterialBindingAPI applied is an error of OpenUSD's own validators
+    (usdShadeValidators), reported only with --usd-checks, at the prim, and it fails the file."""
+    from pxr import Usd, UsdShade
+
+    path = example_builder("rna", size="tiny").write(tmp_path / "no_binding_api.usdc")
+    stage = Usd.Stage.Open(str(path))
+    geometry = next(p for p in stage.Traverse() if p.HasAPI(UsdShade.MaterialBindingAPI))
+    geometry.RemoveAPI(UsdShade.MaterialBindingAPI)  # the material:binding relationship stays
+    stage.GetRootLayer().Save()
+    assert validate_file(path).findings == []
+    report = validate_file(path, usd_checks=True)
+    assert [(f.code, f.severity, f.prim) for f in report.findings] == [("USD_CHECK", "error", str(geometry.GetPath()))]
+    assert "MaterialBindingAPI" in report.findings[0].message and not report.ok
+    r = _cli(str(path), "--usd-checks", "--json")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert [f["code"] for f in json.loads(r.stdout)["findings"]] == ["USD_CHECK"]
+    assert _cli(str(path)).returncode == 0
