@@ -205,11 +205,10 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
         if asset.variant != "fiber" and curves:
             raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} {asset.variant} asset but {curves} are curves "
                         "(they need a fiber asset)", file=str(file))
-        if asset.kind == "neupress":
-            plain = [i for i, s in zip(ids, shapes, strict=True) if "dielectric" not in str(s.bsdf()).split("[")[0].lower()]
-            if plain:
+        if asset.kind == "neupress":  # one of the shapes is the boundary; the others may be inside it
+            if not any("dielectric" in str(s.bsdf()).split("[")[0].lower() for s in shapes):
                 raise error("BENCH_ASSET_KIND", f"{file.name} is a neupress asset (subsurface behind a rough dielectric) but "
-                            f"{plain} have no dielectric boundary", file=str(file))
+                            f"none of {ids} has a dielectric boundary", file=str(file))
         geo = asset.geometry()
         a = np.stack([geo.points.min(0), geo.points.max(0)]).astype(np.float64)
         b = _shape_bounds(mi, shapes)
