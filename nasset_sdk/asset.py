@@ -186,12 +186,13 @@ class AssetBuilder:
         stage.SetDefaultPrim(root)
         Usd.ModelAPI(root).SetKind("component")
         root.CreateAttribute("nasset:kind", Sdf.ValueTypeNames.Token).Set(self.kind)
-        root.CreateAttribute("nasset:specVersion", Sdf.ValueTypeNames.String).Set(limits.SPEC_VERSION)
+        version = limits.written_version(self.components)
+        root.CreateAttribute("nasset:specVersion", Sdf.ValueTypeNames.String).Set(version)
         root.CreateAttribute("nasset:variant", Sdf.ValueTypeNames.Token).Set(self.variant)
         lo, hi = self.domain
         root.CreateAttribute("nasset:domainMin", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*map(float, lo)))
         root.CreateAttribute("nasset:domainMax", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*map(float, hi)))
-        prov = {**self.provenance, "specVersion": limits.SPEC_VERSION, "kind": self.kind}  # required keys win
+        prov = {**self.provenance, "specVersion": version, "kind": self.kind}  # required keys win
         root.CreateAttribute("nasset:provenance", Sdf.ValueTypeNames.String).Set(json.dumps(prov, sort_keys=True))
 
         geo = self.geometry

@@ -1,6 +1,16 @@
 """Bounds applied to untrusted assets (spec/security.md#bounds) and the version this SDK writes."""
 
-SPEC_VERSION = "0.2"
+SPEC_VERSION = "0.2"  # the newest version this SDK writes
+#: the version a written file declares: the lowest one that describes it (a 0.1 reader keeps reading
+#: every file that uses nothing newer), spec/format.md#versioning
+VERSION_OF_COMPONENT = {"portable": "0.2"}
+BASE_SPEC_VERSION = "0.1"
+
+
+def written_version(components) -> str:
+    """specVersion for a file with these component names: the highest minor any of them needs."""
+    return max((VERSION_OF_COMPONENT.get(c, BASE_SPEC_VERSION) for c in components),
+               key=lambda v: tuple(int(x) for x in v.split(".")), default=BASE_SPEC_VERSION)
 #: MAJOR versions this SDK reads; any MINOR of a known MAJOR is read (spec/format.md#versioning).
 SUPPORTED_MAJOR = 0
 MAX_TENSOR_ELEMENTS = 1 << 27  # 134 M elements (256 MiB at fp16)

@@ -202,7 +202,7 @@ def test_unauthored_spec_version_is_rejected_despite_fallback(tmp_path):
     path = tmp_path / "a.usda"
     example_builder("rna", size="tiny").write(path)
     text = path.read_text()
-    authored = f'string nasset:specVersion = "{ns.limits.SPEC_VERSION}"\n'
+    authored = f'string nasset:specVersion = "{ns.limits.BASE_SPEC_VERSION}"\n'
     assert authored in text
     path.write_text(text.replace(authored, ""))
     with pytest.raises(ns.AssetFormatError) as info:
@@ -218,7 +218,7 @@ def test_provenance_required_keys_cannot_be_overridden(tmp_path):
     b.provenance = {"specVersion": "9.9", "kind": "other", "generator": "x"}
     b.write(tmp_path / "a.usdc")
     prov = ns.Asset.open(tmp_path / "a.usdc", load="none").provenance
-    assert (prov["specVersion"], prov["kind"], prov["generator"]) == (ns.SPEC_VERSION, "rna", "x")
+    assert (prov["specVersion"], prov["kind"], prov["generator"]) == (ns.limits.BASE_SPEC_VERSION, "rna", "x")
 
 
 def test_network_width_bound():
@@ -235,3 +235,16 @@ def test_network_width_bound():
     with pytest.raises(NassetError) as info:
         check_model_bytes(blob)
     assert info.value.code == "NETWORK_IO"
+
+
+def test_written_version_is_the_lowest_that_describes_the_file(tmp_path):
+    """A file without 0.2 content declares 0.1 (old readers keep reading it); a portable component makes it 0.2."""
+    import nasset_sdk as ns
+    from nasset_sdk.examples import example_builder
+    from nasset_sdk.portable import add_portable
+
+    plain = example_builder("rna", size="tiny").write(tmp_path / "a.usdc")
+    assert ns.Asset.open(plain, load="none").spec_version == "0.1"
+    add_portable(plain, tmp_path / "b.usdc")
+    b = ns.Asset.open(tmp_path / "b.usdc", load="none")
+    assert b.spec_version == "0.2" and b.provenance["specVersion"] == "0.2"
