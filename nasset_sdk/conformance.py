@@ -58,6 +58,34 @@ def rmse_normalised(image: np.ndarray, reference: np.ndarray, block: int = 1) ->
 METRICS = {"rmse_normalised": rmse_normalised}
 
 
+def mean_bias(image: np.ndarray, reference: np.ndarray) -> float:
+    """|mean(image) / mean(reference) - 1|, means over all pixels and channels: a brightness bias.
+
+    Monte Carlo noise averages over the whole image, so this separates a bias from noise where the
+    block RMSE cannot. Non-finite pixels give +inf."""
+    img = np.asarray(image, np.float64)
+    ref = np.asarray(reference, np.float64)
+    if img.shape != ref.shape:
+        raise ValueError(f"image shape {img.shape} differs from the reference's {ref.shape}")
+    if not np.isfinite(img).all():
+        return float("inf")
+    norm = float(ref.mean())
+    return float(abs(img.mean() / norm - 1.0)) if norm > 0 else float(abs(img.mean()))
+
+
+def compare(image: np.ndarray, reference: np.ndarray, case: dict) -> dict:
+    """Both checks of a case: ``error`` (the case's metric) within ``tolerance`` and, where the case
+    has a ``bias_tolerance``, ``bias_error`` (:func:`mean_bias`) within it. Returns
+    ``{"error", "bias_error", "passed"}`` (errors are floats, +inf for non-finite images; bias_error None without the check)."""
+    err = METRICS[case["metric"]](image, reference, case.get("block", 1))
+    passed = bool(np.isfinite(err) and err <= case["tolerance"])
+    bias = None
+    if case.get("bias_tolerance") is not None:
+        bias = mean_bias(image, reference)
+        passed = passed and bool(np.isfinite(bias) and bias <= case["bias_tolerance"])
+    return {"error": err, "bias_error": bias, "passed": passed}
+
+
 # -- suite ---------------------------------------------------------------------------------------
 def find_suite(suite: str | os.PathLike | None = None) -> Path:
     """The cases folder: ``suite``, else $NASSET_CONFORMANCE_SUITE, else the cases installed with this package."""
@@ -134,6 +162,7 @@ def run_case(case: dict, template: str, workdir: Path, *, seed: int = 0, timeout
     cmd = format_command(template, scene=(Path(case["dir"]) / "scene.usda").resolve(), out=out, spp=spp,
                          width=case["width"], height=case["height"], seed=seed)
     row = {"case": name, "status": "error", "passed": False, "error": None, "tolerance": case["tolerance"],
+           "bias_error": None, "bias_tolerance": case.get("bias_tolerance"),
            "metric": case["metric"], "block": case.get("block", 1), "spp": spp, "seconds": None, "image": str(out),
            "error_map": None, "message": "", "command": cmd}
     env = dict(os.environ, NASSET_CONFORMANCE_CASE=str(Path(case["dir"]).resolve()))
@@ -165,12 +194,16 @@ def run_case(case: dict, template: str, workdir: Path, *, seed: int = 0, timeout
     if image.shape != ref.shape:
         row["message"] = f"image is {image.shape[1]}x{image.shape[0]}, the case needs {ref.shape[1]}x{ref.shape[0]}"
         return row
-    err = METRICS[case["metric"]](image, ref, case.get("block", 1))
+    cmp = compare(image, ref, case)
+    err, bias = cmp["error"], cmp["bias_error"]
     row["error"] = err if np.isfinite(err) else None
-    row["passed"] = bool(np.isfinite(err) and err <= case["tolerance"])
+    row["bias_error"] = bias if bias is not None and np.isfinite(bias) else None
+    row["passed"] = cmp["passed"]
     row["status"] = "pass" if row["passed"] else "fail"
     if not np.isfinite(err):
         row["message"] = "image holds NaN or Inf"
+    elif bias is not None and bias > row["bias_tolerance"]:
+        row["message"] = f"mean brightness off by {bias:.4f} (bias tolerance {row['bias_tolerance']:.4f})"
     if not row["passed"]:
         path = out_dir / "error.png"
         write_error_map(path, image, ref)

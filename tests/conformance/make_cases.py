@@ -13,7 +13,8 @@ statistically: a fresh render at the case's spp with an unused seed must be with
 
 The tolerance of a case comes from measured Monte Carlo noise: the case is rendered ``NOISE_RUNS``
 times at its test spp with seeds 1..NOISE_RUNS, the metric of each image against the reference is
-recorded, and ``tolerance = TOL_FACTOR * max(max(e), mean(e) + 3 std(e))``.
+recorded, and ``tolerance = TOL_FACTOR * max(max(e), mean(e) + 3 std(e))``; ``bias_tolerance`` is
+derived the same way from the same renders' mean brightness bias (``nasset_sdk.conformance.mean_bias``).
 
 Adding a case is one entry in ``CASES``. Entries with ``pending=True`` use a kind or variant the
 reference renderer may not render yet: they are generated only when it accepts the scene.
@@ -74,9 +75,10 @@ def chain(*ms):
 
 
 # -- assets --------------------------------------------------------------------------------
-def _rna_random(seed, *, dtype="float16", variant="surface", curves=None):
+def _rna_random(seed, *, dtype="float16", variant="surface", curves=None, h_gain=1.0):
     """Builder of a tiny rna asset with random networks (triplane stored as ``dtype``); variant
-    ``fiber`` uses ``curves`` (default :func:`_fiber_curves`) as its geometry.
+    ``fiber`` uses ``curves`` (default :func:`_fiber_curves`) as its geometry, and its first layer's
+    weights of the cross-fibre offset h are multiplied by ``h_gain``.
 
     The decoder is a random 2 x 16 ReLU MLP whose last layer is scaled so that transports stay
     in a plausible range (about 0.05 to 0.3 / sr, shadowed darker than unshadowed) while still
@@ -95,6 +97,8 @@ def _rna_random(seed, *, dtype="float16", variant="surface", curves=None):
     widths = [ch + (13 if variant == "fiber" else 12), hidden, hidden, 6]
     ws = [rng.normal(0.0, np.sqrt(2.0 / a), (a, o)) for a, o in zip(widths[:-1], widths[1:], strict=True)]
     bs = [rng.normal(0.0, 0.05, o) for o in widths[1:]]
+    if variant == "fiber":
+        ws[0][ch + 6] *= h_gain  # input column of h (nasset_sdk.kinds.rna)
     ws[-1] *= 0.05
     bs[-1] = np.array([0.16, 0.12, 0.08, 0.05, 0.05, 0.07]) + bs[-1] * 0.2
     core.add_network("decoder", mlp_onnx([w.astype(np.float32) for w in ws], [x.astype(np.float32) for x in bs]))
@@ -127,6 +131,11 @@ def asset_rand_fp32(path):
 
 def asset_fiber(path):
     return _rna_random(13, variant="fiber").write(path)
+
+
+def asset_fiber_h(path):
+    """The fiber asset of rna_fiber_distant with a decoder that depends strongly on h (gain 8)."""
+    return _rna_random(13, variant="fiber", h_gain=8.0).write(path)
 
 
 def asset_fiber_dense(path):
@@ -169,6 +178,7 @@ ASSETS: dict[str, Callable] = {
     "rna_const.usdc": asset_const,
     "rna_fiber.usdc": asset_fiber,
     "rna_fiber_dense.usdc": asset_fiber_dense,
+    "rna_fiber_h.usdc": asset_fiber_h,
     "rna_quality.usdc": asset_quality,
     "neupress.usdc": asset_example("neupress"),
     "8dna.usdc": asset_example("8dna"),
@@ -388,6 +398,19 @@ def b_indirect(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_fiber_closeup(ctx):
+    ctx.camera(eye=(0.0, 0.1, 2.0), target=(0.0, 0.05, 0.0), focal=110.0)  # fibres several pixels wide
+    ctx.floor()
+    ctx.sb.distant("Sun", (0.5, 1.0, 0.35), 3.0)
+    ctx.asset("Asset", "rna_fiber_h.usdc")
+
+
+def b_neupress_direct(ctx):
+    ctx.camera(eye=(0.0, 0.6, 2.2))
+    ctx.sb.distant("Sun", (0.15, 0.5, -1.0), 3.0)  # behind the asset: grazing GGX highlight on its top
+    ctx.asset("Asset", "neupress.usdc")
+
+
 def b_other_kind(asset):
     def build(ctx):
         ctx.camera()
@@ -436,6 +459,10 @@ CASES = [
          "many are crossed; own and neighbouring segments exempt), fibres shadowing the floor", b_distant("rna_fiber_dense.usdc")),
     Case("neupress_distant", "neupress surface asset on a floor under a DistantLight; its optional components (importance "
          "sampling, PRT) are not needed by the plan", b_other_kind("neupress.usdc"), spp=256),
+    Case("rna_fiber_closeup", "close-up of a few rna fibres several pixels wide, the decoder strongly dependent on the "
+         "cross-fibre offset h: the sign and range of h across the fibre", b_fiber_closeup),
+    Case("neupress_direct", "lone neupress surface asset under a delta DistantLight, no other objects (low noise): the "
+         "subsurface network's w_i input and the GGX boundary reflection, its lobe width", b_neupress_direct, spp=256, ref_spp=4096),
     Case("8dna_distant", "8dna surface asset on a floor under a DistantLight", b_other_kind("8dna.usdc")),
 ]
 
@@ -446,6 +473,19 @@ def metric(image, reference, block):
     from nasset_sdk.conformance import rmse_normalised
 
     return rmse_normalised(image, reference, block)
+
+
+def mean_bias(image, reference):
+    """Relative brightness bias (see nasset_sdk.conformance.mean_bias)."""
+    from nasset_sdk.conformance import mean_bias as bias
+
+    return bias(image, reference)
+
+
+def noise_bound(e) -> float:
+    """max(max(e), mean(e) + 3 std(e)) of the noise runs' errors [NOISE_RUNS]."""
+    e = np.asarray(e, np.float64)
+    return max(float(e.max()), float(e.mean() + 3 * e.std(ddof=1)))
 
 
 # -- generation --------------------------------------------------------------------------------
@@ -526,12 +566,21 @@ def generate(case: Case, log=print) -> bool:
         ref = render_ref(tmp, case, case.ref_spp, REF_SEED)
         t_ref = time.perf_counter() - t0
         t0 = time.perf_counter()
-        errs = [metric(render_ref(tmp, case, case.spp, s), ref, case.block) for s in range(1, NOISE_RUNS + 1)]
+        images = [render_ref(tmp, case, case.spp, s) for s in range(1, NOISE_RUNS + 1)]
         t_noise = (time.perf_counter() - t0) / NOISE_RUNS
-        e = np.array(errs)
-        q = max(float(e.max()), float(e.mean() + 3 * e.std(ddof=1)))
+        e = np.array([metric(im, ref, case.block) for im in images])
+        q = noise_bound(e)
         tol = TOL_FACTOR * q
         info["tolerance"] = round(tol, 6)
+        eb = np.array([mean_bias(im, ref) for im in images])
+        qb = noise_bound(eb)
+        info["bias_tolerance"] = round(TOL_FACTOR * qb, 6)
+        info["bias_tolerance_derivation"] = {
+            "text": (f"|mean(image) / mean(reference) - 1| of the same {NOISE_RUNS} noise renders; bias_tolerance = "
+                     f"{TOL_FACTOR} x max(max(b), mean(b) + 3 std(b))."),
+            "errors": [round(float(x), 6) for x in eb], "mean": round(float(eb.mean()), 6),
+            "std": round(float(eb.std(ddof=1)), 6), "max": round(float(eb.max()), 6), "bound": round(qb, 6), "factor": TOL_FACTOR,
+        }
         info["tolerance_derivation"] = {
             "text": (f"reference: reference renderer, {case.ref_spp} spp, seed {REF_SEED}. Noise: {NOISE_RUNS} renders at the "
                      f"test spp ({case.spp}) with seeds 1..{NOISE_RUNS}, metric against the reference each. tolerance = "
@@ -622,14 +671,17 @@ def check(case: Case, log=print) -> list[str]:
         if extra:
             problems.append(f"{case.name}: unexpected files {sorted(extra)}")
         if not problems:
+            from nasset_sdk.conformance import compare
+
             ref = read_exr(folder / "reference.exr")
-            e = metric(render_ref(folder, case, case.spp, CHECK_SEED), ref, case.block)
-            ok = e <= stored["tolerance"]
+            cmp = compare(render_ref(folder, case, case.spp, CHECK_SEED), ref, stored)
+            e, b = cmp["error"], cmp["bias_error"]
+            bias = "" if b is None else f", bias {b:.4f} vs {stored['bias_tolerance']:.4f}"
             log(f"{case.name}: files ok; fresh render (seed {CHECK_SEED}) error {e:.4f} vs tolerance {stored['tolerance']:.4f}"
-                f" {'ok' if ok else 'FAIL'}")
-            if not ok:
+                f"{bias} {'ok' if cmp['passed'] else 'FAIL'}")
+            if not cmp["passed"]:
                 problems.append(f"{case.name}: reference image is not what the reference renderer converges to "
-                                f"(error {e:.4f} > {stored['tolerance']:.4f})")
+                                f"(error {e:.4f} vs {stored['tolerance']:.4f}{bias})")
         return problems
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -217,6 +217,20 @@ def neupress_reflection_dropped():
     NeupressEvaluator.surface_reflection = lambda self, n, wo, wi: 0.0 * orig(self, n, wo, wi)
 
 
+def neupress_lobe_width():
+    """neupress: the boundary's GGX alpha squared again (read as a perceptual roughness), so the reflection lobe is
+    too narrow (alpha 0.2 -> 0.04 for the example asset)."""
+    from nasset_sdk.kinds.neupress import NeupressEvaluator
+
+    orig = NeupressEvaluator.__init__
+
+    def init(self, *a, **k):
+        orig(self, *a, **k)
+        self.alpha = self.alpha ** 2
+
+    NeupressEvaluator.__init__ = init
+
+
 def eightdna_pdf_scale():
     """8dna: the flow's joint density left in t-space units (per unit t^4) instead of per unit box area and steradian:
     too large by the 4 pi of the direction measure (its position marginal unchanged)."""
@@ -260,7 +274,8 @@ def fiber_exempt_stops_search():
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq,
-                                   neupress_wi_flipped, neupress_reflection_dropped, eightdna_pdf_scale, eightdna_direction_flipped,
+                                   neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
+                                   eightdna_pdf_scale, eightdna_direction_flipped,
                                    fiber_h_sign, fiber_exempt_stops_search)}
 
 
