@@ -148,6 +148,29 @@ def format_command(template: str, *, option: str = "--renderer", placeholders=PL
     return out
 
 
+def run_tool(cmd: list[str], row: dict, what: str, log_path: Path, *, timeout: float, env=None) -> bool:
+    """Run a renderer or evaluator command of one case, its output (stdout + stderr) saved to ``log_path``;
+    sets ``row["seconds"]`` and, when it cannot run, times out or exits non-zero, ``row["message"]``.
+    True when it exited 0."""
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, timeout=timeout)
+    except FileNotFoundError as exc:
+        row["message"] = f"cannot run the {what}: {exc}"
+        return False
+    except subprocess.TimeoutExpired:
+        row["seconds"] = round(time.perf_counter() - t0, 2)
+        row["message"] = f"{what} timed out after {timeout:g} s"
+        return False
+    row["seconds"] = round(time.perf_counter() - t0, 2)
+    log = proc.stdout.decode("utf-8", "replace")
+    log_path.write_text(log)
+    if proc.returncode != 0:
+        row["message"] = f"{what} exited with status {proc.returncode}: " + " | ".join(log.strip().splitlines()[-3:])[-400:]
+        return False
+    return True
+
+
 def run_case(case: dict, template: str, workdir: Path, *, seed: int = 0, timeout: float = 600.0, spp_scale: int = 1) -> dict:
     """Render one case with the command template and compare; returns the case's report row."""
     from .images import read_exr
@@ -166,21 +189,7 @@ def run_case(case: dict, template: str, workdir: Path, *, seed: int = 0, timeout
            "metric": case["metric"], "block": case.get("block", 1), "spp": spp, "seconds": None, "image": str(out),
            "error_map": None, "message": "", "command": cmd}
     env = dict(os.environ, NASSET_CONFORMANCE_CASE=str(Path(case["dir"]).resolve()))
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, timeout=timeout)
-    except FileNotFoundError as exc:
-        row["message"] = f"cannot run the renderer: {exc}"
-        return row
-    except subprocess.TimeoutExpired:
-        row["seconds"] = round(time.perf_counter() - t0, 2)
-        row["message"] = f"renderer timed out after {timeout:g} s"
-        return row
-    row["seconds"] = round(time.perf_counter() - t0, 2)
-    log = proc.stdout.decode("utf-8", "replace")
-    (out_dir / "renderer.log").write_text(log)
-    if proc.returncode != 0:
-        row["message"] = f"renderer exited with status {proc.returncode}: " + " | ".join(log.strip().splitlines()[-3:])[-400:]
+    if not run_tool(cmd, row, "renderer", out_dir / "renderer.log", timeout=timeout, env=env):
         return row
     if not out.is_file():
         row["message"] = f"renderer wrote no image at {out}"

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import shlex
-import subprocess
 import sys
 import tempfile
 import time
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .conformance import format_command
+from .conformance import format_command, run_tool
 from .errors import UsageError
 from .evaluator_vectors import NETWORK_INPUT, VECTORS_DIR, read_npz
 
@@ -113,21 +112,7 @@ def run_case(case: dict, template: str, workdir: Path, *, timeout: float = 300.0
                          asset=(case["dir"] / "asset.usdc").resolve(), input=(case["dir"] / "inputs.npz").resolve(), output=out)
     row = {"case": name, "status": "error", "passed": False, "tier": None, "worst": None, "seconds": None,
            "message": "", "problems": [], "command": cmd, "output": str(out)}
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout)
-    except FileNotFoundError as exc:
-        row["message"] = f"cannot run the evaluator: {exc}"
-        return row
-    except subprocess.TimeoutExpired:
-        row["seconds"] = round(time.perf_counter() - t0, 2)
-        row["message"] = f"evaluator timed out after {timeout:g} s"
-        return row
-    row["seconds"] = round(time.perf_counter() - t0, 2)
-    log = proc.stdout.decode("utf-8", "replace")
-    (out_dir / "evaluator.log").write_text(log)
-    if proc.returncode != 0:
-        row["message"] = f"evaluator exited with status {proc.returncode}: " + " | ".join(log.strip().splitlines()[-3:])[-400:]
+    if not run_tool(cmd, row, "evaluator", out_dir / "evaluator.log", timeout=timeout):
         return row
     if not out.is_file():
         row["message"] = f"evaluator wrote no output at {out}"
