@@ -204,7 +204,8 @@ def test_tiny_bake_validates_and_matches_torch(tiny):
     assert np.isfinite(s["heldout_nll"]) and s["heldout_nll"] < -BEAT_UNIFORM_NATS, s["heldout_nll"]
 
 
-def test_tiny_bake_renders_finite_in_reference_renderer(tiny, tmp_path):
+def _render_example_with(asset, folder, res: int, *, heterogeneous: bool = False) -> np.ndarray:
+    """The example scene with its asset replaced by ``asset``, rendered by the reference renderer: [res, res, 3]."""
     import warnings
 
     from nasset_converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
@@ -212,12 +213,16 @@ def test_tiny_bake_renders_finite_in_reference_renderer(tiny, tmp_path):
     from nasset_reference_renderer import RenderSettings, load_scene, render
     from nasset_reference_renderer.scene import SceneWarning
 
-    xml = write_example_scene(tmp_path / "scene", res=12)
-    conv = convert_scene(xml, tmp_path / "scene" / "neural.usda", replace={i: tiny[0] for i in EXAMPLE_ASSET_IDS}, check_usd=False)
+    xml = write_example_scene(folder / "scene", res=res, heterogeneous=heterogeneous)
+    conv = convert_scene(xml, folder / "scene" / "neural.usda", replace={i: asset for i in EXAMPLE_ASSET_IDS}, check_usd=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SceneWarning)
         scene = load_scene(str(conv.output))
-    img = np.asarray(render(scene, RenderSettings(spp=2, seed=1, width=12, height=12, max_depth=2)).image)
+    return np.asarray(render(scene, RenderSettings(spp=2, seed=1, width=res, height=res, max_depth=2)).image)
+
+
+def test_tiny_bake_renders_finite_in_reference_renderer(tiny, tmp_path):
+    img = _render_example_with(tiny[0], tmp_path, 12)
     assert np.isfinite(img).all() and img.max() > 0
 
 
@@ -259,13 +264,7 @@ def test_heterogeneous_example_tiny_bakes_loads_and_renders(tmp_path):
     throughput follows the grid medium's albedo (0.96, 0.85, 0.65): red > green > blue, each ratio > 1.25
     (multiple scattering amplifies the albedo's ratios 1.13 and 1.31). Measured beta 0.64 / 0.38 / 0.195, ratios
     1.66 and 1.97 (margin > x 1.3 on both); ~10 s bake + ~3 s render under a load of 3 on 2 cores."""
-    import warnings
-
     from nasset_bakers.mitsuba.eightdna import bake
-    from nasset_converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
-    from nasset_converters.mitsuba.usd_export import convert_scene
-    from nasset_reference_renderer import RenderSettings, load_scene, render
-    from nasset_reference_renderer.scene import SceneWarning
     from nasset_sdk.asset import Asset
 
     out = tmp_path / "het.usdc"
@@ -280,12 +279,7 @@ def test_heterogeneous_example_tiny_bakes_loads_and_renders(tmp_path):
     x, wo = _query(ev, 64)
     ui, wi, pdf = ev.sample(x, wo, 0, np.random.default_rng(2))
     assert np.isfinite(ui).all() and np.isfinite(wi).all() and np.isfinite(pdf).all() and (pdf > 0).all()
-    xml = write_example_scene(tmp_path / "scene", res=8, heterogeneous=True)
-    conv = convert_scene(xml, tmp_path / "scene" / "neural.usda", replace={i: out for i in EXAMPLE_ASSET_IDS}, check_usd=False)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", SceneWarning)
-        scene = load_scene(str(conv.output))
-    img = np.asarray(render(scene, RenderSettings(spp=2, seed=1, width=8, height=8, max_depth=2)).image)
+    img = _render_example_with(out, tmp_path, 8, heterogeneous=True)
     assert np.isfinite(img).all() and (img >= 0).all() and img.max() > 0
 
 
