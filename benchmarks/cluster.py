@@ -4,7 +4,8 @@ spec/bake.md#cluster. The dataset stage of the built-in Mitsuba rna example (``-
 into fresh folders: once in this process (the scene already loaded, as ``nasset bake`` does), once
 on one worker and once on ``--workers`` workers of a local Ray cluster started beforehand (its start
 is reported apart; a worker's own start -- loading Mitsuba and the scene -- is part of the stage, as
-in a bake). Prints the times and the ratios; the datasets are checked equal array for array.
+in a bake; each worker renders with one Dr.Jit thread, as in a bake, the process with all of them).
+Prints the times and the ratios; the datasets are checked equal array for array.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ def run_bench(*, size: str = "tiny", workers: int = 2, views: int | None = None,
 
     render_one = view_renderer(**kwargs)  # loaded once beforehand, as the single-process bake has it
     here, t_here = stage("process", render_one)
+    kwargs = {**kwargs, "threads": 1}  # a worker owns one CPU, as a bake's workers do
     t = time.perf_counter()
     ray = cluster.require_ray(local=True)
     started = cluster.connect(ray, None)

@@ -150,7 +150,8 @@ def bake(
         views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
     else:  # each worker loads the scene itself
         views_from = ViewSource("nasset_bakers.mitsuba.neupress:view_renderer",
-                                {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant()})
+                                {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant(),
+                                 "threads": 1})
     times["scene_s"] = time.perf_counter() - t
 
     # -- stage 2: dataset -------------------------------------------------------------------------
@@ -311,8 +312,9 @@ def _view_renderer(mi, shapes, bshapes, center, radius, dset):
     return lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val")
 
 
-def view_renderer(scene, asset_ids, dset, variant=None):
-    """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1)."""
+def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):
+    """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1);
+    ``threads`` > 0 limits Dr.Jit's thread pool (a worker owns one CPU)."""
     import warnings
 
     from nasset_converters.mitsuba import load_mitsuba
@@ -321,6 +323,10 @@ def view_renderer(scene, asset_ids, dset, variant=None):
 
     mi = load_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
+    if threads:
+        import drjit as dr
+
+        dr.set_thread_count(int(threads))
     shapes = msc.pick_shapes(msc.load_scene(mi, scene), asset_ids, file=str(scene))
     bshapes, _, _ = nd.boundary_of(mi, shapes, file=str(scene))
     with warnings.catch_warnings():

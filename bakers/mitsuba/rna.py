@@ -142,7 +142,8 @@ def bake(
         views_from = _view_renderer(mi, shapes, center, radius, dset)
     else:  # each worker loads the scene itself
         views_from = ViewSource("nasset_bakers.mitsuba.rna:view_renderer",
-                                {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant()})
+                                {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant(),
+                                 "threads": 1})
     times["scene_s"] = time.perf_counter() - t
 
     # -- stage 2: dataset -------------------------------------------------------------------------
@@ -257,13 +258,18 @@ def _view_renderer(mi, shapes, center, radius, dset):
     return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
 
 
-def view_renderer(scene, asset_ids, dset, variant=None):
-    """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1)."""
+def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):
+    """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1);
+    ``threads`` > 0 limits Dr.Jit's thread pool (a worker owns one CPU)."""
     from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba import scene as msc
 
     mi = load_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
+    if threads:
+        import drjit as dr
+
+        dr.set_thread_count(int(threads))
     shapes = msc.pick_shapes(msc.load_scene(mi, scene), asset_ids, file=str(scene))
     center, radius = msc.bounding_sphere(msc.mesh_geometry(mi, shapes))
     return _view_renderer(mi, shapes, center, radius, dset)
