@@ -317,17 +317,10 @@ def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):
     ``threads`` > 0 limits Dr.Jit's thread pool (a worker owns one CPU)."""
     import warnings
 
-    from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba import neupress_dataset as nd
     from nasset_converters.mitsuba import scene as msc
 
-    mi = load_mitsuba(variant)
-    mi.set_log_level(mi.LogLevel.Error)
-    if threads:
-        import drjit as dr
-
-        dr.set_thread_count(int(threads))
-    shapes = msc.pick_shapes(msc.load_scene(mi, scene), asset_ids, file=str(scene))
+    mi, shapes = msc.open_shapes(scene, asset_ids, variant=variant, threads=threads)
     bshapes, _, _ = nd.boundary_of(mi, shapes, file=str(scene))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the driver already reported them

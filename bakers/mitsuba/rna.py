@@ -261,16 +261,9 @@ def _view_renderer(mi, shapes, center, radius, dset):
 def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):
     """``render_one(split, i)`` built from the scene file (a cluster worker's copy of stage 1);
     ``threads`` > 0 limits Dr.Jit's thread pool (a worker owns one CPU)."""
-    from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba import scene as msc
 
-    mi = load_mitsuba(variant)
-    mi.set_log_level(mi.LogLevel.Error)
-    if threads:
-        import drjit as dr
-
-        dr.set_thread_count(int(threads))
-    shapes = msc.pick_shapes(msc.load_scene(mi, scene), asset_ids, file=str(scene))
+    mi, shapes = msc.open_shapes(scene, asset_ids, variant=variant, threads=threads)
     center, radius = msc.bounding_sphere(msc.mesh_geometry(mi, shapes))
     return _view_renderer(mi, shapes, center, radius, dset)
 

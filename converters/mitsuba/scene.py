@@ -66,6 +66,21 @@ def pick_shapes(scene, ids, *, file: str | None = None) -> list:
     return out
 
 
+def open_shapes(path: str | Path, ids, *, variant: str | None = None, threads: int = 0):
+    """``(mi, shapes)``: Mitsuba loaded (``variant``; errors only in its log), ``threads`` > 0 limiting
+    Dr.Jit's thread pool, the scene at ``path`` loaded and the shapes ``ids`` picked from it -- what a
+    process that did not run a bake's first stage (a cluster worker) needs to render its views."""
+    from . import load_mitsuba
+
+    mi = load_mitsuba(variant)
+    mi.set_log_level(mi.LogLevel.Error)
+    if threads:
+        import drjit as dr
+
+        dr.set_thread_count(int(threads))
+    return mi, pick_shapes(load_scene(mi, path), ids, file=str(path))
+
+
 def mesh_geometry(mi, shapes) -> MeshGeometry:
     """Merge the shapes' world-space triangles into one MeshGeometry (asset object space = scene space)."""
     pts, faces, normals, base, have_normals = [], [], [], 0, True
