@@ -85,20 +85,21 @@ def sensor_for(mi, scene, width: int):
     }), (height, int(width))
 
 
-def render_halves(mi, scene, sensor, spp: int, seed: int = 0, quiet: bool = False):
-    """Two independent unclamped Mitsuba renders of ``spp // 2`` samples each (seeds disjoint)."""
+def render_halves(render, spp: int, seed: int = 0, *, desc: str, quiet: bool = False):
+    """Two independent unclamped renders of ``spp // 2`` samples each (seeds disjoint), each the mean of
+    chunks of at most CHUNK_SPP samples. ``render(n, seed) -> [H, W, 3]`` is one source-renderer call
+    (NaN/Inf samples count as 0). Returns (half a, half b, samples per half)."""
     half = max(1, spp // 2)
-    bar = _bar(2 * half, "mitsuba reference", quiet)
+    bar = _bar(2 * half, desc, quiet)
     out = []
     for h in range(2):
         acc, done, k = None, 0, 0
         while done < half:
             n = min(CHUNK_SPP, half - done)
-            img = np.asarray(mi.render(scene, sensor=sensor, spp=int(n), seed=int(1_000_003 * (2 * seed + h) + k)), np.float64)[..., :3]
-            img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
+            img = np.nan_to_num(np.asarray(render(n, 1_000_003 * (2 * seed + h) + k), np.float64)[..., :3],
+                                nan=0.0, posinf=0.0, neginf=0.0)
             acc = img * n if acc is None else acc + img * n
-            done += n
-            k += 1
+            done, k = done + n, k + 1
             bar.update(n)
         out.append(acc / done)
     bar.close()
@@ -283,7 +284,8 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
         (a, b), half = cached, max(1, spp // 2)
     else:
         say(f"reference: Mitsuba {mi.variant()} {spp} spp at {hw[1]}x{hw[0]} in two halves, unclamped")
-        a, b, half = render_halves(mi, mscene, sensor, spp, seed=seed, quiet=quiet)
+        a, b, half = render_halves(lambda n, s: mi.render(mscene, sensor=sensor, spp=int(n), seed=int(s)), spp, seed,
+                                   desc="mitsuba reference", quiet=quiet)
         (out / "reference_key.json").unlink(missing_ok=True)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
     return SourceReference(
@@ -335,24 +337,12 @@ def blender_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     max_bounces = 32
     setup_cycles(bpy, res, height, max_bounces=max_bounces)
     say(f"reference: Cycles {spp} spp at {res}x{height} in two halves, unclamped")
-    half = max(1, spp // 2)
-    bar = _bar(2 * half, "cycles reference", quiet)
     exr = out / "cycles_chunk.exr"
-    halves = []
-    for part in range(2):
-        acc, done, k = None, 0, 0
-        while done < half:
-            n = min(CHUNK_SPP, half - done)
-            img = render_cycles(bpy, exr, n, seed=1_000_003 * (2 * seed + part) + k)
-            acc = img * n if acc is None else acc + img * n
-            done, k = done + n, k + 1
-            bar.update(n)
-        halves.append(acc / done)
-    bar.close()
+    a, b, half = render_halves(lambda n, s: render_cycles(bpy, exr, n, seed=s), spp, seed, desc="cycles reference", quiet=quiet)
     cov = object_coverage(bpy, bsc.pick_objects(list(rep), file=str(scene_file)), exr, spp=MASK_SUBSAMPLES ** 2)
     exr.unlink(missing_ok=True)
     return SourceReference(
-        halves[0], halves[1], half, cov, fits, Path(converted.output), max_bounces,
+        a, b, half, cov, fits, Path(converted.output), max_bounces,
         {"renderer": f"cycles {bpy.app.version_string}", "variant": "CPU", "integrator": {"max_bounces": max_bounces}},
         "cycles film alpha with every other object a holdout")
 
