@@ -3,7 +3,9 @@
 # (default: dev,render,bench,train,mitsuba,view,blender,cluster). Installs Debian's libllvm19 for Mitsuba's llvm_ad_rgb backend
 # when it is missing and apt-get is usable, and the Node.js host of the portable evaluation graph
 # (tools/portable-host: onnxruntime-web from npm, pinned by its package-lock.json, into its ignored
-# node_modules; Debian's nodejs + npm when node is missing). Idempotent. Used by scripts/example.sh and scripts/test.sh.
+# node_modules; Debian's nodejs + npm when node is missing), and for the web viewer's tests Debian's chromium
+# and tools/web-viewer's npm packages (three.js, onnxruntime-web, esbuild, playwright-core; no browser is
+# downloaded: the tests drive /usr/bin/chromium). Idempotent. Used by scripts/example.sh and scripts/test.sh.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 EXTRAS=${NASSET_EXTRAS:-dev,render,bench,train,mitsuba,view,blender,cluster}
@@ -48,4 +50,23 @@ if command -v npm >/dev/null 2>&1 && { [ ! -d "$HOST/node_modules/onnxruntime-we
   # --ignore-scripts: no install scripts run; the host needs only the packages' JavaScript and WASM files
   (cd "$HOST" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error >/dev/null) \
     || { echo "setup: npm ci in $HOST failed" >&2; exit 1; }
+fi
+
+# Web viewer (nasset web; tests/sdk/test_web.py): Debian's chromium for the headless page tests, and the page's
+# npm packages (build: three, onnxruntime-web, esbuild; test driver: playwright-core, which never downloads a browser)
+if [ ! -x /usr/bin/chromium ]; then
+  if command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    echo "setup: installing chromium (headless tests of the web viewer)"
+    apt-get update -qq >/dev/null && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium >/dev/null \
+      || echo "setup: WARNING chromium not installed; the web viewer's browser tests fail in CI" >&2
+  else
+    echo "setup: WARNING /usr/bin/chromium missing and apt-get unusable; the web viewer's browser tests skip outside CI" >&2
+  fi
+fi
+VIEWER=tools/web-viewer
+if command -v npm >/dev/null 2>&1 && { [ ! -d "$VIEWER/node_modules/playwright-core" ] \
+     || [ "$VIEWER/package-lock.json" -nt "$VIEWER/node_modules/.package-lock.json" ]; }; then
+  # --ignore-scripts: no install scripts (playwright-core's would not download browsers anyway; esbuild finds its binary package)
+  (cd "$VIEWER" && npm ci --ignore-scripts --no-audit --no-fund --loglevel=error >/dev/null) \
+    || { echo "setup: npm ci in $VIEWER failed" >&2; exit 1; }
 fi
