@@ -234,7 +234,9 @@ class Viewer {
 
   // linear radiance RGBA [h w 4] (alpha = coverage) of one pass; null when a newer view superseded it
   async shade(w, h, jx, jy, gen) {
+    const t0 = performance.now();
     const [gpos, gframe] = this.gbuffer(w, h, jx, jy);
+    const pass = { width: w, height: h, gbufferMs: performance.now() - t0, graphMs: 0 };
     const pix = [];
     for (let i = 0; i < w * h; i++) if (gpos[4 * i + 3] > 0) pix.push(i);
     const s = this.settings, eye = this.camera.position, fb = this.asset.doc.fallbackColor;
@@ -261,7 +263,9 @@ class Viewer {
       if (!s.fallback) {
         const feeds = {};
         for (const [name, width] of Object.entries(inputs)) feeds[name] = new ort.Tensor("float32", q[name], [n, width]);
+        const tg = performance.now();
         y = await this.session.run(feeds);
+        pass.graphMs += performance.now() - tg;
         if (gen !== this.generation) return null;
       }
       for (let r = 0; r < n; r++) {
@@ -285,6 +289,7 @@ class Viewer {
       await new Promise((res) => setTimeout(res, 0));
       if (gen !== this.generation) return null;
     }
+    this.stats.lastPass = { ...pass, pixels: pix.length, totalMs: performance.now() - t0 };
     return img;
   }
 
@@ -412,7 +417,9 @@ async function main() {
   if (size > 0 && size <= 4096) $("canvas").width = $("canvas").height = size;
   const base = new URL(params.get("asset") ?? "./", location.href);
   const asset = await loadAsset(base.href.endsWith("/") ? base : new URL(base.href + "/"));
-  ort.env.wasm.numThreads = 1; // no SharedArrayBuffer needed (plain static hosting, no cross-origin isolation)
+  // one thread: onnxruntime-web's worker threads would need a cross-origin isolated page and a worker script
+  // apart from the page bundle; plain static hosting works as is
+  ort.env.wasm.numThreads = 1;
   ort.env.wasm.wasmPaths = { wasm: new URL("ort-wasm-simd-threaded.wasm", document.baseURI).href };
   let session;
   try {
