@@ -1,5 +1,5 @@
 // nasset web viewer: three.js rasterises the fallback mesh into a G-buffer (object-space position, shading
-// frame, facing-the-light flag per pixel), onnxruntime-web (WASM) runs the asset's portable graph on the
+// frame, light visibility from a shadow map per pixel), onnxruntime-web (WASM) runs the asset's portable graph on the
 // covered pixels, and the linear radiance is shown with exposure and the reference renderer's tone curve.
 // Nothing of the kind's encodings (triplanes, Fourier features, MLPs) is written here: the graph holds them.
 // docs/web-viewer.md describes the shading per kind and the test hooks (window.nassetViewer).
@@ -99,16 +99,27 @@ in vec3 position; in vec3 frame; in vec3 ng;
 uniform mat4 modelViewMatrix; uniform mat4 projectionMatrix;
 out vec3 vPos; out vec3 vFrame; out vec3 vNg;
 void main() { vPos = position; vFrame = frame; vNg = ng; gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }`;
-// pass 0: position, alpha 1 = covered; pass 1: frame, alpha 2 when the face looks towards the light, else 1
+// pass 0: position, alpha 1 = covered; pass 1: frame, alpha 2 where the light reaches the point (the face looks
+// towards it and the shadow map holds nothing nearer the light), else 1
 const GBUFFER_FS = `precision highp float;
 in vec3 vPos; in vec3 vFrame; in vec3 vNg;
-uniform int pass; uniform vec3 lightDir;
+uniform int pass; uniform vec3 lightDir; uniform sampler2D shadowMap; uniform mat4 lightViewProj; uniform float texelDepth;
 out vec4 color;
 void main() {
   if (pass == 0) { color = vec4(vPos, 1.0); return; }
-  float l = length(vFrame);
-  color = vec4(l > 1e-20 ? vFrame / l : vec3(0.0, 0.0, 1.0), dot(vNg, lightDir) > 0.0 ? 2.0 : 1.0);
+  float l = length(vFrame), g = length(vNg);
+  float c = g > 0.0 ? dot(vNg, lightDir) / g : 0.0;
+  vec4 lp = lightViewProj * vec4(vPos, 1.0);
+  vec3 s = lp.xyz / lp.w * 0.5 + 0.5;
+  float slope = sqrt(max(1.0 - c * c, 0.0)) / max(c, 0.1); // tan of the angle to the light, capped
+  bool blocked = s.z - texelDepth * (2.0 + 2.0 * slope) > texture(shadowMap, s.xy).r;
+  color = vec4(l > 1e-20 ? vFrame / l : vec3(0.0, 0.0, 1.0), (c > 0.0 && !blocked) ? 2.0 : 1.0);
 }`;
+// depth of the nearest surface seen from the light (orthographic, along -lightDir)
+const SHADOW_FS = `precision highp float;
+out vec4 color;
+void main() { color = vec4(gl_FragCoord.z, 0.0, 0.0, 1.0); }`;
+const SHADOW_MAP_SIZE = 1024;
 // the reference renderer's PNG curve (nasset_sdk.images.tonemap): ACES fit of 0.6 x, then sRGB
 const DISPLAY_FS = `precision highp float;
 in vec2 uv; uniform sampler2D radiance; uniform float exposure; uniform vec3 background;
@@ -150,8 +161,13 @@ class Viewer {
     this.scene = new THREE.Scene();
     this.gmat = new THREE.RawShaderMaterial({
       vertexShader: GBUFFER_VS, fragmentShader: GBUFFER_FS, glslVersion: THREE.GLSL3, side: THREE.DoubleSide,
-      uniforms: { pass: { value: 0 }, lightDir: { value: new THREE.Vector3(0, 1, 0) } },
+      uniforms: { pass: { value: 0 }, lightDir: { value: new THREE.Vector3(0, 1, 0) }, shadowMap: { value: null },
+                  lightViewProj: { value: new THREE.Matrix4() }, texelDepth: { value: 0 } },
     });
+    this.shadowMat = new THREE.RawShaderMaterial({ vertexShader: GBUFFER_VS, fragmentShader: SHADOW_FS, glslVersion: THREE.GLSL3,
+                                                   side: THREE.DoubleSide });
+    this.shadowRT = new THREE.WebGLRenderTarget(SHADOW_MAP_SIZE, SHADOW_MAP_SIZE, {
+      type: THREE.FloatType, format: THREE.RGBAFormat, minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, depthBuffer: true });
     this.scene.add(new THREE.Mesh(buildGeometry(asset.pos, asset.frame, asset.idx), this.gmat));
     const b = asset.doc.mesh.bounds;
     this.center = new THREE.Vector3(...b.min).add(new THREE.Vector3(...b.max)).multiplyScalar(0.5);
@@ -214,6 +230,7 @@ class Viewer {
     this.camera.setViewOffset(w, h, jx, jy, w, h);
     this.camera.updateProjectionMatrix();
     this.gmat.uniforms.lightDir.value.set(...this.settings.light);
+    this.shadowPass();
     const out = [];
     this.renderer.setRenderTarget(rt);
     this.renderer.setClearColor(0x000000, 0);
@@ -230,6 +247,26 @@ class Viewer {
     this.camera.updateProjectionMatrix();
     rt.dispose();
     return out;
+  }
+
+  // shadow map of the current light: an orthographic view along -lightDir framing the bounding sphere
+  shadowPass() {
+    const r = this.radius, L = new THREE.Vector3(...this.settings.light);
+    const cam = new THREE.OrthographicCamera(-r, r, r, -r, 0.5 * r, 3.5 * r);
+    cam.position.copy(this.center).addScaledVector(L, 2 * r);
+    cam.up.set(Math.abs(L.y) < 0.9 ? 0 : 1, Math.abs(L.y) < 0.9 ? 1 : 0, 0);
+    cam.lookAt(this.center);
+    cam.updateMatrixWorld();
+    this.renderer.setRenderTarget(this.shadowRT);
+    this.renderer.setClearColor(0xffffff, 1);
+    this.renderer.clear();
+    this.scene.overrideMaterial = this.shadowMat;
+    this.renderer.render(this.scene, cam);
+    this.scene.overrideMaterial = null;
+    const u = this.gmat.uniforms;
+    u.shadowMap.value = this.shadowRT.texture;
+    u.lightViewProj.value.multiplyMatrices(cam.projectionMatrix, cam.matrixWorldInverse);
+    u.texelDepth.value = (2 * r / SHADOW_MAP_SIZE) / (3 * r); // one texel's width in depth units at slope 1
   }
 
   // linear radiance RGBA [h w 4] (alpha = coverage) of one pass; null when a newer view superseded it
@@ -359,18 +396,36 @@ class Viewer {
   }
 }
 
+function accuracyLines(prov) {
+  // figures a bake records (spec/bake.md#psnr, spec/accuracy.md): held-out PSNR, its noise ceiling, energy ratio
+  const acc = prov?.validation?.accuracy;
+  if (!acc) return ["accuracy: none recorded (not a bake, or an older one)"];
+  const f = (v, d = 2) => (typeof v === "number" ? v.toFixed(d) : "?");
+  const lines = [`held-out PSNR: ${f(acc.psnr_db)} dB (noise-corrected ${f(acc.psnr_corrected_db)} dB; reference ceiling ${f(acc.ceiling_db)} dB)`];
+  if (acc.energy_ratio) lines.push(`energy ratio (RGB): ${acc.energy_ratio.map((v) => f(v, 3)).join(", ")}`);
+  if (acc.claimed_psnr) lines.push(`claimed: ${acc.claimed_psnr}`);
+  return lines;
+}
+
 function showMetadata(doc) {
   const m = doc.metadata ?? {};
   const lines = [`kind: ${doc.kind} (${doc.variant})`, `file: ${m.file ?? "?"} (${((m.fileBytes ?? 0) / 1024).toFixed(0)} KiB)`,
                  `spec: ${m.specVersion ?? "?"}`, `mesh: ${doc.mesh.vertices} vertices, ${doc.mesh.triangles} triangles`];
   if (m.totals) lines.push(`tensors ${(m.totals.tensorBytes / 1024).toFixed(0)} KiB, networks ${(m.totals.networkBytes / 1024).toFixed(0)} KiB, ` +
                            `${m.totals.parameters} parameters`);
-  lines.push("", "provenance (accuracy figures as the bake recorded them):", JSON.stringify(m.provenance ?? {}, null, 1));
-  lines.push("", `components: ${Object.keys(m.components ?? {}).join(", ")}`);
+  lines.push(`components: ${Object.keys(m.components ?? {}).join(", ")}`);
+  const prov = m.provenance ?? {};
+  lines.push(`made by: ${prov.generator ?? "?"}${prov.source?.scene ? ` from ${prov.source.scene.split("/").pop()}` : ""}`, "");
+  lines.push(...accuracyLines(prov));
   if (doc.kind === "8dna") lines.push("", "8dna: the viewer shows the far-field albedo only (the spline flow is not in the portable graph).");
   if (doc.kind === "neupress") lines.push("", "neupress: subsurface transport only (the analytic boundary reflection is not in the portable graph).");
   if (doc.variant === "fiber") lines.push("", "fibres: tubes around the curves, h = 0 (the fibre centre) at every pixel.");
   $("meta").textContent = lines.join("\n");
+  const details = document.createElement("details"), summary = document.createElement("summary"), pre = document.createElement("pre");
+  summary.textContent = "provenance (all recorded fields)";
+  pre.textContent = JSON.stringify(prov, null, 1);
+  details.append(summary, pre);
+  $("meta").append(details);
 }
 
 function bindControls(v, doc) {
