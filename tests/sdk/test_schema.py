@@ -144,6 +144,18 @@ def test_wheel_contains_the_schema(wheel, tmp_path):
     _assert_registers_from(tmp_path / "nasset_sdk/usdschema")
 
 
+
+def test_wheel_contains_the_web_viewer(wheel):
+    """``nasset web`` needs no Node.js: the built page ships in the wheel, and the verb is an entry point."""
+    from nasset_sdk import web
+
+    with zipfile.ZipFile(wheel) as zf:
+        names = set(zf.namelist())
+        for f in web.PAGE_FILES:
+            assert zf.read(f"nasset_sdk/web_viewer/{f}") == (REPO / "nasset_sdk" / "web_viewer" / f).read_bytes()
+        (ep,) = [n for n in names if n.endswith(".dist-info/entry_points.txt")]
+        assert "web = nasset_sdk.web:VERB" in zf.read(ep).decode()
+
 # -- PXR_PLUGINPATH_NAME ------------------------------------------------------------------------
 
 _PROBE = """
