@@ -244,3 +244,47 @@ def test_page_without_an_export_or_webgl_says_so(tmp_path):
     with serving(site) as url:
         res = drive(node, tmp_path / "d2", url, extraArgs=["--disable-webgl", "--disable-3d-apis"])
     assert res["error"] and "WebGL" in res["message"]
+
+
+def kind_radiance(asset, q: dict, irradiance: float) -> np.ndarray:
+    """What the page must show at its G-buffer queries, from the kind's evaluator (not the portable graph): rna
+    E T (shadowed branch where the light is blocked; fibres h = 0), neupress E S, 8dna the albedo. [n, 3]."""
+    n = len(q["x"])
+    x = np.asarray(q["x"], np.float64)
+    wo = np.asarray(q["eye"], np.float64) - x
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    named = {"x": x.astype(np.float32), "wo": wo.astype(np.float32),
+             "wi": np.tile(np.asarray(q["wi"], np.float32), (n, 1)), "frame": np.asarray(q["frame"], np.float32)}
+    if asset.kind == "rna":
+        if asset.variant == "fiber":
+            named["h"] = np.zeros((n, 1), np.float32)
+        out = portable.reference_outputs(asset, named)
+        return irradiance * np.where(np.asarray(q["lit"])[:, None] > 0, out["unshadowed"], out["shadowed"])
+    if asset.kind == "neupress":
+        return irradiance * portable.reference_outputs(asset, {k: named[k] for k in ("x", "wo", "wi")})["transport"]
+    return portable.reference_outputs(asset, {k: named[k] for k in ("x", "wo")})["albedo"]
+
+
+@pytest.mark.parametrize("kind,variant", [("neupress", "surface"), pytest.param("8dna", "surface", marks=pytest.mark.slow),
+                                          pytest.param("rna", "fiber", marks=pytest.mark.slow)])
+def test_page_shades_each_kind_as_its_evaluator(tmp_path, kind, variant):
+    """Per pixel, the page's radiance equals the kind's evaluator at the page's own G-buffer (position, frame,
+    light visibility; w_o towards the camera computed here): the graph's inputs are wired by name and its outputs combined per kind."""
+    from tests.sdk.test_portable import ATOL
+
+    node = tool_or_skip("playwright-core", browser=True)
+    src = tmp_path / "a.usdc"
+    example_builder(kind, variant=variant, size="small", seed=5).write(src)
+    portable.add_portable(src, tmp_path / "p.usdc")
+    web.export(tmp_path / "p.usdc", tmp_path / "site")
+    size, irradiance = 64, 1.7
+    with serving(tmp_path / "site") as url:
+        res = drive(node, tmp_path / "drive", f"{url}?size={size}", queries=True,
+                    settings={"light": [0.3, 0.9, -0.3], "irradiance": irradiance, "ambient": 0.0, "samples": 1})
+    assert res["error"] is None, (res["error"], res["console"][-10:])
+    q = res["queries"]
+    assert len(q["pixel"]) > 300
+    got = np.asarray(res["linear"]["rgb"], np.float64).reshape(-1, 3)[q["pixel"]]
+    want = kind_radiance(Asset.open(tmp_path / "p.usdc", load="all"), q, irradiance)
+    assert np.abs(want).max() > 0.1
+    np.testing.assert_allclose(got, want, rtol=0, atol=ATOL[kind] * max(irradiance, 1.0) + 1e-6)

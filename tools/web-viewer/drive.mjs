@@ -7,7 +7,8 @@
 // JOB.json: {"url": "http://127.0.0.1:P/?size=N", "camera": {"eye": [..], "target": [..], "fovDeg": f},
 //            "settings": {"light": [..], "irradiance": E, "ambient": 0, ...}, "out": "result.json",
 //            "screenshot": "shot.png" (optional), "repeat": K (optional: K more full renders, timed),
-//            "extraArgs": [more Chromium flags] (optional)}
+//            "extraArgs": [more Chromium flags] (optional),
+//            "queries": true (optional: also the graph queries of the last unjittered pass)}
 // result.json: {"error": message or null, "linear": {width, height, rgb, mask}, "stats": {...}, "frameMs": [..]}
 import { chromium } from "playwright-core";
 import { mkdtempSync, readFileSync, renameSync, rmSync, writeFileSync } from "node:fs";
@@ -54,6 +55,7 @@ try {
     }, { camera: job.camera, settings: job.settings, repeat: job.repeat });
     result.stats = await page.evaluate(() => ({ ...window.nassetViewer.viewer.stats, samples: window.nassetViewer.viewer.samples }));
     result.linear = await page.evaluate(() => window.nassetViewer.linear());
+    if (job.queries) result.queries = await page.evaluate(() => window.nassetViewer.queries());
   }
   if (job.screenshot) await page.screenshot({ path: resolve(base, job.screenshot) });
 } catch (e) {

@@ -281,6 +281,7 @@ class Viewer {
     const amb = fb.map((c) => c * s.ambient);
     const img = new Float32Array(4 * w * h);
     const inputs = this.asset.graph.inputs;
+    if (jx === 0 && jy === 0) this.lastGbuffer = { w, h, pix, gpos, gframe, eye: [eye.x, eye.y, eye.z], light: L };
     for (let start = 0; start < pix.length; start += ROWS_PER_RUN) {
       const rows = pix.slice(start, start + ROWS_PER_RUN), n = rows.length;
       const q = { x: new Float32Array(3 * n), frame: new Float32Array(3 * n), wo: new Float32Array(3 * n),
@@ -379,6 +380,20 @@ class Viewer {
     this.dispMat.uniforms.exposure.value = this.settings.exposure;
     this.renderer.setRenderTarget(null);
     this.renderer.render(this.dispScene, this.dispCam);
+  }
+
+  // the G-buffer of the latest unjittered pass, per covered pixel (index into linear()'s rows, top-down):
+  // {pixel: [n], x, frame: [n 3], lit: [n] 0/1, eye: [3], wi: [3]}; w_o is normalize(eye - x)
+  queries() {
+    const { w, h, pix, gpos, gframe, eye, light } = this.lastGbuffer;
+    const out = { pixel: [], x: [], frame: [], lit: [], eye, wi: light };
+    for (const i of pix) {
+      out.pixel.push((h - 1 - Math.floor(i / w)) * w + (i % w));
+      out.x.push([gpos[4 * i], gpos[4 * i + 1], gpos[4 * i + 2]]);
+      out.frame.push([gframe[4 * i], gframe[4 * i + 1], gframe[4 * i + 2]]);
+      out.lit.push(gframe[4 * i + 3] > 1.5 ? 1 : 0);
+    }
+    return out;
   }
 
   // linear radiance of the latest image, rows top-down: {width, height, rgb: [h w 3] array, mask: [h w] 0/1}
@@ -492,6 +507,7 @@ async function main() {
     // wait until refinement has finished (all levels and jittered passes of the current view)
     idle: async () => { while (v.loop) await v.loop; return v.stats; },
     linear: () => v.linear(),
+    queries: () => v.queries(),
   });
   v.restart();
   resolveReady(true);
