@@ -145,6 +145,28 @@ def test_server_serves_wasm_with_its_mime_type(tmp_path):
         assert url.startswith("http://127.0.0.1:")
 
 
+
+def test_serve_flag_prints_the_url_and_serves_the_export(tmp_path):
+    path = portable_asset(tmp_path)
+    nasset = Path(shutil.which("nasset") or Path(sys.executable).with_name("nasset"))
+    proc = subprocess.Popen([str(nasset), "web", str(path), "-o", str(tmp_path / "site"), "--serve", "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        while not any(line.startswith("serving") for line in lines):
+            line = proc.stdout.readline()
+            assert line, (lines, proc.stderr.read()[-2000:])
+            lines.append(line)
+        url = lines[-1].split(" at ")[1].split()[0]
+        assert url.startswith("http://127.0.0.1:")
+        with urllib.request.urlopen(url, timeout=30) as r:
+            assert r.read() == (web.PAGE_DIR / "index.html").read_bytes()
+        with urllib.request.urlopen(url + "asset.json", timeout=30) as r:
+            assert json.loads(r.read())["kind"] == "rna"
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
 def test_checked_in_page_equals_a_fresh_build(tmp_path):
     node = tool_or_skip("esbuild", "three", "onnxruntime-web")
     r = subprocess.run([node, str(VIEWER / "build.mjs"), str(tmp_path)], capture_output=True, text=True, timeout=300)

@@ -195,6 +195,7 @@ class Viewer {
                       fallback: false, samples: 8 }; // samples: jittered full-resolution passes averaged while idle
     this.generation = 0;
     this.stats = {};
+    this.targets = new Map();
   }
 
   setCamera({ eye, target, fovDeg }) {
@@ -225,8 +226,12 @@ class Viewer {
 
   // G-buffer at w x h with a sub-pixel jitter (in pixels); returns [position, frame] as Float32Array RGBA rows, bottom-up
   gbuffer(w, h, jx, jy) {
-    const rt = new THREE.WebGLRenderTarget(w, h, { type: THREE.FloatType, format: THREE.RGBAFormat, minFilter: THREE.NearestFilter,
-                                                   magFilter: THREE.NearestFilter, depthBuffer: true });
+    const key = `${w}x${h}`; // one float target per refinement level, kept across frames
+    if (!this.targets.has(key)) {
+      this.targets.set(key, new THREE.WebGLRenderTarget(w, h, { type: THREE.FloatType, format: THREE.RGBAFormat,
+                                                                minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, depthBuffer: true }));
+    }
+    const rt = this.targets.get(key);
     this.camera.setViewOffset(w, h, jx, jy, w, h);
     this.camera.updateProjectionMatrix();
     this.gmat.uniforms.lightDir.value.set(...this.settings.light);
@@ -245,7 +250,6 @@ class Viewer {
     this.renderer.setRenderTarget(null);
     this.camera.clearViewOffset();
     this.camera.updateProjectionMatrix();
-    rt.dispose();
     return out;
   }
 
