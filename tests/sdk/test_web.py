@@ -182,6 +182,8 @@ def test_checked_in_page_equals_a_fresh_build(tmp_path):
 EYE, TARGET, FOV_DEG = (0.0, 0.5, 2.5), (0.0, 0.0, 0.0), 35.0
 LIGHT, IRRADIANCE = (0.5, 0.8, 0.3), 2.0
 SIZE, WEB_SAMPLES, REF_SPP = 128, 16, 32
+#: display exposure (stops) of the canvas check: the page's tone mapping must equal the reference renderer's PNG curve
+EXPOSURE = 0.5
 
 
 def relative_l1(a: np.ndarray, b: np.ndarray) -> float:
@@ -211,7 +213,8 @@ def test_page_matches_the_reference_renderer(tmp_path):
     mean over the object within 3 % (a graph output scaled by 1.1 is off by 10 %) and the per-pixel relative L1
     below 8 % and below 1.3x the reference's own seed-to-seed difference (the noise ceiling: pixel-footprint noise of 32
     spp; the page's 16 stratified jittered samples add less).
-    A flipped light direction swaps the lit and unlit sides (relative L1 near 1)."""
+    A flipped light direction swaps the lit and unlit sides (relative L1 near 1). The canvas's 8-bit pixels equal
+    the reference renderer's tone curve of the page's radiance at the chosen exposure, within one level."""
     from scipy.ndimage import binary_erosion
 
     node = tool_or_skip("playwright-core", browser=True)
@@ -219,7 +222,8 @@ def test_page_matches_the_reference_renderer(tmp_path):
     web.export(path, tmp_path / "site")
     with serving(tmp_path / "site") as url:
         res = drive(node, tmp_path / "drive", f"{url}?size={SIZE}", camera={"eye": EYE, "target": TARGET, "fovDeg": FOV_DEG},
-                    settings={"light": LIGHT, "irradiance": IRRADIANCE, "ambient": 0.0, "samples": WEB_SAMPLES})
+                    settings={"light": LIGHT, "irradiance": IRRADIANCE, "ambient": 0.0, "samples": WEB_SAMPLES, "exposure": EXPOSURE},
+                    canvas=True)
     assert res["error"] is None, (res["error"], res["console"][-10:])
     lin = res["linear"]
     assert (lin["width"], lin["height"]) == (SIZE, SIZE) and res["stats"]["samples"] == WEB_SAMPLES
@@ -239,6 +243,13 @@ def test_page_matches_the_reference_renderer(tmp_path):
     print(f"web vs reference: mean ratio {mean_ratio:.4f}, relative L1 {err:.4f}; reference seed-to-seed relative L1 {ceiling:.4f}")
     assert abs(mean_ratio - 1.0) < 0.03, mean_ratio
     assert err < min(0.08, 1.3 * ceiling), (err, ceiling)
+    # what the canvas shows is nasset_sdk.images.tonemap (the reference renderer's PNG curve) of that radiance
+    from nasset_sdk.images import tonemap
+
+    shown = np.asarray(res["canvas"]["rgba"], np.int64).reshape(SIZE, SIZE, 4)[..., :3]
+    want = tonemap(got.astype(np.float32), EXPOSURE).astype(np.int64)
+    assert np.abs(shown - want)[mask].max() <= 1
+    assert np.ptp(want[mask]) > 100  # a real range of tones was compared
 
 
 def test_page_says_what_is_missing_instead_of_a_blank_canvas(tmp_path):

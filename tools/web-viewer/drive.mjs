@@ -8,7 +8,8 @@
 //            "settings": {"light": [..], "irradiance": E, "ambient": 0, ...}, "out": "result.json",
 //            "screenshot": "shot.png" (optional), "repeat": K (optional: K more full renders, timed),
 //            "extraArgs": [more Chromium flags] (optional),
-//            "queries": true (optional: also the graph queries of the last unjittered pass)}
+//            "queries": true (optional: also the graph queries of the last unjittered pass),
+//            "canvas": true (optional: also the displayed canvas pixels, RGBA 8-bit)}
 // result.json: {"error": message or null, "linear": {width, height, rgb, mask}, "stats": {...}, "frameMs": [..]}
 import { chromium } from "playwright-core";
 import { mkdtempSync, readFileSync, renameSync, rmSync, writeFileSync } from "node:fs";
@@ -55,6 +56,16 @@ try {
     }, { camera: job.camera, settings: job.settings, repeat: job.repeat });
     result.stats = await page.evaluate(() => ({ ...window.nassetViewer.viewer.stats, samples: window.nassetViewer.viewer.samples }));
     result.linear = await page.evaluate(() => window.nassetViewer.linear());
+    if (job.canvas) { // the displayed 8-bit pixels (what the user sees), rows top-down
+      result.canvas = await page.evaluate(() => {
+        const src = document.getElementById("canvas"), c = document.createElement("canvas");
+        c.width = src.width;
+        c.height = src.height;
+        const ctx = c.getContext("2d");
+        ctx.drawImage(src, 0, 0);
+        return { width: c.width, height: c.height, rgba: Array.from(ctx.getImageData(0, 0, c.width, c.height).data) };
+      });
+    }
     if (job.queries) result.queries = await page.evaluate(() => window.nassetViewer.queries());
   }
   if (job.screenshot) await page.screenshot({ path: resolve(base, job.screenshot) });
