@@ -11,6 +11,8 @@ const ROWS_PER_RUN = 8192; // rows per session.run: bounded memory, and the page
 const LEVELS = [4, 2, 1]; // progressive refinement: image size divisors, coarse first
 
 const $ = (id) => document.getElementById(id);
+// the portable graph's outputs the shading reads, per kind (spec/format.md#portable-evaluation-graphs)
+const OUTPUTS = { rna: ["unshadowed", "shadowed"], neupress: ["transport"], "8dna": ["albedo"] };
 
 function fail(text) {
   $("message").textContent = text;
@@ -54,6 +56,7 @@ async function loadAsset(base) {
     fail(`asset.json is not JSON (${e.message}): this folder was not written by nasset web.`);
   }
   if (doc.format !== "nasset-web/1" || !doc.kind || !doc.mesh) fail("asset.json is not a nasset web export (format nasset-web/1).");
+  if (!Object.hasOwn(OUTPUTS, doc.kind)) fail(`This viewer does not know the asset kind ${JSON.stringify(doc.kind)} (it shows ${Object.keys(OUTPUTS).join(", ")}).`);
   if (!doc.graphs || Object.keys(doc.graphs).length === 0) {
     fail(`The asset ${doc.metadata?.file ?? ""} has no portable evaluation graph. Add it with:\n` +
          "  nasset optimize A.usdc -o A_portable.usdc --portable\nthen export again with nasset web.");
@@ -64,6 +67,8 @@ async function loadAsset(base) {
   const pos = new Float32Array(mesh, 0, 3 * v), frame = new Float32Array(mesh, 12 * v, 3 * v);
   const idx = new Uint32Array(mesh, 24 * v, 3 * f);
   const [name, graph] = Object.entries(doc.graphs)[0];
+  const missing = OUTPUTS[doc.kind].filter((o) => !Object.hasOwn(graph.outputs ?? {}, o));
+  if (missing.length) fail(`The portable graph ${name} lacks the output(s) ${missing.join(", ")} a ${doc.kind} asset's graph has.`);
   const model = await (await fetchOk(new URL(graph.file, base), `the portable graph ${name}`)).arrayBuffer();
   return { doc, pos, frame, idx, graph, model };
 }
@@ -221,7 +226,11 @@ class Viewer {
 
   restart() {
     this.generation++;
-    if (!this.loop) this.loop = this.refine().finally(() => { this.loop = null; });
+    if (!this.loop) {
+      this.loop = this.refine()
+        .catch((e) => { try { fail(`Shading stopped: ${e.message}`); } catch { /* shown on the page */ } })
+        .finally(() => { this.loop = null; });
+    }
   }
 
   // G-buffer at w x h with a sub-pixel jitter (in pixels); returns [position, frame] as Float32Array RGBA rows, bottom-up
