@@ -265,7 +265,7 @@ def test_page_says_what_is_missing_instead_of_a_blank_canvas(tmp_path):
 
 
 @pytest.mark.slow
-def test_page_without_an_export_or_webgl_says_so(tmp_path):
+def test_page_without_an_export_webgl_or_a_known_kind_says_so(tmp_path):
     node = tool_or_skip("playwright-core", browser=True)
     site = tmp_path / "site"
     web.export(portable_asset(tmp_path), site)
@@ -277,6 +277,12 @@ def test_page_without_an_export_or_webgl_says_so(tmp_path):
     with serving(site) as url:
         res = drive(node, tmp_path / "d2", url, extraArgs=["--disable-webgl", "--disable-3d-apis"])
     assert res["error"] and "WebGL" in res["message"]
+    doc = json.loads((site / "asset.json").read_text())
+    doc["kind"] = "9dna"
+    (site / "asset.json").write_text(json.dumps(doc))
+    with serving(site) as url:
+        res = drive(node, tmp_path / "d3", url)
+    assert res["error"] and "does not know the asset kind" in res["message"] and "9dna" in res["message"]
 
 
 def kind_radiance(asset, q: dict, irradiance: float) -> np.ndarray:
