@@ -264,6 +264,9 @@ class Viewer {
 
   // shadow map of the current light: an orthographic view along -lightDir framing the bounding sphere
   shadowPass() {
+    const key = this.settings.light.join(","); // the map depends on the light direction only
+    if (key === this.shadowKey) return;
+    this.shadowKey = key;
     const r = this.radius, L = new THREE.Vector3(...this.settings.light);
     const cam = new THREE.OrthographicCamera(-r, r, r, -r, 0.5 * r, 3.5 * r);
     cam.position.copy(this.center).addScaledVector(L, 2 * r);
