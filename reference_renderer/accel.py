@@ -121,7 +121,7 @@ class NumpyBackend(_Backend):
 class _Part:
     """One acceleration structure: the triangles ``ids`` [k] (global indices) and their bounding box."""
 
-    __slots__ = ("ids", "backend", "lo", "hi", "inst")
+    __slots__ = ("ids", "backend", "lo", "hi", "inst", "box")
 
     def __init__(self, ids, triangles, inst, make) -> None:
         self.ids = ids
@@ -131,6 +131,8 @@ class _Part:
         self.backend = make(tri)
         p = tri.reshape(-1, 3)
         self.lo, self.hi = (p.min(0), p.max(0)) if len(p) else (np.zeros(3), -np.ones(3))
+        pad = 1e-6 * (1.0 + np.abs(self.hi).max() + np.abs(self.lo).max())
+        self.box = [(float(a), float(b)) for a, b in zip(self.lo - pad, self.hi + pad, strict=True)]  # padded, per axis
 
     def rows_hitting_box(self, o, inv, tmax, rows):
         """Subset of ``rows`` (sorted) whose ray segment [0, tmax] meets the bounding box (slab test; padded).
@@ -139,25 +141,24 @@ class _Part:
         columns, without [k,3] temporaries or NaN-aware reductions (``inv`` is finite: no 0 * inf)."""
         if not len(rows):
             return rows
-        pad = 1e-6 * (1.0 + np.abs(self.hi).max() + np.abs(self.lo).max())
         full = len(rows) == len(o)  # every row (rows is sorted and unique): no gathers
         oo, ii = (o, inv) if full else (o[rows], inv[rows])
         t_near = np.zeros(len(rows))
         t_far = np.array(tmax if full else tmax[rows], np.float64)
-        with np.errstate(over="ignore"):  # |offset| * 1e300 may overflow to +-inf: still ordered, never NaN
-            for k in range(3):
-                a = self.lo[k] - pad - oo[:, k]
-                a *= ii[:, k]
-                b = self.hi[k] + pad - oo[:, k]
-                b *= ii[:, k]
-                np.maximum(t_near, np.minimum(a, b), out=t_near)
-                np.minimum(t_far, np.maximum(a, b), out=t_far)
+        for k, (lo, hi) in enumerate(self.box):
+            a = lo - oo[:, k]
+            a *= ii[:, k]
+            b = hi - oo[:, k]
+            b *= ii[:, k]
+            np.maximum(t_near, np.minimum(a, b), out=t_near)
+            np.minimum(t_far, np.maximum(a, b), out=t_far)
         return rows[t_near <= t_far]
 
 
 def reciprocal(d: np.ndarray) -> np.ndarray:
-    """1 / d [n,3], components below 1e-300 in magnitude read as 1e-300 (finite: the slab test never forms 0 * inf)."""
-    return 1.0 / np.where(np.abs(d) < 1e-300, 1e-300, d)
+    """1 / d [n,3], components below 1e-200 in magnitude read as 1e-200: finite, so the slab test never forms
+    0 * inf, and its products (offsets below 1e100 times at most 1e200) do not overflow."""
+    return 1.0 / np.where(np.abs(d) < 1e-200, 1e-200, d)
 
 
 class Accel:

