@@ -226,24 +226,32 @@ class Accel:
         n = len(o)
         tmax = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,))
         ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
-        if np.any(ignore >= len(self.inst_part)) or np.any(self.inst_part[ignore[ignore >= 0]] < 0):
+        same = n > 0 and bool((ignore == ignore[0]).all())  # one value (all camera rays, one asset's rays): no searches
+        ids = ignore[:1] if same else np.unique(ignore)
+        if np.any(ids >= len(self.inst_part)) or np.any(self.inst_part[ids[ids >= 0]] < 0):
             raise UsageError("Accel.trace: an ignored instance has no acceleration structure of its own (Accel separate=...)")
         hits = Hits(n)
         all_rows = np.arange(n)
         inv = reciprocal(d)
         for part in self.parts:
-            self._closest_in(part, o, d, inv, tmax, all_rows if part.inst < 0 else np.nonzero(ignore != part.inst)[0], hits)
-        own = np.nonzero(ignore >= 0)[0]
+            if part.inst < 0 or (same and ids[0] != part.inst):
+                rows = all_rows
+            else:
+                rows = all_rows[:0] if same else np.nonzero(ignore != part.inst)[0]
+            self._closest_in(part, o, d, inv, tmax, rows, hits)
+        own = (all_rows if ids[0] >= 0 else all_rows[:0]) if same else np.nonzero(ignore >= 0)[0]
         if len(own):
             lim = np.minimum(tmax, hits.t)
             part_of = self.inst_part[ignore[own]]
             exempt = None if exempt is None else np.asarray(exempt, np.int64)
-            stepping = np.zeros(len(own), bool) if exempt is None else exempt[own, 0] < exempt[own, 1]
-            for p in np.unique(part_of):
-                rows = own[(part_of == p) & ~stepping]  # nothing exempt: one occlusion query
+            stepping = None if exempt is None else exempt[own, 0] < exempt[own, 1]
+            for p in (self.inst_part[ids[:1]] if same else np.unique(part_of)):
+                mine = own if same else own[part_of == p]
+                step = None if stepping is None else (stepping if same else stepping[part_of == p])
+                rows = mine if step is None else mine[~step]  # nothing exempt: one occlusion query
                 hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, inv, lim, rows)
-                rows = own[(part_of == p) & stepping]
-                if len(rows):
+                if step is not None and step.any():
+                    rows = mine[step]
                     hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, inv, lim, rows, exempt)
         return hits
 

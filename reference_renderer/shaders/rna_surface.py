@@ -48,13 +48,14 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
         rows_kind.append(np.zeros(len(s), bool))
     cont = np.nonzero(indirect)[0]
     wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
-    rows_ray.append(cont)
-    rows_wi.append(wi_c)
-    rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
-    rows_self.append(np.zeros(len(cont), bool))
-    rows_kind.append(np.ones(len(cont), bool))
-    return (np.concatenate(rows_ray), np.concatenate(rows_wi), np.concatenate(rows_w), np.concatenate(rows_self),
-            np.concatenate(rows_kind), cont, wi_c)
+    if len(cont) or not rows_ray:
+        rows_ray.append(cont)
+        rows_wi.append(wi_c)
+        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+        rows_self.append(np.zeros(len(cont), bool))
+        rows_kind.append(np.ones(len(cont), bool))
+    cat = (lambda parts: parts[0]) if len(rows_ray) == 1 else np.concatenate  # one part: no copies
+    return cat(rows_ray), cat(rows_wi), cat(rows_w), cat(rows_self), cat(rows_kind), cont, wi_c
 
 
 @register_shader("rna", "surface")
