@@ -247,6 +247,23 @@ def test_ignoring_a_merged_instance_is_a_usage_error():
     acc.trace(o, d, tmax, np.array([0, -1, 0, -1]))  # instance 0 has its own structure
     with pytest.raises(UsageError, match="acceleration structure"):
         acc.trace(o, d, tmax, np.array([0, 1, -1, -1]))
+    with pytest.raises(UsageError, match="acceleration structure"):
+        acc.trace(o, d, tmax, np.full(4, 1))  # one value for every ray (the path without searches)
+
+
+@pytest.mark.parametrize("inst", [-1, 0, 3])
+def test_trace_with_one_ignored_value_matches_brute_force(inst):
+    """Every ray ignoring the same instance (camera rays: none; one asset's rays) takes a path without searches;
+    it must give the brute force's hits and self_hit flags like mixed ignore arrays do."""
+    tri, tri_inst = _scene()
+    o, d, tmax = _rays(1500, 13)
+    ignore = np.full(len(o), inst)
+    t_b, p_b, s_b, _ = _brute_trace(tri, tri_inst, o, d, tmax, ignore)
+    assert (p_b >= 0).mean() > 0.3 and (inst < 0 or s_b.mean() > 0.02)
+    h = Accel(tri, tri_inst).trace(o, d, tmax, ignore)
+    same = (h.prim == p_b) & (h.self_hit == s_b)
+    assert same.mean() > 0.99
+    np.testing.assert_allclose(h.t[same & (p_b >= 0)], t_b[same & (p_b >= 0)], rtol=T_REL, atol=T_REL)
 
 
 def test_box_test_keeps_every_hit_and_drops_clear_misses():
