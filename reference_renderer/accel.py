@@ -121,7 +121,7 @@ class NumpyBackend(_Backend):
 class _Part:
     """One acceleration structure: the triangles ``ids`` [k] (global indices) and their bounding box."""
 
-    __slots__ = ("ids", "backend", "lo", "hi", "inst")
+    __slots__ = ("ids", "backend", "lo", "hi", "inst", "box")
 
     def __init__(self, ids, triangles, inst, make) -> None:
         self.ids = ids
@@ -131,18 +131,34 @@ class _Part:
         self.backend = make(tri)
         p = tri.reshape(-1, 3)
         self.lo, self.hi = (p.min(0), p.max(0)) if len(p) else (np.zeros(3), -np.ones(3))
-
-    def rows_hitting_box(self, o, d, tmax, rows):
-        """Subset of ``rows`` whose ray segment [0, tmax] meets the bounding box (slab test; padded)."""
         pad = 1e-6 * (1.0 + np.abs(self.hi).max() + np.abs(self.lo).max())
-        oo, dd = o[rows], d[rows]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / np.where(dd == 0.0, 1e-300, dd)
-            ta = (self.lo - pad - oo) * inv
-            tb = (self.hi + pad - oo) * inv
-        t0 = np.nanmax(np.minimum(ta, tb), 1)
-        t1 = np.nanmin(np.maximum(ta, tb), 1)
-        return rows[(t0 <= t1) & (t1 >= 0.0) & (t0 <= tmax[rows])]
+        self.box = [(float(a), float(b)) for a, b in zip(self.lo - pad, self.hi + pad, strict=True)]  # padded, per axis
+
+    def rows_hitting_box(self, o, inv, tmax, rows):
+        """Subset of ``rows`` (sorted) whose ray segment [0, tmax] meets the bounding box (slab test; padded).
+
+        o [n,3] origins, inv [n,3] reciprocal directions (:func:`reciprocal`), tmax [n]. Per axis on
+        columns, without [k,3] temporaries or NaN-aware reductions (``inv`` is finite: no 0 * inf)."""
+        if not len(rows):
+            return rows
+        full = len(rows) == len(o)  # every row (rows is sorted and unique): no gathers
+        oo, ii = (o, inv) if full else (o[rows], inv[rows])
+        t_near = np.zeros(len(rows))
+        t_far = np.array(tmax if full else tmax[rows], np.float64)
+        for k, (lo, hi) in enumerate(self.box):
+            a = lo - oo[:, k]
+            a *= ii[:, k]
+            b = hi - oo[:, k]
+            b *= ii[:, k]
+            np.maximum(t_near, np.minimum(a, b), out=t_near)
+            np.minimum(t_far, np.maximum(a, b), out=t_far)
+        return rows[t_near <= t_far]
+
+
+def reciprocal(d: np.ndarray) -> np.ndarray:
+    """1 / d [n,3], components below 1e-200 in magnitude read as 1e-200: finite, so the slab test never forms
+    0 * inf, and its products (offsets below 1e100 times at most 1e200) do not overflow."""
+    return 1.0 / np.where(np.abs(d) < 1e-200, 1e-200, d)
 
 
 class Accel:
@@ -183,15 +199,18 @@ class Accel:
             self.scale = 1.0
         self.eps = 1e-5 * max(self.scale, 1e-6)
 
-    def _closest_in(self, part, o, d, tmax, rows, hits) -> None:
+    def _closest_in(self, part, o, d, inv, tmax, rows, hits) -> None:
         """Update ``hits`` rows with closer hits on ``part`` (rays limited to the current closest hit)."""
         lim = np.minimum(tmax, hits.t)
-        rows = part.rows_hitting_box(o, d, lim, rows)
+        rows = part.rows_hitting_box(o, inv, lim, rows)
         if not len(rows):
             return
         self.rays_cast += len(rows)
-        t, prim, u, v = part.backend.closest(o[rows], d[rows], lim[rows])
-        better = (prim >= 0) & (t < hits.t[rows])
+        if len(rows) == len(o):  # every ray: no gathers
+            t, prim, u, v = part.backend.closest(o, d, lim)
+        else:
+            t, prim, u, v = part.backend.closest(o[rows], d[rows], lim[rows])
+        better = (prim >= 0) & (t < (hits.t if len(rows) == len(o) else hits.t[rows]))
         r = rows[better]
         hits.t[r], hits.prim[r], hits.u[r], hits.v[r] = t[better], part.ids[prim[better]], u[better], v[better]
 
@@ -207,43 +226,55 @@ class Accel:
         n = len(o)
         tmax = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,))
         ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
-        if np.any(ignore >= len(self.inst_part)) or np.any(self.inst_part[ignore[ignore >= 0]] < 0):
+        same = n > 0 and bool((ignore == ignore[0]).all())  # one value (all camera rays, one asset's rays): no searches
+        ids = ignore[:1] if same else np.unique(ignore)
+        if np.any(ids >= len(self.inst_part)) or np.any(self.inst_part[ids[ids >= 0]] < 0):
             raise UsageError("Accel.trace: an ignored instance has no acceleration structure of its own (Accel separate=...)")
         hits = Hits(n)
         all_rows = np.arange(n)
+        inv = reciprocal(d)
         for part in self.parts:
-            self._closest_in(part, o, d, tmax, all_rows if part.inst < 0 else np.nonzero(ignore != part.inst)[0], hits)
-        own = np.nonzero(ignore >= 0)[0]
+            if part.inst < 0 or (same and ids[0] != part.inst):
+                rows = all_rows
+            else:
+                rows = all_rows[:0] if same else np.nonzero(ignore != part.inst)[0]
+            self._closest_in(part, o, d, inv, tmax, rows, hits)
+        own = (all_rows if ids[0] >= 0 else all_rows[:0]) if same else np.nonzero(ignore >= 0)[0]
         if len(own):
             lim = np.minimum(tmax, hits.t)
             part_of = self.inst_part[ignore[own]]
             exempt = None if exempt is None else np.asarray(exempt, np.int64)
-            stepping = np.zeros(len(own), bool) if exempt is None else exempt[own, 0] < exempt[own, 1]
-            for p in np.unique(part_of):
-                rows = own[(part_of == p) & ~stepping]  # nothing exempt: one occlusion query
-                hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, lim, rows)
-                rows = own[(part_of == p) & stepping]
-                if len(rows):
-                    hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, lim, rows, exempt)
+            stepping = None if exempt is None else exempt[own, 0] < exempt[own, 1]
+            for p in (self.inst_part[ids[:1]] if same else np.unique(part_of)):
+                mine = own if same else own[part_of == p]
+                step = None if stepping is None else (stepping if same else stepping[part_of == p])
+                rows = mine if step is None else mine[~step]  # nothing exempt: one occlusion query
+                hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, inv, lim, rows)
+                if step is not None and step.any():
+                    rows = mine[step]
+                    hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, inv, lim, rows, exempt)
         return hits
 
-    def _occluded_in(self, part, o, d, tmax, rows) -> np.ndarray:
+    def _occluded_in(self, part, o, d, inv, tmax, rows) -> np.ndarray:
         """[len(rows)] bool: any triangle of ``part`` on the ray segment [0, tmax]."""
+        sel = part.rows_hitting_box(o, inv, tmax, rows)
+        if len(sel) == len(o):  # every ray (then rows holds every ray too): no gathers
+            self.rays_cast += len(sel)
+            return part.backend.occluded(o, d, tmax)
         out = np.zeros(len(rows), bool)
-        sel = part.rows_hitting_box(o, d, tmax, rows)
         if len(sel):
             self.rays_cast += len(sel)
             occ = part.backend.occluded(o[sel], d[sel], tmax[sel])
             out[np.searchsorted(rows, sel)] = occ
         return out
 
-    def _passes_outside(self, part, o, d, tmax, rows, exempt) -> np.ndarray:
+    def _passes_outside(self, part, o, d, inv, tmax, rows, exempt) -> np.ndarray:
         """[len(rows)] bool: a triangle of ``part`` outside row i's exempt range lies on [0, tmax].
 
         Exempt hits are stepped over (at most :data:`MAX_EXEMPT_STEPS` per ray); only rays whose
         nearest hit was exempt are cast again."""
         out = np.zeros(len(rows), bool)
-        sel = part.rows_hitting_box(o, d, tmax, rows)
+        sel = part.rows_hitting_box(o, inv, tmax, rows)
         pos = np.searchsorted(rows, sel)
         oo, toff = o[sel], np.zeros(len(sel))
         for _ in range(MAX_EXEMPT_STEPS):
@@ -267,9 +298,10 @@ class Accel:
         d = np.asarray(d, np.float64)
         tmax = np.broadcast_to(np.asarray(tmax, np.float64), (len(o),))
         out = np.zeros(len(o), bool)
+        inv = reciprocal(d)
         for part in self.parts:
             rows = np.nonzero(~out)[0]
             if not len(rows):
                 break
-            out[rows] = self._occluded_in(part, o, d, tmax, rows)
+            out[rows] = self._occluded_in(part, o, d, inv, tmax, rows)
         return out

@@ -20,6 +20,7 @@ import numpy as np
 from .sampling import (
     INV_PI,
     cosine_hemisphere_pdf,
+    dot,
     luminance,
     normalize,
     square_to_cosine_hemisphere,
@@ -73,7 +74,7 @@ def ggx_reflect_pdf(wo, wi, alpha):
 
 
 def reflect(w, h):
-    return 2.0 * np.einsum("ij,ij->i", w, h)[:, None] * h - w
+    return 2.0 * dot(w, h)[:, None] * h - w
 
 
 # -- material table -------------------------------------------------------------------------
@@ -136,7 +137,7 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None):
     h = normalize(wo + wi)
     d = ggx_d(h, alpha)
     g2 = 1.0 / (1.0 + ggx_lambda(wo, alpha) + ggx_lambda(wi, alpha))
-    cos_oh = np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)
+    cos_oh = np.clip(dot(wo, h), 0.0, 1.0)
     fres = f0 + (1.0 - f0) * ((1.0 - cos_oh) ** 5)[:, None]
     den = 4.0 * np.maximum(wo[:, 2] * wi[:, 2], 1e-300)
     f = kd * INV_PI + fres * (d * g2 / den)[:, None]

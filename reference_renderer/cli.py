@@ -118,7 +118,8 @@ def add_args(p) -> None:
     p.add_argument("--variance", default=None, help="also write a per-pixel variance EXR")
     p.add_argument("--explain", action="store_true", help="print the render plan")
     p.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto)")
-    p.add_argument("--batch", type=int, default=65536, help="rays per wavefront batch")
+    p.add_argument("--batch", type=int, default=65536,
+                   help="camera rays in flight per pass over a tile (traced in wavefronts of at most 8192)")
     p.add_argument("--tile", type=int, default=64, help="tile edge in pixels")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--neupress-sampling", default="auto", choices=["auto", "dome", "lobe", "mis"],

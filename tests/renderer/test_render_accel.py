@@ -247,3 +247,52 @@ def test_ignoring_a_merged_instance_is_a_usage_error():
     acc.trace(o, d, tmax, np.array([0, -1, 0, -1]))  # instance 0 has its own structure
     with pytest.raises(UsageError, match="acceleration structure"):
         acc.trace(o, d, tmax, np.array([0, 1, -1, -1]))
+    with pytest.raises(UsageError, match="acceleration structure"):
+        acc.trace(o, d, tmax, np.full(4, 1))  # one value for every ray (the path without searches)
+
+
+@pytest.mark.parametrize("inst", [-1, 0, 3])
+def test_trace_with_one_ignored_value_matches_brute_force(inst):
+    """Every ray ignoring the same instance (camera rays: none; one asset's rays) takes a path without searches;
+    it must give the brute force's hits and self_hit flags like mixed ignore arrays do."""
+    tri, tri_inst = _scene()
+    o, d, tmax = _rays(1500, 13)
+    ignore = np.full(len(o), inst)
+    t_b, p_b, s_b, _ = _brute_trace(tri, tri_inst, o, d, tmax, ignore)
+    assert (p_b >= 0).mean() > 0.3 and (inst < 0 or s_b.mean() > 0.02)
+    h = Accel(tri, tri_inst).trace(o, d, tmax, ignore)
+    same = (h.prim == p_b) & (h.self_hit == s_b)
+    assert same.mean() > 0.99
+    np.testing.assert_allclose(h.t[same & (p_b >= 0)], t_b[same & (p_b >= 0)], rtol=T_REL, atol=T_REL)
+
+
+def test_box_test_keeps_every_hit_and_drops_clear_misses():
+    """_Part.rows_hitting_box (the per-structure cull before Embree): never drops a ray whose segment hits one of
+    the structure's triangles (float64 brute force), also with zero direction components and origins on a box
+    face; drops rays that provably miss the box (constructed: parallel to a face outside it, pointing away,
+    or stopping short)."""
+    from nasset_reference_renderer.accel import _Part, reciprocal
+
+    s = trimesh.creation.box(extents=(1.0, 1.0, 1.0))  # the box [-0.5, 0.5]^3: its triangles span the whole box
+    tri = np.asarray(s.vertices[s.faces], np.float64)
+    part = _Part(np.arange(len(tri)), tri, 0, NumpyBackend)
+    o, d, tmax = _rays(4000, 11)
+    rng = np.random.default_rng(12)
+    axis = rng.integers(0, 3, len(o))
+    flat = rng.random(len(o)) < 0.3  # a zero direction component, some origins exactly on a face plane
+    d[flat, axis[flat]] = 0.0
+    on_face = flat & (rng.random(len(o)) < 0.5)
+    o[on_face, axis[on_face]] = rng.choice([-0.5, 0.5], on_face.sum())
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    rows = np.arange(len(o))
+    kept = part.rows_hitting_box(o, reciprocal(d), tmax, rows)
+    _, prim, _, _ = NumpyBackend(tri).closest(o, d, tmax)
+    assert (prim >= 0).sum() > 500 and len(kept) < len(o)
+    assert np.isin(np.nonzero(prim >= 0)[0], kept).all()  # conservative
+    sub = rows[::3]  # a subset: the same answers for its rows
+    np.testing.assert_array_equal(part.rows_hitting_box(o, reciprocal(d), tmax, sub), np.intersect1d(kept, sub))
+    # constructed misses: parallel to the x faces outside the slab; pointing away; stopping short of the box
+    o2 = np.array([[0.6, 0.0, -3.0], [0.0, 0.0, 2.0], [0.0, 0.0, 2.0], [0.0, 0.0, 2.0]])
+    d2 = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
+    t2 = np.array([np.inf, np.inf, 1.4, 1.6])
+    np.testing.assert_array_equal(part.rows_hitting_box(o2, reciprocal(d2), t2, np.arange(4)), [3])
