@@ -178,7 +178,7 @@ class PathIntegrator:
                 light_hit = np.full(len(idx), -1)
                 le_hit = np.zeros((len(idx), 3))
                 for k, light in enumerate(lights):
-                    if light.area:
+                    if light.area and (depth > 0 or light.camera_visible):
                         tl, le = light.intersect(o, d)
                         closer = tl < t_hit
                         t_hit[closer] = tl[closer]

@@ -103,9 +103,31 @@ class _BlenderConverter(StageConverter):
         settings.CreatePixelAspectRatioAttr(1.0)
 
     def integrator(self) -> None:
+        """Cycles' bounce limit -> ``nasset:maxDepth`` and its pixel filter -> ``nasset:pixelFilter`` on
+        /Render/Settings (spec/bake-blender.md#scene-conversion)."""
+        from pxr import Sdf, UsdRender
+
         c = self.bscene.cycles
+        # Cycles counts bounces after the first hit (0: direct light only), the renderer scattering vertices
+        depth = int(c.max_bounces) + 1
         self.result.integrator = {"type": "cycles", "max_bounces": int(c.max_bounces), "samples": int(c.samples),
-                                  "renderer_max_depth": int(c.max_bounces)}
+                                  "renderer_max_depth": depth}
+        lower = {k: int(getattr(c, f"{k}_bounces")) for k in ("diffuse", "glossy", "transmission")
+                 if int(getattr(c, f"{k}_bounces")) < int(c.max_bounces)}
+        if lower:
+            self.warn(f"render settings: per-type bounce limits {lower} below max bounces {int(c.max_bounces)} dropped "
+                      f"(the reference renderer stops every path after {depth} scattering vertices)")
+        prim = UsdRender.Settings.Define(self.stage, "/Render/Settings").GetPrim()
+        prim.CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(depth)
+        kind, stddev = cycles_pixel_filter(str(c.pixel_filter_type), float(c.filter_width))
+        if kind == "box" and abs(float(c.filter_width) - 1.0) > 1e-6:
+            self.warn(f"render settings: box pixel filter of width {c.filter_width:.3g} px written as 1 px")
+        elif c.pixel_filter_type == "BLACKMAN_HARRIS":
+            self.warn(f"render settings: Blackman-Harris pixel filter (width {c.filter_width:.3g} px) written as a "
+                      f"Gaussian of the same standard deviation ({stddev:.3g} px)")
+        prim.CreateAttribute("nasset:pixelFilter", Sdf.ValueTypeNames.Token, custom=True).Set(kind)
+        if stddev is not None:
+            prim.CreateAttribute("nasset:pixelFilterStddev", Sdf.ValueTypeNames.Float, custom=True).Set(stddev)
 
     # -- lights -------------------------------------------------------------------------------
     def lights(self) -> None:
@@ -127,10 +149,15 @@ class _BlenderConverter(StageConverter):
                 light = UsdLux.SphereLight.Define(self.stage, path)
                 row = _row(ob)
                 scale = float(np.cbrt(abs(np.linalg.det(_row(ob, unit=False)[:3, :3]))))
+                if lt.type == "SPOT" and r * scale > 0:
+                    self.warn(f"light {ob.name}: spot of radius {r * scale:.3g} written as a point spot (hard shadows; "
+                              "the reference renderer shapes point lights only)")
+                    r = 0.0
                 if r * scale > 0:
                     rw = r * scale
                     light.CreateRadiusAttr(rw)
                     light.CreateTreatAsPointAttr(False)
+                    self._hidden_from_camera(light)
                     value = color * float(lt.energy) / (4.0 * math.pi * math.pi * rw * rw)
                 else:
                     light.CreateRadiusAttr(0.0)
@@ -139,12 +166,7 @@ class _BlenderConverter(StageConverter):
                 self._xform(light.GetPrim(), row)
                 what = f"{lt.type.lower()} {ob.name} ({lt.energy:.4g} W, radius {r:.3g})"
                 if lt.type == "SPOT":
-                    cone = math.degrees(float(lt.spot_size)) / 2.0
-                    shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
-                    shaping.CreateShapingConeAngleAttr(cone)
-                    shaping.CreateShapingConeSoftnessAttr(float(lt.spot_blend))
-                    self.warn(f"light {ob.name}: spot written as a sphere light with UsdLux.ShapingAPI (cone {cone:.3g} deg); "
-                              "the reference renderer ignores shaping and renders it omnidirectional")
+                    self._spot_shaping(light, ob)
                 self._light_common(light, value, path, what)
             elif lt.type == "AREA":
                 w = float(lt.size)
@@ -162,11 +184,34 @@ class _BlenderConverter(StageConverter):
                 area = w * h * sx * sy
                 if getattr(lt, "spread", math.pi) < math.pi - 1e-6:
                     self.warn(f"light {ob.name}: area light spread dropped (Lambertian emission)")
+                self._hidden_from_camera(light)
                 self._light_common(light, color * float(lt.energy) / (math.pi * max(area, 1e-12)), path,
                                    f"area {ob.name} ({lt.energy:.4g} W, {w:.3g} x {h:.3g})")
             else:
                 self.warn(f"light {ob.name}: type {lt.type} is not convertible: skipped")
         self.world()
+
+    @staticmethod
+    def _hidden_from_camera(light) -> None:
+        """Cycles does not show point/spot/area light surfaces to camera rays (BSDF rays do reach them)."""
+        from pxr import Sdf
+
+        light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool, custom=True).Set(False)
+
+    def _spot_shaping(self, light, ob) -> None:
+        """Cycles' spot cone on a point light: ``shaping:cone:angle`` = spot_size / 2, ``shaping:cone:softness`` =
+        spot_blend, ``nasset:shaping:falloff`` = smoothstep (spec/renderer.md#spot-lights)."""
+        from pxr import Sdf, UsdLux
+
+        lt = ob.data
+        cone = math.degrees(float(lt.spot_size)) / 2.0
+        shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
+        shaping.CreateShapingConeAngleAttr(cone)
+        shaping.CreateShapingConeSoftnessAttr(float(np.clip(lt.spot_blend, 0.0, 1.0)))
+        light.GetPrim().CreateAttribute("nasset:shaping:falloff", Sdf.ValueTypeNames.Token, custom=True).Set("smoothstep")
+        sx, sy = np.linalg.norm(_row(ob, unit=False)[:2, :3], axis=1)
+        if not np.isclose(sx, sy, rtol=1e-4):
+            self.warn(f"light {ob.name}: elliptic spot cone (object scale {sx:.3g} x {sy:.3g}) written as a round cone")
 
     def world(self) -> None:
         from pxr import Gf, Sdf, UsdLux
@@ -303,6 +348,24 @@ class _BlenderConverter(StageConverter):
         if self.check_usd:
             self.result.usd_checks = usd_check(self.output)
         return self.result
+
+
+def cycles_pixel_filter(kind: str, width: float) -> tuple[str, float | None]:
+    """(``nasset:pixelFilter``, stddev in pixels or None) for Cycles' ``pixel_filter_type`` and ``filter_width`` (px).
+
+    Cycles tabulates its filters over [-width/2, width/2] and samples them separably: ``GAUSSIAN`` is
+    exp(-2 (6 x / width)^2), a Gaussian of standard deviation width / 12; ``BLACKMAN_HARRIS`` the
+    4-term window over that span, whose standard deviation (numerically 0.139 width) the Gaussian
+    takes; ``BOX`` a box (the renderer's is 1 px).
+    """
+    if kind == "GAUSSIAN":
+        return "gaussian", width / 12.0
+    if kind == "BLACKMAN_HARRIS":
+        x = np.linspace(-0.5, 0.5, 4001)
+        v = 2.0 * np.pi * (x + 0.5)
+        w = 0.35875 - 0.48829 * np.cos(v) + 0.14128 * np.cos(2 * v) - 0.01168 * np.cos(3 * v)
+        return "gaussian", width * float(np.sqrt(np.sum(w * x * x) / np.sum(w)))
+    return "box", None
 
 
 #: Principled BSDF inputs that UsdPreviewSurface cannot carry: (input, "off" value)
