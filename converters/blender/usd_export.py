@@ -23,7 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, StageConverter, parse_replace, report, usd_check  # noqa: F401
+from nasset_converters.mitsuba.usd_export import (  # noqa: F401
+    FOCAL_LENGTH_MM,
+    ConvertResult,
+    StageConverter,
+    TextureMap,
+    parse_replace,
+    report,
+    usd_check,
+)
 from nasset_sdk.errors import UsageError, error
 
 from . import Z_UP_TO_Y_UP
@@ -280,7 +288,7 @@ class _BlenderConverter(StageConverter):
 
     # -- materials ----------------------------------------------------------------------------
     def blender_material(self, mat, ob_name: str) -> str:
-        key = ("blender", mat.name if mat is not None else None)
+        key = ("blender", mat.name if mat is not None else None, self.looks_root)
         if key in self.materials:
             return self.materials[key]
         inputs, notes = map_material(mat)
@@ -293,13 +301,18 @@ class _BlenderConverter(StageConverter):
 
     # -- geometry -----------------------------------------------------------------------------
     def shapes(self) -> None:
-        from pxr import UsdGeom, UsdShade, Vt
+        """Meshes of the view layer (world space), then instances: objects placed by collection instances
+        (and other instancers) and linked duplicates (mesh objects sharing one mesh without modifiers) become
+        instanceable Xforms referencing one class prim ``/Prototypes/NAME`` per mesh (object space)."""
+        from .scene import has_particle_hair
 
-        from .scene import has_particle_hair, mesh_geometry
-
-        for ob in self.bscene.objects:
-            if ob.hide_render or ob.name in self.replace:
-                continue
+        bpy = self.bpy
+        objects = [ob for ob in bpy.context.view_layer.objects if not ob.hide_render and ob.name not in self.replace]
+        users: dict = {}
+        for ob in objects:
+            if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
+                users.setdefault(ob.data.name, []).append(ob)
+        for ob in objects:
             if ob.type == "CURVES":
                 self.warn(f"object {ob.name}: hair curves outside an asset are dropped (bake them: --replace {ob.name}=ASSET)")
                 continue
@@ -310,26 +323,87 @@ class _BlenderConverter(StageConverter):
                 continue
             if has_particle_hair(ob):
                 self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
-            try:
-                geo = mesh_geometry([ob])
-            except Exception:  # noqa: BLE001 - an empty mesh
-                self.warn(f"object {ob.name}: no faces: skipped")
+            if len(users.get(ob.data.name, ())) > 1:
+                self._instance(ob, np.array(ob.matrix_world, np.float64), ob.name, f"linked duplicate of mesh {ob.data.name}")
+            else:
+                self._mesh(ob, self._name(self.geometry_root, ob.name), local=False)
+        dg = bpy.context.evaluated_depsgraph_get()
+        skipped = set()
+        for inst in dg.object_instances:
+            if not inst.is_instance:
                 continue
-            path = self._name("/World/Geometry", ob.name)
-            mesh = UsdGeom.Mesh.Define(self.stage, path)
-            mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
-            mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
-            mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(geo.faces.ravel(), np.int32)))
-            mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-            mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.normals, np.float32)))
-            mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-            mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
-            mats = [s.material for s in ob.material_slots if s.material is not None]
-            if len(mats) > 1:
-                self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
-            mat_path = self.blender_material(mats[0] if mats else None, ob.name)
-            UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
-            self.record(path, f"object {ob.name} (mesh, {len(geo.faces)} triangles)")
+            ob, parent = inst.object.original, inst.parent.original if inst.parent is not None else None
+            if ob.type != "MESH" or (parent is not None and parent.name in self.replace):
+                if ob.type not in ("EMPTY", "CAMERA") and ob.name not in skipped:
+                    skipped.add(ob.name)
+                    self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (meshes are): skipped")
+                continue
+            self._instance(ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
+                           f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}")
+
+    def _instance(self, ob, matrix_world, name: str, what: str) -> None:
+        """An instanceable Xform (Blender world matrix ``matrix_world`` [4,4]) referencing the class prim of ``ob``'s
+        mesh (written once per mesh and material set, in object space)."""
+        from pxr import Sdf, Tf
+
+        mats = tuple(s.material.name if s.material else "" for s in ob.material_slots)
+        key = (ob.data.name, mats)
+        proto = self.prototypes.get(key)
+        if proto is None:
+            self.stage.CreateClassPrim("/Prototypes")  # abstract: rendered only through instances
+            proto = self._name("/Prototypes", Tf.MakeValidIdentifier(ob.data.name))
+            self.stage.CreateClassPrim(proto)
+            saved = (self.geometry_root, self.looks_root)
+            self.geometry_root, self.looks_root = proto, f"{proto}/Looks"
+            try:
+                self._mesh(ob, self._name(proto, ob.data.name), local=True)
+            finally:
+                self.geometry_root, self.looks_root = saved
+            self.prototypes[key] = proto
+            self.record(proto, f"mesh {ob.data.name} (prototype)")
+        path = self._name(self.geometry_root, name)
+        prim = self.stage.DefinePrim(path, "Xform")
+        prim.GetReferences().AddInternalReference(Sdf.Path(proto))
+        prim.SetInstanceable(True)
+        self._xform(prim, (_R4 @ matrix_world @ _R4.T).T)
+        self.record(path, what)
+
+    def _mesh(self, ob, path: str, *, local: bool) -> None:
+        """A UsdGeom.Mesh at ``path`` of the evaluated mesh object ``ob`` (world or object space, +Y up) with its
+        first material and, when that is textured, the active render UV map as faceVarying primvar ``st``."""
+        from pxr import Sdf, UsdGeom, UsdShade, Vt
+
+        from .scene import mesh_geometry
+
+        uvs: list = []
+        try:
+            geo = mesh_geometry([ob], local=local, uv_out=uvs)
+        except Exception:  # noqa: BLE001 - an empty mesh
+            self.warn(f"object {ob.name}: no faces: skipped")
+            return
+        mesh = UsdGeom.Mesh.Define(self.stage, path)
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(geo.faces.ravel(), np.int32)))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.normals, np.float32)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
+        mats = [s.material for s in ob.material_slots if s.material is not None]
+        if len(mats) > 1:
+            self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
+        mat_path = self.blender_material(mats[0] if mats else None, ob.name)
+        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+        if mat_path in self.textured_materials:
+            uv = uvs[0] if uvs else None
+            if uv is None:
+                self.warn(f"object {ob.name}: textured material but the mesh has no UV map: the texture's corner texel "
+                          "is used")
+            else:
+                pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                             UsdGeom.Tokens.faceVarying)
+                pv.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(uv.reshape(-1, 2), np.float32)))
+        self.record(path, f"object {ob.name} (mesh, {len(geo.faces)} triangles)")
 
     def run(self) -> ConvertResult:
         from pxr import Gf
@@ -370,7 +444,7 @@ def cycles_pixel_filter(kind: str, width: float) -> tuple[str, float | None]:
 
 #: Principled BSDF inputs that UsdPreviewSurface cannot carry: (input, "off" value)
 _DROPPED = (("Subsurface Weight", 0.0), ("Transmission Weight", 0.0), ("Coat Weight", 0.0), ("Sheen Weight", 0.0),
-            ("Anisotropic", 0.0), ("Emission Strength", 0.0), ("Thin Film Thickness", 0.0))
+            ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
 
 
 def map_material(mat) -> tuple[dict, list]:
@@ -388,9 +462,21 @@ def map_material(mat) -> tuple[dict, list]:
     notes = []
     if node.bl_idname == "ShaderNodeBsdfDiffuse":
         col, linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
-        notes += [f"material {mat.name}: linked Color dropped (its default used)"] if linked else []
-        return {"diffuseColor": col[:3], "roughness": 1.0, "metallic": 0.0, "useSpecularWorkflow": 1,
-                "specularColor": (0.0, 0.0, 0.0)}, notes
+        if linked:
+            col = image_texture(mat, node.inputs["Color"], notes) or col
+        rough, r_linked = _socket(node, "Roughness", 0.0)
+        if r_linked or rough > 0:
+            notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
+        return {"diffuseColor": col if isinstance(col, TextureMap) else col[:3], "roughness": 1.0, "metallic": 0.0,
+                "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}, notes
+    if node.bl_idname == "ShaderNodeEmission":
+        col, c_linked = _socket(node, "Color", (1.0, 1.0, 1.0, 1.0))
+        strength, s_linked = _socket(node, "Strength", 1.0)
+        if c_linked or s_linked:
+            notes.append(f"material {mat.name}: linked emission {'Color' if c_linked else 'Strength'} dropped (its "
+                         "default used)")
+        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+                "roughness": 1.0, "emissiveColor": tuple(float(c) * float(strength) for c in col[:3])}, notes
     if node.bl_idname != "ShaderNodeBsdfPrincipled":
         return grey, [f"material {mat.name}: {node.bl_idname} is not convertible (Principled BSDF, Diffuse BSDF are): grey"]
     vals = {}
@@ -398,8 +484,17 @@ def map_material(mat) -> tuple[dict, list]:
                           ("Specular IOR Level", 0.5), ("Alpha", 1.0), ("Normal", None)):
         v, linked = _socket(node, name, default)
         vals[name] = v
-        if linked:
+        if linked and name == "Base Color":
+            vals[name] = image_texture(mat, node.inputs[name], notes) or v
+        elif linked:
             notes.append(f"material {mat.name}: linked {name} dropped (its default value used)")
+    emission = None
+    e_strength, es_linked = _socket(node, "Emission Strength", 0.0)
+    e_color, ec_linked = _socket(node, "Emission Color", (1.0, 1.0, 1.0, 1.0))
+    if es_linked or ec_linked:
+        notes.append(f"material {mat.name}: linked Principled emission dropped")
+    elif e_strength > 0:
+        emission = tuple(float(c) * float(e_strength) for c in e_color[:3])
     for name, off in _DROPPED:
         v, linked = _socket(node, name, off)
         if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
@@ -407,7 +502,11 @@ def map_material(mat) -> tuple[dict, list]:
                          "bake the object into a neural asset)")
     if isinstance(vals["Alpha"], float) and vals["Alpha"] < 1.0:
         notes.append(f"material {mat.name}: Alpha {vals['Alpha']:.3g} dropped (opaque)")
-    inputs = {"diffuseColor": vals["Base Color"][:3], "roughness": float(vals["Roughness"]), "metallic": float(vals["Metallic"])}
+    base = vals["Base Color"]
+    inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": float(vals["Roughness"]),
+              "metallic": float(vals["Metallic"])}
+    if emission is not None:
+        inputs["emissiveColor"] = emission
     level = float(vals["Specular IOR Level"])
     if level <= 1e-6 and inputs["metallic"] <= 0.0:
         inputs.update(useSpecularWorkflow=1, specularColor=(0.0, 0.0, 0.0))
@@ -416,6 +515,48 @@ def map_material(mat) -> tuple[dict, list]:
         if abs(level - 0.5) > 1e-6:
             notes.append(f"material {mat.name}: Specular IOR Level {level:.3g} dropped (0.5 assumed)")
     return inputs, notes
+
+
+#: Blender colour spaces whose texels are linear values as stored (others are decoded from sRGB or warned)
+_LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
+#: Image Texture extension -> UsdUVTexture wrap mode
+_WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "black", "MIRROR": "mirror"}
+
+
+def image_texture(mat, socket, notes: list) -> TextureMap | None:
+    """A :class:`TextureMap` (linear texels, top row first) for an input ``socket`` fed by an Image Texture node's
+    Color output, else None with a note. Colour space: ``sRGB`` texels are decoded from sRGB, ``Non-Color`` and
+    linear spaces taken as stored; what the renderer does differently (closest/cubic interpolation, a linked
+    Vector, box/sphere projection) is noted per texture."""
+    from nasset_reference_renderer.textures import srgb_to_linear
+
+    link = socket.links[0]
+    tex = link.from_node
+    if tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or link.from_socket.name != "Color":
+        notes.append(f"material {mat.name}: {socket.name} from {tex.bl_idname}.{link.from_socket.name} dropped (Image "
+                     "Texture Color outputs are converted; its default value used)")
+        return None
+    img = tex.image
+    w, h = img.size
+    if w * h == 0 or img.channels < 1:
+        notes.append(f"material {mat.name}: image {img.name} has no pixels (missing file?): {socket.name} default used")
+        return None
+    px = np.array(img.pixels[:], np.float64).reshape(h, w, img.channels)[::-1]  # Blender rows bottom-up
+    rgb = np.repeat(px[..., :1], 3, -1) if img.channels < 3 else px[..., :3]
+    space = img.colorspace_settings.name
+    what = f"image {img.name} ({w}x{h}, {space})"
+    if space == "sRGB":
+        rgb = srgb_to_linear(np.clip(rgb, 0.0, 1.0))
+    elif space not in _LINEAR_SPACES:
+        notes.append(f"material {mat.name}: image {img.name} in colour space {space} taken as linear")
+    if tex.interpolation != "Linear":
+        notes.append(f"material {mat.name}: image {img.name}: {tex.interpolation} interpolation looked up bilinearly")
+    if tex.projection != "FLAT":
+        notes.append(f"material {mat.name}: image {img.name}: {tex.projection} projection dropped (UV mapped)")
+    if tex.inputs["Vector"].is_linked:
+        notes.append(f"material {mat.name}: image {img.name}: linked Vector dropped (the active render UV map used)")
+    rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
+    return TextureMap(rgb, what, wrap=_WRAP.get(tex.extension, "repeat"))
 
 
 def _check_replace(bpy, rep: dict, file: str) -> None:
