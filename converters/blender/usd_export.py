@@ -40,7 +40,7 @@ _R4 = np.eye(4)
 _R4[:3, :3] = Z_UP_TO_Y_UP
 #: dome local axes (rows) in USD world that make the renderer's lat-long lookup equal Blender's
 #: equirectangular one (spec/bake-blender.md#scene-conversion)
-DOME_ROWS = np.array([[0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+DOME_ROWS = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
 def _row(ob, *, unit: bool = True) -> np.ndarray:
@@ -265,6 +265,7 @@ class _BlenderConverter(StageConverter):
         img = src.image
         wid, hei = img.size
         px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
+        px = _upsampled(px) if src.interpolation != "Closest" else px
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         tex = tex_dir / f"{Tf.MakeValidIdentifier(world.name)}.exr"
@@ -277,7 +278,11 @@ class _BlenderConverter(StageConverter):
         self._xform(light.GetPrim(), DOME_ROWS)
         self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
-        self.warn(f"world {world.name}: environment looked up with nearest texels by the reference renderer (Cycles: linear)")
+        if src.interpolation not in ("Linear", "Closest"):
+            self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")
+        if px.shape[:2] == (hei, wid) and src.interpolation != "Closest":
+            self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
+                      "texels by the reference renderer (Cycles: linear)")
 
     def _dome_constant(self, rgb, name) -> None:
         from pxr import UsdLux
@@ -422,6 +427,24 @@ class _BlenderConverter(StageConverter):
         if self.check_usd:
             self.result.usd_checks = usd_check(self.output)
         return self.result
+
+
+def _upsampled(px: np.ndarray) -> np.ndarray:
+    """A lat-long map [H, W, 3] resampled bilinearly (periodic in u, clamped at the poles) at ENVMAP_UPSAMPLE x its
+    size, or less so that it stays within ENVMAP_MAX_PIXELS; unchanged when even 2x is too large. The renderer's
+    nearest-texel lookup of the result then follows Cycles' linear interpolation."""
+    from nasset_converters.mitsuba.usd_export import ENVMAP_MAX_PIXELS, ENVMAP_UPSAMPLE
+    from nasset_reference_renderer.textures import ImageTexture
+
+    h, w = px.shape[:2]
+    f = ENVMAP_UPSAMPLE
+    while f > 1 and h * w * f * f > ENVMAP_MAX_PIXELS:
+        f //= 2
+    if f == 1:
+        return px
+    t, s = np.meshgrid(1.0 - (np.arange(h * f) + 0.5) / (h * f), (np.arange(w * f) + 0.5) / (w * f), indexing="ij")
+    tex = ImageTexture(px, wrap_s="repeat", wrap_t="clamp")
+    return tex.sample(np.stack([s.ravel(), t.ravel()], 1)).reshape(h * f, w * f, 3).astype(np.float32)
 
 
 def cycles_pixel_filter(kind: str, width: float) -> tuple[str, float | None]:

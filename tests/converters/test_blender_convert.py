@@ -83,7 +83,14 @@ def test_point_spot_lights_and_materials(tmp_path):
     L = 100.0 / (4 * math.pi ** 2 * 0.01)  # sphere light radiance P / (4 pi^2 r^2)
     assert np.isclose(_attr(stage, "/World/Lights/Bulb", "inputs:intensity"), L, rtol=1e-5)
     assert np.isclose(_attr(stage, "/World/Lights/Bulb", "inputs:radius"), 0.1, rtol=1e-6)
-    assert any("spot" in w and "ShapingAPI" in w for w in res.warnings)
+    # the spot of radius 0.1 becomes a point spot (the renderer shapes point lights only), warned
+    assert any("Spot" in w and "point spot" in w for w in res.warnings)
+    spot = stage.GetPrimAtPath("/World/Lights/Spot")
+    assert spot.GetAttribute("treatAsPoint").Get() and np.isclose(spot.GetAttribute("inputs:intensity").Get(),
+                                                                   100.0 / (4 * math.pi), rtol=1e-5)
+    assert spot.GetAttribute("nasset:shaping:falloff").Get() == "smoothstep"
+    assert np.isclose(spot.GetAttribute("inputs:shaping:cone:angle").Get(), 22.5, rtol=1e-5)  # spot_size 45 deg / 2
+    assert not stage.GetPrimAtPath("/World/Lights/Bulb").GetAttribute("nasset:cameraVisibility").Get()
     from pxr import UsdGeom
 
     pos = np.array(UsdGeom.Xformable(stage.GetPrimAtPath("/World/Lights/Bulb")).ComputeLocalToWorldTransform(0))[3, :3]
@@ -97,14 +104,16 @@ def test_point_spot_lights_and_materials(tmp_path):
 
 
 def test_dome_rotation_maps_blender_equirect_to_renderer_latlong():
-    """A Blender world direction D (Z up) has equirect u = atan2(D.y, -D.x)/2pi + 1/2 and image row
-    v = acos(D.z)/pi from the top; the renderer's lookup through the written dome rotation agrees."""
+    """A Blender world direction D (Z up) has equirect u = 1/2 - atan2(D.y, D.x)/2pi (+X at the image's centre
+    column, +Y a quarter to its left) and image row v = acos(D.z)/pi from the top, as Cycles renders it (the
+    fidelity suite's hdri scene: with the previous, mirrored mapping its mean green was 1.49x Cycles'); the
+    renderer's lookup through the written dome rotation agrees."""
     from nasset_reference_renderer.lights import DomeLight
 
     rng = np.random.default_rng(3)
     D = rng.normal(size=(64, 3))
     D /= np.linalg.norm(D, axis=1, keepdims=True)
-    u_b = np.mod(np.arctan2(D[:, 1], -D[:, 0]) / (2 * np.pi) + 0.5, 1.0)
+    u_b = np.mod(0.5 - np.arctan2(D[:, 1], D[:, 0]) / (2 * np.pi), 1.0)
     v_b = np.arccos(D[:, 2]) / np.pi
     d_world = np.stack([D[:, 0], D[:, 2], -D[:, 1]], 1)
     R = DOME_ROWS[:3, :3]
