@@ -429,21 +429,27 @@ class _BlenderConverter(StageConverter):
         return self.result
 
 
-def _upsampled(px: np.ndarray) -> np.ndarray:
-    """A lat-long map [H, W, 3] resampled bilinearly (periodic in u, clamped at the poles) at ENVMAP_UPSAMPLE x its
-    size, or less so that it stays within ENVMAP_MAX_PIXELS; unchanged when even 2x is too large. The renderer's
-    nearest-texel lookup of the result then follows Cycles' linear interpolation."""
+#: image textures stored in sRGB are resampled to at most this many texels (see :func:`image_texture`)
+TEXTURE_MAX_PIXELS = 1 << 20
+
+
+def _upsampled(px: np.ndarray, wrap_s: str = "repeat", wrap_t: str = "clamp", max_pixels: int | None = None) -> np.ndarray:
+    """An image [H, W, 3] (row 0 at the top) resampled bilinearly with these wrap modes at ENVMAP_UPSAMPLE x its
+    size, or less so that it stays within ``max_pixels`` (default ENVMAP_MAX_PIXELS); unchanged when even 2x is too
+    large. For a lat-long map (periodic in u, clamped at the poles) the renderer's nearest-texel lookup of the
+    result then follows Cycles' linear interpolation."""
     from nasset_converters.mitsuba.usd_export import ENVMAP_MAX_PIXELS, ENVMAP_UPSAMPLE
     from nasset_reference_renderer.textures import ImageTexture
 
     h, w = px.shape[:2]
+    limit = ENVMAP_MAX_PIXELS if max_pixels is None else max_pixels
     f = ENVMAP_UPSAMPLE
-    while f > 1 and h * w * f * f > ENVMAP_MAX_PIXELS:
+    while f > 1 and h * w * f * f > limit:
         f //= 2
     if f == 1:
         return px
     t, s = np.meshgrid(1.0 - (np.arange(h * f) + 0.5) / (h * f), (np.arange(w * f) + 0.5) / (w * f), indexing="ij")
-    tex = ImageTexture(px, wrap_s="repeat", wrap_t="clamp")
+    tex = ImageTexture(px, wrap_s=wrap_s, wrap_t=wrap_t)
     return tex.sample(np.stack([s.ravel(), t.ravel()], 1)).reshape(h * f, w * f, 3).astype(np.float32)
 
 
@@ -537,7 +543,42 @@ def map_material(mat) -> tuple[dict, list]:
         inputs["ior"] = float(vals["IOR"])
         if abs(level - 0.5) > 1e-6:
             notes.append(f"material {mat.name}: Specular IOR Level {level:.3g} dropped (0.5 assumed)")
+        if inputs["metallic"] <= 0.0:
+            k = principled_diffuse_scale(inputs["roughness"], inputs["ior"])
+            inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], k)
+            notes.append(f"material {mat.name}: Principled base colour x {k:.3f} for the specular layer's albedo "
+                         "(Cycles layers the lobes, UsdPreviewSurface adds them)")
     return inputs, notes
+
+
+def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float:
+    """Factor on a dielectric Principled BSDF's base colour for UsdPreviewSurface: Cycles attenuates the diffuse
+    layer by the specular layer's albedo, UsdPreviewSurface adds the two lobes. Returns 1 - the cosine-weighted
+    mean albedo of the renderer's own specular lobe (GGX, alpha = roughness^2, Schlick F0 of ``ior``), by
+    stratified VNDF quadrature over ``n`` view angles x ``n`` x ``n`` samples (0.947 at roughness 0.5, IOR 1.5)."""
+    from nasset_reference_renderer.bsdf import MIN_ALPHA, ggx_lambda, ggx_sample_vndf, reflect
+
+    f0 = ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2
+    alpha = max(float(roughness) ** 2, MIN_ALPHA)
+    g = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    albedo = 0.0
+    for mu in g:
+        wo = np.tile([math.sqrt(1.0 - mu * mu), 0.0, mu], (len(u), 1))
+        h = ggx_sample_vndf(wo, alpha, u)
+        wi = reflect(wo, h)
+        up = wi[:, 2] > 0
+        fres = f0 + (1.0 - f0) * (1.0 - np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)) ** 5
+        lo, li = ggx_lambda(wo, alpha), ggx_lambda(np.where(up[:, None], wi, [[0.0, 0.0, 1.0]]), alpha)
+        albedo += 2.0 * mu * float(np.mean(np.where(up, fres * (1.0 + lo) / (1.0 + lo + li), 0.0))) / n  # F G2/G1
+    return float(np.clip(1.0 - albedo, 0.0, 1.0))
+
+
+def _scaled(color, k: float):
+    """A colour [3] or TextureMap times ``k``."""
+    if isinstance(color, TextureMap):
+        return TextureMap(color.image * k, color.what, color.scale_bias, color.wrap)
+    return tuple(float(c) * k for c in color)
 
 
 #: Blender colour spaces whose texels are linear values as stored (others are decoded from sRGB or warned)
@@ -568,7 +609,12 @@ def image_texture(mat, socket, notes: list) -> TextureMap | None:
     rgb = np.repeat(px[..., :1], 3, -1) if img.channels < 3 else px[..., :3]
     space = img.colorspace_settings.name
     what = f"image {img.name} ({w}x{h}, {space})"
+    wrap = _WRAP.get(tex.extension, "repeat")
     if space == "sRGB":
+        # Cycles interpolates 8-bit sRGB texels before decoding them: resampled finer in sRGB, then decoded, the
+        # renderer's bilinear lookup of linear texels follows that
+        if not img.is_float and tex.interpolation == "Linear":
+            rgb = _upsampled(np.clip(rgb, 0.0, 1.0), wrap, wrap, TEXTURE_MAX_PIXELS)
         rgb = srgb_to_linear(np.clip(rgb, 0.0, 1.0))
     elif space not in _LINEAR_SPACES:
         notes.append(f"material {mat.name}: image {img.name} in colour space {space} taken as linear")
@@ -579,7 +625,7 @@ def image_texture(mat, socket, notes: list) -> TextureMap | None:
     if tex.inputs["Vector"].is_linked:
         notes.append(f"material {mat.name}: image {img.name}: linked Vector dropped (the active render UV map used)")
     rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
-    return TextureMap(rgb, what, wrap=_WRAP.get(tex.extension, "repeat"))
+    return TextureMap(rgb, what, wrap=wrap)
 
 
 def _check_replace(bpy, rep: dict, file: str) -> None:

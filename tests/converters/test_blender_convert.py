@@ -13,7 +13,13 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 
 from nasset_converters.blender.examples import build_example, write_example_blend  # noqa: E402
-from nasset_converters.blender.usd_export import DOME_ROWS, convert_scene, map_material  # noqa: E402
+from nasset_converters.blender.usd_export import (  # noqa: E402
+    DOME_ROWS,
+    convert_scene,
+    cycles_pixel_filter,
+    map_material,
+    principled_diffuse_scale,
+)
 from nasset_sdk.errors import NassetError  # noqa: E402
 
 
@@ -97,7 +103,9 @@ def test_point_spot_lights_and_materials(tmp_path):
     assert np.allclose(pos, [1.0, 3.0, -2.0])  # (x, z, -y)
     mat = bpy.data.materials["SubsurfaceSkin"]
     inputs, notes = map_material(mat)
-    assert np.allclose(inputs["diffuseColor"], (0.9, 0.5, 0.3)) and np.isclose(inputs["roughness"], 0.35)
+    k = principled_diffuse_scale(0.35, 1.5)
+    assert np.allclose(inputs["diffuseColor"], np.array((0.9, 0.5, 0.3)) * k) and np.isclose(inputs["roughness"], 0.35)
+    assert any("x 0." in n and "albedo" in n for n in notes)
     assert any("Subsurface Weight" in n for n in notes)
     ground, notes = map_material(bpy.data.materials["GroundGrey"])
     assert ground["useSpecularWorkflow"] == 1 and tuple(ground["specularColor"]) == (0.0, 0.0, 0.0) and not notes
@@ -133,3 +141,26 @@ def test_replace_and_errors(tmp_path):
     with pytest.raises(NassetError) as e:
         convert_scene(tmp_path / "none.blend", tmp_path / "s.usda")
     assert e.value.code == "CONVERT_SCENE_MISSING"
+
+
+def test_principled_diffuse_scale_against_smooth_limit():
+    """A smooth lobe (alpha at the renderer's minimum) has the cosine-weighted mean Schlick reflectance as albedo:
+    2 int_0^1 (f0 + (1 - f0)(1 - mu)^5) mu dmu = f0 + (1 - f0) / 21; rougher lobes lose albedo (G2 < G1)."""
+    f0 = 0.04
+    assert principled_diffuse_scale(0.0, 1.5) == pytest.approx(1.0 - (f0 + (1 - f0) / 21.0), abs=1e-3)
+    ks = [principled_diffuse_scale(r, 1.5) for r in (0.0, 0.3, 0.6, 1.0)]
+    assert all(a < b for a, b in zip(ks, ks[1:], strict=False)) and ks[-1] < 1.0
+
+
+def test_cycles_pixel_filter_widths():
+    """Cycles' Gaussian exp(-2 (6x/w)^2) has stddev w/12; the Blackman-Harris window over [-w/2, w/2] has a
+    stddev of 0.1385 w (numerical integral of the 4-term window, independent of the converter's grid)."""
+    assert cycles_pixel_filter("GAUSSIAN", 1.5) == ("gaussian", pytest.approx(0.125))
+    from scipy.integrate import quad
+
+    c = (0.35875, -0.48829, 0.14128, -0.01168)
+    bh = lambda x: sum(a * math.cos(2 * math.pi * k * (x + 0.5)) for k, a in enumerate(c))  # noqa: E731
+    sd = math.sqrt(quad(lambda x: bh(x) * x * x, -0.5, 0.5)[0] / quad(bh, -0.5, 0.5)[0])
+    kind, got = cycles_pixel_filter("BLACKMAN_HARRIS", 2.0)
+    assert kind == "gaussian" and got == pytest.approx(2.0 * sd, rel=1e-4)
+    assert cycles_pixel_filter("BOX", 1.0) == ("box", None)
