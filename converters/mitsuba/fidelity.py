@@ -294,10 +294,13 @@ NOTES = """
 - A PSNR below the seed-to-seed PSNR with MSE / noise near 1 is the reference renderer being noisier
   than Mitsuba at equal spp, not a conversion error (defaults: Gaussian filter drawn by importance
   sampling, and Russian roulette from depth 3).
-- Residuals: mesh_emitter is 0.9 % dark with MSE / noise 1.7 (the renderer's light-sampled and
-  BSDF-only estimates agree within 0.3 %, so the difference is in the scene, likely the tessellated
-  ball next to the emitter); envmap keeps MSE / noise 1.7 from the resampled map (8x, nearest texels)
-  against Mitsuba's bilinear lookup.
+- mesh_emitter was 0.9 % dark with MSE / noise 1.7: the renderer's shadow rays toward an emitting mesh left the
+  offset origin along the direction sampled from the unoffset point, so at grazing angles they met the emitter's
+  own plane before their end and were shadowed by the light itself (a floor point 3 m beside a panel 1 m up
+  got 0 instead of its irradiance). They are now aimed at the light sample from the offset origin
+  (spec/renderer.md#ray-offsets).
+- Residual: envmap keeps MSE / noise 1.7 from the resampled map (8x, nearest texels) against Mitsuba's
+  bilinear lookup.
 - Before these conversions the issue measured (ratio, PSNR vs seed-to-seed): 8-bit textures 1.8-2.0
   (10.2 vs 35.4 dB), spot 4.5-5.3 (9.4 vs 37.2), instances dropped 1.07-1.19 (24.5 vs 42.0),
   one-sided back faces 0.88-2.01 (15.9 vs 36.4), mesh emitter 1.02 (24.3 vs 37.6).
