@@ -69,6 +69,7 @@ class _BlenderConverter(StageConverter):
         super().__init__(None, None, scene_path, output, replace, check_usd)
         self.bpy = bpy
         self.bscene = bpy.context.scene
+        self.emissive_materials: set[str] = set()
 
     # -- camera -----------------------------------------------------------------------------
     def camera(self) -> None:
@@ -302,6 +303,8 @@ class _BlenderConverter(StageConverter):
         path = self._write_material(mat.name if mat is not None else "Default", inputs)
         self.record(path, f"material {mat.name if mat is not None else '(none)'}")
         self.materials[key] = path
+        if max(inputs.get("emissiveColor", (0.0,))) > 0:
+            self.emissive_materials.add(path)
         return path
 
     # -- geometry -----------------------------------------------------------------------------
@@ -378,6 +381,8 @@ class _BlenderConverter(StageConverter):
         first material and, when that is textured, the active render UV map as faceVarying primvar ``st``."""
         from pxr import Sdf, UsdGeom, UsdShade, Vt
 
+        from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
+
         from .scene import mesh_geometry
 
         uvs: list = []
@@ -399,6 +404,10 @@ class _BlenderConverter(StageConverter):
             self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
         mat_path = self.blender_material(mats[0] if mats else None, ob.name)
         UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+        if mat_path in self.emissive_materials and len(geo.faces) > MAX_MESH_LIGHT_TRIANGLES:
+            self.warn(f"object {ob.name}: emissive mesh of {len(geo.faces)} triangles: the reference renderer "
+                      f"light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} triangles only; this one is "
+                      "reached by BSDF rays only (right mean, more noise)")
         if mat_path in self.textured_materials:
             uv = uvs[0] if uvs else None
             if uv is None:

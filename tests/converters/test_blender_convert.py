@@ -164,3 +164,37 @@ def test_cycles_pixel_filter_widths():
     kind, got = cycles_pixel_filter("BLACKMAN_HARRIS", 2.0)
     assert kind == "gaussian" and got == pytest.approx(2.0 * sd, rel=1e-4)
     assert cycles_pixel_filter("BOX", 1.0) == ("box", None)
+
+
+def test_instances_and_linked_duplicates_become_instanceable_prims(tmp_path):
+    """The fidelity suite's instances scene: 3 collection instances of (Head, Body) and 2 objects sharing the
+    Pebble mesh -> 3 class prototypes and 8 instanceable Xforms; the excluded collection's own objects are not
+    written as plain meshes."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("instances", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    protos = stage.GetPrimAtPath("/Prototypes").GetAllChildren()  # class prims: abstract
+    assert len(protos) == 3 and all(p.IsAbstract() for p in protos), protos
+    inst = [p for p in stage.GetPrimAtPath("/World/Geometry").GetChildren() if p.IsInstance()]
+    assert len(inst) == 8
+    plain = [p.GetName() for p in stage.GetPrimAtPath("/World/Geometry").GetChildren() if not p.IsInstance()]
+    assert plain == ["Floor"], plain
+
+
+def test_emissive_mesh_too_large_to_light_sample_is_warned(tmp_path):
+    from nasset_converters.blender.fidelity import _material
+
+    build_example("blender-surface")
+    glow = _material(bpy, "Glow", "emission", **{"Color": (1.0, 1.0, 1.0), "Strength": 3.0})
+    for op, name, kw in (("cube", "SmallLamp", {"size": 0.2}), ("uv_sphere", "BigLamp", {"radius": 0.1})):
+        getattr(bpy.ops.mesh, f"primitive_{op}_add")(location=(1.0, 1.0, 1.0), **kw)
+        bpy.context.active_object.name = name
+        bpy.context.active_object.data.materials.append(glow)
+    blend = tmp_path / "lamps.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), check_existing=False)
+    res = convert_scene(blend, tmp_path / "s.usda")
+    assert [w for w in res.warnings if "BigLamp" in w and "light-samples" in w]
+    assert not [w for w in res.warnings if "SmallLamp" in w]

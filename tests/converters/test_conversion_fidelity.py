@@ -32,3 +32,15 @@ def test_psnr_against_hand_value():
     ref[0, 0] = 2.0  # peak 2
     img = ref + 0.1  # MSE 0.01
     assert psnr(img, ref) == pytest.approx(10 * np.log10(4 / 0.01))
+
+
+def test_write_section_replaces_only_its_own_section(tmp_path):
+    from nasset_converters.mitsuba.fidelity import write_section
+
+    doc = tmp_path / "f.md"
+    doc.write_text("# T\n\nintro\n\n## A\n\nold a\n\n## B\n\nold b\n")
+    write_section(doc, "## A", "new a\n")
+    assert doc.read_text() == "# T\n\nintro\n\n## A\n\nnew a\n\n## B\n\nold b\n"
+    write_section(doc, "## B", "new b")
+    write_section(doc, "## C", "c\n")
+    assert doc.read_text() == "# T\n\nintro\n\n## A\n\nnew a\n\n## B\n\nnew b\n\n## C\n\nc\n"
