@@ -1,8 +1,10 @@
-"""``nasset convert-scene SCENE.blend``: a Blender scene (camera, lights, plain meshes) -> a USD stage.
+"""``nasset convert-scene SCENE.blend``: a Blender scene (camera, lights, meshes, instances) -> a USD stage.
 
 The same stage layout as the Mitsuba converter (converters/mitsuba/usd_export.py, whose stage
 writer this reuses): ``/World/Geometry`` meshes bound to ``UsdPreviewSurface`` materials in
-``/World/Looks``, ``/World/Lights``, one camera, and one NeuralAsset reference per ``--replace
+``/World/Looks`` (Image Texture nodes as ``UsdUVTexture``), instanceable prims of ``/Prototypes``
+class prims for collection instances and linked duplicates, ``/World/Lights``, one camera, render
+settings (``nasset:maxDepth``, ``nasset:pixelFilter``), and one NeuralAsset reference per ``--replace
 OBJECT[,OBJECT]=ASSET`` in ``/World/Assets`` in place of those objects. The mapping table is in
 spec/bake-blender.md#scene-conversion; everything not converted exactly is a warning.
 
@@ -11,9 +13,12 @@ Conventions: Blender world (+Z up) -> USD (+Y up) by :data:`nasset_converters.bl
 suns, spots and area lights look / emit down local -Z like USD's); Blender light units -> the
 renderer's: sun ``strength`` = irradiance (DistantLight intensity, ``angle`` = Blender's angular
 diameter); point/spot of power P and radius r -> SphereLight radiance P / (4 pi^2 r^2) (a point
-light of intensity P / (4 pi) W/sr when r = 0); area of power P and area A -> RectLight radiance
-P / (pi A); world Background colour x strength -> DomeLight (an Environment Texture becomes a
-lat-long OpenEXR with Blender's equirectangular orientation).
+light of intensity P / (4 pi) W/sr when r = 0; a spot is a point light with Cycles' cone,
+``nasset:shaping:falloff = smoothstep``); area of power P and area A -> RectLight radiance
+P / (pi A); point and area lights hidden from camera rays as in Cycles; world Background colour
+x strength -> DomeLight (an Environment Texture becomes a
+lat-long OpenEXR with Cycles' equirectangular orientation). Every choice here is measured against
+Cycles by converters/blender/fidelity.py (docs/conversion-fidelity.md).
 """
 
 from __future__ import annotations
