@@ -346,7 +346,15 @@ class _BlenderConverter(StageConverter):
             if not inst.is_instance:
                 continue
             ob, parent = inst.object.original, inst.parent.original if inst.parent is not None else None
-            if ob.type != "MESH" or (parent is not None and parent.name in self.replace):
+            if parent is not None and parent.name in self.replace:
+                continue  # the asset stands in for the instancer and what it places
+            if ob.name in self.replace:
+                if ("replaced", ob.name) not in skipped:
+                    skipped.add(("replaced", ob.name))
+                    self.warn(f"object {ob.name}: its instances are not written (--replace places the asset once, "
+                              "in world space)")
+                continue
+            if ob.type != "MESH":
                 if ob.type not in ("EMPTY", "CAMERA") and ob.name not in skipped:
                     skipped.add(ob.name)
                     self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (meshes are): skipped")

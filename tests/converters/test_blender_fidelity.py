@@ -3,7 +3,7 @@ converted, by the reference renderer, at 32x32 and 32 spp (the full-size table i
 
 Bounds as in tests/converters/test_conversion_fidelity.py: the mean within 3 % per channel (2 % is the
 target at full size) and the MSE against Cycles at most 1.4x what the two images' noise explains
-(measured 0.6-1.3 here). Measured on the converter before this suite: textures ratio ~2 (linked
+(measured 0.6-1.2 here). Measured on the converter before this suite: textures ratio ~2 (linked
 textures dropped), spot 0.88 (cone ignored), instances 1.04 (collection instances dropped), mesh_emitter
 0 (Emission shader grey), hdri green 1.49 (mirrored dome), render_settings 1.20 (depth 5 instead of
 max bounces + 1), area_lights 1.23 (light surfaces seen by the camera): each fails.
