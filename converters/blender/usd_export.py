@@ -271,7 +271,8 @@ class _BlenderConverter(StageConverter):
         img = src.image
         wid, hei = img.size
         px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
-        px = _upsampled(px) if src.interpolation != "Closest" else px
+        # coarse maps made ENVMAP_MIN_WIDTH wide: at 8x, a 16 x 8 map's nearest texels still showed as steps
+        px = _upsampled(px, min_width=ENVMAP_MIN_WIDTH) if src.interpolation != "Closest" else px
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         tex = tex_dir / f"{Tf.MakeValidIdentifier(world.name)}.exr"
@@ -453,19 +454,25 @@ class _BlenderConverter(StageConverter):
 
 #: image textures stored in sRGB are resampled to at most this many texels (see :func:`image_texture`)
 TEXTURE_MAX_PIXELS = 1 << 20
+#: a resampled environment map is made at least this wide (within ENVMAP_MAX_PIXELS)
+ENVMAP_MIN_WIDTH = 1024
 
 
-def _upsampled(px: np.ndarray, wrap_s: str = "repeat", wrap_t: str = "clamp", max_pixels: int | None = None) -> np.ndarray:
+def _upsampled(px: np.ndarray, wrap_s: str = "repeat", wrap_t: str = "clamp", max_pixels: int | None = None,
+               min_width: int = 0) -> np.ndarray:
     """An image [H, W, 3] (row 0 at the top) resampled bilinearly with these wrap modes at ENVMAP_UPSAMPLE x its
-    size, or less so that it stays within ``max_pixels`` (default ENVMAP_MAX_PIXELS); unchanged when even 2x is too
-    large. For a lat-long map (periodic in u, clamped at the poles) the renderer's nearest-texel lookup of the
-    result then follows Cycles' linear interpolation."""
+    size (more, by powers of two, up to ``min_width`` texels wide), or less so that it stays within
+    ``max_pixels`` (default ENVMAP_MAX_PIXELS); unchanged when even 2x is too large. For a lat-long map
+    (periodic in u, clamped at the poles) the renderer's nearest-texel lookup of the result then follows
+    Cycles' linear interpolation."""
     from nasset_converters.mitsuba.usd_export import ENVMAP_MAX_PIXELS, ENVMAP_UPSAMPLE
     from nasset_reference_renderer.textures import ImageTexture
 
     h, w = px.shape[:2]
     limit = ENVMAP_MAX_PIXELS if max_pixels is None else max_pixels
     f = ENVMAP_UPSAMPLE
+    while w * f < min_width:
+        f *= 2
     while f > 1 and h * w * f * f > limit:
         f //= 2
     if f == 1:
