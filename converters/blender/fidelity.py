@@ -367,7 +367,8 @@ NOTES = """
 - Measures as in the Mitsuba section, against Cycles (CPU, box filter 1 px unless the scene sets one, no
   clamping, "filter glossy" off; seed 1, and seed 2 for the seed-to-seed PSNR). Cycles is less noisy than
   the reference renderer at equal spp (light tree, blue-noise sampling): the PSNR gap to the seed-to-seed
-  PSNR is that noise wherever MSE / noise is near 1 (mesh_emitter: 51 vs 63 dB at MSE / noise 0.9).
+  PSNR is that noise wherever MSE / noise is near 1 (mesh_emitter: 51 vs 63 dB at MSE / noise 0.9); the
+  "PSNR at Cycles' noise" column takes it out and is the one to read against the seed-to-seed PSNR.
 - Measured on Blender 5.0 and used by the converter: Cycles does not show point, spot and area light
   surfaces to camera rays (`nasset:cameraVisibility = false`); a spot's intensity is P / (4 pi) inside its
   cone with a smoothstep edge in cos(theta) and no extra cosine; 8-bit sRGB textures are interpolated
