@@ -254,7 +254,8 @@ def compare(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray)
     noise_ratio = mse / max(noise, 1e-300)
     # the MSE with the reference renderer's own noise replaced by the source's (half the seed-to-seed MSE): the
     # PSNR it would reach at the source's noise level, comparable with psnr_seed (equal for a faithful conversion)
-    mse_eq = max(mse - var + seed_mse / 2.0, 1e-300)
+    # (at least half the seed-to-seed MSE: where the variance estimate exceeds the MSE the excess is noise too)
+    mse_eq = max(mse - var + seed_mse / 2.0, seed_mse / 2.0, 1e-300)
     psnr_eq = 10.0 * math.log10(max(float(np.max(a)), 1e-30) ** 2 / mse_eq)
     return {"ratio": ratio.tolist(), "psnr": psnr(out, a), "psnr_seed": psnr(b, a), "noise_ratio": noise_ratio,
             "psnr_eq": psnr_eq, "images": (a, b, out)}
@@ -263,7 +264,8 @@ def compare(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray)
 def table(results: dict, scenes: dict | None = None, source: str = "Mitsuba") -> str:
     """Markdown table of ``measure`` results keyed by scene name (``scenes``: their FidelityScenes, default ours)."""
     scenes = SCENES if scenes is None else scenes
-    rows = [f"| scene | what | ratio R / G / B | PSNR (dB) | {source} seed-to-seed PSNR (dB) | PSNR at {source}'s noise (dB) "
+    owner = source + ("'" if source.endswith("s") else "'s")
+    rows = [f"| scene | what | ratio R / G / B | PSNR (dB) | {source} seed-to-seed PSNR (dB) | PSNR at {owner} noise (dB) "
             "| MSE / noise |", "|---|---|---|---|---|---|---|"]
     for name, r in results.items():
         ratio = " / ".join(f"{x:.3f}" for x in r["ratio"])
