@@ -24,6 +24,20 @@ from .shaders import NeuralShading
 from .shaders.common import max3, unique
 
 
+def aim_shadow(x, xo, wi, dist, eps):
+    """Shadow ray from the offset origin ``xo`` [n,3] toward the light sample at ``x + wi dist`` (``x`` the
+    shading point, ``dist`` [n], inf for lights at infinity): (direction [n,3], tmax [n]) per
+    spec/renderer.md#ray-offsets. Aimed at the sample point itself, so that the ray meets an emitting mesh
+    exactly at its end: along ``wi`` from ``xo`` it would meet the mesh's plane ``offset / cos`` early at grazing
+    angles and be shadowed by the light itself."""
+    finite = np.isfinite(dist)
+    q = x + wi * np.where(finite, dist, 0.0)[:, None]
+    v = q - xo
+    d2 = np.sqrt(np.maximum(dot(v, v), 1e-300))
+    d = np.where(finite[:, None], v / d2[:, None], wi)
+    return d, np.where(finite, d2 * (1 - 1e-7) - 2 * eps, np.inf)
+
+
 @dataclass
 class RenderSettings:
     spp: int = 16
@@ -179,7 +193,7 @@ class PathIntegrator:
                 light_hit = np.full(len(idx), -1)
                 le_hit = np.zeros((len(idx), 3))
                 for k, light in enumerate(lights):
-                    if light.area:
+                    if light.area and (depth > 0 or light.camera_visible):
                         tl, le = light.intersect(o, d)
                         closer = tl < t_hit
                         t_hit[closer] = tl[closer]
@@ -293,8 +307,8 @@ class PathIntegrator:
             s, c = s[nz], c[nz]
             if not len(s):
                 continue
-            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * self.eps, np.inf)
-            vis = ~self.occluded(xo[s], wi[s], tmax)
+            d_shadow, tmax = aim_shadow(x[s], xo[s], wi[s], dist[s], self.eps)
+            vis = ~self.occluded(xo[s], d_shadow, tmax)
             L[ridx[s[vis]]] += c[vis]  # s holds each ray once: no repeated indices
         cont = np.nonzero(indirect)[0]
         if not len(cont):

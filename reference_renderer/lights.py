@@ -11,7 +11,8 @@ multiplied by ``color * 2^exposure``):
   subtends); radius 0 (or ``treatAsPoint``) is a point light of radiant intensity I = intensity
   (E = I / d^2). With ``UsdLux.ShapingAPI`` a point light is a spot (spec/renderer.md#spot-lights):
   I(w) = intensity * falloff(theta), theta the angle between w and the prim's -Z axis, falloff 1 up
-  to the beam angle cone * (1 - softness), linear in theta down to 0 at the cone angle.
+  to the beam angle cone * (1 - softness), linear in theta down to 0 at the cone angle (``nasset:shaping:falloff``
+  ``smoothstep``: Cycles' smoothstep in cos(theta) instead).
 * RectLight: radiance L = intensity from a ``width`` x ``height`` rectangle in the local XY
   plane, emitting toward local -Z only; sampled uniformly by area.
 * DomeLight: radiance L(d) = intensity * texture(d) (or constant without a texture).
@@ -44,6 +45,7 @@ class Light:
     delta = False
     infinite = False  # reached by escaping rays
     area = False  # has a shape that rays can hit
+    camera_visible = True  # False: camera rays pass through the shape (``nasset:cameraVisibility``)
     prim = ""
 
     def sample(self, p, u):
@@ -103,12 +105,27 @@ class DistantLight(Light):
         return np.where((d @ self.w >= self.cos_max)[:, None], self.L, 0.0)
 
 
-def spot_falloff(cos_theta: np.ndarray, cone_deg: float, softness: float) -> np.ndarray:
-    """Spot falloff [N] at cos(theta) [N] from the spot axis (Mitsuba's ``spot``): 1 inside the beam angle
-    ``cone * (1 - softness)``, then linear in theta to 0 at ``cone`` (degrees, half-angle); 0 beyond."""
+#: ``nasset:shaping:falloff`` values: how a spot fades between the beam and the cone angle
+SPOT_FALLOFFS = ("linear", "smoothstep")
+
+
+def spot_falloff(cos_theta: np.ndarray, cone_deg: float, softness: float, kind: str = "linear") -> np.ndarray:
+    """Spot falloff [N] at cos(theta) [N] from the spot axis, ``cone_deg`` the half-angle (degrees), 0 beyond it.
+
+    ``linear`` (Mitsuba's ``spot``): 1 inside the beam angle ``cone * (1 - softness)``, then linear in theta to 0 at
+    ``cone``. ``smoothstep`` (Cycles' spot): smoothstep((cos theta - cos cone) / ((1 - cos cone) softness)),
+    a step at the cone when softness is 0.
+    """
     cutoff = np.radians(np.clip(cone_deg, 0.0, 180.0))
-    beam = cutoff * (1.0 - float(np.clip(softness, 0.0, 1.0)))
-    theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))
+    soft = float(np.clip(softness, 0.0, 1.0))
+    cos_theta = np.clip(cos_theta, -1.0, 1.0)
+    if kind == "smoothstep":
+        span = (1.0 - np.cos(cutoff)) * soft
+        x = (cos_theta - np.cos(cutoff)) / span if span > 0 else np.where(cos_theta > np.cos(cutoff), 1.0, 0.0)
+        x = np.clip(x, 0.0, 1.0)
+        return x * x * (3.0 - 2.0 * x)
+    beam = cutoff * (1.0 - soft)
+    theta = np.arccos(cos_theta)
     ramp = (cutoff - theta) / max(cutoff - beam, 1e-12)
     return np.where(theta <= beam, 1.0, np.where(theta < cutoff, np.clip(ramp, 0.0, 1.0), 0.0))
 
@@ -117,14 +134,14 @@ class PointLight(Light):
     delta = True
 
     def __init__(self, position, intensity, prim: str = "", *, axis=None, cone_deg: float = 180.0,
-                 softness: float = 0.0) -> None:
-        """``axis`` [3]: the direction the spot emits along (None: omnidirectional); ``cone_deg``, ``softness``
-        as in :func:`spot_falloff`."""
+                 softness: float = 0.0, falloff: str = "linear") -> None:
+        """``axis`` [3]: the direction the spot emits along (None: omnidirectional); ``cone_deg``, ``softness``,
+        ``falloff`` as in :func:`spot_falloff`."""
         self.c = np.asarray(position, np.float64)
         self.I = np.asarray(intensity, np.float64)
         self.prim = prim
         self.axis = None if axis is None or cone_deg >= 180.0 else normalize(np.asarray(axis, np.float64)[None])[0]
-        self.cone_deg, self.softness = float(cone_deg), float(softness)
+        self.cone_deg, self.softness, self.falloff = float(cone_deg), float(softness), falloff
 
     def power_is_zero(self):
         return not (self.I > 0).any() or (self.axis is not None and self.cone_deg <= 0.0)
@@ -136,7 +153,7 @@ class PointLight(Light):
         wi = v / dist[:, None]
         li = self.I / d2[:, None]
         if self.axis is not None:
-            li = li * spot_falloff(-(wi @ self.axis), self.cone_deg, self.softness)[:, None]
+            li = li * spot_falloff(-(wi @ self.axis), self.cone_deg, self.softness, self.falloff)[:, None]
         return wi, dist, li, np.ones(len(p))
 
 

@@ -22,7 +22,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
-from .lights import MAX_MESH_LIGHT_TRIANGLES, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
+from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -47,10 +47,12 @@ PREVIEW_DEFAULTS = {
     "displacement": 0.0, "occlusion": 1.0, "opacityMode": None,
 }
 _LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:normalize",
-                 "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular"}
+                 "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular",
+                 "nasset:cameraVisibility"}
 _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
-    "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness"},
+    "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness",
+                    "nasset:shaping:falloff"},
     "RectLight": {"inputs:width", "inputs:height"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
 }
@@ -269,7 +271,14 @@ class _Loader:
                 self._neural(prim, source)
                 it.PruneChildren()
             elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
+                n = len(self.lights)
                 self._light(prim, tname)
+                vis = prim.GetAttribute("nasset:cameraVisibility")
+                if vis and vis.HasAuthoredValue() and self.lights[n:]:
+                    if not isinstance(vis.Get(self.time), bool):
+                        raise self.err("SCENE_INVALID", "nasset:cameraVisibility must be a bool", str(prim.GetPath()),
+                                       "nasset:cameraVisibility")
+                    self.lights[n].camera_visible = bool(vis.Get(self.time))  # spec/renderer.md#light-surfaces
             elif tname == "Camera":
                 self.cameras.append(prim)
             elif tname == "Mesh":
@@ -796,7 +805,12 @@ class _Loader:
             at = prim.GetAttribute(a)
             if at and at.HasAuthoredValue():
                 self.warn(f"{a} is ignored", prim.GetPath())
-        return {"axis": -M[2, :3], "cone_deg": cone, "softness": soft}
+        falloff = prim.GetAttribute("nasset:shaping:falloff")
+        kind = str(falloff.Get(self.time)) if falloff and falloff.HasAuthoredValue() else "linear"
+        if kind not in SPOT_FALLOFFS:
+            raise self.err("SCENE_INVALID", f"nasset:shaping:falloff {kind!r} is not one of {', '.join(SPOT_FALLOFFS)}",
+                           prim.GetPath(), "nasset:shaping:falloff")
+        return {"axis": -M[2, :3], "cone_deg": cone, "softness": soft, "falloff": kind}
 
     def _light(self, prim, tname):
         from pxr import UsdGeom, UsdLux

@@ -79,13 +79,24 @@ def variant_of(objects, *, file: str | None = None) -> str:
     return kinds.pop()
 
 
-def _mesh_world(ob, depsgraph):
-    """(points [V,3] world Blender, faces [F,3], vertex normals [V,3] world) of an evaluated mesh."""
+def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None):
+    """(points [V,3] world Blender, faces [F,3], vertex normals [V,3] world) of an evaluated mesh; object space
+    when ``local``. ``uv_out`` (a list) receives the active render UV map per triangle corner [F,3,2], or None."""
     ev = ob.evaluated_get(depsgraph)
     me = ev.to_mesh()
     try:
         me.calc_loop_triangles()
         nv, nt = len(me.vertices), len(me.loop_triangles)
+        if uv_out is not None:
+            layer = next((u for u in me.uv_layers if u.active_render), me.uv_layers.active)
+            uv = None
+            if layer is not None and nt:
+                loops = np.empty(nt * 3, np.int32)
+                me.loop_triangles.foreach_get("loops", loops)
+                all_uv = np.empty(len(me.loops) * 2, np.float32)
+                layer.data.foreach_get("uv", all_uv)
+                uv = all_uv.reshape(-1, 2)[loops].reshape(nt, 3, 2).astype(np.float64)
+            uv_out.append(uv)
         co = np.empty(nv * 3, np.float32)
         me.vertices.foreach_get("co", co)
         tri = np.empty(nt * 3, np.int32)
@@ -101,7 +112,7 @@ def _mesh_world(ob, depsgraph):
         tn = tn.reshape(-1, 3).astype(np.float64)
     finally:
         ev.to_mesh_clear()
-    M = np.array(ob.matrix_world, np.float64)
+    M = np.eye(4) if local else np.array(ob.matrix_world, np.float64)
     p = co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
     nlin = np.linalg.inv(M[:3, :3]).T
     if not smooth.all():  # flat faces: split their corners so they keep the face normal
@@ -117,13 +128,14 @@ def _mesh_world(ob, depsgraph):
     return p, tri, n
 
 
-def mesh_geometry(objects) -> MeshGeometry:
-    """World-space (+Y up) triangles of the evaluated meshes, merged."""
+def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None) -> MeshGeometry:
+    """World-space (+Y up) triangles of the evaluated meshes, merged; object space (+Y up) when ``local``.
+    ``uv_out`` receives each object's UVs per triangle corner ([F,3,2] or None, see :func:`_mesh_world`)."""
     bpy = load_bpy()
     dg = bpy.context.evaluated_depsgraph_get()
     pts, faces, normals, base = [], [], [], 0
     for ob in objects:
-        p, f, n = _mesh_world(ob, dg)
+        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out)
         pts.append(p)
         faces.append(f + base)
         normals.append(n)

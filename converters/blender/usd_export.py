@@ -1,8 +1,10 @@
-"""``nasset convert-scene SCENE.blend``: a Blender scene (camera, lights, plain meshes) -> a USD stage.
+"""``nasset convert-scene SCENE.blend``: a Blender scene (camera, lights, meshes, instances) -> a USD stage.
 
 The same stage layout as the Mitsuba converter (converters/mitsuba/usd_export.py, whose stage
 writer this reuses): ``/World/Geometry`` meshes bound to ``UsdPreviewSurface`` materials in
-``/World/Looks``, ``/World/Lights``, one camera, and one NeuralAsset reference per ``--replace
+``/World/Looks`` (Image Texture nodes as ``UsdUVTexture``), instanceable prims of ``/Prototypes``
+class prims for collection instances and linked duplicates, ``/World/Lights``, one camera, render
+settings (``nasset:maxDepth``, ``nasset:pixelFilter``), and one NeuralAsset reference per ``--replace
 OBJECT[,OBJECT]=ASSET`` in ``/World/Assets`` in place of those objects. The mapping table is in
 spec/bake-blender.md#scene-conversion; everything not converted exactly is a warning.
 
@@ -11,9 +13,12 @@ Conventions: Blender world (+Z up) -> USD (+Y up) by :data:`nasset_converters.bl
 suns, spots and area lights look / emit down local -Z like USD's); Blender light units -> the
 renderer's: sun ``strength`` = irradiance (DistantLight intensity, ``angle`` = Blender's angular
 diameter); point/spot of power P and radius r -> SphereLight radiance P / (4 pi^2 r^2) (a point
-light of intensity P / (4 pi) W/sr when r = 0); area of power P and area A -> RectLight radiance
-P / (pi A); world Background colour x strength -> DomeLight (an Environment Texture becomes a
-lat-long OpenEXR with Blender's equirectangular orientation).
+light of intensity P / (4 pi) W/sr when r = 0; a spot is a point light with Cycles' cone,
+``nasset:shaping:falloff = smoothstep``); area of power P and area A -> RectLight radiance
+P / (pi A); point and area lights hidden from camera rays as in Cycles; world Background colour
+x strength -> DomeLight (an Environment Texture becomes a
+lat-long OpenEXR with Cycles' equirectangular orientation). Every choice here is measured against
+Cycles by converters/blender/fidelity.py (docs/conversion-fidelity.md).
 """
 
 from __future__ import annotations
@@ -23,7 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.mitsuba.usd_export import FOCAL_LENGTH_MM, ConvertResult, StageConverter, parse_replace, report, usd_check  # noqa: F401
+from nasset_converters.mitsuba.usd_export import (  # noqa: F401
+    FOCAL_LENGTH_MM,
+    ConvertResult,
+    StageConverter,
+    TextureMap,
+    parse_replace,
+    report,
+    usd_check,
+)
 from nasset_sdk.errors import UsageError, error
 
 from . import Z_UP_TO_Y_UP
@@ -32,7 +45,7 @@ _R4 = np.eye(4)
 _R4[:3, :3] = Z_UP_TO_Y_UP
 #: dome local axes (rows) in USD world that make the renderer's lat-long lookup equal Blender's
 #: equirectangular one (spec/bake-blender.md#scene-conversion)
-DOME_ROWS = np.array([[0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+DOME_ROWS = np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
 def _row(ob, *, unit: bool = True) -> np.ndarray:
@@ -61,6 +74,7 @@ class _BlenderConverter(StageConverter):
         super().__init__(None, None, scene_path, output, replace, check_usd)
         self.bpy = bpy
         self.bscene = bpy.context.scene
+        self.emissive_materials: set[str] = set()
 
     # -- camera -----------------------------------------------------------------------------
     def camera(self) -> None:
@@ -103,9 +117,31 @@ class _BlenderConverter(StageConverter):
         settings.CreatePixelAspectRatioAttr(1.0)
 
     def integrator(self) -> None:
+        """Cycles' bounce limit -> ``nasset:maxDepth`` and its pixel filter -> ``nasset:pixelFilter`` on
+        /Render/Settings (spec/bake-blender.md#scene-conversion)."""
+        from pxr import Sdf, UsdRender
+
         c = self.bscene.cycles
+        # Cycles counts bounces after the first hit (0: direct light only), the renderer scattering vertices
+        depth = int(c.max_bounces) + 1
         self.result.integrator = {"type": "cycles", "max_bounces": int(c.max_bounces), "samples": int(c.samples),
-                                  "renderer_max_depth": int(c.max_bounces)}
+                                  "renderer_max_depth": depth}
+        lower = {k: int(getattr(c, f"{k}_bounces")) for k in ("diffuse", "glossy", "transmission")
+                 if int(getattr(c, f"{k}_bounces")) < int(c.max_bounces)}
+        if lower:
+            self.warn(f"render settings: per-type bounce limits {lower} below max bounces {int(c.max_bounces)} dropped "
+                      f"(the reference renderer stops every path after {depth} scattering vertices)")
+        prim = UsdRender.Settings.Define(self.stage, "/Render/Settings").GetPrim()
+        prim.CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(depth)
+        kind, stddev = cycles_pixel_filter(str(c.pixel_filter_type), float(c.filter_width))
+        if kind == "box" and abs(float(c.filter_width) - 1.0) > 1e-6:
+            self.warn(f"render settings: box pixel filter of width {c.filter_width:.3g} px written as 1 px")
+        elif c.pixel_filter_type == "BLACKMAN_HARRIS":
+            self.warn(f"render settings: Blackman-Harris pixel filter (width {c.filter_width:.3g} px) written as a "
+                      f"Gaussian of the same standard deviation ({stddev:.3g} px)")
+        prim.CreateAttribute("nasset:pixelFilter", Sdf.ValueTypeNames.Token, custom=True).Set(kind)
+        if stddev is not None:
+            prim.CreateAttribute("nasset:pixelFilterStddev", Sdf.ValueTypeNames.Float, custom=True).Set(stddev)
 
     # -- lights -------------------------------------------------------------------------------
     def lights(self) -> None:
@@ -127,10 +163,15 @@ class _BlenderConverter(StageConverter):
                 light = UsdLux.SphereLight.Define(self.stage, path)
                 row = _row(ob)
                 scale = float(np.cbrt(abs(np.linalg.det(_row(ob, unit=False)[:3, :3]))))
+                if lt.type == "SPOT" and r * scale > 0:
+                    self.warn(f"light {ob.name}: spot of radius {r * scale:.3g} written as a point spot (hard shadows; "
+                              "the reference renderer shapes point lights only)")
+                    r = 0.0
                 if r * scale > 0:
                     rw = r * scale
                     light.CreateRadiusAttr(rw)
                     light.CreateTreatAsPointAttr(False)
+                    self._hidden_from_camera(light)
                     value = color * float(lt.energy) / (4.0 * math.pi * math.pi * rw * rw)
                 else:
                     light.CreateRadiusAttr(0.0)
@@ -139,12 +180,7 @@ class _BlenderConverter(StageConverter):
                 self._xform(light.GetPrim(), row)
                 what = f"{lt.type.lower()} {ob.name} ({lt.energy:.4g} W, radius {r:.3g})"
                 if lt.type == "SPOT":
-                    cone = math.degrees(float(lt.spot_size)) / 2.0
-                    shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
-                    shaping.CreateShapingConeAngleAttr(cone)
-                    shaping.CreateShapingConeSoftnessAttr(float(lt.spot_blend))
-                    self.warn(f"light {ob.name}: spot written as a sphere light with UsdLux.ShapingAPI (cone {cone:.3g} deg); "
-                              "the reference renderer ignores shaping and renders it omnidirectional")
+                    self._spot_shaping(light, ob)
                 self._light_common(light, value, path, what)
             elif lt.type == "AREA":
                 w = float(lt.size)
@@ -162,11 +198,34 @@ class _BlenderConverter(StageConverter):
                 area = w * h * sx * sy
                 if getattr(lt, "spread", math.pi) < math.pi - 1e-6:
                     self.warn(f"light {ob.name}: area light spread dropped (Lambertian emission)")
+                self._hidden_from_camera(light)
                 self._light_common(light, color * float(lt.energy) / (math.pi * max(area, 1e-12)), path,
                                    f"area {ob.name} ({lt.energy:.4g} W, {w:.3g} x {h:.3g})")
             else:
                 self.warn(f"light {ob.name}: type {lt.type} is not convertible: skipped")
         self.world()
+
+    @staticmethod
+    def _hidden_from_camera(light) -> None:
+        """Cycles does not show point/spot/area light surfaces to camera rays (BSDF rays do reach them)."""
+        from pxr import Sdf
+
+        light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool, custom=True).Set(False)
+
+    def _spot_shaping(self, light, ob) -> None:
+        """Cycles' spot cone on a point light: ``shaping:cone:angle`` = spot_size / 2, ``shaping:cone:softness`` =
+        spot_blend, ``nasset:shaping:falloff`` = smoothstep (spec/renderer.md#spot-lights)."""
+        from pxr import Sdf, UsdLux
+
+        lt = ob.data
+        cone = math.degrees(float(lt.spot_size)) / 2.0
+        shaping = UsdLux.ShapingAPI.Apply(light.GetPrim())
+        shaping.CreateShapingConeAngleAttr(cone)
+        shaping.CreateShapingConeSoftnessAttr(float(np.clip(lt.spot_blend, 0.0, 1.0)))
+        light.GetPrim().CreateAttribute("nasset:shaping:falloff", Sdf.ValueTypeNames.Token, custom=True).Set("smoothstep")
+        sx, sy = np.linalg.norm(_row(ob, unit=False)[:2, :3], axis=1)
+        if not np.isclose(sx, sy, rtol=1e-4):
+            self.warn(f"light {ob.name}: elliptic spot cone (object scale {sx:.3g} x {sy:.3g}) written as a round cone")
 
     def world(self) -> None:
         from pxr import Gf, Sdf, UsdLux
@@ -212,6 +271,8 @@ class _BlenderConverter(StageConverter):
         img = src.image
         wid, hei = img.size
         px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
+        # coarse maps made ENVMAP_MIN_WIDTH wide: at 8x, a 16 x 8 map's nearest texels still showed as steps
+        px = _upsampled(px, min_width=ENVMAP_MIN_WIDTH) if src.interpolation != "Closest" else px
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         tex = tex_dir / f"{Tf.MakeValidIdentifier(world.name)}.exr"
@@ -224,7 +285,11 @@ class _BlenderConverter(StageConverter):
         self._xform(light.GetPrim(), DOME_ROWS)
         self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
-        self.warn(f"world {world.name}: environment looked up with nearest texels by the reference renderer (Cycles: linear)")
+        if src.interpolation not in ("Linear", "Closest"):
+            self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")
+        if px.shape[:2] == (hei, wid) and src.interpolation != "Closest":
+            self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
+                      "texels by the reference renderer (Cycles: linear)")
 
     def _dome_constant(self, rgb, name) -> None:
         from pxr import UsdLux
@@ -235,7 +300,7 @@ class _BlenderConverter(StageConverter):
 
     # -- materials ----------------------------------------------------------------------------
     def blender_material(self, mat, ob_name: str) -> str:
-        key = ("blender", mat.name if mat is not None else None)
+        key = ("blender", mat.name if mat is not None else None, self.looks_root)
         if key in self.materials:
             return self.materials[key]
         inputs, notes = map_material(mat)
@@ -244,17 +309,24 @@ class _BlenderConverter(StageConverter):
         path = self._write_material(mat.name if mat is not None else "Default", inputs)
         self.record(path, f"material {mat.name if mat is not None else '(none)'}")
         self.materials[key] = path
+        if max(inputs.get("emissiveColor", (0.0,))) > 0:
+            self.emissive_materials.add(path)
         return path
 
     # -- geometry -----------------------------------------------------------------------------
     def shapes(self) -> None:
-        from pxr import UsdGeom, UsdShade, Vt
+        """Meshes of the view layer (world space), then instances: objects placed by collection instances
+        (and other instancers) and linked duplicates (mesh objects sharing one mesh without modifiers) become
+        instanceable Xforms referencing one class prim ``/Prototypes/NAME`` per mesh (object space)."""
+        from .scene import has_particle_hair
 
-        from .scene import has_particle_hair, mesh_geometry
-
-        for ob in self.bscene.objects:
-            if ob.hide_render or ob.name in self.replace:
-                continue
+        bpy = self.bpy
+        objects = [ob for ob in bpy.context.view_layer.objects if not ob.hide_render and ob.name not in self.replace]
+        users: dict = {}
+        for ob in objects:
+            if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
+                users.setdefault(ob.data.name, []).append(ob)
+        for ob in objects:
             if ob.type == "CURVES":
                 self.warn(f"object {ob.name}: hair curves outside an asset are dropped (bake them: --replace {ob.name}=ASSET)")
                 continue
@@ -265,26 +337,101 @@ class _BlenderConverter(StageConverter):
                 continue
             if has_particle_hair(ob):
                 self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
-            try:
-                geo = mesh_geometry([ob])
-            except Exception:  # noqa: BLE001 - an empty mesh
-                self.warn(f"object {ob.name}: no faces: skipped")
+            if len(users.get(ob.data.name, ())) > 1:
+                self._instance(ob, np.array(ob.matrix_world, np.float64), ob.name, f"linked duplicate of mesh {ob.data.name}")
+            else:
+                self._mesh(ob, self._name(self.geometry_root, ob.name), local=False)
+        dg = bpy.context.evaluated_depsgraph_get()
+        skipped = set()
+        for inst in dg.object_instances:
+            if not inst.is_instance:
                 continue
-            path = self._name("/World/Geometry", ob.name)
-            mesh = UsdGeom.Mesh.Define(self.stage, path)
-            mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
-            mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
-            mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(geo.faces.ravel(), np.int32)))
-            mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-            mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.normals, np.float32)))
-            mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
-            mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
-            mats = [s.material for s in ob.material_slots if s.material is not None]
-            if len(mats) > 1:
-                self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
-            mat_path = self.blender_material(mats[0] if mats else None, ob.name)
-            UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
-            self.record(path, f"object {ob.name} (mesh, {len(geo.faces)} triangles)")
+            ob, parent = inst.object.original, inst.parent.original if inst.parent is not None else None
+            if parent is not None and parent.name in self.replace:
+                continue  # the asset stands in for the instancer and what it places
+            if ob.name in self.replace:
+                if ("replaced", ob.name) not in skipped:
+                    skipped.add(("replaced", ob.name))
+                    self.warn(f"object {ob.name}: its instances are not written (--replace places the asset once, "
+                              "in world space)")
+                continue
+            if ob.type != "MESH":
+                if ob.type not in ("EMPTY", "CAMERA") and ob.name not in skipped:
+                    skipped.add(ob.name)
+                    self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (meshes are): skipped")
+                continue
+            self._instance(ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
+                           f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}")
+
+    def _instance(self, ob, matrix_world, name: str, what: str) -> None:
+        """An instanceable Xform (Blender world matrix ``matrix_world`` [4,4]) referencing the class prim of ``ob``'s
+        mesh (written once per mesh and material set, in object space)."""
+        from pxr import Sdf, Tf
+
+        mats = tuple(s.material.name if s.material else "" for s in ob.material_slots)
+        key = (ob.data.name, mats)
+        proto = self.prototypes.get(key)
+        if proto is None:
+            self.stage.CreateClassPrim("/Prototypes")  # abstract: rendered only through instances
+            proto = self._name("/Prototypes", Tf.MakeValidIdentifier(ob.data.name))
+            self.stage.CreateClassPrim(proto)
+            saved = (self.geometry_root, self.looks_root)
+            self.geometry_root, self.looks_root = proto, f"{proto}/Looks"
+            try:
+                self._mesh(ob, self._name(proto, ob.data.name), local=True)
+            finally:
+                self.geometry_root, self.looks_root = saved
+            self.prototypes[key] = proto
+            self.record(proto, f"mesh {ob.data.name} (prototype)")
+        path = self._name(self.geometry_root, name)
+        prim = self.stage.DefinePrim(path, "Xform")
+        prim.GetReferences().AddInternalReference(Sdf.Path(proto))
+        prim.SetInstanceable(True)
+        self._xform(prim, (_R4 @ matrix_world @ _R4.T).T)
+        self.record(path, what)
+
+    def _mesh(self, ob, path: str, *, local: bool) -> None:
+        """A UsdGeom.Mesh at ``path`` of the evaluated mesh object ``ob`` (world or object space, +Y up) with its
+        first material and, when that is textured, the active render UV map as faceVarying primvar ``st``."""
+        from pxr import Sdf, UsdGeom, UsdShade, Vt
+
+        from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
+
+        from .scene import mesh_geometry
+
+        uvs: list = []
+        try:
+            geo = mesh_geometry([ob], local=local, uv_out=uvs)
+        except Exception:  # noqa: BLE001 - an empty mesh
+            self.warn(f"object {ob.name}: no faces: skipped")
+            return
+        mesh = UsdGeom.Mesh.Define(self.stage, path)
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(geo.faces.ravel(), np.int32)))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.normals, np.float32)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
+        mats = [s.material for s in ob.material_slots if s.material is not None]
+        if len(mats) > 1:
+            self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
+        mat_path = self.blender_material(mats[0] if mats else None, ob.name)
+        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
+        if mat_path in self.emissive_materials and len(geo.faces) > MAX_MESH_LIGHT_TRIANGLES:
+            self.warn(f"object {ob.name}: emissive mesh of {len(geo.faces)} triangles: the reference renderer "
+                      f"light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} triangles only; this one is "
+                      "reached by BSDF rays only (right mean, more noise)")
+        if mat_path in self.textured_materials:
+            uv = uvs[0] if uvs else None
+            if uv is None:
+                self.warn(f"object {ob.name}: textured material but the mesh has no UV map: the texture's corner texel "
+                          "is used")
+            else:
+                pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                             UsdGeom.Tokens.faceVarying)
+                pv.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(uv.reshape(-1, 2), np.float32)))
+        self.record(path, f"object {ob.name} (mesh, {len(geo.faces)} triangles)")
 
     def run(self) -> ConvertResult:
         from pxr import Gf
@@ -305,9 +452,57 @@ class _BlenderConverter(StageConverter):
         return self.result
 
 
+#: image textures stored in sRGB are resampled to at most this many texels (see :func:`image_texture`)
+TEXTURE_MAX_PIXELS = 1 << 20
+#: a resampled environment map is made at least this wide (within ENVMAP_MAX_PIXELS)
+ENVMAP_MIN_WIDTH = 1024
+
+
+def _upsampled(px: np.ndarray, wrap_s: str = "repeat", wrap_t: str = "clamp", max_pixels: int | None = None,
+               min_width: int = 0) -> np.ndarray:
+    """An image [H, W, 3] (row 0 at the top) resampled bilinearly with these wrap modes at ENVMAP_UPSAMPLE x its
+    size (more, by powers of two, up to ``min_width`` texels wide), or less so that it stays within
+    ``max_pixels`` (default ENVMAP_MAX_PIXELS); unchanged when even 2x is too large. For a lat-long map
+    (periodic in u, clamped at the poles) the renderer's nearest-texel lookup of the result then follows
+    Cycles' linear interpolation."""
+    from nasset_converters.mitsuba.usd_export import ENVMAP_MAX_PIXELS, ENVMAP_UPSAMPLE
+    from nasset_reference_renderer.textures import ImageTexture
+
+    h, w = px.shape[:2]
+    limit = ENVMAP_MAX_PIXELS if max_pixels is None else max_pixels
+    f = ENVMAP_UPSAMPLE
+    while w * f < min_width:
+        f *= 2
+    while f > 1 and h * w * f * f > limit:
+        f //= 2
+    if f == 1:
+        return px
+    t, s = np.meshgrid(1.0 - (np.arange(h * f) + 0.5) / (h * f), (np.arange(w * f) + 0.5) / (w * f), indexing="ij")
+    tex = ImageTexture(px, wrap_s=wrap_s, wrap_t=wrap_t)
+    return tex.sample(np.stack([s.ravel(), t.ravel()], 1)).reshape(h * f, w * f, 3).astype(np.float32)
+
+
+def cycles_pixel_filter(kind: str, width: float) -> tuple[str, float | None]:
+    """(``nasset:pixelFilter``, stddev in pixels or None) for Cycles' ``pixel_filter_type`` and ``filter_width`` (px).
+
+    Cycles tabulates its filters over [-width/2, width/2] and samples them separably: ``GAUSSIAN`` is
+    exp(-2 (6 x / width)^2), a Gaussian of standard deviation width / 12; ``BLACKMAN_HARRIS`` the
+    4-term window over that span, whose standard deviation (numerically 0.139 width) the Gaussian
+    takes; ``BOX`` a box (the renderer's is 1 px).
+    """
+    if kind == "GAUSSIAN":
+        return "gaussian", width / 12.0
+    if kind == "BLACKMAN_HARRIS":
+        x = np.linspace(-0.5, 0.5, 4001)
+        v = 2.0 * np.pi * (x + 0.5)
+        w = 0.35875 - 0.48829 * np.cos(v) + 0.14128 * np.cos(2 * v) - 0.01168 * np.cos(3 * v)
+        return "gaussian", width * float(np.sqrt(np.sum(w * x * x) / np.sum(w)))
+    return "box", None
+
+
 #: Principled BSDF inputs that UsdPreviewSurface cannot carry: (input, "off" value)
 _DROPPED = (("Subsurface Weight", 0.0), ("Transmission Weight", 0.0), ("Coat Weight", 0.0), ("Sheen Weight", 0.0),
-            ("Anisotropic", 0.0), ("Emission Strength", 0.0), ("Thin Film Thickness", 0.0))
+            ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
 
 
 def map_material(mat) -> tuple[dict, list]:
@@ -325,9 +520,21 @@ def map_material(mat) -> tuple[dict, list]:
     notes = []
     if node.bl_idname == "ShaderNodeBsdfDiffuse":
         col, linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
-        notes += [f"material {mat.name}: linked Color dropped (its default used)"] if linked else []
-        return {"diffuseColor": col[:3], "roughness": 1.0, "metallic": 0.0, "useSpecularWorkflow": 1,
-                "specularColor": (0.0, 0.0, 0.0)}, notes
+        if linked:
+            col = image_texture(mat, node.inputs["Color"], notes) or col
+        rough, r_linked = _socket(node, "Roughness", 0.0)
+        if r_linked or rough > 0:
+            notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
+        return {"diffuseColor": col if isinstance(col, TextureMap) else col[:3], "roughness": 1.0, "metallic": 0.0,
+                "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}, notes
+    if node.bl_idname == "ShaderNodeEmission":
+        col, c_linked = _socket(node, "Color", (1.0, 1.0, 1.0, 1.0))
+        strength, s_linked = _socket(node, "Strength", 1.0)
+        if c_linked or s_linked:
+            notes.append(f"material {mat.name}: linked emission {'Color' if c_linked else 'Strength'} dropped (its "
+                         "default used)")
+        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+                "roughness": 1.0, "emissiveColor": tuple(float(c) * float(strength) for c in col[:3])}, notes
     if node.bl_idname != "ShaderNodeBsdfPrincipled":
         return grey, [f"material {mat.name}: {node.bl_idname} is not convertible (Principled BSDF, Diffuse BSDF are): grey"]
     vals = {}
@@ -335,8 +542,17 @@ def map_material(mat) -> tuple[dict, list]:
                           ("Specular IOR Level", 0.5), ("Alpha", 1.0), ("Normal", None)):
         v, linked = _socket(node, name, default)
         vals[name] = v
-        if linked:
+        if linked and name == "Base Color":
+            vals[name] = image_texture(mat, node.inputs[name], notes) or v
+        elif linked:
             notes.append(f"material {mat.name}: linked {name} dropped (its default value used)")
+    emission = None
+    e_strength, es_linked = _socket(node, "Emission Strength", 0.0)
+    e_color, ec_linked = _socket(node, "Emission Color", (1.0, 1.0, 1.0, 1.0))
+    if es_linked or ec_linked:
+        notes.append(f"material {mat.name}: linked Principled emission dropped")
+    elif e_strength > 0:
+        emission = tuple(float(c) * float(e_strength) for c in e_color[:3])
     for name, off in _DROPPED:
         v, linked = _socket(node, name, off)
         if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
@@ -344,7 +560,11 @@ def map_material(mat) -> tuple[dict, list]:
                          "bake the object into a neural asset)")
     if isinstance(vals["Alpha"], float) and vals["Alpha"] < 1.0:
         notes.append(f"material {mat.name}: Alpha {vals['Alpha']:.3g} dropped (opaque)")
-    inputs = {"diffuseColor": vals["Base Color"][:3], "roughness": float(vals["Roughness"]), "metallic": float(vals["Metallic"])}
+    base = vals["Base Color"]
+    inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": float(vals["Roughness"]),
+              "metallic": float(vals["Metallic"])}
+    if emission is not None:
+        inputs["emissiveColor"] = emission
     level = float(vals["Specular IOR Level"])
     if level <= 1e-6 and inputs["metallic"] <= 0.0:
         inputs.update(useSpecularWorkflow=1, specularColor=(0.0, 0.0, 0.0))
@@ -352,7 +572,89 @@ def map_material(mat) -> tuple[dict, list]:
         inputs["ior"] = float(vals["IOR"])
         if abs(level - 0.5) > 1e-6:
             notes.append(f"material {mat.name}: Specular IOR Level {level:.3g} dropped (0.5 assumed)")
+        if inputs["metallic"] <= 0.0:
+            k = principled_diffuse_scale(inputs["roughness"], inputs["ior"])
+            inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], k)
+            notes.append(f"material {mat.name}: Principled base colour x {k:.3f} for the specular layer's albedo "
+                         "(Cycles layers the lobes, UsdPreviewSurface adds them)")
     return inputs, notes
+
+
+def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float:
+    """Factor on a dielectric Principled BSDF's base colour for UsdPreviewSurface: Cycles attenuates the diffuse
+    layer by the specular layer's albedo, UsdPreviewSurface adds the two lobes. Returns 1 - the cosine-weighted
+    mean albedo of the renderer's own specular lobe (GGX, alpha = roughness^2, Schlick F0 of ``ior``), by
+    stratified VNDF quadrature over ``n`` view angles x ``n`` x ``n`` samples (0.947 at roughness 0.5, IOR 1.5)."""
+    from nasset_reference_renderer.bsdf import MIN_ALPHA, ggx_lambda, ggx_sample_vndf, reflect
+
+    f0 = ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2
+    alpha = max(float(roughness) ** 2, MIN_ALPHA)
+    g = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    albedo = 0.0
+    for mu in g:
+        wo = np.tile([math.sqrt(1.0 - mu * mu), 0.0, mu], (len(u), 1))
+        h = ggx_sample_vndf(wo, alpha, u)
+        wi = reflect(wo, h)
+        up = wi[:, 2] > 0
+        fres = f0 + (1.0 - f0) * (1.0 - np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)) ** 5
+        lo, li = ggx_lambda(wo, alpha), ggx_lambda(np.where(up[:, None], wi, [[0.0, 0.0, 1.0]]), alpha)
+        albedo += 2.0 * mu * float(np.mean(np.where(up, fres * (1.0 + lo) / (1.0 + lo + li), 0.0))) / n  # F G2/G1
+    return float(np.clip(1.0 - albedo, 0.0, 1.0))
+
+
+def _scaled(color, k: float):
+    """A colour [3] or TextureMap times ``k``."""
+    if isinstance(color, TextureMap):
+        return TextureMap(color.image * k, color.what, color.scale_bias, color.wrap)
+    return tuple(float(c) * k for c in color)
+
+
+#: Blender colour spaces whose texels are linear values as stored (others are decoded from sRGB or warned)
+_LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
+#: Image Texture extension -> UsdUVTexture wrap mode
+_WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "black", "MIRROR": "mirror"}
+
+
+def image_texture(mat, socket, notes: list) -> TextureMap | None:
+    """A :class:`TextureMap` (linear texels, top row first) for an input ``socket`` fed by an Image Texture node's
+    Color output, else None with a note. Colour space: ``sRGB`` texels are decoded from sRGB, ``Non-Color`` and
+    linear spaces taken as stored; what the renderer does differently (closest/cubic interpolation, a linked
+    Vector, box/sphere projection) is noted per texture."""
+    from nasset_reference_renderer.textures import srgb_to_linear
+
+    link = socket.links[0]
+    tex = link.from_node
+    if tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or link.from_socket.name != "Color":
+        notes.append(f"material {mat.name}: {socket.name} from {tex.bl_idname}.{link.from_socket.name} dropped (Image "
+                     "Texture Color outputs are converted; its default value used)")
+        return None
+    img = tex.image
+    w, h = img.size
+    if w * h == 0 or img.channels < 1:
+        notes.append(f"material {mat.name}: image {img.name} has no pixels (missing file?): {socket.name} default used")
+        return None
+    px = np.array(img.pixels[:], np.float64).reshape(h, w, img.channels)[::-1]  # Blender rows bottom-up
+    rgb = np.repeat(px[..., :1], 3, -1) if img.channels < 3 else px[..., :3]
+    space = img.colorspace_settings.name
+    what = f"image {img.name} ({w}x{h}, {space})"
+    wrap = _WRAP.get(tex.extension, "repeat")
+    if space == "sRGB":
+        # Cycles interpolates 8-bit sRGB texels before decoding them: resampled finer in sRGB, then decoded, the
+        # renderer's bilinear lookup of linear texels follows that
+        if not img.is_float and tex.interpolation == "Linear":
+            rgb = _upsampled(np.clip(rgb, 0.0, 1.0), wrap, wrap, TEXTURE_MAX_PIXELS)
+        rgb = srgb_to_linear(np.clip(rgb, 0.0, 1.0))
+    elif space not in _LINEAR_SPACES:
+        notes.append(f"material {mat.name}: image {img.name} in colour space {space} taken as linear")
+    if tex.interpolation != "Linear":
+        notes.append(f"material {mat.name}: image {img.name}: {tex.interpolation} interpolation looked up bilinearly")
+    if tex.projection != "FLAT":
+        notes.append(f"material {mat.name}: image {img.name}: {tex.projection} projection dropped (UV mapped)")
+    if tex.inputs["Vector"].is_linked:
+        notes.append(f"material {mat.name}: image {img.name}: linked Vector dropped (the active render UV map used)")
+    rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
+    return TextureMap(rgb, what, wrap=wrap)
 
 
 def _check_replace(bpy, rep: dict, file: str) -> None:

@@ -170,6 +170,7 @@ class TextureMap:
     image: np.ndarray
     what: str
     scale_bias: tuple | None = None  # UsdUVTexture (scale, bias) float4s, e.g. a tangent-space normal map's 2, -1
+    wrap: str = "repeat"  # UsdUVTexture wrapS / wrapT
 
 
 class _Params:
@@ -441,7 +442,7 @@ class StageConverter:
         node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("./" + file.relative_to(self.output.parent).as_posix()))
         node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
         for w in ("wrapS", "wrapT"):
-            node.CreateInput(w, Sdf.ValueTypeNames.Token).Set("repeat")
+            node.CreateInput(w, Sdf.ValueTypeNames.Token).Set(tex.wrap)
         node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
         if tex.scale_bias is not None:
             from pxr import Gf

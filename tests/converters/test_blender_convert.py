@@ -13,7 +13,13 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip install bpy; CI installs it)")
 
 from nasset_converters.blender.examples import build_example, write_example_blend  # noqa: E402
-from nasset_converters.blender.usd_export import DOME_ROWS, convert_scene, map_material  # noqa: E402
+from nasset_converters.blender.usd_export import (  # noqa: E402
+    DOME_ROWS,
+    convert_scene,
+    cycles_pixel_filter,
+    map_material,
+    principled_diffuse_scale,
+)
 from nasset_sdk.errors import NassetError  # noqa: E402
 
 
@@ -83,28 +89,39 @@ def test_point_spot_lights_and_materials(tmp_path):
     L = 100.0 / (4 * math.pi ** 2 * 0.01)  # sphere light radiance P / (4 pi^2 r^2)
     assert np.isclose(_attr(stage, "/World/Lights/Bulb", "inputs:intensity"), L, rtol=1e-5)
     assert np.isclose(_attr(stage, "/World/Lights/Bulb", "inputs:radius"), 0.1, rtol=1e-6)
-    assert any("spot" in w and "ShapingAPI" in w for w in res.warnings)
+    # the spot of radius 0.1 becomes a point spot (the renderer shapes point lights only), warned
+    assert any("Spot" in w and "point spot" in w for w in res.warnings)
+    spot = stage.GetPrimAtPath("/World/Lights/Spot")
+    assert spot.GetAttribute("treatAsPoint").Get() and np.isclose(spot.GetAttribute("inputs:intensity").Get(),
+                                                                   100.0 / (4 * math.pi), rtol=1e-5)
+    assert spot.GetAttribute("nasset:shaping:falloff").Get() == "smoothstep"
+    assert np.isclose(spot.GetAttribute("inputs:shaping:cone:angle").Get(), 22.5, rtol=1e-5)  # spot_size 45 deg / 2
+    assert not stage.GetPrimAtPath("/World/Lights/Bulb").GetAttribute("nasset:cameraVisibility").Get()
     from pxr import UsdGeom
 
     pos = np.array(UsdGeom.Xformable(stage.GetPrimAtPath("/World/Lights/Bulb")).ComputeLocalToWorldTransform(0))[3, :3]
     assert np.allclose(pos, [1.0, 3.0, -2.0])  # (x, z, -y)
     mat = bpy.data.materials["SubsurfaceSkin"]
     inputs, notes = map_material(mat)
-    assert np.allclose(inputs["diffuseColor"], (0.9, 0.5, 0.3)) and np.isclose(inputs["roughness"], 0.35)
+    k = principled_diffuse_scale(0.35, 1.5)
+    assert np.allclose(inputs["diffuseColor"], np.array((0.9, 0.5, 0.3)) * k) and np.isclose(inputs["roughness"], 0.35)
+    assert any("x 0." in n and "albedo" in n for n in notes)
     assert any("Subsurface Weight" in n for n in notes)
     ground, notes = map_material(bpy.data.materials["GroundGrey"])
     assert ground["useSpecularWorkflow"] == 1 and tuple(ground["specularColor"]) == (0.0, 0.0, 0.0) and not notes
 
 
 def test_dome_rotation_maps_blender_equirect_to_renderer_latlong():
-    """A Blender world direction D (Z up) has equirect u = atan2(D.y, -D.x)/2pi + 1/2 and image row
-    v = acos(D.z)/pi from the top; the renderer's lookup through the written dome rotation agrees."""
+    """A Blender world direction D (Z up) has equirect u = 1/2 - atan2(D.y, D.x)/2pi (+X at the image's centre
+    column, +Y a quarter to its left) and image row v = acos(D.z)/pi from the top, as Cycles renders it (the
+    fidelity suite's hdri scene: with the previous, mirrored mapping its mean green was 1.49x Cycles'); the
+    renderer's lookup through the written dome rotation agrees."""
     from nasset_reference_renderer.lights import DomeLight
 
     rng = np.random.default_rng(3)
     D = rng.normal(size=(64, 3))
     D /= np.linalg.norm(D, axis=1, keepdims=True)
-    u_b = np.mod(np.arctan2(D[:, 1], -D[:, 0]) / (2 * np.pi) + 0.5, 1.0)
+    u_b = np.mod(0.5 - np.arctan2(D[:, 1], D[:, 0]) / (2 * np.pi), 1.0)
     v_b = np.arccos(D[:, 2]) / np.pi
     d_world = np.stack([D[:, 0], D[:, 2], -D[:, 1]], 1)
     R = DOME_ROWS[:3, :3]
@@ -124,3 +141,60 @@ def test_replace_and_errors(tmp_path):
     with pytest.raises(NassetError) as e:
         convert_scene(tmp_path / "none.blend", tmp_path / "s.usda")
     assert e.value.code == "CONVERT_SCENE_MISSING"
+
+
+def test_principled_diffuse_scale_against_smooth_limit():
+    """A smooth lobe (alpha at the renderer's minimum) has the cosine-weighted mean Schlick reflectance as albedo:
+    2 int_0^1 (f0 + (1 - f0)(1 - mu)^5) mu dmu = f0 + (1 - f0) / 21; rougher lobes lose albedo (G2 < G1)."""
+    f0 = 0.04
+    assert principled_diffuse_scale(0.0, 1.5) == pytest.approx(1.0 - (f0 + (1 - f0) / 21.0), abs=1e-3)
+    ks = [principled_diffuse_scale(r, 1.5) for r in (0.0, 0.3, 0.6, 1.0)]
+    assert all(a < b for a, b in zip(ks, ks[1:], strict=False)) and ks[-1] < 1.0
+
+
+def test_cycles_pixel_filter_widths():
+    """Cycles' Gaussian exp(-2 (6x/w)^2) has stddev w/12; the Blackman-Harris window over [-w/2, w/2] has a
+    stddev of 0.1385 w (numerical integral of the 4-term window, independent of the converter's grid)."""
+    assert cycles_pixel_filter("GAUSSIAN", 1.5) == ("gaussian", pytest.approx(0.125))
+    from scipy.integrate import quad
+
+    c = (0.35875, -0.48829, 0.14128, -0.01168)
+    bh = lambda x: sum(a * math.cos(2 * math.pi * k * (x + 0.5)) for k, a in enumerate(c))  # noqa: E731
+    sd = math.sqrt(quad(lambda x: bh(x) * x * x, -0.5, 0.5)[0] / quad(bh, -0.5, 0.5)[0])
+    kind, got = cycles_pixel_filter("BLACKMAN_HARRIS", 2.0)
+    assert kind == "gaussian" and got == pytest.approx(2.0 * sd, rel=1e-4)
+    assert cycles_pixel_filter("BOX", 1.0) == ("box", None)
+
+
+def test_instances_and_linked_duplicates_become_instanceable_prims(tmp_path):
+    """The fidelity suite's instances scene: 3 collection instances of (Head, Body) and 2 objects sharing the
+    Pebble mesh -> 3 class prototypes and 8 instanceable Xforms; the excluded collection's own objects are not
+    written as plain meshes."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("instances", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    protos = stage.GetPrimAtPath("/Prototypes").GetAllChildren()  # class prims: abstract
+    assert len(protos) == 3 and all(p.IsAbstract() for p in protos), protos
+    inst = [p for p in stage.GetPrimAtPath("/World/Geometry").GetChildren() if p.IsInstance()]
+    assert len(inst) == 8
+    plain = [p.GetName() for p in stage.GetPrimAtPath("/World/Geometry").GetChildren() if not p.IsInstance()]
+    assert plain == ["Floor"], plain
+
+
+def test_emissive_mesh_too_large_to_light_sample_is_warned(tmp_path):
+    from nasset_converters.blender.fidelity import _material
+
+    build_example("blender-surface")
+    glow = _material(bpy, "Glow", "emission", **{"Color": (1.0, 1.0, 1.0), "Strength": 3.0})
+    for op, name, kw in (("cube", "SmallLamp", {"size": 0.2}), ("uv_sphere", "BigLamp", {"radius": 0.1})):
+        getattr(bpy.ops.mesh, f"primitive_{op}_add")(location=(1.0, 1.0, 1.0), **kw)
+        bpy.context.active_object.name = name
+        bpy.context.active_object.data.materials.append(glow)
+    blend = tmp_path / "lamps.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), check_existing=False)
+    res = convert_scene(blend, tmp_path / "s.usda")
+    assert [w for w in res.warnings if "BigLamp" in w and "light-samples" in w]
+    assert not [w for w in res.warnings if "SmallLamp" in w]

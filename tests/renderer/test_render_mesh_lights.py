@@ -65,3 +65,22 @@ def test_one_sided_mesh_light_emits_from_its_front_only(tmp_path):
     flipped.lights[0].one_sided = True
     flipped.lights[0].n = -flipped.lights[0].n  # its front now faces up, away from the floor
     assert render(flipped, RenderSettings(spp=4, width=4, height=4, max_depth=1)).image.mean() == 0.0
+
+
+def test_mesh_light_reaches_a_floor_point_at_a_grazing_angle(tmp_path):
+    """Light samples toward the panel from 3 m aside (cos 0.32 at the panel): shadow rays leave the offset origin
+    and must not be stopped by the emitting panel itself (spec/renderer.md#ray-offsets). Before they were aimed at
+    the light sample, this point was lit by MIS-weighted BSDF hits only (a few per cent of its irradiance)."""
+    xs = (np.arange(800) + 0.5) / 800 * 0.8 - 0.4
+    x, z = np.meshgrid(xs, xs)
+    expect = 0.5 / np.pi * np.sum(1.0 / ((x - 3.0) ** 2 + 1.0 + z * z) ** 2) * (0.8 / 800) ** 2
+    b = SceneBuilder()
+    b.camera((3.0, 0.5, 0.01), (3.0, 0.0, 0.0), focal=400.0)  # a ~1.3 cm footprint on the floor
+    b.quad("Floor", (0, 0, 0), 10.0, diffuse=(0.5, 0.5, 0.5), specular=(0, 0, 0), roughness=1.0)
+    b.mesh("Panel", PANEL, [[0, 1, 2, 3]], diffuse=(0, 0, 0), emission=(1, 1, 1), specular=(0, 0, 0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(b.write(tmp_path / "s.usda"))
+    r = render(scene, RenderSettings(spp=64, width=4, height=4, max_depth=1, seed=stat_seed(4)))
+    se = np.sqrt(r.variance.mean() / 16)
+    assert abs(r.image.mean() - expect) < 5 * se + 0.01 * expect, (r.image.mean(), expect, se)

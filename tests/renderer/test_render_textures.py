@@ -113,10 +113,29 @@ def test_spot_falloff_hand_values():
     np.testing.assert_allclose(spot_falloff(c, 22.0, 7.0 / 22.0), [1, 1, 0.5, 0.1 / 7, 0, 0], atol=1e-9)
 
 
-def test_spot_light_lights_its_cone_only(tmp_path):
-    from pxr import UsdLux
+def test_spot_smoothstep_falloff_hand_values():
+    """Cycles' profile: smoothstep((cos t - cos c) / ((1 - cos c) s)); x = 1/4 of the span gives 0.25^2 (3 - 0.5)."""
+    from nasset_reference_renderer.lights import spot_falloff
 
-    h, a, intensity, cone, soft = 2.0, 0.5, 4.0, 20.0, 0.25
+    cc, s = np.cos(np.radians(25.0)), 0.3
+    span = (1.0 - cc) * s
+    c = np.array([1.0, cc + span * 1.01, cc + 0.5 * span, cc + 0.25 * span, cc - 1e-4, -1.0])
+    np.testing.assert_allclose(spot_falloff(c, 25.0, s, "smoothstep"), [1, 1, 0.5, 0.15625, 0, 0], atol=1e-9)
+    hard = np.cos(np.radians([0.0, 24.9, 25.1]))
+    np.testing.assert_allclose(spot_falloff(hard, 25.0, 0.0, "smoothstep"), [1, 1, 0])  # softness 0: a step
+
+
+def _smoothstep_ramp(theta, cone, soft):
+    """Hand-written Cycles spot ramp at angles ``theta`` (degrees) for the render test below."""
+    x = np.clip((np.cos(np.radians(theta)) - np.cos(np.radians(cone))) / ((1 - np.cos(np.radians(cone))) * soft), 0, 1)
+    return x * x * (3 - 2 * x)
+
+
+@pytest.mark.parametrize("falloff", [None, "smoothstep"])
+def test_spot_light_lights_its_cone_only(tmp_path, falloff):
+    from pxr import Sdf, UsdLux
+
+    h, a, intensity, cone, soft = 2.0, 0.5, 4.0, 20.0, 0.25 if falloff is None else 0.6
     b = SceneBuilder()
     b.camera((0, 3, 0.001), (0, 0, 0), focal=14)
     b.quad("Floor", (0, 0, 0), 6.0, diffuse=(a, a, a), specular=(0, 0, 0), roughness=1.0)
@@ -129,6 +148,8 @@ def test_spot_light_lights_its_cone_only(tmp_path):
     shaping = UsdLux.ShapingAPI.Apply(lt.GetPrim())
     shaping.CreateShapingConeAngleAttr(cone)
     shaping.CreateShapingConeSoftnessAttr(soft)
+    if falloff is not None:
+        lt.GetPrim().CreateAttribute("nasset:shaping:falloff", Sdf.ValueTypeNames.Token, custom=True).Set(falloff)
     scene = load_scene(b.write(tmp_path / "s.usda"))
     w = 32
     img = render(scene, RenderSettings(spp=32, width=w, height=w, max_depth=1)).image.reshape(-1, 3)[:, 0]
@@ -138,14 +159,50 @@ def test_spot_light_lights_its_cone_only(tmp_path):
     theta = np.degrees(np.arctan(np.hypot(hit[:, 0], hit[:, 2]) / h))
     cos = np.cos(np.radians(theta))
     full = a / np.pi * intensity * cos ** 3 / h ** 2  # E = I cos / d^2 with d = h / cos
-    beam = cone * (1 - soft)
+    if falloff is None:
+        beam, ramp_of = cone * (1 - soft), lambda t: (cone - t) / (cone - cone * (1 - soft))
+    else:  # full strength where cos t >= cos c + (1 - cos c) s
+        beam = np.degrees(np.arccos(np.cos(np.radians(cone)) + (1 - np.cos(np.radians(cone))) * soft))
+        ramp_of = lambda t: _smoothstep_ramp(t, cone, soft)  # noqa: E731
     inner, outer = theta < beam - 3.5, theta > cone + 3.5  # pixel footprints span up to ~3.4 degrees here
     assert inner.sum() > 10 and outer.sum() > 10
     np.testing.assert_allclose(img[inner], full[inner], rtol=1e-2)  # pixel-footprint means of a concave cos^3: a bit low
     assert np.all(img[outer] == 0.0)
     ramp = (theta > beam + 1.7) & (theta < cone - 1.7)
     # in the ramp single pixels straddle its ends: compare the mean over the ramp's pixels
-    assert img[ramp].mean() == pytest.approx((full[ramp] * (cone - theta[ramp]) / (cone - beam)).mean(), rel=0.05)
+    assert ramp.sum() > 10
+    assert img[ramp].mean() == pytest.approx((full[ramp] * ramp_of(theta[ramp])).mean(), rel=0.05)
+
+
+def test_light_hidden_from_camera_still_lights_the_scene(tmp_path):
+    """``nasset:cameraVisibility = false``: camera rays pass through the RectLight (black background there) and the
+    light still lights the floor as before (pixels that do not see the panel keep their mean)."""
+    from pxr import Sdf, Usd
+
+    b = SceneBuilder()
+    b.camera((0, 0.55, 3.0), (0, 0.55, 0), focal=20)  # rays through the panel rise into the black background
+    b.quad("Floor", (0, 0, 0), 6.0, diffuse=(0.3, 0.3, 0.3), specular=(0.5, 0.5, 0.5), roughness=0.05)
+    b.rect_light("Panel", (0, 1.0, 0), 0.8, 0.8, (0.0, -0.3, 1.0), 5.0)
+    path = b.write(tmp_path / "s.usda")
+    shown = render(load_scene(path), RenderSettings(spp=64, width=24, height=24, max_depth=2, seed=3)).image
+    stage = Usd.Stage.Open(path)
+    stage.GetPrimAtPath("/World/Panel").CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool,
+                                                         custom=True).Set(False)
+    stage.GetRootLayer().Save()
+    hidden = render(load_scene(path), RenderSettings(spp=64, width=24, height=24, max_depth=2, seed=3)).image
+    scene = load_scene(path)
+    ys, xs = np.mgrid[0:24, 0:24]
+    touches, panel = np.zeros(24 * 24, bool), np.ones(24 * 24, bool)  # corners or centre on the panel; all of them
+    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1), (0.5, 0.5)):
+        o, d = scene.camera.generate_rays(xs.ravel() + dx, ys.ravel() + dy, 24, 24)
+        on = np.isfinite(scene.lights[0].intersect(o, d)[0])
+        touches, panel = touches | on, panel & on
+    touches, panel = touches.reshape(24, 24), panel.reshape(24, 24)
+    assert panel.sum() > 5
+    np.testing.assert_allclose(shown[panel], 5.0)  # the panel's radiance, seen directly
+    assert np.all(hidden[panel] == 0.0)  # through it: the black background
+    assert (~touches).sum() > 100
+    assert hidden[~touches].mean() == pytest.approx(shown[~touches].mean(), rel=0.03)
 
 
 @pytest.mark.parametrize("file, code", [("https://example.com/t.exr", "SCENE_INVALID"), ("./bad.exr", "IMAGE_INVALID")])

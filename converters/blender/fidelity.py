@@ -1,0 +1,393 @@
+"""Conversion fidelity: small Blender scenes rendered by Cycles and, after ``convert-scene``, by the reference renderer.
+
+Each scene (``SCENES``) is built by bpy code from empty factory settings and saved as a .blend with the
+files it needs. ``measure`` renders it twice with Cycles (CPU, seeds 1 and 2, box filter unless
+the scene sets its own, no clamping; :func:`nasset_converters.blender.cycles.setup_cycles`) and once
+with the reference renderer from the converted stage, at the same size and sample count, and
+reports the measures of :func:`nasset_converters.mitsuba.fidelity.compare` (ratio, PSNR against
+Cycles seed 1, Cycles' seed-to-seed PSNR, MSE over what the noise explains).
+``python -m nasset_converters.blender.fidelity`` writes the table at full size into the Blender
+section of docs/conversion-fidelity.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from nasset_converters.mitsuba.fidelity import FidelityScene, compare, table, write_section
+
+
+# -- scene building blocks -------------------------------------------------------------------------
+def _new_scene(bpy, size: int, eye, target, *, bounces: int = 4) -> None:
+    """Empty factory settings, Cycles at ``size`` x ``size`` with ``bounces`` bounces, a 40 deg camera at ``eye``."""
+    from .cycles import setup_cycles
+    from .examples import _look_at
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    setup_cycles(bpy, size, max_bounces=bounces)
+    sc = bpy.context.scene
+    sc.cycles.blur_glossy = 0.0  # "filter glossy" blurs highlights (biased)
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens_unit = "FOV"
+    cam.angle = math.radians(40.0)
+    co = bpy.data.objects.new("Camera", cam)
+    sc.collection.objects.link(co)
+    _look_at(co, eye, target)
+    sc.camera = co
+
+
+def _material(bpy, name: str, kind: str = "diffuse", **inputs):
+    """A node material whose surface is one shader: ``diffuse`` (ShaderNodeBsdfDiffuse), ``principled`` or
+    ``emission``; ``inputs`` set socket defaults (a tuple of 3 gets alpha 1)."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    for n in list(nt.nodes):
+        if n.bl_idname != "ShaderNodeOutputMaterial":
+            nt.nodes.remove(n)
+    out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    node = nt.nodes.new({"diffuse": "ShaderNodeBsdfDiffuse", "principled": "ShaderNodeBsdfPrincipled",
+                         "emission": "ShaderNodeEmission"}[kind])
+    for k, v in inputs.items():
+        node.inputs[k].default_value = (*v, 1.0) if isinstance(v, tuple) and len(v) == 3 else v
+    nt.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def _image_texture(bpy, mat, socket: str, file: Path, colorspace: str) -> None:
+    """Link an Image Texture node reading ``file`` (colour space ``sRGB`` or ``Non-Color``) to ``socket`` of the
+    material's shader."""
+    nt = mat.node_tree
+    shader = next(n for n in nt.nodes if n.bl_idname != "ShaderNodeOutputMaterial")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(file))
+    tex.image.colorspace_settings.name = colorspace
+    nt.links.new(tex.outputs["Color"], shader.inputs[socket])
+
+
+def _add(bpy, op: str, name: str, mat, *, smooth: bool = False, **kw):
+    """A primitive (``plane``, ``cube``, ``uv_sphere``, ...) via bpy.ops with material ``mat``."""
+    getattr(bpy.ops.mesh, f"primitive_{op}_add")(**kw)
+    ob = bpy.context.active_object
+    ob.name = name
+    if smooth:
+        bpy.ops.object.shade_smooth()
+    if mat is not None:
+        ob.data.materials.append(mat)
+    return ob
+
+
+def _floor(bpy, rgb=(0.5, 0.5, 0.5), size: float = 4.0):
+    return _add(bpy, "plane", "Floor", _material(bpy, "FloorGrey", **{"Color": rgb}), size=size)
+
+
+def _light(bpy, name: str, kind: str, location, *, energy: float, rgb=(1.0, 1.0, 1.0), rotation=(0.0, 0.0, 0.0), **attrs):
+    lt = bpy.data.lights.new(name, kind)
+    lt.energy = energy
+    lt.color = rgb
+    if kind in ("POINT", "SPOT"):
+        lt.shadow_soft_size = 0.0
+    for k, v in attrs.items():
+        setattr(lt, k, v)
+    ob = bpy.data.objects.new(name, lt)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location = location
+    ob.rotation_euler = rotation
+    return ob
+
+
+def _sun(bpy):
+    return _light(bpy, "Sun", "SUN", (0.0, 0.0, 5.0), energy=2.5, rgb=(1.0, 0.96, 0.88), angle=math.radians(2.0),
+                  rotation=(math.radians(35.0), 0.0, math.radians(30.0)))
+
+
+def _world(bpy, rgb=(0.3, 0.35, 0.45), strength: float = 1.0):
+    world = bpy.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    bg.inputs["Color"].default_value = (*rgb, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    bpy.context.scene.world = world
+    return world
+
+
+def _checker_png(path: Path, colors, n: int = 64, squares: int = 8) -> Path:
+    """An 8-bit PNG checkerboard of two uint8 colours, darker toward the top row (flips show)."""
+    from nasset_sdk.images import write_png
+
+    y, x = np.mgrid[0:n, 0:n]
+    sq = ((x * squares // n) + (y * squares // n)) % 2
+    img = np.where(sq[..., None] == 0, np.asarray(colors[0], np.float64), np.asarray(colors[1], np.float64))
+    img = img * (0.55 + 0.45 * (y / (n - 1)))[..., None]
+    return write_png(path, np.clip(np.round(img), 0, 255).astype(np.uint8))
+
+
+# -- the scenes ------------------------------------------------------------------------------------
+def _textures(bpy, folder: Path, size: int) -> None:
+    _new_scene(bpy, size, (1.2, -2.6, 1.8), (0.0, 0.0, 0.3))
+    floor = _material(bpy, "FloorTex")
+    _image_texture(bpy, floor, "Color", _checker_png(folder / "floor.png", [(230, 200, 120), (60, 90, 160)]), "sRGB")
+    _add(bpy, "plane", "Floor", floor, size=3.0)
+    box = _material(bpy, "BoxData", "principled", **{"Roughness": 0.6})
+    _image_texture(bpy, box, "Base Color", _checker_png(folder / "box.png", [(250, 70, 40), (240, 240, 230)], squares=4),
+                   "Non-Color")
+    _add(bpy, "cube", "Box", box, size=0.7, location=(0.0, 0.0, 0.35), rotation=(0.0, 0.0, math.radians(25.0)))
+    _sun(bpy)
+    _world(bpy)
+
+
+def _spot(bpy, folder: Path, size: int) -> None:
+    _new_scene(bpy, size, (0.0, -3.0, 2.2), (0.0, 0.0, 0.2))
+    _floor(bpy, (0.6, 0.6, 0.6))
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Green", **{"Color": (0.3, 0.6, 0.3)}), smooth=True, radius=0.3,
+         location=(0.3, 0.2, 0.3))
+    _light(bpy, "Spot", "SPOT", (0.5, -0.4, 1.8), energy=150.0, rgb=(1.0, 0.9, 0.75), spot_size=math.radians(50.0),
+           spot_blend=0.3, rotation=(math.radians(20.0), math.radians(15.0), 0.0))
+    _light(bpy, "Bulb", "POINT", (-1.2, -0.8, 1.0), energy=8.0, rgb=(0.6, 0.7, 1.0))
+
+
+def _instances(bpy, folder: Path, size: int) -> None:
+    _new_scene(bpy, size, (0.0, -2.8, 1.4), (0.0, 0.0, 0.3))
+    _floor(bpy)
+    group = bpy.data.collections.new("Group")
+    bpy.context.scene.collection.children.link(group)
+    head = _add(bpy, "uv_sphere", "Head", _material(bpy, "Orange", **{"Color": (0.8, 0.3, 0.1)}), smooth=True,
+                radius=0.15, location=(0.0, 0.0, 0.45), segments=24, ring_count=12)
+    body = _add(bpy, "cube", "Body", _material(bpy, "Blue", "principled", **{"Base Color": (0.2, 0.5, 0.8),
+                                                                              "Roughness": 0.5}),
+                size=0.3, location=(0.0, 0.0, 0.15))
+    for ob in (head, body):
+        bpy.context.scene.collection.objects.unlink(ob)
+        group.objects.link(ob)
+    bpy.context.view_layer.layer_collection.children["Group"].exclude = True  # only the instances render
+    for k, (x, y, a) in enumerate([(-0.7, 0.0, 0.0), (0.0, 0.3, 30.0), (0.7, -0.2, 60.0)]):
+        e = bpy.data.objects.new(f"Instance{k}", None)
+        e.instance_type = "COLLECTION"
+        e.instance_collection = group
+        e.location = (x, y, 0.0)
+        e.rotation_euler = (0.0, 0.0, math.radians(a))
+        bpy.context.scene.collection.objects.link(e)
+    # linked duplicates: two objects sharing one mesh
+    pebble = _add(bpy, "cube", "Pebble", _material(bpy, "Red", **{"Color": (0.7, 0.15, 0.15)}), size=0.15,
+                  location=(-0.4, -0.6, 0.075))
+    twin = pebble.copy()  # shares pebble.data
+    twin.name = "PebbleTwin"
+    twin.location = (0.45, -0.7, 0.12)
+    twin.scale = (1.0, 1.0, 1.6)
+    bpy.context.scene.collection.objects.link(twin)
+    _sun(bpy)
+    _world(bpy)
+
+
+def _sidedness(bpy, folder: Path, size: int) -> None:
+    # panels seen from the front and from behind (Cycles shades both sides alike), one with backface culling set
+    _new_scene(bpy, size, (0.0, -2.8, 1.2), (0.0, 0.0, 0.6))
+    _floor(bpy)
+    orange = _material(bpy, "Orange", **{"Color": (0.8, 0.5, 0.2)})
+    culled = _material(bpy, "Culled", **{"Color": (0.2, 0.4, 0.9)})
+    culled.use_backface_culling = True
+    for name, x, a, mat in (("Front", -0.7, 90.0 - 20.0, orange), ("Back", 0.0, -90.0 + 10.0, orange),
+                            ("CulledBack", 0.7, -90.0 - 20.0, culled)):
+        _add(bpy, "plane", name, mat, size=0.5, location=(x, 0.0, 0.6), rotation=(math.radians(a), 0.0, 0.0))
+    _sun(bpy)
+    _world(bpy)
+
+
+def _mesh_emitter(bpy, folder: Path, size: int) -> None:
+    # an emission shader on a small box (12 triangles: a mesh light), over a floor and a ball
+    _new_scene(bpy, size, (0.0, -2.8, 1.3), (0.0, 0.0, 0.4))
+    _floor(bpy, (0.6, 0.6, 0.6))
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Clay", **{"Color": (0.8, 0.4, 0.2)}), smooth=True, radius=0.3,
+         location=(0.3, 0.0, 0.3))
+    lamp = _add(bpy, "cube", "Lamp", _material(bpy, "Glow", "emission", **{"Color": (1.0, 0.9, 0.7), "Strength": 6.0}),
+                size=0.3, location=(-0.4, 0.1, 1.2))
+    lamp.scale = (1.0, 1.0, 0.3)
+
+
+def _principled(bpy, folder: Path, size: int) -> None:
+    _new_scene(bpy, size, (0.0, -2.8, 1.2), (0.0, 0.0, 0.3))
+    _floor(bpy)
+    for name, x, inputs in (("Plastic", -0.7, {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.5}),
+                            ("Metal", 0.0, {"Base Color": (0.9, 0.7, 0.4), "Metallic": 1.0, "Roughness": 0.35}),
+                            ("Matte", 0.7, {"Base Color": (0.2, 0.5, 0.8), "Roughness": 1.0, "Specular IOR Level": 0.0})):
+        _add(bpy, "uv_sphere", name, _material(bpy, name, "principled", **inputs), smooth=True, radius=0.3,
+             location=(x, 0.0, 0.3))
+    _sun(bpy)
+    _world(bpy)
+
+
+def _world_color(bpy, folder: Path, size: int) -> None:
+    # only a coloured world lights diffuse objects (ambient occlusion, colour bleeding)
+    _new_scene(bpy, size, (0.0, -2.6, 1.4), (0.0, 0.0, 0.3))
+    _floor(bpy, (0.7, 0.7, 0.7))
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "White", **{"Color": (0.8, 0.8, 0.8)}), smooth=True, radius=0.35,
+         location=(-0.3, 0.0, 0.35))
+    _add(bpy, "cube", "Box", _material(bpy, "Yellow", **{"Color": (0.8, 0.7, 0.1)}), size=0.5, location=(0.5, 0.2, 0.25))
+    _world(bpy, (0.4, 0.5, 0.8), strength=1.5)
+
+
+def _hdri(bpy, folder: Path, size: int) -> None:
+    # a coarse, high-contrast lat-long map seen behind a ball: its orientation and interpolation show
+    from nasset_sdk.images import write_exr
+
+    _new_scene(bpy, size, (0.0, -2.6, 0.9), (0.0, 0.0, 0.6))
+    _floor(bpy)
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Grey", **{"Color": (0.7, 0.7, 0.7)}), smooth=True, radius=0.4,
+         location=(0.0, 0.0, 0.4))
+    h, w = 8, 16
+    v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    img = np.stack([0.2 + 1.5 * ((np.floor(u * 4) + np.floor(v * 2)) % 2), 0.3 + u, 0.2 + 0.8 * (1 - v)], -1)
+    write_exr(folder / "sky.exr", img.astype(np.float32))
+    world = _world(bpy)
+    nt = world.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(folder / "sky.exr"))
+    bg = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground")
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+
+
+def _render_settings(bpy, folder: Path, size: int) -> None:
+    # max bounces 2 in an open box of bright walls (long paths carry much of the light), Gaussian filter 1.5 px
+    _new_scene(bpy, size, (0.0, -3.2, 1.0), (0.0, 0.0, 1.0), bounces=2)
+    sc = bpy.context.scene
+    sc.cycles.pixel_filter_type = "GAUSSIAN"
+    sc.cycles.filter_width = 1.5
+    white = _material(bpy, "White", **{"Color": (0.9, 0.9, 0.88)})
+    for name, loc, rot, mat in (("Floor", (0, 0, 0), (0, 0, 0), white), ("Ceiling", (0, 0, 2), (180, 0, 0), white),
+                                ("Back", (0, 1, 1), (90, 0, 0), white),
+                                ("Left", (-1, 0, 1), (0, 90, 0), _material(bpy, "Red", **{"Color": (0.9, 0.3, 0.25)})),
+                                ("Right", (1, 0, 1), (0, -90, 0), _material(bpy, "Green", **{"Color": (0.3, 0.9, 0.3)}))):
+        _add(bpy, "plane", name, mat, size=2.0, location=loc, rotation=tuple(math.radians(a) for a in rot))
+    _light(bpy, "Bulb", "POINT", (0.0, 0.0, 1.6), energy=40.0)
+
+
+def _area_lights(bpy, folder: Path, size: int) -> None:
+    # a rectangular and a square area light (exact RectLights), a disk one (an equal-area rectangle, warned)
+    _new_scene(bpy, size, (0.0, -2.8, 1.5), (0.0, 0.0, 0.3))
+    _floor(bpy, (0.6, 0.6, 0.6))
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "White", **{"Color": (0.8, 0.8, 0.8)}), smooth=True, radius=0.3,
+         location=(0.0, 0.0, 0.3))
+    _light(bpy, "Rect", "AREA", (-0.8, 0.0, 1.2), energy=30.0, rgb=(1.0, 0.8, 0.6), shape="RECTANGLE", size=0.6,
+           size_y=0.3, rotation=(0.0, math.radians(-30.0), 0.0))
+    _light(bpy, "Square", "AREA", (0.8, 0.3, 1.4), energy=20.0, rgb=(0.6, 0.8, 1.0), size=0.4,
+           rotation=(0.0, math.radians(25.0), 0.0))
+    _light(bpy, "Disk", "AREA", (0.0, -0.6, 1.6), energy=15.0, shape="DISK", size=0.3)
+
+
+SCENES = {
+    "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor, "
+                              "a Non-Color PNG as a Principled Base Color on a box"),
+    "spot": FidelityScene("spot", _spot, "spot light (size 50 deg, blend 0.3) and a point light over a floor and a ball"),
+    "instances": FidelityScene("instances", _instances, "a collection (sphere + cube) placed by three collection "
+                               "instances; two linked duplicates sharing one mesh"),
+    "sidedness": FidelityScene("sidedness", _sidedness, "panels seen from the front and from behind, one with backface "
+                               "culling set (Cycles shades both sides)"),
+    "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "Emission shader on a 12-triangle box (a mesh light)"),
+    "principled": FidelityScene("principled", _principled, "Principled BSDF balls: dielectric (roughness 0.5), "
+                                "metal (0.35), matte without specular"),
+    "world_color": FidelityScene("world_color", _world_color, "a constant-colour world (strength 1.5) the only light"),
+    "hdri": FidelityScene("hdri", _hdri, "an Environment Texture world (coarse 16 x 8 EXR) seen behind a ball"),
+    "render_settings": FidelityScene("render_settings", _render_settings, "max bounces 2 in an open box of bright walls, "
+                                     "Gaussian pixel filter 1.5 px"),
+    "area_lights": FidelityScene("area_lights", _area_lights, "rectangle, square and disk area lights"),
+}
+
+
+def build(name: str, folder, size: int) -> Path:
+    """Build scene ``name`` in the running Blender (bpy) and save it as ``folder/NAME.blend``; returns the path."""
+    from . import load_bpy, quiet_stdout
+
+    bpy = load_bpy()
+    folder = Path(folder).resolve()
+    folder.mkdir(parents=True, exist_ok=True)
+    with quiet_stdout():
+        SCENES[name].write(bpy, folder, size)
+        bpy.context.view_layer.update()
+        path = folder / f"{name}.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(path), check_existing=False)
+    return path
+
+
+def measure(name: str, folder, *, size: int = 32, spp: int = 64) -> dict:
+    """Render scene ``name`` with Cycles (seeds 1, 2) and converted with the reference renderer (module docstring).
+
+    Returns :func:`compare`'s dict plus "warnings" (the converter's).
+    """
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    from . import load_bpy
+    from .cycles import render_cycles
+    from .usd_export import convert_scene
+
+    bpy = load_bpy()
+    folder = Path(folder)
+    blend = build(name, folder, size)
+    a = render_cycles(bpy, folder / "seed1.exr", spp, seed=1)
+    b = render_cycles(bpy, folder / "seed2.exr", spp, seed=2)
+    res = convert_scene(blend, folder / f"{name}.usda", check_usd=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        usd = load_scene(str(res.output))
+    result = render(usd, RenderSettings(spp=spp, width=size, height=size, seed=5))  # depth, filter: from the stage
+    return {**compare(a, b, result.image, result.variance), "warnings": list(res.warnings)}
+
+
+def main(argv=None) -> int:
+    """Measure every scene and write the Blender section of ``--out`` (default docs/conversion-fidelity.md)."""
+    import tempfile
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="docs/conversion-fidelity.md")
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument("--scenes", nargs="*", default=list(SCENES))
+    args = ap.parse_args(argv)
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.scenes:
+            results[name] = measure(name, Path(tmp) / name, size=args.size, spp=args.spp)
+            print(name, {k: v for k, v in results[name].items() if k in ("ratio", "psnr", "psnr_seed", "noise_ratio")},
+                  flush=True)
+    text = (f"Generated by `python -m nasset_converters.blender.fidelity --size {args.size} --spp {args.spp}` "
+            f"({args.size} x {args.size} pixels, {args.spp} spp for both renderers); scenes and measures are defined in "
+            "`converters/blender/fidelity.py`, and `tests/converters/test_blender_fidelity.py` runs them at 32 x 32, "
+            "32 spp.\n\n" + table(results, SCENES, "Cycles") + NOTES)
+    write_section(args.out, "## Blender (Cycles -> convert-scene -> nasset render)", text)
+    return 0
+
+
+NOTES = """
+- Measures as in the Mitsuba section, against Cycles (CPU, box filter 1 px unless the scene sets one, no
+  clamping, "filter glossy" off; seed 1, and seed 2 for the seed-to-seed PSNR). Cycles is less noisy than
+  the reference renderer at equal spp (light tree, blue-noise sampling): the PSNR gap to the seed-to-seed
+  PSNR is that noise wherever MSE / noise is near 1 (mesh_emitter: 51 vs 63 dB at MSE / noise 0.9); the
+  "PSNR at Cycles' noise" column takes it out and is the one to read against the seed-to-seed PSNR.
+- Measured on Blender 5.0 and used by the converter: Cycles does not show point, spot and area light
+  surfaces to camera rays (`nasset:cameraVisibility = false`); a spot's intensity is P / (4 pi) inside its
+  cone with a smoothstep edge in cos(theta) and no extra cosine; 8-bit sRGB textures are interpolated
+  before they are decoded; the world's equirectangular map has +X at its centre column; backface culling
+  does not affect Cycles (the sidedness scene's culled panel renders from behind like the others).
+- Target (mean within 2 %, PSNR at Cycles' noise within 3 dB of the seed-to-seed PSNR): every mean is within
+  0.6 %; textures ends about 3.3 dB below, the other scenes within 3 dB. Residuals: textures, principled and
+  instances (Principled boxes and spheres) keep MSE / noise 1.3-1.5: the base colour is scaled by one
+  view-averaged factor where Cycles attenuates the diffuse layer per view angle (box tops a few per cent
+  brighter, sides darker); the converter warns with the factor per material. hdri had MSE / noise 2.3 with the map resampled at 8x
+  only: the sky seen directly showed the 16 x 8 map's 128 x 64 nearest texels as steps (red channel 5.9 %
+  rms off Cycles at 48 x 48); made at least 1024 texels wide it is 0.3 % rms.
+- Before this suite the converter measured (ratio, 32 x 32 at 32 spp): textures 1.96-2.37 (Image Texture
+  links dropped), spot 0.88-0.89 (Cycles' smoothstep edge rendered as Mitsuba's linear one),
+  instances 1.03-1.05 (collection instances dropped), mesh_emitter 0 (Emission shader written as grey
+  diffuse), hdri green 1.49 (mirrored dome), render_settings 1.11-1.20 (depth 5 instead of max bounces
+  + 1), area_lights 1.17-1.23 (light surfaces seen by the camera).
+"""
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
