@@ -1,0 +1,149 @@
+"""Mitsuba scenes holding neural assets.
+
+Python cannot register Mitsuba shapes, so an asset instance is its fallback mesh (a ``ply`` shape,
+written once per asset file to a cache folder) carrying the ``nasset`` marker BSDF:
+
+- :func:`asset_shape` returns the scene-dict entry of one instance (``to_world`` as in Mitsuba);
+- :func:`load_file` loads a Mitsuba XML scene in which ``<shape type="nasset">`` holds
+  ``<string name="filename" value="A.usdc"/>`` and optionally ``<transform name="to_world">``;
+- :func:`usd_scene` turns a nasset USD scene (spec/renderer.md#scene-input) into a scene dict.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import error
+
+from .plugins import BSDF, asset_for, register
+from .variant import jit_mitsuba
+
+_PLY_DIR: list[str] = []
+
+
+def _cache_dir() -> Path:
+    if not _PLY_DIR:
+        _PLY_DIR.append(tempfile.mkdtemp(prefix="nasset_mitsuba_"))
+    return Path(_PLY_DIR[0])
+
+
+def fallback_ply(mi, filename: str) -> str:
+    """Path of a PLY file holding the asset's object-space mesh (with its normals when it has them)."""
+    asset = asset_for(mi, filename)
+    g = asset.geometry
+    out = _cache_dir() / (hashlib.sha256(os.path.abspath(filename).encode()).hexdigest()[:16] + ".ply")
+    if not out.exists():
+        pts = np.ascontiguousarray(g.points, np.float32)
+        faces = np.ascontiguousarray(g.faces, np.uint32)
+        mesh = mi.Mesh("nasset_fallback", len(pts), len(faces), has_vertex_normals=g.normals is not None)
+        prm = mi.traverse(mesh)
+        prm["vertex_positions"] = mi.Float(pts.ravel())
+        prm["faces"] = mi.UInt32(faces.ravel())
+        if g.normals is not None:
+            prm["vertex_normals"] = mi.Float(np.ascontiguousarray(g.normals, np.float32).ravel())
+        prm.update()
+        tmp = out.with_suffix(".tmp.ply")
+        mesh.write_ply(str(tmp))
+        os.replace(tmp, out)  # atomic: a concurrent reader never sees half a file
+    return str(out)
+
+
+def asset_shape(filename: str, to_world=None, *, mi=None) -> dict:
+    """Scene-dict entry of an asset instance: its fallback mesh with the ``nasset`` BSDF.
+
+    ``to_world``: 4x4 (column-vector convention, like Mitsuba's) or a ``mi.ScalarTransform4f``; identity by default."""
+    mi = mi or jit_mitsuba()
+    register(mi)
+    filename = os.path.abspath(str(filename))
+    t = mi.ScalarTransform4f() if to_world is None else (
+        to_world if isinstance(to_world, mi.ScalarTransform4f) else mi.ScalarTransform4f(np.asarray(to_world, np.float64).tolist()))
+    has_normals = asset_for(mi, filename).geometry.normals is not None
+    return {"type": "ply", "filename": fallback_ply(mi, filename), "to_world": t, "face_normals": not has_normals,
+            "bsdf": {"type": BSDF, "filename": filename, "to_world": t}}
+
+
+def load_file(path: str, *, mi=None, **params):
+    """Load a Mitsuba XML scene whose ``<shape type="nasset">`` elements are asset instances (see module doc)."""
+    mi = mi or jit_mitsuba()
+    register(mi)
+    path = Path(path)
+    if not path.is_file():
+        raise error("FILE_NOT_FOUND", "no such scene file", file=str(path))
+    try:
+        tree = ET.parse(path)
+    except ET.ParseError as exc:
+        raise error("SCENE_INVALID", f"not XML: {exc}", file=str(path)) from None
+    for shape in tree.getroot().iter("shape"):
+        if shape.get("type") != "nasset":
+            continue
+        names = {c.get("name"): c for c in shape}
+        fn = names.get("filename")
+        if fn is None or fn.tag != "string":
+            raise error("SCENE_INVALID", "<shape type=\"nasset\"> needs <string name=\"filename\" value=\"...\"/>", file=str(path),
+                        prim=shape.get("id"))
+        asset_file = str((path.parent / fn.get("value", "")).resolve())
+        has_normals = asset_for(mi, asset_file).geometry.normals is not None
+        shape.set("type", "ply")
+        fn.set("value", fallback_ply(mi, asset_file))
+        ET.SubElement(shape, "boolean", name="face_normals", value="true" if not has_normals else "false")
+        bsdf = ET.SubElement(shape, "bsdf", type=BSDF)
+        ET.SubElement(bsdf, "string", name="filename", value=asset_file)
+        if "to_world" in names:
+            bsdf.append(copy.deepcopy(names["to_world"]))
+    resolver = mi.Thread.thread().file_resolver()
+    resolver.prepend(str(path.parent.resolve()))
+    try:
+        return mi.load_string(ET.tostring(tree.getroot(), encoding="unicode"), **params)
+    except Exception as exc:  # Mitsuba reports XML and plugin errors as RuntimeError
+        raise error("SCENE_INVALID", f"Mitsuba could not load the scene: {str(exc).splitlines()[0][:300]}", file=str(path)) from None
+
+
+def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
+    """Scene dict of a nasset USD scene: meshes (diffuse ``kd``; emissive ones area lights), asset
+    instances, point / delta distant / sphere / rectangle lights, the camera.
+
+    The GGX lobe of UsdPreviewSurface (spec/renderer.md#materials) is not rendered (Mitsuba has no BSDF
+    with that exact lobe); cone distant and dome lights raise SCENE_UNSUPPORTED."""
+    from nasset_mitsuba_renderer.lights import MitsubaLight, build_lights
+    from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
+    from nasset_mitsuba_renderer.usdscene import read_scene
+
+    mi = mi or jit_mitsuba()
+    register(mi)
+    desc = read_scene(path)
+    w, h = desc.camera.resolution(width, height)
+    entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
+    for k, m in enumerate(desc.meshes):
+        mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
+        bsdf = mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": np.clip(m.material.kd, 0, 1).tolist()}})
+        props = mi.Properties()
+        props["bsdf"] = bsdf
+        entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
+        if np.any(np.asarray(m.material.emission) > 0):
+            entries[f"mesh_{k}"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": np.asarray(m.material.emission).tolist()}}
+    for j, inst in enumerate(desc.assets):
+        mw = np.asarray(inst.to_world, np.float64)
+        if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
+            raise error("SCENE_INVALID", "asset instance transform is singular", file=str(path), prim=inst.prim)
+        entries[f"asset_{j}"] = asset_shape(inst.file, mw.T, mi=mi)  # USD row vectors -> Mitsuba column vectors
+    lights, light_entries = build_lights(desc.lights, str(path))
+    for lt in lights:
+        if not isinstance(lt, MitsubaLight):
+            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant (angle 0), sphere and rect lights, not {type(lt).__name__}",
+                        file=str(path), prim=lt.desc.prim)
+    entries.update(light_entries)
+    return entries
+
+
+def _mesh_ply(mi, mesh) -> str:
+    """A world-space plain mesh written to the cache folder (scene dicts cannot attach a BSDF to a Mesh object)."""
+    out = _cache_dir() / f"mesh_{len(list(_cache_dir().glob('mesh_*.ply')))}.ply"
+    mesh.write_ply(str(out))
+    return str(out)
