@@ -97,8 +97,9 @@ def load_file(path: str, *, mi=None, **params):
         ET.SubElement(bsdf, "string", name="filename", value=asset_file)
         if "to_world" in names:
             bsdf.append(copy.deepcopy(names["to_world"]))
-    resolver = mi.Thread.thread().file_resolver()
-    resolver.prepend(str(path.parent.resolve()))
+    resolver = mi.file_resolver()  # the scene's relative paths (meshes, textures) resolve next to it
+    if str(path.parent.resolve()) not in [str(p) for p in resolver]:
+        resolver.prepend(str(path.parent.resolve()))
     try:
         return mi.load_string(ET.tostring(tree.getroot(), encoding="unicode"), **params)
     except Exception as exc:  # Mitsuba reports XML and plugin errors as RuntimeError
