@@ -6,7 +6,7 @@ decoder MLP) into Dr.Jit kernels, so the same code runs on ``llvm_ad_rgb`` (CPU)
 ``cuda_ad_rgb`` (GPU):
 
 - :mod:`.variant` sets a JIT Mitsuba variant (typed error when none is usable);
-- :mod:`.mlp` turns an asset's ONNX decoder (read once, its initializers) into a ``drjit.nn`` MLP;
+- :mod:`.network` traces an asset's ONNX network (read once) into Dr.Jit (affine layers through ``drjit.nn``);
 - :mod:`.rna` evaluates an ``rna`` surface asset's transport (spec/kinds/rna.md) in Dr.Jit;
 - :mod:`.plugins` registers the ``nasset`` BSDF (marks a shape as an asset instance) and the
   ``nasset_path`` integrator (spec/renderer.md#neural-assets at asset hits, Mitsuba's ``path`` elsewhere);

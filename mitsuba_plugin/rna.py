@@ -1,7 +1,7 @@
 """Kind ``rna`` (surface variant) evaluated in Dr.Jit (spec/kinds/rna.md, spec/kinds/encodings.md).
 
 The triplane is three ``Texture2f`` (bilinear, clamp to edge, texel centres at (i + 1/2) / R: the
-spec's ``grid_sample_2d``), the decoder a :class:`~.mlp.DrJitMLP` built from the ONNX initializers.
+spec's ``grid_sample_2d``), the decoder a :class:`~.network.DrJitNetwork` traced from its ONNX graph.
 Inputs and outputs are Dr.Jit arrays of the active Mitsuba variant, in the asset's object space.
 """
 
@@ -12,7 +12,7 @@ import numpy as np
 from nasset_sdk.asset import Asset
 from nasset_sdk.errors import error
 
-from .mlp import DrJitMLP, mlp_layers
+from .network import DrJitNetwork
 
 #: TRIPLANE_AXES of spec/kinds/encodings.md#triplane: plane k reads (u, v) = (xn[a], xn[b])
 TRIPLANE_AXES = ((0, 1), (1, 2), (2, 0))
@@ -53,9 +53,7 @@ class RnaJit:
         self.channels = int(planes.shape[-1])
         self.planes = [mi.Texture2f(mi.TensorXf(np.ascontiguousarray(planes[k])), use_accel=False,
                                     filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp) for k in range(3)]
-        self.mlp = DrJitMLP(mi, mlp_layers(asset.network_bytes("core", "decoder"), file=self.path, prim="/Asset/core/decoder"))
-        if self.mlp.n_in != self.channels + 12 or self.mlp.n_out != 6:
-            raise error("NETWORK_IO", f"decoder is {self.mlp.n_in} -> {self.mlp.n_out}, expected {self.channels + 12} -> 6", file=self.path)
+        self.decoder = DrJitNetwork(mi, asset.network_bytes("core", "decoder"), file=self.path, prim="/Asset/core/decoder")
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
         self.lo = lo
         self.span = np.maximum(hi - lo, 1e-30)
@@ -94,6 +92,6 @@ class RnaJit:
         """(unshadowed, shadowed) transports [Color3f, 1/sr]: NaN/Inf -> 0, then max(0, y)."""
         import drjit as dr
 
-        y = self.mlp(self.network_input(x, n, wo, wi))
+        y = self.decoder(self.network_input(x, n, wo, wi))
         y = [dr.select(dr.isfinite(v), dr.maximum(v, 0.0), 0.0) for v in y]
         return self.mi.Color3f(y[0], y[1], y[2]), self.mi.Color3f(y[3], y[4], y[5])

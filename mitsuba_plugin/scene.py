@@ -69,41 +69,67 @@ def asset_shape(filename: str, to_world=None, *, mi=None) -> dict:
             "bsdf": {"type": BSDF, "filename": filename, "to_world": t}}
 
 
-def load_file(path: str, *, mi=None, **params):
-    """Load a Mitsuba XML scene whose ``<shape type="nasset">`` elements are asset instances (see module doc)."""
+def load_file(path: str, *, mi=None, replace: dict | None = None, **params):
+    """Load a Mitsuba XML scene whose ``<shape type="nasset">`` elements are asset instances (see module doc).
+
+    ``replace``: {shape id: asset file}: those shapes are left out and each asset file is added once as an
+    instance with the identity transform (an asset baked from a scene's shapes has their world space as
+    its object space, spec/bake.md#stages). ``params``: XML ``$name`` parameters."""
     mi = mi or jit_mitsuba()
     register(mi)
     path = Path(path)
     if not path.is_file():
         raise error("FILE_NOT_FOUND", "no such scene file", file=str(path))
     try:
-        tree = ET.parse(path)
+        root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise error("SCENE_INVALID", f"not XML: {exc}", file=str(path)) from None
-    for shape in tree.getroot().iter("shape"):
-        if shape.get("type") != "nasset":
-            continue
-        names = {c.get("name"): c for c in shape}
-        fn = names.get("filename")
-        if fn is None or fn.tag != "string":
-            raise error("SCENE_INVALID", "<shape type=\"nasset\"> needs <string name=\"filename\" value=\"...\"/>", file=str(path),
-                        prim=shape.get("id"))
-        asset_file = str((path.parent / fn.get("value", "")).resolve())
-        has_normals = asset_for(mi, asset_file).geometry.normals is not None
-        shape.set("type", "ply")
-        fn.set("value", fallback_ply(mi, asset_file))
-        ET.SubElement(shape, "boolean", name="face_normals", value="true" if not has_normals else "false")
-        bsdf = ET.SubElement(shape, "bsdf", type=BSDF)
-        ET.SubElement(bsdf, "string", name="filename", value=asset_file)
-        if "to_world" in names:
-            bsdf.append(copy.deepcopy(names["to_world"]))
+    if replace:
+        _replace_shapes(root, replace, str(path))
+    for shape in root.iter("shape"):
+        if shape.get("type") == "nasset":
+            _expand_asset(mi, shape, path)
     resolver = mi.file_resolver()  # the scene's relative paths (meshes, textures) resolve next to it
     if str(path.parent.resolve()) not in [str(p) for p in resolver]:
         resolver.prepend(str(path.parent.resolve()))
     try:
-        return mi.load_string(ET.tostring(tree.getroot(), encoding="unicode"), **params)
+        return mi.load_string(ET.tostring(root, encoding="unicode"), **params)
     except Exception as exc:  # Mitsuba reports XML and plugin errors as RuntimeError
         raise error("SCENE_INVALID", f"Mitsuba could not load the scene: {str(exc).splitlines()[0][:300]}", file=str(path)) from None
+
+
+def _replace_shapes(root, replace: dict, scene_file: str) -> None:
+    """Drop the shapes whose id is a key of ``replace`` and add one ``nasset`` shape per asset file."""
+    found = set()
+    for parent in list(root.iter()):
+        for child in list(parent):
+            if child.tag == "shape" and child.get("id") in replace:
+                parent.remove(child)
+                found.add(child.get("id"))
+    missing = sorted(set(replace) - found)
+    if missing:
+        raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {', '.join(map(repr, missing))} in the scene", file=scene_file)
+    for k, file in enumerate(dict.fromkeys(str(Path(f).resolve()) for f in replace.values())):
+        shape = ET.SubElement(root, "shape", type="nasset", id=f"nasset_asset_{k}")
+        ET.SubElement(shape, "string", name="filename", value=file)
+
+
+def _expand_asset(mi, shape, path: Path) -> None:
+    """``<shape type="nasset">`` -> its fallback ``ply`` with the ``nasset`` BSDF (in place)."""
+    names = {c.get("name"): c for c in shape}
+    fn = names.get("filename")
+    if fn is None or fn.tag != "string":
+        raise error("SCENE_INVALID", "<shape type=\"nasset\"> needs <string name=\"filename\" value=\"...\"/>", file=str(path),
+                    prim=shape.get("id"))
+    asset_file = str((path.parent / fn.get("value", "")).resolve())
+    has_normals = asset_for(mi, asset_file).geometry.normals is not None
+    shape.set("type", "ply")
+    fn.set("value", fallback_ply(mi, asset_file))
+    ET.SubElement(shape, "boolean", name="face_normals", value="true" if not has_normals else "false")
+    bsdf = ET.SubElement(shape, "bsdf", type=BSDF)
+    ET.SubElement(bsdf, "string", name="filename", value=asset_file)
+    if "to_world" in names:
+        bsdf.append(copy.deepcopy(names["to_world"]))
 
 
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:

@@ -39,14 +39,35 @@ def _vec(mi, a):
     return mi.Vector3f(*[mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)])
 
 
-@pytest.mark.parametrize("size", ["tiny", "small"])
-def test_rna_transport_matches_sdk_evaluator(mi, tmp_path, rng, size):
-    """Dr.Jit triplane + drjit.nn decoder = the SDK's numpy + onnxruntime evaluator on random inputs
-    (points inside and outside the encoding box, unnormalised and zero directions).
-    Tolerance 2e-4 (abs) + 2e-4 (rel): Dr.Jit's texture computes the bilinear fraction in float32
-    from (xn + 1) / 2, the SDK from the spec's formula, ~1e-5 apart on R = 64 planes."""
-    path = tmp_path / f"rna_{size}.usdc"
-    example_builder("rna", size=size, seed=int(rng.integers(1 << 30))).write(path)
+def _baked_style_asset(path, seed):
+    """A tiny rna asset whose decoder is the bakers' model (angular features: Slice, ReduceSum, Sqrt, Div,
+    Exp, Concat before the MLP) exported by torch with random weights."""
+    import torch
+
+    from nasset_bakers.train.rna import build_model, export_onnx
+
+    torch.manual_seed(seed)
+    model = build_model("tiny", init_std=0.5, seed=seed)
+    for p in model.decoder.parameters():
+        torch.nn.init.normal_(p, std=0.5)
+    b = example_builder("rna", size="tiny", seed=seed)
+    b.component("core").add_network("decoder", export_onnx(model))
+    b.write(path)
+
+
+@pytest.mark.parametrize("kind", ["tiny", "small", "baked"])
+def test_rna_transport_matches_sdk_evaluator(mi, tmp_path, rng, kind):
+    """Dr.Jit triplane + traced decoder = the SDK's numpy + onnxruntime evaluator on random inputs
+    (points inside and outside the encoding box, unnormalised and zero directions), for the SDK's random
+    MLPs and for the bakers' decoder graph. Tolerance 2e-4 (abs) + 2e-4 (rel): Dr.Jit's texture computes
+    the bilinear fraction in float32 from (xn + 1) / 2, the SDK from the spec's formula, ~1e-5 apart on
+    R = 64 planes."""
+    path = tmp_path / f"rna_{kind}.usdc"
+    seed = int(rng.integers(1 << 30))
+    if kind == "baked":
+        _baked_style_asset(path, seed)
+    else:
+        example_builder("rna", size=kind, seed=seed).write(path)
     sdk = Asset.open(path).evaluator()
     jit = RnaJit(mi, str(path))
     lo, hi = (np.asarray(v) for v in Asset.open(path).domain)
@@ -152,16 +173,16 @@ def test_wrong_kind(mi, tmp_path):
 
 
 def test_decoder_the_plugin_cannot_run(mi, tmp_path, rng):
-    """A valid rna asset whose decoder ends in a Sigmoid (allowed by the format, not a ReLU MLP)."""
+    """A valid rna asset whose decoder ends in a Softsign (in the format's allow-list, not among the operators the plugin runs)."""
     b = example_builder("rna", size="tiny", seed=2)
     w = [rng.normal(size=(16, 8)).astype(np.float32), rng.normal(size=(8, 6)).astype(np.float32)]
     b.component("core").add_network("decoder", mlp_onnx(w, [np.zeros(8, np.float32), np.zeros(6, np.float32)],
-                                                        output_activation="Sigmoid"))
+                                                        output_activation="Softsign"))
     path = tmp_path / "sig.usdc"
     b.write(path)
     with pytest.raises(SceneError) as exc:
         asset_shape(path, mi=mi)
-    assert exc.value.code == "SCENE_UNSUPPORTED" and "Sigmoid" in exc.value.message
+    assert exc.value.code == "SCENE_UNSUPPORTED" and "Softsign" in exc.value.message
 
 
 def test_xml_scene(mi, tmp_path, rna_asset_path):
