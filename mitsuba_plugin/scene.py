@@ -22,6 +22,7 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
+from . import preview
 from .plugins import BSDF, asset_for, register
 from .variant import jit_mitsuba
 
@@ -133,25 +134,23 @@ def _expand_asset(mi, shape, path: Path) -> None:
 
 
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
-    """Scene dict of a nasset USD scene: meshes (diffuse ``kd``; emissive ones area lights), asset
-    instances, point / delta distant / sphere / rectangle lights, the camera.
-
-    The GGX lobe of UsdPreviewSurface (spec/renderer.md#materials) is not rendered (Mitsuba has no BSDF
-    with that exact lobe); cone distant and dome lights raise SCENE_UNSUPPORTED."""
+    """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
+    ones area lights), asset instances, point / delta distant / sphere / rectangle lights, the camera.
+    Cone distant and dome lights raise SCENE_UNSUPPORTED."""
     from nasset_mitsuba_renderer.lights import MitsubaLight, build_lights
     from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
     from nasset_mitsuba_renderer.usdscene import read_scene
 
     mi = mi or jit_mitsuba()
     register(mi)
+    preview.register(mi)
     desc = read_scene(path)
     w, h = desc.camera.resolution(width, height)
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
     for k, m in enumerate(desc.meshes):
         mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
-        bsdf = mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": np.clip(m.material.kd, 0, 1).tolist()}})
-        props = mi.Properties()
-        props["bsdf"] = bsdf
+        bsdf = mi.load_dict({"type": preview.NAME, "kd": mi.ScalarColor3f(np.clip(m.material.kd, 0, 1).tolist()),
+                             "f0": mi.ScalarColor3f(np.clip(m.material.f0, 0, 1).tolist()), "alpha": float(m.material.alpha)})
         entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
         if np.any(np.asarray(m.material.emission) > 0):
             entries[f"mesh_{k}"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": np.asarray(m.material.emission).tolist()}}
