@@ -164,6 +164,9 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         if not isinstance(lt, MitsubaLight):
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant (angle 0), sphere and rect lights, not {type(lt).__name__}",
                         file=str(path), prim=lt.desc.prim)
+    for ent in light_entries.values():
+        if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
+            ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries
 
