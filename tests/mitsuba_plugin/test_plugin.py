@@ -223,3 +223,22 @@ def test_no_llvm_gives_typed_error(tmp_path, rna_asset_path):
     proc = subprocess.run(RENDER_CMD + [scene, str(tmp_path / "o.exr"), "--spp", "1"], env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, proc.stderr
     assert "[CONVERT_BACKEND]" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_asset_without_the_triplane(mi, tmp_path):
+    """An rna asset whose core component lost its triplane (edited after writing): the SDK's
+    TENSOR_MISSING naming it, not a Dr.Jit error."""
+    from pxr import Sdf
+
+    path = tmp_path / "no_planes.usdc"
+    example_builder("rna", size="tiny", seed=3).write(path)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    found = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == "triplane" else None)
+    assert found
+    for p in found:
+        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
+    layer.Save()
+    with pytest.raises(NassetError) as exc:
+        asset_shape(path, mi=mi)
+    assert exc.value.code == "TENSOR_MISSING" and "triplane" in exc.value.message
