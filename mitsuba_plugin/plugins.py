@@ -93,14 +93,11 @@ def register(mi) -> None:
             self.rr_depth = int(props.get("rr_depth", 5))
             if self.max_depth < 1:
                 raise error("SCENE_INVALID", f"nasset_path: max_depth must be >= 1 (got {self.max_depth})")
-            self._tables: dict = {}
 
         def instances(self, scene):
-            """(assets, instance-of-shape LUT UInt32 [max registry id + 1], per-instance Float tables)."""
-            key = id(scene)
-            if key not in self._tables:
-                self._tables[key] = _instance_tables(mi, scene)
-            return self._tables[key]
+            """(assets, instance-of-shape LUT UInt32 [max registry id + 1], per-instance Float tables); built at
+            every trace of :meth:`sample` (once per render call: a Python loop over the scene's shapes)."""
+            return _instance_tables(mi, scene)
 
         @dr.syntax
         def sample(self, scene, sampler, ray, medium=None, active=True):
