@@ -228,6 +228,7 @@ def add_args(p) -> None:
     p.add_argument("--replace", action="append", default=None, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
                    help="with SCENE: the baked asset in place of these shapes (repeatable)")
     p.add_argument("--variant", default=None, help="with SCENE: llvm_ad_rgb (default) or cuda_ad_rgb")
+    p.add_argument("--repeats", type=int, default=3, help="with SCENE: timed renders per point, the least counts (default 3)")
     p.add_argument("-o", "--output", default="bench_error_vs_time", help="output folder (table JSON, plot PNG, scene)")
     p.add_argument("--asset", default=None, help="baked asset of the example scene's shell+jelly (default: bake one)")
     p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset when baking (default tiny)")
@@ -272,7 +273,7 @@ def _run_equal_engine(args, q: dict, res: int) -> int:
     report = bench_equal_engine(
         args.scene, parse_replace(args.replace), args.output, res=res, gt_spp=args.gt_spp or q.get("gt_spp", 4096),
         mi_spp=ints(args.mi_spp or "1,4,16,64", "mi-spp"), nr_spp=ints(args.nr_spp or "1,4,16,64", "nr-spp"),
-        seed=args.seed, variant=args.variant, quiet=args.json)
+        seed=args.seed, variant=args.variant, repeats=args.repeats, quiet=args.json)
     print(json.dumps(report, indent=2) if args.json else summary_text(report) + "\nwrote " + ", ".join(report["files"]))
     return 0
 
