@@ -8,6 +8,8 @@ decoder MLP) into Dr.Jit kernels, so the same code runs on ``llvm_ad_rgb`` (CPU)
 - :mod:`.variant` sets a JIT Mitsuba variant (typed error when none is usable);
 - :mod:`.network` traces an asset's ONNX network (read once) into Dr.Jit (affine layers through ``drjit.nn``);
 - :mod:`.rna` evaluates an ``rna`` surface asset's transport (spec/kinds/rna.md) in Dr.Jit;
+- :mod:`.preview` is UsdPreviewSurface as a Dr.Jit BSDF (``nasset_preview``), :mod:`.lights` the cone
+  DistantLight as a Dr.Jit emitter (``nasset_cone``), both for USD scenes;
 - :mod:`.plugins` registers the ``nasset`` BSDF (marks a shape as an asset instance) and the
   ``nasset_path`` integrator (spec/renderer.md#neural-assets at asset hits, Mitsuba's ``path`` elsewhere);
 - :mod:`.scene` builds Mitsuba scenes holding assets: ``asset_shape()`` for dict scenes,

@@ -22,6 +22,7 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
+from . import lights as lights_jit
 from . import preview
 from .plugins import BSDF, asset_for, register
 from .variant import jit_mitsuba
@@ -135,15 +136,16 @@ def _expand_asset(mi, shape, path: Path) -> None:
 
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
     """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
-    ones area lights), asset instances, point / delta distant / sphere / rectangle lights, the camera.
-    Cone distant and dome lights raise SCENE_UNSUPPORTED."""
-    from nasset_mitsuba_renderer.lights import MitsubaLight, build_lights
+    ones area lights), asset instances, point / distant (delta or cone) / sphere / rectangle lights, the
+    camera. Dome lights raise SCENE_UNSUPPORTED."""
+    from nasset_mitsuba_renderer.lights import ConeDistantLight, MitsubaLight, build_lights
     from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
     from nasset_mitsuba_renderer.usdscene import read_scene
 
     mi = mi or jit_mitsuba()
     register(mi)
     preview.register(mi)
+    lights_jit.register(mi)
     desc = read_scene(path)
     w, h = desc.camera.resolution(width, height)
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
@@ -160,9 +162,12 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
             raise error("SCENE_INVALID", "asset instance transform is singular", file=str(path), prim=inst.prim)
         entries[f"asset_{j}"] = asset_shape(inst.file, mw.T, mi=mi)  # USD row vectors -> Mitsuba column vectors
     lights, light_entries = build_lights(desc.lights, str(path))
-    for lt in lights:
-        if not isinstance(lt, MitsubaLight):
-            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant (angle 0), sphere and rect lights, not {type(lt).__name__}",
+    for k, lt in enumerate(lights):
+        if isinstance(lt, ConeDistantLight):
+            light_entries[f"cone_{k}"] = {"type": lights_jit.NAME, "direction": mi.ScalarVector3f(lt.axis.tolist()), "angle": float(lt.desc.angle),
+                                          "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist())}
+        elif not isinstance(lt, MitsubaLight):
+            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere and rect lights, not {type(lt).__name__}",
                         file=str(path), prim=lt.desc.prim)
     for ent in light_entries.values():
         if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
