@@ -147,6 +147,7 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     preview.register(mi)
     lights_jit.register(mi)
     desc = read_scene(path)
+    rescale_tiny(desc)
     w, h = desc.camera.resolution(width, height)
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
     for k, m in enumerate(desc.meshes):
@@ -174,6 +175,43 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries
+
+
+#: scenes whose coordinates all lie within this distance of the origin are scaled up to unit size
+TINY_EXTENT = 1e-2
+
+
+def rescale_tiny(desc) -> float:
+    """Scale a tiny scene description (all points, instance and light origins, camera within
+    :data:`TINY_EXTENT` of the origin) uniformly to unit size, in place; returns the factor (1: unchanged).
+
+    Mitsuba offsets spawned rays by ``(1 + max |p|) * RayEpsilon``, an absolute minimum that is a large
+    part of a tiny scene. The image is unchanged by the scaling: directions, radiance and rna transport
+    (per world steradian, object-space inputs) do not depend on it, and the radiance of lights whose
+    emission is per area or falls off with distance (point lights, normalised sphere and rect lights)
+    is multiplied by s^2 so that the scene's irradiance stays the same."""
+    pts = [np.abs(m.points).max() for m in desc.meshes if len(m.points)]
+    pts += [np.abs(a.to_world[3, :3]).max() for a in desc.assets]
+    pts += [np.abs(lt.to_world[3, :3]).max() for lt in desc.lights]
+    pts.append(np.abs(desc.camera.to_world[3, :3]).max())
+    ext = max(pts)
+    if not 0 < ext < TINY_EXTENT:
+        return 1.0
+    s = 1.0 / ext
+    scale = np.diag([s, s, s, 1.0])
+    for m in desc.meshes:
+        m.points = m.points * s
+    for a in desc.assets:
+        a.to_world = a.to_world @ scale
+    for lt in desc.lights:
+        lt.to_world = lt.to_world @ scale
+        point = lt.type == "SphereLight" and lt.radius <= 0
+        if point or (lt.normalize and lt.type in ("SphereLight", "RectLight")):
+            lt.radiance = np.asarray(lt.radiance, np.float64) * s * s
+    cam = desc.camera.to_world.copy()
+    cam[3, :3] *= s
+    desc.camera.to_world = cam
+    return s
 
 
 def _mesh_ply(mi, mesh) -> str:

@@ -110,7 +110,7 @@ def _run_case(name, tmp_path, spp_scale=1):
     return run_case(case, template, tmp_path, seed=0, timeout=300, spp_scale=spp_scale)
 
 
-@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle"])
+@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny"])
 def test_conformance_cases(tmp_path, case):
     """The plugin passes conformance cases through the ``nasset conformance`` machinery (reference:
     the reference renderer at the case's ref_spp; tolerance from the case's measured noise)."""
