@@ -101,8 +101,10 @@ def equal_error_speedup(mi_points: list[dict], nr_points: list[dict]) -> list[di
     return out
 
 
-def plot(path: Path, mi_points, nr_points, floor, title: str) -> str:
-    """Log-log MSE vs time; matplotlib when installed, else a minimal built-in PNG plot. Returns the backend used."""
+def plot(path: Path, mi_points, nr_points, floor, title: str,
+         labels=("Mitsuba path tracing (original scene)", "reference renderer + baked asset")) -> str:
+    """Log-log MSE vs time; matplotlib when installed, else a minimal built-in PNG plot. Returns the backend used.
+    ``labels``: legend entries of the two curves."""
     try:
         import matplotlib
 
@@ -112,8 +114,7 @@ def plot(path: Path, mi_points, nr_points, floor, title: str) -> str:
         _plot_fallback(path, mi_points, nr_points)
         return "builtin"
     fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=120)
-    for pts, label, mk in ((mi_points, "Mitsuba path tracing (original scene)", "o-"),
-                           (nr_points, "reference renderer + baked asset", "s-")):
+    for pts, label, mk in ((mi_points, labels[0], "o-"), (nr_points, labels[1], "s-")):
         good = [p for p in pts if p["mse"] > 0]
         ax.loglog([p["time_s"] for p in good], [p["mse"] for p in good], mk, label=label)
         for p in good:

@@ -221,6 +221,14 @@ def summary_text(r: dict) -> str:
 
 def add_args(p) -> None:
     """Options of ``nasset bench error-vs-time``."""
+    p.add_argument("scene", nargs="?", default=None,
+                   help="a Mitsuba 3 scene .xml: compare path tracing it with Mitsuba + the nasset plugin on the scene with "
+                   "--replace's shapes swapped for the asset, in one engine (nasset_benchmarks.equal_engine); "
+                   "without it: the built-in example against the reference renderer")
+    p.add_argument("--replace", action="append", default=None, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
+                   help="with SCENE: the baked asset in place of these shapes (repeatable)")
+    p.add_argument("--variant", default=None, help="with SCENE: llvm_ad_rgb (default) or cuda_ad_rgb")
+    p.add_argument("--repeats", type=int, default=3, help="with SCENE: timed renders per point, the least counts (default 3)")
     p.add_argument("-o", "--output", default="bench_error_vs_time", help="output folder (table JSON, plot PNG, scene)")
     p.add_argument("--asset", default=None, help="baked asset of the example scene's shell+jelly (default: bake one)")
     p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset when baking (default tiny)")
@@ -238,6 +246,10 @@ def run(args) -> int:
     """CLI entry: ``nasset bench error-vs-time ...``."""
     q = QUICK if args.quick else {}
     res = args.res or q.get("res", 128)
+    if args.scene is not None:
+        return _run_equal_engine(args, q, res)
+    if args.replace:
+        raise UsageError("--replace needs a SCENE.xml")
     report = bench_error_vs_time(
         args.output, asset=args.asset, size=args.size, res=res, gt_spp=args.gt_spp or q.get("gt_spp", 4096),
         mi_spp=ints(args.mi_spp or q.get("mi_spp", "1,2,4,8,16,32,64,128"), "mi-spp"),
@@ -250,3 +262,18 @@ def run(args) -> int:
         print(summary_text(report))
         print("wrote " + ", ".join(report["files"]))
     return 0
+
+
+def _run_equal_engine(args, q: dict, res: int) -> int:
+    from nasset_benchmarks.equal_engine import bench_equal_engine, summary_text
+    from nasset_converters.mitsuba.usd_export import parse_replace
+
+    if Path(args.scene).suffix.lower() != ".xml":
+        raise UsageError(f"the equal-engine benchmark takes a Mitsuba 3 .xml scene, got {Path(args.scene).name!r}")
+    report = bench_equal_engine(
+        args.scene, parse_replace(args.replace), args.output, res=res, gt_spp=args.gt_spp or q.get("gt_spp", 4096),
+        mi_spp=ints(args.mi_spp or "1,4,16,64", "mi-spp"), nr_spp=ints(args.nr_spp or "1,4,16,64", "nr-spp"),
+        seed=args.seed, variant=args.variant, repeats=args.repeats, quiet=args.json)
+    print(json.dumps(report, indent=2) if args.json else summary_text(report) + "\nwrote " + ", ".join(report["files"]))
+    return 0
+

@@ -40,7 +40,8 @@ def _face_normals(pts, faces):
     return c / np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-30)
 
 
-def _mi_mesh(mi, name, pts, faces):
+def mi_mesh(mi, name, pts, faces):
+    """A ``mi.Mesh`` of world-space points [V, 3] and triangles [F, 3] (no normals: flat shading)."""
     m = mi.Mesh(name, len(pts), len(faces))
     prm = mi.traverse(m)
     prm["vertex_positions"] = mi.Float(np.ascontiguousarray(pts, np.float32).ravel())
@@ -95,6 +96,19 @@ def register(mi) -> None:
     _REGISTERED = True
 
 
+def sensor_dict(mi, cam, width: int, height: int) -> dict:
+    """Mitsuba ``perspective`` sensor of a USD camera (horizontal aperture -> x field of view), box-filtered RGB film."""
+    eye = cam.to_world[3, :3]
+    fwd = -cam.to_world[2, :3]
+    return {
+        "type": "perspective",
+        "fov_axis": "x",
+        "fov": float(np.degrees(2.0 * np.arctan(cam.h_aperture / (2.0 * cam.focal)))),
+        "to_world": mi.ScalarTransform4f().look_at(origin=eye.tolist(), target=(eye + fwd).tolist(), up=cam.to_world[1, :3].tolist()),
+        "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+    }
+
+
 def build(scene_path: str, width: int | None = None, height: int | None = None, *, max_depth: int = 5, threads: int = 0, batch: int = 1 << 17):
     """USD scene -> (mitsuba module, mi.Scene, integrator, (width, height))."""
     mi = load_mitsuba()
@@ -108,7 +122,7 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
     for k, mesh in enumerate(desc.meshes):
         name = f"nasset_obj_{k}"
         fn = _face_normals(mesh.points, mesh.faces)
-        entries[name] = _mi_mesh(mi, name, mesh.points, mesh.faces)
+        entries[name] = mi_mesh(mi, name, mesh.points, mesh.faces)
         cn = mesh.corner_normals if mesh.corner_normals is not None else np.repeat(fn[:, None], 3, 1)
         objects.append({"id": name, "kind": Kind.MESH, "material": mesh.material, "face_normals": fn, "corner_normals": cn,
                         "planar": _planar(mesh.points, fn), "prim": mesh.prim, "bbox": (mesh.points.min(0), mesh.points.max(0))})
@@ -124,7 +138,7 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
             raise SceneError("SCENE_INVALID", "asset instance transform is singular", file=scene_path, prim=inst.prim)
         pts = asset.points @ mw[:3, :3] + mw[3, :3]
         name = f"nasset_inst_{j}"
-        entries[name] = _mi_mesh(mi, name, pts, asset.faces)
+        entries[name] = mi_mesh(mi, name, pts, asset.faces)
         objects.append({"id": name, "kind": Kind.ASSET, "asset": asset, "to_world": mw, "m3_inv": np.linalg.inv(mw[:3, :3]),
                         "face_normals": _face_normals(pts, asset.faces), "prim": inst.prim, "bbox": (pts.min(0), pts.max(0))})
     lights, light_entries = build_lights(desc.lights, scene_path)
@@ -133,15 +147,7 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
             objects.append({"id": lt.key, "kind": Kind.LIGHT, "light": lt, "face_normals": np.zeros((1, 3)), "prim": lt.desc.prim})
     entries.update(light_entries)
     cam = desc.camera
-    eye = cam.to_world[3, :3]
-    fwd = -cam.to_world[2, :3]
-    entries["sensor"] = {
-        "type": "perspective",
-        "fov_axis": "x",
-        "fov": float(np.degrees(2.0 * np.arctan(cam.h_aperture / (2.0 * cam.focal)))),
-        "to_world": mi.ScalarTransform4f().look_at(origin=eye.tolist(), target=(eye + fwd).tolist(), up=cam.to_world[1, :3].tolist()),
-        "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-    }
+    entries["sensor"] = sensor_dict(mi, cam, w, h)
     try:
         scene = mi.load_dict(entries)
     except Exception as exc:

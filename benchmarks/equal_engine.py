@@ -1,0 +1,194 @@
+"""``nasset bench error-vs-time SCENE.xml --replace ID=ASSET.usdc``: the same engine with and without the asset.
+
+Both renders run in Mitsuba's JIT (``llvm_ad_rgb`` here, ``cuda_ad_rgb`` with ``--variant``), in this
+process, one after the other, through one camera at one resolution:
+
+* **reference**: the original scene with its own integrator (``volpath`` for media) at ``--gt-spp``,
+  as two independent unclamped halves (``accuracy.render_halves``; kept in the output folder and
+  reused for the same scene, size, spp and seed); its noise variance ``mean((a - b)^2) / 4`` is
+  subtracted from every MSE and reported;
+* **(a) path tracing**: the original scene, the same integrator, at each of ``--mi-spp``;
+* **(b) asset**: the scene with the replaced shapes swapped for the asset (``nasset_mitsuba_plugin``:
+  the ``nasset_path`` integrator with the scene integrator's ``max_depth`` and ``rr_depth``), at each of
+  ``--nr-spp``.
+
+Timing (``time.perf_counter``) is one ``mi.render`` call plus the read-back, after a warm-up render at
+the same spp (JIT kernels compiled and cached): the least of ``repeats`` such calls (other jobs on a
+shared machine only ever add time); the MSE is that of the first. Reported: the points (spp, time, MSE), the asset's
+**bias floor** (its last point's MSE minus its own variance, measured from a second render at that spp),
+the **equal-error speedup** at each asset point and at the bias floor (``common.equal_error_speedup``),
+and the **per-sample cost ratio** (asset time per spp / path tracing time per spp, at the largest spp
+both ran). Plot (PNG) + JSON in the output folder.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from nasset_benchmarks.accuracy import CHUNK_SPP, cached_reference, render_halves, scene_digest, sensor_for
+from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
+from nasset_sdk.errors import UsageError, error
+
+
+def _integrator_settings(mscene) -> dict:
+    """max_depth and rr_depth of the scene's integrator (Mitsuba's defaults when absent)."""
+    text = str(mscene.integrator())
+    out = {"max_depth": -1, "rr_depth": 5}
+    for k in out:
+        m = re.search(rf"{k}\s*=\s*(-?\d+)", text)
+        if m:
+            out[k] = int(m.group(1))
+    return out
+
+
+def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt_spp: int = 4096, mi_spp=(1, 4, 16, 64),
+                       nr_spp=(1, 4, 16, 64), seed: int = 0, variant: str | None = None, repeats: int = 3,
+                       quiet: bool = False) -> dict:
+    """Run the benchmark (module docstring); writes ``error_vs_time.json`` and ``error_vs_time.png`` into ``out_dir``."""
+    from nasset_mitsuba_plugin.plugins import INTEGRATOR
+    from nasset_mitsuba_plugin.scene import load_file
+    from nasset_mitsuba_plugin.variant import jit_mitsuba
+
+    say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    if res < 8 or gt_spp < 2:
+        raise UsageError(f"--res must be >= 8 and --gt-spp >= 2 (got {res}, {gt_spp})")
+    if not Path(scene_file).is_file():
+        raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene_file))
+    if not replace:
+        raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    mi = jit_mitsuba(variant)
+    mi.set_log_level(mi.LogLevel.Error)
+    t_setup = time.perf_counter()
+    try:
+        original = mi.load_file(str(scene_file))
+    except Exception as exc:  # Mitsuba's XML / plugin errors
+        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {str(exc).splitlines()[0][:300]}", file=str(scene_file)) from None
+    settings = _integrator_settings(original)
+    with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})
+    nasset = mi.load_dict({"type": INTEGRATOR, "max_depth": settings["max_depth"] if settings["max_depth"] > 0 else 1024,
+                           "rr_depth": settings["rr_depth"]})
+    sensor, hw = sensor_for(mi, original, res)
+
+    def pt(spp, s):
+        return mi_render(mi, original, sensor, spp, s)
+
+    def na(spp, s):
+        return np.asarray(mi.render(with_asset, sensor=sensor, integrator=nasset, spp=int(spp), seed=int(s)), np.float64)[..., :3]
+
+    key = {"scene_sha256": scene_digest(scene_file), "size": list(hw), "spp": int(gt_spp), "seed": int(seed),
+           "mitsuba": f"{mi.__version__} {mi.variant()}", "chunk": CHUNK_SPP}
+    t = time.perf_counter()
+    cached = cached_reference(out, key)
+    if cached is not None and cached[0].shape[:2] == tuple(hw):
+        say(f"reference: reusing {out / 'reference_a.exr'} and reference_b.exr (same scene, size, spp, seed)")
+        (a, b), half = cached, max(1, gt_spp // 2)
+    else:
+        say(f"reference: {mi.variant()} {gt_spp} spp at {hw[1]}x{hw[0]} (two halves)")
+        a, b, half = render_halves(pt, gt_spp, seed, desc="reference", quiet=quiet)
+        from nasset_reference_renderer.film import write_exr
+
+        (out / "reference_key.json").unlink(missing_ok=True)
+        for name, img in (("reference_a", a), ("reference_b", b)):
+            write_exr(out / f"{name}.exr", img.astype(np.float32))
+        (out / "reference_key.json").write_text(json.dumps(key))
+    t_ref = time.perf_counter() - t
+    ref = 0.5 * (a + b)
+    var_ref = float(np.mean((a - b) ** 2) / 4.0)
+
+    def points(render, spps, base, name):
+        pts = []
+        for k, spp in enumerate(spps):
+            render(spp, 90_000 + base + k)  # warm-up: compile / fetch this spp's kernel
+            times_k, img = [], None
+            for r in range(max(1, int(repeats))):
+                t = time.perf_counter()
+                out = render(spp, base + k + 1000 * r)
+                times_k.append(time.perf_counter() - t)
+                img = out if img is None else img
+            dt = min(times_k)  # the least disturbed of the repeats (shared machines)
+            mse_raw = float(np.mean(np.nan_to_num(img - ref) ** 2))
+            pts.append({"spp": int(spp), "time_s": dt, "mse": mse_raw - var_ref, "mse_raw": mse_raw, "image": img})
+            say(f"  {name} {spp:5d} spp  {dt:8.3f}s  MSE {mse_raw - var_ref:.3e}")
+        return pts
+
+    mi_points = points(pt, mi_spp, 10, "path tracing")
+    nr_points = points(na, nr_spp, 5000, "asset       ")
+    last = nr_points[-1]
+    second = na(last["spp"], 7777)
+    var_last = float(np.mean((last["image"] - second) ** 2) / 2.0)  # one render's pixel variance, from two seeds
+    last["variance"] = var_last
+    floor = last["mse"] - var_last
+    for p in mi_points + nr_points:
+        p.pop("image")
+    speed = equal_error_speedup(mi_points, nr_points)
+    floor_eq = equal_error_speedup(mi_points, [{"spp": 0, "mse": floor, "time_s": 1.0}])
+    common = max(set(mi_spp) & set(nr_spp), default=None)
+    cost = None
+    if common is not None:
+        tp = next(p["time_s"] for p in mi_points if p["spp"] == common)
+        tn = next(p["time_s"] for p in nr_points if p["spp"] == common)
+        cost = {"spp": common, "path_tracing_s": tp, "asset_s": tn, "ratio": tn / tp}
+    best = max((s for s in speed if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)
+    mean = float(np.mean(ref))
+    report = {
+        "benchmark": "error-vs-time (equal engine)",
+        "scene": str(scene_file),
+        "replace": {k: str(v) for k, v in replace.items()},
+        "resolution": [hw[1], hw[0]],
+        "mitsuba": {"version": mi.__version__, "variant": mi.variant(), "integrator": str(original.integrator()).splitlines()[0],
+                    "settings": settings},
+        "reference": {"spp": 2 * half, "mean_radiance": mean, "noise_variance": var_ref, "time_s": t_ref, "reused": cached is not None,
+                      "noise_relative_rmse": math.sqrt(var_ref) / max(mean, 1e-12)},
+        "path_tracing_points": mi_points,
+        "asset_points": nr_points,
+        "bias_floor_mse": floor,
+        "bias_floor_relative_rmse": math.sqrt(max(floor, 0.0)) / max(mean, 1e-12),
+        "bias_floor_path_tracing_equivalent": None if not floor_eq or floor_eq[0]["mitsuba_spp"] is None else
+        {"spp": floor_eq[0]["mitsuba_spp"], "time_s": floor_eq[0]["mitsuba_time_s"]},
+        "equal_error": speed,
+        "best_equal_error_speedup": None if best is None else best["speedup"],
+        "per_sample_cost": cost,
+        "timing_includes": f"one mi.render call + image read-back, after a warm-up render at the same spp (no scene load, no JIT "
+                           f"compile); the least of {max(1, int(repeats))} repeats",
+        "machine": machine(),
+        "setup_s": round(time.perf_counter() - t_setup, 2),
+    }
+    report["plot_backend"] = plot(out / "error_vs_time.png", mi_points, nr_points, floor,
+                                  f"{Path(scene_file).name} {hw[1]}x{hw[0]}, {mi.variant()}",
+                                  labels=("Mitsuba path tracing (original scene)", "Mitsuba + nasset plugin (asset scene)"))
+    report["files"] = [str(out / "error_vs_time.json"), str(out / "error_vs_time.png")]
+    tmp = out / "error_vs_time.json.tmp"
+    tmp.write_text(json.dumps(report, indent=2))
+    tmp.replace(out / "error_vs_time.json")
+    return report
+
+
+def summary_text(r: dict) -> str:
+    ref = r["reference"]
+    lines = [f"error vs time in one engine ({r['mitsuba']['variant']}), {r['scene']} at {r['resolution'][0]}x{r['resolution'][1]}; "
+             f"reference {ref['spp']} spp (noise variance {ref['noise_variance']:.2e} subtracted, relative RMSE "
+             f"{ref['noise_relative_rmse']:.1%})",
+             f"{'':14s}{'spp':>6s} {'time s':>9s} {'MSE':>10s}"]
+    for name, pts in (("path tracing", r["path_tracing_points"]), ("asset", r["asset_points"])):
+        for p in pts:
+            lines.append(f"{name:14s}{p['spp']:6d} {p['time_s']:9.3f} {p['mse']:10.3e}")
+    lines.append(f"asset bias floor: MSE {r['bias_floor_mse']:.3e} (relative RMSE {r['bias_floor_relative_rmse']:.1%})")
+    fe = r["bias_floor_path_tracing_equivalent"]
+    if fe:
+        lines.append(f"  path tracing reaches the floor at about {fe['spp']:.1f} spp ({fe['time_s']:.3f}s)")
+    for s in r["equal_error"]:
+        lines.append(f"  asset {s['spp']:4d} spp: " + ("error within the reference's noise" if s["speedup"] is None else
+                     f"path tracing needs {s['mitsuba_spp']:.1f} spp / {s['mitsuba_time_s']:.3f}s -> speedup {s['speedup']:.2f}x"))
+    c = r["per_sample_cost"]
+    if c:
+        lines.append(f"per-sample cost at {c['spp']} spp: asset {c['asset_s']:.3f}s / path tracing {c['path_tracing_s']:.3f}s = {c['ratio']:.2f}")
+    return "\n".join(lines)

@@ -1,0 +1,281 @@
+"""Mitsuba plugins of the nasset package, registered from Python (:func:`register`):
+
+- BSDF ``nasset`` (``filename``, ``to_world``): marks a shape as an instance of a neural asset
+  (its fallback mesh, in world space). It reflects nothing by itself: the integrator shades it.
+- Integrator ``nasset_path`` (``max_depth``, ``rr_depth``): Mitsuba's unidirectional path tracer
+  (BSDF sampling + emitter sampling with power-heuristic MIS, Russian roulette) that, at a hit on an
+  asset instance, applies spec/renderer.md#neural-assets: object-space inputs, a light sample whose
+  shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
+  ``w_light = power(p_light, 1/4pi)``, and a uniform-sphere continuation of weight T 4pi that ignores
+  the instance. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import numpy as np
+
+from nasset_sdk.errors import error
+
+from .rna import RnaJit
+
+INTEGRATOR = "nasset_path"
+BSDF = "nasset"
+FOUR_PI = 4.0 * math.pi
+#: how many surfaces of the ignored instance one ray may pass through before it is cut (a closed
+#: mesh is crossed twice per convex part)
+MAX_SKIPS = 16
+
+_ASSETS: dict[tuple[str, str], RnaJit] = {}  # (variant, file) -> asset read once per process
+_REGISTERED: set[str] = set()
+
+
+def asset_for(mi, filename: str) -> RnaJit:
+    """The asset of ``filename`` read once per process and variant (typed errors from the SDK)."""
+    key = (mi.variant(), str(filename))
+    if key not in _ASSETS:
+        _ASSETS[key] = RnaJit(mi, filename)
+    return _ASSETS[key]
+
+
+def _mis(a, b):
+    """Power heuristic a^2 / (a^2 + b^2), 0 where both are 0."""
+    import drjit as dr
+
+    a2, b2 = dr.square(a), dr.square(b)
+    return dr.select(a2 + b2 > 0, a2 / dr.select(a2 + b2 > 0, a2 + b2, 1.0), 0.0)
+
+
+def register(mi) -> None:
+    """Register the ``nasset`` BSDF and the ``nasset_path`` integrator for the active variant (idempotent)."""
+    import drjit as dr
+
+    if mi.variant() in _REGISTERED:
+        return
+
+    class NassetBSDF(mi.BSDF):
+        """Marker BSDF of an asset instance: ``filename`` (the asset), ``to_world`` (its instance transform)."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.filename = str(props.get("filename", ""))
+            if not self.filename:
+                raise error("SCENE_INVALID", "bsdf 'nasset' needs a 'filename' property")
+            self.to_world = np.array(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64).reshape(4, 4)
+            self.asset = asset_for(mi, self.filename)
+            self.m_flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [self.m_flags]
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            return dr.zeros(mi.BSDFSample3f), mi.Spectrum(0)
+
+        def eval(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0)
+
+        def pdf(self, ctx, si, wo, active=True):
+            return mi.Float(0)
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return mi.Spectrum(0), mi.Float(0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return f"NassetBSDF[filename={self.filename}]"
+
+    class NassetPathIntegrator(mi.SamplingIntegrator):
+        def __init__(self, props):
+            super().__init__(props)
+            self.max_depth = int(props.get("max_depth", 5))
+            self.rr_depth = int(props.get("rr_depth", 5))
+            if self.max_depth < 1:
+                raise error("SCENE_INVALID", f"nasset_path: max_depth must be >= 1 (got {self.max_depth})")
+
+        def instances(self, scene):
+            """(assets, instance-of-shape LUT UInt32 [max registry id + 1], per-instance Float tables); built at
+            every trace of :meth:`sample` (once per render call: a Python loop over the scene's shapes)."""
+            return _instance_tables(mi, scene)
+
+        @dr.syntax
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            import mitsuba as mi  # dr.syntax recompiles this method without register()'s closure
+            assets, lut, tab = self.instances(scene)
+            ctx = mi.BSDFContext()
+            ray = mi.Ray3f(ray)
+            L = mi.Spectrum(0)
+            beta = mi.Spectrum(1)
+            depth = mi.UInt32(0)
+            active = mi.Bool(active)
+            prev_si = dr.zeros(mi.SurfaceInteraction3f)
+            prev_pdf = mi.Float(1.0)
+            prev_delta = mi.Bool(True)
+            ignore = mi.UInt32(0)  # registry id of the instance the ray leaves (0: none)
+            pending = mi.Bool(False)  # the ray leaves an asset: its weight waits for the branch
+            t_un = mi.Spectrum(0)
+            t_sh = mi.Spectrum(0)
+            valid = mi.Bool(False)
+
+            while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
+                si, passed = _trace(mi, scene, ray, ignore, active)
+                beta[pending] *= dr.select(passed, t_sh, t_un) * FOUR_PI
+                valid |= active & si.is_valid()
+
+                # emission reached by the previous vertex's continuation
+                ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
+                em_pdf = scene.pdf_emitter_direction(prev_si, ds, ~prev_delta)
+                L += beta * _mis(prev_pdf, dr.select(prev_delta, 0.0, em_pdf)) * ds.emitter.eval(si, active)
+
+                active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
+                sid = dr.reinterpret_array(mi.UInt32, si.shape)
+                inst = dr.gather(mi.UInt32, lut, dr.minimum(sid, len(lut) - 1), active_next)
+                on_asset = active_next & (inst > 0)
+                on_plain = active_next & (inst == 0)
+                bsdf = si.bsdf(ray)
+
+                # light sample; at an asset the shadow ray ignores the instance and records crossing it
+                ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_next)
+                active_em = active_next & (ds_em.pdf != 0.0)
+                si_sh, passed_sh = _trace(mi, scene, si.spawn_ray_to(ds_em.p), dr.select(on_asset, sid, 0), active_em)
+                active_em &= ~si_sh.is_valid()
+                val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
+                L[on_plain & active_em] += beta * dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, pdf)) * val * em_weight
+
+                # asset vertex: object-space inputs, both light sample and continuation transports
+                wi_c = mi.warp.square_to_uniform_sphere(sampler.next_2d())
+                if dr.hint(len(assets) > 0, mode="scalar"):
+                    k = inst - 1
+                    x_o, n_o, wo_o = _object_inputs(mi, tab, k, si, -ray.d, on_asset)
+                    wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
+                    wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
+                    ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
+                    for a, asset in enumerate(assets):
+                        mine = on_asset & (dr.gather(mi.UInt32, tab["asset"], k, on_asset) == a)
+                        u, s = asset.transport(x_o, n_o, wo_o, wi_o)
+                        ta_un[mine] = u
+                        ta_sh[mine] = s
+                        u, s = asset.transport(x_o, n_o, wo_o, wc_o)
+                        tc_un[mine] = u
+                        tc_sh[mine] = s
+                    w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, 1.0 / FOUR_PI))
+                    L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
+                    t_un = tc_un
+                    t_sh = tc_sh
+
+                # continuation
+                bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
+                d_next = dr.select(on_asset, wi_c, si.to_world(bs.wo))
+                ray = si.spawn_ray(d_next)
+                beta[on_plain] *= bsdf_weight
+                prev_si = dr.detach(si, True)
+                prev_pdf = dr.select(on_asset, 1.0 / FOUR_PI, bs.pdf)
+                prev_delta = on_plain & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+                pending = mi.Bool(on_asset)
+                ignore = dr.select(on_asset, sid, 0)
+                active_next &= on_asset | (dr.max(beta) != 0)
+
+                # Russian roulette on the throughput before the pending asset weight (any q keeps it unbiased)
+                q = dr.minimum(dr.max(beta), 0.95)
+                rr = depth + 1 >= self.rr_depth
+                survive = sampler.next_1d() < q
+                beta[rr & on_plain] *= dr.rcp(dr.select(q > 0, q, 1.0))
+                active_next &= ~(rr & on_plain) | survive
+                depth[active] += 1
+                active = active_next
+            return dr.select(dr.isfinite(L), L, 0.0), valid, []
+
+        def aov_names(self):
+            return []
+
+        def to_string(self):
+            return f"NassetPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}]"
+
+    mi.register_bsdf(BSDF, lambda props: NassetBSDF(props))
+    mi.register_integrator(INTEGRATOR, lambda props: NassetPathIntegrator(props))
+    _REGISTERED.add(mi.variant())
+
+
+@dr.syntax
+def _trace(mi, scene, ray, ignore, active):
+    """(first intersection of ``ray`` not on shape ``ignore`` [registry id, 0: none], whether the ray crossed that shape)."""
+    si = scene.ray_intersect(ray, active)
+    skip = active & si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore) & (ignore != 0)
+    passed = mi.Bool(skip)
+    r = mi.Ray3f(ray)
+    i = mi.UInt32(0)
+    while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_skip"):
+        left = r.maxt - si.t
+        r = si.spawn_ray(r.d)
+        r.maxt = left
+        si = scene.ray_intersect(r, skip)
+        skip = si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore)
+        i += 1
+    return si, passed
+
+
+def _instance_tables(mi, scene):
+    """Assets and per-instance transforms of the scene's shapes carrying the ``nasset`` BSDF.
+
+    Returns (assets [RnaJit], lut UInt32 [max registry id + 1] -> instance index + 1, tables dict of
+    Float / UInt32 arrays per instance: 'inv' 12 (world -> object affine, row-major 3x4), 'nt' 9
+    (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'asset')."""
+    import drjit as dr
+
+    assets: list = []
+    ids, inv, nt, which = [], [], [], []
+    for sh in scene.shapes():
+        b = sh.bsdf()
+        filename = getattr(b, "filename", None)
+        if filename is None or type(b).__name__ != "NassetBSDF":
+            continue
+        if b.asset not in assets:
+            assets.append(b.asset)
+        m = b.to_world
+        m3 = m[:3, :3]
+        det = float(np.linalg.det(m3))
+        if not np.isfinite(det) or abs(det) < 1e-30:
+            raise error("SCENE_INVALID", f"asset instance {sh.id()!r} has a singular to_world", file=filename)
+        minv = np.linalg.inv(m)
+        sign = 1.0 if b.asset.geometry.normals is not None or det > 0 else -1.0
+        ids.append(int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]))
+        inv.append(minv[:3, :].ravel())
+        nt.append((sign * m3.T).ravel())
+        which.append(assets.index(b.asset))
+    lut = np.zeros(max(ids, default=0) + 1, np.uint32)
+    for j, rid in enumerate(ids):
+        lut[rid] = j + 1
+    tab = {"inv": mi.Float(np.asarray(inv, np.float32).ravel()) if ids else mi.Float(0),
+           "nt": mi.Float(np.asarray(nt, np.float32).ravel()) if ids else mi.Float(0),
+           "asset": mi.UInt32(np.asarray(which, np.uint32)) if ids else mi.UInt32(0)}
+    return assets, mi.UInt32(lut), tab
+
+
+def _rows(mi, arr, k, width, first, active):
+    import drjit as dr
+
+    return [dr.gather(mi.Float, arr, k * width + first + j, active) for j in range(3)]
+
+
+def _object_dir(mi, tab, k, v, active):
+    """normalize(M3^-1 v) of world directions v for instance k (spec/renderer.md#neural-assets item 1)."""
+    import drjit as dr
+
+    rows = [_rows(mi, tab["inv"], k, 12, 4 * r, active) for r in range(3)]
+    out = mi.Vector3f(*[r[0] * v.x + r[1] * v.y + r[2] * v.z for r in rows])
+    return dr.normalize(out)
+
+
+def _object_inputs(mi, tab, k, si, wo, active):
+    """(x, n, wo) in the object space of instance k: x = M^-1 x_w, n the asset's own normal, wo mapped by M3^-1."""
+    import drjit as dr
+
+    rows = [_rows(mi, tab["inv"], k, 12, 4 * r, active) + [dr.gather(mi.Float, tab["inv"], k * 12 + 4 * r + 3, active)]
+            for r in range(3)]
+    p = si.p
+    x = mi.Point3f(*[r[0] * p.x + r[1] * p.y + r[2] * p.z + r[3] for r in rows])
+    nrows = [_rows(mi, tab["nt"], k, 9, 3 * r, active) for r in range(3)]
+    n_w = si.sh_frame.n
+    n = dr.normalize(mi.Vector3f(*[r[0] * n_w.x + r[1] * n_w.y + r[2] * n_w.z for r in nrows]))
+    return x, n, _object_dir(mi, tab, k, wo, active)

@@ -1,0 +1,221 @@
+"""Mitsuba scenes holding neural assets.
+
+Python cannot register Mitsuba shapes, so an asset instance is its fallback mesh (a ``ply`` shape,
+written once per asset file to a cache folder) carrying the ``nasset`` marker BSDF:
+
+- :func:`asset_shape` returns the scene-dict entry of one instance (``to_world`` as in Mitsuba);
+- :func:`load_file` loads a Mitsuba XML scene in which ``<shape type="nasset">`` holds
+  ``<string name="filename" value="A.usdc"/>`` and optionally ``<transform name="to_world">``;
+- :func:`usd_scene` turns a nasset USD scene (spec/renderer.md#scene-input) into a scene dict.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import os
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from nasset_sdk.errors import error
+
+from . import lights as lights_jit
+from . import preview
+from .plugins import BSDF, asset_for, register
+from .variant import jit_mitsuba
+
+_PLY_DIR: list[str] = []
+
+
+def _cache_dir() -> Path:
+    if not _PLY_DIR:
+        _PLY_DIR.append(tempfile.mkdtemp(prefix="nasset_mitsuba_"))
+    return Path(_PLY_DIR[0])
+
+
+def fallback_ply(mi, filename: str) -> str:
+    """Path of a PLY file holding the asset's object-space mesh (with its normals when it has them)."""
+    asset = asset_for(mi, filename)
+    g = asset.geometry
+    out = _cache_dir() / (hashlib.sha256(os.path.abspath(filename).encode()).hexdigest()[:16] + ".ply")
+    if not out.exists():
+        pts = np.ascontiguousarray(g.points, np.float32)
+        faces = np.ascontiguousarray(g.faces, np.uint32)
+        mesh = mi.Mesh("nasset_fallback", len(pts), len(faces), has_vertex_normals=g.normals is not None)
+        prm = mi.traverse(mesh)
+        prm["vertex_positions"] = mi.Float(pts.ravel())
+        prm["faces"] = mi.UInt32(faces.ravel())
+        if g.normals is not None:
+            prm["vertex_normals"] = mi.Float(np.ascontiguousarray(g.normals, np.float32).ravel())
+        prm.update()
+        tmp = out.with_suffix(".tmp.ply")
+        mesh.write_ply(str(tmp))
+        os.replace(tmp, out)  # atomic: a concurrent reader never sees half a file
+    return str(out)
+
+
+def asset_shape(filename: str, to_world=None, *, mi=None) -> dict:
+    """Scene-dict entry of an asset instance: its fallback mesh with the ``nasset`` BSDF.
+
+    ``to_world``: 4x4 (column-vector convention, like Mitsuba's) or a ``mi.ScalarTransform4f``; identity by default."""
+    mi = mi or jit_mitsuba()
+    register(mi)
+    filename = os.path.abspath(str(filename))
+    t = mi.ScalarTransform4f() if to_world is None else (
+        to_world if isinstance(to_world, mi.ScalarTransform4f) else mi.ScalarTransform4f(np.asarray(to_world, np.float64).tolist()))
+    has_normals = asset_for(mi, filename).geometry.normals is not None
+    return {"type": "ply", "filename": fallback_ply(mi, filename), "to_world": t, "face_normals": not has_normals,
+            "bsdf": {"type": BSDF, "filename": filename, "to_world": t}}
+
+
+def load_file(path: str, *, mi=None, replace: dict | None = None, **params):
+    """Load a Mitsuba XML scene whose ``<shape type="nasset">`` elements are asset instances (see module doc).
+
+    ``replace``: {shape id: asset file}: those shapes are left out and each asset file is added once as an
+    instance with the identity transform (an asset baked from a scene's shapes has their world space as
+    its object space, spec/bake.md#stages). ``params``: XML ``$name`` parameters."""
+    mi = mi or jit_mitsuba()
+    register(mi)
+    path = Path(path)
+    if not path.is_file():
+        raise error("FILE_NOT_FOUND", "no such scene file", file=str(path))
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise error("SCENE_INVALID", f"not XML: {exc}", file=str(path)) from None
+    if replace:
+        _replace_shapes(root, replace, str(path))
+    for shape in root.iter("shape"):
+        if shape.get("type") == "nasset":
+            _expand_asset(mi, shape, path)
+    resolver = mi.file_resolver()  # the scene's relative paths (meshes, textures) resolve next to it
+    if str(path.parent.resolve()) not in [str(p) for p in resolver]:
+        resolver.prepend(str(path.parent.resolve()))
+    try:
+        return mi.load_string(ET.tostring(root, encoding="unicode"), **params)
+    except Exception as exc:  # Mitsuba reports XML and plugin errors as RuntimeError
+        raise error("SCENE_INVALID", f"Mitsuba could not load the scene: {str(exc).splitlines()[0][:300]}", file=str(path)) from None
+
+
+def _replace_shapes(root, replace: dict, scene_file: str) -> None:
+    """Drop the shapes whose id is a key of ``replace`` and add one ``nasset`` shape per asset file."""
+    found = set()
+    for parent in list(root.iter()):
+        for child in list(parent):
+            if child.tag == "shape" and child.get("id") in replace:
+                parent.remove(child)
+                found.add(child.get("id"))
+    missing = sorted(set(replace) - found)
+    if missing:
+        raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {', '.join(map(repr, missing))} in the scene", file=scene_file)
+    for k, file in enumerate(dict.fromkeys(str(Path(f).resolve()) for f in replace.values())):
+        shape = ET.SubElement(root, "shape", type="nasset", id=f"nasset_asset_{k}")
+        ET.SubElement(shape, "string", name="filename", value=file)
+
+
+def _expand_asset(mi, shape, path: Path) -> None:
+    """``<shape type="nasset">`` -> its fallback ``ply`` with the ``nasset`` BSDF (in place)."""
+    names = {c.get("name"): c for c in shape}
+    fn = names.get("filename")
+    if fn is None or fn.tag != "string":
+        raise error("SCENE_INVALID", "<shape type=\"nasset\"> needs <string name=\"filename\" value=\"...\"/>", file=str(path),
+                    prim=shape.get("id"))
+    asset_file = str((path.parent / fn.get("value", "")).resolve())
+    has_normals = asset_for(mi, asset_file).geometry.normals is not None
+    shape.set("type", "ply")
+    fn.set("value", fallback_ply(mi, asset_file))
+    ET.SubElement(shape, "boolean", name="face_normals", value="true" if not has_normals else "false")
+    bsdf = ET.SubElement(shape, "bsdf", type=BSDF)
+    ET.SubElement(bsdf, "string", name="filename", value=asset_file)
+    if "to_world" in names:
+        bsdf.append(copy.deepcopy(names["to_world"]))
+
+
+def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
+    """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
+    ones area lights), asset instances, point / distant (delta or cone) / sphere / rectangle lights, the
+    camera. Dome lights raise SCENE_UNSUPPORTED."""
+    from nasset_mitsuba_renderer.lights import ConeDistantLight, MitsubaLight, build_lights
+    from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
+    from nasset_mitsuba_renderer.usdscene import read_scene
+
+    mi = mi or jit_mitsuba()
+    register(mi)
+    preview.register(mi)
+    lights_jit.register(mi)
+    desc = read_scene(path)
+    rescale_tiny(desc)
+    w, h = desc.camera.resolution(width, height)
+    entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
+    for k, m in enumerate(desc.meshes):
+        mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
+        bsdf = mi.load_dict({"type": preview.NAME, "kd": mi.ScalarColor3f(np.clip(m.material.kd, 0, 1).tolist()),
+                             "f0": mi.ScalarColor3f(np.clip(m.material.f0, 0, 1).tolist()), "alpha": float(m.material.alpha)})
+        entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
+        if np.any(np.asarray(m.material.emission) > 0):
+            entries[f"mesh_{k}"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": np.asarray(m.material.emission).tolist()}}
+    for j, inst in enumerate(desc.assets):
+        mw = np.asarray(inst.to_world, np.float64)
+        if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
+            raise error("SCENE_INVALID", "asset instance transform is singular", file=str(path), prim=inst.prim)
+        entries[f"asset_{j}"] = asset_shape(inst.file, mw.T, mi=mi)  # USD row vectors -> Mitsuba column vectors
+    lights, light_entries = build_lights(desc.lights, str(path))
+    for k, lt in enumerate(lights):
+        if isinstance(lt, ConeDistantLight):
+            light_entries[f"cone_{k}"] = {"type": lights_jit.NAME, "direction": mi.ScalarVector3f(lt.axis.tolist()), "angle": float(lt.desc.angle),
+                                          "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist())}
+        elif not isinstance(lt, MitsubaLight):
+            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere and rect lights, not {type(lt).__name__}",
+                        file=str(path), prim=lt.desc.prim)
+    for ent in light_entries.values():
+        if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
+            ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
+    entries.update(light_entries)
+    return entries
+
+
+#: scenes whose coordinates all lie within this distance of the origin are scaled up to unit size
+TINY_EXTENT = 1e-2
+
+
+def rescale_tiny(desc) -> float:
+    """Scale a tiny scene description (all points, instance and light origins, camera within
+    :data:`TINY_EXTENT` of the origin) uniformly to unit size, in place; returns the factor (1: unchanged).
+
+    Mitsuba offsets spawned rays by ``(1 + max |p|) * RayEpsilon``, an absolute minimum that is a large
+    part of a tiny scene. The image is unchanged by the scaling: directions, radiance and rna transport
+    (per world steradian, object-space inputs) do not depend on it, and the radiance of lights whose
+    emission is per area or falls off with distance (point lights, normalised sphere and rect lights)
+    is multiplied by s^2 so that the scene's irradiance stays the same."""
+    pts = [np.abs(m.points).max() for m in desc.meshes if len(m.points)]
+    pts += [np.abs(a.to_world[3, :3]).max() for a in desc.assets]
+    pts += [np.abs(lt.to_world[3, :3]).max() for lt in desc.lights]
+    pts.append(np.abs(desc.camera.to_world[3, :3]).max())
+    ext = max(pts)
+    if not 0 < ext < TINY_EXTENT:
+        return 1.0
+    s = 1.0 / ext
+    scale = np.diag([s, s, s, 1.0])
+    for m in desc.meshes:
+        m.points = m.points * s
+    for a in desc.assets:
+        a.to_world = a.to_world @ scale
+    for lt in desc.lights:
+        lt.to_world = lt.to_world @ scale
+        point = lt.type == "SphereLight" and lt.radius <= 0
+        if point or (lt.normalize and lt.type in ("SphereLight", "RectLight")):
+            lt.radiance = np.asarray(lt.radiance, np.float64) * s * s
+    cam = desc.camera.to_world.copy()
+    cam[3, :3] *= s
+    desc.camera.to_world = cam
+    return s
+
+
+def _mesh_ply(mi, mesh) -> str:
+    """A world-space plain mesh written to the cache folder (scene dicts cannot attach a BSDF to a Mesh object)."""
+    out = _cache_dir() / f"mesh_{len(list(_cache_dir().glob('mesh_*.ply')))}.ply"
+    mesh.write_ply(str(out))
+    return str(out)

@@ -1,0 +1,57 @@
+"""Smoke test of ``nasset bench error-vs-time SCENE.xml --replace ID=ASSET`` (the equal-engine benchmark)
+at toy scale (16x16), and its typed errors. conftest's tiny random rna asset stands in for a bake, so the
+numbers mean nothing; the pipeline (reference halves, both curves, variance subtraction, floor, cost
+ratio, plot, JSON) runs whole."""
+
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from nasset_sdk.errors import NassetError  # noqa: E402
+
+SCENE = textwrap.dedent("""\
+    <scene version="3.0.0">
+      <integrator type="path"><integer name="max_depth" value="4"/></integrator>
+      <sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0,1,3" target="0,0,0" up="0,1,0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="32"/></film></sensor>
+      <shape type="sphere" id="ball"><float name="radius" value="0.5"/><bsdf type="diffuse"/></shape>
+      <shape type="rectangle" id="floor"><transform name="to_world"><rotate x="1" angle="-90"/><translate y="-0.5"/>
+        <scale value="3"/></transform><bsdf type="diffuse"/></shape>
+      <emitter type="directional"><vector name="direction" value="0.3,-1,-0.2"/></emitter>
+      <emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>
+    </scene>""")
+
+
+def test_equal_engine_smoke(tmp_path, rna_asset_path, capsys):
+    from nasset_sdk.cli import main
+
+    (tmp_path / "scene.xml").write_text(SCENE)
+    rc = main(["bench", "error-vs-time", str(tmp_path / "scene.xml"), "--replace", f"ball={rna_asset_path}", "-o", str(tmp_path / "out"),
+               "--res", "16", "--gt-spp", "64", "--mi-spp", "1,4", "--nr-spp", "1,4", "--json"])
+    assert rc == 0
+    r = json.loads(capsys.readouterr().out)
+    assert [p["spp"] for p in r["path_tracing_points"]] == [1, 4] and [p["spp"] for p in r["asset_points"]] == [1, 4]
+    var = r["reference"]["noise_variance"]
+    for p in r["path_tracing_points"] + r["asset_points"]:
+        assert p["time_s"] > 0 and math.isfinite(p["mse"]) and p["mse_raw"] - p["mse"] == pytest.approx(var)
+    assert r["mitsuba"]["settings"] == {"max_depth": 4, "rr_depth": 5}
+    assert r["per_sample_cost"]["spp"] == 4 and r["per_sample_cost"]["ratio"] > 0
+    # the random asset is not the ball: its render converges elsewhere, a floor well above the reference's noise
+    assert r["bias_floor_mse"] > 10 * var
+    assert (tmp_path / "out" / "error_vs_time.png").is_file() and (tmp_path / "out" / "error_vs_time.json").is_file()
+
+
+def test_equal_engine_unknown_shape(tmp_path, rna_asset_path):
+    from nasset_benchmarks.equal_engine import bench_equal_engine
+
+    (tmp_path / "scene.xml").write_text(SCENE)
+    with pytest.raises(NassetError) as exc:
+        bench_equal_engine(tmp_path / "scene.xml", {"nope": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,))
+    assert exc.value.code == "CONVERT_SHAPE_UNKNOWN" and "nope" in exc.value.message

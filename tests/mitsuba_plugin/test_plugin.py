@@ -1,0 +1,244 @@
+"""The Mitsuba JIT plugin (``nasset_mitsuba_plugin``): rna evaluation against the SDK evaluator,
+renders against a closed form and against the reference renderer's conformance references,
+scenes mixing plain shapes and instanced assets, and typed errors for bad input."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from nasset_mitsuba_plugin.plugins import register  # noqa: E402
+from nasset_mitsuba_plugin.render import render  # noqa: E402
+from nasset_mitsuba_plugin.rna import RnaJit  # noqa: E402
+from nasset_mitsuba_plugin.scene import asset_shape, load_file  # noqa: E402
+from nasset_mitsuba_plugin.variant import jit_mitsuba  # noqa: E402
+from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_asset  # noqa: E402
+from nasset_sdk.asset import Asset  # noqa: E402
+from nasset_sdk.errors import AssetReadError, NassetError, SceneError  # noqa: E402
+from nasset_sdk.examples import example_builder  # noqa: E402
+from nasset_sdk.networks import mlp_onnx  # noqa: E402
+
+RENDER_CMD = [sys.executable, "-m", "nasset_mitsuba_plugin.render"]
+
+
+@pytest.fixture(scope="module")
+def mi():
+    mi = jit_mitsuba()  # any failure to load a JIT variant fails (setup installs libLLVM), never skips
+    register(mi)
+    return mi
+
+
+def _vec(mi, a):
+    return mi.Vector3f(*[mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)])
+
+
+def _baked_style_asset(path, seed):
+    """A tiny rna asset whose decoder is the bakers' model (angular features: Slice, ReduceSum, Sqrt, Div,
+    Exp, Concat before the MLP) exported by torch with random weights."""
+    import torch
+
+    from nasset_bakers.train.rna import build_model, export_onnx
+
+    torch.manual_seed(seed)
+    model = build_model("tiny", init_std=0.5, seed=seed)
+    for p in model.decoder.parameters():
+        torch.nn.init.normal_(p, std=0.5)
+    b = example_builder("rna", size="tiny", seed=seed)
+    b.component("core").add_network("decoder", export_onnx(model))
+    b.write(path)
+
+
+@pytest.mark.parametrize("kind", ["tiny", "small", "baked"])
+def test_rna_transport_matches_sdk_evaluator(mi, tmp_path, rng, kind):
+    """Dr.Jit triplane + traced decoder = the SDK's numpy + onnxruntime evaluator on random inputs
+    (points inside and outside the encoding box, unnormalised and zero directions), for the SDK's random
+    MLPs and for the bakers' decoder graph. Tolerance 2e-4 (abs) + 2e-4 (rel): Dr.Jit's texture computes
+    the bilinear fraction in float32 from (xn + 1) / 2, the SDK from the spec's formula, ~1e-5 apart on
+    R = 64 planes."""
+    path = tmp_path / f"rna_{kind}.usdc"
+    seed = int(rng.integers(1 << 30))
+    if kind == "baked":
+        _baked_style_asset(path, seed)
+    else:
+        example_builder("rna", size=kind, seed=seed).write(path)
+    sdk = Asset.open(path).evaluator()
+    jit = RnaJit(mi, str(path))
+    lo, hi = (np.asarray(v) for v in Asset.open(path).domain)
+    n = 3000
+    x = rng.uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (n, 3))
+    frame, wo, wi = (rng.normal(size=(n, 3)) * rng.uniform(0.1, 10, (n, 1)) for _ in range(3))
+    frame[:5] = 0.0  # safe_normalize's fallback
+    u_ref, s_ref = sdk.evaluate(x, frame, wo, wi)
+    u, s = jit.transport(mi.Point3f(_vec(mi, x)), _vec(mi, frame), _vec(mi, wo), _vec(mi, wi))
+    u, s = np.asarray(u.numpy()).T, np.asarray(s.numpy()).T
+    assert np.abs(u_ref).max() > 0.1 and np.abs(s_ref).max() > 0.1  # the comparison sees real outputs
+    np.testing.assert_allclose(u, u_ref, atol=2e-4, rtol=2e-4)
+    np.testing.assert_allclose(s, s_ref, atol=2e-4, rtol=2e-4)
+
+
+@pytest.mark.parametrize("lit_from_camera", [True, False])
+def test_constant_asset_closed_form(tmp_path, lit_from_camera):
+    """Lone convex asset, delta DistantLight of irradiance E: every visible point shows T E, with T the
+    unshadowed output when the light is behind the camera and the shadowed one when it is behind the
+    asset (the continuation from a lone asset reaches nothing)."""
+    unsh, sh = (1.0, 0.5, 0.25), (0.1, 0.2, 0.3)
+    asset = constant_rna_asset(tmp_path / "const.usda", unshadowed=unsh, shadowed=sh)
+    e = 2.5
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.distant("Sun", (0, 0, 1) if lit_from_camera else (0, 0, -1), e)
+    b.asset("A", asset)
+    img = render(b.write(tmp_path / "scene.usda"), 4, width=16, height=16, seed=3)
+    cover = img / (e * np.asarray(unsh if lit_from_camera else sh))
+    assert np.allclose(cover, cover[..., :1], atol=1e-5), "pixels are not multiples of T E"
+    assert cover.max() == pytest.approx(1.0, abs=1e-5)
+    assert (cover[..., 0] > 0.999).sum() > 20  # the asset covers whole pixels
+
+
+def _run_case(name, tmp_path, spp_scale=1):
+    from nasset_sdk.conformance import find_suite, load_cases, run_case
+
+    (case,) = load_cases(find_suite(), [name])
+    template = " ".join(RENDER_CMD) + " {scene} {out} --spp {spp} --width {width} --height {height} --seed {seed}"
+    return run_case(case, template, tmp_path, seed=0, timeout=300, spp_scale=spp_scale)
+
+
+@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny"])
+def test_conformance_cases(tmp_path, case):
+    """The plugin passes conformance cases through the ``nasset conformance`` machinery (reference:
+    the reference renderer at the case's ref_spp; tolerance from the case's measured noise)."""
+    row = _run_case(case, tmp_path)
+    assert row["passed"], row
+
+
+def test_mixed_scene_with_two_instances(mi, tmp_path):
+    """A dict scene with a plain floor, a plain sphere and two instances of one asset (one mirrored
+    and scaled) renders finite, both instances lit, and the floor darker where they shadow it."""
+    path = tmp_path / "rna.usdc"
+    example_builder("rna", size="tiny", seed=5).write(path)
+    t = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 45, "to_world": t().look_at(origin=[0, 2.5, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 48, "height": 32, "rfilter": {"type": "box"}}},
+        "floor": {"type": "rectangle", "to_world": t().translate([0, -0.5, 0]).rotate([1, 0, 0], -90).scale(4),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}},
+        "ball": {"type": "sphere", "center": [0, 0, -1.2], "radius": 0.4, "bsdf": {"type": "diffuse"}},
+        "left": asset_shape(path, t().translate([-0.9, 0, 0]), mi=mi),
+        "right": asset_shape(path, t().translate([0.9, 0.1, 0]).scale([-1.2, 0.8, 1.0]), mi=mi),
+        "sun": {"type": "directional", "direction": [0, -1, 0], "irradiance": {"type": "rgb", "value": 3.0}},
+    })
+    integ = mi.load_dict({"type": "nasset_path", "max_depth": 4})
+    img = np.asarray(mi.render(scene, integrator=integ, spp=16, seed=1))
+    assert img.shape == (32, 48, 3) and np.isfinite(img).all()
+    lum = img.mean(-1)
+    # plain path tracing: open Lambertian floor far behind = rho E / pi (indirect light there is < 1 %)
+    assert np.median(lum[6:8]) == pytest.approx(0.5 * 3.0 / np.pi, rel=0.02)
+    # both instances are lit by their transports
+    assert lum[14:18, 8:14].mean() > 0.5 and lum[14:18, 34:42].mean() > 0.5
+    # the floor below each instance lies in its shadow (the sun is overhead)
+    assert lum[20:24, 8:18].mean() < 0.6 * np.median(lum[6:8]) and lum[20:24, 30:40].mean() < 0.6 * np.median(lum[6:8])
+
+
+# -- bad input -------------------------------------------------------------------------------------
+
+
+def test_missing_asset_file(mi, tmp_path):
+    with pytest.raises(AssetReadError) as exc:
+        asset_shape(tmp_path / "nope.usdc", mi=mi)
+    assert exc.value.code == "FILE_NOT_FOUND" and "nope.usdc" in str(exc.value)
+
+
+def test_invalid_asset_file(mi, tmp_path):
+    bad = tmp_path / "bad.usdc"
+    bad.write_bytes(b"PXR-USDC not really a crate")
+    with pytest.raises(AssetReadError) as exc:
+        asset_shape(bad, mi=mi)
+    assert exc.value.code == "FILE_UNREADABLE"
+
+
+def test_wrong_kind(mi, tmp_path):
+    path = tmp_path / "np.usdc"
+    example_builder("neupress", size="tiny", seed=1).write(path)
+    with pytest.raises(SceneError) as exc:
+        asset_shape(path, mi=mi)
+    assert exc.value.code == "SCENE_UNSUPPORTED" and "neupress" in exc.value.message
+
+
+def test_decoder_the_plugin_cannot_run(mi, tmp_path, rng):
+    """A valid rna asset whose decoder ends in a Softsign (in the format's allow-list, not among the operators the plugin runs)."""
+    b = example_builder("rna", size="tiny", seed=2)
+    w = [rng.normal(size=(16, 8)).astype(np.float32), rng.normal(size=(8, 6)).astype(np.float32)]
+    b.component("core").add_network("decoder", mlp_onnx(w, [np.zeros(8, np.float32), np.zeros(6, np.float32)],
+                                                        output_activation="Softsign"))
+    path = tmp_path / "sig.usdc"
+    b.write(path)
+    with pytest.raises(SceneError) as exc:
+        asset_shape(path, mi=mi)
+    assert exc.value.code == "SCENE_UNSUPPORTED" and "Softsign" in exc.value.message
+
+
+def test_xml_scene(mi, tmp_path, rna_asset_path):
+    """``<shape type="nasset">`` in a Mitsuba XML scene; without a filename: SCENE_INVALID."""
+    xml = textwrap.dedent(f"""\
+        <scene version="3.0.0">
+          <sensor type="perspective"><float name="fov" value="40"/>
+            <transform name="to_world"><lookat origin="0,0,3" target="0,0,0" up="0,1,0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film></sensor>
+          <shape type="nasset" id="a"><string name="filename" value="{rna_asset_path}"/>
+            <transform name="to_world"><scale value="1.5"/></transform></shape>
+          <emitter type="directional"><vector name="direction" value="0,0,-1"/></emitter>
+        </scene>""")
+    (tmp_path / "ok.xml").write_text(xml)
+    scene = load_file(tmp_path / "ok.xml", mi=mi)
+    img = np.asarray(mi.render(scene, integrator=mi.load_dict({"type": "nasset_path"}), spp=2))
+    assert np.isfinite(img).all() and img.max() > 0
+    (tmp_path / "bad.xml").write_text(xml.replace(f'<string name="filename" value="{rna_asset_path}"/>', ""))
+    with pytest.raises(SceneError) as exc:
+        load_file(tmp_path / "bad.xml", mi=mi)
+    assert exc.value.code == "SCENE_INVALID" and exc.value.prim == "a"
+
+
+def test_not_a_jit_variant():
+    with pytest.raises(NassetError) as exc:
+        jit_mitsuba("scalar_rgb")
+    assert exc.value.code == "CONVERT_BACKEND"
+
+
+def test_no_llvm_gives_typed_error(tmp_path, rna_asset_path):
+    """Without a usable libLLVM the command line reports CONVERT_BACKEND, not a Dr.Jit traceback."""
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.distant("Sun", (0, 0, 1), 1.0)
+    b.asset("A", str(rna_asset_path))
+    scene = b.write(tmp_path / "scene.usda")
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=str(tmp_path / "no-libLLVM.so"))
+    proc = subprocess.run(RENDER_CMD + [scene, str(tmp_path / "o.exr"), "--spp", "1"], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert "[CONVERT_BACKEND]" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_asset_without_the_triplane(mi, tmp_path):
+    """An rna asset whose core component lost its triplane (edited after writing): the SDK's
+    TENSOR_MISSING naming it, not a Dr.Jit error."""
+    from pxr import Sdf
+
+    path = tmp_path / "no_planes.usdc"
+    example_builder("rna", size="tiny", seed=3).write(path)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    found = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == "triplane" else None)
+    assert found
+    for p in found:
+        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
+    layer.Save()
+    with pytest.raises(NassetError) as exc:
+        asset_shape(path, mi=mi)
+    assert exc.value.code == "TENSOR_MISSING" and "triplane" in exc.value.message
