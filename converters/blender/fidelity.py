@@ -381,6 +381,17 @@ NOTES = """
   brighter, sides darker); the converter warns with the factor per material. hdri had MSE / noise 2.3 with the map resampled at 8x
   only: the sky seen directly showed the 16 x 8 map's 128 x 64 nearest texels as steps (red channel 5.9 %
   rms off Cycles at 48 x 48); made at least 1024 texels wide it is 0.3 % rms.
+- Where textures loses its 3.3 dB (64 x 64, 1024 spp for both renderers; per-pixel squared error against the
+  mean of Cycles' two seeds minus both renderers' noise, i.e. the excess MSE, 3.0 x the noise): 86 % of the excess
+  lies on the Principled box (71 % on its top face, rendered 0.7-2.0 % too bright; its sides 0.4-0.9 % too
+  dark); the floor's 8-bit sRGB texture is within noise. With the box's Principled BSDF replaced by a Diffuse
+  BSDF on the same Non-Color texture, everything else unchanged, the excess falls 8x (to 0.4 x the noise) and
+  the scene reaches 50.5 dB at Cycles' noise against 50.7 dB seed-to-seed (64 x 64, 128 spp; the Principled
+  scene at that setting: 45.8 against 49.6). So the gap is not a texture or renderer mismatch but the
+  Principled approximation above: UsdPreviewSurface adds its diffuse and specular lobes, so the converter can
+  only scale the base colour by one view-averaged factor (0.956 here, warned), where Cycles takes the
+  specular layer's albedo off the diffuse layer per view angle (more at the top face's grazing view). It
+  stays off target until the format has a layered (view-dependent) diffuse.
 - Before this suite the converter measured (ratio, 32 x 32 at 32 spp): textures 1.96-2.37 (Image Texture
   links dropped), spot 0.88-0.89 (Cycles' smoothstep edge rendered as Mitsuba's linear one),
   instances 1.03-1.05 (collection instances dropped), mesh_emitter 0 (Emission shader written as grey
