@@ -241,11 +241,21 @@ def measure(name: str, folder, *, size: int = 32, spp: int = 64) -> dict:
     return {**compare(a, b, result.image, result.variance), "warnings": list(res.warnings)}
 
 
+def excess_error(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """Error map [H, W]: per pixel, the squared error of ``out`` against the mean of the source's seeds ``a``,
+    ``b`` beyond what the noise of both explains, summed over channels (all inputs [H, W, 3], ``variance`` is
+    ``out``'s variance of the pixel mean): ``|out - (a + b) / 2|^2 - |a - b|^2 / 4 - variance``. Its expectation
+    is the squared bias (0 where the conversion is faithful); single pixels are noisy (and may be negative), so
+    read it summed over regions."""
+    m = 0.5 * (a + b)
+    return (((out - m) ** 2 - 0.25 * (a - b) ** 2) - variance).sum(-1)
+
+
 def compare(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray) -> dict:
     """Measures of the reference renderer's image ``out`` against the source renderer's seeds ``a``, ``b`` (all
     [H, W, 3]); ``variance`` [H, W, 3] is ``out``'s variance of the pixel mean (module docstring).
 
-    Returns {"ratio": [3], "psnr", "psnr_seed", "noise_ratio", "images": (a, b, out)}.
+    Returns {"ratio": [3], "psnr", "psnr_seed", "noise_ratio", "images": (a, b, out), "excess": :func:`excess_error`}.
     """
     ratio = out.reshape(-1, 3).mean(0) / np.maximum(a.reshape(-1, 3).mean(0), 1e-30)
     seed_mse, var = float(np.mean((a - b) ** 2)), float(np.mean(variance))
@@ -258,7 +268,7 @@ def compare(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray)
     mse_eq = max(mse - var + seed_mse / 2.0, seed_mse / 2.0, 1e-300)
     psnr_eq = 10.0 * math.log10(max(float(np.max(a)), 1e-30) ** 2 / mse_eq)
     return {"ratio": ratio.tolist(), "psnr": psnr(out, a), "psnr_seed": psnr(b, a), "noise_ratio": noise_ratio,
-            "psnr_eq": psnr_eq, "images": (a, b, out)}
+            "psnr_eq": psnr_eq, "images": (a, b, out), "excess": excess_error(a, b, out, variance)}
 
 
 def table(results: dict, scenes: dict | None = None, source: str = "Mitsuba") -> str:
