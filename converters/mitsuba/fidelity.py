@@ -319,8 +319,8 @@ NOTES = """
 - mesh_emitter was 0.9 % dark with MSE / noise 1.7: the renderer's shadow rays toward an emitting mesh left the
   offset origin along the direction sampled from the unoffset point, so at grazing angles they met the emitter's
   own plane before their end and were shadowed by the light itself (a floor point 3 m beside a panel 1 m up
-  got 0 instead of its irradiance). They are now aimed at the light sample from the offset origin
-  (spec/renderer.md#ray-offsets).
+  got 0 instead of its irradiance). They are now aimed at the light sample from the offset origin, at mesh
+  vertices and neural-asset hits alike (spec/renderer.md#ray-offsets).
 - Residual: envmap keeps MSE / noise 1.7 from the resampled map (8x, nearest texels) against Mitsuba's
   bilinear lookup.
 - Before these conversions the issue measured (ratio, PSNR vs seed-to-seed): 8-bit textures 1.8-2.0
