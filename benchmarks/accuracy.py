@@ -16,10 +16,11 @@ spec/accuracy.md#in-scene-accuracy. For a Mitsuba 3 scene and ``--replace ID[,ID
   mask (and, for context, over the whole image).
 
 For a Blender ``.blend`` and ``--replace OBJECT=ASSET`` the same, with Cycles (CPU, box filter,
-no clamps, 32 bounces) rendering the reference halves through the scene's camera, and the mask
-from Cycles: the film's alpha on a transparent film with every other object a holdout
-(``MASK_SUBSAMPLES``² samples per pixel), i.e. the fraction of the pixel's camera samples whose
-first visible surface is one of the replaced objects. The reference renderer's depth defaults to 32.
+no clamps, the scene's own bounce limit B for every bounce type) rendering the reference halves
+through the scene's camera, and the mask from Cycles: the film's alpha on a transparent film with
+every other object a holdout (``MASK_SUBSAMPLES``² samples per pixel), i.e. the fraction of the
+pixel's camera samples whose first visible surface is one of the replaced objects. The reference
+renderer's depth defaults to the converted stage's ``nasset:maxDepth`` (B + 1, spec/bake-blender.md).
 
 Writes ``reference.exr`` (+ ``reference_a.exr``, ``reference_b.exr``), ``neural.exr``,
 ``reference.png``, ``neural.png``, ``mask.png``, ``error.png`` (relative error over the mask,
@@ -255,7 +256,7 @@ class SourceReference:
     coverage: np.ndarray  # [H, W] fraction of the pixel's camera samples whose first hit is the asset's shapes
     fits: list  # check_asset_fits / blender_asset_fits rows
     converted: Path  # the converted USD scene with the assets in place
-    max_depth: int  # default reference-renderer depth matching the source integrator
+    max_depth: int | None  # default reference-renderer depth matching the source; None: the converted stage's
     reference: dict  # report["reference"]
     mask_source: str
     reused: bool = False
@@ -334,7 +335,8 @@ def blender_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     fits = blender_asset_fits(rep, scene_file=str(scene_file))
     w, h = converted.resolution
     height = max(1, int(round(res * h / max(w, 1))))
-    max_bounces = 32
+    # the scene's own bounce limit, the one the converted stage's nasset:maxDepth (B + 1) stands for
+    max_bounces = int(converted.integrator["max_bounces"])
     setup_cycles(bpy, res, height, max_bounces=max_bounces)
     say(f"reference: Cycles {spp} spp at {res}x{height} in two halves, unclamped")
     exr = out / "cycles_chunk.exr"
@@ -342,7 +344,7 @@ def blender_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     cov = object_coverage(bpy, bsc.pick_objects(list(rep), file=str(scene_file)), exr, spp=MASK_SUBSAMPLES ** 2)
     exr.unlink(missing_ok=True)
     return SourceReference(
-        a, b, half, cov, fits, Path(converted.output), max_bounces,
+        a, b, half, cov, fits, Path(converted.output), None,
         {"renderer": f"cycles {bpy.app.version_string}", "variant": "CPU", "integrator": {"max_bounces": max_bounces}},
         "cycles film alpha with every other object a holdout")
 
@@ -385,16 +387,19 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
                     file=str(scene_file))
 
     t = time.perf_counter()
-    say(f"estimate: reference renderer {nr_spp} spp, max_depth {max_depth}")
     from nasset_reference_renderer import RenderSettings, render
     from nasset_reference_renderer import load_scene as load_usd
+    from nasset_reference_renderer.integrator import resolve_settings
     from nasset_reference_renderer.scene import SceneWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SceneWarning)
         uscene = load_usd(str(src.converted))
-    result = render(uscene, RenderSettings(spp=int(nr_spp), seed=seed + 7, width=hw[1], height=hw[0], max_depth=max_depth,
-                                           progress=not quiet))
+    settings = resolve_settings(RenderSettings(spp=int(nr_spp), seed=seed + 7, width=hw[1], height=hw[0],
+                                               max_depth=max_depth, progress=not quiet), uscene)
+    max_depth = settings.max_depth
+    say(f"estimate: reference renderer {nr_spp} spp, max_depth {max_depth}")
+    result = render(uscene, settings)
     est = np.nan_to_num(np.asarray(result.image, np.float64)[..., :3])
     est_var = np.nan_to_num(np.asarray(result.variance, np.float64)[..., :3])
     times["estimate_s"] = time.perf_counter() - t
@@ -500,7 +505,8 @@ def add_args(p) -> None:
     p.add_argument("--nr-spp", type=int, default=None, help=f"reference-renderer spp (default {DEFAULT['nr_spp']}; {QUICK['nr_spp']} with --quick)")
     p.add_argument("--res", type=int, default=None, help=f"image width (default {DEFAULT['res']}; {QUICK['res']} with --quick); "
                    "height keeps the scene's aspect")
-    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1; Blender: 32)")
+    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1; Blender: the converted "
+                   "scene's nasset:maxDepth, Cycles' bounces + 1)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")

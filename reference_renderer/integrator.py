@@ -22,20 +22,7 @@ from .plan import RenderPlan, make_plan
 from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading
 from .shaders.common import max3, unique
-
-
-def aim_shadow(x, xo, wi, dist, eps):
-    """Shadow ray from the offset origin ``xo`` [n,3] toward the light sample at ``x + wi dist`` (``x`` the
-    shading point, ``dist`` [n], inf for lights at infinity): (direction [n,3], tmax [n]) per
-    spec/renderer.md#ray-offsets. Aimed at the sample point itself, so that the ray meets an emitting mesh
-    exactly at its end: along ``wi`` from ``xo`` it would meet the mesh's plane ``offset / cos`` early at grazing
-    angles and be shadowed by the light itself."""
-    finite = np.isfinite(dist)
-    q = x + wi * np.where(finite, dist, 0.0)[:, None]
-    v = q - xo
-    d2 = np.sqrt(np.maximum(dot(v, v), 1e-300))
-    d = np.where(finite[:, None], v / d2[:, None], wi)
-    return d, np.where(finite, d2 * (1 - 1e-7) - 2 * eps, np.inf)
+from .shadow import aim_shadow
 
 
 @dataclass

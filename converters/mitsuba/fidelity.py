@@ -241,11 +241,21 @@ def measure(name: str, folder, *, size: int = 32, spp: int = 64) -> dict:
     return {**compare(a, b, result.image, result.variance), "warnings": list(res.warnings)}
 
 
+def excess_error(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """Error map [H, W]: per pixel, the squared error of ``out`` against the mean of the source's seeds ``a``,
+    ``b`` beyond what the noise of both explains, summed over channels (all inputs [H, W, 3], ``variance`` is
+    ``out``'s variance of the pixel mean): ``|out - (a + b) / 2|^2 - |a - b|^2 / 4 - variance``. Its expectation
+    is the squared bias (0 where the conversion is faithful); single pixels are noisy (and may be negative), so
+    read it summed over regions."""
+    m = 0.5 * (a + b)
+    return (((out - m) ** 2 - 0.25 * (a - b) ** 2) - variance).sum(-1)
+
+
 def compare(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray) -> dict:
     """Measures of the reference renderer's image ``out`` against the source renderer's seeds ``a``, ``b`` (all
     [H, W, 3]); ``variance`` [H, W, 3] is ``out``'s variance of the pixel mean (module docstring).
 
-    Returns {"ratio": [3], "psnr", "psnr_seed", "noise_ratio", "images": (a, b, out)}.
+    Returns {"ratio": [3], "psnr", "psnr_seed", "noise_ratio", "images": (a, b, out), "excess": :func:`excess_error`}.
     """
     ratio = out.reshape(-1, 3).mean(0) / np.maximum(a.reshape(-1, 3).mean(0), 1e-30)
     seed_mse, var = float(np.mean((a - b) ** 2)), float(np.mean(variance))
@@ -258,7 +268,7 @@ def compare(a: np.ndarray, b: np.ndarray, out: np.ndarray, variance: np.ndarray)
     mse_eq = max(mse - var + seed_mse / 2.0, seed_mse / 2.0, 1e-300)
     psnr_eq = 10.0 * math.log10(max(float(np.max(a)), 1e-30) ** 2 / mse_eq)
     return {"ratio": ratio.tolist(), "psnr": psnr(out, a), "psnr_seed": psnr(b, a), "noise_ratio": noise_ratio,
-            "psnr_eq": psnr_eq, "images": (a, b, out)}
+            "psnr_eq": psnr_eq, "images": (a, b, out), "excess": excess_error(a, b, out, variance)}
 
 
 def table(results: dict, scenes: dict | None = None, source: str = "Mitsuba") -> str:
@@ -309,8 +319,8 @@ NOTES = """
 - mesh_emitter was 0.9 % dark with MSE / noise 1.7: the renderer's shadow rays toward an emitting mesh left the
   offset origin along the direction sampled from the unoffset point, so at grazing angles they met the emitter's
   own plane before their end and were shadowed by the light itself (a floor point 3 m beside a panel 1 m up
-  got 0 instead of its irradiance). They are now aimed at the light sample from the offset origin
-  (spec/renderer.md#ray-offsets).
+  got 0 instead of its irradiance). They are now aimed at the light sample from the offset origin, at mesh
+  vertices and neural-asset hits alike (spec/renderer.md#ray-offsets).
 - Residual: envmap keeps MSE / noise 1.7 from the resampled map (8x, nearest texels) against Mitsuba's
   bilinear lookup.
 - Before these conversions the issue measured (ratio, PSNR vs seed-to-seed): 8-bit textures 1.8-2.0

@@ -26,6 +26,7 @@ import numpy as np
 from nasset_sdk.kinds.boundary import fresnel_dielectric
 
 from ..sampling import dot, power_heuristic
+from ..shadow import aim_shadow
 from .common import Frames, gather_hit, max3
 from .registry import register_shader
 
@@ -85,8 +86,8 @@ class EightdnaShader:
             else:
                 pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj[s]) * jac[s]
                 w = np.where(cont_on[s], power_heuristic(pdf[s], pb), 1.0)
-            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            vis = ~integ.occluded(x_off[s], wi[s], tmax)
+            d_s, tmax = aim_shadow(h.x[s], x_off[s], wi[s], dist[s], integ.eps)
+            vis = ~integ.occluded(x_off[s], d_s, tmax)
             s, w = s[vis], w[vis]
             np.add.at(L, h.ridx[s], h.beta[s] * li[s] * (f[s] * w / pdf[s])[:, None])
 
@@ -114,8 +115,8 @@ class EightdnaShader:
             s = np.nonzero((pl > 0) & (max3(li) > 0) & (p_u > 0) & (dot(n_u, wl_obj) > 0))[0]
             if not len(s):
                 continue
-            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            free = integ.trace(u_w[s], wl[s], tmax, h.inst[s]).prim < 0
+            d_s, tmax = aim_shadow(u_w[s], u_w[s], wl[s], dist[s], integ.eps)  # from u_i itself: d_s = wl
+            free = integ.trace(u_w[s], d_s, tmax, h.inst[s]).prim < 0
             s = s[free]
             s = s[self._backtrace_ok(u_w[s], wl[s], h.inst[s])]
             q_rows.append(s)

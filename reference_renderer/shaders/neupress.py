@@ -26,6 +26,7 @@ from nasset_sdk.kinds.neupress import gaussian_lobe_pdf, gaussian_lobe_sample
 
 from ..lights import DomeLight
 from ..sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
+from ..shadow import aim_shadow
 from .common import Frames, gather_hit, max3
 from .registry import register_shader
 
@@ -131,8 +132,8 @@ class NeupressShader:
                 continue
             side = np.sign(dot(h.ng[s], wi[s]))[:, None]
             origin = h.x[s] + h.ng[s] * side * h.scale[s]
-            tmax = np.where(np.isfinite(dist[s]), dist[s] * (1 - 1e-7) - 2 * integ.eps, np.inf)
-            hh = integ.trace(origin, wi[s], tmax, h.inst[s])
+            d_s, tmax = aim_shadow(h.x[s], origin, wi[s], dist[s], integ.eps)
+            hh = integ.trace(origin, d_s, tmax, h.inst[s])
             free = hh.prim < 0
             s = s[free]
             wi_obj, jac = self.frames.dir_to_object(wi[s], h.inst[s])

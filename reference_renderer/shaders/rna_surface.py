@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from ..sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
+from ..shadow import aim_shadow
 from .common import max3, unique
 from .registry import register_shader
 
@@ -20,7 +21,8 @@ from .registry import register_shader
 def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
     """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
     blocks it; ``self_hit`` says whether the asset itself does) and one uniform-sphere continuation where
-    ``indirect``. ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s.
+    ``indirect``. ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s; they are aimed at
+    the light sample point (:func:`nasset_reference_renderer.shadow.aim_shadow`).
 
     Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their wi).
     """
@@ -34,10 +36,10 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
         if not len(s):
             continue
         full = len(s) == n
-        wi_s, dist_s, inst_s = (wi, dist, inst) if full else (wi[s], dist[s], inst[s])
+        x_s, wi_s, dist_s, inst_s = (x, wi, dist, inst) if full else (x[s], wi[s], dist[s], inst[s])
         origin, exempt = shadow_origin(s, wi_s)
-        tmax = np.where(np.isfinite(dist_s), dist_s * (1 - 1e-7) - 2 * integ.eps, np.inf)
-        h = integ.trace(origin, wi_s, tmax, inst_s) if exempt is None else integ.trace(origin, wi_s, tmax, inst_s, exempt)
+        d_s, tmax = aim_shadow(x_s, origin, wi_s, dist_s, integ.eps)
+        h = integ.trace(origin, d_s, tmax, inst_s) if exempt is None else integ.trace(origin, d_s, tmax, inst_s, exempt)
         free = h.prim < 0  # no other object in the way
         s = s[free]
         w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)

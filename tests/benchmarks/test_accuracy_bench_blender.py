@@ -104,3 +104,24 @@ def test_tiny_run_mask_from_cycles_matches_the_geometry(blend, tmp_path):
     ours = _renderer_coverage(out / "scene_neural.usda", mask.shape) >= 0.5
     iou = (mask & ours).sum() / max((mask | ours).sum(), 1)
     assert iou > 0.85, iou  # a flipped, shifted or inverted mask gives far less
+
+
+def test_depth_follows_the_scenes_bounce_limit(blend, tmp_path):
+    """Cycles renders the reference with the scene's own bounce limit B and the reference renderer goes B + 1
+    scattering vertices deep, the converted stage's nasset:maxDepth (spec/accuracy.md#in-scene-accuracy,
+    spec/bake-blender.md#scene-conversion); a fixed 32/32 pair was one bounce short."""
+    import bpy
+
+    from nasset_converters.blender import scene as bsc
+
+    bsc.open_blend(blend)
+    bpy.context.scene.cycles.max_bounces = 3
+    three = tmp_path / "three.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(three), check_existing=False)
+    a = _asset(tmp_path, three, ["Monkey"])
+    r = _run(three, [f"Monkey={a}"], tmp_path / "bench", res=8, spp=2, nr_spp=1)
+    assert r["reference"]["integrator"]["max_bounces"] == 3
+    assert r["estimate"]["max_depth"] == 4
+    assert bpy.context.scene.cycles.max_bounces == bpy.context.scene.cycles.diffuse_bounces == 3  # as Cycles rendered
+    r = _run(three, [f"Monkey={a}"], tmp_path / "bench2", res=8, spp=2, nr_spp=1, max_depth=2)
+    assert r["estimate"]["max_depth"] == 2  # --max-depth still overrides

@@ -61,3 +61,23 @@ def test_psnr_at_source_noise_equals_seed_psnr_for_a_faithful_noisier_render():
     assert abs(good["psnr_eq"] - good["psnr_seed"]) < 0.3 and abs(good["noise_ratio"] - 1) < 0.05
     bright = compare(a, b, 1.05 * truth + rng.normal(0, 0.06, truth.shape), var)
     assert bright["psnr_eq"] < bright["psnr_seed"] - 3
+
+
+def test_excess_error_is_the_squared_bias_where_there_is_one_and_zero_elsewhere():
+    """Synthetic (source seeds sigma 0.04, the render 0.06): a 0.04 bias on the top quarter only. Summed over a
+    region, the error map's mean is 3 x 0.04^2 there (three channels) and 0 (within 5 standard errors) on the
+    faithful rest; against one seed instead of their mean (or without the render's variance) it is not."""
+    from nasset_converters.mitsuba.fidelity import excess_error
+
+    rng = np.random.default_rng(12)
+    truth = rng.uniform(0.2, 1.0, (64, 64, 3))
+    a, b = (truth + rng.normal(0, 0.04, truth.shape) for _ in range(2))
+    bias = np.zeros(truth.shape)
+    bias[:16] = 0.04
+    out = truth + bias + rng.normal(0, 0.06, truth.shape)
+    ex = excess_error(a, b, out, np.full(truth.shape, 0.06 ** 2))
+    assert ex.shape == (64, 64)
+    for region, expect in ((ex[:16], 3 * 0.04 ** 2), (ex[16:], 0.0)):
+        se = region.std() / np.sqrt(region.size)
+        assert abs(region.mean() - expect) < 5 * se, (region.mean(), expect, se)
+    assert ex[:16].mean() > 10 * ex[:16].std() / np.sqrt(ex[:16].size)  # the bias stands out
