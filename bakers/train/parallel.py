@@ -13,8 +13,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from datetime import timedelta
 
 from .common import pick_device
+
+#: how long a process waits in a collective: the others wait there while rank 0 renders the dataset
+WAIT = timedelta(hours=24)
 
 
 @dataclass
@@ -59,6 +63,15 @@ class DataParallel:
         return float(t.item()) / self.world
 
 
+    def from_main(self, torch, obj=None):
+        """``obj`` of rank 0, in every process (waits until rank 0 sends it; ``obj`` itself in one process)."""
+        if self.world == 1:
+            return obj
+        box = [obj if self.is_main else None]
+        torch.distributed.broadcast_object_list(box, src=0)
+        return box[0]
+
+
 def data_parallel(torch, want: str = "auto") -> DataParallel:
     """This process's :class:`DataParallel`: from torchrun's environment (the process group is joined
     here: NCCL on CUDA, gloo on CPU; device cuda:LOCAL_RANK where CUDA is used), else one process on
@@ -73,5 +86,5 @@ def data_parallel(torch, want: str = "auto") -> DataParallel:
         torch.cuda.set_device(device)
     dist = torch.distributed
     if not dist.is_initialized():
-        dist.init_process_group(backend="nccl" if device.type == "cuda" else "gloo")
+        dist.init_process_group(backend="nccl" if device.type == "cuda" else "gloo", timeout=WAIT)
     return DataParallel(rank, world, device)

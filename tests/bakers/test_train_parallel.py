@@ -90,3 +90,20 @@ if __name__ == "__main__":  # one process of the torchrun launch above
     state = _train()
     if torch.distributed.get_rank() == 0:
         torch.save(state, sys.argv[1])
+
+
+@pytest.mark.slow
+def test_rna_bake_under_torchrun_writes_one_valid_asset(tmp_path):
+    """``torchrun --nproc_per_node=2 -m nasset_sdk.cli bake ...`` on CPU: rank 0 renders the views,
+    both train, rank 0 alone writes the asset, which validates."""
+    pytest.importorskip("mitsuba")
+    from nasset_sdk.validate import validate_file
+
+    out = tmp_path / "a.usdc"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
+           "-m", "nasset_sdk.cli", "bake", "--example", "--kind", "rna", "--size", "tiny", "--views", "2", "--res", "12",
+           "--epochs", "2", "--device", "cpu", "-o", str(out), "--json"]
+    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert out.is_file() and validate_file(out, probe=False).ok
+    assert sorted(p.name for p in tmp_path.glob("*.usdc")) == ["a.usdc"]
