@@ -114,10 +114,16 @@ def _worker_class(ray):
         def __init__(self, source: ViewSource, threads: int) -> None:
             if threads:
                 os.environ["OMP_NUM_THREADS"] = str(threads)
-            self.render_one = source.build()
             self.pid, self.node = os.getpid(), ray.get_runtime_context().get_node_id()
+            self.render_one, self.failed = None, None
+            try:
+                self.render_one = source.build()
+            except Exception as exc:  # noqa: BLE001 - e.g. the renderer missing on this node: the first job raises it
+                self.failed = exc
 
         def render(self, *job):
+            if self.failed is not None:  # the driver re-raises it: the typed error of one process, not a dead worker
+                raise self.failed
             t = time.perf_counter()
             out = self.render_one(*job)
             return out, {"pid": self.pid, "node": self.node, "seconds": time.perf_counter() - t}

@@ -95,6 +95,7 @@ def _sampler_stage(ray_started, *, size: str, workers: int, tuples: int | None, 
         one, t_one, _ = stage("w1", pool.run, 1)
     with cluster.WorkerPool(source, workers=workers, address=None, say=say) as pool:
         many, t_many, shards = stage(f"w{workers}", pool.run, workers)
+    busy = {str(pid): round(w["seconds"], 2) for pid, w in pool.summary.items()}
     equal = all(np.array_equal(here[k], d[k]) for d in (one, many) for k in here)
     return {
         "stage": "8dna sampler", "example": "mitsuba 8dna default", "size": size, "tuples": n, "rays_per_shard": shard_rays(n),
@@ -102,6 +103,7 @@ def _sampler_stage(ray_started, *, size: str, workers: int, tuples: int | None, 
         "seconds": {"process": round(t_here, 2), "1 worker": round(t_one, 2), f"{workers} workers": round(t_many, 2)},
         "tuples_per_s": {"process": n / t_here, "1 worker": n / t_one, f"{workers} workers": n / t_many},
         "speedup_vs_1_worker": t_one / t_many, "speedup_vs_process": t_here / t_many, "datasets_equal": equal,
+        "busy_s_per_worker": busy,
     }
 
 

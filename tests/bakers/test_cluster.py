@@ -256,6 +256,21 @@ def test_missing_ray_is_one_clear_message(monkeypatch):
     assert e.value.code == "CONVERT_BACKEND" and "nasset-sdk[cluster]" in str(e.value)
 
 
+def renderer_missing(**kwargs):
+    """The Mitsuba rna view renderer in a worker where Mitsuba is not installed."""
+    sys.modules["mitsuba"] = None  # an import of it now fails as on a node without the package
+    from nasset_bakers.mitsuba.rna import view_renderer
+
+    return view_renderer(**kwargs)
+
+
+def test_worker_without_the_renderer_gives_the_typed_error(ray_local, source, tmp_path):
+    missing = cluster.ViewSource("tests.bakers.test_cluster:renderer_missing", source.kwargs)
+    with pytest.raises(NassetError) as e:
+        _render(tmp_path, "missing", missing, workers=1)
+    assert e.value.code == "CONVERT_BACKEND" and "mitsuba is not installed" in str(e.value)
+
+
 def test_unreachable_cluster_fails_before_the_bake(tmp_path):
     from nasset_sdk.cli import main
 
