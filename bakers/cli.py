@@ -30,7 +30,7 @@ def add_args(p) -> None:
                    help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
                         "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="render the views on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
+                   help="render the views (8dna: trace the tuples) on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="the Ray cluster to use with --workers (default: a local one on this machine)")
     p.add_argument("--seed", type=int, default=0)

@@ -11,6 +11,7 @@ import os
 import signal
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -97,7 +98,6 @@ def slow_view_renderer(seconds: float, **kwargs):
 def _rendering_worker_pid(timeout: float = 120.0) -> int:
     """The pid of a Ray worker process busy in ViewWorker.render (Ray names its processes by task)."""
     import time
-    from pathlib import Path
 
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -287,3 +287,24 @@ def test_worker_options_are_checked(tmp_path):
 
     assert main(["bake", "--example", "default", "--kind", "rna", "-o", str(tmp_path / "a.usdc"), "--cluster", "x:1"]) == 2
     assert main(["bake", "--example", "default", "--kind", "rna", "-o", str(tmp_path / "a.usdc"), "--workers", "0"]) == 2
+
+
+@pytest.mark.slow
+def test_8dna_bake_on_workers_equals_one_process(ray_local, tmp_path):
+    """``bake --kind 8dna --workers 2``: the held-out tuples and the trained asset's tensors equal a one-process bake's."""
+    from nasset_bakers.mitsuba.eightdna import bake
+    from nasset_sdk.asset import Asset
+
+    runs = {}
+    for name, kw in (("here", {}), ("there", {"workers": 2})):
+        s = bake(None, None, tmp_path / f"{name}.usdc", size="tiny", example="default", epochs=3, spp=3, quiet=True, **kw)
+        with np.load(Path(s["work_dir"]) / "heldout_tiny_0.npz") as z:
+            held = {k: z[k] for k in z.files}
+        a = Asset.open(s["asset"])
+        a.load("all")
+        runs[name] = (s, held, {t: np.asarray(a.tensor("core", t)) for t in ("triplane", "s1Grid")})
+    (s1, h1, t1), (s2, h2, t2) = runs["here"], runs["there"]
+    _same_tuples(h1, h2)
+    for k in t1:
+        np.testing.assert_array_equal(t1[k], t2[k], err_msg=k)
+    assert s1["workers"] is None and len(s2["workers"]) == 2
