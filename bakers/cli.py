@@ -43,6 +43,7 @@ def add_args(p) -> None:
 
 def run(args) -> int:
     """CLI entry: see ``nasset bake --help``."""
+    import os
     from pathlib import Path
 
     from nasset_sdk.errors import UsageError, error
@@ -59,6 +60,9 @@ def run(args) -> int:
     from .train.common import pick_device, require_torch
 
     pick_device(require_torch(), args.device)  # a bad --device fails before any rendering
+    if int(os.environ.get("WORLD_SIZE", "1") or 1) > 1 and (args.kind, source_of(args.scene, args.example)) != ("rna", "mitsuba"):
+        raise UsageError("data-parallel training under torchrun is implemented for Mitsuba rna bakes only "
+                         "(spec/bake.md#training-devices); run this bake as one process")
     if getattr(args, "clamp", None) is not None and args.kind == "8dna":
         raise UsageError("--clamp applies to rna and neupress bakes only")
     summary = fn(

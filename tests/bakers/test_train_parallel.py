@@ -92,6 +92,14 @@ if __name__ == "__main__":  # one process of the torchrun launch above
         torch.save(state, sys.argv[1])
 
 
+def test_other_bakes_under_torchrun_are_refused(monkeypatch, tmp_path):
+    from nasset_sdk.cli import main
+
+    monkeypatch.setenv("WORLD_SIZE", "2")
+    assert main(["bake", "--example", "--kind", "8dna", "--size", "tiny", "-o", str(tmp_path / "a.usdc")]) == 2
+    assert not list(tmp_path.iterdir())  # refused before any work
+
+
 @pytest.mark.slow
 def test_rna_bake_under_torchrun_writes_one_valid_asset(tmp_path):
     """``torchrun --nproc_per_node=2 -m nasset_sdk.cli bake ...`` on CPU: rank 0 renders the views,
