@@ -30,17 +30,20 @@ def add_args(p) -> None:
                    help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
                         "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="render the views on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
+                   help="render the views (8dna: trace the tuples) on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="the Ray cluster to use with --workers (default: a local one on this machine)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="auto", help="torch device (default: cuda if available, else cpu)")
+    p.add_argument("--device", default="auto", metavar="auto|cpu|cuda|cuda:N",
+                   help="torch device of the training (default auto: cuda if torch sees one, else cpu); under torchrun "
+                        "each process trains on cuda:LOCAL_RANK (rna; spec/bake.md#training-devices)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 def run(args) -> int:
     """CLI entry: see ``nasset bake --help``."""
+    import os
     from pathlib import Path
 
     from nasset_sdk.errors import UsageError, error
@@ -54,6 +57,12 @@ def run(args) -> int:
     if args.scene is not None and not Path(args.scene).is_file():  # before the extras: a typo is not a missing package
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(args.scene))
     require_extras("train", source_of(args.scene, args.example), purpose="nasset bake")
+    from .train.common import pick_device, require_torch
+
+    pick_device(require_torch(), args.device)  # a bad --device fails before any rendering
+    if int(os.environ.get("WORLD_SIZE", "1") or 1) > 1 and (args.kind, source_of(args.scene, args.example)) != ("rna", "mitsuba"):
+        raise UsageError("data-parallel training under torchrun is implemented for Mitsuba rna bakes only "
+                         "(spec/bake.md#training-devices); run this bake as one process")
     if getattr(args, "clamp", None) is not None and args.kind == "8dna":
         raise UsageError("--clamp applies to rna and neupress bakes only")
     summary = fn(

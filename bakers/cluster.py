@@ -106,20 +106,26 @@ def connect(ray, address: str | None) -> bool:
 
 
 def _worker_class(ray):
-    # a dead worker is restarted (it rebuilds its scene) and the view it held is rendered again there
+    # a dead worker is restarted (it rebuilds its scene) and the job it held is run again there
     @ray.remote(num_cpus=1, max_restarts=MAX_ATTEMPTS, max_task_retries=-1)
     class ViewWorker:
-        """One worker: the scene loaded once, then views on demand."""
+        """One worker: the scene loaded once, then jobs (views, sampler shards) on demand."""
 
         def __init__(self, source: ViewSource, threads: int) -> None:
             if threads:
                 os.environ["OMP_NUM_THREADS"] = str(threads)
-            self.render_one = source.build()
             self.pid, self.node = os.getpid(), ray.get_runtime_context().get_node_id()
+            self.render_one, self.failed = None, None
+            try:
+                self.render_one = source.build()
+            except Exception as exc:  # noqa: BLE001 - e.g. the renderer missing on this node: the first job raises it
+                self.failed = exc
 
-        def render(self, split: str, i: int):
+        def render(self, *job):
+            if self.failed is not None:  # the driver re-raises it: the typed error of one process, not a dead worker
+                raise self.failed
             t = time.perf_counter()
-            out = self.render_one(split, i)
+            out = self.render_one(*job)
             return out, {"pid": self.pid, "node": self.node, "seconds": time.perf_counter() - t}
 
         def close(self) -> None:
@@ -130,28 +136,57 @@ def _worker_class(ray):
     return ViewWorker
 
 
-def render_views_on_cluster(store, todo: list[tuple[str, int]], source: ViewSource, *, workers: int, address: str | None,
-                            bar, say: Callable[..., None], threads: int = 1, on_started=None) -> dict:
-    """Render ``todo`` views on ``workers`` actors and save each into ``store`` as it arrives.
+class WorkerPool:
+    """``workers`` Ray actors, each holding what ``source`` builds, kept between batches of jobs.
 
-    ``bar``: a progress bar updated per saved view; ``on_started(actors)``: called once every worker
-    holds its first view (tests kill one then). Returns a per-worker summary ``{pid: {"views": n, "seconds": s}}``."""
-    ray = require_ray(local=not address)
-    started = connect(ray, address)
-    Worker = _worker_class(ray)
-    actors = [Worker.remote(source, threads) for _ in range(int(workers))]
-    summary: dict = {}
-    alive = [True] * len(actors)  # False once Ray gave up restarting a worker
-    attempts: dict = {}  # job -> workers that were lost for good while holding it
-    queue = list(todo)
-    running: dict = {}  # object ref -> (actor index, job)
+    A context manager: entering joins the cluster at ``address`` (default: starts a local one) and
+    starts the actors; leaving closes and kills them (and stops a Ray this pool started). ``summary``:
+    per worker process ``{pid: {"node", "jobs", "seconds"}}`` over every batch run."""
 
-    def hand_out(k: int) -> None:
-        if queue and alive[k]:
-            job = queue.pop(0)
-            running[actors[k].render.remote(*job)] = (k, job)
+    def __init__(self, source: ViewSource, *, workers: int, address: str | None, say: Callable[..., None],
+                 threads: int = 1) -> None:
+        self.source, self.workers, self.address, self.say, self.threads = source, int(workers), address, say, threads
+        self.summary: dict = {}
+        self.actors: list = []
+        self.alive: list[bool] = []  # False once Ray gave up restarting a worker
+        self.ray = None
+        self._started = False
 
-    try:
+    def __enter__(self) -> WorkerPool:
+        self.ray = require_ray(local=not self.address)
+        self._started = connect(self.ray, self.address)
+        Worker = _worker_class(self.ray)
+        self.actors = [Worker.remote(self.source, self.threads) for _ in range(self.workers)]
+        self.alive = [True] * len(self.actors)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        ray = self.ray
+        try:
+            ray.get([a.close.remote() for a, ok in zip(self.actors, self.alive, strict=True) if ok], timeout=30)
+        except Exception:  # noqa: BLE001 - cleanup of workers being torn down; their results are saved or not
+            pass
+        for a in self.actors:
+            ray.kill(a, no_restart=True)
+        if self._started:
+            ray.shutdown()
+
+    def run(self, todo: list[tuple], on_result: Callable[[tuple, object], None], on_started=None) -> None:
+        """Run every job of ``todo`` (the arguments of the source's function) and hand each result to
+        ``on_result(job, out)`` in the driver, in the order they finish. A job whose worker died is run
+        again (by the restarted worker or another); CONVERT_DATASET once workers were lost for good
+        ``MAX_ATTEMPTS`` times on one job or none is left. ``on_started(actors)``: called once every
+        worker holds its first job (tests kill one then)."""
+        ray, actors, alive = self.ray, self.actors, self.alive
+        attempts: dict = {}  # job -> workers that were lost for good while holding it
+        queue = list(todo)
+        running: dict = {}  # object ref -> (actor index, job)
+
+        def hand_out(k: int) -> None:
+            if queue and alive[k]:
+                job = queue.pop(0)
+                running[actors[k].render.remote(*job)] = (k, job)
+
         for k in range(len(actors)):
             hand_out(k)
         if on_started is not None:
@@ -166,29 +201,34 @@ def render_views_on_cluster(store, todo: list[tuple[str, int]], source: ViewSour
                 alive[k] = False
                 attempts[job] = attempts.get(job, 0) + 1
                 if attempts[job] >= MAX_ATTEMPTS or not any(alive):
-                    raise error("CONVERT_DATASET", f"view {job[0]} {job[1]} could not be rendered: the workers died "
-                                f"({attempts[job]} lost for good); the views saved so far are kept") from None
-                say(f"worker lost for good while rendering view {job[0]} {job[1]}; handing it to another")
+                    raise error("CONVERT_DATASET", f"job {job} could not be run: the workers died "
+                                f"({attempts[job]} lost for good); the results saved so far are kept") from None
+                self.say(f"worker lost for good while running job {job}; handing it to another")
                 queue.insert(0, job)
                 if not running:  # every other worker is idle: give it to the first live one
                     hand_out(alive.index(True))
                 continue
-            except ray.exceptions.RayTaskError as exc:  # the view itself raised: the same error as in one process
+            except ray.exceptions.RayTaskError as exc:  # the job itself raised: the same error as in one process
                 cause = exc.cause if getattr(exc, "cause", None) is not None else exc
                 raise cause from None
-            store.save(*job, out)
-            bar.update(1)
-            w = summary.setdefault(info["pid"], {"node": info["node"], "views": 0, "seconds": 0.0})
-            w["views"] += 1
+            on_result(job, out)
+            w = self.summary.setdefault(info["pid"], {"node": info["node"], "jobs": 0, "seconds": 0.0})
+            w["jobs"] += 1
             w["seconds"] += info["seconds"]
             hand_out(k)
-    finally:
-        try:
-            ray.get([a.close.remote() for a, ok in zip(actors, alive, strict=True) if ok], timeout=30)
-        except Exception:  # noqa: BLE001 - cleanup of workers being torn down; their views are saved or not
-            pass
-        for a in actors:
-            ray.kill(a, no_restart=True)
-        if started:
-            ray.shutdown()
-    return summary
+
+
+def render_views_on_cluster(store, todo: list[tuple[str, int]], source: ViewSource, *, workers: int, address: str | None,
+                            bar, say: Callable[..., None], threads: int = 1, on_started=None) -> dict:
+    """Render ``todo`` views on ``workers`` actors and save each into ``store`` as it arrives.
+
+    ``bar``: a progress bar updated per saved view; ``on_started(actors)``: called once every worker
+    holds its first view (tests kill one then). Returns a per-worker summary ``{pid: {"jobs": n, "seconds": s}}``."""
+
+    def save(job, out) -> None:
+        store.save(*job, out)
+        bar.update(1)
+
+    with WorkerPool(source, workers=workers, address=address, say=say, threads=threads) as pool:
+        pool.run(todo, save, on_started=on_started)
+    return pool.summary

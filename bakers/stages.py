@@ -59,11 +59,12 @@ def render_views(store, views: int, val_views: int, render_one, *, desc: str, wo
         bar.close()
 
 
-def worker_lines(summary: dict | None) -> list[str]:
-    """Summary lines of a cluster view stage: views and seconds per worker."""
+def worker_lines(summary: dict | None, unit: str = "views") -> list[str]:
+    """Summary lines of a cluster stage (:class:`nasset_bakers.cluster.WorkerPool` summary): jobs
+    (``unit``: views, sampler shards) and seconds per worker."""
     if not summary:
         return []
-    return ["  workers: " + ", ".join(f"pid {pid} {w['views']} views in {w['seconds']:.1f}s" for pid, w in sorted(summary.items()))]
+    return ["  workers: " + ", ".join(f"pid {pid} {w['jobs']} {unit} in {w['seconds']:.1f}s" for pid, w in sorted(summary.items()))]
 
 
 def train_with_progress(run: Callable[[Callable], object], *, total: int, desc: str, work: Path, quiet: bool,

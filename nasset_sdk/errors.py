@@ -135,6 +135,10 @@ class NassetError(Exception):
         self.attribute = attribute
         super().__init__(self.__str__())
 
+    def __reduce__(self):
+        # pickled (multiprocessing, Ray workers) as its fields: __init__ takes more than the message
+        return (_rebuild, (self.code, self.message, self.file, self.prim, self.attribute))
+
     def location(self) -> str:
         parts = [p for p in (self.file, self.prim) if p]
         loc = ":".join(parts)
@@ -191,6 +195,10 @@ _CATEGORY_CLASS = {
     "usage": NassetError,
     "scene": SceneError,
 }
+
+
+def _rebuild(code: str, message: str, file, prim, attribute) -> NassetError:
+    return error(code, message, file=file, prim=prim, attribute=attribute)
 
 
 def error(code: str, message: str, **loc) -> NassetError:

@@ -17,6 +17,7 @@ optimisation steps and ``--spp N`` the online buffer size in thousands of tuples
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 import time
@@ -28,11 +29,11 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, finite, progress_bar, times_line
+from nasset_bakers.stages import check_options, finite, progress_bar, times_line, worker_lines
 from nasset_sdk.errors import UsageError, error
 
 SAMPLER_PRESETS = presets.EIGHTDNA_MITSUBA_SAMPLER  # the table lives in nasset_bakers/presets.py
-BAKE_VERSION = "8dna-0.1.0"
+BAKE_VERSION = "8dna-0.2.0"  # 0.2: tuples drawn in deterministic shards (spec/bake.md#cluster)
 
 
 def boundary_of(mi, shapes) -> tuple[float, float]:
@@ -67,22 +68,44 @@ def _save_npz(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
-def heldout_tuples(sampler, n: int, path: Path) -> dict:
-    """``n`` held-out tuples (separate seed), cached in ``path`` (.npz) for resumes."""
-    from nasset_converters.mitsuba.eightdna_sampler import FIELDS
+def heldout_tuples(source, n: int, path: Path, progress=None) -> dict:
+    """``n`` held-out tuples (their own shard stream of ``source``, a ShardedTuples), cached in ``path`` (.npz) for resumes."""
+    from nasset_converters.mitsuba.eightdna_sampler import FIELDS, HELDOUT_STREAM
 
     if path.is_file():
         with np.load(path, allow_pickle=False) as z:
             if set(FIELDS) <= set(z.files) and len(z["beta"]) == n:
                 return {k: z[k] for k in FIELDS}
-    parts, have = [], 0
-    while have < n:
-        p = sampler.sample(max(2048, 3 * (n - have)))
-        parts.append(p)
-        have += len(p["beta"])
-    data = {k: np.concatenate([p[k] for p in parts])[:n] for k in FIELDS}
+    data = source.fill(n, HELDOUT_STREAM, progress=progress)
     _save_npz(path, data)
     return data
+
+
+@contextlib.contextmanager
+def tuple_bar(total: int, desc: str, quiet: bool):
+    """A progress bar over traced tuples; yields ``progress(have, total)`` for ShardedTuples.fill."""
+    bar = progress_bar(total=total, desc=desc, unit="tuple", disable=quiet, leave=False)
+
+    def progress(have, total):
+        bar.total = total
+        bar.n = have
+        bar.refresh()
+
+    try:
+        yield progress
+    finally:
+        bar.close()
+
+
+def shard_sampler(scene, asset_ids, domain, rr_depth: int, max_depth: int, variant=None, threads: int = 0):
+    """``sample_shard(key, rays)`` of a PathSampler built from the scene file (a cluster worker's copy
+    of stage 1); ``domain``: the encoding box (lo, hi) [3] each; ``threads`` > 0 limits Dr.Jit's pool."""
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_converters.mitsuba.eightdna_sampler import PathSampler
+
+    mi, shapes = msc.open_shapes(scene, asset_ids, variant=variant, threads=threads)
+    lo, hi = domain
+    return PathSampler(mi, shapes, lo, hi, rr_depth=rr_depth, max_depth=max_depth).sample_shard
 
 
 def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
@@ -108,18 +131,18 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
          far_field: bool = False, workers: int | None = None, cluster: str | None = None, **_ignored) -> dict:
     """Run the whole 8dna bake; returns the summary dict (also stored in the asset's provenance).
 
-    ``workers``/``cluster``: refused (UsageError) -- the 8dna sampler stage runs in this process only.
+    ``workers``/``cluster``: trace the held-out tuples and every buffer fill on Ray workers
+    (nasset_bakers.cluster), in the same deterministic shards as in one process (spec/bake.md#cluster).
 
     ``far_field=True`` bakes the 6D far-field baseline instead (spec/bake-8dna.md#far-field): the same
     asset layout, whose conditioners 3-4 ignore u_i (flows 1-2 untrained); only the benchmark uses it.
     """
-    if workers is not None or cluster:
-        raise UsageError("--workers/--cluster: the 8dna forward-sample stage runs in one process (not on Ray workers yet)")
+    from nasset_bakers.cluster import ViewSource, WorkerPool, check_workers
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, heldout_nll, parity_with_sdk, train
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from nasset_converters.mitsuba import scene as msc
-    from nasset_converters.mitsuba.eightdna_sampler import OnlineBuffer, PathSampler
+    from nasset_converters.mitsuba.eightdna_sampler import OnlineBuffer, PathSampler, ShardedTuples, local_runner
     from nasset_sdk.asset import AssetBuilder
     from nasset_sdk.validate import validate_file
 
@@ -128,6 +151,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         if val is not None:
             raise UsageError(f"--{name} has no meaning for kind 8dna (forward path sampling needs no views or light; "
                              "spec/bake-8dna.md#options)")
+    check_workers(workers, cluster)
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     work.mkdir(parents=True, exist_ok=True)
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
@@ -161,48 +185,54 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         tset = replace(tset, steps=int(epochs))
     if spp is not None:
         tset = replace(tset, buffer=int(spp) * 1000)
-    sampler = PathSampler(mi, shapes, lo, hi, rr_depth=sp["rr_depth"], max_depth=sp["max_depth"], seed=seed + 1)
-    held_sampler = PathSampler(mi, shapes, lo, hi, rr_depth=sp["rr_depth"], max_depth=sp["max_depth"], seed=seed + 7919)
+    if workers is None:
+        pool = None
+        tuples = ShardedTuples(seed, local_runner(PathSampler(mi, shapes, lo, hi, rr_depth=sp["rr_depth"], max_depth=sp["max_depth"]).sample_shard))
+    else:  # each worker loads the scene itself and traces whole shards
+        pool = WorkerPool(ViewSource("nasset_bakers.mitsuba.eightdna:shard_sampler",
+                                     {"scene": scene, "asset_ids": asset_ids, "domain": ([float(v) for v in lo], [float(v) for v in hi]),
+                                      "rr_depth": sp["rr_depth"], "max_depth": sp["max_depth"], "variant": mi.variant(), "threads": 1}),
+                          workers=workers, address=cluster, say=say).__enter__()
+        tuples = ShardedTuples(seed, pool.run, batch=workers)
     times["scene_s"] = time.perf_counter() - t
 
-    # -- stage 2: held-out tuples --------------------------------------------------------------------
-    t = time.perf_counter()
-
-    scene_sha = __import__("hashlib").sha256(scene.read_bytes()).hexdigest()
-    key = {"scene_sha256": scene_sha, "shapes": asset_ids, "train": tset.__dict__, "sampler": sp, "version": BAKE_VERSION,
-           "domain": [list(map(float, lo)), list(map(float, hi))], "variant": mi.variant()}
-    say(f"held-out tuples: {sp['heldout']}")
-    held = heldout_tuples(held_sampler, sp["heldout"], work / f"heldout_{size}_{seed}.npz")
-    times["heldout_s"] = time.perf_counter() - t
-
-    # -- stage 3: train on the online buffer ---------------------------------------------------------
-    t = time.perf_counter()
-    fill = progress_bar(total=tset.buffer, desc="trace buffer", unit="tuple", disable=quiet, leave=False)
-
-    def fill_progress(have, total):
-        fill.total = total
-        fill.n = have
-        fill.refresh()
-
-    buffer = OnlineBuffer(sampler, tset.buffer, reuse=tset.reuse, progress=fill_progress)
-    bar = progress_bar(total=tset.steps, desc="train 6D far-field" if far_field else "train 8dna", unit="step", disable=quiet)
-
-    def progress(step, nll, l2):
-        bar.n = step
-        bar.set_postfix(nll=f"{nll:.3g}", albedo_l2=f"{l2:.3g}", refills=buffer.refreshes)
-        bar.refresh()
-
-    ckpt = TorchCheckpoint(work / ("train_state_farfield.pt" if far_field else "train_state.pt"), key)
     try:
-        result = train(buffer, (lo, hi), tset, progress=progress, checkpoint=ckpt)
-    except KeyboardInterrupt:
-        bar.close()
-        fill.close()
-        say(f"\ninterrupted; training state kept in {work} -- rerun with --resume {work}")
-        raise
-    bar.close()
-    fill.close()
-    times["train_s"] = time.perf_counter() - t
+        # -- stage 2: held-out tuples --------------------------------------------------------------------
+        t = time.perf_counter()
+
+        scene_sha = __import__("hashlib").sha256(scene.read_bytes()).hexdigest()
+        key = {"scene_sha256": scene_sha, "shapes": asset_ids, "train": tset.__dict__, "sampler": sp, "version": BAKE_VERSION,
+               "domain": [list(map(float, lo)), list(map(float, hi))], "variant": mi.variant()}
+        say(f"held-out tuples: {sp['heldout']}")
+        with tuple_bar(sp["heldout"], "trace held-out", quiet) as held_progress:
+            held = heldout_tuples(tuples, sp["heldout"], work / f"heldout_{size}_{seed}.npz", progress=held_progress)
+        times["heldout_s"] = time.perf_counter() - t
+
+        # -- stage 3: train on the online buffer ---------------------------------------------------------
+        t = time.perf_counter()
+        fill = contextlib.ExitStack()
+        buffer = OnlineBuffer(tuples, tset.buffer, reuse=tset.reuse, seed=seed,
+                              progress=fill.enter_context(tuple_bar(tset.buffer, "trace buffer", quiet)))
+        bar = progress_bar(total=tset.steps, desc="train 6D far-field" if far_field else "train 8dna", unit="step", disable=quiet)
+
+        def progress(step, nll, l2):
+            bar.n = step
+            bar.set_postfix(nll=f"{nll:.3g}", albedo_l2=f"{l2:.3g}", refills=buffer.refreshes)
+            bar.refresh()
+
+        ckpt = TorchCheckpoint(work / ("train_state_farfield.pt" if far_field else "train_state.pt"), key)
+        try:
+            result = train(buffer, (lo, hi), tset, progress=progress, checkpoint=ckpt)
+        except KeyboardInterrupt:
+            say(f"\ninterrupted; training state kept in {work} -- rerun with --resume {work}")
+            raise
+        finally:
+            bar.close()
+            fill.close()
+        times["train_s"] = time.perf_counter() - t
+    finally:
+        if pool is not None:  # the workers are needed for sampling only
+            pool.__exit__(None, None, None)
 
     # -- stage 4: export -----------------------------------------------------------------------------
     t = time.perf_counter()
@@ -214,7 +244,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     core.add_tensor("direct", np.array([eta, alpha], np.float32), dtype="float32", layout="parameter")
     for name, data in result.networks.items():
         core.add_network(name, data)
-    st = sampler.stats
+    st = tuples.stats
     prov = {
         "generator": "nasset bake",
         "converter": f"converters.mitsuba {CONVERTER_VERSION}",
@@ -266,6 +296,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         "validate": rep.counts,
         "variant": mi.variant(), "device": result.device,
         "times_s": {k: round(v, 2) for k, v in times.items()},
+        "workers": pool.summary if pool is not None else None,
     }
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
@@ -284,6 +315,7 @@ def _print_summary(s: dict, stream) -> None:
         f"(median {p['pdf_median_rel']:.1e}); ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         f"  validate: {s['validate']['error']} errors, {s['validate']['warning']} warnings",
         times_line(s["times_s"]),
+        *worker_lines(s.get("workers"), unit="shards"),
     ]
     print("\n".join(lines), file=stream)
 

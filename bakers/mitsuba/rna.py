@@ -73,6 +73,7 @@ def bake(
     from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import render_views, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from nasset_converters.mitsuba import dataset as ds
@@ -83,6 +84,9 @@ def bake(
     check_workers(workers, cluster)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
+    dp = data_parallel(require_torch(), device)  # under torchrun: this process's rank (spec/bake.md#training-devices)
+    if not dp.is_main:
+        return train_share(dp)
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
@@ -171,6 +175,8 @@ def bake(
         tset = replace(tset, loss=str(loss))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
+    dp.from_main(require_torch(), {"work": str(work), "views": dset.views, "val_views": dset.val_views,
+                                   "domain": [list(map(float, d)) for d in domain], "train": tset.__dict__})
     result = train_with_progress(
         lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
         total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)
@@ -256,6 +262,20 @@ def _view_renderer(mi, shapes, center, radius, dset):
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
     renderer = ds.Renderer(mi, iso, dset)
     return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
+
+
+def train_share(dp) -> dict:
+    """A torchrun process other than rank 0: wait for rank 0's dataset and settings, train its share
+    of every batch with it, and leave the asset to rank 0."""
+    from nasset_bakers.train.common import require_torch
+    from nasset_bakers.train.rna import TrainSettings, train
+    from nasset_converters.mitsuba import dataset as ds
+
+    job = dp.from_main(require_torch())
+    store = ds.DatasetDir(Path(job["work"]))
+    train(store.load_split("train", job["views"]), store.load_split("val", job["val_views"]), job["domain"],
+          TrainSettings(**job["train"]))
+    return {"rank": dp.rank, "world": dp.world, "asset": None}
 
 
 def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from nasset_sdk.errors import error
+from nasset_sdk.errors import UsageError, error
 
 
 def require_torch():
@@ -19,10 +19,23 @@ def require_torch():
     return torch
 
 
+#: --device values: auto (CUDA when torch sees a device, else CPU), cpu, cuda, cuda:N
+DEVICES = ("auto", "cpu", "cuda")
+
+
 def pick_device(torch, want: str):
-    if want != "auto":
-        return torch.device(want)
-    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    """The torch device for ``--device want``; UsageError for an unknown name, CONVERT_BACKEND for
+    CUDA asked for where torch sees none."""
+    want = str(want or "auto")
+    base, _, index = want.partition(":")
+    if base not in DEVICES or (index and (base != "cuda" or not index.isdigit())):
+        raise UsageError(f"--device must be auto, cpu, cuda or cuda:N, got {want!r}")
+    if base == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if base == "cuda" and (not torch.cuda.is_available() or int(index or 0) >= torch.cuda.device_count()):
+        raise error("CONVERT_BACKEND", f"--device {want}: torch {torch.__version__} sees "
+                    f"{torch.cuda.device_count() if torch.cuda.is_available() else 'no'} CUDA device(s)")
+    return torch.device(want)
 
 
 def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]:

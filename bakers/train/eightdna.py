@@ -33,7 +33,7 @@ from nasset_sdk.kinds.eightdna import FLOWS, SIZES
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES, cube_face_dir, cube_face_uv, to_unit_box
 from nasset_sdk.kinds.spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, S_PER_T, BoxParam, cylindrical_to_direction
 
-from .common import reopen_asset, require_torch
+from .common import pick_device, reopen_asset, require_torch
 
 
 @dataclass(frozen=True)
@@ -280,7 +280,7 @@ def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=
     """Fit the model on tuples from ``buffer`` (an OnlineBuffer); ``progress(step, nll, l2)`` is called every 10 steps."""
     torch = require_torch()
     t0 = time.perf_counter()
-    device = torch.device(settings.device if settings.device != "auto" else ("cuda" if torch.cuda.is_available() else "cpu"))
+    device = pick_device(torch, settings.device)
     lo, hi = domain
     model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed).to(device)
     grids = [model.triplane, model.wo_cube, model.s1_grid, model.s3_grid, model.s12_cube]

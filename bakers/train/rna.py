@@ -34,7 +34,8 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import check_against_torch, display_psnr, held_out_accuracy, pick_device, require_torch
+from .common import check_against_torch, display_psnr, held_out_accuracy, require_torch
+from .parallel import data_parallel
 
 
 @dataclass(frozen=True)
@@ -271,13 +272,16 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     """Fit the model; ``progress(epoch, loss, val_psnr)`` is called per epoch (tqdm hook).
 
     ``checkpoint``: optional object with ``load() -> dict|None`` and ``save(dict)`` (resume).
+    Under ``torchrun`` the processes train data-parallel (nasset_bakers.train.parallel): each holds the
+    whole training set and takes its share of every batch; only rank 0 saves checkpoints.
     """
     torch = require_torch()
     from nasset_sdk.networks import check_model_bytes
 
     t0 = time.perf_counter()
     torch.manual_seed(settings.seed)
-    device = pick_device(torch, settings.device)
+    dp = data_parallel(torch, settings.device)
+    device = dp.device
     lo, hi = domain
     if len(train_data["x"]) == 0:
         raise error("CONVERT_TRAINING", "no training samples: no camera ray hit the asset")
@@ -295,6 +299,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     state = checkpoint.restore(model, opt, sched) if checkpoint is not None else None
     history: list = list(state.get("history", [])) if state else []
     start = int(state["epoch"]) if state else 0
+    net = dp.wrap(torch, model)
     n = len(T["xn"])
     g = torch.Generator(device="cpu").manual_seed(settings.seed)
     for epoch in range(start, settings.epochs):
@@ -303,17 +308,20 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         perm = torch.randperm(n, generator=g).to(device)
         total, count = 0.0, 0
         for s in range(0, n, settings.batch):
-            idx = perm[s:s + settings.batch]
-            y = model(T["xn"][idx], T["n"][idx], T["wo"][idx], T["wi"][idx], sigma)
+            batch = perm[s:s + settings.batch]
+            if len(batch) < dp.world:  # a last batch with fewer samples than processes: skipped by all
+                continue
+            idx = dp.share(batch)
+            y = net(T["xn"][idx], T["n"][idx], T["wo"][idx], T["wi"][idx], sigma)
             pred = torch.where(T["vis"][idx][:, None], y[:, :3], y[:, 3:])
             loss = loss_fn(pred, T["rgb"][idx], settings)
             opt.zero_grad(set_to_none=True)
-            loss.backward()
+            (loss * dp.weight(len(idx), len(batch))).backward()
             opt.step()
             total += float(loss.detach()) * len(idx)
             count += len(idx)
         sched.step()
-        mean_loss = total / max(count, 1)
+        mean_loss = dp.mean(torch, total / max(count, 1))
         if not math.isfinite(mean_loss):
             raise error("CONVERT_TRAINING", f"loss became non-finite at epoch {epoch}")
         val_psnr = float("nan")
@@ -324,7 +332,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "sigma": sigma})
         if progress is not None:
             progress(epoch, mean_loss, val_psnr)
-        if checkpoint is not None and (epoch % 5 == 4 or epoch == settings.epochs - 1):
+        if checkpoint is not None and dp.is_main and (epoch % 5 == 4 or epoch == settings.epochs - 1):
             checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
                              "epoch": epoch + 1, "history": history})
     train_s = time.perf_counter() - t0

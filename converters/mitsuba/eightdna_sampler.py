@@ -210,6 +210,15 @@ class PathSampler:
         d = _unit((r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * s + z[:, None] * inward)
         return o, d
 
+    def sample_shard(self, key: tuple[int, ...], rays: int) -> tuple[dict, dict]:
+        """One shard: ``rays`` starting rays drawn from the random stream ``key`` (seed, stream, shard)
+        alone, so the shard's tuples are the same in any process. Returns (FIELDS arrays, the shard's
+        counts: the keys of ``stats``)."""
+        before = dict(self.stats)
+        self.rng = np.random.default_rng([int(k) for k in key])
+        out = self.sample(int(rays))
+        return out, {k: self.stats[k] - before[k] for k in self.stats}
+
     def sample(self, n: int) -> dict:
         """Trace n starting rays; returns the FIELDS arrays [M, 3] (float32) for the M rays that hit the asset."""
         o, d = self.start_rays(n)
@@ -305,33 +314,87 @@ class PathSampler:
         return {k: np.asarray(out[k], np.float32) for k in FIELDS}
 
 
-class OnlineBuffer:
-    """A buffer of ``size`` tuples served in shuffled batches and regenerated once fully consumed (paper §3.3)."""
+#: most starting rays of one shard (a unit of work a cluster worker runs; spec/bake.md#cluster)
+SHARD_RAYS = 1 << 15
+#: shard streams: 0 the held-out tuples, 1 + k the k-th fill of the online buffer
+HELDOUT_STREAM = 0
 
-    def __init__(self, sampler: PathSampler, size: int, *, reuse: int = 1, chunk: int = 1 << 18, progress=None) -> None:
-        self.sampler = sampler
+
+def shard_rays(n: int) -> int:
+    """Starting rays per shard for a fill of ``n`` tuples: a function of ``n`` alone (never of the
+    worker count), so the shards, and the tuples, are the same however they are spread."""
+    return int(min(SHARD_RAYS, max(2048, int(n) // 8)))
+
+
+def local_runner(sample_shard):
+    """``run(jobs, on_result)`` that runs each shard job ``(key, rays)`` in this process through
+    ``sample_shard`` (:meth:`PathSampler.sample_shard`)."""
+
+    def run(jobs, on_result) -> None:
+        for job in jobs:
+            on_result(job, sample_shard(*job))
+
+    return run
+
+
+class ShardedTuples:
+    """Tuples drawn in deterministic shards: ``fill(n, stream)`` is the first ``n`` tuples of the
+    concatenated shards (seed, stream, 0), (seed, stream, 1), ... of ``shard_rays(n)`` rays each.
+
+    ``run(jobs, on_result)`` runs shard jobs ``(key, rays)`` anywhere (:func:`local_runner`, or a
+    cluster's worker pool) and hands back ``(tuples, counts)`` per job in any order; ``batch``: the
+    fewest shards handed out at once (the worker count). Shards beyond the ``n``-th tuple that ran
+    (handed out together with the needed ones) are traced but not used."""
+
+    def __init__(self, seed: int, run, *, batch: int = 1) -> None:
+        self.seed, self.run, self.batch = int(seed), run, max(1, int(batch))
+        self.stats = {"started": 0, "hits": 0, "shards": 0}
+
+    def fill(self, n: int, stream: int, progress=None) -> dict:
+        """The FIELDS arrays [n, 3] (float32) of stream ``stream``; ``progress(have, n)`` after each shard."""
+        rays, n = shard_rays(n), int(n)
+        done: dict = {}  # shard index -> its tuples
+        arrived = [0]  # tuples of this fill so far, used or not
+
+        def on_result(job, result) -> None:
+            tuples, counts = result
+            done[job[0][2]] = tuples
+            self.stats["started"] += counts["started"]
+            self.stats["hits"] += counts["hits"]
+            self.stats["shards"] += 1
+            arrived[0] += len(tuples["beta"])
+            if progress is not None:
+                progress(min(arrived[0], n), n)
+
+        first, have = 0, 0
+        while have < n:
+            hit_rate = max(self.stats["hits"] / self.stats["started"], 0.05) if self.stats["started"] else 0.5
+            k = max(self.batch, math.ceil(1.1 * (n - have) / (rays * hit_rate)))
+            self.run([((self.seed, int(stream), first + j), rays) for j in range(k)], on_result)
+            first += k
+            have = sum(len(done[i]["beta"]) for i in range(first))
+        return {f: np.concatenate([done[i][f] for i in range(first)])[:n] for f in FIELDS}
+
+
+class OnlineBuffer:
+    """A buffer of ``size`` tuples served in shuffled batches and regenerated once fully consumed
+    (paper §3.3); fill k is stream 1 + k of ``source`` (:class:`ShardedTuples`), shuffled by ``seed``."""
+
+    def __init__(self, source: ShardedTuples, size: int, *, reuse: int = 1, seed: int = 0, progress=None) -> None:
+        self.source = source
         self.size = int(size)
         self.reuse = max(1, int(reuse))
         self.passes = 0
-        self.chunk = int(chunk)
         self.progress = progress
+        self.rng = np.random.default_rng([int(seed), 1])
         self.data: dict | None = None
         self.order = np.zeros(0, np.int64)
         self.pos = 0
         self.refreshes = 0
 
     def refill(self) -> None:
-        parts, have = [], 0
-        while have < self.size:
-            need = self.size - have
-            hit_rate = self.sampler.stats["hits"] / max(self.sampler.stats["started"], 1) or 0.5
-            part = self.sampler.sample(min(self.chunk, max(1024, math.ceil(need / max(hit_rate, 0.05)))))
-            parts.append(part)
-            have += len(part["beta"])
-            if self.progress is not None:
-                self.progress(min(have, self.size), self.size)
-        self.data = {k: np.concatenate([p[k] for p in parts])[: self.size] for k in FIELDS}
-        self.order = self.sampler.rng.permutation(self.size)
+        self.data = self.source.fill(self.size, HELDOUT_STREAM + 1 + self.refreshes, progress=self.progress)
+        self.order = self.rng.permutation(self.size)
         self.pos = 0
         self.passes = 1
         self.refreshes += 1
@@ -340,7 +403,7 @@ class OnlineBuffer:
         """The next ``batch`` tuples (a new shuffled pass, or a regenerated buffer after ``reuse`` passes)."""
         if self.data is None or self.pos + batch > self.size:
             if self.data is not None and self.passes < self.reuse:
-                self.order = self.sampler.rng.permutation(self.size)
+                self.order = self.rng.permutation(self.size)
                 self.pos = 0
                 self.passes += 1
             else:

@@ -11,6 +11,7 @@ import os
 import signal
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,8 +76,8 @@ def test_workers_write_the_same_dataset(ray_local, source, one_process, tmp_path
     two_workers, s2 = _render(tmp_path, "w2", source, workers=2)
     _same(one_process, one_worker)
     _same(one_process, two_workers)
-    assert sum(w["views"] for w in s1.values()) == VIEWS + VAL_VIEWS and len(s1) == 1
-    assert sum(w["views"] for w in s2.values()) == VIEWS + VAL_VIEWS and len(s2) == 2  # both workers rendered
+    assert sum(w["jobs"] for w in s1.values()) == VIEWS + VAL_VIEWS and len(s1) == 1
+    assert sum(w["jobs"] for w in s2.values()) == VIEWS + VAL_VIEWS and len(s2) == 2  # both workers rendered
 
 
 def slow_view_renderer(seconds: float, **kwargs):
@@ -97,7 +98,6 @@ def slow_view_renderer(seconds: float, **kwargs):
 def _rendering_worker_pid(timeout: float = 120.0) -> int:
     """The pid of a Ray worker process busy in ViewWorker.render (Ray names its processes by task)."""
     import time
-    from pathlib import Path
 
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -130,10 +130,88 @@ def test_a_killed_worker_views_are_rendered_again(ray_local, source, one_process
     summary = cluster.render_views_on_cluster(store, todo, slow, workers=2, address=None, bar=tqdm(disable=True),
                                               say=lambda *a: None, on_started=kill_one)
     assert killed and killed[0] not in summary  # the killed process saved nothing
-    assert sum(w["views"] for w in summary.values()) == VIEWS + VAL_VIEWS  # its view was rendered again
+    assert sum(w["jobs"] for w in summary.values()) == VIEWS + VAL_VIEWS  # its view was rendered again
     assert len(summary) == 2  # by the restarted worker (a new process) and the other one
     _same(one_process, store)
     assert not list(store.root.rglob("*.part.npz"))  # nothing half-written
+
+
+# -- the 8dna forward-sampler stage ------------------------------------------------------------------
+TUPLES = 5000  # of one fill: 2048 rays per shard (shard_rays), a few shards
+
+
+@pytest.fixture(scope="module")
+def shard_source(tmp_path_factory):
+    """The ViewSource of the 8dna example's shard sampler (as the bake builds it for workers)."""
+    from nasset_converters.mitsuba.eightdna_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+    scene = write_example_scene(tmp_path_factory.mktemp("eightdna_scene"))
+    return cluster.ViewSource("nasset_bakers.mitsuba.eightdna:shard_sampler",
+                              {"scene": scene, "asset_ids": list(EXAMPLE_ASSET_IDS), "domain": ([-0.6] * 3, [0.6] * 3),
+                               "rr_depth": 4, "max_depth": 256, "variant": None})
+
+
+@pytest.fixture(scope="module")
+def shards_here(shard_source):
+    """Two fills (streams 0 and 1) traced in this process, one shard at a time."""
+    from nasset_converters.mitsuba.eightdna_sampler import ShardedTuples, local_runner
+
+    src = ShardedTuples(11, local_runner(shard_source.build()))
+    return [src.fill(TUPLES, stream) for stream in (0, 1)]
+
+
+def _same_tuples(a: dict, b: dict) -> None:
+    assert sorted(a) == sorted(b)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=f"field {k}")
+
+
+def test_8dna_shards_are_the_same_on_any_number_of_workers(ray_local, shard_source, shards_here):
+    from nasset_converters.mitsuba.eightdna_sampler import ShardedTuples
+
+    for k in (1, 2):
+        with cluster.WorkerPool(shard_source, workers=k, address=None, say=lambda *a: None) as pool:
+            src = ShardedTuples(11, pool.run, batch=k)
+            there = [src.fill(TUPLES, stream) for stream in (0, 1)]
+        for a, b in zip(shards_here, there, strict=True):
+            _same_tuples(a, b)
+        assert len(pool.summary) == k and src.stats["shards"] == sum(w["jobs"] for w in pool.summary.values())
+    # independent shards and streams: no tuple drawn twice (a key that ignored the shard or stream would repeat them)
+    xo = np.concatenate([f["xo"] for f in shards_here])
+    assert len(xo) == 2 * TUPLES and len(np.unique(xo, axis=0)) == len(xo)
+
+
+def slow_shard_sampler(seconds: float, **kwargs):
+    """The 8dna shard sampler, each shard taking ``seconds`` longer (so a test can kill a worker mid-shard)."""
+    import time
+
+    from nasset_bakers.mitsuba.eightdna import shard_sampler
+
+    sample_shard = shard_sampler(**kwargs)
+
+    def slow(key, rays):
+        time.sleep(seconds)
+        return sample_shard(key, rays)
+
+    return slow
+
+
+def test_a_killed_8dna_worker_shard_is_traced_again(ray_local, shard_source, shards_here):
+    from nasset_converters.mitsuba.eightdna_sampler import ShardedTuples
+
+    killed = []
+
+    def kill_one(actors):
+        if not killed:
+            pid = _rendering_worker_pid()
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+    slow = cluster.ViewSource("tests.bakers.test_cluster:slow_shard_sampler", {"seconds": 1.0, **shard_source.kwargs})
+    with cluster.WorkerPool(slow, workers=2, address=None, say=lambda *a: None) as pool:
+        src = ShardedTuples(11, lambda jobs, on_result: pool.run(jobs, on_result, on_started=kill_one), batch=2)
+        _same_tuples(shards_here[0], src.fill(TUPLES, 0))
+    assert killed and killed[0] not in pool.summary and len(pool.summary) == 2  # restarted in a new process
 
 
 def _neupress_source(tmp_path):
@@ -167,7 +245,7 @@ def test_other_bakers_views_on_workers(ray_local, make, tmp_path):
     here, _ = _render(tmp_path, "here", src)
     there, summary = _render(tmp_path, "there", src, workers=2)
     _same(here, there)
-    assert sum(w["views"] for w in summary.values()) == VIEWS + VAL_VIEWS
+    assert sum(w["jobs"] for w in summary.values()) == VIEWS + VAL_VIEWS
     assert not list(tmp_path.glob("cycles_*"))  # workers removed their Cycles temporary folders
 
 
@@ -176,6 +254,21 @@ def test_missing_ray_is_one_clear_message(monkeypatch):
     with pytest.raises(NassetError) as e:
         cluster.check_workers(2, None)
     assert e.value.code == "CONVERT_BACKEND" and "nasset-sdk[cluster]" in str(e.value)
+
+
+def renderer_missing(**kwargs):
+    """The Mitsuba rna view renderer in a worker where Mitsuba is not installed."""
+    sys.modules["mitsuba"] = None  # an import of it now fails as on a node without the package
+    from nasset_bakers.mitsuba.rna import view_renderer
+
+    return view_renderer(**kwargs)
+
+
+def test_worker_without_the_renderer_gives_the_typed_error(ray_local, source, tmp_path):
+    missing = cluster.ViewSource("tests.bakers.test_cluster:renderer_missing", source.kwargs)
+    with pytest.raises(NassetError) as e:
+        _render(tmp_path, "missing", missing, workers=1)
+    assert e.value.code == "CONVERT_BACKEND" and "mitsuba is not installed" in str(e.value)
 
 
 def test_unreachable_cluster_fails_before_the_bake(tmp_path):
@@ -194,3 +287,24 @@ def test_worker_options_are_checked(tmp_path):
 
     assert main(["bake", "--example", "default", "--kind", "rna", "-o", str(tmp_path / "a.usdc"), "--cluster", "x:1"]) == 2
     assert main(["bake", "--example", "default", "--kind", "rna", "-o", str(tmp_path / "a.usdc"), "--workers", "0"]) == 2
+
+
+@pytest.mark.slow
+def test_8dna_bake_on_workers_equals_one_process(ray_local, tmp_path):
+    """``bake --kind 8dna --workers 2``: the held-out tuples and the trained asset's tensors equal a one-process bake's."""
+    from nasset_bakers.mitsuba.eightdna import bake
+    from nasset_sdk.asset import Asset
+
+    runs = {}
+    for name, kw in (("here", {}), ("there", {"workers": 2})):
+        s = bake(None, None, tmp_path / f"{name}.usdc", size="tiny", example="default", epochs=3, spp=3, quiet=True, **kw)
+        with np.load(Path(s["work_dir"]) / "heldout_tiny_0.npz") as z:
+            held = {k: z[k] for k in z.files}
+        a = Asset.open(s["asset"])
+        a.load("all")
+        runs[name] = (s, held, {t: np.asarray(a.tensor("core", t)) for t in ("triplane", "s1Grid")})
+    (s1, h1, t1), (s2, h2, t2) = runs["here"], runs["there"]
+    _same_tuples(h1, h2)
+    for k in t1:
+        np.testing.assert_array_equal(t1[k], t2[k], err_msg=k)
+    assert s1["workers"] is None and len(s2["workers"]) == 2
