@@ -43,6 +43,9 @@ EIGHTDNA_MITSUBA_SAMPLER = {
     "hq": dict(heldout=65536, rr_depth=8, max_depth=4096),
 }
 
+#: points (x_o, w_o) on which the albedo is renormalised for the flow's unlit mass (spec/bake-8dna.md#renormalise)
+EIGHTDNA_RENORM = {"tiny": dict(points=2048), "small": dict(points=8192), "hq": dict(points=32768)}
+
 
 # -- training ------------------------------------------------------------------------------------
 #: per-preset training defaults (network sizes: nasset_sdk.kinds.rna.SIZES)

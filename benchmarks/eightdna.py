@@ -230,10 +230,7 @@ class NearFieldRenderer:
         u, wf, _ = self._net(lambda: ev.sample(x, wo, ch, u=rng.random((m, 4))))
         t3 = lambda a: np.concatenate([a, a, a])  # noqa: E731
         p_u = self._net(ev.pdf_position, t3(x), t3(wo), t3(u), np.repeat(np.arange(3), m)).reshape(3, m).mean(0)
-        rel = u - ev.box.center
-        _, _, axis = ev.box.project(_unit(rel))
-        n_u = np.zeros((m, 3))
-        n_u[np.arange(m), axis] = np.sign(rel[np.arange(m), axis])
+        n_u = ev.box.face_normal(u)
 
         def backtrace_ok(k, w):
             hit, *_ = self.intersect(u[k] + w * self.eps, -w)

@@ -3,8 +3,8 @@
 Stages: load scene (pick the asset's shapes, read the boundary BSDF for the analytic direct lobe)
 -> held-out tuples (path-traced once, kept in the work folder) -> train (online buffer of
 path-traced tuples regenerated as it is consumed, PyTorch) -> export (ONNX + tensors through
-AssetBuilder, written atomically) -> check (re-open the asset: SDK vs torch pdf / albedo parity on
-the held-out tuples, held-out NLL, ``nasset validate``). Each stage shows a progress bar; a summary
+AssetBuilder, written atomically) -> renormalise (albedo / the flow's lit share, 8D only) -> check (re-open the asset: SDK vs
+torch pdf / albedo parity on the held-out tuples, held-out NLL, ``nasset validate``). Each stage shows a progress bar; a summary
 closes the run.
 
 The work folder (``--resume DIR``, default ``OUTPUT.bake/``) keeps the held-out tuples and the
@@ -33,7 +33,12 @@ from nasset_bakers.stages import check_options, finite, progress_bar, times_line
 from nasset_sdk.errors import UsageError, error
 
 SAMPLER_PRESETS = presets.EIGHTDNA_MITSUBA_SAMPLER  # the table lives in nasset_bakers/presets.py
+RENORM_PRESETS = presets.EIGHTDNA_RENORM
+LAYOUTS = {"triplane": "plane,v,u,channel", "woCube": "face,t,s,channel", "s1Grid": "texel,channel",
+           "s3Grid": "texel,channel", "s12Cube": "face,t,s,channel", "splineMinimums": "parameter"}
 BAKE_VERSION = "8dna-0.2.0"  # 0.2: tuples drawn in deterministic shards (spec/bake.md#cluster)
+#: held-out tuples on which the lit energy mean(alpha V) / mean(beta) is measured (spec/bake-8dna.md#renormalise)
+HELD_LIT = 2048
 
 
 def boundary_of(mi, shapes) -> tuple[float, float]:
@@ -108,6 +113,29 @@ def shard_sampler(scene, asset_ids, domain, rr_depth: int, max_depth: int, varia
     return PathSampler(mi, shapes, lo, hi, rr_depth=rr_depth, max_depth=max_depth).sample_shard
 
 
+def renormalise_stage(result, path: Path, source, backtrace_hits, held: dict, lo, hi, points: int, cache: Path, seed: int) -> dict:
+    """Fit ``result.model``'s albedo to alpha / V (:mod:`nasset_bakers.train.eightdna_renorm`) on ``points`` fresh
+    (x_o, w_o) of ``source`` (a ShardedTuples; cached in ``cache``), lit or not as ``backtrace_hits(u, w)``
+    says; the held-out tuples measure the lit energy mean(alpha V) / mean(beta) before and after."""
+    from nasset_bakers.train.common import reopen_asset
+    from nasset_bakers.train.eightdna import torch_eval
+    from nasset_bakers.train.eightdna_renorm import renormalise_albedo, valid_mass
+
+    _, ev = reopen_asset(path)
+    pts = heldout_tuples(source, points, cache)
+    V = valid_mass(ev, backtrace_hits, pts["xo"], pts["wo"], seed=seed)
+    h = {k: v[:HELD_LIT] for k, v in held.items()}
+    Vh = valid_mass(ev, backtrace_hits, h["xo"], h["wo"], seed=seed + 1)
+    beta = h["beta"].astype(np.float64)
+    lit = lambda a: ((a * Vh).mean(0) / np.maximum(beta.mean(0), 1e-12)).tolist()  # noqa: E731
+    before = lit(torch_eval(result.model, h, lo, hi)[0])
+    rn = renormalise_albedo(result.model, pts, V, lo, hi, seed=seed)
+    after = lit(torch_eval(result.model, h, lo, hi)[0])
+    se = (beta.std(0) / np.sqrt(len(beta)) / np.maximum(beta.mean(0), 1e-12)).tolist()
+    return {**rn.__dict__, "heldout_lit_energy_before": before, "heldout_lit_energy_after": after,
+            "heldout_lit_energy_se": se, "heldout_valid_mass": Vh.mean(0).tolist(), "heldout_points": len(beta)}
+
+
 def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
     from nasset_converters.mitsuba import scene as msc
 
@@ -128,9 +156,11 @@ def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
 
 def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=None, views=None, res=None, epochs=None,
          spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False, summary_stream=None,
-         far_field: bool = False, workers: int | None = None, cluster: str | None = None, **_ignored) -> dict:
+         far_field: bool = False, workers: int | None = None, cluster: str | None = None, renormalise: bool = True,
+         **_ignored) -> dict:
     """Run the whole 8dna bake; returns the summary dict (also stored in the asset's provenance).
 
+    ``renormalise``: fit the albedo to the flow's lit share (spec/bake-8dna.md#renormalise; 8D only; False: ablation).
     ``workers``/``cluster``: trace the held-out tuples and every buffer fill on Ray workers
     (nasset_bakers.cluster), in the same deterministic shards as in one process (spec/bake.md#cluster).
 
@@ -139,7 +169,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     """
     from nasset_bakers.cluster import ViewSource, WorkerPool, check_workers
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
-    from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, heldout_nll, parity_with_sdk, train
+    from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, export, heldout_nll, parity_with_sdk, train
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from nasset_converters.mitsuba import scene as msc
     from nasset_converters.mitsuba.eightdna_sampler import OnlineBuffer, PathSampler, ShardedTuples, local_runner
@@ -236,14 +266,19 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
 
     # -- stage 4: export -----------------------------------------------------------------------------
     t = time.perf_counter()
-    core = builder.component("core", required=True, purpose="evaluation", quality=None)
-    layouts = {"triplane": "plane,v,u,channel", "woCube": "face,t,s,channel", "s1Grid": "texel,channel",
-               "s3Grid": "texel,channel", "s12Cube": "face,t,s,channel", "splineMinimums": "parameter"}
-    for name, arr in result.tensors.items():
-        core.add_tensor(name, arr, dtype="float32", layout=layouts[name])
-    core.add_tensor("direct", np.array([eta, alpha], np.float32), dtype="float32", layout="parameter")
-    for name, data in result.networks.items():
-        core.add_network(name, data)
+
+    def write_asset(networks: dict, provenance: dict, to: Path) -> Path:
+        b = AssetBuilder("8dna", variant="surface")
+        b.set_geometry(geo)
+        core = b.component("core", required=True, purpose="evaluation", quality=None)
+        for name, arr in result.tensors.items():
+            core.add_tensor(name, arr, dtype="float32", layout=LAYOUTS[name])
+        core.add_tensor("direct", np.array([eta, alpha], np.float32), dtype="float32", layout="parameter")
+        for name, data in networks.items():
+            core.add_network(name, data)
+        b.provenance = finite(provenance)
+        return b.write(to)
+
     st = tuples.stats
     prov = {
         "generator": "nasset bake",
@@ -265,9 +300,21 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         "timings_s": {k: round(v, 3) for k, v in times.items()},
     }
     prov["sampler"]["mean_beta"] = [float(v) for v in held["beta"].mean(0)]
-    builder.provenance = finite(prov)
-    path = builder.write(output)
+    renorm = renormalise and not far_field
+    # (USD keeps an opened layer per path: the asset measured by the renormalisation is a separate file)
+    path = write_asset(result.networks, prov, work / "before_renormalise.usdc" if renorm else output)
     times["export_s"] = time.perf_counter() - t
+    if renorm:  # -- stage 4b: albedo / lit share of the flow (spec/bake-8dna.md#renormalise)
+        t = time.perf_counter()
+        say("renormalising the albedo for the flow's unlit mass")
+        renorm_sampler = PathSampler(mi, shapes, lo, hi, rr_depth=sp["rr_depth"], max_depth=sp["max_depth"])
+        renorm_source = ShardedTuples(seed + 104729, local_runner(renorm_sampler.sample_shard))
+        prov["renormalise"] = renormalise_stage(result, path, renorm_source, renorm_sampler.backtrace_hits, held, lo, hi,
+                                                RENORM_PRESETS[size]["points"], work / f"renorm_{size}_{seed}.npz", seed)
+        networks = dict(result.networks)
+        networks["albedo"] = export(result.model)[1]["albedo"]
+        path = write_asset(networks, prov, output)
+        times["renormalise_s"] = time.perf_counter() - t
 
     # -- stage 5: check the written asset ------------------------------------------------------------
     t = time.perf_counter()
@@ -294,6 +341,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         "sdk_vs_torch": par,
         "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
         "validate": rep.counts,
+        "renormalise": prov.get("renormalise"),
         "variant": mi.variant(), "device": result.device,
         "times_s": {k: round(v, 2) for k, v in times.items()},
         "workers": pool.summary if pool is not None else None,
@@ -314,6 +362,12 @@ def _print_summary(s: dict, stream) -> None:
         f"  parity SDK vs torch: albedo max |diff| {p['albedo_max_abs']:.2e}, pdf max rel {p['pdf_max_rel']:.2e} "
         f"(median {p['pdf_median_rel']:.1e}); ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         f"  validate: {s['validate']['error']} errors, {s['validate']['warning']} warnings",
+        *([] if not s.get("renormalise") else [
+            f"  renormalised albedo: flow's lit share {', '.join(f'{v:.3f}' for v in s['renormalise']['valid_mass'])}; "
+            "held-out lit energy mean(alpha V) / mean(beta) "
+            f"{', '.join(f'{v:.3f}' for v in s['renormalise']['heldout_lit_energy_before'])} -> "
+            f"{', '.join(f'{v:.3f}' for v in s['renormalise']['heldout_lit_energy_after'])} "
+            f"(+- {', '.join(f'{v:.3f}' for v in s['renormalise']['heldout_lit_energy_se'])})"]),
         times_line(s["times_s"]),
         *worker_lines(s.get("workers"), unit="shards"),
     ]

@@ -183,6 +183,12 @@ class PathSampler:
         dr.eval(si, valid)  # one kernel for all outputs
         return si, np.asarray(valid, bool), np.asarray(si.t, np.float64)
 
+    def backtrace_hits(self, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """bool [N]: the ray from box points u [N,3] along -w [N,3] hits the asset (a renderer lights (u, w) only then)."""
+        if not len(u):
+            return np.zeros(0, bool)
+        return self._intersect(u + w * self.eps, -w)[1]
+
     def _bsdf_sample(self, si, active: np.ndarray):
         mi = self.mi
         n = len(active)

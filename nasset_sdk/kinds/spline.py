@@ -210,6 +210,16 @@ class BoxParam:
         tau = np.take_along_axis(ratio, axis[:, None], 1)[:, 0]
         return d * tau[:, None], tau, axis
 
+    def face_normal(self, u: np.ndarray) -> np.ndarray:
+        """Outward unit normal [N,3] of the face holding box points u [N,3] (object space): the face the ray
+        from the centre through u leaves by (:meth:`project`)."""
+        rel = np.asarray(u, np.float64) - self.center
+        _, _, axis = self.project(rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-300))
+        n = np.zeros((len(rel), 3))
+        rows = np.arange(len(rel))
+        n[rows, axis] = np.where(rel[rows, axis] < 0, -1.0, 1.0)
+        return n
+
     def jacobian(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(u_object [N,3], |n_u . u| / |u|^3 [N]): solid angle of the direction of u per unit box area."""
         u, tau, axis = self.project(d)
