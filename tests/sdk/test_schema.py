@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tomllib
 import zipfile
 from pathlib import Path
 
@@ -115,8 +116,8 @@ def test_provenance_json_schema_is_packaged_data():
 def wheel(tmp_path_factory) -> Path:
     """Build the wheel from a clean copy of the sources (no stale build/ folder can help it)."""
     src = tmp_path_factory.mktemp("src")
-    for item in ("pyproject.toml", "README.md", "nasset_sdk", "schemas", "reference_renderer", "mitsuba_renderer", "converters", "bakers",
-                 "benchmarks"):
+    package_dirs = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["package-dir"].values()
+    for item in ("pyproject.toml", "README.md", "nasset_sdk", *package_dirs):
         if (REPO / item).is_dir():
             shutil.copytree(REPO / item, src / item, ignore=shutil.ignore_patterns("__pycache__"))
         elif (REPO / item).is_file():
