@@ -60,8 +60,8 @@ def run(args) -> int:
     from .train.common import pick_device, require_torch
 
     pick_device(require_torch(), args.device)  # a bad --device fails before any rendering
-    if int(os.environ.get("WORLD_SIZE", "1") or 1) > 1 and (args.kind, source_of(args.scene, args.example)) != ("rna", "mitsuba"):
-        raise UsageError("data-parallel training under torchrun is implemented for Mitsuba rna bakes only "
+    if int(os.environ.get("WORLD_SIZE", "1") or 1) > 1 and args.kind != "rna":
+        raise UsageError("data-parallel training under torchrun is implemented for rna bakes (Mitsuba and Blender) only "
                          "(spec/bake.md#training-devices); run this bake as one process")
     if getattr(args, "clamp", None) is not None and args.kind == "8dna":
         raise UsageError("--clamp applies to rna and neupress bakes only")

@@ -159,3 +159,21 @@ def clamp_lines(s: dict) -> list[str]:
         return []
     return [f"  training clamp {s['clamp']} /sr removed " + "/".join(f"{100 * f:.1f}" for f in s["clamp_removed"]["fraction"])
             + " % of the targets' energy (RGB)"]
+
+
+def train_share(dp, load=None) -> dict:
+    """An rna bake's torchrun process other than rank 0 (spec/bake.md#training-devices): wait for rank
+    0's dataset and settings (the job dict it sends), train its share of every batch with them, and
+    leave the asset to rank 0. ``load(store, split, count, job)`` reads a split (default: the Mitsuba
+    dataset's ``store.load_split``; the Blender bake passes its own)."""
+    from nasset_converters.mitsuba import dataset as ds
+
+    from .train.common import require_torch
+    from .train.rna import TrainSettings, train
+
+    load = load or (lambda store, split, count, job: store.load_split(split, count))
+    job = dp.from_main(require_torch())
+    store = ds.DatasetDir(Path(job["work"]))
+    train(load(store, "train", job["views"], job), load(store, "val", job["val_views"], job), job["domain"],
+          TrainSettings(**job["train"]))
+    return {"rank": dp.rank, "world": dp.world, "asset": None}

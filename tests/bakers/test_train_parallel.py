@@ -25,11 +25,13 @@ N, BATCH, EPOCHS = 601, 256, 2
 TOL = 1e-5
 
 
-def _data(n: int, seed: int) -> dict:
+def _data(n: int, seed: int, fiber: bool = False) -> dict:
+    """Random rna samples; ``fiber``: with the fiber variant's h in [-1, 1] (the Blender hair bake's input)."""
     rng = np.random.default_rng(seed)
     unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)  # noqa: E731
-    return {"x": rng.uniform(-0.4, 0.4, (n, 3)), "n": unit(rng.normal(size=(n, 3))), "wo": unit(rng.normal(size=(n, 3))),
+    data = {"x": rng.uniform(-0.4, 0.4, (n, 3)), "n": unit(rng.normal(size=(n, 3))), "wo": unit(rng.normal(size=(n, 3))),
             "wi": unit(rng.normal(size=(n, 3))), "vis": rng.random(n) < 0.7, "rgb": rng.gamma(2.0, 0.2, (n, 3))}
+    return {**data, "h": rng.uniform(-1.0, 1.0, n)} if fiber else data
 
 
 class _Last:
@@ -44,23 +46,25 @@ class _Last:
         self.state = {k: v.detach().cpu().clone() for k, v in state["model"].items()}
 
 
-def _train() -> dict:
+def _train(fiber: bool = False) -> dict:
     settings = rna.TrainSettings(size="tiny", epochs=EPOCHS, batch=BATCH, device="cpu", seed=4)
     last = _Last()
-    rna.train(_data(N, 1), _data(64, 2), ((-0.5,) * 3, (0.5,) * 3), settings, checkpoint=last)
+    rna.train(_data(N, 1, fiber), _data(64, 2, fiber), ((-0.5,) * 3, (0.5,) * 3), settings, checkpoint=last)
     return last.state
 
 
-def test_two_gloo_processes_take_the_single_process_steps(tmp_path):
+@pytest.mark.parametrize("fiber", [False, True], ids=["surface", "fiber"])
+def test_two_gloo_processes_take_the_single_process_steps(tmp_path, fiber):
+    """Surface (Mitsuba and Blender meshes) and fiber (Blender hair: the h input) rna training."""
     out = tmp_path / "rank0.pt"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
-           "-m", "tests.bakers.test_train_parallel", str(out)]
+           "-m", "tests.bakers.test_train_parallel", str(out), *(["fiber"] if fiber else [])]
     run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-3000:]
     ddp = torch.load(out, weights_only=True)
-    one = _train()
+    one = _train(fiber)
     assert sorted(ddp) == sorted(one)
-    init = _init()
+    init = _init(fiber)
     keys = [k for k in one if one[k].numel()]
     diff = max(float((ddp[k] - one[k]).abs().max()) for k in keys)
     moved = max(float((one[k] - init[k]).abs().max()) for k in keys)
@@ -68,9 +72,9 @@ def test_two_gloo_processes_take_the_single_process_steps(tmp_path):
     assert diff <= TOL and moved > 1e-3, (diff, moved)  # equal steps, and steps that moved the weights
 
 
-def _init() -> dict:
+def _init(fiber: bool = False) -> dict:
     settings = rna.TrainSettings(size="tiny", epochs=EPOCHS, batch=BATCH, device="cpu", seed=4)
-    return rna.build_model(settings.size, init_std=settings.init_std, seed=settings.seed).state_dict()
+    return rna.build_model(settings.size, init_std=settings.init_std, seed=settings.seed, fiber=fiber).state_dict()
 
 
 def test_device_names_are_checked():
@@ -87,7 +91,7 @@ def test_device_names_are_checked():
 
 
 if __name__ == "__main__":  # one process of the torchrun launch above
-    state = _train()
+    state = _train(fiber=sys.argv[2:] == ["fiber"])
     if torch.distributed.get_rank() == 0:
         torch.save(state, sys.argv[1])
 
@@ -96,7 +100,8 @@ def test_other_bakes_under_torchrun_are_refused(monkeypatch, tmp_path):
     from nasset_sdk.cli import main
 
     monkeypatch.setenv("WORLD_SIZE", "2")
-    assert main(["bake", "--example", "--kind", "8dna", "--size", "tiny", "-o", str(tmp_path / "a.usdc")]) == 2
+    for kind in ("8dna", "neupress"):
+        assert main(["bake", "--example", "--kind", kind, "--size", "tiny", "-o", str(tmp_path / "a.usdc")]) == 2, kind
     assert not list(tmp_path.iterdir())  # refused before any work
 
 
@@ -115,3 +120,32 @@ def test_rna_bake_under_torchrun_writes_one_valid_asset(tmp_path):
     assert run.returncode == 0, run.stderr[-3000:]
     assert out.is_file() and validate_file(out, probe=False).ok
     assert sorted(p.name for p in tmp_path.glob("*.usdc")) == ["a.usdc"]
+
+
+def test_blender_hair_bake_under_torchrun_takes_the_single_process_steps(tmp_path):
+    """``torchrun --nproc_per_node=2 ... bake --example blender-hair`` on CPU: rank 0 renders with
+    Cycles and alone writes the asset; rank 1 reads the same dataset (fiber h included) and trains
+    its share. Its checkpointed weights equal a one-process bake's to TOL (same dataset folder
+    re-used, so the two trainings see the same samples), and the asset validates."""
+    pytest.importorskip("bpy", reason="Blender bakes need the bpy wheel")
+    from nasset_sdk.cli import main
+    from nasset_sdk.validate import validate_file
+
+    args = ["bake", "--example", "blender-hair", "--kind", "rna", "--size", "tiny", "--views", "2", "--res", "12",
+            "--epochs", "2", "--device", "cpu", "--quiet"]
+    out, work = tmp_path / "a.usdc", tmp_path / "data"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
+           "-m", "nasset_sdk.cli", *args, "-o", str(out), "--resume", str(work)]
+    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert out.is_file() and validate_file(out, probe=False).ok
+    assert sorted(p.name for p in tmp_path.glob("*.usdc")) == ["a.usdc"]
+    ckpt = work / "train_state.pt"
+    ddp = torch.load(ckpt, weights_only=True)["model"]
+    ckpt.unlink()  # the one-process bake trains anew on the views already rendered
+    assert main([*args, "-o", str(tmp_path / "one.usdc"), "--resume", str(work)]) == 0
+    one = torch.load(ckpt, weights_only=True)["model"]
+    assert sorted(ddp) == sorted(one)
+    diff = max(float((ddp[k] - one[k]).abs().max()) for k in one if one[k].numel())
+    print(f"Blender hair bake: max |DDP - one process| {diff:.2e}")
+    assert diff <= TOL, diff
