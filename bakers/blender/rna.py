@@ -44,7 +44,7 @@ def bake(
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
     ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster), one Cycles thread each."""
     from nasset_bakers.cluster import ViewSource, check_workers
-    from nasset_bakers.stages import check_options, finite, render_views, train_share, train_with_progress
+    from nasset_bakers.stages import check_options, finite, render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
@@ -127,8 +127,7 @@ def bake(
     finally:
         if workers is None:
             views_from.close()
-    job = {"work": str(work), "views": dset.views, "val_views": dset.val_views, "fiber": variant == "fiber",
-           "h_input": h_input}
+    job = {"fiber": variant == "fiber", "h_input": h_input}
     train_data = _load_split(store, "train", dset.views, job)
     val_data = _load_split(store, "val", dset.val_views, job)
     times["dataset_s"] = time.perf_counter() - t
@@ -147,7 +146,7 @@ def bake(
     ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
                            {"data": meta, "train": tset.__dict__, "h_input": h_input,
                             "domain": [list(map(float, d)) for d in domain]})
-    dp.from_main(require_torch(), {**job, "domain": [list(map(float, d)) for d in domain], "train": tset.__dict__})
+    send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt, **job)
     result = train_with_progress(
         lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
         total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)

@@ -71,7 +71,7 @@ def bake(
     is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings');
     ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster)."""
     from nasset_bakers.cluster import ViewSource, check_workers
-    from nasset_bakers.stages import render_views, train_share, train_with_progress
+    from nasset_bakers.stages import render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
@@ -175,8 +175,7 @@ def bake(
         tset = replace(tset, loss=str(loss))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
-    dp.from_main(require_torch(), {"work": str(work), "views": dset.views, "val_views": dset.val_views,
-                                   "domain": [list(map(float, d)) for d in domain], "train": tset.__dict__})
+    send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     result = train_with_progress(
         lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
         total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)
