@@ -153,21 +153,24 @@ def test_rna_bake_under_torchrun_writes_one_valid_asset(tmp_path):
 
 
 def _bake_twice(tmp_path, args: list[str]) -> float:
-    """Bake ``args`` under torchrun (2 processes) and then in this process on the views already
-    rendered; the largest difference of the checkpointed weights. Checks that the torchrun bake
-    wrote one valid asset."""
+    """Bake ``args`` under torchrun (2 processes), resume that bake under torchrun (all epochs done:
+    every process must start after the last one, or one waits for the others' gradients), then bake
+    in this process on the views already rendered; the largest difference of the checkpointed
+    weights. Checks that the torchrun bake wrote one valid asset."""
     from nasset_sdk.cli import main
     from nasset_sdk.validate import validate_file
 
     out, work = tmp_path / "a.usdc", tmp_path / "data"
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
            "-m", "nasset_sdk.cli", *args, "-o", str(out), "--resume", str(work)]
-    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=300)
+    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr[-3000:]
     assert out.is_file() and validate_file(out, probe=False).ok
     assert sorted(p.name for p in tmp_path.glob("*.usdc")) == ["a.usdc"]
     ckpt = work / "train_state.pt"
     ddp = torch.load(ckpt, weights_only=True)["model"]
+    again = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=60)
+    assert again.returncode == 0, again.stderr[-3000:]  # resumed at the last epoch by every process (none waits)
     ckpt.unlink()  # the one-process bake trains anew on the views already rendered
     assert main([*args, "-o", str(tmp_path / "one.usdc"), "--resume", str(work)]) == 0
     one = torch.load(ckpt, weights_only=True)["model"]
