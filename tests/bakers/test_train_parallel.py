@@ -108,6 +108,51 @@ def test_two_gloo_processes_take_the_single_process_neupress_steps(tmp_path):
     assert diff <= TOL and moved > 1e-3, (diff, moved)
 
 
+class _Tuples:
+    """Random 8dna tuples served in batches from a seeded stream: every process draws the same ones."""
+
+    refreshes = 0
+
+    def __init__(self, seed: int = 3) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def next(self, n: int) -> dict:
+        r = self.rng
+        unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)  # noqa: E731
+        return {"xo": r.uniform(-0.4, 0.4, (n, 3)), "wo": unit(r.normal(size=(n, 3))), "ui": unit(r.normal(size=(n, 3))) * 0.5,
+                "wi": unit(r.normal(size=(n, 3))), "beta": r.gamma(2.0, 0.3, (n, 3))}
+
+
+def _train_8dna() -> dict:
+    """The 8dna trainer: 6 steps of 301 tuples (the shares 150 + 151)."""
+    from nasset_bakers.train import eightdna
+
+    settings = eightdna.TrainSettings(size="tiny", steps=6, batch=301, device="cpu", seed=4)
+    result = eightdna.train(_Tuples(), ((-0.5,) * 3, (0.5,) * 3), settings)
+    return {k: v.detach().cpu().clone() for k, v in result.model.state_dict().items()}
+
+
+def test_two_gloo_processes_take_the_single_process_8dna_steps(tmp_path):
+    """The 8dna trainer on a tuple stream both processes draw alike (the buffer fills are
+    deterministic): weights as one process's to TOL, against the untrained model for the steps' size."""
+    from nasset_bakers.train import eightdna
+
+    out = tmp_path / "rank0.pt"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
+           "-m", "tests.bakers.test_train_parallel", str(out), "8dna"]
+    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-3000:]
+    ddp = torch.load(out, weights_only=True)
+    one = _train_8dna()
+    assert sorted(ddp) == sorted(one)
+    init = eightdna.build_model("tiny", init_std=eightdna.TrainSettings.init_std, seed=4).state_dict()
+    keys = [k for k in one if one[k].numel() and one[k].is_floating_point()]
+    diff = max(float((ddp[k] - one[k]).abs().max()) for k in keys)
+    moved = max(float((one[k] - init[k]).abs().max()) for k in keys)
+    print(f"8dna: max |DDP - one process| {diff:.2e}, largest weight change {moved:.2e}")
+    assert diff <= TOL and moved > 1e-3, (diff, moved)
+
+
 def test_device_names_are_checked():
     from nasset_bakers.train.common import pick_device
 
@@ -122,7 +167,9 @@ def test_device_names_are_checked():
 
 
 if __name__ == "__main__":  # one process of the torchrun launch above
-    state = _train_neupress() if sys.argv[2:] == ["neupress"] else _train(fiber=sys.argv[2:] == ["fiber"])
+    which = sys.argv[2:]
+    state = (_train_neupress() if which == ["neupress"] else _train_8dna() if which == ["8dna"]
+             else _train(fiber=which == ["fiber"]))
     if torch.distributed.get_rank() == 0:
         torch.save(state, sys.argv[1])
 
