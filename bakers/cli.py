@@ -36,14 +36,13 @@ def add_args(p) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", metavar="auto|cpu|cuda|cuda:N",
                    help="torch device of the training (default auto: cuda if torch sees one, else cpu); under torchrun "
-                        "each process trains on cuda:LOCAL_RANK (rna; spec/bake.md#training-devices)")
+                        "each process trains on cuda:LOCAL_RANK (spec/bake.md#training-devices)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
 def run(args) -> int:
     """CLI entry: see ``nasset bake --help``."""
-    import os
     from pathlib import Path
 
     from nasset_sdk.errors import UsageError, error
@@ -60,9 +59,6 @@ def run(args) -> int:
     from .train.common import pick_device, require_torch
 
     pick_device(require_torch(), args.device)  # a bad --device fails before any rendering
-    if int(os.environ.get("WORLD_SIZE", "1") or 1) > 1 and (args.kind, source_of(args.scene, args.example)) != ("rna", "mitsuba"):
-        raise UsageError("data-parallel training under torchrun is implemented for Mitsuba rna bakes only "
-                         "(spec/bake.md#training-devices); run this bake as one process")
     if getattr(args, "clamp", None) is not None and args.kind == "8dna":
         raise UsageError("--clamp applies to rna and neupress bakes only")
     summary = fn(

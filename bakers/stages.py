@@ -159,3 +159,41 @@ def clamp_lines(s: dict) -> list[str]:
         return []
     return [f"  training clamp {s['clamp']} /sr removed " + "/".join(f"{100 * f:.1f}" for f in s["clamp_removed"]["fraction"])
             + " % of the targets' energy (RGB)"]
+
+
+def send_job(dp, *, work: Path, views: int, val_views: int, domain, settings, checkpoint, **extra) -> None:
+    """Rank 0 of a torchrun bake: send the other processes (:func:`train_share`) what they train with:
+    the dataset folder and its view counts, the domain, the training settings (a dataclass) and the
+    checkpoint (path and key: they resume from the same epoch); ``extra``: what the bake's loader needs.
+    Nothing in one process."""
+    from .train.common import require_torch
+
+    dp.from_main(require_torch(), {
+        "work": str(work), "views": int(views), "val_views": int(val_views), "domain": [list(map(float, d)) for d in domain],
+        "train": dict(settings.__dict__), "checkpoint": str(checkpoint.path), "checkpoint_key": checkpoint.key, **extra})
+
+
+def train_share(dp, load=None, fit=None) -> dict:
+    """A torchrun process other than rank 0 (spec/bake.md#training-devices): wait for the job of
+    :func:`send_job`, train its share of every batch, and leave checkpoints and the asset to rank 0.
+    ``load(store, split, count, job)`` reads a split (default: the Mitsuba rna dataset's
+    ``store.load_split``); ``fit(train_data, val_data, domain, job, checkpoint)`` trains (default: the
+    rna trainer)."""
+    from nasset_converters.mitsuba import dataset as ds
+
+    from .train.common import TorchCheckpoint, require_torch
+
+    load = load or (lambda store, split, count, job: store.load_split(split, count))
+    job = dp.from_main(require_torch())
+    store = ds.DatasetDir(Path(job["work"]))
+    ckpt = TorchCheckpoint(Path(job["checkpoint"]), job["checkpoint_key"])  # read (resume) only: rank 0 saves
+    (fit or _fit_rna)(load(store, "train", job["views"], job), load(store, "val", job["val_views"], job), job["domain"],
+                      job, ckpt)
+    return {"rank": dp.rank, "world": dp.world, "asset": None}
+
+
+def _fit_rna(train_data: dict, val_data: dict, domain, job: dict, checkpoint) -> None:
+    """:func:`train_share`'s default: the rna trainer with rank 0's settings."""
+    from .train.rna import TrainSettings, train
+
+    train(train_data, val_data, domain, TrainSettings(**job["train"]), checkpoint=checkpoint)

@@ -44,8 +44,9 @@ def bake(
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
     ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster), one Cycles thread each."""
     from nasset_bakers.cluster import ViewSource, check_workers
-    from nasset_bakers.stages import check_options, finite, render_views, train_with_progress
+    from nasset_bakers.stages import check_options, finite, render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
     from nasset_converters.blender import CONVERTER_VERSION, load_bpy
     from nasset_converters.blender import dataset as ds
@@ -58,6 +59,9 @@ def bake(
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
     if example is not None and scene is not None:
         raise UsageError("give a .blend scene or --example, not both")
+    dp = data_parallel(require_torch(), device)  # under torchrun: this process's rank (spec/bake.md#training-devices)
+    if not dp.is_main:
+        return train_share(dp, _load_split)
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
@@ -123,12 +127,9 @@ def bake(
     finally:
         if workers is None:
             views_from.close()
-    fiber = variant == "fiber"
-    train_data = ds.load_split(store, "train", dset.views, fiber)
-    val_data = ds.load_split(store, "val", dset.val_views, fiber)
-    if fiber and not h_input:
-        train_data["h"] = np.zeros_like(train_data["h"])
-        val_data["h"] = np.zeros_like(val_data["h"])
+    job = {"fiber": variant == "fiber", "h_input": h_input}
+    train_data = _load_split(store, "train", dset.views, job)
+    val_data = _load_split(store, "val", dset.val_views, job)
     times["dataset_s"] = time.perf_counter() - t
     if len(val_data["x"]) == 0:
         raise error("CONVERT_TRAINING", "no validation samples: no held-out camera ray hit the asset", file=scene_label)
@@ -145,6 +146,7 @@ def bake(
     ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
                            {"data": meta, "train": tset.__dict__, "h_input": h_input,
                             "domain": [list(map(float, d)) for d in domain]})
+    send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt, **job)
     result = train_with_progress(
         lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
         total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)
@@ -199,6 +201,16 @@ def bake(
     if not quiet:
         _print_summary(summary, summary_stream or sys.stdout)
     return summary
+
+
+def _load_split(store, split: str, count: int, job: dict) -> dict:
+    """A split of the Cycles dataset as the trainer takes it (fiber: h, zeroed when ``job['h_input']`` is off)."""
+    from nasset_converters.blender import dataset as ds
+
+    data = ds.load_split(store, split, count, job["fiber"])
+    if job["fiber"] and not job["h_input"]:
+        data["h"] = np.zeros_like(data["h"])
+    return data
 
 
 def _print_summary(s: dict, stream) -> None:

@@ -170,6 +170,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     from nasset_bakers.cluster import ViewSource, WorkerPool, check_workers
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, export, heldout_nll, parity_with_sdk, train
+    from nasset_bakers.train.parallel import data_parallel
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from nasset_converters.mitsuba import scene as msc
     from nasset_converters.mitsuba.eightdna_sampler import OnlineBuffer, PathSampler, ShardedTuples, local_runner
@@ -182,6 +183,13 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
             raise UsageError(f"--{name} has no meaning for kind 8dna (forward path sampling needs no views or light; "
                              "spec/bake-8dna.md#options)")
     check_workers(workers, cluster)
+    if workers is not None and int(os.environ.get("WORLD_SIZE", "1") or 1) > 1:
+        raise UsageError("--workers does not apply under torchrun (every process traces its own buffer fills; "
+                         "spec/bake.md#training-devices)")
+    dp = data_parallel(require_torch(), device)  # under torchrun: this process's rank (spec/bake.md#training-devices)
+    if not dp.is_main:  # wait for rank 0's scene (an example is written once) and held-out tuples
+        job = dp.from_main(require_torch())
+        scene, asset_ids, example, quiet = job["scene"], job["asset_ids"], None, True
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     work.mkdir(parents=True, exist_ok=True)
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
@@ -234,8 +242,10 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         key = {"scene_sha256": scene_sha, "shapes": asset_ids, "train": tset.__dict__, "sampler": sp, "version": BAKE_VERSION,
                "domain": [list(map(float, lo)), list(map(float, hi))], "variant": mi.variant()}
         say(f"held-out tuples: {sp['heldout']}")
-        with tuple_bar(sp["heldout"], "trace held-out", quiet) as held_progress:
-            held = heldout_tuples(tuples, sp["heldout"], work / f"heldout_{size}_{seed}.npz", progress=held_progress)
+        if dp.is_main:
+            with tuple_bar(sp["heldout"], "trace held-out", quiet) as held_progress:
+                held = heldout_tuples(tuples, sp["heldout"], work / f"heldout_{size}_{seed}.npz", progress=held_progress)
+            dp.from_main(require_torch(), {"scene": str(scene), "asset_ids": list(asset_ids)})
         times["heldout_s"] = time.perf_counter() - t
 
         # -- stage 3: train on the online buffer ---------------------------------------------------------
@@ -260,6 +270,8 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
             bar.close()
             fill.close()
         times["train_s"] = time.perf_counter() - t
+        if not dp.is_main:  # its share of the training is done; the asset is rank 0's
+            return {"rank": dp.rank, "world": dp.world, "asset": None}
     finally:
         if pool is not None:  # the workers are needed for sampling only
             pool.__exit__(None, None, None)

@@ -40,6 +40,13 @@ DATA_PRESETS = presets.NEUPRESS_MITSUBA_DATA  # the table lives in nasset_bakers
 EXAMPLES = ("default", "high-albedo")
 
 
+def _fit_appearance(train_data: dict, val_data: dict, domain, job: dict, checkpoint) -> None:
+    """A torchrun process other than rank 0 (nasset_bakers.stages.train_share): its share of the appearance network."""
+    from nasset_bakers.train.neupress import NeupressTrainSettings, train_appearance
+
+    train_appearance(train_data, val_data, domain, NeupressTrainSettings(**job["train"]), checkpoint=checkpoint)
+
+
 def bake(
     scene: str | Path | None,
     asset_ids: list[str] | None,
@@ -69,7 +76,7 @@ def bake(
 
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
     from nasset_bakers.cluster import ViewSource, check_workers
-    from nasset_bakers.stages import progress_bar, render_views, train_with_progress
+    from nasset_bakers.stages import progress_bar, render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import require_torch
     from nasset_bakers.train.neupress import (
         TRAIN_PRESETS,
@@ -83,6 +90,7 @@ def bake(
         train_sampling,
         vertex_normals,
     )
+    from nasset_bakers.train.parallel import data_parallel
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
     from nasset_converters.mitsuba import dataset as ds
     from nasset_converters.mitsuba import neupress_dataset as nd
@@ -97,6 +105,9 @@ def bake(
         example = "default"
     if example not in (None, False) and example not in EXAMPLES:
         raise UsageError(f"unknown neupress example {example!r} ({', '.join(EXAMPLES)})")
+    dp = data_parallel(require_torch(), device)  # under torchrun: this process's rank (spec/bake.md#training-devices)
+    if not dp.is_main:  # the appearance network trains data-parallel; the rest is rank 0's
+        return train_share(dp, lambda store, split, count, job: nd.load_split(store, split, count), _fit_appearance)
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
@@ -177,6 +188,7 @@ def bake(
         tset = replace(tset, epochs=int(epochs))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
+    send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     app = train_with_progress(
         lambda progress: train_appearance(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
         total=tset.epochs, desc="train appearance", work=work, quiet=quiet, say=say)

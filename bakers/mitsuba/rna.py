@@ -71,7 +71,7 @@ def bake(
     is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings');
     ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster)."""
     from nasset_bakers.cluster import ViewSource, check_workers
-    from nasset_bakers.stages import render_views, train_with_progress
+    from nasset_bakers.stages import render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
@@ -175,8 +175,7 @@ def bake(
         tset = replace(tset, loss=str(loss))
     ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
                                                       "domain": [list(map(float, d)) for d in domain]})
-    dp.from_main(require_torch(), {"work": str(work), "views": dset.views, "val_views": dset.val_views,
-                                   "domain": [list(map(float, d)) for d in domain], "train": tset.__dict__})
+    send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     result = train_with_progress(
         lambda progress: train(train_data, val_data, domain, tset, progress=progress, checkpoint=ckpt),
         total=tset.epochs, desc="train", work=work, quiet=quiet, say=say)
@@ -262,20 +261,6 @@ def _view_renderer(mi, shapes, center, radius, dset):
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
     renderer = ds.Renderer(mi, iso, dset)
     return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
-
-
-def train_share(dp) -> dict:
-    """A torchrun process other than rank 0: wait for rank 0's dataset and settings, train its share
-    of every batch with it, and leave the asset to rank 0."""
-    from nasset_bakers.train.common import require_torch
-    from nasset_bakers.train.rna import TrainSettings, train
-    from nasset_converters.mitsuba import dataset as ds
-
-    job = dp.from_main(require_torch())
-    store = ds.DatasetDir(Path(job["work"]))
-    train(store.load_split("train", job["views"]), store.load_split("val", job["val_views"]), job["domain"],
-          TrainSettings(**job["train"]))
-    return {"rank": dp.rank, "world": dp.world, "asset": None}
 
 
 def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):

@@ -33,7 +33,8 @@ from nasset_sdk.kinds.eightdna import FLOWS, SIZES
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES, cube_face_dir, cube_face_uv, to_unit_box
 from nasset_sdk.kinds.spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, S_PER_T, BoxParam, cylindrical_to_direction
 
-from .common import pick_device, reopen_asset, require_torch
+from .common import reopen_asset, require_torch
+from .parallel import data_parallel
 
 
 @dataclass(frozen=True)
@@ -277,10 +278,15 @@ class TrainResult:
 
 
 def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=None) -> TrainResult:
-    """Fit the model on tuples from ``buffer`` (an OnlineBuffer); ``progress(step, nll, l2)`` is called every 10 steps."""
+    """Fit the model on tuples from ``buffer`` (an OnlineBuffer); ``progress(step, nll, l2)`` is called every 10 steps.
+
+    Under ``torchrun`` the processes train data-parallel (nasset_bakers.train.parallel): ``buffer``
+    must serve every process the same global batches (e.g. the same deterministic fills); each
+    process takes its share of every batch and the steps are one process's. Only rank 0 saves."""
     torch = require_torch()
     t0 = time.perf_counter()
-    device = pick_device(torch, settings.device)
+    dp = data_parallel(torch, settings.device)
+    device = dp.device
     lo, hi = domain
     model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed).to(device)
     grids = [model.triplane, model.wo_cube, model.s1_grid, model.s3_grid, model.s12_cube]
@@ -292,27 +298,31 @@ def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=
     history: list = list(state.get("history", [])) if state else []
     start = int(state["step"]) if state else 0
     acc = [0.0, 0.0, 0]
+    net = dp.wrap(torch, model)
     for step in range(start, settings.steps):
         model.train()
         batch = buffer.next(settings.batch)
-        B = to_torch(torch, prepare(batch, lo, hi, settings.size, far_field=settings.far_field), device)
-        nll, l2 = loss_terms(model, B, steps)
+        n = len(batch["beta"])
+        idx = dp.share(np.arange(n))
+        part = {k: v[idx] for k, v in batch.items()} if dp.world > 1 else batch
+        B = to_torch(torch, prepare(part, lo, hi, settings.size, far_field=settings.far_field), device)
+        nll, l2 = loss_terms(net, B, steps)
         loss = nll + l2
-        if not torch.isfinite(loss):
+        if not math.isfinite(dp.mean(torch, float(loss.detach()))):  # every process stops at the same step
             raise error("CONVERT_TRAINING", f"8dna loss became non-finite at step {step}")
         opt.zero_grad(set_to_none=True)
-        loss.backward()
+        (loss * dp.weight(len(idx), n)).backward()
         opt.step()
         sched.step()
-        acc[0] += float(nll.detach())
-        acc[1] += float(l2.detach())
+        acc[0] += dp.mean(torch, float(nll.detach()) * dp.weight(len(idx), n))
+        acc[1] += dp.mean(torch, float(l2.detach()) * dp.weight(len(idx), n))
         acc[2] += 1
         if (step + 1) % 10 == 0 or step == settings.steps - 1:
             history.append({"step": step + 1, "nll": acc[0] / acc[2], "albedo_l2": acc[1] / acc[2]})
             acc = [0.0, 0.0, 0]
             if progress is not None:
                 progress(step + 1, history[-1]["nll"], history[-1]["albedo_l2"])
-        if checkpoint is not None and ((step + 1) % 250 == 0 or step == settings.steps - 1):
+        if checkpoint is not None and dp.is_main and ((step + 1) % 250 == 0 or step == settings.steps - 1):
             checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
                              "step": step + 1, "history": history})
     seconds = time.perf_counter() - t0

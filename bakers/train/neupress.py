@@ -34,7 +34,8 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, pick_device, require_torch
+from .common import TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, require_torch
+from .parallel import data_parallel
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
            "prt_coefficients", "appearance_inputs", "sampling_inputs", "export_skip_mlp", "export_mlp", "check_asset"]
@@ -191,14 +192,19 @@ def _psnr(pred, gt) -> float:
 
 def train_appearance(train_data: dict, val_data: dict, domain, settings: NeupressTrainSettings, *, progress=None,
                      checkpoint=None) -> AppearanceResult:
-    """Fit S; ``progress(epoch, loss, val_psnr)`` per epoch; ``checkpoint`` (TorchCheckpoint) resumes."""
+    """Fit S; ``progress(epoch, loss, val_psnr)`` per epoch; ``checkpoint`` (TorchCheckpoint) resumes.
+
+    Under ``torchrun`` the processes train data-parallel as the rna trainer does
+    (nasset_bakers.train.parallel): same global batches, each process its share, the steps one
+    process would take; only rank 0 saves checkpoints."""
     torch = require_torch()
     t0 = time.perf_counter()
     m, layers, hidden, *_ = SIZES[settings.size]
     rng = np.random.default_rng(settings.seed)
     G = rng.normal(settings.fourier_mean, settings.fourier_std, (m, 7)).astype(np.float32)
     torch.manual_seed(settings.seed)
-    dev = pick_device(torch, settings.device)
+    dp = data_parallel(torch, settings.device)
+    dev = dp.device
     lo, hi = domain
     v = appearance_inputs(train_data["x"], train_data["wo"], train_data["wi"], lo, hi)
     y = np.asarray(train_data["rgb"], np.float32)
@@ -219,19 +225,23 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
     G64 = torch.as_tensor(G.astype(np.float64), device=dev)
     V = torch.as_tensor(v, device=dev)
     Y = torch.as_tensor(y, device=dev)
+    net = dp.wrap(torch, model)
     gen = torch.Generator().manual_seed(settings.seed)
     for epoch in range(start, settings.epochs):
         model.train()
         perm = torch.randperm(len(V), generator=gen).to(dev)
         tot, cnt = 0.0, 0
         for s in range(0, len(V), settings.batch):
-            idx = perm[s:s + settings.batch]
-            pred = model(_features(torch, G64, V[idx]))
+            batch = perm[s:s + settings.batch]
+            if len(batch) < dp.world:  # a last batch with fewer samples than processes: skipped by all
+                continue
+            idx = dp.share(batch)
+            pred = net(_features(torch, G64, V[idx]))
             loss = torch.mean((pred - Y[idx]) ** 2)
-            if not torch.isfinite(loss):
+            if not math.isfinite(dp.mean(torch, float(loss.detach()))):  # every process stops at the same step
                 raise error("CONVERT_TRAINING", f"non-finite appearance loss at epoch {epoch}")
             opt.zero_grad(set_to_none=True)
-            loss.backward()
+            (loss * dp.weight(len(idx), len(batch))).backward()
             opt.step()
             tot += float(loss.detach()) * len(idx)
             cnt += len(idx)
@@ -240,12 +250,13 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
         val_psnr = float("nan")
         if last or epoch % 5 == 4:
             val_psnr = _psnr(predict_appearance(model, G, v_val), val_data["rgb"])
-        history.append({"epoch": epoch, "loss": tot / max(cnt, 1), "val_psnr": val_psnr})
-        if checkpoint is not None:
+        mean_loss = dp.mean(torch, tot / max(cnt, 1))
+        history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr})
+        if checkpoint is not None and dp.is_main:
             checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
                              "G": torch.as_tensor(G), "history": history, "epoch": epoch})
         if progress:
-            progress(epoch, tot / max(cnt, 1), val_psnr)
+            progress(epoch, mean_loss, val_psnr)
     model = model.cpu().eval()
     pred = predict_appearance(model, G, v_val)
     psnr, mse, peak = display_psnr(np.maximum(pred, 0.0), val_data["rgb"])
