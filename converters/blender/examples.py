@@ -69,6 +69,18 @@ def _look_at(obj, eye, target) -> None:
     obj.rotation_euler = d.to_track_quat("-Z", "Y").to_euler()
 
 
+def add_camera(bpy, eye, target, fov_deg: float = 40.0) -> None:
+    """The scene's camera "Camera": field of view ``fov_deg`` (degrees), at ``eye`` [3] looking at ``target`` [3]."""
+    sc = bpy.context.scene
+    cam = bpy.data.cameras.new("Camera")
+    cam.lens_unit = "FOV"
+    cam.angle = math.radians(fov_deg)
+    co = bpy.data.objects.new("Camera", cam)
+    sc.collection.objects.link(co)
+    _look_at(co, eye, target)
+    sc.camera = co
+
+
 def _stage(bpy, *, ground_z: float, cam_eye, cam_target) -> None:
     sc = bpy.context.scene
     ground = bpy.data.meshes.new("Ground")
@@ -78,13 +90,7 @@ def _stage(bpy, *, ground_z: float, cam_eye, cam_target) -> None:
     sc.collection.objects.link(g)
     g.data.materials.append(_principled(bpy, "GroundGrey", **{"Base Color": (0.5, 0.5, 0.5, 1.0), "Roughness": 1.0,
                                                               "Specular IOR Level": 0.0}))
-    cam = bpy.data.cameras.new("Camera")
-    cam.lens_unit = "FOV"
-    cam.angle = math.radians(40.0)
-    co = bpy.data.objects.new("Camera", cam)
-    sc.collection.objects.link(co)
-    _look_at(co, cam_eye, cam_target)
-    sc.camera = co
+    add_camera(bpy, cam_eye, cam_target)
     sun = bpy.data.lights.new("Sun", "SUN")
     sun.energy = 3.0  # W/m^2
     sun.angle = math.radians(1.0)

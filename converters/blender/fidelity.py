@@ -26,19 +26,12 @@ from nasset_converters.mitsuba.fidelity import FidelityScene, compare, table, wr
 def _new_scene(bpy, size: int, eye, target, *, bounces: int = 4) -> None:
     """Empty factory settings, Cycles at ``size`` x ``size`` with ``bounces`` bounces, a 40 deg camera at ``eye``."""
     from .cycles import setup_cycles
-    from .examples import _look_at
+    from .examples import add_camera
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     setup_cycles(bpy, size, max_bounces=bounces)
-    sc = bpy.context.scene
-    sc.cycles.blur_glossy = 0.0  # "filter glossy" blurs highlights (biased)
-    cam = bpy.data.cameras.new("Camera")
-    cam.lens_unit = "FOV"
-    cam.angle = math.radians(40.0)
-    co = bpy.data.objects.new("Camera", cam)
-    sc.collection.objects.link(co)
-    _look_at(co, eye, target)
-    sc.camera = co
+    bpy.context.scene.cycles.blur_glossy = 0.0  # "filter glossy" blurs highlights (biased)
+    add_camera(bpy, eye, target)
 
 
 def _material(bpy, name: str, kind: str = "diffuse", **inputs):
