@@ -137,6 +137,24 @@ def cached_reference(out: Path, key: dict):
         return None
 
 
+def mitsuba_halves(mi, scene, sensor, hw, scene_file, out: Path, spp: int, seed: int, *, say, quiet: bool = False):
+    """The unclamped two-half Mitsuba reference of ``scene`` seen by ``sensor`` (``hw``: [H, W]): reused from
+    ``out`` when its reference_key.json equals this run's key (scene digest, size, spp, seed, Mitsuba),
+    else rendered by :func:`render_halves` (the stale key removed; the caller writes the key once the
+    halves are on disk). Returns (a, b, samples per half, key, reused)."""
+    key = {"scene_sha256": scene_digest(scene_file), "size": list(hw), "spp": int(spp), "seed": int(seed),
+           "mitsuba": f"{mi.__version__} {mi.variant()}", "chunk": CHUNK_SPP}
+    cached = cached_reference(out, key)
+    if cached is not None and cached[0].shape[:2] == tuple(hw):
+        say(f"reference: reusing {out / 'reference_a.exr'} and reference_b.exr (same scene, size, spp, seed)")
+        return cached[0], cached[1], max(1, spp // 2), key, True
+    say(f"reference: Mitsuba {mi.variant()} {spp} spp at {hw[1]}x{hw[0]} in two halves, unclamped")
+    a, b, half = render_halves(lambda n, s: mi.render(scene, sensor=sensor, spp=int(n), seed=int(s)), spp, seed,
+                               desc="mitsuba reference", quiet=quiet)
+    (out / "reference_key.json").unlink(missing_ok=True)
+    return a, b, half, key, False
+
+
 def object_mask(mi, scene, sensor, shape_ids, shape_hw, sub: int = MASK_SUBSAMPLES) -> np.ndarray:
     """Fraction [H, W] of each pixel's stratified camera sub-samples whose first hit is one of the shapes."""
     import drjit as dr
@@ -277,22 +295,12 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
     md = converted.integrator.get("max_depth", 24)
     sensor, hw = sensor_for(mi, mscene, res)
-    key = {"scene_sha256": scene_digest(scene_file), "size": list(hw), "spp": int(spp), "seed": int(seed),
-           "mitsuba": f"{mi.__version__} {mi.variant()}", "chunk": CHUNK_SPP}
-    cached = cached_reference(out, key)
-    if cached is not None and cached[0].shape[:2] == tuple(hw):
-        say(f"reference: reusing {out / 'reference_a.exr'} and reference_b.exr (same scene, size, spp, seed)")
-        (a, b), half = cached, max(1, spp // 2)
-    else:
-        say(f"reference: Mitsuba {mi.variant()} {spp} spp at {hw[1]}x{hw[0]} in two halves, unclamped")
-        a, b, half = render_halves(lambda n, s: mi.render(mscene, sensor=sensor, spp=int(n), seed=int(s)), spp, seed,
-                                   desc="mitsuba reference", quiet=quiet)
-        (out / "reference_key.json").unlink(missing_ok=True)
+    a, b, half, key, reused = mitsuba_halves(mi, mscene, sensor, hw, scene_file, out, spp, seed, say=say, quiet=quiet)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
     return SourceReference(
         a, b, half, cov, fits, Path(converted.output), max(1, md - 1) if md and md > 0 else 24,
         {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator},
-        "mitsuba camera rays, first hit", reused=cached is not None, cache_key=key)
+        "mitsuba camera rays, first hit", reused=reused, cache_key=key)
 
 
 def blender_asset_fits(rep: dict, *, scene_file: str = "") -> list[dict]:

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.accuracy import CHUNK_SPP, cached_reference, render_halves, scene_digest, sensor_for
+from nasset_benchmarks.accuracy import mitsuba_halves, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
 from nasset_sdk.errors import UsageError, error
 
@@ -84,19 +84,11 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     def na(spp, s):
         return np.asarray(mi.render(with_asset, sensor=sensor, integrator=nasset, spp=int(spp), seed=int(s)), np.float64)[..., :3]
 
-    key = {"scene_sha256": scene_digest(scene_file), "size": list(hw), "spp": int(gt_spp), "seed": int(seed),
-           "mitsuba": f"{mi.__version__} {mi.variant()}", "chunk": CHUNK_SPP}
     t = time.perf_counter()
-    cached = cached_reference(out, key)
-    if cached is not None and cached[0].shape[:2] == tuple(hw):
-        say(f"reference: reusing {out / 'reference_a.exr'} and reference_b.exr (same scene, size, spp, seed)")
-        (a, b), half = cached, max(1, gt_spp // 2)
-    else:
-        say(f"reference: {mi.variant()} {gt_spp} spp at {hw[1]}x{hw[0]} (two halves)")
-        a, b, half = render_halves(pt, gt_spp, seed, desc="reference", quiet=quiet)
+    a, b, half, key, reused = mitsuba_halves(mi, original, sensor, hw, scene_file, out, gt_spp, seed, say=say, quiet=quiet)
+    if not reused:
         from nasset_reference_renderer.film import write_exr
 
-        (out / "reference_key.json").unlink(missing_ok=True)
         for name, img in (("reference_a", a), ("reference_b", b)):
             write_exr(out / f"{name}.exr", img.astype(np.float32))
         (out / "reference_key.json").write_text(json.dumps(key))
@@ -146,7 +138,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
         "resolution": [hw[1], hw[0]],
         "mitsuba": {"version": mi.__version__, "variant": mi.variant(), "integrator": str(original.integrator()).splitlines()[0],
                     "settings": settings},
-        "reference": {"spp": 2 * half, "mean_radiance": mean, "noise_variance": var_ref, "time_s": t_ref, "reused": cached is not None,
+        "reference": {"spp": 2 * half, "mean_radiance": mean, "noise_variance": var_ref, "time_s": t_ref, "reused": reused,
                       "noise_relative_rmse": math.sqrt(var_ref) / max(mean, 1e-12)},
         "path_tracing_points": mi_points,
         "asset_points": nr_points,
