@@ -41,13 +41,19 @@ def block_means(image: np.ndarray, block: int) -> np.ndarray:
     return img.reshape(h // b, b, w // b, b, c).mean((1, 3))
 
 
-def rmse_normalised(image: np.ndarray, reference: np.ndarray, block: int = 1) -> float:
-    """Root-mean-square difference of the b x b block means over every block and channel, divided by
-    the reference's mean radiance (all pixels and channels). Non-finite pixels give +inf."""
+def _float_pair(image, reference) -> tuple[np.ndarray, np.ndarray]:
+    """Both images as float64 arrays of one shape (ValueError naming both shapes otherwise)."""
     img = np.asarray(image, np.float64)
     ref = np.asarray(reference, np.float64)
     if img.shape != ref.shape:
         raise ValueError(f"image shape {img.shape} differs from the reference's {ref.shape}")
+    return img, ref
+
+
+def rmse_normalised(image: np.ndarray, reference: np.ndarray, block: int = 1) -> float:
+    """Root-mean-square difference of the b x b block means over every block and channel, divided by
+    the reference's mean radiance (all pixels and channels). Non-finite pixels give +inf."""
+    img, ref = _float_pair(image, reference)
     if not np.isfinite(img).all():
         return float("inf")
     d = block_means(img, block) - block_means(ref, block)
@@ -63,10 +69,7 @@ def mean_bias(image: np.ndarray, reference: np.ndarray) -> float:
 
     Monte Carlo noise averages over the whole image, so this separates a bias from noise where the
     block RMSE cannot. Non-finite pixels give +inf."""
-    img = np.asarray(image, np.float64)
-    ref = np.asarray(reference, np.float64)
-    if img.shape != ref.shape:
-        raise ValueError(f"image shape {img.shape} differs from the reference's {ref.shape}")
+    img, ref = _float_pair(image, reference)
     if not np.isfinite(img).all():
         return float("inf")
     norm = float(ref.mean())
