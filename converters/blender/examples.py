@@ -40,8 +40,10 @@ def _principled(bpy, name: str, **inputs):
     return mat
 
 
-def _hair_material(bpy, melanin: float = 0.25):
-    mat = bpy.data.materials.new("BlondHair")
+def shader_material(bpy, name: str, shader: str):
+    """A new node material ``name`` whose surface is one new ``shader`` node (a bl_idname such as
+    ``ShaderNodeBsdfDiffuse``; the default nodes but the output removed). Returns (material, shader node)."""
+    mat = bpy.data.materials.new(name)
     if mat.node_tree is None:  # Blender < 5 creates materials without nodes
         mat.use_nodes = True
     nt = mat.node_tree
@@ -49,7 +51,13 @@ def _hair_material(bpy, melanin: float = 0.25):
         if n.bl_idname != "ShaderNodeOutputMaterial":
             nt.nodes.remove(n)
     out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    hb = nt.nodes.new("ShaderNodeBsdfHairPrincipled")
+    node = nt.nodes.new(shader)
+    nt.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat, node
+
+
+def _hair_material(bpy, melanin: float = 0.25):
+    mat, hb = shader_material(bpy, "BlondHair", "ShaderNodeBsdfHairPrincipled")
     hb.parametrization = "MELANIN"
     hb.inputs["Melanin"].default_value = melanin
     hb.inputs["Melanin Redness"].default_value = 0.6
@@ -57,7 +65,6 @@ def _hair_material(bpy, melanin: float = 0.25):
     hb.inputs["Radial Roughness"].default_value = 0.4
     hb.inputs["Random Color"].default_value = 0.0
     hb.inputs["Random Roughness"].default_value = 0.0
-    nt.links.new(hb.outputs[0], out.inputs["Surface"])
     return mat
 
 

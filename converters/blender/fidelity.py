@@ -37,19 +37,12 @@ def _new_scene(bpy, size: int, eye, target, *, bounces: int = 4) -> None:
 def _material(bpy, name: str, kind: str = "diffuse", **inputs):
     """A node material whose surface is one shader: ``diffuse`` (ShaderNodeBsdfDiffuse), ``principled`` or
     ``emission``; ``inputs`` set socket defaults (a tuple of 3 gets alpha 1)."""
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    for n in list(nt.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            nt.nodes.remove(n)
-    out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
-    node = nt.nodes.new({"diffuse": "ShaderNodeBsdfDiffuse", "principled": "ShaderNodeBsdfPrincipled",
-                         "emission": "ShaderNodeEmission"}[kind])
+    from .examples import shader_material
+
+    mat, node = shader_material(bpy, name, {"diffuse": "ShaderNodeBsdfDiffuse", "principled": "ShaderNodeBsdfPrincipled",
+                                            "emission": "ShaderNodeEmission"}[kind])
     for k, v in inputs.items():
         node.inputs[k].default_value = (*v, 1.0) if isinstance(v, tuple) and len(v) == 3 else v
-    nt.links.new(node.outputs[0], out.inputs["Surface"])
     return mat
 
 

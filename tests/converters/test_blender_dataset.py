@@ -14,7 +14,7 @@ bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip i
 
 from nasset_converters.blender import dataset as bds  # noqa: E402
 from nasset_converters.blender import scene as bsc  # noqa: E402
-from nasset_converters.blender.examples import build_example  # noqa: E402
+from nasset_converters.blender.examples import build_example, shader_material  # noqa: E402
 
 
 def _diffuse_quad(albedo: float):
@@ -24,17 +24,9 @@ def _diffuse_quad(albedo: float):
     me.from_pydata([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [], [(0, 1, 2, 3)])
     ob = bpy.data.objects.new("Quad", me)
     bpy.context.scene.collection.objects.link(ob)
-    mat = bpy.data.materials.new("White")
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    for n in list(nt.nodes):
-        if n.bl_idname != "ShaderNodeOutputMaterial":
-            nt.nodes.remove(n)
-    d = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    mat, d = shader_material(bpy, "White", "ShaderNodeBsdfDiffuse")
     d.inputs["Color"].default_value = (albedo, albedo, albedo, 1.0)
     d.inputs["Roughness"].default_value = 0.0
-    nt.links.new(d.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs["Surface"])
     me.materials.append(mat)
     bpy.context.view_layer.update()
     return ob
