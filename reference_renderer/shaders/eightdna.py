@@ -98,10 +98,7 @@ class EightdnaShader:
         u_obj, wf_obj = fs.ui, fs.wi
         p_u = fs.pdf_position_rgb().mean(1)
         integ.stats.time["network"] += time.perf_counter() - t0
-        rel = u_obj - ev.box.center
-        _, _, axis = ev.box.project(rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-300))
-        n_u = np.zeros((n, 3))
-        n_u[np.arange(n), axis] = np.sign(rel[np.arange(n), axis])
+        n_u = ev.box.face_normal(u_obj)  # outward normal of u_i's face
         u_w = fr.point_to_world(u_obj, h.inst)
 
         # rows needing p^k(u_i, w_i): light samples at u_i, then the flow continuation
