@@ -86,8 +86,12 @@ def _component(asset: Asset, info) -> dict:
 
 def inspect_asset(path: str | os.PathLike, load: str = "all") -> dict:
     """Summary of the asset at ``path`` as a JSON-ready dict; ``load``: 'all', 'required' or 'none'."""
+    return describe_asset(Asset.open(Path(path), load=load), path)
+
+
+def describe_asset(asset: Asset, path: str | os.PathLike) -> dict:
+    """:func:`inspect_asset`'s summary of an ``asset`` already opened from ``path``."""
     path = Path(path)
-    asset = Asset.open(path, load=load)
     stage = asset.stage
     lo, hi = asset.domain
     report: dict = {

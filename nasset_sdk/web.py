@@ -105,7 +105,7 @@ def _channel_images(asset, out: Path) -> list[str]:
 def export(path: str | os.PathLike, out_dir: str | os.PathLike) -> dict:
     """Write the page and the asset's files into ``out_dir`` (created if missing; files replaced one by one,
     each atomically). Returns the ``asset.json`` content plus ``files`` (name -> bytes) and ``totalBytes``."""
-    from .inspect import inspect_asset
+    from .inspect import describe_asset
     from .portable import COMPONENT
     from .view import fallback_color
 
@@ -133,7 +133,7 @@ def export(path: str | os.PathLike, out_dir: str | os.PathLike) -> dict:
         info = asset.network_refs(COMPONENT)[name].info
         graphs[name] = {"file": f"{name}.onnx", "inputs": dict(zip(info.input_names, info.input_widths, strict=True)),
                         "outputs": dict(zip(info.output_names, info.output_widths, strict=True))}
-    meta = inspect_asset(path)
+    meta = describe_asset(asset, path)
     meta["file"] = Path(path).name
     lo, hi = pts.min(0), pts.max(0)
     doc = {"format": "nasset-web/1", "kind": asset.kind, "variant": asset.variant,
