@@ -7,7 +7,9 @@
   asset instance, applies spec/renderer.md#neural-assets: object-space inputs, a light sample whose
   shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
   ``w_light = power(p_light, 1/4pi)``, and a uniform-sphere continuation of weight T 4pi that ignores
-  the instance. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+  the instance. Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment,
+  and the triangles of that segment and its neighbours do not count as crossing the instance. Every
+  per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
 """
 
 from __future__ import annotations
@@ -24,9 +26,10 @@ from .rna import RnaJit
 INTEGRATOR = "nasset_path"
 BSDF = "nasset"
 FOUR_PI = 4.0 * math.pi
-#: how many surfaces of the ignored instance one ray may pass through before it is cut (a closed
-#: mesh is crossed twice per convex part)
-MAX_SKIPS = 16
+#: how many surfaces of the ignored instance one ray may pass through before it is cut: only a guard
+#: against rays that make no progress (spec/renderer.md#fibers: no crossing limit; dense hair crosses
+#: hundreds of prism faces)
+MAX_SKIPS = 1 << 16
 
 _ASSETS: dict[tuple[str, str], RnaJit] = {}  # (variant, file) -> asset read once per process
 _REGISTERED: set[str] = set()
@@ -113,13 +116,15 @@ def register(mi) -> None:
             prev_pdf = mi.Float(1.0)
             prev_delta = mi.Bool(True)
             ignore = mi.UInt32(0)  # registry id of the instance the ray leaves (0: none)
+            ign_lo = mi.UInt32(0)  # its exempt triangle range (a fiber hit's segment and neighbours)
+            ign_hi = mi.UInt32(0)
             pending = mi.Bool(False)  # the ray leaves an asset: its weight waits for the branch
             t_un = mi.Spectrum(0)
             t_sh = mi.Spectrum(0)
             valid = mi.Bool(False)
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
-                si, passed = _trace(mi, scene, ray, ignore, active)
+                si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
                 beta[pending] *= dr.select(passed, t_sh, t_un) * FOUR_PI
                 valid |= active & si.is_valid()
 
@@ -134,11 +139,13 @@ def register(mi) -> None:
                 on_asset = active_next & (inst > 0)
                 on_plain = active_next & (inst == 0)
                 bsdf = si.bsdf(ray)
+                k = inst - 1
+                x_o, n_o, wo_o, h_o, ex_lo, ex_hi = _asset_inputs(mi, assets, tab, k, si, -ray.d, on_asset)
 
                 # light sample; at an asset the shadow ray ignores the instance and records crossing it
                 ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_next)
                 active_em = active_next & (ds_em.pdf != 0.0)
-                si_sh, passed_sh = _trace(mi, scene, si.spawn_ray_to(ds_em.p), dr.select(on_asset, sid, 0), active_em)
+                si_sh, passed_sh = _trace(mi, scene, si.spawn_ray_to(ds_em.p), dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em)
                 active_em &= ~si_sh.is_valid()
                 val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
                 L[on_plain & active_em] += beta * dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, pdf)) * val * em_weight
@@ -146,17 +153,15 @@ def register(mi) -> None:
                 # asset vertex: object-space inputs, both light sample and continuation transports
                 wi_c = mi.warp.square_to_uniform_sphere(sampler.next_2d())
                 if dr.hint(len(assets) > 0, mode="scalar"):
-                    k = inst - 1
-                    x_o, n_o, wo_o = _object_inputs(mi, tab, k, si, -ray.d, on_asset)
                     wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
                     wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
                     ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
                     for a, asset in enumerate(assets):
-                        mine = on_asset & (dr.gather(mi.UInt32, tab["asset"], k, on_asset) == a)
-                        u, s = asset.transport(x_o, n_o, wo_o, wi_o)
+                        mine = _of_asset(mi, tab, k, a, on_asset)
+                        u, s = asset.transport(x_o, n_o, wo_o, wi_o, h_o)
                         ta_un[mine] = u
                         ta_sh[mine] = s
-                        u, s = asset.transport(x_o, n_o, wo_o, wc_o)
+                        u, s = asset.transport(x_o, n_o, wo_o, wc_o, h_o)
                         tc_un[mine] = u
                         tc_sh[mine] = s
                     w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, 1.0 / FOUR_PI))
@@ -174,6 +179,8 @@ def register(mi) -> None:
                 prev_delta = on_plain & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
                 pending = mi.Bool(on_asset)
                 ignore = dr.select(on_asset, sid, 0)
+                ign_lo = dr.select(on_asset, ex_lo, 0)
+                ign_hi = dr.select(on_asset, ex_hi, 0)
                 active_next &= on_asset | (dr.max(beta) != 0)
 
                 # Russian roulette on the throughput before the pending asset weight (any q keeps it unbiased)
@@ -198,11 +205,14 @@ def register(mi) -> None:
 
 
 @dr.syntax
-def _trace(mi, scene, ray, ignore, active):
-    """(first intersection of ``ray`` not on shape ``ignore`` [registry id, 0: none], whether the ray crossed that shape)."""
+def _trace(mi, scene, ray, ignore, lo, hi, active):
+    """(first intersection of ``ray`` not on shape ``ignore`` [registry id, 0: none], whether the ray crossed
+    a triangle of that shape outside its exempt range [lo, hi) of primitive indices (a fiber hit's own
+    and neighbouring segments, spec/renderer.md#fibers; lo = hi: none exempt)). No limit on the number
+    of crossings other than :data:`MAX_SKIPS` against rays that make no progress."""
     si = scene.ray_intersect(ray, active)
     skip = active & si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore) & (ignore != 0)
-    passed = mi.Bool(skip)
+    passed = skip & ((si.prim_index < lo) | (si.prim_index >= hi))
     r = mi.Ray3f(ray)
     i = mi.UInt32(0)
     while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_skip"):
@@ -211,6 +221,7 @@ def _trace(mi, scene, ray, ignore, active):
         r.maxt = left
         si = scene.ray_intersect(r, skip)
         skip = si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore)
+        passed |= skip & ((si.prim_index < lo) | (si.prim_index >= hi))
         i += 1
     return si, passed
 
@@ -279,3 +290,29 @@ def _object_inputs(mi, tab, k, si, wo, active):
     n_w = si.sh_frame.n
     n = dr.normalize(mi.Vector3f(*[r[0] * n_w.x + r[1] * n_w.y + r[2] * n_w.z for r in nrows]))
     return x, n, _object_dir(mi, tab, k, wo, active)
+
+
+def _of_asset(mi, tab, k, a, active):
+    """Lanes of ``active`` whose instance k is an instance of asset a."""
+    import drjit as dr
+
+    return active & (dr.gather(mi.UInt32, tab["asset"], k, active) == a)
+
+
+def _asset_inputs(mi, assets, tab, k, si, wo, active):
+    """(x, frame, wo, h, exempt lo, exempt hi) of asset hits in the object space of instance k: frame the
+    asset's normal (surface) or the curve tangent (fiber, with h and the hit segment's exempt triangle
+    range [lo, hi), spec/renderer.md#fibers); h, lo, hi are 0 elsewhere."""
+    import drjit as dr
+
+    h, lo, hi = mi.Float(0), mi.UInt32(0), mi.UInt32(0)
+    if not assets:
+        return mi.Point3f(0), mi.Vector3f(0), mi.Vector3f(0), h, lo, hi
+    x, n, wo_o = _object_inputs(mi, tab, k, si, wo, active)
+    for a, asset in enumerate(assets):
+        if asset.fiber:
+            mine = _of_asset(mi, tab, k, a, active)
+            t, hh, l_, h_ = asset.fiber_frame(si.prim_index, x, wo_o, mine)
+            n, h = dr.select(mine, t, n), dr.select(mine, hh, h)
+            lo, hi = dr.select(mine, l_, lo), dr.select(mine, h_, hi)
+    return x, n, wo_o, h, lo, hi
