@@ -1,8 +1,17 @@
-"""Emitter ``nasset_cone``: the DistantLight with ``angle > 0`` of spec/renderer.md#lights, in Dr.Jit.
+"""Infinite emitters of spec/renderer.md#lights in Dr.Jit, which Mitsuba has no emitter for:
 
-Uniform cone of half-angle t around ``direction`` (toward the light), radiance ``E / (pi sin^2 t)``
-(``irradiance`` E at normal incidence), sampled uniformly in solid angle (pdf ``1 / (2 pi (1 - cos t))``).
-Mitsuba has no emitter with these conventions.
+- ``nasset_cone``: the DistantLight with ``angle > 0``. Uniform cone of half-angle t around
+  ``direction`` (toward the light), radiance ``E / (pi sin^2 t)`` (``irradiance`` E at normal
+  incidence), sampled uniformly in solid angle (pdf ``1 / (2 pi (1 - cos t))``).
+- ``nasset_dome``: the DomeLight. Constant ``radiance``, or times a lat-long ``bitmap`` looked up
+  in the dome's local frame with ``u = 0.5 + atan2(d.x, -d.z) / 2pi``, ``v = acos(d.y) / pi`` (row
+  0 = +Y), nearest texel; ``to_world`` (Mitsuba's column-vector convention, orthogonal: the polar
+  factor of the prim's M3, a mirror kept) maps local to world directions. Mitsuba's ``envmap``
+  interpolates bilinearly and puts u = 0 elsewhere. Sampled by texel (pmf of luminance times
+  sin theta, the second implementation's) then uniformly in the texel's (u, v): pdf
+  ``pmf W H / (2 pi^2 sin theta)``; the constant dome uniformly on the sphere.
+
+Sample points lie :data:`FAR` along the direction (shadow rays end there).
 """
 
 from __future__ import annotations
@@ -12,9 +21,11 @@ import math
 import drjit as dr
 import numpy as np
 
+from nasset_mitsuba_renderer.lights import latlong_pmf
 from nasset_sdk.errors import error
 
 NAME = "nasset_cone"
+DOME = "nasset_dome"
 #: distance of the sample point along a direction (shadow rays end there): far beyond any scene the
 #: renderer accepts (spec/renderer.md#limits), still exact enough in float32 for the ray direction
 FAR = 1e9
@@ -74,5 +85,103 @@ def register(mi) -> None:
         def to_string(self):
             return f"NassetConeLight[cos_t={self.cos_t}]"
 
+    class DomeLight(mi.Emitter):
+        def __init__(self, props):
+            super().__init__(props)
+            self.scale = np.asarray(props.get("radiance", mi.ScalarColor3f(1.0)), np.float64).reshape(3)
+            m = np.asarray(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64).reshape(4, 4)[:3, :3]
+            if not np.allclose(m @ m.T, np.eye(3), atol=1e-4):
+                raise error("SCENE_INVALID", "nasset_dome: to_world is not a rotation or mirror (pass the polar factor of the dome's M3)")
+            self.rot = [[float(v) for v in row] for row in m.T]  # row-vector R: world_j = sum_i local_i R[i][j]
+            self.le = mi.Color3f(*self.scale.tolist())
+            bitmap = props.get("bitmap", None)
+            self.tex = None
+            if bitmap is not None:
+                img = np.asarray(bitmap, np.float64)
+                if img.ndim != 3 or img.shape[2] < 3 or not np.isfinite(img[..., :3]).all():
+                    raise error("SCENE_INVALID", f"nasset_dome: bitmap of shape {img.shape} is not finite RGB")
+                img = img[..., :3]
+                self.h, self.w = img.shape[:2]
+                self.tex = mi.Float(np.ascontiguousarray(img * self.scale, np.float32).ravel())
+                self.dist = mi.DiscreteDistribution(mi.Float(np.asarray(latlong_pmf(img), np.float32)))
+            self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
+
+        def _to_local(self, d):
+            r = self.rot
+            return mi.Vector3f(*[r[j][0] * d.x + r[j][1] * d.y + r[j][2] * d.z for j in range(3)])
+
+        def _to_world(self, d):
+            r = self.rot
+            return mi.Vector3f(*[r[0][j] * d.x + r[1][j] * d.y + r[2][j] * d.z for j in range(3)])
+
+        def _texel(self, d):
+            """(flat texel index, sin theta) of world directions d (nearest texel, clamped to the image)."""
+            dl = dr.normalize(self._to_local(d))
+            u = 0.5 + dr.atan2(dl.x, -dl.z) * (0.5 / math.pi)
+            v = dr.acos(dr.clip(dl.y, -1.0, 1.0)) * (1.0 / math.pi)
+            col = mi.UInt32(dr.clip(mi.Int32(dr.floor(u * self.w)), 0, self.w - 1))
+            row = mi.UInt32(dr.clip(mi.Int32(dr.floor(v * self.h)), 0, self.h - 1))
+            return row * self.w + col, dr.safe_sqrt(1.0 - dr.square(dr.clip(dl.y, -1.0, 1.0)))
+
+        def _radiance(self, d, active=True):
+            if self.tex is None:
+                return mi.Spectrum(self.le)
+            idx, _ = self._texel(d)
+            return mi.Spectrum(dr.gather(mi.Color3f, self.tex, idx, active))
+
+        def _pdf(self, d, active=True):
+            if self.tex is None:
+                return mi.Float(1.0 / (4.0 * math.pi))
+            idx, sin_t = self._texel(d)
+            p_uv = self.dist.eval_pmf_normalized(idx, active) * (self.w * self.h)
+            return dr.select(sin_t > 0, p_uv / (2.0 * math.pi * math.pi * dr.select(sin_t > 0, sin_t, 1.0)), 0.0)
+
+        def sample_direction(self, it, sample, active=True):
+            if self.tex is None:
+                d = mi.warp.square_to_uniform_sphere(sample)
+                pdf = mi.Float(1.0 / (4.0 * math.pi))
+                value = mi.Spectrum(self.le) * (4.0 * math.pi)
+            else:
+                idx, fu = self.dist.sample_reuse(sample.x, active)
+                row, col = idx // self.w, idx % self.w
+                uu = (mi.Float(col) + fu) / self.w
+                vv = (mi.Float(row) + dr.minimum(sample.y, 1.0 - 1e-7)) / self.h
+                sin_p, cos_p = dr.sincos(2.0 * math.pi * (uu - 0.5))
+                sin_t, cos_t = dr.sincos(math.pi * vv)
+                d = dr.normalize(self._to_world(mi.Vector3f(sin_t * sin_p, cos_t, -sin_t * cos_p)))
+                p_uv = self.dist.eval_pmf_normalized(idx, active) * (self.w * self.h)
+                ok = sin_t > 0
+                pdf = dr.select(ok, p_uv / (2.0 * math.pi * math.pi * dr.select(ok, sin_t, 1.0)), 0.0)
+                le = mi.Spectrum(dr.gather(mi.Color3f, self.tex, idx, active))
+                value = dr.select(pdf > 0, le / dr.select(pdf > 0, pdf, 1.0), 0.0)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.d = d
+            ds.p = it.p + d * FAR
+            ds.n = -d
+            ds.dist = FAR
+            ds.pdf = pdf
+            ds.delta = False
+            ds.emitter = mi.EmitterPtr(self)
+            return ds, value
+
+        def pdf_direction(self, it, ds, active=True):
+            return self._pdf(ds.d, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self._radiance(ds.d, active)
+
+        def eval(self, si, active=True):
+            return self._radiance(-si.wi, active)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return f"NassetDomeLight[{'constant' if self.tex is None else f'{self.w}x{self.h} lat-long'}]"
+
     mi.register_emitter(NAME, lambda props: ConeLight(props))
+    mi.register_emitter(DOME, lambda props: DomeLight(props))
     _REGISTERED.add(mi.variant())

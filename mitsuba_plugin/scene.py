@@ -79,6 +79,8 @@ def load_file(path: str, *, mi=None, replace: dict | None = None, **params):
     its object space, spec/bake.md#stages). ``params``: XML ``$name`` parameters."""
     mi = mi or jit_mitsuba()
     register(mi)
+    preview.register(mi)
+    lights_jit.register(mi)
     path = Path(path)
     if not path.is_file():
         raise error("FILE_NOT_FOUND", "no such scene file", file=str(path))
@@ -136,9 +138,9 @@ def _expand_asset(mi, shape, path: Path) -> None:
 
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
     """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
-    ones area lights), asset instances, point / distant (delta or cone) / sphere / rectangle lights, the
-    camera. Dome lights raise SCENE_UNSUPPORTED."""
-    from nasset_mitsuba_renderer.lights import ConeDistantLight, MitsubaLight, build_lights
+    ones area lights), asset instances, point / distant (delta or cone) / sphere / rectangle / dome lights,
+    the camera."""
+    from nasset_mitsuba_renderer.lights import ConeDistantLight, DomeLight, MitsubaLight, build_lights
     from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
     from nasset_mitsuba_renderer.usdscene import read_scene
 
@@ -167,14 +169,32 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         if isinstance(lt, ConeDistantLight):
             light_entries[f"cone_{k}"] = {"type": lights_jit.NAME, "direction": mi.ScalarVector3f(lt.axis.tolist()), "angle": float(lt.desc.angle),
                                           "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist())}
+        elif isinstance(lt, DomeLight):
+            light_entries[f"dome_{k}"] = _dome_entry(mi, lt)
         elif not isinstance(lt, MitsubaLight):
-            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere and rect lights, not {type(lt).__name__}",
+            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere, rect and dome lights, not {type(lt).__name__}",
                         file=str(path), prim=lt.desc.prim)
     for ent in light_entries.values():
         if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries
+
+
+def _column_transform(m3_rows: np.ndarray) -> list:
+    """4x4 column-vector matrix (Mitsuba's) of a 3x3 linear map in USD's row-vector convention."""
+    m = np.eye(4)
+    m[:3, :3] = np.asarray(m3_rows, np.float64).T
+    return m.tolist()
+
+
+def _dome_entry(mi, lt) -> dict:
+    """``nasset_dome`` entry of a DomeLight read by the second implementation (its orientation: the polar factor of M3)."""
+    ent = {"type": lights_jit.DOME, "radiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
+           "to_world": mi.ScalarTransform4f(_column_transform(lt.m3))}
+    if lt.tex is not None:
+        ent["bitmap"] = mi.Bitmap(np.ascontiguousarray(lt.tex[..., :3], np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    return ent
 
 
 #: scenes whose coordinates all lie within this distance of the origin are scaled up to unit size

@@ -111,6 +111,16 @@ class ConeDistantLight:
         return np.where(self.inside(d), self.pdf_value, 0.0)
 
 
+def latlong_pmf(tex: np.ndarray) -> np.ndarray:
+    """Texel sampling pmf [H*W] (row-major) of a lat-long image [H, W, 3]: luminance (plus 1e-3 of its
+    mean, so that no texel is impossible) times sin theta at the texel's centre row, normalised."""
+    h = tex.shape[0]
+    lum = np.maximum(np.asarray(tex[..., :3], np.float64) @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    theta_c = (np.arange(h) + 0.5) / h * np.pi
+    wgt = (lum + 1e-3 * max(lum.mean(), 1e-12)) * np.sin(theta_c)[:, None]
+    return (wgt / wgt.sum()).ravel()
+
+
 class DomeLight:
     """Constant or lat-long dome: u = 0.5 + atan2(d.x, -d.z)/2pi, v = acos(d.y)/pi, nearest texel."""
 
@@ -127,10 +137,7 @@ class DomeLight:
         self.tex = desc.texture
         if self.tex is not None:
             h, w = self.tex.shape[:2]
-            lum = np.maximum(self.tex @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
-            theta_c = (np.arange(h) + 0.5) / h * np.pi
-            wgt = (lum + 1e-3 * max(lum.mean(), 1e-12)) * np.sin(theta_c)[:, None]
-            self.pmf = (wgt / wgt.sum()).ravel()
+            self.pmf = latlong_pmf(self.tex)
             self.cdf = np.cumsum(self.pmf)
             self.cdf[-1] = 1.0
             self.h, self.w = h, w
