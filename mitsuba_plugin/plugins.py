@@ -135,7 +135,9 @@ def register(mi) -> None:
 
                 active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
                 sid = dr.reinterpret_array(mi.UInt32, si.shape)
-                inst = dr.gather(mi.UInt32, lut, dr.minimum(sid, len(lut) - 1), active_next)
+                # shapes registered after the last asset have ids past the table: not assets (a masked gather
+                # reads 0; clamping the id onto the last entry would make them that asset)
+                inst = dr.gather(mi.UInt32, lut, sid, active_next & (sid < len(lut)))
                 on_asset = active_next & (inst > 0)
                 on_plain = active_next & (inst == 0)
                 bsdf = si.bsdf(ray)

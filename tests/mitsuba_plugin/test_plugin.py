@@ -102,6 +102,25 @@ def test_constant_asset_closed_form(tmp_path, lit_from_camera):
     assert (cover[..., 0] > 0.999).sum() > 20  # the asset covers whole pixels
 
 
+def test_light_surface_after_an_asset_is_not_the_asset(tmp_path):
+    """A sphere light registered after the asset (USD scenes add lights last), seen by the camera next
+    to a constant asset: its pixels show its radiance Le exactly (a light surface ends the path,
+    spec/renderer.md#light-surfaces). A shape id past the asset table read as the last asset once added
+    the asset's transport lit by the light there (+3 % green in rna_sphere_light)."""
+    asset = constant_rna_asset(tmp_path / "const.usda", unshadowed=(1.0, 0.5, 0.25), shadowed=(0.1, 0.2, 0.3))
+    le = np.array([3.0, 2.0, 1.0])
+    b = SceneBuilder()
+    b.camera((0, 0, 4), (0, 0, 0))
+    left = np.eye(4)
+    left[3, 0] = -0.8  # USD row-vector translation
+    b.asset("A", asset, left)
+    b.sphere_light("Bulb", (0.8, 0.0, 0.0), 0.4, 1.0, color=tuple(le))
+    img = render(b.write(tmp_path / "scene.usda"), 4, width=32, height=16, seed=2)
+    bulb = img[6:10, 24:28].reshape(-1, 3)  # the light's centre, away from its silhouette
+    np.testing.assert_allclose(bulb, np.broadcast_to(le, bulb.shape), rtol=1e-5)
+    assert img[5:11, 6:11, 0].mean() > 0.3  # the asset beside it is lit
+
+
 def _run_case(name, tmp_path, spp_scale=1):
     from nasset_sdk.conformance import find_suite, load_cases, run_case
 
@@ -110,7 +129,7 @@ def _run_case(name, tmp_path, spp_scale=1):
     return run_case(case, template, tmp_path, seed=0, timeout=300, spp_scale=spp_scale)
 
 
-@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny"])
+@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny", "rna_sphere_light"])
 def test_conformance_cases(tmp_path, case):
     """The plugin passes conformance cases through the ``nasset conformance`` machinery (reference:
     the reference renderer at the case's ref_spp; tolerance from the case's measured noise)."""
