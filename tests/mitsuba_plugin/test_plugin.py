@@ -121,6 +121,20 @@ def test_light_surface_after_an_asset_is_not_the_asset(tmp_path):
     assert img[5:11, 6:11, 0].mean() > 0.3  # the asset beside it is lit
 
 
+@pytest.mark.parametrize("max_depth", [1, 2])
+def test_max_depth_counts_scattering_vertices(tmp_path, max_depth):
+    """``max_depth`` of the render command counts scattering vertices (spec/renderer.md#integrator): 1 is
+    direct lighting, so a Lambertian quad under an overhead delta light of irradiance E shows rho E / pi
+    (F0 = 0, viewed and lit along the normal: no specular term), and 2 adds nothing to a lone quad."""
+    rho, e = 0.5, 2.0
+    b = SceneBuilder()
+    b.camera((0, 3, 0), (0, 0, 0))
+    b.quad("Floor", (0, 0, 0), 4.0, diffuse=(rho, rho, rho), specular=(0.0, 0.0, 0.0))
+    b.distant("Sun", (0, 1, 0), e)
+    img = render(b.write(tmp_path / "scene.usda"), 2, width=8, height=8, seed=1, max_depth=max_depth)
+    np.testing.assert_allclose(img[2:6, 2:6], rho * e / np.pi, rtol=1e-4)
+
+
 def _run_case(name, tmp_path, spp_scale=1):
     from nasset_sdk.conformance import find_suite, load_cases, run_case
 
