@@ -3,7 +3,8 @@
 - ``nasset_cone``: the DistantLight with ``angle > 0``. Uniform cone of half-angle t around
   ``direction`` (toward the light), radiance ``E / (pi sin^2 t)`` (``irradiance`` E at normal
   incidence), sampled uniformly in solid angle (pdf ``1 / (2 pi (1 - cos t))``).
-- ``nasset_dome``: the DomeLight. Constant ``radiance``, or times a lat-long ``bitmap`` looked up
+- ``nasset_dome``: the DomeLight. Constant ``radiance``, or times a lat-long ``bitmap`` (a
+  ``mi.Bitmap``, or ``filename``: an RGB image file, linear values) looked up
   in the dome's local frame with ``u = 0.5 + atan2(d.x, -d.z) / 2pi``, ``v = acos(d.y) / pi`` (row
   0 = +Y), nearest texel; ``to_world`` (Mitsuba's column-vector convention, orthogonal: the polar
   factor of the prim's M3, a mirror kept) maps local to world directions. Mitsuba's ``envmap``
@@ -17,6 +18,7 @@ Sample points lie :data:`FAR` along the direction (shadow rays end there).
 from __future__ import annotations
 
 import math
+import os
 
 import drjit as dr
 import numpy as np
@@ -95,6 +97,15 @@ def register(mi) -> None:
             self.rot = [[float(v) for v in row] for row in m.T]  # row-vector R: world_j = sum_i local_i R[i][j]
             self.le = mi.Color3f(*self.scale.tolist())
             bitmap = props.get("bitmap", None)
+            filename = str(props.get("filename", ""))
+            if bitmap is None and filename:
+                path = str(mi.file_resolver().resolve(filename))
+                if not os.path.isfile(path):
+                    raise error("FILE_NOT_FOUND", "no such dome texture", file=str(path))
+                try:
+                    bitmap = mi.Bitmap(str(path)).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+                except Exception as exc:  # Mitsuba reports unreadable images as RuntimeError
+                    raise error("FILE_UNREADABLE", f"dome texture: {str(exc).splitlines()[0][:200]}", file=str(path)) from None
             self.tex = None
             if bitmap is not None:
                 img = np.asarray(bitmap, np.float64)

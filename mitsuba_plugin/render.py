@@ -21,7 +21,7 @@ import numpy as np
 from nasset_sdk.errors import NassetError, error
 
 from .plugins import INTEGRATOR
-from .scene import load_file, usd_scene
+from .scene import load_file, mitsuba_failure, usd_scene
 from .variant import jit_mitsuba
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
@@ -38,7 +38,7 @@ def load_scene(path: str, width: int | None = None, height: int | None = None, *
         except NassetError:
             raise
         except Exception as exc:  # Mitsuba reports plugin errors as RuntimeError
-            raise error("SCENE_INVALID", f"Mitsuba could not build the scene: {str(exc).splitlines()[0][:300]}", file=str(path)) from None
+            raise mitsuba_failure(exc, "Mitsuba could not build the scene", str(path)) from None
     return load_file(path, mi=mi)
 
 

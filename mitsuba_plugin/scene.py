@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import os
+import re
 import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -99,7 +100,23 @@ def load_file(path: str, *, mi=None, replace: dict | None = None, **params):
     try:
         return mi.load_string(ET.tostring(root, encoding="unicode"), **params)
     except Exception as exc:  # Mitsuba reports XML and plugin errors as RuntimeError
-        raise error("SCENE_INVALID", f"Mitsuba could not load the scene: {str(exc).splitlines()[0][:300]}", file=str(path)) from None
+        raise mitsuba_failure(exc, "Mitsuba could not load the scene", str(path)) from None
+
+
+#: a nasset error raised inside a plugin, as the last line of the traceback Mitsuba's message carries
+_INNER_ERROR = re.compile(r"^\w+(?:\.\w+)*Error: \[([A-Z0-9_]+)\] (.*)$")
+
+
+def mitsuba_failure(exc: Exception, what: str, file: str):
+    """The typed error for an exception of ``mi.load_*``: the nasset error a plugin raised inside it
+    (its code and message), else SCENE_INVALID naming ``file`` with Mitsuba's first line."""
+    from nasset_sdk.errors import CODES
+
+    for line in reversed(str(exc).splitlines()):
+        m = _INNER_ERROR.match(line.strip())
+        if m and m.group(1) in CODES:
+            return error(m.group(1), m.group(2))
+    return error("SCENE_INVALID", f"{what}: {str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__}", file=file)
 
 
 def _replace_shapes(root, replace: dict, scene_file: str) -> None:

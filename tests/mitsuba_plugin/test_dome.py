@@ -116,3 +116,23 @@ def test_dome_conformance_case(tmp_path):
     case's ref_spp; tolerance from its measured noise)."""
     row = _run_case("rna_dome_exr", tmp_path)
     assert row["passed"], row
+
+
+def test_dome_from_xml_file(mi, tmp_path, rng):
+    """An XML ``nasset_dome`` reading its lat-long EXR by filename shows texel (row 0, +Y) times the
+    radiance straight up; a missing file is FILE_NOT_FOUND naming it, through load_file."""
+    img = _image(rng, 8, 16)
+    mi.Bitmap(np.ascontiguousarray(img, np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB).write(str(tmp_path / "sky.exr"))
+    xml = ('<scene version="3.0.0"><emitter type="nasset_dome"><string name="filename" value="{f}"/>'
+           '<rgb name="radiance" value="2, 1, 0.5"/></emitter></scene>')
+    (tmp_path / "s.xml").write_text(xml.format(f="sky.exr"))
+    em = load_file(tmp_path / "s.xml", mi=mi).emitters()[0]
+    si = dr.zeros(mi.SurfaceInteraction3f, 1)
+    si.wi = mi.Vector3f(0, -1, 0)  # looking up
+    up = np.asarray(em.eval(si).numpy()).ravel()
+    row0 = img[0] * np.array([2.0, 1.0, 0.5])
+    assert np.isclose(row0, up, rtol=1e-5).all(axis=1).any(), (up, row0)
+    (tmp_path / "bad.xml").write_text(xml.format(f="nope.exr"))
+    with pytest.raises(NassetError) as exc:
+        load_file(tmp_path / "bad.xml", mi=mi)
+    assert exc.value.code == "FILE_NOT_FOUND" and "nope.exr" in str(exc.value)
