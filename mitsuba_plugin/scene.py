@@ -166,6 +166,7 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     preview.register(mi)
     lights_jit.register(mi)
     desc = read_scene(path)
+    recentre(desc)
     rescale_tiny(desc)
     w, h = desc.camera.resolution(width, height)
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
@@ -212,6 +213,31 @@ def _dome_entry(mi, lt) -> dict:
     if lt.tex is not None:
         ent["bitmap"] = mi.Bitmap(np.ascontiguousarray(lt.tex[..., :3], np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
     return ent
+
+
+def recentre(desc) -> np.ndarray:
+    """Translate a scene description that lies far from the origin (its bounding box's centre farther than
+    the box's extent) so that the box is centred on the origin, in place; returns the translation
+    (zeros: unchanged). Mesh points, instance, light and camera origins move; nothing else changes.
+
+    Mitsuba offsets spawned rays by ``(1 + max |p|) * RayEpsilon`` (about 0.09 at 1000 units): in a
+    scene of unit size far from the origin that loses contact shadows and self-shadowing; the image
+    does not depend on where the scene lies (asset inputs are object-space, x M^-1)."""
+    pts = [np.asarray(m.points, np.float64).reshape(-1, 3) for m in desc.meshes if len(m.points)]
+    pts += [a.to_world[3:, :3] for a in desc.assets] + [lt.to_world[3:, :3] for lt in desc.lights]
+    pts.append(desc.camera.to_world[3:, :3])
+    allp = np.concatenate(pts)
+    lo, hi = allp.min(0), allp.max(0)
+    centre = 0.5 * (lo + hi)
+    if not np.abs(centre).max() > max(float((hi - lo).max()), 1e-30):
+        return np.zeros(3)
+    for m in desc.meshes:
+        m.points = m.points - centre
+    for obj in [*desc.assets, *desc.lights, desc.camera]:
+        mw = np.array(obj.to_world, np.float64)
+        mw[3, :3] -= centre
+        obj.to_world = mw
+    return -centre
 
 
 #: scenes whose coordinates all lie within this distance of the origin are scaled up to unit size

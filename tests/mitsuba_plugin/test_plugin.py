@@ -135,6 +135,28 @@ def test_max_depth_counts_scattering_vertices(tmp_path, max_depth):
     np.testing.assert_allclose(img[2:6, 2:6], rho * e / np.pi, rtol=1e-4)
 
 
+def test_scene_far_from_origin_renders_like_at_the_origin(tmp_path):
+    """A scene whose bounding box is centred on the origin (a constant asset resting on a floor, light
+    from the side), and the same scene under a /World translation of (700, 100, -700): the renderer
+    recentres it, so both render the same image with the same seed (1e-4). Without recentring, Mitsuba's
+    ray offset (1 + max |p|) * RayEpsilon is about 0.09 there and the contact shadow changes."""
+    from pxr import Gf, UsdGeom
+
+    asset = constant_rna_asset(tmp_path / "const.usda", unshadowed=(1.0, 0.5, 0.25), shadowed=(0.1, 0.2, 0.3))
+    images = []
+    for shift in (None, (700.0, 100.0, -700.0)):
+        b = SceneBuilder()
+        if shift is not None:
+            UsdGeom.Xformable(b.stage.GetPrimAtPath("/World")).AddTranslateOp().Set(Gf.Vec3d(*shift))
+        b.camera((0, 1, 2), (0, -0.5, 0))  # with the floor: bounding box [-2, 2] x [-1, 1] x [-2, 2]
+        b.quad("Floor", (0, -1, 0), 4.0, diffuse=(0.5, 0.5, 0.5))
+        b.distant("Sun", (0.8, 0.5, 0.3), 3.0)
+        b.asset("A", asset, np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, -0.5, 0, 1]], np.float64))
+        images.append(render(b.write(tmp_path / f"scene{len(images)}.usda"), 4, width=32, height=32, seed=1))
+    assert images[0].max() > 0.1
+    np.testing.assert_allclose(images[1], images[0], atol=1e-4)
+
+
 def _run_case(name, tmp_path, spp_scale=1):
     from nasset_sdk.conformance import find_suite, load_cases, run_case
 
