@@ -10,6 +10,7 @@ pytest.importorskip("mitsuba")
 
 from nasset_mitsuba_plugin.plugins import register  # noqa: E402
 from nasset_mitsuba_plugin.rna import RnaJit  # noqa: E402
+from nasset_mitsuba_plugin.scene import asset_shape  # noqa: E402
 from nasset_mitsuba_plugin.variant import jit_mitsuba  # noqa: E402
 from nasset_reference_renderer.shaders.rna_fiber import fiber_frame, tessellate  # noqa: E402
 from nasset_sdk.asset import Asset  # noqa: E402
@@ -96,6 +97,37 @@ def test_fiber_without_segments(mi, tmp_path):
     with pytest.raises(NassetError) as exc:
         RnaJit(mi, str(path))
     assert exc.value.code == "GEOMETRY_INVALID" and "degenerate.usdc" in str(exc.value)
+
+
+def test_scene_with_fiber_and_surface_assets(mi, fiber_asset, tmp_path):
+    """A dict scene with a floor, a fiber asset and a surface asset (two different assets, each evaluated
+    on its own lanes): finite, the far floor at rho E cos / pi (5 %), both assets lit, and the fibres
+    casting a shadow (the floor in front of them darker than in the same scene without them)."""
+    surface = tmp_path / "rna.usdc"
+    example_builder("rna", size="tiny", seed=5).write(surface)
+    t = mi.ScalarTransform4f
+    lo, hi = (np.asarray(v, np.float64) for v in Asset.open(fiber_asset).domain)
+    fit = t().translate([-0.7, 0, 0]).scale(float(1.0 / (hi - lo).max())).translate((-0.5 * (lo + hi)).tolist())
+
+    def scene(with_hair: bool):
+        d = {"type": "scene",
+             "sensor": {"type": "perspective", "fov": 45, "to_world": t().look_at(origin=[0, 2.5, 4], target=[0, 0, 0], up=[0, 1, 0]),
+                        "film": {"type": "hdrfilm", "width": 48, "height": 32, "rfilter": {"type": "box"}}},
+             "floor": {"type": "rectangle", "to_world": t().translate([0, -0.6, 0]).rotate([1, 0, 0], -90).scale(4),
+                       "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}},
+             "blob": asset_shape(surface, t().translate([0.9, 0, 0]), mi=mi),
+             "sun": {"type": "directional", "direction": [0, -1, 0.8], "irradiance": {"type": "rgb", "value": 3.0}}}
+        if with_hair:
+            d["hair"] = asset_shape(fiber_asset, fit, mi=mi)
+        integ = mi.load_dict({"type": "nasset_path", "max_depth": 4})
+        return np.asarray(mi.render(mi.load_dict(d), integrator=integ, spp=16, seed=1)).mean(-1)
+
+    lum, bare = scene(True), scene(False)
+    assert lum.shape == (32, 48) and np.isfinite(lum).all()
+    floor = np.median(lum[8:12])  # far floor: cos = 1 / sqrt(1.64)
+    assert floor == pytest.approx(0.5 * 3.0 / np.pi / np.sqrt(1.64), rel=0.05)
+    assert lum[12:20, 10:20].max() > 2 * floor and lum[12:20, 29:40].max() > 2 * floor  # both assets lit
+    assert lum[25:31, 11:19].mean() < 0.95 * bare[25:31, 11:19].mean()  # the fibres' shadow, cast toward the camera
 
 
 @pytest.mark.parametrize("case", ["rna_fiber_dense", pytest.param("rna_fiber_closeup", marks=pytest.mark.slow),
