@@ -28,8 +28,8 @@ INTEGRATOR = "nasset_path"
 BSDF = "nasset"
 FOUR_PI = 4.0 * math.pi
 #: how many surfaces of the ignored instance one ray may pass through before it is cut: only a guard
-#: against rays that make no progress (spec/renderer.md#fibers: no crossing limit; dense hair crosses
-#: hundreds of prism faces)
+#: against rays that make no progress (spec/renderer.md#fibers: no crossing limit; in rna_fiber_dense
+#: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
 
 _ASSETS: dict[tuple[str, str], RnaJit] = {}  # (variant, file) -> asset read once per process
