@@ -32,6 +32,8 @@ MIN_BIN_WIDTH = 1e-3
 MIN_BIN_HEIGHT = 1e-3
 MIN_DERIVATIVE = 1e-3
 _TINY = 1e-300
+#: the float types a spline may compute in (float64: the spec)
+SPLINE_DTYPES = (np.float64, np.float32)
 
 
 def finite64(a) -> np.ndarray:
@@ -66,7 +68,7 @@ class RQSpline:
         self._init_bins(bins(xk), bins(yk), bins(dk), bins(d_raw), d_min)
 
     def _init_bins(self, xb, yb, db, d_raw_b, d_min) -> None:
-        """xb, yb, db or d_raw_b: bin-major [K+1, N] (float64, contiguous)."""
+        """xb, yb, db or d_raw_b: bin-major [K+1, N] (contiguous, all of one float dtype)."""
         self._xb, self._yb, self._db, self._draw_b, self.d_min = xb, yb, db, d_raw_b, float(d_min)
 
     @classmethod
@@ -99,8 +101,13 @@ class RQSpline:
 
     @classmethod
     def from_raw(cls, raw: np.ndarray, *, min_bin_width: float = MIN_BIN_WIDTH, min_bin_height: float = MIN_BIN_HEIGHT,
-                 min_derivative: float = MIN_DERIVATIVE) -> "RQSpline":
-        """Splines from unnormalised parameters raw [N, 3K+1] = [w~ (K), h~ (K), d~ (K+1)]."""
+                 min_derivative: float = MIN_DERIVATIVE, dtype=np.float64) -> "RQSpline":
+        """Splines from unnormalised parameters raw [N, 3K+1] = [w~ (K), h~ (K), d~ (K+1)].
+
+        ``dtype`` float64 is the spec's arithmetic; float32 (:data:`SPLINE_DTYPES`) is for renderers, which
+        must match images within noise, not evaluator vectors bit for bit."""
+        if dtype not in SPLINE_DTYPES:
+            raise UsageError(f"spline dtype must be one of {[d.__name__ for d in SPLINE_DTYPES]}, got {dtype!r}")
         raw = np.asarray(raw)
         if raw.ndim < 2:
             raw = raw.reshape(1, -1)
@@ -110,7 +117,7 @@ class RQSpline:
         k = (p - 1) // 3
         if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
-        rb = np.ascontiguousarray(raw.T, dtype=np.float64)  # [3K+1, N], converted exactly to float64
+        rb = np.ascontiguousarray(raw.T, dtype=dtype)  # [3K+1, N]; float32 -> float64 is exact
         if not np.isfinite(rb).all():
             np.nan_to_num(rb, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
         n = rb.shape[1]
@@ -118,10 +125,10 @@ class RQSpline:
         e = rb[:2 * k].reshape(2, k, n)
         e -= e.max(axis=1, keepdims=True)
         np.exp(e, out=e)
-        m = np.array([min_bin_width, min_bin_height])[:, None, None]
-        e *= (1 - m * k) / np.maximum(e.sum(axis=1, keepdims=True), _TINY)
+        m = np.array([min_bin_width, min_bin_height], dtype)[:, None, None]
+        e *= (1 - m * k) / e.sum(axis=1, keepdims=True)  # >= 1: the largest term is exp(0)
         e += m
-        knots = np.empty((2, k + 1, n))  # x and y knots, each bin-major [K+1, N]
+        knots = np.empty((2, k + 1, n), dtype)  # x and y knots, each bin-major [K+1, N]
         knots[:, 0] = 0.0
         for b in range(k - 1):  # running sums from the left, one bin at a time (np.cumsum over an outer axis is ~7x slower)
             np.add(knots[:, b], e[:, b], out=knots[:, b + 1])
@@ -152,16 +159,17 @@ class RQSpline:
         n = self._xb.shape[1]
         i = k * n + (np.arange(len(k)) if rows is None else rows)  # flat indices of (k, row) in the [K+1, N] arrays
         xk, yk = self._xb.reshape(-1), self._yb.reshape(-1)
-        x0, y0 = xk[i], yk[i]
+        f64 = lambda a: a.astype(np.float64, copy=False)  # noqa: E731 (the bin's arithmetic is float64 whatever the knots)
+        x0, y0 = f64(xk[i]), f64(yk[i])
         i1 = i + n
-        w = xk[i1] - x0
-        h = yk[i1] - y0
+        w = f64(xk[i1]) - x0
+        h = f64(yk[i1]) - y0
         if self._db is None:
             dr = self._draw_b.reshape(-1)
-            d0, d1 = self.d_min + _softplus(dr[i]), self.d_min + _softplus(dr[i1])
+            d0, d1 = self.d_min + _softplus(f64(dr[i])), self.d_min + _softplus(f64(dr[i1]))
         else:
             dk = self._db.reshape(-1)
-            d0, d1 = dk[i], dk[i1]
+            d0, d1 = f64(dk[i]), f64(dk[i1])
         return x0, y0, np.maximum(w, _TINY), np.maximum(h, _TINY), d0, d1
 
     def forward(self, z: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -358,15 +366,18 @@ class BoxFlow:
     at u_i times solid angle at w_i is
 
         pdf(u_i, w_i) = prod_j exp(log|d rqs_j^-1 / dt_j|) / S_PER_T * |n_u . u| / |u|^3.
+
+    ``spline_dtype``: float type of the spline knots (:meth:`RQSpline.from_raw`); float64 is the spec's
+    arithmetic, float32 a renderer's option (spec/kinds/8dna.md#evaluation-cost).
     """
 
     def __init__(self, box: BoxParam, conditioner, *, context=None, min_bin_width=MIN_BIN_WIDTH,
-                 min_bin_height=MIN_BIN_HEIGHT, min_derivative=MIN_DERIVATIVE) -> None:
+                 min_bin_height=MIN_BIN_HEIGHT, min_derivative=MIN_DERIVATIVE, spline_dtype=np.float64) -> None:
         self.box = box
         self.conditioner = conditioner
         self.context = context if context is not None else (lambda x, wo: (x, wo))
         self.minimums = dict(min_bin_width=float(min_bin_width), min_bin_height=float(min_bin_height),
-                             min_derivative=float(min_derivative))
+                             min_derivative=float(min_derivative), dtype=spline_dtype)
 
     def _raw(self, j: int, ctx, s_prev, n: int) -> np.ndarray:
         raw = np.asarray(self.conditioner(j, ctx, s_prev))  # float64 in the spline (RQSpline.from_raw)
