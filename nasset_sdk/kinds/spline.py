@@ -340,20 +340,42 @@ def take_rows(ctx, rows):
 @dataclass
 class FlowSample:
     """One flow sample per row (:meth:`BoxFlow.sample_state`) and what densities at its u_i reuse:
-    conditioners 1-3 do not depend on w_i, so p^k(u_i, w_i) for any new w_i needs only conditioner 4."""
+    conditioners 1-3 do not depend on w_i, so p^k(u_i, w_i) for any new w_i needs only conditioner 4.
+    The per-channel position densities p^k(u_i) are built on demand, only for the rows asked for
+    (:meth:`log_position_rgb`), and kept."""
 
     ui: np.ndarray  # [N, 3] object-space point on the box
     wi: np.ndarray  # [N, 3] unit direction
     pdf: np.ndarray  # [N] density of the sampled channel, per box area and steradian
     ctx: object  # the flow context of the rows
     s: np.ndarray  # [N, 4] box parameters of the sample
-    log_position: np.ndarray  # [N, 3] per channel: log density of (t1, t2) (steps 1-2)
     jac: np.ndarray  # [N] |n_u . u| / |u|^3
+    raw12: tuple[np.ndarray, np.ndarray]  # [N, 3 (3K+1)] conditioner-1 and -2 outputs (all channels)
+    t12: np.ndarray  # [N, 2] the sample's t1, t2
     raw3: np.ndarray  # [N, 3 (3K+1)] conditioner-3 output: it depends on s1, s2 only
+    flow: "BoxFlow"
+    _log_pos: np.ndarray | None = None  # [N, 3] log densities of (t1, t2) per channel, NaN where not built yet
 
-    def pdf_position_rgb(self) -> np.ndarray:
-        """[N, 3]: marginal density of u_i per unit box area, per channel (:meth:`BoxFlow.pdf_position`)."""
-        return np.minimum(np.exp(np.minimum(self.log_position, 700.0)) / (2.0 * 2.0 * np.pi) * self.jac[:, None], PDF_MAX)
+    def log_position_rgb(self, rows=None) -> np.ndarray:
+        """[M, 3] per channel: log density of (t1, t2) (steps 1-2) of rows [M] (default all), built for the
+        rows not asked for before."""
+        n = len(self.s)
+        rows = np.arange(n) if rows is None else np.asarray(rows, np.int64).reshape(-1)
+        if self._log_pos is None:
+            self._log_pos = np.full((n, 3), np.nan)
+        todo = np.unique(rows[np.isnan(self._log_pos[rows, 0])])
+        if len(todo):
+            lp = np.zeros((len(todo), 3))
+            for raw, t in zip(self.raw12, self.t12.T, strict=True):
+                lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
+            self._log_pos[todo] = lp
+        return self._log_pos[rows]
+
+    def pdf_position_rgb(self, rows=None) -> np.ndarray:
+        """[M, 3]: marginal density of u_i per unit box area, per channel (:meth:`BoxFlow.pdf_position`), of rows
+        [M] (default all)."""
+        jac = self.jac if rows is None else self.jac[np.asarray(rows, np.int64).reshape(-1)]
+        return np.minimum(np.exp(np.minimum(self.log_position_rgb(rows), 700.0)) / (2.0 * 2.0 * np.pi) * jac[:, None], PDF_MAX)
 
 
 class BoxFlow:
@@ -456,23 +478,19 @@ class BoxFlow:
         ch = _channels(channel, n)
         z = self._latents(n, 4, rng, u)
         ctx = self.context(x, wo) if context is None else context
-        s, logp, log_pos = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 3))
-        own = 3 * np.arange(n) + ch  # the sampled channel's rows among all-channel splines
-        raw3 = None
+        s, logp, t12, raws = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 2)), []
         for j in (1, 2, 3, 4):
             raw = self._raw(j, ctx, s[:, : j - 1], n)
-            if j <= 2:  # all channels: the position densities p^k(u_i)
-                spl = self._splines_rgb(raw)
-                tj, ld = spl.forward(z[:, j - 1], own)
-                log_pos += self._log_inverse_rgb(spl, tj)
-            else:  # the sampled channel; pdf_rgb_at builds the other channels' splines of the rows it needs
-                tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
-                raw3 = raw if j == 3 else raw3
+            # the sampled channel only; the other channels' splines are built for the rows whose densities are asked for
+            tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
+            if j <= 2:
+                t12[:, j - 1] = tj
+            raws.append(raw)
             logp -= ld
             s[:, j - 1] = self.box.s_from_t_dim(j, tj)
         ui, wi, jac = self.box.to_rays(s)
         pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
-        return FlowSample(ui, wi, pdf, ctx, s, log_pos, jac, raw3)
+        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self)
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
@@ -489,7 +507,7 @@ class BoxFlow:
         s_prev = np.concatenate([fs.s[rows, :2], z3[:, None]], axis=1)
         spl4 = self._splines_rgb(self._raw(4, take_rows(fs.ctx, rows), s_prev, len(rows)))
         spl3 = self._splines_rgb(fs.raw3[rows])
-        logp = fs.log_position[rows] + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
+        logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
