@@ -117,7 +117,7 @@ class RQSpline:
         k = (p - 1) // 3
         if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
-        rb = np.ascontiguousarray(raw.T, dtype=dtype)  # [3K+1, N]; float32 -> float64 is exact
+        rb = np.array(raw.T, dtype=dtype, order="C")  # [3K+1, N], always a copy (worked on in place); float32 -> float64 is exact
         if not np.isfinite(rb).all():
             np.nan_to_num(rb, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
         n = rb.shape[1]

@@ -181,3 +181,14 @@ def test_float32_knots(rng):
     assert np.median(np.abs(ld - s64.forward(z)[1])) < 1e-5
     with pytest.raises(UsageError, match="dtype"):
         RQSpline.from_raw(raw, dtype=np.float16)
+
+
+def test_from_raw_leaves_its_input_alone(rng):
+    """The knots are built in place in a bin-major copy: never in the caller's array, whatever its layout (one row,
+    Fortran order, float32)."""
+    for raw in (rng.normal(0, 2, (1, 25)), np.asfortranarray(rng.normal(0, 2, (7, 25))), rng.normal(0, 2, (5, 25)).astype(np.float32)):
+        keep = raw.copy()
+        a = RQSpline.from_raw(raw)
+        b = RQSpline.from_raw(raw)
+        np.testing.assert_array_equal(raw, keep)
+        np.testing.assert_array_equal(a.xk, b.xk)
