@@ -285,29 +285,9 @@ def cube_extended_table(grid: np.ndarray) -> np.ndarray:
     """[6, Q+2, Q+2, C] float32: entry (f, j + 1, i + 1) is the value the SDK's cube-map lookup reads for tap
     (i, j) of face f, i, j in [-1, Q]: the texel itself inside the face, the re-projected texel across an edge,
     and the mean of the three adjacent taps beyond a corner (spec/kinds/encodings.md#cubemap)."""
-    from .kinds.encodings import cube_face_dir, cube_face_uv
+    from .kinds.encodings import cube_table
 
-    g = np.asarray(grid, np.float32)
-    q = g.shape[1]
-    e = q + 2
-    ext = np.zeros((6, e, e, g.shape[-1]), np.float64)
-    ext[:, 1:-1, 1:-1] = g
-    idx = np.arange(-1, q + 1)
-    jj, ii = np.meshgrid(idx, idx, indexing="ij")
-    edge = ((ii < 0) | (ii >= q)) ^ ((jj < 0) | (jj >= q))
-    for f in range(6):
-        i, j = ii[edge], jj[edge]
-        sc = 2.0 * (i + 0.5) / q - 1.0
-        tc = 2.0 * (j + 0.5) / q - 1.0
-        f2, s2, t2 = cube_face_uv(cube_face_dir(np.full(len(i), f), sc, tc))
-        i2 = np.minimum(np.floor(s2 * q).astype(np.int64), q - 1)
-        j2 = np.minimum(np.floor(t2 * q).astype(np.int64), q - 1)
-        ext[f, j + 1, i + 1] = g[f2, j2, i2]
-    for ci, cj in ((0, 0), (e - 1, 0), (0, e - 1), (e - 1, e - 1)):
-        di = 1 if ci == 0 else -1
-        dj = 1 if cj == 0 else -1
-        ext[:, cj, ci] = (ext[:, cj, ci + di] + ext[:, cj + dj, ci] + ext[:, cj + dj, ci + di]) / 3.0
-    return ext.astype(np.float32)
+    return cube_table(grid).astype(np.float32)
 
 
 def _opset(asset, component: str, network: str) -> int:

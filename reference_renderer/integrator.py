@@ -20,7 +20,7 @@ from .film import Film, check_image_size, pixel_offsets
 from .lights import MeshLight
 from .plan import RenderPlan, make_plan
 from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
-from .shaders import NeuralShading
+from .shaders import NeuralShading, shader_class, variant_of
 from .shaders.common import max3, unique
 from .shadow import aim_shadow
 
@@ -448,9 +448,11 @@ def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings) -> None:
         if data.evaluator is not None:
             continue
         loaded, _ = plan.components[str(data.path)]
+        options = getattr(shader_class(data.asset.kind, variant_of(data)), "evaluator_options", {})
         try:
             data.asset.load(loaded)
-            data.evaluator = data.asset.evaluator(intra_threads=decoder_threads(settings.threads), batch=max(1024, settings.batch))
+            data.evaluator = data.asset.evaluator(intra_threads=decoder_threads(settings.threads), batch=max(1024, settings.batch),
+                                                  **options)
         except NassetError as exc:
             raise SceneError("SCENE_INVALID", f"referenced asset {data.path} is invalid: {exc}", file=scene.file,
                              prim=data.prims[0] if data.prims else None) from None

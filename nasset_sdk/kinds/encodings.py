@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import UsageError
+
 
 def to_unit_box(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Map object-space points [N,3] to the encoding box: 2 (x - lo) / (hi - lo) - 1, in [-1, 1]^3 inside."""
@@ -279,7 +281,33 @@ def cube_face_dir(face: np.ndarray, sc: np.ndarray, tc: np.ndarray) -> np.ndarra
     return d
 
 
-def cubemap(grid: np.ndarray, d: np.ndarray) -> np.ndarray:
+def cube_table(grid: np.ndarray) -> np.ndarray:
+    """[6, R+2, R+2, C] float64: entry (f, j + 1, i + 1) is the value :func:`cubemap` reads for tap (i, j) of
+    face f, i, j in [-1, R]: the texel inside the face, the re-projected texel across an edge, and beyond a
+    cube corner the mean of the lookup's other three taps (summed in tap order, as below). Depends on the
+    grid only: compute it once per grid and pass it to :func:`cubemap` (``table``)."""
+    g = np.asarray(grid, np.float32)
+    r = g.shape[1]
+    e = r + 2
+    ext = np.zeros((6, e, e, g.shape[-1]), np.float64)
+    ext[:, 1:-1, 1:-1] = g
+    idx = np.arange(-1, r + 1)
+    jj, ii = np.meshgrid(idx, idx, indexing="ij")
+    edge = ((ii < 0) | (ii >= r)) ^ ((jj < 0) | (jj >= r))  # exactly one index outside
+    i, j = ii[edge], jj[edge]
+    for f in range(6):  # re-projected taps: the centre (sc, tc) on the extended face plane, looked up by direction
+        f2, s2, t2 = cube_face_uv(cube_face_dir(np.full(len(i), f), 2.0 * (i + 0.5) / r - 1.0, 2.0 * (j + 0.5) / r - 1.0))
+        ext[f, j + 1, i + 1] = g[f2, np.minimum(np.floor(t2 * r).astype(np.int64), r - 1),
+                                 np.minimum(np.floor(s2 * r).astype(np.int64), r - 1)]
+    for k in range(4):  # the corner that is tap k of its lookups: the mean of taps m != k, in the order of m
+        ci, cj = (r if k & 1 else -1), (r if k >> 1 else -1)
+        i0, j0 = ci - (k & 1), cj - (k >> 1)
+        o = [ext[:, j0 + (m >> 1) + 1, i0 + (m & 1) + 1] for m in range(4) if m != k]
+        ext[:, cj + 1, ci + 1] = (o[0] + o[1] + o[2]) / 3.0
+    return ext
+
+
+def cubemap(grid: np.ndarray, d: np.ndarray, *, table: np.ndarray | None = None) -> np.ndarray:
     """Seam-safe bilinear lookup in a cube-map feature grid [6, R, R, C] (face, row t, column s, channel).
 
     Texel (face, j, i) has its centre at s = (i + 1/2) / R, t = (j + 1/2) / R. Within a face:
@@ -288,44 +316,26 @@ def cubemap(grid: np.ndarray, d: np.ndarray) -> np.ndarray:
     on the extended plane of its face gives a 3D direction, which is looked up with :func:`cube_face_uv`
     and read at the texel containing it (min(floor(s R), R - 1), min(floor(t R), R - 1)). A tap with
     both i and j outside (beyond a cube corner) takes the mean of the other three taps. This makes the
-    lookup continuous across face edges and corners. Returns [N, C] float32.
+    lookup continuous across face edges and corners. The taps come from :func:`cube_table` (``table``,
+    built here if not given). Returns [N, C] float32.
     """
     g = np.asarray(grid, np.float32)
     r = g.shape[1]
+    if table is None:
+        table = cube_table(g)
+    e = r + 2
+    if table.shape != (6, e, e, g.shape[-1]):
+        raise UsageError(f"cube table {table.shape} does not belong to a cube map {g.shape}")
     face, s, t = cube_face_uv(d)
     fs = s * r - 0.5
     ft = t * r - 0.5
-    i0 = np.floor(fs).astype(np.int64)
+    i0 = np.floor(fs).astype(np.int64)  # in [-1, R-1]
     j0 = np.floor(ft).astype(np.int64)
     a_s = (fs - i0)[:, None]
     a_t = (ft - j0)[:, None]
-    taps = []
-    for di, dj in ((0, 0), (1, 0), (0, 1), (1, 1)):
-        i = i0 + di
-        j = j0 + dj
-        f = face.copy()
-        out_i = (i < 0) | (i >= r)
-        out_j = (j < 0) | (j >= r)
-        out_of = out_i | out_j
-        if out_of.any():
-            sc = 2.0 * (i[out_of] + 0.5) / r - 1.0
-            tc = 2.0 * (j[out_of] + 0.5) / r - 1.0
-            f2, s2, t2 = cube_face_uv(cube_face_dir(face[out_of], sc, tc))
-            f[out_of] = f2
-            i = i.copy()
-            j = j.copy()
-            i[out_of] = np.minimum(np.floor(s2 * r).astype(np.int64), r - 1)
-            j[out_of] = np.minimum(np.floor(t2 * r).astype(np.int64), r - 1)
-        taps.append(g[f, j, i].astype(np.float64))
-    # a tap beyond a cube corner (both indices outside) has no texel: use the mean of the other three
-    # taps, which are then the three texels meeting at that corner
-    for k in range(4):
-        i = i0 + (k & 1)
-        j = j0 + (k >> 1)
-        corner = ((i < 0) | (i >= r)) & ((j < 0) | (j >= r))
-        if corner.any():
-            others = [taps[m][corner] for m in range(4) if m != k]
-            taps[k][corner] = (others[0] + others[1] + others[2]) / 3.0
+    rows = table.reshape(-1, table.shape[-1])
+    row = (face * e + j0 + 1) * e + i0 + 1  # tap (i0, j0) in the [6 (R+2)^2, C] table
+    taps = [rows[row + off] for off in (0, 1, e, e + 1)]
     out = (taps[0] * (1 - a_s) * (1 - a_t) + taps[1] * a_s * (1 - a_t)
            + taps[2] * (1 - a_s) * a_t + taps[3] * a_s * a_t)
     return out.astype(np.float32)

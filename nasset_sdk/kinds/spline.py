@@ -32,6 +32,8 @@ MIN_BIN_WIDTH = 1e-3
 MIN_BIN_HEIGHT = 1e-3
 MIN_DERIVATIVE = 1e-3
 _TINY = 1e-300
+#: the float types a spline may compute in (float64: the spec)
+SPLINE_DTYPES = (np.float64, np.float32)
 
 
 def finite64(a) -> np.ndarray:
@@ -52,45 +54,86 @@ class RQSpline:
 
     xk [N, K+1] input knots (xk[:, 0] = 0, xk[:, K] = 1), yk [N, K+1] output knots, dk [N, K+1]
     derivatives at the knots (> 0). :meth:`from_raw` keeps the derivatives unnormalised (``d_raw``,
-    ``d_min``) and applies softplus only to the two knots of each evaluated bin."""
+    ``d_min``) and applies softplus only to the two knots of each evaluated bin.
+
+    Stored bin-major (knot k of all rows contiguous, ``[K+1, N]``): every step over the bins (softmax,
+    prefix sums, bin search) is then one pass over contiguous rows of N values, not a reduction over
+    N short rows; ``xk``, ``yk``, ``dk`` are transposed views."""
 
     def __init__(self, xk: np.ndarray, yk: np.ndarray, dk: np.ndarray | None = None, *, d_raw: np.ndarray | None = None,
                  d_min: float = MIN_DERIVATIVE) -> None:
         if (dk is None) == (d_raw is None):
             raise UsageError("give the knot derivatives dk or their unnormalised values d_raw, not both")
-        self.xk, self.yk, self._dk, self.d_raw, self.d_min = xk, yk, dk, d_raw, float(d_min)
+        bins = lambda a: None if a is None else np.ascontiguousarray(np.asarray(a, np.float64).T)  # noqa: E731
+        self._init_bins(bins(xk), bins(yk), bins(dk), bins(d_raw), d_min)
+
+    def _init_bins(self, xb, yb, db, d_raw_b, d_min) -> None:
+        """xb, yb, db or d_raw_b: bin-major [K+1, N] (contiguous, all of one float dtype)."""
+        self._xb, self._yb, self._db, self._draw_b, self.d_min = xb, yb, db, d_raw_b, float(d_min)
+
+    @classmethod
+    def _from_bins(cls, xb, yb, *, d_raw_b, d_min) -> "RQSpline":
+        spl = cls.__new__(cls)
+        spl._init_bins(xb, yb, None, d_raw_b, d_min)
+        return spl
+
+    @property
+    def xk(self) -> np.ndarray:
+        """[N, K+1] input knots."""
+        return self._xb.T
+
+    @property
+    def yk(self) -> np.ndarray:
+        """[N, K+1] output knots."""
+        return self._yb.T
+
+    @property
+    def d_raw(self) -> np.ndarray | None:
+        """[N, K+1] unnormalised derivatives (None if the spline was given its derivatives)."""
+        return None if self._draw_b is None else self._draw_b.T
 
     @property
     def dk(self) -> np.ndarray:
         """[N, K+1] derivatives at the knots."""
-        if self._dk is None:
-            self._dk = self.d_min + _softplus(self.d_raw)
-        return self._dk
+        if self._db is None:
+            self._db = self.d_min + _softplus(self._draw_b)
+        return self._db.T
 
     @classmethod
     def from_raw(cls, raw: np.ndarray, *, min_bin_width: float = MIN_BIN_WIDTH, min_bin_height: float = MIN_BIN_HEIGHT,
-                 min_derivative: float = MIN_DERIVATIVE) -> "RQSpline":
-        """Splines from unnormalised parameters raw [N, 3K+1] = [w~ (K), h~ (K), d~ (K+1)]."""
-        raw = np.atleast_2d(np.asarray(raw, np.float64))
+                 min_derivative: float = MIN_DERIVATIVE, dtype=np.float64) -> "RQSpline":
+        """Splines from unnormalised parameters raw [N, 3K+1] = [w~ (K), h~ (K), d~ (K+1)].
+
+        ``dtype`` float64 is the spec's arithmetic; float32 (:data:`SPLINE_DTYPES`) is for renderers, which
+        must match images within noise, not evaluator vectors bit for bit."""
+        if dtype not in SPLINE_DTYPES:
+            raise UsageError(f"spline dtype must be one of {[d.__name__ for d in SPLINE_DTYPES]}, got {dtype!r}")
+        raw = np.asarray(raw)
+        if raw.ndim < 2:
+            raw = raw.reshape(1, -1)
         p = raw.shape[1]
         if (p - 1) % 3 or p < 4:
             raise UsageError(f"spline parameters need 3K+1 columns (K >= 1), got {p}")
         k = (p - 1) // 3
         if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
-        raw = finite64(raw)
-        # widths and heights in one pass: [N, 2, K] softmax along the bins, then the knots (in place)
-        e = np.ascontiguousarray(raw[:, :2 * k]).reshape(len(raw), 2, k)  # contiguous: reductions over the bins 2-5x faster
-        e -= e.max(axis=-1, keepdims=True)
+        rb = np.array(raw.T, dtype=dtype, order="C")  # [3K+1, N], always a copy (worked on in place); float32 -> float64 is exact
+        if not np.isfinite(rb).all():
+            np.nan_to_num(rb, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
+        n = rb.shape[1]
+        # widths and heights together: e [2, K, N]; the softmax over the bins, then the knots
+        e = rb[:2 * k].reshape(2, k, n)
+        e -= e.max(axis=1, keepdims=True)
         np.exp(e, out=e)
-        m = np.array([[min_bin_width], [min_bin_height]])
-        e *= (1 - m * k) / np.maximum(e.sum(axis=-1, keepdims=True), _TINY)
+        m = np.array([min_bin_width, min_bin_height], dtype)[:, None, None]
+        e *= (1 - m * k) / e.sum(axis=1, keepdims=True)  # >= 1: the largest term is exp(0)
         e += m
-        knots = np.empty((2, len(raw), k + 1))  # x and y knots, each contiguous [N, K+1] (flat gathers)
-        knots[:, :, 0] = 0.0
-        np.cumsum(e, axis=-1, out=knots.transpose(1, 0, 2)[:, :, 1:])
-        knots[:, :, -1] = 1.0
-        return cls(knots[0], knots[1], d_raw=np.ascontiguousarray(raw[:, 2 * k:]), d_min=min_derivative)
+        knots = np.empty((2, k + 1, n), dtype)  # x and y knots, each bin-major [K+1, N]
+        knots[:, 0] = 0.0
+        for b in range(k - 1):  # running sums from the left, one bin at a time (np.cumsum over an outer axis is ~7x slower)
+            np.add(knots[:, b], e[:, b], out=knots[:, b + 1])
+        knots[:, k] = 1.0
+        return cls._from_bins(knots[0], knots[1], d_raw_b=rb[2 * k:], d_min=min_derivative)
 
     @classmethod
     def from_raw_rgb(cls, raw: np.ndarray, **minimums) -> "RQSpline":
@@ -101,37 +144,39 @@ class RQSpline:
 
     @property
     def bins(self) -> int:
-        return self.xk.shape[1] - 1
+        return self._xb.shape[0] - 1
 
-    def _bin(self, knots: np.ndarray, v: np.ndarray) -> np.ndarray:
-        # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}, one knot column at a time
-        # (a sum over an [N, K-1] boolean array's short rows is ~2x slower)
+    @staticmethod
+    def _bin(knots: np.ndarray, v: np.ndarray) -> np.ndarray:
+        # comparison-sum search over interior knots: k = #{x_l <= v, l = 1..K-1}, one knot row at a time
         k = np.zeros(len(v), np.int64)
-        for col in range(1, knots.shape[1] - 1):
-            k += v >= knots[:, col]
+        for col in range(1, knots.shape[0] - 1):
+            k += v >= knots[col]
         return k
 
     def _gather(self, k: np.ndarray, rows: np.ndarray | None = None):
         """Bin k's (x_k, y_k, w_k, h_k, d_k, d_{k+1}) of each row (of rows [M] of the batch if given)."""
-        r = np.arange(len(k)) if rows is None else rows
-        i = r * self.xk.shape[1] + k  # flat indices of (row, k) in the [N, K+1] knot arrays
-        xk, yk = self.xk.reshape(-1), self.yk.reshape(-1)
-        x0, y0 = xk[i], yk[i]
-        w = xk[i + 1] - x0
-        h = yk[i + 1] - y0
-        if self._dk is None:
-            dr = self.d_raw.reshape(-1)
-            d0, d1 = self.d_min + _softplus(dr[i]), self.d_min + _softplus(dr[i + 1])
+        n = self._xb.shape[1]
+        i = k * n + (np.arange(len(k)) if rows is None else rows)  # flat indices of (k, row) in the [K+1, N] arrays
+        xk, yk = self._xb.reshape(-1), self._yb.reshape(-1)
+        f64 = lambda a: a.astype(np.float64, copy=False)  # noqa: E731 (the bin's arithmetic is float64 whatever the knots)
+        x0, y0 = f64(xk[i]), f64(yk[i])
+        i1 = i + n
+        w = f64(xk[i1]) - x0
+        h = f64(yk[i1]) - y0
+        if self._db is None:
+            dr = self._draw_b.reshape(-1)
+            d0, d1 = self.d_min + _softplus(f64(dr[i])), self.d_min + _softplus(f64(dr[i1]))
         else:
-            dk = self._dk.reshape(-1)
-            d0, d1 = dk[i], dk[i + 1]
+            dk = self._db.reshape(-1)
+            d0, d1 = f64(dk[i]), f64(dk[i1])
         return x0, y0, np.maximum(w, _TINY), np.maximum(h, _TINY), d0, d1
 
     def forward(self, z: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0); with ``rows`` [M], z [M]
         goes through the splines of those rows."""
         z = np.clip(np.nan_to_num(np.asarray(z, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
-        k = self._bin(self.xk if rows is None else self.xk[rows], z)
+        k = self._bin(self._xb if rows is None else self._xb[:, rows], z)
         x0, y0, w, h, d0, d1 = self._gather(k, rows)
         s = h / w
         xi = np.clip((z - x0) / w, 0.0, 1.0)
@@ -145,7 +190,7 @@ class RQSpline:
     def inverse(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """z = rqs^-1(y) and log|dz/dy| for y [N] (clamped to [0, 1], NaN -> 0)."""
         y = np.clip(np.nan_to_num(np.asarray(y, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
-        k = self._bin(self.yk, y)
+        k = self._bin(self._yb, y)
         x0, y0, w, h, d0, d1 = self._gather(k)
         s = h / w
         dy = y - y0
@@ -295,20 +340,42 @@ def take_rows(ctx, rows):
 @dataclass
 class FlowSample:
     """One flow sample per row (:meth:`BoxFlow.sample_state`) and what densities at its u_i reuse:
-    conditioners 1-3 do not depend on w_i, so p^k(u_i, w_i) for any new w_i needs only conditioner 4."""
+    conditioners 1-3 do not depend on w_i, so p^k(u_i, w_i) for any new w_i needs only conditioner 4.
+    The per-channel position densities p^k(u_i) are built on demand, only for the rows asked for
+    (:meth:`log_position_rgb`), and kept."""
 
     ui: np.ndarray  # [N, 3] object-space point on the box
     wi: np.ndarray  # [N, 3] unit direction
     pdf: np.ndarray  # [N] density of the sampled channel, per box area and steradian
     ctx: object  # the flow context of the rows
     s: np.ndarray  # [N, 4] box parameters of the sample
-    log_position: np.ndarray  # [N, 3] per channel: log density of (t1, t2) (steps 1-2)
     jac: np.ndarray  # [N] |n_u . u| / |u|^3
+    raw12: tuple[np.ndarray, np.ndarray]  # [N, 3 (3K+1)] conditioner-1 and -2 outputs (all channels)
+    t12: np.ndarray  # [N, 2] the sample's t1, t2
     raw3: np.ndarray  # [N, 3 (3K+1)] conditioner-3 output: it depends on s1, s2 only
+    flow: "BoxFlow"
+    _log_pos: np.ndarray | None = None  # [N, 3] log densities of (t1, t2) per channel, NaN where not built yet
 
-    def pdf_position_rgb(self) -> np.ndarray:
-        """[N, 3]: marginal density of u_i per unit box area, per channel (:meth:`BoxFlow.pdf_position`)."""
-        return np.minimum(np.exp(np.minimum(self.log_position, 700.0)) / (2.0 * 2.0 * np.pi) * self.jac[:, None], PDF_MAX)
+    def log_position_rgb(self, rows=None) -> np.ndarray:
+        """[M, 3] per channel: log density of (t1, t2) (steps 1-2) of rows [M] (default all), built for the
+        rows not asked for before."""
+        n = len(self.s)
+        rows = np.arange(n) if rows is None else np.asarray(rows, np.int64).reshape(-1)
+        if self._log_pos is None:
+            self._log_pos = np.full((n, 3), np.nan)
+        todo = np.unique(rows[np.isnan(self._log_pos[rows, 0])])
+        if len(todo):
+            lp = np.zeros((len(todo), 3))
+            for raw, t in zip(self.raw12, self.t12.T, strict=True):
+                lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
+            self._log_pos[todo] = lp
+        return self._log_pos[rows]
+
+    def pdf_position_rgb(self, rows=None) -> np.ndarray:
+        """[M, 3]: marginal density of u_i per unit box area, per channel (:meth:`BoxFlow.pdf_position`), of rows
+        [M] (default all)."""
+        jac = self.jac if rows is None else self.jac[np.asarray(rows, np.int64).reshape(-1)]
+        return np.minimum(np.exp(np.minimum(self.log_position_rgb(rows), 700.0)) / (2.0 * 2.0 * np.pi) * jac[:, None], PDF_MAX)
 
 
 class BoxFlow:
@@ -321,15 +388,18 @@ class BoxFlow:
     at u_i times solid angle at w_i is
 
         pdf(u_i, w_i) = prod_j exp(log|d rqs_j^-1 / dt_j|) / S_PER_T * |n_u . u| / |u|^3.
+
+    ``spline_dtype``: float type of the spline knots (:meth:`RQSpline.from_raw`); float64 is the spec's
+    arithmetic, float32 a renderer's option (spec/kinds/8dna.md#evaluation-cost).
     """
 
     def __init__(self, box: BoxParam, conditioner, *, context=None, min_bin_width=MIN_BIN_WIDTH,
-                 min_bin_height=MIN_BIN_HEIGHT, min_derivative=MIN_DERIVATIVE) -> None:
+                 min_bin_height=MIN_BIN_HEIGHT, min_derivative=MIN_DERIVATIVE, spline_dtype=np.float64) -> None:
         self.box = box
         self.conditioner = conditioner
         self.context = context if context is not None else (lambda x, wo: (x, wo))
         self.minimums = dict(min_bin_width=float(min_bin_width), min_bin_height=float(min_bin_height),
-                             min_derivative=float(min_derivative))
+                             min_derivative=float(min_derivative), dtype=spline_dtype)
 
     def _raw(self, j: int, ctx, s_prev, n: int) -> np.ndarray:
         raw = np.asarray(self.conditioner(j, ctx, s_prev))  # float64 in the spline (RQSpline.from_raw)
@@ -408,23 +478,19 @@ class BoxFlow:
         ch = _channels(channel, n)
         z = self._latents(n, 4, rng, u)
         ctx = self.context(x, wo) if context is None else context
-        s, logp, log_pos = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 3))
-        own = 3 * np.arange(n) + ch  # the sampled channel's rows among all-channel splines
-        raw3 = None
+        s, logp, t12, raws = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 2)), []
         for j in (1, 2, 3, 4):
             raw = self._raw(j, ctx, s[:, : j - 1], n)
-            if j <= 2:  # all channels: the position densities p^k(u_i)
-                spl = self._splines_rgb(raw)
-                tj, ld = spl.forward(z[:, j - 1], own)
-                log_pos += self._log_inverse_rgb(spl, tj)
-            else:  # the sampled channel; pdf_rgb_at builds the other channels' splines of the rows it needs
-                tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
-                raw3 = raw if j == 3 else raw3
+            # the sampled channel only; the other channels' splines are built for the rows whose densities are asked for
+            tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
+            if j <= 2:
+                t12[:, j - 1] = tj
+            raws.append(raw)
             logp -= ld
             s[:, j - 1] = self.box.s_from_t_dim(j, tj)
         ui, wi, jac = self.box.to_rays(s)
         pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
-        return FlowSample(ui, wi, pdf, ctx, s, log_pos, jac, raw3)
+        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self)
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
@@ -441,7 +507,7 @@ class BoxFlow:
         s_prev = np.concatenate([fs.s[rows, :2], z3[:, None]], axis=1)
         spl4 = self._splines_rgb(self._raw(4, take_rows(fs.ctx, rows), s_prev, len(rows)))
         spl3 = self._splines_rgb(fs.raw3[rows])
-        logp = fs.log_position[rows] + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
+        logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:

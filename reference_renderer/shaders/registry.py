@@ -9,7 +9,8 @@ instances of one asset file::
 the vertex adds its light-sampled terms to); ``x``, ``d``: world hit point and ray direction; ``beta``:
 path throughput; ``prim``, ``bu``, ``bv``, ``inst``: hit triangle, barycentrics and instance; ``asset``:
 the asset file's index in the scene and ``mode`` the plan's per-asset settings (spec/renderer.md).
-Shaders use the integrator's public helpers only (``trace``, ``occluded``, ``to_object``).
+Shaders use the integrator's public helpers only (``trace``, ``occluded``, ``to_object``). A shader class
+may set ``evaluator_options`` (a dict): keyword arguments of its assets' evaluators (``Asset.evaluator``).
 """
 
 from __future__ import annotations

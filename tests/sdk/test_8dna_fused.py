@@ -97,7 +97,8 @@ def test_sample_state_densities_match_per_dimension(small, rng, split):
     n = 40
     x, wo = _queries(ev, rng, n)
     ch = rng.integers(0, 3, n)
-    fs = ev.sample_state(x, wo, ch, u=rng.random((n, 4)))
+    u = rng.random((n, 4))
+    fs = ev.sample_state(x, wo, ch, u=u)
     # sampled channel's joint density, per-channel position densities
     for c in range(3):
         mine = ch == c
@@ -118,6 +119,12 @@ def test_sample_state_densities_match_per_dimension(small, rng, split):
         np.testing.assert_allclose(np.log(got[:, c]), lp + np.log(jac / (16 * np.pi ** 2)), atol=LOG_ATOL, rtol=0)
     # the general entry points agree with the reused ones
     np.testing.assert_allclose(np.log(ev.pdf_rgb(x[rows], wo[rows], fs.ui[rows], wi)), np.log(got), atol=LOG_ATOL, rtol=0)
+    # position densities built on demand, for the asked rows only, equal those built for every row
+    lazy = ev.sample_state(x, wo, ch, u=u)
+    np.testing.assert_array_equal(ev.pdf_rgb_at(lazy, rows, wi), got)
+    assert np.isnan(lazy._log_pos[:, 0]).sum() == n - len(np.unique(rows))  # nothing built for the other rows
+    np.testing.assert_array_equal(lazy.pdf_position_rgb(rows[::-1]), fs.pdf_position_rgb()[rows[::-1]])
+    np.testing.assert_array_equal(lazy.pdf_position_rgb(), fs.pdf_position_rgb())
 
 
 def jac_all(ev, fs):
