@@ -197,10 +197,12 @@ def test_trace_matches_brute_force_on_random_scene():
         np.testing.assert_allclose(h.t[both], t_b[both], rtol=T_REL, atol=T_REL)
 
 
-def test_fiber_rays_cost_constant_embree_calls():
+@pytest.mark.parametrize("fast", [False, True])
+def test_fiber_rays_cost_constant_embree_calls(fast):
     """Rays leaving fiber hits (exempt ranges of their segment and neighbours) through a dense tuft: the same
     hits and self_hit flags as brute force, at a fixed number of Embree rays each although they cross many
-    fibre triangles."""
+    fibre triangles; also with the tuft's structure in Embree's non-robust mode (``fast``, as the renderer
+    builds fibre assets)."""
     tri, tri_inst, tubes = _hair_scene()
     rng = np.random.default_rng(4)
     n = 600
@@ -208,7 +210,8 @@ def test_fiber_rays_cost_constant_embree_calls():
     o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
     d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
     d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
-    acc = Accel(tri, tri_inst, separate=np.array([True, False]))
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([fast, False]))
+    assert [p.backend.robust for p in acc.parts] == [not fast, True]
     h0 = acc.trace(o0, d0)
     m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
     assert m.mean() > 0.5
