@@ -286,12 +286,14 @@ class Accel:
     def _passes_outside(self, part, o, d, inv, tmax, rows, exempt) -> np.ndarray:
         """[len(rows)] bool: a triangle of ``part`` outside row i's exempt range lies on [0, tmax].
 
-        Exempt hits are stepped over (at most :data:`MAX_EXEMPT_STEPS` per ray); only rays whose
-        nearest hit was exempt are cast again."""
+        Exempt hits are stepped over by eps (at most :data:`MAX_EXEMPT_STEPS` per ray); only rays whose
+        nearest hit was exempt are cast again. The search starts at eps too: a ray leaving a fibre hit
+        would otherwise re-hit the (exempt) triangle it starts on about half the time, one more query
+        (spec/renderer.md#fibers)."""
         out = np.zeros(len(rows), bool)
         sel = part.rows_hitting_box(o, inv, tmax, rows)
         pos = np.searchsorted(rows, sel)
-        oo, toff = o[sel], np.zeros(len(sel))
+        oo, toff = o[sel] + d[sel] * self.eps, np.full(len(sel), self.eps)
         for _ in range(MAX_EXEMPT_STEPS):
             if not len(sel):
                 break

@@ -241,6 +241,32 @@ def test_fiber_rays_cost_constant_embree_calls(fast):
     assert ((h2.self_hit == s_b2) & (h2.prim == p_b2)).mean() > 0.98
 
 
+def test_fiber_rays_leaving_outward_cost_one_query():
+    """Rays leaving fiber hits back toward the side the fibre was seen from do not re-hit the triangle they
+    start on (the branch test starts at eps from x): one Embree query each, with the brute force's answers."""
+    tri, tri_inst, tubes = _hair_scene()
+    rng = np.random.default_rng(5)
+    n = 600
+    o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
+    d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
+    d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([True, False]))
+    h0 = acc.trace(o0, d0)
+    m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
+    x = o0[m] + d0[m] * h0.t[m][:, None]
+    exempt = tubes.exempt[tubes.tri_seg[h0.prim[m]]]
+    wi = -d0[m] + rng.normal(0, 0.2, (len(x), 3))  # back out, spread: some rays cross other fibres of the tuft
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    tmax = np.full(len(x), 0.2)
+    ignore = np.zeros(len(x), np.int64)
+    _, p_b, s_b, _ = _brute_trace(tri, tri_inst, x, wi, tmax, ignore, exempt)
+    assert s_b.any() and (~s_b).mean() > 0.5
+    acc.rays_cast = 0
+    h = acc.trace(x, wi, tmax, ignore, exempt)
+    assert acc.rays_cast <= 1.1 * len(x)  # re-hitting the start triangle would cost a second query for about half
+    assert ((h.self_hit == s_b) & (h.prim == p_b)).mean() > 0.98
+
+
 def test_ignoring_a_merged_instance_is_a_usage_error():
     from nasset_sdk.errors import UsageError
 
