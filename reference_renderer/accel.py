@@ -9,7 +9,7 @@ many of the asset's triangles (fibres) it crosses. Structures whose bounding box
 not queried for it.
 
 Embree structures are built in its robust mode (watertight at shared edges), except those of instances
-listed in ``fast``: the prisms of fibre assets, where the robust mode halves the ray rate (measured in
+listed in ``fast``: the prisms of fibre assets, where the robust mode costs 1.3-2x in ray rate (measured in
 docs/benchmarks.md, *Dense hair*) and buys nothing, since a prism is closed and convex: a ray slipping
 through an edge on its way in still meets the prism's far side.
 """
