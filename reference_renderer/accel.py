@@ -207,9 +207,10 @@ class Accel:
         if rest:
             self.parts.append(_Part(np.concatenate(rest), self.triangles, -1, make))
         self.rays_cast = 0
-        if len(self.triangles):
-            ext = self.triangles.reshape(-1, 3)
-            self.scale = float(np.max(np.abs(ext)) + np.max(ext.max(0) - ext.min(0)))
+        if len(self.triangles):  # from the parts' boxes (together: every triangle), not another pass over them
+            lo = np.min([p.lo for p in self.parts], 0)
+            hi = np.max([p.hi for p in self.parts], 0)
+            self.scale = float(np.maximum(np.abs(lo), np.abs(hi)).max() + (hi - lo).max())
         else:
             self.scale = 1.0
         self.eps = 1e-5 * max(self.scale, 1e-6)

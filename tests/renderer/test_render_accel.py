@@ -325,3 +325,16 @@ def test_box_test_keeps_every_hit_and_drops_clear_misses():
     d2 = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
     t2 = np.array([np.inf, np.inf, 1.4, 1.6])
     np.testing.assert_array_equal(part.rows_hitting_box(o2, reciprocal(d2), t2, np.arange(4)), [3])
+
+
+def test_scale_is_the_scenes_extent():
+    """Accel.scale (the ray-offset scale S of spec/renderer.md#ray-offsets): the largest absolute coordinate plus
+    the largest edge of the bounding box of all triangles, however the instances are split into structures."""
+    rng = np.random.default_rng(3)
+    tri = np.concatenate([rng.uniform(-1, 1, (20, 3, 3)), rng.uniform(4, 9, (5, 3, 3)) * [1, -1, 1]])
+    tri_inst = np.repeat([0, 1], [20, 5])
+    ext = tri.reshape(-1, 3)
+    want = np.abs(ext).max() + (ext.max(0) - ext.min(0)).max()
+    for sep in (None, [True, False], [False, True], [False, False]):
+        acc = Accel(tri, tri_inst, backend="numpy", separate=None if sep is None else np.array(sep))
+        assert acc.scale == pytest.approx(want, rel=1e-15)
