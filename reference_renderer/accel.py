@@ -7,6 +7,11 @@ the asset (the asset's self-occlusion, which picks the rna shadowed/unshadowed b
 occlusion query on the asset's own structure: a ray costs a fixed number of Embree calls however
 many of the asset's triangles (fibres) it crosses. Structures whose bounding box a ray misses are
 not queried for it.
+
+Embree structures are built in its robust mode (watertight at shared edges), except those of instances
+listed in ``fast``: the prisms of fibre assets, where the robust mode costs 1.3-2x in ray rate (measured in
+docs/benchmarks.md, *Dense hair*) and buys nothing, since a prism is closed and convex: a ray slipping
+through an edge on its way in still meets the prism's far side.
 """
 
 from __future__ import annotations
@@ -42,14 +47,17 @@ class _Backend:
 
 
 class EmbreeBackend(_Backend):
-    def __init__(self, triangles: np.ndarray) -> None:
+    """Embree (through embreex) over ``triangles`` [F,3,3]; ``robust``: Embree's watertight mode."""
+
+    def __init__(self, triangles: np.ndarray, robust: bool = True) -> None:
         from nasset_sdk.extras import require_extras
 
         require_extras("render", purpose="ray casting with Embree")
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
-        self.scene = rtcore_scene.EmbreeScene()
+        self.robust = robust
+        self.scene = rtcore_scene.EmbreeScene(robust=robust)
         if len(triangles):
             TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
         self.empty = len(triangles) == 0
@@ -77,9 +85,11 @@ class EmbreeBackend(_Backend):
 
 
 class NumpyBackend(_Backend):
-    """Brute-force Moller-Trumbore over all triangles (tests and tiny scenes only)."""
+    """Brute-force Moller-Trumbore over all triangles (tests and tiny scenes only); float64, so always
+    robust (the argument is for the same signature as :class:`EmbreeBackend`)."""
 
-    def __init__(self, triangles: np.ndarray, chunk: int = 1 << 20) -> None:
+    def __init__(self, triangles: np.ndarray, robust: bool = True, chunk: int = 1 << 20) -> None:
+        self.robust = True
         tri = np.asarray(triangles, np.float64)
         self.p0 = tri[:, 0]
         self.e1 = tri[:, 1] - tri[:, 0]
@@ -123,12 +133,12 @@ class _Part:
 
     __slots__ = ("ids", "backend", "lo", "hi", "inst", "box")
 
-    def __init__(self, ids, triangles, inst, make) -> None:
+    def __init__(self, ids, triangles, inst, make, robust: bool = True) -> None:
         self.ids = ids
         self.inst = inst  # the instance held alone, or -1 for the rest of the scene
         contiguous = len(ids) and ids[-1] - ids[0] + 1 == len(ids)  # a scene instance: a view, no copy
         tri = triangles[ids[0]:ids[-1] + 1] if contiguous else triangles[ids]
-        self.backend = make(tri)
+        self.backend = make(tri, robust)
         p = tri.reshape(-1, 3)
         self.lo, self.hi = (p.min(0), p.max(0)) if len(p) else (np.zeros(3), -np.ones(3))
         pad = 1e-6 * (1.0 + np.abs(self.hi).max() + np.abs(self.lo).max())
@@ -165,16 +175,21 @@ class Accel:
     """Closest-hit and shadow queries with per-ray 'ignore this instance'.
 
     ``separate`` [n_instances] bool: instances that rays may ignore (each gets its own structure);
-    None: every instance. Ignoring an instance that is not separate is a ``USAGE`` error.
+    None: every instance. Ignoring an instance that is not separate is a ``USAGE`` error. ``fast``
+    [n_instances] bool or None: separate instances made of closed convex pieces (fibre prisms) whose
+    structure may use Embree's faster non-robust mode (see the module docstring).
     """
 
     def __init__(self, triangles: np.ndarray, tri_inst: np.ndarray, *, backend: str = "embree",
-                 separate: np.ndarray | None = None) -> None:
+                 separate: np.ndarray | None = None, fast: np.ndarray | None = None) -> None:
         self.triangles = np.asarray(triangles, np.float64)
         self.tri_inst = np.asarray(tri_inst, np.int64)
         make = EmbreeBackend if backend == "embree" else NumpyBackend
         n_inst = int(self.tri_inst.max()) + 1 if len(self.tri_inst) else 0
         sep = np.ones(n_inst, bool) if separate is None else np.asarray(separate, bool)[:n_inst]
+        quick = np.zeros(n_inst, bool)
+        if fast is not None:
+            quick[:min(n_inst, len(fast))] = np.asarray(fast, bool)[:n_inst]
         self.parts: list[_Part] = []
         self.inst_part = np.full(max(n_inst, len(sep)), -1, np.int64)
         order = np.argsort(self.tri_inst, kind="stable")
@@ -186,15 +201,16 @@ class Accel:
                 continue
             if sep[i]:
                 self.inst_part[i] = len(self.parts)
-                self.parts.append(_Part(ids, self.triangles, i, make))
+                self.parts.append(_Part(ids, self.triangles, i, make, robust=not quick[i]))
             else:
                 rest.append(ids)
         if rest:
             self.parts.append(_Part(np.concatenate(rest), self.triangles, -1, make))
         self.rays_cast = 0
-        if len(self.triangles):
-            ext = self.triangles.reshape(-1, 3)
-            self.scale = float(np.max(np.abs(ext)) + np.max(ext.max(0) - ext.min(0)))
+        if len(self.triangles):  # from the parts' boxes (together: every triangle), not another pass over them
+            lo = np.min([p.lo for p in self.parts], 0)
+            hi = np.max([p.hi for p in self.parts], 0)
+            self.scale = float(np.maximum(np.abs(lo), np.abs(hi)).max() + (hi - lo).max())
         else:
             self.scale = 1.0
         self.eps = 1e-5 * max(self.scale, 1e-6)
@@ -271,12 +287,14 @@ class Accel:
     def _passes_outside(self, part, o, d, inv, tmax, rows, exempt) -> np.ndarray:
         """[len(rows)] bool: a triangle of ``part`` outside row i's exempt range lies on [0, tmax].
 
-        Exempt hits are stepped over (at most :data:`MAX_EXEMPT_STEPS` per ray); only rays whose
-        nearest hit was exempt are cast again."""
+        Exempt hits are stepped over by eps (at most :data:`MAX_EXEMPT_STEPS` per ray); only rays whose
+        nearest hit was exempt are cast again. The search starts at eps too: a ray leaving a fibre hit
+        would otherwise re-hit the (exempt) triangle it starts on about half the time, one more query
+        (spec/renderer.md#fibers)."""
         out = np.zeros(len(rows), bool)
         sel = part.rows_hitting_box(o, inv, tmax, rows)
         pos = np.searchsorted(rows, sel)
-        oo, toff = o[sel], np.zeros(len(sel))
+        oo, toff = o[sel] + d[sel] * self.eps, np.full(len(sel), self.eps)
         for _ in range(MAX_EXEMPT_STEPS):
             if not len(sel):
                 break

@@ -79,18 +79,34 @@ class _Timer:
         self.stats.time[self.key] += time.perf_counter() - self.t
 
 
+def scene_accel(scene, backend: str, neural: np.ndarray):
+    """(Accel, unit geometric normals [F,3]) of ``scene``, built at the first render and kept in
+    ``scene.accel_cache`` for later ones (on dense hair Embree's build is most of a render's setup).
+
+    ``neural`` [n_instances] bool: rays ignore neural instances only, so those get acceleration
+    structures of their own; fibre assets' structures use Embree's fast mode (accel.py).
+    """
+    fiber = np.array([i.kind == "neural" and scene.assets[i.asset].fiber is not None for i in scene.instances], bool)
+    key = (backend, np.asarray(neural, bool).tobytes(), fiber.tobytes(), id(scene.triangles), len(scene.triangles))
+    hit = scene.accel_cache.get(key)
+    if hit is None:
+        scene.accel_cache.clear()  # one set of structures per scene at a time (their memory)
+        tri = scene.triangles
+        ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) if len(tri) else np.zeros((0, 3))
+        hit = scene.accel_cache[key] = (Accel(tri, scene.tri_inst, backend=backend, separate=neural, fast=fiber),
+                                        normalize(ng))
+    return hit
+
+
 class PathIntegrator:
     def __init__(self, scene, plan: RenderPlan, settings: RenderSettings) -> None:
         self.scene, self.plan, self.s = scene, plan, settings
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
-        # rays ignore neural instances only: those get acceleration structures of their own
-        self.accel = Accel(scene.triangles, scene.tri_inst, backend=settings.backend, separate=self.inst_neural)
+        self.accel, self.tri_ng = scene_accel(scene, settings.backend, self.inst_neural)
+        self.accel.rays_cast = 0  # counts this render's rays
         self.eps = self.accel.eps
         self.stats = RenderStats()
-        tri = scene.triangles
-        ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) if len(tri) else np.zeros((0, 3))
-        self.tri_ng = normalize(ng)
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
         self.inst_one_sided = np.array([i.one_sided for i in insts], bool)
         self.inst_back_mat = np.array([i.back_material for i in insts], np.int64)

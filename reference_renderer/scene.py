@@ -106,6 +106,9 @@ class Scene:
     warnings: list = field(default_factory=list)
     tri_st: np.ndarray | None = None  # [F,3,2] texture coordinates at the corners (zeros where a mesh has none)
     render_settings: dict = field(default_factory=dict)  # nasset:* values of the UsdRender.Settings prim (spec/renderer.md#render-settings)
+    #: ray-casting structures built for this scene (integrator.scene_accel): built once per scene, not per render
+    #: (the geometry arrays above are not changed after loading)
+    accel_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def bounds(self):

@@ -197,10 +197,12 @@ def test_trace_matches_brute_force_on_random_scene():
         np.testing.assert_allclose(h.t[both], t_b[both], rtol=T_REL, atol=T_REL)
 
 
-def test_fiber_rays_cost_constant_embree_calls():
+@pytest.mark.parametrize("fast", [False, True])
+def test_fiber_rays_cost_constant_embree_calls(fast):
     """Rays leaving fiber hits (exempt ranges of their segment and neighbours) through a dense tuft: the same
     hits and self_hit flags as brute force, at a fixed number of Embree rays each although they cross many
-    fibre triangles."""
+    fibre triangles; also with the tuft's structure in Embree's non-robust mode (``fast``, as the renderer
+    builds fibre assets)."""
     tri, tri_inst, tubes = _hair_scene()
     rng = np.random.default_rng(4)
     n = 600
@@ -208,7 +210,8 @@ def test_fiber_rays_cost_constant_embree_calls():
     o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
     d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
     d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
-    acc = Accel(tri, tri_inst, separate=np.array([True, False]))
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([fast, False]))
+    assert [p.backend.robust for p in acc.parts] == [not fast, True]
     h0 = acc.trace(o0, d0)
     m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
     assert m.mean() > 0.5
@@ -236,6 +239,32 @@ def test_fiber_rays_cost_constant_embree_calls():
     _, p_b2, s_b2, _ = _brute_trace(tri, tri_inst, x, wi, tmax2, ignore, exempt)
     h2 = acc.trace(x, wi, tmax2, ignore, exempt)
     assert ((h2.self_hit == s_b2) & (h2.prim == p_b2)).mean() > 0.98
+
+
+def test_fiber_rays_leaving_outward_cost_one_query():
+    """Rays leaving fiber hits back toward the side the fibre was seen from do not re-hit the triangle they
+    start on (the branch test starts at eps from x): one Embree query each, with the brute force's answers."""
+    tri, tri_inst, tubes = _hair_scene()
+    rng = np.random.default_rng(5)
+    n = 600
+    o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
+    d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
+    d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([True, False]))
+    h0 = acc.trace(o0, d0)
+    m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
+    x = o0[m] + d0[m] * h0.t[m][:, None]
+    exempt = tubes.exempt[tubes.tri_seg[h0.prim[m]]]
+    wi = -d0[m] + rng.normal(0, 0.2, (len(x), 3))  # back out, spread: some rays cross other fibres of the tuft
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    tmax = np.full(len(x), 0.2)
+    ignore = np.zeros(len(x), np.int64)
+    _, p_b, s_b, _ = _brute_trace(tri, tri_inst, x, wi, tmax, ignore, exempt)
+    assert s_b.any() and (~s_b).mean() > 0.5
+    acc.rays_cast = 0
+    h = acc.trace(x, wi, tmax, ignore, exempt)
+    assert acc.rays_cast <= 1.1 * len(x)  # re-hitting the start triangle would cost a second query for about half
+    assert ((h.self_hit == s_b) & (h.prim == p_b)).mean() > 0.98
 
 
 def test_ignoring_a_merged_instance_is_a_usage_error():
@@ -296,3 +325,16 @@ def test_box_test_keeps_every_hit_and_drops_clear_misses():
     d2 = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, -1.0]])
     t2 = np.array([np.inf, np.inf, 1.4, 1.6])
     np.testing.assert_array_equal(part.rows_hitting_box(o2, reciprocal(d2), t2, np.arange(4)), [3])
+
+
+def test_scale_is_the_scenes_extent():
+    """Accel.scale (the ray-offset scale S of spec/renderer.md#ray-offsets): the largest absolute coordinate plus
+    the largest edge of the bounding box of all triangles, however the instances are split into structures."""
+    rng = np.random.default_rng(3)
+    tri = np.concatenate([rng.uniform(-1, 1, (20, 3, 3)), rng.uniform(4, 9, (5, 3, 3)) * [1, -1, 1]])
+    tri_inst = np.repeat([0, 1], [20, 5])
+    ext = tri.reshape(-1, 3)
+    want = np.abs(ext).max() + (ext.max(0) - ext.min(0)).max()
+    for sep in (None, [True, False], [False, True], [False, False]):
+        acc = Accel(tri, tri_inst, backend="numpy", separate=None if sep is None else np.array(sep))
+        assert acc.scale == pytest.approx(want, rel=1e-15)

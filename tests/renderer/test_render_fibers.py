@@ -215,3 +215,29 @@ def test_example_fiber_asset_renders(tmp_path):
     b.asset("Ball", surf, M)
     img = _render(b.write(tmp_path / "scene.usda"), spp=4, size=40, max_depth=3)
     assert np.isfinite(img).all() and img.min() >= 0.0 and img.max() > 0.0
+
+
+def test_ray_structures_built_once_per_scene(tmp_path):
+    """Renders of one scene share its ray-casting structures (built at the first render): the same image as a
+    freshly loaded scene, each render counting only its own rays. The fibre asset's structure is in Embree's
+    fast (non-robust) mode, the floor's robust; another backend gets structures of its own."""
+    from nasset_reference_renderer.accel import NumpyBackend
+
+    curves = [[[-1.0, 0.2, 0], [0.0, 0.3, 0.1], [1.0, 0.2, 0]], [[-1.0, -0.3, 0.2], [1.0, -0.2, -0.1]]]
+    asset = constant_rna_fiber_asset(tmp_path / "f.usda", curves, 0.3, unshadowed=UNSH, shadowed=SH)
+    path = _fiber_scene(tmp_path, asset, (0.3, 1.0, 0.4), floor=True)
+    settings = RenderSettings(spp=2, width=16, height=16, seed=5, max_depth=3)
+    scene = _load(path)
+    first = render(scene, settings)
+    (acc, _), = scene.accel_cache.values()
+    second = render(scene, settings)
+    assert next(iter(scene.accel_cache.values()))[0] is acc
+    fresh = render(_load(path), settings)
+    assert first.stats.rays > 0 and second.stats.rays == first.stats.rays == fresh.stats.rays
+    np.testing.assert_array_equal(second.image, first.image)
+    np.testing.assert_array_equal(fresh.image, first.image)
+    fiber_inst = [i for i, inst in enumerate(scene.instances) if inst.kind == "neural"]
+    assert {p.inst: p.backend.robust for p in acc.parts} == {fiber_inst[0]: False, -1: True}
+    render(scene, RenderSettings(spp=1, width=4, height=4, backend="numpy", max_depth=1))
+    (other, _), = scene.accel_cache.values()
+    assert other is not acc and all(isinstance(p.backend, NumpyBackend) for p in other.parts)
