@@ -144,7 +144,8 @@ def clamp_removed(train_data: dict) -> dict | None:
 
 
 def accuracy_lines(acc: dict | None, label: str = "held-out (unclamped reference)") -> list[str]:
-    """Summary lines of a spec/accuracy.md#metrics dict: energy per channel, PSNR and its ceiling."""
+    """Summary lines of a spec/accuracy.md#metrics dict: energy per channel (with groups: the views as the units of
+    its standard error, and the per-view spread), PSNR and its ceiling."""
     if not acc:
         return []
     def pct(values) -> str:
