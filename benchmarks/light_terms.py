@@ -148,6 +148,9 @@ def light_terms(scene_file, replace, out_dir, *, res: int = 64, spp: int = 1024,
         e, ratio = np.asarray(r["reference_energy"]), np.asarray(r["energy_ratio"])
         r["share"] = [float(x) for x in e / total]
         r["excess"] = [float(x) for x in e * (ratio - 1.0) / total]
+    for r in rows:  # a term with no reference energy (an emitter that does not reach the asset): None, never NaN
+        for k in ("energy_ratio", "energy_se", "share", "excess"):
+            r[k] = [x if np.isfinite(x) else None for x in r[k]]
     report = {"scene": str(scene_file), "mask_pixels": int(mask.sum()), "res": res, "spp": spp, "nr_spp": nr_spp,
               "terms": rows, "variants": {k: str(v) for k, v in folders.items()}}
     tmp = out / "light_terms.json.part"
@@ -159,7 +162,7 @@ def light_terms(scene_file, replace, out_dir, *, res: int = 64, spp: int = 1024,
 def table(report: dict) -> str:
     """The terms as a markdown table (energy %, share, points of the full scene's excess; R / G / B)."""
     def pct(v, sign=""):
-        return " / ".join(f"{100 * x:{sign}.1f}" for x in v)
+        return " / ".join("n/a" if x is None else f"{100 * x:{sign}.1f}" for x in v)
 
     lines = ["| term | energy % (R / G / B, ± s.e.) | share | points of the excess |", "|---|---|---|---|"]
     for r in report["terms"]:

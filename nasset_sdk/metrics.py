@@ -68,7 +68,6 @@ class Accuracy:
     notes: list = field(default_factory=list)
     groups: dict | None = None  # with groups: {count, ratio_sd, ratio_min, ratio_max} per channel, see group_figures
 
-
     def claimed_psnr(self) -> str:
         """The PSNR one may state: a number, or "at the ceiling (C dB)"."""
         if self.at_ceiling or self.psnr_corrected_db is None:
