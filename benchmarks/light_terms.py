@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import UsageError, error
+from nasset_sdk.errors import NassetError, UsageError, error
 
 #: a black diffuse BSDF for the shapes that are not replaced, in "direct" variants
 BLACK = '<bsdf type="diffuse"><rgb name="reflectance" value="0, 0, 0"/></bsdf>'
@@ -182,7 +182,11 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
     a = p.parse_args(argv)
-    r = light_terms(a.scene, a.replace, a.output, res=a.res, spp=a.spp, nr_spp=a.nr_spp, seed=a.seed, quiet=a.json)
+    try:
+        r = light_terms(a.scene, a.replace, a.output, res=a.res, spp=a.spp, nr_spp=a.nr_spp, seed=a.seed, quiet=a.json)
+    except NassetError as exc:  # typed errors: a message and the exit code of the nasset CLI (2 usage, 1 failure)
+        print(f"error: {exc}", file=sys.stderr)
+        return 2 if isinstance(exc, UsageError) else 1
     print(json.dumps(r, indent=2) if a.json else table(r))
     return 0
 

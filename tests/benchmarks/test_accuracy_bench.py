@@ -146,3 +146,17 @@ def test_light_terms_split_the_scene(scene, tmp_path):
     full = read_exr(Path(r["variants"]["full"]) / "reference.exr").reshape(-1, 3).sum(0)
     assert (full > 0).all() and (np.abs(diff) < 4 * se + 1e-6 * full).all(), (diff, se, full)
     assert (out / "light_terms.json").is_file()
+
+
+def test_light_terms_bad_input(scene, tmp_path):
+    from nasset_benchmarks.light_terms import light_terms, main
+
+    assert main([str(tmp_path / "nope.xml"), "--replace", "jelly=a.usdc", "-o", str(tmp_path / "o")]) == 1
+    dark = tmp_path / "dark.xml"
+    dark.write_text('<scene version="3.0.0"><shape type="sphere" id="ball"/></scene>')
+    with pytest.raises(NassetError) as e:
+        light_terms(dark, ["ball=a.usdc"], tmp_path / "o")
+    assert e.value.code == "CONVERT_SCENE_LOAD" and "no inline emitter" in str(e.value)
+    with pytest.raises(NassetError) as e:
+        light_terms(scene.with_suffix(".blend"), ["ball=a.usdc"], tmp_path / "o")
+    assert e.value.code == "USAGE"
