@@ -144,13 +144,20 @@ def clamp_removed(train_data: dict) -> dict | None:
 
 
 def accuracy_lines(acc: dict | None, label: str = "held-out (unclamped reference)") -> list[str]:
-    """Summary lines of a spec/accuracy.md#metrics dict: energy per channel, PSNR and its ceiling."""
+    """Summary lines of a spec/accuracy.md#metrics dict: energy per channel (with groups: the views as the units of
+    its standard error, and the per-view spread), PSNR and its ceiling."""
     if not acc:
         return []
-    e = "/".join(f"{100 * r:.1f}" for r in acc["energy_ratio"])
-    se = "/".join(f"{100 * r:.1f}" for r in acc["energy_se"])
-    return [f"  {label}: energy {e} % (RGB, +-{se}), PSNR {acc['psnr_db']:.2f} dB, "
-            f"ceiling {acc['ceiling_db']:.2f} dB -> claimed {acc['claimed_psnr']}"]
+    def pct(values) -> str:
+        return "/".join("n/a" if r is None else f"{100 * r:.1f}" for r in values)
+
+    g = acc.get("groups")
+    units = ""
+    if g:  # views as the units (spec/accuracy.md#metrics): their count and the per-view spread
+        units = (f"; {g['count']} views as units, per view {pct(g['ratio_min'])} to {pct(g['ratio_max'])} %, "
+                 f"sd {pct(g['ratio_sd'])} %")
+    return [f"  {label}: energy {pct(acc['energy_ratio'])} % (RGB, +-{pct(acc['energy_se'])}{units}), "
+            f"PSNR {acc['psnr_db']:.2f} dB, ceiling {acc['ceiling_db']:.2f} dB -> claimed {acc['claimed_psnr']}"]
 
 
 def clamp_lines(s: dict) -> list[str]:

@@ -22,7 +22,8 @@ every other object a holdout (``MASK_SUBSAMPLES``² samples per pixel), i.e. the
 pixel's camera samples whose first visible surface is one of the replaced objects. The reference
 renderer's depth defaults to the converted stage's ``nasset:maxDepth`` (B + 1, spec/bake-blender.md).
 
-Writes ``reference.exr`` (+ ``reference_a.exr``, ``reference_b.exr``), ``neural.exr``,
+Writes ``reference.exr`` (+ ``reference_a.exr``, ``reference_b.exr``), ``neural.exr`` (+ ``neural_var.exr``, the
+variance of its per-pixel mean),
 ``reference.png``, ``neural.png``, ``mask.png``, ``error.png`` (relative error over the mask,
 blue = too dark, red = too bright), ``flip.png`` when FLIP is available, ``accuracy.json`` and
 ``accuracy.md``.
@@ -418,7 +419,7 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
     from nasset_reference_renderer.film import write_exr
 
     files = []
-    for name, img in (("reference", ref), ("reference_a", a), ("reference_b", b), ("neural", est)):
+    for name, img in (("reference", ref), ("reference_a", a), ("reference_b", b), ("neural", est), ("neural_var", est_var)):
         write_exr(out / f"{name}.exr", img.astype(np.float32))
         files.append(str(out / f"{name}.exr"))
     _png(out / "reference.png", ref)

@@ -15,6 +15,12 @@ pixels (samples) of ``mask`` and all channels:
 
 * **energy ratio** per channel ``sum(est) / sum(r)``; its standard error from the reference's
   (and optionally the estimate's) per-pixel variance, pixels taken as independent.
+* **groups** (optional, e.g. the held-out view of each sample): an estimate's error is correlated
+  within a group (one view, one light), so the groups, not the pixels, are the independent units.
+  Per group g the ratio ``E_g / R_g``; their spread; and the standard error of the overall ratio
+  with groups as units, ``sqrt(G / (G - 1) * sum_g (E_g - ratio R_g)^2) / sum_g R_g`` (delta method,
+  cluster-robust), which replaces the per-pixel one. It holds the reference's noise and the
+  estimate's group-to-group error alike.
 * **PSNR** ``10 log10(peak^2 / MSE)``, ``MSE = mean (est - r)^2``, linear radiance, no clipping;
   ``peak`` = the 99.5th percentile of ``r`` over the mask (all channels), unless given.
 * **ceiling** ``10 log10(peak^2 / v)``: the PSNR an exact image scores in expectation against
@@ -48,7 +54,7 @@ class Accuracy:
     pixels: int
     energy_ratio: list  # per channel: sum(est) / sum(ref)
     energy_error: list  # per channel: ratio - 1
-    energy_se: list  # per channel: standard error of the ratio
+    energy_se: list  # per channel: standard error of the ratio (with groups: groups as the units)
     peak: float
     mse: float
     ref_noise_var: float  # v: the reference's own noise variance (mean over mask and channels)
@@ -60,6 +66,7 @@ class Accuracy:
     at_ceiling: bool
     flip: float | None = None
     notes: list = field(default_factory=list)
+    groups: dict | None = None  # with groups: {count, ratio_sd, ratio_min, ratio_max} per channel, see group_figures
 
     def claimed_psnr(self) -> str:
         """The PSNR one may state: a number, or "at the ceiling (C dB)"."""
@@ -86,6 +93,8 @@ def _finite(v):
         return None
     if isinstance(v, list):
         return [_finite(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
     return v
 
 
@@ -110,14 +119,43 @@ def noise_variance(a, b, mask=None) -> float:
     return float(d.mean() / 4.0) if d.size else float("nan")
 
 
-def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None = None, flip: bool = True) -> Accuracy:
+def group_figures(est: np.ndarray, ref: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Cluster-robust standard error [3] of ``sum(est) / sum(ref)`` with groups as the independent units,
+    and the per-group ratios' spread {count, ratio_sd, ratio_min, ratio_max} (lists of 3).
+
+    ``est``, ``ref``: [N, 3]; ``groups``: int [N] labels. With fewer than 2 groups the error is inf."""
+    _, g = np.unique(np.asarray(groups).ravel(), return_inverse=True)
+    count = int(g.max()) + 1 if g.size else 0
+    e_g = np.stack([np.bincount(g, est[:, c], count) for c in range(3)], 1)  # [G, 3] per-group sums
+    r_g = np.stack([np.bincount(g, ref[:, c], count) for c in range(3)], 1)
+    s_ref = r_g.sum(0)
+    safe = np.where(s_ref != 0, s_ref, np.nan)
+    ratio = e_g.sum(0) / safe
+    if count >= 2:
+        z = e_g - ratio * r_g
+        se = np.sqrt(count / (count - 1) * (z ** 2).sum(0)) / np.abs(safe)
+    else:
+        se = np.full(3, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = np.where(r_g != 0, e_g / np.where(r_g != 0, r_g, 1.0), np.nan)
+    lists = {}
+    for name, f in (("ratio_sd", np.nanstd), ("ratio_min", np.nanmin), ("ratio_max", np.nanmax)):
+        lists[name] = [float(x) for x in f(per, axis=0)] if np.isfinite(per).any() else [float("nan")] * 3
+    return se, {"count": count, **lists}
+
+
+def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None = None, flip: bool = True,
+             groups=None) -> Accuracy:
     """Figures of ``est`` against the reference given as two independent unbiased halves.
 
     ``est``, ``ref_a``, ``ref_b``: [..., 3] linear radiance of the same shape (images [H, W, 3] or
     samples [N, 3]); ``mask``: bool [...] (default all); ``est_var``: optional per-pixel-channel
     variance of ``est``'s own mean (a Monte Carlo estimate), subtracted from the MSE and added to
     the energy standard error; ``peak``: PSNR peak (default: the reference's 99.5th percentile
-    over the mask). Non-finite values in any input are a UsageError (never silently dropped)."""
+    over the mask); ``groups``: optional int labels [...] (the shape of the mask; e.g. each held-out
+    sample's view): the energy standard error then takes groups as the independent units, and
+    ``Accuracy.groups`` holds the per-group ratios' spread (:func:`group_figures`). Non-finite values
+    in any input are a UsageError (never silently dropped)."""
     est, a, b = _as3(est, "est"), _as3(ref_a, "ref_a"), _as3(ref_b, "ref_b")
     if not (est.shape == a.shape == b.shape):
         raise UsageError(f"est, ref_a, ref_b shapes differ: {est.shape}, {a.shape}, {b.shape}")
@@ -132,6 +170,8 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
     n = int(m.sum())
     if n == 0:
         raise UsageError("the mask selects no pixels")
+    if groups is not None and np.shape(groups) != m.shape:
+        raise UsageError(f"groups shape {np.shape(groups)} does not match images {est.shape[:-1]}")
     r = 0.5 * (aa + bb)
     d2 = (aa - bb) ** 2
     pix_var = d2 / 4.0  # per pixel-channel estimate of Var(r)
@@ -150,9 +190,13 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
     notes = []
     if not (pk > 0):
         notes.append("the reference is black over the mask: PSNR undefined")
+    energy_se = np.sqrt(np.maximum(var_ratio, 0.0))
+    spread = None
+    if groups is not None:
+        energy_se, spread = group_figures(e, r, np.asarray(groups)[m])
     out = Accuracy(
         pixels=n, energy_ratio=[float(x) for x in ratio], energy_error=[float(x - 1.0) for x in ratio],
-        energy_se=[float(math.sqrt(max(x, 0.0))) for x in var_ratio], peak=pk, mse=mse, ref_noise_var=v,
+        energy_se=[float(x) for x in energy_se], peak=pk, mse=mse, ref_noise_var=v, groups=spread,
         mse_corrected=mse_c, mse_corrected_se=se, psnr_db=_psnr(pk, mse), ceiling_db=_psnr(pk, v),
         psnr_corrected_db=None if at_ceiling else _psnr(pk, mse_c), at_ceiling=bool(at_ceiling), notes=notes,
     )

@@ -96,12 +96,14 @@ class TorchCheckpoint:
 
 def held_out_accuracy(pred: np.ndarray, val_data: dict) -> dict | None:
     """Figures of spec/accuracy.md#metrics of held-out predictions [N, 3] against the unclamped two-half
-    reference (``rgb_a``, ``rgb_b``); None for datasets without halves."""
+    reference (``rgb_a``, ``rgb_b``), with the held-out views as the independent units (``view`` [N], when
+    present: one view is one camera and light, and the asset's error is correlated within it); None for
+    datasets without halves."""
     from nasset_sdk.metrics import accuracy
 
     if "rgb_a" not in val_data or not len(pred):
         return None
-    return accuracy(pred, val_data["rgb_a"], val_data["rgb_b"], flip=False).to_dict()
+    return accuracy(pred, val_data["rgb_a"], val_data["rgb_b"], flip=False, groups=val_data.get("view")).to_dict()
 
 
 def reopen_asset(path):

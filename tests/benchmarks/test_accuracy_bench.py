@@ -113,3 +113,50 @@ def test_tiny_run_writes_images_and_report(scene, tmp_path):
 
     ref = read_exr(out / "reference.exr")
     assert ref.shape[:2] == (24, 24) and np.isfinite(ref).all()
+
+
+def test_light_terms_split_the_scene(scene, tmp_path):
+    """``python -m nasset_benchmarks.light_terms`` (spec/accuracy.md#light-terms): one variant per emitter alone and
+    per emitter with the other shapes black; the emitters' references add up to the full scene's (4 standard
+    errors from the halves, per channel), and every term has a finite energy ratio."""
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+
+    from nasset_benchmarks.light_terms import BLACK, emitters, light_terms, variant_xml
+    from nasset_reference_renderer.film import read_exr
+
+    one = ET.fromstring(variant_xml(scene, "sun", True, {"shell", "jelly"}))
+    assert [label for label, _, _ in emitters(one)] == ["sun"]
+    shapes = {s.get("id"): s for s in one.findall("shape")}
+    assert shapes["ground"].find("bsdf").find("rgb").get("value") == "0, 0, 0"
+    black = ET.fromstring(BLACK)
+    assert not any(ET.tostring(c) == ET.tostring(black) for k in ("shell", "jelly") for c in shapes[k])  # replaced: untouched
+    assert all(Path(f.get("value")).is_absolute() for f in one.iter("string") if f.get("name") == "filename")
+
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    out = tmp_path / "terms"
+    r = light_terms(scene, [f"shell,jelly={a}"], out, res=16, spp=64, nr_spp=2, quiet=True)
+    names = [t["name"] for t in r["terms"]]
+    assert names == ["full scene", "sun, direct", "sun, via the scene", "sky, direct", "sky, via the scene", "sum of the emitters"]
+    assert all(x is not None and np.isfinite(x) for t in r["terms"] for k in ("energy_ratio", "energy_se") for x in t[k])
+    halves = [sum(read_exr(Path(r["variants"][v]) / f"reference_{h}.exr").astype(np.float64) for v in ("light0", "light1"))
+              - read_exr(Path(r["variants"]["full"]) / f"reference_{h}.exr") for h in "ab"]
+    diff = (0.5 * (halves[0] + halves[1])).reshape(-1, 3).sum(0)
+    se = np.sqrt(((halves[0] - halves[1]) ** 2 / 4).reshape(-1, 3).sum(0))
+    full = read_exr(Path(r["variants"]["full"]) / "reference.exr").reshape(-1, 3).sum(0)
+    assert (full > 0).all() and (np.abs(diff) < 4 * se + 1e-6 * full).all(), (diff, se, full)
+    assert (out / "light_terms.json").is_file()
+
+
+def test_light_terms_bad_input(scene, tmp_path):
+    from nasset_benchmarks.light_terms import light_terms, main
+
+    assert main([str(tmp_path / "nope.xml"), "--replace", "jelly=a.usdc", "-o", str(tmp_path / "o")]) == 1
+    dark = tmp_path / "dark.xml"
+    dark.write_text('<scene version="3.0.0"><shape type="sphere" id="ball"/></scene>')
+    with pytest.raises(NassetError) as e:
+        light_terms(dark, ["ball=a.usdc"], tmp_path / "o")
+    assert e.value.code == "CONVERT_SCENE_LOAD" and "no inline emitter" in str(e.value)
+    with pytest.raises(NassetError) as e:
+        light_terms(scene.with_suffix(".blend"), ["ball=a.usdc"], tmp_path / "o")
+    assert e.value.code == "USAGE"
