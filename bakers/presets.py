@@ -17,7 +17,7 @@ SIZES = ("tiny", "small", "hq")
 #: (their noise bounds the measurable PSNR; spec/bake.md#psnr). Measured in spec/bake.md#ablations.
 RNA_MITSUBA_DATA = {
     "tiny": dict(views=16, val_views=2, res=24, spp=8, val_res=24, val_spp=64, lights_per_view=0),
-    "small": dict(views=96, val_views=8, res=96, spp=64, val_res=64, val_spp=1024, lights_per_view=0),
+    "small": dict(views=192, val_views=24, res=96, spp=64, val_res=64, val_spp=1024, lights_per_view=0),
     "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
 }
 
