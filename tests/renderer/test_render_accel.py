@@ -197,6 +197,18 @@ def test_trace_matches_brute_force_on_random_scene():
         np.testing.assert_allclose(h.t[both], t_b[both], rtol=T_REL, atol=T_REL)
 
 
+def _first_fiber_hits(acc, tri_inst, tubes, rng, n=600):
+    """Camera-like rays at the tuft of :func:`_hair_scene` and their first fiber hits: (x [M,3], the rays'
+    directions [M,3], the hit segments [M]); more than half of the rays hit a fibre."""
+    o = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
+    d = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    h = acc.trace(o, d)
+    m = (h.prim >= 0) & (tri_inst[np.maximum(h.prim, 0)] == 0)
+    assert m.mean() > 0.5
+    return o[m] + d[m] * h.t[m][:, None], d[m], tubes.tri_seg[h.prim[m]]
+
+
 @pytest.mark.parametrize("fast", [False, True])
 def test_fiber_rays_cost_constant_embree_calls(fast):
     """Rays leaving fiber hits (exempt ranges of their segment and neighbours) through a dense tuft: the same
@@ -205,18 +217,9 @@ def test_fiber_rays_cost_constant_embree_calls(fast):
     builds fibre assets)."""
     tri, tri_inst, tubes = _hair_scene()
     rng = np.random.default_rng(4)
-    n = 600
-    # camera-like rays at the tuft, their first fiber hits, then random directions from there
-    o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
-    d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
-    d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
     acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([fast, False]))
     assert [p.backend.robust for p in acc.parts] == [not fast, True]
-    h0 = acc.trace(o0, d0)
-    m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
-    assert m.mean() > 0.5
-    x = o0[m] + d0[m] * h0.t[m][:, None]
-    seg = tubes.tri_seg[h0.prim[m]]
+    x, _, seg = _first_fiber_hits(acc, tri_inst, tubes, rng)  # then random directions from there
     exempt = tubes.exempt[seg].copy()
     exempt[::7] = -1  # rows with nothing exempt (surface rows in a batch of mixed kinds)
     wi = rng.normal(size=(len(x), 3))
@@ -246,16 +249,10 @@ def test_fiber_rays_leaving_outward_cost_one_query():
     start on (the branch test starts at eps from x): one Embree query each, with the brute force's answers."""
     tri, tri_inst, tubes = _hair_scene()
     rng = np.random.default_rng(5)
-    n = 600
-    o0 = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.1, 2.0]
-    d0 = rng.normal(0, 0.03, (n, 3)) + [0.0, 0.0, -1.0]
-    d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
     acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([True, False]))
-    h0 = acc.trace(o0, d0)
-    m = (h0.prim >= 0) & (tri_inst[np.maximum(h0.prim, 0)] == 0)
-    x = o0[m] + d0[m] * h0.t[m][:, None]
-    exempt = tubes.exempt[tubes.tri_seg[h0.prim[m]]]
-    wi = -d0[m] + rng.normal(0, 0.2, (len(x), 3))  # back out, spread: some rays cross other fibres of the tuft
+    x, d, seg = _first_fiber_hits(acc, tri_inst, tubes, rng)
+    exempt = tubes.exempt[seg]
+    wi = -d + rng.normal(0, 0.2, (len(x), 3))  # back out, spread: some rays cross other fibres of the tuft
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
     tmax = np.full(len(x), 0.2)
     ignore = np.zeros(len(x), np.int64)
