@@ -44,12 +44,15 @@ def load_scene(path: str, width: int | None = None, height: int | None = None, *
 
 def render(path: str, spp: int, *, width: int | None = None, height: int | None = None, seed: int = 0, max_depth: int = 5,
            variant: str | None = None) -> np.ndarray:
-    """float32 [H, W, 3] radiance of the scene at ``path`` rendered with ``nasset_path``."""
+    """float32 [H, W, 3] radiance of the scene at ``path`` rendered with ``nasset_path``.
+
+    ``max_depth`` counts scattering vertices as spec/renderer.md#integrator does (1 = direct lighting
+    only); the integrator's ``max_depth`` is Mitsuba's (which counts the camera ray: 2 = direct lighting)."""
     if int(spp) < 1:
         raise error("USAGE", f"spp must be >= 1 (got {spp})")
     mi = jit_mitsuba(variant)
     scene = load_scene(path, width, height, mi=mi)
-    integrator = mi.load_dict({"type": INTEGRATOR, "max_depth": int(max_depth)})
+    integrator = mi.load_dict({"type": INTEGRATOR, "max_depth": int(max_depth) + 1})
     img = np.asarray(mi.render(scene, integrator=integrator, spp=int(spp), seed=int(seed)), np.float32)
     return np.where(np.isfinite(img), img, 0.0).astype(np.float32)
 
@@ -75,7 +78,7 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--max-depth", type=int, default=5)
+    ap.add_argument("--max-depth", type=int, default=5, help="scattering vertices per path (spec/renderer.md#integrator; default 5)")
     ap.add_argument("--variant", default=None, help="llvm_ad_rgb (default) or cuda_ad_rgb")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
