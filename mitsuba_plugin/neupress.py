@@ -175,6 +175,8 @@ class NeupressJit:
             self.gs = self._fourier(asset, "sampling", 5)
             self.sigma_net = DrJitNetwork(mi, asset.network_bytes("sampling", "sigma"), file=self.path,
                                           prim=f"{COMPONENTS}/sampling/sigma")
+        self.asset = asset
+        self.prt = None  # (coefficients Float [V*T*P*27], T, P, V), read on first use (PRT mode only)
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
         self.lo = lo
         self.span = np.maximum(hi - lo, 1e-30)
@@ -216,3 +218,40 @@ class NeupressJit:
         if self.sigma_net is None:
             return None
         return GaussianLobe(self.mi, safe_normalize(self.mi, n), self.sigma(x, wo))
+
+    def _prt_table(self):
+        if self.prt is None:
+            if "prt" not in self.asset.components():
+                raise error("COMPONENT_MISSING", "PRT shading needs the asset's 'prt' component", file=self.path,
+                            prim=f"{COMPONENTS}/prt")
+            self.asset.load(["prt"])
+            sh = np.asarray(self.asset.tensor("prt", "sh"), np.float32)
+            if sh.ndim != 5 or sh.shape[3:] != (9, 3) or min(sh.shape[:3]) < 1:
+                raise error("TENSOR_CONTRACT", f"prt sh of shape {sh.shape} is not [V, T, P, 9, 3]", file=self.path,
+                            prim=f"{COMPONENTS}/prt/sh")
+            self.prt = (self.mi.Float(np.ascontiguousarray(sh).ravel()), sh.shape[1], sh.shape[2], sh.shape[0])
+        return self.prt
+
+    def prt_radiance(self, light_sh, vertex, n, wo):
+        """sum_k a_k(vertex, bin(wo)) b_k [Color3f] of neupress.md#component-prt: ``light_sh`` b [9, 3] (numpy),
+        ``vertex`` UInt32 indices (past V - 1 read V - 1), ``n`` the vertex normals n_v and ``wo`` object-space
+        directions [Vector3f].
+        The w_o bin in the local frame of n_v, equal solid angle in theta, below the surface theta bin T - 1."""
+        dr, mi = _dr(), self.mi
+        coeff, nt, nphi, nv = self._prt_table()
+        b = np.asarray(light_sh, np.float64)
+        if b.shape != (9, 3) or not np.isfinite(b).all():
+            raise error("USAGE", f"light_sh must be a finite [9, 3], got {b.shape}")
+        n = safe_normalize(mi, mi.Vector3f(n))
+        w = safe_normalize(mi, mi.Vector3f(wo))
+        t, bt = local_frame(mi, n)
+        ti = mi.UInt32(dr.clip(dr.floor((1.0 - dr.clip(dr.dot(w, n), 0.0, 1.0)) * nt), 0, nt - 1))
+        pi = mi.UInt32(dr.clip(dr.floor((dr.atan2(dr.dot(w, bt), dr.dot(w, t)) + math.pi) * (nphi / TWO_PI)), 0, nphi - 1))
+        v = dr.minimum(mi.UInt32(vertex), nv - 1)
+        base = ((v * nt + ti) * nphi + pi) * 27
+        out = [None, None, None]
+        for k in range(9):
+            for c in range(3):
+                term = dr.gather(mi.Float, coeff, base + (3 * k + c)) * float(b[k, c])
+                out[c] = term if out[c] is None else out[c] + term
+        return mi.Color3f(*out)
