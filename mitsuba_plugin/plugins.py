@@ -307,7 +307,7 @@ def _jacobian(mi, tab, k, w, active):
 
     rows = [_rows(mi, tab["inv"], k, 12, 4 * r, active) for r in range(3)]
     bw = mi.Vector3f(*[r[0] * w.x + r[1] * w.y + r[2] * w.z for r in rows])
-    return dr.gather(mi.Float, tab["jdet"], k, active) * dr.rcp(dr.maximum(dr.norm(bw), 1e-30) ** 3)
+    return dr.gather(mi.Float, tab["jdet"], k, active) * dr.rcp(dr.maximum(dr.norm(bw), 1e-10) ** 3)  # |B w| >= the least singular value of B
 
 
 def _object_inputs(mi, tab, k, si, wo, active):
