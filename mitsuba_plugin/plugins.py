@@ -157,33 +157,9 @@ def register(mi) -> None:
                 wi_c = mi.warp.square_to_uniform_sphere(u_c)
                 p_c = mi.Float(1.0 / FOUR_PI)
                 if dr.hint(len(assets) > 0, mode="scalar"):
-                    k = inst - 1
-                    x_o, n_o, wo_o = _object_inputs(mi, tab, k, si, -ray.d, on_asset)
-                    wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
-                    wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
-                    p_l = mi.Float(1.0 / FOUR_PI)
-                    ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
-                    for a, asset in enumerate(assets):
-                        mine = on_asset & (dr.gather(mi.UInt32, tab["asset"], k, on_asset) == a)
-                        lobe = asset.technique(x_o, n_o, wo_o) if self.lobe else None
-                        wc_a = wc_o
-                        if dr.hint(lobe is not None, mode="scalar"):
-                            wc_a, p_obj = lobe.sample(u_c)
-                            wc_w = _world_dir(mi, tab, k, wc_a, mine)
-                            wi_c[mine] = wc_w
-                            p_c[mine] = p_obj * _jacobian(mi, tab, k, wc_w, mine)
-                            p_l[mine] = lobe.pdf(wi_o) * _jacobian(mi, tab, k, ds_em.d, mine)
-                        u, s = asset.transport(x_o, n_o, wo_o, wi_o)
-                        ta_un[mine] = u
-                        ta_sh[mine] = s
-                        u, s = asset.transport(x_o, n_o, wo_o, wc_a)
-                        tc_un[mine] = u
-                        tc_sh[mine] = s
-                    w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, p_l))
-                    L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
-                    inv_p = dr.select(p_c > 0, dr.rcp(dr.select(p_c > 0, p_c, 1.0)), 0.0)  # T / p_A; a zero pdf carries nothing
-                    t_un = tc_un * inv_p
-                    t_sh = tc_sh * inv_p
+                    if on_asset:  # symbolic: the networks run only in llvm packets / cuda warps with a lane on an asset
+                        L, t_un, t_sh, wi_c, p_c = _asset_vertex(mi, assets, tab, inst, si, -ray.d, ds_em, em_weight, passed_sh,
+                                                                 active_em, on_asset, u_c, self.lobe, L, beta, wi_c, p_c)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
@@ -234,6 +210,43 @@ def _trace(mi, scene, ray, ignore, active):
         skip = si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore)
         i += 1
     return si, passed
+
+
+def _asset_vertex(mi, assets, tab, inst, si, wo, ds_em, em_weight, passed_sh, active_em, on_asset, u_c, use_lobe, L, beta, wi_c, p_c):
+    """spec/renderer.md#neural-assets at the lanes ``on_asset``: object-space inputs, the light sample's
+    contribution added to L (its branch from ``passed_sh``, MIS ``power(p_light, p_A)``), and the
+    continuation of the asset technique: returns (L, T_unshadowed / p_A, T_shadowed / p_A, its world
+    direction wi_c, its world pdf p_A); ``wi_c``, ``p_c`` come in as the uniform world-sphere sample."""
+    import drjit as dr
+
+    k = inst - 1
+    x_o, n_o, wo_o = _object_inputs(mi, tab, k, si, wo, on_asset)
+    wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
+    wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
+    wi_c, p_c = mi.Vector3f(wi_c), mi.Float(p_c)
+    p_l = mi.Float(1.0 / FOUR_PI)
+    ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
+    for a, asset in enumerate(assets):
+        mine = on_asset & (dr.gather(mi.UInt32, tab["asset"], k, on_asset) == a)
+        lobe = asset.technique(x_o, n_o, wo_o) if use_lobe else None
+        wc_a = wc_o
+        if lobe is not None:
+            wc_a, p_obj = lobe.sample(u_c)
+            wc_w = _world_dir(mi, tab, k, wc_a, mine)
+            wi_c[mine] = wc_w
+            p_c[mine] = p_obj * _jacobian(mi, tab, k, wc_w, mine)
+            p_l[mine] = lobe.pdf(wi_o) * _jacobian(mi, tab, k, ds_em.d, mine)
+        u, s = asset.transport(x_o, n_o, wo_o, wi_o)
+        ta_un[mine] = u
+        ta_sh[mine] = s
+        u, s = asset.transport(x_o, n_o, wo_o, wc_a)
+        tc_un[mine] = u
+        tc_sh[mine] = s
+    w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, p_l))
+    L = mi.Spectrum(L)
+    L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
+    inv_p = dr.select(p_c > 0, dr.rcp(dr.select(p_c > 0, p_c, 1.0)), 0.0)  # T / p_A; a zero pdf carries nothing
+    return L, tc_un * inv_p, tc_sh * inv_p, wi_c, p_c
 
 
 def _instance_tables(mi, scene):
