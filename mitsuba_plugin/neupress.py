@@ -156,12 +156,12 @@ class NeupressJit:
 
     ``transport(x, n, wo, wi) -> (S + f_r |n.wi|, S)`` Color3f (1/sr): the first for light the asset does not
     block (V_self = 1), the second for light behind the asset itself (V_self = 0; S already holds the
-    self-shadowing). ``technique(x, n, wo)`` is the Gaussian lobe when the asset has ``sampling`` and
-    ``lobe`` is true, else None (the integrator samples the uniform world sphere)."""
+    self-shadowing). ``technique(x, n, wo)`` is the Gaussian lobe when the asset has ``sampling``, else None
+    (the integrator samples the uniform world sphere; so does ``nasset_path`` with ``lobe`` false)."""
 
     to_unit_box = RnaJit.to_unit_box  # the encoding box of encodings.md#unit-box, as for rna
 
-    def __init__(self, mi, path: str, *, lobe: bool = True) -> None:
+    def __init__(self, mi, path: str) -> None:
         self.mi = mi
         self.path = str(path)
         asset = open_asset(path, kinds=("neupress",))
@@ -170,7 +170,7 @@ class NeupressJit:
         self.appearance = DrJitNetwork(mi, asset.network_bytes("core", "appearance"), file=self.path,
                                        prim=f"{COMPONENTS}/core/appearance")
         self.sigma_net = None
-        if lobe and "sampling" in asset.components():
+        if "sampling" in asset.components():
             asset.load(["sampling"])
             self.gs = self._fourier(asset, "sampling", 5)
             self.sigma_net = DrJitNetwork(mi, asset.network_bytes("sampling", "sigma"), file=self.path,
