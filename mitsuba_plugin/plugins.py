@@ -3,14 +3,15 @@
 - BSDF ``nasset`` (``filename``, ``to_world``): marks a shape as an instance of a neural asset
   (its fallback mesh, in world space). It reflects nothing by itself: the integrator shades it.
 - Integrator ``nasset_path`` (``max_depth``, ``rr_depth``, counted like Mitsuba's ``path``: 2 = direct
-  lighting, i.e. spec/renderer.md's max_depth + 1): Mitsuba's unidirectional path tracer
+  lighting, i.e. spec/renderer.md's max_depth + 1; ``lobe``): Mitsuba's unidirectional path tracer
   (BSDF sampling + emitter sampling with power-heuristic MIS, Russian roulette) that, at a hit on an
   asset instance, applies spec/renderer.md#neural-assets: object-space inputs, a light sample whose
   shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
-  ``w_light = power(p_light, 1/4pi)``, and a uniform-sphere continuation of weight T 4pi that ignores
-  the instance. Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment,
-  and the triangles of that segment and its neighbours do not count as crossing the instance. Every
-  per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+  ``w_light = power(p_light, p_A)``, and a continuation of weight T / p_A that ignores the instance, drawn
+  by the asset technique: the uniform world sphere (p_A = 1/4pi; rna, neupress without ``sampling``) or
+  the kind's object-space lobe mapped to world, p_A = pdf_obj J (neupress, spec/renderer.md#neupress).
+  Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
+  of that segment and its neighbours do not count as crossing the instance. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
-from .rna import RnaJit
+from .neupress import NeupressJit
+from .rna import RnaJit, open_asset
 
 INTEGRATOR = "nasset_path"
 BSDF = "nasset"
@@ -32,15 +34,19 @@ FOUR_PI = 4.0 * math.pi
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
 
-_ASSETS: dict[tuple[str, str], RnaJit] = {}  # (variant, file) -> asset read once per process
+#: kind -> its Dr.Jit evaluator class: ``transport(x, n, wo, wi) -> (unshadowed, shadowed)`` Color3f (1/sr),
+#: ``technique(x, n, wo) -> None`` (uniform world sphere) or an object-space sampler with ``sample(u)`` and ``pdf(w)``
+JIT_KINDS = {"rna": RnaJit, "neupress": NeupressJit}
+_ASSETS: dict[tuple[str, str], object] = {}  # (variant, file) -> asset read once per process
 _REGISTERED: set[str] = set()
 
 
-def asset_for(mi, filename: str) -> RnaJit:
-    """The asset of ``filename`` read once per process and variant (typed errors from the SDK)."""
+def asset_for(mi, filename: str):
+    """The asset of ``filename`` read once per process and variant, evaluated by its kind's class in
+    :data:`JIT_KINDS` (typed errors from the SDK; SCENE_UNSUPPORTED for other kinds)."""
     key = (mi.variant(), str(filename))
     if key not in _ASSETS:
-        _ASSETS[key] = RnaJit(mi, filename)
+        _ASSETS[key] = JIT_KINDS[open_asset(filename, kinds=tuple(JIT_KINDS)).kind](mi, filename)
     return _ASSETS[key]
 
 
@@ -95,6 +101,7 @@ def register(mi) -> None:
             super().__init__(props)
             self.max_depth = int(props.get("max_depth", 5))
             self.rr_depth = int(props.get("rr_depth", 5))
+            self.lobe = bool(props.get("lobe", True))  # False: the uniform world sphere for every asset
             if self.max_depth < 1:
                 raise error("SCENE_INVALID", f"nasset_path: max_depth must be >= 1 (got {self.max_depth})")
 
@@ -126,7 +133,7 @@ def register(mi) -> None:
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
                 si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
-                beta[pending] *= dr.select(passed, t_sh, t_un) * FOUR_PI
+                beta[pending] *= dr.select(passed, t_sh, t_un)
                 valid |= active & si.is_valid()
 
                 # emission reached by the previous vertex's continuation
@@ -153,24 +160,15 @@ def register(mi) -> None:
                 val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
                 L[on_plain & active_em] += beta * dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, pdf)) * val * em_weight
 
-                # asset vertex: object-space inputs, both light sample and continuation transports
-                wi_c = mi.warp.square_to_uniform_sphere(sampler.next_2d())
+                # asset vertex: object-space inputs, both light sample and continuation transports; the
+                # continuation from the asset technique (uniform world sphere unless the kind has a lobe)
+                u_c = sampler.next_2d()
+                wi_c = mi.warp.square_to_uniform_sphere(u_c)
+                p_c = mi.Float(1.0 / FOUR_PI)
                 if dr.hint(len(assets) > 0, mode="scalar"):
-                    wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
-                    wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
-                    ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
-                    for a, asset in enumerate(assets):
-                        mine = _of_asset(mi, tab, k, a, on_asset)
-                        u, s = asset.transport(x_o, n_o, wo_o, wi_o, h_o)
-                        ta_un[mine] = u
-                        ta_sh[mine] = s
-                        u, s = asset.transport(x_o, n_o, wo_o, wc_o, h_o)
-                        tc_un[mine] = u
-                        tc_sh[mine] = s
-                    w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, 1.0 / FOUR_PI))
-                    L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
-                    t_un = tc_un
-                    t_sh = tc_sh
+                    if on_asset:  # symbolic: the networks run only in llvm packets / cuda warps with a lane on an asset
+                        L, t_un, t_sh, wi_c, p_c = _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh,
+                                                                 active_em, on_asset, u_c, self.lobe, L, beta, wi_c, p_c)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
@@ -178,7 +176,7 @@ def register(mi) -> None:
                 ray = si.spawn_ray(d_next)
                 beta[on_plain] *= bsdf_weight
                 prev_si = dr.detach(si, True)
-                prev_pdf = dr.select(on_asset, 1.0 / FOUR_PI, bs.pdf)
+                prev_pdf = dr.select(on_asset, p_c, bs.pdf)
                 prev_delta = on_plain & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
                 pending = mi.Bool(on_asset)
                 ignore = dr.select(on_asset, sid, 0)
@@ -200,7 +198,7 @@ def register(mi) -> None:
             return []
 
         def to_string(self):
-            return f"NassetPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}]"
+            return f"NassetPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, lobe={self.lobe}]"
 
     mi.register_bsdf(BSDF, lambda props: NassetBSDF(props))
     mi.register_integrator(INTEGRATOR, lambda props: NassetPathIntegrator(props))
@@ -229,16 +227,53 @@ def _trace(mi, scene, ray, ignore, lo, hi, active):
     return si, passed
 
 
+def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh, active_em, on_asset, u_c, use_lobe, L, beta, wi_c, p_c):
+    """spec/renderer.md#neural-assets at the lanes ``on_asset`` of instances k (object-space inputs x_o, n_o,
+    wo_o, h_o from :func:`_asset_inputs`): the light sample's
+    contribution added to L (its branch from ``passed_sh``, MIS ``power(p_light, p_A)``), and the
+    continuation of the asset technique: returns (L, T_unshadowed / p_A, T_shadowed / p_A, its world
+    direction wi_c, its world pdf p_A); ``wi_c``, ``p_c`` come in as the uniform world-sphere sample."""
+    import drjit as dr
+
+    wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
+    wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
+    wi_c, p_c = mi.Vector3f(wi_c), mi.Float(p_c)
+    p_l = mi.Float(1.0 / FOUR_PI)
+    ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
+    for a, asset in enumerate(assets):
+        mine = _of_asset(mi, tab, k, a, on_asset)
+        lobe = asset.technique(x_o, n_o, wo_o) if use_lobe else None
+        wc_a = wc_o
+        if lobe is not None:
+            wc_a, p_obj = lobe.sample(u_c)
+            wc_w = _world_dir(mi, tab, k, wc_a, mine)
+            wi_c[mine] = wc_w
+            p_c[mine] = p_obj * _jacobian(mi, tab, k, wc_w, mine)
+            p_l[mine] = lobe.pdf(wi_o) * _jacobian(mi, tab, k, ds_em.d, mine)
+        u, s = asset.transport(x_o, n_o, wo_o, wi_o, h_o)
+        ta_un[mine] = u
+        ta_sh[mine] = s
+        u, s = asset.transport(x_o, n_o, wo_o, wc_a, h_o)
+        tc_un[mine] = u
+        tc_sh[mine] = s
+    w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, p_l))
+    L = mi.Spectrum(L)
+    L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
+    inv_p = dr.select(p_c > 0, dr.rcp(dr.select(p_c > 0, p_c, 1.0)), 0.0)  # T / p_A; a zero pdf carries nothing
+    return L, tc_un * inv_p, tc_sh * inv_p, wi_c, p_c
+
+
 def _instance_tables(mi, scene):
     """Assets and per-instance transforms of the scene's shapes carrying the ``nasset`` BSDF.
 
-    Returns (assets [RnaJit], lut UInt32 [max registry id + 1] -> instance index + 1, tables dict of
+    Returns (assets [JIT_KINDS instances], lut UInt32 [max registry id + 1] -> instance index + 1, tables dict of
     Float / UInt32 arrays per instance: 'inv' 12 (world -> object affine, row-major 3x4), 'nt' 9
-    (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'asset')."""
+    (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'fwd' 9
+    (M3, row-major), 'jdet' 1 (|det M3^-1|), 'asset')."""
     import drjit as dr
 
     assets: list = []
-    ids, inv, nt, which = [], [], [], []
+    ids, inv, nt, fwd, jdet, which = [], [], [], [], [], []
     for sh in scene.shapes():
         b = sh.bsdf()
         filename = getattr(b, "filename", None)
@@ -256,12 +291,16 @@ def _instance_tables(mi, scene):
         ids.append(int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]))
         inv.append(minv[:3, :].ravel())
         nt.append((sign * m3.T).ravel())
+        fwd.append(m3.ravel())
+        jdet.append(1.0 / abs(det))
         which.append(assets.index(b.asset))
     lut = np.zeros(max(ids, default=0) + 1, np.uint32)
     for j, rid in enumerate(ids):
         lut[rid] = j + 1
     tab = {"inv": mi.Float(np.asarray(inv, np.float32).ravel()) if ids else mi.Float(0),
            "nt": mi.Float(np.asarray(nt, np.float32).ravel()) if ids else mi.Float(0),
+           "fwd": mi.Float(np.asarray(fwd, np.float32).ravel()) if ids else mi.Float(0),
+           "jdet": mi.Float(np.asarray(jdet, np.float32)) if ids else mi.Float(0),
            "asset": mi.UInt32(np.asarray(which, np.uint32)) if ids else mi.UInt32(0)}
     return assets, mi.UInt32(lut), tab
 
@@ -279,6 +318,23 @@ def _object_dir(mi, tab, k, v, active):
     rows = [_rows(mi, tab["inv"], k, 12, 4 * r, active) for r in range(3)]
     out = mi.Vector3f(*[r[0] * v.x + r[1] * v.y + r[2] * v.z for r in rows])
     return dr.normalize(out)
+
+
+def _world_dir(mi, tab, k, v, active):
+    """normalize(M3 v) of object directions v for instance k (spec/renderer.md#neupress: the lobe mapped to world)."""
+    import drjit as dr
+
+    rows = [_rows(mi, tab["fwd"], k, 9, 3 * r, active) for r in range(3)]
+    return dr.normalize(mi.Vector3f(*[r[0] * v.x + r[1] * v.y + r[2] * v.z for r in rows]))
+
+
+def _jacobian(mi, tab, k, w, active):
+    """J = d omega_obj / d omega_world = |det B| / |B w|^3 at unit world directions w (B = M3^-1; 1 for rigid motions)."""
+    import drjit as dr
+
+    rows = [_rows(mi, tab["inv"], k, 12, 4 * r, active) for r in range(3)]
+    bw = mi.Vector3f(*[r[0] * w.x + r[1] * w.y + r[2] * w.z for r in rows])
+    return dr.gather(mi.Float, tab["jdet"], k, active) * dr.rcp(dr.maximum(dr.norm(bw), 1e-10) ** 3)  # |B w| >= the least singular value of B
 
 
 def _object_inputs(mi, tab, k, si, wo, active):

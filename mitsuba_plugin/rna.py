@@ -166,3 +166,7 @@ class RnaJit:
         y = self.decoder(self.network_input(x, frame, wo, wi, h))
         y = [dr.select(dr.isfinite(v), dr.maximum(v, 0.0), 0.0) for v in y]
         return self.mi.Color3f(y[0], y[1], y[2]), self.mi.Color3f(y[3], y[4], y[5])
+
+    def technique(self, x, n, wo):
+        """None: continuations leave an rna asset uniformly on the world sphere (spec/renderer.md#neural-assets item 4)."""
+        return None

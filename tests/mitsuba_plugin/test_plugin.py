@@ -165,7 +165,8 @@ def _run_case(name, tmp_path, spp_scale=1):
     return run_case(case, template, tmp_path, seed=0, timeout=300, spp_scale=spp_scale)
 
 
-@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny", "rna_sphere_light"])
+@pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny",
+                                  "rna_sphere_light", "neupress_distant", pytest.param("neupress_direct", marks=pytest.mark.slow)])
 def test_conformance_cases(tmp_path, case):
     """The plugin passes conformance cases through the ``nasset conformance`` machinery (reference:
     the reference renderer at the case's ref_spp; tolerance from the case's measured noise)."""
@@ -220,11 +221,11 @@ def test_invalid_asset_file(mi, tmp_path):
 
 
 def test_wrong_kind(mi, tmp_path):
-    path = tmp_path / "np.usdc"
-    example_builder("neupress", size="tiny", seed=1).write(path)
+    path = tmp_path / "8dna.usdc"
+    example_builder("8dna", size="tiny", seed=1).write(path)
     with pytest.raises(SceneError) as exc:
         asset_shape(path, mi=mi)
-    assert exc.value.code == "SCENE_UNSUPPORTED" and "neupress" in exc.value.message
+    assert exc.value.code == "SCENE_UNSUPPORTED" and "8dna" in exc.value.message
 
 
 def test_decoder_the_plugin_cannot_run(mi, tmp_path, rng):
