@@ -441,3 +441,117 @@ class EightDnaJit:
         h = st * dr.cos(phi) * t + st * dr.sin(phi) * b + ct * n
         wi = safe_normalize(mi, 2.0 * dr.dot(wo, h) * h - wo)
         return wi, self.direct_pdf(n, wo, wi)
+
+
+# --- the vertex estimator of spec/renderer.md#8dna ----------------------------------------------------
+
+def _matrix(mi, tab, name, k, active) -> list:
+    """Rows (3 x 4 Floats) of instance k's affine map ``name`` ('inv': world -> object, 'fwd': object -> world)."""
+    import drjit as dr
+
+    return [[dr.gather(mi.Float, tab[name], k * 12 + 4 * r + j, active) for j in range(4)] for r in range(3)]
+
+
+def _apply(mi, rows, v, point=False):
+    return mi.Vector3f(*[r[0] * v.x + r[1] * v.y + r[2] * v.z + (r[3] if point else 0.0) for r in rows])
+
+
+def vertex(mi, scene, sampler, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> dict:
+    """The 8dna estimator at asset hits ``on`` (spec/renderer.md#8dna) for the ``nasset_path`` integrator.
+
+    si: the hit; wo_world: -ray.d; sid: the hit shape's registry id (UInt32); assets: (index, EightDnaJit)
+    of the scene's 8dna assets; tab, k: the integrator's instance tables and instance index; x, n, wo: the
+    object-space inputs. Returns 'L' (Spectrum: direct lobe at x_o plus the light sample at u_i, to be
+    multiplied by the path throughput), the continuation 'd' (world, unit), 'from_u' (Bool: it leaves the
+    world point 'origin' = u_i M, else x_o), 'weight' (Spectrum throughput factor; 0 where a GGX
+    continuation passes through the asset: 'weight_passed'), 'pdf' (its world solid-angle pdf for MIS
+    at a reached light) and 'alive'."""
+    import drjit as dr
+
+    from .plugins import _mis, _of_asset, _trace
+
+    u_ch, z = sampler.next_1d(), [sampler.next_1d() for _ in range(4)]
+    u_ex, u_eu, u_pick, u_g = sampler.next_2d(), sampler.next_2d(), sampler.next_1d(), sampler.next_2d()
+    ch = dr.minimum(mi.UInt32(u_ch * 3.0), 2)
+    inv, fwd = _matrix(mi, tab, "inv", k, on), _matrix(mi, tab, "fwd", k, on)
+    det = dr.abs(inv[0][0] * (inv[1][1] * inv[2][2] - inv[1][2] * inv[2][1])
+                 - inv[0][1] * (inv[1][0] * inv[2][2] - inv[1][2] * inv[2][0])
+                 + inv[0][2] * (inv[1][0] * inv[2][1] - inv[1][1] * inv[2][0]))
+
+    def jac(w):  # d omega_object / d omega_world of unit world w
+        v = _apply(mi, inv, w)
+        return det / dr.maximum(dr.norm(v) ** 3, TINY)
+
+    def obj(w):
+        return safe_normalize(mi, _apply(mi, inv, w))
+
+    def world(w):
+        return safe_normalize(mi, _apply(mi, fwd, w))
+
+    ng = si.n
+    side = dr.select(dr.dot(wo_world, ng) >= 0, 1.0, -1.0)
+
+    def backtrace(p, w, active):  # the ray p - t w first meets this instance
+        bt = scene.ray_intersect(mi.Ray3f(p, -w), active)
+        return active & bt.is_valid() & (dr.reinterpret_array(mi.UInt32, bt.shape) == sid)
+
+    # direct lobe at x_o: an ordinary light sample (the asset occludes; w_i on the viewer's side)
+    ds_x, ew_x = scene.sample_emitter_direction(si, u_ex, True, on)
+    wl_x = obj(ds_x.d)
+    f3 = dict(alpha=mi.Color3f(0), pd=mi.Float(0.5), fd=mi.Float(0), pdl=mi.Float(0), u=mi.Point3f(0), wf=mi.Vector3f(0),
+              p_u=mi.Color3f(0), nu=mi.Vector3f(0), wg=mi.Vector3f(0), pdg=mi.Float(0), fg=mi.Float(0))
+    states = []
+    for a, asset in assets:
+        mine = _of_asset(mi, tab, k, a, on)
+        ctx = asset.context(x, wo)
+        fres = asset.fresnel(dr.dot(n, safe_normalize(mi, wo)))
+        am = (ctx["albedo"].x + ctx["albedo"].y + ctx["albedo"].z) / 3.0
+        tot = fres + am
+        st = asset.sample(ctx, ch, z)
+        wg, pdg = asset.direct_sample(n, wo, u_g)
+        new = dict(alpha=ctx["albedo"], pd=dr.select(tot > 0, dr.clip(fres / dr.select(tot > 0, tot, 1.0), 0.05, 0.95), 0.5),
+                   fd=asset.direct_eval(n, wo, wl_x), pdl=asset.direct_pdf(n, wo, wl_x), u=st["u"], wf=st["w"], p_u=st["p_u"],
+                   nu=asset.box_normal(st["u"]), wg=wg, pdg=pdg, fg=asset.direct_eval(n, wo, wg))
+        f3 = {key: dr.select(mine, new[key], f3[key]) for key in f3}
+        states.append((mine, asset, st))
+    pd = f3["pd"]
+    ok_x = on & (ds_x.pdf != 0) & (dr.dot(ds_x.d, ng) * side > 0)
+    w_x = dr.select(ds_x.delta, 1.0, _mis(ds_x.pdf, pd * f3["pdl"] * jac(ds_x.d)))
+    L = dr.select(ok_x, f3["fd"] * jac(ds_x.d) * w_x * ew_x, 0.0)
+
+    # neural part: a light sample at u_i (shadow ray from u_i ignoring the asset; n_u . w > 0; back-trace)
+    pbar_u = (f3["p_u"].x + f3["p_u"].y + f3["p_u"].z) / 3.0
+    good_u = on & (pbar_u > 0)
+    u_w = mi.Point3f(_apply(mi, fwd, f3["u"], point=True))
+    it = dr.zeros(mi.Interaction3f)
+    it.p, it.time, it.wavelengths = u_w, si.time, si.wavelengths
+    ds_u, ew_u = scene.sample_emitter_direction(it, u_eu, False, good_u)
+    wl_u = obj(ds_u.d)
+    ok_u = good_u & (ds_u.pdf != 0) & (dr.dot(f3["nu"], wl_u) > 0)
+    sh, _ = _trace(mi, scene, it.spawn_ray_to(ds_u.p), sid, mi.UInt32(0), mi.UInt32(0), ok_u)
+    ok_u &= ~sh.is_valid()
+    ok_u = backtrace(u_w, ds_u.d, ok_u)
+    p_l, p_f = mi.Color3f(0), mi.Color3f(0)
+    for mine, asset, st in states:
+        p_l = dr.select(mine, asset.pdf_rgb_at(st, wl_u), p_l)
+        p_f = dr.select(mine, asset.pdf_rgb_at(st, f3["wf"]), p_f)
+    safe_u = dr.select(good_u, pbar_u, 1.0)
+    j_u = jac(ds_u.d)
+    pbar_wl = (p_l.x + p_l.y + p_l.z) / 3.0 / safe_u
+    w_u = dr.select(ds_u.delta, 1.0, _mis(ds_u.pdf, (1.0 - pd) * pbar_wl * j_u))
+    L += dr.select(ok_u, f3["alpha"] * p_l * ew_u * (j_u * w_u / safe_u), 0.0)
+
+    # one continuation: GGX from x_o with probability P_d, else the flow direction from u_i
+    pick_d = u_pick < pd
+    wg = world(f3["wg"])
+    ok_g = on & pick_d & (f3["fg"] > 0) & (f3["pdg"] > 0) & (dr.dot(wg, ng) * side > 0)
+    wf = world(f3["wf"])
+    pbar_wf = (p_f.x + p_f.y + p_f.z) / 3.0 / safe_u
+    ok_f = good_u & ~pick_d & (dr.dot(f3["nu"], f3["wf"]) > 0) & (pbar_wf > 0)
+    ok_f = backtrace(u_w, wf, ok_f)
+    weight_g = mi.Color3f(f3["fg"] / dr.select(ok_g, pd * f3["pdg"], 1.0))
+    weight_f = f3["alpha"] * p_f / dr.select(ok_f, pbar_u * pbar_wf * (1.0 - pd), 1.0)
+    weight = dr.select(ok_g, weight_g, dr.select(ok_f, weight_f, 0.0))
+    return {"L": L, "d": dr.select(pick_d, wg, wf), "from_u": ~pick_d, "origin": u_w, "weight": weight,
+            "weight_passed": dr.select(ok_f, weight_f, 0.0),
+            "pdf": dr.select(pick_d, pd * f3["pdg"] * jac(wg), (1.0 - pd) * pbar_wf * jac(wf)), "alive": ok_g | ok_f}

@@ -22,6 +22,8 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
+from .eightdna import EightDnaJit
+from .eightdna import vertex as eightdna_vertex
 from .rna import RnaJit
 
 INTEGRATOR = "nasset_path"
@@ -32,15 +34,24 @@ FOUR_PI = 4.0 * math.pi
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
 
-_ASSETS: dict[tuple[str, str], RnaJit] = {}  # (variant, file) -> asset read once per process
+#: kind -> the class that evaluates it in Dr.Jit (each has ``kind``, ``fiber``, ``geometry``)
+JIT_KINDS = {"rna": RnaJit, "8dna": EightDnaJit}
+_ASSETS: dict[tuple[str, str], object] = {}  # (variant, file) -> asset read once per process
 _REGISTERED: set[str] = set()
 
 
-def asset_for(mi, filename: str) -> RnaJit:
-    """The asset of ``filename`` read once per process and variant (typed errors from the SDK)."""
+def asset_for(mi, filename: str):
+    """The asset of ``filename`` read once per process and variant, by its kind (:data:`JIT_KINDS`; typed
+    errors from the SDK, SCENE_UNSUPPORTED for other kinds)."""
+    from nasset_sdk.asset import Asset
+
     key = (mi.variant(), str(filename))
     if key not in _ASSETS:
-        _ASSETS[key] = RnaJit(mi, filename)
+        kind = Asset.open(filename).kind
+        if kind not in JIT_KINDS:
+            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders kinds {', '.join(JIT_KINDS)}, not {kind!r}",
+                        file=str(filename))
+        _ASSETS[key] = JIT_KINDS[kind](mi, filename)
     return _ASSETS[key]
 
 
@@ -107,6 +118,7 @@ def register(mi) -> None:
         def sample(self, scene, sampler, ray, medium=None, active=True):
             import mitsuba as mi  # dr.syntax recompiles this method without register()'s closure
             assets, lut, tab = self.instances(scene)
+            rna, eight = _by_kind(assets, "rna"), _by_kind(assets, "8dna")
             ctx = mi.BSDFContext()
             ray = mi.Ray3f(ray)
             L = mi.Spectrum(0)
@@ -126,7 +138,7 @@ def register(mi) -> None:
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
                 si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
-                beta[pending] *= dr.select(passed, t_sh, t_un) * FOUR_PI
+                beta[pending] *= dr.select(passed, t_sh, t_un)
                 valid |= active & si.is_valid()
 
                 # emission reached by the previous vertex's continuation
@@ -159,7 +171,7 @@ def register(mi) -> None:
                     wi_o = _object_dir(mi, tab, k, ds_em.d, on_asset)
                     wc_o = _object_dir(mi, tab, k, wi_c, on_asset)
                     ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
-                    for a, asset in enumerate(assets):
+                    for a, asset in rna:
                         mine = _of_asset(mi, tab, k, a, on_asset)
                         u, s = asset.transport(x_o, n_o, wo_o, wi_o, h_o)
                         ta_un[mine] = u
@@ -169,16 +181,31 @@ def register(mi) -> None:
                         tc_sh[mine] = s
                     w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, 1.0 / FOUR_PI))
                     L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
-                    t_un = tc_un
-                    t_sh = tc_sh
+                    t_un = tc_un * FOUR_PI
+                    t_sh = tc_sh * FOUR_PI
+                on_8 = mi.Bool(False)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    on_8 = on_asset & (dr.gather(mi.UInt32, tab["kind8"], k, on_asset) > 0)
+                    v8 = eightdna_vertex(mi, scene, sampler, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8)
+                    L[on_8] += beta * v8["L"]
+                    t_un = dr.select(on_8, v8["weight"], t_un)
+                    t_sh = dr.select(on_8, v8["weight_passed"], t_sh)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
                 d_next = dr.select(on_asset, wi_c, si.to_world(bs.wo))
-                ray = si.spawn_ray(d_next)
-                beta[on_plain] *= bsdf_weight
                 prev_si = dr.detach(si, True)
                 prev_pdf = dr.select(on_asset, 1.0 / FOUR_PI, bs.pdf)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    d_next = dr.select(on_8, v8["d"], d_next)
+                    prev_pdf = dr.select(on_8, v8["pdf"], prev_pdf)
+                    active_next &= ~on_8 | v8["alive"]
+                ray = si.spawn_ray(d_next)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    from_u = on_8 & v8["from_u"]  # a flow continuation leaves u_i M itself (no offset)
+                    ray.o = dr.select(from_u, v8["origin"], ray.o)
+                    prev_si.p = dr.select(from_u, v8["origin"], prev_si.p)
+                beta[on_plain] *= bsdf_weight
                 prev_delta = on_plain & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
                 pending = mi.Bool(on_asset)
                 ignore = dr.select(on_asset, sid, 0)
@@ -205,6 +232,11 @@ def register(mi) -> None:
     mi.register_bsdf(BSDF, lambda props: NassetBSDF(props))
     mi.register_integrator(INTEGRATOR, lambda props: NassetPathIntegrator(props))
     _REGISTERED.add(mi.variant())
+
+
+def _by_kind(assets, kind):
+    """(index, asset) of the assets of ``kind``."""
+    return [(a, asset) for a, asset in enumerate(assets) if asset.kind == kind]
 
 
 @dr.syntax
@@ -238,7 +270,7 @@ def _instance_tables(mi, scene):
     import drjit as dr
 
     assets: list = []
-    ids, inv, nt, which = [], [], [], []
+    ids, inv, fwd, nt, which = [], [], [], [], []
     for sh in scene.shapes():
         b = sh.bsdf()
         filename = getattr(b, "filename", None)
@@ -255,12 +287,15 @@ def _instance_tables(mi, scene):
         sign = 1.0 if b.asset.geometry.normals is not None or det > 0 else -1.0
         ids.append(int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]))
         inv.append(minv[:3, :].ravel())
+        fwd.append(m[:3, :].ravel())
         nt.append((sign * m3.T).ravel())
         which.append(assets.index(b.asset))
     lut = np.zeros(max(ids, default=0) + 1, np.uint32)
     for j, rid in enumerate(ids):
         lut[rid] = j + 1
     tab = {"inv": mi.Float(np.asarray(inv, np.float32).ravel()) if ids else mi.Float(0),
+           "fwd": mi.Float(np.asarray(fwd, np.float32).ravel()) if ids else mi.Float(0),
+           "kind8": mi.UInt32(np.asarray([assets[w].kind == "8dna" for w in which], np.uint32)) if ids else mi.UInt32(0),
            "nt": mi.Float(np.asarray(nt, np.float32).ravel()) if ids else mi.Float(0),
            "asset": mi.UInt32(np.asarray(which, np.uint32)) if ids else mi.UInt32(0)}
     return assets, mi.UInt32(lut), tab
