@@ -46,7 +46,7 @@ def _np(v):
     return np.asarray(v.numpy(), np.float64).T
 
 
-@pytest.fixture(scope="module", params=["tiny", "small"])
+@pytest.fixture(scope="module", params=["tiny", pytest.param("small", marks=pytest.mark.slow)])
 def pair(mi, tmp_path_factory, request):
     path = tmp_path_factory.mktemp("eightdna") / f"8dna_{request.param}.usdc"
     example_builder("8dna", size=request.param, seed=7).write(path)
@@ -125,3 +125,51 @@ def test_direct_lobe_matches_sdk(mi, pair, rng):
     ws, _ = jit.direct_sample(_vec(mi, nrm), _vec(mi, wo), mi.Point2f(*[mi.Float(u2[:, k].astype(np.float32)) for k in range(2)]))
     w_ref, _ = sdk.direct_sample(nrm, wo, u2)
     np.testing.assert_allclose(_np(ws), w_ref, atol=2e-3)  # (its pdf is direct_pdf, checked above)
+
+
+def test_conformance_case_8dna_distant(tmp_path):
+    """The plugin's render of 8dna_distant (an 8dna asset on a floor under a DistantLight, max_depth 5)
+    passes through the ``nasset conformance`` machinery: reference by the reference renderer at 2048 spp,
+    tolerance twice the largest of its own 64-spp noise runs."""
+    import sys
+
+    from nasset_sdk.conformance import find_suite, load_cases, run_case
+
+    (case,) = load_cases(find_suite(), ["8dna_distant"])
+    template = (f"{sys.executable} -m nasset_mitsuba_plugin.render {{scene}} {{out}} --spp {{spp}} --width {{width}}"
+                " --height {height} --seed {seed}")
+    row = run_case(case, template, tmp_path, seed=0, timeout=300)
+    assert row["passed"], row
+
+
+@pytest.mark.parametrize("light", ["distant", "sphere"])
+def test_lone_asset_matches_reference_renderer(tmp_path, light):
+    """A lone 8dna asset filling the frame, lit by a DistantLight (delta: light samples only) or a nearby
+    SphereLight (near field: MIS between the light samples at x_o and u_i and the continuations that reach
+    it), where the flow's light samples at u_i carry most of the image: the plugin's mean over the asset's
+    pixels equals the reference renderer's per channel within 4 % (both 512 spp on 24 x 24 pixels: the
+    means' sampling noise, measured over seeds at 256 and 1024 spp, is about 2 % at 256 spp, 1 % at 1024;
+    converged, the two agree within 0.5 % in red and green and 1.5 % in blue, the reference's own spread)."""
+    from nasset_mitsuba_plugin.render import render
+    from nasset_reference_renderer.integrator import RenderSettings
+    from nasset_reference_renderer.integrator import render as ref_render
+    from nasset_reference_renderer.scene import load_scene
+    from nasset_reference_renderer.testscenes import SceneBuilder
+    from nasset_sdk.conformance import find_suite
+
+    asset = find_suite() / "8dna_distant" / "8dna.usdc"
+    b = SceneBuilder()
+    b.camera((0.4, 0.6, 1.6), (0, 0, 0))
+    if light == "distant":
+        b.distant("Sun", (0.3, 1.0, 0.5), 3.0)
+    else:
+        b.sphere_light("Bulb", (0.9, 0.9, 0.3), 0.2, 30.0)
+    b.asset("A", str(asset))
+    scene = b.write(tmp_path / "scene.usda")
+    img = render(scene, 512, width=24, height=24, seed=1, max_depth=2)
+    ref = ref_render(load_scene(scene), RenderSettings(spp=512, width=24, height=24, seed=2, max_depth=2)).image[..., :3]
+    mask = ref.sum(-1) > 0
+    assert mask.mean() > 0.5
+    a, r = img[mask].mean(0), ref[mask].mean(0)
+    assert r.min() > 0.01
+    np.testing.assert_allclose(a, r, rtol=0.04)
