@@ -156,10 +156,13 @@ def register(mi) -> None:
                 bsdf = si.bsdf(ray)
                 k = inst - 1
                 x_o, n_o, wo_o, h_o, ex_lo, ex_hi = _asset_inputs(mi, assets, tab, k, si, -ray.d, on_asset)
+                on_8 = mi.Bool(False)  # 8dna hits: their own light samples and continuation (eightdna.vertex)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    on_8 = on_asset & (dr.gather(mi.UInt32, tab["kind8"], k, on_asset) > 0)
 
                 # light sample; at an asset the shadow ray ignores the instance and records crossing it
                 ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_next)
-                active_em = active_next & (ds_em.pdf != 0.0)
+                active_em = active_next & (ds_em.pdf != 0.0) & ~on_8
                 si_sh, passed_sh = _trace(mi, scene, si.spawn_ray_to(ds_em.p), dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em)
                 active_em &= ~si_sh.is_valid()
                 val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
@@ -183,9 +186,7 @@ def register(mi) -> None:
                     L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
                     t_un = tc_un * FOUR_PI
                     t_sh = tc_sh * FOUR_PI
-                on_8 = mi.Bool(False)
                 if dr.hint(len(eight) > 0, mode="scalar"):
-                    on_8 = on_asset & (dr.gather(mi.UInt32, tab["kind8"], k, on_asset) > 0)
                     v8 = eightdna_vertex(mi, scene, sampler, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8)
                     L[on_8] += beta * v8["L"]
                     t_un = dr.select(on_8, v8["weight"], t_un)
