@@ -4,8 +4,8 @@ Encodings: the triplane through ``Texture2f`` (:func:`~.rna.triplane_lookup`), t
 SDK's extended tables (``nasset_sdk.portable.cube_extended_table``: every face bordered by the texels
 the seam re-projection reads, corners the mean of three) read with one plain bilinear gather, the 1D
 grids by linear gathers. Networks: the five ONNX graphs traced by :class:`~.network.DrJitNetwork`.
-The rational-quadratic spline, the bounding-box parameterisation and the GGX direct lobe follow
-8dna.md#spline, #bbox, #flow and encodings.md#ggx in float32 (the renderer tier of
+The rational-quadratic spline and the bounding-box parameterisation follow 8dna.md#spline, #bbox and
+#flow in float32, the direct lobe is :class:`~.boundary.GgxJit` (the renderer tier of
 spec/conformance.md: images within noise, not bit-exact vectors). Densities are capped at
 :data:`PDF_MAX` (float32 cannot hold the spec's 1e300).
 
@@ -25,6 +25,7 @@ from nasset_sdk.kinds.boundary import boundary_params
 from nasset_sdk.kinds.eightdna import FLOWS, spline_bins
 from nasset_sdk.portable import cube_extended_table
 
+from .boundary import GgxJit
 from .network import DrJitNetwork
 from .rna import open_asset, plane_textures, safe_normalize, triplane_lookup
 
@@ -154,7 +155,7 @@ class EightDnaJit:
         self.grids = {n: (mi.Float(np.ascontiguousarray(t[n]).ravel()), t[n].shape[0], t[n].shape[1])
                       for n in ("s1Grid", "s3Grid")}
         self.mins = [float(v) for v in t["splineMinimums"].reshape(-1)]
-        self.eta, self.alpha = boundary_params(t["direct"])
+        self.ggx = GgxJit(mi, *boundary_params(t["direct"]))
         refs = asset.network_refs("core")
         nets = {}
         for name in ("albedo",) + FLOWS:
@@ -365,82 +366,23 @@ class EightDnaJit:
             lg = [a + sp.inverse_log(t) for a, sp in zip(lg, self._splines(self._conditioner(ctx, j, s[:j - 1])), strict=True)]
         return mi.Color3f(*[dr.minimum(dr.exp(dr.minimum(v, LOG_PDF_MAX)) / S_PER_T * jac, PDF_MAX) for v in lg])
 
-    # --- direct lobe (encodings.md#ggx, nasset_sdk.kinds.boundary) --------------------------------
+    # --- direct lobe (encodings.md#ggx): the shared Dr.Jit GGX boundary -------------------------------
 
     def fresnel(self, cos_i):
-        """Unpolarised dielectric Fresnel reflectance at |cos_i| (1 under total internal reflection)."""
-        import drjit as dr
-
-        c = dr.clip(dr.abs(dr.select(dr.isnan(cos_i), 0.0, cos_i)), 0.0, 1.0)
-        eta = self.eta
-        st2 = (1.0 - c * c) / (eta * eta)
-        ct = dr.sqrt(dr.maximum(1.0 - st2, 0.0))
-        rs = (c - eta * ct) / dr.maximum(c + eta * ct, 1e-12)
-        rp = (eta * c - ct) / dr.maximum(eta * c + ct, 1e-12)
-        return dr.select(st2 >= 1.0, 1.0, dr.clip(0.5 * (rs * rs + rp * rp), 0.0, 1.0))
-
-    def _d(self, cos_h):
-        import drjit as dr
-
-        a2 = self.alpha * self.alpha
-        den = cos_h * cos_h * (a2 - 1.0) + 1.0
-        return dr.select(cos_h > 0, a2 / (math.pi * dr.maximum(den * den, 1e-12)), 0.0)
-
-    def _lambda(self, c):
-        import drjit as dr
-
-        c = dr.minimum(dr.maximum(dr.abs(c), 1e-12), 1.0)
-        return 0.5 * (dr.sqrt(c * c + self.alpha * self.alpha * (1.0 - c * c)) / c - 1.0)
-
-    def _dots(self, n, wo, wi):
-        import drjit as dr
-
-        mi = self.mi
-        n, wo, wi = (safe_normalize(mi, mi.Vector3f(v)) for v in (n, wo, wi))
-        h = wo + wi
-        hl = dr.norm(h)
-        h = dr.select(hl > 1e-12, h / dr.maximum(hl, 1e-12), n)
-        return dr.dot(n, wo), dr.dot(n, wi), dr.dot(n, h), dr.dot(wo, h)
+        """Dielectric Fresnel reflectance of ``core/direct`` at |cos_i|."""
+        return self.ggx.fresnel(cos_i)
 
     def direct_eval(self, n, wo, wi):
-        """f |n.wi| of the GGX rough-dielectric reflection [Float, 1/sr, grey] (object space)."""
-        import drjit as dr
-
-        co, ci, ch, coh = self._dots(n, wo, wi)
-        g2 = 1.0 / (1.0 + self._lambda(co) + self._lambda(ci))
-        val = self.fresnel(coh) * self._d(ch) * g2 / (4.0 * dr.maximum(co, 1e-12))
-        return dr.select((co > 0) & (ci > 0), val, 0.0)
+        """f |n.wi| of the direct lobe [Float, 1/sr, grey] (object space)."""
+        return self.ggx.eval(n, wo, wi)
 
     def direct_pdf(self, n, wo, wi):
         """Density per object steradian of :meth:`direct_sample` at wi."""
-        import drjit as dr
-
-        co, _, ch, coh = self._dots(n, wo, wi)
-        flip = dr.select(ch < 0, -1.0, 1.0)
-        ch, coh = ch * flip, coh * flip
-        pdf = self._d(ch) * ch / (4.0 * dr.maximum(dr.abs(coh), 1e-12))
-        return dr.select((co > 0) & (ch > 0), pdf, 0.0)
+        return self.ggx.pdf(n, wo, wi)
 
     def direct_sample(self, n, wo, u2):
-        """wo reflected about h ~ D(h) (n.h) (encodings.md#frames for the frame of n): (wi, pdf)."""
-        import drjit as dr
-
-        mi = self.mi
-        n = safe_normalize(mi, mi.Vector3f(n))
-        wo = safe_normalize(mi, mi.Vector3f(wo))
-        u0 = dr.clip(u2.x, 0.0, 1.0 - 1e-7)
-        tan2 = self.alpha * self.alpha * u0 / dr.maximum(1.0 - u0, 1e-7)
-        ct = dr.rsqrt(1.0 + tan2)
-        st = dr.sqrt(dr.maximum(1.0 - ct * ct, 0.0))
-        phi = 2.0 * math.pi * u2.y
-        sign = dr.select(n.z >= 0, 1.0, -1.0)
-        a = -1.0 / (sign + n.z)
-        c = n.x * n.y * a
-        t = mi.Vector3f(1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x)
-        b = mi.Vector3f(c, sign + n.y * n.y * a, -n.y)
-        h = st * dr.cos(phi) * t + st * dr.sin(phi) * b + ct * n
-        wi = safe_normalize(mi, 2.0 * dr.dot(wo, h) * h - wo)
-        return wi, self.direct_pdf(n, wo, wi)
+        """(wi, pdf) of the direct lobe's GGX sampler."""
+        return self.ggx.sample(n, wo, u2)
 
 
 # --- the vertex estimator of spec/renderer.md#8dna ----------------------------------------------------

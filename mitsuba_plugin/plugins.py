@@ -9,8 +9,9 @@
   shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
   ``w_light = power(p_light, 1/4pi)``, and a uniform-sphere continuation of weight T 4pi that ignores
   the instance. Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment,
-  and the triangles of that segment and its neighbours do not count as crossing the instance. Every
-  per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+  and the triangles of that segment and its neighbours do not count as crossing the instance. 8dna
+  assets (spec/renderer.md#8dna) take their own light samples (at x_o and at u_i) and continuation
+  from :func:`.eightdna.vertex`. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
 """
 
 from __future__ import annotations
