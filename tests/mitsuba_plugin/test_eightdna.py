@@ -209,3 +209,26 @@ def test_scene_mixing_rna_and_8dna_assets(tmp_path):
     np.testing.assert_allclose(both[block_r].mean(), only_rna[block_r].mean(), rtol=0.1)
     np.testing.assert_allclose(both[block_e].mean(), only_8[block_e].mean(), rtol=0.1)
     assert only_rna[block_e].mean() != pytest.approx(both[block_e].mean(), rel=0.1)  # the 8dna asset is what shows there
+
+
+@pytest.mark.parametrize("name", ["s12Cube", "flow3"])
+def test_asset_without_a_component_part(mi, tmp_path, name):
+    """An 8dna asset whose core component lost a tensor or a network (edited after writing): the SDK's
+    TENSOR_MISSING / NETWORK_MISSING naming it, not a Dr.Jit error."""
+    from pxr import Sdf
+
+    from nasset_mitsuba_plugin.scene import asset_shape
+    from nasset_sdk.errors import NassetError
+
+    path = tmp_path / f"no_{name}.usdc"
+    example_builder("8dna", size="tiny", seed=3).write(path)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    found = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == name else None)
+    assert found
+    for p in found:
+        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
+    layer.Save()
+    with pytest.raises(NassetError) as exc:
+        asset_shape(path, mi=mi)
+    assert exc.value.code == ("TENSOR_MISSING" if name == "s12Cube" else "NETWORK_MISSING") and name in exc.value.message
