@@ -26,6 +26,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.boundary import boundary_params
 from nasset_sdk.kinds.neupress import SIGMA_MAX, SIGMA_MIN
 
+from .boundary import GgxJit
 from .network import DrJitNetwork
 from .rna import RnaJit, open_asset, safe_normalize
 
@@ -90,38 +91,6 @@ def local_frame(mi, n):
     return t, b
 
 
-def fresnel(c, eta: float):
-    """Unpolarised dielectric Fresnel reflectance at |c| for relative IOR eta (1 under total internal reflection)."""
-    dr = _dr()
-    c = dr.clip(dr.abs(c), 0.0, 1.0)
-    st2 = (1.0 - dr.square(c)) / (eta * eta)
-    ct = dr.sqrt(dr.maximum(1.0 - st2, 0.0))
-    rs = (c - eta * ct) / dr.maximum(c + eta * ct, 1e-12)
-    rp = (eta * c - ct) / dr.maximum(eta * c + ct, 1e-12)
-    return dr.select(st2 >= 1.0, 1.0, dr.clip(0.5 * (dr.square(rs) + dr.square(rp)), 0.0, 1.0))
-
-
-def ggx_reflection(mi, n, wo, wi, eta: float, alpha: float):
-    """Cosine-weighted GGX rough-dielectric reflection f(wo, wi) |n.wi| [Float, 1/sr] (encodings.md#ggx)."""
-    dr = _dr()
-    n, wo, wi = (safe_normalize(mi, mi.Vector3f(v)) for v in (n, wo, wi))
-    h = wo + wi
-    hl = dr.norm(h)
-    h = dr.select(hl > 1e-12, h / dr.select(hl > 1e-12, hl, 1.0), n)
-    cos_o, cos_i, cos_h, cos_oh = dr.dot(n, wo), dr.dot(n, wi), dr.dot(n, h), dr.dot(wo, h)
-    a2 = alpha * alpha
-    den = dr.square(cos_h) * (a2 - 1.0) + 1.0
-    d = dr.select(cos_h > 0, a2 / (math.pi * dr.maximum(dr.square(den), 1e-12)), 0.0)
-
-    def lam(c):
-        c = dr.minimum(dr.maximum(dr.abs(c), 1e-12), 1.0)
-        return 0.5 * (dr.sqrt(dr.square(c) + a2 * (1.0 - dr.square(c))) / c - 1.0)
-
-    g2 = dr.rcp(1.0 + lam(cos_o) + lam(cos_i))
-    val = fresnel(cos_oh, eta) * d * g2 / (4.0 * dr.maximum(cos_o, 1e-12))
-    return dr.select((cos_o > 0) & (cos_i > 0), val, 0.0)
-
-
 class GaussianLobe:
     """The truncated planar Gaussian of neupress.md#lobe around unit normals n [Vector3f], sigma [Float] (radians)."""
 
@@ -160,6 +129,7 @@ class NeupressJit:
     (the integrator samples the uniform world sphere; so does ``nasset_path`` with ``lobe`` false)."""
 
     to_unit_box = RnaJit.to_unit_box  # the encoding box of encodings.md#unit-box, as for rna
+    kind = "neupress"
     fiber = False  # neupress assets are surfaces: the frame is the normal, no h
 
     def __init__(self, mi, path: str) -> None:
@@ -167,7 +137,7 @@ class NeupressJit:
         self.path = str(path)
         asset = open_asset(path, kinds=("neupress",))
         self.g = self._fourier(asset, "core", 7)
-        self.eta, self.alpha = boundary_params(asset.tensor("core", "boundary"))
+        self.ggx = GgxJit(mi, *boundary_params(asset.tensor("core", "boundary")))
         self.appearance = DrJitNetwork(mi, asset.network_bytes("core", "appearance"), file=self.path,
                                        prim=f"{COMPONENTS}/core/appearance")
         self.sigma_net = None
@@ -200,7 +170,7 @@ class NeupressJit:
 
     def reflection(self, n, wo, wi):
         """f_r |n.wi| [Float, 1/sr] of the boundary (the same in R, G, B)."""
-        return ggx_reflection(self.mi, n, wo, wi, self.eta, self.alpha)
+        return self.ggx.eval(n, wo, wi)
 
     def transport(self, x, n, wo, wi, h=None):
         """(unshadowed S + f_r |n.wi|, shadowed S) [Color3f, 1/sr]; h (fibers only) is ignored."""

@@ -11,7 +11,9 @@
   by the asset technique: the uniform world sphere (p_A = 1/4pi; rna, neupress without ``sampling``) or
   the kind's object-space lobe mapped to world, p_A = pdf_obj J (neupress, spec/renderer.md#neupress).
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
-  of that segment and its neighbours do not count as crossing the instance. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+  of that segment and its neighbours do not count as crossing the instance. 8dna assets
+  (spec/renderer.md#8dna) take their own light samples (at x_o and at u_i) and continuation from
+  :func:`.eightdna.vertex`. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
 """
 
 from __future__ import annotations
@@ -23,8 +25,10 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
+from .eightdna import EightDnaJit
+from .eightdna import vertex as eightdna_vertex
 from .neupress import NeupressJit
-from .rna import RnaJit, open_asset
+from .rna import RnaJit
 
 INTEGRATOR = "nasset_path"
 BSDF = "nasset"
@@ -34,19 +38,27 @@ FOUR_PI = 4.0 * math.pi
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
 
-#: kind -> its Dr.Jit evaluator class: ``transport(x, n, wo, wi) -> (unshadowed, shadowed)`` Color3f (1/sr),
-#: ``technique(x, n, wo) -> None`` (uniform world sphere) or an object-space sampler with ``sample(u)`` and ``pdf(w)``
-JIT_KINDS = {"rna": RnaJit, "neupress": NeupressJit}
+#: kind -> its Dr.Jit evaluator class (each has ``kind``, ``fiber``, ``geometry``). rna and neupress:
+#: ``transport(x, n, wo, wi, h) -> (unshadowed, shadowed)`` Color3f (1/sr) and ``technique(x, n, wo) -> None``
+#: (uniform world sphere) or an object-space sampler with ``sample(u)`` and ``pdf(w)``; 8dna: its own vertex
+#: estimator (:func:`.eightdna.vertex`)
+JIT_KINDS = {"rna": RnaJit, "neupress": NeupressJit, "8dna": EightDnaJit}
 _ASSETS: dict[tuple[str, str], object] = {}  # (variant, file) -> asset read once per process
 _REGISTERED: set[str] = set()
 
 
 def asset_for(mi, filename: str):
-    """The asset of ``filename`` read once per process and variant, evaluated by its kind's class in
-    :data:`JIT_KINDS` (typed errors from the SDK; SCENE_UNSUPPORTED for other kinds)."""
+    """The asset of ``filename`` read once per process and variant, by its kind (:data:`JIT_KINDS`; typed
+    errors from the SDK, SCENE_UNSUPPORTED for other kinds)."""
+    from nasset_sdk.asset import Asset
+
     key = (mi.variant(), str(filename))
     if key not in _ASSETS:
-        _ASSETS[key] = JIT_KINDS[open_asset(filename, kinds=tuple(JIT_KINDS)).kind](mi, filename)
+        kind = Asset.open(filename).kind
+        if kind not in JIT_KINDS:
+            raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders kinds {', '.join(JIT_KINDS)}, not {kind!r}",
+                        file=str(filename))
+        _ASSETS[key] = JIT_KINDS[kind](mi, filename)
     return _ASSETS[key]
 
 
@@ -114,6 +126,8 @@ def register(mi) -> None:
         def sample(self, scene, sampler, ray, medium=None, active=True):
             import mitsuba as mi  # dr.syntax recompiles this method without register()'s closure
             assets, lut, tab = self.instances(scene)
+            shaded = _by_kind(assets, "rna") + _by_kind(assets, "neupress")  # transport + technique
+            eight = _by_kind(assets, "8dna")
             ctx = mi.BSDFContext()
             ray = mi.Ray3f(ray)
             L = mi.Spectrum(0)
@@ -151,10 +165,14 @@ def register(mi) -> None:
                 bsdf = si.bsdf(ray)
                 k = inst - 1
                 x_o, n_o, wo_o, h_o, ex_lo, ex_hi = _asset_inputs(mi, assets, tab, k, si, -ray.d, on_asset)
+                on_8 = mi.Bool(False)  # 8dna hits: their own light samples and continuation (eightdna.vertex)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    on_8 = on_asset & (dr.gather(mi.UInt32, tab["kind8"], k, on_asset) > 0)
+                on_shaded = on_asset & ~on_8
 
                 # light sample; at an asset the shadow ray ignores the instance and records crossing it
                 ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_next)
-                active_em = active_next & (ds_em.pdf != 0.0)
+                active_em = active_next & (ds_em.pdf != 0.0) & ~on_8
                 si_sh, passed_sh = _trace(mi, scene, si.spawn_ray_to(ds_em.p), dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em)
                 active_em &= ~si_sh.is_valid()
                 val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
@@ -165,18 +183,31 @@ def register(mi) -> None:
                 u_c = sampler.next_2d()
                 wi_c = mi.warp.square_to_uniform_sphere(u_c)
                 p_c = mi.Float(1.0 / FOUR_PI)
-                if dr.hint(len(assets) > 0, mode="scalar"):
-                    if on_asset:  # symbolic: the networks run only in llvm packets / cuda warps with a lane on an asset
-                        L, t_un, t_sh, wi_c, p_c = _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh,
-                                                                 active_em, on_asset, u_c, self.lobe, L, beta, wi_c, p_c)
+                if dr.hint(len(shaded) > 0, mode="scalar"):
+                    if on_shaded:  # symbolic: the networks run only in llvm packets / cuda warps with a lane on an asset
+                        L, t_un, t_sh, wi_c, p_c = _asset_vertex(mi, shaded, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh,
+                                                                 active_em, on_shaded, u_c, self.lobe, L, beta, wi_c, p_c)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    v8 = eightdna_vertex(mi, scene, sampler, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8)
+                    L[on_8] += beta * v8["L"]
+                    t_un = dr.select(on_8, v8["weight"], t_un)
+                    t_sh = dr.select(on_8, v8["weight_passed"], t_sh)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
                 d_next = dr.select(on_asset, wi_c, si.to_world(bs.wo))
-                ray = si.spawn_ray(d_next)
-                beta[on_plain] *= bsdf_weight
                 prev_si = dr.detach(si, True)
                 prev_pdf = dr.select(on_asset, p_c, bs.pdf)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    d_next = dr.select(on_8, v8["d"], d_next)
+                    prev_pdf = dr.select(on_8, v8["pdf"], prev_pdf)
+                    active_next &= ~on_8 | v8["alive"]
+                ray = si.spawn_ray(d_next)
+                if dr.hint(len(eight) > 0, mode="scalar"):
+                    from_u = on_8 & v8["from_u"]  # a flow continuation leaves u_i M itself (no offset)
+                    ray.o = dr.select(from_u, v8["origin"], ray.o)
+                    prev_si.p = dr.select(from_u, v8["origin"], prev_si.p)
+                beta[on_plain] *= bsdf_weight
                 prev_delta = on_plain & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
                 pending = mi.Bool(on_asset)
                 ignore = dr.select(on_asset, sid, 0)
@@ -203,6 +234,11 @@ def register(mi) -> None:
     mi.register_bsdf(BSDF, lambda props: NassetBSDF(props))
     mi.register_integrator(INTEGRATOR, lambda props: NassetPathIntegrator(props))
     _REGISTERED.add(mi.variant())
+
+
+def _by_kind(assets, kind):
+    """(index, asset) of the assets of ``kind``."""
+    return [(a, asset) for a, asset in enumerate(assets) if asset.kind == kind]
 
 
 @dr.syntax
@@ -240,7 +276,7 @@ def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, pas
     wi_c, p_c = mi.Vector3f(wi_c), mi.Float(p_c)
     p_l = mi.Float(1.0 / FOUR_PI)
     ta_un, ta_sh, tc_un, tc_sh = (mi.Spectrum(0) for _ in range(4))
-    for a, asset in enumerate(assets):
+    for a, asset in assets:
         mine = _of_asset(mi, tab, k, a, on_asset)
         lobe = asset.technique(x_o, n_o, wo_o) if use_lobe else None
         wc_a = wc_o
@@ -268,8 +304,8 @@ def _instance_tables(mi, scene):
 
     Returns (assets [JIT_KINDS instances], lut UInt32 [max registry id + 1] -> instance index + 1, tables dict of
     Float / UInt32 arrays per instance: 'inv' 12 (world -> object affine, row-major 3x4), 'nt' 9
-    (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'fwd' 9
-    (M3, row-major), 'jdet' 1 (|det M3^-1|), 'asset')."""
+    (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'fwd' 12
+    (the object -> world affine map M, 3 x 4 row-major), 'kind8' (1 for 8dna instances), 'jdet' 1 (|det M3^-1|), 'asset')."""
     import drjit as dr
 
     assets: list = []
@@ -291,7 +327,7 @@ def _instance_tables(mi, scene):
         ids.append(int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]))
         inv.append(minv[:3, :].ravel())
         nt.append((sign * m3.T).ravel())
-        fwd.append(m3.ravel())
+        fwd.append(m[:3, :].ravel())
         jdet.append(1.0 / abs(det))
         which.append(assets.index(b.asset))
     lut = np.zeros(max(ids, default=0) + 1, np.uint32)
@@ -301,6 +337,7 @@ def _instance_tables(mi, scene):
            "nt": mi.Float(np.asarray(nt, np.float32).ravel()) if ids else mi.Float(0),
            "fwd": mi.Float(np.asarray(fwd, np.float32).ravel()) if ids else mi.Float(0),
            "jdet": mi.Float(np.asarray(jdet, np.float32)) if ids else mi.Float(0),
+           "kind8": mi.UInt32(np.asarray([assets[w].kind == "8dna" for w in which], np.uint32)) if ids else mi.UInt32(0),
            "asset": mi.UInt32(np.asarray(which, np.uint32)) if ids else mi.UInt32(0)}
     return assets, mi.UInt32(lut), tab
 
@@ -324,7 +361,7 @@ def _world_dir(mi, tab, k, v, active):
     """normalize(M3 v) of object directions v for instance k (spec/renderer.md#neupress: the lobe mapped to world)."""
     import drjit as dr
 
-    rows = [_rows(mi, tab["fwd"], k, 9, 3 * r, active) for r in range(3)]
+    rows = [_rows(mi, tab["fwd"], k, 12, 4 * r, active) for r in range(3)]
     return dr.normalize(mi.Vector3f(*[r[0] * v.x + r[1] * v.y + r[2] * v.z for r in rows]))
 
 

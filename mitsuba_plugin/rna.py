@@ -42,6 +42,28 @@ def open_asset(path: str, kinds=("rna",), variants=("surface", "fiber")) -> Asse
     return asset
 
 
+def plane_textures(mi, planes: np.ndarray) -> list:
+    """Three bilinear, edge-clamped ``Texture2f`` of triplane planes [3, R, R, C] (texel centres at (i + 1/2) / R)."""
+    import drjit as dr
+
+    return [mi.Texture2f(mi.TensorXf(np.ascontiguousarray(planes[k], np.float32)), use_accel=False,
+                         filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp) for k in range(3)]
+
+
+def triplane_lookup(mi, textures: list, xn) -> list:
+    """Sum of the three bilinear plane lookups at unit-box points xn [Vector3f]: C Floats, plane order 0 + 1 + 2."""
+    import drjit as dr
+
+    # the edge clamp makes every |coordinate| >= 1 + 1/R read the edge texel: clamping to [-2, 2]
+    # keeps the texture's integer conversion defined; NaN reads texel 0 (-1 is texel 0's edge)
+    c = [dr.clip(dr.select(dr.isnan(xn[k]), -1.0, xn[k]), -2.0, 2.0) for k in range(3)]
+    out = None
+    for k, (a, b) in enumerate(TRIPLANE_AXES):
+        f = textures[k].eval(mi.Point2f((c[a] + 1.0) * 0.5, (c[b] + 1.0) * 0.5))
+        out = list(f) if out is None else [o + v for o, v in zip(out, f, strict=True)]
+    return out
+
+
 def safe_normalize(mi, v):
     """Unit vector of v [Vector3f]; zero, tiny or non-finite v -> (0, 0, 1) (encodings.md#normalize)."""
     import drjit as dr
@@ -57,9 +79,9 @@ class RnaJit:
     ``geometry``: the triangles Mitsuba traces (the mesh, or the fiber prisms) as a MeshGeometry;
     ``fiber``: whether frame is the curve tangent and h an input."""
 
-    def __init__(self, mi, path: str) -> None:
-        import drjit as dr
+    kind = "rna"
 
+    def __init__(self, mi, path: str) -> None:
         self.mi = mi
         self.path = str(path)
         asset = open_asset(path)
@@ -67,8 +89,7 @@ class RnaJit:
         if planes.ndim != 4 or planes.shape[0] != 3 or planes.shape[1] != planes.shape[2]:
             raise error("TENSOR_CONTRACT", f"triplane shape {planes.shape} is not [3, R, R, C]", file=self.path)
         self.channels = int(planes.shape[-1])
-        self.planes = [mi.Texture2f(mi.TensorXf(np.ascontiguousarray(planes[k])), use_accel=False,
-                                    filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp) for k in range(3)]
+        self.planes = plane_textures(mi, planes)
         self.decoder = DrJitNetwork(mi, asset.network_bytes("core", "decoder"), file=self.path, prim="/Asset/core/decoder")
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
         self.lo = lo
@@ -130,17 +151,7 @@ class RnaJit:
 
     def triplane(self, xn) -> list:
         """Sum of the three bilinear plane lookups at unit-box points xn: C Floats, plane order 0 + 1 + 2."""
-        import drjit as dr
-
-        mi = self.mi
-        # the edge clamp makes every |coordinate| >= 1 + 1/R read the edge texel: clamping to [-2, 2]
-        # keeps the texture's integer conversion defined; NaN reads texel 0 (-1 is texel 0's edge)
-        c = [dr.clip(dr.select(dr.isnan(xn[k]), -1.0, xn[k]), -2.0, 2.0) for k in range(3)]
-        out = None
-        for k, (a, b) in enumerate(TRIPLANE_AXES):
-            f = self.planes[k].eval(mi.Point2f((c[a] + 1.0) * 0.5, (c[b] + 1.0) * 0.5))
-            out = list(f) if out is None else [o + v for o, v in zip(out, f, strict=True)]
-        return out
+        return triplane_lookup(self.mi, self.planes, xn)
 
     def network_input(self, x, frame, wo, wi, h=None) -> list:
         """Decoder input row (spec/kinds/rna.md): surface [zeta (C), xn, n, wo, wi] (C + 12 Floats), fiber
