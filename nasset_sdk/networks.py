@@ -434,13 +434,11 @@ class FirstLayerSplit:
     tail_inputs: tuple[str, ...]
 
 
-def split_first_layer(data: bytes, head: int, *, transpose_output: bool = False) -> FirstLayerSplit | None:
+def split_first_layer(data: bytes, head: int) -> FirstLayerSplit | None:
     """Split a checked single-input network at input column ``head`` (see :class:`FirstLayerSplit`).
 
     None when the graph does not start with one affine layer that alone reads the input (a Gemm
-    with transA = 0 or a MatMul, with a constant weight): callers then run the whole network.
-    ``transpose_output``: the tail's output 0 is [width, N] (a Transpose inside the graph, for callers
-    that work column-major; onnxruntime transposes faster than a numpy copy)."""
+    with transA = 0 or a MatMul, with a constant weight): callers then run the whole network."""
     import onnx
     from onnx import helper, numpy_helper
 
@@ -489,16 +487,8 @@ def split_first_layer(data: bytes, head: int, *, transpose_output: bool = False)
     else:
         nodes.append(helper.make_node("Identity", [pre], [first.output[0]]))
     nodes += [n for n in g.node if n is not first]
-    outputs = list(g.output)
-    if transpose_output:
-        out0 = outputs[0]
-        t_name = _fresh(out0.name + "_t", taken | {o for n in nodes for o in n.output})
-        nodes.append(helper.make_node("Transpose", [out0.name], [t_name], perm=[1, 0]))
-        width = out0.type.tensor_type.shape.dim[1]
-        dim = width.dim_value if width.HasField("dim_value") else width.dim_param
-        outputs[0] = helper.make_tensor_value_info(t_name, out0.type.tensor_type.elem_type, [dim, "N"])
     used = {i for n in nodes for i in n.input}
-    graph = helper.make_graph(nodes, g.name + "_tail", inputs, outputs, [t for t in inits if t.name in used])
+    graph = helper.make_graph(nodes, g.name + "_tail", inputs, list(g.output), [t for t in inits if t.name in used])
     tail = helper.make_model(graph, opset_imports=list(model.opset_import), producer_name="nasset_sdk")
     tail.ir_version = model.ir_version
     return FirstLayerSplit(np.ascontiguousarray(w[:head]), bias, tail.SerializeToString(), rest,
@@ -531,14 +521,12 @@ def make_session(data: bytes, *, intra_threads: int = 0, inter_threads: int = 1)
 
 class CheckedSession:
     """An onnxruntime session whose failures are typed: ``run`` raises ``NETWORK_RUNTIME`` naming the
-    network (file, prim, attribute) for any runtime exception or an output that is not [n, declared width]
-    ([declared width, n] with ``transposed``, e.g. a tail of :func:`split_first_layer`).
+    network (file, prim, attribute) for any runtime exception or an output that is not [n, declared width].
     Other attributes (``get_inputs``, ``get_outputs``, ...) are the wrapped session's."""
 
-    def __init__(self, session, info: NetworkInfo | None = None, *, transposed: bool = False, **loc) -> None:
+    def __init__(self, session, info: NetworkInfo | None = None, **loc) -> None:
         self.session = session
         self.info = info
-        self.transposed = bool(transposed)
         self.loc = loc
 
     def run(self, output_names, input_feed, run_options=None):
@@ -552,11 +540,9 @@ class CheckedSession:
             names = list(output_names) if output_names else list(self.info.output_names)
             widths = dict(zip(self.info.output_names, self.info.output_widths, strict=True))
             for name, out in zip(names, outs, strict=False):
-                want = (rows, widths.get(name, -1))
-                if np.shape(out) != (want[::-1] if self.transposed else want):
-                    decl = f"[{widths.get(name)}, n]" if self.transposed else f"[n, {widths.get(name)}]"
+                if np.shape(out) != (rows, widths.get(name, -1)):
                     raise error("NETWORK_RUNTIME", f"output {name!r} has shape {np.shape(out)} for {rows} rows, "
-                                f"declared {decl}", **self.loc)
+                                f"declared [n, {widths.get(name)}]", **self.loc)
         return outs
 
     def __getattr__(self, name):

@@ -242,8 +242,7 @@ class EightDnaEvaluator(Evaluator):
         base_width = self.planes.shape[-1] + self.wo_cube.shape[-1] + 6
         refs = asset.network_refs("core")
         try:
-            # tails answer [G, N]: the spline math is bin-major (spline.RQSpline), so no numpy transpose
-            splits = [split_first_layer(asset.network_bytes("core", n), base_width, transpose_output=True) for n in FLOWS]
+            splits = [split_first_layer(asset.network_bytes("core", n), base_width) for n in FLOWS]
         except Exception:  # any graph the splitter cannot read runs whole, which is always correct
             return
         if not all(sp is not None and sp.rest_width == refs[n].info.input_widths[0] - base_width
@@ -256,7 +255,7 @@ class EightDnaEvaluator(Evaluator):
                 session = make_session(sp.tail, intra_threads=intra_threads)
             except Exception:  # a graph onnxruntime accepts whole but not split: run it whole
                 return
-            tails.append((CheckedSession(session, refs[name].info, transposed=True, **loc), sp.tail_inputs))
+            tails.append((CheckedSession(session, refs[name].info, **loc), sp.tail_inputs))
         self.head_weight = np.concatenate([sp.head_weight for sp in splits], axis=1)
         self.head_bias = np.concatenate([sp.bias for sp in splits])
         self.head_cols = np.cumsum([0] + [sp.head_weight.shape[1] for sp in splits])
@@ -288,16 +287,12 @@ class EightDnaEvaluator(Evaluator):
         """Session output 0 [N, width] as float64 (NaN -> 0, +-inf -> +-1e30), in row batches of ``batch``."""
         return finite64(self._run32(session, feed))
 
-    def _run32(self, session, feed: dict[str, np.ndarray], axis: int = 0) -> np.ndarray:
-        """Session output 0 [N, width] as the runtime returns it (float32), in row batches of ``batch``;
-        ``axis`` 1: the session answers [width, N] (a transposed tail)."""
+    def _run32(self, session, feed: dict[str, np.ndarray]) -> np.ndarray:
+        """Session output 0 [N, width] as the runtime returns it (float32), in row batches of ``batch``."""
         n = len(next(iter(feed.values())))
         outs = [session.run(None, {k: v[s:s + self.batch] for k, v in feed.items()})[0]
-                for s in range(0, n, self.batch)]
-        if not outs:
-            w = session.get_outputs()[0].shape[1 - axis]
-            outs = [np.zeros((w, 0) if axis else (0, w), np.float32)]
-        return outs[0] if len(outs) == 1 else np.concatenate(outs, axis=axis)
+                for s in range(0, n, self.batch)] or [np.zeros((0, session.get_outputs()[0].shape[1]), np.float32)]
+        return outs[0] if len(outs) == 1 else np.concatenate(outs, axis=0)
 
     def base_features(self, x, wo) -> np.ndarray:
         """[N, 2C + 6] = [triplane(xn), xn, cube_wo(w_o), w_o] (float32)."""
@@ -344,8 +339,7 @@ class EightDnaEvaluator(Evaluator):
         feed = {names[0]: ctx.pre[j - 1]}
         if j > 1:
             feed[names[1]] = self.flow_extra(j, s_prev, ctx)
-        # [N, G] view of the tail's [G, N]: the spline reads it bin-major without a copy, NaN / inf as the spec says
-        return self._run32(session, feed, axis=1).T
+        return self._run32(session, feed)  # the spline reads NaN / inf as the spec says (finite64)
 
     # -- indirect transport ----------------------------------------------------------------
     def albedo(self, x, wo, *, context: FlowContext | None = None) -> np.ndarray:

@@ -106,30 +106,18 @@ class RQSpline:
 
         ``dtype`` float64 is the spec's arithmetic; float32 (:data:`SPLINE_DTYPES`) is for renderers, which
         must match images within noise, not evaluator vectors bit for bit."""
+        if dtype not in SPLINE_DTYPES:
+            raise UsageError(f"spline dtype must be one of {[d.__name__ for d in SPLINE_DTYPES]}, got {dtype!r}")
         raw = np.asarray(raw)
         if raw.ndim < 2:
             raw = raw.reshape(1, -1)
-        return cls.from_raw_bins(raw.T, min_bin_width=min_bin_width, min_bin_height=min_bin_height,
-                                 min_derivative=min_derivative, dtype=dtype)
-
-    @classmethod
-    def from_raw_bins(cls, rb: np.ndarray, *, min_bin_width: float = MIN_BIN_WIDTH, min_bin_height: float = MIN_BIN_HEIGHT,
-                      min_derivative: float = MIN_DERIVATIVE, dtype=np.float64, owned: bool = False) -> "RQSpline":
-        """:meth:`from_raw` of bin-major parameters rb [3K+1, N] (column n = row n of raw). ``owned``: rb is a
-        fresh C-contiguous array of ``dtype`` the spline may work in (no copy)."""
-        if dtype not in SPLINE_DTYPES:
-            raise UsageError(f"spline dtype must be one of {[d.__name__ for d in SPLINE_DTYPES]}, got {dtype!r}")
-        rb = np.asarray(rb)
-        if rb.ndim != 2:
-            raise UsageError(f"bin-major spline parameters must be [3K+1, N], got shape {rb.shape}")
-        p = rb.shape[0]
+        p = raw.shape[1]
         if (p - 1) % 3 or p < 4:
             raise UsageError(f"spline parameters need 3K+1 columns (K >= 1), got {p}")
         k = (p - 1) // 3
         if not (0 <= min_bin_width * k < 1 and 0 <= min_bin_height * k < 1 and min_derivative > 0):
             raise UsageError(f"spline minimums ({min_bin_width}, {min_bin_height}, {min_derivative}) invalid for K={k}")
-        if not (owned and rb.dtype == dtype and rb.flags.c_contiguous):
-            rb = np.array(rb, dtype=dtype, order="C")  # worked on in place; float32 -> float64 is exact
+        rb = np.array(raw.T, dtype=dtype, order="C")  # [3K+1, N], always a copy (worked on in place); float32 -> float64 is exact
         if not np.isfinite(rb).all():
             np.nan_to_num(rb, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
         n = rb.shape[1]
@@ -153,28 +141,6 @@ class RQSpline:
         channel c of row n."""
         raw = np.asarray(raw)
         return cls.from_raw(raw.reshape(3 * len(raw), raw.shape[1] // 3), **minimums)
-
-    @classmethod
-    def from_raw_bins_rgb(cls, rb: np.ndarray, *, dtype=np.float64, **minimums) -> "RQSpline":
-        """Splines of all three channels of bin-major rb [3 (3K+1), N] (channel-major rows): spline c N + n is
-        channel c of column n."""
-        rb = np.asarray(rb)
-        p, n = rb.shape[0] // 3, rb.shape[1]
-        if rb.ndim != 2 or rb.shape[0] != 3 * p:
-            raise UsageError(f"bin-major spline parameters of three channels must be [3 (3K+1), N], got {rb.shape}")
-        out = np.empty((p, 3, n), dtype)
-        out[...] = rb.reshape(3, p, n).transpose(1, 0, 2)  # one copy, runs of N contiguous values
-        return cls.from_raw_bins(out.reshape(p, 3 * n), dtype=dtype, owned=True, **minimums)
-
-    @classmethod
-    def from_raw_bins_channel(cls, rb: np.ndarray, ch: np.ndarray, *, dtype=np.float64, **minimums) -> "RQSpline":
-        """Splines of channel ch[n] (0..2) of each column n of bin-major rb [3 (3K+1), N]."""
-        rb = np.asarray(rb)
-        p, n = rb.shape[0] // 3, rb.shape[1]
-        if rb.ndim != 2 or rb.shape[0] != 3 * p or np.shape(ch) != (n,):
-            raise UsageError(f"bin-major spline parameters [3 (3K+1), N] {rb.shape} need one channel per column")
-        sel = np.choose(np.asarray(ch, np.intp), rb.reshape(3, p, n))  # [p, N], one pass
-        return cls.from_raw_bins(sel, dtype=dtype, owned=True, **minimums)
 
     @property
     def bins(self) -> int:
@@ -384,12 +350,12 @@ class FlowSample:
     ctx: object  # the flow context of the rows
     s: np.ndarray  # [N, 4] box parameters of the sample
     jac: np.ndarray  # [N] |n_u . u| / |u|^3
-    raw12: tuple[np.ndarray, np.ndarray]  # [3 (3K+1), N] bin-major conditioner-1 and -2 outputs (all channels)
+    raw12: tuple[np.ndarray, np.ndarray]  # [N, 3 (3K+1)] conditioner-1 and -2 outputs (all channels)
     t12: np.ndarray  # [N, 2] the sample's t1, t2
-    raw3: np.ndarray  # [3 (3K+1), N] conditioner-3 output (bin-major): it depends on s1, s2 only
+    raw3: np.ndarray  # [N, 3 (3K+1)] conditioner-3 output: it depends on s1, s2 only
     flow: "BoxFlow"
     dir_rows: np.ndarray | None = None  # [D] sorted rows whose steps 3-4 ran (w_i drawn); None: all rows
-    raw4: np.ndarray | None = None  # [3 (3K+1), D] conditioner-4 output of those rows at their own w_i (bin-major)
+    raw4: np.ndarray | None = None  # [D, 3 (3K+1)] conditioner-4 output of those rows at their own w_i
     _log_pos: np.ndarray | None = None  # [N, 3] log densities of (t1, t2) per channel, NaN where not built yet
 
     def direction_index(self, rows) -> np.ndarray:
@@ -413,7 +379,7 @@ class FlowSample:
         if len(todo):
             lp = np.zeros((len(todo), 3))
             for raw, t in zip(self.raw12, self.t12.T, strict=True):
-                lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[:, todo]), t[todo])
+                lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
             self._log_pos[todo] = lp
         return self._log_pos[rows]
 
@@ -448,25 +414,25 @@ class BoxFlow:
                              min_derivative=float(min_derivative), dtype=spline_dtype)
 
     def _raw(self, j: int, ctx, s_prev, n: int) -> np.ndarray:
-        """Conditioner j's output, bin-major [3 (3K+1), N] (no copy where it returns a transposed view)."""
-        raw = np.asarray(self.conditioner(j, ctx, s_prev))
+        raw = np.asarray(self.conditioner(j, ctx, s_prev))  # float64 in the spline (RQSpline.from_raw)
         if raw.ndim != 2 or raw.shape[1] % 3 or len(raw) != n:
             raise UsageError(f"conditioner {j} returned shape {raw.shape}; expected [N, 3 (3K+1)]")
-        return np.ascontiguousarray(raw.T)
+        return raw
 
-    def _channel_spline(self, rb: np.ndarray, ch: np.ndarray) -> RQSpline:
-        return RQSpline.from_raw_bins_channel(rb, ch, **self.minimums)
+    def _channel_spline(self, raw: np.ndarray, ch: np.ndarray) -> RQSpline:
+        p = raw.shape[1] // 3
+        return RQSpline.from_raw(raw.reshape(len(raw), 3, p)[np.arange(len(raw)), ch], **self.minimums)
 
     def _spline(self, j: int, ctx, s_prev, ch: np.ndarray) -> RQSpline:
         return self._channel_spline(self._raw(j, ctx, s_prev, len(ch)), ch)
 
-    def _splines_rgb(self, rb: np.ndarray) -> RQSpline:
-        return RQSpline.from_raw_bins_rgb(rb, **self.minimums)
+    def _splines_rgb(self, raw: np.ndarray) -> RQSpline:
+        return RQSpline.from_raw_rgb(raw, **self.minimums)
 
     @staticmethod
     def _log_inverse_rgb(spl: RQSpline, t: np.ndarray) -> np.ndarray:
-        """[N, 3]: log|d rqs^-1 / dt| at t [N] of all-channel splines spl (spline c N + n)."""
-        return spl.inverse(np.tile(t, 3))[1].reshape(3, -1).T
+        """[N, 3]: log|d rqs^-1 / dt| at t [N] of all-channel splines spl (row 3 n + c)."""
+        return spl.inverse(np.repeat(t, 3))[1].reshape(-1, 3)
 
     def _walk(self, x, wo, ch, *, t=None, z=None, steps=(1, 2, 3, 4), s_prev=None):
         """Run steps in order; forward from latents z or inverse from values t. Returns (t, s, logp)."""
@@ -543,7 +509,7 @@ class BoxFlow:
             raws.append(raw)
             r = slice(None) if j <= 2 else rr
             # the sampled channel only; the other channels' splines are built for the rows whose densities are asked for
-            tj, ld = self._channel_spline(raw[:, d] if j == 3 and d is not None else raw, ch[r]).forward(z[r, j - 1])
+            tj, ld = self._channel_spline(raw[d] if j == 3 and d is not None else raw, ch[r]).forward(z[r, j - 1])
             if j <= 2:
                 t12[:, j - 1] = tj
             logp[r] -= ld
@@ -569,7 +535,7 @@ class BoxFlow:
         t3, t4 = np.clip((z3 + 1) / 2, 0.0, 1.0), np.clip((p3 + np.pi) / (2 * np.pi), 0.0, 1.0)
         s_prev = np.concatenate([fs.s[rows, :2], z3[:, None]], axis=1)
         spl4 = self._splines_rgb(self._raw(4, take_rows(fs.ctx, rows), s_prev, len(rows)))
-        spl3 = self._splines_rgb(fs.raw3[:, rows])
+        spl3 = self._splines_rgb(fs.raw3[rows])
         logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
@@ -583,7 +549,7 @@ class BoxFlow:
         if not len(rows):
             return np.zeros((0, 3))
         t = self.box.t_from_s(fs.s[rows])
-        spl3, spl4 = self._splines_rgb(fs.raw3[:, rows]), self._splines_rgb(fs.raw4[:, pos])
+        spl3, spl4 = self._splines_rgb(fs.raw3[rows]), self._splines_rgb(fs.raw4[pos])
         logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t[:, 2]) + self._log_inverse_rgb(spl4, t[:, 3])
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 

@@ -143,7 +143,7 @@ class EightdnaShader:
         P[p_u[rows] <= 0] = 0.0  # an underflowed p(u_i): no contribution, and p_u only divides
         p_u = np.where(p_u > 0, p_u, 1.0)
         # albedo + conditioners 1-3 per hit, conditioner 4 per drawn w_i and per light row
-        integ.stats.network_evals += n * 4 + fs.raw4.shape[1] + n_nee
+        integ.stats.network_evals += n * 4 + len(fs.raw4) + n_nee
         q = P.mean(1)
         o = 0
         for s, (delta, li, pl, jac) in zip(q_rows[:-1], nee_info, strict=True):

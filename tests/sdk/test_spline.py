@@ -192,27 +192,3 @@ def test_from_raw_leaves_its_input_alone(rng):
         b = RQSpline.from_raw(raw)
         np.testing.assert_array_equal(raw, keep)
         np.testing.assert_array_equal(a.xk, b.xk)
-
-
-@pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_bin_major_channel_and_rgb_splines_equal_row_major(rng, dtype):
-    """From bin-major conditioner outputs [3 (3K+1), N]: the chosen channel's splines and all three channels' equal
-    from_raw of the matching row-major slices (the channel gathered here by a Python loop); NaN handled alike."""
-    k, n = 6, 50
-    p = 3 * k + 1
-    raw = rng.normal(0, 2, (n, 3 * p)).astype(np.float32)
-    raw[3, 5] = np.nan
-    rb = np.ascontiguousarray(raw.T)
-    keep = rb.copy()
-    ch = rng.integers(0, 3, n)
-    one = RQSpline.from_raw_bins_channel(rb, ch, dtype=dtype)
-    ref = RQSpline.from_raw(np.stack([raw[i, c * p:(c + 1) * p] for i, c in enumerate(ch)]), dtype=dtype)
-    for a in ("xk", "yk", "d_raw"):
-        np.testing.assert_array_equal(getattr(one, a), getattr(ref, a))
-    rgb = RQSpline.from_raw_bins_rgb(rb, dtype=dtype)  # spline c N + i is channel c of column i
-    ref = RQSpline.from_raw(np.concatenate([raw[:, c * p:(c + 1) * p] for c in range(3)]), dtype=dtype)
-    for a in ("xk", "yk", "d_raw"):
-        np.testing.assert_array_equal(getattr(rgb, a), getattr(ref, a))
-    np.testing.assert_array_equal(rb, keep)  # the caller's array is not worked in
-    with pytest.raises(UsageError):
-        RQSpline.from_raw_bins_channel(rb, ch[:-1])
