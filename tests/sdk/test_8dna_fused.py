@@ -139,7 +139,18 @@ def test_directions_mask_and_sampled_densities(small, rng):
     ch, u = rng.integers(0, 3, n), rng.random((n, 4))
     mask = rng.random(n) < 0.5
     full = ev.sample_state(x, wo, ch, u=u)
-    part = ev.sample_state(x, wo, ch, u=u, directions=mask)
+    rows_run, orig = {}, ev.flow.conditioner
+
+    def counted(j, ctx, s_prev):
+        rows_run[j] = rows_run.get(j, 0) + len(s_prev)
+        return orig(j, ctx, s_prev)
+
+    ev.flow.conditioner = counted
+    try:
+        part = ev.sample_state(x, wo, ch, u=u, directions=mask)
+    finally:
+        ev.flow.conditioner = orig
+    assert rows_run == {1: n, 2: n, 3: n, 4: mask.sum()}  # conditioner 4 ran for the drawn rows only
     np.testing.assert_array_equal(part.ui, full.ui)
     np.testing.assert_allclose(part.wi[mask], full.wi[mask], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(part.pdf[mask], full.pdf[mask], rtol=1e-6)
