@@ -80,20 +80,22 @@ class EightdnaShader:
             if not use_light[k]:
                 continue
             wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
-            wi_obj, jac = fr.dir_to_object(wi, h.inst)
-            f = ev.direct_eval(h.n_obj, h.wo_obj, wi_obj)[:, 0].astype(np.float64) * jac
-            s = np.nonzero((pdf > 0) & (max3(li) > 0) & (f > 0) & (dot(wi, ngf) > 0))[0]
+            s = np.nonzero((pdf > 0) & (max3(li) > 0) & (dot(wi, ngf) > 0))[0]  # the lobe only where it can count
+            wi_obj, jac = fr.dir_to_object(wi[s], h.inst[s])
+            f = ev.direct_eval(h.n_obj[s], h.wo_obj[s], wi_obj)[:, 0].astype(np.float64) * jac
+            keep = f > 0
+            s, wi_obj, jac, f = s[keep], wi_obj[keep], jac[keep], f[keep]
             if not len(s):
                 continue
             if light.delta or smode == "light":
                 w = np.ones(len(s))
             else:
-                pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj[s]) * jac[s]
+                pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj) * jac
                 w = np.where(cont_on[s], power_heuristic(pdf[s], pb), 1.0)
             d_s, tmax = aim_shadow(h.x[s], x_off[s], wi[s], dist[s], integ.eps)
             vis = ~integ.occluded(x_off[s], d_s, tmax)
             s, w = s[vis], w[vis]
-            np.add.at(L, h.ridx[s], h.beta[s] * li[s] * (f[s] * w / pdf[s])[:, None])
+            np.add.at(L, h.ridx[s], h.beta[s] * li[s] * (f[vis] * w / pdf[s])[:, None])
 
         # 2. neural: (u_i, w_i) ~ p^c, c uniform
         ch = rng.integers(0, 3, n)
