@@ -352,13 +352,19 @@ class EightDnaEvaluator(Evaluator):
         """(u_i [N,3], w_i [N,3], pdf [N]) ~ p^channel(u_i, w_i | x_o, w_o); pdf per box area and steradian."""
         return self.flow.sample(x, wo, channel, rng, u=u)
 
-    def sample_state(self, x, wo, channel, rng=None, *, u=None, context: FlowContext | None = None) -> FlowSample:
-        """:meth:`sample` keeping what later densities at the same u_i reuse (:meth:`pdf_rgb_at`)."""
-        return self.flow.sample_state(x, wo, channel, rng, u=u, context=context)
+    def sample_state(self, x, wo, channel, rng=None, *, u=None, context: FlowContext | None = None,
+                     directions=None) -> FlowSample:
+        """:meth:`sample` keeping what later densities at the same u_i reuse (:meth:`pdf_rgb_at`,
+        :meth:`pdf_rgb_sampled`); ``directions`` (bool [N]): rows whose w_i is drawn (default all)."""
+        return self.flow.sample_state(x, wo, channel, rng, u=u, context=context, directions=directions)
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """p^k(u_i, w_i | x_o, w_o) [M, 3] for rows of a :meth:`sample_state` (its u_i) and new w_i [M, 3]."""
         return self.flow.pdf_rgb_at(fs, rows, wi)
+
+    def pdf_rgb_sampled(self, fs: FlowSample, rows) -> np.ndarray:
+        """p^k(u_i, w_i | x_o, w_o) [M, 3] at the sample's own (u_i, w_i) of rows [M]: no network runs."""
+        return self.flow.pdf_rgb_sampled(fs, rows)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
         """p^channel(u_i, w_i | x_o, w_o) [N] per unit box area at u_i and steradian at w_i."""

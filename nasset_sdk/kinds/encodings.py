@@ -113,9 +113,14 @@ def _norm_no_overflow(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """float64 unit vectors [N,3]; zero / non-finite input becomes ``fallback``."""
     v = np.atleast_2d(np.asarray(v, np.float64))
-    v = np.where(np.isfinite(v), v, 0.0)
-    v, n = _norm_no_overflow(v)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow / non-finite rows take the careful path below
+        n = np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))  # np.linalg.norm's arithmetic, without its checks
+    if not np.isfinite(n).all():  # a non-finite component or an overflowing norm: the careful path
+        v = np.where(np.isfinite(v), v, 0.0)
+        v, n = _norm_no_overflow(v)
     ok = n > 1e-20
+    if ok.all():  # the common case: one division, no fallback rows
+        return v / n
     return np.where(ok, v / np.where(ok, n, 1.0), np.asarray(fallback, np.float64))
 
 

@@ -354,7 +354,19 @@ class FlowSample:
     t12: np.ndarray  # [N, 2] the sample's t1, t2
     raw3: np.ndarray  # [N, 3 (3K+1)] conditioner-3 output: it depends on s1, s2 only
     flow: "BoxFlow"
+    dir_rows: np.ndarray | None = None  # [D] sorted rows whose steps 3-4 ran (w_i drawn); None: all rows
+    raw4: np.ndarray | None = None  # [D, 3 (3K+1)] conditioner-4 output of those rows at their own w_i
     _log_pos: np.ndarray | None = None  # [N, 3] log densities of (t1, t2) per channel, NaN where not built yet
+
+    def direction_index(self, rows) -> np.ndarray:
+        """Positions in ``raw4`` of rows [M] (each must have had its w_i drawn)."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        if self.dir_rows is None:
+            return rows
+        pos = np.searchsorted(self.dir_rows, rows)
+        if len(rows) and (pos.max() >= len(self.dir_rows) or (self.dir_rows[pos] != rows).any()):
+            raise UsageError("rows must be rows of the flow sample whose direction w_i was drawn")
+        return pos
 
     def log_position_rgb(self, rows=None) -> np.ndarray:
         """[M, 3] per channel: log density of (t1, t2) (steps 1-2) of rows [M] (default all), built for the
@@ -470,27 +482,44 @@ class BoxFlow:
         ui, wi, jac = self.box.to_rays(s)
         return ui, wi, np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
 
-    def sample_state(self, x, wo, channel, rng=None, *, u=None, context=None) -> FlowSample:
+    def sample_state(self, x, wo, channel, rng=None, *, u=None, context=None, directions=None) -> FlowSample:
         """:meth:`sample` plus the per-channel position densities and the conditioner outputs that
-        :meth:`pdf_rgb_at` reuses; ``context`` is ``self.context(x, wo)`` if the caller has it."""
+        :meth:`pdf_rgb_at` and :meth:`pdf_rgb_sampled` reuse; ``context`` is ``self.context(x, wo)`` if the
+        caller has it. ``directions`` (bool [N], default all): rows whose w_i is drawn (steps 3-4); the
+        others get u_i only, w_i = 0 and pdf = 0 (conditioner 3, which depends on u_i only, runs for all)."""
         x, wo = self._prep(x, wo)
         n = len(x)
         ch = _channels(channel, n)
         z = self._latents(n, 4, rng, u)
         ctx = self.context(x, wo) if context is None else context
+        if directions is None:
+            d = None
+        else:
+            directions = np.asarray(directions, bool).reshape(-1)
+            if len(directions) != n:
+                raise UsageError(f"directions must be a bool mask of the {n} rows, got {len(directions)}")
+            d = np.nonzero(directions)[0]
         s, logp, t12, raws = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 2)), []
+        rr = slice(None) if d is None else d  # rows of steps 3-4
         for j in (1, 2, 3, 4):
-            raw = self._raw(j, ctx, s[:, : j - 1], n)
+            if j < 4 or d is None:
+                raw = self._raw(j, ctx, s[:, : j - 1], n)
+            else:  # conditioner 4 only where w_i is drawn
+                raw = self._raw(4, take_rows(ctx, d), s[d, :3], len(d))
+            raws.append(raw)
+            r = slice(None) if j <= 2 else rr
             # the sampled channel only; the other channels' splines are built for the rows whose densities are asked for
-            tj, ld = self._channel_spline(raw, ch).forward(z[:, j - 1])
+            tj, ld = self._channel_spline(raw[d] if j == 3 and d is not None else raw, ch[r]).forward(z[r, j - 1])
             if j <= 2:
                 t12[:, j - 1] = tj
-            raws.append(raw)
-            logp -= ld
-            s[:, j - 1] = self.box.s_from_t_dim(j, tj)
+            logp[r] -= ld
+            s[r, j - 1] = self.box.s_from_t_dim(j, tj)
         ui, wi, jac = self.box.to_rays(s)
         pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
-        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self)
+        if d is not None:
+            skip = ~directions
+            wi[skip], pdf[skip] = 0.0, 0.0
+        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self, d, raws[3])
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
@@ -508,6 +537,20 @@ class BoxFlow:
         spl4 = self._splines_rgb(self._raw(4, take_rows(fs.ctx, rows), s_prev, len(rows)))
         spl3 = self._splines_rgb(fs.raw3[rows])
         logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t3) + self._log_inverse_rgb(spl4, t4)
+        return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
+
+    def pdf_rgb_sampled(self, fs: FlowSample, rows) -> np.ndarray:
+        """[M, 3]: :meth:`pdf_rgb_at` at the sample's own (u_i, w_i) of rows [M] (whose w_i was drawn), reusing
+        its conditioner-3 and -4 outputs: no network runs."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        if len(rows) and (rows.min() < 0 or rows.max() >= len(fs.s)):
+            raise UsageError(f"rows must index the {len(fs.s)} rows of the flow sample")
+        pos = fs.direction_index(rows)
+        if not len(rows):
+            return np.zeros((0, 3))
+        t = self.box.t_from_s(fs.s[rows])
+        spl3, spl4 = self._splines_rgb(fs.raw3[rows]), self._splines_rgb(fs.raw4[pos])
+        logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t[:, 2]) + self._log_inverse_rgb(spl4, t[:, 3])
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:

@@ -80,25 +80,28 @@ class EightdnaShader:
             if not use_light[k]:
                 continue
             wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
-            wi_obj, jac = fr.dir_to_object(wi, h.inst)
-            f = ev.direct_eval(h.n_obj, h.wo_obj, wi_obj)[:, 0].astype(np.float64) * jac
-            s = np.nonzero((pdf > 0) & (max3(li) > 0) & (f > 0) & (dot(wi, ngf) > 0))[0]
+            s = np.nonzero((pdf > 0) & (max3(li) > 0) & (dot(wi, ngf) > 0))[0]  # the lobe only where it can count
+            wi_obj, jac = fr.dir_to_object(wi[s], h.inst[s])
+            f = ev.direct_eval(h.n_obj[s], h.wo_obj[s], wi_obj)[:, 0].astype(np.float64) * jac
+            keep = f > 0
+            s, wi_obj, jac, f = s[keep], wi_obj[keep], jac[keep], f[keep]
             if not len(s):
                 continue
             if light.delta or smode == "light":
                 w = np.ones(len(s))
             else:
-                pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj[s]) * jac[s]
+                pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj) * jac
                 w = np.where(cont_on[s], power_heuristic(pdf[s], pb), 1.0)
             d_s, tmax = aim_shadow(h.x[s], x_off[s], wi[s], dist[s], integ.eps)
             vis = ~integ.occluded(x_off[s], d_s, tmax)
             s, w = s[vis], w[vis]
-            np.add.at(L, h.ridx[s], h.beta[s] * li[s] * (f[s] * w / pdf[s])[:, None])
+            np.add.at(L, h.ridx[s], h.beta[s] * li[s] * (f[vis] * w / pdf[s])[:, None])
 
         # 2. neural: (u_i, w_i) ~ p^c, c uniform
         ch = rng.integers(0, 3, n)
+        choose_d = rng.random(n) < p_d  # the continuation: direct lobe, else the flow's w_i (drawn only there)
         t0 = time.perf_counter()
-        fs = ev.sample_state(h.x_obj, h.wo_obj, ch, u=rng.random((n, 4)), context=ctx)
+        fs = ev.sample_state(h.x_obj, h.wo_obj, ch, u=rng.random((n, 4)), context=ctx, directions=cont_on & ~choose_d)
         u_obj, wf_obj = fs.ui, fs.wi
         integ.stats.time["network"] += time.perf_counter() - t0
         n_u = ev.box.face_normal(u_obj)  # outward normal of u_i's face
@@ -123,25 +126,26 @@ class EightdnaShader:
             q_w.append(wl_obj[s])
             nee_info.append((light.delta, li[s], pl[s], jac[s]))
         n_nee = sum(len(s) for s in q_rows)
-        choose_d = rng.random(n) < p_d
         dn = np.nonzero(cont_on & choose_d)[0]
         fn = np.nonzero(cont_on & ~choose_d)[0]
         fn = fn[dot(n_u[fn], wf_obj[fn]) > 0]
         wf_w = fr.dir_to_world(wf_obj[fn], h.inst[fn])
         keep = self._backtrace_ok(u_w[fn], wf_w, h.inst[fn])
         fn, wf_w = fn[keep], wf_w[keep]
-        wf_obj_f, jac_f = fr.dir_to_object(wf_w, h.inst[fn])
+        _, jac_f = fr.dir_to_object(wf_w, h.inst[fn])
         q_rows.append(fn)
-        q_w.append(wf_obj_f)
         rows = np.concatenate(q_rows)
         t0 = time.perf_counter()
         p_u = np.zeros(n)  # the channel-averaged density of u_i: only for the rows that use it
         p_u[rows] = fs.pdf_position_rgb(rows).mean(1)
-        P = ev.pdf_rgb_at(fs, rows, np.concatenate(q_w))  # conditioners 1-3 of the sample serve these rows
+        # conditioners 1-3 of the sample serve the light rows; the flow continuations reuse conditioner 4 too
+        P = np.concatenate([ev.pdf_rgb_at(fs, rows[:n_nee], np.concatenate(q_w) if q_w else np.zeros((0, 3))),
+                            ev.pdf_rgb_sampled(fs, fn)])
         integ.stats.time["network"] += time.perf_counter() - t0
         P[p_u[rows] <= 0] = 0.0  # an underflowed p(u_i): no contribution, and p_u only divides
         p_u = np.where(p_u > 0, p_u, 1.0)
-        integ.stats.network_evals += n * 5 + len(rows)  # albedo + 4 conditioners per hit, conditioner 4 per row
+        # albedo + conditioners 1-3 per hit, conditioner 4 per drawn w_i and per light row
+        integ.stats.network_evals += n * 4 + len(fs.raw4) + n_nee
         q = P.mean(1)
         o = 0
         for s, (delta, li, pl, jac) in zip(q_rows[:-1], nee_info, strict=True):

@@ -127,6 +127,48 @@ def test_sample_state_densities_match_per_dimension(small, rng, split):
     np.testing.assert_array_equal(lazy.pdf_position_rgb(), fs.pdf_position_rgb())
 
 
+def test_directions_mask_and_sampled_densities(small, rng):
+    """``directions``: rows whose w_i is drawn get the full sample's w_i and pdf, the others u_i only (conditioner 4
+    runs for the drawn rows alone); pdf_rgb_sampled at the sample's own (u_i, w_i), which reuses its conditioner
+    outputs, equals the per-dimension reference."""
+    from nasset_sdk.errors import UsageError
+
+    _, ev, ref = small
+    n = 40
+    x, wo = _queries(ev, rng, n)
+    ch, u = rng.integers(0, 3, n), rng.random((n, 4))
+    mask = rng.random(n) < 0.5
+    full = ev.sample_state(x, wo, ch, u=u)
+    rows_run, orig = {}, ev.flow.conditioner
+
+    def counted(j, ctx, s_prev):
+        rows_run[j] = rows_run.get(j, 0) + len(s_prev)
+        return orig(j, ctx, s_prev)
+
+    ev.flow.conditioner = counted
+    try:
+        part = ev.sample_state(x, wo, ch, u=u, directions=mask)
+    finally:
+        ev.flow.conditioner = orig
+    assert rows_run == {1: n, 2: n, 3: n, 4: mask.sum()}  # conditioner 4 ran for the drawn rows only
+    np.testing.assert_array_equal(part.ui, full.ui)
+    np.testing.assert_allclose(part.wi[mask], full.wi[mask], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(part.pdf[mask], full.pdf[mask], rtol=1e-6)
+    assert (part.wi[~mask] == 0).all() and (part.pdf[~mask] == 0).all()
+    assert len(part.raw4) == mask.sum()
+    rows = rng.choice(np.nonzero(mask)[0], 30)  # repeats, any order
+    got = ev.pdf_rgb_sampled(part, rows)
+    jac = ev.box.from_rays(full.ui[rows], full.wi[rows])[1]
+    for c in range(3):
+        lp = ref.log_steps(x[rows], wo[rows], full.ui[rows], full.wi[rows], c)
+        np.testing.assert_allclose(np.log(got[:, c]), lp + np.log(jac / (16 * np.pi ** 2)), atol=LOG_ATOL, rtol=0)
+    np.testing.assert_allclose(got[np.arange(len(rows)), ch[rows]], full.pdf[rows], rtol=1e-6)
+    with pytest.raises(UsageError):  # a row whose w_i was not drawn
+        ev.pdf_rgb_sampled(part, [np.nonzero(~mask)[0][0]])
+    with pytest.raises(UsageError):
+        ev.sample_state(x, wo, ch, u=u, directions=mask[:-1])
+
+
 def jac_all(ev, fs):
     return ev.box.from_rays(fs.ui, fs.wi)[1]
 

@@ -20,6 +20,7 @@ from nasset_sdk.kinds.encodings import (
     sh9,
     spherical_coords,
     to_local,
+    unit64,
 )
 
 POLES = np.array([[0, 0, 1.0], [0, 0, -1.0], [0, 0, -0.0], [1e-20, 0, -1.0], [0, 1e-30, 1.0], [0, 0, 0.0], [np.nan, 0, 1.0],
@@ -182,3 +183,22 @@ def test_cubemap_table_equals_the_per_tap_lookup(rng, res):
     np.testing.assert_array_equal(cubemap(g, d, table=cube_table(g)), want)
     with pytest.raises(UsageError):
         cubemap(g, d, table=cube_table(g)[:, 1:])
+
+
+def test_unit64_against_a_per_row_reference(rng):
+    """unit64 (one fast pass when every row is finite and non-zero, the careful path otherwise) equals v / |v| in
+    float64 row by row (norm from math.hypot), with the fallback for zero / non-finite rows and overflowing norms
+    rescaled, however the rows are mixed."""
+    import math
+
+    v = rng.normal(size=(300, 3)) * 10.0 ** rng.uniform(-15, 300, (300, 1))
+    v[::7] = 0.0
+    v[3, 1], v[5, 0], v[8] = np.nan, -np.inf, 1e308
+    for block in (v, v[v.any(axis=1) & np.isfinite(v).all(axis=1) & (np.abs(v).max(axis=1) < 1e150)]):
+        got = unit64(block)
+        for row, out in zip(block, got, strict=True):
+            r = np.where(np.isfinite(row), row, 0.0)
+            scale = np.abs(r).max()
+            n = math.hypot(*(r / scale)) * scale if scale > 0 else 0.0
+            want = r / n if n > 1e-20 else np.array([0.0, 0.0, 1.0])
+            np.testing.assert_allclose(out, want, rtol=1e-15, atol=1e-300)

@@ -378,6 +378,15 @@ def test_boxflow_sample_matches_pdf(counts, u, scale, aspect, channel):
     np.testing.assert_allclose(fs.pdf, pdf, rtol=1e-12)
     np.testing.assert_allclose(fs.pdf_position_rgb()[inner, channel], pp[inner], rtol=1e-6)
     np.testing.assert_allclose(prgb[inner, channel], (pp * pd2)[inner], rtol=1e-6)
+    # w_i drawn for every other row only; the densities at the sample's own (u_i, w_i) reuse its conditioners
+    drawn = np.arange(n) % 2 == 0
+    fd = flow.sample_state(x, wo, channel, u=u, directions=drawn)
+    counts.add("spline.BoxFlow.sample_state", n)
+    own = flow.pdf_rgb_sampled(fd, np.nonzero(drawn)[0])
+    counts.add("spline.BoxFlow.pdf_rgb_sampled", int(drawn.sum()))
+    assert finite_all(fd.ui, fd.wi, fd.pdf, own) and (own > 0).all()
+    np.testing.assert_allclose(fd.pdf[drawn], pdf[drawn], rtol=1e-12)
+    np.testing.assert_allclose(own[inner[drawn], channel], pdf[drawn & inner], rtol=1e-6)
 
 
 @SLOW
@@ -401,6 +410,9 @@ def test_boxflow_adversarial_parameters(counts, u, wi, scale):
     prgb = flow.pdf_rgb_at(fs, np.arange(m), wi[:m])
     counts.add("spline.BoxFlow.pdf_rgb_at", m)
     assert finite_all(fs.ui, fs.wi, fs.pdf, fs.pdf_position_rgb(), prgb) and (prgb >= 0).all()
+    own = flow.pdf_rgb_sampled(fs, np.arange(n))
+    counts.add("spline.BoxFlow.pdf_rgb_sampled", n)
+    assert finite_all(own) and (own >= 0).all()
 
 
 # ----------------------------------------------------------------------------------------

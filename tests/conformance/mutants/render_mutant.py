@@ -236,9 +236,10 @@ def eightdna_pdf_scale():
     too large by the 4 pi of the direction measure (its position marginal unchanged)."""
     from nasset_sdk.kinds.eightdna import EightDnaEvaluator
 
-    orig, orig_at = EightDnaEvaluator.pdf, EightDnaEvaluator.pdf_rgb_at
+    orig, orig_at, orig_own = EightDnaEvaluator.pdf, EightDnaEvaluator.pdf_rgb_at, EightDnaEvaluator.pdf_rgb_sampled
     EightDnaEvaluator.pdf = lambda self, *a, **k: 4 * np.pi * orig(self, *a, **k)
     EightDnaEvaluator.pdf_rgb_at = lambda self, *a, **k: 4 * np.pi * orig_at(self, *a, **k)
+    EightDnaEvaluator.pdf_rgb_sampled = lambda self, *a, **k: 4 * np.pi * orig_own(self, *a, **k)
 
 
 def eightdna_direction_flipped():
@@ -248,6 +249,7 @@ def eightdna_direction_flipped():
     orig, orig_at = EightDnaEvaluator.pdf, EightDnaEvaluator.pdf_rgb_at
     EightDnaEvaluator.pdf = lambda self, x, wo, ui, wi, ch: orig(self, x, wo, ui, -np.asarray(wi), ch)
     EightDnaEvaluator.pdf_rgb_at = lambda self, fs, rows, wi: orig_at(self, fs, rows, -np.asarray(wi))
+    EightDnaEvaluator.pdf_rgb_sampled = lambda self, fs, rows: orig_at(self, fs, rows, -fs.wi[np.asarray(rows, np.int64)])
 
 
 def fiber_h_sign():
