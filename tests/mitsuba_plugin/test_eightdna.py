@@ -215,20 +215,10 @@ def test_scene_mixing_rna_and_8dna_assets(tmp_path):
 def test_asset_without_a_component_part(mi, tmp_path, name):
     """An 8dna asset whose core component lost a tensor or a network (edited after writing): the SDK's
     TENSOR_MISSING / NETWORK_MISSING naming it, not a Dr.Jit error."""
-    from pxr import Sdf
-
     from nasset_mitsuba_plugin.scene import asset_shape
     from nasset_sdk.errors import NassetError
+    from tests.mitsuba_plugin.test_plugin import _asset_without
 
-    path = tmp_path / f"no_{name}.usdc"
-    example_builder("8dna", size="tiny", seed=3).write(path)
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    found = []
-    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == name else None)
-    assert found
-    for p in found:
-        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
-    layer.Save()
     with pytest.raises(NassetError) as exc:
-        asset_shape(path, mi=mi)
+        asset_shape(_asset_without(tmp_path, "8dna", name), mi=mi)
     assert exc.value.code == ("TENSOR_MISSING" if name == "s12Cube" else "NETWORK_MISSING") and name in exc.value.message

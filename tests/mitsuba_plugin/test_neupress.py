@@ -17,6 +17,7 @@ from nasset_sdk.asset import Asset  # noqa: E402
 from nasset_sdk.errors import NassetError  # noqa: E402
 from nasset_sdk.examples import example_builder  # noqa: E402
 from nasset_sdk.kinds.neupress import gaussian_lobe_pdf, gaussian_lobe_sample  # noqa: E402
+from tests.mitsuba_plugin.test_plugin import _asset_without  # noqa: E402
 from tests.stats import SIGNIFICANCE, sphere_chi2  # noqa: E402
 
 
@@ -148,17 +149,6 @@ def test_lobe_technique_is_unbiased_under_nonuniform_scale(mi, tmp_path):
 
 def test_asset_without_the_appearance_network(mi, tmp_path):
     """A neupress asset whose core component lost its appearance network: the SDK's NETWORK_MISSING naming it."""
-    from pxr import Sdf
-
-    path = tmp_path / "no_net.usdc"
-    example_builder("neupress", size="tiny", seed=3).write(path)
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    found = []
-    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == "appearance" else None)
-    assert found
-    for p in found:
-        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
-    layer.Save()
     with pytest.raises(NassetError) as exc:
-        asset_shape(path, mi=mi)
+        asset_shape(_asset_without(tmp_path, "neupress", "appearance"), mi=mi)
     assert exc.value.code == "NETWORK_MISSING" and "appearance" in exc.value.message

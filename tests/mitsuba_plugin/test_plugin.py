@@ -157,6 +157,23 @@ def test_scene_far_from_origin_renders_like_at_the_origin(tmp_path):
     np.testing.assert_allclose(images[1], images[0], atol=1e-4)
 
 
+def _asset_without(tmp_path, kind: str, name: str):
+    """Path of a tiny example asset of ``kind`` whose prims named ``name`` (a tensor or network) were removed
+    after writing, as an edit by another tool would."""
+    from pxr import Sdf
+
+    path = tmp_path / f"{kind}_without_{name}.usdc"
+    example_builder(kind, size="tiny", seed=3).write(path)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    found = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == name else None)
+    assert found
+    for p in found:
+        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
+    layer.Save()
+    return path
+
+
 def _run_case(name, tmp_path, spp_scale=1):
     from nasset_sdk.conformance import find_suite, load_cases, run_case
 
@@ -289,17 +306,6 @@ def test_no_llvm_gives_typed_error(tmp_path, rna_asset_path):
 def test_asset_without_the_triplane(mi, tmp_path):
     """An rna asset whose core component lost its triplane (edited after writing): the SDK's
     TENSOR_MISSING naming it, not a Dr.Jit error."""
-    from pxr import Sdf
-
-    path = tmp_path / "no_planes.usdc"
-    example_builder("rna", size="tiny", seed=3).write(path)
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    found = []
-    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.IsPrimPath() and p.name == "triplane" else None)
-    assert found
-    for p in found:
-        del layer.GetPrimAtPath(p.GetParentPath()).nameChildren[p.name]
-    layer.Save()
     with pytest.raises(NassetError) as exc:
-        asset_shape(path, mi=mi)
+        asset_shape(_asset_without(tmp_path, "rna", "triplane"), mi=mi)
     assert exc.value.code == "TENSOR_MISSING" and "triplane" in exc.value.message
