@@ -398,22 +398,30 @@ def _apply(mi, rows, v, point=False):
     return mi.Vector3f(*[r[0] * v.x + r[1] * v.y + r[2] * v.z + (r[3] if point else 0.0) for r in rows])
 
 
-def vertex(mi, scene, sampler, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> dict:
+def draw(sampler) -> tuple:
+    """The random numbers of one 8dna vertex, drawn on every lane before the integrator's symbolic ``if``
+    (the sampler's sequence does not depend on which lanes hit an 8dna asset): (channel u [Float],
+    4 latents z [Float], light sample at x_o [Point2f], light sample at u_i [Point2f], continuation
+    pick [Float], GGX sample [Point2f])."""
+    u_ch, z = sampler.next_1d(), [sampler.next_1d() for _ in range(4)]
+    return u_ch, z, sampler.next_2d(), sampler.next_2d(), sampler.next_1d(), sampler.next_2d()
+
+
+def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> dict:
     """The 8dna estimator at asset hits ``on`` (spec/renderer.md#8dna) for the ``nasset_path`` integrator.
 
-    si: the hit; wo_world: -ray.d; sid: the hit shape's registry id (UInt32); assets: (index, EightDnaJit)
-    of the scene's 8dna assets; tab, k: the integrator's instance tables and instance index; x, n, wo: the
-    object-space inputs. Returns 'L' (Spectrum: direct lobe at x_o plus the light sample at u_i, to be
-    multiplied by the path throughput), the continuation 'd' (world, unit), 'from_u' (Bool: it leaves the
-    world point 'origin' = u_i M, else x_o), 'weight' (Spectrum throughput factor; 0 where a GGX
-    continuation passes through the asset: 'weight_passed'), 'pdf' (its world solid-angle pdf for MIS
-    at a reached light) and 'alive'."""
+    rnd: the vertex's random numbers (:func:`draw`); si: the hit; wo_world: -ray.d; sid: the hit shape's
+    registry id (UInt32); assets: (index, EightDnaJit) of the scene's 8dna assets; tab, k: the integrator's
+    instance tables and instance index; x, n, wo: the object-space inputs. Returns 'L' (Spectrum: direct lobe
+    at x_o plus the light sample at u_i, to be multiplied by the path throughput), the continuation 'd'
+    (world, unit), 'from_u' (Bool: it leaves the world point 'origin' = u_i M, else x_o), 'weight' (Spectrum
+    throughput factor; 0 where a GGX continuation passes through the asset: 'weight_passed'), 'pdf' (its world
+    solid-angle pdf for MIS at a reached light) and 'alive'."""
     import drjit as dr
 
     from .plugins import _mis, _of_asset, _trace
 
-    u_ch, z = sampler.next_1d(), [sampler.next_1d() for _ in range(4)]
-    u_ex, u_eu, u_pick, u_g = sampler.next_2d(), sampler.next_2d(), sampler.next_1d(), sampler.next_2d()
+    u_ch, z, u_ex, u_eu, u_pick, u_g = rnd
     ch = dr.minimum(mi.UInt32(u_ch * 3.0), 2)
     inv, fwd = _matrix(mi, tab, "inv", k, on), _matrix(mi, tab, "fwd", k, on)
     det = dr.abs(inv[0][0] * (inv[1][1] * inv[2][2] - inv[1][2] * inv[2][1])

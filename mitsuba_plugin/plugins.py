@@ -25,8 +25,8 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
+from . import eightdna
 from .eightdna import EightDnaJit
-from .eightdna import vertex as eightdna_vertex
 from .neupress import NeupressJit
 from .rna import RnaJit
 
@@ -188,10 +188,11 @@ def register(mi) -> None:
                         L, t_un, t_sh, wi_c, p_c = _asset_vertex(mi, shaded, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh,
                                                                  active_em, on_shaded, u_c, self.lobe, L, beta, wi_c, p_c)
                 if dr.hint(len(eight) > 0, mode="scalar"):
-                    v8 = eightdna_vertex(mi, scene, sampler, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8)
-                    L[on_8] += beta * v8["L"]
-                    t_un = dr.select(on_8, v8["weight"], t_un)
-                    t_sh = dr.select(on_8, v8["weight_passed"], t_sh)
+                    rnd8 = eightdna.draw(sampler)  # on every lane, outside the symbolic if: the same sample sequence
+                    d8, pdf8, alive8, from_u8, origin8 = mi.Vector3f(0), mi.Float(0), mi.Bool(False), mi.Bool(False), mi.Point3f(0)
+                    if on_8:  # symbolic, like the transport kinds: the flows run only in packets with an 8dna lane
+                        L, t_un, t_sh, d8, pdf8, alive8, from_u8, origin8 = _eightdna_vertex(
+                            mi, scene, rnd8, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
@@ -199,14 +200,14 @@ def register(mi) -> None:
                 prev_si = dr.detach(si, True)
                 prev_pdf = dr.select(on_asset, p_c, bs.pdf)
                 if dr.hint(len(eight) > 0, mode="scalar"):
-                    d_next = dr.select(on_8, v8["d"], d_next)
-                    prev_pdf = dr.select(on_8, v8["pdf"], prev_pdf)
-                    active_next &= ~on_8 | v8["alive"]
+                    d_next = dr.select(on_8, d8, d_next)
+                    prev_pdf = dr.select(on_8, pdf8, prev_pdf)
+                    active_next &= ~on_8 | alive8
                 ray = si.spawn_ray(d_next)
                 if dr.hint(len(eight) > 0, mode="scalar"):
-                    from_u = on_8 & v8["from_u"]  # a flow continuation leaves u_i M itself (no offset)
-                    ray.o = dr.select(from_u, v8["origin"], ray.o)
-                    prev_si.p = dr.select(from_u, v8["origin"], prev_si.p)
+                    from_u = on_8 & from_u8  # a flow continuation leaves u_i M itself (no offset)
+                    ray.o = dr.select(from_u, origin8, ray.o)
+                    prev_si.p = dr.select(from_u, origin8, prev_si.p)
                 beta[on_plain] *= bsdf_weight
                 prev_delta = on_plain & mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
                 pending = mi.Bool(on_asset)
@@ -297,6 +298,19 @@ def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, pas
     L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
     inv_p = dr.select(p_c > 0, dr.rcp(dr.select(p_c > 0, p_c, 1.0)), 0.0)  # T / p_A; a zero pdf carries nothing
     return L, tc_un * inv_p, tc_sh * inv_p, wi_c, p_c
+
+
+def _eightdna_vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh):
+    """:func:`.eightdna.vertex` at the lanes ``on_8`` as the state of the integrator's symbolic ``if``:
+    returns (L plus beta times the vertex's light, t_un and t_sh with its continuation weights, the
+    continuation's world direction, its world pdf, whether it lives, whether it leaves u_i M, u_i M)."""
+    import drjit as dr
+
+    v = eightdna.vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8)
+    L = dr.select(on_8, L + beta * v["L"], L)
+    t_un = dr.select(on_8, v["weight"], t_un)
+    t_sh = dr.select(on_8, v["weight_passed"], t_sh)
+    return L, t_un, t_sh, v["d"], v["pdf"], v["alive"], v["from_u"], v["origin"]
 
 
 def _instance_tables(mi, scene):
