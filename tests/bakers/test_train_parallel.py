@@ -23,6 +23,14 @@ from nasset_sdk.errors import NassetError, UsageError  # noqa: E402
 
 N, BATCH, EPOCHS = 601, 256, 2
 TOL = 1e-5
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _torchrun(*module_args: str, timeout: float = 120) -> None:
+    """``torchrun --standalone --nproc_per_node=2 -m MODULE ARGS...`` from the repository root; it must exit 0."""
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2", "-m", *module_args]
+    run = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+    assert run.returncode == 0, run.stderr[-3000:]
 
 
 def _data(n: int, seed: int, fiber: bool = False) -> dict:
@@ -57,10 +65,7 @@ def _train(fiber: bool = False) -> dict:
 def test_two_gloo_processes_take_the_single_process_steps(tmp_path, fiber):
     """Surface (Mitsuba and Blender meshes) and fiber (Blender hair: the h input) rna training."""
     out = tmp_path / "rank0.pt"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
-           "-m", "tests.bakers.test_train_parallel", str(out), *(["fiber"] if fiber else [])]
-    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stderr[-3000:]
+    _torchrun("tests.bakers.test_train_parallel", str(out), *(["fiber"] if fiber else []))
     ddp = torch.load(out, weights_only=True)
     one = _train(fiber)
     assert sorted(ddp) == sorted(one)
@@ -92,10 +97,7 @@ def test_two_gloo_processes_take_the_single_process_neupress_steps(tmp_path):
     from nasset_bakers.train.neupress import SIZES, build_skip_mlp
 
     out = tmp_path / "rank0.pt"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
-           "-m", "tests.bakers.test_train_parallel", str(out), "neupress"]
-    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stderr[-3000:]
+    _torchrun("tests.bakers.test_train_parallel", str(out), "neupress")
     ddp = torch.load(out, weights_only=True)
     one = _train_neupress()
     assert sorted(ddp) == sorted(one)
@@ -138,10 +140,7 @@ def test_two_gloo_processes_take_the_single_process_8dna_steps(tmp_path):
     from nasset_bakers.train import eightdna
 
     out = tmp_path / "rank0.pt"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
-           "-m", "tests.bakers.test_train_parallel", str(out), "8dna"]
-    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stderr[-3000:]
+    _torchrun("tests.bakers.test_train_parallel", str(out), "8dna")
     ddp = torch.load(out, weights_only=True)
     one = _train_8dna()
     assert sorted(ddp) == sorted(one)
@@ -191,11 +190,8 @@ def test_rna_bake_under_torchrun_writes_one_valid_asset(tmp_path):
     from nasset_sdk.validate import validate_file
 
     out = tmp_path / "a.usdc"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
-           "-m", "nasset_sdk.cli", "bake", "--example", "--kind", "rna", "--size", "tiny", "--views", "2", "--res", "12",
-           "--epochs", "2", "--device", "cpu", "-o", str(out), "--json"]
-    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=600)
-    assert run.returncode == 0, run.stderr[-3000:]
+    _torchrun("nasset_sdk.cli", "bake", "--example", "--kind", "rna", "--size", "tiny", "--views", "2", "--res", "12",
+              "--epochs", "2", "--device", "cpu", "-o", str(out), "--json", timeout=600)
     assert out.is_file() and validate_file(out, probe=False).ok
     assert sorted(p.name for p in tmp_path.glob("*.usdc")) == ["a.usdc"]
 
@@ -209,16 +205,13 @@ def _bake_twice(tmp_path, args: list[str]) -> float:
     from nasset_sdk.validate import validate_file
 
     out, work = tmp_path / "a.usdc", tmp_path / "data"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2",
-           "-m", "nasset_sdk.cli", *args, "-o", str(out), "--resume", str(work)]
-    run = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
-    assert run.returncode == 0, run.stderr[-3000:]
+    bake = ("nasset_sdk.cli", *args, "-o", str(out), "--resume", str(work))
+    _torchrun(*bake)
     assert out.is_file() and validate_file(out, probe=False).ok
     assert sorted(p.name for p in tmp_path.glob("*.usdc")) == ["a.usdc"]
     ckpt = work / "train_state.pt"
     ddp = torch.load(ckpt, weights_only=True)["model"]
-    again = subprocess.run(cmd, cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=60)
-    assert again.returncode == 0, again.stderr[-3000:]  # resumed at the last epoch by every process (none waits)
+    _torchrun(*bake, timeout=60)  # resumed at the last epoch by every process (none waits)
     ckpt.unlink()  # the one-process bake trains anew on the views already rendered
     assert main([*args, "-o", str(tmp_path / "one.usdc"), "--resume", str(work)]) == 0
     one = torch.load(ckpt, weights_only=True)["model"]
