@@ -125,8 +125,13 @@ def dataset_line(s: dict) -> str:
 
 
 def psnr_line(s: dict, label: str = "held-out PSNR") -> str:
-    """The held-out PSNR of the trained model (torch) and of the written asset (SDK evaluator)."""
-    return f"  {label}: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)"
+    """The held-out PSNR of the trained model (torch) and of the written asset (SDK evaluator), and which
+    epoch's state the asset keeps."""
+    line = f"  {label}: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)"
+    if s.get("kept_epoch"):
+        line += f"; kept epoch {s['kept_epoch']} of {s['epochs']} ({s['keep']}: lowest held-out MSE)" \
+            if s.get("keep") == "best" else f"; kept the last of {s['epochs']} epochs"
+    return line
 
 
 def times_line(times: dict) -> str:

@@ -274,6 +274,7 @@ def bake(
         "boundary": {"eta": eta, "alpha": alpha},
         "variant": mi.variant(), "device": app.device,
         "val_psnr_db": app.val["psnr_db"],
+        **{k: app.val.get(k) for k in ("kept_epoch", "epochs", "keep")},
         "val_mse": app.val["mse"],
         "sdk_val_psnr_db": check["psnr_db"],
         "val_accuracy": app.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),

@@ -223,6 +223,7 @@ def bake(
         "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp,
         "variant": mi.variant(), "device": result.device,
         "val_psnr_db": result.val["psnr_db"],
+        **{k: result.val.get(k) for k in ("kept_epoch", "epochs", "keep")},
         "val_accuracy": result.val.get("accuracy"),
         "sdk_val_accuracy": check.get("accuracy"),
         "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],

@@ -53,6 +53,41 @@ def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]
     return (10.0 * math.log10(1.0 / max(mse, 1e-20))), mse_lin, peak
 
 
+def held_out_mse(pred: np.ndarray, gt: np.ndarray) -> float:
+    """Plain MSE of held-out predictions [N, 3] against the unclamped references [N, 3] (linear radiance,
+    no exposure or clipping): its expectation is the squared error plus the references' constant noise,
+    so it ranks models without bias."""
+    gt = np.asarray(gt, np.float64)
+    return float(np.mean((np.asarray(pred, np.float64) - gt) ** 2)) if gt.size else float("nan")
+
+
+class BestEpoch:
+    """The model state of the epoch with the lowest held-out MSE (``held_out_mse``): what a bake exports
+    with ``keep = "best"``, as the RNA paper keeps its best checkpoint (spec/bake.md#training).
+    ``saved``: ``to_dict()`` of a checkpoint, to resume."""
+
+    def __init__(self, saved: dict | None = None) -> None:
+        saved = saved or {}
+        self.epoch = int(saved.get("epoch", -1))
+        self.mse = float(saved.get("mse", math.inf))
+        self.state = saved.get("state")
+
+    def offer(self, epoch: int, mse: float, model) -> None:
+        """Keep ``model``'s state (a CPU copy) when ``mse`` is finite and the lowest so far."""
+        if math.isfinite(mse) and mse < self.mse:
+            self.epoch, self.mse = int(epoch), float(mse)
+            self.state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+
+    def restore(self, model) -> int:
+        """Load the kept state into ``model`` (on its device); returns the kept epoch (0-based), -1 if none."""
+        if self.state is not None:
+            model.load_state_dict(self.state)
+        return self.epoch
+
+    def to_dict(self) -> dict:
+        return {"epoch": self.epoch, "mse": self.mse, "state": self.state}
+
+
 class TorchCheckpoint:
     """Training state in the dataset folder; read back with ``weights_only=True`` (no pickle code)."""
 

@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, require_torch
+from .common import BestEpoch, TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, held_out_mse, require_torch
 from .parallel import data_parallel
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
@@ -59,6 +59,7 @@ class NeupressTrainSettings:
     prt_dirs: int = 256  # K quasi-Monte Carlo directions per (vertex, w_o bin)
     seed: int = 0
     device: str = "auto"
+    keep: str = "best"  # appearance network: the epoch with the lowest held-out MSE ("best") or the last ("last")
 
 
 TRAIN_PRESETS = presets.NEUPRESS_TRAIN  # the table lives in nasset_bakers/presets.py
@@ -222,6 +223,9 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
         G = state["G"].numpy()
         history = list(state.get("history", []))
         start = int(state["epoch"]) + 1
+    best = BestEpoch(state.get("best") if state is not None else None)
+    if settings.keep not in ("best", "last"):
+        raise error("CONVERT_TRAINING", f"keep must be 'best' or 'last', got {settings.keep!r}")
     G64 = torch.as_tensor(G.astype(np.float64), device=dev)
     V = torch.as_tensor(v, device=dev)
     Y = torch.as_tensor(y, device=dev)
@@ -246,24 +250,25 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
             tot += float(loss.detach()) * len(idx)
             cnt += len(idx)
         sched.step()
-        last = epoch == settings.epochs - 1
-        val_psnr = float("nan")
-        if last or epoch % 5 == 4:
-            val_psnr = _psnr(predict_appearance(model, G, v_val), val_data["rgb"])
+        pv = np.maximum(predict_appearance(model, G, v_val), 0.0)  # every epoch: the kept one is chosen by it
+        val_psnr, val_mse = _psnr(pv, val_data["rgb"]), held_out_mse(pv, val_data["rgb"])
+        best.offer(epoch, val_mse, model)
         mean_loss = dp.mean(torch, tot / max(cnt, 1))
-        history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr})
+        history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "val_mse": val_mse})
         if checkpoint is not None and dp.is_main:
             checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
-                             "G": torch.as_tensor(G), "history": history, "epoch": epoch})
+                             "G": torch.as_tensor(G), "history": history, "epoch": epoch, "best": best.to_dict()})
         if progress:
             progress(epoch, mean_loss, val_psnr)
+    kept = best.restore(model) if settings.keep == "best" and best.state is not None else settings.epochs - 1
     model = model.cpu().eval()
     pred = predict_appearance(model, G, v_val)
     psnr, mse, peak = display_psnr(np.maximum(pred, 0.0), val_data["rgb"])
     val = {"psnr_db": psnr, "mse": mse, "peak": peak, "samples": int(len(v_val)),
            "mean_gt": float(np.mean(val_data["rgb"])) if len(v_val) else float("nan"),
            "mean_pred": float(np.mean(np.maximum(pred, 0.0))) if len(v_val) else float("nan"),
-           "accuracy": held_out_accuracy(np.maximum(pred, 0.0), val_data)}
+           "accuracy": held_out_accuracy(np.maximum(pred, 0.0), val_data),
+           "kept_epoch": kept + 1, "epochs": settings.epochs, "keep": settings.keep}
     return AppearanceResult(model, G, history, val, time.perf_counter() - t0, str(dev))
 
 

@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import check_against_torch, display_psnr, held_out_accuracy, require_torch
+from .common import BestEpoch, check_against_torch, display_psnr, held_out_accuracy, held_out_mse, require_torch
 from .parallel import data_parallel
 
 
@@ -57,6 +57,7 @@ class TrainSettings:
     plane_channels: int = 0  # triplane channels C; 0: the preset's
     seed: int = 0
     device: str = "auto"
+    keep: str = "best"  # "best": the epoch with the lowest held-out MSE (the paper's best checkpoint); "last"
 
 
 TRAIN_PRESETS = presets.RNA_TRAIN  # the table lives in nasset_bakers/presets.py
@@ -299,6 +300,9 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     state = checkpoint.restore(model, opt, sched) if checkpoint is not None else None
     history: list = list(state.get("history", [])) if state else []
     start = int(state["epoch"]) if state else 0
+    best = BestEpoch(state.get("best") if state else None)
+    if settings.keep not in ("best", "last"):
+        raise error("CONVERT_TRAINING", f"keep must be 'best' or 'last', got {settings.keep!r}")
     net = dp.wrap(torch, model)
     n = len(T["xn"])
     g = torch.Generator(device="cpu").manual_seed(settings.seed)
@@ -324,23 +328,24 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         mean_loss = dp.mean(torch, total / max(count, 1))
         if not math.isfinite(mean_loss):
             raise error("CONVERT_TRAINING", f"loss became non-finite at epoch {epoch}")
-        val_psnr = float("nan")
-        if epoch == settings.epochs - 1 or epoch % max(1, settings.epochs // 10) == 0:
-            model.eval()
-            yv = np.maximum(predict(model, V, sigma=blur_sigma(settings, epoch)), 0.0)
-            val_psnr = display_psnr(select_branch(yv, val_data["vis"]), val_data["rgb"])[0]
-        history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "sigma": sigma})
+        model.eval()  # held-out figures every epoch: the kept epoch is chosen by them
+        pv = select_branch(np.maximum(predict(model, V, sigma=sigma), 0.0), val_data["vis"])
+        val_psnr, val_mse = display_psnr(pv, val_data["rgb"])[0], held_out_mse(pv, val_data["rgb"])
+        best.offer(epoch, val_mse, model)
+        history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "val_mse": val_mse, "sigma": sigma})
         if progress is not None:
             progress(epoch, mean_loss, val_psnr)
         if checkpoint is not None and dp.is_main and (epoch % 5 == 4 or epoch == settings.epochs - 1):
             checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
-                             "epoch": epoch + 1, "history": history})
+                             "epoch": epoch + 1, "history": history, "best": best.to_dict()})
     train_s = time.perf_counter() - t0
 
+    # the kept state: the best epoch's (its blur) or the last one's
+    kept = best.restore(model) if settings.keep == "best" and best.state is not None else settings.epochs - 1
     # freeze what is stored: blurred planes rounded to float16
     model.eval()
     with torch.no_grad():
-        eff = blur_planes(model.planes, blur_sigma(settings, settings.epochs)).detach()
+        eff = blur_planes(model.planes, blur_sigma(settings, kept)).detach()
         planes16 = eff.permute(0, 2, 3, 1).cpu().numpy().astype(np.float16)  # [3, R(v), R(u), C]
         model.freeze_planes(torch.from_numpy(planes16.astype(np.float32)).permute(0, 3, 1, 2).to(device))
     if not np.isfinite(planes16.astype(np.float32)).all():
@@ -356,7 +361,8 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     model.to(device)
     return TrainResult(
         model=model, planes=planes16, onnx=onnx_bytes, history=history,
-        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv)), "accuracy": acc},
+        val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv)), "accuracy": acc,
+             "kept_epoch": kept + 1, "epochs": settings.epochs, "keep": settings.keep},
         onnx_max_abs_diff=diff, seconds=train_s, device=str(device),
     )
 
