@@ -177,8 +177,8 @@ class _Image:
 
 
 def test_prt_render_matches_reference_renderer(mi, tmp_path):
-    """A neupress instance (rotated, non-uniformly scaled) on a diffuse floor under a rotated textured dome
-    (with a bright patch) and a sun, PRT mode, 24 x 24, max_depth 3: the plugin (16 renders of 16 spp,
+    """A neupress instance (rotated, non-uniformly scaled) and an rna instance (path mode: PRT concerns neupress)
+    on a diffuse floor under a rotated textured dome (with a bright patch) and a sun, PRT mode, 24 x 24, max_depth 3: the plugin (16 renders of 16 spp,
     variance of the mean from their spread) against the reference renderer's --prt render (64 spp, its film
     variance). Per-channel image means within 4.5 standard errors; at most 5 % of pixels beyond 3.5 sigma;
     mean over pixels of (a - b)^2 / (var_a + var_b) (the per-pixel squared error in units of the two
@@ -186,9 +186,11 @@ def test_prt_render_matches_reference_renderer(mi, tmp_path):
     from 16 renders), 1.0-1.2 measured over seeds. Pixels that see a single dome texel have no noise: their
     variance gets a float32 rounding floor (1e-5 relative), so they must agree to ~1e-5."""
     asset = example_builder("neupress", size="tiny", seed=21).write(tmp_path / "np.usdc")
+    rna = example_builder("rna", size="tiny", seed=22).write(tmp_path / "rna.usdc")
     tex = _gradient_dome(tmp_path / "dome.exr", hot=10.0)
     m3 = _rotation((0, 1, 0.3), 35) @ np.diag([1.2, 0.8, 1.0])
-    path = _scene(tmp_path, [(asset, _matrix(m3))], dome_tex=tex, dome_rot=_rotation((0, 1, 0), 50), floor=True, sun=True)
+    path = _scene(tmp_path, [(asset, _matrix(m3, (-0.25, 0, 0))), (rna, _matrix(0.6 * np.eye(3), (0.7, -0.2, 0.3)))],
+                  dome_tex=tex, dome_rot=_rotation((0, 1, 0), 50), floor=True, sun=True)
     ref = render_finite(path, width=24, height=24, spp=64, seed=7, prt=True, max_depth=3)
     runs = np.stack([render(path, 16, width=24, height=24, seed=100 + s, prt=True, max_depth=3) for s in range(16)])
     assert np.isfinite(runs).all()
