@@ -13,7 +13,9 @@
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
   of that segment and its neighbours do not count as crossing the instance. 8dna assets
   (spec/renderer.md#8dna) take their own light samples (at x_o and at u_i) and continuation from
-  :func:`.eightdna.vertex`. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+  :func:`.eightdna.vertex`. ``prt`` (default false): neupress instances are shaded by their PRT
+  component under the scene's domes and end the path there (:mod:`.prt`; spec/renderer.md#neupress).
+  Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
 """
 
 from __future__ import annotations
