@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from nasset_reference_renderer.lights import DomeLight
-from nasset_reference_renderer.shaders.neupress import dome_sh
+from nasset_reference_renderer.shaders.neupress import dome_sh, dome_sh_world
 from nasset_sdk.errors import error
 from nasset_sdk.view import vertex_normals
 
@@ -67,9 +67,10 @@ def tables(mi, scene, assets, tab) -> PrtTables:
     which = np.asarray(tab["asset"].numpy(), np.int64).reshape(-1)
     inv = np.asarray(tab["inv"].numpy(), np.float64).reshape(-1, 3, 4)
     b = np.zeros((len(which), SH_RGB))
+    quadrature = dome_sh_world(lights)  # once per call; per instance only the SH of its object-space directions
     for i, a in enumerate(which):
         if assets[a].kind == "neupress":  # world -> object linear part, row vectors: d @ M3^-T
-            b[i] = dome_sh(lights, inv[i, :, :3].T).ravel()
+            b[i] = dome_sh(quadrature, inv[i, :, :3].T).ravel()
     if not np.isfinite(b).all():
         raise error("SCENE_INVALID", "the dome's SH projection is not finite")
     prt_assets = [(a, asset) for a, asset in enumerate(assets) if asset.kind == "neupress"]

@@ -61,11 +61,11 @@ def dome_sh_world(lights, min_rows: int = 128):
     return np.concatenate(dirs), np.concatenate(rad), np.concatenate(wts)
 
 
-def dome_sh(lights, to_obj3) -> np.ndarray:
-    """b_k = sum over the cells of :func:`dome_sh_world` of L w Y_k(d_obj) [9, 3]: the SH projection of every
-    DomeLight in ``lights`` in an object space, d_obj = normalize(d @ to_obj3) (to_obj3 [3, 3] the
+def dome_sh(quadrature, to_obj3) -> np.ndarray:
+    """b_k = sum over the cells of ``quadrature`` (:func:`dome_sh_world` of the lights) of L w Y_k(d_obj) [9, 3]:
+    the SH projection of the domes in an object space, d_obj = normalize(d @ to_obj3) (to_obj3 [3, 3] the
     world-to-object linear map, row vectors)."""
-    d, rad, w = dome_sh_world(lights)
+    d, rad, w = quadrature
     d_obj = normalize(d @ np.asarray(to_obj3, np.float64))
     return (sh9(d_obj)[:, :, None] * (rad * w[:, None])[:, None, :]).sum(0)
 
@@ -81,7 +81,7 @@ class NeupressShader:
     def _light_sh(self, inst: int) -> np.ndarray:
         """b_k = integral L_i(w) Y_k(w_obj) dw for instance ``inst`` (object-space SH of the domes) [9,3]."""
         if inst not in self._sh_cache:
-            self._sh_cache[inst] = dome_sh(self.integ.scene.lights, self.frames.to_obj[inst, :3, :3])
+            self._sh_cache[inst] = dome_sh(dome_sh_world(self.integ.scene.lights), self.frames.to_obj[inst, :3, :3])
         return self._sh_cache[inst]
 
     def _vertex_normals(self, a: int) -> np.ndarray:
