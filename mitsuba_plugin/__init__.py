@@ -12,6 +12,8 @@ decoder MLP) into Dr.Jit kernels, so the same code runs on ``llvm_ad_rgb`` (CPU)
   DistantLight as a Dr.Jit emitter (``nasset_cone``), both for USD scenes;
 - :mod:`.plugins` registers the ``nasset`` BSDF (marks a shape as an asset instance) and the
   ``nasset_path`` integrator (spec/renderer.md#neural-assets at asset hits, Mitsuba's ``path`` elsewhere);
+- :mod:`.prt` is the integrator's neupress PRT mode (``prt``: the dome's SH projection per instance at load
+  time, the per-vertex gathers in Dr.Jit);
 - :mod:`.scene` builds Mitsuba scenes holding assets: ``asset_shape()`` for dict scenes,
   ``load_file()`` for XML with ``<shape type="nasset">``, ``usd_scene()`` for nasset USD scenes;
 - :mod:`.render` is the command line (``python -m nasset_mitsuba_plugin.render``), a conformance renderer.

@@ -94,6 +94,7 @@ def register(mi) -> None:
             m = np.asarray(props.get("to_world", mi.ScalarTransform4f()).matrix, np.float64).reshape(4, 4)[:3, :3]
             if not np.allclose(m @ m.T, np.eye(3), atol=1e-4):
                 raise error("SCENE_INVALID", "nasset_dome: to_world is not a rotation or mirror (pass the polar factor of the dome's M3)")
+            self.rotation = m.T  # [3, 3] row-vector R: world = local @ R (numpy, for load-time projections)
             self.rot = [[float(v) for v in row] for row in m.T]  # row-vector R: world_j = sum_i local_i R[i][j]
             self.le = mi.Color3f(*self.scale.tolist())
             bitmap = props.get("bitmap", None)
@@ -107,11 +108,13 @@ def register(mi) -> None:
                 except Exception as exc:  # Mitsuba reports unreadable images as RuntimeError
                     raise error("FILE_UNREADABLE", f"dome texture: {str(exc).splitlines()[0][:200]}", file=str(path)) from None
             self.tex = None
+            self.image = None  # [H, W, 3] float64 lat-long radiance before ``radiance`` scaling (numpy), or None
             if bitmap is not None:
                 img = np.asarray(bitmap, np.float64)
                 if img.ndim != 3 or img.shape[2] < 3 or not np.isfinite(img[..., :3]).all():
                     raise error("SCENE_INVALID", f"nasset_dome: bitmap of shape {img.shape} is not finite RGB")
                 img = img[..., :3]
+                self.image = img
                 self.h, self.w = img.shape[:2]
                 self.tex = mi.Float(np.ascontiguousarray(img * self.scale, np.float32).ravel())
                 self.dist = mi.DiscreteDistribution(mi.Float(np.asarray(latlong_pmf(img), np.float32)))

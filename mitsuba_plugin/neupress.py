@@ -204,15 +204,21 @@ class NeupressJit:
         return self.prt
 
     def prt_radiance(self, light_sh, vertex, n, wo):
-        """sum_k a_k(vertex, bin(wo)) b_k [Color3f] of neupress.md#component-prt: ``light_sh`` b [9, 3] (numpy),
-        ``vertex`` UInt32 indices (past V - 1 read V - 1), ``n`` the vertex normals n_v and ``wo`` object-space
-        directions [Vector3f].
+        """sum_k a_k(vertex, bin(wo)) b_k [Color3f] of neupress.md#component-prt: ``light_sh`` b [9, 3] (numpy,
+        the same for every lane) or a list of 27 Floats (per lane, b[k, c] at 3 k + c), ``vertex`` UInt32
+        indices (past V - 1 read V - 1), ``n`` the vertex normals n_v and ``wo`` object-space directions [Vector3f].
         The w_o bin in the local frame of n_v, equal solid angle in theta, below the surface theta bin T - 1."""
         dr, mi = _dr(), self.mi
         coeff, nt, nphi, nv = self._prt_table()
-        b = np.asarray(light_sh, np.float64)
-        if b.shape != (9, 3) or not np.isfinite(b).all():
-            raise error("USAGE", f"light_sh must be a finite [9, 3], got {b.shape}")
+        if isinstance(light_sh, list):
+            if len(light_sh) != 27:
+                raise error("USAGE", f"light_sh as a list needs 27 Floats, got {len(light_sh)}")
+            b = [light_sh[3 * k:3 * k + 3] for k in range(9)]
+        else:
+            b = np.asarray(light_sh, np.float64)
+            if b.shape != (9, 3) or not np.isfinite(b).all():
+                raise error("USAGE", f"light_sh must be a finite [9, 3], got {b.shape}")
+            b = b.tolist()
         n = safe_normalize(mi, mi.Vector3f(n))
         w = safe_normalize(mi, mi.Vector3f(wo))
         t, bt = local_frame(mi, n)
@@ -223,6 +229,6 @@ class NeupressJit:
         out = [None, None, None]
         for k in range(9):
             for c in range(3):
-                term = dr.gather(mi.Float, coeff, base + (3 * k + c)) * float(b[k, c])
+                term = dr.gather(mi.Float, coeff, base + (3 * k + c)) * b[k][c]
                 out[c] = term if out[c] is None else out[c] + term
         return mi.Color3f(*out)

@@ -13,7 +13,9 @@
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
   of that segment and its neighbours do not count as crossing the instance. 8dna assets
   (spec/renderer.md#8dna) take their own light samples (at x_o and at u_i) and continuation from
-  :func:`.eightdna.vertex`. Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
+  :func:`.eightdna.vertex`. ``prt`` (default false): neupress instances are shaded by their PRT
+  component under the scene's domes and end the path there (:mod:`.prt`; spec/renderer.md#neupress).
+  Every per-sample step is Dr.Jit (one kernel per render on llvm and cuda).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 from nasset_sdk.errors import error
 
 from . import eightdna
+from . import prt as prt_mode
 from .eightdna import EightDnaJit
 from .neupress import NeupressJit
 from .rna import RnaJit
@@ -114,6 +117,7 @@ def register(mi) -> None:
             self.max_depth = int(props.get("max_depth", 5))
             self.rr_depth = int(props.get("rr_depth", 5))
             self.lobe = bool(props.get("lobe", True))  # False: the uniform world sphere for every asset
+            self.prt = bool(props.get("prt", False))  # True: neupress assets shaded by PRT (.prt)
             if self.max_depth < 1:
                 raise error("SCENE_INVALID", f"nasset_path: max_depth must be >= 1 (got {self.max_depth})")
 
@@ -126,7 +130,8 @@ def register(mi) -> None:
         def sample(self, scene, sampler, ray, medium=None, active=True):
             import mitsuba as mi  # dr.syntax recompiles this method without register()'s closure
             assets, lut, tab = self.instances(scene)
-            shaded = _by_kind(assets, "rna") + _by_kind(assets, "neupress")  # transport + technique
+            prt = prt_mode.tables(mi, scene, assets, tab) if self.prt else None  # PRT mode: neupress by .prt
+            shaded = _by_kind(assets, "rna") + ([] if self.prt else _by_kind(assets, "neupress"))  # transport + technique
             eight = _by_kind(assets, "8dna")
             ctx = mi.BSDFContext()
             ray = mi.Ray3f(ray)
@@ -169,6 +174,12 @@ def register(mi) -> None:
                 if dr.hint(len(eight) > 0, mode="scalar"):
                     on_8 = on_asset & (dr.gather(mi.UInt32, tab["kind8"], k, on_asset) > 0)
                 on_shaded = on_asset & ~on_8
+                if dr.hint(prt is not None, mode="scalar"):  # PRT vertices end their path here
+                    on_prt = _prt_lanes(mi, prt, tab, k, on_shaded)
+                    on_shaded &= ~on_prt
+                    active_next &= ~on_prt
+                    if on_prt:  # symbolic: the gathers run only in packets with a lane on a PRT asset
+                        L = _prt_vertex(mi, prt, tab, k, si, wo_o, on_prt, L, beta)
 
                 # light sample; at an asset the shadow ray ignores the instance and records crossing it
                 ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_next)
@@ -230,7 +241,7 @@ def register(mi) -> None:
             return []
 
         def to_string(self):
-            return f"NassetPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, lobe={self.lobe}]"
+            return f"NassetPathIntegrator[max_depth={self.max_depth}, rr_depth={self.rr_depth}, lobe={self.lobe}, prt={self.prt}]"
 
     mi.register_bsdf(BSDF, lambda props: NassetBSDF(props))
     mi.register_integrator(INTEGRATOR, lambda props: NassetPathIntegrator(props))
@@ -298,6 +309,25 @@ def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, pas
     L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
     inv_p = dr.select(p_c > 0, dr.rcp(dr.select(p_c > 0, p_c, 1.0)), 0.0)  # T / p_A; a zero pdf carries nothing
     return L, tc_un * inv_p, tc_sh * inv_p, wi_c, p_c
+
+
+def _prt_lanes(mi, prt, tab, k, active):
+    """Lanes of ``active`` whose instance k is an instance of a PRT-shaded (neupress) asset."""
+    mine = mi.Bool(False)
+    for a, _ in prt.assets:
+        mine |= _of_asset(mi, tab, k, a, active)
+    return mine
+
+
+def _prt_vertex(mi, prt, tab, k, si, wo_o, on_prt, L, beta):
+    """L plus beta times the PRT radiance (:func:`.prt.radiance`) at the lanes ``on_prt`` of instances k."""
+    val = mi.Color3f(0)
+    for a, asset in prt.assets:
+        mine = _of_asset(mi, tab, k, a, on_prt)
+        val[mine] = prt_mode.radiance(mi, prt, a, asset, k, si.prim_index, si.uv, wo_o, mine)
+    L = mi.Spectrum(L)
+    L[on_prt] += beta * val
+    return L
 
 
 def _eightdna_vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh):

@@ -1,9 +1,11 @@
 """Render a scene with neural assets inside Mitsuba's JIT (the ``nasset_path`` integrator).
 
-    python -m nasset_mitsuba_plugin.render SCENE OUT.exr --spp N [--width W --height H --seed S --max-depth D --variant V]
+    python -m nasset_mitsuba_plugin.render SCENE OUT.exr --spp N [--width W --height H --seed S --max-depth D --variant V --prt]
 
 SCENE is a nasset USD scene (``.usda``/``.usdc``/``.usd``) or a Mitsuba XML scene with
-``<shape type="nasset">`` instances. As a conformance renderer::
+``<shape type="nasset">`` instances. ``--prt`` shades neupress assets with their ``prt`` component and the
+dome's SH projection (spec/renderer.md#neupress, PRT mode; a usage error without ``prt`` or a dome). As a
+conformance renderer::
 
     nasset conformance --renderer "python -m nasset_mitsuba_plugin.render {scene} {out} --spp {spp} --width {width} --height {height} --seed {seed}"
 """
@@ -43,19 +45,25 @@ def load_scene(path: str, width: int | None = None, height: int | None = None, *
 
 
 def render(path: str, spp: int, *, width: int | None = None, height: int | None = None, seed: int = 0, max_depth: int = 5,
-           variant: str | None = None) -> np.ndarray:
+           variant: str | None = None, prt: bool = False) -> np.ndarray:
     """float32 [H, W, 3] radiance of the scene at ``path`` rendered with ``nasset_path``.
 
     ``max_depth``: scattering vertices as in spec/renderer.md#integrator (1 = direct lighting only);
-    ``nasset_path`` counts like Mitsuba's ``path`` (the camera ray is a segment too), so it gets ``max_depth + 1``."""
+    ``nasset_path`` counts like Mitsuba's ``path`` (the camera ray is a segment too), so it gets ``max_depth + 1``.
+    ``prt``: neupress assets in PRT mode (:mod:`.prt`; USAGE error for an asset without ``prt`` or a scene without a dome)."""
     if int(spp) < 1:
         raise error("USAGE", f"spp must be >= 1 (got {spp})")
     if int(max_depth) < 1:
         raise error("USAGE", f"max_depth must be >= 1 (got {max_depth})")
     mi = jit_mitsuba(variant)
     scene = load_scene(path, width, height, mi=mi)
-    integrator = mi.load_dict({"type": INTEGRATOR, "max_depth": int(max_depth) + 1})
-    img = np.asarray(mi.render(scene, integrator=integrator, spp=int(spp), seed=int(seed)), np.float32)
+    integrator = mi.load_dict({"type": INTEGRATOR, "max_depth": int(max_depth) + 1, "prt": bool(prt)})
+    try:
+        img = np.asarray(mi.render(scene, integrator=integrator, spp=int(spp), seed=int(seed)), np.float32)
+    except RuntimeError as exc:  # Dr.Jit wraps what the integrator raised while tracing: give the typed error
+        if isinstance(exc.__cause__, NassetError):
+            raise exc.__cause__ from None
+        raise
     return np.where(np.isfinite(img), img, 0.0).astype(np.float32)
 
 
@@ -82,11 +90,12 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-depth", type=int, default=5, help="scattering vertices (1 = direct lighting only; spec/renderer.md#integrator)")
     ap.add_argument("--variant", default=None, help="llvm_ad_rgb (default) or cuda_ad_rgb")
+    ap.add_argument("--prt", action="store_true", help="neupress: shade with the PRT component and the dome's SH projection")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     try:
         img = render(args.scene, args.spp, width=args.width, height=args.height, seed=args.seed, max_depth=args.max_depth,
-                     variant=args.variant)
+                     variant=args.variant, prt=args.prt)
         write_exr(args.output, img)
     except NassetError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -61,6 +61,15 @@ def dome_sh_world(lights, min_rows: int = 128):
     return np.concatenate(dirs), np.concatenate(rad), np.concatenate(wts)
 
 
+def dome_sh(quadrature, to_obj3) -> np.ndarray:
+    """b_k = sum over the cells of ``quadrature`` (:func:`dome_sh_world` of the lights) of L w Y_k(d_obj) [9, 3]:
+    the SH projection of the domes in an object space, d_obj = normalize(d @ to_obj3) (to_obj3 [3, 3] the
+    world-to-object linear map, row vectors)."""
+    d, rad, w = quadrature
+    d_obj = normalize(d @ np.asarray(to_obj3, np.float64))
+    return (sh9(d_obj)[:, :, None] * (rad * w[:, None])[:, None, :]).sum(0)
+
+
 class NeupressShader:
     def __init__(self, integ) -> None:
         self.integ = integ
@@ -72,9 +81,7 @@ class NeupressShader:
     def _light_sh(self, inst: int) -> np.ndarray:
         """b_k = integral L_i(w) Y_k(w_obj) dw for instance ``inst`` (object-space SH of the domes) [9,3]."""
         if inst not in self._sh_cache:
-            d, rad, w = dome_sh_world(self.integ.scene.lights)
-            d_obj = normalize(d @ self.frames.to_obj[inst, :3, :3])
-            self._sh_cache[inst] = (sh9(d_obj)[:, :, None] * (rad * w[:, None])[:, None, :]).sum(0)
+            self._sh_cache[inst] = dome_sh(dome_sh_world(self.integ.scene.lights), self.frames.to_obj[inst, :3, :3])
         return self._sh_cache[inst]
 
     def _vertex_normals(self, a: int) -> np.ndarray:
