@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .encodings import from_local, unit64
+from .encodings import dot3, from_local, unit64
 
 ALPHA_MIN = 1e-4
 _EPS = 1e-12
@@ -61,9 +61,9 @@ def ggx_lambda(cos_t: np.ndarray, alpha: float) -> np.ndarray:
 def _dots(n, wo, wi):
     n, wo, wi = unit64(n), unit64(wo), unit64(wi)
     h = wo + wi
-    hl = np.linalg.norm(h, axis=1, keepdims=True)
+    hl = np.sqrt(dot3(h, h))[:, None]  # np.linalg.norm's sum, in its order
     h = np.where(hl > 1e-12, h / np.maximum(hl, 1e-12), n)
-    return (n * wo).sum(1), (n * wi).sum(1), (n * h).sum(1), (wo * h).sum(1)
+    return dot3(n, wo), dot3(n, wi), dot3(n, h), dot3(wo, h)
 
 
 def ggx_reflection(n, wo, wi, eta: float, alpha: float) -> np.ndarray:
@@ -95,6 +95,6 @@ def ggx_sample(n, wo, u2, alpha: float) -> tuple[np.ndarray, np.ndarray]:
     phi = 2.0 * np.pi * u2[:, 1]
     h = from_local(np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=1), n)
     wo = unit64(wo)
-    wi = 2.0 * (wo * h).sum(1, keepdims=True) * h - wo
+    wi = 2.0 * dot3(wo, h)[:, None] * h - wo
     wi = unit64(wi)
     return wi, ggx_pdf(n, wo, wi, alpha)

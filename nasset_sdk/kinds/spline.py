@@ -44,6 +44,14 @@ def finite64(a) -> np.ndarray:
     return np.nan_to_num(a, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
 
 
+def clamp01(a) -> np.ndarray:
+    """float64 copy of a [N] clamped to [0, 1], NaN -> 0: ``np.clip(np.nan_to_num(a, nan=0.0), 0, 1)`` in two passes."""
+    a = np.array(a, np.float64).reshape(-1)
+    np.fmax(a, 0.0, out=a)  # fmax / fmin return the number where one side is NaN
+    np.fmin(a, 1.0, out=a)
+    return a
+
+
 def _softplus(a: np.ndarray) -> np.ndarray:
     """log(1 + e^a) for finite a, without overflow."""
     return np.maximum(a, 0.0) + np.log1p(np.exp(-np.abs(a)))
@@ -175,7 +183,7 @@ class RQSpline:
     def forward(self, z: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0); with ``rows`` [M], z [M]
         goes through the splines of those rows."""
-        z = np.clip(np.nan_to_num(np.asarray(z, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
+        z = clamp01(z)
         k = self._bin(self._xb if rows is None else self._xb[:, rows], z)
         x0, y0, w, h, d0, d1 = self._gather(k, rows)
         s = h / w
@@ -189,7 +197,7 @@ class RQSpline:
 
     def inverse(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """z = rqs^-1(y) and log|dz/dy| for y [N] (clamped to [0, 1], NaN -> 0)."""
-        y = np.clip(np.nan_to_num(np.asarray(y, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
+        y = clamp01(y)
         k = self._bin(self._yb, y)
         x0, y0, w, h, d0, d1 = self._gather(k)
         s = h / w
@@ -221,8 +229,12 @@ S_PER_T = 2.0 * 2.0 * np.pi * 2.0 * 2.0 * np.pi
 
 def cylindrical_to_direction(z: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """(z, phi) -> unit direction (sqrt(1 - z^2) cos phi, sqrt(1 - z^2) sin phi, z), z clamped to [-1, 1]."""
-    z = np.clip(np.nan_to_num(np.asarray(z, np.float64)), -1.0, 1.0)
-    phi = np.nan_to_num(np.asarray(phi, np.float64))
+    z, phi = np.asarray(z, np.float64), np.asarray(phi, np.float64)
+    if not np.isfinite(z).all():  # one pass where all are finite (the common case)
+        z = np.nan_to_num(z)
+    z = np.clip(z, -1.0, 1.0)
+    if not np.isfinite(phi).all():
+        phi = np.nan_to_num(phi)
     r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
