@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import UsageError, error
 from ..networks import CheckedSession, make_session, mlp_onnx, split_first_layer
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
-from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
+from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_reflection_pdf, ggx_sample
 from .encodings import cube_table, cubemap, grid_1d, to_unit_box, triplane, unit64
 from .query import Evaluator, Query
 from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, FlowSample, cylindrical_to_direction, finite64
@@ -451,6 +451,18 @@ class EightDnaEvaluator(Evaluator):
     def direct_sample(self, n, wo, u2):
         n, wo = rows3(n, wo)
         return ggx_sample(n, wo, u2, self.alpha)
+
+    def direct_sample_eval(self, n, wo, u2):
+        """(w_i [N,3], pdf [N], :meth:`direct_eval` at w_i [N,3]) of :meth:`direct_sample`: one set of dot products."""
+        n, wo = rows3(n, wo)
+        wi, pdf, val = ggx_sample(n, wo, u2, self.alpha, self.eta)
+        return wi, pdf, np.repeat(val[:, None], 3, axis=1).astype(np.float32)
+
+    def direct_eval_pdf(self, n, wo, wi):
+        """(:meth:`direct_eval` [N,3], :meth:`direct_pdf` [N]) from one set of dot products."""
+        n, wo, wi = rows3(n, wo, wi)
+        val, pdf = ggx_reflection_pdf(n, wo, wi, self.eta, self.alpha)
+        return np.repeat(val[:, None], 3, axis=1).astype(np.float32), pdf
 
     def direct_pdf(self, n, wo, wi) -> np.ndarray:
         n, wo, wi = rows3(n, wo, wi)
