@@ -323,7 +323,7 @@ class EightDnaEvaluator(Evaluator):
         x, wo = rows3(x, wo)
         xn = to_unit_box(x, self.lo, self.hi)
         wo = unit64(wo).astype(np.float32)
-        return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo, table=self.wo_table), wo], axis=1).astype(np.float32)
+        return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo, table=self.wo_table), wo], axis=1, dtype=np.float32)
 
     def context(self, x, wo) -> FlowContext:
         """Base features of (x_o [N,3], w_o [N,3]) and the flows' shared first-layer products."""

@@ -431,9 +431,10 @@ class BoxFlow:
             raise UsageError(f"conditioner {j} returned shape {raw.shape}; expected [N, 3 (3K+1)]")
         return raw
 
-    def _channel_spline(self, raw: np.ndarray, ch: np.ndarray) -> RQSpline:
+    def _channel_spline(self, raw: np.ndarray, ch: np.ndarray, rows: np.ndarray | None = None) -> RQSpline:
+        """Splines of channel ch [M] of raw's rows [M] (default all rows, M = N): one gather."""
         p = raw.shape[1] // 3
-        return RQSpline.from_raw(raw.reshape(len(raw), 3, p)[np.arange(len(raw)), ch], **self.minimums)
+        return RQSpline.from_raw(raw.reshape(len(raw), 3, p)[np.arange(len(raw)) if rows is None else rows, ch], **self.minimums)
 
     def _spline(self, j: int, ctx, s_prev, ch: np.ndarray) -> RQSpline:
         return self._channel_spline(self._raw(j, ctx, s_prev, len(ch)), ch)
@@ -521,7 +522,7 @@ class BoxFlow:
             raws.append(raw)
             r = slice(None) if j <= 2 else rr
             # the sampled channel only; the other channels' splines are built for the rows whose densities are asked for
-            tj, ld = self._channel_spline(raw[d] if j == 3 and d is not None else raw, ch[r]).forward(z[r, j - 1])
+            tj, ld = self._channel_spline(raw, ch[r], d if j == 3 else None).forward(z[r, j - 1])
             if j <= 2:
                 t12[:, j - 1] = tj
             logp[r] -= ld
