@@ -368,6 +368,8 @@ class FlowSample:
     flow: "BoxFlow"
     dir_rows: np.ndarray | None = None  # [D] sorted rows whose steps 3-4 ran (w_i drawn); None: all rows
     raw4: np.ndarray | None = None  # [D, 3 (3K+1)] conditioner-4 output of those rows at their own w_i
+    ch: np.ndarray | None = None  # [N] the sampled channel of each row
+    log_steps: np.ndarray | None = None  # [N, 4] log density of each step's t_j in the sampled channel (0: not drawn)
     _log_pos: np.ndarray | None = None  # [N, 3] log densities of (t1, t2) per channel, NaN where not built yet
 
     def direction_index(self, rows) -> np.ndarray:
@@ -389,9 +391,14 @@ class FlowSample:
             self._log_pos = np.full((n, 3), np.nan)
         todo = np.unique(rows[np.isnan(self._log_pos[rows, 0])])
         if len(todo):
-            lp = np.zeros((len(todo), 3))
-            for raw, t in zip(self.raw12, self.t12.T, strict=True):
-                lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
+            if self.ch is None:
+                lp = np.zeros((len(todo), 3))
+                for raw, t in zip(self.raw12, self.t12.T, strict=True):
+                    lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
+            else:  # the sampled channel's from its own steps; splines for the other two only
+                ch = self.ch[todo]
+                other = sum(self.flow._log_inverse_others(raw[todo], ch, t[todo]) for raw, t in zip(self.raw12, self.t12.T, strict=True))
+                lp = _by_channel(self.log_steps[todo, 0] + self.log_steps[todo, 1], other, ch)
             self._log_pos[todo] = lp
         return self._log_pos[rows]
 
@@ -400,6 +407,20 @@ class FlowSample:
         [M] (default all)."""
         jac = self.jac if rows is None else self.jac[np.asarray(rows, np.int64).reshape(-1)]
         return np.minimum(np.exp(np.minimum(self.log_position_rgb(rows), 700.0)) / (2.0 * 2.0 * np.pi) * jac[:, None], PDF_MAX)
+
+
+def _others(ch: np.ndarray) -> np.ndarray:
+    """[M, 2]: the channels other than ch [M], in the order (ch + 1) % 3, (ch + 2) % 3."""
+    return (ch[:, None] + np.array([1, 2])) % 3
+
+
+def _by_channel(own: np.ndarray, other: np.ndarray, ch: np.ndarray) -> np.ndarray:
+    """[M, 3]: channel ch [M] from own [M], the other two (:func:`_others`) from other [M, 2]."""
+    out = np.empty((len(ch), 3))
+    i = np.arange(len(ch))
+    out[i, ch] = own
+    out[i[:, None], _others(ch)] = other
+    return out
 
 
 class BoxFlow:
@@ -441,6 +462,13 @@ class BoxFlow:
 
     def _splines_rgb(self, raw: np.ndarray) -> RQSpline:
         return RQSpline.from_raw_rgb(raw, **self.minimums)
+
+    def _log_inverse_others(self, raw: np.ndarray, ch: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """[M, 2]: log|d rqs^-1 / dt| at t [M] of the splines of raw [M, 3 (3K+1)] in the two channels other than ch
+        [M] (:func:`_others`)."""
+        m, p = len(raw), raw.shape[1] // 3
+        spl = RQSpline.from_raw(raw.reshape(m, 3, p)[np.arange(m)[:, None], _others(ch)].reshape(2 * m, p), **self.minimums)
+        return spl.inverse(np.repeat(t, 2))[1].reshape(m, 2)
 
     @staticmethod
     def _log_inverse_rgb(spl: RQSpline, t: np.ndarray) -> np.ndarray:
@@ -512,7 +540,7 @@ class BoxFlow:
             if len(directions) != n:
                 raise UsageError(f"directions must be a bool mask of the {n} rows, got {len(directions)}")
             d = np.nonzero(directions)[0]
-        s, logp, t12, raws = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 2)), []
+        s, logs, t12, raws = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2)), []
         rr = slice(None) if d is None else d  # rows of steps 3-4
         for j in (1, 2, 3, 4):
             if j < 4 or d is None:
@@ -525,14 +553,15 @@ class BoxFlow:
             tj, ld = self._channel_spline(raw, ch[r], d if j == 3 else None).forward(z[r, j - 1])
             if j <= 2:
                 t12[:, j - 1] = tj
-            logp[r] -= ld
+            logs[r, j - 1] = -ld
             s[r, j - 1] = self.box.s_from_t_dim(j, tj)
+        logp = ((logs[:, 0] + logs[:, 1]) + logs[:, 2]) + logs[:, 3]  # 0 - ld_1 - ld_2 - ... in the order of the steps
         ui, wi, jac = self.box.to_rays(s)
         pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
         if d is not None:
             skip = ~directions
             wi[skip], pdf[skip] = 0.0, 0.0
-        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self, d, raws[3])
+        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self, d, raws[3], ch, logs)
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
@@ -562,8 +591,15 @@ class BoxFlow:
         if not len(rows):
             return np.zeros((0, 3))
         t = self.box.t_from_s(fs.s[rows])
-        spl3, spl4 = self._splines_rgb(fs.raw3[rows]), self._splines_rgb(fs.raw4[pos])
-        logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t[:, 2]) + self._log_inverse_rgb(spl4, t[:, 3])
+        if fs.ch is None:
+            spl3, spl4 = self._splines_rgb(fs.raw3[rows]), self._splines_rgb(fs.raw4[pos])
+            logd = self._log_inverse_rgb(spl3, t[:, 2]) + self._log_inverse_rgb(spl4, t[:, 3])
+        else:  # the sampled channel's from its own steps 3-4; splines for the other two only
+            ch = fs.ch[rows]
+            logd = _by_channel(fs.log_steps[rows, 2] + fs.log_steps[rows, 3],
+                               self._log_inverse_others(fs.raw3[rows], ch, t[:, 2])
+                               + self._log_inverse_others(fs.raw4[pos], ch, t[:, 3]), ch)
+        logp = fs.log_position_rgb(rows) + logd
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:
