@@ -467,7 +467,8 @@ class BoxFlow:
         """[M, 2]: log|d rqs^-1 / dt| at t [M] of the splines of raw [M, 3 (3K+1)] in the two channels other than ch
         [M] (:func:`_others`)."""
         m, p = len(raw), raw.shape[1] // 3
-        spl = RQSpline.from_raw(raw.reshape(m, 3, p)[np.arange(m)[:, None], _others(ch)].reshape(2 * m, p), **self.minimums)
+        rows = (3 * np.arange(m)[:, None] + _others(ch)).reshape(-1)  # rows of raw as [3M, 3K+1]
+        spl = RQSpline.from_raw(raw.reshape(3 * m, p).take(rows, axis=0), **self.minimums)
         return spl.inverse(np.repeat(t, 2))[1].reshape(m, 2)
 
     @staticmethod
