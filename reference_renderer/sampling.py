@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from nasset_sdk.kinds.encodings import dot3
+
 INV_PI = 1.0 / np.pi
 INV_4PI = 0.25 / np.pi
 
@@ -15,10 +17,7 @@ INV_4PI = 0.25 / np.pi
 def dot(a, b):
     """Row dot products [N] of a, b [N,3] (on columns: several times faster than einsum for 3 columns)."""
     if a.ndim == 2 and a.shape[1] == 3 and b.ndim == 2 and b.shape[1] == 3:
-        out = a[:, 0] * b[:, 0]
-        out += a[:, 1] * b[:, 1]
-        out += a[:, 2] * b[:, 2]
-        return out
+        return dot3(a, b)
     return np.einsum("ij,ij->i", a, b)
 
 

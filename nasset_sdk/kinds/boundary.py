@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .encodings import from_local, unit64
+from .encodings import dot3, from_local, unit64
 
 ALPHA_MIN = 1e-4
 _EPS = 1e-12
@@ -61,32 +61,47 @@ def ggx_lambda(cos_t: np.ndarray, alpha: float) -> np.ndarray:
 def _dots(n, wo, wi):
     n, wo, wi = unit64(n), unit64(wo), unit64(wi)
     h = wo + wi
-    hl = np.linalg.norm(h, axis=1, keepdims=True)
+    hl = np.sqrt(dot3(h, h))[:, None]  # np.linalg.norm's sum, in its order
     h = np.where(hl > 1e-12, h / np.maximum(hl, 1e-12), n)
-    return (n * wo).sum(1), (n * wi).sum(1), (n * h).sum(1), (wo * h).sum(1)
+    return dot3(n, wo), dot3(n, wi), dot3(n, h), dot3(wo, h)
 
 
-def ggx_reflection(n, wo, wi, eta: float, alpha: float) -> np.ndarray:
-    """Cosine-weighted reflection f(wo, wi) |n.wi| [N] (1/sr)."""
-    cos_o, cos_i, cos_h, cos_oh = _dots(n, wo, wi)
+def _reflection(dots, eta: float, alpha: float) -> np.ndarray:
+    cos_o, cos_i, cos_h, cos_oh = dots
     g2 = 1.0 / (1.0 + ggx_lambda(cos_o, alpha) + ggx_lambda(cos_i, alpha))
     val = fresnel_dielectric(cos_oh, eta) * ggx_d(cos_h, alpha) * g2 / (4.0 * np.maximum(cos_o, _EPS))
     return np.where((cos_o > 0) & (cos_i > 0), val, 0.0)
 
 
-def ggx_pdf(n, wo, wi, alpha: float) -> np.ndarray:
-    """Density per steradian of :func:`ggx_sample` at wi [N]; h = +-normalize(wo + wi) with n.h >= 0."""
-    cos_o, _, cos_h, cos_oh = _dots(n, wo, wi)
+def _pdf(dots, alpha: float) -> np.ndarray:
+    cos_o, _, cos_h, cos_oh = dots
     flip = np.where(cos_h < 0, -1.0, 1.0)
     cos_h, cos_oh = cos_h * flip, cos_oh * flip
     pdf = ggx_d(cos_h, alpha) * cos_h / (4.0 * np.maximum(np.abs(cos_oh), _EPS))
     return np.where((cos_o > 0) & (cos_h > 0), pdf, 0.0)
 
 
-def ggx_sample(n, wo, u2, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+def ggx_reflection(n, wo, wi, eta: float, alpha: float) -> np.ndarray:
+    """Cosine-weighted reflection f(wo, wi) |n.wi| [N] (1/sr)."""
+    return _reflection(_dots(n, wo, wi), eta, alpha)
+
+
+def ggx_pdf(n, wo, wi, alpha: float) -> np.ndarray:
+    """Density per steradian of :func:`ggx_sample` at wi [N]; h = +-normalize(wo + wi) with n.h >= 0."""
+    return _pdf(_dots(n, wo, wi), alpha)
+
+
+def ggx_reflection_pdf(n, wo, wi, eta: float, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`ggx_reflection`, :func:`ggx_pdf`) [N] each, from one set of dot products: the same values."""
+    dots = _dots(n, wo, wi)
+    return _reflection(dots, eta, alpha), _pdf(dots, alpha)
+
+
+def ggx_sample(n, wo, u2, alpha: float, eta: float | None = None):
     """Reflect wo about h ~ D(h) (n.h): tan^2 theta_h = alpha^2 u1 / (1 - u1), phi_h = 2 pi u2.
 
-    Returns (wi [N,3], pdf [N]); wi may lie below the surface (then the value is 0).
+    Returns (wi [N,3], pdf [N]), and with ``eta`` also :func:`ggx_reflection` at wi [N] (the same dot
+    products); wi may lie below the surface (then the value is 0).
     """
     u2 = np.clip(np.nan_to_num(np.asarray(u2, np.float64)), 0.0, 1.0 - 1e-16)
     tan2 = alpha * alpha * u2[:, 0] / np.maximum(1.0 - u2[:, 0], 1e-16)
@@ -95,6 +110,9 @@ def ggx_sample(n, wo, u2, alpha: float) -> tuple[np.ndarray, np.ndarray]:
     phi = 2.0 * np.pi * u2[:, 1]
     h = from_local(np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=1), n)
     wo = unit64(wo)
-    wi = 2.0 * (wo * h).sum(1, keepdims=True) * h - wo
+    wi = 2.0 * dot3(wo, h)[:, None] * h - wo
     wi = unit64(wi)
-    return wi, ggx_pdf(n, wo, wi, alpha)
+    if eta is None:
+        return wi, ggx_pdf(n, wo, wi, alpha)
+    val, pdf = ggx_reflection_pdf(n, wo, wi, eta, alpha)
+    return wi, pdf, val

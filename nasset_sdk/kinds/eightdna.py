@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import UsageError, error
 from ..networks import CheckedSession, make_session, mlp_onnx, split_first_layer
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
-from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_sample
+from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_reflection_pdf, ggx_sample
 from .encodings import cube_table, cubemap, grid_1d, to_unit_box, triplane, unit64
 from .query import Evaluator, Query
 from .spline import MIN_BIN_HEIGHT, MIN_BIN_WIDTH, MIN_DERIVATIVE, BoxFlow, BoxParam, FlowSample, cylindrical_to_direction, finite64
@@ -170,17 +170,41 @@ class EightDnaKind(KindContract):
 class FlowContext:
     """Per-row conditioning of the flow: base features [N, 2C+6] (float32) and, where the flow networks'
     first layers are split (:func:`~nasset_sdk.networks.split_first_layer`), their base-column
-    pre-activations, one [N, W1_j] block per conditioner j = 1..4 (else None)."""
+    pre-activations, one [N, W1_j] block per conditioner j = 1..4 (else None).
 
-    def __init__(self, base: np.ndarray, pre: list[np.ndarray] | None) -> None:
-        self.base, self.pre = base, pre
+    A context of some rows (:meth:`take`) gathers each block from its parent when first read: a later
+    step reads one block (conditioner 4 its own), not all five."""
+
+    def __init__(self, base: np.ndarray, pre: list[np.ndarray] | None, *, rows: np.ndarray | None = None) -> None:
+        self._src, self._rows = (base, pre), rows
+        self._base = base if rows is None else None
+        self._pre = None if pre is None else (list(pre) if rows is None else [None] * len(pre))
         self.s12: tuple[np.ndarray, np.ndarray] | None = None  # (s1, s2 [N, 2], their s12 cube columns [N, C + 3])
 
     def __len__(self) -> int:
-        return len(self.base)
+        return len(self._src[0]) if self._rows is None else len(self._rows)
+
+    @property
+    def base(self) -> np.ndarray:
+        if self._base is None:
+            self._base = self._src[0][self._rows]
+        return self._base
+
+    @property
+    def split(self) -> bool:
+        """Whether the pre-activation blocks exist (the flows' first layers are split)."""
+        return self._pre is not None
+
+    def pre(self, j: int) -> np.ndarray:
+        """[N, W1_j] pre-activation block of conditioner j (1..4); only when :attr:`split`."""
+        if self._pre[j - 1] is None:
+            self._pre[j - 1] = self._src[1][j - 1][self._rows]
+        return self._pre[j - 1]
 
     def take(self, rows: np.ndarray) -> "FlowContext":
-        out = FlowContext(self.base[rows], None if self.pre is None else [p[rows] for p in self.pre])
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        # rows of rows: gather from the original blocks, once
+        out = FlowContext(*self._src, rows=rows if self._rows is None else self._rows[rows])
         if self.s12 is not None:
             out.s12 = (self.s12[0][rows], self.s12[1][rows])
         return out
@@ -299,7 +323,7 @@ class EightDnaEvaluator(Evaluator):
         x, wo = rows3(x, wo)
         xn = to_unit_box(x, self.lo, self.hi)
         wo = unit64(wo).astype(np.float32)
-        return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo, table=self.wo_table), wo], axis=1).astype(np.float32)
+        return np.concatenate([triplane(self.planes, xn), xn, cubemap(self.wo_cube, wo, table=self.wo_table), wo], axis=1, dtype=np.float32)
 
     def context(self, x, wo) -> FlowContext:
         """Base features of (x_o [N,3], w_o [N,3]) and the flows' shared first-layer products."""
@@ -331,12 +355,12 @@ class EightDnaEvaluator(Evaluator):
         return base if j == 1 else np.concatenate([base, self.flow_extra(j, s_prev)], axis=1)
 
     def _conditioner(self, j: int, ctx: FlowContext, s_prev: np.ndarray) -> np.ndarray:
-        if ctx.pre is None or self.tails is None:
+        if not ctx.split or self.tails is None:
             session = self.flow_sessions[j - 1]
             x = ctx.base if j == 1 else np.concatenate([ctx.base, self.flow_extra(j, s_prev, ctx)], axis=1)
             return self._run32(session, {session.get_inputs()[0].name: x})
         session, names = self.tails[j - 1]
-        feed = {names[0]: ctx.pre[j - 1]}
+        feed = {names[0]: ctx.pre(j)}
         if j > 1:
             feed[names[1]] = self.flow_extra(j, s_prev, ctx)
         return self._run32(session, feed)  # the spline reads NaN / inf as the spec says (finite64)
@@ -427,6 +451,18 @@ class EightDnaEvaluator(Evaluator):
     def direct_sample(self, n, wo, u2):
         n, wo = rows3(n, wo)
         return ggx_sample(n, wo, u2, self.alpha)
+
+    def direct_sample_eval(self, n, wo, u2):
+        """(w_i [N,3], pdf [N], :meth:`direct_eval` at w_i [N,3]) of :meth:`direct_sample`: one set of dot products."""
+        n, wo = rows3(n, wo)
+        wi, pdf, val = ggx_sample(n, wo, u2, self.alpha, self.eta)
+        return wi, pdf, np.repeat(val[:, None], 3, axis=1).astype(np.float32)
+
+    def direct_eval_pdf(self, n, wo, wi):
+        """(:meth:`direct_eval` [N,3], :meth:`direct_pdf` [N]) from one set of dot products."""
+        n, wo, wi = rows3(n, wo, wi)
+        val, pdf = ggx_reflection_pdf(n, wo, wi, self.eta, self.alpha)
+        return np.repeat(val[:, None], 3, axis=1).astype(np.float32), pdf
 
     def direct_pdf(self, n, wo, wi) -> np.ndarray:
         n, wo, wi = rows3(n, wo, wi)

@@ -85,6 +85,15 @@ def triplane(planes: np.ndarray, xn: np.ndarray) -> np.ndarray:
     return out
 
 
+def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row dot products [N] of a, b [N, 3]: ``(a * b).sum(1)`` bit for bit (summed left to right), without numpy's
+    reduction over rows of three (several times slower)."""
+    out = a[:, 0] * b[:, 0]
+    out += a[:, 1] * b[:, 1]
+    out += a[:, 2] * b[:, 2]
+    return out
+
+
 def safe_normalize(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """Unit vectors [N,3]; zero, non-finite or denormal input becomes ``fallback``."""
     v = np.asarray(v, np.float64)
@@ -114,7 +123,8 @@ def unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """float64 unit vectors [N,3]; zero / non-finite input becomes ``fallback``."""
     v = np.atleast_2d(np.asarray(v, np.float64))
     with np.errstate(over="ignore", invalid="ignore"):  # overflow / non-finite rows take the careful path below
-        n = np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))  # np.linalg.norm's arithmetic, without its checks
+        # np.linalg.norm's arithmetic (the same sum, left to right), without its checks or its reduction over rows of 3
+        n = np.sqrt(dot3(v, v)[:, None] if v.ndim == 2 and v.shape[1] == 3 else np.add.reduce(v * v, axis=-1, keepdims=True))
     if not np.isfinite(n).all():  # a non-finite component or an overflowing norm: the careful path
         v = np.where(np.isfinite(v), v, 0.0)
         v, n = _norm_no_overflow(v)
@@ -145,7 +155,7 @@ def to_local(w: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Components of directions w [N,3] in the frame local_frame(n): (w.t, w.b, w.n), float64."""
     t, b, nn = local_frame(n)
     w = np.asarray(w, np.float64)
-    return np.stack([(w * t).sum(1), (w * b).sum(1), (w * nn).sum(1)], axis=1)
+    return np.stack([dot3(w, t), dot3(w, b), dot3(w, nn)], axis=1)
 
 
 def from_local(wl: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -233,13 +243,16 @@ def grid_1d(grid: np.ndarray, t: np.ndarray) -> np.ndarray:
     result = (1 - a) grid[i0] + a grid[i1]. NaN t reads texel 0.
     """
     k = grid.shape[0]
-    f = np.clip((np.asarray(t, np.float64).reshape(-1) + 1.0) * 0.5 * k - 0.5, 0.0, k - 1)
-    f = np.nan_to_num(f, nan=0.0)
+    f = (np.asarray(t, np.float64).reshape(-1) + 1.0) * 0.5 * k - 0.5
+    np.fmax(f, 0.0, out=f)  # fmax / fmin: the clamp, and NaN -> 0 (the lower bound)
+    np.fmin(f, k - 1, out=f)
     i0 = np.minimum(f.astype(np.int64), k - 1)
     i1 = np.minimum(i0 + 1, k - 1)
     a = (f - i0)[:, None]
     g = np.asarray(grid, np.float32)
-    return (g[i0] * (1 - a) + g[i1] * a).astype(np.float32)
+    out = g.take(i0, 0) * (1 - a)
+    out += g.take(i1, 0) * a
+    return out.astype(np.float32)
 
 
 #: face -> (major axis, sign, (axis, sign) of s_c, (axis, sign) of t_c); OpenGL cube-map table.
@@ -253,6 +266,10 @@ CUBE_FACES = (
 )
 
 
+#: face -> (axis of s_c, its sign, axis of t_c, its sign), from :data:`CUBE_FACES`
+_CUBE_TAPS = np.array([[f[2][0], f[2][1], f[3][0], f[3][1]] for f in CUBE_FACES])
+
+
 def cube_face_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Direction [N,3] (any length; zero/non-finite -> +Z) -> (face [N] int, s [N], t [N]) with s, t in [0, 1].
 
@@ -261,13 +278,15 @@ def cube_face_uv(d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     d = unit64(d)
     ad = np.abs(d)
-    axis = np.argmax(ad, axis=1)
-    neg = np.take_along_axis(d, axis[:, None], 1)[:, 0] < 0
-    face = 2 * axis + neg
-    tab = np.array([[f[2][0], f[2][1], f[3][0], f[3][1]] for f in CUBE_FACES])[face]
-    ma = np.maximum(np.take_along_axis(ad, axis[:, None], 1)[:, 0], 1e-30)
-    sc = tab[:, 1] * np.take_along_axis(d, tab[:, 0:1], 1)[:, 0]
-    tc = tab[:, 3] * np.take_along_axis(d, tab[:, 2:3], 1)[:, 0]
+    a0, a1, a2 = ad[:, 0], ad[:, 1], ad[:, 2]
+    axis = np.where((a0 >= a1) & (a0 >= a2), 0, np.where(a1 >= a2, 1, 2))  # np.argmax: ties to the lower axis
+    base = 3 * np.arange(len(d))  # flat index of each row's first component
+    flat = d.reshape(-1)
+    face = 2 * axis + (flat.take(base + axis) < 0)
+    tab = _CUBE_TAPS[face]
+    ma = np.maximum(ad.reshape(-1).take(base + axis), 1e-30)
+    sc = tab[:, 1] * flat.take(base + tab[:, 0])
+    tc = tab[:, 3] * flat.take(base + tab[:, 2])
     s = np.clip((sc / ma + 1.0) * 0.5, 0.0, 1.0)
     t = np.clip((tc / ma + 1.0) * 0.5, 0.0, 1.0)
     return face, s, t
@@ -340,7 +359,15 @@ def cubemap(grid: np.ndarray, d: np.ndarray, *, table: np.ndarray | None = None)
     a_t = (ft - j0)[:, None]
     rows = table.reshape(-1, table.shape[-1])
     row = (face * e + j0 + 1) * e + i0 + 1  # tap (i0, j0) in the [6 (R+2)^2, C] table
-    taps = [rows[row + off] for off in (0, 1, e, e + 1)]
-    out = (taps[0] * (1 - a_s) * (1 - a_t) + taps[1] * a_s * (1 - a_t)
-           + taps[2] * (1 - a_s) * a_t + taps[3] * a_s * a_t)
+    b_s, b_t = 1 - a_s, 1 - a_t
+    # taps[0] (1 - a_s) (1 - a_t) + taps[1] a_s (1 - a_t) + taps[2] (1 - a_s) a_t + taps[3] a_s a_t, in this
+    # order, accumulated in place
+    out = rows.take(row, 0)
+    out *= b_s
+    out *= b_t
+    for off, ws, wt in ((1, a_s, b_t), (e, b_s, a_t), (e + 1, a_s, a_t)):
+        tap = rows.take(row + off, 0)
+        tap *= ws
+        tap *= wt
+        out += tap
     return out.astype(np.float32)

@@ -44,6 +44,14 @@ def finite64(a) -> np.ndarray:
     return np.nan_to_num(a, copy=False, nan=0.0, posinf=1e30, neginf=-1e30)
 
 
+def clamp01(a) -> np.ndarray:
+    """float64 copy of a [N] clamped to [0, 1], NaN -> 0: ``np.clip(np.nan_to_num(a, nan=0.0), 0, 1)`` in two passes."""
+    a = np.array(a, np.float64).reshape(-1)
+    np.fmax(a, 0.0, out=a)  # fmax / fmin return the number where one side is NaN
+    np.fmin(a, 1.0, out=a)
+    return a
+
+
 def _softplus(a: np.ndarray) -> np.ndarray:
     """log(1 + e^a) for finite a, without overflow."""
     return np.maximum(a, 0.0) + np.log1p(np.exp(-np.abs(a)))
@@ -175,7 +183,7 @@ class RQSpline:
     def forward(self, z: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """y = rqs(z) and log|dy/dz| for z [N] (clamped to [0, 1], NaN -> 0); with ``rows`` [M], z [M]
         goes through the splines of those rows."""
-        z = np.clip(np.nan_to_num(np.asarray(z, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
+        z = clamp01(z)
         k = self._bin(self._xb if rows is None else self._xb[:, rows], z)
         x0, y0, w, h, d0, d1 = self._gather(k, rows)
         s = h / w
@@ -189,7 +197,7 @@ class RQSpline:
 
     def inverse(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """z = rqs^-1(y) and log|dz/dy| for y [N] (clamped to [0, 1], NaN -> 0)."""
-        y = np.clip(np.nan_to_num(np.asarray(y, np.float64).reshape(-1), nan=0.0), 0.0, 1.0)
+        y = clamp01(y)
         k = self._bin(self._yb, y)
         x0, y0, w, h, d0, d1 = self._gather(k)
         s = h / w
@@ -221,8 +229,12 @@ S_PER_T = 2.0 * 2.0 * np.pi * 2.0 * 2.0 * np.pi
 
 def cylindrical_to_direction(z: np.ndarray, phi: np.ndarray) -> np.ndarray:
     """(z, phi) -> unit direction (sqrt(1 - z^2) cos phi, sqrt(1 - z^2) sin phi, z), z clamped to [-1, 1]."""
-    z = np.clip(np.nan_to_num(np.asarray(z, np.float64)), -1.0, 1.0)
-    phi = np.nan_to_num(np.asarray(phi, np.float64))
+    z, phi = np.asarray(z, np.float64), np.asarray(phi, np.float64)
+    if not np.isfinite(z).all():  # one pass where all are finite (the common case)
+        z = np.nan_to_num(z)
+    z = np.clip(z, -1.0, 1.0)
+    if not np.isfinite(phi).all():
+        phi = np.nan_to_num(phi)
     r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
@@ -356,6 +368,8 @@ class FlowSample:
     flow: "BoxFlow"
     dir_rows: np.ndarray | None = None  # [D] sorted rows whose steps 3-4 ran (w_i drawn); None: all rows
     raw4: np.ndarray | None = None  # [D, 3 (3K+1)] conditioner-4 output of those rows at their own w_i
+    ch: np.ndarray | None = None  # [N] the sampled channel of each row
+    log_steps: np.ndarray | None = None  # [N, 4] log density of each step's t_j in the sampled channel (0: not drawn)
     _log_pos: np.ndarray | None = None  # [N, 3] log densities of (t1, t2) per channel, NaN where not built yet
 
     def direction_index(self, rows) -> np.ndarray:
@@ -377,9 +391,14 @@ class FlowSample:
             self._log_pos = np.full((n, 3), np.nan)
         todo = np.unique(rows[np.isnan(self._log_pos[rows, 0])])
         if len(todo):
-            lp = np.zeros((len(todo), 3))
-            for raw, t in zip(self.raw12, self.t12.T, strict=True):
-                lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
+            if self.ch is None:
+                lp = np.zeros((len(todo), 3))
+                for raw, t in zip(self.raw12, self.t12.T, strict=True):
+                    lp += self.flow._log_inverse_rgb(self.flow._splines_rgb(raw[todo]), t[todo])
+            else:  # the sampled channel's from its own steps; splines for the other two only
+                ch = self.ch[todo]
+                other = sum(self.flow._log_inverse_others(raw[todo], ch, t[todo]) for raw, t in zip(self.raw12, self.t12.T, strict=True))
+                lp = _by_channel(self.log_steps[todo, 0] + self.log_steps[todo, 1], other, ch)
             self._log_pos[todo] = lp
         return self._log_pos[rows]
 
@@ -388,6 +407,20 @@ class FlowSample:
         [M] (default all)."""
         jac = self.jac if rows is None else self.jac[np.asarray(rows, np.int64).reshape(-1)]
         return np.minimum(np.exp(np.minimum(self.log_position_rgb(rows), 700.0)) / (2.0 * 2.0 * np.pi) * jac[:, None], PDF_MAX)
+
+
+def _others(ch: np.ndarray) -> np.ndarray:
+    """[M, 2]: the channels other than ch [M], in the order (ch + 1) % 3, (ch + 2) % 3."""
+    return (ch[:, None] + np.array([1, 2])) % 3
+
+
+def _by_channel(own: np.ndarray, other: np.ndarray, ch: np.ndarray) -> np.ndarray:
+    """[M, 3]: channel ch [M] from own [M], the other two (:func:`_others`) from other [M, 2]."""
+    out = np.empty((len(ch), 3))
+    i = np.arange(len(ch))
+    out[i, ch] = own
+    out[i[:, None], _others(ch)] = other
+    return out
 
 
 class BoxFlow:
@@ -419,15 +452,24 @@ class BoxFlow:
             raise UsageError(f"conditioner {j} returned shape {raw.shape}; expected [N, 3 (3K+1)]")
         return raw
 
-    def _channel_spline(self, raw: np.ndarray, ch: np.ndarray) -> RQSpline:
+    def _channel_spline(self, raw: np.ndarray, ch: np.ndarray, rows: np.ndarray | None = None) -> RQSpline:
+        """Splines of channel ch [M] of raw's rows [M] (default all rows, M = N): one gather."""
         p = raw.shape[1] // 3
-        return RQSpline.from_raw(raw.reshape(len(raw), 3, p)[np.arange(len(raw)), ch], **self.minimums)
+        return RQSpline.from_raw(raw.reshape(len(raw), 3, p)[np.arange(len(raw)) if rows is None else rows, ch], **self.minimums)
 
     def _spline(self, j: int, ctx, s_prev, ch: np.ndarray) -> RQSpline:
         return self._channel_spline(self._raw(j, ctx, s_prev, len(ch)), ch)
 
     def _splines_rgb(self, raw: np.ndarray) -> RQSpline:
         return RQSpline.from_raw_rgb(raw, **self.minimums)
+
+    def _log_inverse_others(self, raw: np.ndarray, ch: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """[M, 2]: log|d rqs^-1 / dt| at t [M] of the splines of raw [M, 3 (3K+1)] in the two channels other than ch
+        [M] (:func:`_others`)."""
+        m, p = len(raw), raw.shape[1] // 3
+        rows = (3 * np.arange(m)[:, None] + _others(ch)).reshape(-1)  # rows of raw as [3M, 3K+1]
+        spl = RQSpline.from_raw(raw.reshape(3 * m, p).take(rows, axis=0), **self.minimums)
+        return spl.inverse(np.repeat(t, 2))[1].reshape(m, 2)
 
     @staticmethod
     def _log_inverse_rgb(spl: RQSpline, t: np.ndarray) -> np.ndarray:
@@ -499,7 +541,7 @@ class BoxFlow:
             if len(directions) != n:
                 raise UsageError(f"directions must be a bool mask of the {n} rows, got {len(directions)}")
             d = np.nonzero(directions)[0]
-        s, logp, t12, raws = np.zeros((n, 4)), np.zeros(n), np.zeros((n, 2)), []
+        s, logs, t12, raws = np.zeros((n, 4)), np.zeros((n, 4)), np.zeros((n, 2)), []
         rr = slice(None) if d is None else d  # rows of steps 3-4
         for j in (1, 2, 3, 4):
             if j < 4 or d is None:
@@ -509,17 +551,18 @@ class BoxFlow:
             raws.append(raw)
             r = slice(None) if j <= 2 else rr
             # the sampled channel only; the other channels' splines are built for the rows whose densities are asked for
-            tj, ld = self._channel_spline(raw[d] if j == 3 and d is not None else raw, ch[r]).forward(z[r, j - 1])
+            tj, ld = self._channel_spline(raw, ch[r], d if j == 3 else None).forward(z[r, j - 1])
             if j <= 2:
                 t12[:, j - 1] = tj
-            logp[r] -= ld
+            logs[r, j - 1] = -ld
             s[r, j - 1] = self.box.s_from_t_dim(j, tj)
+        logp = ((logs[:, 0] + logs[:, 1]) + logs[:, 2]) + logs[:, 3]  # 0 - ld_1 - ld_2 - ... in the order of the steps
         ui, wi, jac = self.box.to_rays(s)
         pdf = np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * jac, PDF_MAX)
         if d is not None:
             skip = ~directions
             wi[skip], pdf[skip] = 0.0, 0.0
-        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self, d, raws[3])
+        return FlowSample(ui, wi, pdf, ctx, s, jac, (raws[0], raws[1]), t12, raws[2], self, d, raws[3], ch, logs)
 
     def pdf_rgb_at(self, fs: FlowSample, rows, wi) -> np.ndarray:
         """[M, 3]: :meth:`pdf_rgb` at (u_i of ``fs`` rows [M], w_i [M, 3]), evaluating only conditioner 4."""
@@ -549,8 +592,15 @@ class BoxFlow:
         if not len(rows):
             return np.zeros((0, 3))
         t = self.box.t_from_s(fs.s[rows])
-        spl3, spl4 = self._splines_rgb(fs.raw3[rows]), self._splines_rgb(fs.raw4[pos])
-        logp = fs.log_position_rgb(rows) + self._log_inverse_rgb(spl3, t[:, 2]) + self._log_inverse_rgb(spl4, t[:, 3])
+        if fs.ch is None:
+            spl3, spl4 = self._splines_rgb(fs.raw3[rows]), self._splines_rgb(fs.raw4[pos])
+            logd = self._log_inverse_rgb(spl3, t[:, 2]) + self._log_inverse_rgb(spl4, t[:, 3])
+        else:  # the sampled channel's from its own steps 3-4; splines for the other two only
+            ch = fs.ch[rows]
+            logd = _by_channel(fs.log_steps[rows, 2] + fs.log_steps[rows, 3],
+                               self._log_inverse_others(fs.raw3[rows], ch, t[:, 2])
+                               + self._log_inverse_others(fs.raw4[pos], ch, t[:, 3]), ch)
+        logp = fs.log_position_rgb(rows) + logd
         return np.minimum(np.exp(np.minimum(logp, 700.0)) / S_PER_T * fs.jac[rows, None], PDF_MAX)
 
     def pdf(self, x, wo, ui, wi, channel) -> np.ndarray:

@@ -70,6 +70,9 @@ class Frames:
         self.det_obj = np.abs(np.linalg.det(self.to_obj[:, :3, :3])) if insts else np.zeros(0)
 
     def _apply(self, mats, v, inst, point):
+        if len(inst) and (inst == inst[0]).all():  # one instance (the common case): no row masks
+            o = v @ mats[inst[0], :3, :3]
+            return o + mats[inst[0], 3, :3] if point else o
         out = np.empty((len(v), 3))
         for i in np.unique(inst):
             m = inst == i

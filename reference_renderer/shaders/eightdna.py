@@ -82,15 +82,16 @@ class EightdnaShader:
             wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
             s = np.nonzero((pdf > 0) & (max3(li) > 0) & (dot(wi, ngf) > 0))[0]  # the lobe only where it can count
             wi_obj, jac = fr.dir_to_object(wi[s], h.inst[s])
-            f = ev.direct_eval(h.n_obj[s], h.wo_obj[s], wi_obj)[:, 0].astype(np.float64) * jac
+            f, pb = ev.direct_eval_pdf(h.n_obj[s], h.wo_obj[s], wi_obj)
+            f = f[:, 0].astype(np.float64) * jac
             keep = f > 0
-            s, wi_obj, jac, f = s[keep], wi_obj[keep], jac[keep], f[keep]
+            s, wi_obj, jac, f, pb = s[keep], wi_obj[keep], jac[keep], f[keep], pb[keep]
             if not len(s):
                 continue
             if light.delta or smode == "light":
                 w = np.ones(len(s))
             else:
-                pb = p_d[s] * ev.direct_pdf(h.n_obj[s], h.wo_obj[s], wi_obj) * jac
+                pb = p_d[s] * pb * jac
                 w = np.where(cont_on[s], power_heuristic(pdf[s], pb), 1.0)
             d_s, tmax = aim_shadow(h.x[s], x_off[s], wi[s], dist[s], integ.eps)
             vis = ~integ.occluded(x_off[s], d_s, tmax)
@@ -166,8 +167,8 @@ class EightdnaShader:
         fn, wf_w, Pf, qf, jac_f = fn[okf], wf_w[okf], Pf[okf], qf[okf], jac_f[okf]
         tf = alpha[fn] * Pf / (qf * (1 - p_d[fn]))[:, None]
         prev_f = (1 - p_d[fn]) * qf / p_u[fn] * jac_f
-        wd_obj, pd_obj = ev.direct_sample(h.n_obj[dn], h.wo_obj[dn], rng.random((len(dn), 2)))
-        fd = ev.direct_eval(h.n_obj[dn], h.wo_obj[dn], wd_obj)[:, 0].astype(np.float64)
+        wd_obj, pd_obj, fd = ev.direct_sample_eval(h.n_obj[dn], h.wo_obj[dn], rng.random((len(dn), 2)))
+        fd = fd[:, 0].astype(np.float64)
         wd_w = fr.dir_to_world(wd_obj, h.inst[dn])
         _, jac_d = fr.dir_to_object(wd_w, h.inst[dn])
         okd = (pd_obj > 0) & (fd > 0) & (dot(wd_w, ngf[dn]) > 0)

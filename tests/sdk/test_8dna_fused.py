@@ -232,3 +232,42 @@ def test_pdf_rgb_at_rejects_rows_outside_the_sample(small, rng):
         ev.pdf_rgb_at(fs, [0, 4], np.tile([0.0, 0.0, 1.0], (2, 1)))
     with pytest.raises(UsageError):
         ev.pdf_rgb_at(fs, [0], np.tile([0.0, 0.0, 1.0], (2, 1)))
+
+
+def test_taken_context_gathers_each_block_as_read(small, rng):
+    """A context of some rows gathers its base features and pre-activation blocks from the parent when read, and
+    rows of rows index the parent's rows: the same arrays as gathering every block at once."""
+    _, ev, _ = small
+    n = 50
+    x, wo = _queries(ev, rng, n)
+    ctx = ev.context(x, wo)
+    full = ev._run32(ev.head, {"x": ctx.base})
+    rows = rng.integers(0, n, 30)
+    sub = rng.integers(0, 30, 12)
+    for c, r in ((ctx.take(rows), rows), (ctx.take(rows).take(sub), rows[sub])):
+        assert len(c) == len(r)
+        for j in (4, 1, 3, 2):  # any order, each block once
+            np.testing.assert_array_equal(c.pre(j), full[:, ev.head_cols[j - 1]:ev.head_cols[j]][r])
+        np.testing.assert_array_equal(c.base, ctx.base[r])
+    s12 = rng.uniform(-1, 1, (n, 2))
+    ctx.s12_columns(s12, ev._s12_columns)
+    np.testing.assert_array_equal(ctx.take(rows).take(sub).s12[1], ev._s12_columns(s12)[rows[sub]])
+
+
+def test_direct_lobe_fused_calls_equal_the_separate_ones(small, rng):
+    """direct_eval_pdf and direct_sample_eval (one set of dot products) return what direct_eval, direct_pdf and
+    direct_sample return, bit for bit."""
+    _, ev, _ = small
+    n = 300
+    nrm = rng.normal(size=(n, 3))
+    wo, wi = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    f, pdf = ev.direct_eval_pdf(nrm, wo, wi)
+    np.testing.assert_array_equal(f, ev.direct_eval(nrm, wo, wi))
+    np.testing.assert_array_equal(pdf, ev.direct_pdf(nrm, wo, wi))
+    u2 = rng.random((n, 2))
+    wd, pd, fd = ev.direct_sample_eval(nrm, wo, u2)
+    wd2, pd2 = ev.direct_sample(nrm, wo, u2)
+    np.testing.assert_array_equal(wd, wd2)
+    np.testing.assert_array_equal(pd, pd2)
+    np.testing.assert_array_equal(fd, ev.direct_eval(nrm, wo, wd))
+    assert (pd > 0).any() and (fd > 0).any()

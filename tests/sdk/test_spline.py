@@ -192,3 +192,22 @@ def test_from_raw_leaves_its_input_alone(rng):
         b = RQSpline.from_raw(raw)
         np.testing.assert_array_equal(raw, keep)
         np.testing.assert_array_equal(a.xk, b.xk)
+
+
+def test_clamps_equal_nan_to_num_then_clip():
+    """The spline's clamp of latents / values (clamp01) and cylindrical_to_direction's inputs equal numpy's
+    nan_to_num followed by clip, bit for bit, on NaN, +-inf, signed zeros, the ends and values outside."""
+    from nasset_sdk.kinds.spline import clamp01, cylindrical_to_direction
+
+    v = np.array([np.nan, np.inf, -np.inf, -0.0, 0.0, 1.0, np.nextafter(1.0, 2.0), -1e-300, 0.3, 7.0, -2.0, 1e308])
+    np.testing.assert_array_equal(clamp01(v), np.clip(np.nan_to_num(v, nan=0.0), 0.0, 1.0))
+    phi = v[::-1].copy()
+    z = np.clip(np.nan_to_num(v), -1.0, 1.0)
+    with np.errstate(invalid="ignore"):
+        p = np.nan_to_num(phi)
+        r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+        want = np.stack([r * np.cos(p), r * np.sin(p), z], axis=-1)
+    with np.errstate(invalid="ignore"):
+        np.testing.assert_array_equal(cylindrical_to_direction(v, phi), want)
+        finite = np.isfinite(v) & np.isfinite(phi)  # the one-pass branch: all inputs finite
+        np.testing.assert_array_equal(cylindrical_to_direction(v[finite], phi[finite]), want[finite])
