@@ -355,7 +355,8 @@ class EightDnaJit:
     def pdf_rgb_own(self, state: dict) -> object:
         """p^k(u_i, w_i | x_o, w_o) [Color3f] at a :meth:`sample` state's own (u_i, w_i): all four conditioners
         reused (the sample's s_1..s_3 are the inputs of its conditioner 4), the splines inverted at the
-        sample's own t_3, t_4. Equals ``pdf_rgb_at(state, state["w"])`` up to float32 rounding of
+        sample's own t_3, t_4 (8dna.md#evaluation-cost, as the reference renderer's ``pdf_rgb_sampled``).
+        Equals ``pdf_rgb_at(state, state["w"])`` up to float32 rounding of
         s_3 = w.z and s_4 = atan2(w.y, w.x) (which that recovers from w; at s_4 = +-pi it may take the other
         end of the phi spline), one conditioner evaluation fewer."""
         import drjit as dr
