@@ -4,7 +4,8 @@ scattered into buffers), and evaluated after the loop on the dense queue, its co
 lanes' L. Inside the loop an asset vertex's networks run in every llvm packet / cuda warp holding one asset
 lane (a symbolic ``if``); past the first bounce most of that work is masked out, and the queue runs it only
 for the rows that need it. The estimator and its random numbers are unchanged; L sums its terms in another
-order (float32 rounding).
+order (float32 rounding; two queued rows of one lane are added atomically, in an order that may differ
+between runs).
 
 Rows past the queue's capacity (:data:`CAPACITY` per lane of the wavefront) are evaluated in the loop as before.
 """
@@ -13,8 +14,9 @@ from __future__ import annotations
 
 import drjit as dr
 
-#: queue rows per lane of the wavefront (asset light samples per sample are ~0.2 in the benchmark scenes)
-CAPACITY = 1.0
+#: queue rows per lane of the wavefront (asset light samples per sample are ~0.2 in the benchmark scenes;
+#: a row takes 76 bytes, so the queue adds 38 bytes per lane)
+CAPACITY = 0.5
 #: queued per row: instance index, object-space x, frame, w_o, w_i (3 each), h, crossed-the-instance flag,
 #: the lane, and the RGB weight beta * emitter weight * MIS weight
 FIELDS = ("k", "x", "n", "wo", "wi", "h", "passed", "lane", "weight")
