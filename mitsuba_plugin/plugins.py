@@ -3,7 +3,8 @@
 - BSDF ``nasset`` (``filename``, ``to_world``): marks a shape as an instance of a neural asset
   (its fallback mesh, in world space). It reflects nothing by itself: the integrator shades it.
 - Integrator ``nasset_path`` (``max_depth``, ``rr_depth``, counted like Mitsuba's ``path``: 2 = direct
-  lighting, i.e. spec/renderer.md's max_depth + 1; ``lobe``): Mitsuba's unidirectional path tracer
+  lighting, i.e. spec/renderer.md's max_depth + 1; ``lobe``; ``defer``: the light samples' asset transports
+  queued and evaluated densely after the path loop, :mod:`.deferred`): Mitsuba's unidirectional path tracer
   (BSDF sampling + emitter sampling with power-heuristic MIS, Russian roulette) that, at a hit on an
   asset instance, applies spec/renderer.md#neural-assets: object-space inputs, a light sample whose
   shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
