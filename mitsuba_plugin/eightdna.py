@@ -314,8 +314,8 @@ class EightDnaJit:
 
         mi = self.mi
         ctx = dict(ctx)
-        s, logp, log_pos = [], mi.Float(0.0), [mi.Float(0.0)] * 3
-        raw3 = None
+        s, t, logp, log_pos = [], [], mi.Float(0.0), [mi.Float(0.0)] * 3
+        raw3 = raw4 = None
         for j in (1, 2, 3, 4):
             raw = self._conditioner(ctx, j, s)
             tj, ld = JitSpline(mi, _channel(dr, raw, channel), self.mins).forward(z[j - 1])
@@ -323,14 +323,17 @@ class EightDnaJit:
                 log_pos = [lp + sp.inverse_log(tj) for lp, sp in zip(log_pos, self._splines(raw), strict=True)]
             elif j == 3:
                 raw3 = raw
+            else:
+                raw4 = raw
             logp -= ld
+            t.append(tj)
             s.append(self._s_of_t(tj, j))
         u, jac, _ = self._project(self._dir(mi, s[0], s[1]))
         w = self._dir(mi, s[2], s[3])
         cap = lambda v: dr.minimum(dr.exp(dr.minimum(v, LOG_PDF_MAX)), PDF_MAX)  # noqa: E731
         p_u = mi.Color3f(*[dr.minimum(cap(lp) / (4.0 * math.pi) * jac, PDF_MAX) for lp in log_pos])
         return {"u": u, "w": w, "pdf": dr.minimum(cap(logp) / S_PER_T * jac, PDF_MAX), "p_u": p_u, "jac": jac,
-                "s": s, "log_pos": log_pos, "raw3": raw3, "ctx": ctx}
+                "s": s, "t": t, "log_pos": log_pos, "raw3": raw3, "raw4": raw4, "ctx": ctx}
 
     def pdf_rgb_at(self, state: dict, w) -> object:
         """p^k(u_i, w | x_o, w_o) [Color3f] at the u_i of a :meth:`sample` state and object-space w (unit):
@@ -348,6 +351,21 @@ class EightDnaJit:
             lg = lp + sp3.inverse_log(t3) + sp4.inverse_log(t4)
             out.append(dr.minimum(dr.exp(dr.minimum(lg, LOG_PDF_MAX)) / S_PER_T * state["jac"], PDF_MAX))
         return mi.Color3f(*out)
+
+    def pdf_rgb_own(self, state: dict) -> object:
+        """p^k(u_i, w_i | x_o, w_o) [Color3f] at a :meth:`sample` state's own (u_i, w_i): all four conditioners
+        reused (the sample's s_1..s_3 are the inputs of its conditioner 4), the splines inverted at the
+        sample's own t_3, t_4 (8dna.md#evaluation-cost, as the reference renderer's ``pdf_rgb_sampled``).
+        Equals ``pdf_rgb_at(state, state["w"])`` up to float32 rounding of
+        s_3 = w.z and s_4 = atan2(w.y, w.x) (which that recovers from w; at s_4 = +-pi it may take the other
+        end of the phi spline), one conditioner evaluation fewer."""
+        import drjit as dr
+
+        out = []
+        for lp, sp3, sp4 in zip(state["log_pos"], self._splines(state["raw3"]), self._splines(state["raw4"]), strict=True):
+            lg = lp + sp3.inverse_log(state["t"][2]) + sp4.inverse_log(state["t"][3])
+            out.append(dr.minimum(dr.exp(dr.minimum(lg, LOG_PDF_MAX)) / S_PER_T * state["jac"], PDF_MAX))
+        return self.mi.Color3f(*out)
 
     def pdf_rgb(self, ctx: dict, u, w):
         """p^k(u_i, w_i | x_o, w_o) [Color3f] per box area and steradian of object-space (u_i, w_i)
@@ -484,7 +502,7 @@ def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> d
     p_l, p_f = mi.Color3f(0), mi.Color3f(0)
     for mine, asset, st in states:
         p_l = dr.select(mine, asset.pdf_rgb_at(st, wl_u), p_l)
-        p_f = dr.select(mine, asset.pdf_rgb_at(st, f3["wf"]), p_f)
+        p_f = dr.select(mine, asset.pdf_rgb_own(st), p_f)  # f3["wf"] is st["w"] on these lanes
     safe_u = dr.select(good_u, pbar_u, 1.0)
     j_u = jac(ds_u.d)
     pbar_wl = (p_l.x + p_l.y + p_l.z) / 3.0 / safe_u

@@ -3,7 +3,8 @@
 - BSDF ``nasset`` (``filename``, ``to_world``): marks a shape as an instance of a neural asset
   (its fallback mesh, in world space). It reflects nothing by itself: the integrator shades it.
 - Integrator ``nasset_path`` (``max_depth``, ``rr_depth``, counted like Mitsuba's ``path``: 2 = direct
-  lighting, i.e. spec/renderer.md's max_depth + 1; ``lobe``): Mitsuba's unidirectional path tracer
+  lighting, i.e. spec/renderer.md's max_depth + 1; ``lobe``; ``defer``: the light samples' asset transports
+  queued and evaluated densely after the path loop, :mod:`.deferred`): Mitsuba's unidirectional path tracer
   (BSDF sampling + emitter sampling with power-heuristic MIS, Russian roulette) that, at a hit on an
   asset instance, applies spec/renderer.md#neural-assets: object-space inputs, a light sample whose
   shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
@@ -29,6 +30,7 @@ from nasset_sdk.errors import error
 
 from . import eightdna
 from . import prt as prt_mode
+from .deferred import LightQueue
 from .eightdna import EightDnaJit
 from .neupress import NeupressJit
 from .rna import RnaJit
@@ -118,6 +120,8 @@ def register(mi) -> None:
             self.rr_depth = int(props.get("rr_depth", 5))
             self.lobe = bool(props.get("lobe", True))  # False: the uniform world sphere for every asset
             self.prt = bool(props.get("prt", False))  # True: neupress assets shaded by PRT (.prt)
+            # True: the light samples' asset transports run after the path loop on a dense queue (.deferred)
+            self.defer = bool(props.get("defer", True))
             if self.max_depth < 1:
                 raise error("SCENE_INVALID", f"nasset_path: max_depth must be >= 1 (got {self.max_depth})")
 
@@ -149,6 +153,8 @@ def register(mi) -> None:
             t_un = mi.Spectrum(0)
             t_sh = mi.Spectrum(0)
             valid = mi.Bool(False)
+            # held out of the loop state (not a Dr.Jit tree): the queue's buffers are written, never carried
+            queue = LightQueue(mi, dr.width(ray)) if self.defer and shaded else None
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
                 si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
@@ -197,7 +203,7 @@ def register(mi) -> None:
                 if dr.hint(len(shaded) > 0, mode="scalar"):
                     if on_shaded:  # symbolic: the networks run only in llvm packets / cuda warps with a lane on an asset
                         L, t_un, t_sh, wi_c, p_c = _asset_vertex(mi, shaded, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh,
-                                                                 active_em, on_shaded, u_c, self.lobe, L, beta, wi_c, p_c)
+                                                                 active_em, on_shaded, u_c, self.lobe, L, beta, wi_c, p_c, queue)
                 if dr.hint(len(eight) > 0, mode="scalar"):
                     rnd8 = eightdna.draw(sampler)  # on every lane, outside the symbolic if: the same sample sequence
                     d8, pdf8, alive8, from_u8, origin8 = mi.Vector3f(0), mi.Float(0), mi.Bool(False), mi.Bool(False), mi.Point3f(0)
@@ -235,6 +241,8 @@ def register(mi) -> None:
                 active_next &= ~(rr & on_plain) | survive
                 depth[active] += 1
                 active = active_next
+            if dr.hint(queue is not None, mode="scalar"):
+                L = queue.flush(shaded, tab, L)
             return dr.select(dr.isfinite(L), L, 0.0), valid, []
 
         def aov_names(self):
@@ -275,7 +283,8 @@ def _trace(mi, scene, ray, ignore, lo, hi, active):
     return si, passed
 
 
-def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh, active_em, on_asset, u_c, use_lobe, L, beta, wi_c, p_c):
+def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh, active_em, on_asset, u_c, use_lobe, L, beta, wi_c, p_c,
+                  queue=None):
     """spec/renderer.md#neural-assets at the lanes ``on_asset`` of instances k (object-space inputs x_o, n_o,
     wo_o, h_o from :func:`_asset_inputs`): the light sample's
     contribution added to L (its branch from ``passed_sh``, MIS ``power(p_light, p_A)``), and the
@@ -298,15 +307,24 @@ def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, pas
             wi_c[mine] = wc_w
             p_c[mine] = p_obj * _jacobian(mi, tab, k, wc_w, mine)
             p_l[mine] = lobe.pdf(wi_o) * _jacobian(mi, tab, k, ds_em.d, mine)
-        u, s = asset.transport(x_o, n_o, wo_o, wi_o, h_o)
-        ta_un[mine] = u
-        ta_sh[mine] = s
         u, s = asset.transport(x_o, n_o, wo_o, wc_a, h_o)
         tc_un[mine] = u
         tc_sh[mine] = s
     w_light = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, p_l))
+    here = on_asset & active_em  # light samples whose transport runs here
+    if queue is not None:  # queued for the dense evaluation after the loop; what does not fit stays here
+        here = queue.push(here, k=k, x=x_o, n=n_o, wo=wo_o, wi=wi_o, h=h_o, passed=passed_sh, weight=beta * em_weight * w_light)
+    for a, asset in assets:
+        mine = _of_asset(mi, tab, k, a, here)
+        if queue is None:
+            u, s = asset.transport(x_o, n_o, wo_o, wi_o, h_o)
+        else:  # symbolic: packets without such a lane skip it
+            u, s = dr.if_stmt((x_o, n_o, wo_o, wi_o, h_o), mine, lambda *v, asset=asset: asset.transport(*v),
+                              lambda *_: (mi.Spectrum(0), mi.Spectrum(0)))
+        ta_un[mine] = u
+        ta_sh[mine] = s
     L = mi.Spectrum(L)
-    L[on_asset & active_em] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
+    L[here] += beta * dr.select(passed_sh, ta_sh, ta_un) * em_weight * w_light
     inv_p = dr.select(p_c > 0, dr.rcp(dr.select(p_c > 0, p_c, 1.0)), 0.0)  # T / p_A; a zero pdf carries nothing
     return L, tc_un * inv_p, tc_sh * inv_p, wi_c, p_c
 
