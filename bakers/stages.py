@@ -129,7 +129,7 @@ def psnr_line(s: dict, label: str = "held-out PSNR") -> str:
     epoch's state the asset keeps."""
     line = f"  {label}: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)"
     if s.get("kept_epoch"):
-        line += f"; kept epoch {s['kept_epoch']} of {s['epochs']} ({s['keep']}: lowest held-out MSE)" \
+        line += f"; kept epoch {s['kept_epoch']} of {s['epochs']} ({s['keep']}: highest held-out display PSNR)" \
             if s.get("keep") == "best" else f"; kept the last of {s['epochs']} epochs"
     return line
 

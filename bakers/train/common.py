@@ -62,20 +62,21 @@ def held_out_mse(pred: np.ndarray, gt: np.ndarray) -> float:
 
 
 class BestEpoch:
-    """The model state of the epoch with the lowest held-out MSE (``held_out_mse``): what a bake exports
-    with ``keep = "best"``, as the RNA paper keeps its best checkpoint (spec/bake.md#training).
-    ``saved``: ``to_dict()`` of a checkpoint, to resume."""
+    """The model state of the epoch with the highest held-out display PSNR (``display_psnr``: references
+    normalised by their 99.5th percentile and clipped, so that the rare fireflies of path-traced references
+    do not decide): what a bake exports with ``keep = "best"``, as the RNA paper keeps its best checkpoint
+    (spec/bake.md#training). ``saved``: ``to_dict()`` of a checkpoint, to resume."""
 
     def __init__(self, saved: dict | None = None) -> None:
         saved = saved or {}
         self.epoch = int(saved.get("epoch", -1))
-        self.mse = float(saved.get("mse", math.inf))
+        self.psnr = float(saved.get("psnr", -math.inf))
         self.state = saved.get("state")
 
-    def offer(self, epoch: int, mse: float, model) -> None:
-        """Keep ``model``'s state (a CPU copy) when ``mse`` is finite and the lowest so far."""
-        if math.isfinite(mse) and mse < self.mse:
-            self.epoch, self.mse = int(epoch), float(mse)
+    def offer(self, epoch: int, psnr: float, model) -> None:
+        """Keep ``model``'s state (a CPU copy) when ``psnr`` (dB) is finite and the highest so far."""
+        if math.isfinite(psnr) and psnr > self.psnr:
+            self.epoch, self.psnr = int(epoch), float(psnr)
             self.state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
 
     def restore(self, model) -> int:
@@ -85,7 +86,7 @@ class BestEpoch:
         return self.epoch
 
     def to_dict(self) -> dict:
-        return {"epoch": self.epoch, "mse": self.mse, "state": self.state}
+        return {"epoch": self.epoch, "psnr": self.psnr, "state": self.state}
 
 
 class TorchCheckpoint:

@@ -59,7 +59,7 @@ class NeupressTrainSettings:
     prt_dirs: int = 256  # K quasi-Monte Carlo directions per (vertex, w_o bin)
     seed: int = 0
     device: str = "auto"
-    keep: str = "best"  # appearance network: the epoch with the lowest held-out MSE ("best") or the last ("last")
+    keep: str = "best"  # appearance network: the epoch with the highest held-out display PSNR ("best") or the last ("last")
 
 
 TRAIN_PRESETS = presets.NEUPRESS_TRAIN  # the table lives in nasset_bakers/presets.py
@@ -252,7 +252,7 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
         sched.step()
         pv = np.maximum(predict_appearance(model, G, v_val), 0.0)  # every epoch: the kept one is chosen by it
         val_psnr, val_mse = _psnr(pv, val_data["rgb"]), held_out_mse(pv, val_data["rgb"])
-        best.offer(epoch, val_mse, model)
+        best.offer(epoch, val_psnr, model)
         mean_loss = dp.mean(torch, tot / max(cnt, 1))
         history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "val_mse": val_mse})
         if checkpoint is not None and dp.is_main:

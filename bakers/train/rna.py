@@ -57,7 +57,7 @@ class TrainSettings:
     plane_channels: int = 0  # triplane channels C; 0: the preset's
     seed: int = 0
     device: str = "auto"
-    keep: str = "best"  # "best": the epoch with the lowest held-out MSE (the paper's best checkpoint); "last"
+    keep: str = "best"  # "best": the epoch with the highest held-out display PSNR (the paper's best checkpoint); "last"
 
 
 TRAIN_PRESETS = presets.RNA_TRAIN  # the table lives in nasset_bakers/presets.py
@@ -331,7 +331,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         model.eval()  # held-out figures every epoch: the kept epoch is chosen by them
         pv = select_branch(np.maximum(predict(model, V, sigma=sigma), 0.0), val_data["vis"])
         val_psnr, val_mse = display_psnr(pv, val_data["rgb"])[0], held_out_mse(pv, val_data["rgb"])
-        best.offer(epoch, val_mse, model)
+        best.offer(epoch, val_psnr, model)
         history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "val_mse": val_mse, "sigma": sigma})
         if progress is not None:
             progress(epoch, mean_loss, val_psnr)
