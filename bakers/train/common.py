@@ -65,7 +65,7 @@ class BestEpoch:
     """The model state of the epoch with the highest held-out display PSNR (``display_psnr``: references
     normalised by their 99.5th percentile and clipped, so that the rare fireflies of path-traced references
     do not decide): what a bake exports with ``keep = "best"``, as the RNA paper keeps its best checkpoint
-    (spec/bake.md#training). ``saved``: ``to_dict()`` of a checkpoint, to resume."""
+    (spec/bake.md#training; not the default, spec/accuracy.md#best-epoch). ``saved``: ``to_dict()`` of a checkpoint, to resume."""
 
     def __init__(self, saved: dict | None = None) -> None:
         saved = saved or {}

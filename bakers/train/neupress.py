@@ -59,7 +59,7 @@ class NeupressTrainSettings:
     prt_dirs: int = 256  # K quasi-Monte Carlo directions per (vertex, w_o bin)
     seed: int = 0
     device: str = "auto"
-    keep: str = "best"  # appearance network: the epoch with the highest held-out display PSNR ("best") or the last ("last")
+    keep: str = "last"  # appearance network: the last epoch, or "best": the highest held-out display PSNR (spec/accuracy.md#best-epoch)
 
 
 TRAIN_PRESETS = presets.NEUPRESS_TRAIN  # the table lives in nasset_bakers/presets.py

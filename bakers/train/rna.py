@@ -57,7 +57,7 @@ class TrainSettings:
     plane_channels: int = 0  # triplane channels C; 0: the preset's
     seed: int = 0
     device: str = "auto"
-    keep: str = "best"  # "best": the epoch with the highest held-out display PSNR (the paper's best checkpoint); "last"
+    keep: str = "last"  # "last" epoch, or "best": the highest held-out display PSNR (the paper's best checkpoint; spec/accuracy.md#best-epoch)
 
 
 TRAIN_PRESETS = presets.RNA_TRAIN  # the table lives in nasset_bakers/presets.py
