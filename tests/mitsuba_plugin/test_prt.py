@@ -23,6 +23,7 @@ from nasset_sdk.asset import Asset  # noqa: E402
 from nasset_sdk.errors import UsageError  # noqa: E402
 from nasset_sdk.examples import example_builder  # noqa: E402
 from nasset_sdk.kinds.encodings import sh9  # noqa: E402
+from tests.mitsuba_plugin.test_neupress import _np3, _vec  # noqa: E402
 from tests.renderer.render_stats import assert_renders_agree, render_finite  # noqa: E402
 from tests.renderer.test_render_neupress import _gradient_dome, _wi_only_asset  # noqa: E402
 
@@ -36,14 +37,6 @@ def mi():
     mi = jit_mitsuba()
     register(mi)
     return mi
-
-
-def _vec(mi, a):
-    return mi.Vector3f(*[mi.Float(np.ascontiguousarray(a[:, k], np.float32)) for k in range(3)])
-
-
-def _np3(v):
-    return np.asarray(v.numpy(), np.float64).reshape(3, -1).T
 
 
 def _rotation(axis, degrees) -> np.ndarray:
