@@ -55,8 +55,8 @@ def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]
 
 def held_out_mse(pred: np.ndarray, gt: np.ndarray) -> float:
     """Plain MSE of held-out predictions [N, 3] against the unclamped references [N, 3] (linear radiance,
-    no exposure or clipping): its expectation is the squared error plus the references' constant noise,
-    so it ranks models without bias."""
+    no exposure or clipping), kept in the training history. Not used to rank epochs: on 1024-spp
+    references a few fireflies decide it (spec/accuracy.md#best-epoch)."""
     gt = np.asarray(gt, np.float64)
     return float(np.mean((np.asarray(pred, np.float64) - gt) ** 2)) if gt.size else float("nan")
 
