@@ -284,7 +284,10 @@ def _alive(pid: int) -> bool:
 def test_killing_validate_kills_its_probe_child(tmp_path, how):
     fifo = tmp_path / "hang.usdc"
     os.mkfifo(fifo)  # the probe child blocks opening it for ever
-    code = f"from nasset_sdk.safeopen import probe; probe({str(fifo)!r}, timeout=600)"
+    # SIGINT as a shell gives it to `nasset validate`: a SIG_IGN disposition that a library set in this test
+    # process (inherited through exec) would make the SIGINT case hang for a reason outside the product
+    code = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+            f"from nasset_sdk.safeopen import probe; probe({str(fifo)!r}, timeout=600)")
     parent = subprocess.Popen([sys.executable, "-c", code], cwd=str(ROOT), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.time() + 60
