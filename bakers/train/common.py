@@ -53,14 +53,6 @@ def display_psnr(pred: np.ndarray, gt: np.ndarray) -> tuple[float, float, float]
     return (10.0 * math.log10(1.0 / max(mse, 1e-20))), mse_lin, peak
 
 
-def held_out_mse(pred: np.ndarray, gt: np.ndarray) -> float:
-    """Plain MSE of held-out predictions [N, 3] against the unclamped references [N, 3] (linear radiance,
-    no exposure or clipping), kept in the training history. Not used to rank epochs: on 1024-spp
-    references a few fireflies decide it (spec/accuracy.md#best-epoch)."""
-    gt = np.asarray(gt, np.float64)
-    return float(np.mean((np.asarray(pred, np.float64) - gt) ** 2)) if gt.size else float("nan")
-
-
 class BestEpoch:
     """The model state of the epoch with the highest held-out display PSNR (``display_psnr``: references
     normalised by their 99.5th percentile and clipped, so that the rare fireflies of path-traced references

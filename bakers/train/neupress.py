@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import BestEpoch, TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, held_out_mse, require_torch
+from .common import BestEpoch, TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, require_torch
 from .parallel import data_parallel
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
@@ -187,10 +187,6 @@ def predict_appearance(model, G: np.ndarray, v: np.ndarray, batch: int = 65536) 
     return np.concatenate(out) if out else np.zeros((0, 3), np.float32)
 
 
-def _psnr(pred, gt) -> float:
-    return display_psnr(np.maximum(pred, 0.0), gt)[0]
-
-
 def train_appearance(train_data: dict, val_data: dict, domain, settings: NeupressTrainSettings, *, progress=None,
                      checkpoint=None) -> AppearanceResult:
     """Fit S; ``progress(epoch, loss, val_psnr)`` per epoch; ``checkpoint`` (TorchCheckpoint) resumes.
@@ -251,7 +247,7 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
             cnt += len(idx)
         sched.step()
         pv = np.maximum(predict_appearance(model, G, v_val), 0.0)  # every epoch: the kept one is chosen by it
-        val_psnr, val_mse = _psnr(pv, val_data["rgb"]), held_out_mse(pv, val_data["rgb"])
+        val_psnr, val_mse, _ = display_psnr(pv, val_data["rgb"])  # val_mse: linear, for the history
         best.offer(epoch, val_psnr, model)
         mean_loss = dp.mean(torch, tot / max(cnt, 1))
         history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "val_mse": val_mse})

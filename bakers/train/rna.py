@@ -34,7 +34,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import BestEpoch, check_against_torch, display_psnr, held_out_accuracy, held_out_mse, require_torch
+from .common import BestEpoch, check_against_torch, display_psnr, held_out_accuracy, require_torch
 from .parallel import data_parallel
 
 
@@ -330,7 +330,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
             raise error("CONVERT_TRAINING", f"loss became non-finite at epoch {epoch}")
         model.eval()  # held-out figures every epoch: the kept epoch is chosen by them
         pv = select_branch(np.maximum(predict(model, V, sigma=sigma), 0.0), val_data["vis"])
-        val_psnr, val_mse = display_psnr(pv, val_data["rgb"])[0], held_out_mse(pv, val_data["rgb"])
+        val_psnr, val_mse, _ = display_psnr(pv, val_data["rgb"])  # val_mse: linear, for the history
         best.offer(epoch, val_psnr, model)
         history.append({"epoch": epoch, "loss": mean_loss, "val_psnr": val_psnr, "val_mse": val_mse, "sigma": sigma})
         if progress is not None:
