@@ -3,6 +3,7 @@
     python -m nasset_benchmarks.renderer_throughput [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
     python -m nasset_benchmarks.renderer_throughput --scene 8dna-near [--size small] [--res 128] [--spp 2]
     python -m nasset_benchmarks.renderer_throughput --hair [--strands 20000] [--segments 4] [--res 128] [--spp 4]
+    python -m nasset_benchmarks.renderer_throughput --usd SCENE.usda [--res 64] [--spp 16] [--repeat 3]
 
 Scene: one rna asset under a distant light (no other objects: NEE only). For each onnxruntime
 thread setting, in one process and with that same setting throughout, it renders ``--repeat``
@@ -26,6 +27,10 @@ time within the render.
 light at about one box size (near field: light samples at x_o and at every flow sample u_i). It prints
 camera samples/s (median), onnxruntime calls and network rows per camera sample and the time split
 (trace, onnx, network = the rest of the evaluator: encodings and spline math, other).
+
+``--usd SCENE`` (:func:`main_usd`): any scene, e.g. one from ``nasset convert-scene``: the setup's CPU time
+by phase and peak memory (on dense hair the setup, not the render loop, is what a short render waits for),
+then camera samples/s and Embree queries per camera sample of the render loop.
 """
 
 from __future__ import annotations
@@ -283,8 +288,10 @@ def tessellation_bytes(scene) -> dict:
     copy as float32 triangles, without its BVH nodes)."""
     segs = sum(len(data.fiber.p0) for data in scene.assets if data.fiber is not None)
     n_tri = len(scene.triangles)
-    per_tri = (scene.triangles.itemsize * 9 + scene.tri_normals.itemsize * 9 + scene.tri_inst.itemsize
-               + scene.tri_local.itemsize + 8 * 3 + 4 * 9)  # + integrator face normals, Embree float32 copy
+    # world corners, instance and local ids, unit face normals (neural triangles have no corner normals or
+    # texture coordinates: Scene.tri_normals), + Embree's float32 copy
+    per_tri = (scene.triangles.itemsize * 9 + scene.tri_inst.itemsize + scene.tri_local.itemsize
+               + scene.tri_ng.itemsize * 3 + 4 * 9)
     return dict(segments=segs, triangles=n_tri, tri_per_segment=n_tri / max(segs, 1), bytes_per_segment=per_tri * n_tri / max(segs, 1))
 
 
@@ -307,6 +314,33 @@ def main_hair(a) -> int:
     return 0
 
 
+def main_usd(a) -> int:
+    """A user's scene (``--usd FILE``): the setup's CPU time by phase (loading, with the fibre tessellation, then
+    the acceleration structures) and peak memory, then the render loop at --res x --res x --spp."""
+    import resource
+
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    t = time.process_time()
+    scene = load_scene(a.usd)
+    t_load = time.process_time() - t
+    t = time.process_time()
+    render(scene, RenderSettings(width=8, height=8, spp=1, progress=False))  # builds the structures (kept by the scene)
+    t_struct = time.process_time() - t
+    mem = tessellation_bytes(scene) if any(d.fiber is not None for d in scene.assets) else None
+    print(f"scene: {a.usd}, {len(scene.triangles):,} triangles; setup (CPU s): load {t_load:.1f}, structures and "
+          f"first render {t_struct:.1f}; peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB")
+    if mem:
+        print(f"fibres: {mem['triangles']:,} triangles, {mem['bytes_per_segment']:,.0f} B per segment in renderer arrays")
+    for _ in range(a.repeat):
+        st = render(scene, RenderSettings(width=a.res, height=a.res, spp=a.spp, progress=False)).stats
+        loop = st.cpu_total if a.clock == "cpu" else st.time_total
+        print(f"render {a.res}x{a.res} x {a.spp} spp: {st.camera_samples / loop:,.0f} camera samples/s, "
+              f"{st.rays / st.camera_samples:.2f} Embree queries per camera sample, trace {st.time['trace']:.2f} of "
+              f"{st.time_total:.2f} s wall")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scene", default="rna", choices=("rna", "8dna-near"))
@@ -318,6 +352,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="renders per setting (the median is reported)")
     ap.add_argument("--profile", type=int, default=12, help="top entries of a profiled render (0: none)")
     ap.add_argument("--hair", action="store_true", help="dense-hair scenes instead (see main_hair)")
+    ap.add_argument("--usd", metavar="FILE", help="a USD scene instead: setup by phase, then the render loop (main_usd)")
     ap.add_argument("--strands", type=int, default=20000)
     ap.add_argument("--segments", type=int, default=4)
     ap.add_argument("--clock", default="cpu", choices=("cpu", "wall"),
@@ -334,6 +369,8 @@ def main(argv=None) -> int:
         return 0
     if a.hair:
         return main_hair(a)
+    if a.usd:
+        return main_usd(a)
     scene = _scene(a.size)
     print(f"scene: rna '{a.size}' asset, distant light, {a.res}x{a.res} x {a.spp} spp "
           f"(median of {a.repeat} renders per thread setting)")

@@ -20,6 +20,8 @@ import numpy as np
 
 from nasset_sdk.errors import UsageError
 
+from .sampling import box3
+
 #: bound on the exempt triangles a ray leaving a fiber hit steps over (three convex prisms: at most
 #: six crossings, doubled for hits at shared edges and the ray's start on its own prism)
 MAX_EXEMPT_STEPS = 16
@@ -47,9 +49,12 @@ class _Backend:
 
 
 class EmbreeBackend(_Backend):
-    """Embree (through embreex) over ``triangles`` [F,3,3]; ``robust``: Embree's watertight mode."""
+    """Embree (through embreex) over ``triangles`` [F,3,3]; ``robust``: Embree's watertight mode. ``mesh``: the same
+    triangles as (points [V,3], faces [F,3]) when the caller has them: Embree then gets shared vertices, which
+    embreex copies faster (it copies element by element) and which take less memory (a fibre prism's 28
+    triangles share 16 points); the hits are the same, the corners being the same float32 values."""
 
-    def __init__(self, triangles: np.ndarray, robust: bool = True) -> None:
+    def __init__(self, triangles: np.ndarray, robust: bool = True, mesh: tuple | None = None) -> None:
         from nasset_sdk.extras import require_extras
 
         require_extras("render", purpose="ray casting with Embree")
@@ -58,7 +63,9 @@ class EmbreeBackend(_Backend):
 
         self.robust = robust
         self.scene = rtcore_scene.EmbreeScene(robust=robust)
-        if len(triangles):
+        if len(triangles) and mesh is not None:
+            TriangleMesh(self.scene, np.ascontiguousarray(mesh[0], np.float32), np.ascontiguousarray(mesh[1], np.uint32))
+        elif len(triangles):
             TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
         self.empty = len(triangles) == 0
         if not self.empty:  # Embree builds its BVH at the first query: build it now, with the scene setup
@@ -88,7 +95,7 @@ class NumpyBackend(_Backend):
     """Brute-force Moller-Trumbore over all triangles (tests and tiny scenes only); float64, so always
     robust (the argument is for the same signature as :class:`EmbreeBackend`)."""
 
-    def __init__(self, triangles: np.ndarray, robust: bool = True, chunk: int = 1 << 20) -> None:
+    def __init__(self, triangles: np.ndarray, robust: bool = True, mesh: tuple | None = None, chunk: int = 1 << 20) -> None:
         self.robust = True
         tri = np.asarray(triangles, np.float64)
         self.p0 = tri[:, 0]
@@ -133,14 +140,15 @@ class _Part:
 
     __slots__ = ("ids", "backend", "lo", "hi", "inst", "box")
 
-    def __init__(self, ids, triangles, inst, make, robust: bool = True) -> None:
+    def __init__(self, ids, triangles, inst, make, robust: bool = True, box=None, mesh=None) -> None:
         self.ids = ids
         self.inst = inst  # the instance held alone, or -1 for the rest of the scene
         contiguous = len(ids) and ids[-1] - ids[0] + 1 == len(ids)  # a scene instance: a view, no copy
         tri = triangles[ids[0]:ids[-1] + 1] if contiguous else triangles[ids]
-        self.backend = make(tri, robust)
-        p = tri.reshape(-1, 3)
-        self.lo, self.hi = (p.min(0), p.max(0)) if len(p) else (np.zeros(3), -np.ones(3))
+        self.backend = make(tri, robust, mesh if contiguous else None)
+        if box is None:
+            box = box3(tri.reshape(-1, 3)) if len(tri) else (np.zeros(3), -np.ones(3))
+        self.lo, self.hi = box
         pad = 1e-6 * (1.0 + np.abs(self.hi).max() + np.abs(self.lo).max())
         self.box = [(float(a), float(b)) for a, b in zip(self.lo - pad, self.hi + pad, strict=True)]  # padded, per axis
 
@@ -177,11 +185,15 @@ class Accel:
     ``separate`` [n_instances] bool: instances that rays may ignore (each gets its own structure);
     None: every instance. Ignoring an instance that is not separate is a ``USAGE`` error. ``fast``
     [n_instances] bool or None: separate instances made of closed convex pieces (fibre prisms) whose
-    structure may use Embree's faster non-robust mode (see the module docstring).
+    structure may use Embree's faster non-robust mode (see the module docstring). ``boxes``: per instance
+    (lo [3], hi [3]) of its triangles (None for one without), when the caller has them; else computed here.
+    ``meshes``: per instance its triangles as (points [V,3], faces [k,3]) or None (see :class:`EmbreeBackend`),
+    used for separate instances.
     """
 
     def __init__(self, triangles: np.ndarray, tri_inst: np.ndarray, *, backend: str = "embree",
-                 separate: np.ndarray | None = None, fast: np.ndarray | None = None) -> None:
+                 separate: np.ndarray | None = None, fast: np.ndarray | None = None, boxes: list | None = None,
+                 meshes: list | None = None) -> None:
         self.triangles = np.asarray(triangles, np.float64)
         self.tri_inst = np.asarray(tri_inst, np.int64)
         make = EmbreeBackend if backend == "embree" else NumpyBackend
@@ -199,13 +211,17 @@ class Accel:
             ids = order[bounds[i]:bounds[i + 1]]
             if not len(ids):
                 continue
+            box = boxes[i] if boxes is not None and i < len(boxes) else None
             if sep[i]:
                 self.inst_part[i] = len(self.parts)
-                self.parts.append(_Part(ids, self.triangles, i, make, robust=not quick[i]))
+                mesh = meshes[i] if meshes is not None and i < len(meshes) else None
+                self.parts.append(_Part(ids, self.triangles, i, make, robust=not quick[i], box=box, mesh=mesh))
             else:
-                rest.append(ids)
+                rest.append((ids, box))
         if rest:
-            self.parts.append(_Part(np.concatenate(rest), self.triangles, -1, make))
+            known = all(b is not None for _, b in rest)
+            box = (np.min([b[0] for _, b in rest], 0), np.max([b[1] for _, b in rest], 0)) if known else None
+            self.parts.append(_Part(np.concatenate([ids for ids, _ in rest]), self.triangles, -1, make, box=box))
         self.rays_cast = 0
         if len(self.triangles):  # from the parts' boxes (together: every triangle), not another pass over them
             lo = np.min([p.lo for p in self.parts], 0)

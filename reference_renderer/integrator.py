@@ -19,7 +19,7 @@ from .bsdf import bsdf_eval, bsdf_sample
 from .film import Film, check_image_size, pixel_offsets
 from .lights import MeshLight
 from .plan import RenderPlan, make_plan
-from .sampling import dot, frame, normalize, power_heuristic, to_local, to_world
+from .sampling import dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading, shader_class, variant_of
 from .shaders.common import max3, unique
 from .shadow import aim_shadow
@@ -92,9 +92,10 @@ def scene_accel(scene, backend: str, neural: np.ndarray):
     if hit is None:
         scene.accel_cache.clear()  # one set of structures per scene at a time (their memory)
         tri = scene.triangles
-        ng = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) if len(tri) else np.zeros((0, 3))
-        hit = scene.accel_cache[key] = (Accel(tri, scene.tri_inst, backend=backend, separate=neural, fast=fiber),
-                                        normalize(ng))
+        ng = scene.tri_ng if scene.tri_ng is not None else face_normals(tri)
+        hit = scene.accel_cache[key] = (Accel(tri, scene.tri_inst, backend=backend, separate=neural, fast=fiber,
+                                              boxes=[i.box for i in scene.instances],
+                                              meshes=[i.world_mesh for i in scene.instances]), ng)
     return hit
 
 
@@ -128,8 +129,7 @@ class PathIntegrator:
             elif data.normals is not None:
                 cn = data.normals[data.faces]
             else:
-                p = data.points[data.faces]
-                n = normalize(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
+                n = face_normals(data.points[data.faces])
                 cn = np.repeat(n[:, None], 3, 1)
             self.asset_corner_n.append(cn)
         self.shading = NeuralShading(self)  # the shaders of the scene's neural assets
@@ -276,7 +276,8 @@ class PathIntegrator:
         if not front.all():
             x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front = (
                 a[front] for a in (x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front))
-        cn = self.scene.tri_normals[prim]
+        rows = self.scene.corner_rows(prim, inst)
+        cn = self.scene.tri_normals[rows]
         ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
         flip = dot(ng, wo) < 0
         ng = np.where(flip[:, None], -ng, ng)
@@ -289,7 +290,7 @@ class PathIntegrator:
         mat = np.where(~seen_front & (back_mat >= 0), back_mat, mat)  # a two-sided material's back side
         kd = f0 = None
         if self.mt.textured:
-            cst = self.scene.tri_st[prim]
+            cst = self.scene.tri_st[rows]
             st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
             kd, f0 = self.mt.lookup(mat, st)
         indirect = self.indirect[inst]

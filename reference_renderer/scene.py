@@ -23,6 +23,7 @@ from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
+from .sampling import box3, face_normals
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -72,6 +73,7 @@ class NeuralAssetData:
     evaluator: object = None
     prims: list = field(default_factory=list)
     fiber: object = None  # shaders.rna_fiber.FiberTubes of an rna fiber asset (points/faces are then its prisms)
+    used_points: object = None  # points referenced by faces (an index array, or slice(None) for all), set at load
 
 
 @dataclass
@@ -86,6 +88,9 @@ class Instance:
     planar: bool = False
     one_sided: bool = False  # doubleSided authored false: black seen from the back (spec/renderer.md#sidedness)
     back_material: int = -1  # nasset:backMaterial: the material seen from the back (-1: the bound one)
+    box: tuple | None = None  # (lo [3], hi [3]) of its world triangles; None without triangles
+    corner_offset: int = 0  # mesh instances: triangle ``prim``'s row in Scene.tri_normals / tri_st is prim + corner_offset
+    world_mesh: tuple | None = None  # neural instances: (world points [V,3], faces [k,3]) of its triangles
 
     def __post_init__(self):
         self.to_object = np.linalg.inv(self.to_world)
@@ -98,13 +103,16 @@ class Scene:
     triangles: np.ndarray  # [F,3,3] world
     tri_inst: np.ndarray  # [F]
     tri_local: np.ndarray  # [F] face index inside its instance's source geometry
-    tri_normals: np.ndarray  # [F,3,3] world shading normals at the corners (meshes), geometric where none
+    tri_normals: np.ndarray  # [F_mesh,3,3] world shading normals at the corners of mesh triangles (geometric where
+    # none); neural instances have no rows (their shaders never read them): see corner_rows
     instances: list
     materials: MaterialTable
     lights: list
     assets: list
     warnings: list = field(default_factory=list)
-    tri_st: np.ndarray | None = None  # [F,3,2] texture coordinates at the corners (zeros where a mesh has none)
+    tri_st: np.ndarray | None = None  # [F_mesh,3,2] texture coordinates at the corners of mesh triangles (zeros
+    # where a mesh has none), rows as tri_normals
+    tri_ng: np.ndarray | None = None  # [F,3] unit geometric normals of all triangles (zero for degenerate ones)
     render_settings: dict = field(default_factory=dict)  # nasset:* values of the UsdRender.Settings prim (spec/renderer.md#render-settings)
     #: ray-casting structures built for this scene (integrator.scene_accel): built once per scene, not per render
     #: (the geometry arrays above are not changed after loading)
@@ -112,10 +120,15 @@ class Scene:
 
     @property
     def bounds(self):
-        if len(self.triangles) == 0:
+        """(lo [3], hi [3]) of the world triangles, from the instances' boxes (zeros without triangles)."""
+        boxes = [i.box for i in self.instances if i.box is not None]
+        if len(self.triangles) == 0 or not boxes:
             return np.zeros(3), np.zeros(3)
-        p = self.triangles.reshape(-1, 3)
-        return p.min(0), p.max(0)
+        return np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
+
+    def corner_rows(self, prim: np.ndarray, inst: np.ndarray) -> np.ndarray:
+        """Rows of tri_normals / tri_st [n] of mesh triangles ``prim`` [n] on instances ``inst`` [n]."""
+        return prim + np.array([i.corner_offset for i in self.instances], np.int64)[inst]
 
 
 def _matrix(xformable, time):
@@ -227,6 +240,7 @@ class _Loader:
         self.tris: list = []
         self.tri_local: list = []
         self.tri_normals: list = []
+        self.tri_ng: list = []
         self.tri_inst: list = []
         self.tri_st: list = []
         self.instances: list[Instance] = []
@@ -301,7 +315,7 @@ class _Loader:
         self._mesh_lights()
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
-        self._check_world_bounds(tris)
+        self._check_world_bounds()
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
@@ -310,9 +324,10 @@ class _Loader:
             file=self.file, camera=camera, triangles=tris,
             tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
             tri_local=np.concatenate(self.tri_local) if n else np.zeros(0, np.int64),
-            tri_normals=np.concatenate(self.tri_normals) if n else np.zeros((0, 3, 3)),
+            tri_normals=np.concatenate(self.tri_normals) if self.tri_normals else np.zeros((0, 3, 3)),
             instances=self.instances, materials=table, lights=self.lights, assets=self.assets, warnings=self.warnings,
-            tri_st=np.concatenate(self.tri_st) if n else np.zeros((0, 3, 2)),
+            tri_st=np.concatenate(self.tri_st) if self.tri_st else np.zeros((0, 3, 2)),
+            tri_ng=np.concatenate(self.tri_ng) if n else np.zeros((0, 3)),
             render_settings=self._render_settings(),
         )
 
@@ -329,36 +344,44 @@ class _Loader:
             self.lights.append(MeshLight(self.tris[i], self.mat_rows[inst.material][3], one_sided=inst.one_sided,
                                          instance=i, prim=inst.prim))
 
-    def _check_world_bounds(self, tris: np.ndarray) -> None:
+    def _check_world_bounds(self) -> None:
         """``SCENE_INVALID`` for a world coordinate above MAX_WORLD_COORDINATE, or a NeuralAsset instance whose world
         bounding-box diagonal is below MIN_ASSET_SIZE or MIN_ASSET_SIZE_RATIO x the scene scale S (it would vanish
-        in float32 ray casting or under the ray offsets, spec/renderer.md#limits)."""
-        if not len(tris):
+        in float32 ray casting or under the ray offsets, spec/renderer.md#limits). From the instances' boxes."""
+        boxed = [i for i in self.instances if i.box is not None]
+        if not boxed:
             return
-        for inst in self.instances:
-            t = tris[inst.first_tri:inst.first_tri + inst.n_tri]
-            if len(t) and np.abs(t).max() > MAX_WORLD_COORDINATE:
-                raise self.err("SCENE_INVALID", f"world coordinates up to {np.abs(t).max():.3g} exceed the bound "
+        for inst in boxed:
+            big = float(max(np.abs(inst.box[0]).max(), np.abs(inst.box[1]).max()))
+            if big > MAX_WORLD_COORDINATE:
+                raise self.err("SCENE_INVALID", f"world coordinates up to {big:.3g} exceed the bound "
                                f"{MAX_WORLD_COORDINATE:g} (float32 ray casting)", inst.prim, "xformOpOrder")
-        p = tris.reshape(-1, 3)
-        scene_scale = float(np.abs(p).max() + (p.max(0) - p.min(0)).max())  # S of spec/renderer.md#ray-offsets
-        for inst in self.instances:
-            if inst.kind != "neural" or not inst.n_tri:
+        lo, hi = np.min([i.box[0] for i in boxed], 0), np.max([i.box[1] for i in boxed], 0)
+        scene_scale = float(max(np.abs(lo).max(), np.abs(hi).max()) + (hi - lo).max())  # S of spec/renderer.md#ray-offsets
+        for inst in boxed:
+            if inst.kind != "neural":
                 continue
-            t = tris[inst.first_tri:inst.first_tri + inst.n_tri].reshape(-1, 3)
-            diag = float(np.linalg.norm(t.max(0) - t.min(0)))
+            diag = float(np.linalg.norm(inst.box[1] - inst.box[0]))
             if diag < MIN_ASSET_SIZE or diag < MIN_ASSET_SIZE_RATIO * scene_scale:
                 raise self.err("SCENE_INVALID", f"the asset's world size {diag:.3g} is below {MIN_ASSET_SIZE:g} or "
                                f"{MIN_ASSET_SIZE_RATIO:g} x the scene scale {scene_scale:.3g}: it would not render", inst.prim,
                                "xformOpOrder")
 
-    def _add(self, inst: Instance, tris_world, normals_world, local_ids, st=None):
+    def _add(self, inst: Instance, tris_world, normals_world, local_ids, st=None, *, ng=None, box=None):
+        """Append an instance's world triangles [k,3,3]; ``normals_world`` [k,3,3] corner normals and ``st`` [k,3,2]
+        (meshes; None for neural instances), ``ng`` [k,3] unit geometric normals and ``box`` (lo, hi) when the
+        caller has them."""
         inst.first_tri = sum(len(t) for t in self.tris)
         inst.n_tri = len(tris_world)
+        if inst.n_tri:
+            inst.box = box if box is not None else box3(tris_world.reshape(-1, 3))
         self.instances.append(inst)
         self.tris.append(tris_world)
-        self.tri_normals.append(normals_world)
-        self.tri_st.append(np.zeros((len(tris_world), 3, 2)) if st is None else st)
+        self.tri_ng.append(face_normals(tris_world) if ng is None else ng)
+        if normals_world is not None:
+            inst.corner_offset = sum(len(t) for t in self.tri_normals) - inst.first_tri
+            self.tri_normals.append(normals_world)
+            self.tri_st.append(np.zeros((len(tris_world), 3, 2)) if st is None else st)
         self.tri_local.append(local_ids.astype(np.int64))
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
@@ -677,12 +700,9 @@ class _Loader:
             if normals is not None:
                 normals = normals @ nlin
                 normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
+        nn = face_normals(tris)
         if normals is None:
-            ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-            ng /= np.maximum(np.linalg.norm(ng, axis=-1, keepdims=True), 1e-300)
-            normals = np.repeat(ng[:, None], 3, 1)
-        ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-        nn = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+            normals = np.repeat(nn[:, None], 3, 1)
         tol = 1e-9 * (1 + np.abs(pw).max())
         planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
         mat, back = self._material(prim), self._back_material(prim)
@@ -692,7 +712,7 @@ class _Loader:
                                                        len(idx))
         inst = Instance("mesh", path, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
                         back_material=back)
-        self._add(inst, tris, normals, np.arange(len(tri)), st)
+        self._add(inst, tris, normals, np.arange(len(tri)), st, ng=nn)
 
     def _one_sided(self, gprim) -> bool:
         """True when ``doubleSided`` is authored false (spec/renderer.md#sidedness); unauthored keeps both sides."""
@@ -785,10 +805,13 @@ class _Loader:
             raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
         pw = data.points @ M[:3, :3] + M[3, :3]
         tris = pw[data.faces]
-        ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-        ng /= np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
-        inst = Instance("neural", path, 0, 0, M, asset=ai)
-        self._add(inst, tris, np.repeat(ng[:, None], 3, 1), np.arange(len(data.faces)))
+        if data.used_points is None:  # the box of the triangles is that of the points they use
+            used = np.zeros(len(data.points), bool)
+            used[data.faces.ravel()] = True
+            data.used_points = slice(None) if used.all() else np.nonzero(used)[0]
+        inst = Instance("neural", path, 0, 0, M, asset=ai, world_mesh=(pw, data.faces))
+        box = box3(pw[data.used_points]) if len(data.faces) else None
+        self._add(inst, tris, None, np.arange(len(data.faces)), ng=face_normals(tris), box=box)
 
     # -- lights ----------------------------------------------------------------------------
     def _shaping(self, prim, M) -> dict:

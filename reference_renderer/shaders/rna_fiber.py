@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sampling import INV_4PI, normalize
+from ..sampling import INV_4PI, cross3, normalize
 from .registry import register_shader
 from .rna_surface import rna_sample_rows
 
@@ -63,8 +63,8 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
     live = seg_len > tiny  # zero-length segments get no triangles
     t = _unit_rows(p1 - p0)
     helper = np.where(np.abs(t[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-    b1 = _unit_rows(np.cross(t, helper))
-    b2 = np.cross(t, b1)
+    b1 = _unit_rows(cross3(t, helper))
+    b2 = cross3(t, b1)
     ang = 2 * np.pi * np.arange(sides) / sides
     ring = np.cos(ang)[None, :, None] * b1[:, None] + np.sin(ang)[None, :, None] * b2[:, None]  # [S,N,3]
     verts = np.concatenate([p0[:, None] + r0[:, None, None] * ring, p1[:, None] + r1[:, None, None] * ring], 1)  # [S,2N,3]
@@ -102,7 +102,7 @@ def fiber_frame(tubes: FiberTubes, seg, x_obj, wo_obj):
     rel = x_obj - p0
     s = np.clip((rel * t).sum(1) / np.where(ln > 0, ln, 1.0), 0.0, 1.0)
     r = tubes.r0[seg] + s * (tubes.r1[seg] - tubes.r0[seg])
-    c = np.cross(t, wo_obj)
+    c = cross3(t, wo_obj)
     cl = np.linalg.norm(c, axis=1)
     ok = (cl > 1e-9) & (r > 0)
     h = np.where(ok, (rel * c).sum(1) / np.where(ok, cl * r, 1.0), 0.0)

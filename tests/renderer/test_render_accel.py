@@ -335,3 +335,34 @@ def test_scale_is_the_scenes_extent():
     for sep in (None, [True, False], [False, True], [False, False]):
         acc = Accel(tri, tri_inst, backend="numpy", separate=None if sep is None else np.array(sep))
         assert acc.scale == pytest.approx(want, rel=1e-15)
+
+
+@pytest.mark.parametrize("fast", [False, True])
+def test_shared_vertex_structure_gives_the_same_hits(fast):
+    """A fibre instance handed to Embree as shared points and faces (``meshes``, what the renderer does) and as
+    a flat triangle soup: the same closest hits, barycentrics, distances and self_hit flags, bit for bit, and
+    the same part boxes whether given (``boxes``) or computed."""
+    from nasset_reference_renderer.sampling import box3
+
+    tri, tri_inst, tubes = _hair_scene()
+    sep, quick = np.array([True, False]), np.array([fast, False])
+    boxes = [box3(tri[tri_inst == i].reshape(-1, 3)) for i in (0, 1)]
+    flat = Accel(tri, tri_inst, separate=sep, fast=quick)
+    shared = Accel(tri, tri_inst, separate=sep, fast=quick, boxes=boxes, meshes=[(tubes.points, tubes.faces), None])
+    for a, b in zip(flat.parts, shared.parts, strict=True):
+        np.testing.assert_array_equal(a.lo, b.lo)
+        np.testing.assert_array_equal(a.hi, b.hi)
+    assert shared.scale == flat.scale
+    rng = np.random.default_rng(5)
+    x, _, seg = _first_fiber_hits(flat, tri_inst, tubes, rng)
+    wi = rng.normal(size=(len(x), 3))
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    o = rng.normal(0, 0.05, (600, 3)) + [0.0, 0.1, 2.0]  # camera-like rays: closest hits on the tuft itself
+    d = rng.normal(0, 0.03, (600, 3)) + [0.0, 0.0, -1.0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    leaving = (x, wi, np.full(len(x), np.inf), np.zeros(len(x), np.int64), tubes.exempt[seg])  # branch tests
+    for args in ((o, d), leaving):
+        h1, h2 = flat.trace(*args), shared.trace(*args)
+        for k in ("prim", "t", "u", "v", "self_hit"):
+            np.testing.assert_array_equal(getattr(h1, k), getattr(h2, k), err_msg=k)
+    assert (tri_inst[flat.trace(o, d).prim] == 0).mean() > 0.5 and 0.1 < h1.self_hit.mean() < 0.9

@@ -194,3 +194,48 @@ def test_scene_stage_loads_scene_payloads_but_no_asset_components(tmp_path):
     for root in ("/World/Direct", "/World/Placed"):
         comp = opened.GetPrimAtPath(root + "/Components/core")
         assert comp and not comp.IsLoaded()  # the asset's component payloads were not
+
+
+def test_mesh_rows_and_boxes_with_neural_instances_between_meshes(tmp_path):
+    """Corner normals are stored for mesh triangles only (Scene.corner_rows): a mesh loaded after a neural
+    instance keeps the rows it has in a scene without the asset; face normals and the scene's bounds cover every
+    triangle, and the neural instance's box and shared-vertex mesh describe its own triangles."""
+    from pxr import Sdf, UsdGeom
+
+    from nasset_reference_renderer.sampling import face_normals
+
+    asset = random_rna_asset(tmp_path / "a.usdc", seed=3)
+
+    def scene(with_asset, fname):
+        b = SceneBuilder()
+        b.camera((0, 0.5, 4), (0, 0, 0), focal=35)
+        b.distant("Sun", (0.3, 1.0, 0.5), E)
+        b.quad("Floor", (0, -1, 0), 4.0)
+        if with_asset:
+            b.asset("A", asset, _rot_y(30, (-0.8, 0, 0)))
+        ball = b.sphere_mesh("Ball", (0.8, 0, 0), 0.4, subdivisions=1)
+        n = np.asarray(ball.GetPointsAttr().Get(), np.float64) - [0.8, 0, 0]  # smooth normals, unlike the faces'
+        UsdGeom.PrimvarsAPI(ball).CreatePrimvar("normals", Sdf.ValueTypeNames.Normal3fArray,
+                                                UsdGeom.Tokens.vertex).Set(n.astype(np.float32))
+        return load_scene(b.write(tmp_path / fname))
+
+    mixed, plain = scene(True, "mixed.usda"), scene(False, "plain.usda")
+    kinds = [i.kind for i in mixed.instances]
+    assert kinds == ["mesh", "neural", "mesh"]
+    floor, neural, ball = mixed.instances
+    assert len(mixed.tri_normals) == len(mixed.tri_st) == floor.n_tri + ball.n_tri
+    for inst, ref in zip((floor, ball), plain.instances, strict=True):
+        prim = inst.first_tri + np.arange(inst.n_tri)
+        rows = mixed.corner_rows(prim, np.full(len(prim), mixed.instances.index(inst)))
+        got = mixed.tri_normals[rows]
+        want = plain.tri_normals[ref.first_tri + np.arange(ref.n_tri)]
+        np.testing.assert_array_equal(got, want)
+    ball_rows = mixed.corner_rows(ball.first_tri + np.arange(ball.n_tri), np.full(ball.n_tri, 2))
+    assert np.abs(mixed.tri_normals[ball_rows] - np.repeat(mixed.tri_ng[ball.first_tri:][:, None], 3, 1)).max() > 0.05
+    np.testing.assert_array_equal(mixed.tri_ng, face_normals(mixed.triangles))
+    p = mixed.triangles.reshape(-1, 3)
+    np.testing.assert_array_equal(np.stack(mixed.bounds), np.stack([p.min(0), p.max(0)]))
+    own = mixed.triangles[neural.first_tri:neural.first_tri + neural.n_tri]
+    np.testing.assert_array_equal(np.stack(neural.box), np.stack([own.reshape(-1, 3).min(0), own.reshape(-1, 3).max(0)]))
+    pts, faces = neural.world_mesh
+    np.testing.assert_array_equal(pts[faces], own)
