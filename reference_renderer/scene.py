@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -126,9 +127,14 @@ class Scene:
             return np.zeros(3), np.zeros(3)
         return np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
 
+    @cached_property
+    def corner_offsets(self) -> np.ndarray:
+        """[n_instances] Instance.corner_offset of every instance."""
+        return np.array([i.corner_offset for i in self.instances], np.int64)
+
     def corner_rows(self, prim: np.ndarray, inst: np.ndarray) -> np.ndarray:
         """Rows of tri_normals / tri_st [n] of mesh triangles ``prim`` [n] on instances ``inst`` [n]."""
-        return prim + np.array([i.corner_offset for i in self.instances], np.int64)[inst]
+        return prim + self.corner_offsets[inst]
 
 
 def _matrix(xformable, time):
