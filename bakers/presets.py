@@ -32,7 +32,7 @@ RNA_BLENDER_DATA = {
 #: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
 NEUPRESS_MITSUBA_DATA = {
     "tiny": dict(views=12, val_views=2, res=24, spp=8, val_res=24, val_spp=128),
-    "small": dict(views=320, val_views=12, res=64, spp=32, val_res=64, val_spp=1024),
+    "small": dict(views=640, val_views=12, res=64, spp=32, val_res=64, val_spp=1024),
     "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
 }
 
