@@ -95,7 +95,7 @@ def scene_accel(scene, backend: str, neural: np.ndarray):
         ng = scene.tri_ng if scene.tri_ng is not None else face_normals(tri)
         hit = scene.accel_cache[key] = (Accel(tri, scene.tri_inst, backend=backend, separate=neural, fast=fiber,
                                               boxes=[i.box for i in scene.instances],
-                                              meshes=[i.world_mesh for i in scene.instances]), ng)
+                                              meshes=[scene.world_mesh(i) for i in range(len(scene.instances))]), ng)
     return hit
 
 

@@ -91,7 +91,6 @@ class Instance:
     back_material: int = -1  # nasset:backMaterial: the material seen from the back (-1: the bound one)
     box: tuple | None = None  # (lo [3], hi [3]) of its world triangles; None without triangles
     corner_offset: int = 0  # mesh instances: triangle ``prim``'s row in Scene.tri_normals / tri_st is prim + corner_offset
-    world_mesh: tuple | None = None  # neural instances: (world points [V,3], faces [k,3]) of its triangles
 
     def __post_init__(self):
         self.to_object = np.linalg.inv(self.to_world)
@@ -123,7 +122,7 @@ class Scene:
     def bounds(self):
         """(lo [3], hi [3]) of the world triangles, from the instances' boxes (zeros without triangles)."""
         boxes = [i.box for i in self.instances if i.box is not None]
-        if len(self.triangles) == 0 or not boxes:
+        if not boxes:
             return np.zeros(3), np.zeros(3)
         return np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
 
@@ -132,9 +131,23 @@ class Scene:
         """[n_instances] Instance.corner_offset of every instance."""
         return np.array([i.corner_offset for i in self.instances], np.int64)
 
+    def world_mesh(self, i: int) -> tuple | None:
+        """Neural instance ``i``'s triangles as (world points [V,3], faces [k,3]), computed as the loader computed
+        them (the same bits); None for other instances."""
+        inst = self.instances[i]
+        if inst.kind != "neural":
+            return None
+        data = self.assets[inst.asset]
+        return world_points(data.points, inst.to_world), data.faces
+
     def corner_rows(self, prim: np.ndarray, inst: np.ndarray) -> np.ndarray:
         """Rows of tri_normals / tri_st [n] of mesh triangles ``prim`` [n] on instances ``inst`` [n]."""
         return prim + self.corner_offsets[inst]
+
+
+def world_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """World positions [V,3] of object-space ``points`` [V,3] under the 4x4 row-vector transform ``M``."""
+    return points @ M[:3, :3] + M[3, :3]
 
 
 def _matrix(xformable, time):
@@ -809,13 +822,13 @@ class _Loader:
         M = self.matrix(UsdGeom.Xformable(prim))
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
-        pw = data.points @ M[:3, :3] + M[3, :3]
+        pw = world_points(data.points, M)
         tris = pw[data.faces]
         if data.used_points is None:  # the box of the triangles is that of the points they use
             used = np.zeros(len(data.points), bool)
             used[data.faces.ravel()] = True
             data.used_points = slice(None) if used.all() else np.nonzero(used)[0]
-        inst = Instance("neural", path, 0, 0, M, asset=ai, world_mesh=(pw, data.faces))
+        inst = Instance("neural", path, 0, 0, M, asset=ai)
         box = box3(pw[data.used_points]) if len(data.faces) else None
         self._add(inst, tris, None, np.arange(len(data.faces)), ng=face_normals(tris), box=box)
 
