@@ -11,6 +11,7 @@ the processes take the optimiser steps one process would take on the full batche
 
 from __future__ import annotations
 
+import atexit
 import os
 from dataclasses import dataclass
 from datetime import timedelta
@@ -87,4 +88,14 @@ def data_parallel(torch, want: str = "auto") -> DataParallel:
     dist = torch.distributed
     if not dist.is_initialized():
         dist.init_process_group(backend="nccl" if device.type == "cuda" else "gloo", timeout=WAIT)
+        atexit.register(_leave_group, dist)
     return DataParallel(rank, world, device)
+
+
+def _leave_group(dist) -> None:
+    """Destroy the process group at exit while the interpreter is still whole. Left to interpreter
+    finalisation, gloo's worker threads can still be joinable when they are destroyed, and the process
+    aborts ("terminate called without an active exception", SIGABRT): a rank that finished its share
+    and exited then took down rank 0 while it was writing the asset."""
+    if dist.is_initialized():
+        dist.destroy_process_group()

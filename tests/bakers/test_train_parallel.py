@@ -42,6 +42,24 @@ def _data(n: int, seed: int, fiber: bool = False) -> dict:
     return {**data, "h": rng.uniform(-1.0, 1.0, n)} if fiber else data
 
 
+def test_every_process_leaves_the_group_before_the_interpreter_finalises(tmp_path):
+    """A torchrun process destroys its process group at exit, before interpreter finalisation (else
+    gloo's threads can abort a rank that finished first: SIGABRT, and torchrun kills the others). An
+    exit handler registered before the group is joined runs after the trainer's own and must find it gone."""
+    script = tmp_path / "leave.py"
+    script.write_text(
+        "import atexit, os, pathlib\nimport torch\nimport torch.distributed as dist\n"
+        "out = pathlib.Path(__file__).with_name('rank' + os.environ['RANK'])\n"
+        "atexit.register(lambda: out.write_text(str(dist.is_initialized())))\n"
+        "from nasset_bakers.train.parallel import data_parallel\n"
+        "dp = data_parallel(torch, 'cpu')\n"
+        "t = torch.ones(1)\ndist.all_reduce(t)\nassert dp.world == 2 and t.item() == 2.0\n")
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nnodes=1", "--nproc_per_node=2", str(script)]
+    run = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert [(tmp_path / f"rank{r}").read_text() for r in (0, 1)] == ["False", "False"]  # initialised: "True"
+
+
 class _Last:
     """A checkpoint that keeps the last state saved (the weights before the planes are frozen)."""
 
