@@ -130,7 +130,7 @@ def bench_example(out: Path, example: str, *, size: str, res: int, gt_spp: int, 
         say(f"  neural {spp:5d} spp  {dt:8.3f}s  MSE {mse:.3e}  (own variance {var_nr:.2e})")
     peak = float(np.percentile(gt, 99.5))
     for name, img in (("gt", gt), ("cycles_low", low), ("neural", nimg)):
-        _png(out / f"blender_{example.split('-')[1]}_{name}.png", img, peak)
+        _png(out / f"blender_{example.removeprefix('blender-').replace('-', '_')}_{name}.png", img, peak)
     last = nr_points[-1]
     floor = last["mse"] - last["variance"]
     speed = equal_error_speedup(cy_points, nr_points)

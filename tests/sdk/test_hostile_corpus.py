@@ -8,11 +8,11 @@ studio scene through the real renderer with a finite image written to EXR and PN
 typed or not, counts as validated-then-failed. Scene cases (``Case.scene``) are rendered and must raise
 their typed code (or, with code None, render finite).
 
-All work runs in one worker subprocess, case after case, with a time bound per case: a crash or hang
-fails that case, the worker restarts for the rest. Validation first runs in-process without the crash
-probe as a fast path for clear rejections; every case it does not clearly reject (it validates, reports
-another code, crashes or hangs) and every ``Case.probe`` case is judged by the validator as
-``nasset validate`` runs it, with its crash probe.
+All work runs in one worker subprocess, case after case, with a time bound per case: a crash, or a hang
+that repeats in a fresh worker with three times the bound, fails that case; the worker restarts for the
+rest. Validation first runs in-process without the crash probe as a fast path for clear rejections;
+every case it does not clearly reject (it validates, reports another code, crashes or hangs) and every
+``Case.probe`` case is judged by the validator as ``nasset validate`` runs it, with its crash probe.
 """
 
 from __future__ import annotations
@@ -150,6 +150,8 @@ def run_cases(cases: list[tuple[str, object]]) -> list[Outcome]:
                 # files, measures decoded array sizes); the in-process pass is only a fast path for clear rejections
                 job["probe"] = True
                 res, stage, trouble = worker.run(job, CASE_TIMEOUT)
+            if trouble == "hang":  # once more in a fresh worker with 3x the time: a shared machine can stall a
+                res, stage, trouble = worker.run(job, 3 * CASE_TIMEOUT)  # cold start; a real hang hangs again
             if trouble:
                 o.kind, o.failure = trouble, f"{trouble} during {stage}"
                 if stage not in ("start", "validate"):
