@@ -12,8 +12,10 @@ import numpy as np
 
 
 def setup_cycles(bpy, width: int, height: int | None = None, max_bounces: int = 32) -> None:
-    """CPU Cycles at ``width`` x ``height`` (default square) pixels: box filter 1 px, no clamping,
-    no denoising or adaptive sampling, ``max_bounces`` of every type, persistent data, 32-bit EXR."""
+    """CPU Cycles at ``width`` x ``height`` (default square) pixels: box filter 1 px, persistent data,
+    32-bit EXR, and none of Cycles' biased shortcuts whatever the scene sets: no clamping, no Filter
+    Glossy (it widens glossy lobes after the first bounce: +15-19 % on the dense blond hair example),
+    caustics on, no Fast GI, no denoising or adaptive sampling, ``max_bounces`` of every type."""
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
     sc.render.resolution_x = int(width)
@@ -33,8 +35,11 @@ def setup_cycles(bpy, width: int, height: int | None = None, max_bounces: int = 
     c.filter_width = 1.0
     c.sample_clamp_direct = 0.0
     c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = c.caustics_refractive = True
+    c.use_fast_gi = False
     c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = max_bounces
-    c.transparent_max_bounces = max_bounces
+    c.volume_bounces = c.transparent_max_bounces = max_bounces
 
 
 def render_cycles(bpy, path: Path, spp: int, seed: int, *, alpha: bool = False) -> np.ndarray:

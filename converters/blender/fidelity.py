@@ -30,7 +30,6 @@ def _new_scene(bpy, size: int, eye, target, *, bounces: int = 4) -> None:
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     setup_cycles(bpy, size, max_bounces=bounces)
-    bpy.context.scene.cycles.blur_glossy = 0.0  # "filter glossy" blurs highlights (biased)
     add_camera(bpy, eye, target)
 
 

@@ -125,3 +125,25 @@ def test_depth_follows_the_scenes_bounce_limit(blend, tmp_path):
     assert bpy.context.scene.cycles.max_bounces == bpy.context.scene.cycles.diffuse_bounces == 3  # as Cycles rendered
     r = _run(three, [f"Monkey={a}"], tmp_path / "bench2", res=8, spp=2, nr_spp=1, max_depth=2)
     assert r["estimate"]["max_depth"] == 2  # --max-depth still overrides
+
+
+def test_ground_truth_settings_leave_no_biased_shortcut_on(blend):
+    """Whatever the scene sets, the Cycles ground truth (``setup_cycles``: bench accuracy, bench blender, the
+    fidelity scenes) renders without clamps, Filter Glossy (+15-19 % on the dense hair example), Fast GI or
+    dropped caustics, and with the bounce limit for every bounce type."""
+    import bpy
+
+    from nasset_converters.blender import scene as bsc
+    from nasset_converters.blender.cycles import setup_cycles
+
+    bsc.open_blend(blend)
+    c = bpy.context.scene.cycles
+    c.blur_glossy, c.use_fast_gi, c.caustics_reflective, c.caustics_refractive = 1.0, True, False, False
+    c.sample_clamp_direct = c.sample_clamp_indirect = 10.0
+    c.glossy_bounces = c.volume_bounces = 1
+    c.use_denoising = c.use_adaptive_sampling = True
+    setup_cycles(bpy, 16, max_bounces=12)
+    assert (c.blur_glossy, c.use_fast_gi, c.caustics_reflective, c.caustics_refractive) == (0.0, False, True, True)
+    assert (c.sample_clamp_direct, c.sample_clamp_indirect, c.use_denoising, c.use_adaptive_sampling) == (0.0, 0.0, False, False)
+    assert {c.max_bounces, c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces, c.volume_bounces,
+            c.transparent_max_bounces} == {12}
