@@ -94,7 +94,7 @@ def bake(
     center, radius = bsc.bounding_sphere(geo)
     materials = bsc.material_names(objs)
     bsc.isolate(objs)
-    dset = replace(ds.DataSettings(), **DATA_PRESETS[size], seed=seed,
+    dset = replace(ds.DataSettings(), **data_preset(size, variant), seed=seed,
                    light_angle_deg=float(DEFAULT_LIGHT_ANGLE if light_angle is None else light_angle))
     if views is not None:
         dset = replace(dset, views=int(views), val_views=max(1, int(views) // 12))
@@ -246,6 +246,12 @@ def _view_renderer(variant, geo, center, radius, dset, work, threads: int = 0):
 
     render_one.close = rig.close
     return render_one
+
+
+def data_preset(size: str, variant: str) -> dict:
+    """The DataSettings fields of preset ``size`` for a ``variant`` ("surface" or "fiber") asset: fibers
+    render more views (presets.RNA_BLENDER_FIBER_DATA)."""
+    return {**DATA_PRESETS[size], **(presets.RNA_BLENDER_FIBER_DATA.get(size, {}) if variant == "fiber" else {})}
 
 
 def view_renderer(scene, example, asset_ids, dset, work, threads: int = 1):

@@ -115,6 +115,17 @@ def test_bake_typed_errors(tmp_path):
     assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
 
 
+def test_fiber_assets_get_more_views_at_small():
+    """Fibers render 400 training views at `small`, surfaces 160; everything else of the preset is shared
+    (spec/accuracy.md#dense-hair measured the 400)."""
+    from nasset_bakers.blender.rna import data_preset
+
+    surface, fiber = data_preset("small", "surface"), data_preset("small", "fiber")
+    assert (surface["views"], fiber["views"]) == (160, 400)
+    assert {**fiber, "views": 160} == surface
+    assert data_preset("tiny", "fiber") == data_preset("tiny", "surface")
+
+
 @pytest.mark.slow
 def test_bench_blender_quick_runs(tmp_path):
     """``nasset bench blender`` end to end at toy sizes: report, plot, images, finite numbers."""
