@@ -33,6 +33,10 @@ RNA_BLENDER_DATA = {
 #: (spec/accuracy.md#dense-hair): 400 views against 160, in the scene 95-98 % against 92-95 % of the energy, 26.4
 #: against 22.7 dB bias-corrected; the bake 12 min from scratch
 RNA_BLENDER_FIBER_DATA = {"small": dict(views=400)}
+#: what fiber bakes change in RNA_TRAIN: at `small` a decoder 128 wide (4 x 128) on those 400 views, in the scene
+#: 96.8 / 98.2 / 97.7 % and 27.2 dB against 95.0 / 96.7 / 98.2 % and 26.4 dB for 4 x 64, same training time
+#: (spec/accuracy.md#dense-hair)
+RNA_BLENDER_FIBER_TRAIN = {"small": dict(hidden=128)}
 
 #: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
 NEUPRESS_MITSUBA_DATA = {

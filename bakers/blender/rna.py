@@ -47,7 +47,7 @@ def bake(
     from nasset_bakers.stages import check_options, finite, render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
     from nasset_bakers.train.parallel import data_parallel
-    from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
+    from nasset_bakers.train.rna import TrainSettings, check_asset, train
     from nasset_converters.blender import CONVERTER_VERSION, load_bpy
     from nasset_converters.blender import dataset as ds
     from nasset_converters.blender import scene as bsc
@@ -94,7 +94,8 @@ def bake(
     center, radius = bsc.bounding_sphere(geo)
     materials = bsc.material_names(objs)
     bsc.isolate(objs)
-    dset = replace(ds.DataSettings(), **data_preset(size, variant), seed=seed,
+    data_fields, train_fields = variant_preset(size, variant)
+    dset = replace(ds.DataSettings(), **data_fields, seed=seed,
                    light_angle_deg=float(DEFAULT_LIGHT_ANGLE if light_angle is None else light_angle))
     if views is not None:
         dset = replace(dset, views=int(views), val_views=max(1, int(views) // 12))
@@ -140,7 +141,7 @@ def bake(
     builder = AssetBuilder("rna", variant=variant)
     builder.set_geometry(geo)
     domain = builder.domain
-    tset = TrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
+    tset = TrainSettings(size=size, seed=seed, device=device, **train_fields)
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
     ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
@@ -248,10 +249,14 @@ def _view_renderer(variant, geo, center, radius, dset, work, threads: int = 0):
     return render_one
 
 
-def data_preset(size: str, variant: str) -> dict:
-    """The DataSettings fields of preset ``size`` for a ``variant`` ("surface" or "fiber") asset: fibers
-    render more views (presets.RNA_BLENDER_FIBER_DATA)."""
-    return {**DATA_PRESETS[size], **(presets.RNA_BLENDER_FIBER_DATA.get(size, {}) if variant == "fiber" else {})}
+def variant_preset(size: str, variant: str) -> tuple[dict, dict]:
+    """The DataSettings and TrainSettings fields of preset ``size`` for a ``variant`` ("surface" or "fiber")
+    asset: fibers render more views and train a wider decoder (presets.RNA_BLENDER_FIBER_DATA, _TRAIN)."""
+    fiber = variant == "fiber"
+    from nasset_bakers.train.rna import TRAIN_PRESETS
+
+    return ({**DATA_PRESETS[size], **(presets.RNA_BLENDER_FIBER_DATA.get(size, {}) if fiber else {})},
+            {**TRAIN_PRESETS[size], **(presets.RNA_BLENDER_FIBER_TRAIN.get(size, {}) if fiber else {})})
 
 
 def view_renderer(scene, example, asset_ids, dset, work, threads: int = 1):

@@ -55,6 +55,7 @@ class TrainSettings:
     encoding: str = "lobes"  # decoder-internal features of the fixed input row: "raw" or "lobes"
     plane_res: int = 0  # triplane resolution R; 0: the preset's (nasset_sdk.kinds.rna.SIZES)
     plane_channels: int = 0  # triplane channels C; 0: the preset's
+    hidden: int = 0  # decoder width; 0: the preset's
     seed: int = 0
     device: str = "auto"
     keep: str = "last"  # "last" epoch, or "best": the highest held-out display PSNR (the paper's best checkpoint; spec/accuracy.md#best-epoch)
@@ -68,16 +69,16 @@ LOBE_SHARPNESS = (4.0, 16.0, 64.0)
 
 
 def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: int = 0, plane_channels: int = 0,
-                encoding: str = "lobes", fiber: bool = False):
-    """The rna model for a preset of ``nasset_sdk.kinds.rna.SIZES`` (MLP fixed by the preset;
-    the triplane's R and C may be overridden). ``fiber``: the fiber variant, whose frame input is
+                hidden_width: int = 0, encoding: str = "lobes", fiber: bool = False):
+    """The rna model for a preset of ``nasset_sdk.kinds.rna.SIZES`` (the MLP's depth fixed by the preset;
+    the triplane's R and C and the decoder's width may be overridden). ``fiber``: the fiber variant, whose frame input is
     [t (3), h (1)] (``n`` passed as [N, 4]), with the azimuth cosine as an extra feature and lobes
     exp(-k (t.h)^2) (spec/bake-blender.md#training)."""
     torch = require_torch()
     nn = torch.nn
     F = torch.nn.functional
     res, ch, layers, hidden = SIZES[size]
-    res, ch = plane_res or res, plane_channels or ch
+    res, ch, hidden = plane_res or res, plane_channels or ch, hidden_width or hidden
 
     class DirectionFeatures(nn.Module):
         """Part of the exported decoder: appends angular features computed from the contract's input
@@ -289,7 +290,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     T = _tensors(torch, train_data, lo, hi, device)
     V = _tensors(torch, val_data, lo, hi, device)
     model = build_model(settings.size, init_std=settings.init_std, seed=settings.seed, plane_res=settings.plane_res,
-                        plane_channels=settings.plane_channels, encoding=settings.encoding,
+                        plane_channels=settings.plane_channels, hidden_width=settings.hidden, encoding=settings.encoding,
                         fiber="h" in train_data).to(device)
     opt = torch.optim.Adam([
         {"params": [model.planes], "lr": settings.plane_lr},

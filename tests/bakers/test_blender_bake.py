@@ -115,15 +115,20 @@ def test_bake_typed_errors(tmp_path):
     assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
 
 
-def test_fiber_assets_get_more_views_at_small():
-    """Fibers render 400 training views at `small`, surfaces 160; everything else of the preset is shared
-    (spec/accuracy.md#dense-hair measured the 400)."""
-    from nasset_bakers.blender.rna import data_preset
+def test_fiber_assets_get_more_views_and_a_wider_decoder_at_small():
+    """Fibers render 400 training views at `small` and train a 4 x 128 decoder, surfaces 160 views and
+    4 x 64; everything else of the preset is shared (spec/accuracy.md#dense-hair measured both)."""
+    from nasset_bakers.blender.rna import variant_preset
+    from nasset_bakers.train.rna import TrainSettings, build_model
 
-    surface, fiber = data_preset("small", "surface"), data_preset("small", "fiber")
+    (surface, surface_train), (fiber, fiber_train) = variant_preset("small", "surface"), variant_preset("small", "fiber")
     assert (surface["views"], fiber["views"]) == (160, 400)
     assert {**fiber, "views": 160} == surface
-    assert data_preset("tiny", "fiber") == data_preset("tiny", "surface")
+    assert {**fiber_train, "hidden": 0} == {**surface_train, "hidden": 0} and fiber_train["hidden"] == 128
+    assert variant_preset("tiny", "fiber") == variant_preset("tiny", "surface")
+    widths = {h: {p.shape[0] for n, p in build_model("small", hidden_width=h, fiber=True).named_parameters() if p.ndim == 2}
+              for h in (TrainSettings(**surface_train).hidden, TrainSettings(**fiber_train).hidden)}
+    assert 64 in widths[0] and 128 not in widths[0] and 128 in widths[128] and 64 not in widths[128]
 
 
 @pytest.mark.slow
