@@ -126,7 +126,7 @@ def test_fiber_assets_get_more_views_and_a_wider_decoder_at_small():
     assert {**fiber, "views": 160} == surface
     assert {**fiber_train, "hidden": 0} == {**surface_train, "hidden": 0} and fiber_train["hidden"] == 128
     assert variant_preset("tiny", "fiber") == variant_preset("tiny", "surface")
-    widths = {h: {p.shape[0] for n, p in build_model("small", hidden_width=h, fiber=True).named_parameters() if p.ndim == 2}
+    widths = {h: {p.shape[0] for p in build_model("small", hidden_width=h, fiber=True).parameters() if p.ndim == 2}
               for h in (TrainSettings(**surface_train).hidden, TrainSettings(**fiber_train).hidden)}
     assert 64 in widths[0] and 128 not in widths[0] and 128 in widths[128] and 64 not in widths[128]
 
