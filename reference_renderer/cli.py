@@ -67,7 +67,8 @@ def run(args) -> int:
     settings = RenderSettings(spp=args.spp, seed=args.seed, width=args.width, height=args.height, max_depth=args.max_depth,
                               batch=args.batch, tile=args.tile, threads=args.threads, progress=not args.quiet,
                               neupress_sampling=getattr(args, "neupress_sampling", "auto"), prt=bool(getattr(args, "prt", False)),
-                              eightdna_sampling=getattr(args, "eightdna_sampling", "mis"))
+                              eightdna_sampling=getattr(args, "eightdna_sampling", "mis"),
+                              rna_continuation=getattr(args, "rna_continuation", "lobes"))
     check_settings(settings, min_depth=1)
     # sizes given on the command line are checked before the scene is read; the final size again below
     check_image_size(1 if args.width is None else args.width, 1 if args.height is None else args.height, args.spp)
@@ -84,7 +85,7 @@ def run(args) -> int:
     width, height = check_image_size(*scene.camera.default_resolution(args.width, args.height), args.spp)
     plan = make_plan(scene, width=width, height=height, spp=args.spp, max_depth=settings.max_depth, tile=args.tile,
                      batch=args.batch, neupress_sampling=settings.neupress_sampling, prt=settings.prt,
-                     eightdna_sampling=settings.eightdna_sampling)
+                     eightdna_sampling=settings.eightdna_sampling, rna_continuation=settings.rna_continuation)
     if args.explain:
         print(plan.explain())
     prepare_assets(scene, plan, settings)
@@ -128,6 +129,10 @@ def add_args(p) -> None:
     p.add_argument("--prt", action="store_true", help="neupress: shade with the PRT component and the dome's SH projection")
     p.add_argument("--8dna-sampling", dest="eightdna_sampling", default="mis", choices=["light", "flow", "mis"],
                    help="8dna: emitter sampling, the asset's own sampling (GGX lobe, flow directions), or both with MIS")
+    p.add_argument("--rna-continuation", default="lobes", choices=["uniform", "lobes"],
+                   help="rna: continuation directions from the uniform sphere, or from a mixture of it with lobes "
+                        "(surfaces: cosine and mirror; fibers: forward and specular cone; default: same expectation, "
+                        "less variance)")
 
 
 #: ``nasset render`` (entry point ``nasset.verbs``)

@@ -41,6 +41,7 @@ class RenderSettings:
     neupress_sampling: str = "auto"  # auto | dome | lobe | mis (spec/renderer.md#neupress)
     prt: bool = False  # neupress PRT mode
     eightdna_sampling: str = "mis"  # light | flow | mis (spec/renderer.md#8dna)
+    rna_continuation: str = "lobes"  # uniform | lobes (spec/renderer.md#neural-assets, #fibers)
 
 
 @dataclass
@@ -364,7 +365,8 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
     if plan is None:
         plan = make_plan(scene, width=width, height=height, spp=s.spp, max_depth=s.max_depth, tile=s.tile, batch=s.batch,
-                         neupress_sampling=s.neupress_sampling, prt=s.prt, eightdna_sampling=s.eightdna_sampling)
+                         neupress_sampling=s.neupress_sampling, prt=s.prt, eightdna_sampling=s.eightdna_sampling,
+                         rna_continuation=s.rna_continuation)
     if load_components:
         prepare_assets(scene, plan, s)
     integ = PathIntegrator(scene, plan, s)

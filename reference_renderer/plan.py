@@ -27,6 +27,9 @@ from .lights import DomeLight, RectLight
 
 NEUPRESS_SAMPLING = ("auto", "dome", "lobe", "mis")
 EIGHTDNA_SAMPLING = ("light", "flow", "mis")
+#: rna continuation densities (spec/renderer.md#neural-assets): the uniform sphere, or the kind's mixture of it with
+#: lobes (surfaces: cosine and mirror lobes; fibers: forward lobe and specular-cone band)
+RNA_CONTINUATION = ("uniform", "lobes")
 
 
 @dataclass
@@ -61,7 +64,8 @@ class RenderPlan:
         return "\n".join(lines)
 
 
-def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, has_dome: bool) -> tuple[dict, list, str]:
+def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, has_dome: bool,
+               rna_continuation: str = "lobes") -> tuple[dict, list, str]:
     """(mode, extra components to load, explain note) for one asset file."""
     a = data.asset
     present = a.components()
@@ -90,11 +94,16 @@ def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, 
         return ({"kind": "8dna", "sampling": eightdna_sampling}, [],
                 f"8dna {data.path.name}: direct lobe at x_o + flow sample u_i (uniform channel), {what}; "
                 "continuation: direct lobe with probability P_d, else flow direction from u_i")
+    if a.kind == "rna":
+        lobes = "forward lobe + specular-cone band" if a.variant == "fiber" else "cosine lobe + mirror lobe"
+        what = "the uniform sphere" if rna_continuation == "uniform" else f"uniform sphere + {lobes}"
+        return ({"kind": a.kind}, [], f"rna {a.variant} {data.path.name}: continuation directions from {what} "
+                                      "(MIS with the same density)")
     return {"kind": a.kind}, [], ""
 
 
 def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sampling: str = "auto", prt: bool = False,
-              eightdna_sampling: str = "mis") -> RenderPlan:
+              eightdna_sampling: str = "mis", rna_continuation: str = "lobes") -> RenderPlan:
     lo, hi = scene.bounds
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     has_geo = len(scene.triangles) > 0
@@ -134,11 +143,13 @@ def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sam
         raise UsageError(f"neupress sampling must be one of {NEUPRESS_SAMPLING}, got {neupress_sampling!r}")
     if eightdna_sampling not in EIGHTDNA_SAMPLING:
         raise UsageError(f"8dna sampling must be one of {EIGHTDNA_SAMPLING}, got {eightdna_sampling!r}")
+    if rna_continuation not in RNA_CONTINUATION:
+        raise UsageError(f"rna continuation must be one of {RNA_CONTINUATION}, got {rna_continuation!r}")
     has_dome = any(isinstance(light, DomeLight) for light in scene.lights)
     comps, modes, kind_notes = {}, [], []
     for data in scene.assets:
         a = data.asset
-        mode, extra, note = asset_mode(data, neupress_sampling, prt, eightdna_sampling, has_dome)
+        mode, extra, note = asset_mode(data, neupress_sampling, prt, eightdna_sampling, has_dome, rna_continuation)
         required = list(a.contract.required_components(a.variant)) + extra
         skipped = [n for n in a.components() if n not in required]
         comps[str(data.path)] = (required, skipped)

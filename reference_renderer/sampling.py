@@ -77,6 +77,12 @@ def to_world(v, t, b, n):
     return v[:, 0:1] * t + v[:, 1:2] * b + v[:, 2:3] * n
 
 
+def around(axis, local):
+    """Local directions [m,3] (z along the axis) turned about unit axes [m,3] into world directions."""
+    t, b = frame(axis)
+    return to_world(local, t, b, axis)
+
+
 # -- hemisphere / sphere / cone ---------------------------------------------------------------
 def square_to_cosine_hemisphere(u):
     r = np.sqrt(u[:, 0])
@@ -112,6 +118,22 @@ def square_to_uniform_cone(u, cos_max):
 def uniform_cone_pdf(v, cos_max):
     cos_max = np.broadcast_to(np.asarray(cos_max, np.float64), (len(v),))
     return np.where(v[:, 2] >= cos_max, 1.0 / (2.0 * np.pi * np.maximum(1.0 - cos_max, 1e-300)), 0.0)
+
+
+def square_to_vmf(u, kappa):
+    """Directions [n,3] from a von Mises-Fisher lobe around +Z with concentration ``kappa`` > 0 (scalar):
+    density kappa exp(kappa (z - 1)) / (2 pi (1 - exp(-2 kappa))) per steradian (:func:`vmf_pdf`).
+    Inverse CDF in z written without cancellation: z = 1 + log(u0 + (1 - u0) exp(-2 kappa)) / kappa."""
+    z = 1.0 + np.log(np.maximum(u[:, 0] + (1.0 - u[:, 0]) * np.exp(-2.0 * kappa), 1e-300)) / kappa
+    z = np.clip(z, -1.0, 1.0)
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = 2.0 * np.pi * u[:, 1]
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def vmf_pdf(cos, kappa):
+    """Density [1/sr] of :func:`square_to_vmf` at directions whose cosine to the lobe axis is ``cos``."""
+    return kappa / (2.0 * np.pi * -np.expm1(-2.0 * kappa)) * np.exp(kappa * (np.clip(cos, -1.0, 1.0) - 1.0))
 
 
 # -- MIS --------------------------------------------------------------------------------------

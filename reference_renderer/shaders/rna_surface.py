@@ -12,19 +12,77 @@ import time
 
 import numpy as np
 
-from ..sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
+from ..sampling import (
+    INV_4PI,
+    INV_PI,
+    around,
+    dot,
+    normalize,
+    power_heuristic,
+    square_to_cosine_hemisphere,
+    square_to_uniform_sphere,
+    square_to_vmf,
+    vmf_pdf,
+)
 from ..shadow import aim_shadow
 from .common import max3, unique
 from .registry import register_shader
 
+#: the surface continuation's mixture weights: uniform sphere, cosine lobe about the normal on wo's side, mirror
+#: lobe (:class:`SurfaceContinuation`). Chosen on the built-in rna example and the high-albedo pebble (300 camera
+#: hits each, T on 4096 directions): the variance of T / pdf is 4.7x and 3.2x lower than the uniform sphere's
+#: (second moments 0.32 against 0.89 and 0.94 against 1.52; sampling proportional to T: 0.17 and 0.70)
+SURFACE_CONT_MIX = (0.4, 0.2, 0.4)
+#: the mirror lobe's von Mises-Fisher concentration
+MIRROR_KAPPA = 6.0
 
-def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
+
+def sample_mixture(weights, u, lobes) -> np.ndarray:
+    """Unit directions [m,3] from the mixture whose component k (picked by u[:,2] against ``weights``) maps
+    u[:,:2] of its rows through ``lobes[k](rows_mask, u2)`` -> [r,3]; lobe 0 is the uniform sphere."""
+    wi = np.empty((len(u), 3))
+    pick = np.searchsorted(np.cumsum(weights)[:-1], u[:, 2], side="right")
+    for k, lobe in enumerate(lobes):
+        m = pick == k
+        if m.any():
+            wi[m] = lobe(m, u[m, :2])
+    return normalize(wi)
+
+
+class SurfaceContinuation:
+    """Continuation directions of rna surface hits (spec/renderer.md#neural-assets): a defensive mixture, per
+    world steradian, of the uniform sphere, a cosine lobe about the shading normal on wo's side and a von
+    Mises-Fisher lobe about the mirror direction of wo (most assets reflect most of their light near it: a
+    glossy boundary, a rough surface). Density >= SURFACE_CONT_MIX[0] / 4pi everywhere.
+
+    ``wo``, ``n`` [n,3]: unit world directions toward the viewer and shading normals, one row per hit."""
+
+    def __init__(self, wo: np.ndarray, n: np.ndarray) -> None:
+        self.n = np.where((dot(n, wo) < 0)[:, None], -n, n)
+        self.mirror = normalize(2.0 * dot(wo, self.n)[:, None] * self.n - wo)
+
+    def sample(self, rows: np.ndarray, u: np.ndarray) -> np.ndarray:
+        n, mirror = self.n[rows], self.mirror[rows]
+        return sample_mixture(SURFACE_CONT_MIX, u, (
+            lambda m, u2: square_to_uniform_sphere(u2),
+            lambda m, u2: around(n[m], square_to_cosine_hemisphere(u2)),
+            lambda m, u2: around(mirror[m], square_to_vmf(u2, MIRROR_KAPPA))))
+
+    def pdf(self, rows: np.ndarray, wi: np.ndarray) -> np.ndarray:
+        return (SURFACE_CONT_MIX[0] * INV_4PI + SURFACE_CONT_MIX[1] * np.maximum(dot(wi, self.n[rows]), 0.0) * INV_PI
+                + SURFACE_CONT_MIX[2] * vmf_pdf(dot(wi, self.mirror[rows]), MIRROR_KAPPA))
+
+
+def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=None):
     """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
-    blocks it; ``self_hit`` says whether the asset itself does) and one uniform-sphere continuation where
-    ``indirect``. ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s; they are aimed at
-    the light sample point (:func:`nasset_reference_renderer.shadow.aim_shadow`).
+    blocks it; ``self_hit`` says whether the asset itself does) and one continuation where ``indirect``.
+    ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s; they are aimed at
+    the light sample point (:func:`nasset_reference_renderer.shadow.aim_shadow`). ``continuation``: the
+    continuation's direction sampler, an object with ``sample(rows, u [m,3]) -> wi [m,3]`` and ``pdf(rows, wi)
+    -> [m]`` (world solid angle, > 0 everywhere; spec/renderer.md#neural-assets); None: the uniform sphere.
 
-    Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their wi).
+    Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their
+    wi, their pdf).
     """
     n = len(x)
     rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
@@ -42,22 +100,31 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin):
         h = integ.trace(origin, d_s, tmax, inst_s) if exempt is None else integ.trace(origin, d_s, tmax, inst_s, exempt)
         free = h.prim < 0  # no other object in the way
         s = s[free]
-        w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], INV_4PI), 1.0)
+        if light.delta:
+            w = np.ones(len(s))
+        else:
+            p_cont = INV_4PI if continuation is None else continuation.pdf(s, wi[s])
+            w = np.where(indirect[s], power_heuristic(pdf[s], p_cont), 1.0)
         rows_ray.append(s)
         rows_wi.append(wi[s])
         rows_w.append(li[s] * (w / pdf[s])[:, None])
         rows_self.append(h.self_hit[free])
         rows_kind.append(np.zeros(len(s), bool))
     cont = np.nonzero(indirect)[0]
-    wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
+    if continuation is None:
+        wi_c = square_to_uniform_sphere(rng.random((len(cont), 2)))
+        pdf_c = np.full(len(cont), INV_4PI)
+    else:
+        wi_c = continuation.sample(cont, rng.random((len(cont), 3)))
+        pdf_c = continuation.pdf(cont, wi_c)
     if len(cont) or not rows_ray:
         rows_ray.append(cont)
         rows_wi.append(wi_c)
-        rows_w.append(np.full((len(cont), 3), 1.0 / INV_4PI))
+        rows_w.append(np.repeat((1.0 / pdf_c)[:, None], 3, 1))
         rows_self.append(np.zeros(len(cont), bool))
         rows_kind.append(np.ones(len(cont), bool))
     cat = (lambda parts: parts[0]) if len(rows_ray) == 1 else np.concatenate  # one part: no copies
-    return cat(rows_ray), cat(rows_wi), cat(rows_w), cat(rows_self), cat(rows_kind), cont, wi_c
+    return cat(rows_ray), cat(rows_wi), cat(rows_w), cat(rows_self), cat(rows_kind), cont, wi_c, pdf_c
 
 
 @register_shader("rna", "surface")
@@ -94,7 +161,15 @@ class RnaSurfaceShader:
             ng_s, x_s, scale_s = (ng, x, scale) if len(s) == n else (ng[s], x[s], scale[s])
             return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
 
-        ray, wi_all, w_all, self_all, is_cont, cont, wi_c = rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin)
+        continuation = None  # the uniform sphere
+        if integ.s.rna_continuation == "lobes" and indirect.any():
+            n_world = np.empty_like(n_obj)
+            for i in unique(inst):  # normals map by the inverse transpose: rows times to_object's transpose
+                m = inst == i
+                n_world[m] = n_obj[m] @ integ.inst_to_obj[i][:3, :3].T
+            continuation = SurfaceContinuation(-d, normalize(n_world))
+        ray, wi_all, w_all, self_all, is_cont, cont, wi_c, pdf_c = rna_sample_rows(integ, x, inst, indirect, rng,
+                                                                                   shadow_origin, continuation)
         # one light sample per hit that nothing else blocks, no continuation: rows are the hits in order
         every = len(ray) == n and not len(cont) and len(integ.nee) == 1
         tu = ts = np.zeros((len(ray), 3), np.float32)
@@ -137,4 +212,4 @@ class RnaSurfaceShader:
         cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
         origin = x[cont] + ng[cont] * np.sign(dot(ng[cont], wi_c))[:, None] * scale[cont]
         mask = np.ones(len(cont), bool)
-        return ridx[cont], origin, wi_c, beta[cont], np.full(len(cont), INV_4PI), inst[cont], (mask, cu, cs)
+        return ridx[cont], origin, wi_c, beta[cont], pdf_c, inst[cont], (mask, cu, cs)

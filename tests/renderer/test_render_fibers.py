@@ -241,3 +241,47 @@ def test_ray_structures_built_once_per_scene(tmp_path):
     render(scene, RenderSettings(spp=1, width=4, height=4, backend="numpy", max_depth=1))
     (other, _), = scene.accel_cache.values()
     assert other is not acc and all(isinstance(p.backend, NumpyBackend) for p in other.parts)
+
+
+
+@pytest.mark.parametrize("transformed,continuation", [(False, "lobes"), (True, "lobes"), (True, "uniform")])
+def test_fiber_continuation_is_unbiased_under_a_constant_sky(tmp_path, transformed, continuation):
+    """A lone straight fiber of constant transport T under a constant sky of radiance Le: a covered pixel's
+    expectation is 4 pi T Le times its coverage, whatever density the continuation samples, as long as the MIS
+    weights of the sky's light samples and the continuation's weights use the same density. Compared with the
+    same scene at max_depth 1 (light samples alone, weight 1, no continuation: the same coverage). A tiny black
+    quad far away (solid angle < 1e-6 sr) turns continuations on. Under a rotated, non-uniformly scaled
+    instance the density is still per world steradian."""
+    asset = constant_rna_fiber_asset(tmp_path / "f.usda", [[[-1.0, 0.0, 0], [1.0, 0.0, 0]]], 0.3, unshadowed=UNSH, shadowed=SH)
+    le = 0.5
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.dome("Sky", le)
+    b.quad("Speck", (0, 0, -40), 0.01, normal=(0, 0, 1), diffuse=(0.0, 0.0, 0.0))
+    M = None
+    if transformed:
+        c, s = np.cos(0.5), np.sin(0.5)
+        M = np.eye(4)
+        M[:3, :3] = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]) @ np.diag([1.0, 1.0, 0.6])
+    b.asset("A", asset, M)
+    scene = b.write(tmp_path / "scene.usda")
+    full = render(_load(scene), RenderSettings(spp=128, width=24, height=24, seed=5, max_depth=3,
+                                               rna_continuation=continuation))
+    direct = render(_load(scene), RenderSettings(spp=128, width=24, height=24, seed=6, max_depth=1))
+    expected = 4 * np.pi * le * np.asarray(UNSH)
+    assert np.isfinite(full.image).all()
+    assert direct.image[..., 0].max() == pytest.approx(expected[0], rel=1e-6)  # a fully covered pixel, exactly
+    assert (direct.image[..., 0] > 0.99 * expected[0]).sum() >= 20
+    diff = full.image.sum((0, 1)) - direct.image.sum((0, 1))
+    se = np.sqrt(full.variance.sum((0, 1)) + direct.variance.sum((0, 1)))
+    assert np.all(np.abs(diff) < 4 * se), (diff / direct.image.sum((0, 1)), se / direct.image.sum((0, 1)))
+    assert np.all(se < 0.01 * direct.image.sum((0, 1)))  # the test can see a 4 % bias
+
+
+def test_rna_continuation_setting_is_checked(tmp_path):
+    asset = constant_rna_fiber_asset(tmp_path / "f.usda", [[[-1.0, 0.0, 0], [1.0, 0.0, 0]]], 0.3)
+    from nasset_sdk.errors import UsageError
+
+    with pytest.raises(UsageError, match="rna continuation must be one of"):
+        render(_load(_fiber_scene(tmp_path, asset, (0, 0, 1))), RenderSettings(spp=1, width=4, height=4,
+                                                                             rna_continuation="cosine"))

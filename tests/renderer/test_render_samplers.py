@@ -29,6 +29,63 @@ def test_uniform_sphere_and_cone():
     assert p > P_MIN and abs(integral - 1) < 2e-2
 
 
+@pytest.mark.parametrize("kappa", [0.3, 6.0, 60.0])
+def test_von_mises_fisher(kappa):
+    p, dof, integral = sphere_chi2(lambda u: sampling.square_to_vmf(u, kappa), lambda v: sampling.vmf_pdf(v[:, 2], kappa),
+                                   n_theta=30, n_phi=40, pdf_total=1.0)
+    _report(f"vmf kappa={kappa}", p, dof)
+    assert p > P_MIN and abs(integral - 1) < 2e-2
+
+
+@pytest.mark.parametrize("wo,t", [
+    ((0.3, 0.5, 0.81), (0.0, 1.0, 0.0)),  # general
+    ((0.0, 0.0, 1.0), (1.0, 0.0, 0.0)),  # wo perpendicular to the fiber: the band is the great circle
+    ((0.0, 0.96, 0.28), (0.0, 1.0, 0.0)),  # grazing: the band is clipped at the pole
+    ((0.0, 1.0, 0.0), (0.0, 1.0, 0.0)),  # wo along the fiber
+    ((0.6, 0.0, 0.8), (0.0, 0.0, 0.0)),  # no tangent (degenerate segment): a fixed axis, still a density
+])
+def test_fiber_continuation_mixture(wo, t):
+    from nasset_reference_renderer.shaders.rna_fiber import FiberContinuation
+
+    wo = sampling.normalize(np.array([wo], float))
+    fc = FiberContinuation(wo, np.array([t], float))
+    pick = np.random.default_rng(7)
+
+    def sample(u):
+        u3 = np.concatenate([u, pick.random((len(u), 1))], 1)
+        return fc.sample(np.zeros(len(u), np.int64), u3)
+
+    p, dof, integral = sphere_chi2(sample, lambda v: fc.pdf(np.zeros(len(v), np.int64), v), n_theta=30, n_phi=40,
+                                   pdf_total=1.0)
+    _report(f"fiber continuation wo={wo[0]}", p, dof)
+    assert p > P_MIN and abs(integral - 1) < 2e-2
+    v = fc.sample(np.zeros(1000, np.int64), pick.random((1000, 3)))
+    assert np.allclose(np.linalg.norm(v, axis=1), 1.0) and (fc.pdf(np.zeros(1000, np.int64), v) >= 0.4 / (4 * np.pi)).all()
+
+
+@pytest.mark.parametrize("wo,n", [
+    ((0.3, 0.5, 0.81), (0.0, 0.0, 1.0)),  # general
+    ((0.0, 0.6, -0.8), (0.0, 0.0, 1.0)),  # wo below the normal: the lobes flip to wo's side
+    ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),  # grazing: the mirror direction is wo's opposite along the surface
+    ((0.0, 0.0, 1.0), (0.0, 0.0, 1.0)),  # head-on: the mirror lobe and the cosine lobe share the axis
+])
+def test_surface_continuation_mixture(wo, n):
+    from nasset_reference_renderer.shaders.rna_surface import SurfaceContinuation
+
+    sc = SurfaceContinuation(sampling.normalize(np.array([wo], float)), np.array([n], float))
+    pick = np.random.default_rng(8)
+    rows = lambda k: np.zeros(k, np.int64)  # noqa: E731
+
+    def sample(u):
+        return sc.sample(rows(len(u)), np.concatenate([u, pick.random((len(u), 1))], 1))
+
+    p, dof, integral = sphere_chi2(sample, lambda v: sc.pdf(rows(len(v)), v), n_theta=30, n_phi=40, pdf_total=1.0)
+    _report(f"surface continuation wo={wo}", p, dof)
+    assert p > P_MIN and abs(integral - 1) < 2e-2
+    v = sc.sample(rows(1000), pick.random((1000, 3)))
+    assert np.allclose(np.linalg.norm(v, axis=1), 1.0) and (sc.pdf(rows(1000), v) >= 0.4 / (4 * np.pi)).all()
+
+
 @pytest.mark.parametrize("alpha,theta", [(0.3, 0.4), (0.7, 1.1), (0.15, 0.9)])
 def test_ggx_visible_normals(alpha, theta):
     wo = np.array([[np.sin(theta), 0.0, np.cos(theta)]])

@@ -107,8 +107,10 @@ def test_huge_radiance_stays_finite_in_every_file(cases, tmp_path):
 
 def test_assets_at_the_size_bounds_do_not_vanish(cases, tmp_path):
     """Validated extremes (diagonal 3e-8, coordinates 2.5e9) render like the unit asset: the studio frames the asset
-    and the rna transport sees object space through the encoding box, so the pictures agree. An asset 300 diagonals
-    off its origin is still drawn (its centre pixels are not the background)."""
+    and the rna transport sees object space through the encoding box, so the pictures agree within their noise
+    (the same random numbers do not give the same paths: a continuation lobe's tangent frame flips where a normal
+    crosses z = 0, and rounding decides on which side). An asset 300 diagonals off its origin is still drawn (its
+    centre pixels are not the background)."""
     from nasset_reference_renderer.film import read_exr
     from nasset_sdk.validate import validate_file
 
@@ -118,11 +120,16 @@ def test_assets_at_the_size_bounds_do_not_vanish(cases, tmp_path):
     imgs = {}
     for name, path in paths.items():
         assert validate_file(path, probe=False).ok
-        r = _render(path, tmp_path / f"{name}.exr", "--spp", 4)
+        r = _render(path, tmp_path / f"{name}.exr", "--spp", 16, "--variance", tmp_path / f"{name}_var.exr")
         assert r.returncode == 0, r.stderr
-        imgs[name] = read_exr(tmp_path / f"{name}.exr")
-    ref = imgs["unit"]
+        imgs[name] = read_exr(tmp_path / f"{name}.exr"), read_exr(tmp_path / f"{name}_var.exr")
+    ref, ref_var = imgs["unit"]
+    assert ref.mean() > 0.1
     for name in names[:2]:
-        assert np.abs(imgs[name] - ref).mean() < 0.02 * ref.mean(), name
-    centre = imgs["r9_geometry_offset_300"][6:10, 6:10]
-    assert (centre > 1.5 * imgs["r9_geometry_offset_300"][0, 0]).mean() > 0.5
+        img, var = imgs[name]
+        se = np.sqrt((var + ref_var).sum()) / img.size  # standard error of the difference of the image means
+        assert abs(img.mean() - ref.mean()) < 4 * se + 1e-3 * ref.mean(), (name, img.mean(), ref.mean(), se)
+        z = np.abs(img - ref) / np.sqrt(var + ref_var + 1e-12)
+        assert (z > 5).mean() < 0.02, name
+    centre = imgs["r9_geometry_offset_300"][0][6:10, 6:10]
+    assert (centre > 1.5 * imgs["r9_geometry_offset_300"][0][0, 0]).mean() > 0.5
