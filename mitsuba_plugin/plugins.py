@@ -9,8 +9,9 @@
   asset instance, applies spec/renderer.md#neural-assets: object-space inputs, a light sample whose
   shadow ray ignores the instance and picks the shadowed branch when the instance lies on it,
   ``w_light = power(p_light, p_A)``, and a continuation of weight T / p_A that ignores the instance, drawn
-  by the asset technique: the uniform world sphere (p_A = 1/4pi; rna, neupress without ``sampling``) or
-  the kind's object-space lobe mapped to world, p_A = pdf_obj J (neupress, spec/renderer.md#neupress).
+  by the asset technique: the kind's object-space sampler mapped to world, p_A = pdf_obj J (rna: the
+  continuation mixture of :mod:`.lobes`; neupress: its Gaussian lobe, spec/renderer.md#neupress), or the
+  uniform world sphere (p_A = 1/4pi; neupress without ``sampling``, and every asset with ``lobe`` false).
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
   of that segment and its neighbours do not count as crossing the instance. 8dna assets
   (spec/renderer.md#8dna) take their own light samples (at x_o and at u_i) and continuation from
@@ -196,7 +197,7 @@ def register(mi) -> None:
                 L[on_plain & active_em] += beta * dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, pdf)) * val * em_weight
 
                 # asset vertex: object-space inputs, both light sample and continuation transports; the
-                # continuation from the asset technique (uniform world sphere unless the kind has a lobe)
+                # continuation from the asset technique (uniform world sphere unless the kind has a sampler)
                 u_c = sampler.next_2d()
                 wi_c = mi.warp.square_to_uniform_sphere(u_c)
                 p_c = mi.Float(1.0 / FOUR_PI)

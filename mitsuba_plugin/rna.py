@@ -179,5 +179,9 @@ class RnaJit:
         return self.mi.Color3f(y[0], y[1], y[2]), self.mi.Color3f(y[3], y[4], y[5])
 
     def technique(self, x, n, wo):
-        """None: continuations leave an rna asset uniformly on the world sphere (spec/renderer.md#neural-assets item 4)."""
-        return None
+        """The continuation mixture of spec/renderer.md#neural-assets item 4 at these hits (:class:`.lobes.RnaLobes`;
+        frame n: the normal, or the tangent of a fiber); ``nasset_path`` with ``lobe`` false samples the uniform
+        world sphere instead."""
+        from .lobes import RnaLobes
+
+        return RnaLobes(self.mi, self.fiber, n, wo)
