@@ -40,6 +40,7 @@ class RnaLobes:
         import drjit as dr
 
         self.mi, self.dr, self.fiber = mi, dr, fiber
+        frame = dr.select(dr.squared_norm(frame) > 0.5, frame, wo)  # a degenerate frame: lobes about wo
         self.weights = CONT_MIX if fiber else SURFACE_CONT_MIX
         if fiber:
             self.axis = mi.Vector3f(frame)

@@ -58,6 +58,7 @@ class SurfaceContinuation:
     ``wo``, ``n`` [n,3]: unit world directions toward the viewer and shading normals, one row per hit."""
 
     def __init__(self, wo: np.ndarray, n: np.ndarray) -> None:
+        n = np.where((dot(n, n) > 0.5)[:, None], n, wo)  # no normal (a degenerate one): lobes about wo
         self.n = np.where((dot(n, wo) < 0)[:, None], -n, n)
         self.mirror = normalize(2.0 * dot(wo, self.n)[:, None] * self.n - wo)
 

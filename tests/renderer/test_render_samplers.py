@@ -68,6 +68,7 @@ def test_fiber_continuation_mixture(wo, t):
     ((0.0, 0.6, -0.8), (0.0, 0.0, 1.0)),  # wo below the normal: the lobes flip to wo's side
     ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),  # grazing: the mirror direction is wo's opposite along the surface
     ((0.0, 0.0, 1.0), (0.0, 0.0, 1.0)),  # head-on: the mirror lobe and the cosine lobe share the axis
+    ((0.3, 0.5, 0.81), (0.0, 0.0, 0.0)),  # no normal: the lobes turn about wo, still a density
 ])
 def test_surface_continuation_mixture(wo, n):
     from nasset_reference_renderer.shaders.rna_surface import SurfaceContinuation
