@@ -18,7 +18,10 @@ shared machine only ever add time); the MSE is that of the first. Reported: the 
 **bias floor** (its last point's MSE minus its own variance, measured from a second render at that spp),
 the **equal-error speedup** at each asset point and at the bias floor (``common.equal_error_speedup``),
 and the **per-sample cost ratio** (asset time per spp / path tracing time per spp, at the largest spp
-both ran). Plot (PNG) + JSON in the output folder.
+both ran). The MSE, floor and speedups are given twice: over the whole image, and over the **object's
+pixels** (mask from Mitsuba's camera rays on the replaced shapes, ``accuracy.object_mask``, half coverage),
+where the asset does its work; the whole image adds the rest of the scene's noise, which both renders
+share. Plot (PNG) + JSON in the output folder.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.accuracy import mitsuba_halves, sensor_for
+from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
 from nasset_sdk.errors import UsageError, error
 
@@ -95,6 +98,8 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     t_ref = time.perf_counter() - t
     ref = 0.5 * (a + b)
     var_ref = float(np.mean((a - b) ** 2) / 4.0)
+    mask = object_mask(mi, original, sensor, [i for k in replace for i in str(k).split(",")], hw) >= 0.5
+    var_ref_obj = float(np.mean(((a - b) ** 2)[mask]) / 4.0) if mask.any() else 0.0
 
     def points(render, spps, base, name):
         pts = []
@@ -107,8 +112,10 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
                 times_k.append(time.perf_counter() - t)
                 img = out if img is None else img
             dt = min(times_k)  # the least disturbed of the repeats (shared machines)
-            mse_raw = float(np.mean(np.nan_to_num(img - ref) ** 2))
-            pts.append({"spp": int(spp), "time_s": dt, "mse": mse_raw - var_ref, "mse_raw": mse_raw, "image": img})
+            sq = np.nan_to_num(img - ref) ** 2
+            mse_raw = float(np.mean(sq))
+            pts.append({"spp": int(spp), "time_s": dt, "mse": mse_raw - var_ref, "mse_raw": mse_raw, "image": img,
+                        "mse_object": float(np.mean(sq[mask])) - var_ref_obj if mask.any() else None})
             say(f"  {name} {spp:5d} spp  {dt:8.3f}s  MSE {mse_raw - var_ref:.3e}")
         return pts
 
@@ -119,6 +126,16 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     var_last = float(np.mean((last["image"] - second) ** 2) / 2.0)  # one render's pixel variance, from two seeds
     last["variance"] = var_last
     floor = last["mse"] - var_last
+    obj = None
+    if mask.any():
+        floor_obj = last["mse_object"] - float(np.mean(((last["image"] - second) ** 2)[mask]) / 2.0)
+        on = [[{"spp": p["spp"], "time_s": p["time_s"], "mse": p["mse_object"]} for p in pts] for pts in (mi_points, nr_points)]
+        speed_obj = equal_error_speedup(*on)
+        best_obj = max((s for s in speed_obj if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)
+        obj = {"pixels": int(mask.sum()), "mask": "mitsuba camera rays, first hit on the replaced shapes, >= half coverage",
+               "reference_noise_variance": var_ref_obj, "bias_floor_mse": floor_obj,
+               "bias_floor_relative_rmse": math.sqrt(max(floor_obj, 0.0)) / max(float(np.mean(ref[mask])), 1e-12),
+               "equal_error": speed_obj, "best_equal_error_speedup": None if best_obj is None else best_obj["speedup"]}
     for p in mi_points + nr_points:
         p.pop("image")
     speed = equal_error_speedup(mi_points, nr_points)
@@ -149,6 +166,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
         "equal_error": speed,
         "best_equal_error_speedup": None if best is None else best["speedup"],
         "per_sample_cost": cost,
+        "object": obj,  # the same over the object's pixels (None when the replaced shapes are not in view)
         "timing_includes": f"one mi.render call + image read-back, after a warm-up render at the same spp (no scene load, no JIT "
                            f"compile); the least of {max(1, int(repeats))} repeats",
         "machine": machine(),
@@ -180,6 +198,14 @@ def summary_text(r: dict) -> str:
     for s in r["equal_error"]:
         lines.append(f"  asset {s['spp']:4d} spp: " + ("error within the reference's noise" if s["speedup"] is None else
                      f"path tracing needs {s['mitsuba_spp']:.1f} spp / {s['mitsuba_time_s']:.3f}s -> speedup {s['speedup']:.2f}x"))
+    o = r.get("object")
+    if o:
+        lines.append(f"over the object's {o['pixels']} pixels (reference noise variance {o['reference_noise_variance']:.2e} "
+                     f"subtracted): asset bias floor MSE {o['bias_floor_mse']:.3e} (relative RMSE {o['bias_floor_relative_rmse']:.1%})")
+        for s in o["equal_error"]:
+            lines.append(f"  asset {s['spp']:4d} spp: object MSE {s['mse']:.3e}, " + (
+                "within the reference's noise" if s["speedup"] is None else
+                f"path tracing needs {s['mitsuba_spp']:.1f} spp / {s['mitsuba_time_s']:.3f}s -> speedup {s['speedup']:.2f}x"))
     c = r["per_sample_cost"]
     if c:
         lines.append(f"per-sample cost at {c['spp']} spp: asset {c['asset_s']:.3f}s / path tracing {c['path_tracing_s']:.3f}s = {c['ratio']:.2f}")

@@ -46,6 +46,11 @@ def test_equal_engine_smoke(tmp_path, rna_asset_path, capsys):
     # the random asset is not the ball: its render converges elsewhere, a floor well above the reference's noise
     assert r["bias_floor_mse"] > 10 * var
     assert (tmp_path / "out" / "error_vs_time.png").is_file() and (tmp_path / "out" / "error_vs_time.json").is_file()
+    # the same over the ball's pixels: Mitsuba's own mask (a sphere of radius 0.5 at distance 3.16, fov 40: about
+    # 15 % of the frame), and the floor there is the random asset's, larger per pixel than over the whole image
+    o = r["object"]
+    assert 0.05 * 256 < o["pixels"] < 0.25 * 256
+    assert len(o["equal_error"]) == 2 and o["bias_floor_mse"] > r["bias_floor_mse"]
 
 
 def test_equal_engine_unknown_shape(tmp_path, rna_asset_path):
