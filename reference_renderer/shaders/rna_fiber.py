@@ -132,8 +132,7 @@ class FiberContinuation:
 
     def __init__(self, wo: np.ndarray, t: np.ndarray) -> None:
         self.fwd = -wo
-        ok = dot(t, t) > 0.5
-        self.t = np.where(ok[:, None], t, np.array([0.0, 0.0, 1.0]))
+        self.t = np.where((dot(t, t) > 0.5)[:, None], t, wo)  # no tangent (a degenerate one): the band about wo
         s_o = np.clip(dot(wo, self.t), -1.0, 1.0)
         self.lo = np.maximum(-1.0, -s_o - CONE_HALF_WIDTH)
         self.hi = np.minimum(1.0, -s_o + CONE_HALF_WIDTH)  # hi - lo >= CONE_HALF_WIDTH
@@ -200,7 +199,7 @@ class FiberShading:
         indirect = integ.indirect[inst]
         # rays leave a fiber hit from the hit point itself; its own and neighbouring segments are exempt
         continuation = None  # the uniform sphere
-        if self.lobes:
+        if self.lobes and indirect.any():
             t_world = np.empty_like(t_obj)
             for i in np.unique(inst):  # one matrix product per instance (as integ.to_object)
                 m = inst == i
