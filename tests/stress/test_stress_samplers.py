@@ -208,3 +208,34 @@ def test_dome_all_dark_image(counts):
     wi, dist, li, pdf = light.sample(np.zeros((64, 3)), u)
     counts.add("lights.DomeLight.sample", 64)
     assert light.power_is_zero() and finite_all(wi, li, pdf) and (li == 0).all()
+
+
+@FAST
+@given(u=uniforms, kappa=st.one_of(st.sampled_from([1e-8, 1e-3, 6.0, 700.0, 1e4]), st.floats(1e-6, 1e3)))
+def test_von_mises_fisher(counts, u, kappa):
+    w = RS.square_to_vmf(u, kappa)
+    p = RS.vmf_pdf(w[:, 2], kappa)
+    counts.add("sampling.square_to_vmf", len(u))
+    assert finite_all(w, p) and _unit(w).all() and (p >= 0).all()
+
+
+_axes = [(0, 0, 1), (1, 0, 0), (0, 0, -1), (0, 0, 0), (1e-300, 0, 1), (1, 1, TINY)]
+
+
+@FAST
+@given(wo=up_dirs, u=uniforms, pick=st.floats(0, 1), fiber=st.booleans(), axis=st.sampled_from(_axes))
+def test_rna_continuation_mixtures(counts, wo, u, pick, fiber, axis):
+    """The continuation mixtures at normal incidence, grazing, wo along the fiber and a missing normal or
+    tangent: unit directions, finite densities, never below the uniform part's 0.4 / 4 pi."""
+    from nasset_reference_renderer.shaders.rna_fiber import FiberContinuation
+    from nasset_reference_renderer.shaders.rna_surface import SurfaceContinuation
+
+    m = min(len(wo), len(u))
+    wo, u = wo[:m], u[:m]
+    frame = RS.normalize(np.repeat(np.array([axis], np.float64), m, 0))  # a zero axis stays zero
+    cont = (FiberContinuation if fiber else SurfaceContinuation)(wo, frame)
+    rows = np.arange(m)
+    w = cont.sample(rows, np.concatenate([u, np.full((m, 1), pick)], 1))
+    p = cont.pdf(rows, w)
+    counts.add("rna_fiber.FiberContinuation" if fiber else "rna_surface.SurfaceContinuation", m)
+    assert finite_all(w, p) and _unit(w).all() and (p >= 0.4 / (4 * np.pi) - 1e-12).all()
