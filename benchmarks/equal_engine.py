@@ -123,12 +123,13 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     nr_points = points(na, nr_spp, 5000, "asset       ")
     last = nr_points[-1]
     second = na(last["spp"], 7777)
-    var_last = float(np.mean((last["image"] - second) ** 2) / 2.0)  # one render's pixel variance, from two seeds
+    d2 = (last["image"] - second) ** 2
+    var_last = float(np.mean(d2) / 2.0)  # one render's pixel variance, from two seeds
     last["variance"] = var_last
     floor = last["mse"] - var_last
     obj = None
     if mask.any():
-        floor_obj = last["mse_object"] - float(np.mean(((last["image"] - second) ** 2)[mask]) / 2.0)
+        floor_obj = last["mse_object"] - float(np.mean(d2[mask]) / 2.0)
         on = [[{"spp": p["spp"], "time_s": p["time_s"], "mse": p["mse_object"]} for p in pts] for pts in (mi_points, nr_points)]
         speed_obj = equal_error_speedup(*on)
         best_obj = max((s for s in speed_obj if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)

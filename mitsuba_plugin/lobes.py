@@ -18,19 +18,6 @@ from nasset_reference_renderer.shaders.rna_surface import MIRROR_KAPPA, SURFACE_
 INV_4PI = 0.25 / math.pi
 
 
-def _vmf_pdf(dr, cos, kappa: float):
-    """von Mises-Fisher density [Float, 1/sr] at cosine ``cos`` to its axis."""
-    return kappa / (2.0 * math.pi * -math.expm1(-2.0 * kappa)) * dr.exp(kappa * (dr.clip(cos, -1.0, 1.0) - 1.0))
-
-
-def _vmf_local(mi, dr, u, kappa: float):
-    """A direction about +Z from u [Point2f] with density :func:`_vmf_pdf` (inverse CDF without cancellation)."""
-    z = dr.clip(1.0 + dr.log(dr.maximum(u.x + (1.0 - u.x) * math.exp(-2.0 * kappa), 1e-30)) / kappa, -1.0, 1.0)
-    r = dr.safe_sqrt(1.0 - z * z)
-    s, c = dr.sincos(2.0 * math.pi * u.y)
-    return mi.Vector3f(r * c, r * s, z)
-
-
 class RnaLobes:
     """The mixture at rna hits, object space: ``frame`` the normal (surface) or tangent (fiber) [Vector3f,
     unit], ``wo`` [Vector3f, unit] toward the viewer. ``sample(u) -> (w, pdf)`` from u [Point2f]: u.x picks
@@ -62,7 +49,7 @@ class RnaLobes:
         ux = dr.select(pick2, (u.x - w0 - w1) / (1.0 - w0 - w1), dr.select(pick1, (u.x - w0) / w1, u.x / w0))
         v = mi.Point2f(dr.clip(ux, 0.0, 1.0 - 1e-7), u.y)
         uniform = mi.warp.square_to_uniform_sphere(v)
-        toward_lobe = mi.Frame3f(self.lobe).to_world(_vmf_local(mi, dr, v, self.kappa))
+        toward_lobe = mi.Frame3f(self.lobe).to_world(mi.warp.square_to_von_mises_fisher(v, self.kappa))
         if self.fiber:  # the band: uniform in z = sin(theta) about the tangent over [lo, hi], and in azimuth
             z = self.lo + v.x * (self.hi - self.lo)
             r = dr.safe_sqrt(1.0 - z * z)
@@ -75,12 +62,12 @@ class RnaLobes:
         return w, self.pdf(w)
 
     def pdf(self, w):
-        dr = self.dr
+        mi, dr = self.mi, self.dr
         w = dr.normalize(w)
         w0, w1, w2 = self.weights
+        lobe = mi.warp.square_to_von_mises_fisher_pdf(mi.Frame3f(self.lobe).to_local(w), self.kappa)
         if self.fiber:
             z = dr.dot(w, self.axis)
             band = dr.select((z >= self.lo) & (z <= self.hi), 1.0 / (2.0 * math.pi * (self.hi - self.lo)), 0.0)
-            return w0 * INV_4PI + w1 * _vmf_pdf(dr, dr.dot(w, self.lobe), self.kappa) + w2 * band
-        return (w0 * INV_4PI + w1 * dr.maximum(dr.dot(w, self.axis), 0.0) * (1.0 / math.pi)
-                + w2 * _vmf_pdf(dr, dr.dot(w, self.lobe), self.kappa))
+            return w0 * INV_4PI + w1 * lobe + w2 * band
+        return w0 * INV_4PI + w1 * dr.maximum(dr.dot(w, self.axis), 0.0) * (1.0 / math.pi) + w2 * lobe

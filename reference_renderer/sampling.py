@@ -136,6 +136,18 @@ def vmf_pdf(cos, kappa):
     return kappa / (2.0 * np.pi * -np.expm1(-2.0 * kappa)) * np.exp(kappa * (np.clip(cos, -1.0, 1.0) - 1.0))
 
 
+def sample_mixture(weights, u, lobes) -> np.ndarray:
+    """Unit directions [m,3] from the mixture whose component k (picked by u[:,2] against ``weights``) maps
+    u[:,:2] of its rows through ``lobes[k](rows_mask, u2)`` -> [r,3]; lobe 0 is the uniform sphere."""
+    wi = np.empty((len(u), 3))
+    pick = np.searchsorted(np.cumsum(weights)[:-1], u[:, 2], side="right")
+    for k, lobe in enumerate(lobes):
+        m = pick == k
+        if m.any():
+            wi[m] = lobe(m, u[m, :2])
+    return normalize(wi)
+
+
 # -- MIS --------------------------------------------------------------------------------------
 def power_heuristic(a, b):
     """w = a² / (a² + b²); a is the pdf of the strategy that produced the sample."""

@@ -68,6 +68,7 @@ class Frames:
         self.to_world = np.array([i.to_world for i in insts]) if insts else np.zeros((0, 4, 4))
         self.to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
         self.det_obj = np.abs(np.linalg.det(self.to_obj[:, :3, :3])) if insts else np.zeros(0)
+        self.to_obj_t = self.to_obj.transpose(0, 2, 1)  # normals map by the inverse transpose
 
     def _apply(self, mats, v, inst, point):
         if len(inst) and (inst == inst[0]).all():  # one instance (the common case): no row masks
@@ -85,6 +86,10 @@ class Frames:
 
     def dir_to_world(self, v, inst):
         return normalize(self._apply(self.to_world, v, inst, False))
+
+    def normal_to_world(self, n_obj, inst):
+        """Unit world normals of object-space normals (rows times to_object's transpose)."""
+        return normalize(self._apply(self.to_obj_t, n_obj, inst, False))
 
     def dir_to_object(self, w_world, inst):
         """(unit object-space direction, J = d omega_obj / d omega_world) of unit world directions.

@@ -21,9 +21,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sampling import INV_4PI, around, cross3, dot, normalize, square_to_uniform_sphere, square_to_vmf, vmf_pdf
+from ..sampling import (
+    INV_4PI,
+    around,
+    cross3,
+    dot,
+    normalize,
+    sample_mixture,
+    square_to_uniform_sphere,
+    square_to_vmf,
+    vmf_pdf,
+)
+from .common import Frames
 from .registry import register_shader
-from .rna_surface import rna_sample_rows, sample_mixture
+from .rna_surface import rna_sample_rows
 
 #: sides of the prism built around each curve segment
 TUBE_SIDES = 8
@@ -168,7 +179,7 @@ class FiberShading:
         self.tubes = [data.fiber for data in scene.assets]
         self.inst_first_tri = np.array([i.first_tri for i in scene.instances], np.int64)
         self.lobes = integ.s.rna_continuation == "lobes"  # else the uniform sphere (RenderSettings)
-        self.inst_to_world = np.array([i.to_world[:3, :3] for i in scene.instances]) if scene.instances else np.zeros((0, 3, 3))
+        self.frames = Frames(scene)
 
     def hit_frame(self, x_obj, wo_obj, prim, asset_id):
         """(t, h, segment, exempt [n,2] world triangle ranges) of fiber hits on triangles ``prim``."""
@@ -200,11 +211,7 @@ class FiberShading:
         # rays leave a fiber hit from the hit point itself; its own and neighbouring segments are exempt
         continuation = None  # the uniform sphere
         if self.lobes and indirect.any():
-            t_world = np.empty_like(t_obj)
-            for i in np.unique(inst):  # one matrix product per instance (as integ.to_object)
-                m = inst == i
-                t_world[m] = t_obj[m] @ self.inst_to_world[i]
-            continuation = FiberContinuation(-d, normalize(t_world))
+            continuation = FiberContinuation(-d, self.frames.dir_to_world(t_obj, inst))
         ray, wi_all, w_all, self_all, is_cont, cont, wi_c, pdf_c = rna_sample_rows(
             integ, x, inst, indirect, rng, lambda s, wi_s: (x[s], exempt[s]), continuation)
         tu = np.zeros((len(ray), 3))

@@ -19,13 +19,14 @@ from ..sampling import (
     dot,
     normalize,
     power_heuristic,
+    sample_mixture,
     square_to_cosine_hemisphere,
     square_to_uniform_sphere,
     square_to_vmf,
     vmf_pdf,
 )
 from ..shadow import aim_shadow
-from .common import max3, unique
+from .common import Frames, max3, unique
 from .registry import register_shader
 
 #: the surface continuation's mixture weights: uniform sphere, cosine lobe about the normal on wo's side, mirror
@@ -35,18 +36,6 @@ from .registry import register_shader
 SURFACE_CONT_MIX = (0.4, 0.2, 0.4)
 #: the mirror lobe's von Mises-Fisher concentration
 MIRROR_KAPPA = 6.0
-
-
-def sample_mixture(weights, u, lobes) -> np.ndarray:
-    """Unit directions [m,3] from the mixture whose component k (picked by u[:,2] against ``weights``) maps
-    u[:,:2] of its rows through ``lobes[k](rows_mask, u2)`` -> [r,3]; lobe 0 is the uniform sphere."""
-    wi = np.empty((len(u), 3))
-    pick = np.searchsorted(np.cumsum(weights)[:-1], u[:, 2], side="right")
-    for k, lobe in enumerate(lobes):
-        m = pick == k
-        if m.any():
-            wi[m] = lobe(m, u[m, :2])
-    return normalize(wi)
 
 
 class SurfaceContinuation:
@@ -132,6 +121,8 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=N
 class RnaSurfaceShader:
     def __init__(self, integ) -> None:
         self.integ = integ
+        self.frames = Frames(integ.scene)
+        self.lobes = integ.s.rna_continuation == "lobes"  # else the uniform sphere (RenderSettings)
 
     def vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng, asset: int | None = None, mode: dict | None = None):
         integ = self.integ
@@ -163,12 +154,8 @@ class RnaSurfaceShader:
             return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
 
         continuation = None  # the uniform sphere
-        if integ.s.rna_continuation == "lobes" and indirect.any():
-            n_world = np.empty_like(n_obj)
-            for i in unique(inst):  # normals map by the inverse transpose: rows times to_object's transpose
-                m = inst == i
-                n_world[m] = n_obj[m] @ integ.inst_to_obj[i][:3, :3].T
-            continuation = SurfaceContinuation(-d, normalize(n_world))
+        if self.lobes and indirect.any():
+            continuation = SurfaceContinuation(-d, self.frames.normal_to_world(n_obj, inst))
         ray, wi_all, w_all, self_all, is_cont, cont, wi_c, pdf_c = rna_sample_rows(integ, x, inst, indirect, rng,
                                                                                    shadow_origin, continuation)
         # one light sample per hit that nothing else blocks, no continuation: rows are the hits in order
