@@ -17,7 +17,7 @@ def add_args(p) -> None:
     p.add_argument("-o", "--output", required=True, help="output asset .usdc")
     p.add_argument("--example", nargs="?", const="default", default=None, metavar="NAME",
                    help="bake a built-in example scene (no files needed); NAME picks one where a kind has several "
-                        "(rna: default, high-albedo, blender-surface, blender-hair, blender-hair-dense; neupress: default, high-albedo; "
+                        "(rna: default, high-albedo, hair-dense, blender-surface, blender-hair, blender-hair-dense; neupress: default, high-albedo; "
                         "8dna: default, heterogeneous)")
     p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
     p.add_argument("--views", type=int, default=None, help="training views (held-out views: views/8)")

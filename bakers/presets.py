@@ -37,6 +37,9 @@ RNA_BLENDER_FIBER_DATA = {"small": dict(views=400)}
 #: 96.8 / 98.2 / 97.7 % and 27.2 dB against 95.0 / 96.7 / 98.2 % and 26.4 dB for 4 x 64, same training time
 #: (spec/accuracy.md#dense-hair)
 RNA_BLENDER_FIBER_TRAIN = {"small": dict(hidden=128)}
+#: what Mitsuba fiber bakes (curve shapes) change in RNA_TRAIN: the Blender fibers' wider decoder; their views keep
+#: RNA_MITSUBA_DATA, whose per-pixel lights already give every pixel its own light direction
+RNA_MITSUBA_FIBER_TRAIN = RNA_BLENDER_FIBER_TRAIN
 
 #: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
 NEUPRESS_MITSUBA_DATA = {

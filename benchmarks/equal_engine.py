@@ -130,11 +130,14 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     obj = None
     if mask.any():
         floor_obj = last["mse_object"] - float(np.mean(d2[mask]) / 2.0)
+        mean_asset = 0.5 * (last["image"] + second)[mask].mean(0)  # [3], two renders at the last spp
+        energy = mean_asset / np.maximum(ref[mask].mean(0), 1e-12)
         on = [[{"spp": p["spp"], "time_s": p["time_s"], "mse": p["mse_object"]} for p in pts] for pts in (mi_points, nr_points)]
         speed_obj = equal_error_speedup(*on)
         best_obj = max((s for s in speed_obj if s["speedup"] is not None), key=lambda s: s["speedup"], default=None)
         obj = {"pixels": int(mask.sum()), "mask": "mitsuba camera rays, first hit on the replaced shapes, >= half coverage",
                "reference_noise_variance": var_ref_obj, "bias_floor_mse": floor_obj,
+               "energy_ratio": [float(e) for e in energy],  # asset / reference over the object, at the last spp
                "bias_floor_relative_rmse": math.sqrt(max(floor_obj, 0.0)) / max(float(np.mean(ref[mask])), 1e-12),
                "equal_error": speed_obj, "best_equal_error_speedup": None if best_obj is None else best_obj["speedup"]}
     for p in mi_points + nr_points:
@@ -203,6 +206,8 @@ def summary_text(r: dict) -> str:
     if o:
         lines.append(f"over the object's {o['pixels']} pixels (reference noise variance {o['reference_noise_variance']:.2e} "
                      f"subtracted): asset bias floor MSE {o['bias_floor_mse']:.3e} (relative RMSE {o['bias_floor_relative_rmse']:.1%})")
+        if o.get("energy_ratio"):
+            lines.append("  asset energy / reference over the object (R/G/B): " + " / ".join(f"{100 * e:.1f} %" for e in o["energy_ratio"]))
         for s in o["equal_error"]:
             lines.append(f"  asset {s['spp']:4d} spp: object MSE {s['mse']:.3e}, " + (
                 "within the reference's noise" if s["speedup"] is None else

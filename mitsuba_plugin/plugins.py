@@ -43,6 +43,8 @@ FOUR_PI = 4.0 * math.pi
 #: against rays that make no progress (spec/renderer.md#fibers: no crossing limit; in rna_fiber_dense
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
+#: scenes with at most this many fiber instances trace rays leaving one on split structures (:func:`split_scenes`)
+MAX_SPLIT_INSTANCES = 8
 
 #: kind -> its Dr.Jit evaluator class (each has ``kind``, ``fiber``, ``geometry``). rna and neupress:
 #: ``transport(x, n, wo, wi, h) -> (unshadowed, shadowed)`` Color3f (1/sr) and ``technique(x, n, wo) -> None``
@@ -135,6 +137,7 @@ def register(mi) -> None:
         def sample(self, scene, sampler, ray, medium=None, active=True):
             import mitsuba as mi  # dr.syntax recompiles this method without register()'s closure
             assets, lut, tab = self.instances(scene)
+            split_scenes(mi, scene)  # built here, outside the symbolic loop whose rays use them
             prt = prt_mode.tables(mi, scene, assets, tab) if self.prt else None  # PRT mode: neupress by .prt
             shaded = _by_kind(assets, "rna") + ([] if self.prt else _by_kind(assets, "neupress"))  # transport + technique
             eight = _by_kind(assets, "8dna")
@@ -262,11 +265,57 @@ def _by_kind(assets, kind):
     return [(a, asset) for a, asset in enumerate(assets) if asset.kind == kind]
 
 
-@dr.syntax
 def _trace(mi, scene, ray, ignore, lo, hi, active):
     """(first intersection of ``ray`` not on shape ``ignore`` [registry id, 0: none], whether the ray crossed
     a triangle of that shape outside its exempt range [lo, hi) of primitive indices (a fiber hit's own
-    and neighbouring segments, spec/renderer.md#fibers; lo = hi: none exempt)). No limit on the number
+    and neighbouring segments, spec/renderer.md#fibers; lo = hi: none exempt)).
+
+    A ray leaving a fiber instance (rays through hair cross tens of its prisms) costs O(1) queries on the
+    scene's split structures (:func:`split_scenes`), as in the reference renderer (spec/renderer.md#fibers):
+    its closest hit is a query on the scene of every other shape, its branch a query on the instance's own
+    scene up to that hit, stepping only over exempt triangles. Every other ray is traced on the whole scene,
+    re-tracing past each surface of the instance it leaves (a surface asset's rays cross it once or twice:
+    measured 5 % faster on the high-albedo pebble than two structures)."""
+    import drjit as dr
+
+    split = split_scenes(mi, scene) or []
+    on_split = mi.Bool(False)
+    for rid, _, _ in split:
+        on_split |= ignore == rid
+    si, passed = _trace_skipping(mi, scene, ray, ignore, lo, hi, active & ~on_split)
+    for rid, others, own in split:
+        mine = active & (ignore == rid)
+        si_j = others.ray_intersect(ray, mine)
+        si = dr.select(mine, si_j, si)
+        passed |= _branch(mi, own, ray, dr.select(si_j.is_valid(), si_j.t, ray.maxt), lo, hi, mine)
+    return si, passed
+
+
+@dr.syntax
+def _branch(mi, own, ray, tmax, lo, hi, active):
+    """Whether ``ray`` crosses a triangle of the instance's own scene ``own`` outside [lo, hi) before ``tmax``."""
+    r = mi.Ray3f(ray)
+    r.maxt = tmax
+    s = own.ray_intersect(r, active)
+    exempt = active & s.is_valid() & (s.prim_index >= lo) & (s.prim_index < hi)
+    passed = active & s.is_valid() & ~exempt
+    i = mi.UInt32(0)
+    while dr.hint(exempt & (i < MAX_SKIPS), max_iterations=-1, label="nasset_branch"):
+        left = r.maxt - s.t
+        r = s.spawn_ray(r.d)
+        r.maxt = left
+        s = own.ray_intersect(r, exempt)
+        hit = exempt & s.is_valid()
+        is_exempt = (s.prim_index >= lo) & (s.prim_index < hi)
+        passed |= hit & ~is_exempt
+        exempt = hit & is_exempt
+        i += 1
+    return passed
+
+
+@dr.syntax
+def _trace_skipping(mi, scene, ray, ignore, lo, hi, active):
+    """:func:`_trace` on the whole scene: re-trace past every hit on shape ``ignore``. No limit on the number
     of crossings other than :data:`MAX_SKIPS` against rays that make no progress."""
     si = scene.ray_intersect(ray, active)
     skip = active & si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore) & (ignore != 0)
@@ -282,6 +331,38 @@ def _trace(mi, scene, ray, ignore, lo, hi, active):
         passed |= skip & ((si.prim_index < lo) | (si.prim_index >= hi))
         i += 1
     return si, passed
+
+
+#: per scene (keyed by id, checked against its shapes): [(registry id, scene without instance j, instance j alone)]
+_SPLIT: dict[int, tuple] = {}
+
+
+def split_scenes(mi, scene):
+    """Per fiber-asset instance j of ``scene``: (its registry id, a Mitsuba scene of every other shape, a scene
+    of instance j alone), built at the first render of the scene and kept (the shapes are shared, the
+    acceleration structures are new: the instances' triangles are in two structures). None for a scene
+    without fiber instances or with more than :data:`MAX_SPLIT_INSTANCES` (the structures grow with their square)."""
+    shapes = list(scene.shapes())
+    rid = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]) for sh in shapes]
+    key = (id(scene), mi.variant())
+    hit = _SPLIT.get(key)
+    if hit is not None and hit[0] == rid:
+        return hit[1]
+    fibers = [j for j, sh in enumerate(shapes)
+              if type(sh.bsdf()).__name__ == "NassetBSDF" and getattr(sh.bsdf().asset, "fiber", False)]
+    split = None
+    if 0 < len(fibers) <= MAX_SPLIT_INSTANCES:
+        # keyed by their own ids: Mitsuba renames an object after the key it is loaded under
+        keys = [sh.id() or f"_nasset_shape_{i}" for i, sh in enumerate(shapes)]
+        split = []
+        for j in fibers:
+            others = mi.load_dict({"type": "scene", **{keys[i]: sh for i, sh in enumerate(shapes) if i != j}})
+            own = mi.load_dict({"type": "scene", keys[j]: shapes[j]})
+            split.append((rid[j], others, own))
+    if len(_SPLIT) > 16:  # scenes of earlier renders: their structures are freed with them
+        _SPLIT.clear()
+    _SPLIT[key] = (rid, split)
+    return split
 
 
 def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, passed_sh, active_em, on_asset, u_c, use_lobe, L, beta, wi_c, p_c,

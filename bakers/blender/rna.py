@@ -236,9 +236,10 @@ register_baker("blender", "rna", bake)
 def _view_renderer(variant, geo, center, radius, dset, work, threads: int = 0):
     """``render_one(split, i)`` of the dataset stage (Cycles on the isolated objects); ``.close()`` removes its temporary files."""
     from nasset_converters.blender import dataset as ds
+    from nasset_converters.caster import Caster
 
     rig = ds.CyclesRig(dset, work, threads=threads)
-    caster = ds.Caster(variant, geo)
+    caster = Caster(variant, geo)
 
     def render_one(split, i):
         with warnings.catch_warnings():

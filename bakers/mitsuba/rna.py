@@ -106,6 +106,11 @@ def bake(
 
         scene = write_example_scene(work / "example_scene")
         asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
+    elif example == "hair-dense":
+        from nasset_converters.mitsuba.hair_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+        scene = write_example_scene(work / "example_scene", size)
+        asset_ids = list(asset_ids or EXAMPLE_ASSET_IDS)
     elif example:
         from nasset_converters.mitsuba.examples import EXAMPLE_ASSET_IDS, write_example_scene
 
@@ -115,8 +120,8 @@ def bake(
         raise UsageError("give a scene file or --example")
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
-    shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene))
-    geo = msc.mesh_geometry(mi, shapes)
+    shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
+    asset_variant, geo = msc.asset_geometry(mi, shapes)
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)
     if light_angle is None:
@@ -143,7 +148,7 @@ def bake(
     if md is not None and (md < 0 or md > dset.max_depth):
         dset = replace(dset, max_depth=md if md > 0 else 1024)
     if workers is None:
-        views_from = _view_renderer(mi, shapes, center, radius, dset)
+        views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
     else:  # each worker loads the scene itself
         views_from = ViewSource("nasset_bakers.mitsuba.rna:view_renderer",
                                 {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant(),
@@ -165,10 +170,11 @@ def bake(
 
     # -- stage 3: train ---------------------------------------------------------------------------
     t = time.perf_counter()
-    builder = AssetBuilder("rna", variant="surface")
+    builder = AssetBuilder("rna", variant=asset_variant)
     builder.set_geometry(geo)
     domain = builder.domain
-    tset = TrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
+    fiber_train = presets.RNA_MITSUBA_FIBER_TRAIN.get(size, {}) if asset_variant == "fiber" else {}
+    tset = TrainSettings(size=size, seed=seed, device=device, **{**TRAIN_PRESETS[size], **fiber_train})
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
     if loss is not None:
@@ -196,7 +202,8 @@ def bake(
         "light": {"type": "directional" if dset.light_angle_deg == 0 else "distant-sphere",
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
-                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
+                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves",
+                 **_mask_statistics(train_data)},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
@@ -221,7 +228,8 @@ def bake(
         "val_samples": int(len(val_data["x"])),
         "views": dset.views, "val_views": dset.val_views, "res": dset.res, "spp": dset.spp,
         "val_res": dset.val_res or dset.res, "val_spp": dset.val_spp,
-        "variant": mi.variant(), "device": result.device,
+        "variant": mi.variant(), "device": result.device, "asset_variant": asset_variant,
+        **_mask_statistics(train_data),
         "val_psnr_db": result.val["psnr_db"],
         **{k: result.val.get(k) for k in ("kept_epoch", "epochs", "keep")},
         "val_accuracy": result.val.get("accuracy"),
@@ -244,6 +252,8 @@ def _print_summary(s: dict, stream) -> None:
         f"baked {s['asset']}  ({s['asset_bytes'] / 1024:.1f} KiB)",
         f"  mitsuba {s['variant']}, training on {s['device']}",
         dataset_line(s) + f"  (kept in {s['dataset_dir']})",
+        *([f"  fiber mask: Mitsuba's curves and the prisms disagree on {100 * s['mask_disagreement']:.2f} % of the "
+           "covered training pixels"] if s.get("mask_disagreement") is not None else []),
         *accuracy_lines(s.get("sdk_val_accuracy")),
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
         *clamp_lines(s),
@@ -254,13 +264,24 @@ def _print_summary(s: dict, stream) -> None:
     print("\n".join(lines), file=stream)
 
 
-def _view_renderer(mi, shapes, center, radius, dset):
-    """``render_one(split, i)`` of the dataset stage: the shapes isolated under the bake's light."""
+def _mask_statistics(data: dict) -> dict:
+    """Fiber bakes: the fraction of covered pixels on which Mitsuba's curves and the prisms disagree."""
+    if "disagree" not in data:
+        return {}
+    return {"mask_disagreement": float(data["disagree"]) / max(int(data["covered"]), 1)}
+
+
+def _view_renderer(mi, shapes, geo, center, radius, dset):
+    """``render_one(split, i)`` of the dataset stage: the shapes isolated under the bake's light (curves: the
+    geometric inputs from the prisms the renderer traces, spec/bake.md#mitsuba-curves)."""
+    from nasset_converters.caster import Caster
     from nasset_converters.mitsuba import dataset as ds
     from nasset_converters.mitsuba import scene as msc
+    from nasset_sdk.geometry import CurvesGeometry
 
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
-    renderer = ds.Renderer(mi, iso, dset)
+    caster = Caster("fiber", geo) if isinstance(geo, CurvesGeometry) else None
+    renderer = ds.Renderer(mi, iso, dset, caster=caster)
     return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
 
 
@@ -269,15 +290,17 @@ def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):
     ``threads`` > 0 limits Dr.Jit's thread pool (a worker owns one CPU)."""
     from nasset_converters.mitsuba import scene as msc
 
-    mi, shapes = msc.open_shapes(scene, asset_ids, variant=variant, threads=threads)
-    center, radius = msc.bounding_sphere(msc.mesh_geometry(mi, shapes))
-    return _view_renderer(mi, shapes, center, radius, dset)
+    mi, shapes = msc.open_shapes(scene, asset_ids, variant=variant, threads=threads, curves=True)
+    _, geo = msc.asset_geometry(mi, shapes)
+    center, radius = msc.bounding_sphere(geo)
+    return _view_renderer(mi, shapes, geo, center, radius, dset)
 
 
 def bake_named_example(scene, asset_ids, output, *, example: str | None = None, **options) -> dict:
     """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna: default, high-albedo)."""
-    if example not in (None, "default", "high-albedo"):
-        raise UsageError(f"unknown rna example {example!r} (default, high-albedo, blender-surface, blender-hair, blender-hair-dense)")
+    if example not in (None, "default", "high-albedo", "hair-dense"):
+        raise UsageError(f"unknown rna example {example!r} (default, high-albedo, hair-dense, blender-surface, blender-hair, "
+                         "blender-hair-dense)")
     return bake(scene, asset_ids, output, example=example or False, **options)
 
 

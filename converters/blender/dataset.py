@@ -35,12 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, concat_views, unit_sphere  # noqa: F401 - re-exported
+from nasset_converters.caster import Caster  # noqa: F401 - re-exported
+from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, unit_sphere  # noqa: F401 - re-exported
+from nasset_sdk.errors import error
 
 from . import CONVERTER_VERSION, quiet_stdout, to_z_up
-
-FIELDS = ("x", "n", "wo", "wi", "vis", "rgb", "pix")
-FIBER_FIELDS = FIELDS + ("h",)
 
 
 @dataclass(frozen=True)
@@ -160,67 +159,6 @@ class CyclesRig:
             pass
 
 
-class Caster:
-    """Primary hits and light visibility on the exported asset geometry (Embree)."""
-
-    def __init__(self, variant: str, geo) -> None:
-        from nasset_reference_renderer.accel import Accel
-
-        self.variant = variant
-        if variant == "fiber":
-            from nasset_reference_renderer.shaders.rna_fiber import tessellate
-
-            self.tubes = tessellate(geo.points, geo.counts, geo.widths)
-            tris = self.tubes.points[self.tubes.faces]
-        else:
-            self.faces = np.asarray(geo.faces, np.int64)
-            pts = np.asarray(geo.points, np.float64)
-            tris = pts[self.faces]
-            self.corner_n = np.asarray(geo.normals, np.float64)[self.faces]
-            e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
-            ng = np.cross(e1, e2)
-            self.ng = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
-        self.accel = Accel(tris, np.zeros(len(tris), np.int64))
-
-    def hits(self, o, d) -> dict:
-        """Rows that hit: {'pix', 'x', 'frame' (n or t), 'h' (fibers), 'prim'}."""
-        from nasset_reference_renderer.shaders.rna_fiber import fiber_frame
-
-        h = self.accel.trace(o, d)
-        hit = np.nonzero(h.prim >= 0)[0]
-        x = o[hit] + d[hit] * h.t[hit][:, None]
-        prim = h.prim[hit]
-        out = {"pix": hit, "x": x, "prim": prim}
-        if self.variant == "fiber":
-            seg = self.tubes.tri_seg[prim]
-            t, hh = fiber_frame(self.tubes, seg, x, -d[hit])
-            out.update(frame=t, h=hh, seg=seg)
-        else:
-            bu, bv = h.u[hit], h.v[hit]
-            cn = self.corner_n[prim]
-            n = cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None]
-            out["frame"] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        return out
-
-    def visibility(self, hit: dict, wi) -> np.ndarray:
-        """1 where wi is not blocked by the asset, cast as the reference renderer casts it
-        (spec/renderer.md#neural-vertex, #fibers)."""
-        x = hit["x"]
-        n = len(x)
-        if n == 0:
-            return np.zeros(0, bool)
-        wi = np.broadcast_to(np.asarray(wi, np.float64), (n, 3))
-        ignore = np.zeros(n, np.int64)
-        if self.variant == "fiber":
-            res = self.accel.trace(x, wi, ignore=ignore, exempt=self.tubes.exempt[hit["seg"]])
-        else:
-            ng = self.ng[hit["prim"]]
-            scale = self.accel.eps * (1.0 + np.max(np.abs(x), axis=1) / self.accel.scale)
-            o = x + ng * (np.sign((ng * wi).sum(1)) * scale)[:, None]
-            res = self.accel.trace(o, wi, ignore=ignore)
-        return ~res.self_hit
-
-
 def view_camera(s: DataSettings, center, radius: float, view_id: int, validation: bool):
     """(rng, eye, half_fov, res) of a view; deterministic in (seed, split, view)."""
     rng = np.random.default_rng([s.seed, 1 if validation else 0, view_id])
@@ -309,8 +247,8 @@ def file_sha256(path) -> str:
 
 def load_split(store: DatasetDir, split: str, count: int, fiber: bool) -> dict:
     """All views of a split concatenated (FIELDS, 'h' for fibers) plus 'view' and the mask statistics."""
-    parts = [store.load(split, i) for i in range(count)]
-    out = concat_views(parts, FIBER_FIELDS if fiber else FIELDS)
-    out["disagree"] = int(sum(int(p["disagree"]) for p in parts))
-    out["covered"] = int(sum(int(p["covered"]) for p in parts))
+    out = store.load_split(split, count)
+    if fiber != ("h" in out) or "disagree" not in out:
+        raise error("CONVERT_DATASET", f"the {split} views are not those of a {'fiber' if fiber else 'surface'} Cycles bake",
+                    file=str(store.root))
     return out

@@ -34,6 +34,7 @@ from nasset_sdk.errors import error
 from . import CONVERTER_VERSION, is_jit
 
 FIELDS = ("x", "n", "wo", "wi", "vis", "rgb", "pix")
+FIBER_FIELDS = FIELDS + ("h",)  # fibers: n holds the tangent t, h the offset across the fiber
 
 #: lights per training view when per-pixel lights are unavailable (finite-angle light, scalar variant)
 FALLBACK_LIGHT_GROUPS = 32
@@ -83,11 +84,14 @@ def camera_rays(eye: np.ndarray, target: np.ndarray, half_fov: float, res: int):
 
 
 class Renderer:
-    """Mitsuba queries on an IsolatedAsset: primary hits, light visibility, transport."""
+    """Mitsuba queries on an IsolatedAsset: primary hits, light visibility, transport. ``caster``
+    (:class:`nasset_converters.caster.Caster`, fiber assets): the geometric inputs and the visibility come from
+    the fiber prisms the reference renderer traces, the transport from Mitsuba's own curves."""
 
-    def __init__(self, mi, iso, settings: DataSettings) -> None:
+    def __init__(self, mi, iso, settings: DataSettings, caster=None) -> None:
         self.mi, self.iso, self.s = mi, iso, settings
         self.jit = is_jit(mi)
+        self.caster = caster
 
     # -- helpers -------------------------------------------------------------------------------
     def _ray(self, o, d):
@@ -270,8 +274,23 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     res = (s.val_res or s.res) if validation else s.res
     o, d = camera_rays(eye, np.asarray(center, np.float64), half_fov, res)
     mask, x, n = renderer.hits(o, d)
-    pix = np.nonzero(mask)[0]
-    o, d, x, n = o[pix], d[pix], x[pix], n[pix]
+    fiber = None
+    if renderer.caster is not None:  # fibers: pixels where Mitsuba's curves and our prisms both are hit
+        fiber = renderer.caster.hits(o, d)
+        ours = np.zeros(len(o), bool)
+        ours[fiber["pix"]] = True
+        keep = mask[fiber["pix"]]
+        fiber = {k: (v[keep] if isinstance(v, np.ndarray) and len(v) == len(keep) else v) for k, v in fiber.items()}
+        fiber["disagree"] = int(np.count_nonzero(ours != mask))
+        fiber["covered"] = int(np.count_nonzero(ours | mask))
+        pix = fiber["pix"]
+        x, n = fiber["x"], fiber["frame"]
+        o, d = o[pix], d[pix]
+    else:
+        pix = np.nonzero(mask)[0]
+        o, d, x, n = o[pix], d[pix], x[pix], n[pix]
+    visibility = ((lambda o_, d_, w: renderer.caster.visibility(fiber, w)) if fiber is not None
+                  else renderer.visibility)
     spp = s.val_spp if validation else s.spp
     seed = hash((s.seed, split_seed, view_id)) & 0xFFFFFF
     per_pixel = not validation and s.lights_per_view == 0
@@ -279,14 +298,14 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     halves = None
     if per_pixel and renderer.iso.per_path_lights:
         wi = unit_sphere(rng, len(pix), s.upper_hemisphere).astype(np.float32)
-        vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
+        vis = visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
         rgb = renderer.transport(o, d, spp, seed=seed, wi=wi, stats=stats) if len(pix) else np.zeros((0, 3), np.float32)
     else:
         k = 1 if validation else (s.lights_per_view or FALLBACK_LIGHT_GROUPS)
         lights = unit_sphere(rng, k, s.upper_hemisphere)
         group = rng.integers(0, k, len(pix)) if k > 1 else np.zeros(len(pix), np.int64)
         wi = lights[group].astype(np.float32)
-        vis = renderer.visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
+        vis = visibility(o, d, wi) if len(pix) else np.zeros(0, bool)
         rgb = np.zeros((len(pix), 3), np.float32)
         halves = [np.zeros((len(pix), 3), np.float32), np.zeros((len(pix), 3), np.float32)] if validation else None
         for g in range(k):
@@ -305,6 +324,8 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
         "x": x.astype(np.float32), "n": n.astype(np.float32), "wo": (-d).astype(np.float32), "wi": wi,
         "vis": vis.astype(np.uint8), "rgb": rgb, "pix": pix.astype(np.int32), "res": np.int32(res),
     }
+    if fiber is not None:
+        out.update(h=fiber["h"].astype(np.float32), disagree=np.int32(fiber["disagree"]), covered=np.int32(fiber["covered"]))
     if halves is not None:
         out["rgb_a"], out["rgb_b"] = halves
     else:
@@ -384,5 +405,12 @@ class DatasetDir:
             raise error("CONVERT_DATASET", f"view file unreadable ({type(exc).__name__})", file=str(p)) from None
 
     def load_split(self, split: str, count: int) -> dict:
-        """All views of a split concatenated (FIELDS) plus 'view' [M] view index."""
-        return concat_views([self.load(split, i) for i in range(count)], FIELDS)
+        """All views of a split concatenated (FIELDS; fibers also 'h') plus 'view' [M] view index, and where the views
+        have them the mask statistics 'disagree' and 'covered' (pixels, summed over the views)."""
+        parts = [self.load(split, i) for i in range(count)]
+        fiber = bool(parts) and all("h" in p for p in parts)
+        out = concat_views(parts, FIBER_FIELDS if fiber else FIELDS)
+        if parts and all("disagree" in p for p in parts):
+            out["disagree"] = int(sum(int(p["disagree"]) for p in parts))
+            out["covered"] = int(sum(int(p["covered"]) for p in parts))
+        return out

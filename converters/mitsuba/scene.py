@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_sdk.errors import error
-from nasset_sdk.geometry import MeshGeometry
+from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 #: BSDF classes through which a delta light is never reached by next-event estimation.
 DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
@@ -46,8 +46,18 @@ def load_scene(mi, path: str | Path):
         raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(path)) from None
 
 
-def pick_shapes(scene, ids, *, file: str | None = None) -> list:
-    """The scene's shapes with these ids, in the given order (each must be a triangle mesh)."""
+#: Mitsuba curve shapes an rna fiber asset can be baked from (spec/bake.md#mitsuba-curves)
+CURVE_CLASSES = ("LinearCurve", "BSpline", "BSplineCurve")
+
+
+def shape_class(shape) -> str:
+    """Mitsuba's class name of a shape ("PLYMesh", "LinearCurve", ...)."""
+    return str(shape).split("[")[0].strip()
+
+
+def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) -> list:
+    """The scene's shapes with these ids, in the given order: triangle meshes, or with ``curves`` also Mitsuba
+    curves (``linearcurve``, ``bsplinecurve``; all of them then, not mixed with meshes)."""
     by_id = {s.id(): s for s in scene.shapes()}
     if not ids:
         raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset shape id given; the scene has {sorted(by_id)}", file=file)
@@ -56,17 +66,23 @@ def pick_shapes(scene, ids, *, file: str | None = None) -> list:
         if i not in by_id:
             raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {i!r}; the scene has {sorted(by_id)}", file=file)
         shape = by_id[i]
+        cls = shape_class(shape)
+        if curves and cls in CURVE_CLASSES:
+            out.append(shape)
+            continue
         if not shape.is_mesh():
-            raise error(
-                "CONVERT_SHAPE_UNSUPPORTED",
-                f"shape {i!r} is a {str(shape).split('[')[0]}, not a triangle mesh; convert it to ply/obj",
-                file=file,
-            )
+            hint = ("; curves make rna fiber assets only (--kind rna)" if cls in CURVE_CLASSES
+                    else "; convert it to ply/obj" + (" or a linearcurve" if curves else ""))
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is a {cls}, not a triangle mesh{hint}", file=file)
         out.append(shape)
+    kinds = {shape_class(s) in CURVE_CLASSES for s in out}
+    if len(kinds) > 1:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"shapes {list(ids)} mix curves and meshes: an asset is either fibers or a "
+                    "surface; bake them as two assets", file=file)
     return out
 
 
-def open_shapes(path: str | Path, ids, *, variant: str | None = None, threads: int = 0):
+def open_shapes(path: str | Path, ids, *, variant: str | None = None, threads: int = 0, curves: bool = False):
     """``(mi, shapes)``: Mitsuba loaded (``variant``; errors only in its log), ``threads`` > 0 limiting
     Dr.Jit's thread pool, the scene at ``path`` loaded and the shapes ``ids`` picked from it -- what a
     process that did not run a bake's first stage (a cluster worker) needs to render its views."""
@@ -78,7 +94,49 @@ def open_shapes(path: str | Path, ids, *, variant: str | None = None, threads: i
         import drjit as dr
 
         dr.set_thread_count(int(threads))
-    return mi, pick_shapes(load_scene(mi, path), ids, file=str(path))
+    return mi, pick_shapes(load_scene(mi, path), ids, file=str(path), curves=curves)
+
+
+def asset_geometry(mi, shapes) -> tuple[str, MeshGeometry | CurvesGeometry]:
+    """``(variant, geometry)`` of picked shapes: ("fiber", CurvesGeometry) for curves, else ("surface", MeshGeometry)."""
+    if shape_class(shapes[0]) in CURVE_CLASSES:
+        return "fiber", curves_geometry(mi, shapes)
+    return "surface", mesh_geometry(mi, shapes)
+
+
+def curves_geometry(mi, shapes) -> CurvesGeometry:
+    """Mitsuba curves as linear fiber curves (asset object space = scene space; widths = 2 x Mitsuba's radius).
+
+    A ``linearcurve`` is taken as it is. A ``bsplinecurve`` (uniform cubic B-spline, one span per four
+    control points) becomes the polyline through its span ends, one segment per span: the same number of
+    segments as Mitsuba intersects, off the smooth curve by at most its deviation within a span
+    (spec/bake.md#mitsuba-curves); the bake records how many pixels the two disagree on."""
+    pts, widths, counts = [], [], []
+    for s in shapes:
+        params = mi.traverse(s)
+        cp = np.asarray(params["control_points"], np.float64).reshape(-1, 4)
+        seg = np.asarray(params["segment_indices"], np.int64).ravel()
+        if len(seg) == 0:
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"curve shape {s.id()!r} has no segments")
+        starts = np.concatenate([[0], np.nonzero(np.diff(seg) != 1)[0] + 1, [len(seg)]])
+        bspline = shape_class(s).startswith("BSpline")
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            first = int(seg[a])
+            if bspline:  # span j's ends: (P_j + 4 P_j+1 + P_j+2) / 6 for j = first .. first + spans
+                j = first + np.arange(b - a + 1)
+                c = (cp[j] + 4.0 * cp[j + 1] + cp[j + 2]) / 6.0
+            else:
+                c = cp[first:first + (b - a) + 1]
+            pts.append(c[:, :3])
+            widths.append(2.0 * c[:, 3])
+            counts.append(len(c))
+    geo = CurvesGeometry(np.concatenate(pts).astype(np.float32), np.asarray(counts, np.int32),
+                         np.concatenate(widths).astype(np.float32))
+    try:
+        geo.validate()
+    except Exception as exc:  # noqa: BLE001 - the SDK's check names what is wrong; say which shapes
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"curve shapes {[s.id() for s in shapes]}: {exc}") from None
+    return geo
 
 
 def mesh_geometry(mi, shapes) -> MeshGeometry:
@@ -271,8 +329,11 @@ class IsolatedAsset:
         self.lane_scene.emitters()[0].table = self.mi.Float(dirs.ravel())
 
 
-def bounding_sphere(geo: MeshGeometry) -> tuple[np.ndarray, float]:
+def bounding_sphere(geo: MeshGeometry | CurvesGeometry) -> tuple[np.ndarray, float]:
+    """(centre [3], radius) of a sphere holding the geometry (curves: their points plus half their width)."""
     lo, hi = geo.bounds()
     c = 0.5 * (np.asarray(lo, np.float64) + np.asarray(hi, np.float64))
     r = float(np.linalg.norm(np.asarray(geo.points, np.float64) - c, axis=1).max())
+    if isinstance(geo, CurvesGeometry):
+        r += 0.5 * float(np.max(geo.widths))
     return c, max(r, 1e-6)

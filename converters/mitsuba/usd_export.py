@@ -667,8 +667,10 @@ class StageConverter:
         elif cls == "Sphere":
             self._sphere(shape, sid, emission)
         else:
+            hint = (f"; bake it into an rna fiber asset (nasset bake --kind rna --asset {sid}) and --replace {sid}=ASSET"
+                    if "Curve" in cls or cls.startswith("BSpline") else "")
             self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
-                      "are): skipped")
+                      f"are): skipped{hint}")
 
     def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade

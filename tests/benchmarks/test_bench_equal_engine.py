@@ -51,6 +51,7 @@ def test_equal_engine_smoke(tmp_path, rna_asset_path, capsys):
     o = r["object"]
     assert 0.05 * 256 < o["pixels"] < 0.25 * 256
     assert len(o["equal_error"]) == 2 and o["bias_floor_mse"] > r["bias_floor_mse"]
+    assert len(o["energy_ratio"]) == 3 and all(math.isfinite(e) and e > 0 for e in o["energy_ratio"])
 
 
 def test_equal_engine_unknown_shape(tmp_path, rna_asset_path):

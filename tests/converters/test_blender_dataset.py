@@ -15,6 +15,7 @@ bpy = pytest.importorskip("bpy", reason="Blender tests need the bpy wheel (pip i
 from nasset_converters.blender import dataset as bds  # noqa: E402
 from nasset_converters.blender import scene as bsc  # noqa: E402
 from nasset_converters.blender.examples import build_example, shader_material  # noqa: E402
+from nasset_converters.caster import Caster  # noqa: E402
 
 
 def _diffuse_quad(albedo: float):
@@ -41,7 +42,7 @@ def test_sun_units_and_camera_alignment(tmp_path):
     bsc.isolate([ob])
     s = bds.DataSettings(res=24, spp=64, light_angle_deg=0.0, distance=1.5)
     rig = bds.CyclesRig(s, tmp_path)
-    caster = bds.Caster(variant, geo)
+    caster = Caster(variant, geo)
     eye = np.array([0.3, 1.5, 0.2])  # above the quad (asset space, +Y up)
     o, d = bds.camera_rays(eye, np.zeros(3), math.radians(25.0), 24)
     hit = caster.hits(o, d)
@@ -73,7 +74,7 @@ def test_fiber_view_inputs(tmp_path):
     bsc.isolate(objs)
     s = bds.DataSettings(res=48, spp=4, val_spp=4)
     rig = bds.CyclesRig(s, tmp_path)
-    caster = bds.Caster(variant, geo)
+    caster = Caster(variant, geo)
     views = [bds.render_view(rig, caster, center, radius, i, validation=False) for i in range(3)]
     rig.close()
     h = np.concatenate([v["h"] for v in views])
@@ -101,7 +102,7 @@ def test_lights_per_view_groups(tmp_path):
     bsc.isolate(objs)
     s = bds.DataSettings(res=24, spp=6, lights_per_view=3)
     rig = bds.CyclesRig(s, tmp_path)
-    caster = bds.Caster(variant, geo)
+    caster = Caster(variant, geo)
     v = bds.render_view(rig, caster, center, radius, 0, validation=False)
     val = bds.render_view(rig, caster, center, radius, 0, validation=True)
     rig.close()
