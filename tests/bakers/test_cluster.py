@@ -238,9 +238,23 @@ def _blender_source(tmp_path):
                                "work": str(tmp_path), "threads": 1})
 
 
-@pytest.mark.parametrize("make", [_neupress_source, _blender_source], ids=["neupress", "blender"])
+def _mitsuba_curves_source(tmp_path):
+    from nasset_bakers.presets import RNA_MITSUBA_DATA
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba.hair_example import EXAMPLE_ASSET_IDS, write_example_scene
+
+    scene = write_example_scene(tmp_path / "hair_scene", "tiny")
+    dset = replace(ds.DataSettings(), **RNA_MITSUBA_DATA["tiny"], seed=4)
+    dset = replace(dset, views=VIEWS, val_views=VAL_VIEWS, res=16, val_res=16, spp=4, val_spp=8)
+    return cluster.ViewSource("nasset_bakers.mitsuba.rna:view_renderer",
+                              {"scene": scene, "asset_ids": list(EXAMPLE_ASSET_IDS), "dset": dset, "variant": None})
+
+
+@pytest.mark.parametrize("make", [_neupress_source, _blender_source, _mitsuba_curves_source],
+                         ids=["neupress", "blender", "mitsuba-curves"])
 def test_other_bakers_views_on_workers(ray_local, make, tmp_path):
-    """The neupress (Mitsuba) and rna (Cycles) view factories: two workers write what one process writes."""
+    """The neupress (Mitsuba), rna (Cycles) and rna fiber (Mitsuba curves) view factories: two workers write what
+    one process writes."""
     src = make(tmp_path)
     here, _ = _render(tmp_path, "here", src)
     there, summary = _render(tmp_path, "there", src, workers=2)
