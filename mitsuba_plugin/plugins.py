@@ -13,7 +13,8 @@
   continuation mixture of :mod:`.lobes`; neupress: its Gaussian lobe, spec/renderer.md#neupress), or the
   uniform world sphere (p_A = 1/4pi; neupress without ``sampling``, and every asset with ``lobe`` false).
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
-  of that segment and its neighbours do not count as crossing the instance. 8dna assets
+  of that segment and its neighbours do not count as crossing the instance; a ray leaving a fiber
+  instance costs O(1) queries on split structures (:func:`_trace`), not one per prism surface it crosses. 8dna assets
   (spec/renderer.md#8dna) take their own light samples (at x_o and at u_i) and continuation from
   :func:`.eightdna.vertex`. ``prt`` (default false): neupress instances are shaded by their PRT
   component under the scene's domes and end the path there (:mod:`.prt`; spec/renderer.md#neupress).
@@ -333,8 +334,10 @@ def _trace_skipping(mi, scene, ray, ignore, lo, hi, active):
     return si, passed
 
 
-#: per scene (keyed by id, checked against its shapes): [(registry id, scene without instance j, instance j alone)]
-_SPLIT: dict[int, tuple] = {}
+#: per scene with fiber instances (keyed by id, checked against its shapes): its shapes' registry ids and
+#: [(registry id, scene without instance j, instance j alone)]; at most MAX_SPLIT_SCENES scenes are kept
+_SPLIT: dict[tuple, tuple] = {}
+MAX_SPLIT_SCENES = 2
 
 
 def split_scenes(mi, scene):
@@ -359,9 +362,10 @@ def split_scenes(mi, scene):
             others = mi.load_dict({"type": "scene", **{keys[i]: sh for i, sh in enumerate(shapes) if i != j}})
             own = mi.load_dict({"type": "scene", keys[j]: shapes[j]})
             split.append((rid[j], others, own))
-    if len(_SPLIT) > 16:  # scenes of earlier renders: their structures are freed with them
-        _SPLIT.clear()
-    _SPLIT[key] = (rid, split)
+    if split is not None:
+        while len(_SPLIT) >= MAX_SPLIT_SCENES:  # the oldest scene's structures go (a hair's are hundreds of MB)
+            _SPLIT.pop(next(iter(_SPLIT)))
+        _SPLIT[key] = (rid, split)
     return split
 
 

@@ -297,7 +297,7 @@ def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):
 
 
 def bake_named_example(scene, asset_ids, output, *, example: str | None = None, **options) -> dict:
-    """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna: default, high-albedo)."""
+    """:func:`bake` with ``example`` a name as the other bakers take it (Mitsuba rna: default, high-albedo, hair-dense)."""
     if example not in (None, "default", "high-albedo", "hair-dense"):
         raise UsageError(f"unknown rna example {example!r} (default, high-albedo, hair-dense, blender-surface, blender-hair, "
                          "blender-hair-dense)")

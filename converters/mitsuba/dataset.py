@@ -12,7 +12,9 @@ variant), k random directions per view shared by random pixel groups. Validation
 fixed light per view, at ``val_res`` and ``val_spp``, **never clamped**, in two independent halves
 (``rgb_a``, ``rgb_b``, each ``val_spp / 2`` paths; ``rgb`` is their mean) so the reference's own noise
 is measured (spec/accuracy.md#metrics). Training views store the energy a clamp removed
-(``clamp_removed`` and ``energy``, per channel, summed over the view's pixel means).
+(``clamp_removed`` and ``energy``, per channel, summed over the view's pixel means). Fiber assets (Mitsuba
+curves, spec/bake.md#mitsuba-curves) take x, the tangent (in ``n``), h and V from the prisms the reference
+renderer traces (:class:`nasset_converters.caster.Caster`) and record the pixels on which the two disagree.
 
 A dataset lives in a folder: ``meta.json`` (settings; a resume must match them) and one
 ``train/NNNN.npz`` / ``val/NNNN.npz`` per view, each written atomically, so an interrupted

@@ -45,6 +45,22 @@ def test_linear_curves_are_taken_as_written(mi, tmp_path):
     np.testing.assert_allclose(geo.widths, 2.0 * rows[:, 3], rtol=1e-6)  # USD widths are diameters
 
 
+def test_curves_take_their_to_world_and_keep_their_radius(mi, tmp_path):
+    """Mitsuba moves the control points by ``to_world`` and keeps the radius as written: so does the asset."""
+    rows = np.array([[0.0, 0.0, 0.0, 0.02], [0.0, 1.0, 0.0, 0.02], [0.5, 1.5, 0.0, 0.01]])
+    (tmp_path / "c.txt").write_text("\n".join(" ".join(f"{v:g}" for v in r) for r in rows) + "\n")
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="linearcurve" id="hair"><string name="filename" value="c.txt"/>'
+                   '<transform name="to_world"><scale value="2"/><translate x="1"/></transform></shape></scene>')
+    scene = msc.load_scene(mi, xml)
+    geo = msc.curves_geometry(mi, msc.pick_shapes(scene, ["hair"], curves=True))
+    np.testing.assert_allclose(geo.points, 2.0 * rows[:, :3] + [1.0, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(geo.widths, 2.0 * rows[:, 3], rtol=1e-6)
+    # Mitsuba's tube there has that radius: a ray down the z axis onto the first segment's middle meets it at z = r
+    si = scene.ray_intersect(mi.Ray3f(mi.Point3f(1.0, 1.0, 1.0), mi.Vector3f(0.0, 0.0, -1.0)))
+    assert bool(si.is_valid()[0]) and abs(float(si.p.z[0]) - 0.02) < 1e-3
+
+
 def test_bspline_becomes_the_polyline_through_its_span_ends(mi, tmp_path):
     # a uniform cubic B-spline reproduces straight lines: control points at x = 0..5 give span ends at x = 1..4
     cp = np.c_[np.arange(6.0), np.zeros(6), np.zeros(6), np.full(6, 0.05)]
