@@ -292,6 +292,14 @@ def _trace(mi, scene, ray, ignore, lo, hi, active):
     return si, passed
 
 
+def _beyond(ray, si):
+    """The rest of ``ray`` past its hit ``si`` (from Mitsuba's offset origin at the hit, up to the same end)."""
+    left = ray.maxt - si.t
+    r = si.spawn_ray(ray.d)
+    r.maxt = left
+    return r
+
+
 @dr.syntax
 def _branch(mi, own, ray, tmax, lo, hi, active):
     """Whether ``ray`` crosses a triangle of the instance's own scene ``own`` outside [lo, hi) before ``tmax``."""
@@ -302,9 +310,7 @@ def _branch(mi, own, ray, tmax, lo, hi, active):
     passed = active & s.is_valid() & ~exempt
     i = mi.UInt32(0)
     while dr.hint(exempt & (i < MAX_SKIPS), max_iterations=-1, label="nasset_branch"):
-        left = r.maxt - s.t
-        r = s.spawn_ray(r.d)
-        r.maxt = left
+        r = _beyond(r, s)
         s = own.ray_intersect(r, exempt)
         hit = exempt & s.is_valid()
         is_exempt = (s.prim_index >= lo) & (s.prim_index < hi)
@@ -324,9 +330,7 @@ def _trace_skipping(mi, scene, ray, ignore, lo, hi, active):
     r = mi.Ray3f(ray)
     i = mi.UInt32(0)
     while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_skip"):
-        left = r.maxt - si.t
-        r = si.spawn_ray(r.d)
-        r.maxt = left
+        r = _beyond(r, si)
         si = scene.ray_intersect(r, skip)
         skip = si.is_valid() & (dr.reinterpret_array(mi.UInt32, si.shape) == ignore)
         passed |= skip & ((si.prim_index < lo) | (si.prim_index >= hi))
