@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.caster import Caster  # noqa: F401 - re-exported
+from nasset_converters.caster import Caster
 from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, unit_sphere  # noqa: F401 - re-exported
 from nasset_sdk.errors import error
 
