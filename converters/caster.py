@@ -73,3 +73,14 @@ class Caster:
             o = x + ng * (np.sign((ng * wi).sum(1)) * scale)[:, None]
             res = self.accel.trace(o, wi, ignore=ignore)
         return ~res.self_hit
+
+
+def agree(hit: dict, pixels: int, keep: np.ndarray, theirs: np.ndarray) -> tuple[dict, int, int]:
+    """The rows of ``hit`` (from :meth:`Caster.hits` over ``pixels`` rays) whose pixel the source renderer also
+    puts on the asset (``keep`` [pixels] bool), and the mask statistics against its coverage ``theirs``
+    [pixels] bool: (kept rows, pixels where the two masks disagree, pixels either covers)."""
+    ours = np.zeros(pixels, bool)
+    ours[hit["pix"]] = True
+    rows = keep[hit["pix"]]
+    kept = {k: (v[rows] if isinstance(v, np.ndarray) and len(v) == len(rows) else v) for k, v in hit.items()}
+    return kept, int(np.count_nonzero(ours != theirs)), int(np.count_nonzero(ours | theirs))

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.caster import Caster
+from nasset_converters.caster import Caster, agree
 from nasset_converters.mitsuba.dataset import DatasetDir, camera_rays, unit_sphere  # noqa: F401 - re-exported
 from nasset_sdk.errors import error
 
@@ -203,20 +203,15 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
             rgba[sel] = rig.render(max(1, spp // k), seed=hash((s.seed, int(validation), view_id, g)) & 0xFFFFFF).reshape(-1, 4)[sel]
             wi_pix[sel] = wg
     alpha = rgba[:, 3]
-    ours = np.zeros(len(o), bool)
-    ours[hit["pix"]] = True
-    theirs = alpha >= s.alpha_min
-    keep_rows = theirs[hit["pix"]]
-    disagree = int(np.count_nonzero(ours != (alpha > 0.5)))
-    pix = hit["pix"][keep_rows]
-    sel = {k: (v[keep_rows] if isinstance(v, np.ndarray) and len(v) == len(hit["pix"]) else v) for k, v in hit.items()}
+    sel, disagree, covered = agree(hit, len(o), alpha >= s.alpha_min, alpha > 0.5)
+    pix = sel["pix"]
     vis = caster.visibility(sel, wi_pix[pix])
     rgb = rgba[pix, :3] / np.maximum(alpha[pix], 1e-6)[:, None]
     out = {
         "x": sel["x"].astype(np.float32), "n": sel["frame"].astype(np.float32), "wo": (-d[pix]).astype(np.float32),
         "wi": wi_pix[pix].astype(np.float32), "vis": vis.astype(np.uint8),
         "rgb": np.maximum(rgb, 0.0).astype(np.float32), "pix": pix.astype(np.int32), "res": np.int32(res),
-        "disagree": np.int32(disagree), "covered": np.int32(int(np.count_nonzero(ours | (alpha > 0.5)))),
+        "disagree": np.int32(disagree), "covered": np.int32(covered),
     }
     if caster.variant == "fiber":
         out["h"] = sel["h"].astype(np.float32)

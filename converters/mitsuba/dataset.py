@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_converters.caster import agree
 from nasset_sdk.errors import error
 
 from . import CONVERTER_VERSION, is_jit
@@ -278,13 +279,8 @@ def render_view(renderer: Renderer, center, radius, view_id: int, *, validation:
     mask, x, n = renderer.hits(o, d)
     fiber = None
     if renderer.caster is not None:  # fibers: pixels where Mitsuba's curves and our prisms both are hit
-        fiber = renderer.caster.hits(o, d)
-        ours = np.zeros(len(o), bool)
-        ours[fiber["pix"]] = True
-        keep = mask[fiber["pix"]]
-        fiber = {k: (v[keep] if isinstance(v, np.ndarray) and len(v) == len(keep) else v) for k, v in fiber.items()}
-        fiber["disagree"] = int(np.count_nonzero(ours != mask))
-        fiber["covered"] = int(np.count_nonzero(ours | mask))
+        fiber, disagree, covered = agree(renderer.caster.hits(o, d), len(o), mask, mask)
+        fiber.update(disagree=disagree, covered=covered)
         pix = fiber["pix"]
         x, n = fiber["x"], fiber["frame"]
         o, d = o[pix], d[pix]
