@@ -30,6 +30,8 @@ import numpy as np
 from nasset_sdk.errors import error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
+from .analytic import ANALYTIC_CLASSES, as_mesh
+
 #: BSDF classes through which a delta light is never reached by next-event estimation.
 DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
 
@@ -56,8 +58,9 @@ def shape_class(shape) -> str:
 
 
 def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) -> list:
-    """The scene's shapes with these ids, in the given order: triangle meshes, or with ``curves`` also Mitsuba
-    curves (``linearcurve``, ``bsplinecurve``; all of them then, not mixed with meshes)."""
+    """The scene's shapes with these ids, in the given order: triangle meshes (analytic shapes as their
+    tessellation, :func:`.analytic.as_mesh`), or with ``curves`` also Mitsuba curves (``linearcurve``,
+    ``bsplinecurve``; all of them then, not mixed with meshes)."""
     by_id = {s.id(): s for s in scene.shapes()}
     if not ids:
         raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset shape id given; the scene has {sorted(by_id)}", file=file)
@@ -70,10 +73,16 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
         if curves and cls in CURVE_CLASSES:
             out.append(shape)
             continue
+        if cls in ANALYTIC_CLASSES:  # baked from its tessellation (spec/bake.md#analytic-shapes)
+            import mitsuba as mi
+
+            out.append(as_mesh(mi, shape))
+            continue
         if not shape.is_mesh():
             hint = ("; curves make rna fiber assets only (--kind rna)" if cls in CURVE_CLASSES
                     else "; convert it to ply/obj" + (" or a linearcurve" if curves else ""))
-            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is a {cls}, not a triangle mesh{hint}", file=file)
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is a {cls}, not a triangle mesh or an analytic shape "
+                        f"({', '.join(c.lower() for c in ANALYTIC_CLASSES)}){hint}", file=file)
         out.append(shape)
     kinds = {shape_class(s) in CURVE_CLASSES for s in out}
     if len(kinds) > 1:

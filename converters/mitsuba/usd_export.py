@@ -43,6 +43,8 @@ import numpy as np
 
 from nasset_sdk.errors import UsageError, error
 
+from . import analytic
+
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
 #: segments of the triangle fan written for a Mitsuba ``disk``
@@ -666,11 +668,16 @@ class StageConverter:
                              local_to_world=True)
         elif cls == "Sphere":
             self._sphere(shape, sid, emission)
+        elif cls == "Cylinder":
+            pts, faces, nrm = analytic.world_mesh(self.mi, shape)
+            uv = analytic.local_mesh(cls)[3]
+            self.warn(f"shape {sid}: cylinder tessellated into {len(faces)} triangles (open, like Mitsuba's)")
+            self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
         else:
             hint = (f"; bake it into an rna fiber asset (nasset bake --kind rna --asset {sid}) and --replace {sid}=ASSET"
                     if "Curve" in cls or cls.startswith("BSpline") else "")
-            self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere "
-                      f"are): skipped{hint}")
+            self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere, "
+                      f"cylinder are): skipped{hint}")
 
     def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade

@@ -41,12 +41,15 @@ def test_unknown_shape_id(example_xml, tmp_path):
     assert "teapot" in str(e.value) and "jelly" in str(e.value)  # names the known ids
 
 
-def test_primitive_shape_is_unsupported(tmp_path):
+def test_non_mesh_shape_is_unsupported(tmp_path):
+    """An instance of a shape group is neither a mesh nor an analytic shape (those bake: test_analytic_shapes.py)."""
     xml = tmp_path / "s.xml"
-    xml.write_text('<scene version="3.0.0"><shape type="sphere" id="ball"/></scene>')
+    xml.write_text('<scene version="3.0.0"><shape type="shapegroup" id="g"><shape type="sphere"/></shape>'
+                   '<shape type="instance" id="ball"><ref id="g"/></shape></scene>')
     with pytest.raises(SceneError) as e:
         bake(xml, ["ball"], tmp_path / "o.usdc", size="tiny", quiet=True)
     assert _code(e) == "CONVERT_SHAPE_UNSUPPORTED"
+    assert not (tmp_path / "o.usdc").exists()
 
 
 def _ply_scene(tmp_path, points, faces):

@@ -1,0 +1,102 @@
+"""Mitsuba's analytic shapes (``sphere``, ``rectangle``, ``disk``, ``cylinder``) as triangle meshes.
+
+A neural asset's geometry is a triangle mesh. A bake whose object is an analytic shape renders its
+training data from a tessellation of it, with the shape's own BSDF and media, so that the data and
+the asset's surface agree exactly (spec/bake.md#analytic-shapes). The tessellations are closed where
+the shape is (a sphere: one vertex per pole, no seam), carry the analytic unit normals as vertex
+normals, and are fine enough that the surface lies within ``1e-3`` of the shape's size of the true one.
+``convert-scene`` writes a ``cylinder`` with the same tessellation (spheres, rectangles and disks have
+their own USD prims there).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Mitsuba classes of the shapes tessellated here
+ANALYTIC_CLASSES = ("Sphere", "Rectangle", "Disk", "Cylinder")
+#: latitude rings of a sphere (2x as many longitudes): the chord's sagitta is 1 - cos(pi / 128) = 3.0e-4 of the radius
+SPHERE_RINGS = 64
+#: segments around a disk or a cylinder: sagitta 1 - cos(pi / 192) = 1.3e-4 of the radius
+ROUND_SEGMENTS = 192
+
+
+def local_mesh(cls: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(points [V,3], faces [F,3], normals [V,3], uv [V,2])`` of the shape ``cls`` in Mitsuba's local frame:
+    the unit sphere about the origin (poles on ±Z), the square [-1, 1]² at z = 0 facing +Z, the unit disk at
+    z = 0 facing +Z, the open unit cylinder from z = 0 to 1 (normals outward). ``uv`` follows Mitsuba's
+    parameterisation (sphere u = phi / 2pi, v = theta / pi; cylinder u = phi / 2pi, v = z)."""
+    if cls == "Sphere":
+        return _sphere(SPHERE_RINGS)
+    if cls == "Rectangle":
+        pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+        return pts, np.array([[0, 1, 2], [0, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)), 0.5 * (pts[:, :2] + 1.0)
+    n = ROUND_SEGMENTS
+    a = 2.0 * np.pi * np.arange(n) / n
+    ring = np.stack([np.cos(a), np.sin(a), np.zeros(n)], 1)
+    nxt = (np.arange(n) + 1) % n
+    if cls == "Disk":
+        pts = np.concatenate([[[0.0, 0.0, 0.0]], ring])
+        faces = np.stack([np.zeros(n, np.int64), 1 + np.arange(n), 1 + nxt], 1)
+        return pts, faces, np.tile([0.0, 0.0, 1.0], (n + 1, 1)), 0.5 * (pts[:, :2] + 1.0)
+    if cls == "Cylinder":
+        top = ring + [0.0, 0.0, 1.0]
+        pts = np.concatenate([ring, top])
+        i = np.arange(n)
+        faces = np.concatenate([np.stack([i, nxt, n + nxt], 1), np.stack([i, n + nxt, n + i], 1)])
+        nrm = np.concatenate([ring, ring])
+        uv = np.stack([np.tile(a / (2.0 * np.pi), 2), np.repeat([0.0, 1.0], n)], 1)
+        return pts, faces, nrm, uv
+    raise ValueError(f"not an analytic shape class: {cls!r}")
+
+
+def _sphere(rings: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A closed latitude-longitude unit sphere: one vertex per pole, ``rings - 1`` rings of ``2 rings`` vertices."""
+    cols = 2 * rings
+    theta = np.pi * np.arange(1, rings) / rings
+    phi = 2.0 * np.pi * np.arange(cols) / cols
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    body = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
+    pts = np.concatenate([[[0.0, 0.0, 1.0]], body, [[0.0, 0.0, -1.0]]])
+    uv = np.concatenate([[[0.0, 0.0]], np.stack([ph / (2.0 * np.pi), th / np.pi], -1).reshape(-1, 2), [[0.0, 1.0]]])
+    j = np.arange(cols)
+    jn = (j + 1) % cols
+    north, south = 0, len(pts) - 1
+    faces = [np.stack([np.full(cols, north), 1 + j, 1 + jn], 1)]  # counter-clockwise seen from outside
+    for r in range(rings - 2):
+        a, b = 1 + r * cols + j, 1 + r * cols + jn
+        c, d = a + cols, b + cols
+        faces += [np.stack([a, c, d], 1), np.stack([a, d, b], 1)]
+    last = 1 + (rings - 2) * cols
+    faces.append(np.stack([last + j, np.full(cols, south), last + jn], 1))
+    return pts, np.concatenate(faces).astype(np.int64), pts.copy(), uv
+
+
+def world_mesh(mi, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(points [V,3], faces [F,3], unit normals [V,3])`` of an analytic Mitsuba shape in world space
+    (its ``to_world``; normals by the inverse transpose)."""
+    cls = str(shape).split("[")[0].strip()
+    pts, faces, nrm, _ = local_mesh(cls)
+    m = np.array(mi.traverse(shape)["to_world"].matrix, np.float64).reshape(4, 4)
+    wp = pts @ m[:3, :3].T + m[:3, 3]
+    wn = nrm @ np.linalg.inv(m[:3, :3])
+    wn /= np.maximum(np.linalg.norm(wn, axis=1, keepdims=True), 1e-30)
+    return wp, faces, wn
+
+
+def as_mesh(mi, shape):
+    """A Mitsuba triangle mesh in place of the analytic ``shape``: its tessellation in world space with the
+    shape's id, BSDF and interior / exterior media (an emitter is not carried: an asset emits nothing)."""
+    pts, faces, nrm = world_mesh(mi, shape)
+    props = mi.Properties()
+    props.set_id(shape.id())
+    for key, obj in (("bsdf", shape.bsdf()), ("interior", shape.interior_medium()), ("exterior", shape.exterior_medium())):
+        if obj is not None:
+            props[key] = obj
+    mesh = mi.Mesh(shape.id() or "analytic", len(pts), len(faces), props, has_vertex_normals=True)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(np.ascontiguousarray(pts, np.float32).ravel())
+    params["faces"] = mi.UInt32(np.ascontiguousarray(faces, np.uint32).ravel())
+    params["vertex_normals"] = mi.Float(np.ascontiguousarray(nrm, np.float32).ravel())
+    params.update()
+    return mesh
