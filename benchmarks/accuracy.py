@@ -298,10 +298,34 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     sensor, hw = sensor_for(mi, mscene, res)
     a, b, half, key, reused = mitsuba_halves(mi, mscene, sensor, hw, scene_file, out, spp, seed, say=say, quiet=quiet)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
+    reference = {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator}
+    caveat = delta_light_caveat(mi, mscene, list(rep))
+    if caveat:
+        say(f"warning: {caveat}")
+        reference["warnings"] = [caveat]
     return SourceReference(
         a, b, half, cov, fits, Path(converted.output), max(1, md - 1) if md and md > 0 else 24,
-        {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator},
-        "mitsuba camera rays, first hit", reused=reused, cache_key=key)
+        reference, "mitsuba camera rays, first hit", reused=reused, cache_key=key)
+
+
+def delta_light_caveat(mi, scene, ids: list[str]) -> str | None:
+    """A warning when Mitsuba cannot render the reference's light through a replaced shape: a delta emitter
+    (directional, point, spot) is never reached by next-event estimation through a smooth dielectric boundary, so
+    the light it sends through the object is missing from Mitsuba's image, while the asset (baked with a small
+    area light, spec/bake.md#light) carries it. None when no replaced shape has such a boundary or no light is delta."""
+    from nasset_converters.mitsuba.scene import blocks_delta_light
+
+    shapes = [s for s in scene.shapes() if s.id() in ids]
+    if not blocks_delta_light(shapes):
+        return None
+    delta = mi.EmitterFlags.DeltaPosition | mi.EmitterFlags.DeltaDirection
+    lights = [e.id() or type(e).__name__ for e in scene.emitters() if int(e.flags()) & int(delta)]
+    if not lights:
+        return None
+    return (f"delta light(s) {lights} cannot reach the inside of {ids} through their smooth dielectric boundary in "
+            "Mitsuba (next-event estimation never meets a delta light through a delta BSDF): the reference lacks the "
+            "light they send through the object, the asset does not, so it will read too bright. Measure with a "
+            "rough dielectric boundary or with small area lights instead (spec/accuracy.md#in-scene-accuracy)")
 
 
 def blender_asset_fits(rep: dict, *, scene_file: str = "") -> list[dict]:
@@ -488,7 +512,7 @@ def markdown(r: dict) -> str:
         "",
         "Times: " + ", ".join(f"{k[:-2]} {v:.1f} s" for k, v in r["times_s"].items()) + ".",
         "",
-    ]
+    ] + [f"**Warning:** {w}\n" for w in ref.get("warnings", [])]
     return "\n".join(lines)
 
 
@@ -499,7 +523,8 @@ def summary_text(r: dict) -> str:
     a = Accuracy(**{k: v for k, v in o.items() if k in Accuracy.__dataclass_fields__})
     return (f"in-scene accuracy over the object ({o['pixels']} pixels, mask from {r['reference']['renderer']}): {a.line()}\n"
             f"reference: {r['reference']['spp']} spp unclamped in two halves; estimate {r['estimate']['spp']} spp\n"
-            "wrote " + ", ".join(r["files"]))
+            + "".join(f"warning: {w}\n" for w in r["reference"].get("warnings", []))
+            + "wrote " + ", ".join(r["files"]))
 
 
 def add_args(p) -> None:

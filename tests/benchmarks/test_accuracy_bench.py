@@ -160,3 +160,39 @@ def test_light_terms_bad_input(scene, tmp_path):
     with pytest.raises(NassetError) as e:
         light_terms(scene.with_suffix(".blend"), ["ball=a.usdc"], tmp_path / "o")
     assert e.value.code == "USAGE"
+
+
+def _ball_scene(bsdf: str, lights: str) -> str:
+    return ('<scene version="3.0.0"><integrator type="volpath"><integer name="max_depth" value="32"/></integrator>'
+            '<sensor type="perspective"><transform name="to_world"><lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/>'
+            '</transform><film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>'
+            f'</sensor>{lights}<shape type="sphere" id="ball"><float name="radius" value="0.5"/>{bsdf}'
+            '<medium type="homogeneous" name="interior"><float name="sigma_t" value="4"/>'
+            '<rgb name="albedo" value="0.99, 0.99, 0.99"/></medium></shape></scene>')
+
+
+SMOOTH = '<bsdf type="dielectric"/>'
+ROUGH = '<bsdf type="roughdielectric"><float name="alpha" value="0.2"/></bsdf>'
+SUN = '<emitter type="directional" id="sun"><vector name="direction" value="0, 0, -1"/><rgb name="irradiance" value="1, 1, 1"/></emitter>'
+SKY = '<emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>'
+
+
+def test_delta_light_through_a_smooth_boundary_is_flagged():
+    """The premise, checked on Mitsuba itself: a sun behind the camera lights the inside of a rough-dielectric ball but
+    not of a smooth one (next-event estimation cannot reach a delta light through a delta BSDF); the bench warns for
+    that combination only."""
+    from nasset_benchmarks.accuracy import delta_light_caveat
+    from nasset_converters.mitsuba import load_mitsuba
+
+    mi = load_mitsuba()
+    smooth, rough = mi.load_string(_ball_scene(SMOOTH, SUN)), mi.load_string(_ball_scene(ROUGH, SUN))
+    inner = (slice(5, 11), slice(5, 11))
+    lit_smooth = float(np.asarray(mi.render(smooth, spp=64))[inner].mean())
+    lit_rough = float(np.asarray(mi.render(rough, spp=64))[inner].mean())
+    assert lit_rough > 0.05 and lit_smooth < 0.02 * lit_rough
+
+    msg = delta_light_caveat(mi, smooth, ["ball"])
+    assert msg and "sun" in msg and "ball" in msg
+    assert delta_light_caveat(mi, rough, ["ball"]) is None
+    assert delta_light_caveat(mi, mi.load_string(_ball_scene(SMOOTH, SKY)), ["ball"]) is None
+    assert delta_light_caveat(mi, smooth, ["nothing"]) is None
