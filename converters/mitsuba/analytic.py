@@ -5,7 +5,7 @@ training data from a tessellation of it, with the shape's own BSDF and media, so
 the asset's surface agree exactly (spec/bake.md#analytic-shapes). The tessellations are closed where
 the shape is (a sphere: one vertex per pole, no seam), carry the analytic unit normals as vertex
 normals, and are fine enough that the surface lies within ``1e-3`` of the shape's size of the true one.
-``convert-scene`` writes a ``cylinder`` with the same tessellation (spheres, rectangles and disks have
+``convert-scene`` writes disks and cylinders with the same tessellation (spheres and rectangles have
 their own USD prims there).
 """
 
@@ -25,7 +25,8 @@ def local_mesh(cls: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     """``(points [V,3], faces [F,3], normals [V,3], uv [V,2])`` of the shape ``cls`` in Mitsuba's local frame:
     the unit sphere about the origin (poles on ±Z), the square [-1, 1]² at z = 0 facing +Z, the unit disk at
     z = 0 facing +Z, the open unit cylinder from z = 0 to 1 (normals outward). ``uv`` follows Mitsuba's
-    parameterisation (sphere u = phi / 2pi, v = theta / pi; cylinder u = phi / 2pi, v = z)."""
+    parameterisation (sphere u = phi / 2pi, v = theta / pi; rectangle (x + 1, y + 1) / 2; disk u = r, v = phi / 2pi;
+    cylinder u = phi / 2pi, v = z)."""
     if cls == "Sphere":
         return _sphere(SPHERE_RINGS)
     if cls == "Rectangle":
@@ -38,7 +39,7 @@ def local_mesh(cls: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     if cls == "Disk":
         pts = np.concatenate([[[0.0, 0.0, 0.0]], ring])
         faces = np.stack([np.zeros(n, np.int64), 1 + np.arange(n), 1 + nxt], 1)
-        return pts, faces, np.tile([0.0, 0.0, 1.0], (n + 1, 1)), 0.5 * (pts[:, :2] + 1.0)
+        return pts, faces, np.tile([0.0, 0.0, 1.0], (n + 1, 1)), np.c_[np.r_[0.0, np.ones(n)], np.r_[0.0, a / (2.0 * np.pi)]]
     if cls == "Cylinder":
         top = ring + [0.0, 0.0, 1.0]
         pts = np.concatenate([ring, top])
@@ -72,11 +73,15 @@ def _sphere(rings: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     return pts, np.concatenate(faces).astype(np.int64), pts.copy(), uv
 
 
+def shape_class(shape) -> str:
+    """Mitsuba's class name of a shape ("PLYMesh", "Sphere", "LinearCurve", ...)."""
+    return str(shape).split("[")[0].strip()
+
+
 def world_mesh(mi, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(points [V,3], faces [F,3], unit normals [V,3])`` of an analytic Mitsuba shape in world space
     (its ``to_world``; normals by the inverse transpose)."""
-    cls = str(shape).split("[")[0].strip()
-    pts, faces, nrm, _ = local_mesh(cls)
+    pts, faces, nrm, _ = local_mesh(shape_class(shape))
     m = np.array(mi.traverse(shape)["to_world"].matrix, np.float64).reshape(4, 4)
     wp = pts @ m[:3, :3].T + m[:3, 3]
     wn = nrm @ np.linalg.inv(m[:3, :3])

@@ -30,7 +30,7 @@ import numpy as np
 from nasset_sdk.errors import error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
-from .analytic import ANALYTIC_CLASSES, as_mesh
+from .analytic import ANALYTIC_CLASSES, as_mesh, shape_class
 
 #: BSDF classes through which a delta light is never reached by next-event estimation.
 DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
@@ -50,11 +50,6 @@ def load_scene(mi, path: str | Path):
 
 #: Mitsuba curve shapes an rna fiber asset can be baked from (spec/bake.md#mitsuba-curves)
 CURVE_CLASSES = ("LinearCurve", "BSpline", "BSplineCurve")
-
-
-def shape_class(shape) -> str:
-    """Mitsuba's class name of a shape ("PLYMesh", "LinearCurve", ...)."""
-    return str(shape).split("[")[0].strip()
 
 
 def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) -> list:

@@ -47,8 +47,6 @@ from . import analytic
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
-#: segments of the triangle fan written for a Mitsuba ``disk``
-DISK_SEGMENTS = 96
 #: an envmap is written at up to this many times its resolution (resampled with Mitsuba's own lookup), as
 #: long as the written map stays within ENVMAP_MAX_PIXELS
 ENVMAP_UPSAMPLE = 8
@@ -658,20 +656,12 @@ class StageConverter:
             uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
             self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
                              shape, cls, emission, local_to_world=True, uv=uv)
-        elif cls == "Disk":
-            a = np.linspace(0.0, 2.0 * np.pi, DISK_SEGMENTS, endpoint=False)
-            pts = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)])
-            faces = np.stack([np.zeros(DISK_SEGMENTS, int), 1 + np.arange(DISK_SEGMENTS),
-                              1 + (np.arange(DISK_SEGMENTS) + 1) % DISK_SEGMENTS], 1)
-            self.warn(f"shape {sid}: disk tessellated into {DISK_SEGMENTS} triangles")
-            self._write_mesh(sid, pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), shape, cls, emission,
-                             local_to_world=True)
         elif cls == "Sphere":
             self._sphere(shape, sid, emission)
-        elif cls == "Cylinder":
+        elif cls in ("Disk", "Cylinder"):  # world space, the tessellation bakes use (spec/bake.md#analytic-shapes)
             pts, faces, nrm = analytic.world_mesh(self.mi, shape)
-            uv = analytic.local_mesh(cls)[3]
-            self.warn(f"shape {sid}: cylinder tessellated into {len(faces)} triangles (open, like Mitsuba's)")
+            self.warn(f"shape {sid}: {cls.lower()} tessellated into {len(faces)} triangles")
+            uv = analytic.local_mesh(cls)[3] if cls == "Cylinder" else None  # a fan cannot carry the disk's polar uv
             self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
         else:
             hint = (f"; bake it into an rna fiber asset (nasset bake --kind rna --asset {sid}) and --replace {sid}=ASSET"

@@ -244,7 +244,7 @@ def test_shapes_and_materials(converted):
     m = _xf(stage, "/World/Geometry/ball")
     assert ball.GetRadiusAttr().Get() * np.linalg.norm(m[0, :3]) == pytest.approx(0.5)
     np.testing.assert_allclose(m[3, :3], [1, 0.5, 0], atol=1e-6)
-    assert len(UsdGeom.Mesh(stage.GetPrimAtPath("/World/Geometry/disk")).GetFaceVertexCountsAttr().Get()) == 96
+    assert len(UsdGeom.Mesh(stage.GetPrimAtPath("/World/Geometry/disk")).GetFaceVertexCountsAttr().Get()) == 192
     cyl = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Geometry/cyl"))  # world space, Mitsuba's unit tube z 0..1
     pts, nrm = np.array(cyl.GetPointsAttr().Get()), np.array(cyl.GetNormalsAttr().Get())
     np.testing.assert_allclose(np.hypot(pts[:, 0], pts[:, 1]), 1.0, atol=1e-6)
