@@ -74,10 +74,12 @@ NEUPRESS_TRAIN = {
     "hq": dict(epochs=80, batch=4096, sampling_epochs=40, sampling_samples=16384, sampling_bins=24, prt_dirs=1024),
 }
 
-#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES)
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 3000 steps with each buffer
+#: used 4 times, in-scene bias^2 2.0e-5 against 5.6e-5 for 1200 steps used twice, bake 7-11 min
+#: (spec/bake-8dna.md#small-budget)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
-    "small": dict(steps=1200, batch=2048, buffer=1 << 18, reuse=2),
+    "small": dict(steps=3000, batch=2048, buffer=1 << 18, reuse=4),
     "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
 }
 
