@@ -15,9 +15,10 @@ import numpy as np
 
 #: Mitsuba classes of the shapes tessellated here
 ANALYTIC_CLASSES = ("Sphere", "Rectangle", "Disk", "Cylinder")
-#: latitude rings of a sphere (2x as many longitudes): the chord's sagitta is 1 - cos(pi / 128) = 3.0e-4 of the radius
+#: latitude rings of a sphere (2x as many longitudes): a face's circumcentre lies 1 - cos(sqrt(2) pi / 128) = 6.0e-4
+#: of the radius inside the sphere (at the equator; less towards the poles)
 SPHERE_RINGS = 64
-#: segments around a disk or a cylinder: sagitta 1 - cos(pi / 192) = 1.3e-4 of the radius
+#: segments around a disk or a cylinder: a chord's sagitta is 1 - cos(pi / 192) = 1.3e-4 of the radius
 ROUND_SEGMENTS = 192
 
 

@@ -113,17 +113,6 @@ def test_pick_shapes_tessellates_and_keeps_material_and_medium(mi, tmp_path):
     assert np.allclose(center, [0.3, -0.2, 0.1], atol=1e-3) and abs(radius - 0.7) < 2e-3
 
 
-def test_other_non_mesh_shapes_stay_unsupported(mi, tmp_path):
-    from nasset_sdk.errors import SceneError
-
-    xml = tmp_path / "g.xml"
-    xml.write_text('<scene version="3.0.0"><shape type="shapegroup" id="g"><shape type="sphere"/></shape>'
-                   '<shape type="instance" id="i"><ref id="g"/></shape></scene>')
-    with pytest.raises(SceneError) as e:
-        msc.pick_shapes(msc.load_scene(mi, xml), ["i"])
-    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "sphere" in str(e.value)
-
-
 def test_a_translucent_sphere_bakes_and_stands_in_for_itself(tmp_path):
     """A ``sphere`` with a dielectric boundary and a medium bakes to a closed asset whose bounds are the sphere's, and
     the accuracy bench takes it in place of the analytic shape (the bench's scene-asset check)."""
