@@ -353,8 +353,9 @@ def test_bake_rejects_meaningless_options_and_unsupported_boundaries(mi, tmp_pat
         boundary_of(mi, shapes)
     assert exc.value.code == "CONVERT_SHAPE_UNSUPPORTED"
     shapes = _sphere_scene(mi, tmp_path, bsdf={"type": "roughdielectric", "alpha": 0.3, "int_ior": 1.33})  # Beckmann default
-    with pytest.raises(NassetError, match="Beckmann"):
+    with pytest.raises(NassetError, match="Beckmann") as exc:
         boundary_of(mi, shapes)
+    assert 'value="ggx"' in str(exc.value)  # the message says how to fix the scene
     shapes = _sphere_scene(mi, tmp_path, bsdf={"type": "roughdielectric", "distribution": "ggx", "alpha": 0.3, "int_ior": 1.33})
     eta, alpha = boundary_of(mi, shapes)
     assert abs(eta - 1.33) < 1e-3 and abs(alpha - 0.3) < 1e-6  # Mitsuba's default exterior is air (1.000277)
