@@ -282,6 +282,20 @@ class SourceReference:
     cache_key: dict | None = None  # written as reference_key.json once the halves are on disk
 
 
+#: the estimate's depth when the scene's integrator states none (e.g. ``direct``)
+FALLBACK_DEPTH = 24
+
+
+def estimate_depth(integrator: dict) -> int:
+    """The reference renderer's max_depth for a converted scene's ``integrator`` record: Mitsuba's max_depth - 1
+    (the renderer counts scattering vertices, Mitsuba path segments); an unbounded one (-1) is the renderer's
+    MAX_DEPTH with Russian roulette, as Mitsuba's; FALLBACK_DEPTH when the integrator states no depth."""
+    from nasset_reference_renderer.integrator import MAX_DEPTH
+
+    md = integrator.get("renderer_max_depth")
+    return FALLBACK_DEPTH if md is None else (MAX_DEPTH if md < 0 else max(1, int(md)))
+
+
 def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, seed: int, quiet: bool, say) -> SourceReference:
     """The Mitsuba side: check the assets fit, convert, render the reference halves (reusing a cached
     pair for the same scene, size, spp and seed) and the object mask from Mitsuba's camera rays."""
@@ -294,7 +308,6 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     mscene = load_scene(mi, scene_file)
     fits = check_asset_fits(mi, mscene, rep, scene_file=str(scene_file))
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
-    md = converted.integrator.get("max_depth", 24)
     sensor, hw = sensor_for(mi, mscene, res)
     a, b, half, key, reused = mitsuba_halves(mi, mscene, sensor, hw, scene_file, out, spp, seed, say=say, quiet=quiet)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
@@ -304,7 +317,7 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
         say(f"warning: {caveat}")
         reference["warnings"] = [caveat]
     return SourceReference(
-        a, b, half, cov, fits, Path(converted.output), max(1, md - 1) if md and md > 0 else 24,
+        a, b, half, cov, fits, Path(converted.output), estimate_depth(converted.integrator),
         reference, "mitsuba camera rays, first hit", reused=reused, cache_key=key)
 
 
@@ -539,8 +552,8 @@ def add_args(p) -> None:
     p.add_argument("--nr-spp", type=int, default=None, help=f"reference-renderer spp (default {DEFAULT['nr_spp']}; {QUICK['nr_spp']} with --quick)")
     p.add_argument("--res", type=int, default=None, help=f"image width (default {DEFAULT['res']}; {QUICK['res']} with --quick); "
                    "height keeps the scene's aspect")
-    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1; Blender: the converted "
-                   "scene's nasset:maxDepth, Cycles' bounces + 1)")
+    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1, "
+                   "1024 with Russian roulette when unbounded; Blender: the converted scene's nasset:maxDepth, Cycles' bounces + 1)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")

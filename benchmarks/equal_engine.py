@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import json
 import math
-import re
 import sys
 import time
 from pathlib import Path
@@ -37,18 +36,8 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
+from nasset_converters.mitsuba.scene import integrator_depths
 from nasset_sdk.errors import UsageError, error
-
-
-def _integrator_settings(mscene) -> dict:
-    """max_depth and rr_depth of the scene's integrator (Mitsuba's defaults when absent)."""
-    text = str(mscene.integrator())
-    out = {"max_depth": -1, "rr_depth": 5}
-    for k in out:
-        m = re.search(rf"{k}\s*=\s*(-?\d+)", text)
-        if m:
-            out[k] = int(m.group(1))
-    return out
 
 
 def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt_spp: int = 4096, mi_spp=(1, 4, 16, 64),
@@ -75,7 +64,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
         original = mi.load_file(str(scene_file))
     except Exception as exc:  # Mitsuba's XML / plugin errors
         raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {str(exc).splitlines()[0][:300]}", file=str(scene_file)) from None
-    settings = _integrator_settings(original)
+    settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults
     with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})
     nasset = mi.load_dict({"type": INTEGRATOR, "max_depth": settings["max_depth"] if settings["max_depth"] > 0 else 1024,
                            "rr_depth": settings["rr_depth"]})

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_benchmarks.accuracy import estimate_depth
 from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
 from nasset_sdk.errors import UsageError
 
@@ -88,9 +89,8 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
     mi.set_log_level(mi.LogLevel.Error)
     mscene = mi.load_file(str(xml))
     sensor = mi_sensor(mi, mscene, res)
-    md = converted.integrator.get("max_depth", 24)
     if max_depth is None:
-        max_depth = max(1, md - 1) if md and md > 0 else 24
+        max_depth = estimate_depth(converted.integrator)
 
     # ground truth
     say(f"ground truth: Mitsuba {mi.variant()} {gt_spp} spp at {res}x{res}")

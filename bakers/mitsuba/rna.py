@@ -142,11 +142,7 @@ def bake(
         if not clamp >= 0:
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
         dset = replace(dset, clamp=float(clamp))
-    from nasset_converters.mitsuba.high_albedo_example import scene_max_depth
-
-    md = scene_max_depth(msc_scene)  # ground truth as deep as the scene's own integrator (spec/accuracy.md)
-    if md is not None and (md < 0 or md > dset.max_depth):
-        dset = replace(dset, max_depth=md if md > 0 else 1024)
+    dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     if workers is None:
         views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
     else:  # each worker loads the scene itself

@@ -91,12 +91,3 @@ def write_example_scene(folder: str | Path, size: str | None = None, *, max_dept
     xml = folder / "scene.xml"
     xml.write_text(_XML.format(max_depth=int(max_depth), albedo=", ".join(f"{a:g}" for a in ALBEDO), sigma_t=f"{SIGMA_T:g}"))
     return xml
-
-
-def scene_max_depth(mscene) -> int | None:
-    """The loaded scene integrator's ``max_depth`` (None when it has none; -1 is unbounded)."""
-    import re
-
-    integ = mscene.integrator()
-    m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ)) if integ is not None else None
-    return int(m.group(1)) if m else None

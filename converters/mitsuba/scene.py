@@ -48,6 +48,34 @@ def load_scene(mi, path: str | Path):
         raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(path)) from None
 
 
+def integrator_depths(integrator) -> dict:
+    """``max_depth`` and ``rr_depth`` as a loaded Mitsuba integrator reports them (a key is absent when the
+    integrator has no such setting, or is None). -1 is unbounded: Mitsuba stores the depth unsigned and prints
+    -1 as 2^32 - 1, which is read back as -1 (any value >= 2^31)."""
+    import re
+
+    out = {}
+    for key in ("max_depth", "rr_depth"):
+        m = re.search(rf"\b{key}\s*=\s*(-?\d+)", str(integrator)) if integrator is not None else None
+        if m:
+            v = int(m.group(1))
+            out[key] = -1 if v >= 2 ** 31 or v < 0 else v
+    return out
+
+
+#: the depth training views are rendered with for a scene whose integrator is unbounded (Russian roulette ends paths)
+UNBOUNDED_DEPTH = 1024
+
+
+def training_depth(integrator, preset_depth: int) -> int:
+    """max_depth of a bake's training renders: the preset's, or the scene integrator's where that is deeper, so that
+    the ground truth is as deep as the scene's own (spec/accuracy.md); an unbounded one gives UNBOUNDED_DEPTH."""
+    md = integrator_depths(integrator).get("max_depth")
+    if md is None or 0 <= md <= preset_depth:
+        return int(preset_depth)
+    return UNBOUNDED_DEPTH if md < 0 else md
+
+
 #: Mitsuba curve shapes an rna fiber asset can be baked from (spec/bake.md#mitsuba-curves)
 CURVE_CLASSES = ("LinearCurve", "BSpline", "BSplineCurve")
 

@@ -44,6 +44,7 @@ import numpy as np
 from nasset_sdk.errors import UsageError, error
 
 from . import analytic
+from .scene import integrator_depths
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
@@ -359,13 +360,10 @@ class StageConverter:
         integ = self.scene.integrator()
         if integ is None:
             return
-        text = str(integ)
         cls = _class_name(integ)
         info = {"type": cls}
-        m = re.search(r"max_depth\s*=\s*(-?\d+)", text)
-        if m:
-            md = int(m.group(1))
-            md = -1 if md >= 2 ** 31 else md  # -1 (unbounded) prints as uint32 max
+        md = integrator_depths(integ).get("max_depth")
+        if md is not None:
             info["max_depth"] = md
             info["renderer_max_depth"] = -1 if md < 0 else max(md - 1, 1)
             from pxr import Sdf, UsdRender

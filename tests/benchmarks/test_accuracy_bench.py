@@ -196,3 +196,18 @@ def test_delta_light_through_a_smooth_boundary_is_flagged():
     assert delta_light_caveat(mi, rough, ["ball"]) is None
     assert delta_light_caveat(mi, mi.load_string(_ball_scene(SMOOTH, SKY)), ["ball"]) is None
     assert delta_light_caveat(mi, smooth, ["nothing"]) is None
+
+
+@pytest.mark.parametrize("record, want", [
+    ({"type": "VolumetricPathIntegrator", "max_depth": -1, "renderer_max_depth": -1}, 1024),
+    ({"type": "PathIntegrator", "max_depth": 8, "renderer_max_depth": 7}, 7),
+    ({"type": "DirectIntegrator"}, 24),
+])
+def test_in_scene_estimate_depth(record, want):
+    """The accuracy bench's estimate is as deep as the Mitsuba reference: unbounded stays unbounded (the
+    reference renderer's MAX_DEPTH with Russian roulette), not a fixed 24."""
+    from nasset_benchmarks.accuracy import estimate_depth
+    from nasset_reference_renderer.integrator import MAX_DEPTH
+
+    assert MAX_DEPTH == 1024
+    assert estimate_depth(record) == want
