@@ -300,12 +300,13 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     """The Mitsuba side: check the assets fit, convert, render the reference halves (reusing a cached
     pair for the same scene, size, spp and seed) and the object mask from Mitsuba's camera rays."""
     from nasset_converters.mitsuba import load_mitsuba
-    from nasset_converters.mitsuba.scene import load_scene
+    from nasset_converters.mitsuba.scene import load_scene, require_integrator
     from nasset_converters.mitsuba.usd_export import convert_scene
 
     mi = load_mitsuba()  # CONVERT_BACKEND when mitsuba is missing
     mi.set_log_level(mi.LogLevel.Error)
     mscene = load_scene(mi, scene_file)
+    require_integrator(mscene, scene_file)
     fits = check_asset_fits(mi, mscene, rep, scene_file=str(scene_file))
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
     sensor, hw = sensor_for(mi, mscene, res)

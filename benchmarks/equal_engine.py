@@ -36,7 +36,7 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
-from nasset_converters.mitsuba.scene import integrator_depths
+from nasset_converters.mitsuba.scene import integrator_depths, require_integrator
 from nasset_sdk.errors import UsageError, error
 
 
@@ -64,6 +64,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
         original = mi.load_file(str(scene_file))
     except Exception as exc:  # Mitsuba's XML / plugin errors
         raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {str(exc).splitlines()[0][:300]}", file=str(scene_file)) from None
+    require_integrator(original, scene_file)
     settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults
     with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})
     nasset = mi.load_dict({"type": INTEGRATOR, "max_depth": settings["max_depth"] if settings["max_depth"] > 0 else 1024,

@@ -48,6 +48,14 @@ def load_scene(mi, path: str | Path):
         raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(path)) from None
 
 
+def require_integrator(scene, file: str | Path) -> None:
+    """CONVERT_SCENE_LOAD unless the scene names an integrator: Mitsuba 3 renders no scene without one, so a
+    benchmark has no reference to compare with (a bake needs none: it renders with its own)."""
+    if scene.integrator() is None:
+        raise error("CONVERT_SCENE_LOAD", "the scene has no <integrator>, and Mitsuba renders none without one: there is no "
+                    "reference to measure against; add one, e.g. <integrator type=\"volpath\"/>", file=str(file))
+
+
 def integrator_depths(integrator) -> dict:
     """``max_depth`` and ``rr_depth`` as a loaded Mitsuba integrator reports them (a key is absent when the
     integrator has no such setting, or is None). -1 is unbounded: Mitsuba stores the depth unsigned and prints

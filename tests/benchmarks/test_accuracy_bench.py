@@ -89,6 +89,19 @@ def test_missing_asset_file(scene, tmp_path):
     assert e.value.code == "CONVERT_ASSET_REFERENCE"
 
 
+def test_scene_without_integrator(scene, tmp_path):
+    """Mitsuba renders no scene without an <integrator>: a typed error naming the file, not Mitsuba's exception."""
+    import re
+
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    bare = tmp_path / "bare.xml"
+    bare.write_text(re.sub(r"<integrator.*?</integrator>|<integrator[^>]*/>", "", scene.read_text(), flags=re.S))
+    assert "<integrator" not in bare.read_text()
+    with pytest.raises(NassetError) as e:
+        _run(bare, [f"shell,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_SCENE_LOAD" and "integrator" in str(e.value) and "bare.xml" in str(e.value)
+
+
 def test_cli_exit_code_and_json_error(scene, tmp_path):
     from nasset_sdk.cli import main
 

@@ -61,3 +61,25 @@ def test_equal_engine_unknown_shape(tmp_path, rna_asset_path):
     with pytest.raises(NassetError) as exc:
         bench_equal_engine(tmp_path / "scene.xml", {"nope": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,))
     assert exc.value.code == "CONVERT_SHAPE_UNKNOWN" and "nope" in exc.value.message
+
+
+def test_equal_engine_scene_without_integrator(tmp_path, rna_asset_path):
+    from nasset_benchmarks.equal_engine import bench_equal_engine
+
+    bare = SCENE.replace('<integrator type="path"><integer name="max_depth" value="4"/></integrator>', "")
+    assert "<integrator" not in bare
+    (tmp_path / "scene.xml").write_text(bare)
+    with pytest.raises(NassetError) as exc:
+        bench_equal_engine(tmp_path / "scene.xml", {"ball": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,))
+    assert exc.value.code == "CONVERT_SCENE_LOAD" and "integrator" in exc.value.message
+
+
+def test_equal_engine_unbounded_scene_depth(tmp_path, rna_asset_path):
+    """Mitsuba's default max_depth (-1, printed unsigned) gives the plugin's unbounded 1024, not 2^32 - 1."""
+    from nasset_benchmarks.equal_engine import bench_equal_engine
+
+    (tmp_path / "scene.xml").write_text(SCENE.replace('<integrator type="path"><integer name="max_depth" value="4"/></integrator>',
+                                                      '<integrator type="path"/>'))
+    r = bench_equal_engine(tmp_path / "scene.xml", {"ball": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,),
+                           quiet=True)
+    assert r["mitsuba"]["settings"] == {"max_depth": -1, "rr_depth": 5}
