@@ -26,8 +26,11 @@ pixels (samples) of ``mask`` and all channels:
 * **ceiling** ``10 log10(peak^2 / v)``: the PSNR an exact image scores in expectation against
   this reference. No figure above it can be claimed.
 * **bias-corrected MSE** ``MSE - v`` (minus the estimate's own variance when given) and its PSNR;
-  when it is not significantly above 0 (``< 2`` standard errors) the estimate is **at the
-  ceiling**, and the claimed PSNR is "at the ceiling" rather than a number.
+  when it is not significantly above 0 (``< 2`` standard errors) no corrected PSNR is given. Its
+  upper bound ``B = max(MSE - v, 0) + 2 se`` gives the **PSNR bound** ``10 log10(peak^2 / B)``. Only when
+  ``B <= v`` (whatever error is left is within the reference's own noise) is the estimate **at the
+  ceiling** and the claimed PSNR "at the ceiling"; a noisy estimate whose error the comparison cannot
+  resolve claims ">= bound" instead, never the ceiling.
 * **FLIP** (HDR-FLIP of ``est`` against ``r``, mean over the mask) when ``flip-evaluator`` is
   importable and the inputs are images; else None.
 """
@@ -65,13 +68,17 @@ class Accuracy:
     psnr_corrected_db: float | None  # from the bias-corrected MSE; None at the ceiling
     at_ceiling: bool
     flip: float | None = None
+    psnr_bound_db: float | None = None  # 10 log10(peak^2 / (max(mse_corrected, 0) + 2 se)): a 2-sigma lower bound
     notes: list = field(default_factory=list)
     groups: dict | None = None  # with groups: {count, ratio_sd, ratio_min, ratio_max} per channel, see group_figures
 
     def claimed_psnr(self) -> str:
-        """The PSNR one may state: a number, or "at the ceiling (C dB)"."""
-        if self.at_ceiling or self.psnr_corrected_db is None:
+        """The PSNR one may state: a number, ">= bound" when the error is not resolved, or "at the ceiling (C dB)"."""
+        if self.at_ceiling:
             return f"at the ceiling ({self.ceiling_db:.1f} dB)"
+        if self.psnr_corrected_db is None:
+            bound = self.psnr_bound_db if self.psnr_bound_db is not None else self.psnr_db
+            return f">= {min(max(bound, self.psnr_db), self.ceiling_db):.1f} dB (error not resolved)"
         return f"{min(self.psnr_db, self.ceiling_db):.1f} dB"
 
     def to_dict(self) -> dict:
@@ -186,7 +193,9 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
     q = err2 - pix_var - (ev if ev is not None else 0.0)
     mse_c = float(q.mean())
     se = float(q.std(ddof=1) / math.sqrt(q.size)) if q.size > 1 else float("inf")
-    at_ceiling = mse_c < CEILING_SIGMAS * se
+    resolved = mse_c >= CEILING_SIGMAS * se
+    bound = max(mse_c, 0.0) + CEILING_SIGMAS * se  # the error's upper bound
+    at_ceiling = not resolved and bound <= v
     notes = []
     if not (pk > 0):
         notes.append("the reference is black over the mask: PSNR undefined")
@@ -198,7 +207,8 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
         pixels=n, energy_ratio=[float(x) for x in ratio], energy_error=[float(x - 1.0) for x in ratio],
         energy_se=[float(x) for x in energy_se], peak=pk, mse=mse, ref_noise_var=v, groups=spread,
         mse_corrected=mse_c, mse_corrected_se=se, psnr_db=_psnr(pk, mse), ceiling_db=_psnr(pk, v),
-        psnr_corrected_db=None if at_ceiling else _psnr(pk, mse_c), at_ceiling=bool(at_ceiling), notes=notes,
+        psnr_corrected_db=_psnr(pk, mse_c) if resolved else None, at_ceiling=bool(at_ceiling), notes=notes,
+        psnr_bound_db=_psnr(pk, bound) if math.isfinite(bound) else None,
     )
     if flip and est.ndim == 3 and est.shape[0] >= 8 and est.shape[1] >= 8:
         out.flip = flip_mean(est, 0.5 * (a + b), m)
