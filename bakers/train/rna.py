@@ -85,9 +85,9 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
         row [zeta (C), xn, n, wo, wi] -- n.wi, n.wo, n.h, wo.wi and lobes exp(k (n.h - 1)), h the
         half vector -- so the MLP need not build a highlight out of ReLUs of raw directions."""
 
-        def __init__(self, c: int, grazing: bool = False) -> None:
+        def __init__(self, c: int) -> None:
             super().__init__()
-            self.c, self.grazing = c, grazing
+            self.c = c
             self.register_buffer("k", torch.tensor(LOBE_SHARPNESS))
 
         def forward(self, x):
@@ -102,12 +102,9 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
                 a, b = wo - nwo * n, wi - nwi * n
                 dots.append((a * b).sum(1, keepdim=True) / torch.sqrt((a * a).sum(1, keepdim=True) * (b * b).sum(1, keepdim=True) + 1e-8))
             lobes = torch.exp(-self.k * nh * nh) if fiber else torch.exp(self.k * (nh - 1.0))
-            if self.grazing:  # steep near grazing, as Fresnel transmittance and masking are: (1 - |c|)^5, sqrt|c|
-                co, ci = nwo.abs().clamp(max=1.0), nwi.abs().clamp(max=1.0)
-                dots += [(1.0 - co) ** 5, (1.0 - ci) ** 5, torch.sqrt(co + 1e-12), torch.sqrt(ci + 1e-12)]
             return torch.cat([x, *dots, lobes], dim=1)
 
-    extra = {"raw": 0, "lobes": 4 + int(fiber) + len(LOBE_SHARPNESS), "grazing": 8 + int(fiber) + len(LOBE_SHARPNESS)}
+    extra = {"raw": 0, "lobes": 4 + int(fiber) + len(LOBE_SHARPNESS)}
     if encoding not in extra:
         raise ValueError(f"unknown encoding {encoding!r}")
 
@@ -119,7 +116,7 @@ def build_model(size: str, *, init_std: float = 0.1, seed: int = 0, plane_res: i
             self.planes = nn.Parameter(torch.randn(3, ch, res, res, generator=g) * init_std)
             self.in_width = ch + 12 + int(fiber)
             widths = [self.in_width + extra[encoding]] + [hidden] * layers + [6]
-            mods = [DirectionFeatures(ch, grazing=encoding == "grazing")] if encoding != "raw" else []
+            mods = [DirectionFeatures(ch)] if encoding == "lobes" else []
             for i, (a, b) in enumerate(zip(widths[:-1], widths[1:], strict=False)):
                 mods.append(nn.Linear(a, b))
                 if i < len(widths) - 2:
