@@ -65,7 +65,7 @@ class Accuracy:
     mse_corrected_se: float
     psnr_db: float  # against the mean-of-halves reference, raw
     ceiling_db: float  # the PSNR an exact image would score against this reference
-    psnr_corrected_db: float | None  # from the bias-corrected MSE; None at the ceiling
+    psnr_corrected_db: float | None  # from the bias-corrected MSE; None when that is within 2 s.e. of 0 (not resolved)
     at_ceiling: bool
     flip: float | None = None
     psnr_bound_db: float | None = None  # 10 log10(peak^2 / (max(mse_corrected, 0) + 2 se)): a 2-sigma lower bound
