@@ -5,7 +5,7 @@
 The USD scene becomes a Mitsuba scene (``mi.load_dict``): meshes and every neural-asset
 instance are ``mi.Mesh`` shapes in world space; point, delta distant, sphere and rectangle lights
 are Mitsuba emitters; a ``perspective`` sensor mirrors the USD camera. The integrator
-``nasset_path`` (a Python ``mi.SamplingIntegrator`` registered with ``mi.register_integrator``)
+``nasset_numpy_path`` (a Python ``mi.SamplingIntegrator`` registered with ``mi.register_integrator``)
 renders it as wavefronts: numpy path state, Mitsuba ray casts on whole batches, Mitsuba emitter
 sampling and evaluation, the neural transport evaluated per batch with onnxruntime. See
 ``mitsuba_renderer/`` for the pieces and spec/conformance-notes.md for the readings of the
@@ -29,7 +29,8 @@ from .loader import is_jit, load_mitsuba
 from .rna import KNOWN_KINDS, asset_kind
 from .usdscene import read_scene
 
-INTEGRATOR = "nasset_path"
+#: not ``nasset_path``: that name is the JIT plugin's (nasset_mitsuba_plugin), and both may be registered in one process
+INTEGRATOR = "nasset_numpy_path"
 _CONTEXTS: dict[str, dict] = {}
 _REGISTERED = False
 
@@ -68,7 +69,7 @@ def open_asset(path: str, threads: int = 0):
 
 
 def register(mi) -> None:
-    """Register the ``nasset_path`` integrator with Mitsuba (idempotent)."""
+    """Register the ``nasset_numpy_path`` integrator with Mitsuba (idempotent)."""
     global _REGISTERED
     if _REGISTERED:
         return
@@ -87,7 +88,7 @@ def register(mi) -> None:
             return mi.TensorXf(img.astype(np.float32))
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
-            raise NotImplementedError("nasset_path renders whole wavefronts; use render()")
+            raise NotImplementedError(f"{INTEGRATOR} renders whole wavefronts; use render()")
 
         def to_string(self):
             return f"NassetPathIntegrator[max_depth={self.max_depth}]"

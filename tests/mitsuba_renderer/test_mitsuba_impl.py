@@ -131,6 +131,28 @@ def test_random_asset_agrees_with_reference(nr, tmp_path):
     assert np.all(np.abs(mine.mean((0, 1)) - ref.mean((0, 1))) < 4.0 * np.maximum(se, 0.01 * ref.mean())), (mine.mean((0, 1)), ref.mean((0, 1)))
 
 
+def test_integrator_name_is_not_the_jit_plugins():
+    """This implementation and the JIT plugin register integrators with Mitsuba; registered in one process (either
+    order), each name loads its own class. They shared ``nasset_path``: the one registered last took it, and the
+    equal-engine bench then loaded this one with the plugin's ``rr_depth`` (an unreferenced-property error)."""
+    code = """
+from nasset_converters.mitsuba import load_mitsuba
+from nasset_mitsuba_plugin import plugins
+from nasset_mitsuba_renderer import render
+mi = load_mitsuba()
+plugins.register(mi)
+render.register(mi)
+jit = mi.load_dict({"type": plugins.INTEGRATOR, "max_depth": 3, "rr_depth": 5})
+mine = mi.load_dict({"type": render.INTEGRATOR, "max_depth": 3})
+print(jit.to_string()); print(mine.to_string())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    jit, mine = out.stdout.strip().splitlines()[-2:]
+    assert "rr_depth=5" in jit, jit
+    assert mine == "NassetPathIntegrator[max_depth=3]", mine
+
+
 def test_unsupported_kind_is_a_scene_error(nr, tmp_path):
     from pxr import Sdf
 
