@@ -14,7 +14,7 @@ from .errors import error
 DISTRIBUTION = "nasset-sdk"
 #: distribution name -> import name, where they differ
 IMPORT_NAMES = {"openexr": "OpenEXR", "usd-core": "pxr", "pillow": "PIL", "flip-evaluator": "flip_evaluator",
-                "import-linter": "importlinter"}
+                "import-linter": "importlinter", "pytest-xdist": "xdist"}
 _EXTRA = re.compile(r"""extra\s*==\s*["']([^"']+)["']""")
 _NAME = re.compile(r"^\s*([A-Za-z0-9][A-Za-z0-9._-]*)")
 

@@ -1,12 +1,17 @@
-"""Shared fixtures: small example assets written once per session."""
+"""Shared fixtures: small example assets written once per session; the stress suite's counts over test workers."""
 
 from __future__ import annotations
+
+import json
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from nasset_sdk.examples import example_builder
 from tests.stats import stat_seed
+from tests.stress import counting
 
 
 @pytest.fixture(scope="session")
@@ -20,3 +25,33 @@ def rna_asset_path(tmp_path_factory):
 @pytest.fixture
 def rng():
     return np.random.default_rng(stat_seed(1234))  # 1234 unless the seed sweep (tests/stats_sweep.py) shifts it
+
+
+# -- the stress suite's example counts (tests/stress): each test worker hands its counts to the main process ----
+
+
+def pytest_sessionfinish(session):
+    workeroutput = getattr(session.config, "workeroutput", None)  # set in a pytest-xdist worker only
+    if workeroutput is not None:
+        workeroutput["stress_counts"] = json.dumps(counting.COUNTS)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    counting.merge(json.loads(getattr(node, "workeroutput", {}).get("stress_counts", "{}")))
+
+
+def pytest_terminal_summary(terminalreporter):
+    if not counting.COUNTS or hasattr(terminalreporter.config, "workeroutput"):
+        return
+    tr, counts = terminalreporter, counting.COUNTS
+    tr.section("numerical stress: examples / inputs per function (all outputs checked finite)")
+    width = max(len(k) for k in counts)
+    for name, (ex, rows) in sorted(counts.items()):
+        tr.write_line(f"{name:<{width}}  {ex:6d} examples  {rows:8d} inputs")
+    tr.write_line(f"total: {sum(v[0] for v in counts.values())} examples, {sum(v[1] for v in counts.values())} inputs")
+    factory = getattr(tr.config, "_tmp_path_factory", None)
+    base = factory.getbasetemp() if factory is not None else Path(tempfile.mkdtemp(prefix="nasset-stress-"))
+    path = base / "stress_counts.json"
+    path.write_text(json.dumps({k: {"examples": v[0], "inputs": v[1]} for k, v in sorted(counts.items())}, indent=1))
+    tr.write_line(f"written to {path}")
