@@ -36,7 +36,7 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
-from nasset_converters.mitsuba.scene import integrator_depths, require_integrator
+from nasset_converters.mitsuba.scene import integrator_depths, load_scene, require_integrator
 from nasset_sdk.errors import UsageError, error
 
 
@@ -60,10 +60,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     mi = jit_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
     t_setup = time.perf_counter()
-    try:
-        original = mi.load_file(str(scene_file))
-    except Exception as exc:  # Mitsuba's XML / plugin errors
-        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {str(exc).splitlines()[0][:300]}", file=str(scene_file)) from None
+    original = load_scene(mi, scene_file)
     require_integrator(original, scene_file)
     settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults
     with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})

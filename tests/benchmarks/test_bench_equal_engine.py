@@ -74,6 +74,15 @@ def test_equal_engine_scene_without_integrator(tmp_path, rna_asset_path):
     assert exc.value.code == "CONVERT_SCENE_LOAD" and "integrator" in exc.value.message
 
 
+def test_equal_engine_scene_mitsuba_cannot_load(tmp_path, rna_asset_path):
+    from nasset_benchmarks.equal_engine import bench_equal_engine
+
+    (tmp_path / "scene.xml").write_text(SCENE.replace('type="path"', 'type="no_such_integrator"'))
+    with pytest.raises(NassetError) as exc:
+        bench_equal_engine(tmp_path / "scene.xml", {"ball": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,))
+    assert exc.value.code == "CONVERT_SCENE_LOAD" and exc.value.file == str(tmp_path / "scene.xml"), exc.value
+
+
 def test_equal_engine_unbounded_scene_depth(tmp_path, rna_asset_path):
     """Mitsuba's default max_depth (-1, printed unsigned) gives the plugin's unbounded 1024, not 2^32 - 1."""
     from nasset_benchmarks.equal_engine import bench_equal_engine
