@@ -36,7 +36,7 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
-from nasset_converters.mitsuba.scene import integrator_depths, load_scene, require_integrator
+from nasset_converters.mitsuba.scene import ignored_media, integrator_depths, load_scene, require_integrator
 from nasset_sdk.errors import UsageError, error
 
 
@@ -62,6 +62,9 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     t_setup = time.perf_counter()
     original = load_scene(mi, scene_file)
     require_integrator(original, scene_file)
+    caveats = [c for c in (ignored_media(original, list(replace)),) if c]
+    for caveat in caveats:
+        say(f"warning: {caveat}")
     settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults
     with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})
     nasset = mi.load_dict({"type": INTEGRATOR, "max_depth": settings["max_depth"] if settings["max_depth"] > 0 else 1024,
@@ -147,7 +150,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
         "mitsuba": {"version": mi.__version__, "variant": mi.variant(), "integrator": str(original.integrator()).splitlines()[0],
                     "settings": settings},
         "reference": {"spp": 2 * half, "mean_radiance": mean, "noise_variance": var_ref, "time_s": t_ref, "reused": reused,
-                      "noise_relative_rmse": math.sqrt(var_ref) / max(mean, 1e-12)},
+                      "noise_relative_rmse": math.sqrt(var_ref) / max(mean, 1e-12), "warnings": caveats},
         "path_tracing_points": mi_points,
         "asset_points": nr_points,
         "bias_floor_mse": floor,

@@ -152,6 +152,8 @@ def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
     scene = Path(scene)
     mscene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(mscene, asset_ids or [], file=str(scene))
+    if media := msc.ignored_media(mscene, asset_ids):
+        say(f"warning: {media}")
     return scene, list(asset_ids), shapes
 
 

@@ -134,6 +134,8 @@ def bake(
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene))
+    if media := msc.ignored_media(msc_scene, asset_ids):
+        say(f"warning: {media}")
     bshapes, eta, alpha = nd.boundary_of(mi, shapes, file=str(scene))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

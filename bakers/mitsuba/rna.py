@@ -121,6 +121,8 @@ def bake(
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
+    if media := msc.ignored_media(msc_scene, asset_ids):
+        say(f"warning: {media}")
     asset_variant, geo = msc.asset_geometry(mi, shapes)
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)

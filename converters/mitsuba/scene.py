@@ -21,6 +21,7 @@ light) at the cost of one light.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -218,6 +219,27 @@ def is_closed(faces: np.ndarray) -> bool:
 
 def bsdf_names(shapes) -> list[str]:
     return [str(s.bsdf()).split("[")[0].strip() for s in shapes]
+
+
+#: the to_string names of Mitsuba's integrators that render participating media (volpath, volpathmis, prbvolpath)
+_MEDIA_INTEGRATORS = re.compile(r"\s*(Volumetric\w*|PRBVolpath)Integrator\b")
+
+
+def ignored_media(scene, ids) -> str | None:
+    """A warning when shapes ``ids`` have an interior or exterior medium that the scene's own integrator does not
+    render: Mitsuba's ``path`` (and ``direct``, ``prb``, ...) shows such a shape as if it held no medium (a smooth
+    dielectric boundary then looks like clear glass), while a bake renders the medium (spec/bake.md#data). None when the
+    integrator renders media (``volpath``, ``volpathmis``, ``prbvolpath``), the scene has none, or no shape has a medium."""
+    integrator = scene.integrator()
+    if integrator is None or _MEDIA_INTEGRATORS.match(str(integrator)):
+        return None
+    with_media = [s.id() for s in scene.shapes() if s.id() in ids and (s.interior_medium() is not None or s.exterior_medium() is not None)]
+    if not with_media:
+        return None
+    name = str(integrator).split("[")[0].strip()
+    return (f"the scene's integrator ({name}) renders no participating media, so Mitsuba shows shape(s) {with_media} without "
+            "their medium, while the asset holds it (bakes render the medium). Use <integrator type=\"volpath\"> for "
+            "a scene that renders what the asset holds")
 
 
 def blocks_delta_light(shapes) -> bool:

@@ -1,0 +1,74 @@
+"""A shape's participating medium that the scene's own integrator does not render (Mitsuba's ``path`` ignores media):
+bakes render the medium with volpath, so the bakes and the in-scene benches warn that the scene shows something else.
+Found on an unseen scene: a milky blob behind a smooth boundary, ``<integrator type="path">``, which Mitsuba rendered
+as clear glass; the bench read 166 / 137 / 73 % of the energy without saying why."""
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+
+BLOB = """<shape type="cube" id="blob">
+  <bsdf type="dielectric"/>
+  <medium type="homogeneous" name="interior"><rgb name="albedo" value="0.0, 0.0, 0.0"/><float name="sigma_t" value="50"/></medium>
+</shape>"""
+PLAIN = '<shape type="sphere" id="plain"><transform name="to_world"><translate x="3"/></transform></shape>'
+
+
+@pytest.fixture(scope="module")
+def mi():
+    from nasset_converters.mitsuba import load_mitsuba
+
+    return load_mitsuba()
+
+
+def _scene(mi, integrator: str, shapes: str = BLOB + PLAIN):
+    return mi.load_string(f'<scene version="3.0.0">{integrator}{shapes}</scene>')
+
+
+@pytest.mark.parametrize("integrator, warns", [
+    ('<integrator type="path"/>', True),
+    ('<integrator type="direct"/>', True),
+    ('<integrator type="prb"/>', True),
+    ('<integrator type="volpath"/>', False),
+    ('<integrator type="volpathmis"/>', False),
+    ('<integrator type="prbvolpath"/>', False),
+    ("", False),  # no integrator: a bake renders with its own, and the benches refuse the scene
+])
+def test_ignored_media_by_integrator(mi, integrator, warns):
+    from nasset_converters.mitsuba.scene import ignored_media
+
+    msg = ignored_media(_scene(mi, integrator), ["blob", "plain"])
+    assert (msg is not None) == warns, msg
+    if warns:
+        assert "['blob']" in msg and "volpath" in msg and "plain" not in msg
+
+
+def test_no_warning_for_shapes_without_a_medium(mi):
+    from nasset_converters.mitsuba.scene import ignored_media
+
+    assert ignored_media(_scene(mi, '<integrator type="path"/>'), ["plain"]) is None
+
+
+def test_premise_path_renders_the_medium_as_empty(mi):
+    """The premise, measured: a black, dense medium behind a smooth boundary, in front of a bright emitter. ``volpath``
+    shows it dark; ``path`` lets the light through as if the cube were clear glass."""
+    scene_xml = ('<sensor type="orthographic"><transform name="to_world"><lookat origin="0,0,5" target="0,0,0" up="0,1,0"/>'
+                 '<scale x="0.5" y="0.5"/></transform><film type="hdrfilm"><integer name="width" value="8"/>'
+                 '<integer name="height" value="8"/></film></sensor>'
+                 '<shape type="rectangle"><transform name="to_world"><translate z="-3"/><scale value="4"/></transform>'
+                 '<emitter type="area"><rgb name="radiance" value="1"/></emitter></shape>')
+    means = {}
+    for name in ("path", "volpath"):
+        scene = _scene(mi, f'<integrator type="{name}"><integer name="max_depth" value="8"/></integrator>', BLOB + scene_xml)
+        means[name] = float(np.mean(np.asarray(mi.render(scene, spp=16))))
+    assert means["path"] > 0.5 and means["volpath"] < 0.05, means
+
+
+def test_8dna_bake_says_it(mi, tmp_path):
+    from nasset_bakers.mitsuba.eightdna import scene_shapes
+
+    (tmp_path / "s.xml").write_text(f'<scene version="3.0.0"><integrator type="path"/>{BLOB}</scene>')
+    said = []
+    scene_shapes(mi, tmp_path / "s.xml", ["blob"], None, tmp_path, said.append)
+    assert any(s.startswith("warning:") and "renders no participating media" in s for s in said), said
