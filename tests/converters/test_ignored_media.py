@@ -1,5 +1,5 @@
 """A shape's participating medium that the scene's own integrator does not render (Mitsuba's ``path`` ignores media):
-bakes render the medium with volpath, so the bakes and the in-scene benches warn that the scene shows something else.
+bakes render the medium, so the bakes and the in-scene benches warn that the scene shows something else.
 Found on an unseen scene: a milky blob behind a smooth boundary, ``<integrator type="path">``, which Mitsuba rendered
 as clear glass; the bench read 166 / 137 / 73 % of the energy without saying why."""
 

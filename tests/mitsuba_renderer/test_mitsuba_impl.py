@@ -132,8 +132,8 @@ def test_random_asset_agrees_with_reference(nr, tmp_path):
 
 
 def test_integrator_name_is_not_the_jit_plugins():
-    """This implementation and the JIT plugin register integrators with Mitsuba; registered in one process (either
-    order), each name loads its own class. They shared ``nasset_path``: the one registered last took it, and the
+    """This implementation and the JIT plugin register integrators with Mitsuba; registered in one process (the plugin
+    first: the order that failed), each name loads its own class. They shared ``nasset_path``: the one registered last took it, and the
     equal-engine bench then loaded this one with the plugin's ``rr_depth`` (an unreferenced-property error)."""
     code = """
 from nasset_converters.mitsuba import load_mitsuba
