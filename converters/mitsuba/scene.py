@@ -242,6 +242,21 @@ def ignored_media(scene, ids) -> str | None:
             "a scene that renders what the asset holds")
 
 
+def truncated_media(scene, ids) -> str | None:
+    """A warning when the scene's integrator stops paths at a bounded ``max_depth`` and shapes ``ids`` have a medium:
+    light inside a high-albedo medium takes far more bounces than a typical depth allows, so the scene's own image
+    lacks it, while bakes trace deeper (spec/bake.md#data). None when the depth is unbounded or no shape has a medium."""
+    depth = integrator_depths(scene.integrator()).get("max_depth")
+    if depth is None or depth < 0:
+        return None
+    with_media = [s.id() for s in scene.shapes() if s.id() in ids and (s.interior_medium() is not None or s.exterior_medium() is not None)]
+    if not with_media:
+        return None
+    return (f"the scene's integrator stops paths at max_depth {depth}: inside the medium of shape(s) {with_media} light takes "
+            "more bounces than that, so the scene's image lacks it, while the asset (baked deeper) holds it and reads too "
+            "bright. Use max_depth -1 (unbounded, Russian roulette) for a scene that renders what the asset holds")
+
+
 def blocks_delta_light(shapes) -> bool:
     """True when a shape's BSDF is a smooth (delta) dielectric: delta lights cannot light its interior."""
     return any(any(b in str(s.bsdf()) for b in DELTA_BLOCKING_BSDFS) for s in shapes)
