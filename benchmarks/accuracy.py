@@ -300,7 +300,7 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     """The Mitsuba side: check the assets fit, convert, render the reference halves (reusing a cached
     pair for the same scene, size, spp and seed) and the object mask from Mitsuba's camera rays."""
     from nasset_converters.mitsuba import load_mitsuba
-    from nasset_converters.mitsuba.scene import ignored_media, load_scene, require_integrator, truncated_media
+    from nasset_converters.mitsuba.scene import load_scene, media_caveats, require_integrator
     from nasset_converters.mitsuba.usd_export import convert_scene
 
     mi = load_mitsuba()  # CONVERT_BACKEND when mitsuba is missing
@@ -313,8 +313,7 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     a, b, half, key, reused = mitsuba_halves(mi, mscene, sensor, hw, scene_file, out, spp, seed, say=say, quiet=quiet)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
     reference = {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator}
-    caveats = [c for c in (delta_light_caveat(mi, mscene, list(rep)), ignored_media(mscene, list(rep)),
-                           truncated_media(mscene, list(rep))) if c]
+    caveats = [c for c in (delta_light_caveat(mi, mscene, list(rep)),) if c] + media_caveats(mscene, list(rep))
     for caveat in caveats:
         say(f"warning: {caveat}")
     if caveats:

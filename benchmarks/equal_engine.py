@@ -36,7 +36,7 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
-from nasset_converters.mitsuba.scene import ignored_media, integrator_depths, load_scene, require_integrator, truncated_media
+from nasset_converters.mitsuba.scene import integrator_depths, load_scene, media_caveats, require_integrator
 from nasset_sdk.errors import UsageError, error
 
 
@@ -62,7 +62,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     t_setup = time.perf_counter()
     original = load_scene(mi, scene_file)
     require_integrator(original, scene_file)
-    caveats = [c for c in (ignored_media(original, list(replace)), truncated_media(original, list(replace))) if c]
+    caveats = media_caveats(original, list(replace))
     for caveat in caveats:
         say(f"warning: {caveat}")
     settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults

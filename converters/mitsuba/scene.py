@@ -221,6 +221,15 @@ def bsdf_names(shapes) -> list[str]:
     return [str(s.bsdf()).split("[")[0].strip() for s in shapes]
 
 
+def has_medium(shape) -> bool:
+    """True when a Mitsuba shape has an interior or an exterior medium."""
+    return shape.interior_medium() is not None or shape.exterior_medium() is not None
+
+
+def _ids_with_media(scene, ids) -> list[str]:
+    return [s.id() for s in scene.shapes() if s.id() in ids and has_medium(s)]
+
+
 #: the to_string names of Mitsuba's integrators that render participating media (volpath, volpathmis, prbvolpath)
 _MEDIA_INTEGRATORS = re.compile(r"\s*(Volumetric\w*|PRBVolpath)Integrator\b")
 
@@ -233,7 +242,7 @@ def ignored_media(scene, ids) -> str | None:
     integrator = scene.integrator()
     if integrator is None or _MEDIA_INTEGRATORS.match(str(integrator)):
         return None
-    with_media = [s.id() for s in scene.shapes() if s.id() in ids and (s.interior_medium() is not None or s.exterior_medium() is not None)]
+    with_media = _ids_with_media(scene, ids)
     if not with_media:
         return None
     name = str(integrator).split("[")[0].strip()
@@ -249,12 +258,18 @@ def truncated_media(scene, ids) -> str | None:
     depth = integrator_depths(scene.integrator()).get("max_depth")
     if depth is None or depth < 0:
         return None
-    with_media = [s.id() for s in scene.shapes() if s.id() in ids and (s.interior_medium() is not None or s.exterior_medium() is not None)]
+    with_media = _ids_with_media(scene, ids)
     if not with_media:
         return None
     return (f"the scene's integrator stops paths at max_depth {depth}: inside the medium of shape(s) {with_media} light takes "
             "more bounces than that, so the scene's image lacks it, while the asset (baked deeper) holds it and reads too "
             "bright. Use max_depth -1 (unbounded, Russian roulette) for a scene that renders what the asset holds")
+
+
+def media_caveats(scene, ids) -> list[str]:
+    """The warnings of :func:`ignored_media` and :func:`truncated_media` that apply: where the scene's own image of
+    shapes ``ids`` lacks light their asset holds (the in-scene benches' ``reference.warnings``)."""
+    return [c for c in (ignored_media(scene, ids), truncated_media(scene, ids)) if c]
 
 
 def blocks_delta_light(shapes) -> bool:
@@ -376,7 +391,7 @@ class IsolatedAsset:
         if self.angle_deg == 0 and not mi.variant().startswith("scalar"):
             plugin = register_lane_emitter(mi)
             self.lane_scene = mi.load_dict({"type": "scene", **shapes, "light": {"type": plugin}})
-        has_media = any(s.interior_medium() is not None or s.exterior_medium() is not None for s in self.shapes)
+        has_media = any(has_medium(s) for s in self.shapes)
         self.integrator = mi.load_dict(
             {"type": "volpath" if has_media else "path", "max_depth": int(self.max_depth), "rr_depth": 8}
         )
