@@ -4,7 +4,7 @@ Paper §3.3 "Training data generation": a point is drawn uniformly on the asset'
 (centre c, radius 1.01 r) and a cosine-weighted direction d about the inward normal; the ray is
 traced into the asset (alone: no other shape, no emitter) and continued as a path through the
 asset's own BSDFs (Mitsuba ``bsdf.sample``, radiance transport mode) and interior media
-(free-flight sampling against the medium's majorant, delta tracking with coefficients looked up per
+(free-flight sampling against the medium's majorant, history-aware spectral tracking with coefficients looked up per
 collision -- constants for homogeneous media, Mitsuba's ``get_scattering_coefficients`` for grid
 media -- and the medium's phase function), with
 throughput Russian roulette, until it leaves the asset. Camera-side / light-side convention
@@ -53,7 +53,7 @@ class MediumParams:
 
 class GridMedium:
     """A heterogeneous Mitsuba medium: coefficients looked up through Mitsuba at each tentative collision,
-    against its global majorant (delta tracking)."""
+    against its global majorant (spectral tracking)."""
 
     def __init__(self, mi, medium, g: float) -> None:
         import drjit as dr
@@ -119,6 +119,22 @@ def _frame(n: np.ndarray):
     t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], 1)
     s = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], 1)
     return t, s
+
+
+def real_collision_probability(beta: np.ndarray, sigma_t: np.ndarray, majorant: float) -> np.ndarray:
+    """Probability [N] that a tentative collision at coefficients ``sigma_t`` [N,3] (1/m, each <= ``majorant``) is
+    real, for paths of throughput ``beta`` [N,3]: history-aware spectral tracking (Kutz et al. 2017, Sec. 5), the
+    throughput-weighted mean of sigma_t / majorant.
+
+    With the weights sigma_s / (majorant p) on a real collision and (1 - sigma_t / majorant) / (1 - p) on a null one,
+    every channel stays unbiased for any p in (0, 1), and this p keeps the channel sum of beta from growing: a
+    chromatic medium's thin channel is not multiplied up at each null collision (with the plain mean of the channels,
+    a channel at a third of the majorant gained x3 per null collision and a long path's weights grew without bound).
+    Paths with zero throughput use the plain mean."""
+    w = np.clip(beta, 0.0, None)
+    total = w.sum(1, keepdims=True)
+    w = np.where(total > 0, w / np.maximum(total, 1e-300), 1.0 / 3.0)
+    return np.clip((w * sigma_t).sum(1) / majorant, 0.0, 1.0)
 
 
 def sample_hg(rng, d: np.ndarray, g: float) -> np.ndarray:
@@ -245,7 +261,7 @@ class PathSampler:
         while len(rows):
             si, hit, t = self._intersect(pos, dirv)
             t = np.where(hit, t, np.inf)
-            # medium events (inside only): delta tracking with one majorant for the three channels
+            # medium events (inside only): spectral tracking with one majorant for the three channels
             mev = np.zeros(len(rows), bool)
             if med is not None and majorant > 0:
                 tm = -np.log1p(-self.rng.random(len(rows))) / majorant
@@ -254,10 +270,10 @@ class PathSampler:
                     k = np.nonzero(mev)[0]
                     pos[k] += tm[k, None] * dirv[k]
                     sig_s, sig_t = med.coefficients(pos[k])
-                    p_real = sig_t.mean(1) / majorant
+                    p_real = real_collision_probability(beta[k], sig_t, majorant)
                     real = self.rng.random(len(k)) < p_real
                     kr, kn = k[real], k[~real]
-                    beta[kr] *= sig_s[real] / (majorant * p_real[real, None])
+                    beta[kr] *= sig_s[real] / np.maximum(majorant * p_real[real, None], 1e-300)
                     if len(kn):
                         beta[kn] *= (1.0 - sig_t[~real] / majorant) / np.maximum(1.0 - p_real[~real, None], 1e-12)
                     dirv[kr] = sample_hg(self.rng, dirv[kr], med.g)
