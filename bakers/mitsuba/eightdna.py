@@ -137,7 +137,9 @@ def renormalise_stage(result, path: Path, source, backtrace_hits, held: dict, lo
             "heldout_lit_energy_se": se, "heldout_valid_mass": Vh.mean(0).tolist(), "heldout_points": len(beta)}
 
 
-def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
+def scene_shapes(mi, scene, asset_ids, example, work: Path, say, baked_depth: int | None = None):
+    """(scene path, asset ids, shapes) of a bake, saying where the scene's integrator shows less of the shapes' media
+    than a sampler of depth ``baked_depth`` holds."""
     from nasset_converters.mitsuba import scene as msc
 
     if example is not None:
@@ -154,6 +156,8 @@ def scene_shapes(mi, scene, asset_ids, example, work: Path, say):
     shapes = msc.pick_shapes(mscene, asset_ids or [], file=str(scene))
     if media := msc.ignored_media(mscene, asset_ids):
         say(f"warning: {media}")
+    if cut := msc.truncated_media(mscene, asset_ids, baked_depth=baked_depth):
+        say(f"warning: {cut}")
     return scene, list(asset_ids), shapes
 
 
@@ -210,7 +214,8 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     if not mi.variant().startswith("llvm"):
         raise error("CONVERT_BACKEND", f"the 8dna sampler needs a vectorised Mitsuba variant (llvm_ad_rgb), got {mi.variant()}")
     mi.set_log_level(mi.LogLevel.Error)
-    scene, asset_ids, shapes = scene_shapes(mi, scene, asset_ids, example, work, say)
+    scene, asset_ids, shapes = scene_shapes(mi, scene, asset_ids, example, work, say,
+                                            baked_depth=SAMPLER_PRESETS[size]["max_depth"])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         geo = msc.mesh_geometry(mi, shapes)

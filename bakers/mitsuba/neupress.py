@@ -155,6 +155,8 @@ def bake(
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
         dset = replace(dset, clamp=float(clamp))
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
+    if cut := msc.truncated_media(msc_scene, asset_ids, baked_depth=dset.max_depth):
+        say(f"warning: {cut}")
     if workers is None:
         views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
     else:  # each worker loads the scene itself

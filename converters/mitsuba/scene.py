@@ -251,19 +251,25 @@ def ignored_media(scene, ids) -> str | None:
             "a scene that renders what the asset holds")
 
 
-def truncated_media(scene, ids) -> str | None:
+def truncated_media(scene, ids, baked_depth: int | None = None) -> str | None:
     """A warning when the scene's integrator stops paths at a bounded ``max_depth`` and shapes ``ids`` have a medium:
-    light inside a high-albedo medium takes far more bounces than a typical depth allows, so the scene's own image
-    lacks it, while bakes trace deeper (spec/bake.md#data). None when the depth is unbounded or no shape has a medium."""
+    light inside a high-albedo medium may take more bounces than the scene's depth allows, so the scene's own image
+    lacks it, while bakes may trace deeper (spec/bake.md#data). None when the depth is unbounded, no shape has a
+    medium, or the bake's own depth ``baked_depth`` (-1: unbounded) is no deeper than the scene's. A heuristic: how
+    much a depth cuts depends on the medium (16 cut a third of a blob's light, 128 nothing measurable of the
+    pebble's: spec/accuracy.md#in-scene-accuracy item 8)."""
     depth = integrator_depths(scene.integrator()).get("max_depth")
     if depth is None or depth < 0:
+        return None
+    if baked_depth is not None and 0 <= baked_depth <= depth:
         return None
     with_media = _ids_with_media(scene, ids)
     if not with_media:
         return None
-    return (f"the scene's integrator stops paths at max_depth {depth}: inside the medium of shape(s) {with_media} light takes "
-            "more bounces than that, so the scene's image lacks it, while the asset (baked deeper) holds it and reads too "
-            "bright. Use max_depth -1 (unbounded, Russian roulette) for a scene that renders what the asset holds")
+    return (f"the scene's integrator stops paths at max_depth {depth}: inside the medium of shape(s) {with_media} light may "
+            "take more bounces than that, so the scene's image lacks it, while an asset baked deeper holds it and reads "
+            "bright against that image. Use max_depth -1 (unbounded, Russian roulette) for a scene that renders what the "
+            "asset holds")
 
 
 def media_caveats(scene, ids) -> list[str]:

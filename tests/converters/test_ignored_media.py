@@ -90,3 +90,19 @@ def test_truncated_media_by_depth(mi, integrator, warns):
     if warns:
         assert "max_depth 16" in msg and "['blob']" in msg and "plain" not in msg
     assert truncated_media(_scene(mi, integrator), ["plain"]) is None
+
+
+@pytest.mark.parametrize("baked_depth, warns", [(1024, True), (-1, True), (17, True), (16, False), (8, False)])
+def test_truncated_media_only_where_the_bake_is_deeper(mi, tmp_path, baked_depth, warns):
+    """A bake warns only when its own depth is deeper than the scene's (an rna or neupress bake of a scene deeper than
+    its preset trains at the scene's depth, and then holds no more than the scene shows); the 8dna bake passes its
+    sampler's depth."""
+    from nasset_bakers.mitsuba.eightdna import scene_shapes
+    from nasset_converters.mitsuba.scene import truncated_media
+
+    integrator = '<integrator type="volpath"><integer name="max_depth" value="16"/></integrator>'
+    assert (truncated_media(_scene(mi, integrator), ["blob"], baked_depth=baked_depth) is not None) == warns
+    (tmp_path / "s.xml").write_text(f'<scene version="3.0.0">{integrator}{BLOB}</scene>')
+    said = []
+    scene_shapes(mi, tmp_path / "s.xml", ["blob"], None, tmp_path, said.append, baked_depth=baked_depth)
+    assert any(s.startswith("warning:") and "max_depth 16" in s for s in said) == warns, said
