@@ -7,7 +7,8 @@ camera) we estimate
     S(x_o, w_o, w_i) = radiance leaving x_o towards w_o per unit irradiance of a distant light from w_i,
                        **without** the light reflected at x_o itself
 
-with the scene's own ``volpath`` integrator: the first boundary interaction samples the boundary BSDF's
+with ``scene.IsolatedAsset``'s ``volpath`` integrator (``volpathmis`` for a chromatic medium): the first
+boundary interaction samples the boundary BSDF's
 **transmission lobe only** (``BSDFContext.type_mask = Transmission``, so the path weight is the
 transmitted part (1 - F) G ... of the rough dielectric), and the refracted ray continues inside the
 boundary's interior medium (``integrator.sample(..., medium=interior)``): volume scattering, the inner

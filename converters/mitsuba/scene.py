@@ -226,6 +226,38 @@ def has_medium(shape) -> bool:
     return shape.interior_medium() is not None or shape.exterior_medium() is not None
 
 
+#: relative spread (max - min) / max of a medium's RGB extinction above which training renders use ``volpathmis``
+#: (measured, spec/bake.md#data "Media": at 0.2 spectral MIS wins 1.3-2.7x in variance x time, at 0.05 it loses 1.1-1.4x)
+CHROMATIC_SPREAD = 0.1
+
+
+def chromatic_media(mi, shapes, points: int = 256, seed: int = 0) -> bool:
+    """True when an interior or exterior medium of ``shapes`` has an extinction sigma_t whose RGB channels differ by
+    more than CHROMATIC_SPREAD (relative to the largest) at any of ``points`` random points in the shape's bounding
+    box (a grid medium is looked up there; a homogeneous one is constant).
+
+    Mitsuba's ``volpath`` samples distances in one channel and weights the others by the ratio of transmittances,
+    whose variance grows along the long walks of a high-albedo medium; ``volpathmis`` combines the channels by
+    spectral MIS."""
+    import drjit as dr
+
+    rng = np.random.default_rng(seed)
+    for shape in shapes:
+        bbox = shape.bbox()
+        lo, hi = np.asarray(bbox.min, np.float64), np.asarray(bbox.max, np.float64)
+        p = lo + rng.random((points, 3)) * (hi - lo)
+        for medium in (shape.interior_medium(), shape.exterior_medium()):
+            if medium is None:
+                continue
+            mei = dr.zeros(mi.MediumInteraction3f, points)
+            mei.p = mi.Point3f(np.ascontiguousarray(p.T, np.float32))
+            _, _, sigma_t = medium.get_scattering_coefficients(mei)
+            st = np.asarray(sigma_t, np.float64).reshape(3, -1).T  # [points, 3], or [1, 3] for a constant
+            if (st.max(1) - st.min(1) > CHROMATIC_SPREAD * np.maximum(st.max(1), 1e-30)).any():
+                return True
+    return False
+
+
 def _ids_with_media(scene, ids) -> list[str]:
     return [s.id() for s in scene.shapes() if s.id() in ids and has_medium(s)]
 
@@ -398,9 +430,8 @@ class IsolatedAsset:
             plugin = register_lane_emitter(mi)
             self.lane_scene = mi.load_dict({"type": "scene", **shapes, "light": {"type": plugin}})
         has_media = any(has_medium(s) for s in self.shapes)
-        self.integrator = mi.load_dict(
-            {"type": "volpath" if has_media else "path", "max_depth": int(self.max_depth), "rr_depth": 8}
-        )
+        kind = ("volpathmis" if chromatic_media(mi, self.shapes) else "volpath") if has_media else "path"
+        self.integrator = mi.load_dict({"type": kind, "max_depth": int(self.max_depth), "rr_depth": 8})
 
     def _sphere_to_world(self, wi: np.ndarray):
         pos = np.asarray(self.center, np.float64) + self._dist * np.asarray(wi, np.float64)
