@@ -227,8 +227,9 @@ def has_medium(shape) -> bool:
 
 
 #: relative spread (max - min) / max of a medium's RGB extinction above which training renders use ``volpathmis``
-#: (measured, spec/bake.md#data "Media": at 0.2 spectral MIS wins 1.3-2.7x in variance x time, at 0.05 it loses 1.1-1.4x)
-CHROMATIC_SPREAD = 0.1
+#: (measured, spec/bake.md#data "Media": in variance x time spectral MIS wins 1.5-12x at 0.3, 0.9-2.7x at 0.2, and
+#: loses 1.1-1.4x at 0.05)
+CHROMATIC_SPREAD = 0.25
 
 
 def chromatic_media(mi, shapes, points: int = 256, seed: int = 0) -> bool:
