@@ -305,10 +305,27 @@ def truncated_media(scene, ids, baked_depth: int | None = None) -> str | None:
             "asset holds")
 
 
-def media_caveats(scene, ids) -> list[str]:
-    """The warnings of :func:`ignored_media` and :func:`truncated_media` that apply: where the scene's own image of
-    shapes ``ids`` lacks light their asset holds (the in-scene benches' ``reference.warnings``)."""
-    return [c for c in (ignored_media(scene, ids), truncated_media(scene, ids)) if c]
+def chromatic_volpath(mi, scene, ids) -> str | None:
+    """A warning when the scene's integrator is Mitsuba's ``volpath`` and shapes ``ids`` have a chromatic medium
+    (:func:`chromatic_media`): its image of them is heavy-tailed, so it converges slowly and a two-half estimate of its
+    noise can read low; ``volpathmis`` renders the same expectation with 1.2-1000x less variance x time there
+    (spec/bake.md#data, "Media"). None otherwise."""
+    if not str(scene.integrator()).lstrip().startswith("VolumetricSimplePathIntegrator"):
+        return None
+    shapes = [s for s in scene.shapes() if s.id() in ids and has_medium(s)]
+    if not shapes or not chromatic_media(mi, shapes):
+        return None
+    return (f"the scene's volpath renders the chromatic medium of shape(s) {[s.id() for s in shapes]} (extinction "
+            f"differing by more than {CHROMATIC_SPREAD:.0%} between channels) with heavy-tailed noise: the Mitsuba side "
+            "converges slowly and its noise estimate can read low. <integrator type=\"volpathmis\"> renders the same "
+            "image with far less noise")
+
+
+def media_caveats(mi, scene, ids) -> list[str]:
+    """The warnings of :func:`ignored_media`, :func:`truncated_media` and :func:`chromatic_volpath` that apply:
+    where the scene's own image of shapes ``ids`` lacks light their asset holds, or is needlessly noisy (the in-scene
+    benches' ``reference.warnings``)."""
+    return [c for c in (ignored_media(scene, ids), truncated_media(scene, ids), chromatic_volpath(mi, scene, ids)) if c]
 
 
 def blocks_delta_light(shapes) -> bool:
