@@ -313,7 +313,7 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     a, b, half, key, reused = mitsuba_halves(mi, mscene, sensor, hw, scene_file, out, spp, seed, say=say, quiet=quiet)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
     reference = {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator}
-    caveats = [c for c in (delta_light_caveat(mi, mscene, list(rep)),) if c] + media_caveats(mi, mscene, list(rep))
+    caveats = [c for c in (delta_light_caveat(mi, mscene, list(rep)),) if c] + media_caveats(mi, mscene, rep)
     for caveat in caveats:
         say(f"warning: {caveat}")
     if caveats:

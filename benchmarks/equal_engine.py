@@ -62,7 +62,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     t_setup = time.perf_counter()
     original = load_scene(mi, scene_file)
     require_integrator(original, scene_file)
-    caveats = media_caveats(mi, original, list(replace))
+    caveats = media_caveats(mi, original, replace)
     for caveat in caveats:
         say(f"warning: {caveat}")
     settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import error
+from nasset_sdk.errors import NassetError, error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from .analytic import ANALYTIC_CLASSES, as_mesh, shape_class
@@ -321,11 +321,36 @@ def chromatic_volpath(mi, scene, ids) -> str | None:
             "image with far less noise")
 
 
-def media_caveats(mi, scene, ids) -> list[str]:
-    """The warnings of :func:`ignored_media`, :func:`truncated_media` and :func:`chromatic_volpath` that apply:
-    where the scene's own image of shapes ``ids`` lacks light their asset holds, or is needlessly noisy (the in-scene
-    benches' ``reference.warnings``)."""
-    return [c for c in (ignored_media(scene, ids), truncated_media(scene, ids), chromatic_volpath(mi, scene, ids)) if c]
+def baked_depth(provenance: dict) -> int | None:
+    """The depth an asset's training paths were traced to, from its bake provenance (rna and neupress ``data``,
+    8dna ``sampler``); None when the provenance does not say (another baker, a hand-made asset)."""
+    for section in ("data", "sampler"):
+        depth = (provenance.get(section) or {}).get("max_depth") if isinstance(provenance, dict) else None
+        if isinstance(depth, int) and not isinstance(depth, bool):
+            return depth
+    return None
+
+
+def media_caveats(mi, scene, replace: dict) -> list[str]:
+    """The warnings of :func:`ignored_media`, :func:`truncated_media` and :func:`chromatic_volpath` that apply to
+    ``replace`` (shape id -> asset file): where the scene's own image of the replaced shapes lacks light their asset
+    holds, or is needlessly noisy (the in-scene benches' ``reference.warnings``). The depth warning is per asset,
+    from the depth its provenance says it was baked at."""
+    from nasset_sdk.asset import Asset
+
+    ids = list(replace)
+    out = [ignored_media(scene, ids)]
+    groups: dict[str, list[str]] = {}
+    for sid, file in replace.items():
+        groups.setdefault(str(file), []).append(sid)
+    for file, group in groups.items():
+        try:
+            depth = baked_depth(Asset.open(file, load="none").provenance)
+        except (NassetError, OSError):  # an unreadable asset is reported by the bench itself
+            depth = None
+        out.append(truncated_media(scene, group, baked_depth=depth))
+    out.append(chromatic_volpath(mi, scene, ids))
+    return [c for c in out if c]
 
 
 def blocks_delta_light(shapes) -> bool:

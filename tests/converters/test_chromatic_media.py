@@ -135,6 +135,6 @@ def test_benches_warn_about_volpath_on_a_chromatic_medium(mi, integrator, sigma_
                           "ball": {"type": "sphere", "radius": 0.2,
                                    "interior": _homogeneous({"type": "rgb", "value": sigma_t})},
                           "plain": {"type": "sphere", "center": [1, 0, 0], "radius": 0.2}})
-    caveats = media_caveats(mi, scene, ["ball", "plain"])
+    caveats = media_caveats(mi, scene, {"ball": "missing.usdc", "plain": "missing.usdc"})
     assert any("chromatic medium of shape(s) ['ball']" in c for c in caveats) == warns, caveats
-    assert media_caveats(mi, scene, ["plain"]) == []
+    assert media_caveats(mi, scene, {"plain": "missing.usdc"}) == []

@@ -106,3 +106,22 @@ def test_truncated_media_only_where_the_bake_is_deeper(mi, tmp_path, baked_depth
     said = []
     scene_shapes(mi, tmp_path / "s.xml", ["blob"], None, tmp_path, said.append, baked_depth=baked_depth)
     assert any(s.startswith("warning:") and "max_depth 16" in s for s in said) == warns, said
+
+
+@pytest.mark.parametrize("provenance, warns", [
+    ({"data": {"max_depth": 1024}}, True),  # rna / neupress baked deeper than the scene
+    ({"sampler": {"max_depth": 1024}}, True),  # 8dna
+    ({"data": {"max_depth": 16}}, False),  # baked at the scene's own depth: the asset holds what the scene shows
+    ({}, True),  # the provenance does not say: warn
+])
+def test_bench_depth_caveat_reads_the_assets_baked_depth(mi, tmp_path, provenance, warns):
+    from nasset_converters.mitsuba.scene import baked_depth, media_caveats
+    from nasset_sdk.examples import example_builder
+
+    builder = example_builder("rna", size="tiny")
+    builder.provenance = provenance
+    asset = builder.write(tmp_path / "a.usdc")
+    scene = _scene(mi, '<integrator type="volpath"><integer name="max_depth" value="16"/></integrator>')
+    assert baked_depth(provenance) == (provenance.get("data") or provenance.get("sampler") or {}).get("max_depth")
+    caveats = media_caveats(mi, scene, {"blob": asset, "plain": asset})
+    assert any("max_depth 16" in c for c in caveats) == warns, caveats
