@@ -288,11 +288,13 @@ def truncated_media(scene, ids, baked_depth: int | None = None) -> str | None:
     """A warning when the scene's integrator stops paths at a bounded ``max_depth`` and shapes ``ids`` have a medium:
     light inside a high-albedo medium may take more bounces than the scene's depth allows, so the scene's own image
     lacks it, while bakes may trace deeper (spec/bake.md#data). None when the depth is unbounded, no shape has a
-    medium, or the bake's own depth ``baked_depth`` (-1: unbounded) is no deeper than the scene's. A heuristic: how
-    much a depth cuts depends on the medium (16 cut a third of a blob's light, 128 nothing measurable of the
-    pebble's: spec/accuracy.md#in-scene-accuracy item 8)."""
-    depth = integrator_depths(scene.integrator()).get("max_depth")
-    if depth is None or depth < 0:
+    medium, the integrator renders no media at all (:func:`ignored_media` says so), or the bake's own depth
+    ``baked_depth`` (-1: unbounded) is no deeper than the scene's. A heuristic: how much a depth cuts depends on the
+    medium (16 cut a third of a blob's light, 128 nothing measurable of the pebble's: spec/accuracy.md#in-scene-accuracy
+    item 8)."""
+    integrator = scene.integrator()
+    depth = integrator_depths(integrator).get("max_depth")
+    if depth is None or depth < 0 or not _MEDIA_INTEGRATORS.match(str(integrator)):
         return None
     if baked_depth is not None and 0 <= baked_depth <= depth:
         return None

@@ -79,6 +79,7 @@ def test_8dna_bake_says_it(mi, tmp_path):
     ('<integrator type="volpath"/>', False),  # Mitsuba's default -1: unbounded
     ('<integrator type="volpath"><integer name="max_depth" value="-1"/></integrator>', False),
     ('<integrator type="direct"/>', False),  # no depth setting
+    ('<integrator type="path"><integer name="max_depth" value="16"/></integrator>', False),  # no media at all: ignored_media
 ])
 def test_truncated_media_by_depth(mi, integrator, warns):
     """A bounded scene depth cuts the many bounces inside a high-albedo medium; bakes trace deeper. Found on the same
