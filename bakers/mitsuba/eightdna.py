@@ -137,7 +137,7 @@ def renormalise_stage(result, path: Path, source, backtrace_hits, held: dict, lo
             "heldout_lit_energy_se": se, "heldout_valid_mass": Vh.mean(0).tolist(), "heldout_points": len(beta)}
 
 
-def scene_shapes(mi, scene, asset_ids, example, work: Path, say, baked_depth: int | None = None):
+def scene_shapes(mi, scene, asset_ids, example, work: Path, say, baked_depth: int = -1):
     """(scene path, asset ids, shapes) of a bake, saying where the scene's integrator shows less of the shapes' media
     than a sampler of depth ``baked_depth`` holds."""
     from nasset_converters.mitsuba import scene as msc
@@ -154,10 +154,8 @@ def scene_shapes(mi, scene, asset_ids, example, work: Path, say, baked_depth: in
     scene = Path(scene)
     mscene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(mscene, asset_ids or [], file=str(scene))
-    if media := msc.ignored_media(mscene, asset_ids):
-        say(f"warning: {media}")
-    if cut := msc.truncated_media(mscene, asset_ids, baked_depth=baked_depth):
-        say(f"warning: {cut}")
+    for warning in msc.bake_media_warnings(mscene, asset_ids, baked_depth):
+        say(f"warning: {warning}")
     return scene, list(asset_ids), shapes
 
 

@@ -134,8 +134,6 @@ def bake(
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene))
-    if media := msc.ignored_media(msc_scene, asset_ids):
-        say(f"warning: {media}")
     bshapes, eta, alpha = nd.boundary_of(mi, shapes, file=str(scene))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -155,8 +153,8 @@ def bake(
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
         dset = replace(dset, clamp=float(clamp))
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
-    if cut := msc.truncated_media(msc_scene, asset_ids, baked_depth=dset.max_depth):
-        say(f"warning: {cut}")
+    for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
+        say(f"warning: {warning}")
     if workers is None:
         views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
     else:  # each worker loads the scene itself

@@ -121,8 +121,6 @@ def bake(
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
-    if media := msc.ignored_media(msc_scene, asset_ids):
-        say(f"warning: {media}")
     asset_variant, geo = msc.asset_geometry(mi, shapes)
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)
@@ -145,8 +143,8 @@ def bake(
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")
         dset = replace(dset, clamp=float(clamp))
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
-    if cut := msc.truncated_media(msc_scene, asset_ids, baked_depth=dset.max_depth):
-        say(f"warning: {cut}")
+    for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
+        say(f"warning: {warning}")
     if workers is None:
         views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
     else:  # each worker loads the scene itself

@@ -327,10 +327,17 @@ def baked_depth(provenance: dict) -> int | None:
     """The depth an asset's training paths were traced to, from its bake provenance (rna and neupress ``data``,
     8dna ``sampler``); None when the provenance does not say (another baker, a hand-made asset)."""
     for section in ("data", "sampler"):
-        depth = (provenance.get(section) or {}).get("max_depth") if isinstance(provenance, dict) else None
+        part = provenance.get(section) if isinstance(provenance, dict) else None
+        depth = part.get("max_depth") if isinstance(part, dict) else None
         if isinstance(depth, int) and not isinstance(depth, bool):
             return depth
     return None
+
+
+def bake_media_warnings(scene, ids, baked_depth: int) -> list[str]:
+    """What a bake of shapes ``ids`` at depth ``baked_depth`` says about their media: :func:`ignored_media` and
+    :func:`truncated_media`, where the scene's own image will show less than the asset holds."""
+    return [c for c in (ignored_media(scene, ids), truncated_media(scene, ids, baked_depth=baked_depth)) if c]
 
 
 def media_caveats(mi, scene, replace: dict) -> list[str]:

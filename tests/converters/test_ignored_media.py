@@ -126,3 +126,13 @@ def test_bench_depth_caveat_reads_the_assets_baked_depth(mi, tmp_path, provenanc
     assert baked_depth(provenance) == (provenance.get("data") or provenance.get("sampler") or {}).get("max_depth")
     caveats = media_caveats(mi, scene, {"blob": asset, "plain": asset})
     assert any("max_depth 16" in c for c in caveats) == warns, caveats
+
+
+@pytest.mark.parametrize("provenance, depth", [
+    ({"data": {"max_depth": 24}}, 24), ({"sampler": {"max_depth": -1}}, -1), ({"data": [24]}, None),
+    ({"data": {"max_depth": "24"}}, None), ({"data": {"max_depth": True}}, None), ([], None), ({}, None),
+])
+def test_baked_depth_reads_untrusted_provenance(provenance, depth):
+    from nasset_converters.mitsuba.scene import baked_depth
+
+    assert baked_depth(provenance) == depth
