@@ -201,6 +201,7 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
     replaced shapes' by more than BOX_TOLERANCE of the diagonal). BENCH_ASSET_KIND: a fiber asset
     for mesh shapes (or a surface asset for curves), or a neupress asset for shapes without a
     dielectric boundary (neupress carries subsurface transport behind a rough dielectric)."""
+    from nasset_converters.mitsuba.scene import refuse_emitter
     from nasset_sdk.asset import Asset
 
     by_id = {s.id(): s for s in scene.shapes() if s.id()}
@@ -219,6 +220,8 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {','.join(ids)}: {file} is not a readable neural asset "
                         f"({getattr(exc, 'code', type(exc).__name__)})", file=str(file)) from None
         shapes = [by_id[i] for i in ids]
+        for shape in shapes:
+            refuse_emitter(shape, file=scene_file)
         curves = [i for i, s in zip(ids, shapes, strict=True) if _is_curve(s)]
         if asset.variant == "fiber" and len(curves) != len(ids):
             raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} fiber asset but "

@@ -89,6 +89,16 @@ def training_depth(integrator, preset_depth: int) -> int:
 CURVE_CLASSES = ("LinearCurve", "BSpline", "BSplineCurve")
 
 
+def refuse_emitter(shape, *, file: str | None = None) -> None:
+    """CONVERT_SHAPE_UNSUPPORTED when a shape to bake or replace is an area emitter: a neural asset carries light
+    transport (the response to light arriving, kinds/*.md), not emission, so its training targets would hold the
+    emission as if it were lit, and replacing it would take its light out of the scene."""
+    if shape.emitter() is not None:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {shape.id()!r} is an area emitter: a neural asset carries light "
+                    "transport, not emission; keep the emitter in the scene and bake the shapes around it (a glass bulb "
+                    "without its filament)", file=file)
+
+
 def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) -> list:
     """The scene's shapes with these ids, in the given order: triangle meshes (analytic shapes as their
     tessellation, :func:`.analytic.as_mesh`), or with ``curves`` also Mitsuba curves (``linearcurve``,
@@ -101,6 +111,7 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
         if i not in by_id:
             raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {i!r}; the scene has {sorted(by_id)}", file=file)
         shape = by_id[i]
+        refuse_emitter(shape, file=file)
         cls = shape_class(shape)
         if curves and cls in CURVE_CLASSES:
             out.append(shape)

@@ -44,7 +44,7 @@ import numpy as np
 from nasset_sdk.errors import UsageError, error
 
 from . import analytic
-from .scene import integrator_depths
+from .scene import integrator_depths, refuse_emitter
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
@@ -1050,11 +1050,12 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
         first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
         raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(scene)) from None
-    ids = [s.id() for s in mscene.shapes() if s.id()]
+    by_id = {s.id(): s for s in mscene.shapes() if s.id()}
     for sid, file in rep.items():
-        if sid not in ids:
-            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(ids)}",
+        if sid not in by_id:
+            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(by_id)}",
                         file=str(scene))
+        refuse_emitter(by_id[sid], file=str(scene))
         if not file.is_file() or not is_asset_file(str(file)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "
                         "(defaultPrim of type NeuralAsset)", file=str(file))
