@@ -62,8 +62,44 @@ def pick_objects(names, *, file: str | None = None) -> list:
             raise error("CONVERT_SHAPE_UNKNOWN", f"no object named {n!r}; the scene has {have}", file=file)
         if ob.type not in ("MESH", "CURVES"):
             raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r} is a {ob.type}, not a mesh or hair curves", file=file)
+        refuse_emitter(ob, file=file)
         out.append(ob)
     return out
+
+
+def _emits(node) -> bool:
+    """Whether a shader node used in a material adds light: an Emission node, or a Principled BSDF with emission
+    (strength and colour each linked or non-zero)."""
+    def live(name, default):
+        sock = node.inputs.get(name)
+        if sock is None:
+            return False
+        if sock.is_linked:
+            return True
+        value = getattr(sock, "default_value", default)
+        return any(float(v) > 0 for v in (value[:3] if hasattr(value, "__len__") else (value,)))
+
+    if not any(out.is_linked for out in node.outputs):
+        return False
+    if node.bl_idname == "ShaderNodeEmission":
+        return live("Strength", 1.0) and live("Color", (1.0, 1.0, 1.0))
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        return live("Emission Strength", 0.0) and (live("Emission Color", (0.0, 0.0, 0.0)) or live("Emission", (0.0, 0.0, 0.0)))
+    return False
+
+
+def refuse_emitter(ob, *, file: str | None = None) -> None:
+    """CONVERT_SHAPE_UNSUPPORTED when an object to bake or replace has an emitting material (:func:`_emits`): a
+    neural asset carries light transport, not emission (the Mitsuba side: ``scene.refuse_emitter``)."""
+    for slot in getattr(ob, "material_slots", ()):
+        mat = slot.material
+        if mat is None or mat.node_tree is None:
+            continue
+        for node in mat.node_tree.nodes:
+            if _emits(node):
+                raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} emits light (material {mat.name!r}, node "
+                            f"{node.name!r}): a neural asset carries light transport, not emission; keep the emitter in "
+                            "the scene and bake the objects around it", file=file)
 
 
 def has_particle_hair(ob) -> bool:

@@ -660,10 +660,13 @@ def image_texture(mat, socket, notes: list) -> TextureMap | None:
 def _check_replace(bpy, rep: dict, file: str) -> None:
     from nasset_reference_renderer.scene import is_asset_file
 
+    from .scene import refuse_emitter
+
     names = sorted(o.name for o in bpy.context.scene.objects)
     for name, path in rep.items():
         if name not in names:
             raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no object named {name!r}; the scene has {names}", file=file)
+        refuse_emitter(bpy.context.scene.objects[name], file=file)
         if not path.is_file() or not is_asset_file(str(path)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {name}: {path} is not an existing neural asset file "
                         "(defaultPrim of type NeuralAsset)", file=str(path))

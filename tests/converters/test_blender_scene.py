@@ -94,3 +94,55 @@ def test_missing_blend_and_unknown_object(tmp_path):
     with pytest.raises(NassetError) as e:
         bsc.pick_objects(["Camera"], file=str(path))
     assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED"
+
+
+def _material(name: str, *, emission_node: bool = False, strength: float = 0.0, linked: bool = True):
+    mat = bpy.data.materials.new(name)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    out = next(n for n in nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    if emission_node:
+        em = nodes.new("ShaderNodeEmission")
+        em.inputs["Strength"].default_value = strength
+        if linked:
+            links.new(em.outputs[0], out.inputs["Surface"])
+    else:
+        bsdf = next(n for n in nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+        bsdf.inputs["Emission Color"].default_value = (1.0, 0.8, 0.5, 1.0)
+        bsdf.inputs["Emission Strength"].default_value = strength
+    return mat
+
+
+@pytest.mark.parametrize("case, emits", [
+    ("principled, emission strength 0", False),
+    ("principled, emission strength 3", True),
+    ("emission node, linked", True),
+    ("emission node, strength 0", False),
+    ("emission node, not linked to the output", False),
+])
+def test_an_emitting_object_cannot_be_baked_or_replaced(tmp_path, case, emits):
+    """A neural asset carries light transport, not emission: bakes (pick_objects) and convert --replace refuse an
+    object whose material emits, with CONVERT_SHAPE_UNSUPPORTED naming object, material and node."""
+    from nasset_converters.blender.usd_export import _check_replace
+    from nasset_sdk.examples import example_builder
+
+    names = build_example("blender-surface")
+    ob = bpy.context.scene.objects[names[0]]
+    mat = {"principled, emission strength 0": lambda: _material("m", strength=0.0),
+           "principled, emission strength 3": lambda: _material("m", strength=3.0),
+           "emission node, linked": lambda: _material("m", emission_node=True, strength=5.0),
+           "emission node, strength 0": lambda: _material("m", emission_node=True, strength=0.0),
+           "emission node, not linked to the output": lambda: _material("m", emission_node=True, strength=5.0,
+                                                                        linked=False)}[case]()
+    ob.data.materials.clear()
+    ob.data.materials.append(mat)
+    asset = example_builder("rna", size="tiny").write(tmp_path / "a.usdc")
+    if not emits:
+        assert bsc.pick_objects(names) == [ob]
+        _check_replace(bpy, {names[0]: asset}, "scene.blend")
+        return
+    for call in (lambda: bsc.pick_objects(names, file="scene.blend"),
+                 lambda: _check_replace(bpy, {names[0]: asset}, "scene.blend")):
+        with pytest.raises(NassetError) as ei:
+            call()
+        assert ei.value.code == "CONVERT_SHAPE_UNSUPPORTED" and repr(names[0]) in str(ei.value), ei.value
+        assert f"material {mat.name!r}" in str(ei.value)
