@@ -43,25 +43,20 @@ HELD_LIT = 2048
 
 def boundary_of(mi, shapes) -> tuple[float, float]:
     """(eta, GGX alpha) of the asset's boundary BSDF (all shapes must share it); roughdielectric GGX or dielectric."""
+    from nasset_converters.mitsuba import scene as msc
+
     found = set()
     for s in shapes:
         b = s.bsdf()
         name = str(b).split("[")[0].strip()
-        p = mi.traverse(b)
-        keys = list(p.keys())
         if name == "RoughDielectric":
-            if "ggx" not in str(b).lower():
-                raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: the 8dna direct lobe is GGX; the boundary uses "
-                            "a Beckmann distribution (Mitsuba's roughdielectric default), whose reflection differs from GGX's "
-                            "by 30-70 % of its lobe: add <string name=\"distribution\" value=\"ggx\"/> to the BSDF")
-            ak = next((k for k in keys if k.startswith("alpha")), None)
-            alpha = float(np.asarray(p[ak]).ravel()[0]) if ak else 0.1
+            eta, alpha = msc.ggx_dielectric(mi, s, kind="8dna")
         elif name == "SmoothDielectric":
-            alpha = 1e-3
+            p = mi.traverse(b)
+            eta, alpha = (float(np.asarray(p["eta"]).ravel()[0]) if "eta" in p else 1.5), 1e-3
         else:
             raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: boundary BSDF {name} is not a (rough) dielectric; the 8dna "
                         "direct lobe stores a GGX rough dielectric (spec/kinds/8dna.md)")
-        eta = float(np.asarray(p["eta"]).ravel()[0]) if "eta" in keys else 1.5
         found.add((round(eta, 6), round(alpha, 6)))
     if len(found) != 1:
         raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes have different boundaries {sorted(found)}; 8dna stores one")

@@ -33,6 +33,7 @@ import numpy as np
 from nasset_sdk.errors import error
 
 from .dataset import account_clamp, camera_rays, concat_views, half_seeds, unit_sphere
+from .scene import ggx_dielectric
 
 FIELDS = ("x", "n", "wo", "wi", "rgb", "pix")
 
@@ -61,17 +62,7 @@ def boundary_of(mi, shapes, file: str = "") -> tuple[list, float, float]:
     for s in shapes:
         text = str(s.bsdf())
         if text.startswith("RoughDielectric"):
-            p = mi.traverse(s.bsdf())
-            eta = float(np.asarray(p["eta"]).ravel()[0]) if "eta" in p else 1.5
-            if "alpha.value" not in p:
-                raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: the boundary roughness must be one isotropic "
-                            "constant alpha (the format stores one GGX alpha)", file=file)
-            alpha = float(np.asarray(p["alpha.value"]).ravel()[0])
-            if "GGX" not in text and "ggx" not in text:
-                raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: the boundary must use the GGX distribution "
-                            "(the analytic reflection of the format is GGX; Mitsuba's roughdielectric defaults to Beckmann, "
-                            "whose reflection differs from GGX's by 30-70 % of its lobe: add <string name=\"distribution\" "
-                            "value=\"ggx\"/> to the BSDF)", file=file)
+            eta, alpha = ggx_dielectric(mi, s, kind="neupress", file=file)
             if s.interior_medium() is None:
                 raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: a neupress boundary needs an interior medium",
                             file=file)

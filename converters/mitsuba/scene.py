@@ -89,6 +89,26 @@ def training_depth(integrator, preset_depth: int) -> int:
 CURVE_CLASSES = ("LinearCurve", "BSpline", "BSplineCurve")
 
 
+def ggx_dielectric(mi, shape, *, kind: str, file: str = "") -> tuple[float, float]:
+    """(eta, GGX alpha) of a shape's ``roughdielectric`` boundary, as the ``kind``'s format stores it: one GGX lobe
+    with one isotropic constant alpha. CONVERT_SHAPE_UNSUPPORTED for Mitsuba's default Beckmann distribution (its
+    reflection differs from GGX's by 30-70 % of the lobe) and for an anisotropic or textured roughness."""
+    bsdf = shape.bsdf()
+    params = mi.traverse(bsdf)
+    if "ggx" not in str(bsdf).lower():
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {shape.id()!r}: the {kind} boundary must use the GGX distribution "
+                    "(the format's analytic reflection is GGX; Mitsuba's roughdielectric defaults to Beckmann, whose "
+                    "reflection differs from GGX's by 30-70 % of its lobe: add <string name=\"distribution\" "
+                    "value=\"ggx\"/> to the BSDF)", file=file)
+    if "alpha.value" not in params:
+        rough = sorted(k for k in params.keys() if k.startswith("alpha"))
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {shape.id()!r}: the {kind} boundary roughness must be one isotropic "
+                    f"constant alpha (the format stores one GGX alpha); it has {rough}", file=file)
+    alpha = float(np.asarray(params["alpha.value"]).ravel()[0])
+    eta = float(np.asarray(params["eta"]).ravel()[0]) if "eta" in params else 1.5
+    return eta, alpha
+
+
 def refuse_emitter(shape, *, file: str | None = None) -> None:
     """CONVERT_SHAPE_UNSUPPORTED when a shape to bake or replace is an area emitter: a neural asset carries light
     transport (the response to light arriving, kinds/*.md), not emission, so its training targets would hold the
