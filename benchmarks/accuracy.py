@@ -72,10 +72,18 @@ def _bar(total: int, desc: str, quiet: bool):
         return _Null()
 
 
-def sensor_for(mi, scene, width: int):
-    """A box-filtered perspective sensor with the scene camera's pose, horizontal field of view and aspect."""
-    sensor = scene.sensors()[0]
-    p = mi.traverse(sensor)
+def sensor_for(mi, scene, width: int, *, file: str = ""):
+    """A box-filtered perspective sensor with the scene camera's pose, horizontal field of view and aspect (a
+    ``thinlens`` camera as its pinhole). CONVERT_SCENE_LOAD when the scene has no camera with a field of view
+    (none, ``orthographic``, ``radiancemeter``, ...): the benches compare images seen from the scene's camera."""
+    sensors = scene.sensors()
+    p = mi.traverse(sensors[0]) if sensors else None
+    if p is None or "x_fov" not in p or "to_world" not in p:
+        kind = str(sensors[0]).split("[")[0].strip() if sensors else "none"
+        raise error("CONVERT_SCENE_LOAD", f"the scene's camera ({kind}) has no field of view: the benches compare images "
+                    "from the scene's own perspective camera; add a <sensor type=\"perspective\"> (a thinlens camera is "
+                    "used as its pinhole)", file=str(file))
+    sensor = sensors[0]
     m = np.asarray(p["to_world"].matrix, np.float64).reshape(4, 4, -1)[:, :, 0]
     fw, fh = (int(v) for v in sensor.film().size())
     height = max(1, int(round(width * fh / max(fw, 1))))
@@ -312,7 +320,7 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     require_integrator(mscene, scene_file)
     fits = check_asset_fits(mi, mscene, rep, scene_file=str(scene_file))
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
-    sensor, hw = sensor_for(mi, mscene, res)
+    sensor, hw = sensor_for(mi, mscene, res, file=str(scene_file))
     a, b, half, key, reused = mitsuba_halves(mi, mscene, sensor, hw, scene_file, out, spp, seed, say=say, quiet=quiet)
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
     reference = {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator}

@@ -72,7 +72,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})
     nasset = mi.load_dict({"type": INTEGRATOR, "max_depth": settings["max_depth"] if settings["max_depth"] > 0 else 1024,
                            "rr_depth": settings["rr_depth"]})
-    sensor, hw = sensor_for(mi, original, res)
+    sensor, hw = sensor_for(mi, original, res, file=str(scene_file))
 
     def pt(spp, s):
         return mi_render(mi, original, sensor, spp, s)

@@ -134,7 +134,7 @@ def light_terms(scene_file, replace, out_dir, *, res: int = 64, spp: int = 1024,
         folders[name] = out / name
     mi = load_mitsuba()
     mscene = msc.load_scene(mi, scene_file)
-    sensor, hw = sensor_for(mi, mscene, res)
+    sensor, hw = sensor_for(mi, mscene, res, file=str(scene_file))
     mask = object_mask(mi, mscene, sensor, sorted(ids), hw) >= 0.5
     sums = {name: _sums(folder, mask) for name, folder in folders.items()}
     full = term([sums["full"]], [], mask)
