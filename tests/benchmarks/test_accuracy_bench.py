@@ -114,7 +114,7 @@ def test_scene_without_a_perspective_camera(scene, tmp_path, sensor):
         text = re.sub(r"<sensor.*?</sensor>", "", text, flags=re.S)
     else:
         text = text.replace('<sensor type="perspective"', f'<sensor type="{sensor}"').replace('<float name="fov" value="35"/>', "")
-    bad = tmp_path / "bad.xml"
+    bad = scene.parent / "bad.xml"  # beside the scene: its meshes are relative paths
     bad.write_text(text)
     assert ('type="perspective"' in text) is False
     with pytest.raises(NassetError) as e:
