@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import error
+from nasset_sdk.errors import UsageError, error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from . import load_bpy, quiet_stdout, to_y_up
@@ -55,6 +55,8 @@ def pick_objects(names, *, file: str | None = None) -> list:
     have = sorted(o.name for o in objs if o.type in ("MESH", "CURVES"))
     if not names:
         raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset object name given; the scene has {have}", file=file)
+    if twice := sorted({n for n in names if list(names).count(n) > 1}):
+        raise UsageError(f"--asset {twice} given more than once: each object belongs to the asset once")
     out = []
     for n in names:
         ob = objs.get(n)

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import NassetError, error
+from nasset_sdk.errors import NassetError, UsageError, error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from .analytic import ANALYTIC_CLASSES, as_mesh, shape_class
@@ -126,6 +126,8 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
     by_id = {s.id(): s for s in scene.shapes()}
     if not ids:
         raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset shape id given; the scene has {sorted(by_id)}", file=file)
+    if twice := sorted({i for i in ids if list(ids).count(i) > 1}):
+        raise UsageError(f"--asset {twice} given more than once: each shape belongs to the asset once")
     out = []
     for i in ids:
         if i not in by_id:

@@ -146,3 +146,11 @@ def test_an_emitting_object_cannot_be_baked_or_replaced(tmp_path, case, emits):
             call()
         assert ei.value.code == "CONVERT_SHAPE_UNSUPPORTED" and repr(names[0]) in str(ei.value), ei.value
         assert f"material {mat.name!r}" in str(ei.value)
+
+
+def test_an_object_given_twice_is_a_usage_error():
+    from nasset_sdk.errors import UsageError
+
+    names = build_example("blender-surface")
+    with pytest.raises(UsageError, match="given more than once"):
+        bsc.pick_objects([names[0], names[0]])

@@ -65,3 +65,15 @@ def test_convert_and_bench_refuse_to_replace_an_emitter(scene_file, tmp_path):
     with pytest.raises(NassetError) as ei:
         check_asset_fits(mi, mi.load_file(str(scene_file)), {"lamp": asset}, scene_file=str(scene_file))
     assert ei.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "'lamp'" in str(ei.value)
+
+
+def test_an_id_given_twice_is_a_usage_error(scene_file):
+    """--asset box --asset box used to bake the shape twice over (coincident triangles, every edge shared by four
+    faces)."""
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.scene import load_scene, pick_shapes
+    from nasset_sdk.errors import UsageError
+
+    scene = load_scene(load_mitsuba(), scene_file)
+    with pytest.raises(UsageError, match=r"\['box'\] given more than once"):
+        pick_shapes(scene, ["box", "box"])
