@@ -1,6 +1,9 @@
-"""A shape that emits light cannot become a neural asset: the format carries light transport (the response to light
-arriving), not emission. Baked, its training targets would hold the emission as if it were lit; replaced, its light
-would leave the scene. Every Mitsuba entry point that takes shape ids refuses it with CONVERT_SHAPE_UNSUPPORTED."""
+"""Which Mitsuba shapes can become an asset.
+
+A shape that emits light cannot: the format carries light transport (the response to light arriving), not emission.
+Baked, its training targets would hold the emission as if it were lit; replaced, its light would leave the scene.
+Every Mitsuba entry point that takes shape ids refuses it with CONVERT_SHAPE_UNSUPPORTED. And a shape id given twice
+is a usage error."""
 
 import pytest
 
