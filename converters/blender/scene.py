@@ -119,7 +119,9 @@ def variant_of(objects, *, file: str | None = None) -> str:
 
 def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None):
     """(points [V,3] world Blender, faces [F,3], vertex normals [V,3] world) of an evaluated mesh; object space
-    when ``local``. ``uv_out`` (a list) receives the active render UV map per triangle corner [F,3,2], or None."""
+    when ``local``. ``uv_out`` (a list) receives the active render UV map per triangle corner [F,3,2], or None.
+    The faces wind counter-clockwise about the normals also for a mirrored object (negative scale), as Cycles
+    renders it."""
     ev = ob.evaluated_get(depsgraph)
     me = ev.to_mesh()
     try:
@@ -163,6 +165,10 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
         tri[flat] = base + np.arange(3 * len(flat)).reshape(-1, 3)
     n = vn @ nlin.T
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    if np.linalg.det(M[:3, :3]) < 0:  # a mirrored object: keep the winding counter-clockwise about the normals
+        tri = tri[:, ::-1].copy()
+        if uv_out is not None and uv_out[-1] is not None:
+            uv_out[-1] = uv_out[-1][:, ::-1].copy()
     return p, tri, n
 
 

@@ -154,3 +154,28 @@ def test_an_object_given_twice_is_a_usage_error():
     names = build_example("blender-surface")
     with pytest.raises(UsageError, match="given more than once"):
         bsc.pick_objects([names[0], names[0]])
+
+
+def test_a_mirrored_object_keeps_its_faces_wound_about_its_normals():
+    """A negative scale mirrors the points; the faces must be reversed with them (and their UV corners), or the
+    triangles wind clockwise about the (correctly mirrored) normals: an inside-out asset and scene mesh."""
+    names = build_example("blender-surface")
+    ob = bpy.context.scene.objects[names[0]]
+
+    def geometry():
+        uvs = []
+        geo = bsc.mesh_geometry([ob], uv_out=uvs)
+        tri = geo.points[geo.faces]
+        face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        agree = np.mean(np.sum(face_n * geo.normals[geo.faces].mean(1), 1) > 0)
+        return geo, uvs[0], agree
+
+    geo, uv, agree = geometry()
+    ob.scale = (-1.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    geo_m, uv_m, agree_m = geometry()
+    assert agree > 0.99 and agree_m > 0.99, (agree, agree_m)
+    np.testing.assert_allclose(geo_m.points[:, 0], -geo.points[:, 0], atol=1e-6)  # +X (Blender and USD) mirrored
+    np.testing.assert_array_equal(geo_m.faces, geo.faces[:, ::-1])
+    if uv is not None:
+        np.testing.assert_array_equal(uv_m, uv[:, ::-1])
