@@ -120,11 +120,17 @@ def mitsuba_failure(exc: Exception, what: str, file: str):
 
 
 def _replace_shapes(root, replace: dict, scene_file: str) -> None:
-    """Drop the shapes whose id is a key of ``replace`` and add one ``nasset`` shape per asset file."""
+    """Drop the shapes whose id is a key of ``replace`` and add one ``nasset`` shape per asset file.
+    CONVERT_SHAPE_UNSUPPORTED for an area-emitter shape: an asset carries light transport, not emission, so
+    replacing it would take its light out of the scene (spec/bake.md#errors)."""
     found = set()
     for parent in list(root.iter()):
         for child in list(parent):
             if child.tag == "shape" and child.get("id") in replace:
+                if child.find("emitter") is not None:
+                    raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {child.get('id')!r} is an area emitter: a neural "
+                                "asset carries light transport, not emission; keep the emitter in the scene",
+                                file=scene_file)
                 parent.remove(child)
                 found.add(child.get("id"))
     missing = sorted(set(replace) - found)

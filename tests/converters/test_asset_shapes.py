@@ -80,3 +80,16 @@ def test_an_id_given_twice_is_a_usage_error(scene_file):
     scene = load_scene(load_mitsuba(), scene_file)
     with pytest.raises(UsageError, match=r"\['box'\] given more than once"):
         pick_shapes(scene, ["box", "box"])
+
+
+def test_the_plugin_scene_loader_refuses_to_replace_an_emitter(scene_file, tmp_path):
+    """The JIT plugin's ``load_file(replace=...)``, which ``bench error-vs-time`` renders the asset scene with."""
+    from nasset_mitsuba_plugin.scene import load_file
+    from nasset_mitsuba_plugin.variant import jit_mitsuba
+    from nasset_sdk.errors import NassetError
+    from nasset_sdk.examples import example_builder
+
+    asset = example_builder("rna", size="tiny").write(tmp_path / "a.usdc")
+    with pytest.raises(NassetError) as ei:
+        load_file(scene_file, mi=jit_mitsuba(), replace={"lamp": asset})
+    assert ei.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "'lamp'" in str(ei.value)
