@@ -292,8 +292,12 @@ def chromatic_media(mi, shapes, points: int = 256, seed: int = 0) -> bool:
     return False
 
 
+def _shapes_with_media(scene, ids) -> list:
+    return [s for s in scene.shapes() if s.id() in ids and has_medium(s)]
+
+
 def _ids_with_media(scene, ids) -> list[str]:
-    return [s.id() for s in scene.shapes() if s.id() in ids and has_medium(s)]
+    return [s.id() for s in _shapes_with_media(scene, ids)]
 
 
 #: the to_string names of Mitsuba's integrators that render participating media (volpath, volpathmis, prbvolpath)
@@ -347,7 +351,7 @@ def chromatic_volpath(mi, scene, ids) -> str | None:
     (spec/bake.md#data, "Media"). None otherwise."""
     if not str(scene.integrator()).lstrip().startswith("VolumetricSimplePathIntegrator"):
         return None
-    shapes = [s for s in scene.shapes() if s.id() in ids and has_medium(s)]
+    shapes = _shapes_with_media(scene, ids)
     if not shapes or not chromatic_media(mi, shapes):
         return None
     return (f"the scene's volpath renders the chromatic medium of shape(s) {[s.id() for s in shapes]} (extinction "
