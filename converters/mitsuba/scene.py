@@ -301,7 +301,19 @@ def _ids_with_media(scene, ids) -> list[str]:
 
 
 #: the to_string names of Mitsuba's integrators that render participating media (volpath, volpathmis, prbvolpath)
-_MEDIA_INTEGRATORS = re.compile(r"\s*(Volumetric\w*|PRBVolpath)Integrator\b")
+_MEDIA_INTEGRATORS = re.compile(r"(Volumetric\w*|PRBVolpath)Integrator")
+#: integrators that only wrap the one making the image (``aov``, ``stokes``; ``moment`` prints as ``Scene[``)
+_WRAPPER_INTEGRATORS = ("AOVIntegrator", "StokesIntegrator", "MomentIntegrator")
+
+
+def image_integrator(integrator) -> str | None:
+    """The to_string class name of the integrator that renders a loaded Mitsuba integrator's image: itself, or for a
+    wrapper (``aov``, ``stokes``, ``moment``) the first integrator nested in it; None for None."""
+    if integrator is None:
+        return None
+    names = re.findall(r"\b(\w+)\[", str(integrator))
+    inner = [n for n in names if n.endswith("Integrator") and n not in _WRAPPER_INTEGRATORS]
+    return inner[0] if inner else (names[0] if names else str(integrator).strip())
 
 
 def ignored_media(scene, ids) -> str | None:
@@ -309,13 +321,12 @@ def ignored_media(scene, ids) -> str | None:
     render: Mitsuba's ``path`` (and ``direct``, ``prb``, ...) shows such a shape as if it held no medium (a smooth
     dielectric boundary then looks like clear glass), while a bake renders the medium (spec/bake.md#data). None when the
     integrator renders media (``volpath``, ``volpathmis``, ``prbvolpath``), the scene has none, or no shape has a medium."""
-    integrator = scene.integrator()
-    if integrator is None or _MEDIA_INTEGRATORS.match(str(integrator)):
+    name = image_integrator(scene.integrator())
+    if name is None or _MEDIA_INTEGRATORS.fullmatch(name):
         return None
     with_media = _ids_with_media(scene, ids)
     if not with_media:
         return None
-    name = str(integrator).split("[")[0].strip()
     return (f"the scene's integrator ({name}) renders no participating media, so Mitsuba shows shape(s) {with_media} without "
             "their medium, while the asset holds it (bakes render the medium). Use <integrator type=\"volpath\"> for "
             "a scene that renders what the asset holds")
@@ -331,7 +342,7 @@ def truncated_media(scene, ids, baked_depth: int | None = None) -> str | None:
     item 8)."""
     integrator = scene.integrator()
     depth = integrator_depths(integrator).get("max_depth")
-    if depth is None or depth < 0 or not _MEDIA_INTEGRATORS.match(str(integrator)):
+    if depth is None or depth < 0 or not _MEDIA_INTEGRATORS.fullmatch(image_integrator(integrator) or ""):
         return None
     if baked_depth is not None and 0 <= baked_depth <= depth:
         return None
@@ -349,7 +360,7 @@ def chromatic_volpath(mi, scene, ids) -> str | None:
     (:func:`chromatic_media`): its image of them is heavy-tailed, so it converges slowly and a two-half estimate of its
     noise can read low; ``volpathmis`` renders the same expectation with 1.2-1000x less variance x time there
     (spec/bake.md#data, "Media"). None otherwise."""
-    if not str(scene.integrator()).lstrip().startswith("VolumetricSimplePathIntegrator"):
+    if image_integrator(scene.integrator()) != "VolumetricSimplePathIntegrator":
         return None
     shapes = _shapes_with_media(scene, ids)
     if not shapes or not chromatic_media(mi, shapes):

@@ -44,7 +44,7 @@ import numpy as np
 from nasset_sdk.errors import UsageError, error
 
 from . import analytic
-from .scene import integrator_depths, refuse_emitter
+from .scene import image_integrator, integrator_depths, refuse_emitter
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
@@ -362,6 +362,9 @@ class StageConverter:
             return
         cls = _class_name(integ)
         info = {"type": cls}
+        image = image_integrator(integ)
+        if image != cls:  # a wrapper (aov, stokes, moment): the nested integrator makes the image
+            info["image_integrator"] = cls = image
         md = integrator_depths(integ).get("max_depth")
         if md is not None:
             info["max_depth"] = md

@@ -125,13 +125,14 @@ def test_neupress_transport_with_volpathmis_equals_volpath(mi):
     ("volpath", [0.5, 1.0, 1.0], True),
     ("volpathmis", [0.5, 1.0, 1.0], False),
     ("volpath", [1.0, 1.0, 1.0], False),
+    ({"type": "aov", "aovs": "d:depth", "img": {"type": "volpath"}}, [0.5, 1.0, 1.0], True),  # the nested one renders
 ])
 def test_benches_warn_about_volpath_on_a_chromatic_medium(mi, integrator, sigma_t, warns):
     """The in-scene benches' caveats: the scene's own ``volpath`` on a chromatic medium gives a heavy-tailed
     Mitsuba side (the premise test above: ~1300x the variance of ``volpathmis`` in green)."""
     from nasset_converters.mitsuba.scene import media_caveats
 
-    scene = mi.load_dict({"type": "scene", "integrator": {"type": integrator},
+    scene = mi.load_dict({"type": "scene", "integrator": integrator if isinstance(integrator, dict) else {"type": integrator},
                           "ball": {"type": "sphere", "radius": 0.2,
                                    "interior": _homogeneous({"type": "rgb", "value": sigma_t})},
                           "plain": {"type": "sphere", "center": [1, 0, 0], "radius": 0.2}})

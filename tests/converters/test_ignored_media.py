@@ -34,6 +34,11 @@ def _scene(mi, integrator: str, shapes: str = BLOB + PLAIN):
     ('<integrator type="volpathmis"/>', False),
     ('<integrator type="prbvolpath"/>', False),
     ("", False),  # no integrator: a bake renders with its own, and the benches refuse the scene
+    # wrappers: the nested integrator makes the image (an aov scene's volpath used to be read as "no media")
+    ('<integrator type="aov"><string name="aovs" value="d:depth"/><integrator type="volpath"/></integrator>', False),
+    ('<integrator type="aov"><string name="aovs" value="d:depth"/><integrator type="path"/></integrator>', True),
+    ('<integrator type="moment"><integrator type="volpath"/></integrator>', False),
+    ('<integrator type="moment"><integrator type="path"/></integrator>', True),
 ])
 def test_ignored_media_by_integrator(mi, integrator, warns):
     from nasset_converters.mitsuba.scene import ignored_media
@@ -80,6 +85,8 @@ def test_8dna_bake_says_it(mi, tmp_path):
     ('<integrator type="volpath"><integer name="max_depth" value="-1"/></integrator>', False),
     ('<integrator type="direct"/>', False),  # no depth setting
     ('<integrator type="path"><integer name="max_depth" value="16"/></integrator>', False),  # no media at all: ignored_media
+    ('<integrator type="aov"><string name="aovs" value="d:depth"/><integrator type="volpath"><integer name="max_depth" '
+     'value="16"/></integrator></integrator>', True),
 ])
 def test_truncated_media_by_depth(mi, integrator, warns):
     """A bounded scene depth cuts the many bounces inside a high-albedo medium; bakes trace deeper. Found on the same
