@@ -145,6 +145,12 @@ def bake(
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
         say(f"warning: {warning}")
+    clear = msc.see_through(mi, shapes)
+    if clear:
+        say(f"warning: shape(s) {clear} let light through unscattered (a smooth, thin or masked surface over at most a "
+            f"thin medium: over {msc.SEE_THROUGH_SHARE:.0%} of it crosses): rna stores smooth transport, so what "
+            "they show of the scene behind them will be missing or blurred in every render of the asset "
+            "(spec/bake.md#see-through)")
     if workers is None:
         views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
     else:  # each worker loads the scene itself

@@ -237,14 +237,20 @@ def mesh_geometry(mi, shapes) -> MeshGeometry:
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     if not np.isfinite(areas).all() or float(areas.sum()) <= 0.0:
         raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes {[s.id() for s in shapes]} have no surface area")
-    if not is_closed(geo.faces):
+    if not is_closed(geo.faces, geo.points):
         warnings.warn(f"asset shapes {[s.id() for s in shapes]} do not form a closed surface: the asset is seen from "
                       "both sides, and light can pass through its holes", RuntimeWarning, stacklevel=2)
     return geo
 
 
-def is_closed(faces: np.ndarray) -> bool:
-    """True when every undirected edge of the triangles [F,3] is shared by exactly two faces (a watertight mesh)."""
+def is_closed(faces: np.ndarray, points: np.ndarray | None = None) -> bool:
+    """True when every undirected edge of the triangles [F,3] is shared by exactly two faces (a watertight mesh).
+    With ``points`` [V,3], vertices at the same position count as one: a mesh split along its hard edges or UV seams
+    (a Mitsuba ``cube``: 24 vertices) is closed when its surface is."""
+    faces = np.asarray(faces)
+    if points is not None:
+        _, weld = np.unique(np.asarray(points), axis=0, return_inverse=True)
+        faces = weld.reshape(-1)[faces]
     e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     _, counts = np.unique(e, axis=0, return_counts=True)
     return bool((counts == 2).all())
@@ -413,6 +419,68 @@ def media_caveats(mi, scene, replace: dict) -> list[str]:
 def blocks_delta_light(shapes) -> bool:
     """True when a shape's BSDF is a smooth (delta) dielectric: delta lights cannot light its interior."""
     return any(any(b in str(s.bsdf()) for b in DELTA_BLOCKING_BSDFS) for s in shapes)
+
+
+#: the share of straight-through light above which a shape counts as see-through (:func:`see_through`)
+SEE_THROUGH_SHARE = 0.01
+
+
+def see_through(mi, shapes, rays: int = 256, samples: int = 16, seed: int = 0) -> list[str]:
+    """Ids of ``shapes`` that light crosses without scattering: a BSDF with a delta or null transmission (``dielectric``,
+    ``thindielectric``, ``mask``, ``null``, a ``blendbsdf`` of one) and an interior medium that lets more than
+    SEE_THROUGH_SHARE of it through in its thinnest channel, averaged over ``rays`` random chords (optical depth from
+    ``samples`` lookups of sigma_t along each; no interior medium: all of it).
+
+    rna stores smooth transport T(x, wo, wi) (spec/kinds/rna.md): what such a shape shows of the scene behind it is
+    a delta in wi, which neither its training views (lit by one distant light) nor its continuation rays can hold."""
+    import drjit as dr
+
+    found = []
+    rng = np.random.default_rng(seed)
+    for shape in shapes:
+        bsdf = shape.bsdf()
+        flags = bsdf.flags() if bsdf is not None else 0
+        if not (mi.has_flag(flags, mi.BSDFFlags.DeltaTransmission) or mi.has_flag(flags, mi.BSDFFlags.Null)):
+            continue
+        medium = shape.interior_medium()
+        if medium is None or _straight_through(mi, dr, shape, medium, rng, rays, samples) > SEE_THROUGH_SHARE:
+            found.append(shape.id())
+    return found
+
+
+def _straight_through(mi, dr, shape, medium, rng, rays: int, samples: int) -> float:
+    """Mean over random chords through ``shape`` of exp(-optical depth of ``medium``) in its thinnest channel."""
+    bbox = shape.bbox()
+    lo, hi = np.asarray(bbox.min, np.float64), np.asarray(bbox.max, np.float64)
+    reach = float(np.linalg.norm(hi - lo)) + 1e-6
+    d = rng.normal(size=(rays, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = lo + rng.random((rays, 3)) * (hi - lo) - 2.0 * reach * d
+    sid = shape.id()
+    alone = mi.load_dict({"type": "scene", "shape": shape})
+    shape.set_id(sid)  # a shape put in another scene takes that scene's key as its id
+
+    def first_hit(origin, direction):
+        ray = mi.Ray3f(mi.Point3f(np.ascontiguousarray(origin.T, np.float32)),
+                       mi.Vector3f(np.ascontiguousarray(direction.T, np.float32)))
+        si = alone.ray_intersect(ray)
+        return np.asarray(si.is_valid(), bool).reshape(-1), np.asarray(si.t, np.float64).reshape(-1)
+
+    hit, t_in = first_hit(o, d)
+    if not hit.any():
+        return 0.0
+    o, d, t_in = o[hit], d[hit], t_in[hit]
+    entry = o + (t_in[:, None] + 1e-4 * reach) * d
+    out, t_out = first_hit(entry, d)
+    chord = np.where(out, t_out, 0.0)  # [n] length inside the shape
+    frac = (np.arange(samples) + 0.5) / samples
+    pts = entry[:, None, :] + chord[:, None, None] * frac[None, :, None] * d[:, None, :]  # [n, samples, 3]
+    mei = dr.zeros(mi.MediumInteraction3f, pts.shape[0] * samples)
+    mei.p = mi.Point3f(np.ascontiguousarray(pts.reshape(-1, 3).T, np.float32))
+    _, _, sigma_t = medium.get_scattering_coefficients(mei)
+    st = np.broadcast_to(np.asarray(sigma_t, np.float64).reshape(3, -1).T, (pts.shape[0] * samples, 3))
+    depth = st.reshape(-1, samples, 3).mean(axis=1) * chord[:, None]  # [n, 3]
+    return float(np.exp(-depth.min(axis=1)).mean())
 
 
 _LANE_PLUGIN = "nasset_lane_directional"

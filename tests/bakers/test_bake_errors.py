@@ -78,6 +78,11 @@ def test_closed_surface_check():
 
     tetra = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]])
     assert is_closed(tetra) and not is_closed(tetra[:3])
+    # the same tetrahedron with its vertices split per face (hard edges, UV seams): closed once welded by position
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    split = np.arange(12).reshape(4, 3)
+    points = corners[tetra.reshape(-1)]
+    assert not is_closed(split) and is_closed(split, points) and not is_closed(split[:3], points)
 
 
 def test_open_shape_warning_from_geometry(tmp_path):
@@ -88,6 +93,21 @@ def test_open_shape_warning_from_geometry(tmp_path):
     shapes = pick_shapes(load_scene(mi, xml), ["m"])
     with pytest.warns(RuntimeWarning, match="closed surface"):
         mesh_geometry(mi, shapes)
+
+
+def test_a_cube_with_split_vertices_is_closed(tmp_path):
+    """Mitsuba's ``cube`` has 24 vertices (four per face, for its hard edges): it used to be called open."""
+    import warnings
+
+    from nasset_converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
+
+    mi = cm.load_mitsuba()
+    (tmp_path / "c.xml").write_text('<scene version="3.0.0"><shape type="cube" id="c"/></scene>')
+    shapes = pick_shapes(load_scene(mi, tmp_path / "c.xml"), ["c"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        geo = mesh_geometry(mi, shapes)
+    assert len(geo.points) == 24
 
 
 def test_dataset_write_failure_is_typed(tmp_path, monkeypatch):
