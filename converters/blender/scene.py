@@ -118,21 +118,23 @@ def variant_of(objects, *, file: str | None = None) -> str:
 
 
 def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None):
-    """(points [V,3] world Blender, faces [F,3], vertex normals [V,3] world) of an evaluated mesh; object space
-    when ``local``. ``uv_out`` (a list) receives the active render UV map per triangle corner [F,3,2], or None.
-    The faces wind counter-clockwise about the normals also for a mirrored object (negative scale), as Cycles
-    renders it."""
+    """(points [V,3] world Blender, faces [F,3], normals [V,3] world) of an evaluated mesh; object space when
+    ``local``. The normals are Blender's corner normals, as Cycles shades them: a vertex is split where its corners
+    differ (flat faces, sharp edges, Smooth by Angle, custom normals), so a cube shades flat and a smooth sphere
+    keeps one normal per vertex. ``uv_out`` (a list) receives the active render UV map per triangle corner
+    [F,3,2], or None. The faces wind counter-clockwise about the normals also for a mirrored object (negative
+    scale), as Cycles renders it."""
     ev = ob.evaluated_get(depsgraph)
     me = ev.to_mesh()
     try:
         me.calc_loop_triangles()
         nv, nt = len(me.vertices), len(me.loop_triangles)
+        loops = np.empty(nt * 3, np.int32)
+        me.loop_triangles.foreach_get("loops", loops)
         if uv_out is not None:
             layer = next((u for u in me.uv_layers if u.active_render), me.uv_layers.active)
             uv = None
             if layer is not None and nt:
-                loops = np.empty(nt * 3, np.int32)
-                me.loop_triangles.foreach_get("loops", loops)
                 all_uv = np.empty(len(me.loops) * 2, np.float32)
                 layer.data.foreach_get("uv", all_uv)
                 uv = all_uv.reshape(-1, 2)[loops].reshape(nt, 3, 2).astype(np.float64)
@@ -141,30 +143,19 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
         me.vertices.foreach_get("co", co)
         tri = np.empty(nt * 3, np.int32)
         me.loop_triangles.foreach_get("vertices", tri)
-        tri = tri.reshape(-1, 3)
-        smooth = np.empty(nt, bool)
-        me.loop_triangles.foreach_get("use_smooth", smooth)
-        vn = np.empty(nv * 3, np.float32)
-        me.vertices.foreach_get("normal", vn)
-        vn = vn.reshape(-1, 3).astype(np.float64)
-        tn = np.empty(nt * 3, np.float32)
-        me.loop_triangles.foreach_get("normal", tn)
-        tn = tn.reshape(-1, 3).astype(np.float64)
+        cn = np.empty(len(me.loops) * 3, np.float32)
+        me.corner_normals.foreach_get("vector", cn)
+        corner_n = cn.reshape(-1, 3)[loops].astype(np.float64)  # [F*3, 3] the normal of each triangle corner
     finally:
         ev.to_mesh_clear()
+    # one vertex per distinct (position, corner normal): normals equal to float32 precision share a vertex
+    key = np.concatenate([tri[:, None].astype(np.float64), corner_n], axis=1)
+    _, first, corner_vertex = np.unique(key, axis=0, return_index=True, return_inverse=True)
     M = np.eye(4) if local else np.array(ob.matrix_world, np.float64)
-    p = co.reshape(-1, 3).astype(np.float64) @ M[:3, :3].T + M[:3, 3]
-    nlin = np.linalg.inv(M[:3, :3]).T
-    if not smooth.all():  # flat faces: split their corners so they keep the face normal
-        flat = np.nonzero(~smooth)[0]
-        base = len(p)
-        extra = tri[flat].ravel()
-        p = np.concatenate([p, p[extra]])
-        vn = np.concatenate([vn, np.repeat(tn[flat], 3, axis=0)])
-        tri = tri.copy()
-        tri[flat] = base + np.arange(3 * len(flat)).reshape(-1, 3)
-    n = vn @ nlin.T
+    p = co.reshape(-1, 3).astype(np.float64)[tri[first]] @ M[:3, :3].T + M[:3, 3]
+    n = corner_n[first] @ np.linalg.inv(M[:3, :3])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    tri = corner_vertex.reshape(-1, 3).astype(np.int32)
     if np.linalg.det(M[:3, :3]) < 0:  # a mirrored object: keep the winding counter-clockwise about the normals
         tri = tri[:, ::-1].copy()
         if uv_out is not None and uv_out[-1] is not None:

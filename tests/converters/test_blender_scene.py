@@ -179,3 +179,39 @@ def test_a_mirrored_object_keeps_its_faces_wound_about_its_normals():
     np.testing.assert_array_equal(geo_m.faces, geo.faces[:, ::-1])
     if uv is not None:
         np.testing.assert_array_equal(uv_m, uv[:, ::-1])
+
+
+@pytest.mark.parametrize("shading", ["smooth by angle", "sharp edges", "flat"])
+def test_hard_edges_keep_cycles_normals(shading):
+    """Cycles shades with Blender's corner normals: a cube under Smooth by Angle (the modifier Blender's "Shade Auto
+    Smooth" adds), with its edges marked sharp, or with flat faces shades flat. The export used to average the
+    vertex normals across a hard edge, so a smooth-shaded cube with hard edges came out shaded like a sphere."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    ob = bpy.context.active_object
+    if shading == "smooth by angle":
+        bpy.ops.object.shade_auto_smooth(angle=np.radians(30.0))
+    elif shading == "sharp edges":
+        bpy.ops.object.shade_smooth()
+        ob.data.attributes.new("sharp_edge", "BOOLEAN", "EDGE").data.foreach_set("value", [True] * len(ob.data.edges))
+    else:
+        bpy.ops.object.shade_flat()
+    bpy.context.view_layer.update()
+    geo = bsc.mesh_geometry([ob], local=True)
+    tri = geo.points[geo.faces]
+    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
+    for corner in range(3):  # every corner's normal is its face's
+        np.testing.assert_allclose(geo.normals[geo.faces[:, corner]], face_n, atol=1e-6)
+    assert len(geo.points) == 24
+
+
+def test_a_smooth_mesh_keeps_one_vertex_per_blender_vertex():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0)
+    ob = bpy.context.active_object
+    bpy.ops.object.shade_smooth()
+    bpy.context.view_layer.update()
+    geo = bsc.mesh_geometry([ob], local=True)
+    assert len(geo.points) == len(ob.data.vertices)
+    np.testing.assert_allclose(np.sum(geo.normals * geo.points, axis=1), 1.0, atol=1e-4)  # radial normals
