@@ -214,15 +214,26 @@ def curves_geometry(mi, shapes) -> CurvesGeometry:
 
 
 def mesh_geometry(mi, shapes) -> MeshGeometry:
-    """Merge the shapes' world-space triangles into one MeshGeometry (asset object space = scene space)."""
-    pts, faces, normals, base, have_normals = [], [], [], 0, True
+    """Merge the shapes' world-space triangles into one MeshGeometry (asset object space = scene space). Normals: the
+    shapes' vertex normals; None when no shape has any (flat shading everywhere). Where only some have them, the
+    others (``face_normals``, or a file without normals) get their vertices split per triangle with the face normal,
+    so they stay flat and the smooth ones smooth."""
+    meshes = []
     for s in shapes:
         params = mi.traverse(s)
         p = np.asarray(params["vertex_positions"], np.float32).reshape(-1, 3)
         f = np.asarray(params["faces"], np.int64).reshape(-1, 3)
         n = np.asarray(params["vertex_normals"], np.float32).reshape(-1, 3) if "vertex_normals" in params else None
-        if n is None or n.shape != p.shape:
-            have_normals = False
+        meshes.append((p, f, n if n is not None and n.size and n.shape == p.shape else None))
+    some_normals = any(n is not None for _, _, n in meshes)
+    pts, faces, normals, base = [], [], [], 0
+    for p, f, n in meshes:
+        if some_normals and n is None:  # flat: one vertex per triangle corner, carrying the face normal
+            p = p[f].reshape(-1, 3)
+            f = np.arange(len(p)).reshape(-1, 3)
+            fn = np.cross(p[1::3] - p[0::3], p[2::3] - p[0::3]).astype(np.float64)
+            fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-30)
+            n = np.repeat(fn, 3, axis=0).astype(np.float32)
         pts.append(p)
         faces.append(f + base)
         normals.append(n)
@@ -230,7 +241,7 @@ def mesh_geometry(mi, shapes) -> MeshGeometry:
     geo = MeshGeometry(
         np.concatenate(pts).astype(np.float32),
         np.concatenate(faces).astype(np.int32),
-        np.concatenate(normals).astype(np.float32) if have_normals else None,
+        np.concatenate(normals).astype(np.float32) if some_normals else None,
     )
     geo.validate()
     tri = geo.points[geo.faces]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import types
 import warnings
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mitsuba", reason="bake tests need mitsuba (pip install 'nasset-sdk[mitsuba]')")
@@ -108,6 +109,29 @@ def test_a_cube_with_split_vertices_is_closed(tmp_path):
         warnings.simplefilter("error")
         geo = mesh_geometry(mi, shapes)
     assert len(geo.points) == 24
+
+
+def test_a_flat_shape_beside_a_smooth_one_keeps_both_shadings(tmp_path):
+    """A shape without vertex normals (``face_normals``) in one asset with a smooth one: the smooth one used to lose
+    its normals too (the merged asset had none: faceted everywhere)."""
+    from nasset_converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
+
+    mi = cm.load_mitsuba()
+    (tmp_path / "c.xml").write_text(
+        '<scene version="3.0.0"><shape type="sphere" id="s"/><shape type="obj" id="t">'
+        '<string name="filename" value="t.obj"/><boolean name="face_normals" value="true"/></shape></scene>')
+    (tmp_path / "t.obj").write_text("v 3 0 0\nv 4 0 0\nv 3 1 0\nv 3 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n")
+    shapes = pick_shapes(load_scene(mi, tmp_path / "c.xml"), ["s", "t"])
+    geo = mesh_geometry(mi, shapes)
+    sphere = np.linalg.norm(geo.points, axis=1) < 1.5
+    np.testing.assert_allclose(np.sum(geo.normals[sphere] * geo.points[sphere], axis=1), 1.0, atol=1e-3)  # radial
+    tri = geo.points[geo.faces]
+    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    face_n /= np.linalg.norm(face_n, axis=1, keepdims=True)
+    flat = ~sphere[geo.faces[:, 0]]
+    assert flat.sum() == 4
+    for corner in range(3):
+        np.testing.assert_allclose(geo.normals[geo.faces[flat, corner]], face_n[flat], atol=1e-5)
 
 
 def test_dataset_write_failure_is_typed(tmp_path, monkeypatch):
