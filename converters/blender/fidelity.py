@@ -266,6 +266,34 @@ def _area_lights(bpy, folder: Path, size: int) -> None:
     _light(bpy, "Disk", "AREA", (0.0, -0.6, 1.6), energy=15.0, shape="DISK", size=0.3)
 
 
+def _surface_types(bpy, folder: Path, size: int) -> None:
+    # objects that are not meshes but render as surfaces (their evaluated mesh), and hard edges on a smooth mesh
+    _new_scene(bpy, size, (0.0, -2.8, 1.6), (0.0, 0.0, 0.3))
+    _floor(bpy)
+
+    def place(ob, name, rgb):
+        ob.name = name
+        ob.data.materials.append(_material(bpy, name + "Mat", **{"Color": rgb}))
+        return ob
+
+    bpy.ops.curve.primitive_bezier_circle_add(radius=0.3, location=(-0.7, 0.2, 0.1))
+    ring = place(bpy.context.active_object, "Ring", (0.8, 0.3, 0.1))
+    ring.data.bevel_depth = 0.08
+    bpy.ops.object.text_add(location=(0.25, -0.5, 0.0))
+    text = place(bpy.context.active_object, "Label", (0.2, 0.5, 0.8))
+    text.data.body, text.data.size, text.data.extrude = "N", 0.6, 0.08
+    bpy.ops.surface.primitive_nurbs_surface_sphere_add(radius=0.25, location=(0.7, 0.3, 0.25))
+    place(bpy.context.active_object, "Nurbs", (0.3, 0.7, 0.2))
+    bpy.ops.object.metaball_add(type="BALL", radius=0.25, location=(0.0, 0.5, 0.25))
+    place(bpy.context.active_object, "Blob", (0.8, 0.8, 0.3))
+    box = _add(bpy, "cube", "AutoSmoothBox", _material(bpy, "Grey", **{"Color": (0.7, 0.7, 0.7)}), size=0.3,
+               location=(-0.2, -0.2, 0.15), rotation=(0.0, 0.0, math.radians(30.0)))
+    bpy.context.view_layer.objects.active = box
+    bpy.ops.object.shade_auto_smooth(angle=math.radians(30.0))  # flat faces, by Blender's corner normals
+    _sun(bpy)
+    _world(bpy)
+
+
 SCENES = {
     "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor, "
                               "a Non-Color PNG as a Principled Base Color on a box"),
@@ -282,6 +310,8 @@ SCENES = {
     "render_settings": FidelityScene("render_settings", _render_settings, "max bounces 2 in an open box of bright walls, "
                                      "Gaussian pixel filter 1.5 px"),
     "area_lights": FidelityScene("area_lights", _area_lights, "rectangle, square and disk area lights"),
+    "surface_types": FidelityScene("surface_types", _surface_types, "a bevelled curve, extruded text, a NURBS sphere, "
+                                   "a metaball; a cube under Shade Auto Smooth (hard edges on smooth faces)"),
 }
 
 

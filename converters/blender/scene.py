@@ -47,12 +47,17 @@ def open_blend(path):
     return bpy.context.scene
 
 
+#: object types whose evaluated geometry is a mesh, as Cycles renders them: meshes, and curves (bevelled or
+#: extruded), NURBS surfaces, metaballs and text
+SURFACE_TYPES = ("MESH", "CURVE", "SURFACE", "META", "FONT")
+
+
 def pick_objects(names, *, file: str | None = None) -> list:
-    """The scene's objects with these names, in order; each must be a mesh, a hair Curves object or
-    a mesh carrying particle hair."""
+    """The scene's objects with these names, in order; each must have a surface (SURFACE_TYPES), be a hair Curves
+    object or a mesh carrying particle hair."""
     bpy = load_bpy()
     objs = bpy.context.scene.objects
-    have = sorted(o.name for o in objs if o.type in ("MESH", "CURVES"))
+    have = sorted(o.name for o in objs if o.type in (*SURFACE_TYPES, "CURVES"))
     if not names:
         raise error("CONVERT_SHAPE_UNKNOWN", f"no --asset object name given; the scene has {have}", file=file)
     if twice := sorted({n for n in names if list(names).count(n) > 1}):
@@ -62,8 +67,9 @@ def pick_objects(names, *, file: str | None = None) -> list:
         ob = objs.get(n)
         if ob is None:
             raise error("CONVERT_SHAPE_UNKNOWN", f"no object named {n!r}; the scene has {have}", file=file)
-        if ob.type not in ("MESH", "CURVES"):
-            raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r} is a {ob.type}, not a mesh or hair curves", file=file)
+        if ob.type not in (*SURFACE_TYPES, "CURVES"):
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r} is a {ob.type}, not a surface (mesh, curve, "
+                        "surface, metaball, text) or hair curves", file=file)
         refuse_emitter(ob, file=file)
         out.append(ob)
     return out

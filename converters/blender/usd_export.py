@@ -318,7 +318,7 @@ class _BlenderConverter(StageConverter):
         """Meshes of the view layer (world space), then instances: objects placed by collection instances
         (and other instancers) and linked duplicates (mesh objects sharing one mesh without modifiers) become
         instanceable Xforms referencing one class prim ``/Prototypes/NAME`` per mesh (object space)."""
-        from .scene import has_particle_hair
+        from .scene import SURFACE_TYPES, has_particle_hair
 
         bpy = self.bpy
         objects = [ob for ob in bpy.context.view_layer.objects if not ob.hide_render and ob.name not in self.replace]
@@ -332,8 +332,9 @@ class _BlenderConverter(StageConverter):
                 continue
             if ob.type in ("CAMERA", "LIGHT", "EMPTY"):
                 continue
-            if ob.type != "MESH":
-                self.warn(f"object {ob.name}: {ob.type} is not convertible (meshes are): skipped")
+            if ob.type not in SURFACE_TYPES:
+                self.warn(f"object {ob.name}: {ob.type} is not convertible (surfaces are: {', '.join(SURFACE_TYPES)}): "
+                          "skipped")
                 continue
             if has_particle_hair(ob):
                 self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
@@ -349,16 +350,19 @@ class _BlenderConverter(StageConverter):
             ob, parent = inst.object.original, inst.parent.original if inst.parent is not None else None
             if parent is not None and parent.name in self.replace:
                 continue  # the asset stands in for the instancer and what it places
+            if parent is not None and parent.name == ob.name:
+                continue  # a curve, text, surface or metaball's own evaluated mesh: written as the object itself
             if ob.name in self.replace:
                 if ("replaced", ob.name) not in skipped:
                     skipped.add(("replaced", ob.name))
                     self.warn(f"object {ob.name}: its instances are not written (--replace places the asset once, "
                               "in world space)")
                 continue
-            if ob.type != "MESH":
+            if ob.type not in SURFACE_TYPES:
                 if ob.type not in ("EMPTY", "CAMERA") and ob.name not in skipped:
                     skipped.add(ob.name)
-                    self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (meshes are): skipped")
+                    self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (surfaces are: "
+                              f"{', '.join(SURFACE_TYPES)}): skipped")
                 continue
             self._instance(ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
                            f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}")

@@ -184,6 +184,23 @@ def test_instances_and_linked_duplicates_become_instanceable_prims(tmp_path):
     assert plain == ["Floor"], plain
 
 
+def test_curves_text_surfaces_and_metaballs_become_one_mesh_each(tmp_path):
+    """Objects that are not meshes but render as surfaces (a bevelled curve, text, a NURBS surface, a metaball) are
+    written as their evaluated mesh, once: they used to be skipped (the fidelity suite's surface_types scene then read
+    a noise ratio of 81), and their evaluated geometry is also listed among the depsgraph's instances."""
+    from pxr import Usd, UsdGeom
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("surface_types", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    children = stage.GetPrimAtPath("/World/Geometry").GetChildren()
+    assert sorted(p.GetName() for p in children) == ["AutoSmoothBox", "Blob", "Floor", "Label", "Nurbs", "Ring"]
+    faces = {p.GetName(): len(UsdGeom.Mesh(p).GetFaceVertexCountsAttr().Get()) for p in children if p.IsA(UsdGeom.Mesh)}
+    assert len(faces) == 6 and min(n for name, n in faces.items() if name != "Floor") >= 12, faces
+    assert not stage.GetPrimAtPath("/Prototypes") and not res.warnings, res.warnings
+
+
 def test_emissive_mesh_too_large_to_light_sample_is_warned(tmp_path):
     from nasset_converters.blender.fidelity import _material
 
