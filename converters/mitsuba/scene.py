@@ -146,7 +146,7 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
         if not shape.is_mesh():
             hint = ("; curves make rna fiber assets only (--kind rna)" if cls in CURVE_CLASSES
                     else "; convert it to ply/obj" + (" or a linearcurve" if curves else ""))
-            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is a {cls}, not a triangle mesh or an analytic shape "
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is a Mitsuba {cls}, not a triangle mesh or an analytic shape "
                         f"({', '.join(c.lower() for c in ANALYTIC_CLASSES)}){hint}", file=file)
         out.append(shape)
     kinds = {shape_class(s) in CURVE_CLASSES for s in out}
