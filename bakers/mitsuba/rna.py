@@ -121,7 +121,11 @@ def bake(
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
-    asset_variant, geo = msc.asset_geometry(mi, shapes)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        asset_variant, geo = msc.asset_geometry(mi, shapes)
+    for w in caught:
+        say(f"warning: {w.message}")
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)
     if light_angle is None:
