@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
-from nasset_sdk.cli import Verb
+from nasset_sdk.cli import Verb, seed_arg
 
 
 def add_args(p) -> None:
@@ -33,7 +33,7 @@ def add_args(p) -> None:
                    help="render the views (8dna: trace the tuples) on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="the Ray cluster to use with --workers (default: a local one on this machine)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--device", default="auto", metavar="auto|cpu|cuda|cuda:N",
                    help="torch device of the training (default auto: cuda if torch sees one, else cpu); under torchrun "
                         "each process trains on cuda:LOCAL_RANK (spec/bake.md#training-devices)")

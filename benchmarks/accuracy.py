@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import UsageError, error
 
 #: samples per Mitsuba render call (bounds memory; the halves are means of such chunks)
@@ -568,7 +569,7 @@ def add_args(p) -> None:
     p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1, "
                    "1024 with Russian roulette when unbounded; Blender: the converted scene's nasset:maxDepth, Cycles' bounces + 1)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
 
 

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_converters.blender.cycles import render_cycles, setup_cycles
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 1024, "cy_spp": "4,16,64", "nr_spp": "1,4,16", "size": "tiny"}
@@ -288,7 +289,7 @@ def add_args(p) -> None:
     p.add_argument("--examples", default="blender-surface,blender-hair", help="comma-separated examples")
     p.add_argument("--no-ablation", action="store_true", help="skip the h ablation")
     p.add_argument("--quick", action="store_true", help="tiny bakes and small images (a few minutes)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
 
 

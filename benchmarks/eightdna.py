@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_benchmarks.common import machine
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
@@ -604,7 +605,7 @@ def add_args(p) -> None:
     p.add_argument("--reference-npz", default=None, help="reuse the reference image of an earlier run (its bench_8dna_images.npz)")
     p.add_argument("--quick", action="store_true",
                    help="tiny bakes and small renders, a few minutes (a smoke run: errors near the reference's noise)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
 
 

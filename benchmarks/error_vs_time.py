@@ -38,6 +38,7 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import estimate_depth
 from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 1024, "mi_spp": "1,4,16,64", "nr_spp": "1,4,16"}
@@ -238,7 +239,7 @@ def add_args(p) -> None:
     p.add_argument("--nr-spp", default=None, help="reference-renderer spp list, e.g. 1,2,4,8,16,32")
     p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
 
 

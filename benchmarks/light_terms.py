@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import NassetError, UsageError, error
 
 #: a black diffuse BSDF for the shapes that are not replaced, in "direct" variants
@@ -179,7 +180,7 @@ def main(argv=None) -> int:
     p.add_argument("--res", type=int, default=64)
     p.add_argument("--spp", type=int, default=1024, help="Mitsuba reference spp per variant, both halves")
     p.add_argument("--nr-spp", type=int, default=256, help="reference-renderer spp per variant")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true")
     a = p.parse_args(argv)
     try:

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_benchmarks.common import ints
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 256, "spp": "1,4,16", "equal_spp": 4}
@@ -383,7 +384,7 @@ def add_args(p) -> None:
     p.add_argument("--max-depth", type=int, default=16, help="reference renderer path depth (default 16)")
     p.add_argument("--repeat", type=int, default=2, help="time each render as the best of N identical renders (default 2)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import NassetError, error
 
 from .plugins import INTEGRATOR
@@ -87,7 +88,7 @@ def main(argv=None) -> int:
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--height", type=int, default=None)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_arg, default=0)
     ap.add_argument("--max-depth", type=int, default=5, help="scattering vertices (1 = direct lighting only; spec/renderer.md#integrator)")
     ap.add_argument("--variant", default=None, help="llvm_ad_rgb (default) or cuda_ad_rgb")
     ap.add_argument("--prt", action="store_true", help="neupress: shade with the PRT component and the dome's SH projection")

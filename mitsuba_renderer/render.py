@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 
+from nasset_sdk.cli import seed_arg
 from nasset_sdk.errors import NassetError, SceneError, error
 
 from . import eightdna, neupress  # noqa: F401  (eightdna: importing it registers the 8dna shader)
@@ -184,7 +185,7 @@ def main(argv=None) -> int:
     ap.add_argument("spp", type=int)
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--height", type=int, default=None)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=seed_arg, default=0)
     ap.add_argument("--max-depth", type=int, default=5)
     ap.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto)")
     ap.add_argument("--batch", type=int, default=1 << 17, help="paths per wavefront")

@@ -28,6 +28,21 @@ class Verb(NamedTuple):
     target: str
 
 
+#: largest --seed: seeds reach Mitsuba's samplers as unsigned 32-bit integers
+MAX_SEED = 2**32 - 1
+
+
+def seed_arg(text: str) -> int:
+    """argparse type of every ``--seed``: an integer in 0 .. MAX_SEED (a usage error otherwise, exit code 2)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed must be an integer, got {text!r}") from None
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed must be in 0 .. {MAX_SEED}, got {value}")
+    return value
+
+
 #: the SDK's own verbs; :func:`all_verbs` adds the installed packages' ones
 VERBS: dict[str, Verb] = {}
 
@@ -86,7 +101,7 @@ def _example_args(p):
     p.add_argument("--kind", default="rna", choices=list(kind_ids()))
     p.add_argument("--variant", default="surface", help="surface or fiber (rna)")
     p.add_argument("--size", default="small", help="preset: tiny, small, hq")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--quality-variants", action="store_true", help="store small and hq cores as a quality variant set")
 
 
@@ -129,7 +144,7 @@ def _conformance_args(p):
     p.add_argument("--cases", nargs="+", default=None, metavar="NAME", help="run only these cases")
     p.add_argument("--suite", default=None, metavar="DIR", help="cases folder (default: the cases installed with nasset_sdk)")
     p.add_argument("--workdir", default=None, metavar="DIR", help="where images, logs and error maps go (default: a new temp folder)")
-    p.add_argument("--seed", type=int, default=0, help="value of {seed} (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="value of {seed} (default 0)")
     p.add_argument("--spp-scale", type=int, default=1, metavar="K", help="render at K x the case's spp (tolerances unchanged)")
     p.add_argument("--timeout", type=float, default=600.0, help="seconds per case before the render counts as failed")
     p.add_argument("--list", action="store_true", help="list the cases and exit")

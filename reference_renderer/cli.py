@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
-from nasset_sdk.cli import Verb
+from nasset_sdk.cli import Verb, seed_arg
 from nasset_sdk.errors import UsageError
 
 
@@ -107,7 +107,7 @@ def add_args(p) -> None:
     p.add_argument("scene", help="scene .usda/.usdc, or an asset file (rendered in a default studio scene)")
     p.add_argument("-o", "--output", required=True, help="output .exr")
     p.add_argument("--spp", type=int, default=16)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--width", type=int, default=None)
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--max-depth", type=int, default=None,

@@ -124,3 +124,42 @@ def test_network_too_large(monkeypatch, tmp_path):
     assert e.value.code == "NETWORK_TOO_LARGE"
     report = validate_file(path, probe=False)
     assert "NETWORK_TOO_LARGE" in report.codes("error"), report.format_text()
+
+
+def _seed_options(parser, path=()):
+    """(command path, action) of every ``--seed`` option of ``parser`` and its sub-commands."""
+    import argparse
+
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _seed_options(sub, (*path, name))
+        elif "--seed" in action.option_strings:
+            yield path, action
+
+
+def test_every_seed_option_is_checked():
+    """A negative seed used to reach numpy and Mitsuba and end in a traceback (ValueError: expected non-negative
+    integer): every ``--seed`` now takes 0 .. 2^32 - 1 and refuses anything else as a usage error (exit 2)."""
+    from nasset_sdk.cli import MAX_SEED, seed_arg
+
+    found = list(_seed_options(build_parser()))
+    assert len(found) >= 8 and all(a.type is seed_arg for _, a in found), [(p, a.type) for p, a in found]
+    for path, _ in found:
+        for bad in ("-1", str(MAX_SEED + 1), "1.5"):
+            _, code, text = _parse([*path, "--seed", bad])
+            assert code == 2 and "seed" in text, (path, bad, text)
+    assert seed_arg("0") == 0 and seed_arg(str(MAX_SEED)) == MAX_SEED
+
+
+def test_no_command_line_parses_a_seed_as_a_bare_int():
+    """The stand-alone command lines (the Mitsuba plugin's and renderer's ``render``, the benchmark modules) are built
+    inside their ``main``; they share the type too: no product source declares ``--seed`` with ``type=int``."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    packages = ("nasset_sdk", "bakers", "benchmarks", "converters", "reference_renderer", "mitsuba_plugin",
+                "mitsuba_renderer", "tools")
+    offenders = [str(f.relative_to(root)) for pkg in packages for f in (root / pkg).rglob("*.py")
+                 if '"--seed", type=int' in f.read_text()]
+    assert not offenders, offenders
