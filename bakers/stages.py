@@ -102,8 +102,13 @@ def finite(v):
     return v
 
 
+#: the largest value each count option takes: a training view of --res 4096 is 16 M pixels (its per-pixel arrays
+#: ~1 GiB); the others bound run time only, at values no bake needs
+MAX_COUNTS = {"res": 4096, "views": 65536, "spp": 1 << 20, "epochs": 100_000}
+
+
 def check_options(size: str, presets, output, **counts) -> Path:
-    """Argument checks every baker shares: a known preset, counts >= 1 where given, an asset file name.
+    """Argument checks every baker shares: a known preset, counts in 1 .. MAX_COUNTS where given, an asset file name.
 
     Returns ``output`` as a Path; raises UsageError."""
     if size not in presets:
@@ -111,6 +116,8 @@ def check_options(size: str, presets, output, **counts) -> Path:
     for name, val in counts.items():
         if val is not None and int(val) < 1:
             raise UsageError(f"--{name} must be >= 1, got {val}")
+        if val is not None and int(val) > MAX_COUNTS[name]:
+            raise UsageError(f"--{name} must be <= {MAX_COUNTS[name]}, got {val}")
     output = Path(output)
     if output.suffix not in (".usdc", ".usda", ".usd"):
         raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")

@@ -170,6 +170,11 @@ def test_usage_errors(tmp_path):
         bake(None, None, tmp_path / "o.png", size="tiny", example=True, quiet=True)
     with pytest.raises(UsageError):
         bake(None, None, tmp_path / "o.usdc", size="tiny", example=True, quiet=True, views=0)
+    # too large: --res 100000 used to end in a numpy MemoryError (74.5 GiB for one view's image)
+    for option, value in (("res", 100_000), ("views", 10**6), ("spp", 1 << 30), ("epochs", 10**9)):
+        with pytest.raises(UsageError, match=f"--{option} must be <="):
+            bake(None, None, tmp_path / "o.usdc", size="tiny", example=True, quiet=True, **{option: value})
+    assert not (tmp_path / "o.usdc.bake").exists()
 
 
 def test_cli_exit_codes(tmp_path, capsys):
