@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.cli import seed_arg
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
 
 #: samples per Mitsuba render call (bounds memory; the halves are means of such chunks)
@@ -561,12 +561,13 @@ def add_args(p) -> None:
     p.add_argument("--replace", action="append", required=True, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
                    help="the baked asset in place of these shapes (Mitsuba ids) or objects (Blender names); repeatable")
     p.add_argument("-o", "--output", default="bench_accuracy", help="output folder (images, JSON, markdown, converted scene)")
-    p.add_argument("--spp", type=int, default=None, help=f"Mitsuba reference spp, both halves together (default {DEFAULT['spp']}; "
-                   f"{QUICK['spp']} with --quick)")
-    p.add_argument("--nr-spp", type=int, default=None, help=f"reference-renderer spp (default {DEFAULT['nr_spp']}; {QUICK['nr_spp']} with --quick)")
-    p.add_argument("--res", type=int, default=None, help=f"image width (default {DEFAULT['res']}; {QUICK['res']} with --quick); "
-                   "height keeps the scene's aspect")
-    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1, "
+    p.add_argument("--spp", type=count_arg(2, MAX_SPP), default=None,
+                   help=f"Mitsuba reference spp, both halves together (default {DEFAULT['spp']}; {QUICK['spp']} with --quick)")
+    p.add_argument("--nr-spp", type=count_arg(1, MAX_SPP), default=None,
+                   help=f"reference-renderer spp (default {DEFAULT['nr_spp']}; {QUICK['nr_spp']} with --quick)")
+    p.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=None,
+                   help=f"image width (default {DEFAULT['res']}; {QUICK['res']} with --quick); height keeps the scene's aspect")
+    p.add_argument("--max-depth", type=count_arg(0, 1024), default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1, "
                    "1024 with Russian roulette when unbounded; Blender: the converted scene's nasset:maxDepth, Cycles' bounces + 1)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
     p.add_argument("--seed", type=seed_arg, default=0)

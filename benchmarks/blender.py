@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_converters.blender.cycles import render_cycles, setup_cycles
-from nasset_sdk.cli import seed_arg
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 1024, "cy_spp": "4,16,64", "nr_spp": "1,4,16", "size": "tiny"}
@@ -281,11 +281,11 @@ def add_args(p) -> None:
     """Options of ``nasset bench blender``."""
     p.add_argument("-o", "--output", default="bench_blender", help="output folder (JSON, plot PNG, images, assets)")
     p.add_argument("--size", default=None, choices=["tiny", "small", "hq"], help="bake preset (default small; tiny with --quick)")
-    p.add_argument("--res", type=int, default=None, help="image width = height (default 128; 64 with --quick)")
-    p.add_argument("--gt-spp", type=int, default=None, help="Cycles ground-truth spp (default 4096; 1024 with --quick)")
+    p.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=None, help="image width = height (default 128; 64 with --quick)")
+    p.add_argument("--gt-spp", type=count_arg(2, MAX_SPP), default=None, help="Cycles ground-truth spp (default 4096; 1024 with --quick)")
     p.add_argument("--cy-spp", default=None, help="Cycles spp list (default 4,16,64,256)")
     p.add_argument("--nr-spp", default=None, help="reference-renderer spp list (default 1,4,16,64)")
-    p.add_argument("--max-depth", type=int, default=8, help="reference renderer path depth (default 8)")
+    p.add_argument("--max-depth", type=count_arg(0, 1024), default=8, help="reference renderer path depth (default 8)")
     p.add_argument("--examples", default="blender-surface,blender-hair", help="comma-separated examples")
     p.add_argument("--no-ablation", action="store_true", help="skip the h ablation")
     p.add_argument("--quick", action="store_true", help="tiny bakes and small images (a few minutes)")

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk.cli import count_arg
+
 
 def _dataset_equal(a, b, views: int, val_views: int) -> bool:
     for split, n in (("train", views), ("val", val_views)):
@@ -139,11 +141,11 @@ def run_bench(*, size: str = "tiny", workers: int = 2, views: int | None = None,
 
 def add_args(p) -> None:
     p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset of the examples (default tiny)")
-    p.add_argument("--views", type=int, default=None, help="training views of the view stage (default: the preset's)")
-    p.add_argument("--tuples", type=int, default=None, help="tuples of the 8dna sampler fill (default: the preset's buffer)")
+    p.add_argument("--views", type=count_arg(1, 65536), default=None, help="training views of the view stage (default: the preset's)")
+    p.add_argument("--tuples", type=count_arg(1, 1 << 26), default=None, help="tuples of the 8dna sampler fill (default: the preset's buffer)")
     p.add_argument("--stage", action="append", choices=["views", "8dna"], default=None,
                    help="stage to time (repeat; default both)")
-    p.add_argument("--workers", type=int, default=2, help="workers of the last run (default 2)")
+    p.add_argument("--workers", type=count_arg(1, 4096), default=2, help="workers of the last run (default 2)")
     p.add_argument("--json", action="store_true")
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk.cli import MAX_SPP
 from nasset_sdk.errors import UsageError
 
 
@@ -25,13 +26,13 @@ def machine() -> dict:
 
 
 def ints(text: str, name: str) -> list[int]:
-    """Sorted distinct positive integers of a comma-separated option value (``--spp 1,4,16``)."""
+    """Sorted distinct integers in 1 .. MAX_SPP of a comma-separated option value (``--spp 1,4,16``)."""
     try:
         vals = sorted({int(v) for v in str(text).split(",") if v.strip()})
     except ValueError:
         raise UsageError(f"--{name} must be a comma-separated list of integers, got {text!r}") from None
-    if not vals or vals[0] < 1:
-        raise UsageError(f"--{name} needs positive integers, got {text!r}")
+    if not vals or vals[0] < 1 or vals[-1] > MAX_SPP:
+        raise UsageError(f"--{name} needs integers in 1 .. {MAX_SPP}, got {text!r}")
     return vals
 
 

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_benchmarks.common import machine
-from nasset_sdk.cli import seed_arg
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
@@ -595,12 +595,12 @@ def add_args(p) -> None:
     p.add_argument("--asset", default=None, help="baked 8D asset of the example (default: bake one)")
     p.add_argument("--farfield", default=None, help="baked 6D far-field baseline of the example (default: bake one)")
     p.add_argument("--size", default=None, choices=["tiny", "small", "hq"], help="preset when baking (default small; tiny with --quick)")
-    p.add_argument("--res", type=int, default=None, help="image width = height (default 64; 32 with --quick)")
-    p.add_argument("--spp", type=int, default=None, help="samples per pixel of the compared renders (default 128; 32 with --quick)")
-    p.add_argument("--gt-spp", type=int, default=None, help="reference spp (default 4096; 512 with --quick)")
-    p.add_argument("--reference-renderer-spp", type=int, default=0,
+    p.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=None, help="image width = height (default 64; 32 with --quick)")
+    p.add_argument("--spp", type=count_arg(1, MAX_SPP), default=None, help="samples per pixel of the compared renders (default 128; 32 with --quick)")
+    p.add_argument("--gt-spp", type=count_arg(2, MAX_SPP), default=None, help="reference spp (default 4096; 512 with --quick)")
+    p.add_argument("--reference-renderer-spp", type=count_arg(0, MAX_SPP), default=0,
                    help="also render the 8D asset through reference_renderer at this spp (0: skip)")
-    p.add_argument("--converged-spp", type=int, default=None,
+    p.add_argument("--converged-spp", type=count_arg(1, MAX_SPP), default=None,
                    help="also render both neural assets at this spp for their model error (default 512; 0 with --quick)")
     p.add_argument("--reference-npz", default=None, help="reuse the reference image of an earlier run (its bench_8dna_images.npz)")
     p.add_argument("--quick", action="store_true",

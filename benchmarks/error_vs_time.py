@@ -38,7 +38,7 @@ import numpy as np
 
 from nasset_benchmarks.accuracy import estimate_depth
 from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
-from nasset_sdk.cli import seed_arg
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 1024, "mi_spp": "1,4,16,64", "nr_spp": "1,4,16"}
@@ -229,15 +229,15 @@ def add_args(p) -> None:
     p.add_argument("--replace", action="append", default=None, metavar="SHAPE_ID[,SHAPE_ID]=ASSET",
                    help="with SCENE: the baked asset in place of these shapes (repeatable)")
     p.add_argument("--variant", default=None, help="with SCENE: llvm_ad_rgb (default) or cuda_ad_rgb")
-    p.add_argument("--repeats", type=int, default=3, help="with SCENE: timed renders per point, the least counts (default 3)")
+    p.add_argument("--repeats", type=count_arg(1, 1000), default=3, help="with SCENE: timed renders per point, the least counts (default 3)")
     p.add_argument("-o", "--output", default="bench_error_vs_time", help="output folder (table JSON, plot PNG, scene)")
     p.add_argument("--asset", default=None, help="baked asset of the example scene's shell+jelly (default: bake one)")
     p.add_argument("--size", default="tiny", choices=["tiny", "small", "hq"], help="preset when baking (default tiny)")
-    p.add_argument("--res", type=int, default=None, help="image width = height (default 128; 64 with --quick)")
-    p.add_argument("--gt-spp", type=int, default=None, help="ground-truth spp (default 4096; 1024 with --quick)")
+    p.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=None, help="image width = height (default 128; 64 with --quick)")
+    p.add_argument("--gt-spp", type=count_arg(2, MAX_SPP), default=None, help="ground-truth spp (default 4096; 1024 with --quick)")
     p.add_argument("--mi-spp", default=None, help="Mitsuba spp list, e.g. 1,2,4,8,16,32,64,128")
     p.add_argument("--nr-spp", default=None, help="reference-renderer spp list, e.g. 1,2,4,8,16,32")
-    p.add_argument("--max-depth", type=int, default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
+    p.add_argument("--max-depth", type=count_arg(0, 1024), default=None, help="reference renderer depth (default: Mitsuba's max_depth - 1)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
     p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")

@@ -19,6 +19,7 @@ import numpy as np
 from nasset_converters.mitsuba import load_mitsuba
 from nasset_converters.mitsuba.dataset import DataSettings, Renderer, camera_rays
 from nasset_converters.mitsuba.scene import IsolatedAsset
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg
 
 
 def _sphere_shape(mi, bsdf: dict):
@@ -71,8 +72,8 @@ def study(spp: int = 256, res: int = 16, angles=(0.0, 1.0, 2.0, 5.0, 10.0)) -> l
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--spp", type=int, default=256)
-    ap.add_argument("--res", type=int, default=16)
+    ap.add_argument("--spp", type=count_arg(1, MAX_SPP), default=256)
+    ap.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=16)
     args = ap.parse_args()
     rows = study(args.spp, args.res)
     for r in rows:

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.cli import seed_arg
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import NassetError, UsageError, error
 
 #: a black diffuse BSDF for the shapes that are not replaced, in "direct" variants
@@ -177,9 +177,9 @@ def main(argv=None) -> int:
     p.add_argument("scene")
     p.add_argument("--replace", action="append", required=True, metavar="SHAPE_ID[,SHAPE_ID]=ASSET")
     p.add_argument("-o", "--output", default="light_terms")
-    p.add_argument("--res", type=int, default=64)
-    p.add_argument("--spp", type=int, default=1024, help="Mitsuba reference spp per variant, both halves")
-    p.add_argument("--nr-spp", type=int, default=256, help="reference-renderer spp per variant")
+    p.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=64)
+    p.add_argument("--spp", type=count_arg(1, MAX_SPP), default=1024, help="Mitsuba reference spp per variant, both halves")
+    p.add_argument("--nr-spp", type=count_arg(1, MAX_SPP), default=256, help="reference-renderer spp per variant")
     p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true")
     a = p.parse_args(argv)

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_benchmarks.common import ints
-from nasset_sdk.cli import seed_arg
+from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
 
 QUICK = {"res": 64, "gt_spp": 256, "spp": "1,4,16", "equal_spp": 4}
@@ -377,12 +377,12 @@ def add_args(p) -> None:
     p.add_argument("-o", "--output", default="bench_neupress", help="output folder (table JSON/markdown, plots, scene)")
     p.add_argument("--asset", default=None, help="a neupress asset baked from the example (default: bake one)")
     p.add_argument("--size", default="small", choices=["tiny", "small"], help="preset when baking (default small)")
-    p.add_argument("--res", type=int, default=None, help="image width = height (default 128; 64 with --quick)")
-    p.add_argument("--gt-spp", type=int, default=None, help="ground-truth spp (default 2048; 256 with --quick)")
+    p.add_argument("--res", type=count_arg(8, MAX_IMAGE_SIDE), default=None, help="image width = height (default 128; 64 with --quick)")
+    p.add_argument("--gt-spp", type=count_arg(2, MAX_SPP), default=None, help="ground-truth spp (default 2048; 256 with --quick)")
     p.add_argument("--spp", default=None, help="spp sweep for every method (default 1,2,4,8,16,32; 1,4,16 with --quick)")
-    p.add_argument("--equal-spp", type=int, default=None, help="spp of the equal-spp table (default 16; 4 with --quick)")
-    p.add_argument("--max-depth", type=int, default=16, help="reference renderer path depth (default 16)")
-    p.add_argument("--repeat", type=int, default=2, help="time each render as the best of N identical renders (default 2)")
+    p.add_argument("--equal-spp", type=count_arg(1, MAX_SPP), default=None, help="spp of the equal-spp table (default 16; 4 with --quick)")
+    p.add_argument("--max-depth", type=count_arg(0, 1024), default=16, help="reference renderer path depth (default 16)")
+    p.add_argument("--repeat", type=count_arg(1, 1000), default=2, help="time each render as the best of N identical renders (default 2)")
     p.add_argument("--quick", action="store_true", help="small defaults that finish in a few minutes")
     p.add_argument("--seed", type=seed_arg, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON (progress is silenced)")

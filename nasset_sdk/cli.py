@@ -28,19 +28,31 @@ class Verb(NamedTuple):
     target: str
 
 
+def count_arg(lo: int, hi: int):
+    """argparse type of an integer option in ``lo .. hi``: anything else is a usage error (exit code 2) before the
+    command runs, instead of a default silently taken for 0 or a traceback (or a huge allocation) far into it."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be in {lo} .. {hi}, got {value}")
+        return value
+
+    parse.__name__ = f"integer in {lo} .. {hi}"
+    return parse
+
+
 #: largest --seed: seeds reach Mitsuba's samplers as unsigned 32-bit integers
 MAX_SEED = 2**32 - 1
-
-
-def seed_arg(text: str) -> int:
-    """argparse type of every ``--seed``: an integer in 0 .. MAX_SEED (a usage error otherwise, exit code 2)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be an integer, got {text!r}") from None
-    if not 0 <= value <= MAX_SEED:
-        raise argparse.ArgumentTypeError(f"seed must be in 0 .. {MAX_SEED}, got {value}")
-    return value
+#: the type of every ``--seed``
+seed_arg = count_arg(0, MAX_SEED)
+#: bounds of the benchmarks' image side and sample counts (an image of 4096^2 pixels is ~200 MB per float32 RGB
+#: buffer; 2^24 samples per pixel is ~10^5 times any reference the benches use)
+MAX_IMAGE_SIDE = 4096
+MAX_SPP = 1 << 24
 
 
 #: the SDK's own verbs; :func:`all_verbs` adds the installed packages' ones

@@ -35,6 +35,7 @@ imported lazily. Without a display (no ``DISPLAY``) the picture goes to a PNG fi
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -70,7 +71,10 @@ def _unit(v) -> np.ndarray:
 
 
 def tonemap(rgb, exposure: float = 0.0) -> np.ndarray:
-    """Linear RGB -> uint8 sRGB: clamp(x 2^exposure, 0, 1), then the sRGB transfer curve."""
+    """Linear RGB -> uint8 sRGB: clamp(x 2^exposure, 0, 1), then the sRGB transfer curve. ``exposure`` in stops,
+    finite and within +-64 (UsageError otherwise: NaN would turn every pixel into an undefined byte)."""
+    if not (math.isfinite(float(exposure)) and abs(float(exposure)) <= 64.0):
+        raise UsageError(f"exposure must be a finite number of stops within +-64, got {exposure}")
     x = np.clip(np.nan_to_num(np.asarray(rgb, np.float64), nan=0.0, posinf=1.0, neginf=0.0) * 2.0 ** float(exposure), 0.0, 1.0)
     s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
     return np.clip(np.round(s * 255.0), 0, 255).astype(np.uint8)

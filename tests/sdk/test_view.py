@@ -131,6 +131,9 @@ def test_tonemap():
     y = view.tonemap(x)
     assert y.tolist() == [0, 10, 188, 255, 255, 0]
     assert view.tonemap(0.25, exposure=1.0) == view.tonemap(0.5)
+    for bad in (float("nan"), float("inf"), 65.0):  # NaN made every byte undefined; refused before any pixel
+        with pytest.raises(UsageError, match="exposure"):
+            view.tonemap(x, exposure=bad)
 
 
 def test_per_pixel_png_without_pyvista(assets, tmp_path):
