@@ -163,3 +163,28 @@ def test_no_command_line_parses_a_seed_as_a_bare_int():
     offenders = [str(f.relative_to(root)) for pkg in packages for f in (root / pkg).rglob("*.py")
                  if '"--seed", type=int' in f.read_text()]
     assert not offenders, offenders
+
+
+def test_bounded_integer_options_refuse_values_outside_their_range():
+    """Every integer option declared with ``count_arg`` (the benchmarks' image sizes, sample counts, depths) refuses
+    one below and one above its range with exit code 2: ``bench accuracy --res 100000`` used to end in a Mitsuba
+    error minutes in, and ``--res 0`` silently meant the default."""
+    import argparse
+    import re
+
+    def walk(parser, path=()):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    yield from walk(sub, (*path, name))
+            elif action.option_strings and getattr(action.type, "__name__", "").startswith("integer in "):
+                yield path, action
+
+    found = list(walk(build_parser()))
+    assert len(found) >= 15, [(p, a.option_strings) for p, a in found]
+    required = {("bench", "accuracy"): ["x.xml", "--replace", "a=b.usdc"]}
+    for path, action in found:
+        lo, hi = map(int, re.findall(r"-?\d+", action.type.__name__))
+        for bad in (lo - 1, hi + 1):
+            _, code, text = _parse([*path, *required.get(path, []), action.option_strings[-1], str(bad)])
+            assert code == 2 and f"must be in {lo} .. {hi}" in text, (path, action.option_strings, bad, text)
