@@ -131,10 +131,15 @@ def dataset_line(s: dict) -> str:
             f"{s['val_res']}^2, {s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples")
 
 
+def _db(value) -> str:
+    """``12.34 dB``, or ``n/a`` where a PSNR is undefined (None or not finite: a black held-out reference)."""
+    return f"{value:.2f} dB" if value is not None and math.isfinite(value) else "n/a"
+
+
 def psnr_line(s: dict, label: str = "held-out PSNR") -> str:
     """The held-out PSNR of the trained model (torch) and of the written asset (SDK evaluator), and which
     epoch's state the asset keeps."""
-    line = f"  {label}: {s['val_psnr_db']:.2f} dB (torch), {s['sdk_val_psnr_db']:.2f} dB (SDK evaluator)"
+    line = f"  {label}: {_db(s['val_psnr_db'])} (torch), {_db(s['sdk_val_psnr_db'])} (SDK evaluator)"
     if s.get("kept_epoch"):
         line += f"; kept epoch {s['kept_epoch']} of {s['epochs']} ({s['keep']}: highest held-out display PSNR)" \
             if s.get("keep") == "best" else f"; kept the last of {s['epochs']} epochs"
@@ -169,7 +174,7 @@ def accuracy_lines(acc: dict | None, label: str = "held-out (unclamped reference
         units = (f"; {g['count']} views as units, per view {pct(g['ratio_min'])} to {pct(g['ratio_max'])} %, "
                  f"sd {pct(g['ratio_sd'])} %")
     return [f"  {label}: energy {pct(acc['energy_ratio'])} % (RGB, +-{pct(acc['energy_se'])}{units}), "
-            f"PSNR {acc['psnr_db']:.2f} dB, ceiling {acc['ceiling_db']:.2f} dB -> claimed {acc['claimed_psnr']}"]
+            f"PSNR {_db(acc['psnr_db'])}, ceiling {_db(acc['ceiling_db'])} -> claimed {acc['claimed_psnr']}"]
 
 
 def clamp_lines(s: dict) -> list[str]:

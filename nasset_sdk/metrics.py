@@ -73,7 +73,10 @@ class Accuracy:
     groups: dict | None = None  # with groups: {count, ratio_sd, ratio_min, ratio_max} per channel, see group_figures
 
     def claimed_psnr(self) -> str:
-        """The PSNR one may state: a number, ">= bound" when the error is not resolved, or "at the ceiling (C dB)"."""
+        """The PSNR one may state: a number, ">= bound" when the error is not resolved, "at the ceiling (C dB)", or
+        "undefined" when the reference has no peak (black over the mask: nothing to compare)."""
+        if not (math.isfinite(self.psnr_db) and math.isfinite(self.ceiling_db)):
+            return "undefined (black reference)"
         if self.at_ceiling:
             return f"at the ceiling ({self.ceiling_db:.1f} dB)"
         if self.psnr_corrected_db is None:
@@ -88,11 +91,14 @@ class Accuracy:
 
     def line(self) -> str:
         """One human-readable line: energy per channel, PSNR with the ceiling, FLIP."""
-        e = "/".join(f"{100 * r:.1f}" for r in self.energy_ratio)
-        se = "/".join(f"{100 * s:.1f}" for s in self.energy_se)
-        f = "" if self.flip is None else f", FLIP {self.flip:.3f}"
-        return (f"energy {e} % of the reference (RGB, +-{se}), PSNR {self.psnr_db:.1f} dB "
-                f"(ceiling {self.ceiling_db:.1f} dB; claimed {self.claimed_psnr()}){f}")
+        def num(x, scale=1.0, digits=1) -> str:
+            return f"{scale * x:.{digits}f}" if x is not None and math.isfinite(x) else "n/a"
+
+        e = "/".join(num(r, 100) for r in self.energy_ratio)
+        se = "/".join(num(s, 100) for s in self.energy_se)
+        f = "" if self.flip is None else f", FLIP {num(self.flip, digits=3)}"
+        return (f"energy {e} % of the reference (RGB, +-{se}), PSNR {num(self.psnr_db)} dB "
+                f"(ceiling {num(self.ceiling_db)} dB; claimed {self.claimed_psnr()}){f}")
 
 
 def _finite(v):

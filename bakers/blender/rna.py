@@ -89,6 +89,11 @@ def bake(
     variant, geo, notes = bsc.asset_geometry(objs, file=scene_label)
     for n in notes:
         say(f"warning: {n}")
+    clear = bsc.see_through(objs) if variant == "surface" else []
+    if clear:
+        say(f"warning: object(s) {clear} let light through unscattered (a sharp or transparent surface over at most a "
+            "thin volume: over 1% of it crosses): rna stores smooth transport, so what they show of the scene behind "
+            "them will be missing or blurred in every render of the asset (spec/bake.md#see-through)")
     if variant != "fiber" and not h_input:
         raise UsageError("h_input=False applies to fiber assets only")
     center, radius = bsc.bounding_sphere(geo)

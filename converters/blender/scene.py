@@ -18,6 +18,7 @@ CONVERT_SHAPE_UNSUPPORTED.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -108,6 +109,69 @@ def refuse_emitter(ob, *, file: str | None = None) -> None:
                 raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} emits light (material {mat.name!r}, node "
                             f"{node.name!r}): a neural asset carries light transport, not emission; keep the emitter in "
                             "the scene and bake the objects around it", file=file)
+
+
+#: roughness below which Cycles' glass, refraction or Principled transmission passes light along (near) one direction
+SHARP_ROUGHNESS = 0.01
+_VOLUME_NODES = ("ShaderNodeVolumeScatter", "ShaderNodeVolumeAbsorption", "ShaderNodeVolumePrincipled")
+
+
+def _clear_lobe(node) -> str | None:
+    """What in a shader node used in a material lets light through unscattered (a Transparent BSDF, a Principled
+    alpha below 1, a sharp glass, refraction or Principled transmission), or None. Linked inputs count as not clear."""
+    if not any(out.is_linked for out in node.outputs):
+        return None
+
+    def value(name, default):
+        sock = node.inputs.get(name)
+        if sock is None:
+            return default
+        return None if sock.is_linked else float(sock.default_value)
+
+    rough = value("Roughness", 0.0)
+    sharp = rough is not None and rough < SHARP_ROUGHNESS
+    if node.bl_idname == "ShaderNodeBsdfTransparent":
+        return "Transparent BSDF"
+    if node.bl_idname in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction") and sharp:
+        return f"{node.bl_label} of roughness {rough:g}"
+    if node.bl_idname == "ShaderNodeBsdfPrincipled":
+        alpha, transmission = value("Alpha", 1.0), value("Transmission Weight", 0.0)
+        if alpha is not None and alpha < 1.0:
+            return f"Principled alpha {alpha:g}"
+        if transmission is not None and transmission > 0.0 and sharp:
+            return f"Principled transmission {transmission:g} of roughness {rough:g}"
+    return None
+
+
+def see_through(objects, share: float = 0.01) -> list[str]:
+    """Names of mesh ``objects`` light crosses without scattering (the Mitsuba side: ``scene.see_through``): a
+    material with a clear lobe (:func:`_clear_lobe`) and no volume, or volume nodes whose summed Density (1/m)
+    lets more than ``share`` through along the object's mean chord 4 V / S (Cauchy's formula for a convex body;
+    a linked density counts as opaque)."""
+    found = []
+    for ob in objects:
+        for slot in getattr(ob, "material_slots", ()):
+            mat = slot.material
+            if mat is None or mat.node_tree is None:
+                continue
+            clear = next((c for c in map(_clear_lobe, mat.node_tree.nodes) if c), None)
+            if clear is None:
+                continue
+            density = 0.0
+            for node in mat.node_tree.nodes:
+                if node.bl_idname in _VOLUME_NODES and any(out.is_linked for out in node.outputs):
+                    sock = node.inputs.get("Density")
+                    density += math.inf if sock is None or sock.is_linked else float(sock.default_value)
+            if density > 0.0:
+                geo = mesh_geometry([ob])
+                tri = geo.points[geo.faces].astype(np.float64)
+                area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+                volume = abs(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum()) / 6.0
+                if math.exp(-density * 4.0 * volume / max(area, 1e-30)) <= share:
+                    continue
+            found.append(f"{ob.name} ({clear})")
+            break
+    return found
 
 
 def has_particle_hair(ob) -> bool:

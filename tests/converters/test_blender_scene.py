@@ -215,3 +215,65 @@ def test_a_smooth_mesh_keeps_one_vertex_per_blender_vertex():
     geo = bsc.mesh_geometry([ob], local=True)
     assert len(geo.points) == len(ob.data.vertices)
     np.testing.assert_allclose(np.sum(geo.normals * geo.points, axis=1), 1.0, atol=1e-4)  # radial normals
+
+
+def _ball_with(name, build):
+    """A sphere of radius 0.5 m whose node material ``build(node_tree, output, principled)`` sets up."""
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5)
+    ob = bpy.context.active_object
+    ob.name = name
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    build(nt, nt.nodes.get("Material Output"), nt.nodes.get("Principled BSDF"))
+    ob.data.materials.append(mat)
+    return ob
+
+
+def _glass(roughness, density=None):
+    def build(nt, out, principled):
+        glass = nt.nodes.new("ShaderNodeBsdfGlass")
+        glass.inputs["Roughness"].default_value = roughness
+        nt.links.new(glass.outputs[0], out.inputs["Surface"])
+        if density is not None:
+            volume = nt.nodes.new("ShaderNodeVolumeScatter")
+            volume.inputs["Density"].default_value = density
+            nt.links.new(volume.outputs[0], out.inputs["Volume"])
+    return build
+
+
+def _principled(**inputs):
+    def build(nt, out, principled):
+        for key, value in inputs.items():
+            principled.inputs[key].default_value = value
+    return build
+
+
+def test_see_through_materials():
+    """Blender's side of spec/bake.md#see-through: sharp glass, Principled transmission or alpha over at most a thin
+    volume lets light through unscattered, which rna cannot store. A 0.5 m ball has mean chord 2/3 m: density 1 / m
+    lets ~51 % through, 50 / m ~3e-15."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    cases = {  # name: (material, flagged)
+        "clear": (_glass(0.0), True), "frosted": (_glass(0.3), False), "milky": (_glass(0.0, 1.0), True),
+        "dense": (_glass(0.0, 50.0), False), "cutout": (_principled(Alpha=0.0), True),
+        "half": (_principled(Alpha=0.5), True), "plain": (_principled(), False),
+        "pglass": (_principled(**{"Transmission Weight": 1.0, "Roughness": 0.0}), True),
+        "pfrosted": (_principled(**{"Transmission Weight": 1.0, "Roughness": 0.2}), False),
+    }
+    objects = [_ball_with(name, build) for name, (build, _) in cases.items()]
+    bpy.context.view_layer.update()
+    found = [s.split(" (")[0] for s in bsc.see_through(objects)]
+    assert found == [name for name, (_, flagged) in cases.items() if flagged], found
+
+
+def test_rna_bake_warns_about_a_see_through_object(tmp_path, capsys):
+    pytest.importorskip("torch", reason="bakes need torch")
+    from nasset_bakers.blender.rna import bake
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    _ball_with("Lens", _glass(0.0))
+    blend = tmp_path / "lens.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bake(blend, ["Lens"], tmp_path / "lens.usdc", size="tiny", views=2, epochs=1, res=16)
+    assert "warning: object(s) ['Lens (Glass BSDF of roughness 0)'] let light through" in capsys.readouterr().err

@@ -206,3 +206,18 @@ def test_group_spread_and_report():
     with pytest.raises(UsageError):
         accuracy(est, a, b, flip=False, groups=labels[:-1])
 
+
+
+def test_a_black_reference_claims_nothing_and_prints_no_nan():
+    """A held-out reference with no energy over the mask (a clear glass ball under a sun: the refracted sun misses
+    every held-out view) has no PSNR peak: the claim says so, and no 'nan' reaches the lines people read. The bake
+    summary used to stop with a TypeError formatting None after the whole training."""
+    from nasset_bakers.stages import accuracy_lines
+
+    rng = np.random.default_rng(0)
+    est = rng.random((64, 3))
+    acc = accuracy(est, np.zeros((64, 3)), np.zeros((64, 3)), flip=False)
+    assert acc.claimed_psnr() == "undefined (black reference)"
+    assert "nan" not in acc.line().lower()
+    [line] = accuracy_lines(acc.to_dict())
+    assert "nan" not in line.lower() and "undefined (black reference)" in line
