@@ -388,6 +388,18 @@ def chromatic_volpath(mi, scene, ids) -> str | None:
             "image with far less noise")
 
 
+def camera_medium(scene) -> str | None:
+    """A warning when the scene's first sensor sits in a participating medium (fog around the camera): USD has no
+    participating media and the in-scene benches render both sides from a sensor of their own, so neither image holds
+    it. None otherwise."""
+    sensors = scene.sensors()
+    medium = sensors[0].get_medium() if sensors else None
+    if medium is None:
+        return None
+    return (f"the scene's camera sits in a medium ({str(medium).split('[')[0].strip()}): the converted scene and the "
+            "benches' images leave it out (USD has no participating media), so they show the scene without that fog")
+
+
 def baked_depth(provenance: dict) -> int | None:
     """The depth an asset's training paths were traced to, from its bake provenance (rna and neupress ``data``,
     8dna ``sampler``); None when the provenance does not say (another baker, a hand-made asset)."""
@@ -408,7 +420,7 @@ def bake_media_warnings(scene, ids, baked_depth: int) -> list[str]:
 def media_caveats(mi, scene, replace: dict) -> list[str]:
     """The warnings of :func:`ignored_media`, :func:`truncated_media` and :func:`chromatic_volpath` that apply to
     ``replace`` (shape id -> asset file): where the scene's own image of the replaced shapes lacks light their asset
-    holds, or is needlessly noisy (the in-scene benches' ``reference.warnings``). The depth warning is per asset,
+    holds, or is needlessly noisy; and :func:`camera_medium` (the in-scene benches' ``reference.warnings``). The depth warning is per asset,
     from the depth its provenance says it was baked at."""
     from nasset_sdk.asset import Asset
 
@@ -424,6 +436,7 @@ def media_caveats(mi, scene, replace: dict) -> list[str]:
             depth = None
         out.append(truncated_media(scene, group, baked_depth=depth))
     out.append(chromatic_volpath(mi, scene, ids))
+    out.append(camera_medium(scene))
     return [c for c in out if c]
 
 

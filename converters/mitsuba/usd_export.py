@@ -44,7 +44,7 @@ import numpy as np
 from nasset_sdk.errors import UsageError, error
 
 from . import analytic
-from .scene import image_integrator, integrator_depths, refuse_emitter
+from .scene import camera_medium, image_integrator, integrator_depths, refuse_emitter
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
@@ -312,6 +312,8 @@ class StageConverter:
         p = self.mi.traverse(sensor)
         if cls == "ThinLensCamera":
             self.warn("thinlens sensor: converted as a pinhole camera (no depth of field)")
+        if fog := camera_medium(self.scene):
+            self.warn(fog)
         film = sensor.film()
         size = tuple(int(v) for v in film.size())
         crop, off = tuple(int(v) for v in film.crop_size()), tuple(int(v) for v in film.crop_offset())

@@ -143,3 +143,25 @@ def test_baked_depth_reads_untrusted_provenance(provenance, depth):
     from nasset_converters.mitsuba.scene import baked_depth
 
     assert baked_depth(provenance) == depth
+
+
+def test_fog_around_the_camera_is_named(mi, tmp_path):
+    """A medium on the sensor (fog the camera sits in): USD has no participating media and the benches render from a
+    sensor of their own, so neither side shows it. Found on an unseen scene: the bench's figures were those of the
+    scene without its fog, without a word."""
+    from nasset_converters.mitsuba.scene import camera_medium, media_caveats
+    from nasset_converters.mitsuba.usd_export import convert_scene
+
+    camera = ('<sensor type="perspective">{}<transform name="to_world"><lookat origin="0,0,5" target="0,0,0" up="0,1,0"/>'
+              '</transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>'
+              '</sensor>')
+    fog = '<medium type="homogeneous" name="medium"><float name="sigma_t" value="0.05"/></medium>'
+    foggy = _scene(mi, '<integrator type="volpath"/>', BLOB + camera.format(fog))
+    clear = _scene(mi, '<integrator type="volpath"/>', BLOB + camera.format(""))
+    assert "camera sits in a medium (HomogeneousMedium)" in camera_medium(foggy)
+    assert camera_medium(clear) is None
+    assert any("camera sits in a medium" in c for c in media_caveats(mi, foggy, {"blob": "missing.usdc"}))
+    assert not any("camera sits" in c for c in media_caveats(mi, clear, {"blob": "missing.usdc"}))
+    (tmp_path / "fog.xml").write_text(f'<scene version="3.0.0">{BLOB}{camera.format(fog)}</scene>')
+    res = convert_scene(tmp_path / "fog.xml", tmp_path / "fog.usda", check_usd=False)
+    assert any("camera sits in a medium" in w for w in res.warnings), res.warnings
