@@ -66,7 +66,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     for caveat in caveats:
         say(f"warning: {caveat}")
     settings = {"max_depth": -1, "rr_depth": 5} | integrator_depths(original.integrator())  # Mitsuba's defaults
-    with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()})
+    with_asset = load_file(scene_file, mi=mi, replace={k: str(v) for k, v in replace.items()}, own_integrator=True)
     nasset = mi.load_dict({"type": INTEGRATOR, "max_depth": settings["max_depth"] if settings["max_depth"] > 0 else 1024,
                            "rr_depth": settings["rr_depth"]})
     sensor, hw = sensor_for(mi, original, res, file=str(scene_file))

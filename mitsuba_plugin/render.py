@@ -42,7 +42,7 @@ def load_scene(path: str, width: int | None = None, height: int | None = None, *
             raise
         except Exception as exc:  # Mitsuba reports plugin errors as RuntimeError
             raise mitsuba_failure(exc, "Mitsuba could not build the scene", str(path)) from None
-    return load_file(path, mi=mi)
+    return load_file(path, mi=mi, own_integrator=True)  # rendered with nasset_path below
 
 
 def render(path: str, spp: int, *, width: int | None = None, height: int | None = None, seed: int = 0, max_depth: int = 5,

@@ -25,7 +25,7 @@ from nasset_sdk.errors import error
 
 from . import lights as lights_jit
 from . import preview
-from .plugins import BSDF, asset_for, register
+from .plugins import BSDF, INTEGRATOR, asset_for, register
 from .variant import jit_mitsuba
 
 _PLY_DIR: list[str] = []
@@ -72,12 +72,34 @@ def asset_shape(filename: str, to_world=None, *, mi=None) -> dict:
             "bsdf": {"type": BSDF, "filename": filename, "to_world": t}}
 
 
-def load_file(path: str, *, mi=None, replace: dict | None = None, **params):
+#: integrators that only wrap the one that makes the image
+_WRAPPERS = ("aov", "stokes", "moment")
+
+
+def _warn_unless_nasset_path(root, file: str) -> None:
+    """A RuntimeWarning when the scene's integrator (the one a wrapper nests) is not ``nasset_path``: any other shades
+    an asset instance's ``nasset`` BSDF as black (it reflects nothing by itself; found on a user scene with
+    ``<integrator type="path">``: the assets rendered black without a word). Silent without an integrator (Mitsuba
+    asks for one when rendering)."""
+    import warnings
+
+    node = root.find("integrator")
+    while node is not None and node.get("type") in _WRAPPERS:
+        node = node.find("integrator")
+    if node is not None and node.get("type") != INTEGRATOR:
+        warnings.warn(f"{file}: the scene's integrator {node.get('type')!r} does not shade neural assets: rendered with "
+                      f'it they are black. Use <integrator type="{INTEGRATOR}"> in the scene, or pass a {INTEGRATOR} '
+                      "integrator to mi.render and load with own_integrator=True", RuntimeWarning, stacklevel=3)
+
+
+def load_file(path: str, *, mi=None, replace: dict | None = None, own_integrator: bool = False, **params):
     """Load a Mitsuba XML scene whose ``<shape type="nasset">`` elements are asset instances (see module doc).
 
     ``replace``: {shape id: asset file}: those shapes are left out and each asset file is added once as an
     instance with the identity transform (an asset baked from a scene's shapes has their world space as
-    its object space, spec/bake.md#stages). ``params``: XML ``$name`` parameters."""
+    its object space, spec/bake.md#stages). ``own_integrator``: the caller renders with a ``nasset_path`` of its
+    own, so the scene's integrator is not checked (otherwise one that is not ``nasset_path`` is warned about: it
+    renders the assets black). ``params``: XML ``$name`` parameters."""
     mi = mi or jit_mitsuba()
     register(mi)
     preview.register(mi)
@@ -91,9 +113,11 @@ def load_file(path: str, *, mi=None, replace: dict | None = None, **params):
         raise error("SCENE_INVALID", f"not XML: {exc}", file=str(path)) from None
     if replace:
         _replace_shapes(root, replace, str(path))
-    for shape in root.iter("shape"):
-        if shape.get("type") == "nasset":
-            _expand_asset(mi, shape, path)
+    assets = [shape for shape in root.iter("shape") if shape.get("type") == "nasset"]
+    for shape in assets:
+        _expand_asset(mi, shape, path)
+    if (assets or replace) and not own_integrator:
+        _warn_unless_nasset_path(root, str(path))
     resolver = mi.file_resolver()  # the scene's relative paths (meshes, textures) resolve next to it
     if str(path.parent.resolve()) not in [str(p) for p in resolver]:
         resolver.prepend(str(path.parent.resolve()))
