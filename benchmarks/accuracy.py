@@ -404,6 +404,11 @@ def blender_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     bpy = load_bpy()  # CONVERT_BACKEND when bpy is missing
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
     bsc.open_blend(scene_file)
+    camera = bpy.context.scene.camera
+    if camera is None or camera.data.type != "PERSP":  # as sensor_for on the Mitsuba side
+        raise error("CONVERT_SCENE_LOAD", f"the scene's camera ({'none' if camera is None else camera.data.type}) is "
+                    "not a perspective one: the benches compare images from the scene's own perspective camera; add "
+                    "one and make it the scene's active camera", file=str(scene_file))
     fits = blender_asset_fits(rep, scene_file=str(scene_file))
     w, h = converted.resolution
     height = max(1, int(round(res * h / max(w, 1))))

@@ -58,6 +58,27 @@ def test_unknown_object_and_wrong_variant_and_mismatch(blend, tmp_path):
     assert e.value.code == "BENCH_ASSET_MISMATCH"
 
 
+@pytest.mark.parametrize("camera", ["none", "ORTHO"])
+def test_a_scene_without_a_perspective_camera(blend, tmp_path, camera):
+    """The Mitsuba side's rule (test_accuracy_bench.py): the Blender scene's active camera must be a perspective one.
+    Without one Cycles stopped the bench with a RuntimeError traceback ("Cannot render, no camera")."""
+    import bpy
+
+    from nasset_converters.blender import scene as bsc
+
+    a = _asset(tmp_path, blend, ["Monkey"])
+    bsc.open_blend(blend)
+    if camera == "none":
+        bpy.context.scene.camera = None
+    else:
+        bpy.context.scene.camera.data.type = camera
+    bad = tmp_path / "bad.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(bad), copy=True)
+    with pytest.raises(NassetError) as e:
+        _run(bad, [f"Monkey={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_SCENE_LOAD" and "perspective" in str(e.value) and "bad.blend" in str(e.value)
+
+
 def test_unknown_scene_type_and_missing_file(tmp_path):
     with pytest.raises(NassetError) as e:
         _run(tmp_path / "scene.obj", ["a=b.usdc"], tmp_path / "o")
