@@ -222,11 +222,15 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
     key = np.concatenate([tri[:, None].astype(np.float64), corner_n], axis=1)
     _, first, corner_vertex = np.unique(key, axis=0, return_index=True, return_inverse=True)
     M = np.eye(4) if local else np.array(ob.matrix_world, np.float64)
-    p = co.reshape(-1, 3).astype(np.float64)[tri[first]] @ M[:3, :3].T + M[:3, 3]
-    n = corner_n[first] @ np.linalg.inv(M[:3, :3])
+    lin = M[:3, :3]
+    if not np.isfinite(M).all() or abs(np.linalg.det(lin)) <= 1e-12 * max(np.abs(lin).max(), 1e-30) ** 3:
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} has a degenerate transform (a scale of 0 along "
+                    "some axis, or non-finite): its surface has no area or no normals")
+    p = co.reshape(-1, 3).astype(np.float64)[tri[first]] @ lin.T + M[:3, 3]
+    n = corner_n[first] @ np.linalg.inv(lin)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
     tri = corner_vertex.reshape(-1, 3).astype(np.int32)
-    if np.linalg.det(M[:3, :3]) < 0:  # a mirrored object: keep the winding counter-clockwise about the normals
+    if np.linalg.det(lin) < 0:  # a mirrored object: keep the winding counter-clockwise about the normals
         tri = tri[:, ::-1].copy()
         if uv_out is not None and uv_out[-1] is not None:
             uv_out[-1] = uv_out[-1][:, ::-1].copy()

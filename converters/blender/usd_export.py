@@ -37,7 +37,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     report,
     usd_check,
 )
-from nasset_sdk.errors import UsageError, error
+from nasset_sdk.errors import NassetError, UsageError, error
 
 from . import Z_UP_TO_Y_UP
 
@@ -406,8 +406,8 @@ class _BlenderConverter(StageConverter):
         uvs: list = []
         try:
             geo = mesh_geometry([ob], local=local, uv_out=uvs)
-        except Exception:  # noqa: BLE001 - an empty mesh
-            self.warn(f"object {ob.name}: no faces: skipped")
+        except NassetError as exc:  # no faces, or a degenerate transform
+            self.warn(f"object {ob.name}: {exc.message}: skipped")
             return
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))

@@ -277,3 +277,23 @@ def test_rna_bake_warns_about_a_see_through_object(tmp_path, capsys):
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     bake(blend, ["Lens"], tmp_path / "lens.usdc", size="tiny", views=2, epochs=1, res=16)
     assert "warning: object(s) ['Lens (Glass BSDF of roughness 0)'] let light through" in capsys.readouterr().err
+
+
+def test_a_degenerate_transform_is_a_typed_error(tmp_path):
+    """An object scaled to 0 along one axis: the normals' inverse transform is singular. The bake stopped with
+    numpy's LinAlgError and the converter called the object empty ("no faces")."""
+    from nasset_converters.blender.usd_export import convert_scene
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    box = bpy.context.active_object
+    box.name = "Squashed"
+    box.scale = (1.0, 1.0, 0.0)
+    bpy.context.view_layer.update()
+    with pytest.raises(NassetError) as e:
+        bsc.mesh_geometry([box])
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "degenerate transform" in str(e.value)
+    blend = tmp_path / "squashed.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
+    assert any("Squashed" in w and "degenerate transform" in w for w in res.warnings), res.warnings
