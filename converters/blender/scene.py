@@ -291,8 +291,35 @@ def _curves_strands(ob, depsgraph) -> HairStrands:
     return HairStrands(p, np.diff(off).astype(np.int32), rad.astype(np.float64) * scale, notes)
 
 
-def _particle_strands(ob, depsgraph) -> HairStrands:
-    ev = ob.evaluated_get(depsgraph)
+#: ParticleSettings fields the viewport evaluates by, and the render fields Cycles uses instead (its strands)
+_RENDER_AS_VIEWPORT = (("display_step", "render_step"), ("child_percent", "rendered_child_count"))
+
+
+def _particle_strands(ob) -> HairStrands:
+    """The strands Cycles renders of ``ob``'s hair particle systems: parents and children, 2^render_step + 1 points
+    each. The depsgraph here evaluates for the viewport (its display steps, display child amount and display
+    percentage of parents), so those settings are set to the render ones while the strands are read, then put back:
+    before, a hair with interpolated children exported its parents only (50 of the 1 050 strands Cycles rendered)."""
+    bpy = load_bpy()
+    systems = [ps.settings for ps in ob.particle_systems if ps.settings.type == "HAIR"]
+    saved = [{k: getattr(st, k) for k, _ in _RENDER_AS_VIEWPORT} | {"display_percentage": st.display_percentage}
+             for st in systems]
+    try:
+        for st in systems:
+            for viewport, render in _RENDER_AS_VIEWPORT:
+                setattr(st, viewport, getattr(st, render))
+            st.display_percentage = 100
+        bpy.context.view_layer.update()
+        return _read_strands(ob.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+    finally:
+        for st, values in zip(systems, saved, strict=True):
+            for key, value in values.items():
+                setattr(st, key, value)
+        bpy.context.view_layer.update()
+
+
+def _read_strands(ev) -> HairStrands:
+    """Every strand (parents, then children) of the evaluated object's hair particle systems, as evaluated."""
     pts, counts, rad = [], [], []
     for ps in ev.particle_systems:
         st = ps.settings
@@ -302,7 +329,7 @@ def _particle_strands(ob, depsgraph) -> HairStrands:
         r_root = 0.5 * float(st.root_radius) * float(st.radius_scale)
         r_tip = 0.5 * float(st.tip_radius) * float(st.radius_scale)
         # Cycles' particle hair width: root/tip radius x radius scale (diameter convention in the UI is x2)
-        for i in range(len(ps.particles)):
+        for i in range(len(ps.particles) + len(ps.child_particles)):  # co_hair numbers the children after the parents
             strand = np.array([tuple(ps.co_hair(ev, particle_no=i, step=s)) for s in range(steps)], np.float64)
             if len(strand) < 2 or not np.isfinite(strand).all():
                 continue
@@ -320,7 +347,7 @@ def hair_strands(objects) -> HairStrands:
     dg = bpy.context.evaluated_depsgraph_get()
     parts = []
     for ob in objects:
-        parts.append(_curves_strands(ob, dg) if ob.type == "CURVES" else _particle_strands(ob, dg))
+        parts.append(_curves_strands(ob, dg) if ob.type == "CURVES" else _particle_strands(ob))
     pts = np.concatenate([p.points for p in parts]) if parts else np.zeros((0, 3))
     return HairStrands(pts, np.concatenate([p.counts for p in parts]).astype(np.int32),
                        np.concatenate([p.radius for p in parts]), [n for p in parts for n in p.notes])

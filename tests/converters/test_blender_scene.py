@@ -297,3 +297,43 @@ def test_a_degenerate_transform_is_a_typed_error(tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
     assert any("Squashed" in w and "degenerate transform" in w for w in res.warnings), res.warnings
+
+
+def _fuzzy_ball(name="Fuzz"):
+    """A ball with particle hair whose viewport settings differ from the render ones Cycles uses: 2 display steps
+    against 3 render steps, 2 interpolated children per parent in the viewport against 10 in renders, 40 % of the
+    parents displayed."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3)
+    ob = bpy.context.active_object
+    ob.name = name
+    st = ob.modifiers.new("hair", "PARTICLE_SYSTEM").particle_system.settings
+    st.type, st.count, st.hair_length = "HAIR", 60, 0.25
+    st.root_radius, st.tip_radius, st.radius_scale = 1.0, 0.5, 0.01
+    st.display_step, st.render_step = 2, 3
+    st.child_type, st.child_percent, st.rendered_child_count, st.display_percentage = "INTERPOLATED", 2, 10, 40
+    bpy.context.view_layer.update()
+    return ob, st
+
+
+def test_particle_hair_exports_the_strands_cycles_renders():
+    """Parents and their render children, at the render step count (2^3 + 1 points), and the viewport settings put
+    back. Before: the viewport's strands (parents only, here a share of them, at 2^2 + 1 points)."""
+    ob, st = _fuzzy_ball()
+    hair = bsc.hair_strands([ob])
+    assert len(hair.counts) == 60 * (1 + 10) and set(hair.counts.tolist()) == {9}
+    assert (st.display_step, st.child_percent, st.display_percentage) == (2, 2, 40)
+
+
+def test_particle_hair_with_children_matches_cycles_in_the_bake(tmp_path):
+    """Independent check by Cycles itself: the bake keeps pixels where our caster (on the exported strands) and
+    Cycles' alpha agree. With the parents only, 90 % of the pixels disagreed (135 samples were left); now the
+    silhouettes of thin fibres at 32^2 pixels, 9 %."""
+    pytest.importorskip("torch", reason="bakes need torch")
+    from nasset_bakers.blender.rna import bake
+
+    _fuzzy_ball()
+    blend = tmp_path / "fuzz.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    summary = bake(blend, ["Fuzz"], tmp_path / "fuzz.usdc", size="tiny", views=4, epochs=1, quiet=True)
+    assert summary["mask_disagreement"] < 0.2, summary["mask_disagreement"]
