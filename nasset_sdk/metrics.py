@@ -75,7 +75,7 @@ class Accuracy:
     def claimed_psnr(self) -> str:
         """The PSNR one may state: a number, ">= bound" when the error is not resolved, "at the ceiling (C dB)", or
         "undefined" when the reference has no peak (black over the mask: nothing to compare)."""
-        if not (math.isfinite(self.psnr_db) and math.isfinite(self.ceiling_db)):
+        if not all(v is not None and math.isfinite(v) for v in (self.psnr_db, self.ceiling_db)):  # None: from JSON
             return "undefined (black reference)"
         if self.at_ceiling:
             return f"at the ceiling ({self.ceiling_db:.1f} dB)"

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from nasset_sdk.errors import UsageError
-from nasset_sdk.metrics import accuracy, group_figures, noise_variance
+from nasset_sdk.metrics import Accuracy, accuracy, group_figures, noise_variance
 
 
 def _scene(rng, h=64, w=64):
@@ -221,3 +221,6 @@ def test_a_black_reference_claims_nothing_and_prints_no_nan():
     assert "nan" not in acc.line().lower()
     [line] = accuracy_lines(acc.to_dict())
     assert "nan" not in line.lower() and "undefined (black reference)" in line
+    stored = acc.to_dict()  # as read back from a report: non-finite figures are null
+    again = Accuracy(**{k: v for k, v in stored.items() if k in Accuracy.__dataclass_fields__})
+    assert again.claimed_psnr() == "undefined (black reference)" and "n/a dB" in again.line()
