@@ -123,8 +123,10 @@ class NearFieldRenderer:
     """The bench renderer (module docstring): one asset (8D or far-field evaluator) + one sphere light."""
 
     def __init__(self, mi, shapes, ev, light: SphereLight, *, far_field: bool) -> None:
+        from nasset_converters.mitsuba.scene import scene_of
+
         self.mi = mi
-        self.scene = mi.load_dict({"type": "scene", **{f"a{k}": s for k, s in enumerate(shapes)}})
+        self.scene = scene_of(mi, list(shapes))
         self.ev = ev
         self.light = light
         self.far = bool(far_field)

@@ -27,6 +27,8 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
+from .scene import scene_of
+
 FIELDS = ("xo", "wo", "xi", "wi", "ui", "beta")
 
 
@@ -168,7 +170,7 @@ class PathSampler:
                  seed: int = 0) -> None:
         self.mi = mi
         self.shapes = list(shapes)
-        self.scene = mi.load_dict({"type": "scene", **{f"asset_{k}": s for k, s in enumerate(self.shapes)}})
+        self.scene = scene_of(mi, self.shapes)
         self.lo = np.asarray(lo, np.float64)
         self.hi = np.asarray(hi, np.float64)
         bb = self.scene.bbox()

@@ -445,6 +445,17 @@ def blocks_delta_light(shapes) -> bool:
     return any(any(b in str(s.bsdf()) for b in DELTA_BLOCKING_BSDFS) for s in shapes)
 
 
+def scene_of(mi, shapes, **extra):
+    """A Mitsuba scene of ``shapes`` (plus ``extra`` entries of its dict, e.g. ``light={...}``) that leaves the shapes'
+    ids as they were: a shape put in another scene takes its key there as its id, and the user's ids would read
+    ``asset_0`` afterwards (a neupress bake recorded its boundary shape so in the provenance)."""
+    ids = [s.id() for s in shapes]
+    scene = mi.load_dict({"type": "scene", **{f"asset_{k}": s for k, s in enumerate(shapes)}, **extra})
+    for shape, sid in zip(shapes, ids, strict=True):
+        shape.set_id(sid)
+    return scene
+
+
 #: the share of straight-through light above which a shape counts as see-through (:func:`see_through`)
 SEE_THROUGH_SHARE = 0.01
 
@@ -480,9 +491,7 @@ def _straight_through(mi, dr, shape, medium, rng, rays: int, samples: int) -> fl
     d = rng.normal(size=(rays, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = lo + rng.random((rays, 3)) * (hi - lo) - 2.0 * reach * d
-    sid = shape.id()
-    alone = mi.load_dict({"type": "scene", "shape": shape})
-    shape.set_id(sid)  # a shape put in another scene takes that scene's key as its id
+    alone = scene_of(mi, [shape])
 
     def first_hit(origin, direction):
         ray = mi.Ray3f(mi.Point3f(np.ascontiguousarray(origin.T, np.float32)),
@@ -602,8 +611,7 @@ class IsolatedAsset:
 
     def __post_init__(self) -> None:
         mi = self.mi
-        shapes = {f"asset_{k}": s for k, s in enumerate(self.shapes)}
-        self.geometry_scene = mi.load_dict({"type": "scene", **shapes})
+        self.geometry_scene = scene_of(mi, self.shapes)
         if self.angle_deg > 0:
             theta = math.radians(self.angle_deg)
             self._dist = 1000.0 * max(self.radius, 1e-3)
@@ -616,11 +624,11 @@ class IsolatedAsset:
             }
         else:
             light = {"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": {"type": "rgb", "value": [1.0] * 3}}
-        self.lit_scene = mi.load_dict({"type": "scene", **shapes, "light": light})
+        self.lit_scene = scene_of(mi, self.shapes, light=light)
         self._params = mi.traverse(self.lit_scene)
         if self.angle_deg == 0 and not mi.variant().startswith("scalar"):
             plugin = register_lane_emitter(mi)
-            self.lane_scene = mi.load_dict({"type": "scene", **shapes, "light": {"type": plugin}})
+            self.lane_scene = scene_of(mi, self.shapes, light={"type": plugin})
         has_media = any(has_medium(s) for s in self.shapes)
         kind = ("volpathmis" if chromatic_media(mi, self.shapes) else "volpath") if has_media else "path"
         self.integrator = mi.load_dict({"type": kind, "max_depth": int(self.max_depth), "rr_depth": 8})

@@ -64,6 +64,7 @@ def test_isolated_asset_integrator(mi, medium, integrator):
 
     iso = IsolatedAsset(mi, _ball(mi, medium), np.zeros(3), 0.2, max_depth=64)
     assert str(iso.integrator).split("[")[0].strip() == integrator
+    assert [s.id() for s in iso.shapes] == ["ball"]  # the user's id, not the isolated scene's key (asset_0)
 
 
 def test_premise_spectral_mis_tames_a_chromatic_medium(mi):
