@@ -7,6 +7,8 @@ Both keep what is done on Ctrl-C (views on disk, the training checkpoint) and sa
 from __future__ import annotations
 
 import math
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -129,6 +131,25 @@ def dataset_line(s: dict) -> str:
     """``  dataset: V views at R^2, S spp + H held-out at ... -> N train / M held-out samples`` of a summary dict."""
     return (f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "
             f"{s['val_res']}^2, {s['val_spp']} spp -> {s['train_samples']} train / {s['val_samples']} held-out samples")
+
+
+@contextmanager
+def warnings_said(say):
+    """Run the block with Python warnings recorded, then ``say`` each as a ``warning:`` line (the bakes' summary
+    voice, instead of Python's ``file:line: RuntimeWarning`` form)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    for w in caught:
+        say(f"warning: {w.message}")
+
+
+def see_through_line(what: str, names: list, share: float) -> str:
+    """The rna bakes' warning for ``what`` (``shape(s)``, ``object(s)``) ``names`` that light crosses unscattered
+    (spec/bake.md#see-through; more than ``share`` of it)."""
+    return (f"warning: {what} {names} let light through unscattered (a clear, thin or masked surface over at most a thin "
+            f"medium: over {share:.0%} of it crosses): rna stores smooth transport, so what they show of the scene "
+            "behind them will be missing or blurred in every render of the asset (spec/bake.md#see-through)")
 
 
 def _db(value) -> str:

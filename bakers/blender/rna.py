@@ -28,7 +28,7 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, times_line, worker_lines
+from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, see_through_line, times_line, worker_lines
 from nasset_sdk.errors import UsageError, error
 
 DATA_PRESETS = presets.RNA_BLENDER_DATA  # the table lives in nasset_bakers/presets.py
@@ -89,11 +89,8 @@ def bake(
     variant, geo, notes = bsc.asset_geometry(objs, file=scene_label)
     for n in notes:
         say(f"warning: {n}")
-    clear = bsc.see_through(objs) if variant == "surface" else []
-    if clear:
-        say(f"warning: object(s) {clear} let light through unscattered (a sharp or transparent surface over at most a "
-            "thin volume: over 1% of it crosses): rna stores smooth transport, so what they show of the scene behind "
-            "them will be missing or blurred in every render of the asset (spec/bake.md#see-through)")
+    if clear := (bsc.see_through(objs) if variant == "surface" else []):
+        say(see_through_line("object(s)", clear, bsc.SEE_THROUGH_SHARE))
     if variant != "fiber" and not h_input:
         raise UsageError("h_input=False applies to fiber assets only")
     center, radius = bsc.bounding_sphere(geo)

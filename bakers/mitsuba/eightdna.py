@@ -21,7 +21,6 @@ import contextlib
 import os
 import sys
 import time
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -29,7 +28,7 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, finite, progress_bar, times_line, worker_lines
+from nasset_bakers.stages import check_options, finite, progress_bar, times_line, warnings_said, worker_lines
 from nasset_sdk.errors import UsageError, error
 
 SAMPLER_PRESETS = presets.EIGHTDNA_MITSUBA_SAMPLER  # the table lives in nasset_bakers/presets.py
@@ -199,21 +198,15 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     # -- stage 1: scene -----------------------------------------------------------------------------
     t = time.perf_counter()
     require_torch()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_said(say):
         mi = load_mitsuba()
-    for w in caught:
-        say(f"warning: {w.message}")
     if not mi.variant().startswith("llvm"):
         raise error("CONVERT_BACKEND", f"the 8dna sampler needs a vectorised Mitsuba variant (llvm_ad_rgb), got {mi.variant()}")
     mi.set_log_level(mi.LogLevel.Error)
     scene, asset_ids, shapes = scene_shapes(mi, scene, asset_ids, example, work, say,
                                             baked_depth=SAMPLER_PRESETS[size]["max_depth"])
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_said(say):
         geo = msc.mesh_geometry(mi, shapes)
-    for w in caught:
-        say(f"warning: {w.message}")
     eta, alpha = boundary_of(mi, shapes)
     builder = AssetBuilder("8dna", variant="surface")
     builder.set_geometry(geo)

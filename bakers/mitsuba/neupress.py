@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import sys
 import time
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,6 +31,7 @@ from nasset_bakers.stages import (
     finite,
     psnr_line,
     times_line,
+    warnings_said,
     worker_lines,
 )
 from nasset_sdk.errors import UsageError, error
@@ -116,11 +116,8 @@ def bake(
     # -- stage 1: scene ---------------------------------------------------------------------------
     t = time.perf_counter()
     torch = require_torch()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_said(say):
         mi = load_mitsuba(variant)
-    for w in caught:
-        say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
     if example == "high-albedo":
         from nasset_converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
@@ -135,11 +132,8 @@ def bake(
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene))
     bshapes, eta, alpha = nd.boundary_of(mi, shapes, file=str(scene))
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_said(say):
         geo = msc.mesh_geometry(mi, bshapes)
-    for w in caught:
-        say(f"warning: {w.message}")
     center, radius = msc.bounding_sphere(geo)
     dset = replace(nd.NeupressDataSettings(), **DATA_PRESETS[size], seed=seed)
     if views is not None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import sys
 import time
-import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,7 +27,9 @@ from nasset_bakers.stages import (
     dataset_line,
     finite,
     psnr_line,
+    see_through_line,
     times_line,
+    warnings_said,
     worker_lines,
 )
 from nasset_sdk.errors import UsageError, error
@@ -95,11 +96,8 @@ def bake(
     # -- stage 1: scene ---------------------------------------------------------------------------
     t = time.perf_counter()
     require_torch()  # fail early (typed) when torch is missing, before minutes of rendering
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_said(say):
         mi = load_mitsuba(variant)
-    for w in caught:
-        say(f"warning: {w.message}")
     mi.set_log_level(mi.LogLevel.Error)
     if example == "high-albedo":
         from nasset_converters.mitsuba.high_albedo_example import EXAMPLE_ASSET_IDS, write_example_scene
@@ -121,11 +119,8 @@ def bake(
     scene = Path(scene)
     msc_scene = msc.load_scene(mi, scene)
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings_said(say):
         asset_variant, geo = msc.asset_geometry(mi, shapes)
-    for w in caught:
-        say(f"warning: {w.message}")
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)
     if light_angle is None:
@@ -149,12 +144,8 @@ def bake(
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
         say(f"warning: {warning}")
-    clear = msc.see_through(mi, shapes)
-    if clear:
-        say(f"warning: shape(s) {clear} let light through unscattered (a smooth, thin or masked surface over at most a "
-            f"thin medium: over {msc.SEE_THROUGH_SHARE:.0%} of it crosses): rna stores smooth transport, so what "
-            "they show of the scene behind them will be missing or blurred in every render of the asset "
-            "(spec/bake.md#see-through)")
+    if clear := msc.see_through(mi, shapes):
+        say(see_through_line("shape(s)", clear, msc.SEE_THROUGH_SHARE))
     if workers is None:
         views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
     else:  # each worker loads the scene itself

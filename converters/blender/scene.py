@@ -143,7 +143,11 @@ def _clear_lobe(node) -> str | None:
     return None
 
 
-def see_through(objects, share: float = 0.01) -> list[str]:
+#: the share of light crossing unscattered above which an object counts as see-through (as on the Mitsuba side)
+SEE_THROUGH_SHARE = 0.01
+
+
+def see_through(objects, share: float = SEE_THROUGH_SHARE) -> list[str]:
     """Names of mesh ``objects`` light crosses without scattering (the Mitsuba side: ``scene.see_through``): a
     material with a clear lobe (:func:`_clear_lobe`) and no volume, or volume nodes whose summed Density (1/m)
     lets more than ``share`` through along the object's mean chord 4 V / S (Cauchy's formula for a convex body;
