@@ -602,7 +602,7 @@ def add_args(p) -> None:
     p.add_argument("--gt-spp", type=count_arg(2, MAX_SPP), default=None, help="reference spp (default 4096; 512 with --quick)")
     p.add_argument("--reference-renderer-spp", type=count_arg(0, MAX_SPP), default=0,
                    help="also render the 8D asset through reference_renderer at this spp (0: skip)")
-    p.add_argument("--converged-spp", type=count_arg(1, MAX_SPP), default=None,
+    p.add_argument("--converged-spp", type=count_arg(0, MAX_SPP), default=None,
                    help="also render both neural assets at this spp for their model error (default 512; 0 with --quick)")
     p.add_argument("--reference-npz", default=None, help="reuse the reference image of an earlier run (its bench_8dna_images.npz)")
     p.add_argument("--quick", action="store_true",

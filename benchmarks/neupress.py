@@ -396,7 +396,7 @@ def run(args) -> int:
     report = bench_neupress(
         args.output, asset=args.asset, size=args.size if args.asset or not args.quick else "tiny",
         res=args.res or d["res"], gt_spp=args.gt_spp or d["gt_spp"], spp=ints(args.spp or d["spp"], "spp"),
-        equal_spp=args.equal_spp or d["equal_spp"], max_depth=args.max_depth, repeat=max(1, args.repeat), seed=args.seed,
+        equal_spp=args.equal_spp or d["equal_spp"], max_depth=args.max_depth, repeat=args.repeat, seed=args.seed,
         quiet=args.json,
     )
     if args.json:

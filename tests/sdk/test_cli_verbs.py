@@ -188,3 +188,5 @@ def test_bounded_integer_options_refuse_values_outside_their_range():
         for bad in (lo - 1, hi + 1):
             _, code, text = _parse([*path, *required.get(path, []), action.option_strings[-1], str(bad)])
             assert code == 2 and f"must be in {lo} .. {hi}" in text, (path, action.option_strings, bad, text)
+    args, code, _ = _parse(["bench", "8dna", "--converged-spp", "0"])  # 0: skip the converged renders (as --quick)
+    assert code == 0 and args.converged_spp == 0
