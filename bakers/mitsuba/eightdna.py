@@ -51,8 +51,7 @@ def boundary_of(mi, shapes) -> tuple[float, float]:
         if name == "RoughDielectric":
             eta, alpha = msc.ggx_dielectric(mi, s, kind="8dna")
         elif name == "SmoothDielectric":
-            p = mi.traverse(b)
-            eta, alpha = (float(np.asarray(p["eta"]).ravel()[0]) if "eta" in p else 1.5), 1e-3
+            eta, alpha = msc.dielectric_eta(mi.traverse(b)), 1e-3
         else:
             raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {s.id()!r}: boundary BSDF {name} is not a (rough) dielectric; the 8dna "
                         "direct lobe stores a GGX rough dielectric (spec/kinds/8dna.md)")

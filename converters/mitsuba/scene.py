@@ -89,6 +89,12 @@ def training_depth(integrator, preset_depth: int) -> int:
 CURVE_CLASSES = ("LinearCurve", "BSpline", "BSplineCurve")
 
 
+def dielectric_eta(params) -> float:
+    """The relative index of refraction of a (rough) dielectric from its ``mi.traverse`` parameters (Mitsuba's default
+    1.5 when it does not expose one)."""
+    return float(np.asarray(params["eta"]).ravel()[0]) if "eta" in params else 1.5
+
+
 def ggx_dielectric(mi, shape, *, kind: str, file: str = "") -> tuple[float, float]:
     """(eta, GGX alpha) of a shape's ``roughdielectric`` boundary, as the ``kind``'s format stores it: one GGX lobe
     with one isotropic constant alpha. CONVERT_SHAPE_UNSUPPORTED for Mitsuba's default Beckmann distribution (its
@@ -105,8 +111,7 @@ def ggx_dielectric(mi, shape, *, kind: str, file: str = "") -> tuple[float, floa
         raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {shape.id()!r}: the {kind} boundary roughness must be one isotropic "
                     f"constant alpha (the format stores one GGX alpha); it has {rough}", file=file)
     alpha = float(np.asarray(params["alpha.value"]).ravel()[0])
-    eta = float(np.asarray(params["eta"]).ravel()[0]) if "eta" in params else 1.5
-    return eta, alpha
+    return dielectric_eta(params), alpha
 
 
 def refuse_emitter(shape, *, file: str | None = None) -> None:
