@@ -341,7 +341,7 @@ def conversion_notes(converted, say) -> dict:
     material it simplifies), said as ``conversion:`` lines and returned as ``{"conversion_warnings": [...]}`` for the
     report (empty dict when there are none): the estimate renders that scene, so they can explain what the figures
     show (a dropped projector emitter read as an asset keeping 16-28 % of the energy)."""
-    notes = list(getattr(converted, "warnings", []) or [])
+    notes = list(converted.warnings)
     for note in notes:
         say(f"conversion: {note}")
     return {"conversion_warnings": notes} if notes else {}

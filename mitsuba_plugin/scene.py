@@ -116,7 +116,7 @@ def load_file(path: str, *, mi=None, replace: dict | None = None, own_integrator
     assets = [shape for shape in root.iter("shape") if shape.get("type") == "nasset"]
     for shape in assets:
         _expand_asset(mi, shape, path)
-    if (assets or replace) and not own_integrator:
+    if assets and not own_integrator:  # replaced shapes are nasset shapes by now
         _warn_unless_nasset_path(root, str(path))
     resolver = mi.file_resolver()  # the scene's relative paths (meshes, textures) resolve next to it
     if str(path.parent.resolve()) not in [str(p) for p in resolver]:
