@@ -232,10 +232,12 @@ class PathIntegrator:
             neural = self.inst_neural[inst]
             mesh = ~neural
             if mesh.any():
-                em = mesh & self.emissive[self.inst_mat[inst]] & (~self.inst_one_sided[inst] | (dot(self.tri_ng[prim], d) < 0))
+                seen_front = dot(self.tri_ng[prim], d) < 0
+                side_mat = np.where(~seen_front & (self.inst_back_mat[inst] >= 0), self.inst_back_mat[inst], self.inst_mat[inst])
+                em = mesh & self.emissive[side_mat] & (~self.inst_one_sided[inst] | seen_front)
                 if em.any():
                     w = self._mesh_light_mis(inst[em], hit_pdf[em], hit_specular[em], o[em], d[em])
-                    L[idx[em]] += beta[em] * self.mt.emission[self.inst_mat[inst[em]]] * w[:, None]
+                    L[idx[em]] += beta[em] * self.mt.emission[side_mat[em]] * w[:, None]
             if depth >= self.s.max_depth:
                 break
             new = []

@@ -264,16 +264,18 @@ MAX_MESH_LIGHT_TRIANGLES = 64
 
 class MeshLight(Light):
     """An emissive mesh instance sampled as a light (spec/renderer.md#mesh-lights): uniform by area over its
-    world triangles [T,3,3]; radiance ``L`` from the front side (winding normal) or both sides.
+    world triangles [T,3,3]; radiance ``L`` [3] from the front side (winding normal), ``L_back`` [3] from the back
+    (0 for a one-sided prim, the back material's emission for a prim with ``nasset:backMaterial``, else ``L``).
 
     Its triangles are ordinary geometry (rays hit them through the scene's accelerator; ``area`` is
     False); ``pdf(p, wi)`` intersects them itself, so it is meant for small emitters
     (MAX_MESH_LIGHT_TRIANGLES)."""
 
-    def __init__(self, triangles, radiance, *, one_sided: bool, instance: int, prim: str = "") -> None:
+    def __init__(self, triangles, radiance, *, back_radiance, instance: int, prim: str = "") -> None:
         self.tri = np.asarray(triangles, np.float64)
         self.L = np.asarray(radiance, np.float64)
-        self.one_sided, self.instance, self.prim = bool(one_sided), int(instance), prim
+        self.L_back = np.asarray(back_radiance, np.float64)
+        self.instance, self.prim = int(instance), prim
         cr = np.cross(self.tri[:, 1] - self.tri[:, 0], self.tri[:, 2] - self.tri[:, 0])
         areas = 0.5 * np.linalg.norm(cr, axis=1)
         self.n = cr / np.maximum(2.0 * areas, 1e-300)[:, None]
@@ -281,12 +283,14 @@ class MeshLight(Light):
         self.cdf = np.cumsum(areas) / max(self.area_total, 1e-300)
 
     def power_is_zero(self):
-        return not (self.L > 0).any() or not self.area_total > 0
+        return not ((self.L > 0).any() or (self.L_back > 0).any()) or not self.area_total > 0
 
     def _emitted(self, n, wi):
-        """|cos| at the light toward -wi (0 from behind a one-sided light)."""
+        """(|cos| at the light toward -wi, 0 where that side emits nothing; [n, 3] radiance of that side)."""
         c = -dot(n, wi)
-        return np.maximum(c, 0.0) if self.one_sided else np.abs(c)
+        back = c < 0
+        lit = np.where(back, (self.L_back > 0).any(), (self.L > 0).any())
+        return np.where(lit, np.abs(c), 0.0), np.where(back[:, None], self.L_back, self.L)
 
     def sample(self, p, u):
         k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), len(self.tri) - 1)
@@ -300,10 +304,10 @@ class MeshLight(Light):
         d2 = np.maximum(dot(v, v), 1e-300)
         dist = np.sqrt(d2)
         wi = v / dist[:, None]
-        cos = self._emitted(self.n[k], wi)
+        cos, L = self._emitted(self.n[k], wi)
         ok = cos > 0
         pdf = np.where(ok, d2 / (self.area_total * np.maximum(cos, 1e-300)), 0.0)
-        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+        return wi, dist, np.where(ok[:, None], L, 0.0), pdf
 
     def pdf(self, p, wi):
         """Solid-angle pdf of ``sample`` for direction wi from p: the nearest of its triangles along the ray."""
@@ -322,7 +326,7 @@ class MeshLight(Light):
             tt = (qv @ e2) * inv
             hit = ok & (bu >= 0) & (bv >= 0) & (bu + bv <= 1) & (tt > 0) & (tt < t_best)
             t_best = np.where(hit, tt, t_best)
-            cos_best = np.where(hit, self._emitted(np.broadcast_to(self.n[k], wi.shape), wi), cos_best)
+            cos_best = np.where(hit, self._emitted(np.broadcast_to(self.n[k], wi.shape), wi)[0], cos_best)
         ok = np.isfinite(t_best) & (cos_best > 0)
         return np.where(ok, t_best ** 2 / (self.area_total * np.maximum(cos_best, 1e-300)), 0.0)
 

@@ -354,14 +354,18 @@ class _Loader:
         """A MeshLight for every emissive mesh instance of at most MAX_MESH_LIGHT_TRIANGLES triangles
         (spec/renderer.md#mesh-lights); larger ones stay reachable by BSDF rays only, with a warning."""
         for i, inst in enumerate(self.instances):
-            if inst.kind != "mesh" or inst.material < 0 or not self.mat_rows[inst.material][3].any():
+            if inst.kind != "mesh" or inst.material < 0:
+                continue
+            front = np.asarray(self.mat_rows[inst.material][3], np.float64)
+            back = (np.zeros(3) if inst.one_sided else
+                    front if inst.back_material < 0 else np.asarray(self.mat_rows[inst.back_material][3], np.float64))
+            if not (front.any() or back.any()):
                 continue
             if inst.n_tri > MAX_MESH_LIGHT_TRIANGLES:
                 self.warn(f"emissive mesh of {inst.n_tri} triangles (> {MAX_MESH_LIGHT_TRIANGLES}) is not light-sampled: "
                           "reached by BSDF rays only", inst.prim)
                 continue
-            self.lights.append(MeshLight(self.tris[i], self.mat_rows[inst.material][3], one_sided=inst.one_sided,
-                                         instance=i, prim=inst.prim))
+            self.lights.append(MeshLight(self.tris[i], front, back_radiance=back, instance=i, prim=inst.prim))
 
     def _check_world_bounds(self) -> None:
         """``SCENE_INVALID`` for a world coordinate above MAX_WORLD_COORDINATE, or a NeuralAsset instance whose world
@@ -692,8 +696,10 @@ class _Loader:
         k = np.arange(nt.sum()) - np.repeat(np.cumsum(nt) - nt, nt)
         base = starts[face_of_tri]
         corner = np.stack([base, base + k + 1, base + k + 2], 1)  # face-vertex slots
-        tri = idx[corner]
         M = self.matrix(mesh)
+        if self._reversed(mesh, M):
+            corner = corner[:, [0, 2, 1]]
+        tri = idx[corner]
         pw = pts @ M[:3, :3] + M[3, :3]
         tris = pw[tri]
         # shading normals
@@ -724,14 +730,64 @@ class _Loader:
             normals = np.repeat(nn[:, None], 3, 1)
         tol = 1e-9 * (1 + np.abs(pw).max())
         planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
-        mat, back = self._material(prim), self._back_material(prim)
-        tex = next((self.mat_rows[m][5] for m in (mat, back) if m >= 0 and len(self.mat_rows[m]) > 5
+        back = self._back_material(prim)
+        groups = self._face_groups(mesh, len(counts))  # [(prim path, material, faces or None)]
+        tex = next((self.mat_rows[m][5] for m in [g[1] for g in groups] + [back] if m >= 0 and len(self.mat_rows[m]) > 5
                     and self.mat_rows[m][5] is not None), None)
         st = None if tex is None else self._primvar_st(prim, tex.varname, tri, corner, face_of_tri, len(pts), len(counts),
                                                        len(idx))
-        inst = Instance("mesh", path, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
-                        back_material=back)
-        self._add(inst, tris, normals, np.arange(len(tri)), st, ng=nn)
+        for where, mat, faces in groups:
+            sel = slice(None) if faces is None else np.isin(face_of_tri, faces)
+            ids = np.arange(len(tri))[sel]
+            if not len(ids):
+                continue
+            inst = Instance("mesh", where, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
+                            back_material=back)
+            self._add(inst, tris[sel], normals[sel], ids, None if st is None else st[sel], ng=nn[sel])
+
+    def _face_groups(self, mesh, n_faces: int) -> list:
+        """The mesh's faces by material: [(prim path, material id, face indices)] (spec/renderer.md#materials).
+        A ``GeomSubset`` of element type ``face`` in the ``materialBind`` family with a bound material shades its
+        faces (the first such subset holding a face wins); the other faces take the mesh's binding; faces listed in
+        ``holeIndices`` are left out. One group with faces None: every face, the mesh's material."""
+        from pxr import UsdGeom, UsdShade
+
+        path = str(mesh.GetPath())
+        holes = np.asarray(mesh.GetHoleIndicesAttr().Get(self.time) or [], np.int64)
+        owner = np.full(n_faces, -1, np.int64)
+        groups = []
+        for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets():
+            sub_path = str(subset.GetPath())
+            if subset.GetElementTypeAttr().Get(self.time) != UsdGeom.Tokens.face:
+                self.warn("GeomSubset of an element type other than face ignored", sub_path)
+                continue
+            mat, _ = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()
+            if not mat:
+                continue
+            ind = np.asarray(subset.GetIndicesAttr().Get(self.time) or [], np.int64)
+            if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):
+                raise self.err("SCENE_INVALID", f"GeomSubset face indices outside the mesh's {n_faces} faces", sub_path,
+                               "indices")
+            free = ind[owner[ind] < 0]
+            owner[free] = len(groups)
+            groups.append((sub_path, self._material_of(mat)))
+        if len(holes):
+            if holes.min() < 0 or holes.max() >= n_faces:
+                raise self.err("SCENE_INVALID", f"hole indices outside the mesh's {n_faces} faces", path, "holeIndices")
+            owner[holes] = -2
+        if not groups and not len(holes):
+            return [(path, self._material(mesh.GetPrim()), None)]
+        out = [(where, mat, np.nonzero(owner == k)[0]) for k, (where, mat) in enumerate(groups)]
+        rest = np.nonzero(owner == -1)[0]
+        return out + ([(path, self._material(mesh.GetPrim()), rest)] if len(rest) else [])
+
+    def _reversed(self, gprim, M) -> bool:
+        """True when the prim's front side is the left-hand side of its winding in world space: ``orientation``
+        ``leftHanded``, or a world transform that mirrors (det M3 < 0), but not both (USD's effective orientation,
+        spec/renderer.md#sidedness). The loader then reverses its triangles, so that ``(v1 - v0) x (v2 - v0)`` of
+        every world triangle points to its front."""
+        left = gprim.GetOrientationAttr().Get(self.time) == "leftHanded"
+        return bool(np.linalg.det(M[:3, :3]) < 0) != left
 
     def _one_sided(self, gprim) -> bool:
         """True when ``doubleSided`` is authored false (spec/renderer.md#sidedness); unauthored keeps both sides."""
@@ -753,6 +809,10 @@ class _Loader:
         M = self.matrix(UsdGeom.Xformable(prim))
         pw = np.asarray(tm.vertices, np.float64) @ M[:3, :3] + M[3, :3]
         faces = np.asarray(tm.faces, np.int64)
+        if self._reversed(UsdGeom.Gprim(prim), M):
+            faces = faces[:, [0, 2, 1]]
+        if nrm is not None and UsdGeom.Gprim(prim).GetOrientationAttr().Get(self.time) == "leftHanded":
+            nrm = -nrm  # the front of a left-handed sphere is its inside
         tris = pw[faces]
         if nrm is not None:
             n = (nrm @ np.linalg.inv(M[:3, :3]).T)[faces]

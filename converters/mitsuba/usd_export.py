@@ -45,6 +45,7 @@ from nasset_sdk.errors import UsageError, error
 
 from . import analytic
 from .scene import camera_medium, image_integrator, integrator_depths, refuse_emitter
+from .sidedness import faces_facing_as_mitsuba, sampled_normal
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
@@ -635,10 +636,12 @@ class StageConverter:
                 self.warn(f"shape {sid}: {side} medium ({_class_name(med)}) ignored (no participating media in USD "
                           "preview shading); bake the object into a neural asset (--replace)")
         bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
-        if bsdf_cls == "Null":
-            self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped")
-            return
         emitter = shape.emitter()
+        if bsdf_cls == "Null":
+            self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped" + (
+                "; its area emitter too (Mitsuba's path tracer does not show it to the camera and lights the scene from "
+                "it through emitter samples only, which no USD light reproduces)" if emitter is not None else ""))
+            return
         if emitter is not None and cls in ("Rectangle", "Sphere"):
             self._area_light(shape, sid, cls, emitter)
             return
@@ -677,9 +680,11 @@ class StageConverter:
 
         mat_path = self.material(shape.bsdf(), sid, emission)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
-        if _class_name(shape.bsdf()) == "TwoSided" and _two_sides_differ(str(shape.bsdf())):
-            # the back side's own material (spec/renderer.md#sidedness): no USD schema names one
-            back = self.material(shape.bsdf(), sid, emission, back=True)
+        differ = _class_name(shape.bsdf()) == "TwoSided" and _two_sides_differ(str(shape.bsdf()))
+        if differ or (emission is not None and not _is_one_sided(shape.bsdf())):
+            # the back side's own material (spec/renderer.md#sidedness): no USD schema names one. Mitsuba's area
+            # emitter emits from the front only, so the back material of an emitter has no emission.
+            back = self.material(shape.bsdf(), sid, None, back=True)
             prim.CreateRelationship("nasset:backMaterial", custom=True).SetTargets([back])
         return mat_path
 
@@ -687,6 +692,13 @@ class StageConverter:
         """Author ``doubleSided = false`` for a one-sided BSDF (black from behind in Mitsuba and in the renderer)."""
         if _is_one_sided(shape.bsdf()):
             gprim.CreateDoubleSidedAttr(False)
+
+    @staticmethod
+    def _sided(shape, emission) -> bool:
+        """True when the shape's front side shows: a one-sided BSDF, a twosided one with two BSDFs, or an emitter."""
+        bsdf = shape.bsdf()
+        return (emission is not None or _is_one_sided(bsdf)
+                or (_class_name(bsdf) == "TwoSided" and _two_sides_differ(str(bsdf))))
 
     def _mesh(self, shape, sid, cls, emission) -> None:
         p = self.mi.traverse(shape)
@@ -705,6 +717,11 @@ class StageConverter:
         vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
         from pxr import Sdf, UsdGeom, Vt
 
+        if self._sided(shape, emission):
+            m = _matrix(self.mi.traverse(shape)["to_world"]) if local_to_world else np.eye(4)
+            world = pts @ m[:3, :3].T + m[:3, 3]
+            wn = None if normals is None else normals @ np.linalg.inv(m[:3, :3])  # the inverse transpose, on rows
+            faces = faces_facing_as_mitsuba(self.mi, shape, world, faces, wn, mirrored=bool(np.linalg.det(m[:3, :3]) < 0))
         path = self._name(self.geometry_root, sid)
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts, np.float32)))
@@ -752,9 +769,14 @@ class StageConverter:
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
-        self._xform(sph.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
+        m = _matrix(self.mi.traverse(shape)["to_world"])
+        self._xform(sph.GetPrim(), _row(m))
         self._bind(sph.GetPrim(), shape, sid, emission)
         self._one_sided(sph, shape)
+        if self._sided(shape, emission):
+            p, n = sampled_normal(self.mi, shape)
+            if float(n @ (p - m[:3, 3])) < 0.0:  # Mitsuba's front is the inside (flip_normals, or a mirror)
+                sph.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
         self.record(path, f"shape {sid} (Sphere)")
 
     # -- lights -------------------------------------------------------------------------------
@@ -782,7 +804,10 @@ class StageConverter:
             light = UsdLux.RectLight.Define(self.stage, path)
             light.CreateWidthAttr(2.0)
             light.CreateHeightAttr(2.0)
-            self._xform(light.GetPrim(), _FLIP_RECT @ _row(m))
+            rows = _FLIP_RECT @ _row(m)
+            if float(np.cross(rows[0, :3], rows[1, :3]) @ sampled_normal(self.mi, shape)[1]) > 0.0:
+                rows = np.diag([-1.0, 1.0, -1.0, 1.0]) @ rows  # it emits along -(e_x x e_y): turn it to Mitsuba's side
+            self._xform(light.GetPrim(), rows)
             self._light_common(light, radiance, path, f"area emitter on rectangle {sid}")
         else:
             scales = np.linalg.norm(m[:3, :3], axis=0)

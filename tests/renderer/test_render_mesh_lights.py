@@ -19,7 +19,7 @@ PANEL = np.array([[-0.4, 1.0, -0.4], [0.4, 1.0, -0.4], [0.4, 1.0, 0.4], [-0.4, 1
 
 def test_sample_pdf_matches_pdf_and_integrates_irradiance():
     tri = PANEL[[[0, 1, 2], [0, 2, 3]]]  # normal -Y (down)
-    light = MeshLight(tri, [1.0, 1.0, 1.0], one_sided=True, instance=0)
+    light = MeshLight(tri, [1.0, 1.0, 1.0], back_radiance=[0.0, 0.0, 0.0], instance=0)
     rng = np.random.default_rng(stat_seed(21))
     p = np.tile([0.1, 0.0, 0.2], (200_000, 1))
     wi, _, li, pdf = light.sample(p, rng.random((len(p), 2)))
@@ -37,22 +37,34 @@ def test_sample_pdf_matches_pdf_and_integrates_irradiance():
     assert not li_b.any() and not pdf_b.any()
 
 
-def _scene(tmp_path, one_sided):
+def _scene(tmp_path, one_sided, *, left_handed=False, back_emission=None):
+    from pxr import UsdGeom
+
     b = SceneBuilder()
     b.camera((0, 0.5, 0.001), (0, 0, 0), focal=400)  # a small patch of floor under the panel
     b.quad("Floor", (0, 0, 0), 10.0, diffuse=(0.5, 0.5, 0.5), specular=(0, 0, 0), roughness=1.0)
     panel = b.mesh("Panel", PANEL, [[0, 1, 2, 3]], diffuse=(0, 0, 0), emission=(1, 1, 1), specular=(0, 0, 0))
     if one_sided is not None:
         panel.CreateDoubleSidedAttr(not one_sided)
+    if left_handed:
+        panel.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    if back_emission is not None:
+        back = b.material("PanelBack", diffuse=(0, 0, 0), emission=back_emission, specular=(0, 0, 0))
+        panel.GetPrim().CreateRelationship("nasset:backMaterial", custom=True).SetTargets([back.GetPath()])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return load_scene(b.write(tmp_path / "s.usda"))
 
 
-def test_mesh_light_direct_and_mis_match_the_analytic_irradiance(tmp_path):
+def _floor_under_panel() -> float:
+    """kd / pi * E at the origin under the unit-radiance panel (midpoint quadrature)."""
     xs = (np.arange(800) + 0.5) / 800 * 0.8 - 0.4
     x, z = np.meshgrid(xs, xs)
-    expect = 0.5 / np.pi * np.sum(1.0 / (x * x + 1.0 + z * z) ** 2) * (0.8 / 800) ** 2  # kd/pi * E at the origin
+    return 0.5 / np.pi * np.sum(1.0 / (x * x + 1.0 + z * z) ** 2) * (0.8 / 800) ** 2
+
+
+def test_mesh_light_direct_and_mis_match_the_analytic_irradiance(tmp_path):
+    expect = _floor_under_panel()
     scene = _scene(tmp_path, None)
     assert [type(light).__name__ for light in scene.lights] == ["MeshLight"]
     for depth in (1, 2):  # 1: light samples only; 2: light samples and BSDF hits, MIS-weighted
@@ -64,10 +76,25 @@ def test_mesh_light_direct_and_mis_match_the_analytic_irradiance(tmp_path):
 def test_one_sided_mesh_light_emits_from_its_front_only(tmp_path):
     scene = _scene(tmp_path, True)  # the panel faces down: the floor is lit
     assert render(scene, RenderSettings(spp=4, width=4, height=4, max_depth=2)).image.mean() > 0.05
-    flipped = _scene(tmp_path, True)
-    flipped.lights[0].one_sided = True
-    flipped.lights[0].n = -flipped.lights[0].n  # its front now faces up, away from the floor
-    assert render(flipped, RenderSettings(spp=4, width=4, height=4, max_depth=1)).image.mean() == 0.0
+    flipped = _scene(tmp_path, True, left_handed=True)  # its front now faces up, away from the floor
+    for depth in (1, 2):  # light samples; light samples and BSDF hits on the panel's back
+        assert render(flipped, RenderSettings(spp=4, width=4, height=4, max_depth=depth)).image.mean() == 0.0
+
+
+@pytest.mark.parametrize("back_emission, lit", [((0, 0, 0), False), ((2, 2, 2), True)])
+def test_back_material_decides_what_the_back_of_an_emitter_emits(tmp_path, back_emission, lit):
+    """A panel whose front faces up (away from the floor) with a ``nasset:backMaterial``: the floor gets the back
+    material's emission, by light samples and by BSDF hits (an area emitter on a twosided Mitsuba BSDF emits from
+    its front only: the converter gives it a back material without emission). Before, the back emitted the front
+    material's emission whatever the back material said."""
+    scene = _scene(tmp_path, None, left_handed=True, back_emission=back_emission)
+    for depth in (1, 2):
+        r = render(scene, RenderSettings(spp=16, width=4, height=4, max_depth=depth, seed=depth))
+        if lit:
+            expect, se = 2.0 * _floor_under_panel(), np.sqrt(r.variance.mean() / 16)
+            assert abs(r.image.mean() - expect) < 5 * se + 2e-4, (depth, r.image.mean(), expect, se)
+        else:
+            assert r.image.mean() == 0.0, (depth, r.image.mean())
 
 
 def test_mesh_light_reaches_a_floor_point_at_a_grazing_angle(tmp_path):
