@@ -191,13 +191,13 @@ def variant_of(objects, *, file: str | None = None) -> str:
     return kinds.pop()
 
 
-def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None):
+def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None):
     """(points [V,3] world Blender, faces [F,3], normals [V,3] world) of an evaluated mesh; object space when
     ``local``. The normals are Blender's corner normals, as Cycles shades them: a vertex is split where its corners
     differ (flat faces, sharp edges, Smooth by Angle, custom normals), so a cube shades flat and a smooth sphere
     keeps one normal per vertex. ``uv_out`` (a list) receives the active render UV map per triangle corner
     [F,3,2], or None. The faces wind counter-clockwise about the normals also for a mirrored object (negative
-    scale), as Cycles renders it."""
+    scale), as Cycles renders it. ``slot_out`` (a list) receives each triangle's material slot [F]."""
     ev = ob.evaluated_get(depsgraph)
     me = ev.to_mesh()
     try:
@@ -205,6 +205,10 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
         nv, nt = len(me.vertices), len(me.loop_triangles)
         loops = np.empty(nt * 3, np.int32)
         me.loop_triangles.foreach_get("loops", loops)
+        if slot_out is not None:
+            slots = np.empty(nt, np.int32)
+            me.loop_triangles.foreach_get("material_index", slots)
+            slot_out.append(slots)
         if uv_out is not None:
             layer = next((u for u in me.uv_layers if u.active_render), me.uv_layers.active)
             uv = None
@@ -241,14 +245,15 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
     return p, tri, n
 
 
-def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None) -> MeshGeometry:
+def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None) -> MeshGeometry:
     """World-space (+Y up) triangles of the evaluated meshes, merged; object space (+Y up) when ``local``.
-    ``uv_out`` receives each object's UVs per triangle corner ([F,3,2] or None, see :func:`_mesh_world`)."""
+    ``uv_out`` receives each object's UVs per triangle corner ([F,3,2] or None), ``slot_out`` each object's material
+    slot per triangle ([F]; see :func:`_mesh_world`)."""
     bpy = load_bpy()
     dg = bpy.context.evaluated_depsgraph_get()
     pts, faces, normals, base = [], [], [], 0
     for ob in objects:
-        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out)
+        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out, slot_out=slot_out)
         pts.append(p)
         faces.append(f + base)
         normals.append(n)

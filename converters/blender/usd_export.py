@@ -395,8 +395,9 @@ class _BlenderConverter(StageConverter):
         self.record(path, what)
 
     def _mesh(self, ob, path: str, *, local: bool) -> None:
-        """A UsdGeom.Mesh at ``path`` of the evaluated mesh object ``ob`` (world or object space, +Y up) with its
-        first material and, when that is textured, the active render UV map as faceVarying primvar ``st``."""
+        """A UsdGeom.Mesh at ``path`` of the evaluated mesh object ``ob`` (world or object space, +Y up) bound to its
+        first slot's material, a ``materialBind`` GeomSubset per other slot in use, and, when a material is textured,
+        the active render UV map as faceVarying primvar ``st``."""
         from pxr import Sdf, UsdGeom, UsdShade, Vt
 
         from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
@@ -404,8 +405,9 @@ class _BlenderConverter(StageConverter):
         from .scene import mesh_geometry
 
         uvs: list = []
+        slots: list = []
         try:
-            geo = mesh_geometry([ob], local=local, uv_out=uvs)
+            geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots)
         except NassetError as exc:  # no faces, or a degenerate transform
             self.warn(f"object {ob.name}: {exc.message}: skipped")
             return
@@ -417,16 +419,24 @@ class _BlenderConverter(StageConverter):
         mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.normals, np.float32)))
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
-        mats = [s.material for s in ob.material_slots if s.material is not None]
-        if len(mats) > 1:
-            self.warn(f"object {ob.name}: {len(mats)} materials, only the first ({mats[0].name}) is bound")
-        mat_path = self.blender_material(mats[0] if mats else None, ob.name)
-        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
-        if mat_path in self.emissive_materials and len(geo.faces) > MAX_MESH_LIGHT_TRIANGLES:
-            self.warn(f"object {ob.name}: emissive mesh of {len(geo.faces)} triangles: the reference renderer "
-                      f"light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} triangles only; this one is "
-                      "reached by BSDF rays only (right mean, more noise)")
-        if mat_path in self.textured_materials:
+        # Cycles shades a triangle with its slot's material (slot indices past the last slot take the last one)
+        slot_mats = [s.material for s in ob.material_slots] or [None]
+        tri_slot = np.minimum(slots[0] if slots else np.zeros(len(geo.faces), np.int32), len(slot_mats) - 1)
+        used = np.unique(tri_slot)
+        paths = {int(k): self.blender_material(slot_mats[k], ob.name) for k in used}
+        binding = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+        binding.Bind(UsdShade.Material(self.stage.GetPrimAtPath(paths[int(used[0])])))
+        for k in used[1:]:  # the first slot in use is the mesh's binding, each other one a GeomSubset of its faces
+            subset = binding.CreateMaterialBindSubset(f"slot_{int(k)}", Vt.IntArray.FromNumpy(
+                np.nonzero(tri_slot == k)[0].astype(np.int32)), UsdGeom.Tokens.face)
+            UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(UsdShade.Material(self.stage.GetPrimAtPath(paths[int(k)])))
+        for k, mat_path in paths.items():
+            n_tri = int((tri_slot == k).sum())
+            if mat_path in self.emissive_materials and n_tri > MAX_MESH_LIGHT_TRIANGLES:
+                self.warn(f"object {ob.name}: emissive mesh of {n_tri} triangles: the reference renderer "
+                          f"light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} triangles only; this one "
+                          "is reached by BSDF rays only (right mean, more noise)")
+        if any(p in self.textured_materials for p in paths.values()):
             uv = uvs[0] if uvs else None
             if uv is None:
                 self.warn(f"object {ob.name}: textured material but the mesh has no UV map: the texture's corner texel "

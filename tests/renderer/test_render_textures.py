@@ -105,6 +105,74 @@ def test_one_sided_surface_is_black_from_behind(tmp_path, authored, normal_up, l
     assert (img.mean() > 0.1) == lit, img.mean()
 
 
+@pytest.mark.parametrize("left_handed, mirror, lit", [(False, False, False), (True, False, True), (False, True, True),
+                                                      (True, True, False)])
+def test_front_side_follows_usd_orientation_and_mirroring(tmp_path, left_handed, mirror, lit):
+    """A one-sided quad wound to face down, seen from above: black, unless its effective orientation flips
+    (``orientation = leftHanded``, or a world transform with det < 0; both cancel), as USD defines the front side.
+    Before, the front was the world winding's right-hand side whatever the prim said."""
+    from pxr import Gf, UsdGeom
+
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=200)
+    quad = b.quad("Floor", (0, 0, 0), 4.0, normal=(0, -1, 0), diffuse=(0.5, 0.5, 0.5))
+    quad.CreateDoubleSidedAttr(False)
+    if left_handed:
+        quad.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    if mirror:  # a mirror through the quad's plane y = 0: the world points and winding stay, the orientation flips
+        UsdGeom.Xformable(quad).AddTransformOp().Set(Gf.Matrix4d(1, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1))
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    img = render(load_scene(b.write(tmp_path / "s.usda")), RenderSettings(spp=1, width=4, height=4, max_depth=2)).image
+    assert (img.mean() > 0.1) == lit, img.mean()
+
+
+@pytest.mark.parametrize("left_handed, mirror, lit", [(False, False, True), (True, False, False), (False, True, True)])
+def test_one_sided_implicit_sphere_front_is_outside_unless_left_handed(tmp_path, left_handed, mirror, lit):
+    """A one-sided UsdGeom.Sphere seen from outside: lit whatever its transform (a mirror keeps its outside the
+    front), black when ``orientation = leftHanded`` (its front is the inside)."""
+    import warnings
+
+    from pxr import Gf, UsdGeom
+
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=60)
+    sph = UsdGeom.Sphere.Define(b.stage, "/World/Ball")
+    sph.CreateRadiusAttr(0.5)
+    sph.CreateDoubleSidedAttr(False)
+    if left_handed:
+        sph.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    if mirror:
+        UsdGeom.Xformable(sph).AddTransformOp().Set(Gf.Matrix4d(-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1))
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the sphere is tessellated
+        scene = load_scene(b.write(tmp_path / "s.usda"))
+    img = render(scene, RenderSettings(spp=1, width=4, height=4, max_depth=2)).image
+    assert (img.mean() > 0.01) == lit and (lit or img.mean() == 0.0), img.mean()
+
+
+def test_geom_subsets_bind_materials_per_face_and_holes_are_left_out(tmp_path):
+    """A floor of three faces: the left one in a ``materialBind`` GeomSubset bound to a red material, the middle one
+    a hole, the right one with the mesh's own (green) binding. Seen from above under a sun: red, black, green.
+    Before, the whole mesh took the mesh's material and the hole rendered."""
+    from pxr import UsdGeom, UsdShade
+
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=12)
+    pts = [(x, 0.0, z) for x in (-1.5, -0.5, 0.5, 1.5) for z in (-0.5, 0.5)]  # columns of 2 points, +x to the right
+    faces = [[2 * i, 2 * i + 1, 2 * i + 3, 2 * i + 2] for i in range(3)]
+    mesh = b.mesh("Floor", pts, faces, diffuse=(0.1, 0.8, 0.1), specular=(0, 0, 0), roughness=1.0)
+    red = b.material("Red", diffuse=(0.8, 0.1, 0.1), specular=(0, 0, 0), roughness=1.0)
+    subset = UsdShade.MaterialBindingAPI(mesh.GetPrim()).CreateMaterialBindSubset("left", [0], UsdGeom.Tokens.face)
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(red)
+    mesh.CreateHoleIndicesAttr([1])
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    img = render(load_scene(b.write(tmp_path / "s.usda")), RenderSettings(spp=4, width=30, height=10, max_depth=1)).image
+    left, middle, right = img[4:6, 3:7].mean((0, 1)), img[4:6, 13:17].mean((0, 1)), img[4:6, 23:27].mean((0, 1))
+    assert left[0] > 4 * left[1] and right[1] > 4 * right[0], (left, right)
+    assert not middle.any(), middle
+
+
 def test_spot_falloff_hand_values():
     from nasset_reference_renderer.lights import spot_falloff
 
