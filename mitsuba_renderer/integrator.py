@@ -275,8 +275,8 @@ class PathTracer:
     def camera_rays(self, px, py, width, height):
         cam = self.camera
         tan_h = 0.5 * cam.h_aperture / cam.focal
-        x = (2.0 * px / width - 1.0) * tan_h
-        y = (1.0 - 2.0 * py / height) * tan_h * (height / width)
+        x = (2.0 * px / width - 1.0) * tan_h + cam.h_offset / cam.focal
+        y = (1.0 - 2.0 * py / height) * tan_h * (height / width) + cam.v_offset / cam.focal
         dl = np.stack([x, y, -np.ones_like(x)], 1)
         d = normalized(dl @ cam.to_world[:3, :3])
         o = np.broadcast_to(cam.to_world[3, :3], d.shape).copy()

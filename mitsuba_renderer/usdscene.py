@@ -60,6 +60,8 @@ class Camera:
     focal: float
     h_aperture: float
     v_aperture: float
+    h_offset: float = 0.0  # horizontalApertureOffset (lens shift), the aperture's units
+    v_offset: float = 0.0
 
     def resolution(self, width: int | None, height: int | None) -> tuple[int, int]:
         aspect = self.v_aperture / self.h_aperture
@@ -227,7 +229,9 @@ def read_scene(path: str) -> SceneDesc:
                     raise SceneError("SCENE_UNSUPPORTED", "only perspective cameras are supported", file=path, prim=ppath)
                 ha = float(cam.GetHorizontalApertureAttr().Get())
                 va = cam.GetVerticalApertureAttr().Get()
-                camera = Camera(ppath, _m4(cache.GetLocalToWorldTransform(prim)), float(cam.GetFocalLengthAttr().Get()), ha, float(va or ha))
+                camera = Camera(ppath, _m4(cache.GetLocalToWorldTransform(prim)), float(cam.GetFocalLengthAttr().Get()), ha,
+                                float(va or ha), float(cam.GetHorizontalApertureOffsetAttr().Get() or 0.0),
+                                float(cam.GetVerticalApertureOffsetAttr().Get() or 0.0))
             continue
         if tn in _LIGHTS:
             lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from typing import Callable, NamedTuple
 
@@ -44,6 +45,19 @@ def count_arg(lo: int, hi: int):
     parse.__name__ = f"integer in {lo} .. {hi}"
     return parse
 
+
+def finite_arg(text: str) -> float:
+    """argparse type of a real-valued option: a finite number, else a usage error (exit code 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+    return value
+
+
+finite_arg.__name__ = "finite number"
 
 #: largest --seed: seeds reach Mitsuba's samplers as unsigned 32-bit integers
 MAX_SEED = 2**32 - 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
-from nasset_sdk.cli import Verb, seed_arg
+from nasset_sdk.cli import Verb, finite_arg, seed_arg
 from nasset_sdk.errors import UsageError
 
 
@@ -77,7 +77,7 @@ def run(args) -> int:
     check_outputs(outputs, [os.path.realpath(args.scene)] if os.path.exists(args.scene) else [])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SceneWarning)
-        scene = load_scene(args.scene, search_paths=getattr(args, "search_path", None))
+        scene = load_scene(args.scene, time=args.time, search_paths=getattr(args, "search_path", None))
     check_outputs(outputs, input_files(scene))
     settings = resolve_settings(settings, scene)
     for w in scene.warnings:
@@ -115,6 +115,9 @@ def add_args(p) -> None:
     p.add_argument("--search-path", action="append", default=None, metavar="DIR",
                    help="folder where USD's resolver looks up bare asset paths of the scene (repeatable; "
                         "PXR_AR_DEFAULT_SEARCH_PATH works too)")
+    p.add_argument("--time", type=finite_arg, default=None, metavar="T",
+                   help="USD time code to render at (default: the stage's startTimeCode when it authors a range, else "
+                        "each attribute's default value or first time sample)")
     p.add_argument("--png", default=None, help="also write a tone-mapped PNG preview")
     p.add_argument("--variance", default=None, help="also write a per-pixel variance EXR")
     p.add_argument("--explain", action="store_true", help="print the render plan")

@@ -232,7 +232,7 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
     """Load a scene from a path or an opened ``Usd.Stage`` (which keeps its own resolver context).
 
     ``search_paths``: folders where USD's resolver looks up bare asset paths (``chair.usdc``) of a scene file."""
-    from pxr import Ar, Usd
+    from pxr import Ar
 
     from nasset_sdk.references import resolver_context
 
@@ -249,7 +249,26 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
         stage = source
         file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     with Ar.ResolverContextBinder(stage.GetPathResolverContext()):
-        return _Loader(stage, file, Usd.TimeCode.Default() if time is None else time).load()
+        return _Loader(stage, file, render_time(stage, time)).load()
+
+
+def render_time(stage, time=None):
+    """The ``Usd.TimeCode`` a scene renders at (spec/renderer.md#traversal): ``time`` (a number) when given, else the
+    stage's ``startTimeCode`` when it authors a time code range, else the earliest time: an attribute's default
+    value, or its first time sample where it has samples (an animation cache without defaults still renders)."""
+    import math
+
+    from pxr import Usd
+
+    if time is not None:
+        if isinstance(time, Usd.TimeCode):
+            return time
+        if not math.isfinite(float(time)):
+            raise SceneError("SCENE_INVALID", f"render time {time!r} is not finite")
+        return Usd.TimeCode(float(time))
+    if stage.HasAuthoredTimeCodeRange():
+        return Usd.TimeCode(stage.GetStartTimeCode())
+    return Usd.TimeCode.EarliestTime()
 
 
 class _Loader:
@@ -432,13 +451,22 @@ class _Loader:
         if not CAMERA_RATIO[0] <= va / ha <= CAMERA_RATIO[1]:
             raise self.err("SCENE_INVALID", f"verticalAperture / horizontalAperture = {va / ha:.3g} outside {CAMERA_RATIO[0]:g} .. "
                            f"{CAMERA_RATIO[1]:g}", prim.GetPath(), "verticalAperture")
+        offsets = []
+        for name, attr in (("horizontalApertureOffset", cam.GetHorizontalApertureOffsetAttr()),
+                           ("verticalApertureOffset", cam.GetVerticalApertureOffsetAttr())):
+            v = attr.Get(self.time) if attr else None
+            v = 0.0 if v is None else float(v)
+            if not (np.isfinite(v) and abs(v) <= CAMERA_RATIO[1] * fl):
+                raise self.err("SCENE_INVALID", f"camera {name} = {v!r} must be finite and at most {CAMERA_RATIO[1]:g} x "
+                               "focalLength", prim.GetPath(), name)
+            offsets.append(v)
         M = self.matrix(cam)
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "camera transform is singular", prim.GetPath(), "xformOpOrder")
         if np.abs(M[3, :3]).max() > MAX_WORLD_COORDINATE:
             raise self.err("SCENE_INVALID", f"camera position {M[3, :3].tolist()} beyond |coordinate| <= {MAX_WORLD_COORDINATE:g}",
                            prim.GetPath(), "xformOpOrder")
-        return PerspectiveCamera(M, fl, ha, va, str(prim.GetPath()), self._render_resolution())
+        return PerspectiveCamera(M, fl, ha, va, str(prim.GetPath()), self._render_resolution(), *offsets)
 
     def _render_resolution(self) -> tuple[int, int] | None:
         """Resolution of the stage's first UsdRender.Settings prim (None when absent or invalid)."""

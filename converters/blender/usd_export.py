@@ -92,8 +92,6 @@ class _BlenderConverter(StageConverter):
             return
         if cam.dof.use_dof:
             self.warn(f"camera {ob.name}: depth of field dropped (pinhole)")
-        if abs(cam.shift_x) > 0 or abs(cam.shift_y) > 0:
-            self.warn(f"camera {ob.name}: lens shift dropped")
         horizontal = cam.sensor_fit == "HORIZONTAL" or (cam.sensor_fit == "AUTO" and size[0] >= size[1])
         if horizontal:
             x_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_x)
@@ -107,6 +105,10 @@ class _BlenderConverter(StageConverter):
         c.CreateFocalLengthAttr(FOCAL_LENGTH_MM)
         c.CreateHorizontalApertureAttr(ha)
         c.CreateVerticalApertureAttr(ha * size[1] / size[0])
+        if cam.shift_x or cam.shift_y:  # Blender's shift is in units of the fitted side of the frame
+            fit = ha if horizontal else ha * size[1] / size[0]
+            c.CreateHorizontalApertureOffsetAttr(float(cam.shift_x) * fit)
+            c.CreateVerticalApertureOffsetAttr(float(cam.shift_y) * fit)
         c.CreateClippingRangeAttr(Gf.Vec2f(float(cam.clip_start), float(cam.clip_end)))
         self._xform(c.GetPrim(), _row(ob))
         self.record(path, f"camera {ob.name} (x_fov {math.degrees(x_fov):.4g} deg)")

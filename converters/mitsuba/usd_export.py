@@ -327,9 +327,8 @@ class StageConverter:
             pixel_filter = ("gaussian", float(m.group(1)) if m else 0.5)
         elif filt and not filt.startswith("BoxFilter"):
             self.warn(f"film reconstruction filter {_class_name(film.rfilter())}: written as a box filter")
-        for k in ("principal_point_offset_x", "principal_point_offset_y"):
-            if k in p and abs(float(_np(p[k]).ravel()[0])) > 0:
-                self.warn(f"{k} ignored")
+        shift = [float(_np(p[k]).ravel()[0]) if k in p else 0.0
+                 for k in ("principal_point_offset_x", "principal_point_offset_y")]
         x_fov = float(_np(p["x_fov"]).ravel()[0])
         row = _FLIP_CAMERA @ _row(_matrix(p["to_world"]))
         scale = np.linalg.norm(row[:3, :3], axis=1)
@@ -343,6 +342,9 @@ class StageConverter:
         cam.CreateFocalLengthAttr(FOCAL_LENGTH_MM)
         cam.CreateHorizontalApertureAttr(ha)
         cam.CreateVerticalApertureAttr(ha * size[1] / size[0])
+        if shift[0] or shift[1]:  # Mitsuba's principal point offset: film widths right, film heights down
+            cam.CreateHorizontalApertureOffsetAttr(shift[0] * ha)
+            cam.CreateVerticalApertureOffsetAttr(-shift[1] * ha * size[1] / size[0])
         near, far = float(_np(p["near_clip"]).ravel()[0]), float(_np(p["far_clip"]).ravel()[0])
         cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
         self._xform(cam.GetPrim(), row)
