@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import error
+from .errors import NassetError, error
 
 #: Largest magnitude any float image file holds: float32 max (spec/renderer.md#limits).
 IMAGE_VALUE_MAX = float(np.finfo(np.float32).max)
@@ -180,6 +180,41 @@ def read_exr(path) -> np.ndarray:
     if img.ndim != 3 or img.shape[:2] != (h, w):
         raise error("IMAGE_INVALID", f"decoded pixels {img.shape} differ from the header's {w} x {h}", file=str(path))
     return img
+
+
+#: 8-bit / 16-bit image formats :func:`read_png_jpeg` decodes (Pillow's names)
+PNG_JPEG = ("PNG", "JPEG")
+
+
+def read_png_jpeg(path) -> tuple[np.ndarray, int]:
+    """(image [H, W, 3] float32 in 0 .. 1, bits per channel: 8 or 16) of a PNG or JPEG file, values as stored (no
+    colour decoding); grey is repeated, alpha dropped, a palette expanded. The size is checked from the header before
+    anything is decoded (each side 1 .. MAX_TEXTURE_SIDE, at most MAX_TEXTURE_PIXELS pixels); any other format or a
+    corrupt file is ``IMAGE_INVALID``. Needs Pillow (the ``render`` extra)."""
+    from PIL import Image
+
+    def bad(msg):
+        return error("IMAGE_INVALID", msg, file=str(path))
+
+    try:
+        with Image.open(path, formats=PNG_JPEG) as im:
+            w, h = im.size
+            if not (1 <= w <= MAX_TEXTURE_SIDE and 1 <= h <= MAX_TEXTURE_SIDE) or w * h > MAX_TEXTURE_PIXELS:
+                raise bad(f"image of {w} x {h} pixels is outside the bounds (each side 1 .. {MAX_TEXTURE_SIDE}, at most "
+                          f"{MAX_TEXTURE_PIXELS} pixels)")
+            mode = im.mode
+            if mode in ("I;16", "I;16B", "I;16L", "I"):  # 16-bit grey PNG
+                grey = np.asarray(im, np.float32) / 65535.0
+                img, bits = np.repeat(grey[..., None], 3, -1), 16
+            else:
+                img, bits = np.asarray(im.convert("RGB"), np.float32) / 255.0, 8
+    except NassetError:
+        raise
+    except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
+        raise bad(f"cannot decode it as PNG or JPEG: {str(exc).strip()[:200] or type(exc).__name__}") from None
+    if img.shape != (h, w, 3):
+        raise bad(f"decoded pixels {img.shape} differ from the header's {w} x {h}")
+    return img, bits
 
 
 def tonemap(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:

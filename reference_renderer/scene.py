@@ -32,6 +32,8 @@ MAX_TRANSFORM = 1e15  # |entry| of a world transform
 MAX_WORLD_COORDINATE = 1e12  # |world coordinate| of any triangle vertex or the camera (float32 ray casting)
 MIN_ASSET_SIZE = 1e-9  # world bounding-box diagonal of a NeuralAsset instance, absolute ...
 MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ray offset 1e-5 S)
+#: UsdUVTexture files the renderer reads (spec/renderer.md#textures): OpenEXR, and 8/16-bit PNG and JPEG
+TEXTURE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg")
 CAMERA_RATIO = (1e-6, 1e6)  # horizontalAperture / focalLength and verticalAperture / horizontalAperture
 MAX_LIGHT_EXPOSURE = 1000.0  # stops
 MAX_LIGHT_SCALE = 1e30  # intensity * 2^exposure * color, per channel
@@ -616,15 +618,15 @@ class _Loader:
             self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
             return None
         resolved = asset.resolvedPath or ""
-        if not resolved.lower().endswith(".exr"):
-            self.warn(f"texture {asset.path}: only OpenEXR textures are read; the connected input's own value is used",
-                      tpath)
+        if not resolved.lower().endswith(TEXTURE_SUFFIXES):
+            self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; the connected input's own "
+                      "value is used", tpath)
             return None
         if resolved not in self.images:  # one decode per file
-            self.images[resolved] = self._read_image(asset, tpath, "inputs:file", "UsdUVTexture texture")
-        image = self.images[resolved]
+            self.images[resolved] = self._read_image(asset, tpath, "inputs:file", "UsdUVTexture texture", ldr=True)
+        image, bits = self.images[resolved]
         space = str(value("sourceColorSpace", "auto"))
-        if space == "sRGB":
+        if space == "sRGB" or (space == "auto" and bits == 8):  # UsdPreviewSurface: auto is sRGB for 8-bit images
             image = srgb_to_linear(image)
         elif space not in ("auto", "raw"):
             self.warn(f"sourceColorSpace {space!r} read as raw (linear)", tpath)
@@ -632,7 +634,7 @@ class _Loader:
         for name in ("wrapS", "wrapT"):
             mode = str(value(name, "useMetadata"))
             if mode == "useMetadata":
-                mode = "black"  # OpenEXR carries no wrap metadata: UsdUVTexture's rule then gives black
+                mode = "black"  # OpenEXR, PNG and JPEG carry no wrap metadata: UsdUVTexture's rule then gives black
             if mode not in WRAP_MODES:
                 self.warn(f"{name} {mode!r} unknown: black", tpath)
                 mode = "black"
@@ -652,24 +654,28 @@ class _Loader:
             self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2; primvar 'st' is used", tpath)
         return ImageTexture(image, wraps[0], wraps[1], scale, bias, str(tpath)), varname
 
-    def _read_image(self, asset, prim, attribute: str, what: str) -> np.ndarray:
+    def _read_image(self, asset, prim, attribute: str, what: str, *, ldr: bool = False):
         """[H, W, 3] float32 from an OpenEXR file named by an asset-path value (resolved by USD; the scene's
         paths were checked when it was opened): ``SCENE_INVALID`` when missing or not finite and >= 0,
-        ``SCENE_UNSUPPORTED`` for another format, ``IMAGE_INVALID`` beyond the image bounds."""
+        ``SCENE_UNSUPPORTED`` for another format, ``IMAGE_INVALID`` beyond the image bounds. ``ldr``: PNG and JPEG
+        files are read too, and the result is (image, bits per channel: 32 for OpenEXR, 8 or 16)."""
+        from nasset_sdk.images import read_png_jpeg
+
         from .film import read_exr
 
         resolved = asset.resolvedPath or ""
         if not resolved or not os.path.isfile(resolved):
             raise self.err("SCENE_INVALID", f"{what} not found: {asset.path}", prim, attribute)
-        if not resolved.lower().endswith(".exr"):
+        exr = resolved.lower().endswith(".exr")
+        if not exr and not (ldr and resolved.lower().endswith(TEXTURE_SUFFIXES)):
             raise self.err("SCENE_UNSUPPORTED", f"{what} {asset.path}: only OpenEXR images", prim, attribute)
         try:
-            image = read_exr(resolved)
+            image, bits = (read_exr(resolved), 32) if exr else read_png_jpeg(resolved)
         except NassetError as exc:
             raise self.err("IMAGE_INVALID", f"{what} {resolved}: {exc.message}", prim, attribute) from None
         if not np.isfinite(image).all() or (image < 0).any():
             raise self.err("SCENE_INVALID", f"{what} holds NaN/Inf or negative values", prim, attribute)
-        return image
+        return (image, bits) if ldr else image
 
     def _primvar_st(self, prim, varname: str, tri, corner, face_of_tri, n_points, n_faces, n_corners):
         """Texture coordinates [T,3,2] of the triangles from primvar ``varname`` (zeros, with a warning, when unusable)."""

@@ -38,12 +38,14 @@ def test_bilinear_lookup_reproduces_a_linear_image_and_wraps():
     np.testing.assert_allclose(scaled.sample(st), 2 * tex.sample(st) + 1, atol=1e-9)
 
 
-def _textured_quad_scene(tmp_path, space: str):
+def _textured_quad_scene(tmp_path, space: str, file: str = "t.exr"):
     """A 4 x 4 floor under a distant light, seen from above; its diffuseColor is a 2 x 1 texture (left texel 0.5,
-    right texel (0.9, 0.2, 0.1)) with clamp wrap, st running 0 .. 1 across the floor."""
+    right texel (0.9, 0.2, 0.1)) with clamp wrap, st running 0 .. 1 across the floor. Another ``file`` (written by
+    the caller) replaces the texture."""
     from pxr import Sdf, UsdGeom, UsdShade
 
-    write_exr(tmp_path / "t.exr", np.array([[[0.5, 0.5, 0.5], [0.9, 0.2, 0.1]]], np.float32))
+    if file == "t.exr":
+        write_exr(tmp_path / "t.exr", np.array([[[0.5, 0.5, 0.5], [0.9, 0.2, 0.1]]], np.float32))
     b = SceneBuilder()
     b.camera((0, 3, 0.001), (0, 0, 0), focal=14)  # the floor fills the view, with a margin
     quad = b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0, 0, 0), specular=(0, 0, 0), roughness=1.0)
@@ -57,13 +59,50 @@ def _textured_quad_scene(tmp_path, space: str):
     reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
     node = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/tex")
     node.CreateIdAttr("UsdUVTexture")
-    node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./t.exr")
+    node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./{file}")
     node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
     for k in ("wrapS", "wrapT"):
         node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("clamp")
     node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
     surf.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(node.ConnectableAPI(), "rgb")
-    return b.write(tmp_path / "s.usda"), pts
+    return b.write(tmp_path / f"s_{file}.usda"), pts
+
+
+@pytest.mark.parametrize("space", ["auto", "sRGB", "raw"])
+def test_png_texture_renders_like_an_openexr_of_its_decoded_values(tmp_path, space):
+    """An 8-bit PNG texture is its values / 255, decoded from sRGB under ``sRGB`` and ``auto`` (UsdPreviewSurface:
+    auto is sRGB for 8-bit images), as stored under ``raw``. Before, a PNG was ignored (the input's own value,
+    black here, with a warning)."""
+    from nasset_sdk.images import write_png
+
+    u8 = np.array([[[128, 128, 128], [230, 51, 26]]], np.uint8)
+    write_png(tmp_path / "t.png", u8)
+    linear = u8 / 255.0 if space == "raw" else srgb_to_linear(u8 / 255.0)
+    write_exr(tmp_path / "lin.exr", linear.astype(np.float32))
+    png, _ = _textured_quad_scene(tmp_path, space, "t.png")
+    exr, _ = _textured_quad_scene(tmp_path, "raw", "lin.exr")
+    settings = RenderSettings(spp=4, width=12, height=12, max_depth=1)
+    a, b = render(load_scene(png), settings).image, render(load_scene(exr), settings).image
+    assert a.mean() > 0.05
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-7)
+
+
+def test_png_texture_beyond_the_image_bounds_is_refused_before_decoding(tmp_path):
+    """A PNG whose header claims 40000 x 1 pixels (a side over MAX_TEXTURE_SIDE): IMAGE_INVALID from the header."""
+    import struct
+    import zlib
+
+    from nasset_sdk.errors import NassetError
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", 40000, 1, 8, 2, 0, 0, 0)
+    (tmp_path / "big.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IEND", b""))
+    path, _ = _textured_quad_scene(tmp_path, "auto", "big.png")
+    with pytest.raises(NassetError) as exc:
+        load_scene(path)
+    assert exc.value.code == "IMAGE_INVALID" and "40000" in str(exc.value)
 
 
 @pytest.mark.parametrize("space, left, right", [("raw", 0.5, (0.9, 0.2, 0.1)),
