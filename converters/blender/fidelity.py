@@ -212,6 +212,39 @@ def _lens_shift(bpy, folder: Path, size: int) -> None:
     _world(bpy)
 
 
+def _mixed(bpy, name: str, kind: str, subs, fac: float = 0.5):
+    """A material whose surface is a Mix (``kind`` "mix", Factor ``fac``) or Add Shader of new shader nodes ``subs``
+    [(bl_idname, {socket: value})]."""
+    from .examples import shader_material
+
+    mat, node = shader_material(bpy, name, "ShaderNodeMixShader" if kind == "mix" else "ShaderNodeAddShader")
+    if kind == "mix":
+        node.inputs["Factor"].default_value = fac
+    slots = [s for s in node.inputs if s.type == "SHADER"]
+    for slot, (idname, values) in zip(slots, subs, strict=False):
+        sub = mat.node_tree.nodes.new(idname)
+        for k, v in values.items():
+            sub.inputs[k].default_value = (*v, 1.0) if isinstance(v, tuple) and len(v) == 3 else v
+        mat.node_tree.links.new(sub.outputs[0], slot)
+    return mat
+
+
+def _shader_mixes(bpy, folder: Path, size: int) -> None:
+    # a Mix Shader of two Diffuse BSDFs, a Glossy BSDF, an Add Shader of a Diffuse BSDF and an Emission
+    _new_scene(bpy, size, (0.0, -2.8, 1.2), (0.0, 0.0, 0.35))
+    _floor(bpy)
+    diffuse, glossy, emission = "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeEmission"
+    mats = [_mixed(bpy, "MixDiffuse", "mix", [(diffuse, {"Color": (0.8, 0.1, 0.1)}), (diffuse, {"Color": (0.1, 0.2, 0.8)})],
+                   0.3),
+            _mixed(bpy, "Glossy", "mix", [(glossy, {"Color": (0.9, 0.7, 0.3), "Roughness": 0.35})], 0.0),
+            _mixed(bpy, "Glow", "add", [(diffuse, {"Color": (0.2, 0.6, 0.2)}),
+                                        (emission, {"Color": (1.0, 0.8, 0.5), "Strength": 0.6})])]
+    for k, mat in enumerate(mats):
+        _add(bpy, "uv_sphere", f"Ball{k}", mat, smooth=True, radius=0.3, location=(-0.75 + 0.75 * k, 0.0, 0.3))
+    _sun(bpy)
+    _world(bpy)
+
+
 def _mesh_emitter(bpy, folder: Path, size: int) -> None:
     # an emission shader on a small box (12 triangles: a mesh light), over a floor and a ball
     _new_scene(bpy, size, (0.0, -2.8, 1.3), (0.0, 0.0, 0.4))
@@ -332,6 +365,8 @@ SCENES = {
     "material_slots": FidelityScene("material_slots", _material_slots, "one mesh with three material slots: red upper "
                                     "half, blue lower half, an emitting band"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
+    "shader_mixes": FidelityScene("shader_mixes", _shader_mixes, "a Mix Shader of two Diffuse BSDFs (0.3), a Glossy BSDF "
+                                  "(roughness 0.35), an Add Shader of a Diffuse BSDF and an Emission"),
     "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "Emission shader on a 12-triangle box (a mesh light)"),
     "principled": FidelityScene("principled", _principled, "Principled BSDF balls: dielectric (roughness 0.5), "
                                 "metal (0.35), matte without specular"),
@@ -459,6 +494,8 @@ NOTES = """
   stays off target until the format has a layered (view-dependent) diffuse.
 - lens_shift was 0.96 / 0.97 / 0.99 with MSE / noise 288 (64 x 64, 64 spp): the camera's shift was dropped
   (warned). It is now the camera's aperture offsets, which the renderer applies (spec/renderer.md#scene-input).
+- shader_mixes was 1.02 / 1.08 / 1.20 with MSE / noise 159 (64 x 64, 64 spp): Mix and Add Shaders (and a Glossy
+  BSDF) were grey. They are now combined in the specular workflow (spec/bake-blender.md#scene-conversion).
 - material_slots was 0.86 / 0.81 / 0.85 with MSE / noise 1634 (64 x 64, 64 spp): the converter bound an object's
   first material to every face (warned), and the renderer read no per-face materials. Each material slot in use
   past the first is now a `materialBind` GeomSubset, which the renderer shades with its own material

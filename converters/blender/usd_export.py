@@ -532,8 +532,53 @@ def map_material(mat) -> tuple[dict, list]:
     out = next((n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None)
     if out is None or not out.inputs["Surface"].is_linked:
         return grey, [f"material {mat.name}: no surface shader, grey used"]
-    node = out.inputs["Surface"].links[0].from_node
-    notes = []
+    notes: list = []
+    inputs = _map_shader(mat, out.inputs["Surface"].links[0].from_node, notes)
+    return (grey, notes) if inputs is None else (inputs, notes)
+
+
+#: shader nodes :func:`_map_shader` converts
+SHADER_NODES = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfPrincipled", "ShaderNodeEmission", "ShaderNodeBsdfAnisotropic",
+                "ShaderNodeMixShader", "ShaderNodeAddShader")
+
+
+def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
+    """UsdPreviewSurface inputs of the shader ``node`` (None, with a note, when it is not convertible). Mix and Add
+    Shaders combine their inputs' parameters (:func:`_combine`)."""
+    if node.bl_idname in ("ShaderNodeMixShader", "ShaderNodeAddShader") and depth >= 8:
+        notes.append(f"material {mat.name}: shader mixes nested deeper than 8: grey")
+        return None
+    if node.bl_idname in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
+        mix = node.bl_idname == "ShaderNodeMixShader"
+        fac, f_linked = _socket(node, "Factor", 0.5) if mix else (0.0, False)
+        if f_linked:
+            notes.append(f"material {mat.name}: linked Mix Shader Factor dropped (its default {fac:.3g} used)")
+        fac = float(np.clip(fac, 0.0, 1.0))
+        parts = []
+        for k, sock in enumerate(s for s in node.inputs if s.type == "SHADER"):
+            w = ((1.0 - fac) if k == 0 else fac) if mix else 1.0
+            if not sock.is_linked or w <= 0.0:
+                continue  # an empty shader slot adds nothing
+            sub = _map_shader(mat, sock.links[0].from_node, notes, depth + 1)
+            if sub is None:
+                return None
+            parts.append((w, sub))
+        notes.append(f"material {mat.name}: {node.name} converted by combining its shaders' parameters (exact for "
+                     "diffuse and emission, approximate for glossy lobes)")
+        return _combine(parts, mat, notes)
+    if node.bl_idname == "ShaderNodeBsdfAnisotropic":  # Blender's Glossy BSDF
+        col, c_linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
+        rough, r_linked = _socket(node, "Roughness", 0.5)
+        aniso, _ = _socket(node, "Anisotropy", 0.0)
+        if c_linked or r_linked:
+            notes.append(f"material {mat.name}: linked Glossy BSDF {'Color' if c_linked else 'Roughness'} dropped")
+        notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it, "
+                     "no multiple-scattering compensation)" + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
+        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": tuple(col[:3]),
+                "roughness": float(np.clip(rough, 0.0, 1.0))}
+    if node.bl_idname not in SHADER_NODES:
+        notes.append(f"material {mat.name}: {node.bl_idname} is not convertible ({', '.join(SHADER_NODES)} are): grey")
+        return None
     if node.bl_idname == "ShaderNodeBsdfDiffuse":
         col, linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
         if linked:
@@ -542,7 +587,7 @@ def map_material(mat) -> tuple[dict, list]:
         if r_linked or rough > 0:
             notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
         return {"diffuseColor": col if isinstance(col, TextureMap) else col[:3], "roughness": 1.0, "metallic": 0.0,
-                "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}, notes
+                "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
     if node.bl_idname == "ShaderNodeEmission":
         col, c_linked = _socket(node, "Color", (1.0, 1.0, 1.0, 1.0))
         strength, s_linked = _socket(node, "Strength", 1.0)
@@ -550,9 +595,7 @@ def map_material(mat) -> tuple[dict, list]:
             notes.append(f"material {mat.name}: linked emission {'Color' if c_linked else 'Strength'} dropped (its "
                          "default used)")
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
-                "roughness": 1.0, "emissiveColor": tuple(float(c) * float(strength) for c in col[:3])}, notes
-    if node.bl_idname != "ShaderNodeBsdfPrincipled":
-        return grey, [f"material {mat.name}: {node.bl_idname} is not convertible (Principled BSDF, Diffuse BSDF are): grey"]
+                "roughness": 1.0, "emissiveColor": tuple(float(c) * float(strength) for c in col[:3])}
     vals = {}
     for name, default in (("Base Color", (0.8, 0.8, 0.8, 1.0)), ("Roughness", 0.5), ("Metallic", 0.0), ("IOR", 1.5),
                           ("Specular IOR Level", 0.5), ("Alpha", 1.0), ("Normal", None)):
@@ -593,7 +636,53 @@ def map_material(mat) -> tuple[dict, list]:
             inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], k)
             notes.append(f"material {mat.name}: Principled base colour x {k:.3f} for the specular layer's albedo "
                          "(Cycles layers the lobes, UsdPreviewSurface adds them)")
-    return inputs, notes
+    return inputs
+
+
+def _specular_form(inputs: dict) -> tuple:
+    """(kd, F0, roughness, emission) of converted inputs in the specular workflow (spec/renderer.md#materials:
+    kd = diffuseColor (1 - metallic), F0 = lerp(((1 - ior) / (1 + ior))^2, diffuseColor, metallic)); kd may be a
+    TextureMap, F0 of a textured metal is its mean colour."""
+    base = inputs["diffuseColor"]
+    emission = np.asarray(inputs.get("emissiveColor", (0.0, 0.0, 0.0)), np.float64)
+    if inputs.get("useSpecularWorkflow"):
+        return base, np.asarray(inputs.get("specularColor", (0.0, 0.0, 0.0)), np.float64), inputs["roughness"], emission
+    m, ior = float(inputs.get("metallic", 0.0)), float(inputs.get("ior", 1.5))
+    mean = base.image.reshape(-1, 3).mean(0) if isinstance(base, TextureMap) else np.asarray(base, np.float64)
+    f0 = ((1.0 - ior) / (1.0 + ior)) ** 2 * (1.0 - m) + mean * m
+    return _scaled(base, 1.0 - m), f0, inputs["roughness"], emission
+
+
+def _combine(parts: list, mat, notes: list) -> dict:
+    """Specular-workflow inputs of ``sum(w * shader)`` over ``parts`` [(w, inputs)]: kd, F0 and emission are the
+    weighted sums (a texture is kept and the constant colours are added to its texels; of two textures the heavier
+    one is kept, noted), the roughness is the mean weighted by each part's w x mean F0 (the lobes it shapes)."""
+    kd_tex, kd_sum, f0, em, rough_w, rough = None, np.zeros(3), np.zeros(3), np.zeros(3), 0.0, 0.0
+    for w, inputs in parts:
+        kd, f, r, e = _specular_form(inputs)
+        if isinstance(kd, TextureMap):
+            if kd_tex is None or w > kd_tex[0]:
+                if kd_tex is not None:
+                    notes.append(f"material {mat.name}: a mixed texture ({kd_tex[1].what}) dropped: one texture per input")
+                kd_tex = (w, kd)
+            else:
+                notes.append(f"material {mat.name}: a mixed texture ({kd.what}) dropped: one texture per input")
+        else:
+            kd_sum += w * np.asarray(kd, np.float64)
+        f0 += w * f
+        em += w * e
+        s = w * float(np.mean(f))
+        rough_w, rough = rough_w + s, rough + s * float(r)
+    if kd_tex is not None:
+        w, tex = kd_tex
+        kd = TextureMap(tex.image * w + kd_sum, tex.what, tex.scale_bias, tex.wrap)
+    else:
+        kd = tuple(float(c) for c in kd_sum)
+    out = {"diffuseColor": kd, "useSpecularWorkflow": 1, "specularColor": tuple(float(c) for c in f0),
+           "roughness": rough / rough_w if rough_w > 0 else 1.0}
+    if em.any():
+        out["emissiveColor"] = tuple(float(c) for c in em)
+    return out
 
 
 def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float:
