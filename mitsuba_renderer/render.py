@@ -99,13 +99,16 @@ def register(mi) -> None:
 
 
 def sensor_dict(mi, cam, width: int, height: int) -> dict:
-    """Mitsuba ``perspective`` sensor of a USD camera (horizontal aperture -> x field of view), box-filtered RGB film."""
+    """Mitsuba ``perspective`` sensor of a USD camera (horizontal aperture -> x field of view; aperture offsets ->
+    the principal point, in film widths right and film heights down), box-filtered RGB film."""
     eye = cam.to_world[3, :3]
     fwd = -cam.to_world[2, :3]
     return {
         "type": "perspective",
         "fov_axis": "x",
         "fov": float(np.degrees(2.0 * np.arctan(cam.h_aperture / (2.0 * cam.focal)))),
+        "principal_point_offset_x": float(cam.h_offset / cam.h_aperture),
+        "principal_point_offset_y": float(-cam.v_offset / (cam.h_aperture * height / width)),
         "to_world": mi.ScalarTransform4f().look_at(origin=eye.tolist(), target=(eye + fwd).tolist(), up=cam.to_world[1, :3].tolist()),
         "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
     }

@@ -87,18 +87,18 @@ def _m4(gf) -> np.ndarray:
     return np.array([[gf[i][j] for j in range(4)] for i in range(4)], np.float64)
 
 
-def _input(shader, name, default):
+def _input(shader, name, default, t=None):
     inp = shader.GetInput(name)
     if not inp:
         return default
     if inp.HasConnectedSource():
         warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected; its texture is ignored (default used)", stacklevel=3)
         return default
-    v = inp.Get()
+    v = inp.Get() if t is None else inp.Get(t)
     return default if v is None else v
 
 
-def read_material(prim, path) -> Material:
+def read_material(prim, path, t=None) -> Material:
     from pxr import UsdShade
 
     kd = np.array([0.18, 0.18, 0.18])
@@ -114,13 +114,13 @@ def read_material(prim, path) -> Material:
             sid = shader.GetIdAttr().Get()
             if sid != "UsdPreviewSurface":
                 raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not UsdPreviewSurface", file=path, prim=str(shader.GetPath()))
-            kd = np.asarray(_input(shader, "diffuseColor", kd), np.float64)
-            spec = np.asarray(_input(shader, "specularColor", spec), np.float64)
-            rough = float(_input(shader, "roughness", rough))
-            metal = float(_input(shader, "metallic", metal))
-            use_spec = int(_input(shader, "useSpecularWorkflow", use_spec))
-            ior = float(_input(shader, "ior", ior))
-            emis = np.asarray(_input(shader, "emissiveColor", emis), np.float64)
+            kd = np.asarray(_input(shader, "diffuseColor", kd, t), np.float64)
+            spec = np.asarray(_input(shader, "specularColor", spec, t), np.float64)
+            rough = float(_input(shader, "roughness", rough, t))
+            metal = float(_input(shader, "metallic", metal, t))
+            use_spec = int(_input(shader, "useSpecularWorkflow", use_spec, t))
+            ior = float(_input(shader, "ior", ior, t))
+            emis = np.asarray(_input(shader, "emissiveColor", emis, t), np.float64)
     if use_spec == 1:
         k, f0 = kd.copy(), spec
     else:
@@ -199,7 +199,8 @@ def read_scene(path: str) -> SceneDesc:
         stage = Usd.Stage.Open(path, Usd.Stage.LoadNone)
     except Exception as exc:
         raise SceneError("SCENE_INVALID", f"scene does not open: {str(exc).splitlines()[0][:200]}", file=path) from None
-    t = Usd.TimeCode.Default()
+    # the render time of spec/renderer.md#traversal: the stage's start, else each attribute's default or first sample
+    t = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.EarliestTime()
     cache = UsdGeom.XformCache(t)
     camera = None
     meshes, lights, assets = [], [], []
@@ -225,22 +226,22 @@ def read_scene(path: str) -> SceneDesc:
         if tn == "Camera":
             if camera is None:
                 cam = UsdGeom.Camera(prim)
-                if cam.GetProjectionAttr().Get() not in (None, "perspective"):
+                if cam.GetProjectionAttr().Get(t) not in (None, "perspective"):
                     raise SceneError("SCENE_UNSUPPORTED", "only perspective cameras are supported", file=path, prim=ppath)
-                ha = float(cam.GetHorizontalApertureAttr().Get())
-                va = cam.GetVerticalApertureAttr().Get()
-                camera = Camera(ppath, _m4(cache.GetLocalToWorldTransform(prim)), float(cam.GetFocalLengthAttr().Get()), ha,
-                                float(va or ha), float(cam.GetHorizontalApertureOffsetAttr().Get() or 0.0),
-                                float(cam.GetVerticalApertureOffsetAttr().Get() or 0.0))
+                ha = float(cam.GetHorizontalApertureAttr().Get(t))
+                va = cam.GetVerticalApertureAttr().Get(t)
+                camera = Camera(ppath, _m4(cache.GetLocalToWorldTransform(prim)), float(cam.GetFocalLengthAttr().Get(t)), ha,
+                                float(va or ha), float(cam.GetHorizontalApertureOffsetAttr().Get(t) or 0.0),
+                                float(cam.GetVerticalApertureOffsetAttr().Get(t) or 0.0))
             continue
         if tn in _LIGHTS:
-            lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path))
+            lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path, t))
             continue
         if tn == "Mesh":
             m = UsdGeom.Mesh(prim)
-            pts = np.asarray(m.GetPointsAttr().Get() or [], np.float64).reshape(-1, 3)
-            counts = np.asarray(m.GetFaceVertexCountsAttr().Get() or [], np.int64)
-            idx = np.asarray(m.GetFaceVertexIndicesAttr().Get() or [], np.int64)
+            pts = np.asarray(m.GetPointsAttr().Get(t) or [], np.float64).reshape(-1, 3)
+            counts = np.asarray(m.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
+            idx = np.asarray(m.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
             if len(pts) == 0 or len(counts) == 0:
                 warnings.warn(f"{ppath}: empty mesh ignored", stacklevel=2)
                 continue
@@ -257,8 +258,10 @@ def read_scene(path: str) -> SceneDesc:
             mw = _m4(cache.GetLocalToWorldTransform(prim))
             wp = pts @ mw[:3, :3] + mw[3, :3]
             faces = np.asarray(faces, np.int64)
-            cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), np.asarray(face_of, np.int64), len(pts), len(idx), len(counts), mw)
-            meshes.append(Mesh(ppath, wp, faces, read_material(prim, path), cn))
+            face_of = np.asarray(face_of, np.int64)
+            cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
+            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t):
+                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t), None if cn is None else cn[sel]))
             continue
         if tn in _STRUCTURAL:
             continue
@@ -270,18 +273,48 @@ def read_scene(path: str) -> SceneDesc:
     return SceneDesc(path, camera, meshes, lights, assets)
 
 
-def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw):
+def _face_groups(mesh, face_of, n_faces: int, path: str, t) -> list:
+    """[(prim path, prim whose binding shades them, triangle mask)] of a mesh (spec/renderer.md#materials): the faces of
+    each ``materialBind`` GeomSubset of element type face with a bound material (the first subset listing a face
+    wins), the rest under the mesh's own binding; ``holeIndices`` faces left out."""
+    from pxr import UsdGeom, UsdShade
+
+    owner = np.full(n_faces, -1, np.int64)
+    groups = []
+    for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets():
+        if subset.GetElementTypeAttr().Get(t) != UsdGeom.Tokens.face:
+            continue
+        if not UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0]:
+            continue
+        ind = np.asarray(subset.GetIndicesAttr().Get(t) or [], np.int64)
+        if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):
+            raise SceneError("SCENE_INVALID", "GeomSubset face indices outside the mesh", file=path, prim=str(subset.GetPath()))
+        free = ind[owner[ind] < 0]
+        owner[free] = len(groups)
+        groups.append((str(subset.GetPath()), subset.GetPrim()))
+    holes = np.asarray(mesh.GetHoleIndicesAttr().Get(t) or [], np.int64)
+    if len(holes):
+        if holes.min() < 0 or holes.max() >= n_faces:
+            raise SceneError("SCENE_INVALID", "hole indices outside the mesh", file=path, prim=str(mesh.GetPath()))
+        owner[holes] = -2
+    out = [(where, prim, owner[face_of] == k) for k, (where, prim) in enumerate(groups)]
+    rest = owner[face_of] == -1
+    out.append((str(mesh.GetPath()), mesh.GetPrim(), rest))
+    return [g for g in out if g[2].any()]
+
+
+def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
     """Authored normals (primvars:normals, else normals) as world shading normals per triangle corner."""
     from pxr import UsdGeom
 
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
     if pv and pv.HasAuthoredValue():
-        vals, interp = pv.ComputeFlattened(), pv.GetInterpolation()
+        vals, interp = pv.ComputeFlattened(t), pv.GetInterpolation()
     else:
         a = UsdGeom.Mesh(prim).GetNormalsAttr()
         if not a or not a.HasAuthoredValue():
             return None
-        vals, interp = a.Get(), UsdGeom.Mesh(prim).GetNormalsInterpolation()
+        vals, interp = a.Get(t), UsdGeom.Mesh(prim).GetNormalsInterpolation()
     if vals is None:
         return None
     v = np.asarray(vals, np.float64).reshape(-1, 3)
@@ -298,7 +331,7 @@ def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw):
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
 
 
-def _read_light(prim, tn, mw, path) -> Light:
+def _read_light(prim, tn, mw, path, t) -> Light:
     from pxr import Sdf
 
     ppath = str(prim.GetPath())
@@ -307,7 +340,7 @@ def _read_light(prim, tn, mw, path) -> Light:
         a = prim.GetAttribute("inputs:" + name)
         if not a:
             a = prim.GetAttribute(name)
-        v = a.Get() if a else None
+        v = a.Get(t) if a else None
         return default if v is None else v
 
     rad = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)
