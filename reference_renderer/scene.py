@@ -23,6 +23,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
+from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
 from .sampling import box3, face_normals
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
@@ -340,11 +341,12 @@ class _Loader:
                 self.cameras.append(prim)
             elif tname == "Mesh":
                 self._mesh(prim)
-            elif tname in ("Sphere", "Cube"):
+            elif tname in IMPLICIT_PRIMS:
                 self._implicit(prim, tname)
-            elif tname in ("Cylinder", "Cone", "Capsule", "Plane", "BasisCurves", "NurbsCurves", "NurbsPatch", "Points",
-                           "HermiteCurves", "TetMesh", "PointInstancer", "Volume"):
-                raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh, Sphere, Cube are)", path)
+            elif tname in ("BasisCurves", "NurbsCurves", "NurbsPatch", "Points", "HermiteCurves", "TetMesh", "PointInstancer",
+                           "Volume"):
+                raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh and the implicit "
+                               f"{', '.join(IMPLICIT_PRIMS)} are)", path)
         if not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
         camera = self._camera(self.cameras[0])
@@ -829,30 +831,30 @@ class _Loader:
         return bool(attr and attr.HasAuthoredValue() and not attr.Get(self.time))
 
     def _implicit(self, prim, tname):
-        import trimesh
+        """An implicit prim as the mesh of :func:`implicit.implicit_mesh` (spec/renderer.md#implicit-prims)."""
         from pxr import UsdGeom
 
-        if tname == "Sphere":
-            r = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time) or 1.0)
-            tm = trimesh.creation.icosphere(subdivisions=4, radius=r)
-            nrm = np.asarray(tm.vertex_normals, np.float64)
-        else:
-            s = float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time) or 2.0)
-            tm = trimesh.creation.box(extents=(s, s, s))
-            nrm = None
+        size = {}
+        for name, fallback in IMPLICIT_PRIMS[tname].items():
+            attr = prim.GetAttribute(name)
+            v = attr.Get(self.time) if attr else None
+            v = fallback if v is None else float(v)
+            if not (np.isfinite(v) and 0 < v <= MAX_WORLD_COORDINATE):
+                raise self.err("SCENE_INVALID", f"{tname} {name} = {v!r} must be finite and > 0", prim.GetPath(), name)
+            size[name] = v
+        axis_attr = prim.GetAttribute("axis")
+        axis = str(axis_attr.Get(self.time)) if axis_attr and axis_attr.Get(self.time) is not None else "Z"
+        if axis not in ("X", "Y", "Z"):
+            raise self.err("SCENE_INVALID", f"{tname} axis {axis!r} (X, Y or Z)", prim.GetPath(), "axis")
+        pts, faces, nrm = implicit_mesh(tname, size, axis)
         M = self.matrix(UsdGeom.Xformable(prim))
-        pw = np.asarray(tm.vertices, np.float64) @ M[:3, :3] + M[3, :3]
-        faces = np.asarray(tm.faces, np.int64)
+        pw = pts @ M[:3, :3] + M[3, :3]
         if self._reversed(UsdGeom.Gprim(prim), M):
-            faces = faces[:, [0, 2, 1]]
-        if nrm is not None and UsdGeom.Gprim(prim).GetOrientationAttr().Get(self.time) == "leftHanded":
-            nrm = -nrm  # the front of a left-handed sphere is its inside
+            faces, nrm = faces[:, [0, 2, 1]], nrm[:, [0, 2, 1]]
+        if UsdGeom.Gprim(prim).GetOrientationAttr().Get(self.time) == "leftHanded":
+            nrm = -nrm  # the front of a left-handed prim is its inside
         tris = pw[faces]
-        if nrm is not None:
-            n = (nrm @ np.linalg.inv(M[:3, :3]).T)[faces]
-        else:
-            ng = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-            n = np.repeat(ng[:, None], 3, 1)
+        n = nrm @ np.linalg.inv(M[:3, :3]).T
         n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
         self.warn(f"implicit {tname} tessellated into {len(faces)} triangles", prim.GetPath())
         inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim),
