@@ -265,7 +265,7 @@ def read_scene(path: str) -> SceneDesc:
             continue
         if tn in _STRUCTURAL:
             continue
-        if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim):
+        if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim) or tn == "PointInstancer":
             raise SceneError("SCENE_UNSUPPORTED", f"prim type {tn!r} is not supported", file=path, prim=ppath)
         warnings.warn(f"{ppath}: prim type {tn!r} ignored", stacklevel=2)
     if camera is None:

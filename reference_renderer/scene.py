@@ -30,6 +30,7 @@ from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
+MAX_INSTANCED_TRIANGLES = 1 << 24  # triangles a PointInstancer's instances may add (a small file must not fill memory)
 MAX_WORLD_COORDINATE = 1e12  # |world coordinate| of any triangle vertex or the camera (float32 ray casting)
 MIN_ASSET_SIZE = 1e-9  # world bounding-box diagonal of a NeuralAsset instance, absolute ...
 MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ray offset 1e-5 S)
@@ -277,6 +278,8 @@ def render_time(stage, time=None):
 class _Loader:
     def __init__(self, stage, file: str, time) -> None:
         self.stage, self.file, self.time = stage, file, time
+        self._said: set[str] = set()
+        self._placement: np.ndarray | None = None  # inv(prototype root) @ instance @ PointInstancer, while expanding one
         self.warnings: list[str] = []
         self.tris: list = []
         self.tri_local: list = []
@@ -300,13 +303,18 @@ class _Loader:
         """The prim's world transform (4x4, row vectors); ``SCENE_INVALID`` when it is not finite or exceeds
         MAX_TRANSFORM (a NaN transform would otherwise pass every later test and render nothing)."""
         M = _matrix(xformable, self.time)
+        if self._placement is not None:  # a PointInstancer's prototype: relative to its root, then the instance
+            M = M @ self._placement
         if not np.isfinite(M).all() or np.abs(M).max() > MAX_TRANSFORM:
             raise self.err("SCENE_INVALID", f"world transform is not finite or has an entry above {MAX_TRANSFORM:g}",
                            xformable.GetPrim().GetPath(), "xformOpOrder")
         return M
 
     def warn(self, msg, prim=None):
-        _warn(self.warnings, f"{self.file}:{prim}: {msg}" if prim else f"{self.file}: {msg}")
+        text = f"{self.file}:{prim}: {msg}" if prim else f"{self.file}: {msg}"
+        if text not in self._said:  # once each (a PointInstancer repeats its prototypes' warnings per instance)
+            self._said.add(text)
+            _warn(self.warnings, text)
 
     # -- traversal -------------------------------------------------------------------------
     def load(self) -> Scene:
@@ -343,8 +351,10 @@ class _Loader:
                 self._mesh(prim)
             elif tname in IMPLICIT_PRIMS:
                 self._implicit(prim, tname)
-            elif tname in ("BasisCurves", "NurbsCurves", "NurbsPatch", "Points", "HermiteCurves", "TetMesh", "PointInstancer",
-                           "Volume"):
+            elif tname == "PointInstancer":
+                self._point_instancer(prim)
+                it.PruneChildren()  # prototypes beneath it render only as its instances
+            elif tname in ("BasisCurves", "NurbsCurves", "NurbsPatch", "Points", "HermiteCurves", "TetMesh", "Volume"):
                 raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh and the implicit "
                                f"{', '.join(IMPLICIT_PRIMS)} are)", path)
         if not self.cameras:
@@ -829,6 +839,57 @@ class _Loader:
         """True when ``doubleSided`` is authored false (spec/renderer.md#sidedness); unauthored keeps both sides."""
         attr = gprim.GetDoubleSidedAttr()
         return bool(attr and attr.HasAuthoredValue() and not attr.Get(self.time))
+
+    def _point_instancer(self, prim) -> None:
+        """Every instance of a PointInstancer whose prototypes are meshes and implicit prims (spec/renderer.md#geometry):
+        each prototype prim placed by ``ComputeInstanceTransformsAtTime`` (the prototype root's own transform
+        included) under the instancer's world transform; masked (``invisibleIds``) instances are left out."""
+        from pxr import Usd, UsdGeom
+
+        from nasset_sdk.references import asset_source
+
+        pi = UsdGeom.PointInstancer(prim)
+        path = str(prim.GetPath())
+        protos = [self.stage.GetPrimAtPath(p) for p in pi.GetPrototypesRel().GetForwardedTargets()]
+        xforms = pi.ComputeInstanceTransformsAtTime(self.time, self.time, UsdGeom.PointInstancer.IncludeProtoXform,
+                                                    UsdGeom.PointInstancer.IgnoreMask)  # the mask is applied below
+        indices = np.asarray(pi.GetProtoIndicesAttr().Get(self.time) or [], np.int64)
+        if xforms is None or len(xforms) != len(indices):
+            raise self.err("SCENE_INVALID", "PointInstancer instances cannot be computed (protoIndices, positions, "
+                           "orientations, scales or the prototypes disagree)", path, "protoIndices")
+        if len(indices) and (indices.min() < 0 or indices.max() >= len(protos) or not all(protos)):
+            raise self.err("SCENE_INVALID", "protoIndices name a prototype that is missing", path, "protoIndices")
+        mask = np.asarray(pi.ComputeMaskAtTime(self.time) or [True] * len(indices), bool)
+        world = self.matrix(pi)
+        parts = {k: [] for k in range(len(protos))}  # prototype -> [(prim, type name)]
+        for k, root in enumerate(protos):
+            walk = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies()))
+            for p in walk:
+                img = UsdGeom.Imageable(p)
+                if img and (img.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible
+                            or img.GetPurposeAttr().Get(self.time) in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)):
+                    walk.PruneChildren()
+                    continue
+                t = str(p.GetTypeName())
+                if asset_source(p) is not None or t in ("NeuralAsset", "PointInstancer"):
+                    raise self.err("SCENE_UNSUPPORTED", f"a {t or 'neural asset'} as a PointInstancer prototype (meshes "
+                                   "and implicit prims are rendered)", str(p.GetPath()))
+                if t == "Mesh" or t in IMPLICIT_PRIMS:
+                    parts[k].append((p, t))
+        inv_roots = [np.linalg.inv(_matrix(UsdGeom.Xformable(root), self.time)) for root in protos]
+        added = 0
+        for i in np.nonzero(mask)[0]:
+            k, first = int(indices[i]), len(self.tris)
+            self._placement = inv_roots[k] @ np.array(xforms[int(i)], np.float64) @ world
+            try:
+                for p, t in parts[k]:
+                    self._mesh(p) if t == "Mesh" else self._implicit(p, t)
+            finally:
+                self._placement = None
+            added += sum(len(t) for t in self.tris[first:])
+            if added > MAX_INSTANCED_TRIANGLES:
+                raise self.err("SCENE_INVALID", f"the instances add more than {MAX_INSTANCED_TRIANGLES} triangles", path,
+                               "protoIndices")
 
     def _implicit(self, prim, tname):
         """An implicit prim as the mesh of :func:`implicit.implicit_mesh` (spec/renderer.md#implicit-prims)."""

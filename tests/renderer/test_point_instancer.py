@@ -1,0 +1,76 @@
+"""PointInstancer (spec/renderer.md#geometry): each instance renders its prototype, placed as USD computes it.
+Before, a PointInstancer was SCENE_UNSUPPORTED."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from pxr import Gf, UsdGeom, Vt
+
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.testscenes import SceneBuilder
+from nasset_sdk.errors import SceneError
+
+
+def _scene(tmp_path, *, positions, proto_indices, invisible=(), with_root_xform=False):
+    """Two prototypes under the instancer (a red unit quad facing +Y, a green cube of edge 0.5), a camera above."""
+    b = SceneBuilder()
+    b.camera((0, 6, 0.001), (0, 0, 0), focal=20)
+    pi = UsdGeom.PointInstancer.Define(b.stage, "/World/Scatter")
+    protos = b.stage.DefinePrim("/World/Scatter/Prototypes", "Scope")
+    quad = b.mesh("Scatter/Prototypes/Tile", [(-0.5, 0, -0.5), (-0.5, 0, 0.5), (0.5, 0, 0.5), (0.5, 0, -0.5)],
+                  [[0, 1, 2, 3]], diffuse=(0.8, 0.1, 0.1), specular=(0, 0, 0), roughness=1.0)
+    if with_root_xform:  # the prototype root's own transform is part of each instance
+        UsdGeom.Xformable(quad).AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 1.0))
+    cube = UsdGeom.Cube.Define(b.stage, "/World/Scatter/Prototypes/Box")
+    cube.CreateSizeAttr(0.5)
+    assert protos
+    pi.CreatePrototypesRel().SetTargets([quad.GetPath(), cube.GetPath()])
+    pi.CreateProtoIndicesAttr(Vt.IntArray(list(proto_indices)))
+    pi.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(*p) for p in positions]))
+    if invisible:
+        pi.CreateInvisibleIdsAttr(Vt.Int64Array(list(invisible)))
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load_scene(b.write(tmp_path / "s.usda"))
+
+
+def _centroid_x(scene, channel):
+    img = render(scene, RenderSettings(spp=2, width=64, height=64, max_depth=1)).image[..., channel]
+    ys, xs = np.mgrid[0:64, 0:64]
+    return float((img * xs).sum() / img.sum()), float(img.sum())
+
+
+def test_instances_render_their_prototypes_where_the_instancer_places_them(tmp_path):
+    scene = _scene(tmp_path, positions=[(-1.5, 0, 0), (1.5, 0, 0), (0, 0, 0)], proto_indices=[0, 0, 1])
+    assert len([i for i in scene.instances if i.prim.endswith("/Tile")]) == 2
+    assert len([i for i in scene.instances if i.prim.endswith("/Box")]) == 1
+    tiles = [i.box for i in scene.instances if i.prim.endswith("/Tile")]
+    np.testing.assert_allclose(sorted(0.5 * (lo[0] + hi[0]) for lo, hi in tiles), [-1.5, 1.5], atol=1e-9)
+    x, red = _centroid_x(scene, 0)
+    assert red > 0 and abs(x - 31.5) < 1.0  # two tiles placed symmetrically about the image centre
+
+
+def test_masked_instances_and_the_prototype_root_transform(tmp_path):
+    scene = _scene(tmp_path, positions=[(-1.5, 0, 0), (1.5, 0, 0)], proto_indices=[0, 0], invisible=[0],
+                   with_root_xform=True)
+    (lo, hi), = [i.box for i in scene.instances]
+    np.testing.assert_allclose(0.5 * (lo + hi), [1.5, 0.0, 1.0], atol=1e-6)
+
+
+def test_bad_proto_indices_are_scene_errors(tmp_path):
+    with pytest.raises(SceneError) as exc:
+        _scene(tmp_path, positions=[(0, 0, 0)], proto_indices=[5])
+    assert "protoIndices" in str(exc.value)
+
+
+def test_instances_past_the_triangle_bound_are_refused(tmp_path, monkeypatch):
+    from nasset_reference_renderer import scene as scene_module
+
+    monkeypatch.setattr(scene_module, "MAX_INSTANCED_TRIANGLES", 20)
+    with pytest.raises(SceneError) as exc:
+        _scene(tmp_path, positions=[(x, 0, 0) for x in range(20)], proto_indices=[0] * 20)
+    assert "more than 20 triangles" in str(exc.value)
