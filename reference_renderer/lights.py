@@ -258,6 +258,39 @@ class RectLight(Light):
         return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
 
 
+class DiskLight(RectLight):
+    """UsdLux.DiskLight: the ellipse ``c + a e_x + b e_y``, a² + b² <= 1 (``axis_x`` / ``axis_y``: radius vectors, world
+    space, scale included: a disk under non-uniform scale is an ellipse), emitting along -(e_x x e_y), sampled
+    uniformly by area."""
+
+    def __init__(self, center, axis_x, axis_y, radiance, prim: str = "") -> None:
+        super().__init__(center, axis_x, axis_y, radiance, prim)
+        self.A *= np.pi  # pi |e_x x e_y|
+        g = np.array([[self.ex @ self.ex, self.ex @ self.ey], [self.ex @ self.ey, self.ey @ self.ey]])
+        self.g_inv = np.linalg.inv(g) if abs(np.linalg.det(g)) > 1e-300 else np.zeros((2, 2))
+
+    def sample(self, p, u):
+        rho, phi = np.sqrt(u[:, 0:1]), 2.0 * np.pi * u[:, 1:2]  # uniform on the unit disk, so on its affine image
+        q = self.c + rho * np.cos(phi) * self.ex + rho * np.sin(phi) * self.ey
+        v = q - p
+        d2 = np.maximum(dot(v, v), 1e-300)
+        dist = np.sqrt(d2)
+        wi = v / dist[:, None]
+        cos_l = -(wi @ self.n)
+        ok = cos_l > 1e-9
+        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+
+    def _hit(self, o, d):
+        den = d @ self.n
+        front = den < -1e-12  # ray travels against the emission direction
+        t = np.where(front, ((self.c - o) @ self.n) / np.where(front, den, -1.0), INF)
+        q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
+        ab = np.stack([q @ self.ex, q @ self.ey], 1) @ self.g_inv  # q = a e_x + b e_y
+        ok = front & (t > 0) & ((ab * ab).sum(1) <= 1.0)
+        return np.where(ok, t, INF)
+
+
 #: Emissive meshes with at most this many triangles are sampled as lights (``MeshLight.pdf`` tests each triangle).
 MAX_MESH_LIGHT_TRIANGLES = 64
 

@@ -24,7 +24,7 @@ from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
-from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
+from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DiskLight, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
 from .sampling import box3, face_normals
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
 
@@ -45,7 +45,7 @@ class SceneWarning(UserWarning):
     """Something in the scene is ignored or approximated; the render still runs."""
 
 
-SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DomeLight")
+SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "DomeLight")
 PREVIEW_DEFAULTS = {
     "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
     "specularColor": (0.0, 0.0, 0.0), "metallic": 0.0, "roughness": 0.5, "ior": 1.5, "opacity": 1.0,
@@ -60,6 +60,7 @@ _LIGHT_INPUTS = {
     "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness",
                     "nasset:shaping:falloff"},
     "RectLight": {"inputs:width", "inputs:height"},
+    "DiskLight": {"inputs:radius"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
 }
 _IGNORED_PREFIXES = ("xformOp", "visibility", "purpose", "extent", "proxyPrim", "collection:", "light:", "primvars:",
@@ -1084,6 +1085,14 @@ class _Loader:
             area = float(np.linalg.norm(np.cross(ex, ey)))
             L = scale / area if normalize and area > 0 else scale
             self.lights.append(RectLight(M[3, :3], ex, ey, L, path))
+        elif tname == "DiskLight":
+            r = float(g(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5))
+            if r < 0:
+                raise self.err("SCENE_INVALID", "radius must be >= 0", path, "inputs:radius")
+            ex, ey = r * M[0, :3], r * M[1, :3]
+            area = float(np.pi * np.linalg.norm(np.cross(ex, ey)))
+            L = scale / area if normalize and area > 0 else scale
+            self.lights.append(DiskLight(M[3, :3], ex, ey, L, path))
         else:
             dl = UsdLux.DomeLight(prim)
             fmt = g(dl.GetTextureFormatAttr(), "automatic")

@@ -187,17 +187,19 @@ class _BlenderConverter(StageConverter):
             elif lt.type == "AREA":
                 w = float(lt.size)
                 h = float(lt.size_y) if lt.shape in ("RECTANGLE", "ELLIPSE") else w
-                if lt.shape in ("DISK", "ELLIPSE"):
-                    k = math.sqrt(math.pi) / 2.0  # equal-area square side / diameter
-                    self.warn(f"light {ob.name}: {lt.shape.lower()} area light written as an equal-area rectangle")
-                    w, h = w * k, h * k
-                light = UsdLux.RectLight.Define(self.stage, path)
-                light.CreateWidthAttr(w)
-                light.CreateHeightAttr(h)
                 row = _row(ob, unit=False)
-                self._xform(light.GetPrim(), row)
                 sx, sy = np.linalg.norm(row[0, :3]), np.linalg.norm(row[1, :3])
-                area = w * h * sx * sy
+                if lt.shape in ("DISK", "ELLIPSE"):  # a DiskLight of radius 0.5 scaled to the w x h ellipse
+                    light = UsdLux.DiskLight.Define(self.stage, path)
+                    light.CreateRadiusAttr(0.5)
+                    row = np.diag([w, h, 1.0, 1.0]) @ row
+                    area = math.pi * 0.25 * w * h * sx * sy
+                else:
+                    light = UsdLux.RectLight.Define(self.stage, path)
+                    light.CreateWidthAttr(w)
+                    light.CreateHeightAttr(h)
+                    area = w * h * sx * sy
+                self._xform(light.GetPrim(), row)
                 if getattr(lt, "spread", math.pi) < math.pi - 1e-6:
                     self.warn(f"light {ob.name}: area light spread dropped (Lambertian emission)")
                 self._hidden_from_camera(light)

@@ -88,7 +88,8 @@ def _sidedness(folder: Path, size: int) -> str:
 def _orientation(folder: Path, size: int) -> str:
     # which side is the front: mirrored (scale z -1) and flip_normals shapes, one-sided, seen from their
     # Mitsuba back (black); a rectangle emitter turned to the floor by flip_normals; a twosided emitting
-    # panel seen from its back (Mitsuba's area emitter emits from its front only)
+    # panel seen from its back (Mitsuba's area emitter emits from its front only); a flip_normals disk emitter (a
+    # DiskLight)
     (folder / "quad.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n")
     (folder / "up.obj").write_text("v -0.3 0 -0.3\nv 0.3 0 -0.3\nv 0.3 0 0.3\nv -0.3 0 0.3\nf 4 3 2 1\n")
     def panel(sid, shape, x, scale_z="0.25", flip=False):
@@ -107,6 +108,9 @@ def _orientation(folder: Path, size: int) -> str:
             + panel("flipped", "rectangle", 0.3, flip=True) + panel("front", "rectangle", 0.9)
             + '<shape type="rectangle" id="light"><boolean name="flip_normals" value="true"/><transform name="to_world">'
               '<scale value="0.2"/><rotate x="1" angle="-90"/><translate x="-0.5" y="1.2" z="0.4"/></transform>'
+            + emit + "</shape>\n"
+            + '<shape type="disk" id="disk_light"><boolean name="flip_normals" value="true"/><transform name="to_world">'
+              '<scale value="0.15"/><rotate x="1" angle="-90"/><translate x="0.1" y="1.0" z="-0.4"/></transform>'
             + emit + "</shape>\n"
             + '<shape type="obj" id="lamp"><string name="filename" value="up.obj"/><transform name="to_world">'
               '<translate x="0.5" y="1.3" z="0.4"/></transform><bsdf type="twosided"><bsdf type="diffuse"/></bsdf>'
@@ -249,7 +253,7 @@ SCENES = {
                                "panels, one with a different back BSDF"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a sensor with its principal point offset (x 0.15, y -0.1)"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
-                                 "flip_normals, a flip_normals rectangle emitter, a twosided emitting panel"),
+                                 "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }
 
 

@@ -644,7 +644,7 @@ class StageConverter:
                 "; its area emitter too (Mitsuba's path tracer does not show it to the camera and lights the scene from "
                 "it through emitter samples only, which no USD light reproduces)" if emitter is not None else ""))
             return
-        if emitter is not None and cls in ("Rectangle", "Sphere"):
+        if emitter is not None and cls in ("Rectangle", "Disk", "Sphere"):
             self._area_light(shape, sid, cls, emitter)
             return
         emission = None
@@ -802,15 +802,19 @@ class StageConverter:
             self.warn(f"shape {sid}: the reflectance of the emitting {cls} is dropped (it becomes a light)")
         m = _matrix(self.mi.traverse(shape)["to_world"])
         path = self._name("/World/Lights", sid)
-        if cls == "Rectangle":
-            light = UsdLux.RectLight.Define(self.stage, path)
-            light.CreateWidthAttr(2.0)
-            light.CreateHeightAttr(2.0)
+        if cls in ("Rectangle", "Disk"):  # the local [-1, 1]^2 square or unit disk, as a RectLight or DiskLight
+            if cls == "Rectangle":
+                light = UsdLux.RectLight.Define(self.stage, path)
+                light.CreateWidthAttr(2.0)
+                light.CreateHeightAttr(2.0)
+            else:
+                light = UsdLux.DiskLight.Define(self.stage, path)
+                light.CreateRadiusAttr(1.0)
             rows = _FLIP_RECT @ _row(m)
             if float(np.cross(rows[0, :3], rows[1, :3]) @ sampled_normal(self.mi, shape)[1]) > 0.0:
                 rows = np.diag([-1.0, 1.0, -1.0, 1.0]) @ rows  # it emits along -(e_x x e_y): turn it to Mitsuba's side
             self._xform(light.GetPrim(), rows)
-            self._light_common(light, radiance, path, f"area emitter on rectangle {sid}")
+            self._light_common(light, radiance, path, f"area emitter on {cls.lower()} {sid}")
         else:
             scales = np.linalg.norm(m[:3, :3], axis=0)
             if not np.allclose(scales, scales.mean(), rtol=1e-4):

@@ -26,7 +26,13 @@ def test_converted_blender_scene_renders_like_cycles(tmp_path, name):
     assert r["noise_ratio"] < 1.4, (name, r["noise_ratio"], r["psnr"], r["psnr_seed"])
 
 
-def test_warnings_name_what_is_approximated(tmp_path):
-    """One warning per approximated object: the disk area light (and nothing for the exact rectangles)."""
+def test_area_lights_convert_exactly_without_warnings(tmp_path):
+    """Rectangle and square area lights are RectLights, disk and ellipse ones DiskLights (before: equal-area
+    rectangles, warned); none is approximated, so none is warned about."""
+    from pxr import Usd
+
     r = measure("area_lights", tmp_path, size=8, spp=4)
-    assert [w for w in r["warnings"] if "Disk" in w] and not [w for w in r["warnings"] if "Rect" in w or "Square" in w]
+    assert not [w for w in r["warnings"] if "light" in w], r["warnings"]
+    stage = Usd.Stage.Open(str(tmp_path / "area_lights.usda"))
+    types = {p.GetName(): str(p.GetTypeName()) for p in stage.Traverse() if p.GetTypeName().endswith("Light")}
+    assert types == {"Rect": "RectLight", "Square": "RectLight", "Disk": "DiskLight", "Ellipse": "DiskLight"}, types

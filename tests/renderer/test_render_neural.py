@@ -107,10 +107,10 @@ def test_unsupported_light(tmp_path):
 
     b = SceneBuilder()
     b.camera((0, 0, 3), (0, 0, 0))
-    UsdLux.DiskLight.Define(b.stage, "/World/Disk")
+    UsdLux.CylinderLight.Define(b.stage, "/World/Tube")
     with pytest.raises(SceneError) as e:
         load_scene(b.write(tmp_path / "s.usda"))
-    assert e.value.code == "SCENE_UNSUPPORTED" and e.value.prim == "/World/Disk"
+    assert e.value.code == "SCENE_UNSUPPORTED" and e.value.prim == "/World/Tube"
 
 
 def test_unsupported_material(tmp_path):
