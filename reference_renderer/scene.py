@@ -26,7 +26,7 @@ from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DiskLight, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
 from .sampling import box3, face_normals
-from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear
+from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
@@ -656,16 +656,33 @@ class _Loader:
         bias = np.asarray(value("bias", (0.0, 0.0, 0.0, 0.0)), np.float64)[:3]
         if not (np.isfinite(scale).all() and np.isfinite(bias).all()):
             raise self.err("SCENE_INVALID", "UsdUVTexture scale / bias must be finite", tpath, "inputs:scale")
-        varname = "st"
-        st = node.GetInput("st")
-        reader = st.GetConnectedSource() if st and st.HasConnectedSource() else None
-        rnode = UsdShade.Shader(reader[0].GetPrim()) if reader and reader[0] else None
+        varname, uv_matrix = "st", None
+
+        def source_of(shader, name):
+            inp = shader.GetInput(name)
+            src = inp.GetConnectedSource() if inp and inp.HasConnectedSource() else None
+            return UsdShade.Shader(src[0].GetPrim()) if src and src[0] else None
+
+        rnode = source_of(node, "st")
+        if rnode and rnode.GetIdAttr().Get() == "UsdTransform2d":  # st through a 2D transform (texture tiling)
+            vals = []
+            for name, default in (("scale", (1.0, 1.0)), ("rotation", 0.0), ("translation", (0.0, 0.0))):
+                i = rnode.GetInput(name)
+                v = i.Get(self.time) if i else None
+                v = np.asarray(default if v is None else v, np.float64)
+                if not np.isfinite(v).all() or np.abs(v).max(initial=0.0) > 1e9:
+                    raise self.err("SCENE_INVALID", f"UsdTransform2d {name} must be finite (|value| <= 1e9)",
+                                   rnode.GetPath(), f"inputs:{name}")
+                vals.append(v)
+            uv_matrix = transform2d(vals[0], float(vals[1]), vals[2])
+            rnode = source_of(rnode, "in")
         if rnode and rnode.GetIdAttr().Get() == "UsdPrimvarReader_float2":
             vi = rnode.GetInput("varname")
             varname = str((vi.Get(self.time) if vi else None) or "st")
         else:
-            self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2; primvar 'st' is used", tpath)
-        return ImageTexture(image, wraps[0], wraps[1], scale, bias, str(tpath)), varname
+            self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2 (directly or through a "
+                      "UsdTransform2d); primvar 'st' is used", tpath)
+        return ImageTexture(image, wraps[0], wraps[1], scale, bias, str(tpath), uv_matrix), varname
 
     def _read_image(self, asset, prim, attribute: str, what: str, *, ldr: bool = False):
         """[H, W, 3] float32 from an OpenEXR file named by an asset-path value (resolved by USD; the scene's

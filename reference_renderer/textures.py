@@ -21,6 +21,14 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def transform2d(scale=(1.0, 1.0), rotation: float = 0.0, translation=(0.0, 0.0)) -> np.ndarray:
+    """[2, 3] affine map of a UsdTransform2d: ``in * scale``, rotated counter-clockwise by ``rotation`` degrees,
+    plus ``translation``."""
+    c, s = np.cos(np.radians(rotation)), np.sin(np.radians(rotation))
+    m = np.array([[c, -s], [s, c]]) @ np.diag(np.asarray(scale, np.float64)[:2])
+    return np.concatenate([m, np.asarray(translation, np.float64)[:2, None]], 1)
+
+
 def _wrap(i: np.ndarray, n: int, mode: str) -> tuple[np.ndarray, np.ndarray]:
     """Texel indices [N] (any integers) -> (indices inside 0 .. n-1, valid mask) under a wrap mode."""
     if mode == "repeat":
@@ -42,6 +50,7 @@ class ImageTexture:
     scale: np.ndarray = None  # [3]
     bias: np.ndarray = None  # [3]
     name: str = ""
+    uv_matrix: np.ndarray | None = None  # [2, 3] affine st -> st of a UsdTransform2d (None: the identity)
 
     def __post_init__(self) -> None:
         self.image = np.ascontiguousarray(self.image, np.float64)
@@ -56,7 +65,10 @@ class ImageTexture:
     def sample(self, st: np.ndarray) -> np.ndarray:
         """Bilinear lookup at texture coordinates ``st`` [N, 2] -> colours [N, 3]."""
         h, w = self.image.shape[:2]
-        st = np.nan_to_num(np.asarray(st, np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        st = np.asarray(st, np.float64)
+        if self.uv_matrix is not None:
+            st = st @ self.uv_matrix[:, :2].T + self.uv_matrix[:, 2]
+        st = np.nan_to_num(st, nan=0.0, posinf=0.0, neginf=0.0)
         st = np.clip(st, -1e6, 1e6)  # floor() below stays an exact integer
         x = st[:, 0] * w - 0.5
         y = (1.0 - st[:, 1]) * h - 0.5

@@ -119,6 +119,13 @@ def _textures(bpy, folder: Path, size: int) -> None:
     _new_scene(bpy, size, (1.2, -2.6, 1.8), (0.0, 0.0, 0.3))
     floor = _material(bpy, "FloorTex")
     _image_texture(bpy, floor, "Color", _checker_png(folder / "floor.png", [(230, 200, 120), (60, 90, 160)]), "sRGB")
+    nt = floor.node_tree  # the floor's UVs tiled and turned by a Mapping node (scale, rotate about Z, translate)
+    coords, mapping = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (2.0, 1.5, 1.0)
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(20.0))
+    mapping.inputs["Location"].default_value = (0.1, 0.3, 0.0)
+    nt.links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeTexImage").inputs["Vector"])
     _add(bpy, "plane", "Floor", floor, size=3.0)
     box = _material(bpy, "BoxData", "principled", **{"Roughness": 0.6})
     _image_texture(bpy, box, "Base Color", _checker_png(folder / "box.png", [(250, 70, 40), (240, 240, 230)], squares=4),
@@ -358,7 +365,7 @@ def _surface_types(bpy, folder: Path, size: int) -> None:
 
 
 SCENES = {
-    "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor, "
+    "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor (UVs through a Mapping node), "
                               "a Non-Color PNG as a Principled Base Color on a box"),
     "spot": FidelityScene("spot", _spot, "spot light (size 50 deg, blend 0.3) and a point light over a floor and a ball"),
     "instances": FidelityScene("instances", _instances, "a collection (sphere + cube) placed by three collection "
@@ -497,6 +504,9 @@ NOTES = """
   stays off target until the format has a layered (view-dependent) diffuse.
 - lens_shift was 0.96 / 0.97 / 0.99 with MSE / noise 288 (64 x 64, 64 spp): the camera's shift was dropped
   (warned). It is now the camera's aperture offsets, which the renderer applies (spec/renderer.md#scene-input).
+- textures read 1.07 / 1.06 / 1.03 with MSE / noise 539 (64 x 64, 64 spp) once its floor's UVs went through a
+  Mapping node (scale 2 x 1.5, 20 deg, offset): the node was dropped (warned). A Point mapping of UVs is now the
+  texture's UsdTransform2d (spec/renderer.md#textures).
 - area_lights read MSE / noise 1.97 with its ellipse light 5 cm over the floor (64 x 64, 64 spp) while disk and
   ellipse lights were equal-area rectangles (warned); they are DiskLights now (spec/renderer.md#lights).
 - shader_mixes was 1.02 / 1.08 / 1.20 with MSE / noise 159 (64 x 64, 64 spp): Mix and Add Shaders (and a Glossy

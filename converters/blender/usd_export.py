@@ -23,6 +23,7 @@ Cycles by converters/blender/fidelity.py (docs/conversion-fidelity.md).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -677,7 +678,7 @@ def _combine(parts: list, mat, notes: list) -> dict:
         rough_w, rough = rough_w + s, rough + s * float(r)
     if kd_tex is not None:
         w, tex = kd_tex
-        kd = TextureMap(tex.image * w + kd_sum, tex.what, tex.scale_bias, tex.wrap)
+        kd = dataclasses.replace(tex, image=tex.image * w + kd_sum)
     else:
         kd = tuple(float(c) for c in kd_sum)
     out = {"diffuseColor": kd, "useSpecularWorkflow": 1, "specularColor": tuple(float(c) for c in f0),
@@ -713,7 +714,7 @@ def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float
 def _scaled(color, k: float):
     """A colour [3] or TextureMap times ``k``."""
     if isinstance(color, TextureMap):
-        return TextureMap(color.image * k, color.what, color.scale_bias, color.wrap)
+        return dataclasses.replace(color, image=color.image * k)
     return tuple(float(c) * k for c in color)
 
 
@@ -758,10 +759,40 @@ def image_texture(mat, socket, notes: list) -> TextureMap | None:
         notes.append(f"material {mat.name}: image {img.name}: {tex.interpolation} interpolation looked up bilinearly")
     if tex.projection != "FLAT":
         notes.append(f"material {mat.name}: image {img.name}: {tex.projection} projection dropped (UV mapped)")
+    uv = None
     if tex.inputs["Vector"].is_linked:
-        notes.append(f"material {mat.name}: image {img.name}: linked Vector dropped (the active render UV map used)")
+        uv, note = _uv_mapping(tex.inputs["Vector"].links[0])
+        if note:
+            notes.append(f"material {mat.name}: image {img.name}: {note} (the active render UV map used)")
     rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
-    return TextureMap(rgb, what, wrap=wrap)
+    return TextureMap(rgb, what, wrap=wrap, uv=uv)
+
+
+def _uv_mapping(link) -> tuple[tuple | None, str]:
+    """(UsdTransform2d (scale [2], rotation in degrees, translation [2]) or None, note) of the Vector feeding an Image
+    Texture: the UV output of a Texture Coordinate node, a UV Map node (identity), or a Point-type Mapping node on
+    one of them, turning about Z only (scale, rotate, translate: the UsdTransform2d order). Anything else is noted
+    and the UVs are used as they are."""
+    node, out = link.from_node, link.from_socket.name
+
+    def plain_uv(n, socket) -> bool:
+        return (n.bl_idname == "ShaderNodeTexCoord" and socket == "UV") or (n.bl_idname == "ShaderNodeUVMap"
+                                                                            and not getattr(n, "from_instancer", False))
+
+    if plain_uv(node, out):
+        return None, ""
+    if node.bl_idname != "ShaderNodeMapping":
+        return None, f"Vector from {node.bl_idname}.{out} dropped"
+    linked = [k for k in ("Location", "Rotation", "Scale") if k in node.inputs and node.inputs[k].is_linked]
+    vec = node.inputs["Vector"]
+    if node.vector_type != "POINT" or linked or not vec.is_linked or not plain_uv(vec.links[0].from_node,
+                                                                                   vec.links[0].from_socket.name):
+        return None, (f"Mapping node ({node.vector_type}" + (f", linked {', '.join(linked)}" if linked else "")
+                      + ") dropped: Point mappings of UVs with unlinked values convert")
+    loc, rot, scale = (np.asarray(node.inputs[k].default_value, np.float64) for k in ("Location", "Rotation", "Scale"))
+    if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6:
+        return None, "Mapping node rotation about X or Y dropped"
+    return ((float(scale[0]), float(scale[1])), math.degrees(float(rot[2])), (float(loc[0]), float(loc[1]))), ""
 
 
 def _check_replace(bpy, rep: dict, file: str) -> None:

@@ -173,6 +173,24 @@ class TextureMap:
     what: str
     scale_bias: tuple | None = None  # UsdUVTexture (scale, bias) float4s, e.g. a tangent-space normal map's 2, -1
     wrap: str = "repeat"  # UsdUVTexture wrapS / wrapT
+    uv: tuple | None = None  # UsdTransform2d (scale [2], rotation in degrees, translation [2]) of st; None: identity
+
+
+def st_transform(to_uv: np.ndarray) -> tuple | None:
+    """UsdTransform2d (scale [2], rotation (degrees), translation [2]) acting on USD's st = (u, 1 - v) as Mitsuba's
+    3x3 ``to_uv`` acts on its uv (spec/bake.md#materials); None when it shears (no scale-rotate-translate
+    form)."""
+    (a, b, c), (d, e, f) = np.asarray(to_uv, np.float64)[:2]
+    lin, offset = np.array([[a, -b], [-d, e]]), np.array([b + c, 1.0 - e - f])  # in t = 1 - v
+    sx = float(np.hypot(lin[0, 0], lin[1, 0]))
+    if sx <= 0.0:
+        return None
+    theta = math.atan2(lin[1, 0], lin[0, 0])
+    axis_y = np.array([-math.sin(theta), math.cos(theta)])
+    sy = float(lin[:, 1] @ axis_y)
+    if np.abs(lin[:, 1] - sy * axis_y).max() > 1e-6 * max(abs(sx), abs(sy), 1.0):
+        return None
+    return (sx, sy), math.degrees(theta), tuple(float(x) for x in offset)
 
 
 class _Params:
@@ -449,7 +467,17 @@ class StageConverter:
         node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
         for w in ("wrapS", "wrapT"):
             node.CreateInput(w, Sdf.ValueTypeNames.Token).Set(tex.wrap)
-        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        st = reader
+        if tex.uv is not None:  # texture tiling: a UsdTransform2d between the reader and the texture
+            from pxr import Gf
+
+            st = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_st_transform")
+            st.CreateIdAttr("UsdTransform2d")
+            st.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+            st.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*tex.uv[0]))
+            st.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(float(tex.uv[1]))
+            st.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(*tex.uv[2]))
+        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st.ConnectableAPI(), "result")
         if tex.scale_bias is not None:
             from pxr import Gf
 
@@ -574,8 +602,12 @@ class StageConverter:
         for t, tm in p.bitmaps.items():
             if id(tm) not in converted:
                 continue
-            if p.uv_transform(t) is not None:
-                notes.append(f"{cls}.{t}: texture to_uv transform ignored")
+            to_uv = p.uv_transform(t)
+            if to_uv is not None:
+                tm.uv = st_transform(to_uv)
+                if tm.uv is None:
+                    notes.append(f"{cls}.{t}: texture to_uv transform with shear ignored (UsdTransform2d scales, "
+                                 "rotates and translates)")
         for k in p.p.keys():
             name = k[len(prefix):-len(".data")] if k.startswith(prefix) and k.endswith(".data") else None
             if name and name not in p.bitmaps:

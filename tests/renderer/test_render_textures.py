@@ -326,3 +326,43 @@ def test_texture_files_are_checked_like_other_asset_paths(tmp_path, file, code):
     with pytest.raises(NassetError) as exc:
         load_scene(path)
     assert exc.value.code == code, exc.value
+
+
+def test_transform2d_hand_value():
+    from nasset_reference_renderer.textures import transform2d
+
+    m = transform2d((2.0, 3.0), 90.0, (0.5, 0.0))  # scale, then rotate counter-clockwise, then translate
+    np.testing.assert_allclose(m @ [1.0, 1.0, 1.0], [-2.5, 2.0], atol=1e-12)
+
+
+def test_st_through_a_usd_transform2d_is_the_textures_uv_map(tmp_path):
+    """A UsdTransform2d (scale, rotation, translation) between the primvar reader and the texture: the loaded texture
+    looks up ``transform2d(...) st`` (checked against a lookup at the hand-transformed coordinates). Before, the
+    transform was not followed (a warning, primvar st used as is)."""
+    import warnings
+
+    from pxr import Sdf, Usd, UsdShade
+
+    from nasset_reference_renderer.textures import transform2d
+
+    plain, _ = _textured_quad_scene(tmp_path, "raw")
+    stage = Usd.Stage.Open(plain)
+    tex = UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/tex"))
+    xf = UsdShade.Shader.Define(stage, "/World/Looks/FloorMat/tile")
+    xf.CreateIdAttr("UsdTransform2d")
+    xf.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set((3.0, 2.0))
+    xf.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(30.0)
+    xf.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set((0.25, -0.5))
+    xf.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/st")).ConnectableAPI(), "result")
+    tex.GetInput("st").ConnectToSource(xf.ConnectableAPI(), "result")
+    stage.GetRootLayer().Export(str(tmp_path / "tiled.usda"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the chain is followed: no "primvar st used" warning
+        scene = load_scene(str(tmp_path / "tiled.usda"))
+    texture = next(t for t in scene.materials.textures if t is not None).texture
+    np.testing.assert_allclose(texture.uv_matrix, transform2d((3.0, 2.0), 30.0, (0.25, -0.5)))
+    st = np.random.default_rng(3).random((50, 2))
+    moved = st @ texture.uv_matrix[:, :2].T + texture.uv_matrix[:, 2]
+    plain_lookup = ImageTexture(texture.image, texture.wrap_s, texture.wrap_t)
+    np.testing.assert_allclose(texture.sample(st), plain_lookup.sample(moved))
