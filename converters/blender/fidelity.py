@@ -252,6 +252,33 @@ def _shader_mixes(bpy, folder: Path, size: int) -> None:
     _world(bpy)
 
 
+def _render_visibility(bpy, folder: Path, size: int) -> None:
+    # a ball and a point light in a collection disabled in renders, a point light in an excluded collection: Cycles
+    # renders none of them; one ball and the sun render
+    _new_scene(bpy, size, (0.0, -2.8, 1.2), (0.0, 0.0, 0.3))
+    _floor(bpy)
+    _add(bpy, "uv_sphere", "Shown", _material(bpy, "Clay", **{"Color": (0.8, 0.4, 0.2)}), smooth=True, radius=0.3,
+         location=(-0.4, 0.0, 0.3))
+    hidden, excluded = bpy.data.collections.new("NotRendered"), bpy.data.collections.new("Excluded")
+    for coll in (hidden, excluded):
+        bpy.context.scene.collection.children.link(coll)
+    hidden.hide_render = True
+    bpy.context.view_layer.layer_collection.children["Excluded"].exclude = True
+    ball = _add(bpy, "uv_sphere", "Hidden", _material(bpy, "Red", **{"Color": (0.9, 0.1, 0.1)}), smooth=True, radius=0.3,
+                location=(0.4, 0.0, 0.3))
+    for coll in list(ball.users_collection):
+        coll.objects.unlink(ball)
+    hidden.objects.link(ball)
+    for coll, name, x in ((hidden, "HiddenLamp", -0.6), (excluded, "ExcludedLamp", 0.6)):
+        data = bpy.data.lights.new(name, "POINT")
+        data.energy = 60.0
+        lamp = bpy.data.objects.new(name, data)
+        lamp.location = (x, -0.5, 1.0)
+        coll.objects.link(lamp)
+    _sun(bpy)
+    _world(bpy)
+
+
 def _mesh_emitter(bpy, folder: Path, size: int) -> None:
     # an emission shader on a small box (12 triangles: a mesh light), over a floor and a ball
     _new_scene(bpy, size, (0.0, -2.8, 1.3), (0.0, 0.0, 0.4))
@@ -377,6 +404,8 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
     "shader_mixes": FidelityScene("shader_mixes", _shader_mixes, "a Mix Shader of two Diffuse BSDFs (0.3), a Glossy BSDF "
                                   "(roughness 0.35), an Add Shader of a Diffuse BSDF and an Emission"),
+    "render_visibility": FidelityScene("render_visibility", _render_visibility, "a ball and a point light in a collection "
+                                       "disabled in renders, a point light in an excluded collection (none renders)"),
     "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "Emission shader on a 12-triangle box (a mesh light)"),
     "principled": FidelityScene("principled", _principled, "Principled BSDF balls: dielectric (roughness 0.5), "
                                 "metal (0.35), matte without specular"),
@@ -504,6 +533,9 @@ NOTES = """
   stays off target until the format has a layered (view-dependent) diffuse.
 - lens_shift was 0.96 / 0.97 / 0.99 with MSE / noise 288 (64 x 64, 64 spp): the camera's shift was dropped
   (warned). It is now the camera's aperture offsets, which the renderer applies (spec/renderer.md#scene-input).
+- render_visibility was 2.08 / 1.48 / 1.35 with MSE / noise 53 (64 x 64, 64 spp): objects and lights of
+  collections disabled in renders, and lights of excluded collections, were converted. Objects and lights are
+  now taken as Cycles renders them (`scene.render_visible`).
 - textures read 1.07 / 1.06 / 1.03 with MSE / noise 539 (64 x 64, 64 spp) once its floor's UVs went through a
   Mapping node (scale 2 x 1.5, 20 deg, offset): the node was dropped (warned). A Point mapping of UVs is now the
   texture's UsdTransform2d (spec/renderer.md#textures).

@@ -53,6 +53,24 @@ def open_blend(path):
 SURFACE_TYPES = ("MESH", "CURVE", "SURFACE", "META", "FONT")
 
 
+def render_visible(view_layer):
+    """A predicate: does Cycles render object ``ob`` of the scene in ``view_layer``? Not when the object is disabled
+    in renders (``hide_render``), nor when none of its collections is reached from the scene collection through
+    layer collections that are not excluded and collections that are not disabled in renders. (Objects placed by
+    collection instances render whatever their source collection says: only their instancer is asked.)"""
+    rendered = {view_layer.layer_collection.collection.as_pointer()}
+
+    def walk(layer):
+        for child in layer.children:
+            if child.exclude or child.collection.hide_render:
+                continue
+            rendered.add(child.collection.as_pointer())
+            walk(child)
+
+    walk(view_layer.layer_collection)
+    return lambda ob: not ob.hide_render and any(c.as_pointer() in rendered for c in ob.users_collection)
+
+
 def pick_objects(names, *, file: str | None = None) -> list:
     """The scene's objects with these names, in order; each must have a surface (SURFACE_TYPES), be a hair Curves
     object or a mesh carrying particle hair."""
@@ -408,6 +426,17 @@ def material_names(objects) -> list[str]:
     return out
 
 
+def _include(layer, wanted: set) -> bool:
+    """Un-exclude the layer collections on the way to each collection in ``wanted`` (pointers); True when found."""
+    found = layer.collection.as_pointer() in wanted
+    for child in layer.children:
+        if _include(child, wanted):
+            child.exclude = False
+            child.collection.hide_render = False
+            found = True
+    return found
+
+
 def isolate(objects) -> None:
     """Make only the asset objects renderable: every other object hidden from render (lights too),
     particle emitters' own surfaces kept only when they are asset meshes; world black."""
@@ -415,6 +444,12 @@ def isolate(objects) -> None:
     keep = {o.name for o in objects}
     for ob in bpy.context.scene.objects:
         ob.hide_render = ob.name not in keep
+    renders = render_visible(bpy.context.view_layer)
+    for ob in objects:  # an asset object in a collection disabled in renders (or excluded) is rendered all the same
+        if not renders(ob):
+            for coll in ob.users_collection:
+                coll.hide_render = False
+            _include(bpy.context.view_layer.layer_collection, {c.as_pointer() for c in ob.users_collection})
     for ob in objects:
         if has_particle_hair(ob):  # keep the hair, not the emitter mesh
             ob.show_instancer_for_render = False

@@ -41,6 +41,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
 from nasset_sdk.errors import NassetError, UsageError, error
 
 from . import Z_UP_TO_Y_UP
+from .scene import render_visible
 
 _R4 = np.eye(4)
 _R4[:3, :3] = Z_UP_TO_Y_UP
@@ -150,8 +151,9 @@ class _BlenderConverter(StageConverter):
     def lights(self) -> None:
         from pxr import UsdLux
 
+        renders = render_visible(self.bpy.context.view_layer)
         for ob in self.bscene.objects:
-            if ob.type != "LIGHT" or ob.hide_render:
+            if ob.type != "LIGHT" or not renders(ob):
                 continue
             lt = ob.data
             color = np.array(lt.color, np.float64)
@@ -326,7 +328,8 @@ class _BlenderConverter(StageConverter):
         from .scene import SURFACE_TYPES, has_particle_hair
 
         bpy = self.bpy
-        objects = [ob for ob in bpy.context.view_layer.objects if not ob.hide_render and ob.name not in self.replace]
+        renders = render_visible(bpy.context.view_layer)
+        objects = [ob for ob in bpy.context.view_layer.objects if renders(ob) and ob.name not in self.replace]
         users: dict = {}
         for ob in objects:
             if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
@@ -357,6 +360,8 @@ class _BlenderConverter(StageConverter):
                 continue  # the asset stands in for the instancer and what it places
             if parent is not None and parent.name == ob.name:
                 continue  # a curve, text, surface or metaball's own evaluated mesh: written as the object itself
+            if parent is not None and not renders(parent):
+                continue  # an instancer Cycles does not render places nothing
             if ob.name in self.replace:
                 if ("replaced", ob.name) not in skipped:
                     skipped.add(("replaced", ob.name))

@@ -113,3 +113,27 @@ def test_lights_per_view_groups(tmp_path):
     sel = {k: (a[keep] if isinstance(a, np.ndarray) and len(a) == len(hit["pix"]) else a) for k, a in hit.items()}
     assert np.array_equal(caster.visibility(sel, v["wi"]).astype(np.uint8), v["vis"])
     assert np.isfinite(v["rgb"]).all() and (v["rgb"] >= 0).all()
+
+
+def test_isolate_renders_an_asset_object_of_a_hidden_or_excluded_collection():
+    """The asset's own object is rendered whatever its collection says (Cycles skips objects of collections disabled
+    in renders or excluded from the view layer: the views would be black); the other objects stay hidden."""
+    ob = _diffuse_quad(0.5)
+    other = bpy.data.objects.new("Other", ob.data)
+    bpy.context.scene.collection.objects.link(other)
+    for hide in ("render", "exclude"):
+        coll = bpy.data.collections.new(f"C_{hide}")
+        bpy.context.scene.collection.children.link(coll)
+        for c in list(ob.users_collection):
+            c.objects.unlink(ob)
+        coll.objects.link(ob)
+        if hide == "render":
+            coll.hide_render = True
+        else:
+            bpy.context.view_layer.layer_collection.children[coll.name].exclude = True
+        renders = bsc.render_visible(bpy.context.view_layer)
+        assert not renders(ob) and renders(other)
+        bsc.isolate([ob])
+        renders = bsc.render_visible(bpy.context.view_layer)
+        assert renders(ob) and not renders(other), hide
+        other.hide_render = False
