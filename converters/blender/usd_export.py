@@ -346,6 +346,7 @@ class _BlenderConverter(StageConverter):
                 continue
             if has_particle_hair(ob):
                 self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
+            self._ray_visibility(ob)
             if len(users.get(ob.data.name, ())) > 1:
                 self._instance(ob, np.array(ob.matrix_world, np.float64), ob.name, f"linked duplicate of mesh {ob.data.name}")
             else:
@@ -376,6 +377,15 @@ class _BlenderConverter(StageConverter):
                 continue
             self._instance(ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
                            f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}")
+
+    def _ray_visibility(self, ob) -> None:
+        """Warn about Cycles settings the stage cannot carry: ray visibility switched off, holdout, shadow catcher."""
+        off = [k[len("visible_"):] for k in ("visible_camera", "visible_shadow", "visible_diffuse", "visible_glossy",
+                                              "visible_transmission", "visible_volume_scatter") if not getattr(ob, k, True)]
+        flags = [k for k in ("is_holdout", "is_shadow_catcher") if getattr(ob, k, False)]
+        if off or flags:
+            self.warn(f"object {ob.name}: " + ", ".join(([f"invisible to {', '.join(off)} rays"] if off else []) + flags)
+                      + " dropped (the stage shows it to every ray as an ordinary surface)")
 
     def _instance(self, ob, matrix_world, name: str, what: str) -> None:
         """An instanceable Xform (Blender world matrix ``matrix_world`` [4,4]) referencing the class prim of ``ob``'s

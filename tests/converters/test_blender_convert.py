@@ -215,3 +215,20 @@ def test_emissive_mesh_too_large_to_light_sample_is_warned(tmp_path):
     res = convert_scene(blend, tmp_path / "s.usda")
     assert [w for w in res.warnings if "BigLamp" in w and "light-samples" in w]
     assert not [w for w in res.warnings if "SmallLamp" in w]
+
+
+def test_ray_visibility_holdout_and_shadow_catcher_are_warned(tmp_path):
+    """Cycles' per-object ray visibility, holdout and shadow catcher have no USD counterpart: each is named in a
+    warning (the object is written as an ordinary surface). Before, they were dropped silently."""
+    from nasset_converters.blender.fidelity import _floor, _new_scene
+    from nasset_converters.blender.usd_export import convert_scene
+
+    _new_scene(bpy, 8, (0.0, -2.8, 1.2), (0.0, 0.0, 0.3))
+    floor = _floor(bpy)
+    floor.visible_camera = False
+    floor.is_shadow_catcher = True
+    blend = tmp_path / "s.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
+    said = [w for w in res.warnings if "Floor" in w]
+    assert said and "invisible to camera rays" in said[0] and "is_shadow_catcher" in said[0], res.warnings
