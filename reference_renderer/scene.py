@@ -894,7 +894,12 @@ class _Loader:
                                    "and implicit prims are rendered)", str(p.GetPath()))
                 if t == "Mesh" or t in IMPLICIT_PRIMS:
                     parts[k].append((p, t))
-        inv_roots = [np.linalg.inv(_matrix(UsdGeom.Xformable(root), self.time)) for root in protos]
+        roots = [_matrix(UsdGeom.Xformable(root), self.time) for root in protos]
+        for root, m in zip(protos, roots, strict=True):
+            if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-30:
+                raise self.err("SCENE_INVALID", "a prototype root's transform is singular or not finite", root.GetPath(),
+                               "xformOpOrder")
+        inv_roots = [np.linalg.inv(m) for m in roots]
         added = 0
         for i in np.nonzero(mask)[0]:
             k, first = int(indices[i]), len(self.tris)
