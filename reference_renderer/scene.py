@@ -45,7 +45,7 @@ class SceneWarning(UserWarning):
     """Something in the scene is ignored or approximated; the render still runs."""
 
 
-SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "DomeLight")
+SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "DomeLight", "DomeLight_1")
 PREVIEW_DEFAULTS = {
     "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
     "specularColor": (0.0, 0.0, 0.0), "metallic": 0.0, "roughness": 0.5, "ior": 1.5, "opacity": 1.0,
@@ -62,6 +62,7 @@ _LIGHT_INPUTS = {
     "RectLight": {"inputs:width", "inputs:height"},
     "DiskLight": {"inputs:radius"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
+    "DomeLight_1": {"inputs:texture:file", "inputs:texture:format", "guideRadius", "poleAxis"},
 }
 _IGNORED_PREFIXES = ("xformOp", "visibility", "purpose", "extent", "proxyPrim", "collection:", "light:", "primvars:",
                      "physics", "doubleSided")
@@ -1127,4 +1128,11 @@ class _Loader:
                 image = self._read_image(tex, path, "inputs:texture:file", "DomeLight texture")
             R = M[:3, :3]
             u, _, vt = np.linalg.svd(R)
-            self.lights.append(DomeLight(scale, image, u @ vt, path))
+            rotation = u @ vt
+            if tname == "DomeLight_1":  # poleAxis: the texture's top pole along +Y, +Z, or the stage's up axis
+                pole = str(g(prim.GetAttribute("poleAxis"), "scene"))
+                if pole not in ("scene", "Y", "Z"):
+                    raise self.err("SCENE_INVALID", f"poleAxis {pole!r} (scene, Y or Z)", path, "poleAxis")
+                if pole == "Z" or (pole == "scene" and UsdGeom.GetStageUpAxis(self.stage) == UsdGeom.Tokens.z):
+                    rotation = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]) @ rotation  # +Y -> +Z first
+            self.lights.append(DomeLight(scale, image, rotation, path))
