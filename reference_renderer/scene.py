@@ -1042,6 +1042,9 @@ class _Loader:
         from pxr import UsdGeom, UsdLux
 
         path = str(prim.GetPath())
+        if tname == "PortalLight":  # a sampling aid of dome lights: no light of its own
+            self.warn("PortalLight ignored (it guides a renderer's sampling of dome lights and emits nothing)", path)
+            return
         if tname not in SUPPORTED_LIGHTS:
             raise self.err("SCENE_UNSUPPORTED", f"light type {tname or 'untyped'} is not supported "
                            f"(supported: {', '.join(SUPPORTED_LIGHTS)})", path)

@@ -36,3 +36,14 @@ def test_an_unknown_pole_axis_is_a_scene_error(tmp_path):
     with pytest.raises(SceneError) as exc:
         load_scene(b.write(tmp_path / "s.usda"))
     assert "poleAxis" in str(exc.value)
+
+
+def test_a_portal_light_is_ignored_with_a_warning(tmp_path):
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.quad("Floor", (0, 0, 0), 1.0, normal=(0, 0, 1))
+    UsdLux.DomeLight.Define(b.stage, "/World/Sky")
+    UsdLux.PortalLight.Define(b.stage, "/World/Window")
+    with pytest.warns(UserWarning, match="PortalLight ignored"):
+        scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert [type(light).__name__ for light in scene.lights] == ["DomeLight"]
