@@ -45,6 +45,22 @@ class SceneWarning(UserWarning):
     """Something in the scene is ignored or approximated; the render still runs."""
 
 
+#: surface shader ids read with UsdPreviewSurface's inputs
+PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
+#: MaterialX surfaces mapped to UsdPreviewSurface: inputs in the order (base weight, base colour, metalness,
+#: specular roughness, specular IOR, emission weight, emission colour) with their MaterialX defaults, and the
+#: lobes whose weight is warned when on
+MTLX_SURFACES = {
+    "ND_standard_surface_surfaceshader": {
+        "inputs": {"base": 1.0, "base_color": (0.8, 0.8, 0.8), "metalness": 0.0, "specular_roughness": 0.2,
+                   "specular_IOR": 1.5, "emission": 0.0, "emission_color": (1.0, 1.0, 1.0)},
+        "dropped": ("coat", "transmission", "subsurface", "sheen", "thin_film_thickness", "specular_anisotropy")},
+    "ND_open_pbr_surface_surfaceshader": {
+        "inputs": {"base_weight": 1.0, "base_color": (0.8, 0.8, 0.8), "base_metalness": 0.0, "specular_roughness": 0.3,
+                   "specular_ior": 1.5, "emission_luminance": 0.0, "emission_color": (1.0, 1.0, 1.0)},
+        "dropped": ("coat_weight", "transmission_weight", "subsurface_weight", "fuzz_weight", "thin_film_weight",
+                    "specular_roughness_anisotropy")},
+}
 SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "DomeLight", "DomeLight_1")
 PREVIEW_DEFAULTS = {
     "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
@@ -555,18 +571,23 @@ class _Loader:
         if mpath in self.mat_index:
             return self.mat_index[mpath]
         shader = None
-        src = mat.ComputeSurfaceSource()
-        if src and src[0]:
-            shader = src[0]
+        for context in ("", "mtlx"):  # the universal outputs:surface, else MaterialX's outputs:mtlx:surface
+            src = mat.ComputeSurfaceSource(context)
+            if src and src[0]:
+                shader = src[0]
+                break
         if shader is None:
-            raise self.err("SCENE_UNSUPPORTED", "material has no UsdPreviewSurface connected to outputs:surface", mpath)
+            raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or "
+                           "outputs:mtlx:surface", mpath)
         sid = shader.GetIdAttr().Get()
-        if sid != "UsdPreviewSurface":
-            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; only UsdPreviewSurface "
-                           "is supported", mpath)
+        if sid not in PREVIEW_SURFACES and sid not in MTLX_SURFACES:
+            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; supported: "
+                           f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
         texture = None
-        for inp in shader.GetInputs():
+        if sid in MTLX_SURFACES:
+            vals.update(self._mtlx_surface(shader, sid))
+        for inp in shader.GetInputs() if sid in PREVIEW_SURFACES else ():
             name = inp.GetBaseName()
             if name not in PREVIEW_DEFAULTS:
                 self.warn(f"unknown UsdPreviewSurface input {name!r} ignored", shader.GetPath())
@@ -607,6 +628,27 @@ class _Loader:
         self.mat_index[mpath] = len(self.mat_rows)
         self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath, textured))
         return self.mat_index[mpath]
+
+    def _mtlx_surface(self, shader, sid: str) -> dict:
+        """UsdPreviewSurface values of a MaterialX standard_surface or open_pbr_surface (spec/renderer.md#materials):
+        base colour x weight, metalness, specular roughness and IOR, emission; lobes UsdPreviewSurface lacks are
+        warned about when they are on, connected inputs use their own values (warned)."""
+        names = MTLX_SURFACES[sid]
+        vals = {}
+        for name, default in names["inputs"].items():
+            inp = shader.GetInput(name)
+            if inp and inp.HasConnectedSource():
+                self.warn(f"MaterialX input {name!r} is connected; its own value is used", shader.GetPath())
+            v = inp.Get(self.time) if inp else None
+            vals[name] = np.asarray(default if v is None else v, np.float64)
+        for name in names["dropped"]:
+            inp = shader.GetInput(name)
+            v = inp.Get(self.time) if inp else None
+            if v is not None and float(np.max(v)) > 0.0:
+                self.warn(f"MaterialX {name} is dropped (no UsdPreviewSurface counterpart)", shader.GetPath())
+        b, c, m, r, i, e, ec = (vals[k] for k in names["inputs"])
+        return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
+                "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}
 
     def _uv_texture(self, inp, where):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own

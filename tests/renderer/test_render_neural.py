@@ -117,7 +117,7 @@ def test_unsupported_material(tmp_path):
     b = SceneBuilder()
     b.camera((0, 0, 3), (0, 0, 0))
     b.quad("Floor", (0, 0, 0), 1.0)
-    b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface").GetAttribute("info:id").Set("ND_standard_surface_surfaceshader")
+    b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface").GetAttribute("info:id").Set("arnold:standard_surface")
     with pytest.raises(SceneError) as e:
         load_scene(b.write(tmp_path / "s.usda"))
     assert e.value.code == "SCENE_UNSUPPORTED" and "/World/Looks/FloorMat" in str(e.value)
