@@ -10,6 +10,7 @@ are loaded later, by the plan); every referencing prim is an instance with its o
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
 from dataclasses import dataclass, field
@@ -291,6 +292,47 @@ def render_time(stage, time=None):
     if stage.HasAuthoredTimeCodeRange():
         return Usd.TimeCode(stage.GetStartTimeCode())
     return Usd.TimeCode.EarliestTime()
+
+
+#: largest image file read out of a package (usdz) into a temporary file
+MAX_PACKAGED_IMAGE_BYTES = 1 << 30
+
+
+def _packaged_name(resolved: str) -> str:
+    """The file name inside a package of a package-relative resolved path (``a.usdz[tex/wood.png]`` -> ``tex/wood.png``,
+    the innermost for nested packages), or "" for a plain path."""
+    from pxr import Ar
+
+    if not resolved or not Ar.IsPackageRelativePath(resolved):
+        return ""
+    inner = resolved
+    while Ar.IsPackageRelativePath(inner):
+        inner = Ar.SplitPackageRelativePathInner(inner)[1]
+    return inner
+
+
+@contextlib.contextmanager
+def _local_copy(resolved: str, packaged: str):
+    """A file path holding the image: ``resolved`` itself, or for a file inside a package (usdz) a temporary copy
+    read through USD's resolver (at most MAX_PACKAGED_IMAGE_BYTES; ``IMAGE_INVALID`` otherwise)."""
+    import tempfile
+
+    from pxr import Ar
+
+    if not packaged:
+        yield resolved
+        return
+    handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+    if handle is None:
+        raise error("IMAGE_INVALID", "cannot be read from its package", file=resolved)
+    size = handle.GetSize()
+    if size > MAX_PACKAGED_IMAGE_BYTES:
+        raise error("IMAGE_INVALID", f"{size} bytes in its package, above {MAX_PACKAGED_IMAGE_BYTES}", file=resolved)
+    with tempfile.TemporaryDirectory() as tmp:
+        local = os.path.join(tmp, "image" + os.path.splitext(packaged)[1].lower())
+        with open(local, "wb") as fh:
+            fh.write(bytes(handle.GetBuffer()))
+        yield local
 
 
 class _Loader:
@@ -674,7 +716,7 @@ class _Loader:
             self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
             return None
         resolved = asset.resolvedPath or ""
-        if not resolved.lower().endswith(TEXTURE_SUFFIXES):
+        if not (_packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
             self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; the connected input's own "
                       "value is used", tpath)
             return None
@@ -737,13 +779,16 @@ class _Loader:
         from .film import read_exr
 
         resolved = asset.resolvedPath or ""
-        if not resolved or not os.path.isfile(resolved):
+        packaged = _packaged_name(resolved)
+        if not resolved or not (packaged or os.path.isfile(resolved)):
             raise self.err("SCENE_INVALID", f"{what} not found: {asset.path}", prim, attribute)
-        exr = resolved.lower().endswith(".exr")
-        if not exr and not (ldr and resolved.lower().endswith(TEXTURE_SUFFIXES)):
+        name = (packaged or resolved).lower()
+        exr = name.endswith(".exr")
+        if not exr and not (ldr and name.endswith(TEXTURE_SUFFIXES)):
             raise self.err("SCENE_UNSUPPORTED", f"{what} {asset.path}: only OpenEXR images", prim, attribute)
         try:
-            image, bits = (read_exr(resolved), 32) if exr else read_png_jpeg(resolved)
+            with _local_copy(resolved, packaged) as local:
+                image, bits = (read_exr(local), 32) if exr else read_png_jpeg(local)
         except NassetError as exc:
             raise self.err("IMAGE_INVALID", f"{what} {resolved}: {exc.message}", prim, attribute) from None
         if not np.isfinite(image).all() or (image < 0).any():

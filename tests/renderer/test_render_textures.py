@@ -366,3 +366,22 @@ def test_st_through_a_usd_transform2d_is_the_textures_uv_map(tmp_path):
     moved = st @ texture.uv_matrix[:, :2].T + texture.uv_matrix[:, 2]
     plain_lookup = ImageTexture(texture.image, texture.wrap_s, texture.wrap_t)
     np.testing.assert_allclose(texture.sample(st), plain_lookup.sample(moved))
+
+
+def test_textures_inside_a_usdz_package_are_read(tmp_path):
+    """A usdz holding the scene and its PNG texture renders like the loose files (the texture resolves to
+    ``scene.usdz[t.png]``, read through USD's resolver). Before, the packaged texture was not found."""
+    from pxr import Sdf, UsdUtils
+
+    from nasset_sdk.images import write_png
+
+    write_png(tmp_path / "t.png", np.array([[[128, 128, 128], [230, 51, 26]]], np.uint8))
+    loose, _ = _textured_quad_scene(tmp_path, "auto", "t.png")
+    package = tmp_path / "scene.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(loose)), str(package))
+    settings = RenderSettings(spp=2, width=12, height=12, max_depth=1)
+    b = render(load_scene(loose), settings).image
+    (tmp_path / "t.png").unlink()  # only the packaged copy is left
+    a = render(load_scene(str(package)), settings).image
+    assert a.mean() > 0.05
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)
