@@ -634,13 +634,13 @@ class _Loader:
             if name not in PREVIEW_DEFAULTS:
                 self.warn(f"unknown UsdPreviewSurface input {name!r} ignored", shader.GetPath())
                 continue
-            if inp.HasConnectedSource():
+            if self._producer(inp) is not None:  # fed by a shader's output (a texture); else a value
                 if name == "diffuseColor":
                     texture = self._uv_texture(inp, shader.GetPath())
                 else:
                     self.warn(f"input {name!r} is connected (only diffuseColor textures are rendered); its own value "
                               "is used", shader.GetPath())
-            v = inp.Get(self.time)
+            v = self._value(inp) if self._producer(inp) is None else inp.Get(self.time)
             if v is not None:
                 vals[name] = v
         if float(vals["opacity"]) < 1.0:
@@ -679,9 +679,9 @@ class _Loader:
         vals = {}
         for name, default in names["inputs"].items():
             inp = shader.GetInput(name)
-            if inp and inp.HasConnectedSource():
+            if self._producer(inp) is not None:
                 self.warn(f"MaterialX input {name!r} is connected; its own value is used", shader.GetPath())
-            v = inp.Get(self.time) if inp else None
+            v = self._value(inp) if self._producer(inp) is None else inp.Get(self.time)
             vals[name] = np.asarray(default if v is None else v, np.float64)
         for name in names["dropped"]:
             inp = shader.GetInput(name)
@@ -692,23 +692,43 @@ class _Loader:
         return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
                 "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}
 
+    @staticmethod
+    def _producer(inp):
+        """(shader, output name) whose output feeds ``inp`` through any connections (node graph boundaries, a
+        material's interface inputs), or None when what feeds it is a value."""
+        from pxr import UsdShade
+
+        attrs = inp.GetValueProducingAttributes() if inp else []
+        if not attrs or UsdShade.Utils.GetType(attrs[0].GetName()) != UsdShade.AttributeType.Output:
+            return None
+        return UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]
+
+    def _value(self, inp):
+        """The value of a shader input, read where its connections lead when they end at a value (a material's or
+        node graph's interface input, as in USD's own UsdPreviewSurface example); None when unset."""
+        from pxr import UsdShade
+
+        if not inp:
+            return None
+        attrs = inp.GetValueProducingAttributes() if inp.HasConnectedSource() else [inp.GetAttr()]
+        if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Input:
+            return attrs[0].Get(self.time)
+        return None
+
     def _uv_texture(self, inp, where):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
         value is then used): a ``UsdUVTexture``'s ``rgb`` output whose ``st`` reads a ``UsdPrimvarReader_float2``."""
-        from pxr import UsdShade
-
-        src = inp.GetConnectedSource()
-        node = UsdShade.Shader(src[0].GetPrim()) if src and src[0] else None
+        producer = self._producer(inp)
+        node, out = producer if producer else (None, None)
         nid = node.GetIdAttr().Get() if node else None
-        if nid != "UsdUVTexture" or str(src[1]) != "rgb":
-            self.warn(f"input {inp.GetBaseName()!r} is connected to {nid!r} output {str(src[1]) if src else None!r} (only a "
-                      "UsdUVTexture's rgb output is rendered); its own value is used", where)
+        if nid != "UsdUVTexture" or str(out) != "rgb":
+            self.warn(f"input {inp.GetBaseName()!r} is connected to {nid!r} output {out!r} (only a UsdUVTexture's rgb "
+                      "output is rendered); its own value is used", where)
             return None
         tpath = node.GetPath()
 
         def value(name, default):
-            i = node.GetInput(name)
-            v = i.Get(self.time) if i else None
+            v = self._value(node.GetInput(name))
             return default if v is None else v
 
         asset = value("file", None)
@@ -744,16 +764,14 @@ class _Loader:
         varname, uv_matrix = "st", None
 
         def source_of(shader, name):
-            inp = shader.GetInput(name)
-            src = inp.GetConnectedSource() if inp and inp.HasConnectedSource() else None
-            return UsdShade.Shader(src[0].GetPrim()) if src and src[0] else None
+            producer = self._producer(shader.GetInput(name))
+            return producer[0] if producer else None
 
         rnode = source_of(node, "st")
         if rnode and rnode.GetIdAttr().Get() == "UsdTransform2d":  # st through a 2D transform (texture tiling)
             vals = []
             for name, default in (("scale", (1.0, 1.0)), ("rotation", 0.0), ("translation", (0.0, 0.0))):
-                i = rnode.GetInput(name)
-                v = i.Get(self.time) if i else None
+                v = self._value(rnode.GetInput(name))
                 v = np.asarray(default if v is None else v, np.float64)
                 if not np.isfinite(v).all() or np.abs(v).max(initial=0.0) > 1e9:
                     raise self.err("SCENE_INVALID", f"UsdTransform2d {name} must be finite (|value| <= 1e9)",
@@ -762,8 +780,7 @@ class _Loader:
             uv_matrix = transform2d(vals[0], float(vals[1]), vals[2])
             rnode = source_of(rnode, "in")
         if rnode and rnode.GetIdAttr().Get() == "UsdPrimvarReader_float2":
-            vi = rnode.GetInput("varname")
-            varname = str((vi.Get(self.time) if vi else None) or "st")
+            varname = str(self._value(rnode.GetInput("varname")) or "st")
         else:
             self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2 (directly or through a "
                       "UsdTransform2d); primvar 'st' is used", tpath)

@@ -385,3 +385,36 @@ def test_textures_inside_a_usdz_package_are_read(tmp_path):
     a = render(load_scene(str(package)), settings).image
     assert a.mean() > 0.05
     np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)
+
+
+def test_inputs_connected_to_the_materials_interface_take_its_values(tmp_path):
+    """USD's own UsdPreviewSurface example: the primvar reader's varname is connected to the material's interface
+    input (``inputs:frame:stPrimvarName``), and a value input may be too. The floor with its primvar renamed "UVs"
+    and read that way renders like the plain one; a roughness fed by the interface is used. Before, a connected
+    varname read as unset ("st": no texture coordinates) and connected values were dropped."""
+    import warnings
+
+    from pxr import Sdf, Usd, UsdGeom, UsdShade
+
+    plain, _ = _textured_quad_scene(tmp_path, "raw")
+    settings = RenderSettings(spp=2, width=12, height=12, max_depth=1)
+    want = render(load_scene(plain), settings).image
+    stage = Usd.Stage.Open(plain)
+    mat = UsdShade.Material(stage.GetPrimAtPath("/World/Looks/FloorMat"))
+    floor = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Floor"))
+    st = floor.GetPrimvar("st").Get()
+    floor.RemovePrimvar("st")
+    floor.CreatePrimvar("UVs", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
+    name_in = mat.CreateInput("frame:stPrimvarName", Sdf.ValueTypeNames.Token)
+    name_in.Set("UVs")
+    UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/st")).GetInput("varname").ConnectToSource(name_in)
+    surface = UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface"))
+    rough_in = mat.CreateInput("roughness", Sdf.ValueTypeNames.Float)
+    rough_in.Set(float(surface.GetInput("roughness").Get()))
+    surface.GetInput("roughness").ConnectToSource(rough_in)
+    surface.GetInput("roughness").GetAttr().Clear()  # the value now lives only on the material's interface
+    stage.GetRootLayer().Export(str(tmp_path / "interface.usda"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing dropped, nothing defaulted
+        scene = load_scene(str(tmp_path / "interface.usda"))
+    np.testing.assert_allclose(render(scene, settings).image, want, rtol=1e-6, atol=1e-7)
