@@ -208,6 +208,65 @@ class SphereLight(Light):
         return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
 
 
+class CylinderLight(Light):
+    """UsdLux.CylinderLight: the side of a cylinder (no caps) of world ``radius`` around the unit ``axis`` through
+    ``center``, ``length`` long, emitting outward; sampled uniformly by area, hit only from outside."""
+
+    area = True
+
+    def __init__(self, center, axis, radius: float, length: float, radiance, prim: str = "") -> None:
+        self.c = np.asarray(center, np.float64)
+        self.a = np.asarray(axis, np.float64) / max(float(np.linalg.norm(axis)), 1e-300)
+        self.r, self.len = float(radius), float(length)
+        self.u, self.v = frame(self.a[None])
+        self.u, self.v = self.u[0], self.v[0]
+        self.A = 2.0 * np.pi * self.r * self.len
+        self.L = np.asarray(radiance, np.float64)
+        self.prim = prim
+
+    def power_is_zero(self):
+        return not (self.L > 0).any() or self.A <= 0
+
+    def _normal(self, q):
+        rel = q - self.c
+        return normalize(rel - (rel @ self.a)[:, None] * self.a)
+
+    def sample(self, p, u):
+        phi = 2.0 * np.pi * u[:, 1:2]
+        q = self.c + (u[:, 0:1] - 0.5) * self.len * self.a + self.r * (np.cos(phi) * self.u + np.sin(phi) * self.v)
+        v = q - p
+        d2 = np.maximum(dot(v, v), 1e-300)
+        dist = np.sqrt(d2)
+        wi = v / dist[:, None]
+        cos_l = -dot(wi, self._normal(q))
+        ok = cos_l > 1e-9  # the outside of the side faces p
+        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+
+    def _hit(self, o, d):
+        rel = o - self.c
+        dp = d - (d @ self.a)[:, None] * self.a  # components across the axis
+        rp = rel - (rel @ self.a)[:, None] * self.a
+        qa, qb, qc = dot(dp, dp), dot(dp, rp), dot(rp, rp) - self.r * self.r
+        disc = qb * qb - qa * qc
+        t = (-qb - np.sqrt(np.maximum(disc, 0.0))) / np.maximum(qa, 1e-300)  # the near crossing: entering from outside
+        along = (rel @ self.a) + t * (d @ self.a)
+        ok = (qa > 1e-300) & (disc >= 0) & (qc > 0) & (t > 0) & (np.abs(along) <= 0.5 * self.len)
+        return np.where(ok, t, INF)
+
+    def pdf(self, p, wi):
+        t = self._hit(p, wi)
+        ok = np.isfinite(t)
+        tt = np.where(ok, t, 0.0)
+        cos_l = -dot(wi, self._normal(p + wi * tt[:, None]))
+        ok &= cos_l > 1e-9
+        return np.where(ok, tt * tt / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+
+    def intersect(self, o, d):
+        t = self._hit(o, d)
+        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+
+
 class RectLight(Light):
     area = True
 

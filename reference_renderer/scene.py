@@ -25,7 +25,19 @@ from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import PerspectiveCamera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
-from .lights import MAX_MESH_LIGHT_TRIANGLES, SPOT_FALLOFFS, DiskLight, DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight
+from .lights import (
+    MAX_MESH_LIGHT_TRIANGLES,
+    SPOT_FALLOFFS,
+    CylinderLight,
+    DiskLight,
+    DistantLight,
+    DomeLight,
+    Light,
+    MeshLight,
+    PointLight,
+    RectLight,
+    SphereLight,
+)
 from .sampling import box3, face_normals
 from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear, transform2d
 
@@ -62,7 +74,7 @@ MTLX_SURFACES = {
         "dropped": ("coat_weight", "transmission_weight", "subsurface_weight", "fuzz_weight", "thin_film_weight",
                     "specular_roughness_anisotropy")},
 }
-SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "DomeLight", "DomeLight_1")
+SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "CylinderLight", "DomeLight", "DomeLight_1")
 PREVIEW_DEFAULTS = {
     "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
     "specularColor": (0.0, 0.0, 0.0), "metallic": 0.0, "roughness": 0.5, "ior": 1.5, "opacity": 1.0,
@@ -78,6 +90,7 @@ _LIGHT_INPUTS = {
                     "nasset:shaping:falloff"},
     "RectLight": {"inputs:width", "inputs:height"},
     "DiskLight": {"inputs:radius"},
+    "CylinderLight": {"inputs:radius", "inputs:length", "treatAsLine"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
     "DomeLight_1": {"inputs:texture:file", "inputs:texture:format", "guideRadius", "poleAxis"},
 }
@@ -1215,6 +1228,21 @@ class _Loader:
             area = float(np.linalg.norm(np.cross(ex, ey)))
             L = scale / area if normalize and area > 0 else scale
             self.lights.append(RectLight(M[3, :3], ex, ey, L, path))
+        elif tname == "CylinderLight":
+            cl = UsdLux.CylinderLight(prim)
+            r, length = float(g(cl.GetRadiusAttr(), 0.5)), float(g(cl.GetLengthAttr(), 1.0))
+            if r < 0 or length < 0:
+                raise self.err("SCENE_INVALID", "radius and length must be >= 0", path, "inputs:radius")
+            if bool(g(cl.GetTreatAsLineAttr(), False)):
+                self.warn("treatAsLine ignored: rendered as the cylinder of its radius", path)
+            across = np.linalg.norm(M[1:3, :3], axis=1)  # the scale across the axis (rows: images of local y, z)
+            if not np.isclose(across[0], across[1], rtol=1e-4):
+                self.warn(f"non-uniform scale across the axis: a round cylinder of the mean radius scale {across.mean():.4g}",
+                          path)
+            rw, lw = r * float(across.mean()), length * float(np.linalg.norm(M[0, :3]))
+            area = 2.0 * np.pi * rw * lw
+            L = scale / area if normalize and area > 0 else scale
+            self.lights.append(CylinderLight(M[3, :3], M[0, :3], rw, lw, L, path))
         elif tname == "DiskLight":
             r = float(g(UsdLux.DiskLight(prim).GetRadiusAttr(), 0.5))
             if r < 0:

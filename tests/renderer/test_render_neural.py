@@ -107,7 +107,7 @@ def test_unsupported_light(tmp_path):
 
     b = SceneBuilder()
     b.camera((0, 0, 3), (0, 0, 0))
-    UsdLux.CylinderLight.Define(b.stage, "/World/Tube")
+    UsdLux.GeometryLight.Define(b.stage, "/World/Tube")
     with pytest.raises(SceneError) as e:
         load_scene(b.write(tmp_path / "s.usda"))
     assert e.value.code == "SCENE_UNSUPPORTED" and e.value.prim == "/World/Tube"
