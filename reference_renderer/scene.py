@@ -1156,7 +1156,7 @@ class _Loader:
         return {"axis": -M[2, :3], "cone_deg": cone, "softness": soft, "falloff": kind}
 
     def _light(self, prim, tname):
-        from pxr import UsdGeom, UsdLux
+        from pxr import Usd, UsdGeom, UsdLux
 
         path = str(prim.GetPath())
         if tname == "PortalLight":  # a sampling aid of dome lights: no light of its own
@@ -1171,6 +1171,12 @@ class _Loader:
             if n in known or n.startswith(_IGNORED_PREFIXES):
                 continue
             self.warn(f"attribute {n!r} is not used by the renderer", path)
+        for link in ("lightLink", "shadowLink"):  # a collection that leaves objects out: every object is lit all the same
+            coll = Usd.CollectionAPI(prim, link)
+            include_root = coll.GetIncludeRootAttr().Get(self.time) if coll.GetIncludeRootAttr() else None
+            if coll.GetExcludesRel().GetTargets() or (coll.GetIncludesRel().GetTargets() and include_root is False):
+                self.warn(f"{link} collection ignored: the light {'lights' if link == 'lightLink' else 'shadows'} every "
+                          "object", path)
         api = UsdLux.LightAPI(prim)
         g = lambda a, d: (a.Get(self.time) if a and a.Get(self.time) is not None else d)  # noqa: E731
         intensity = float(g(api.GetIntensityAttr(), 1.0))

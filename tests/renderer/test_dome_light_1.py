@@ -47,3 +47,15 @@ def test_a_portal_light_is_ignored_with_a_warning(tmp_path):
     with pytest.warns(UserWarning, match="PortalLight ignored"):
         scene = load_scene(b.write(tmp_path / "s.usda"))
     assert [type(light).__name__ for light in scene.lights] == ["DomeLight"]
+
+
+def test_light_linking_that_leaves_objects_out_is_warned(tmp_path):
+    from pxr import Usd
+
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.quad("Floor", (0, 0, 0), 1.0, normal=(0, 0, 1))
+    dome = UsdLux.DomeLight.Define(b.stage, "/World/Sky")
+    Usd.CollectionAPI(dome.GetPrim(), "lightLink").CreateExcludesRel().SetTargets(["/World/Floor"])
+    with pytest.warns(UserWarning, match="lightLink collection ignored"):
+        load_scene(b.write(tmp_path / "s.usda"))
