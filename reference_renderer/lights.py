@@ -284,8 +284,18 @@ class RectLight(Light):
     def power_is_zero(self):
         return not (self.L > 0).any() or self.A <= 0
 
+    def _point(self, u):
+        """Points [N, 3] on the light, uniform by area, for samples ``u`` [N, 2]."""
+        return self.c + (u[:, 0:1] - 0.5) * self.ex + (u[:, 1:2] - 0.5) * self.ey
+
+    def _inside(self, q):
+        """True where ``q`` [N, 3] (from the centre, in the light's plane) lies on the light."""
+        sx = (q @ self.ex) / (self.ex @ self.ex)
+        sy = (q @ self.ey) / (self.ey @ self.ey)
+        return (np.abs(sx) <= 0.5) & (np.abs(sy) <= 0.5)
+
     def sample(self, p, u):
-        q = self.c + (u[:, 0:1] - 0.5) * self.ex + (u[:, 1:2] - 0.5) * self.ey
+        q = self._point(u)
         v = q - p
         d2 = np.maximum(dot(v, v), 1e-300)
         dist = np.sqrt(d2)
@@ -300,9 +310,7 @@ class RectLight(Light):
         front = den < -1e-12  # ray travels against the emission direction
         t = np.where(front, ((self.c - o) @ self.n) / np.where(front, den, -1.0), INF)
         q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
-        sx = (q @ self.ex) / (self.ex @ self.ex)
-        sy = (q @ self.ey) / (self.ey @ self.ey)
-        ok = front & (t > 0) & (np.abs(sx) <= 0.5) & (np.abs(sy) <= 0.5)
+        ok = front & (t > 0) & self._inside(q)
         return np.where(ok, t, INF)
 
     def pdf(self, p, wi):
@@ -328,26 +336,13 @@ class DiskLight(RectLight):
         g = np.array([[self.ex @ self.ex, self.ex @ self.ey], [self.ex @ self.ey, self.ey @ self.ey]])
         self.g_inv = np.linalg.inv(g) if abs(np.linalg.det(g)) > 1e-300 else np.zeros((2, 2))
 
-    def sample(self, p, u):
+    def _point(self, u):
         rho, phi = np.sqrt(u[:, 0:1]), 2.0 * np.pi * u[:, 1:2]  # uniform on the unit disk, so on its affine image
-        q = self.c + rho * np.cos(phi) * self.ex + rho * np.sin(phi) * self.ey
-        v = q - p
-        d2 = np.maximum(dot(v, v), 1e-300)
-        dist = np.sqrt(d2)
-        wi = v / dist[:, None]
-        cos_l = -(wi @ self.n)
-        ok = cos_l > 1e-9
-        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
-        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+        return self.c + rho * np.cos(phi) * self.ex + rho * np.sin(phi) * self.ey
 
-    def _hit(self, o, d):
-        den = d @ self.n
-        front = den < -1e-12  # ray travels against the emission direction
-        t = np.where(front, ((self.c - o) @ self.n) / np.where(front, den, -1.0), INF)
-        q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
+    def _inside(self, q):
         ab = np.stack([q @ self.ex, q @ self.ey], 1) @ self.g_inv  # q = a e_x + b e_y
-        ok = front & (t > 0) & ((ab * ab).sum(1) <= 1.0)
-        return np.where(ok, t, INF)
+        return (ab * ab).sum(1) <= 1.0
 
 
 #: Emissive meshes with at most this many triangles are sampled as lights (``MeshLight.pdf`` tests each triangle).
