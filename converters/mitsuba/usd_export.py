@@ -714,8 +714,7 @@ class StageConverter:
 
         mat_path = self.material(shape.bsdf(), sid, emission)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
-        differ = _class_name(shape.bsdf()) == "TwoSided" and _two_sides_differ(str(shape.bsdf()))
-        if differ or (emission is not None and not _is_one_sided(shape.bsdf())):
+        if _has_back_bsdf(shape.bsdf()) or (emission is not None and not _is_one_sided(shape.bsdf())):
             # the back side's own material (spec/renderer.md#sidedness): no USD schema names one. Mitsuba's area
             # emitter emits from the front only, so the back material of an emitter has no emission.
             back = self.material(shape.bsdf(), sid, None, back=True)
@@ -730,9 +729,7 @@ class StageConverter:
     @staticmethod
     def _sided(shape, emission) -> bool:
         """True when the shape's front side shows: a one-sided BSDF, a twosided one with two BSDFs, or an emitter."""
-        bsdf = shape.bsdf()
-        return (emission is not None or _is_one_sided(bsdf)
-                or (_class_name(bsdf) == "TwoSided" and _two_sides_differ(str(bsdf))))
+        return emission is not None or _is_one_sided(shape.bsdf()) or _has_back_bsdf(shape.bsdf())
 
     def _mesh(self, shape, sid, cls, emission) -> None:
         p = self.mi.traverse(shape)
@@ -751,8 +748,8 @@ class StageConverter:
         vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
         from pxr import Sdf, UsdGeom, Vt
 
-        if self._sided(shape, emission):
-            m = _matrix(self.mi.traverse(shape)["to_world"]) if local_to_world else np.eye(4)
+        m = _matrix(self.mi.traverse(shape)["to_world"]) if local_to_world else np.eye(4)
+        if self._sided(shape, emission) and abs(np.linalg.det(m[:3, :3])) > 1e-300:  # (a flat transform has no sides)
             world = pts @ m[:3, :3].T + m[:3, 3]
             wn = None if normals is None else normals @ np.linalg.inv(m[:3, :3])  # the inverse transpose, on rows
             faces = faces_facing_as_mitsuba(self.mi, shape, world, faces, wn, mirrored=bool(np.linalg.det(m[:3, :3]) < 0))
@@ -1037,6 +1034,11 @@ def _is_one_sided(bsdf) -> bool:
         return False
     cls = _class_name(bsdf)
     return cls != "Null" and "Dielectric" not in cls and "TwoSided" not in str(bsdf)
+
+
+def _has_back_bsdf(bsdf) -> bool:
+    """True for a ``twosided`` BSDF with a back BSDF of its own."""
+    return bsdf is not None and _class_name(bsdf) == "TwoSided" and _two_sides_differ(str(bsdf))
 
 
 def _two_sides_differ(text: str) -> bool:
