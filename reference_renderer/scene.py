@@ -44,6 +44,7 @@ from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear,
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
 MAX_INSTANCED_TRIANGLES = 1 << 24  # triangles a PointInstancer's instances may add (a small file must not fill memory)
+MAX_INSTANCES = 1 << 20  # instances of one PointInstancer (each costs a matrix and a loop step before any triangle)
 MAX_WORLD_COORDINATE = 1e12  # |world coordinate| of any triangle vertex or the camera (float32 ray casting)
 MIN_ASSET_SIZE = 1e-9  # world bounding-box diagonal of a NeuralAsset instance, absolute ...
 MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ray offset 1e-5 S)
@@ -987,9 +988,11 @@ class _Loader:
         pi = UsdGeom.PointInstancer(prim)
         path = str(prim.GetPath())
         protos = [self.stage.GetPrimAtPath(p) for p in pi.GetPrototypesRel().GetForwardedTargets()]
+        indices = np.asarray(pi.GetProtoIndicesAttr().Get(self.time) or [], np.int64)
+        if len(indices) > MAX_INSTANCES:  # before USD computes a matrix for each
+            raise self.err("SCENE_INVALID", f"{len(indices)} instances, more than {MAX_INSTANCES}", path, "protoIndices")
         xforms = pi.ComputeInstanceTransformsAtTime(self.time, self.time, UsdGeom.PointInstancer.IncludeProtoXform,
                                                     UsdGeom.PointInstancer.IgnoreMask)  # the mask is applied below
-        indices = np.asarray(pi.GetProtoIndicesAttr().Get(self.time) or [], np.int64)
         if xforms is None or len(xforms) != len(indices):
             raise self.err("SCENE_INVALID", "PointInstancer instances cannot be computed (protoIndices, positions, "
                            "orientations, scales or the prototypes disagree)", path, "protoIndices")
@@ -1197,7 +1200,7 @@ class _Loader:
         if not np.isfinite(scale).all() or (scale < 0).any() or scale.max(initial=0.0) > MAX_LIGHT_SCALE:
             raise self.err("SCENE_INVALID", f"intensity * 2^exposure * color = {scale.tolist()} must be finite, >= 0 and <= "
                            f"{MAX_LIGHT_SCALE:g}", path, "inputs:intensity")
-        for name in ("inputs:angle", "inputs:radius", "inputs:width", "inputs:height"):
+        for name in ("inputs:angle", "inputs:radius", "inputs:width", "inputs:height", "inputs:length"):
             at = prim.GetAttribute(name)
             v = at.Get(self.time) if at and at.HasAuthoredValue() else None
             if v is not None and not np.isfinite(float(v)):

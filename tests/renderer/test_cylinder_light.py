@@ -53,3 +53,17 @@ def test_floor_under_a_cylinder_light(tmp_path):
     expect = 0.5 / np.pi * _quadrature(np.array([0.3, 0.0, 0.1]), 0.2, 1.5)
     se = np.sqrt(r.variance.mean() / 16)
     assert abs(r.image.mean() - expect) < 5 * se + 0.01 * expect, (r.image.mean(), expect, se)
+
+
+def test_a_cylinder_light_of_infinite_length_is_a_scene_error(tmp_path):
+    import pytest
+    from pxr import UsdLux
+
+    from nasset_sdk.errors import SceneError
+
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    UsdLux.CylinderLight.Define(b.stage, "/World/Tube").CreateLengthAttr(float("inf"))
+    with pytest.raises(SceneError) as exc:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert "length" in str(exc.value)

@@ -74,3 +74,12 @@ def test_instances_past_the_triangle_bound_are_refused(tmp_path, monkeypatch):
     with pytest.raises(SceneError) as exc:
         _scene(tmp_path, positions=[(x, 0, 0) for x in range(20)], proto_indices=[0] * 20)
     assert "more than 20 triangles" in str(exc.value)
+
+
+def test_more_instances_than_the_bound_are_refused_before_their_transforms(tmp_path, monkeypatch):
+    from nasset_reference_renderer import scene as scene_module
+
+    monkeypatch.setattr(scene_module, "MAX_INSTANCES", 3)
+    with pytest.raises(SceneError) as exc:
+        _scene(tmp_path, positions=[(x, 0, 0) for x in range(4)], proto_indices=[0] * 4)
+    assert "more than 3" in str(exc.value)
