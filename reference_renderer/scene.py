@@ -696,7 +696,7 @@ class _Loader:
             if self._producer(inp) is not None:
                 self.warn(f"MaterialX input {name!r} is connected; its own value is used", shader.GetPath())
             v = self._value(inp) if self._producer(inp) is None else inp.Get(self.time)
-            vals[name] = np.asarray(default if v is None else v, np.float64)
+            vals[name] = self._finite(v, default, shader.GetPath(), name)
         for name in names["dropped"]:
             inp = shader.GetInput(name)
             v = inp.Get(self.time) if inp else None
@@ -728,6 +728,18 @@ class _Loader:
         if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Input:
             return attrs[0].Get(self.time)
         return None
+
+    def _finite(self, value, default, shader_path, name: str, bound: float = np.inf) -> np.ndarray:
+        """``value`` (``default`` when None) as float64 of the default's shape; ``SCENE_INVALID`` naming the shader
+        input when it is not a number of that shape, not finite, or beyond ``bound`` in magnitude."""
+        try:
+            out = np.broadcast_to(np.asarray(default if value is None else value, np.float64), np.shape(default))
+        except (TypeError, ValueError):
+            out = None
+        if out is None or not np.isfinite(out).all() or np.abs(out).max(initial=0.0) > bound:
+            raise self.err("SCENE_INVALID", f"{name} = {value!r} is not a finite value of its type"
+                           + (f" within {bound:g}" if np.isfinite(bound) else ""), shader_path, f"inputs:{name}")
+        return out
 
     def _uv_texture(self, inp, where):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
@@ -785,12 +797,7 @@ class _Loader:
         if rnode and rnode.GetIdAttr().Get() == "UsdTransform2d":  # st through a 2D transform (texture tiling)
             vals = []
             for name, default in (("scale", (1.0, 1.0)), ("rotation", 0.0), ("translation", (0.0, 0.0))):
-                v = self._value(rnode.GetInput(name))
-                v = np.asarray(default if v is None else v, np.float64)
-                if not np.isfinite(v).all() or np.abs(v).max(initial=0.0) > 1e9:
-                    raise self.err("SCENE_INVALID", f"UsdTransform2d {name} must be finite (|value| <= 1e9)",
-                                   rnode.GetPath(), f"inputs:{name}")
-                vals.append(v)
+                vals.append(self._finite(self._value(rnode.GetInput(name)), default, rnode.GetPath(), name, bound=1e9))
             uv_matrix = transform2d(vals[0], float(vals[1]), vals[2])
             rnode = source_of(rnode, "in")
         if rnode and rnode.GetIdAttr().Get() == "UsdPrimvarReader_float2":

@@ -68,3 +68,20 @@ def test_mtlx_lobes_without_a_preview_counterpart_are_warned(tmp_path):
 
     with pytest.warns(UserWarning, match="transmission is dropped"):
         _floor_scene(tmp_path, "mx", mtlx)
+
+
+def test_a_mtlx_input_that_is_not_a_finite_number_is_a_scene_error(tmp_path):
+    from nasset_sdk.errors import SceneError
+
+    def mtlx(stage):
+        mat = UsdShade.Material.Define(stage, "/World/Looks/Mx")
+        sh = UsdShade.Shader.Define(stage, "/World/Looks/Mx/Surface")
+        sh.CreateIdAttr("ND_standard_surface_surfaceshader")
+        sh.CreateInput("metalness", Sdf.ValueTypeNames.String).Set("shiny")
+        sh.CreateInput("base", Sdf.ValueTypeNames.Float).Set(float("nan"))
+        mat.CreateSurfaceOutput("mtlx").ConnectToSource(sh.ConnectableAPI(), "out")
+        return mat
+
+    with pytest.raises(SceneError) as exc:
+        _floor_scene(tmp_path, "mx", mtlx)
+    assert exc.value.code == "SCENE_INVALID" and "inputs:" in str(exc.value)

@@ -418,3 +418,25 @@ def test_inputs_connected_to_the_materials_interface_take_its_values(tmp_path):
         warnings.simplefilter("error")  # nothing dropped, nothing defaulted
         scene = load_scene(str(tmp_path / "interface.usda"))
     np.testing.assert_allclose(render(scene, settings).image, want, rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("name, value_type, value", [("scale", "String", "big"), ("rotation", "Float", float("inf")),
+                                                     ("translation", "Float2", (1e12, 0.0))])
+def test_a_bad_transform2d_value_is_a_scene_error(tmp_path, name, value_type, value):
+    from pxr import Sdf, Usd, UsdShade
+
+    from nasset_sdk.errors import SceneError
+
+    plain, _ = _textured_quad_scene(tmp_path, "raw")
+    stage = Usd.Stage.Open(plain)
+    xf = UsdShade.Shader.Define(stage, "/World/Looks/FloorMat/tile")
+    xf.CreateIdAttr("UsdTransform2d")
+    xf.CreateInput(name, getattr(Sdf.ValueTypeNames, value_type)).Set(value)
+    xf.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(
+        UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/st")).ConnectableAPI(), "result")
+    UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/FloorMat/tex")).GetInput("st").ConnectToSource(xf.ConnectableAPI(),
+                                                                                                  "result")
+    stage.GetRootLayer().Export(str(tmp_path / "bad.usda"))
+    with pytest.raises(SceneError) as exc:
+        load_scene(str(tmp_path / "bad.usda"))
+    assert exc.value.code == "SCENE_INVALID" and f"inputs:{name}" in str(exc.value)
