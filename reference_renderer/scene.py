@@ -656,7 +656,8 @@ class _Loader:
                               "is used", shader.GetPath())
             v = self._value(inp) if self._producer(inp) is None else inp.Get(self.time)
             if v is not None:
-                vals[name] = v
+                default = PREVIEW_DEFAULTS[name]
+                vals[name] = v if default is None else self._finite(v, default, shader.GetPath(), name)
         if float(vals["opacity"]) < 1.0:
             self.warn("opacity < 1 is ignored (rendered opaque)", shader.GetPath())
         if float(vals["clearcoat"]) > 0.0:
@@ -669,6 +670,8 @@ class _Loader:
             kd = diffuse
         else:
             ior = float(vals["ior"])
+            if ior <= 0.0:  # F0 = ((1 - ior) / (1 + ior))^2 has no meaning there (a pole at -1)
+                raise self.err("SCENE_INVALID", f"ior = {ior!r} must be > 0", shader.GetPath(), "inputs:ior")
             m = float(np.clip(vals["metallic"], 0, 1))
             f0s = ((1.0 - ior) / (1.0 + ior)) ** 2
             f0 = (1.0 - m) * f0s + m * diffuse

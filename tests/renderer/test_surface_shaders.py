@@ -1,4 +1,6 @@
-"""MaterialX surfaces (spec/renderer.md#materials): a material whose only surface is a MaterialX standard_surface or
+"""Surface shaders (spec/renderer.md#materials): their inputs are checked, and MaterialX surfaces are read.
+
+MaterialX surfaces: a material whose only surface is a MaterialX standard_surface or
 open_pbr_surface on outputs:mtlx:surface renders as the UsdPreviewSurface of the same base colour, metalness,
 roughness, IOR and emission. Before, the whole scene was SCENE_UNSUPPORTED."""
 
@@ -85,3 +87,23 @@ def test_a_mtlx_input_that_is_not_a_finite_number_is_a_scene_error(tmp_path):
     with pytest.raises(SceneError) as exc:
         _floor_scene(tmp_path, "mx", mtlx)
     assert exc.value.code == "SCENE_INVALID" and "inputs:" in str(exc.value)
+
+
+@pytest.mark.parametrize("name, value_type, value", [("roughness", "String", "rough"), ("diffuseColor", "Color3f",
+                                                                                         (float("nan"), 0.1, 0.1)),
+                                                     ("ior", "Float", -1.0)])
+def test_preview_surface_inputs_that_are_not_usable_numbers_are_scene_errors(tmp_path, name, value_type, value):
+    """Before: a string was a numpy traceback, a NaN colour went on to the render, ior -1 divided by zero."""
+    from nasset_sdk.errors import SceneError
+
+    def preview(stage):
+        mat = UsdShade.Material.Define(stage, "/World/Looks/Preview")
+        sh = UsdShade.Shader.Define(stage, "/World/Looks/Preview/Surface")
+        sh.CreateIdAttr("UsdPreviewSurface")
+        sh.CreateInput(name, getattr(Sdf.ValueTypeNames, value_type)).Set(value)
+        mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+        return mat
+
+    with pytest.raises(SceneError) as exc:
+        _floor_scene(tmp_path, "bad", preview)
+    assert exc.value.code == "SCENE_INVALID" and f"inputs:{name}" in str(exc.value)
