@@ -384,6 +384,16 @@ class _Loader:
                            xformable.GetPrim().GetPath(), "xformOpOrder")
         return M
 
+    @contextlib.contextmanager
+    def _reading(self, prim):
+        """``SCENE_INVALID`` naming ``prim`` for a value Python cannot use where a number or an array of one is read
+        (a hand-written file may give a schema attribute another type: ``string inputs:intensity = "x"``)."""
+        try:
+            yield
+        except (ValueError, TypeError, OverflowError, IndexError) as exc:
+            raise self.err("SCENE_INVALID", f"a value of the wrong type or shape ({type(exc).__name__}: "
+                           f"{str(exc).strip()[:160]})", prim) from None
+
     def warn(self, msg, prim=None):
         text = f"{self.file}:{prim}: {msg}" if prim else f"{self.file}: {msg}"
         if text not in self._said:  # once each (a PointInstancer repeats its prototypes' warnings per instance)
@@ -406,34 +416,36 @@ class _Loader:
                     it.PruneChildren()
                     continue
             tname = str(prim.GetTypeName())
-            source = asset_source(prim)
-            if source is not None or tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
-                self._neural(prim, source)
-                it.PruneChildren()
-            elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
-                n = len(self.lights)
-                self._light(prim, tname)
-                vis = prim.GetAttribute("nasset:cameraVisibility")
-                if vis and vis.HasAuthoredValue() and self.lights[n:]:
-                    if not isinstance(vis.Get(self.time), bool):
-                        raise self.err("SCENE_INVALID", "nasset:cameraVisibility must be a bool", str(prim.GetPath()),
-                                       "nasset:cameraVisibility")
-                    self.lights[n].camera_visible = bool(vis.Get(self.time))  # spec/renderer.md#light-surfaces
-            elif tname == "Camera":
-                self.cameras.append(prim)
-            elif tname == "Mesh":
-                self._mesh(prim)
-            elif tname in IMPLICIT_PRIMS:
-                self._implicit(prim, tname)
-            elif tname == "PointInstancer":
-                self._point_instancer(prim)
-                it.PruneChildren()  # prototypes beneath it render only as its instances
-            elif tname in ("BasisCurves", "NurbsCurves", "NurbsPatch", "Points", "HermiteCurves", "TetMesh", "Volume"):
-                raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh and the implicit "
-                               f"{', '.join(IMPLICIT_PRIMS)} are)", path)
+            with self._reading(path):
+                source = asset_source(prim)
+                if source is not None or tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
+                    self._neural(prim, source)
+                    it.PruneChildren()
+                elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
+                    n = len(self.lights)
+                    self._light(prim, tname)
+                    vis = prim.GetAttribute("nasset:cameraVisibility")
+                    if vis and vis.HasAuthoredValue() and self.lights[n:]:
+                        if not isinstance(vis.Get(self.time), bool):
+                            raise self.err("SCENE_INVALID", "nasset:cameraVisibility must be a bool", str(prim.GetPath()),
+                                           "nasset:cameraVisibility")
+                        self.lights[n].camera_visible = bool(vis.Get(self.time))  # spec/renderer.md#light-surfaces
+                elif tname == "Camera":
+                    self.cameras.append(prim)
+                elif tname == "Mesh":
+                    self._mesh(prim)
+                elif tname in IMPLICIT_PRIMS:
+                    self._implicit(prim, tname)
+                elif tname == "PointInstancer":
+                    self._point_instancer(prim)
+                    it.PruneChildren()  # prototypes beneath it render only as its instances
+                elif tname in ("BasisCurves", "NurbsCurves", "NurbsPatch", "Points", "HermiteCurves", "TetMesh", "Volume"):
+                    raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh and the implicit "
+                                   f"{', '.join(IMPLICIT_PRIMS)} are)", path)
         if not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
-        camera = self._camera(self.cameras[0])
+        with self._reading(str(self.cameras[0].GetPath())):
+            camera = self._camera(self.cameras[0])
         if len(self.cameras) > 1:
             self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
