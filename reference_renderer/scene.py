@@ -356,6 +356,9 @@ class _Loader:
         self._placement: np.ndarray | None = None  # inv(prototype root) @ instance @ PointInstancer, while expanding one
         self.warnings: list[str] = []
         self.tris: list = []
+        self.n_tri = 0  # triangles in self.tris, and corner rows in self.tri_normals (kept as they grow)
+        self.n_corner_rows = 0
+        self._implicit_meshes: dict = {}  # (type, sizes, axis) -> implicit_mesh(...): one tessellation per shape
         self.tri_local: list = []
         self.tri_normals: list = []
         self.tri_ng: list = []
@@ -513,15 +516,17 @@ class _Loader:
         """Append an instance's world triangles [k,3,3]; ``normals_world`` [k,3,3] corner normals and ``st`` [k,3,2]
         (meshes; None for neural instances), ``ng`` [k,3] unit geometric normals and ``box`` (lo, hi) when the
         caller has them."""
-        inst.first_tri = sum(len(t) for t in self.tris)
+        inst.first_tri = self.n_tri
         inst.n_tri = len(tris_world)
+        self.n_tri += inst.n_tri
         if inst.n_tri:
             inst.box = box if box is not None else box3(tris_world.reshape(-1, 3))
         self.instances.append(inst)
         self.tris.append(tris_world)
         self.tri_ng.append(face_normals(tris_world) if ng is None else ng)
         if normals_world is not None:
-            inst.corner_offset = sum(len(t) for t in self.tri_normals) - inst.first_tri
+            inst.corner_offset = self.n_corner_rows - inst.first_tri
+            self.n_corner_rows += len(normals_world)
             self.tri_normals.append(normals_world)
             self.tri_st.append(np.zeros((len(tris_world), 3, 2)) if st is None else st)
         self.tri_local.append(local_ids.astype(np.int64))
@@ -1043,17 +1048,16 @@ class _Loader:
                 raise self.err("SCENE_INVALID", "a prototype root's transform is singular or not finite", root.GetPath(),
                                "xformOpOrder")
         inv_roots = [np.linalg.inv(m) for m in roots]
-        added = 0
+        before = self.n_tri
         for i in np.nonzero(mask)[0]:
-            k, first = int(indices[i]), len(self.tris)
+            k = int(indices[i])
             self._placement = inv_roots[k] @ np.array(xforms[int(i)], np.float64) @ world
             try:
                 for p, t in parts[k]:
                     self._mesh(p) if t == "Mesh" else self._implicit(p, t)
             finally:
                 self._placement = None
-            added += sum(len(t) for t in self.tris[first:])
-            if added > MAX_INSTANCED_TRIANGLES:
+            if self.n_tri - before > MAX_INSTANCED_TRIANGLES:
                 raise self.err("SCENE_INVALID", f"the instances add more than {MAX_INSTANCED_TRIANGLES} triangles", path,
                                "protoIndices")
 
@@ -1073,7 +1077,10 @@ class _Loader:
         axis = str(axis_attr.Get(self.time)) if axis_attr and axis_attr.Get(self.time) is not None else "Z"
         if axis not in ("X", "Y", "Z"):
             raise self.err("SCENE_INVALID", f"{tname} axis {axis!r} (X, Y or Z)", prim.GetPath(), "axis")
-        pts, faces, nrm = implicit_mesh(tname, size, axis)
+        key = (tname, tuple(size.items()), axis)
+        if key not in self._implicit_meshes:
+            self._implicit_meshes[key] = implicit_mesh(tname, size, axis)
+        pts, faces, nrm = self._implicit_meshes[key]
         M = self.matrix(UsdGeom.Xformable(prim))
         pw = pts @ M[:3, :3] + M[3, :3]
         if self._reversed(UsdGeom.Gprim(prim), M):
