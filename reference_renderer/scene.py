@@ -665,13 +665,13 @@ class _Loader:
             if name not in PREVIEW_DEFAULTS:
                 self.warn(f"unknown UsdPreviewSurface input {name!r} ignored", shader.GetPath())
                 continue
-            if self._producer(inp) is not None:  # fed by a shader's output (a texture); else a value
+            producer, v = self._read_input(inp)
+            if producer is not None:  # fed by a shader's output (a texture)
                 if name == "diffuseColor":
                     texture = self._uv_texture(inp, shader.GetPath())
                 else:
                     self.warn(f"input {name!r} is connected (only diffuseColor textures are rendered); its own value "
                               "is used", shader.GetPath())
-            v = self._value(inp) if self._producer(inp) is None else inp.Get(self.time)
             if v is not None:
                 default = PREVIEW_DEFAULTS[name]
                 vals[name] = v if default is None else self._finite(v, default, shader.GetPath(), name)
@@ -712,10 +712,9 @@ class _Loader:
         names = MTLX_SURFACES[sid]
         vals = {}
         for name, default in names["inputs"].items():
-            inp = shader.GetInput(name)
-            if self._producer(inp) is not None:
+            producer, v = self._read_input(shader.GetInput(name))
+            if producer is not None:
                 self.warn(f"MaterialX input {name!r} is connected; its own value is used", shader.GetPath())
-            v = self._value(inp) if self._producer(inp) is None else inp.Get(self.time)
             vals[name] = self._finite(v, default, shader.GetPath(), name)
         for name in names["dropped"]:
             inp = shader.GetInput(name)
@@ -726,28 +725,25 @@ class _Loader:
         return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
                 "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}
 
-    @staticmethod
-    def _producer(inp):
-        """(shader, output name) whose output feeds ``inp`` through any connections (node graph boundaries, a
-        material's interface inputs), or None when what feeds it is a value."""
-        from pxr import UsdShade
-
-        attrs = inp.GetValueProducingAttributes() if inp else []
-        if not attrs or UsdShade.Utils.GetType(attrs[0].GetName()) != UsdShade.AttributeType.Output:
-            return None
-        return UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]
-
-    def _value(self, inp):
-        """The value of a shader input, read where its connections lead when they end at a value (a material's or
-        node graph's interface input, as in USD's own UsdPreviewSurface example); None when unset."""
+    def _read_input(self, inp) -> tuple:
+        """(producer, value) of a shader input, followed through its connections (node graph boundaries, a
+        material's interface inputs, as in USD's own UsdPreviewSurface example): producer is the (shader, output
+        name) whose output feeds it, or None when a value does; value is that value, or the input's own when a
+        shader output feeds it (None when unset)."""
         from pxr import UsdShade
 
         if not inp:
-            return None
+            return None, None
         attrs = inp.GetValueProducingAttributes() if inp.HasConnectedSource() else [inp.GetAttr()]
-        if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Input:
-            return attrs[0].Get(self.time)
-        return None
+        if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Output:
+            return (UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]), \
+                inp.Get(self.time)
+        return None, (attrs[0].Get(self.time) if attrs else None)
+
+    def _value(self, inp):
+        """The value feeding a shader input (:meth:`_read_input`); None when unset or fed by a shader's output."""
+        producer, v = self._read_input(inp)
+        return None if producer else v
 
     def _finite(self, value, default, shader_path, name: str, bound: float = np.inf) -> np.ndarray:
         """``value`` (``default`` when None) as float64 of the default's shape; ``SCENE_INVALID`` naming the shader
@@ -764,7 +760,7 @@ class _Loader:
     def _uv_texture(self, inp, where):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
         value is then used): a ``UsdUVTexture``'s ``rgb`` output whose ``st`` reads a ``UsdPrimvarReader_float2``."""
-        producer = self._producer(inp)
+        producer = self._read_input(inp)[0]
         node, out = producer if producer else (None, None)
         nid = node.GetIdAttr().Get() if node else None
         if nid != "UsdUVTexture" or str(out) != "rgb":
@@ -810,7 +806,7 @@ class _Loader:
         varname, uv_matrix = "st", None
 
         def source_of(shader, name):
-            producer = self._producer(shader.GetInput(name))
+            producer = self._read_input(shader.GetInput(name))[0]
             return producer[0] if producer else None
 
         rnode = source_of(node, "st")
