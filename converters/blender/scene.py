@@ -427,7 +427,8 @@ def material_names(objects) -> list[str]:
 
 
 def _include(layer, wanted: set) -> bool:
-    """Un-exclude the layer collections on the way to each collection in ``wanted`` (pointers); True when found."""
+    """Include (not excluded, not disabled in renders) every layer collection on the way to each collection in
+    ``wanted`` (pointers), those collections too; True when ``layer`` leads to one."""
     found = layer.collection.as_pointer() in wanted
     for child in layer.children:
         if _include(child, wanted):
@@ -447,8 +448,6 @@ def isolate(objects) -> None:
     renders = render_visible(bpy.context.view_layer)
     for ob in objects:  # an asset object in a collection disabled in renders (or excluded) is rendered all the same
         if not renders(ob):
-            for coll in ob.users_collection:
-                coll.hide_render = False
             _include(bpy.context.view_layer.layer_collection, {c.as_pointer() for c in ob.users_collection})
     for ob in objects:
         if has_particle_hair(ob):  # keep the hair, not the emitter mesh
