@@ -563,10 +563,10 @@ SHADER_NODES = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfPrincipled", "ShaderNode
 def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     """UsdPreviewSurface inputs of the shader ``node`` (None, with a note, when it is not convertible). Mix and Add
     Shaders combine their inputs' parameters (:func:`_combine`)."""
-    if node.bl_idname in ("ShaderNodeMixShader", "ShaderNodeAddShader") and depth >= 8:
-        notes.append(f"material {mat.name}: shader mixes nested deeper than 8: grey")
-        return None
     if node.bl_idname in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
+        if depth >= 8:
+            notes.append(f"material {mat.name}: shader mixes nested deeper than 8: grey")
+            return None
         mix = node.bl_idname == "ShaderNodeMixShader"
         fac, f_linked = _socket(node, "Factor", 0.5) if mix else (0.0, False)
         if f_linked:

@@ -12,10 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], 1)
+from nasset_reference_renderer.sampling import cross3
 
 
 def sampled_normal(mi, shape) -> tuple[np.ndarray, np.ndarray]:
@@ -44,7 +41,7 @@ def front_sign(mi, shape, pts: np.ndarray, faces: np.ndarray, normals: np.ndarra
     den = np.where(ok, den, 1.0)
     b1, b2 = (d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den
     b = np.stack([1.0 - b1 - b2, b1, b2], 1)
-    cr = _cross(e1, e2)
+    cr = cross3(e1, e2)
     area2 = np.maximum(np.linalg.norm(cr, axis=1), 1e-300)
     off_plane = np.abs((v * cr).sum(1)) / area2
     outside = np.maximum(-b.min(1), 0.0) * np.sqrt(area2)
@@ -66,7 +63,7 @@ def faces_facing_as_mitsuba(mi, shape, pts: np.ndarray, faces: np.ndarray, norma
     pts, faces = np.asarray(pts, np.float64), np.asarray(faces, np.int64)
     fan = np.concatenate([faces[:, [0, j, j + 1]] for j in range(1, faces.shape[1] - 1)])
     t = pts[faces]
-    cr = _cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    cr = cross3(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
     mitsuba = cr if normals is None else np.asarray(normals, np.float64)[faces].sum(1)
     mitsuba = mitsuba * front_sign(mi, shape, pts, fan, normals)
     usd = -cr if mirrored else cr
