@@ -208,11 +208,42 @@ class SphereLight(Light):
         return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
 
 
-class CylinderLight(Light):
-    """UsdLux.CylinderLight: the side of a cylinder (no caps) of world ``radius`` around the unit ``axis`` through
-    ``center``, ``length`` long, emitting outward; sampled uniformly by area, hit only from outside."""
+class _SurfaceLight(Light):
+    """An analytic light surface sampled uniformly by area (``A``, radiance ``L``): subclasses give its points
+    (``_point``), the cosine at the light toward ``-wi`` (``_cos``) and the ray hit (``_hit``)."""
 
     area = True
+
+    def power_is_zero(self):
+        return not (self.L > 0).any() or self.A <= 0
+
+    def sample(self, p, u):
+        q = self._point(u)
+        v = q - p
+        d2 = np.maximum(dot(v, v), 1e-300)
+        dist = np.sqrt(d2)
+        wi = v / dist[:, None]
+        cos_l = self._cos(wi, q)
+        ok = cos_l > 1e-9  # the emitting side faces p
+        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+
+    def pdf(self, p, wi):
+        t = self._hit(p, wi)
+        ok = np.isfinite(t)
+        tt = np.where(ok, t, 0.0)
+        cos_l = self._cos(wi, p + wi * tt[:, None])
+        ok &= cos_l > 1e-9
+        return np.where(ok, tt * tt / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
+
+    def intersect(self, o, d):
+        t = self._hit(o, d)
+        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+
+
+class CylinderLight(_SurfaceLight):
+    """UsdLux.CylinderLight: the side of a cylinder (no caps) of world ``radius`` around the unit ``axis`` through
+    ``center``, ``length`` long, emitting outward; sampled uniformly by area, hit only from outside."""
 
     def __init__(self, center, axis, radius: float, length: float, radiance, prim: str = "") -> None:
         self.c = np.asarray(center, np.float64)
@@ -224,24 +255,13 @@ class CylinderLight(Light):
         self.L = np.asarray(radiance, np.float64)
         self.prim = prim
 
-    def power_is_zero(self):
-        return not (self.L > 0).any() or self.A <= 0
-
-    def _normal(self, q):
-        rel = q - self.c
-        return normalize(rel - (rel @ self.a)[:, None] * self.a)
-
-    def sample(self, p, u):
+    def _point(self, u):
         phi = 2.0 * np.pi * u[:, 1:2]
-        q = self.c + (u[:, 0:1] - 0.5) * self.len * self.a + self.r * (np.cos(phi) * self.u + np.sin(phi) * self.v)
-        v = q - p
-        d2 = np.maximum(dot(v, v), 1e-300)
-        dist = np.sqrt(d2)
-        wi = v / dist[:, None]
-        cos_l = -dot(wi, self._normal(q))
-        ok = cos_l > 1e-9  # the outside of the side faces p
-        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
-        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+        return self.c + (u[:, 0:1] - 0.5) * self.len * self.a + self.r * (np.cos(phi) * self.u + np.sin(phi) * self.v)
+
+    def _cos(self, wi, q):
+        rel = q - self.c
+        return -dot(wi, normalize(rel - (rel @ self.a)[:, None] * self.a))  # the outward normal at q
 
     def _hit(self, o, d):
         rel = o - self.c
@@ -254,22 +274,8 @@ class CylinderLight(Light):
         ok = (qa > 1e-300) & (disc >= 0) & (qc > 0) & (t > 0) & (np.abs(along) <= 0.5 * self.len)
         return np.where(ok, t, INF)
 
-    def pdf(self, p, wi):
-        t = self._hit(p, wi)
-        ok = np.isfinite(t)
-        tt = np.where(ok, t, 0.0)
-        cos_l = -dot(wi, self._normal(p + wi * tt[:, None]))
-        ok &= cos_l > 1e-9
-        return np.where(ok, tt * tt / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
 
-    def intersect(self, o, d):
-        t = self._hit(o, d)
-        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
-
-
-class RectLight(Light):
-    area = True
-
+class RectLight(_SurfaceLight):
     def __init__(self, center, axis_x, axis_y, radiance, prim: str = "") -> None:
         """axis_x / axis_y: full edge vectors (width and height, world space, scale included)."""
         self.c = np.asarray(center, np.float64)
@@ -281,9 +287,6 @@ class RectLight(Light):
         self.L = np.asarray(radiance, np.float64)
         self.prim = prim
 
-    def power_is_zero(self):
-        return not (self.L > 0).any() or self.A <= 0
-
     def _point(self, u):
         """Points [N, 3] on the light, uniform by area, for samples ``u`` [N, 2]."""
         return self.c + (u[:, 0:1] - 0.5) * self.ex + (u[:, 1:2] - 0.5) * self.ey
@@ -294,16 +297,8 @@ class RectLight(Light):
         sy = (q @ self.ey) / (self.ey @ self.ey)
         return (np.abs(sx) <= 0.5) & (np.abs(sy) <= 0.5)
 
-    def sample(self, p, u):
-        q = self._point(u)
-        v = q - p
-        d2 = np.maximum(dot(v, v), 1e-300)
-        dist = np.sqrt(d2)
-        wi = v / dist[:, None]
-        cos_l = -(wi @ self.n)
-        ok = cos_l > 1e-9
-        pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
-        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+    def _cos(self, wi, q):
+        return -(wi @ self.n)
 
     def _hit(self, o, d):
         den = d @ self.n
@@ -312,17 +307,6 @@ class RectLight(Light):
         q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
         ok = front & (t > 0) & self._inside(q)
         return np.where(ok, t, INF)
-
-    def pdf(self, p, wi):
-        t = self._hit(p, wi)
-        cos_l = -(wi @ self.n)
-        ok = np.isfinite(t) & (cos_l > 1e-9)
-        tt = np.where(ok, t, 0.0)
-        return np.where(ok, tt * tt / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
-
-    def intersect(self, o, d):
-        t = self._hit(o, d)
-        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
 
 
 class DiskLight(RectLight):
