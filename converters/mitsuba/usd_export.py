@@ -770,7 +770,7 @@ class StageConverter:
             pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
             pv.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(st, np.float32)))
         if local_to_world:
-            self._xform(mesh.GetPrim(), _row(_matrix(self.mi.traverse(shape)["to_world"])))
+            self._xform(mesh.GetPrim(), _row(m))
         mat = self._bind(mesh.GetPrim(), shape, sid, emission)
         if mat in self.textured_materials and uv is None:
             self.warn(f"shape {sid}: textured material but the {cls} has no texture coordinates: the texture's corner "
