@@ -43,6 +43,8 @@ import numpy as np
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
 
+from .common import camera_sensor
+
 #: samples per Mitsuba render call (bounds memory; the halves are means of such chunks)
 CHUNK_SPP = 256
 #: stratified sub-samples per pixel side for the mask
@@ -74,26 +76,20 @@ def _bar(total: int, desc: str, quiet: bool):
 
 
 def sensor_for(mi, scene, width: int, *, file: str = ""):
-    """A box-filtered perspective sensor with the scene camera's pose, horizontal field of view and aspect (a
-    ``thinlens`` camera as its pinhole). CONVERT_SCENE_LOAD when the scene has no camera with a field of view
-    (none, ``orthographic``, ``radiancemeter``, ...): the benches compare images seen from the scene's camera."""
+    """A box-filtered copy of the scene's camera (``common.camera_sensor``: perspective, thinlens or orthographic, as
+    the converted stage has it) ``width`` wide at its film's aspect; returns (sensor, (height, width)).
+    CONVERT_SCENE_LOAD when the scene has no such camera (none, ``radiancemeter``, ...): the benches compare images
+    seen from the scene's camera."""
     sensors = scene.sensors()
-    p = mi.traverse(sensors[0]) if sensors else None
-    if p is None or "x_fov" not in p or "to_world" not in p:
-        kind = str(sensors[0]).split("[")[0].strip() if sensors else "none"
-        raise error("CONVERT_SCENE_LOAD", f"the scene's camera ({kind}) has no field of view: the benches compare images "
-                    "from the scene's own perspective camera; add a <sensor type=\"perspective\"> (a thinlens camera is "
-                    "used as its pinhole)", file=str(file))
-    sensor = sensors[0]
-    m = np.asarray(p["to_world"].matrix, np.float64).reshape(4, 4, -1)[:, :, 0]
-    fw, fh = (int(v) for v in sensor.film().size())
+    fw, fh = (int(v) for v in sensors[0].film().size()) if sensors else (1, 1)
     height = max(1, int(round(width * fh / max(fw, 1))))
-    return mi.load_dict({
-        "type": "perspective", "fov": float(np.asarray(p["x_fov"]).ravel()[0]), "fov_axis": "x",
-        "to_world": mi.ScalarTransform4f(m.tolist()),
-        "film": {"type": "hdrfilm", "width": int(width), "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-        "sampler": {"type": "independent"},
-    }), (height, int(width))
+    sensor = camera_sensor(mi, sensors[0], width, height) if sensors else None
+    if sensor is None:
+        kind = str(sensors[0]).split("[")[0].strip() if sensors else "none"
+        raise error("CONVERT_SCENE_LOAD", f"the scene's camera ({kind}) is not a perspective, thinlens or orthographic "
+                    "camera: the benches compare images seen from the scene's own camera; add a <sensor "
+                    "type=\"perspective\">", file=str(file))
+    return sensor, (height, int(width))
 
 
 def render_halves(render, spp: int, seed: int = 0, *, desc: str, quiet: bool = False):
@@ -405,10 +401,10 @@ def blender_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     converted = convert_scene(scene_file, out / "scene_neural.usda", replace=rep, check_usd=False)
     bsc.open_blend(scene_file)
     camera = bpy.context.scene.camera
-    if camera is None or camera.data.type != "PERSP":  # as sensor_for on the Mitsuba side
+    if camera is None or camera.data.type not in ("PERSP", "ORTHO"):  # as sensor_for on the Mitsuba side
         raise error("CONVERT_SCENE_LOAD", f"the scene's camera ({'none' if camera is None else camera.data.type}) is "
-                    "not a perspective one: the benches compare images from the scene's own perspective camera; add "
-                    "one and make it the scene's active camera", file=str(scene_file))
+                    "not a perspective or orthographic one: the benches compare images seen from the scene's own "
+                    "camera; add one and make it the scene's active camera", file=str(scene_file))
     fits = blender_asset_fits(rep, scene_file=str(scene_file))
     w, h = converted.resolution
     height = max(1, int(round(res * h / max(w, 1))))

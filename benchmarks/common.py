@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_sdk.cli import MAX_SPP
-from nasset_sdk.errors import UsageError
+from nasset_sdk.errors import UsageError, error
 
 
 def machine() -> dict:
@@ -36,17 +36,36 @@ def ints(text: str, name: str) -> list[int]:
     return vals
 
 
-def mi_sensor(mi, scene, res: int):
-    """A box-filtered res x res perspective sensor with the scene camera's pose and horizontal field of view."""
-    sensor = scene.sensors()[0]
+def camera_sensor(mi, sensor, width: int, height: int):
+    """A box-filtered ``width`` x ``height`` copy of a Mitsuba ``sensor``'s camera: its pose and its model
+    (``perspective`` with its horizontal field of view, ``thinlens`` with its aperture and focus distance, or
+    ``orthographic`` with its to_world scale), as the converted stage describes it (spec/renderer.md#cameras).
+    None for a sensor without one of these cameras (``radiancemeter``, ...)."""
     p = mi.traverse(sensor)
+    if "to_world" not in p:
+        return None
     m = np.asarray(p["to_world"].matrix, np.float64).reshape(4, 4, -1)[:, :, 0]
-    return mi.load_dict({
-        "type": "perspective", "fov": float(np.asarray(p["x_fov"]).ravel()[0]), "fov_axis": "x",
-        "to_world": mi.ScalarTransform4f(m.tolist()),
-        "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-        "sampler": {"type": "independent"},
-    })
+    d = {"to_world": mi.ScalarTransform4f(m.tolist()), "sampler": {"type": "independent"},
+         "film": {"type": "hdrfilm", "width": int(width), "height": int(height), "rfilter": {"type": "box"}, "pixel_format": "rgb"}}
+    if "x_fov" in p:
+        d |= {"type": "perspective", "fov": float(np.asarray(p["x_fov"]).ravel()[0]), "fov_axis": "x"}
+        if "aperture_radius" in p:
+            d |= {"type": "thinlens", "aperture_radius": float(np.asarray(p["aperture_radius"]).ravel()[0]),
+                  "focus_distance": float(np.asarray(p["focus_distance"]).ravel()[0])}
+    elif type(sensor).__name__ == "ProjectiveCamera" and str(sensor).startswith("OrthographicCamera"):
+        d["type"] = "orthographic"
+    else:
+        return None
+    return mi.load_dict(d)
+
+
+def mi_sensor(mi, scene, res: int):
+    """A box-filtered res x res copy of the scene's camera (:func:`camera_sensor`)."""
+    sensor = camera_sensor(mi, scene.sensors()[0], res, res)
+    if sensor is None:
+        raise error("CONVERT_SCENE_LOAD", f"the scene's sensor ({str(scene.sensors()[0]).split('[')[0].strip()}) is not a "
+                    "perspective, thinlens or orthographic camera")
+    return sensor
 
 
 def mi_render(mi, scene, sensor, spp: int, seed: int) -> np.ndarray:

@@ -198,6 +198,7 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     desc = read_scene(path)
     recentre(desc)
     rescale_tiny(desc)
+    expose(desc)
     w, h = desc.camera.resolution(width, height)
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
     for k, m in enumerate(desc.meshes):
@@ -304,7 +305,24 @@ def rescale_tiny(desc) -> float:
     cam = desc.camera.to_world.copy()
     cam[3, :3] *= s
     desc.camera.to_world = cam
+    c = desc.camera  # lengths of the lens and of an orthographic window scale too (a perspective view keeps its ratios)
+    c.lens_radius, c.focus_distance = c.lens_radius * s, c.focus_distance * s
+    if c.orthographic:
+        c.h_aperture, c.v_aperture, c.h_offset, c.v_offset = (v * s for v in (c.h_aperture, c.v_aperture, c.h_offset, c.v_offset))
     return s
+
+
+def expose(desc) -> None:
+    """Fold the camera's exposure scale (spec/renderer.md#cameras) into every emitter, in place: light transport is
+    linear in the emission, so the image scales by the same factor (Mitsuba's film has no gain)."""
+    e = float(desc.camera.exposure)
+    if e == 1.0:
+        return
+    for lt in desc.lights:
+        lt.radiance = np.asarray(lt.radiance, np.float64) * e
+    for mat in {id(m.material): m.material for m in desc.meshes}.values():  # a shared material once
+        mat.emission = np.asarray(mat.emission, np.float64) * e
+    desc.camera.exposure = 1.0
 
 
 def _mesh_ply(mi, mesh) -> str:

@@ -267,20 +267,34 @@ class PathTracer:
             pix = ids % npix
             px = (pix % width) + rng.random(len(ids))
             py = (pix // width) + rng.random(len(ids))
-            o, d = self.camera_rays(px, py, width, height)
+            lens = rng.random((len(ids), 2)) if self.camera.lens_radius > 0 else None
+            o, d = self.camera_rays(px, py, width, height, lens)
             contrib = self.radiance(o, d, rng)
             np.add.at(acc, pix, contrib)
-        return (acc / spp).reshape(height, width, 3)
+        return (acc * (self.camera.exposure / spp)).reshape(height, width, 3)
 
-    def camera_rays(self, px, py, width, height):
+    def camera_rays(self, px, py, width, height, lens=None):
+        """Origins and unit directions [n,3] (spec/renderer.md#cameras): the film position on the image window
+        (tenths of a scene unit), a pinhole, a thin lens (``lens`` [n,2] in [0,1)^2, concentric disk map) or
+        parallel rays (orthographic)."""
         cam = self.camera
-        tan_h = 0.5 * cam.h_aperture / cam.focal
-        x = (2.0 * px / width - 1.0) * tan_h + cam.h_offset / cam.focal
-        y = (1.0 - 2.0 * py / height) * tan_h * (height / width) + cam.v_offset / cam.focal
-        dl = np.stack([x, y, -np.ones_like(x)], 1)
-        d = normalized(dl @ cam.to_world[:3, :3])
-        o = np.broadcast_to(cam.to_world[3, :3], d.shape).copy()
-        return o, d
+        u = (2.0 * px / width - 1.0) * (0.5 * cam.h_aperture) + cam.h_offset
+        v = (1.0 - 2.0 * py / height) * (0.5 * cam.h_aperture * height / width) + cam.v_offset
+        m3, eye = cam.to_world[:3, :3], cam.to_world[3, :3]
+        if cam.orthographic:
+            local = np.stack([0.1 * u, 0.1 * v, np.zeros_like(u)], 1)
+            return local @ m3 + eye, normalized(np.tile(-m3[2], (len(u), 1)))
+        target = np.stack([u / cam.focal, v / cam.focal, -np.ones_like(u)], 1)  # the image plane at distance 1
+        if lens is None:
+            return np.tile(eye, (len(u), 1)), normalized(target @ m3)
+        a, b = 2.0 * lens[:, 0] - 1.0, 2.0 * lens[:, 1] - 1.0  # Shirley-Chiu concentric map onto the disk
+        wide = np.abs(a) > np.abs(b)
+        r = np.where(wide, a, b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            phi = np.where(wide, 0.25 * np.pi * b / a, 0.5 * np.pi - 0.25 * np.pi * a / b)
+        phi = np.where(r == 0, 0.0, phi)
+        start = np.stack([cam.lens_radius * r * np.cos(phi), cam.lens_radius * r * np.sin(phi), np.zeros_like(u)], 1)
+        return start @ m3 + eye, normalized((target * cam.focus_distance - start) @ m3)
 
     def radiance(self, o, d, rng):
         m = len(o)

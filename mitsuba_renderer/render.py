@@ -99,18 +99,35 @@ def register(mi) -> None:
 
 
 def sensor_dict(mi, cam, width: int, height: int) -> dict:
-    """Mitsuba ``perspective`` sensor of a USD camera (horizontal aperture -> x field of view; aperture offsets ->
-    the principal point, in film widths right and film heights down), box-filtered RGB film."""
+    """Mitsuba sensor of a USD camera (spec/renderer.md#cameras), box-filtered RGB film: ``perspective``
+    (horizontal aperture -> x field of view; aperture offsets -> the principal point, in film widths right and film
+    heights down), ``thinlens`` (aperture radius, focus distance) or ``orthographic`` (the window 0.1 x the
+    apertures, as a to_world scale of Mitsuba's [-1, 1] film width). Mitsuba's thin-lens and orthographic sensors
+    have no principal point: with an aperture offset they are SCENE_UNSUPPORTED. The exposure scale is the
+    caller's (a factor on the image)."""
     eye = cam.to_world[3, :3]
     fwd = -cam.to_world[2, :3]
+    frame = mi.ScalarTransform4f().look_at(origin=eye.tolist(), target=(eye + fwd).tolist(), up=cam.to_world[1, :3].tolist())
+    film = {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"}
+    if (cam.orthographic or cam.lens_radius > 0) and (cam.h_offset or cam.v_offset):
+        raise SceneError("SCENE_UNSUPPORTED", "Mitsuba's thin-lens and orthographic sensors have no lens shift (aperture "
+                         "offsets)", prim=cam.prim)
+    if cam.orthographic:
+        half = 0.05 * cam.h_aperture  # scene units: Mitsuba's film spans x in [-1, 1] before to_world
+        return {"type": "orthographic", "near_clip": 1e-6, "to_world": frame @ mi.ScalarTransform4f().scale([half, half, 1.0]),
+                "film": film}
+    fov = float(np.degrees(2.0 * np.arctan(cam.h_aperture / (2.0 * cam.focal))))
+    if cam.lens_radius > 0:
+        return {"type": "thinlens", "fov_axis": "x", "fov": fov, "aperture_radius": float(cam.lens_radius),
+                "focus_distance": float(cam.focus_distance), "to_world": frame, "film": film}
     return {
         "type": "perspective",
         "fov_axis": "x",
-        "fov": float(np.degrees(2.0 * np.arctan(cam.h_aperture / (2.0 * cam.focal)))),
+        "fov": fov,
         "principal_point_offset_x": float(cam.h_offset / cam.h_aperture),
         "principal_point_offset_y": float(-cam.v_offset / (cam.h_aperture * height / width)),
-        "to_world": mi.ScalarTransform4f().look_at(origin=eye.tolist(), target=(eye + fwd).tolist(), up=cam.to_world[1, :3].tolist()),
-        "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "to_world": frame,
+        "film": film,
     }
 
 

@@ -62,6 +62,10 @@ class Camera:
     v_aperture: float
     h_offset: float = 0.0  # horizontalApertureOffset (lens shift), the aperture's units
     v_offset: float = 0.0
+    orthographic: bool = False
+    lens_radius: float = 0.0  # thin lens (perspective): aperture radius in scene units; 0 is a pinhole
+    focus_distance: float = 0.0  # scene units
+    exposure: float = 1.0  # linear factor on the image
 
     def resolution(self, width: int | None, height: int | None) -> tuple[int, int]:
         aspect = self.v_aperture / self.h_aperture
@@ -81,6 +85,41 @@ class SceneDesc:
     meshes: list[Mesh] = field(default_factory=list)
     lights: list[Light] = field(default_factory=list)
     assets: list[AssetInstance] = field(default_factory=list)
+
+
+def _read_camera(prim, to_world, path, t) -> Camera:
+    """spec/renderer.md#cameras: lens and apertures in tenths of a scene unit, focusDistance in scene units."""
+    from pxr import UsdGeom
+
+    cam = UsdGeom.Camera(prim)
+    ppath = str(prim.GetPath())
+
+    def get(name, default):
+        attr = prim.GetAttribute(name)
+        v = attr.Get(t) if attr else None
+        try:
+            v = float(default if v is None else v)
+        except (TypeError, ValueError):
+            v = float("nan")
+        if not np.isfinite(v):
+            raise SceneError("SCENE_INVALID", f"camera {name} is not a finite number", file=path, prim=ppath)
+        return v
+
+    projection = cam.GetProjectionAttr().Get(t) or "perspective"
+    if projection not in ("perspective", "orthographic"):
+        raise SceneError("SCENE_UNSUPPORTED", f"camera projection {projection!r}", file=path, prim=ppath)
+    focal, ha = get("focalLength", 50.0), get("horizontalAperture", 20.955)
+    va = get("verticalAperture", 15.2908)
+    f_stop, focus = get("fStop", 0.0), get("focusDistance", 0.0)
+    if min(focal, ha, va) <= 0 or min(f_stop, focus) < 0:
+        raise SceneError("SCENE_INVALID", "camera lens or aperture out of range", file=path, prim=ppath)
+    thin = projection == "perspective" and f_stop > 0 and focus > 0
+    exposure = (2.0 ** get("exposure", 0.0) * get("exposure:responsivity", 1.0) * get("exposure:time", 1.0)
+                * get("exposure:iso", 100.0) / 100.0 / get("exposure:fStop", 1.0) ** 2)
+    if not (np.isfinite(exposure) and exposure >= 0):
+        raise SceneError("SCENE_INVALID", "camera exposure scale is not finite and >= 0", file=path, prim=ppath)
+    return Camera(ppath, to_world, focal, ha, va, get("horizontalApertureOffset", 0.0), get("verticalApertureOffset", 0.0),
+                  projection == "orthographic", (0.05 * focal / f_stop) if thin else 0.0, focus if thin else 0.0, exposure)
 
 
 def _m4(gf) -> np.ndarray:
@@ -225,14 +264,7 @@ def read_scene(path: str) -> SceneDesc:
                 continue
         if tn == "Camera":
             if camera is None:
-                cam = UsdGeom.Camera(prim)
-                if cam.GetProjectionAttr().Get(t) not in (None, "perspective"):
-                    raise SceneError("SCENE_UNSUPPORTED", "only perspective cameras are supported", file=path, prim=ppath)
-                ha = float(cam.GetHorizontalApertureAttr().Get(t))
-                va = cam.GetVerticalApertureAttr().Get(t)
-                camera = Camera(ppath, _m4(cache.GetLocalToWorldTransform(prim)), float(cam.GetFocalLengthAttr().Get(t)), ha,
-                                float(va or ha), float(cam.GetHorizontalApertureOffsetAttr().Get(t) or 0.0),
-                                float(cam.GetVerticalApertureOffsetAttr().Get(t) or 0.0))
+                camera = _read_camera(prim, _m4(cache.GetLocalToWorldTransform(prim)), path, t)
             continue
         if tn in _LIGHTS:
             lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path, t))

@@ -397,8 +397,12 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
                 jit = pixel_offsets(rng, len(pix), *filt)
                 px = (pix % width) + jit[:, 0]
                 py = (pix // width) + jit[:, 1]
-                o, d = scene.camera.generate_rays(px, py, width, height)
+                cam = scene.camera
+                lens = rng.random((len(pix), 2)) if cam.needs_lens_samples else None
+                o, d = cam.generate_rays(px, py, width, height, lens)
                 L = integ.radiance(o, d, rng)
+                if cam.exposure_scale != 1.0:
+                    L *= cam.exposure_scale
                 film.add_passes(pix_band, L)  # pix is pix_band repeated p1 - p0 times
                 integ.stats.camera_samples += len(pix)
             if bar is not None:

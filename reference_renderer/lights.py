@@ -32,6 +32,7 @@ from .sampling import (
     luminance,
     normalize,
     square_to_uniform_cone,
+    square_to_uniform_disk,
     square_to_uniform_sphere,
     to_world,
 )
@@ -321,8 +322,8 @@ class DiskLight(RectLight):
         self.g_inv = np.linalg.inv(g) if abs(np.linalg.det(g)) > 1e-300 else np.zeros((2, 2))
 
     def _point(self, u):
-        rho, phi = np.sqrt(u[:, 0:1]), 2.0 * np.pi * u[:, 1:2]  # uniform on the unit disk, so on its affine image
-        return self.c + rho * np.cos(phi) * self.ex + rho * np.sin(phi) * self.ey
+        q = square_to_uniform_disk(u)  # uniform on the unit disk, so on its affine image
+        return self.c + q[:, 0:1] * self.ex + q[:, 1:2] * self.ey
 
     def _inside(self, q):
         ab = np.stack([q @ self.ex, q @ self.ey], 1) @ self.g_inv  # q = a e_x + b e_y

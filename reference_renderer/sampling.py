@@ -83,7 +83,13 @@ def around(axis, local):
     return to_world(local, t, b, axis)
 
 
-# -- hemisphere / sphere / cone ---------------------------------------------------------------
+# -- disk / hemisphere / sphere / cone --------------------------------------------------------
+def square_to_uniform_disk(u):
+    """Points [m,2] uniform on the unit disk (polar map; density 1/pi) from u [m,2] in [0,1)^2."""
+    rho, phi = np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
+    return np.stack([rho * np.cos(phi), rho * np.sin(phi)], axis=1)
+
+
 def square_to_cosine_hemisphere(u):
     r = np.sqrt(u[:, 0])
     phi = 2.0 * np.pi * u[:, 1]

@@ -22,7 +22,7 @@ import numpy as np
 from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
-from .camera import PerspectiveCamera
+from .camera import LENS_UNIT, Camera
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
@@ -50,6 +50,7 @@ MIN_ASSET_SIZE = 1e-9  # world bounding-box diagonal of a NeuralAsset instance, 
 MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ray offset 1e-5 S)
 #: UsdUVTexture files the renderer reads (spec/renderer.md#textures): OpenEXR, and 8/16-bit PNG and JPEG
 TEXTURE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg")
+MAX_EXPOSURE_SCALE = 1e30  # the camera's linear exposure scale
 CAMERA_RATIO = (1e-6, 1e6)  # horizontalAperture / focalLength and verticalAperture / horizontalAperture
 MAX_LIGHT_EXPOSURE = 1000.0  # stops
 MAX_LIGHT_SCALE = 1e30  # intensity * 2^exposure * color, per channel
@@ -136,7 +137,7 @@ class Instance:
 @dataclass
 class Scene:
     file: str
-    camera: PerspectiveCamera
+    camera: Camera
     triangles: np.ndarray  # [F,3,3] world
     tri_inst: np.ndarray  # [F]
     tri_local: np.ndarray  # [F] face index inside its instance's source geometry
@@ -533,45 +534,74 @@ class _Loader:
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
     # -- camera ----------------------------------------------------------------------------
-    def _camera(self, prim) -> PerspectiveCamera:
+    def _camera(self, prim) -> Camera:
+        """The camera of spec/renderer.md#cameras: projection, apertures, lens shift, thin lens, exposure."""
         from pxr import UsdGeom
 
         cam = UsdGeom.Camera(prim)
+        path = prim.GetPath()
         proj = cam.GetProjectionAttr().Get(self.time)
-        if proj and proj != UsdGeom.Tokens.perspective:
-            raise self.err("SCENE_UNSUPPORTED", f"camera projection {proj!r} (only perspective)", prim.GetPath(), "projection")
+        if proj and proj not in (UsdGeom.Tokens.perspective, UsdGeom.Tokens.orthographic):
+            raise self.err("SCENE_UNSUPPORTED", f"camera projection {proj!r} (perspective or orthographic)", path, "projection")
+        ortho = proj == UsdGeom.Tokens.orthographic
         vals = {}
-        for name, attr, fallback in (("focalLength", cam.GetFocalLengthAttr(), 50.0),
-                                     ("horizontalAperture", cam.GetHorizontalApertureAttr(), 20.955),
-                                     ("verticalAperture", cam.GetVerticalApertureAttr(), 15.2908)):
-            v = attr.Get(self.time) if attr else None  # None only when nothing is authored: the schema fallback
-            v = fallback if v is None else float(v)
-            if not (np.isfinite(v) and v > 0):
-                raise self.err("SCENE_INVALID", f"camera {name} = {v!r} must be finite and > 0", prim.GetPath(), name)
+        for name, attr, fallback, positive in (("focalLength", cam.GetFocalLengthAttr(), 50.0, True),
+                                               ("horizontalAperture", cam.GetHorizontalApertureAttr(), 20.955, True),
+                                               ("verticalAperture", cam.GetVerticalApertureAttr(), 15.2908, True),
+                                               ("fStop", cam.GetFStopAttr(), 0.0, False),
+                                               ("focusDistance", cam.GetFocusDistanceAttr(), 0.0, False)):
+            with self._reading(path):
+                v = attr.Get(self.time) if attr else None  # None only when nothing is authored: the schema fallback
+                v = fallback if v is None else float(v)
+            if not (np.isfinite(v) and (v > 0 if positive else v >= 0) and v <= MAX_WORLD_COORDINATE / LENS_UNIT):
+                raise self.err("SCENE_INVALID", f"camera {name} = {v!r} must be finite, {'> 0' if positive else '>= 0'} "
+                               f"and <= {MAX_WORLD_COORDINATE / LENS_UNIT:g}", path, name)
             vals[name] = v
         fl, ha, va = vals["focalLength"], vals["horizontalAperture"], vals["verticalAperture"]
-        if not CAMERA_RATIO[0] <= ha / fl <= CAMERA_RATIO[1]:
+        if not ortho and not CAMERA_RATIO[0] <= ha / fl <= CAMERA_RATIO[1]:
             raise self.err("SCENE_INVALID", f"horizontalAperture / focalLength = {ha / fl:.3g} outside {CAMERA_RATIO[0]:g} .. "
-                           f"{CAMERA_RATIO[1]:g} (field of view too narrow or too wide to trace)", prim.GetPath(), "focalLength")
+                           f"{CAMERA_RATIO[1]:g} (field of view too narrow or too wide to trace)", path, "focalLength")
         if not CAMERA_RATIO[0] <= va / ha <= CAMERA_RATIO[1]:
             raise self.err("SCENE_INVALID", f"verticalAperture / horizontalAperture = {va / ha:.3g} outside {CAMERA_RATIO[0]:g} .. "
-                           f"{CAMERA_RATIO[1]:g}", prim.GetPath(), "verticalAperture")
+                           f"{CAMERA_RATIO[1]:g}", path, "verticalAperture")
         offsets = []
+        unit, unit_name = (ha, "horizontalAperture") if ortho else (fl, "focalLength")
         for name, attr in (("horizontalApertureOffset", cam.GetHorizontalApertureOffsetAttr()),
                            ("verticalApertureOffset", cam.GetVerticalApertureOffsetAttr())):
-            v = attr.Get(self.time) if attr else None
-            v = 0.0 if v is None else float(v)
-            if not (np.isfinite(v) and abs(v) <= CAMERA_RATIO[1] * fl):
+            with self._reading(path):
+                v = attr.Get(self.time) if attr else None
+                v = 0.0 if v is None else float(v)
+            if not (np.isfinite(v) and abs(v) <= CAMERA_RATIO[1] * unit):
                 raise self.err("SCENE_INVALID", f"camera {name} = {v!r} must be finite and at most {CAMERA_RATIO[1]:g} x "
-                               "focalLength", prim.GetPath(), name)
+                               f"{unit_name}", path, name)
             offsets.append(v)
+        lens_radius, focus = 0.0, vals["focusDistance"]
+        if vals["fStop"] > 0:
+            if ortho:
+                self.warn("fStop on an orthographic camera ignored (no depth of field)", path)
+            elif focus == 0:
+                self.warn(f"fStop {vals['fStop']:g} without a focusDistance: no depth of field (pinhole)", path)
+            else:
+                lens_radius = LENS_UNIT * fl / (2.0 * vals["fStop"])
         M = self.matrix(cam)
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
-            raise self.err("SCENE_INVALID", "camera transform is singular", prim.GetPath(), "xformOpOrder")
+            raise self.err("SCENE_INVALID", "camera transform is singular", path, "xformOpOrder")
         if np.abs(M[3, :3]).max() > MAX_WORLD_COORDINATE:
             raise self.err("SCENE_INVALID", f"camera position {M[3, :3].tolist()} beyond |coordinate| <= {MAX_WORLD_COORDINATE:g}",
-                           prim.GetPath(), "xformOpOrder")
-        return PerspectiveCamera(M, fl, ha, va, str(prim.GetPath()), self._render_resolution(), *offsets)
+                           path, "xformOpOrder")
+        return Camera(M, fl, ha, va, str(path), self._render_resolution(), *offsets, orthographic=ortho,
+                      lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
+
+    def _exposure_scale(self, cam) -> float:
+        """The camera's linear exposure scale (``UsdGeomCamera::ComputeLinearExposureScale``: 2^exposure x
+        responsivity x time x iso / 100 / exposure:fStop^2; 1 when nothing is authored)."""
+        path = cam.GetPrim().GetPath()
+        with self._reading(path):
+            scale = float(cam.ComputeLinearExposureScale(self.time))
+        if not (np.isfinite(scale) and 0.0 <= scale <= MAX_EXPOSURE_SCALE):
+            raise self.err("SCENE_INVALID", f"camera exposure scale {scale!r} (2^exposure x responsivity x time x iso / 100 "
+                           f"/ exposure:fStop^2) must be finite and in [0, {MAX_EXPOSURE_SCALE:g}]", path, "exposure")
+        return scale
 
     def _render_resolution(self) -> tuple[int, int] | None:
         """Resolution of the stage's first UsdRender.Settings prim (None when absent or invalid)."""

@@ -219,6 +219,33 @@ def _lens_shift(bpy, folder: Path, size: int) -> None:
     _world(bpy)
 
 
+def _camera_objects(bpy) -> None:
+    _floor(bpy)
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Clay", **{"Color": (0.8, 0.4, 0.2)}), smooth=True, radius=0.3,
+         location=(0.3, 0.0, 0.3))
+    _add(bpy, "cube", "Box", _material(bpy, "Teal", **{"Color": (0.1, 0.6, 0.6)}), size=0.4, location=(-0.5, 0.9, 0.2))
+    _sun(bpy)
+    _world(bpy)
+
+
+def _orthographic(bpy, folder: Path, size: int) -> None:
+    # an orthographic camera (ortho scale 2.6) and Film > Exposure 1.6 over a floor, a ball and a box
+    _new_scene(bpy, size, (0.6, -2.6, 1.6), (0.0, 0.0, 0.3))
+    cam = bpy.context.scene.camera.data
+    cam.type, cam.ortho_scale = "ORTHO", 2.6
+    bpy.context.scene.cycles.film_exposure = 1.6
+    _camera_objects(bpy)
+
+
+def _depth_of_field(bpy, folder: Path, size: int) -> None:
+    # depth of field at f/0.12 (lens radius about 0.2) focused on the ball through a focus object; the box behind it blurs
+    _new_scene(bpy, size, (0.2, -2.4, 0.9), (0.0, 0.0, 0.3))
+    dof = bpy.context.scene.camera.data.dof
+    dof.use_dof, dof.aperture_fstop = True, 0.12
+    _camera_objects(bpy)
+    dof.focus_object = bpy.data.objects["Ball"]
+
+
 def _mixed(bpy, name: str, kind: str, subs, fac: float = 0.5):
     """A material whose surface is a Mix (``kind`` "mix", Factor ``fac``) or Add Shader of new shader nodes ``subs``
     [(bl_idname, {socket: value})]."""
@@ -402,6 +429,10 @@ SCENES = {
     "material_slots": FidelityScene("material_slots", _material_slots, "one mesh with three material slots: red upper "
                                     "half, blue lower half, an emitting band"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
+    "orthographic": FidelityScene("orthographic", _orthographic, "an orthographic camera (ortho scale 2.6) and Film "
+                                  "Exposure 1.6 over a floor, a ball and a box"),
+    "depth_of_field": FidelityScene("depth_of_field", _depth_of_field, "depth of field at f/0.12 focused on the ball (a "
+                                    "focus object), a box behind it out of focus"),
     "shader_mixes": FidelityScene("shader_mixes", _shader_mixes, "a Mix Shader of two Diffuse BSDFs (0.3), a Glossy BSDF "
                                   "(roughness 0.35), an Add Shader of a Diffuse BSDF and an Emission"),
     "render_visibility": FidelityScene("render_visibility", _render_visibility, "a ball and a point light in a collection "
@@ -532,7 +563,7 @@ NOTES = """
   specular layer's albedo off the diffuse layer per view angle (more at the top face's grazing view). It
   stays off target until the format has a layered (view-dependent) diffuse.
 - lens_shift was 0.96 / 0.97 / 0.99 with MSE / noise 288 (64 x 64, 64 spp): the camera's shift was dropped
-  (warned). It is now the camera's aperture offsets, which the renderer applies (spec/renderer.md#scene-input).
+  (warned). It is now the camera's aperture offsets, which the renderer applies (spec/renderer.md#cameras).
 - render_visibility was 2.08 / 1.48 / 1.35 with MSE / noise 53 (64 x 64, 64 spp): objects and lights of
   collections disabled in renders, and lights of excluded collections, were converted. Objects and lights are
   now taken as Cycles renders them (`scene.render_visible`).
@@ -552,6 +583,10 @@ NOTES = """
   instances 1.03-1.05 (collection instances dropped), mesh_emitter 0 (Emission shader written as grey
   diffuse), hdri green 1.49 (mirrored dome), render_settings 1.11-1.20 (depth 5 instead of max bounces
   + 1), area_lights 1.17-1.23 (light surfaces seen by the camera).
+- orthographic had no camera at all (orthographic cameras were not converted) and its Film Exposure 1.6
+  was dropped (ratio 0.625 once a camera is there); depth_of_field read MSE / noise 1.84 (32 x 32, 64 spp):
+  depth of field was dropped (pinhole). They are now an orthographic camera, the camera's `exposure`, and
+  `fStop` / `focusDistance` (spec/renderer.md#cameras).
 """
 
 

@@ -30,7 +30,6 @@ from pathlib import Path
 import numpy as np
 
 from nasset_converters.mitsuba.usd_export import (  # noqa: F401
-    FOCAL_LENGTH_MM,
     ConvertResult,
     StageConverter,
     TextureMap,
@@ -89,36 +88,75 @@ class _BlenderConverter(StageConverter):
         cam = ob.data
         r = self.bscene.render
         size = (int(r.resolution_x * r.resolution_percentage / 100), int(r.resolution_y * r.resolution_percentage / 100))
-        if cam.type != "PERSP":
-            self.warn(f"camera {ob.name}: {cam.type} projection is not converted (perspective only)")
+        if cam.type not in ("PERSP", "ORTHO"):
+            self.warn(f"camera {ob.name}: {cam.type} projection is not converted (perspective and orthographic only)")
             return
-        if cam.dof.use_dof:
-            self.warn(f"camera {ob.name}: depth of field dropped (pinhole)")
         horizontal = cam.sensor_fit == "HORIZONTAL" or (cam.sensor_fit == "AUTO" and size[0] >= size[1])
-        if horizontal:
-            x_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_x)
-        else:
-            y_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_y)
-            x_fov = 2.0 * math.atan(math.tan(y_fov / 2.0) * size[0] / size[1])
         path = self._name("/World", ob.name)
         c = UsdGeom.Camera.Define(self.stage, path)
-        ha = 2.0 * FOCAL_LENGTH_MM * math.tan(x_fov / 2.0)
-        c.CreateProjectionAttr(UsdGeom.Tokens.perspective)
-        c.CreateFocalLengthAttr(FOCAL_LENGTH_MM)
+        # USD's lens and filmback unit is a tenth of a scene unit; Cycles reads Blender's millimetres as 1e-3 units
+        fl = float(cam.lens) / 100.0
+        if cam.type == "ORTHO":  # ortho_scale spans the fitted side of the frame, in scene units
+            fitted = 10.0 * float(cam.ortho_scale)
+            ha = fitted if horizontal else fitted * size[0] / size[1]
+            c.CreateProjectionAttr(UsdGeom.Tokens.orthographic)
+            view = f"{0.1 * ha:.4g} units wide"
+        else:
+            if horizontal:
+                x_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_x)
+            else:
+                y_fov = float(cam.angle if cam.sensor_fit == "AUTO" else cam.angle_y)
+                x_fov = 2.0 * math.atan(math.tan(y_fov / 2.0) * size[0] / size[1])
+            ha = 2.0 * fl * math.tan(x_fov / 2.0)
+            c.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+            view = f"x_fov {math.degrees(x_fov):.4g} deg"
+        c.CreateFocalLengthAttr(fl)
         c.CreateHorizontalApertureAttr(ha)
         c.CreateVerticalApertureAttr(ha * size[1] / size[0])
         if cam.shift_x or cam.shift_y:  # Blender's shift is in units of the fitted side of the frame
             fit = ha if horizontal else ha * size[1] / size[0]
             c.CreateHorizontalApertureOffsetAttr(float(cam.shift_x) * fit)
             c.CreateVerticalApertureOffsetAttr(float(cam.shift_y) * fit)
+        if cam.dof.use_dof:
+            self._depth_of_field(ob, c)
+        exposure = float(getattr(self.bscene.cycles, "film_exposure", 1.0))
+        if exposure != 1.0:  # Cycles' Film > Exposure multiplies the rendered image
+            if exposure > 0:
+                c.CreateExposureAttr(math.log2(exposure))
+            else:
+                c.CreateExposureTimeAttr(0.0)
+                self.warn(f"film exposure {exposure:g}: a black image")
         c.CreateClippingRangeAttr(Gf.Vec2f(float(cam.clip_start), float(cam.clip_end)))
         self._xform(c.GetPrim(), _row(ob))
-        self.record(path, f"camera {ob.name} (x_fov {math.degrees(x_fov):.4g} deg)")
+        self.record(path, f"camera {ob.name} ({cam.type.lower()}, {view})")
         self.result.resolution = size
         settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")
         settings.CreateResolutionAttr(Gf.Vec2i(*size))
         settings.CreateCameraRel().SetTargets([path])
         settings.CreatePixelAspectRatioAttr(1.0)
+
+    def _depth_of_field(self, ob, c) -> None:
+        """Cycles' thin lens -> ``fStop``, ``focusDistance`` (spec/renderer.md#cameras): Cycles' lens radius is
+        ``lens 1e-3 / (2 fstop)`` and USD's ``0.1 focalLength / (2 fStop)`` with ``focalLength = lens / 100``, so the
+        f-number carries over; a focus object gives its distance along the view axis, as Cycles measures it."""
+        cam = ob.data
+        if cam.type != "PERSP":
+            self.warn(f"camera {ob.name}: depth of field of an orthographic camera dropped")
+            return
+        dof = cam.dof
+        focus = float(dof.focus_distance)
+        if dof.focus_object is not None:
+            view = -np.array(ob.matrix_world, np.float64)[:3, 2]
+            to_target = np.array(dof.focus_object.matrix_world, np.float64)[:3, 3] - np.array(ob.matrix_world, np.float64)[:3, 3]
+            focus = abs(float(view @ to_target) / max(float(np.linalg.norm(view)), 1e-30))
+        if dof.aperture_blades >= 3 or abs(float(dof.aperture_ratio) - 1.0) > 1e-6:
+            self.warn(f"camera {ob.name}: a polygonal or anamorphic aperture ({dof.aperture_blades} blades, ratio "
+                      f"{dof.aperture_ratio:g}) written as a round one")
+        if focus <= 0:
+            self.warn(f"camera {ob.name}: depth of field without a focus distance dropped (pinhole)")
+            return
+        c.CreateFStopAttr(max(float(dof.aperture_fstop), 1e-5))  # Cycles clamps the f-number alike
+        c.CreateFocusDistanceAttr(focus)
 
     def integrator(self) -> None:
         """Cycles' bounce limit -> ``nasset:maxDepth`` and its pixel filter -> ``nasset:pixelFilter`` on

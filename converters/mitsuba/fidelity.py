@@ -132,6 +132,37 @@ def _lens_shift(folder: Path, size: int) -> str:
             + SUN + SKY + "</scene>")
 
 
+def _objects() -> str:
+    """A floor, a ball and a box under a sun and a sky (the camera scenes)."""
+    return (FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="0"/><float name="radius" value="0.3"/>'
+              '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.4, 0.2"/></bsdf></shape>\n'
+            + '<shape type="cube" id="box"><transform name="to_world"><scale value="0.2"/><translate x="-0.5" y="0.2" '
+              'z="-0.9"/></transform><bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.6, 0.6"/></bsdf></shape>\n'
+            + SUN + SKY + "</scene>")
+
+
+def _orthographic(folder: Path, size: int) -> str:
+    # an orthographic sensor whose to_world scale (1.3) sets the view's half-width, looking down at 30 degrees
+    sensor = ('<sensor type="orthographic"><transform name="to_world"><scale x="1.3" y="1.3"/>'
+              '<lookat origin="0.6, 1.6, 2.6" target="0, 0.3, 0" up="0, 1, 0"/></transform>')
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1, 2", size=size).split("<sensor")[0] + sensor
+            + HEADER.format(depth=3, rfilter=BOX, origin="0, 1, 2", size=size).split("</transform>", 1)[1]
+            + _objects())
+
+
+def _depth_of_field(folder: Path, size: int) -> str:
+    # a thin lens (aperture radius 0.35) focused on the ball; the box behind it and the checkered floor blur
+    _checker_png(folder / "floor.png", [(230, 200, 120), (60, 90, 160)])
+    head = HEADER.format(depth=3, rfilter=BOX, origin="0.2, 0.9, 2.4", size=size).replace(
+        '<sensor type="perspective"><float name="fov" value="40"/>',
+        '<sensor type="thinlens"><float name="fov" value="40"/><float name="aperture_radius" value="0.35"/>'
+        '<float name="focus_distance" value="2.4"/>')
+    checker = ('<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="floor.png"/>'
+               '</texture></bsdf>')
+    return head + _objects().replace('<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>', checker, 1)
+
+
 def _spot(folder: Path, size: int) -> str:
     spot = ('<emitter type="spot" id="spot"><transform name="to_world"><lookat origin="0.5, 1.8, 0.4" target="-0.2, 0, 0" '
             'up="0, 1, 0"/></transform><rgb name="intensity" value="12, 11, 9"/><float name="cutoff_angle" value="22"/>'
@@ -254,6 +285,10 @@ SCENES = {
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; twosided "
                                "panels, one with a different back BSDF"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a sensor with its principal point offset (x 0.15, y -0.1)"),
+    "orthographic": FidelityScene("orthographic", _orthographic, "an orthographic sensor (to_world scale 1.3) over a floor, "
+                                  "a ball and a box"),
+    "depth_of_field": FidelityScene("depth_of_field", _depth_of_field, "a thinlens sensor (aperture radius 0.35) focused on "
+                                    "the ball, a box behind it and a checkered floor out of focus"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
                                  "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }
@@ -388,7 +423,11 @@ NOTES = """
   (spec/renderer.md#textures).
 - lens_shift was 1.05 / 1.04 / 1.02 with MSE / noise 21.5 (64 x 64, 64 spp): the principal point offset was
   dropped (warned). It is now the camera's aperture offsets, which the renderer applies
-  (spec/renderer.md#scene-input).
+  (spec/renderer.md#cameras).
+- orthographic had no camera at all (an orthographic sensor was not converted: nothing rendered), and
+  depth_of_field read MSE / noise 5.8 (32 x 32, 64 spp; 1.02 now): the thinlens sensor was written as a pinhole.
+  They are now an orthographic camera (apertures from the to_world scale) and the thin lens of `fStop` and
+  `focusDistance`, in USD's lens unit (spec/renderer.md#cameras).
 - Not converted: an area emitter on a null BSDF. Mitsuba's path tracer does not show it to the camera and
   lights the scene from it by emitter samples only, which no USD light reproduces; the shape is skipped with
   a warning.

@@ -56,7 +56,7 @@ ENVMAP_MAX_PIXELS = 1 << 22
 #: latitude rings of the mesh written for a textured Mitsuba ``sphere`` (twice as many longitude segments)
 SPHERE_RINGS = 48
 #: focal length (mm) of the written camera; the apertures carry the field of view
-FOCAL_LENGTH_MM = 50.0
+FOCAL_LENGTH = 0.5  # 50 mm in USD's lens unit, tenths of a scene unit (the stage's metersPerUnit is 1)
 
 _FLIP_CAMERA = np.diag([-1.0, 1.0, -1.0, 1.0])  # Mitsuba camera local -> USD camera local
 _FLIP_RECT = np.diag([1.0, -1.0, -1.0, 1.0])  # rotate 180 deg about X: RectLight -Z -> rectangle +Z
@@ -325,12 +325,10 @@ class StageConverter:
             self.warn(f"{len(sensors)} sensors: only the first is converted")
         sensor = sensors[0]
         cls = _class_name(sensor)
-        if cls not in ("PerspectiveCamera", "ThinLensCamera"):
-            self.warn(f"sensor {cls} is not a perspective camera: no camera written")
+        if cls not in ("PerspectiveCamera", "ThinLensCamera", "OrthographicCamera"):
+            self.warn(f"sensor {cls} is not a perspective, thinlens or orthographic camera: no camera written")
             return
         p = self.mi.traverse(sensor)
-        if cls == "ThinLensCamera":
-            self.warn("thinlens sensor: converted as a pinhole camera (no depth of field)")
         if fog := camera_medium(self.scene):
             self.warn(fog)
         film = sensor.film()
@@ -347,26 +345,42 @@ class StageConverter:
             self.warn(f"film reconstruction filter {_class_name(film.rfilter())}: written as a box filter")
         shift = [float(_np(p[k]).ravel()[0]) if k in p else 0.0
                  for k in ("principal_point_offset_x", "principal_point_offset_y")]
-        x_fov = float(_np(p["x_fov"]).ravel()[0])
         row = _FLIP_CAMERA @ _row(_matrix(p["to_world"]))
         scale = np.linalg.norm(row[:3, :3], axis=1)
-        if not np.allclose(scale, 1.0, atol=1e-4):
-            self.warn(f"camera to_world has scale {scale.round(4).tolist()}: removed")
-            row[:3, :3] /= scale[:, None]
+        row[:3, :3] /= scale[:, None]
         path = self._name("/World", sensor.id() or "Camera")
         cam = UsdGeom.Camera.Define(self.stage, path)
-        ha = 2.0 * FOCAL_LENGTH_MM * math.tan(math.radians(x_fov) / 2.0)
-        cam.CreateProjectionAttr(UsdGeom.Tokens.perspective)
-        cam.CreateFocalLengthAttr(FOCAL_LENGTH_MM)
+        if cls == "OrthographicCamera":
+            # Mitsuba's orthographic film spans x in [-1, 1] and y in [-h/w, h/w] before to_world: its scale is the
+            # view's size (USD: the apertures, in tenths of a scene unit)
+            ha = 20.0 * float(scale[0])
+            if not math.isclose(scale[0], scale[1], rel_tol=1e-4):
+                self.warn(f"orthographic camera to_world scales x by {scale[0]:.4g} and y by {scale[1]:.4g}: the vertical "
+                          "extent follows the image aspect (square pixels)")
+            cam.CreateProjectionAttr(UsdGeom.Tokens.orthographic)
+            x_fov = None
+        else:
+            if not np.allclose(scale, 1.0, atol=1e-4):
+                self.warn(f"camera to_world has scale {scale.round(4).tolist()}: removed")
+            x_fov = float(_np(p["x_fov"]).ravel()[0])
+            ha = 2.0 * FOCAL_LENGTH * math.tan(math.radians(x_fov) / 2.0)
+            cam.CreateProjectionAttr(UsdGeom.Tokens.perspective)
+        cam.CreateFocalLengthAttr(FOCAL_LENGTH)
         cam.CreateHorizontalApertureAttr(ha)
         cam.CreateVerticalApertureAttr(ha * size[1] / size[0])
+        if cls == "ThinLensCamera":  # USD's lens diameter is focalLength / fStop, in tenths of a scene unit
+            radius, focus = (float(_np(p[k]).ravel()[0]) for k in ("aperture_radius", "focus_distance"))
+            if radius > 0 and focus > 0:
+                cam.CreateFStopAttr(0.1 * FOCAL_LENGTH / (2.0 * radius))
+                cam.CreateFocusDistanceAttr(focus)
         if shift[0] or shift[1]:  # Mitsuba's principal point offset: film widths right, film heights down
             cam.CreateHorizontalApertureOffsetAttr(shift[0] * ha)
             cam.CreateVerticalApertureOffsetAttr(-shift[1] * ha * size[1] / size[0])
         near, far = float(_np(p["near_clip"]).ravel()[0]), float(_np(p["far_clip"]).ravel()[0])
         cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
         self._xform(cam.GetPrim(), row)
-        self.record(path, f"sensor {sensor.id() or '(unnamed)'} ({cls}, x_fov {x_fov:.4g} deg)")
+        view = f"x_fov {x_fov:.4g} deg" if x_fov is not None else f"{0.1 * ha:.4g} units wide"
+        self.record(path, f"sensor {sensor.id() or '(unnamed)'} ({cls}, {view})")
         self.result.resolution = size
         # resolution: the standard place is a UsdRender.Settings prim (outside the defaultPrim)
         settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")

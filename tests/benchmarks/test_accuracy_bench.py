@@ -102,10 +102,10 @@ def test_scene_without_integrator(scene, tmp_path):
     assert e.value.code == "CONVERT_SCENE_LOAD" and "integrator" in str(e.value) and "bare.xml" in str(e.value)
 
 
-@pytest.mark.parametrize("sensor", ["orthographic", None])
-def test_scene_without_a_perspective_camera(scene, tmp_path, sensor):
-    """The bench compares images from the scene's own camera: an orthographic camera (no field of view) or none at
-    all is a typed error naming the file (it was a KeyError / IndexError)."""
+@pytest.mark.parametrize("sensor", ["radiancemeter", None])
+def test_scene_without_a_camera(scene, tmp_path, sensor):
+    """The bench compares images seen from the scene's own camera: a sensor that is no camera (a radiance meter) or
+    none at all is a typed error naming the file (it was a KeyError / IndexError)."""
     import re
 
     a = _asset(tmp_path, scene, ["shell", "jelly"])
@@ -114,12 +114,13 @@ def test_scene_without_a_perspective_camera(scene, tmp_path, sensor):
         text = re.sub(r"<sensor.*?</sensor>", "", text, flags=re.S)
     else:
         text = text.replace('<sensor type="perspective"', f'<sensor type="{sensor}"').replace('<float name="fov" value="35"/>', "")
+        text = re.sub(r'name="(width|height)" value="\d+"', r'name="\1" value="1"', text)  # a radiance meter's 1 x 1 film
     bad = scene.parent / "bad.xml"  # beside the scene: its meshes are relative paths
     bad.write_text(text)
     assert ('type="perspective"' in text) is False
     with pytest.raises(NassetError) as e:
         _run(bad, [f"shell,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
-    assert e.value.code == "CONVERT_SCENE_LOAD" and "field of view" in str(e.value) and "bad.xml" in str(e.value)
+    assert e.value.code == "CONVERT_SCENE_LOAD" and "orthographic" in str(e.value) and "bad.xml" in str(e.value)
 
 
 def test_cli_exit_code_and_json_error(scene, tmp_path):

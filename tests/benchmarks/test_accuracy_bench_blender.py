@@ -58,9 +58,10 @@ def test_unknown_object_and_wrong_variant_and_mismatch(blend, tmp_path):
     assert e.value.code == "BENCH_ASSET_MISMATCH"
 
 
-@pytest.mark.parametrize("camera", ["none", "ORTHO"])
+@pytest.mark.parametrize("camera", ["none", "PANO"])
 def test_a_scene_without_a_perspective_camera(blend, tmp_path, camera):
-    """The Mitsuba side's rule (test_accuracy_bench.py): the Blender scene's active camera must be a perspective one.
+    """The Mitsuba side's rule (test_accuracy_bench.py): the Blender scene's active camera must be a perspective or
+    orthographic one (a panoramic one is not converted).
     Without one Cycles stopped the bench with a RuntimeError traceback ("Cannot render, no camera")."""
     import bpy
 

@@ -1,4 +1,4 @@
-"""Lens shift (spec/renderer.md#scene-input): ``horizontalApertureOffset`` / ``verticalApertureOffset`` move the
+"""Lens shift (spec/renderer.md#cameras): ``horizontalApertureOffset`` / ``verticalApertureOffset`` move the
 image window by offset / focalLength in the image plane at distance 1."""
 
 from __future__ import annotations
