@@ -160,6 +160,9 @@ def read_material(prim, path, t=None) -> Material:
             use_spec = int(_input(shader, "useSpecularWorkflow", use_spec, t))
             ior = float(_input(shader, "ior", ior, t))
             emis = np.asarray(_input(shader, "emissiveColor", emis, t), np.float64)
+            if float(_input(shader, "opacity", 1.0, t)) < 1.0:
+                warnings.warn(f"{shader.GetPath()}: opacity < 1 rendered opaque (cut-outs, spec/renderer.md#cutouts, are "
+                              "the reference renderer's)", stacklevel=2)
     if use_spec == 1:
         k, f0 = kd.copy(), spec
     else:

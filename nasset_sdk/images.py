@@ -150,8 +150,9 @@ def _chlist_names(value: bytes):
         pos = end + 1 + 16
 
 
-def read_exr(path) -> np.ndarray:
-    """[H, W, 3] float32 RGB (a single-channel image is repeated; alpha is dropped).
+def read_exr(path, *, alpha: bool = False) -> np.ndarray:
+    """[H, W, 3] float32 RGB (a single-channel image is repeated; alpha is dropped), or with ``alpha`` [H, W, 4]:
+    RGB and the ``A`` channel (1 where the file has none).
 
     The header is checked first (:func:`exr_header_size`): each side 1 .. MAX_TEXTURE_SIDE, at most
     MAX_TEXTURE_PIXELS pixels and MAX_TEXTURE_VALUES values; a corrupt file is ``IMAGE_INVALID``.
@@ -174,6 +175,9 @@ def read_exr(path) -> np.ndarray:
             else:
                 first = np.asarray(next(iter(ch.values())).pixels, np.float32)
                 img = np.stack([first] * 3, -1)
+            if alpha:
+                a = np.asarray(ch["A"].pixels, np.float32) if "A" in ch else np.ones(img.shape[:2], np.float32)
+                img = np.concatenate([img, a.reshape(img.shape[:2])[..., None]], -1)
     except (RuntimeError, OSError, ValueError, TypeError, StopIteration) as exc:  # OpenEXR's own errors are RuntimeError
         detail = str(exc).strip().splitlines()[-1][:200] if str(exc).strip() else type(exc).__name__
         raise error("IMAGE_INVALID", f"cannot decode the OpenEXR image: {detail}", file=str(path)) from None
@@ -186,9 +190,10 @@ def read_exr(path) -> np.ndarray:
 PNG_JPEG = ("PNG", "JPEG")
 
 
-def read_png_jpeg(path) -> tuple[np.ndarray, int]:
+def read_png_jpeg(path, *, alpha: bool = False) -> tuple[np.ndarray, int]:
     """(image [H, W, 3] float32 in 0 .. 1, bits per channel: 8 or 16) of a PNG or JPEG file, values as stored (no
-    colour decoding); grey is repeated, alpha dropped, a palette expanded. The size is checked from the header before
+    colour decoding); grey is repeated, alpha dropped (with ``alpha``: kept as a fourth channel, 1 where the file has
+    none; a palette's transparency included), a palette expanded. The size is checked from the header before
     anything is decoded (each side 1 .. MAX_TEXTURE_SIDE, at most MAX_TEXTURE_PIXELS pixels); any other format or a
     corrupt file is ``IMAGE_INVALID``. Needs Pillow (the ``render`` extra)."""
     from PIL import Image
@@ -206,13 +211,15 @@ def read_png_jpeg(path) -> tuple[np.ndarray, int]:
             if mode in ("I;16", "I;16B", "I;16L", "I"):  # 16-bit grey PNG
                 grey = np.asarray(im, np.float32) / 65535.0
                 img, bits = np.repeat(grey[..., None], 3, -1), 16
+                if alpha:
+                    img = np.concatenate([img, np.ones((h, w, 1), np.float32)], -1)
             else:
-                img, bits = np.asarray(im.convert("RGB"), np.float32) / 255.0, 8
+                img, bits = np.asarray(im.convert("RGBA" if alpha else "RGB"), np.float32) / 255.0, 8
     except NassetError:
         raise
     except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
         raise bad(f"cannot decode it as PNG or JPEG: {str(exc).strip()[:200] or type(exc).__name__}") from None
-    if img.shape != (h, w, 3):
+    if img.shape != (h, w, 4 if alpha else 3):
         raise bad(f"decoded pixels {img.shape} differ from the header's {w} x {h}")
     return img, bits
 

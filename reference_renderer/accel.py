@@ -8,6 +8,10 @@ occlusion query on the asset's own structure: a ray costs a fixed number of Embr
 many of the asset's triangles (fibres) it crosses. Structures whose bounding box a ray misses are
 not queried for it.
 
+Instances listed in ``cutout`` (meshes whose material has an opacity, spec/renderer.md#cutouts) share one
+structure of their own, queried hit by hit: a hit where ``Accel.presence`` says the surface is absent is stepped
+over and the ray goes on (at most :data:`MAX_CUTOUT_STEPS` absent hits per ray; the next one then counts).
+
 Embree structures are built in its robust mode (watertight at shared edges), except those of instances
 listed in ``fast``: the prisms of fibre assets, where the robust mode costs 1.3-2x in ray rate (measured in
 docs/benchmarks.md, *Dense hair*) and buys nothing, since a prism is closed and convex: a ray slipping
@@ -25,6 +29,8 @@ from .sampling import box3
 #: bound on the exempt triangles a ray leaving a fiber hit steps over (three convex prisms: at most
 #: six crossings, doubled for hits at shared edges and the ray's start on its own prism)
 MAX_EXEMPT_STEPS = 16
+#: bound on the absent (cut-out) hits one ray steps over
+MAX_CUTOUT_STEPS = 64
 
 
 class Hits:
@@ -138,11 +144,12 @@ class NumpyBackend(_Backend):
 class _Part:
     """One acceleration structure: the triangles ``ids`` [k] (global indices) and their bounding box."""
 
-    __slots__ = ("ids", "backend", "lo", "hi", "inst", "box")
+    __slots__ = ("ids", "backend", "lo", "hi", "inst", "box", "cutout")
 
-    def __init__(self, ids, triangles, inst, make, robust: bool = True, box=None, mesh=None) -> None:
+    def __init__(self, ids, triangles, inst, make, robust: bool = True, box=None, mesh=None, cutout: bool = False) -> None:
         self.ids = ids
         self.inst = inst  # the instance held alone, or -1 for the rest of the scene
+        self.cutout = cutout  # triangles whose presence is tested hit by hit (Accel.presence)
         contiguous = len(ids) and ids[-1] - ids[0] + 1 == len(ids)  # a scene instance: a view, no copy
         tri = triangles[ids[0]:ids[-1] + 1] if contiguous else triangles[ids]
         self.backend = make(tri, robust, mesh if contiguous else None)
@@ -188,25 +195,30 @@ class Accel:
     structure may use Embree's faster non-robust mode (see the module docstring). ``boxes``: per instance
     (lo [3], hi [3]) of its triangles (None for one without), when the caller has them; else computed here.
     ``meshes``: per instance its triangles as (points [V,3], faces [k,3]) or None (see :class:`EmbreeBackend`),
-    used for separate instances.
+    used for separate instances. ``cutout`` [n_instances] bool or None: instances (not separate) whose hits are
+    kept only where ``presence(triangles [k], u [k], v [k]) -> bool [k]`` says so (set :attr:`presence`; while it
+    is None they are opaque).
     """
 
     def __init__(self, triangles: np.ndarray, tri_inst: np.ndarray, *, backend: str = "embree",
                  separate: np.ndarray | None = None, fast: np.ndarray | None = None, boxes: list | None = None,
-                 meshes: list | None = None) -> None:
+                 meshes: list | None = None, cutout: np.ndarray | None = None) -> None:
         self.triangles = np.asarray(triangles, np.float64)
         self.tri_inst = np.asarray(tri_inst, np.int64)
         make = EmbreeBackend if backend == "embree" else NumpyBackend
         n_inst = int(self.tri_inst.max()) + 1 if len(self.tri_inst) else 0
         sep = np.ones(n_inst, bool) if separate is None else np.asarray(separate, bool)[:n_inst]
-        quick = np.zeros(n_inst, bool)
+        quick, cut = np.zeros(n_inst, bool), np.zeros(n_inst, bool)
         if fast is not None:
             quick[:min(n_inst, len(fast))] = np.asarray(fast, bool)[:n_inst]
+        if cutout is not None:
+            cut[:min(n_inst, len(cutout))] = np.asarray(cutout, bool)[:n_inst]
+        self.presence = None
         self.parts: list[_Part] = []
         self.inst_part = np.full(max(n_inst, len(sep)), -1, np.int64)
         order = np.argsort(self.tri_inst, kind="stable")
         bounds = np.searchsorted(self.tri_inst[order], np.arange(n_inst + 1))
-        rest = []
+        rest, cut_rest = [], []
         for i in range(n_inst):
             ids = order[bounds[i]:bounds[i + 1]]
             if not len(ids):
@@ -217,11 +229,13 @@ class Accel:
                 mesh = meshes[i] if meshes is not None and i < len(meshes) else None
                 self.parts.append(_Part(ids, self.triangles, i, make, robust=not quick[i], box=box, mesh=mesh))
             else:
-                rest.append((ids, box))
-        if rest:
-            known = all(b is not None for _, b in rest)
-            box = (np.min([b[0] for _, b in rest], 0), np.max([b[1] for _, b in rest], 0)) if known else None
-            self.parts.append(_Part(np.concatenate([ids for ids, _ in rest]), self.triangles, -1, make, box=box))
+                (cut_rest if cut[i] else rest).append((ids, box))
+        for group, is_cut in ((rest, False), (cut_rest, True)):
+            if group:
+                known = all(b is not None for _, b in group)
+                box = (np.min([b[0] for _, b in group], 0), np.max([b[1] for _, b in group], 0)) if known else None
+                self.parts.append(_Part(np.concatenate([ids for ids, _ in group]), self.triangles, -1, make, box=box,
+                                        cutout=is_cut))
         self.rays_cast = 0
         if len(self.triangles):  # from the parts' boxes (together: every triangle), not another pass over them
             lo = np.min([p.lo for p in self.parts], 0)
@@ -237,10 +251,13 @@ class Accel:
         rows = part.rows_hitting_box(o, inv, lim, rows)
         if not len(rows):
             return
-        self.rays_cast += len(rows)
-        if len(rows) == len(o):  # every ray: no gathers
+        if part.cutout and self.presence is not None:
+            t, prim, u, v = self._closest_present(part, o[rows], d[rows], lim[rows])
+        elif len(rows) == len(o):  # every ray: no gathers
+            self.rays_cast += len(rows)
             t, prim, u, v = part.backend.closest(o, d, lim)
         else:
+            self.rays_cast += len(rows)
             t, prim, u, v = part.backend.closest(o[rows], d[rows], lim[rows])
         better = (prim >= 0) & (t < (hits.t if len(rows) == len(o) else hits.t[rows]))
         r = rows[better]
@@ -287,8 +304,38 @@ class Accel:
                     hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, inv, lim, rows, exempt)
         return hits
 
+    def _closest_present(self, part, o, d, tmax):
+        """(t, prim, u, v) [n] of the closest hit on the cut-out ``part`` where the surface is present: absent hits
+        are stepped over by eps (as :meth:`_passes_outside` steps over exempt ones); prim is part-local, -1: none."""
+        n = len(o)
+        t_out, prim_out = np.full(n, np.inf), np.full(n, -1, np.int64)
+        u_out, v_out = np.zeros(n), np.zeros(n)
+        idx, toff, oo = np.arange(n), np.zeros(n), o
+        for step in range(MAX_CUTOUT_STEPS):
+            if not len(idx):
+                break
+            self.rays_cast += len(idx)
+            t, prim, u, v = part.backend.closest(oo, d[idx], np.maximum(tmax[idx] - toff, 0.0))
+            hit = prim >= 0
+            keep = hit.copy()
+            if step < MAX_CUTOUT_STEPS - 1 and hit.any():
+                keep[hit] = self.presence(part.ids[prim[hit]], u[hit], v[hit])
+            r = idx[keep]
+            t_out[r], prim_out[r], u_out[r], v_out[r] = t[keep] + toff[keep], prim[keep], u[keep], v[keep]
+            go = hit & ~keep
+            ahead = t[go] + self.eps
+            idx, toff = idx[go], toff[go] + ahead
+            oo = oo[go] + d[idx] * ahead[:, None]
+        return t_out, prim_out, u_out, v_out
+
     def _occluded_in(self, part, o, d, inv, tmax, rows) -> np.ndarray:
-        """[len(rows)] bool: any triangle of ``part`` on the ray segment [0, tmax]."""
+        """[len(rows)] bool: any triangle of ``part`` on the ray segment [0, tmax] (a present one, on a cut-out part)."""
+        if part.cutout and self.presence is not None:
+            sel = part.rows_hitting_box(o, inv, tmax, rows)
+            out = np.zeros(len(rows), bool)
+            if len(sel):
+                out[np.searchsorted(rows, sel)] = self._closest_present(part, o[sel], d[sel], tmax[sel])[1] >= 0
+            return out
         sel = part.rows_hitting_box(o, inv, tmax, rows)
         if len(sel) == len(o):  # every ray (then rows holds every ray too): no gathers
             self.rays_cast += len(sel)

@@ -100,6 +100,7 @@ class MaterialTable:
     emission: np.ndarray  # [M,3]
     names: list
     textures: list = field(default_factory=list)  # [M] TexturedDiffuse | None (empty: none textured)
+    opacities: list = field(default_factory=list)  # [M] textures.Opacity | None (empty: every material opaque)
 
     @property
     def p_spec(self) -> np.ndarray:
@@ -108,6 +109,10 @@ class MaterialTable:
 
     def has_specular(self, m):
         return self.f0[m].max(-1) > 0
+
+    def opacity_of(self, m: int):
+        """The presence (textures.Opacity) of material ``m``, None where it is opaque."""
+        return self.opacities[m] if m < len(self.opacities) else None
 
     @property
     def textured(self) -> bool:

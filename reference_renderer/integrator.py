@@ -88,14 +88,17 @@ def scene_accel(scene, backend: str, neural: np.ndarray):
     structures of their own; fibre assets' structures use Embree's fast mode (accel.py).
     """
     fiber = np.array([i.kind == "neural" and scene.assets[i.asset].fiber is not None for i in scene.instances], bool)
-    key = (backend, np.asarray(neural, bool).tobytes(), fiber.tobytes(), id(scene.triangles), len(scene.triangles))
+    cutout = np.array([i.kind == "mesh" and scene.materials.opacity_of(max(i.material, 0)) is not None
+                       for i in scene.instances], bool)
+    key = (backend, np.asarray(neural, bool).tobytes(), fiber.tobytes(), cutout.tobytes(), id(scene.triangles),
+           len(scene.triangles))
     hit = scene.accel_cache.get(key)
     if hit is None:
         scene.accel_cache.clear()  # one set of structures per scene at a time (their memory)
         tri = scene.triangles
         ng = scene.tri_ng if scene.tri_ng is not None else face_normals(tri)
         hit = scene.accel_cache[key] = (Accel(tri, scene.tri_inst, backend=backend, separate=neural, fast=fiber,
-                                              boxes=[i.box for i in scene.instances],
+                                              cutout=cutout, boxes=[i.box for i in scene.instances],
                                               meshes=[scene.world_mesh(i) for i in range(len(scene.instances))]), ng)
     return hit
 
@@ -107,6 +110,8 @@ class PathIntegrator:
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         self.accel, self.tri_ng = scene_accel(scene, settings.backend, self.inst_neural)
         self.accel.rays_cast = 0  # counts this render's rays
+        self.accel.presence = self._present  # cut-out surfaces (spec/renderer.md#cutouts)
+        self.presence_rng = np.random.default_rng(settings.seed)  # replaced by each wavefront's generator
         self.eps = self.accel.eps
         self.stats = RenderStats()
         self.inst_mat = np.array([max(i.material, 0) for i in insts], np.int64)
@@ -136,6 +141,26 @@ class PathIntegrator:
         self.shading = NeuralShading(self)  # the shaders of the scene's neural assets
 
     # -- helpers ---------------------------------------------------------------------------
+    def _present(self, tri, u, v) -> np.ndarray:
+        """[k] bool: the surface is there at hits on cut-out mesh triangles ``tri`` [k] (global ids) with
+        barycentrics (u, v) [k] (spec/renderer.md#cutouts)."""
+        inst = self.scene.tri_inst[tri]
+        mat = self.inst_mat[inst]
+        out = np.ones(len(tri), bool)
+        draws = self.presence_rng.random(len(tri))
+        for m in np.unique(mat):
+            op = self.mt.opacity_of(m)
+            if op is None:
+                continue
+            sel = np.nonzero(mat == m)[0]
+            st = None
+            if op.texture is not None:
+                cst = self.scene.tri_st[self.scene.corner_rows(tri[sel], inst[sel])]
+                bu, bv = u[sel], v[sel]
+                st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+            out[sel] = op.present(st, draws[sel])
+        return out
+
     def trace(self, o, d, tmax=None, ignore=None, exempt=None):
         with _Timer(self.stats, "trace"):
             return self.accel.trace(o, d, tmax, ignore, exempt)
@@ -163,6 +188,7 @@ class PathIntegrator:
 
     # -- main loop -------------------------------------------------------------------------
     def radiance(self, o, d, rng) -> np.ndarray:
+        self.presence_rng = rng  # draws only where a ray meets a cut-out surface
         n0 = len(o)
         L = np.zeros((n0, 3))
         idx = np.arange(n0)

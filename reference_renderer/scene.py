@@ -39,7 +39,7 @@ from .lights import (
     SphereLight,
 )
 from .sampling import box3, face_normals
-from .textures import WRAP_MODES, ImageTexture, TexturedDiffuse, srgb_to_linear, transform2d
+from .textures import WRAP_MODES, ImageTexture, Opacity, TexturedDiffuse, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
@@ -461,7 +461,8 @@ class _Loader:
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
-                              textures=[m[5] if len(m) > 5 else None for m in mats])
+                              textures=[m[5] if len(m) > 5 else None for m in mats],
+                              opacities=[m[6] if len(m) > 6 else None for m in mats])
         return Scene(
             file=self.file, camera=camera, triangles=tris,
             tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
@@ -687,7 +688,7 @@ class _Loader:
             raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; supported: "
                            f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
-        texture = None
+        texture = opacity_texture = None
         if sid in MTLX_SURFACES:
             vals.update(self._mtlx_surface(shader, sid))
         for inp in shader.GetInputs() if sid in PREVIEW_SURFACES else ():
@@ -699,14 +700,15 @@ class _Loader:
             if producer is not None:  # fed by a shader's output (a texture)
                 if name == "diffuseColor":
                     texture = self._uv_texture(inp, shader.GetPath())
+                elif name == "opacity":
+                    opacity_texture = self._uv_texture(inp, shader.GetPath(), outputs=("a", "r", "g", "b"))
                 else:
-                    self.warn(f"input {name!r} is connected (only diffuseColor textures are rendered); its own value "
-                              "is used", shader.GetPath())
+                    self.warn(f"input {name!r} is connected (only diffuseColor and opacity textures are rendered); its "
+                              "own value is used", shader.GetPath())
             if v is not None:
                 default = PREVIEW_DEFAULTS[name]
                 vals[name] = v if default is None else self._finite(v, default, shader.GetPath(), name)
-        if float(vals["opacity"]) < 1.0:
-            self.warn("opacity < 1 is ignored (rendered opaque)", shader.GetPath())
+        opacity = self._opacity(vals, opacity_texture)
         if float(vals["clearcoat"]) > 0.0:
             self.warn("clearcoat is ignored", shader.GetPath())
         diffuse = np.clip(np.asarray(vals["diffuseColor"], np.float64), 0, 1)
@@ -732,8 +734,17 @@ class _Loader:
                 textured = TexturedDiffuse(tex, varname, 1.0 - m, np.full(3, (1.0 - m) * f0s), m)
             kd, f0 = textured.kd_weight * np.clip(tex.mean, 0, 1), textured.f0_base + textured.f0_weight * np.clip(tex.mean, 0, 1)
         self.mat_index[mpath] = len(self.mat_rows)
-        self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath, textured))
+        self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath, textured, opacity))
         return self.mat_index[mpath]
+
+    @staticmethod
+    def _opacity(vals: dict, texture) -> Opacity | None:
+        """The material's presence (spec/renderer.md#cutouts; both ``opacityMode`` values), None where it is
+        everywhere opaque."""
+        op, threshold = (float(np.clip(vals[k], 0.0, 1.0)) for k in ("opacity", "opacityThreshold"))
+        if texture is None and (op >= 1.0 or (threshold > 0 and op >= threshold)):
+            return None
+        return Opacity(op, threshold) if texture is None else Opacity(op, threshold, texture[0], texture[1])
 
     def _mtlx_surface(self, shader, sid: str) -> dict:
         """UsdPreviewSurface values of a MaterialX standard_surface or open_pbr_surface (spec/renderer.md#materials):
@@ -787,15 +798,17 @@ class _Loader:
                            + (f" within {bound:g}" if np.isfinite(bound) else ""), shader_path, f"inputs:{name}")
         return out
 
-    def _uv_texture(self, inp, where):
+    def _uv_texture(self, inp, where, outputs=("rgb",)):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
-        value is then used): a ``UsdUVTexture``'s ``rgb`` output whose ``st`` reads a ``UsdPrimvarReader_float2``."""
+        value is then used): a ``UsdUVTexture``'s output (one of ``outputs``: ``rgb``, or a channel ``r``, ``g``,
+        ``b``, ``a``, whose value the texture then repeats in its three colours) whose ``st`` reads a
+        ``UsdPrimvarReader_float2``."""
         producer = self._read_input(inp)[0]
         node, out = producer if producer else (None, None)
         nid = node.GetIdAttr().Get() if node else None
-        if nid != "UsdUVTexture" or str(out) != "rgb":
-            self.warn(f"input {inp.GetBaseName()!r} is connected to {nid!r} output {out!r} (only a UsdUVTexture's rgb "
-                      "output is rendered); its own value is used", where)
+        if nid != "UsdUVTexture" or str(out) not in outputs:
+            self.warn(f"input {inp.GetBaseName()!r} is connected to {nid!r} output {out!r} (only a UsdUVTexture's "
+                      f"{' / '.join(outputs)} output is rendered); its own value is used", where)
             return None
         tpath = node.GetPath()
 
@@ -814,9 +827,13 @@ class _Loader:
             return None
         if resolved not in self.images:  # one decode per file
             self.images[resolved] = self._read_image(asset, tpath, "inputs:file", "UsdUVTexture texture", ldr=True)
-        image, bits = self.images[resolved]
+        rgba, bits = self.images[resolved]
+        channel = "rgba".find(str(out)) if str(out) != "rgb" else -1
+        image = rgba[..., :3] if channel < 0 else np.repeat(rgba[..., channel:channel + 1], 3, -1)
         space = str(value("sourceColorSpace", "auto"))
-        if space == "sRGB" or (space == "auto" and bits == 8):  # UsdPreviewSurface: auto is sRGB for 8-bit images
+        if channel == 3:
+            pass  # alpha is linear whatever the colour space
+        elif space == "sRGB" or (space == "auto" and bits == 8):  # UsdPreviewSurface: auto is sRGB for 8-bit images
             image = srgb_to_linear(image)
         elif space not in ("auto", "raw"):
             self.warn(f"sourceColorSpace {space!r} read as raw (linear)", tpath)
@@ -829,10 +846,15 @@ class _Loader:
                 self.warn(f"{name} {mode!r} unknown: black", tpath)
                 mode = "black"
             wraps.append(mode)
-        scale = np.asarray(value("scale", (1.0, 1.0, 1.0, 1.0)), np.float64)[:3]
-        bias = np.asarray(value("bias", (0.0, 0.0, 0.0, 0.0)), np.float64)[:3]
+        def float4(name, fallback):  # a shorter value keeps the fallbacks of the channels it lacks
+            v = np.asarray(value(name, fallback), np.float64).ravel()[:4]
+            return np.concatenate([v, fallback[len(v):]])
+
+        with self._reading(tpath):
+            scale, bias = float4("scale", np.ones(4)), float4("bias", np.zeros(4))
         if not (np.isfinite(scale).all() and np.isfinite(bias).all()):
             raise self.err("SCENE_INVALID", "UsdUVTexture scale / bias must be finite", tpath, "inputs:scale")
+        scale, bias = (scale[:3], bias[:3]) if channel < 0 else (np.full(3, scale[channel]), np.full(3, bias[channel]))
         varname, uv_matrix = "st", None
 
         def source_of(shader, name):
@@ -871,8 +893,8 @@ class _Loader:
         if not exr and not (ldr and name.endswith(TEXTURE_SUFFIXES)):
             raise self.err("SCENE_UNSUPPORTED", f"{what} {asset.path}: only OpenEXR images", prim, attribute)
         try:
-            with _local_copy(resolved, packaged) as local:
-                image, bits = (read_exr(local), 32) if exr else read_png_jpeg(local)
+            with _local_copy(resolved, packaged) as local:  # textures (ldr) keep their alpha: [H, W, 4]
+                image, bits = (read_exr(local, alpha=ldr), 32) if exr else read_png_jpeg(local, alpha=ldr)
         except NassetError as exc:
             raise self.err("IMAGE_INVALID", f"{what} {resolved}: {exc.message}", prim, attribute) from None
         if not np.isfinite(image).all() or (image < 0).any():
@@ -968,8 +990,10 @@ class _Loader:
         planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
         back = self._back_material(prim)
         groups = self._face_groups(mesh, len(counts))  # [(prim path, material, faces or None)]
-        tex = next((self.mat_rows[m][5] for m in [g[1] for g in groups] + [back] if m >= 0 and len(self.mat_rows[m]) > 5
-                    and self.mat_rows[m][5] is not None), None)
+        # the texture coordinates of its first texture (colour or opacity) that reads them
+        tex = next((t for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:7]
+                    if t is not None and getattr(t, "varname", None)
+                    and (not isinstance(t, Opacity) or t.texture is not None)), None)
         st = None if tex is None else self._primvar_st(prim, tex.varname, tri, corner, face_of_tri, len(pts), len(counts),
                                                        len(idx))
         for where, mat, faces in groups:

@@ -102,3 +102,21 @@ class TexturedDiffuse:
         """(kd [N, 3], F0 [N, 3]) at texture coordinates ``st`` [N, 2]."""
         c = np.clip(self.texture.sample(st), 0.0, 1.0)
         return c * self.kd_weight, self.f0_base + c * self.f0_weight
+
+
+@dataclass
+class Opacity:
+    """UsdPreviewSurface ``opacity`` as presence (spec/renderer.md#cutouts): with ``opacityThreshold`` > 0 a
+    surface point is there where its opacity is >= the threshold and absent elsewhere (a cut-out); with threshold 0
+    it is there with probability ``opacity`` (what Cycles' alpha and Mitsuba's ``mask`` do)."""
+
+    value: float  # opacity in [0, 1] where no texture gives it
+    threshold: float  # opacityThreshold in [0, 1]
+    texture: ImageTexture | None = None  # opacity = the texture's (first) channel at the hit
+    varname: str = "st"
+
+    def present(self, st: np.ndarray | None, u: np.ndarray) -> np.ndarray:
+        """[N] bool: the surface is there at texture coordinates ``st`` [N, 2] (None without a texture); ``u`` [N]
+        uniform numbers in [0, 1) draw the fractional case."""
+        op = np.full(len(u), self.value) if self.texture is None else np.clip(self.texture.sample(st)[:, 0], 0.0, 1.0)
+        return op >= self.threshold if self.threshold > 0 else u < op

@@ -246,6 +246,42 @@ def _depth_of_field(bpy, folder: Path, size: int) -> None:
     dof.focus_object = bpy.data.objects["Ball"]
 
 
+def _alpha_png(path: Path, n: int = 64, squares: int = 4) -> Path:
+    """An 8-bit RGBA PNG: orange, its alpha a checkerboard of 0 and 255 (a cut-out pattern)."""
+    from PIL import Image
+
+    y, x = np.mgrid[0:n, 0:n]
+    img = np.zeros((n, n, 4), np.uint8)
+    img[..., :3] = (230, 120, 40)
+    img[..., 3] = 255 * (((x * squares // n) + (y * squares // n)) % 2)
+    Image.fromarray(img, "RGBA").save(path)
+    return path
+
+
+def _cutouts(bpy, folder: Path, size: int) -> None:
+    # alpha as presence: a panel whose Principled Alpha is an RGBA image's alpha (a checker of holes) casting a
+    # patterned shadow; a panel with a Mix Shader of a Transparent BSDF and a Diffuse BSDF (Factor 0.6); a ball of
+    # Principled Alpha 0.4
+    _new_scene(bpy, size, (0.4, -2.3, 1.9), (0.0, 0.0, 0.3))
+    _floor(bpy, (0.6, 0.6, 0.6))
+    holes = _material(bpy, "Holes", "principled", **{"Roughness": 0.8})
+    nt = holes.node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.load(str(_alpha_png(folder / "holes.png")))
+    shader = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    nt.links.new(tex.outputs["Color"], shader.inputs["Base Color"])
+    nt.links.new(tex.outputs["Alpha"], shader.inputs["Alpha"])
+    _add(bpy, "plane", "HolePanel", holes, size=1.0, location=(0.1, 0.1, 0.7))
+    veil = _mixed(bpy, "Veil", "mix", [("ShaderNodeBsdfTransparent", {}),
+                                       ("ShaderNodeBsdfDiffuse", {"Color": (0.2, 0.4, 0.8, 1.0)})], fac=0.6)
+    _add(bpy, "plane", "VeilPanel", veil, size=0.7, location=(-0.7, 0.3, 0.4), rotation=(math.radians(90.0), 0.0, 0.0))
+    _add(bpy, "uv_sphere", "Ghost", _material(bpy, "Ghost", "principled", **{"Base Color": (0.3, 0.8, 0.3),
+                                                                             "Alpha": 0.4}),
+         smooth=True, radius=0.25, location=(0.7, -0.5, 0.25))
+    _sun(bpy)
+    _world(bpy)
+
+
 def _mixed(bpy, name: str, kind: str, subs, fac: float = 0.5):
     """A material whose surface is a Mix (``kind`` "mix", Factor ``fac``) or Add Shader of new shader nodes ``subs``
     [(bl_idname, {socket: value})]."""
@@ -429,6 +465,9 @@ SCENES = {
     "material_slots": FidelityScene("material_slots", _material_slots, "one mesh with three material slots: red upper "
                                     "half, blue lower half, an emitting band"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
+    "cutouts": FidelityScene("cutouts", _cutouts, "alpha as presence: a Principled Alpha from an RGBA image (checker "
+                             "holes, patterned shadow), a Mix of a Transparent and a Diffuse BSDF (0.6), a ball of "
+                             "Alpha 0.4"),
     "orthographic": FidelityScene("orthographic", _orthographic, "an orthographic camera (ortho scale 2.6) and Film "
                                   "Exposure 1.6 over a floor, a ball and a box"),
     "depth_of_field": FidelityScene("depth_of_field", _depth_of_field, "depth of field at f/0.12 focused on the ball (a "
@@ -587,6 +626,9 @@ NOTES = """
   was dropped (ratio 0.625 once a camera is there); depth_of_field read MSE / noise 1.84 (32 x 32, 64 spp):
   depth of field was dropped (pinhole). They are now an orthographic camera, the camera's `exposure`, and
   `fStop` / `focusDistance` (spec/renderer.md#cameras).
+- cutouts read MSE / noise 63 (32 x 32, 64 spp; 0.98 now): alpha was dropped and the renderer drew every surface
+  opaque. Principled Alpha (constant or an image's alpha) and a Mix with a Transparent BSDF are now the
+  UsdPreviewSurface opacity, which the renderer reads as presence (spec/renderer.md#cutouts).
 """
 
 

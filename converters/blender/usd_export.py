@@ -595,7 +595,7 @@ def map_material(mat) -> tuple[dict, list]:
 
 #: shader nodes :func:`_map_shader` converts
 SHADER_NODES = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfPrincipled", "ShaderNodeEmission", "ShaderNodeBsdfAnisotropic",
-                "ShaderNodeMixShader", "ShaderNodeAddShader")
+                "ShaderNodeMixShader", "ShaderNodeAddShader", "ShaderNodeBsdfTransparent")
 
 
 def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
@@ -606,6 +606,9 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: shader mixes nested deeper than 8: grey")
             return None
         mix = node.bl_idname == "ShaderNodeMixShader"
+        socks = [sk for sk in node.inputs if sk.type == "SHADER"]
+        if mix and any(sk.is_linked and sk.links[0].from_node.bl_idname == "ShaderNodeBsdfTransparent" for sk in socks):
+            return _presence_mix(mat, node, socks, notes, depth)
         fac, f_linked = _socket(node, "Factor", 0.5) if mix else (0.0, False)
         if f_linked:
             notes.append(f"material {mat.name}: linked Mix Shader Factor dropped (its default {fac:.3g} used)")
@@ -632,6 +635,9 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
                      "no multiple-scattering compensation)" + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": tuple(col[:3]),
                 "roughness": float(np.clip(rough, 0.0, 1.0))}
+    if node.bl_idname == "ShaderNodeBsdfTransparent":  # alone: nothing there (presence 0)
+        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+                "roughness": 1.0, "opacity": 0.0}
     if node.bl_idname not in SHADER_NODES:
         notes.append(f"material {mat.name}: {node.bl_idname} is not convertible ({', '.join(SHADER_NODES)} are): grey")
         return None
@@ -659,6 +665,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         vals[name] = v
         if linked and name == "Base Color":
             vals[name] = image_texture(mat, node.inputs[name], notes) or v
+        elif linked and name == "Alpha":
+            vals[name] = image_texture(mat, node.inputs[name], notes, scalar=True) or v
         elif linked:
             notes.append(f"material {mat.name}: linked {name} dropped (its default value used)")
     emission = None
@@ -673,11 +681,12 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
             notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
                          "bake the object into a neural asset)")
-    if isinstance(vals["Alpha"], float) and vals["Alpha"] < 1.0:
-        notes.append(f"material {mat.name}: Alpha {vals['Alpha']:.3g} dropped (opaque)")
     base = vals["Base Color"]
     inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": float(vals["Roughness"]),
               "metallic": float(vals["Metallic"])}
+    alpha = vals["Alpha"]  # Cycles' alpha is presence: UsdPreviewSurface opacity, threshold 0 (renderer.md#cutouts)
+    if isinstance(alpha, TextureMap) or float(alpha) < 1.0:
+        inputs["opacity"] = alpha if isinstance(alpha, TextureMap) else float(np.clip(alpha, 0.0, 1.0))
     if emission is not None:
         inputs["emissiveColor"] = emission
     level = float(vals["Specular IOR Level"])
@@ -693,6 +702,44 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: Principled base colour x {k:.3f} for the specular layer's albedo "
                          "(Cycles layers the lobes, UsdPreviewSurface adds them)")
     return inputs
+
+
+def _presence_mix(mat, node, socks, notes: list, depth: int) -> dict | None:
+    """A Mix Shader of a Transparent BSDF and a shader S: S with presence (UsdPreviewSurface ``opacity``, threshold 0;
+    renderer.md#cutouts) = S's weight, the Factor or 1 - Factor, a texture where the Factor is an Image Texture's
+    Alpha or Color (Cycles' classic cut-out leaf); times S's own opacity."""
+    kinds = [sk.links[0].from_node.bl_idname if sk.is_linked else None for sk in socks]
+    k_other = 1 if kinds[0] == "ShaderNodeBsdfTransparent" else 0
+    if kinds[k_other] in (None, "ShaderNodeBsdfTransparent"):
+        notes.append(f"material {mat.name}: {node.name} mixes a Transparent BSDF with nothing else: grey")
+        return None
+    transparent = socks[1 - k_other].links[0].from_node
+    col, c_linked = _socket(transparent, "Color", (1.0, 1.0, 1.0, 1.0))
+    if c_linked or min(col[:3]) < 1.0 - 1e-6:
+        notes.append(f"material {mat.name}: Transparent BSDF colour {tuple(round(c, 3) for c in col[:3])} written as "
+                     "colourless presence")
+    sub = _map_shader(mat, socks[k_other].links[0].from_node, notes, depth + 1)
+    if sub is None:
+        return None
+    fac, f_linked = _socket(node, "Factor", 0.5)
+    weight = image_texture(mat, node.inputs["Factor"], notes, scalar=True) if f_linked else None
+    if weight is None:
+        fac = float(np.clip(fac, 0.0, 1.0))
+        weight = fac if k_other == 1 else 1.0 - fac
+    else:
+        weight.image = np.clip(weight.image if k_other == 1 else 1.0 - weight.image, 0.0, 1.0)
+    own = sub.get("opacity", 1.0)
+    if isinstance(weight, TextureMap) and isinstance(own, TextureMap):
+        if weight.image.shape == own.image.shape:
+            weight.image = weight.image * own.image
+        else:
+            notes.append(f"material {mat.name}: two opacity textures of different sizes: the Mix Shader's kept")
+    elif isinstance(own, TextureMap):
+        weight = _scaled(own, float(weight))
+    else:
+        weight = _scaled(weight, float(own)) if isinstance(weight, TextureMap) else float(weight) * float(own)
+    sub["opacity"] = weight
+    return sub
 
 
 def _specular_form(inputs: dict) -> tuple:
@@ -738,6 +785,9 @@ def _combine(parts: list, mat, notes: list) -> dict:
            "roughness": rough / rough_w if rough_w > 0 else 1.0}
     if em.any():
         out["emissiveColor"] = tuple(float(c) for c in em)
+    if any("opacity" in inputs for _, inputs in parts):
+        notes.append(f"material {mat.name}: the opacity of a shader inside a Mix / Add Shader dropped (opaque; a Mix "
+                     "with a Transparent BSDF is converted)")
     return out
 
 
@@ -777,18 +827,21 @@ _LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XY
 _WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "black", "MIRROR": "mirror"}
 
 
-def image_texture(mat, socket, notes: list) -> TextureMap | None:
+def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureMap | None:
     """A :class:`TextureMap` (linear texels, top row first) for an input ``socket`` fed by an Image Texture node's
     Color output, else None with a note. Colour space: ``sRGB`` texels are decoded from sRGB, ``Non-Color`` and
     linear spaces taken as stored; what the renderer does differently (closest/cubic interpolation, a linked
-    Vector, box/sphere projection) is noted per texture."""
+    Vector, box/sphere projection) is noted per texture. ``scalar`` (a float socket such as Alpha): the node's
+    Alpha output (1 where the image has no alpha; never colour-decoded) or its Color output's luminance, repeated
+    in the three channels."""
     from nasset_reference_renderer.textures import srgb_to_linear
 
     link = socket.links[0]
     tex = link.from_node
-    if tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or link.from_socket.name != "Color":
+    outputs = ("Color", "Alpha") if scalar else ("Color",)
+    if tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or link.from_socket.name not in outputs:
         notes.append(f"material {mat.name}: {socket.name} from {tex.bl_idname}.{link.from_socket.name} dropped (Image "
-                     "Texture Color outputs are converted; its default value used)")
+                     f"Texture {' / '.join(outputs)} outputs are converted; its default value used)")
         return None
     img = tex.image
     w, h = img.size
@@ -800,6 +853,9 @@ def image_texture(mat, socket, notes: list) -> TextureMap | None:
     space = img.colorspace_settings.name
     what = f"image {img.name} ({w}x{h}, {space})"
     wrap = _WRAP.get(tex.extension, "repeat")
+    if link.from_socket.name == "Alpha":  # straight alpha, linear whatever the colour space
+        alpha = px[..., 3] if img.channels == 4 else np.ones((h, w))
+        rgb, space, what = np.repeat(alpha[..., None], 3, -1), "Non-Color", f"alpha of image {img.name} ({w}x{h})"
     if space == "sRGB":
         # Cycles interpolates 8-bit sRGB texels before decoding them: resampled finer in sRGB, then decoded, the
         # renderer's bilinear lookup of linear texels follows that
@@ -818,6 +874,8 @@ def image_texture(mat, socket, notes: list) -> TextureMap | None:
         if note:
             notes.append(f"material {mat.name}: image {img.name}: {note} (the active render UV map used)")
     rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
+    if scalar and link.from_socket.name == "Color":  # a colour into a float socket: its luminance (Rec. 709)
+        rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
     return TextureMap(rgb, what, wrap=wrap, uv=uv)
 
 

@@ -445,7 +445,8 @@ class StageConverter:
         types = {"diffuseColor": Sdf.ValueTypeNames.Color3f, "specularColor": Sdf.ValueTypeNames.Color3f,
                  "emissiveColor": Sdf.ValueTypeNames.Color3f, "useSpecularWorkflow": Sdf.ValueTypeNames.Int,
                  "roughness": Sdf.ValueTypeNames.Float, "metallic": Sdf.ValueTypeNames.Float,
-                 "ior": Sdf.ValueTypeNames.Float, "opacity": Sdf.ValueTypeNames.Float}
+                 "ior": Sdf.ValueTypeNames.Float, "opacity": Sdf.ValueTypeNames.Float,
+                 "opacityThreshold": Sdf.ValueTypeNames.Float}
         for k, v in inputs.items():
             if isinstance(v, TextureMap):
                 self._texture_input(path, sh, k, v)
@@ -497,9 +498,13 @@ class StageConverter:
 
             node.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[0]))
             node.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[1]))
-        node.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
-        kind = Sdf.ValueTypeNames.Normal3f if name == "normal" else Sdf.ValueTypeNames.Color3f
-        surface.CreateInput(name, kind).ConnectToSource(node.ConnectableAPI(), "rgb")
+        if name == "opacity":  # a float input: the texture's r channel (the converted opacity is grey)
+            node.CreateOutput("r", Sdf.ValueTypeNames.Float)
+            surface.CreateInput(name, Sdf.ValueTypeNames.Float).ConnectToSource(node.ConnectableAPI(), "r")
+        else:
+            node.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+            kind = Sdf.ValueTypeNames.Normal3f if name == "normal" else Sdf.ValueTypeNames.Color3f
+            surface.CreateInput(name, kind).ConnectToSource(node.ConnectableAPI(), "rgb")
         self.textured_materials.add(mat_path)  # its prims need texture coordinates
 
     def map_bsdf(self, bsdf, prefix: str = "", cls: str | None = None, back: bool = False) -> tuple[dict, list]:
@@ -520,12 +525,23 @@ class StageConverter:
         if cls in WRAPPERS:
             inner = re.search(r"nested_bsdf\s*=\s*(\w+)", text)
             out, notes = self.map_bsdf(bsdf, f"{prefix}nested_bsdf.", inner.group(1) if inner else "SmoothDiffuse")
-            if cls == "Mask":
-                opacity = _Params(mi, bsdf, prefix).scalar("opacity", 1.0)
-                out["opacity"] = opacity
-                if opacity < 1.0:
-                    notes.append(f"mask: opacity {opacity:.3g} written to UsdPreviewSurface opacity (the reference "
-                                 "renderer renders it opaque)")
+            if cls == "Mask":  # Mitsuba's mask is presence: UsdPreviewSurface opacity, threshold 0 (renderer.md#cutouts)
+                p = _Params(mi, bsdf, prefix)
+                img = p.bitmap("opacity")
+                if img is None:
+                    out["opacity"] = float(np.clip(p.scalar("opacity", 1.0), 0.0, 1.0))
+                else:  # a colour bitmap is read as its luminance, as Mitsuba's mask does
+                    lum = np.clip(img @ np.array([0.212671, 0.715160, 0.072169]), 0.0, 1.0)
+                    out["opacity"] = TextureMap(np.repeat(lum[..., None], 3, -1), "mask opacity")
+                    to_uv = p.uv_transform("opacity")
+                    if to_uv is not None:
+                        out["opacity"].uv = st_transform(to_uv)
+                integrator = self.scene.integrator()
+                if (img is not None or out["opacity"] < 1.0) and integrator is not None \
+                        and _class_name(integrator) == "PathIntegrator":
+                    notes.append("mask: Mitsuba's path integrator stops shadow rays at a mask whatever its opacity "
+                                 "(measured: no light through opacity 0.25); the converted surface lets 1 - opacity "
+                                 "through, as volpath does")
             elif cls == "NormalMap" and (img := _Params(mi, bsdf, prefix).bitmap("normalmap")) is not None:
                 # tangent-space normals stored as (n + 1) / 2, as UsdPreviewSurface's normal input expects them
                 out["normal"] = TextureMap(img, "normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))

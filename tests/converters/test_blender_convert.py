@@ -36,8 +36,12 @@ def test_examples_convert_and_pass_usd_checks(example, tmp_path):
     stage = Usd.Stage.Open(str(res.output))
     assert stage.GetPrimAtPath("/World/Camera").GetTypeName() == "Camera"
     assert res.resolution == (128, 128)
-    ha = _attr(stage, "/World/Camera", "horizontalAperture")
-    assert np.isclose(2 * math.degrees(math.atan(ha / 100.0)), 40.0, atol=1e-3)  # 40 deg fov, 50 mm lens
+    ha, fl = _attr(stage, "/World/Camera", "horizontalAperture"), _attr(stage, "/World/Camera", "focalLength")
+    assert np.isclose(2 * math.degrees(math.atan(ha / (2 * fl))), 40.0, atol=1e-3)  # 40 deg fov
+    # USD's lens unit is a tenth of a scene unit: the camera's lens in mm / 100 in a metre scene
+    import bpy
+
+    assert np.isclose(fl, bpy.data.objects["Camera"].data.lens / 100.0, rtol=1e-6)
     # sun: irradiance 3 W/m^2, angular diameter 1 deg
     assert np.isclose(_attr(stage, "/World/Lights/Sun", "inputs:intensity"), 3.0)
     assert np.isclose(_attr(stage, "/World/Lights/Sun", "inputs:angle"), 1.0, atol=1e-4)

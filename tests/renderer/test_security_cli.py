@@ -79,7 +79,7 @@ def test_outputs_never_overwrite_inputs(cases, tmp_path):
 
 @pytest.mark.parametrize("name,code,where", [
     ("r9_camera_focal_zero", "SCENE_INVALID", "/World/Camera.focalLength"),
-    ("r9_camera_aperture_huge", "SCENE_INVALID", "/World/Camera.focalLength"),
+    ("r9_camera_aperture_huge", "SCENE_INVALID", "/World/Camera.horizontalAperture"),
     ("r9_transform_asset_nan", "SCENE_INVALID", "/World/Asset.xformOpOrder"),
     ("r9_transform_asset_scale_1e37", "SCENE_INVALID", "/World/Asset.xformOpOrder"),
     ("r9_transform_asset_scale_2e-4_vs_ground", "SCENE_INVALID", "/World/Asset.xformOpOrder"),
