@@ -92,14 +92,14 @@ def spec_probability(kd: np.ndarray, f0: np.ndarray) -> np.ndarray:
 @dataclass
 class MaterialTable:
     """Per-material constants, indexed by material id; ``textures[m]`` (a
-    :class:`~nasset_reference_renderer.textures.TexturedDiffuse` or None) replaces kd and F0 per hit."""
+    :class:`~nasset_reference_renderer.textures.TexturedMaterial` or None) replaces kd, F0 and alpha per hit."""
 
     kd: np.ndarray  # [M,3]
     f0: np.ndarray  # [M,3]
     alpha: np.ndarray  # [M]
     emission: np.ndarray  # [M,3]
     names: list
-    textures: list = field(default_factory=list)  # [M] TexturedDiffuse | None (empty: none textured)
+    textures: list = field(default_factory=list)  # [M] TexturedMaterial | None (empty: none textured)
     opacities: list = field(default_factory=list)  # [M] textures.Opacity | None (empty: every material opaque)
 
     @property
@@ -118,26 +118,29 @@ class MaterialTable:
     def textured(self) -> bool:
         return any(t is not None for t in self.textures)
 
-    def lookup(self, m: np.ndarray, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(kd [N,3], F0 [N,3]) of materials m [N] at texture coordinates st [N,2] (constants where untextured)."""
-        kd, f0 = self.kd[m].copy(), self.f0[m].copy()
+    def lookup(self, m: np.ndarray, st: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kd [N,3], F0 [N,3], alpha [N]) of materials m [N] at texture coordinates st [N,2] (constants where
+        untextured)."""
+        kd, f0, alpha = self.kd[m].copy(), self.f0[m].copy(), self.alpha[m].copy()
         for k, tex in enumerate(self.textures):
             if tex is None:
                 continue
             sel = m == k
             if sel.any():
-                kd[sel], f0[sel] = tex.lookup(st[sel])
-        return kd, f0
+                kd[sel], f0[sel], alpha[sel] = tex.lookup(st[sel])
+        return kd, f0, alpha
 
 
-def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None):
+def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None):
     """f(wo, wi) [N,3] and pdf(wi) [N] for local-frame directions (normal = +Z).
 
-    ``kd``, ``f0`` [N,3] override the materials' constants (textured materials, :meth:`MaterialTable.lookup`).
+    ``kd``, ``f0`` [N,3] and ``alpha`` [N] override the materials' constants (textured materials,
+    :meth:`MaterialTable.lookup`).
     """
     kd = mt.kd[m] if kd is None else kd
     f0 = mt.f0[m] if f0 is None else f0
-    alpha, ps = mt.alpha[m], spec_probability(kd, f0)
+    alpha = mt.alpha[m] if alpha is None else alpha
+    ps = spec_probability(kd, f0)
     ok = (wo[:, 2] > 0) & (wi[:, 2] > 0)
     h = normalize(wo + wi)
     d = ggx_d(h, alpha)
@@ -151,15 +154,17 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None):
     return f, np.where(ok, pdf, 0.0)
 
 
-def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None):
-    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample (``kd``, ``f0`` as in bsdf_eval)."""
+def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None, alpha=None):
+    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample (``kd``, ``f0``, ``alpha`` as in
+    bsdf_eval)."""
     kd = mt.kd[m] if kd is None else kd
     f0 = mt.f0[m] if f0 is None else f0
-    alpha, ps = mt.alpha[m], spec_probability(kd, f0)
+    alpha = mt.alpha[m] if alpha is None else alpha
+    ps = spec_probability(kd, f0)
     spec = u_lobe < ps
     wi = square_to_cosine_hemisphere(u)
     if spec.any():
         h = ggx_sample_vndf(wo[spec], alpha[spec], u[spec])
         wi[spec] = reflect(wo[spec], h)
-    f, pdf = bsdf_eval(mt, m, wo, wi, kd, f0)
+    f, pdf = bsdf_eval(mt, m, wo, wi, kd, f0, alpha)
     return wi, f, pdf

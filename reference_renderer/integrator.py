@@ -317,11 +317,11 @@ class PathIntegrator:
         mat = self.inst_mat[inst]
         back_mat = self.inst_back_mat[inst]
         mat = np.where(~seen_front & (back_mat >= 0), back_mat, mat)  # a two-sided material's back side
-        kd = f0 = None
+        looked_up = None  # (kd, f0, alpha) per hit of textured materials
         if self.mt.textured:
             cst = self.scene.tri_st[rows]
             st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
-            kd, f0 = self.mt.lookup(mat, st)
+            looked_up = self.mt.lookup(mat, st)
         indirect = self.indirect[inst]
         xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
         for k in self.nee:
@@ -333,7 +333,7 @@ class PathIntegrator:
             if not len(s):
                 continue
             f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]),
-                                *((None, None) if kd is None else (kd[s], f0[s])))
+                                *(() if looked_up is None else (a[s] for a in looked_up)))
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
             nz = max3(c) > 0
@@ -347,7 +347,7 @@ class PathIntegrator:
         if not len(cont):
             return None
         wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)),
-                                   *((None, None) if kd is None else (kd[cont], f0[cont])))
+                                   *(() if looked_up is None else (a[cont] for a in looked_up)))
         wi = to_world(wi_l, t[cont], b[cont], ns[cont])
         ok = (pdf > 0) & (wi_l[:, 2] > 0) & (dot(wi, ng[cont]) > 0)
         c = cont[ok]

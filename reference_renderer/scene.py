@@ -39,7 +39,7 @@ from .lights import (
     SphereLight,
 )
 from .sampling import box3, face_normals
-from .textures import WRAP_MODES, ImageTexture, Opacity, TexturedDiffuse, srgb_to_linear, transform2d
+from .textures import WRAP_MODES, ImageTexture, Opacity, TexturedMaterial, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
@@ -50,6 +50,9 @@ MIN_ASSET_SIZE = 1e-9  # world bounding-box diagonal of a NeuralAsset instance, 
 MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ray offset 1e-5 S)
 #: UsdUVTexture files the renderer reads (spec/renderer.md#textures): OpenEXR, and 8/16-bit PNG and JPEG
 TEXTURE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg")
+#: UsdPreviewSurface inputs the renderer reads from a UsdUVTexture, with the texture outputs it accepts for each
+TEXTURED_INPUTS = {"diffuseColor": ("rgb",), "roughness": ("r", "g", "b", "a"), "metallic": ("r", "g", "b", "a"),
+                   "opacity": ("a", "r", "g", "b")}
 MAX_EXPOSURE_SCALE = 1e30  # the camera's linear exposure scale
 CAMERA_RATIO = (1e-6, 1e6)  # horizontalAperture / focalLength and verticalAperture / horizontalAperture
 MAX_LIGHT_EXPOSURE = 1000.0  # stops
@@ -688,7 +691,7 @@ class _Loader:
             raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; supported: "
                            f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
-        texture = opacity_texture = None
+        textures = {}  # input name -> (ImageTexture, st primvar name)
         if sid in MTLX_SURFACES:
             vals.update(self._mtlx_surface(shader, sid))
         for inp in shader.GetInputs() if sid in PREVIEW_SURFACES else ():
@@ -698,53 +701,51 @@ class _Loader:
                 continue
             producer, v = self._read_input(inp)
             if producer is not None:  # fed by a shader's output (a texture)
-                if name == "diffuseColor":
-                    texture = self._uv_texture(inp, shader.GetPath())
-                elif name == "opacity":
-                    opacity_texture = self._uv_texture(inp, shader.GetPath(), outputs=("a", "r", "g", "b"))
+                if name in TEXTURED_INPUTS:
+                    tex = self._uv_texture(inp, shader.GetPath(), outputs=TEXTURED_INPUTS[name])
+                    if tex is not None:
+                        textures[name] = tex
                 else:
-                    self.warn(f"input {name!r} is connected (only diffuseColor and opacity textures are rendered); its "
-                              "own value is used", shader.GetPath())
+                    self.warn(f"input {name!r} is connected (only {', '.join(TEXTURED_INPUTS)} textures are rendered); "
+                              "its own value is used", shader.GetPath())
             if v is not None:
                 default = PREVIEW_DEFAULTS[name]
                 vals[name] = v if default is None else self._finite(v, default, shader.GetPath(), name)
-        opacity = self._opacity(vals, opacity_texture)
+        varnames = {v[1] for v in textures.values()}
+        if len(varnames) > 1:
+            self.warn(f"textures read different primvars {sorted(varnames)}; all are read at {textures[next(iter(textures))][1]!r}",
+                      shader.GetPath())
+        varname = textures[next(iter(textures))][1] if textures else "st"
+        opacity = self._opacity(vals, textures.get("opacity"), varname)
         if float(vals["clearcoat"]) > 0.0:
             self.warn("clearcoat is ignored", shader.GetPath())
-        diffuse = np.clip(np.asarray(vals["diffuseColor"], np.float64), 0, 1)
         emission = np.maximum(np.asarray(vals["emissiveColor"], np.float64), 0)
-        rough = float(np.clip(vals["roughness"], 0, 1))
-        if int(vals["useSpecularWorkflow"]):
-            f0 = np.clip(np.asarray(vals["specularColor"], np.float64), 0, 1)
-            kd = diffuse
-        else:
-            ior = float(vals["ior"])
-            if ior <= 0.0:  # F0 = ((1 - ior) / (1 + ior))^2 has no meaning there (a pole at -1)
-                raise self.err("SCENE_INVALID", f"ior = {ior!r} must be > 0", shader.GetPath(), "inputs:ior")
-            m = float(np.clip(vals["metallic"], 0, 1))
-            f0s = ((1.0 - ior) / (1.0 + ior)) ** 2
-            f0 = (1.0 - m) * f0s + m * diffuse
-            kd = diffuse * (1.0 - m)
-        textured = None
-        if texture is not None:
-            tex, varname = texture
-            if int(vals["useSpecularWorkflow"]):
-                textured = TexturedDiffuse(tex, varname, 1.0, f0, 0.0)
-            else:
-                textured = TexturedDiffuse(tex, varname, 1.0 - m, np.full(3, (1.0 - m) * f0s), m)
-            kd, f0 = textured.kd_weight * np.clip(tex.mean, 0, 1), textured.f0_base + textured.f0_weight * np.clip(tex.mean, 0, 1)
+        specular_workflow = bool(int(vals["useSpecularWorkflow"]))
+        ior = float(vals["ior"])
+        if not specular_workflow and ior <= 0.0:  # F0 = ((1 - ior) / (1 + ior))^2 has no meaning there (a pole at -1)
+            raise self.err("SCENE_INVALID", f"ior = {ior!r} must be > 0", shader.GetPath(), "inputs:ior")
+
+        def value(name):
+            return textures[name][0] if name in textures else np.clip(np.asarray(vals[name], np.float64), 0, 1)
+
+        material = TexturedMaterial(varname, value("diffuseColor"), value("roughness"),
+                                    None if specular_workflow else value("metallic"),
+                                    np.clip(np.asarray(vals["specularColor"], np.float64), 0, 1),
+                                    ((1.0 - ior) / (1.0 + ior)) ** 2, MIN_ALPHA)
+        kd, f0, alpha = material.constants()
+        textured = material if set(textures) - {"opacity"} else None
         self.mat_index[mpath] = len(self.mat_rows)
-        self.mat_rows.append((kd, f0, max(rough * rough, MIN_ALPHA), emission, mpath, textured, opacity))
+        self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity))
         return self.mat_index[mpath]
 
     @staticmethod
-    def _opacity(vals: dict, texture) -> Opacity | None:
+    def _opacity(vals: dict, texture, varname: str) -> Opacity | None:
         """The material's presence (spec/renderer.md#cutouts; both ``opacityMode`` values), None where it is
         everywhere opaque."""
         op, threshold = (float(np.clip(vals[k], 0.0, 1.0)) for k in ("opacity", "opacityThreshold"))
         if texture is None and (op >= 1.0 or (threshold > 0 and op >= threshold)):
             return None
-        return Opacity(op, threshold) if texture is None else Opacity(op, threshold, texture[0], texture[1])
+        return Opacity(op, threshold) if texture is None else Opacity(op, threshold, texture[0], varname)
 
     def _mtlx_surface(self, shader, sid: str) -> dict:
         """UsdPreviewSurface values of a MaterialX standard_surface or open_pbr_surface (spec/renderer.md#materials):

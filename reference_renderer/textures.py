@@ -85,23 +85,53 @@ class ImageTexture:
 
 
 @dataclass
-class TexturedDiffuse:
-    """A material whose ``diffuseColor`` is a texture: ``kd = c * kd_weight``, ``F0 = f0_base + c * f0_weight``.
+class TexturedMaterial:
+    """A UsdPreviewSurface with textured inputs: kd, F0 and the GGX alpha per hit (spec/renderer.md#textures).
 
-    ``c`` [N, 3] is the texture's colour clamped to [0, 1]; the weights carry the metallic workflow
-    (``kd_weight = 1 - metallic``, ``f0_weight = metallic``) or the specular one (1 and 0).
+    ``diffuse`` ([3] or an rgb texture), ``roughness`` and ``metallic`` (floats, or one-channel textures whose value
+    is their first colour component) are each a constant or a texture, read at one ``varname`` primvar.
+    ``metallic`` None is the specular workflow (kd = c, F0 = ``specular``); else kd = c (1 - m) and
+    F0 = (1 - m) ``f0_dielectric`` + m c. Colours, roughness and metallic are clamped to [0, 1]; alpha = max(r^2,
+    ``min_alpha``).
     """
 
-    texture: ImageTexture
     varname: str
-    kd_weight: float
-    f0_base: np.ndarray  # [3]
-    f0_weight: float
+    diffuse: object  # [3] | ImageTexture
+    roughness: object  # float | ImageTexture
+    metallic: object  # float | ImageTexture | None (specular workflow)
+    specular: np.ndarray  # [3] specularColor (specular workflow)
+    f0_dielectric: float  # ((1 - ior) / (1 + ior))^2 (metallic workflow)
+    min_alpha: float
 
-    def lookup(self, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(kd [N, 3], F0 [N, 3]) at texture coordinates ``st`` [N, 2]."""
-        c = np.clip(self.texture.sample(st), 0.0, 1.0)
-        return c * self.kd_weight, self.f0_base + c * self.f0_weight
+    @staticmethod
+    def _at(v, st, channels: int):
+        if isinstance(v, ImageTexture):
+            out = np.clip(v.sample(st), 0.0, 1.0)
+            return out if channels == 3 else out[:, 0]
+        return np.broadcast_to(np.clip(np.asarray(v, np.float64), 0.0, 1.0), (len(st), channels) if channels == 3 else (len(st),))
+
+    def lookup(self, st: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kd [N, 3], F0 [N, 3], alpha [N]) at texture coordinates ``st`` [N, 2]."""
+        c = self._at(self.diffuse, st, 3)
+        alpha = np.maximum(self._at(self.roughness, st, 1) ** 2, self.min_alpha)
+        if self.metallic is None:
+            return c * 1.0, np.tile(self.specular, (len(c), 1)), alpha
+        m = self._at(self.metallic, st, 1)[:, None]
+        return c * (1.0 - m), (1.0 - m) * self.f0_dielectric + c * m, alpha
+
+    def constants(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """(kd [3], F0 [3], alpha) with each texture replaced by its mean: the material's row for what needs one
+        value per material (the lobe-sampling probability of untextured lookups, light paths)."""
+        def mean(v):
+            v = v.mean if isinstance(v, ImageTexture) else np.asarray(v, np.float64)
+            return np.clip(v, 0.0, 1.0)
+
+        c, r = mean(self.diffuse), float(np.ravel(mean(self.roughness))[0])
+        alpha = max(r * r, self.min_alpha)
+        if self.metallic is None:
+            return c, np.asarray(self.specular, np.float64), alpha
+        m = float(np.ravel(mean(self.metallic))[0])
+        return c * (1.0 - m), (1.0 - m) * self.f0_dielectric + c * m, alpha
 
 
 @dataclass

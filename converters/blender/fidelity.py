@@ -246,6 +246,23 @@ def _depth_of_field(bpy, folder: Path, size: int) -> None:
     dof.focus_object = bpy.data.objects["Ball"]
 
 
+def _pbr_textures(bpy, folder: Path, size: int) -> None:
+    # PBR maps: a floor whose Principled Roughness is a Non-Color checker image (0.15 / 0.85), a ball whose Metallic
+    # is a Non-Color striped image (0 / 1) and Roughness a grey image, under a low sun and a bright sky
+    _new_scene(bpy, size, (0.0, -2.6, 1.2), (0.0, 0.0, 0.3))
+    floor = _material(bpy, "RoughFloor", "principled", **{"Base Color": (0.5, 0.45, 0.4)})
+    _image_texture(bpy, floor, "Roughness", _checker_png(folder / "rough.png", [(38, 38, 38), (217, 217, 217)]),
+                   "Non-Color")
+    _add(bpy, "plane", "Floor", floor, size=4.0)
+    ball = _material(bpy, "MetalBall", "principled", **{"Base Color": (0.9, 0.6, 0.3), "Roughness": 0.3})
+    _image_texture(bpy, ball, "Metallic", _checker_png(folder / "metal.png", [(0, 0, 0), (255, 255, 255)], squares=4),
+                   "Non-Color")
+    _add(bpy, "uv_sphere", "Ball", ball, smooth=True, radius=0.4, location=(0.0, 0.2, 0.4))
+    _light(bpy, "Sun", "SUN", (0.0, 0.0, 3.0), energy=3.0, rotation=(math.radians(70.0), 0.0, math.radians(180.0)),
+           angle=math.radians(3.0))
+    _world(bpy, (0.5, 0.55, 0.6), 1.0)
+
+
 def _alpha_png(path: Path, n: int = 64, squares: int = 4) -> Path:
     """An 8-bit RGBA PNG: orange, its alpha a checkerboard of 0 and 255 (a cut-out pattern)."""
     from PIL import Image
@@ -465,6 +482,8 @@ SCENES = {
     "material_slots": FidelityScene("material_slots", _material_slots, "one mesh with three material slots: red upper "
                                     "half, blue lower half, an emitting band"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
+    "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "Image Textures on Principled Roughness (a checker, "
+                                  "0.15 / 0.85) and Metallic (0 / 1) under a low sun"),
     "cutouts": FidelityScene("cutouts", _cutouts, "alpha as presence: a Principled Alpha from an RGBA image (checker "
                              "holes, patterned shadow), a Mix of a Transparent and a Diffuse BSDF (0.6), a ball of "
                              "Alpha 0.4"),
@@ -626,6 +645,8 @@ NOTES = """
   was dropped (ratio 0.625 once a camera is there); depth_of_field read MSE / noise 1.84 (32 x 32, 64 spp):
   depth of field was dropped (pinhole). They are now an orthographic camera, the camera's `exposure`, and
   `fStop` / `focusDistance` (spec/renderer.md#cameras).
+- pbr_textures read MSE / noise 12 (64 x 64, 64 spp; 0.8 now): Image Textures on Roughness and Metallic were
+  dropped (the sockets' defaults used) and the renderer textured diffuseColor only (spec/renderer.md#textures).
 - cutouts read MSE / noise 63 (32 x 32, 64 spp; 0.98 now): alpha was dropped and the renderer drew every surface
   opaque. Principled Alpha (constant or an image's alpha) and a Mix with a Transparent BSDF are now the
   UsdPreviewSurface opacity, which the renderer reads as presence (spec/renderer.md#cutouts).

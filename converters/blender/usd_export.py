@@ -665,7 +665,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         vals[name] = v
         if linked and name == "Base Color":
             vals[name] = image_texture(mat, node.inputs[name], notes) or v
-        elif linked and name == "Alpha":
+        elif linked and name in ("Alpha", "Roughness", "Metallic"):
             vals[name] = image_texture(mat, node.inputs[name], notes, scalar=True) or v
         elif linked:
             notes.append(f"material {mat.name}: linked {name} dropped (its default value used)")
@@ -682,22 +682,22 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
                          "bake the object into a neural asset)")
     base = vals["Base Color"]
-    inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": float(vals["Roughness"]),
-              "metallic": float(vals["Metallic"])}
+    inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": _scalar(vals["Roughness"]),
+              "metallic": _scalar(vals["Metallic"])}
     alpha = vals["Alpha"]  # Cycles' alpha is presence: UsdPreviewSurface opacity, threshold 0 (renderer.md#cutouts)
     if isinstance(alpha, TextureMap) or float(alpha) < 1.0:
         inputs["opacity"] = alpha if isinstance(alpha, TextureMap) else float(np.clip(alpha, 0.0, 1.0))
     if emission is not None:
         inputs["emissiveColor"] = emission
     level = float(vals["Specular IOR Level"])
-    if level <= 1e-6 and inputs["metallic"] <= 0.0:
+    if level <= 1e-6 and _mean(inputs["metallic"]) <= 0.0:
         inputs.update(useSpecularWorkflow=1, specularColor=(0.0, 0.0, 0.0))
     else:
         inputs["ior"] = float(vals["IOR"])
         if abs(level - 0.5) > 1e-6:
             notes.append(f"material {mat.name}: Specular IOR Level {level:.3g} dropped (0.5 assumed)")
-        if inputs["metallic"] <= 0.0:
-            k = principled_diffuse_scale(inputs["roughness"], inputs["ior"])
+        if _mean(inputs["metallic"]) <= 0.0:  # a textured roughness: the factor at its mean
+            k = principled_diffuse_scale(_mean(inputs["roughness"]), inputs["ior"])
             inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], k)
             notes.append(f"material {mat.name}: Principled base colour x {k:.3f} for the specular layer's albedo "
                          "(Cycles layers the lobes, UsdPreviewSurface adds them)")
@@ -742,6 +742,16 @@ def _presence_mix(mat, node, socks, notes: list, depth: int) -> dict | None:
     return sub
 
 
+def _scalar(v):
+    """A Principled float input: its TextureMap, or its value as a float."""
+    return v if isinstance(v, TextureMap) else float(v)
+
+
+def _mean(v) -> float:
+    """A float, or the mean of a one-channel TextureMap (inside shader mixes, which keep one value per lobe)."""
+    return float(v.image[..., 0].mean()) if isinstance(v, TextureMap) else float(v)
+
+
 def _specular_form(inputs: dict) -> tuple:
     """(kd, F0, roughness, emission) of converted inputs in the specular workflow (spec/renderer.md#materials:
     kd = diffuseColor (1 - metallic), F0 = lerp(((1 - ior) / (1 + ior))^2, diffuseColor, metallic)); kd may be a
@@ -749,11 +759,11 @@ def _specular_form(inputs: dict) -> tuple:
     base = inputs["diffuseColor"]
     emission = np.asarray(inputs.get("emissiveColor", (0.0, 0.0, 0.0)), np.float64)
     if inputs.get("useSpecularWorkflow"):
-        return base, np.asarray(inputs.get("specularColor", (0.0, 0.0, 0.0)), np.float64), inputs["roughness"], emission
-    m, ior = float(inputs.get("metallic", 0.0)), float(inputs.get("ior", 1.5))
+        return base, np.asarray(inputs.get("specularColor", (0.0, 0.0, 0.0)), np.float64), _mean(inputs["roughness"]), emission
+    m, ior = _mean(inputs.get("metallic", 0.0)), float(inputs.get("ior", 1.5))
     mean = base.image.reshape(-1, 3).mean(0) if isinstance(base, TextureMap) else np.asarray(base, np.float64)
     f0 = ((1.0 - ior) / (1.0 + ior)) ** 2 * (1.0 - m) + mean * m
-    return _scaled(base, 1.0 - m), f0, inputs["roughness"], emission
+    return _scaled(base, 1.0 - m), f0, _mean(inputs["roughness"]), emission
 
 
 def _combine(parts: list, mat, notes: list) -> dict:

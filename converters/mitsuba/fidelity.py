@@ -163,6 +163,24 @@ def _depth_of_field(folder: Path, size: int) -> str:
     return head + _objects().replace('<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>', checker, 1)
 
 
+def _pbr_textures(folder: Path, size: int) -> str:
+    # principled BSDFs with a roughness bitmap on the floor (a raw checker, 0.15 / 0.85) and a metallic bitmap on a
+    # ball (0 / 1), under a low sun and the sky
+    _checker_png(folder / "rough.png", [(38, 38, 38), (217, 217, 217)])
+    _checker_png(folder / "metal.png", [(0, 0, 0), (255, 255, 255)], squares=4)
+
+    def raw(name, file):
+        return (f'<texture type="bitmap" name="{name}"><string name="filename" value="{file}"/>'
+                '<boolean name="raw" value="true"/></texture>')
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1.2, 2.6", size=size)
+            + FLOOR.format(bsdf='<bsdf type="principled"><rgb name="base_color" value="0.5, 0.45, 0.4"/>'
+                                + raw("roughness", "rough.png") + '</bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0" y="0.4" z="0"/><float name="radius" value="0.4"/>'
+              '<bsdf type="principled"><rgb name="base_color" value="0.9, 0.6, 0.3"/><float name="roughness" value="0.6"/>'
+            + raw("metallic", "metal.png") + '</bsdf></shape>\n'
+            + SUN.replace("-0.4, -0.8, -0.45", "0, -0.35, -1") + SKY + "</scene>")
+
+
 def _cutouts(folder: Path, size: int) -> str:
     # a horizontal panel whose mask opacity is a black / white checker bitmap (holes), casting a patterned shadow on
     # the floor seen through it, and an upright panel of constant opacity 0.4; volpath (Mitsuba's path integrator
@@ -303,6 +321,8 @@ SCENES = {
     "sidedness": FidelityScene("sidedness", _sidedness, "one-sided diffuse panels from the front and from behind; twosided "
                                "panels, one with a different back BSDF"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a sensor with its principal point offset (x 0.15, y -0.1)"),
+    "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "principled BSDFs with a roughness bitmap (a raw "
+                                  "checker, 0.15 / 0.85) and a metallic bitmap (0 / 1) under a low sun"),
     "cutouts": FidelityScene("cutouts", _cutouts, "mask BSDFs: a panel cut by a checker bitmap opacity casting a patterned "
                              "shadow, a panel of opacity 0.4 (volpath)"),
     "orthographic": FidelityScene("orthographic", _orthographic, "an orthographic sensor (to_world scale 1.3) over a floor, "
@@ -452,6 +472,10 @@ NOTES = """
   opacity is now presence (spec/renderer.md#cutouts), a bitmap opacity a texture of its luminance. Mitsuba's `path`
   integrator stops shadow rays at a mask whatever its opacity (measured: no light through opacity 0.25, where
   `volpath` passes 0.75); the converted scene passes them as `volpath` does, warned for `path` scenes.
+- pbr_textures read MSE / noise 2.1 (32 x 32, 64 spp; 1.3 now): bitmaps on principled roughness and metallic were
+  written as their means and the renderer textured diffuseColor only. They are now grey textures on roughness and
+  metallic, which the renderer reads per hit (spec/renderer.md#textures). What remains is the principled
+  conversion's 1-2 % (the floor), not the textures.
 - Not converted: an area emitter on a null BSDF. Mitsuba's path tracer does not show it to the camera and
   lights the scene from it by emitter samples only, which no USD light reproduces; the shape is skipped with
   a warning.

@@ -165,6 +165,10 @@ def texel_values(data, raw: bool) -> np.ndarray:
     return np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
 
 
+#: UsdPreviewSurface float inputs a converted texture feeds through its ``r`` output (its texels are grey)
+SCALAR_TEXTURE_INPUTS = ("roughness", "metallic", "opacity")
+
+
 @dataclass
 class TextureMap:
     """A converted bitmap: linear texels [H, W, 3] (BSDF-specific per-texel factors applied) and where it came from."""
@@ -261,6 +265,17 @@ class _Params:
 
     def scalar(self, name: str, default: float) -> float:
         return float(self.rgb(name, (default,) * 3).mean())
+
+    def scalar_or_texture(self, name: str, default: float, what: str, per_texel=None):
+        """A grey :class:`TextureMap` (a colour bitmap read as its luminance, as Mitsuba evaluates a float texture)
+        for a bitmap parameter, else its value; both through ``per_texel`` (e.g. alpha -> sqrt for a roughness)."""
+        f = per_texel or (lambda x: x)
+        img = self.bitmap(name)
+        if img is None:
+            return float(f(self.scalar(name, default)))
+        lum = img @ np.array([0.212671, 0.715160, 0.072169])
+        self.bitmaps[name] = TextureMap(np.repeat(f(np.maximum(lum, 0.0))[..., None], 3, -1), what)
+        return self.bitmaps[name]
 
 
 # -- the converter ------------------------------------------------------------------------------
@@ -498,7 +513,7 @@ class StageConverter:
 
             node.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[0]))
             node.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*tex.scale_bias[1]))
-        if name == "opacity":  # a float input: the texture's r channel (the converted opacity is grey)
+        if name in SCALAR_TEXTURE_INPUTS:  # a float input: the texture's r channel (the converted texels are grey)
             node.CreateOutput("r", Sdf.ValueTypeNames.Float)
             surface.CreateInput(name, Sdf.ValueTypeNames.Float).ConnectToSource(node.ConnectableAPI(), "r")
         else:
@@ -572,8 +587,7 @@ class StageConverter:
                                        lambda c: np.clip(c * plastic_diffuse_scale(eta, c if nonlinear else None), 0, 1))
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
             if cls == "RoughPlastic":
-                alpha = p.scalar("alpha", 0.1)
-                rough = math.sqrt(max(alpha, 0.0))
+                rough = p.scalar_or_texture("alpha", 0.1, "roughplastic alpha", lambda a: np.sqrt(np.maximum(a, 0.0)))
                 if "beckmann" in text:
                     notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
             else:
@@ -589,13 +603,12 @@ class StageConverter:
             f0 = f0 * p.rgb("specular_reflectance", (1.0,) * 3)
             if cls == "RoughConductor":
                 if p.has("alpha"):
-                    alpha = p.scalar("alpha", 0.1)
+                    rough = p.scalar_or_texture("alpha", 0.1, "roughconductor alpha", lambda a: np.sqrt(np.maximum(a, 0.0)))
                 else:
                     au, av = p.scalar("alpha_u", 0.1), p.scalar("alpha_v", 0.1)
                     if abs(au - av) > 1e-6:
                         notes.append(f"anisotropic roughness ({au:.3g}, {av:.3g}) replaced by their mean")
-                    alpha = 0.5 * (au + av)
-                rough = math.sqrt(max(alpha, 0.0))
+                    rough = math.sqrt(max(0.5 * (au + av), 0.0))
                 if "beckmann" in text:
                     notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
             else:
@@ -607,7 +620,8 @@ class StageConverter:
             spec = p.scalar("specular", 0.5)
             s = math.sqrt(min(max(0.08 * spec, 0.0), 0.99))
             out = {"useSpecularWorkflow": 0, "diffuseColor": p.texture_or_rgb("base_color", (0.5,) * 3, "principled base_color"),
-                   "metallic": p.scalar("metallic", 0.0), "roughness": p.scalar("roughness", 0.5),
+                   "metallic": p.scalar_or_texture("metallic", 0.0, "principled metallic"),
+                   "roughness": p.scalar_or_texture("roughness", 0.5, "principled roughness"),
                    "ior": (1.0 + s) / (1.0 - s)}
             for lobe in ("clearcoat", "sheen", "spec_trans", "anisotropic", "flatness"):
                 if p.scalar(lobe, 0.0) > 0:

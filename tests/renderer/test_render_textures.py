@@ -360,7 +360,7 @@ def test_st_through_a_usd_transform2d_is_the_textures_uv_map(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the chain is followed: no "primvar st used" warning
         scene = load_scene(str(tmp_path / "tiled.usda"))
-    texture = next(t for t in scene.materials.textures if t is not None).texture
+    texture = next(t for t in scene.materials.textures if t is not None).diffuse
     np.testing.assert_allclose(texture.uv_matrix, transform2d((3.0, 2.0), 30.0, (0.25, -0.5)))
     st = np.random.default_rng(3).random((50, 2))
     moved = st @ texture.uv_matrix[:, :2].T + texture.uv_matrix[:, 2]
@@ -440,3 +440,58 @@ def test_a_bad_transform2d_value_is_a_scene_error(tmp_path, name, value_type, va
     with pytest.raises(SceneError) as exc:
         load_scene(str(tmp_path / "bad.usda"))
     assert exc.value.code == "SCENE_INVALID" and f"inputs:{name}" in str(exc.value)
+
+
+def _orm_floor(tmp_path, textured: bool, rough=0.5, metal=0.0):
+    """A glossy floor under a sun and a sky seen at an angle (the specular lobe shows). ``textured``: roughness from the
+    ``g`` and metallic from the ``b`` output of one 2 x 1 OpenEXR (glTF's occlusion-roughness-metallic packing): left
+    texel (1, 0.2, 0), right texel (1, 0.9, 1), clamp wrap; else the constants ``rough``, ``metal``."""
+    from pxr import Sdf, UsdGeom, UsdShade
+
+    b = SceneBuilder()
+    b.camera((0, 1.2, 3.0), (0, 0, 0), focal=24)
+    quad = b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0.6, 0.4, 0.2), roughness=rough, metallic=metal)
+    pts = np.asarray(quad.GetPointsAttr().Get())
+    b.distant("Sun", (0.0, 0.5, -1.0), 3.0, angle=5.0)
+    b.dome("Sky", 0.3)
+    st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    UsdGeom.PrimvarsAPI(quad).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
+    if textured:
+        write_exr(tmp_path / "orm.exr", np.array([[[1.0, 0.2, 0.0], [1.0, 0.9, 1.0]]], np.float32))
+        surf = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface"))
+        reader = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/st")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        node = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/orm")
+        node.CreateIdAttr("UsdUVTexture")
+        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./orm.exr")
+        for k in ("wrapS", "wrapT"):
+            node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("clamp")
+        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        surf.GetInput("roughness").ConnectToSource(node.ConnectableAPI(), "g")
+        surf.GetInput("metallic").ConnectToSource(node.ConnectableAPI(), "b")
+    return load_scene(b.write(tmp_path / f"orm_{textured}_{rough}_{metal}.usda")), pts
+
+
+def test_roughness_and_metallic_textures_shade_each_hit_like_their_constants(tmp_path):
+    """Where st reads only the left texel the textured floor renders as the constant material (roughness 0.2,
+    metallic 0), where it reads only the right one as (0.9, 1): same seed, same paths, same pixels. Before, a
+    connected roughness or metallic used the input's own value (warned)."""
+    w = h = 32
+    s_ = RenderSettings(spp=8, width=w, height=h, max_depth=2, seed=4)
+    scene, pts = _orm_floor(tmp_path, True)
+    img = render(scene, s_).image.reshape(-1, 3)
+    left = render(_orm_floor(tmp_path, False, 0.2, 0.0)[0], s_).image.reshape(-1, 3)
+    right = render(_orm_floor(tmp_path, False, 0.9, 1.0)[0], s_).image.reshape(-1, 3)
+    ys, xs = np.mgrid[0:h, 0:w]
+    o, d = scene.camera.generate_rays(xs.ravel() + 0.5, ys.ravel() + 0.5, w, h)
+    hit = o + d * (-o[:, 1] / np.minimum(d[:, 1], -1e-9))[:, None]
+    e0, e1 = pts[1] - pts[0], pts[3] - pts[0]
+    s = (hit - pts[0]) @ e0 / (e0 @ e0)
+    t = (hit - pts[0]) @ e1 / (e1 @ e1)
+    inside = (d[:, 1] < 0) & (t > 0.05) & (t < 0.95)
+    lo, hi = inside & (s > 0.03) & (s < 0.2), inside & (s > 0.8) & (s < 0.97)
+    assert lo.sum() > 20 and hi.sum() > 20
+    assert np.abs(left[lo] - right[lo]).max() > 0.05  # the two materials differ in the view
+    np.testing.assert_allclose(img[lo], left[lo], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(img[hi], right[hi], rtol=1e-6, atol=1e-9)
