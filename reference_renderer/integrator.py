@@ -19,7 +19,7 @@ from .bsdf import bsdf_eval, bsdf_sample
 from .film import Film, check_image_size, pixel_offsets
 from .lights import MeshLight
 from .plan import RenderPlan, make_plan
-from .sampling import dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
+from .sampling import cross3, dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading, shader_class, variant_of
 from .shaders.common import max3, unique
 from .shadow import aim_shadow
@@ -103,6 +103,19 @@ def scene_accel(scene, backend: str, neural: np.ndarray):
     return hit
 
 
+def bump_terminator(smooth, mapped, wi):
+    """[n] Estevez et al.'s bump-terminator shadowing (Mitsuba's normalmap, Cycles' diffuse closures): a GGX masking
+    term with alpha^2 = min(tan^2(theta_d) / 8, 1), theta_d the angle between the interpolated normal ``smooth`` and
+    the ``mapped`` one, at the angle of ``wi`` to ``smooth`` (0 at or below its horizon). Where the normals agree it
+    is 1 (spec/renderer.md#normal-maps)."""
+    cos_d = np.minimum(np.abs(dot(smooth, mapped)), 1.0)
+    alpha2 = np.minimum(0.125 * (1.0 - cos_d * cos_d) / np.maximum(cos_d * cos_d, 1e-300), 1.0)
+    cos_i = dot(smooth, wi)
+    c2 = np.maximum(cos_i * cos_i, 1e-300)
+    g = 2.0 / (1.0 + np.sqrt(1.0 + alpha2 * (1.0 - c2) / c2))
+    return np.where(cos_i > 1e-6, g, 0.0)
+
+
 class PathIntegrator:
     def __init__(self, scene, plan: RenderPlan, settings: RenderSettings) -> None:
         self.scene, self.plan, self.s = scene, plan, settings
@@ -121,6 +134,7 @@ class PathIntegrator:
         self.inst_to_obj = np.array([i.to_object for i in insts]) if insts else np.zeros((0, 4, 4))
         self.indirect = plan.instance_indirect
         self.mt = scene.materials
+        self.normal_maps = [(m, t.normal) for m, t in enumerate(self.mt.textures) if t is not None and t.normal is not None]
         self.emissive = self.mt.emission.max(1) > 0
         self.inst_light = np.full(len(insts), -1, np.int64)  # instance -> index of its MeshLight
         for k, light in enumerate(scene.lights):
@@ -296,6 +310,36 @@ class PathIntegrator:
         return L
 
     # -- ordinary surfaces -----------------------------------------------------------------
+    def _normal_mapped(self, ns, mat, prim, cst, st):
+        """Shading normals [n,3] turned by the materials' tangent-space normal maps (spec/renderer.md#normal-maps):
+        the texel (x, y, z) (scale and bias applied) in the frame T = dP/ds made orthogonal to the interpolated normal
+        N, B = N x T, N. Where the triangle's st are degenerate T is any tangent; a mapped normal that is not finite
+        or zero keeps N. Returns (normals [n,3], [n] bool: the row's material has a map)."""
+        out, mapped = ns.copy(), np.zeros(len(ns), bool)
+        for m, tex in self.normal_maps:
+            sel = np.nonzero(mat == m)[0]
+            if not len(sel):
+                continue
+            mapped[sel] = True
+            v = tex.sample(st[sel])
+            tri = self.scene.triangles[prim[sel]]
+            e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+            c = cst[sel]
+            d1, d2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+            det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+            ok = np.abs(det) > 1e-300
+            dpds = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / np.where(ok, det, 1.0)[:, None]
+            n = ns[sel]
+            tan = dpds - n * dot(n, dpds)[:, None]
+            length = np.sqrt(dot(tan, tan))
+            ok &= np.isfinite(length) & (length > 1e-12 * np.sqrt(np.maximum(dot(dpds, dpds), 1e-300)))
+            tan = np.where(ok[:, None], tan / np.where(ok, length, 1.0)[:, None], frame(n)[0])
+            turned = tan * v[:, 0:1] + cross3(n, tan) * v[:, 1:2] + n * v[:, 2:3]
+            size = np.sqrt(dot(turned, turned))
+            good = np.isfinite(size) & (size > 1e-12)
+            out[sel] = np.where(good[:, None], turned / np.where(good, size, 1.0)[:, None], n)
+        return out, mapped
+
     def _mesh_vertex(self, r, idx, x, d, beta, prim, bu, bv, inst, L, rng):
         x, d, beta, prim, bu, bv, inst, ridx = x[r], d[r], beta[r], prim[r], bu[r], bv[r], inst[r], idx[r]
         wo = -d
@@ -306,22 +350,28 @@ class PathIntegrator:
             x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front = (
                 a[front] for a in (x, d, beta, prim, bu, bv, inst, ridx, wo, ng, seen_front))
         rows = self.scene.corner_rows(prim, inst)
-        cn = self.scene.tri_normals[rows]
-        ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
-        flip = dot(ng, wo) < 0
-        ng = np.where(flip[:, None], -ng, ng)
-        ns = np.where(flip[:, None], -ns, ns)
-        ns = np.where((dot(ns, wo) <= 1e-6)[:, None], ng, ns)
-        t, b = frame(ns)
-        wo_l = to_local(wo, t, b, ns)
         mat = self.inst_mat[inst]
         back_mat = self.inst_back_mat[inst]
         mat = np.where(~seen_front & (back_mat >= 0), back_mat, mat)  # a two-sided material's back side
         looked_up = None  # (kd, f0, alpha) per hit of textured materials
+        cn = self.scene.tri_normals[rows]
+        ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
         if self.mt.textured:
             cst = self.scene.tri_st[rows]
             st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
             looked_up = self.mt.lookup(mat, st)
+        smooth = None  # the interpolated normal under a normal map (the terminator term's reference)
+        if looked_up is not None and self.normal_maps:
+            smooth = ns
+            ns, mapped = self._normal_mapped(ns, mat, prim, cst, st)
+        flip = dot(ng, wo) < 0
+        ng = np.where(flip[:, None], -ng, ng)
+        ns = np.where(flip[:, None], -ns, ns)
+        ns = np.where((dot(ns, wo) <= 1e-6)[:, None], ng, ns)
+        if smooth is not None:  # rows without a map: the shading normal itself (a term of 1)
+            smooth = np.where(mapped[:, None], np.where(flip[:, None], -smooth, smooth), ns)
+        t, b = frame(ns)
+        wo_l = to_local(wo, t, b, ns)
         indirect = self.indirect[inst]
         xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
         for k in self.nee:
@@ -334,6 +384,8 @@ class PathIntegrator:
                 continue
             f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]),
                                 *(() if looked_up is None else (a[s] for a in looked_up)))
+            if smooth is not None:
+                f = f * bump_terminator(smooth[s], ns[s], wi[s])[:, None]
             w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
             nz = max3(c) > 0
@@ -352,6 +404,8 @@ class PathIntegrator:
         ok = (pdf > 0) & (wi_l[:, 2] > 0) & (dot(wi, ng[cont]) > 0)
         c = cont[ok]
         nb = beta[c] * f[ok] * (wi_l[ok, 2] / pdf[ok])[:, None]
+        if smooth is not None:
+            nb *= bump_terminator(smooth[c], ns[c], wi[ok])[:, None]
         return ridx[c], xo[c], wi[ok], nb, pdf[ok], np.full(len(c), -1, np.int64), None
 
     # -- neural assets ---------------------------------------------------------------------

@@ -52,7 +52,7 @@ MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ra
 TEXTURE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg")
 #: UsdPreviewSurface inputs the renderer reads from a UsdUVTexture, with the texture outputs it accepts for each
 TEXTURED_INPUTS = {"diffuseColor": ("rgb",), "roughness": ("r", "g", "b", "a"), "metallic": ("r", "g", "b", "a"),
-                   "opacity": ("a", "r", "g", "b")}
+                   "opacity": ("a", "r", "g", "b"), "normal": ("rgb",)}
 MAX_EXPOSURE_SCALE = 1e30  # the camera's linear exposure scale
 CAMERA_RATIO = (1e-6, 1e6)  # horizontalAperture / focalLength and verticalAperture / horizontalAperture
 MAX_LIGHT_EXPOSURE = 1000.0  # stops
@@ -731,7 +731,8 @@ class _Loader:
         material = TexturedMaterial(varname, value("diffuseColor"), value("roughness"),
                                     None if specular_workflow else value("metallic"),
                                     np.clip(np.asarray(vals["specularColor"], np.float64), 0, 1),
-                                    ((1.0 - ior) / (1.0 + ior)) ** 2, MIN_ALPHA)
+                                    ((1.0 - ior) / (1.0 + ior)) ** 2, MIN_ALPHA,
+                                    textures["normal"][0] if "normal" in textures else None)
         kd, f0, alpha = material.constants()
         textured = material if set(textures) - {"opacity"} else None
         self.mat_index[mpath] = len(self.mat_rows)

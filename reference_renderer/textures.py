@@ -102,6 +102,7 @@ class TexturedMaterial:
     specular: np.ndarray  # [3] specularColor (specular workflow)
     f0_dielectric: float  # ((1 - ior) / (1 + ior))^2 (metallic workflow)
     min_alpha: float
+    normal: ImageTexture | None = None  # tangent-space normal map (scale and bias applied), spec/renderer.md#normal-maps
 
     @staticmethod
     def _at(v, st, channels: int):

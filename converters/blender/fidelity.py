@@ -263,6 +263,27 @@ def _pbr_textures(bpy, folder: Path, size: int) -> None:
     _world(bpy, (0.5, 0.55, 0.6), 1.0)
 
 
+def _normal_maps(bpy, folder: Path, size: int) -> None:
+    # a floor whose Diffuse BSDF Normal is a tangent-space Normal Map node (strength 0.8) reading a Non-Color image of
+    # stripes leaning +-35 deg along U, lit by a low sun along +X
+    from nasset_converters.mitsuba.fidelity import _stripes_normal_png
+
+    _new_scene(bpy, size, (0.0, -2.0, 2.4), (0.0, 0.0, 0.0))
+    floor = _material(bpy, "Stripes", **{"Color": (0.6, 0.6, 0.6)})
+    nt = floor.node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    _stripes_normal_png(folder / "stripes.png")
+    tex.image = bpy.data.images.load(str(folder / "stripes.png"))
+    tex.image.colorspace_settings.name = "Non-Color"
+    nmap = nt.nodes.new("ShaderNodeNormalMap")
+    nmap.inputs["Strength"].default_value = 0.8
+    nt.links.new(tex.outputs["Color"], nmap.inputs["Color"])
+    nt.links.new(nmap.outputs["Normal"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfDiffuse").inputs["Normal"])
+    _add(bpy, "plane", "Floor", floor, size=4.0)
+    _light(bpy, "Sun", "SUN", (0.0, 0.0, 3.0), energy=2.5, rotation=(0.0, math.radians(58.0), 0.0), angle=math.radians(2.0))
+    _world(bpy)
+
+
 def _alpha_png(path: Path, n: int = 64, squares: int = 4) -> Path:
     """An 8-bit RGBA PNG: orange, its alpha a checkerboard of 0 and 255 (a cut-out pattern)."""
     from PIL import Image
@@ -484,6 +505,8 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "Image Textures on Principled Roughness (a checker, "
                                   "0.15 / 0.85) and Metallic (0 / 1) under a low sun"),
+    "normal_maps": FidelityScene("normal_maps", _normal_maps, "a Normal Map node (tangent space, strength 0.8) on a "
+                                 "Diffuse BSDF floor: stripes leaning +-35 deg along U, a low sun"),
     "cutouts": FidelityScene("cutouts", _cutouts, "alpha as presence: a Principled Alpha from an RGBA image (checker "
                              "holes, patterned shadow), a Mix of a Transparent and a Diffuse BSDF (0.6), a ball of "
                              "Alpha 0.4"),
@@ -647,6 +670,8 @@ NOTES = """
   `fStop` / `focusDistance` (spec/renderer.md#cameras).
 - pbr_textures read MSE / noise 12 (64 x 64, 64 spp; 0.8 now): Image Textures on Roughness and Metallic were
   dropped (the sockets' defaults used) and the renderer textured diffuseColor only (spec/renderer.md#textures).
+- normal_maps read ratio 1.13 and MSE / noise 27 (32 x 32, 64 spp; 1.02 now): Normal Map nodes were dropped and the
+  renderer ignored UsdPreviewSurface normal (spec/renderer.md#normal-maps).
 - cutouts read MSE / noise 63 (32 x 32, 64 spp; 0.98 now): alpha was dropped and the renderer drew every surface
   opaque. Principled Alpha (constant or an image's alpha) and a Mix with a Transparent BSDF are now the
   UsdPreviewSurface opacity, which the renderer reads as presence (spec/renderer.md#cutouts).

@@ -648,8 +648,11 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         rough, r_linked = _socket(node, "Roughness", 0.0)
         if r_linked or rough > 0:
             notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
-        return {"diffuseColor": col if isinstance(col, TextureMap) else col[:3], "roughness": 1.0, "metallic": 0.0,
-                "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
+        out = {"diffuseColor": col if isinstance(col, TextureMap) else col[:3], "roughness": 1.0, "metallic": 0.0,
+               "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
+        if node.inputs["Normal"].is_linked and (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
+            out["normal"] = nmap
+        return out
     if node.bl_idname == "ShaderNodeEmission":
         col, c_linked = _socket(node, "Color", (1.0, 1.0, 1.0, 1.0))
         strength, s_linked = _socket(node, "Strength", 1.0)
@@ -667,6 +670,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             vals[name] = image_texture(mat, node.inputs[name], notes) or v
         elif linked and name in ("Alpha", "Roughness", "Metallic"):
             vals[name] = image_texture(mat, node.inputs[name], notes, scalar=True) or v
+        elif linked and name == "Normal":
+            vals[name] = normal_map(mat, node.inputs[name], notes)
         elif linked:
             notes.append(f"material {mat.name}: linked {name} dropped (its default value used)")
     emission = None
@@ -684,6 +689,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     base = vals["Base Color"]
     inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": _scalar(vals["Roughness"]),
               "metallic": _scalar(vals["Metallic"])}
+    if isinstance(vals["Normal"], TextureMap):
+        inputs["normal"] = vals["Normal"]
     alpha = vals["Alpha"]  # Cycles' alpha is presence: UsdPreviewSurface opacity, threshold 0 (renderer.md#cutouts)
     if isinstance(alpha, TextureMap) or float(alpha) < 1.0:
         inputs["opacity"] = alpha if isinstance(alpha, TextureMap) else float(np.clip(alpha, 0.0, 1.0))
@@ -887,6 +894,36 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
     if scalar and link.from_socket.name == "Color":  # a colour into a float socket: its luminance (Rec. 709)
         rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
     return TextureMap(rgb, what, wrap=wrap, uv=uv)
+
+
+def normal_map(mat, socket, notes: list) -> TextureMap | None:
+    """A tangent-space normal map for a Normal input fed by a Normal Map node (tangent space) reading an Image
+    Texture, else None with a note: texels (n + 1) / 2 with the node's Strength folded in, n' = z + (n - z) strength
+    in tangent space (Cycles mixes the world normals so; the renderer normalises), and UsdUVTexture scale 2, bias -1
+    (renderer.md#normal-maps)."""
+    node = socket.links[0].from_node
+    if node.bl_idname != "ShaderNodeNormalMap" or node.space != "TANGENT":
+        what = node.bl_idname if node.bl_idname != "ShaderNodeNormalMap" else f"a Normal Map in {node.space} space"
+        notes.append(f"material {mat.name}: {socket.name} from {what} dropped (tangent-space Normal Map nodes are "
+                     "converted; the mesh normals used)")
+        return None
+    strength, s_linked = _socket(node, "Strength", 1.0)
+    color = node.inputs["Color"]
+    if s_linked or not color.is_linked:
+        notes.append(f"material {mat.name}: Normal Map {'Strength linked' if s_linked else 'without an image'} "
+                     "dropped (the mesh normals used)")
+        return None
+    tex = image_texture(mat, color, notes)
+    if tex is None:
+        return None
+    if color.links[0].from_node.image.colorspace_settings.name == "sRGB":
+        notes.append(f"material {mat.name}: normal map {tex.what} is in sRGB (decoded; normal maps are Non-Color)")
+    n = 2.0 * tex.image - 1.0
+    n = np.array([0.0, 0.0, 1.0]) + (n - np.array([0.0, 0.0, 1.0])) * max(float(strength), 0.0)
+    if node.uv_map:
+        notes.append(f"material {mat.name}: Normal Map UV map {node.uv_map!r} read as the active render UV map")
+    return dataclasses.replace(tex, image=(n + 1.0) / 2.0, what=f"normal map {tex.what}",
+                               scale_bias=((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))
 
 
 def _uv_mapping(link) -> tuple[tuple | None, str]:

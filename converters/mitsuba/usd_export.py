@@ -558,10 +558,12 @@ class StageConverter:
                                  "(measured: no light through opacity 0.25); the converted surface lets 1 - opacity "
                                  "through, as volpath does")
             elif cls == "NormalMap" and (img := _Params(mi, bsdf, prefix).bitmap("normalmap")) is not None:
-                # tangent-space normals stored as (n + 1) / 2, as UsdPreviewSurface's normal input expects them
+                # tangent-space normals stored as (n + 1) / 2, as UsdPreviewSurface's normal input expects them; the
+                # renderer's frame is Mitsuba's (dP/du, N x dP/du, N: renderer.md#normal-maps)
                 out["normal"] = TextureMap(img, "normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))
-                notes.append("normalmap: written to UsdPreviewSurface normal (texture); the reference renderer ignores "
-                             "it and shades with the mesh normals")
+                to_uv = _Params(mi, bsdf, prefix).uv_transform("normalmap")
+                if to_uv is not None:
+                    out["normal"].uv = st_transform(to_uv)
             else:
                 notes.append(f"{cls}: the nested BSDF is converted, its {WRAPPERS[cls]} is dropped (the reference "
                              "renderer shades with the mesh normals)")

@@ -495,3 +495,54 @@ def test_roughness_and_metallic_textures_shade_each_hit_like_their_constants(tmp
     assert np.abs(left[lo] - right[lo]).max() > 0.05  # the two materials differ in the view
     np.testing.assert_allclose(img[lo], left[lo], rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(img[hi], right[hi], rtol=1e-6, atol=1e-9)
+
+
+def _normal_mapped_floor(tmp_path, toward, tilt_deg=20.0, mapped=True):
+    """A diffuse floor whose normal map (one texel, stored (n + 1) / 2 with UsdUVTexture scale 2, bias -1) tilts the
+    normal by ``tilt_deg`` toward +dP/ds, under a delta sun ``toward`` (unit)."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    t = np.radians(tilt_deg)
+    write_exr(tmp_path / "n.exr", ((np.array([[[np.sin(t), 0.0, np.cos(t)]]]) + 1) / 2).astype(np.float32))
+    b = SceneBuilder()
+    b.camera((0, 3, 0.001), (0, 0, 0), focal=60)
+    quad = b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0.5, 0.5, 0.5), specular=(0, 0, 0), roughness=1.0)
+    pts = np.asarray(quad.GetPointsAttr().Get(), np.float64)
+    b.distant("Sun", tuple(toward), 2.0, angle=0.0)
+    st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    UsdGeom.PrimvarsAPI(quad).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
+    if mapped:
+        surf = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface"))
+        reader = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/st")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        node = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/nmap")
+        node.CreateIdAttr("UsdUVTexture")
+        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./n.exr")
+        node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
+        for k in ("wrapS", "wrapT"):
+            node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("repeat")
+        node.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(2, 2, 2, 1))
+        node.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-1, -1, -1, 0))
+        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(node.ConnectableAPI(), "rgb")
+    return load_scene(b.write(tmp_path / f"nmap_{mapped}_{np.round(toward, 3).tolist()}.usda")), pts
+
+
+@pytest.mark.parametrize("side, expect_cos", [(1.0, 1.0), (-1.0, np.cos(np.radians(40.0)))])
+def test_normal_map_turns_the_shading_normal_toward_dp_ds(tmp_path, side, expect_cos):
+    """The map tilts the normal 20 deg toward +dP/ds (tangent space x). A sun tilted 20 deg the same way meets it
+    head-on (cos 1); tilted the other way, at 40 deg. A diffuse floor shows kd / pi x E x that cosine x the
+    bump-terminator term G = 2 / (1 + sqrt(1 + a2 tan^2 20)), a2 = tan^2 20 / 8 (the sun is 20 deg off the unmapped
+    normal either way), where without the map both suns give cos 20 deg. Before, the normal input was ignored."""
+    probe, pts = _normal_mapped_floor(tmp_path, (0.0, 1.0, 0.0), mapped=False)
+    tangent = (pts[1] - pts[0]) / np.linalg.norm(pts[1] - pts[0])  # st's s grows along the floor's first edge
+    t = np.radians(20.0)
+    toward = np.cos(t) * np.array([0.0, 1.0, 0.0]) + side * np.sin(t) * tangent
+    s_ = RenderSettings(spp=4, width=8, height=8, max_depth=1)
+    img = render(_normal_mapped_floor(tmp_path, toward)[0], s_).image
+    tan2 = np.tan(t) ** 2
+    g = 2.0 / (1.0 + np.sqrt(1.0 + tan2 / 8.0 * tan2))
+    np.testing.assert_allclose(img, 0.5 / np.pi * 2.0 * expect_cos * g, rtol=1e-5)
+    plain = render(_normal_mapped_floor(tmp_path, toward, mapped=False)[0], s_).image
+    np.testing.assert_allclose(plain, 0.5 / np.pi * 2.0 * np.cos(t), rtol=1e-5)
