@@ -118,16 +118,21 @@ class MaterialTable:
     def textured(self) -> bool:
         return any(t is not None for t in self.textures)
 
-    def lookup(self, m: np.ndarray, st: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(kd [N,3], F0 [N,3], alpha [N]) of materials m [N] at texture coordinates st [N,2] (constants where
-        untextured)."""
+    @property
+    def reads_colors(self) -> bool:
+        """Some material's diffuse colour is a mesh primvar: lookups need the hits' colours."""
+        return any(t is not None and t.reads_colors for t in self.textures)
+
+    def lookup(self, m: np.ndarray, st: np.ndarray, colors: np.ndarray | None = None):
+        """(kd [N,3], F0 [N,3], alpha [N]) of materials m [N] at texture coordinates st [N,2] and primvar colours
+        ``colors`` [N,3] (:attr:`reads_colors`; constants where untextured)."""
         kd, f0, alpha = self.kd[m].copy(), self.f0[m].copy(), self.alpha[m].copy()
         for k, tex in enumerate(self.textures):
             if tex is None:
                 continue
             sel = m == k
             if sel.any():
-                kd[sel], f0[sel], alpha[sel] = tex.lookup(st[sel])
+                kd[sel], f0[sel], alpha[sel] = tex.lookup(st[sel], None if colors is None else colors[sel])
         return kd, f0, alpha
 
 

@@ -359,7 +359,11 @@ class PathIntegrator:
         if self.mt.textured:
             cst = self.scene.tri_st[rows]
             st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
-            looked_up = self.mt.lookup(mat, st)
+            colors = None
+            if self.scene.tri_color is not None:
+                cc = self.scene.tri_color[rows]
+                colors = cc[:, 0] * (1 - bu - bv)[:, None] + cc[:, 1] * bu[:, None] + cc[:, 2] * bv[:, None]
+            looked_up = self.mt.lookup(mat, st, colors)
         smooth = None  # the interpolated normal under a normal map (the terminator term's reference)
         if looked_up is not None and self.normal_maps:
             smooth = ns

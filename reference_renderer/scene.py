@@ -39,7 +39,7 @@ from .lights import (
     SphereLight,
 )
 from .sampling import box3, face_normals
-from .textures import WRAP_MODES, ImageTexture, Opacity, TexturedMaterial, srgb_to_linear, transform2d
+from .textures import WRAP_MODES, ImageTexture, Opacity, PrimvarColor, TexturedMaterial, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
 MAX_TRANSFORM = 1e15  # |entry| of a world transform
@@ -153,6 +153,8 @@ class Scene:
     warnings: list = field(default_factory=list)
     tri_st: np.ndarray | None = None  # [F_mesh,3,2] texture coordinates at the corners of mesh triangles (zeros
     # where a mesh has none), rows as tri_normals
+    tri_color: np.ndarray | None = None  # [F_mesh,3,3] primvar colours at the corners of mesh triangles, rows as
+    # tri_normals; None when no material reads one (spec/renderer.md#primvar-colors)
     tri_ng: np.ndarray | None = None  # [F,3] unit geometric normals of all triangles (zero for degenerate ones)
     render_settings: dict = field(default_factory=dict)  # nasset:* values of the UsdRender.Settings prim (spec/renderer.md#render-settings)
     #: ray-casting structures built for this scene (integrator.scene_accel): built once per scene, not per render
@@ -368,6 +370,7 @@ class _Loader:
         self.tri_ng: list = []
         self.tri_inst: list = []
         self.tri_st: list = []
+        self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self.instances: list[Instance] = []
         self.mat_rows: list = []
         self.mat_index: dict = {}
@@ -473,6 +476,8 @@ class _Loader:
             tri_normals=np.concatenate(self.tri_normals) if self.tri_normals else np.zeros((0, 3, 3)),
             instances=self.instances, materials=table, lights=self.lights, assets=self.assets, warnings=self.warnings,
             tri_st=np.concatenate(self.tri_st) if self.tri_st else np.zeros((0, 3, 2)),
+            tri_color=None if all(c is None for c in self.tri_color) else np.concatenate(
+                [np.zeros((len(st), 3, 3)) if c is None else c for c, st in zip(self.tri_color, self.tri_st, strict=True)]),
             tri_ng=np.concatenate(self.tri_ng) if n else np.zeros((0, 3)),
             render_settings=self._render_settings(),
         )
@@ -517,10 +522,10 @@ class _Loader:
                                f"{MIN_ASSET_SIZE_RATIO:g} x the scene scale {scene_scale:.3g}: it would not render", inst.prim,
                                "xformOpOrder")
 
-    def _add(self, inst: Instance, tris_world, normals_world, local_ids, st=None, *, ng=None, box=None):
-        """Append an instance's world triangles [k,3,3]; ``normals_world`` [k,3,3] corner normals and ``st`` [k,3,2]
-        (meshes; None for neural instances), ``ng`` [k,3] unit geometric normals and ``box`` (lo, hi) when the
-        caller has them."""
+    def _add(self, inst: Instance, tris_world, normals_world, local_ids, st=None, *, ng=None, box=None, color=None):
+        """Append an instance's world triangles [k,3,3]; ``normals_world`` [k,3,3] corner normals, ``st`` [k,3,2] and
+        ``color`` [k,3,3] primvar colours (meshes; None for neural instances), ``ng`` [k,3] unit geometric normals and
+        ``box`` (lo, hi) when the caller has them."""
         inst.first_tri = self.n_tri
         inst.n_tri = len(tris_world)
         self.n_tri += inst.n_tri
@@ -534,6 +539,7 @@ class _Loader:
             self.n_corner_rows += len(normals_world)
             self.tri_normals.append(normals_world)
             self.tri_st.append(np.zeros((len(tris_world), 3, 2)) if st is None else st)
+            self.tri_color.append(color)
         self.tri_local.append(local_ids.astype(np.int64))
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
@@ -650,8 +656,19 @@ class _Loader:
         mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
         if not mat:
             dc = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
-            val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
-            color = tuple(np.asarray(val, np.float64).reshape(-1, 3).mean(0)) if val is not None and len(val) else (0.18,) * 3
+            with self._reading(prim.GetPath()):
+                val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
+                val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
+            if val is not None and len(val) > 1:  # varying: interpolated per hit (spec/renderer.md#primvar-colors)
+                key = ("display", "primvar")
+                if key not in self.mat_index:
+                    self.mat_index[key] = len(self.mat_rows)
+                    material = TexturedMaterial("st", PrimvarColor("displayColor", np.full(3, 0.18)), np.asarray(0.5),
+                                                np.asarray(0.0), np.zeros(3), 0.04, MIN_ALPHA)
+                    kd, f0, alpha = material.constants()
+                    self.mat_rows.append((kd, f0, alpha, np.zeros(3), "displayColor (primvar)", material, None))
+                return self.mat_index[key]
+            color = tuple(np.clip(val.mean(0), 0, 1)) if val is not None and np.isfinite(val).all() else (0.18,) * 3
             key = ("display", color)
             if key not in self.mat_index:
                 self.mat_index[key] = len(self.mat_rows)
@@ -692,6 +709,7 @@ class _Loader:
                            f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
         textures = {}  # input name -> (ImageTexture, st primvar name)
+        primvar_color = None  # diffuseColor from a UsdPrimvarReader_float3
         if sid in MTLX_SURFACES:
             vals.update(self._mtlx_surface(shader, sid))
         for inp in shader.GetInputs() if sid in PREVIEW_SURFACES else ():
@@ -700,8 +718,10 @@ class _Loader:
                 self.warn(f"unknown UsdPreviewSurface input {name!r} ignored", shader.GetPath())
                 continue
             producer, v = self._read_input(inp)
-            if producer is not None:  # fed by a shader's output (a texture)
-                if name in TEXTURED_INPUTS:
+            if producer is not None:  # fed by a shader's output (a texture, a primvar reader)
+                if name == "diffuseColor" and (reader := self._primvar_reader(producer, shader.GetPath())) is not None:
+                    primvar_color = reader
+                elif name in TEXTURED_INPUTS:
                     tex = self._uv_texture(inp, shader.GetPath(), outputs=TEXTURED_INPUTS[name])
                     if tex is not None:
                         textures[name] = tex
@@ -726,6 +746,8 @@ class _Loader:
             raise self.err("SCENE_INVALID", f"ior = {ior!r} must be > 0", shader.GetPath(), "inputs:ior")
 
         def value(name):
+            if name == "diffuseColor" and primvar_color is not None:
+                return primvar_color
             return textures[name][0] if name in textures else np.clip(np.asarray(vals[name], np.float64), 0, 1)
 
         material = TexturedMaterial(varname, value("diffuseColor"), value("roughness"),
@@ -734,10 +756,20 @@ class _Loader:
                                     ((1.0 - ior) / (1.0 + ior)) ** 2, MIN_ALPHA,
                                     textures["normal"][0] if "normal" in textures else None)
         kd, f0, alpha = material.constants()
-        textured = material if set(textures) - {"opacity"} else None
+        textured = material if set(textures) - {"opacity"} or primvar_color is not None else None
         self.mat_index[mpath] = len(self.mat_rows)
         self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity))
         return self.mat_index[mpath]
+
+    def _primvar_reader(self, producer, where) -> PrimvarColor | None:
+        """The :class:`PrimvarColor` of a ``UsdPrimvarReader_float3`` feeding diffuseColor (its ``varname``, string or
+        token, fallback ``displayColor``; its ``fallback`` value, else 0.18 grey), None for another producer."""
+        node, _ = producer
+        if node.GetIdAttr().Get() != "UsdPrimvarReader_float3":
+            return None
+        varname = str(self._value(node.GetInput("varname")) or "displayColor")
+        fallback = self._finite(self._value(node.GetInput("fallback")), (0.18, 0.18, 0.18), node.GetPath(), "fallback")
+        return PrimvarColor(varname, np.clip(fallback, 0.0, 1.0))
 
     @staticmethod
     def _opacity(vals: dict, texture, varname: str) -> Opacity | None:
@@ -903,25 +935,27 @@ class _Loader:
             raise self.err("SCENE_INVALID", f"{what} holds NaN/Inf or negative values", prim, attribute)
         return (image, bits) if ldr else image
 
-    def _primvar_st(self, prim, varname: str, tri, corner, face_of_tri, n_points, n_faces, n_corners):
-        """Texture coordinates [T,3,2] of the triangles from primvar ``varname`` (zeros, with a warning, when unusable)."""
+    def _primvar_corners(self, prim, varname: str, width: int, tri, corner, face_of_tri, n_points, n_faces, n_corners):
+        """Values [T,3,width] of primvar ``varname`` at the triangles' corners, or None when it is missing or unusable
+        (not finite, another width, or a length its interpolation does not give)."""
         from pxr import UsdGeom
 
         pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(varname)
-        vals = pv.ComputeFlattened(self.time) if pv and pv.HasAuthoredValue() else None
-        st = np.asarray(vals, np.float64).reshape(-1, 2) if vals is not None and len(vals) else None
+        with self._reading(prim.GetPath()):
+            vals = pv.ComputeFlattened(self.time) if pv and pv.HasAuthoredValue() else None
+            v = np.asarray(vals, np.float64) if vals is not None and len(vals) else None
         interp = pv.GetInterpolation() if pv else None
-        if st is not None and np.isfinite(st).all():
-            if interp in ("vertex", "varying") and len(st) == n_points:
-                return st[tri]
-            if interp == "faceVarying" and len(st) == n_corners:
-                return st[corner]
-            if interp == "uniform" and len(st) == n_faces:
-                return np.repeat(st[face_of_tri][:, None], 3, 1)
-            if interp == "constant" and len(st) == 1:
-                return np.broadcast_to(st[0], (len(tri), 3, 2)).copy()
-        self.warn(f"textured material but no usable primvar {varname!r} (float2, finite, vertex / faceVarying / uniform / "
-                  "constant): texture coordinates (0, 0)", prim.GetPath())
+        if v is None or v.size % width or not np.isfinite(v).all():
+            return None
+        v = v.reshape(-1, width)
+        if interp in ("vertex", "varying") and len(v) == n_points:
+            return v[tri]
+        if interp == "faceVarying" and len(v) == n_corners:
+            return v[corner]
+        if interp == "uniform" and len(v) == n_faces:
+            return np.repeat(v[face_of_tri][:, None], 3, 1)
+        if interp == "constant" and len(v) == 1:
+            return np.broadcast_to(v[0], (len(tri), 3, width)).copy()
         return None
 
     def _mesh(self, prim):
@@ -994,10 +1028,22 @@ class _Loader:
         groups = self._face_groups(mesh, len(counts))  # [(prim path, material, faces or None)]
         # the texture coordinates of its first texture (colour or opacity) that reads them
         tex = next((t for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:7]
-                    if t is not None and getattr(t, "varname", None)
-                    and (not isinstance(t, Opacity) or t.texture is not None)), None)
-        st = None if tex is None else self._primvar_st(prim, tex.varname, tri, corner, face_of_tri, len(pts), len(counts),
-                                                       len(idx))
+                    if (isinstance(t, Opacity) and t.texture is not None) or (isinstance(t, TexturedMaterial) and t.reads_st)),
+                   None)
+        layout = (tri, corner, face_of_tri, len(pts), len(counts), len(idx))
+        st = None if tex is None else self._primvar_corners(prim, tex.varname, 2, *layout)
+        if tex is not None and st is None:
+            self.warn(f"textured material but no usable primvar {tex.varname!r} (float2, finite, vertex / faceVarying / "
+                      "uniform / constant): texture coordinates (0, 0)", prim.GetPath())
+        # the colours of its first material that reads a primvar colour (spec/renderer.md#primvar-colors)
+        reader = next((t.diffuse for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:6]
+                       if t is not None and t.reads_colors), None)
+        color = None if reader is None else self._primvar_corners(prim, reader.varname, 3, *layout)
+        if reader is not None and color is None:
+            color = np.broadcast_to(np.asarray(reader.fallback, np.float64), (len(tri), 3, 3)).copy()
+            if reader.varname != "displayColor":
+                self.warn(f"no usable color primvar {reader.varname!r} (float3, finite): its reader's fallback is used",
+                          prim.GetPath())
         for where, mat, faces in groups:
             sel = slice(None) if faces is None else np.isin(face_of_tri, faces)
             ids = np.arange(len(tri))[sel]
@@ -1005,7 +1051,8 @@ class _Loader:
                 continue
             inst = Instance("mesh", where, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
                             back_material=back)
-            self._add(inst, tris[sel], normals[sel], ids, None if st is None else st[sel], ng=nn[sel])
+            self._add(inst, tris[sel], normals[sel], ids, None if st is None else st[sel], ng=nn[sel],
+                      color=None if color is None else color[sel])
 
     def _face_groups(self, mesh, n_faces: int) -> list:
         """The mesh's faces by material: [(prim path, material id, face indices)] (spec/renderer.md#materials).

@@ -85,6 +85,19 @@ class ImageTexture:
 
 
 @dataclass
+class PrimvarColor:
+    """A colour read from a mesh primvar (a ``UsdPrimvarReader_float3``, or an unbound mesh's varying
+    ``displayColor``), interpolated over each triangle (spec/renderer.md#primvar-colors)."""
+
+    varname: str
+    fallback: np.ndarray  # [3] where a mesh lacks the primvar
+
+    @property
+    def mean(self) -> np.ndarray:
+        return np.asarray(self.fallback, np.float64)
+
+
+@dataclass
 class TexturedMaterial:
     """A UsdPreviewSurface with textured inputs: kd, F0 and the GGX alpha per hit (spec/renderer.md#textures).
 
@@ -104,6 +117,16 @@ class TexturedMaterial:
     min_alpha: float
     normal: ImageTexture | None = None  # tangent-space normal map (scale and bias applied), spec/renderer.md#normal-maps
 
+    @property
+    def reads_st(self) -> bool:
+        """Some input is an image texture: lookups need the hits' texture coordinates."""
+        return any(isinstance(v, ImageTexture) for v in (self.diffuse, self.roughness, self.metallic, self.normal))
+
+    @property
+    def reads_colors(self) -> bool:
+        """The diffuse colour comes from a primvar (:class:`PrimvarColor`): lookups need the hits' colours."""
+        return isinstance(self.diffuse, PrimvarColor)
+
     @staticmethod
     def _at(v, st, channels: int):
         if isinstance(v, ImageTexture):
@@ -111,9 +134,10 @@ class TexturedMaterial:
             return out if channels == 3 else out[:, 0]
         return np.broadcast_to(np.clip(np.asarray(v, np.float64), 0.0, 1.0), (len(st), channels) if channels == 3 else (len(st),))
 
-    def lookup(self, st: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(kd [N, 3], F0 [N, 3], alpha [N]) at texture coordinates ``st`` [N, 2]."""
-        c = self._at(self.diffuse, st, 3)
+    def lookup(self, st: np.ndarray, colors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kd [N, 3], F0 [N, 3], alpha [N]) at texture coordinates ``st`` [N, 2]; ``colors`` [N, 3] the hits'
+        interpolated primvar colours when :attr:`reads_colors`."""
+        c = np.clip(colors, 0.0, 1.0) if self.reads_colors else self._at(self.diffuse, st, 3)
         alpha = np.maximum(self._at(self.roughness, st, 1) ** 2, self.min_alpha)
         if self.metallic is None:
             return c * 1.0, np.tile(self.specular, (len(c), 1)), alpha
@@ -124,7 +148,7 @@ class TexturedMaterial:
         """(kd [3], F0 [3], alpha) with each texture replaced by its mean: the material's row for what needs one
         value per material (the lobe-sampling probability of untextured lookups, light paths)."""
         def mean(v):
-            v = v.mean if isinstance(v, ImageTexture) else np.asarray(v, np.float64)
+            v = v.mean if isinstance(v, (ImageTexture, PrimvarColor)) else np.asarray(v, np.float64)
             return np.clip(v, 0.0, 1.0)
 
         c, r = mean(self.diffuse), float(np.ravel(mean(self.roughness))[0])

@@ -284,6 +284,35 @@ def _normal_maps(bpy, folder: Path, size: int) -> None:
     _world(bpy)
 
 
+def _vertex_colors(bpy, folder: Path, size: int) -> None:
+    # colour attributes: a ball whose Principled Base Color is an Attribute node reading a float point attribute
+    # (a gradient over its height and around it), a subdivided floor whose Diffuse Color is a Color Attribute node
+    # on its default byte corner attribute (a colour per face corner)
+    _new_scene(bpy, size, (0.0, -2.6, 1.4), (0.0, 0.0, 0.3))
+    floor_mat = _material(bpy, "PaintedFloor")
+    nt = floor_mat.node_tree
+    vc = nt.nodes.new("ShaderNodeVertexColor")
+    nt.links.new(vc.outputs["Color"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfDiffuse").inputs["Color"])
+    floor = _add(bpy, "grid", "Floor", floor_mat, x_subdivisions=4, y_subdivisions=4, size=4.0)
+    corner = floor.data.color_attributes.new("Corners", "BYTE_COLOR", "CORNER")
+    floor.data.color_attributes.default_color_name = "Corners"
+    rng = np.random.default_rng(7)
+    corner.data.foreach_set("color", np.concatenate([rng.uniform(0.1, 0.9, (len(corner.data), 3)),
+                                                     np.ones((len(corner.data), 1))], 1).ravel().astype(np.float32))
+    ball_mat = _material(bpy, "PaintedBall", "principled", **{"Roughness": 0.6})
+    nt = ball_mat.node_tree
+    at = nt.nodes.new("ShaderNodeAttribute")
+    at.attribute_name = "Paint"
+    nt.links.new(at.outputs["Color"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled").inputs["Base Color"])
+    ball = _add(bpy, "uv_sphere", "Ball", ball_mat, smooth=True, radius=0.45, location=(0.0, 0.2, 0.45))
+    paint = ball.data.color_attributes.new("Paint", "FLOAT_COLOR", "POINT")
+    co = np.array([v.co for v in ball.data.vertices])
+    rgb = np.stack([0.5 + 0.45 * co[:, 2] / 0.45, 0.5 + 0.4 * np.sin(3 * np.arctan2(co[:, 1], co[:, 0])), 0.3 + 0 * co[:, 0]], 1)
+    paint.data.foreach_set("color", np.concatenate([np.clip(rgb, 0, 1), np.ones((len(co), 1))], 1).ravel().astype(np.float32))
+    _sun(bpy)
+    _world(bpy)
+
+
 def _alpha_png(path: Path, n: int = 64, squares: int = 4) -> Path:
     """An 8-bit RGBA PNG: orange, its alpha a checkerboard of 0 and 255 (a cut-out pattern)."""
     from PIL import Image
@@ -505,6 +534,9 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "Image Textures on Principled Roughness (a checker, "
                                   "0.15 / 0.85) and Metallic (0 / 1) under a low sun"),
+    "vertex_colors": FidelityScene("vertex_colors", _vertex_colors, "colour attributes: an Attribute node on Principled "
+                                   "Base Color (float, per point), a Color Attribute node on Diffuse Color (byte, per "
+                                   "face corner)"),
     "normal_maps": FidelityScene("normal_maps", _normal_maps, "a Normal Map node (tangent space, strength 0.8) on a "
                                  "Diffuse BSDF floor: stripes leaning +-35 deg along U, a low sun"),
     "cutouts": FidelityScene("cutouts", _cutouts, "alpha as presence: a Principled Alpha from an RGBA image (checker "
@@ -670,6 +702,9 @@ NOTES = """
   `fStop` / `focusDistance` (spec/renderer.md#cameras).
 - pbr_textures read MSE / noise 12 (64 x 64, 64 spp; 0.8 now): Image Textures on Roughness and Metallic were
   dropped (the sockets' defaults used) and the renderer textured diffuseColor only (spec/renderer.md#textures).
+- vertex_colors read MSE / noise 307 (32 x 32, 64 spp; 1.02 now): Color Attribute and Attribute nodes were dropped
+  (the sockets' default colours used). The attributes are now primvars read by UsdPrimvarReader_float3, which the
+  renderer interpolates per hit (spec/renderer.md#primvar-colors).
 - normal_maps read ratio 1.13 and MSE / noise 27 (32 x 32, 64 spp; 1.02 now): Normal Map nodes were dropped and the
   renderer ignored UsdPreviewSurface normal (spec/renderer.md#normal-maps).
 - cutouts read MSE / noise 63 (32 x 32, 64 spp; 0.98 now): alpha was dropped and the renderer drew every surface

@@ -209,13 +209,16 @@ def variant_of(objects, *, file: str | None = None) -> str:
     return kinds.pop()
 
 
-def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None):
+def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None,
+                color_out: list | None = None):
     """(points [V,3] world Blender, faces [F,3], normals [V,3] world) of an evaluated mesh; object space when
     ``local``. The normals are Blender's corner normals, as Cycles shades them: a vertex is split where its corners
     differ (flat faces, sharp edges, Smooth by Angle, custom normals), so a cube shades flat and a smooth sphere
     keeps one normal per vertex. ``uv_out`` (a list) receives the active render UV map per triangle corner
     [F,3,2], or None. The faces wind counter-clockwise about the normals also for a mirrored object (negative
-    scale), as Cycles renders it. ``slot_out`` (a list) receives each triangle's material slot [F]."""
+    scale), as Cycles renders it. ``slot_out`` (a list) receives each triangle's material slot [F]. ``color_out`` (a
+    list) receives {colour attribute name: linear RGB per triangle corner [F,3,3]}, the render default also under
+    ""."""
     ev = ob.evaluated_get(depsgraph)
     me = ev.to_mesh()
     try:
@@ -235,6 +238,22 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
                 layer.data.foreach_get("uv", all_uv)
                 uv = all_uv.reshape(-1, 2)[loops].reshape(nt, 3, 2).astype(np.float64)
             uv_out.append(uv)
+        if color_out is not None:
+            colors = {}
+            vidx = np.empty(len(me.loops), np.int32)
+            me.loops.foreach_get("vertex_index", vidx)
+            for attr in me.color_attributes:
+                n = len(attr.data)
+                rgba = np.empty(n * 4, np.float32)
+                attr.data.foreach_get("color", rgba)  # linear whatever the storage (BYTE_COLOR is sRGB-encoded)
+                rgba = rgba.reshape(-1, 4).astype(np.float64)
+                at = loops if attr.domain == "CORNER" else vidx[loops] if attr.domain == "POINT" else None
+                if at is not None and nt:
+                    colors[attr.name] = rgba[at, :3].reshape(nt, 3, 3)
+            default = me.color_attributes.default_color_name
+            if default in colors:
+                colors[""] = colors[default]
+            color_out.append(colors)
         co = np.empty(nv * 3, np.float32)
         me.vertices.foreach_get("co", co)
         tri = np.empty(nt * 3, np.int32)
@@ -260,10 +279,13 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
         tri = tri[:, ::-1].copy()
         if uv_out is not None and uv_out[-1] is not None:
             uv_out[-1] = uv_out[-1][:, ::-1].copy()
+        if color_out is not None:
+            color_out[-1] = {k: v[:, ::-1].copy() for k, v in color_out[-1].items()}
     return p, tri, n
 
 
-def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None) -> MeshGeometry:
+def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None,
+                  color_out: list | None = None) -> MeshGeometry:
     """World-space (+Y up) triangles of the evaluated meshes, merged; object space (+Y up) when ``local``.
     ``uv_out`` receives each object's UVs per triangle corner ([F,3,2] or None), ``slot_out`` each object's material
     slot per triangle ([F]; see :func:`_mesh_world`)."""
@@ -271,7 +293,7 @@ def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None, s
     dg = bpy.context.evaluated_depsgraph_get()
     pts, faces, normals, base = [], [], [], 0
     for ob in objects:
-        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out, slot_out=slot_out)
+        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out, slot_out=slot_out, color_out=color_out)
         pts.append(p)
         faces.append(f + base)
         normals.append(n)

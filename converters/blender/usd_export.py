@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_converters.mitsuba.usd_export import (  # noqa: F401
+    ColorPrimvar,
     ConvertResult,
     StageConverter,
     TextureMap,
@@ -464,8 +465,9 @@ class _BlenderConverter(StageConverter):
 
         uvs: list = []
         slots: list = []
+        colors: list = []
         try:
-            geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots)
+            geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
         except NassetError as exc:  # no faces, or a degenerate transform
             self.warn(f"object {ob.name}: {exc.message}: skipped")
             return
@@ -494,6 +496,15 @@ class _BlenderConverter(StageConverter):
                 self.warn(f"object {ob.name}: emissive mesh of {n_tri} triangles: the reference renderer "
                           f"light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} triangles only; this one "
                           "is reached by BSDF rays only (right mean, more noise)")
+        wanted = {self.color_primvars[p].primvar: self.color_primvars[p] for p in paths.values() if p in self.color_primvars}
+        for name, want in wanted.items():  # colour attributes the materials read (renderer.md#primvar-colors)
+            values = colors[0].get(want.attribute) if colors else None
+            if values is None:
+                self.warn(f"object {ob.name}: its material reads colour attribute {want.attribute or '(default)'!r}, which "
+                          "the mesh lacks: the reader's fallback (grey) is used")
+                continue
+            pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(name, Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.faceVarying)
+            pv.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(values.reshape(-1, 3) * want.scale, np.float32)))
         if any(p in self.textured_materials for p in paths.values()):
             uv = uvs[0] if uvs else None
             if uv is None:
@@ -644,11 +655,12 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     if node.bl_idname == "ShaderNodeBsdfDiffuse":
         col, linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
         if linked:
-            col = image_texture(mat, node.inputs["Color"], notes) or col
+            col = color_input(mat, node.inputs["Color"], notes) or col
         rough, r_linked = _socket(node, "Roughness", 0.0)
         if r_linked or rough > 0:
             notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
-        out = {"diffuseColor": col if isinstance(col, TextureMap) else col[:3], "roughness": 1.0, "metallic": 0.0,
+        out = {"diffuseColor": col if isinstance(col, (TextureMap, ColorPrimvar)) else col[:3], "roughness": 1.0,
+               "metallic": 0.0,
                "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
         if node.inputs["Normal"].is_linked and (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
             out["normal"] = nmap
@@ -667,7 +679,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         v, linked = _socket(node, name, default)
         vals[name] = v
         if linked and name == "Base Color":
-            vals[name] = image_texture(mat, node.inputs[name], notes) or v
+            vals[name] = color_input(mat, node.inputs[name], notes) or v
         elif linked and name in ("Alpha", "Roughness", "Metallic"):
             vals[name] = image_texture(mat, node.inputs[name], notes, scalar=True) or v
         elif linked and name == "Normal":
@@ -687,7 +699,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
                          "bake the object into a neural asset)")
     base = vals["Base Color"]
-    inputs = {"diffuseColor": base if isinstance(base, TextureMap) else base[:3], "roughness": _scalar(vals["Roughness"]),
+    inputs = {"diffuseColor": base if isinstance(base, (TextureMap, ColorPrimvar)) else base[:3],
+              "roughness": _scalar(vals["Roughness"]),
               "metallic": _scalar(vals["Metallic"])}
     if isinstance(vals["Normal"], TextureMap):
         inputs["normal"] = vals["Normal"]
@@ -768,7 +781,8 @@ def _specular_form(inputs: dict) -> tuple:
     if inputs.get("useSpecularWorkflow"):
         return base, np.asarray(inputs.get("specularColor", (0.0, 0.0, 0.0)), np.float64), _mean(inputs["roughness"]), emission
     m, ior = _mean(inputs.get("metallic", 0.0)), float(inputs.get("ior", 1.5))
-    mean = base.image.reshape(-1, 3).mean(0) if isinstance(base, TextureMap) else np.asarray(base, np.float64)
+    mean = base.image.reshape(-1, 3).mean(0) if isinstance(base, TextureMap) else \
+        np.full(3, 0.5 * base.scale) if isinstance(base, ColorPrimvar) else np.asarray(base, np.float64)
     f0 = ((1.0 - ior) / (1.0 + ior)) ** 2 * (1.0 - m) + mean * m
     return _scaled(base, 1.0 - m), f0, _mean(inputs["roughness"]), emission
 
@@ -787,6 +801,9 @@ def _combine(parts: list, mat, notes: list) -> dict:
                 kd_tex = (w, kd)
             else:
                 notes.append(f"material {mat.name}: a mixed texture ({kd.what}) dropped: one texture per input")
+        elif isinstance(kd, ColorPrimvar):  # one value per lobe here: the attribute's colour is lost
+            notes.append(f"material {mat.name}: colour attribute {kd.attribute!r} inside a shader mix replaced by grey")
+            kd_sum += w * 0.5 * kd.scale
         else:
             kd_sum += w * np.asarray(kd, np.float64)
         f0 += w * f
@@ -832,9 +849,11 @@ def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float
 
 
 def _scaled(color, k: float):
-    """A colour [3] or TextureMap times ``k``."""
+    """A colour [3], TextureMap or ColorPrimvar times ``k``."""
     if isinstance(color, TextureMap):
         return dataclasses.replace(color, image=color.image * k)
+    if isinstance(color, ColorPrimvar):
+        return dataclasses.replace(color, scale=color.scale * k)
     return tuple(float(c) * k for c in color)
 
 
@@ -842,6 +861,18 @@ def _scaled(color, k: float):
 _LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
 #: Image Texture extension -> UsdUVTexture wrap mode
 _WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "black", "MIRROR": "mirror"}
+
+
+def color_input(mat, socket, notes: list):
+    """A colour socket fed by a Color Attribute node, or an Attribute node of geometry type, reading a colour attribute:
+    a :class:`ColorPrimvar` (the mesh carries it, renderer.md#primvar-colors); else :func:`image_texture`."""
+    node = socket.links[0].from_node
+    if node.bl_idname == "ShaderNodeVertexColor" and socket.links[0].from_socket.name == "Color":
+        return ColorPrimvar(node.layer_name)
+    if node.bl_idname == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY" \
+            and socket.links[0].from_socket.name == "Color":
+        return ColorPrimvar(node.attribute_name)
+    return image_texture(mat, socket, notes)
 
 
 def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureMap | None:

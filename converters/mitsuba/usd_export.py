@@ -180,6 +180,19 @@ class TextureMap:
     uv: tuple | None = None  # UsdTransform2d (scale [2], rotation in degrees, translation [2]) of st; None: identity
 
 
+@dataclass
+class ColorPrimvar:
+    """A diffuse colour read from a mesh's colour attribute (Blender) through a ``UsdPrimvarReader_float3``
+    (renderer.md#primvar-colors): the primvar ``primvar:NAME`` holds the attribute's values times ``scale``."""
+
+    attribute: str  # the source's attribute name ("" for its default colour attribute)
+    scale: float = 1.0
+
+    @property
+    def primvar(self) -> str:
+        return "color_" + (re.sub(r"[^A-Za-z0-9_]", "_", self.attribute) or "default")
+
+
 def st_transform(to_uv: np.ndarray) -> tuple | None:
     """UsdTransform2d (scale [2], rotation (degrees), translation [2]) acting on USD's st = (u, 1 - v) as Mitsuba's
     3x3 ``to_uv`` acts on its uv (spec/bake.md#materials); None when it shears (no scale-rotate-translate
@@ -290,6 +303,7 @@ class StageConverter:
         self.names: set[str] = set()
         self.materials: dict = {}
         self.textured_materials: set[str] = set()
+        self.color_primvars: dict = {}  # material path -> ColorPrimvar its meshes carry
         self.prototypes: dict[str, str] = {}  # shapegroup name -> class prim path
         self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
@@ -465,6 +479,14 @@ class StageConverter:
         for k, v in inputs.items():
             if isinstance(v, TextureMap):
                 self._texture_input(path, sh, k, v)
+                continue
+            if isinstance(v, ColorPrimvar):
+                reader = UsdShade.Shader.Define(self.stage, f"{path}/{k}_primvar")
+                reader.CreateIdAttr("UsdPrimvarReader_float3")
+                reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set(v.primvar)
+                reader.CreateOutput("result", Sdf.ValueTypeNames.Float3)
+                sh.CreateInput(k, Sdf.ValueTypeNames.Color3f).ConnectToSource(reader.ConnectableAPI(), "result")
+                self.color_primvars[path] = v  # its meshes write the primvar
                 continue
             if types[k] == Sdf.ValueTypeNames.Color3f:
                 v = Gf.Vec3f(*(float(x) for x in v))
