@@ -38,7 +38,7 @@ from .lights import (
     RectLight,
     SphereLight,
 )
-from .sampling import box3, face_normals
+from .sampling import box3, cross3, face_normals
 from .textures import WRAP_MODES, ImageTexture, Opacity, PrimvarColor, TexturedMaterial, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -186,6 +186,25 @@ class Scene:
     def corner_rows(self, prim: np.ndarray, inst: np.ndarray) -> np.ndarray:
         """Rows of tri_normals / tri_st [n] of mesh triangles ``prim`` [n] on instances ``inst`` [n]."""
         return prim + self.corner_offsets[inst]
+
+
+def smooth_vertex_normals(points: np.ndarray, counts: np.ndarray, idx: np.ndarray, reversed_winding: bool) -> np.ndarray:
+    """Unit normals [V,3] of the ``points`` [V,3] (world) of polygons ``counts`` / ``idx``: at each polygon corner the
+    cross product of its two edges, (next - p) x (prev - p) (area-weighted, Hydra's smooth normals of a cage), summed
+    per point; negated for a reversed winding. A point whose sum vanishes gets (0, 0, 1)."""
+    starts = np.repeat(np.cumsum(counts) - counts, counts)
+    n = np.repeat(counts, counts)
+    k = np.arange(len(idx)) - starts
+    nxt, prv = idx[starts + (k + 1) % n], idx[starts + (k - 1) % n]
+    p = points[idx]
+    cross = cross3(points[nxt] - p, points[prv] - p)
+    acc = np.zeros((len(points), 3))
+    np.add.at(acc, idx, -cross if reversed_winding else cross)
+    length = np.sqrt((acc * acc).sum(1))
+    out = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    ok = length > 1e-300
+    out[ok] = acc[ok] / length[ok, None]
+    return out
 
 
 def world_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
@@ -982,7 +1001,8 @@ class _Loader:
         if (counts < 3).any() or counts.sum() != len(idx) or idx.min() < 0 or idx.max() >= len(pts) or not np.isfinite(pts).all():
             raise self.err("SCENE_INVALID", "mesh topology invalid (counts/indices/points)", path, "faceVertexIndices")
         scheme = mesh.GetSubdivisionSchemeAttr().Get(self.time)
-        if scheme not in (None, UsdGeom.Tokens.none):
+        subdivided = scheme not in (None, UsdGeom.Tokens.none)
+        if subdivided:
             self.warn(f"subdivisionScheme {scheme!r}: rendered as its control cage", path)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         nt = counts - 2
@@ -991,7 +1011,8 @@ class _Loader:
         base = starts[face_of_tri]
         corner = np.stack([base, base + k + 1, base + k + 2], 1)  # face-vertex slots
         M = self.matrix(mesh)
-        if self._reversed(mesh, M):
+        reversed_winding = self._reversed(mesh, M)
+        if reversed_winding:
             corner = corner[:, [0, 2, 1]]
         tri = idx[corner]
         pw = pts @ M[:3, :3] + M[3, :3]
@@ -1020,6 +1041,8 @@ class _Loader:
                 normals = normals @ nlin
                 normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
         nn = face_normals(tris)
+        if normals is None and subdivided:  # a subdivision surface's cage shades smooth, as usdview draws it
+            normals = smooth_vertex_normals(pw, counts, idx, reversed_winding)[tri]
         if normals is None:
             normals = np.repeat(nn[:, None], 3, 1)
         tol = 1e-9 * (1 + np.abs(pw).max())

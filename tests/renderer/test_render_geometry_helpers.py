@@ -29,3 +29,36 @@ def test_face_normals_are_unit_and_zero_for_degenerate_triangles():
     # perpendicular to both edges, right-handed from corner 0
     np.testing.assert_allclose(np.einsum("ij,ij->i", n, tri[:, 1] - tri[:, 0]), 0.0, atol=1e-12)
     assert (np.einsum("ij,ij->i", np.cross(tri[3:, 1] - tri[3:, 0], tri[3:, 2] - tri[3:, 0]), n[3:]) > 0).all()
+
+
+def test_subdivision_cage_without_normals_shades_smooth(tmp_path):
+    """A catmullClark mesh (the schema's fallback scheme) without normals gets area-weighted vertex normals, as
+    usdview draws its cage; with scheme none it stays faceted. Checked on a cube: each corner's normal is the
+    normalised diagonal (its three faces have equal area), and a face-centre hit then interpolates them."""
+    from pxr import UsdGeom
+
+    from nasset_reference_renderer import load_scene
+    from nasset_reference_renderer.testscenes import SceneBuilder
+
+    def cube(scheme):
+        b = SceneBuilder()
+        b.camera((0, 0, 5), (0, 0, 0))
+        b.distant("Sun", (0, 0, 1), 1.0)
+        pts = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+        faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+        m = b.mesh("Cube", pts, faces)
+        if scheme is None:
+            m.GetSubdivisionSchemeAttr().Clear()
+        else:
+            m.GetSubdivisionSchemeAttr().Set(scheme)
+        return load_scene(b.write(tmp_path / f"cube_{scheme}.usda")), np.array(pts, np.float64)
+
+    for scheme in (None, UsdGeom.Tokens.catmullClark, UsdGeom.Tokens.loop):
+        scene, pts = cube(scheme)
+        n = scene.tri_normals.reshape(-1, 3)
+        corners = scene.triangles.reshape(-1, 3)
+        np.testing.assert_allclose(n, corners / np.sqrt(3.0), atol=1e-12)  # outward diagonals at every corner
+        assert any("control cage" in w for w in scene.warnings)
+    flat, _ = cube(UsdGeom.Tokens.none)
+    ng = np.repeat(flat.tri_ng[:, None], 3, 1).reshape(-1, 3)
+    np.testing.assert_allclose(np.abs(flat.tri_normals.reshape(-1, 3)), np.abs(ng), atol=1e-12)
