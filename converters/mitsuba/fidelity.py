@@ -202,6 +202,34 @@ def _normal_maps(folder: Path, size: int) -> str:
             + SUN.replace("-0.4, -0.8, -0.45", "-0.8, -0.5, 0") + SKY + "</scene>")
 
 
+def _color_grid_ply(path: Path, n: int = 6) -> None:
+    """An ASCII PLY: an n x n grid of triangle pairs (2 x 2 units, in the XZ plane, normal +Y) with a float colour in
+    [0, 1] per vertex (Mitsuba takes 8-bit ones as they are, 0 .. 255, and warns)."""
+    rng = np.random.default_rng(5)
+    g = np.linspace(-1.0, 1.0, n + 1)
+    x, z = np.meshgrid(g, g)
+    cols = rng.uniform(0.1, 0.9, ((n + 1) ** 2, 3))
+    faces = [t for i in range(n) for j in range(n) for t in (
+        (i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1),
+        (i * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1))]
+    lines = ["ply", "format ascii 1.0", f"element vertex {(n + 1) ** 2}", "property float x", "property float y",
+             "property float z", "property float red", "property float green", "property float blue",
+             f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]
+    lines += [f"{a:.6f} 0 {b:.6f} {c[0]:.6f} {c[1]:.6f} {c[2]:.6f}" for a, b, c in zip(x.ravel(), z.ravel(), cols, strict=True)]
+    lines += ["3 " + " ".join(map(str, f)) for f in faces]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _vertex_colors(folder: Path, size: int) -> str:
+    # a PLY grid with a colour per vertex, shaded by a diffuse BSDF whose reflectance is a mesh_attribute texture
+    _color_grid_ply(folder / "grid.ply")
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 2.0, 1.6", size=size)
+            + '<shape type="ply" id="grid"><string name="filename" value="grid.ply"/><transform name="to_world">'
+              '<scale value="1.2"/></transform><bsdf type="diffuse"><texture type="mesh_attribute" name="reflectance">'
+              '<string name="name" value="vertex_color"/></texture></bsdf></shape>\n'
+            + SUN + SKY + "</scene>")
+
+
 def _cutouts(folder: Path, size: int) -> str:
     # a horizontal panel whose mask opacity is a black / white checker bitmap (holes), casting a patterned shadow on
     # the floor seen through it, and an upright panel of constant opacity 0.4; volpath (Mitsuba's path integrator
@@ -344,6 +372,8 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a sensor with its principal point offset (x 0.15, y -0.1)"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "principled BSDFs with a roughness bitmap (a raw "
                                   "checker, 0.15 / 0.85) and a metallic bitmap (0 / 1) under a low sun"),
+    "vertex_colors": FidelityScene("vertex_colors", _vertex_colors, "a PLY grid with a colour per vertex read by a "
+                                   "mesh_attribute texture on a diffuse reflectance"),
     "normal_maps": FidelityScene("normal_maps", _normal_maps, "a normalmap BSDF on a floor: stripes leaning +-35 deg "
                                  "along u, a low sun"),
     "cutouts": FidelityScene("cutouts", _cutouts, "mask BSDFs: a panel cut by a checker bitmap opacity casting a patterned "
@@ -499,6 +529,9 @@ NOTES = """
   written as their means and the renderer textured diffuseColor only. They are now grey textures on roughness and
   metallic, which the renderer reads per hit (spec/renderer.md#textures). What remains is the principled
   conversion's 1-2 % (the floor), not the textures.
+- vertex_colors read MSE / noise 11.6 (32 x 32, 64 spp; 1.1 now): a mesh_attribute reflectance was written as grey
+  0.5 without a warning. It is now a colour primvar of the mesh read by a UsdPrimvarReader_float3
+  (spec/renderer.md#primvar-colors).
 - normal_maps read ratio 1.15 and MSE / noise 17 (32 x 32, 64 spp; 1.04 now): the converter wrote the normalmap to
   UsdPreviewSurface normal, which the renderer ignored. It now turns the shading normal in Mitsuba's frame and
   applies Mitsuba's default bump-terminator term (spec/renderer.md#normal-maps).

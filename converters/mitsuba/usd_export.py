@@ -266,9 +266,19 @@ class _Params:
             v = np.repeat(v, 3)
         return v[:3].copy()
 
+    def mesh_attribute(self, name: str) -> ColorPrimvar | None:
+        """A ``mesh_attribute`` texture on parameter ``name`` as a :class:`ColorPrimvar` of its attribute and scale
+        (the shape's meshes carry the values), else None."""
+        text = str(self.obj)
+        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*=\s*MeshAttribute\[\s*name\s*=\s*\"([^\"]+)\",\s*"
+                       r"scale\s*=\s*\"([^\"]+)\"", text)
+        return None if at is None else ColorPrimvar(at.group(1), float(at.group(2)))
+
     def texture_or_rgb(self, name: str, default, what: str, per_texel=None):
-        """A :class:`TextureMap` for a bitmap parameter (texels through ``per_texel``), else its colour [3]
-        (through ``per_texel`` too)."""
+        """A :class:`TextureMap` for a bitmap parameter (texels through ``per_texel``), a :class:`ColorPrimvar` for a
+        ``mesh_attribute`` one (when there is no ``per_texel``), else its colour [3] (through ``per_texel`` too)."""
+        if per_texel is None and (attr := self.mesh_attribute(name)) is not None:
+            return attr
         f = per_texel or (lambda c: c)
         img = self.bitmap(name)
         if img is None:
@@ -840,11 +850,31 @@ class StageConverter:
         if local_to_world:
             self._xform(mesh.GetPrim(), _row(m))
         mat = self._bind(mesh.GetPrim(), shape, sid, emission)
+        if mat in self.color_primvars:
+            self._color_primvar(mesh, shape, sid, self.color_primvars[mat], len(pts), len(faces))
         if mat in self.textured_materials and uv is None:
             self.warn(f"shape {sid}: textured material but the {cls} has no texture coordinates: the texture's corner "
                       "texel is used")
         self._one_sided(mesh, shape)
         self.record(path, f"shape {sid} ({cls}, {len(faces)} faces)")
+
+    def _color_primvar(self, mesh, shape, sid, want: ColorPrimvar, n_points: int, n_faces: int) -> None:
+        """The shape's attribute ``want.attribute`` (``vertex_*`` per point, ``face_*`` per face; 1 or 3 channels) times
+        ``want.scale`` as the colour primvar its material reads (renderer.md#primvar-colors)."""
+        from pxr import Sdf, UsdGeom, Vt
+
+        name = want.attribute
+        values = None
+        if hasattr(shape, "has_attribute") and shape.has_attribute(name):
+            values = np.asarray(shape.attribute_buffer(name), np.float64)
+        per, interp = (n_points, UsdGeom.Tokens.vertex) if name.startswith("vertex_") else (n_faces, UsdGeom.Tokens.uniform)
+        if values is None or values.size not in (per, 3 * per):
+            self.warn(f"shape {sid}: its BSDF reads mesh attribute {name!r}, which the shape lacks (or of another size): "
+                      "the reader's fallback (grey) is used")
+            return
+        rgb = np.repeat(values.reshape(per, 1), 3, 1) if values.size == per else values.reshape(per, 3)
+        pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(want.primvar, Sdf.ValueTypeNames.Color3fArray, interp)
+        pv.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(rgb * want.scale, np.float32)))
 
     def _sphere(self, shape, sid, emission) -> None:
         from pxr import Gf, UsdGeom
