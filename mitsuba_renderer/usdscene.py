@@ -379,8 +379,13 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         return default if v is None else v
 
     rad = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)
-    if bool(get("enableColorTemperature", False)):
-        warnings.warn(f"{ppath}: colour temperature ignored", stacklevel=3)
+    if bool(get("enableColorTemperature", False)):  # USD's own blackbody curve (spec/renderer.md#lights)
+        from pxr import UsdLux
+
+        kelvin = float(get("colorTemperature", 6500.0))
+        if not (np.isfinite(kelvin) and kelvin > 0):
+            raise SceneError("SCENE_INVALID", "colorTemperature must be finite and > 0", file=path, prim=ppath)
+        rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
     if tn == "DistantLight":
         lt.angle = float(get("angle", 0.53))

@@ -1340,8 +1340,13 @@ class _Loader:
             raise self.err("SCENE_INVALID", f"exposure {exposure!r} must be finite with |exposure| <= {MAX_LIGHT_EXPOSURE:g} stops",
                            path, "inputs:exposure")
         normalize = bool(g(api.GetNormalizeAttr(), False))
-        if bool(g(api.GetEnableColorTemperatureAttr(), False)):
-            self.warn("enableColorTemperature is ignored", path)
+        if bool(g(api.GetEnableColorTemperatureAttr(), False)):  # UsdLux: color x the blackbody's RGB (spec #lights)
+            with self._reading(path):
+                kelvin = float(g(api.GetColorTemperatureAttr(), 6500.0))
+            if not (np.isfinite(kelvin) and 0.0 < kelvin <= MAX_LIGHT_SCALE):
+                raise self.err("SCENE_INVALID", f"colorTemperature {kelvin!r} must be finite and > 0 (kelvin)", path,
+                               "inputs:colorTemperature")
+            color = color * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
         for a in ("inputs:diffuse", "inputs:specular"):
             at = prim.GetAttribute(a)
             if at and at.HasAuthoredValue() and float(at.Get(self.time)) != 1.0:

@@ -249,6 +249,10 @@ class _BlenderConverter(StageConverter):
                                    f"area {ob.name} ({lt.energy:.4g} W, {w:.3g} x {h:.3g})")
             else:
                 self.warn(f"light {ob.name}: type {lt.type} is not convertible: skipped")
+                continue
+            if getattr(lt, "use_temperature", False):  # Cycles' blackbody tint is UsdLux's colour temperature
+                light.CreateEnableColorTemperatureAttr(True)
+                light.CreateColorTemperatureAttr(float(lt.temperature))
         self.world()
 
     @staticmethod

@@ -158,3 +158,4 @@ def test_unknown_projection_is_unsupported_and_lens_without_focus_warns(tmp_path
     with pytest.raises(SceneError) as exc:
         load_scene(path)
     assert exc.value.code == "SCENE_UNSUPPORTED" and "projection" in str(exc.value)
+
