@@ -314,13 +314,20 @@ def _vertex_colors(bpy, folder: Path, size: int) -> None:
 
 
 def _light_temperature(bpy, folder: Path, size: int) -> None:
-    # lights in Temperature colour mode: a 3000 K sun and a 9000 K point light over a floor and a ball
+    # lights in Temperature colour mode: a 3000 K sun and a 9000 K point light over a floor and a ball; an emitting
+    # cube whose Emission Color is a Blackbody node (2000 K)
     _new_scene(bpy, size, (0.0, -2.6, 1.4), (0.0, 0.0, 0.3))
     _camera_objects(bpy)
     sun = bpy.data.objects["Sun"].data
     sun.use_temperature, sun.temperature = True, 3000.0
     bulb = _light(bpy, "Bulb", "POINT", (-0.8, -0.6, 1.2), energy=60.0).data
     bulb.use_temperature, bulb.temperature = True, 9000.0
+    glow = _material(bpy, "Glow", "emission", **{"Strength": 3.0})
+    bb = glow.node_tree.nodes.new("ShaderNodeBlackbody")
+    bb.inputs["Temperature"].default_value = 2000.0
+    glow.node_tree.links.new(bb.outputs["Color"], next(n for n in glow.node_tree.nodes
+                                                      if n.bl_idname == "ShaderNodeEmission").inputs["Color"])
+    _add(bpy, "cube", "Ember", glow, size=0.25, location=(0.7, -0.4, 0.125))
 
 
 def _alpha_png(path: Path, n: int = 64, squares: int = 4) -> Path:
@@ -545,7 +552,7 @@ SCENES = {
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "Image Textures on Principled Roughness (a checker, "
                                   "0.15 / 0.85) and Metallic (0 / 1) under a low sun"),
     "light_temperature": FidelityScene("light_temperature", _light_temperature, "lights in Temperature colour mode: a "
-                                       "3000 K sun and a 9000 K point light"),
+                                       "3000 K sun and a 9000 K point light; a Blackbody (2000 K) emission cube"),
     "vertex_colors": FidelityScene("vertex_colors", _vertex_colors, "colour attributes: an Attribute node on Principled "
                                    "Base Color (float, per point), a Color Attribute node on Diffuse Color (byte, per "
                                    "face corner)"),
@@ -714,9 +721,10 @@ NOTES = """
   `fStop` / `focusDistance` (spec/renderer.md#cameras).
 - pbr_textures read MSE / noise 12 (64 x 64, 64 spp; 0.8 now): Image Textures on Roughness and Metallic were
   dropped (the sockets' defaults used) and the renderer textured diffuseColor only (spec/renderer.md#textures).
-- light_temperature read ratio 0.79 / 1.06 / 1.15 and MSE / noise 121 (32 x 32, 64 spp; 1.02 now): lights in
-  Temperature colour mode were converted white. They are now enableColorTemperature / colorTemperature, and the
-  renderer tints by USD's blackbody RGB (Blender's curve to 1e-4; it ignored the attributes before).
+- light_temperature read ratio 0.68 / 1.12 / 1.35 and MSE / noise 329 (32 x 32, 64 spp; 0.94 now): lights in
+  Temperature colour mode were converted white and a Blackbody node on an Emission colour was dropped (white). They
+  are now enableColorTemperature / colorTemperature, which the renderer tints by USD's blackbody RGB (it ignored
+  them before), and the blackbody's colour (Blender's curve to 1e-4).
 - vertex_colors read MSE / noise 307 (32 x 32, 64 spp; 1.02 now): Color Attribute and Attribute nodes were dropped
   (the sockets' default colours used). The attributes are now primvars read by UsdPrimvarReader_float3, which the
   renderer interpolates per hit (spec/renderer.md#primvar-colors).

@@ -671,6 +671,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         return out
     if node.bl_idname == "ShaderNodeEmission":
         col, c_linked = _socket(node, "Color", (1.0, 1.0, 1.0, 1.0))
+        if c_linked and (bb := _blackbody(node.inputs["Color"])) is not None:
+            col, c_linked = bb, False
         strength, s_linked = _socket(node, "Strength", 1.0)
         if c_linked or s_linked:
             notes.append(f"material {mat.name}: linked emission {'Color' if c_linked else 'Strength'} dropped (its "
@@ -693,6 +695,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     emission = None
     e_strength, es_linked = _socket(node, "Emission Strength", 0.0)
     e_color, ec_linked = _socket(node, "Emission Color", (1.0, 1.0, 1.0, 1.0))
+    if ec_linked and (bb := _blackbody(node.inputs["Emission Color"])) is not None:
+        e_color, ec_linked = bb, False
     if es_linked or ec_linked:
         notes.append(f"material {mat.name}: linked Principled emission dropped")
     elif e_strength > 0:
@@ -865,6 +869,17 @@ def _scaled(color, k: float):
 _LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
 #: Image Texture extension -> UsdUVTexture wrap mode
 _WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "black", "MIRROR": "mirror"}
+
+
+def _blackbody(socket) -> tuple | None:
+    """The colour of a Blackbody node (unlinked Temperature) feeding ``socket``: USD's blackbody RGB, which is Blender's
+    curve to 1e-4 (renderer.md#lights), else None."""
+    node = socket.links[0].from_node
+    if node.bl_idname != "ShaderNodeBlackbody" or node.inputs["Temperature"].is_linked:
+        return None
+    from pxr import UsdLux
+
+    return tuple(float(c) for c in UsdLux.BlackbodyTemperatureAsRgb(float(node.inputs["Temperature"].default_value)))
 
 
 def color_input(mat, socket, notes: list):
