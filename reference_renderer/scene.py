@@ -23,6 +23,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
+from .curves import BASES, CurveError, polylines, sphere_mesh, tube_mesh
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
@@ -39,6 +40,7 @@ from .lights import (
     SphereLight,
 )
 from .sampling import box3, cross3, face_normals
+from .shaders.rna_fiber import TUBE_SIDES
 from .textures import WRAP_MODES, ImageTexture, Opacity, PrimvarColor, TexturedMaterial, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -468,9 +470,11 @@ class _Loader:
                 elif tname == "PointInstancer":
                     self._point_instancer(prim)
                     it.PruneChildren()  # prototypes beneath it render only as its instances
-                elif tname in ("BasisCurves", "NurbsCurves", "NurbsPatch", "Points", "HermiteCurves", "TetMesh", "Volume"):
-                    raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh and the implicit "
-                                   f"{', '.join(IMPLICIT_PRIMS)} are)", path)
+                elif tname in ("BasisCurves", "Points"):
+                    self._curves_or_points(prim, tname)
+                elif tname in ("NurbsCurves", "NurbsPatch", "HermiteCurves", "TetMesh", "Volume"):
+                    raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh, BasisCurves, "
+                                   f"Points and the implicit {', '.join(IMPLICIT_PRIMS)} are)", path)
         if not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
         with self._reading(str(self.cameras[0].GetPath())):
@@ -669,7 +673,9 @@ class _Loader:
         return out
 
     # -- meshes and materials --------------------------------------------------------------
-    def _material(self, prim) -> int:
+    def _material(self, prim, *, varying_colors: bool = True) -> int:
+        """Material id of a prim's bound material, else of its displayColor (``varying_colors`` False: the mean of
+        several values, for prims whose triangles carry no primvar colours)."""
         from pxr import UsdGeom, UsdShade
 
         mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
@@ -678,7 +684,7 @@ class _Loader:
             with self._reading(prim.GetPath()):
                 val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
                 val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
-            if val is not None and len(val) > 1:  # varying: interpolated per hit (spec/renderer.md#primvar-colors)
+            if val is not None and len(val) > 1 and varying_colors:  # interpolated per hit (spec #primvar-colors)
                 key = ("display", "primvar")
                 if key not in self.mat_index:
                     self.mat_index[key] = len(self.mat_rows)
@@ -1215,6 +1221,72 @@ class _Loader:
         self.warn(f"implicit {tname} tessellated into {len(faces)} triangles", prim.GetPath())
         inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim),
                         one_sided=self._one_sided(UsdGeom.Gprim(prim)), back_material=self._back_material(prim))
+        self._add(inst, tris, n, np.arange(len(faces)))
+
+    def _curves_or_points(self, prim, tname):
+        """BasisCurves as tubes and Points as spheres of their widths (:mod:`curves`, spec/renderer.md#curves-and-points)."""
+        from pxr import UsdGeom
+
+        path = prim.GetPath()
+        geom = UsdGeom.BasisCurves(prim) if tname == "BasisCurves" else UsdGeom.Points(prim)
+        with self._reading(path):
+            pts = np.asarray(geom.GetPointsAttr().Get(self.time) or [], np.float64).reshape(-1, 3)
+            counts = (np.asarray(geom.GetCurveVertexCountsAttr().Get(self.time) or [], np.int64)
+                      if tname == "BasisCurves" else np.ones(len(pts), np.int64))
+            wv = geom.GetWidthsAttr().Get(self.time)
+            wv = None if wv is None else np.asarray(wv, np.float64).ravel()
+        if not len(pts) or not len(counts):
+            self.warn(f"{tname} without points skipped", path)
+            return
+        if not np.isfinite(pts).all() or (counts < 1).any() or counts.sum() != len(pts):
+            raise self.err("SCENE_INVALID", f"{tname} points and curveVertexCounts do not match (or are not finite)",
+                           path, "curveVertexCounts" if tname == "BasisCurves" else "points")
+        interp = geom.GetWidthsInterpolation()
+        if wv is None or not len(wv):
+            self.warn(f"{tname} without widths: width 1 (scene units)", path)
+            widths = np.ones(len(pts))
+        elif interp == "constant" and len(wv) == 1:
+            widths = np.full(len(pts), wv[0])
+        elif interp == "uniform" and len(wv) == len(counts):
+            widths = np.repeat(wv, counts)
+        elif len(wv) == len(pts):  # vertex (or varying of linear curves and points)
+            widths = wv
+        else:
+            self.warn(f"{tname} widths ({interp}, {len(wv)} values) read as their mean", path)
+            widths = np.full(len(pts), float(np.mean(wv)))
+        if not (np.isfinite(widths).all() and (widths >= 0).all() and widths.max() <= MAX_WORLD_COORDINATE):
+            raise self.err("SCENE_INVALID", "widths must be finite and >= 0", path, "widths")
+        if tname == "Points":
+            if len(pts) * 80 > MAX_INSTANCED_TRIANGLES:
+                raise self.err("SCENE_INVALID", f"{len(pts)} points: their spheres would exceed {MAX_INSTANCED_TRIANGLES} "
+                               "triangles", path, "points")
+            local, faces, nrm = sphere_mesh(pts, widths)
+        else:
+            kind = str(geom.GetTypeAttr().Get(self.time) or "cubic")
+            basis = str(geom.GetBasisAttr().Get(self.time) or "bezier")
+            wrap = str(geom.GetWrapAttr().Get(self.time) or "nonperiodic")
+            if kind not in ("linear", "cubic") or basis not in BASES or wrap not in ("nonperiodic", "periodic", "pinned"):
+                raise self.err("SCENE_UNSUPPORTED", f"BasisCurves type {kind!r}, basis {basis!r}, wrap {wrap!r}", path, "basis")
+            try:
+                p, c, w = polylines(pts, counts, widths, kind, basis, wrap)
+            except CurveError as exc:
+                raise self.err("SCENE_INVALID", f"curveVertexCounts do not fit: {exc}", path, "curveVertexCounts") from None
+            if (len(p) - len(c)) * (4 * TUBE_SIDES - 4) > MAX_INSTANCED_TRIANGLES:
+                raise self.err("SCENE_INVALID", f"{len(p) - len(c)} curve segments: their tubes would exceed "
+                               f"{MAX_INSTANCED_TRIANGLES} triangles", path, "points")
+            local, faces, nrm = tube_mesh(p, c, w)
+        if not len(faces):
+            self.warn(f"{tname} of zero width or length skipped", path)
+            return
+        M = self.matrix(geom)
+        if np.linalg.det(M[:3, :3]) < 0:  # mirrored: keep the triangles wound about their outward normals
+            faces, nrm = faces[:, [0, 2, 1]], nrm[:, [0, 2, 1]]
+        tris = (local @ M[:3, :3] + M[3, :3])[faces]
+        n = nrm @ np.linalg.inv(M[:3, :3]).T
+        n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+        self.warn(f"{tname} tessellated into {len(faces)} triangles", path)
+        inst = Instance("mesh", str(path), 0, 0, M, material=self._material(prim, varying_colors=False),
+                        back_material=self._back_material(prim))
         self._add(inst, tris, n, np.arange(len(faces)))
 
     # -- neural assets ---------------------------------------------------------------------

@@ -230,6 +230,25 @@ def _vertex_colors(folder: Path, size: int) -> str:
             + SUN + SKY + "</scene>")
 
 
+def _curves(folder: Path, size: int) -> str:
+    # a linearcurve of three arcs and a bsplinecurve of two loops (radius 0.02-0.05) over a floor
+    t = np.linspace(0.0, 1.0, 9)
+    arcs = ["\n".join(f"{x0 + 0.6 * s:.5f} {0.05 + 0.5 * np.sin(np.pi * s):.5f} {z0:.5f} {0.03 + 0.02 * s:.5f}"
+                      for s in t) for x0, z0 in ((-1.0, -0.4), (-0.9, 0.0), (-0.8, 0.4))]
+    (folder / "arcs.txt").write_text("\n\n".join(arcs) + "\n")
+    u = np.linspace(0.0, 2 * np.pi, 14)
+    loops = ["\n".join(f"{xc + 0.35 * np.cos(a):.5f} {0.4 + 0.3 * np.sin(a):.5f} {zc + 0.1 * np.sin(2 * a):.5f} 0.035"
+                       for a in u) for xc, zc in ((0.5, -0.3), (0.6, 0.4))]
+    (folder / "loops.txt").write_text("\n\n".join(loops) + "\n")
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1.6, 2.6", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
+            + '<shape type="linearcurve" id="arcs"><string name="filename" value="arcs.txt"/><bsdf type="diffuse">'
+              '<rgb name="reflectance" value="0.8, 0.3, 0.2"/></bsdf></shape>\n'
+            + '<shape type="bsplinecurve" id="loops"><string name="filename" value="loops.txt"/><bsdf type="diffuse">'
+              '<rgb name="reflectance" value="0.2, 0.5, 0.8"/></bsdf></shape>\n'
+            + SUN + SKY + "</scene>")
+
+
 def _cutouts(folder: Path, size: int) -> str:
     # a horizontal panel whose mask opacity is a black / white checker bitmap (holes), casting a patterned shadow on
     # the floor seen through it, and an upright panel of constant opacity 0.4; volpath (Mitsuba's path integrator
@@ -372,6 +391,8 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a sensor with its principal point offset (x 0.15, y -0.1)"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "principled BSDFs with a roughness bitmap (a raw "
                                   "checker, 0.15 / 0.85) and a metallic bitmap (0 / 1) under a low sun"),
+    "curves": FidelityScene("curves", _curves, "a linearcurve of three arcs and a bsplinecurve of two loops (radius "
+                            "0.03-0.05) over a floor"),
     "vertex_colors": FidelityScene("vertex_colors", _vertex_colors, "a PLY grid with a colour per vertex read by a "
                                    "mesh_attribute texture on a diffuse reflectance"),
     "normal_maps": FidelityScene("normal_maps", _normal_maps, "a normalmap BSDF on a floor: stripes leaning +-35 deg "
@@ -529,6 +550,9 @@ NOTES = """
   written as their means and the renderer textured diffuseColor only. They are now grey textures on roughness and
   metallic, which the renderer reads per hit (spec/renderer.md#textures). What remains is the principled
   conversion's 1-2 % (the floor), not the textures.
+- curves read MSE / noise 5.7 (32 x 32, 64 spp; 1.04 now): linearcurve and bsplinecurve shapes were skipped (and a
+  scene with BasisCurves was refused by the renderer). They are now BasisCurves (linear, or cubic B-spline) of their
+  control points and radii, which the renderer draws as tubes (spec/renderer.md#curves-and-points).
 - vertex_colors read MSE / noise 11.6 (32 x 32, 64 spp; 1.1 now): a mesh_attribute reflectance was written as grey
   0.5 without a warning. It is now a colour primvar of the mesh read by a UsdPrimvarReader_float3
   (spec/renderer.md#primvar-colors).

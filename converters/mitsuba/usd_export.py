@@ -781,11 +781,40 @@ class StageConverter:
             self.warn(f"shape {sid}: {cls.lower()} tessellated into {len(faces)} triangles")
             uv = analytic.local_mesh(cls)[3] if cls == "Cylinder" else None  # a fan cannot carry the disk's polar uv
             self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
+        elif cls in ("LinearCurve", "BSplineCurve", "BSpline"):
+            self._curves(shape, sid, cls, emission)
         else:
-            hint = (f"; bake it into an rna fiber asset (nasset bake --kind rna --asset {sid}) and --replace {sid}=ASSET"
-                    if "Curve" in cls or cls.startswith("BSpline") else "")
             self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere, "
-                      f"cylinder are): skipped{hint}")
+                      f"cylinder, linearcurve, bsplinecurve are): skipped")
+
+    def _curves(self, shape, sid, cls, emission) -> None:
+        """A ``linearcurve`` / ``bsplinecurve`` as UsdGeom.BasisCurves (``linear``, or ``cubic`` ``bspline``) of its
+        world-space control points, widths twice their radii: the renderer's tubes (renderer.md#curves-and-points).
+        A light hair or fur is better baked (nasset bake --kind rna) and put in place with --replace."""
+        from pxr import UsdGeom, Vt
+
+        p = self.mi.traverse(shape)
+        cp = np.asarray(p["control_points"], np.float64).reshape(-1, 4)
+        seg = np.asarray(p["segment_indices"], np.int64).ravel()
+        reach = 1 if cls == "LinearCurve" else 3  # the control points a segment uses after its first (B-spline: 3)
+        breaks = np.flatnonzero(np.diff(seg) != 1) + 1  # a new curve where the segments stop following each other
+        runs = np.split(seg, breaks) if len(seg) else []
+        idx = np.concatenate([np.arange(r[0], r[-1] + reach + 1) for r in runs]) if runs else np.zeros(0, np.int64)
+        if emission is not None:
+            self.warn(f"shape {sid}: area emitter on a {cls} dropped (the curves are converted, not their emission)")
+        path = self._name(self.geometry_root, sid)
+        curves = UsdGeom.BasisCurves.Define(self.stage, path)
+        curves.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(cp[idx, :3], np.float32)))
+        curves.CreateCurveVertexCountsAttr(Vt.IntArray.FromNumpy(np.array([len(r) + reach for r in runs], np.int32)))
+        curves.CreateTypeAttr(UsdGeom.Tokens.linear if cls == "LinearCurve" else UsdGeom.Tokens.cubic)
+        curves.CreateBasisAttr(UsdGeom.Tokens.bspline)
+        curves.CreateWrapAttr(UsdGeom.Tokens.nonperiodic)
+        curves.CreateWidthsAttr(Vt.FloatArray.FromNumpy(np.ascontiguousarray(2.0 * cp[idx, 3], np.float32)))
+        curves.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+        self._bind(curves.GetPrim(), shape, sid, None)
+        self.warn(f"shape {sid}: {cls} of {len(runs)} curves written as BasisCurves (rendered as 8-sided tubes; a fur or "
+                  f"hair is better baked: nasset bake --kind rna --asset {sid}, then --replace {sid}=ASSET)")
+        self.record(path, f"shape {sid} ({cls}, {len(runs)} curves, {len(idx)} control points)")
 
     def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade
