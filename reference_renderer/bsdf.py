@@ -101,6 +101,18 @@ class MaterialTable:
     names: list
     textures: list = field(default_factory=list)  # [M] TexturedMaterial | None (empty: none textured)
     opacities: list = field(default_factory=list)  # [M] textures.Opacity | None (empty: every material opaque)
+    emission_textures: list = field(default_factory=list)  # [M] textures.ImageTexture | None: emission per hit
+
+    def emission_at(self, m: np.ndarray, st: np.ndarray | None) -> np.ndarray:
+        """Emitted radiance [N,3] of materials m [N] at texture coordinates st [N,2] (their constant where untextured;
+        a texture's value clamped to >= 0)."""
+        out = self.emission[m].copy()
+        if st is None:
+            return out
+        for k, tex in enumerate(self.emission_textures):
+            if tex is not None and (sel := m == k).any():
+                out[sel] = np.maximum(tex.sample(st[sel]), 0.0)
+        return out
 
     @property
     def p_spec(self) -> np.ndarray:

@@ -277,7 +277,7 @@ class PathIntegrator:
                 em = mesh & self.emissive[side_mat] & (~self.inst_one_sided[inst] | seen_front)
                 if em.any():
                     w = self._mesh_light_mis(inst[em], hit_pdf[em], hit_specular[em], o[em], d[em])
-                    L[idx[em]] += beta[em] * self.mt.emission[side_mat[em]] * w[:, None]
+                    L[idx[em]] += beta[em] * self._emission(side_mat[em], prim[em], inst[em], bu[em], bv[em]) * w[:, None]
             if depth >= self.s.max_depth:
                 break
             new = []
@@ -310,6 +310,15 @@ class PathIntegrator:
         return L
 
     # -- ordinary surfaces -----------------------------------------------------------------
+    def _emission(self, mat, prim, inst, bu, bv):
+        """Emitted radiance [n,3] of hits on mesh triangles ``prim`` with materials ``mat`` (textured emission read at
+        the hit's st, spec/renderer.md#textures)."""
+        if not any(t is not None for t in self.mt.emission_textures):
+            return self.mt.emission[mat]
+        cst = self.scene.tri_st[self.scene.corner_rows(prim, inst)]
+        st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+        return self.mt.emission_at(mat, st)
+
     def _normal_mapped(self, ns, mat, prim, cst, st):
         """Shading normals [n,3] turned by the materials' tangent-space normal maps (spec/renderer.md#normal-maps):
         the texel (x, y, z) (scale and bias applied) in the frame T = dP/ds made orthogonal to the interpolated normal

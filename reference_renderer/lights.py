@@ -343,10 +343,12 @@ class MeshLight(Light):
     False); ``pdf(p, wi)`` intersects them itself, so it is meant for small emitters
     (MAX_MESH_LIGHT_TRIANGLES)."""
 
-    def __init__(self, triangles, radiance, *, back_radiance, instance: int, prim: str = "") -> None:
+    def __init__(self, triangles, radiance, *, back_radiance, instance: int, prim: str = "", textures=None) -> None:
         self.tri = np.asarray(triangles, np.float64)
         self.L = np.asarray(radiance, np.float64)
         self.L_back = np.asarray(back_radiance, np.float64)
+        # (st corners [T,3,2], front texture, back texture): textured emission at the sampled points (None: constant)
+        self.textures = textures
         self.instance, self.prim = int(instance), prim
         cr = np.cross(self.tri[:, 1] - self.tri[:, 0], self.tri[:, 2] - self.tri[:, 0])
         areas = 0.5 * np.linalg.norm(cr, axis=1)
@@ -377,6 +379,14 @@ class MeshLight(Light):
         dist = np.sqrt(d2)
         wi = v / dist[:, None]
         cos, L = self._emitted(self.n[k], wi)
+        if self.textures is not None:  # the emitting side's texture at the sample's texture coordinates
+            st_c, front, back = self.textures
+            c = st_c[k]
+            st = c[:, 0] * (1.0 - b1 - b2)[:, None] + c[:, 1] * b1[:, None] + c[:, 2] * b2[:, None]
+            is_back = dot(self.n[k], wi) > 0
+            for side, tex in ((~is_back, front), (is_back, back)):
+                if tex is not None and side.any():
+                    L[side] = np.maximum(tex.sample(st[side]), 0.0)
         ok = cos > 0
         pdf = np.where(ok, d2 / (self.area_total * np.maximum(cos, 1e-300)), 0.0)
         return wi, dist, np.where(ok[:, None], L, 0.0), pdf

@@ -54,7 +54,7 @@ MIN_ASSET_SIZE_RATIO = 1e-4  # ... and relative to the scene scale S (10x the ra
 TEXTURE_SUFFIXES = (".exr", ".png", ".jpg", ".jpeg")
 #: UsdPreviewSurface inputs the renderer reads from a UsdUVTexture, with the texture outputs it accepts for each
 TEXTURED_INPUTS = {"diffuseColor": ("rgb",), "roughness": ("r", "g", "b", "a"), "metallic": ("r", "g", "b", "a"),
-                   "opacity": ("a", "r", "g", "b"), "normal": ("rgb",)}
+                   "opacity": ("a", "r", "g", "b"), "normal": ("rgb",), "emissiveColor": ("rgb",)}
 MAX_EXPOSURE_SCALE = 1e30  # the camera's linear exposure scale
 CAMERA_RATIO = (1e-6, 1e6)  # horizontalAperture / focalLength and verticalAperture / horizontalAperture
 MAX_LIGHT_EXPOSURE = 1000.0  # stops
@@ -392,6 +392,7 @@ class _Loader:
         self.tri_inst: list = []
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
+        self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
         self.instances: list[Instance] = []
         self.mat_rows: list = []
         self.mat_index: dict = {}
@@ -491,7 +492,8 @@ class _Loader:
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
                               textures=[m[5] if len(m) > 5 else None for m in mats],
-                              opacities=[m[6] if len(m) > 6 else None for m in mats])
+                              opacities=[m[6] if len(m) > 6 else None for m in mats],
+                              emission_textures=[m[7][0] if len(m) > 7 and m[7] is not None else None for m in mats])
         return Scene(
             file=self.file, camera=camera, triangles=tris,
             tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
@@ -520,7 +522,13 @@ class _Loader:
                 self.warn(f"emissive mesh of {inst.n_tri} triangles (> {MAX_MESH_LIGHT_TRIANGLES}) is not light-sampled: "
                           "reached by BSDF rays only", inst.prim)
                 continue
-            self.lights.append(MeshLight(self.tris[i], front, back_radiance=back, instance=i, prim=inst.prim))
+            st = self._inst_st.get(i)
+            textures = [None if st is None or m < 0 or len(self.mat_rows[m]) < 8 or self.mat_rows[m][7] is None
+                        else self.mat_rows[m][7][0] for m in (inst.material, inst.back_material)]
+            if inst.back_material < 0 and not inst.one_sided:
+                textures[1] = textures[0]
+            self.lights.append(MeshLight(self.tris[i], front, back_radiance=back, instance=i, prim=inst.prim,
+                                         textures=None if st is None or textures == [None, None] else (st, *textures)))
 
     def _check_world_bounds(self) -> None:
         """``SCENE_INVALID`` for a world coordinate above MAX_WORLD_COORDINATE, or a NeuralAsset instance whose world
@@ -563,6 +571,8 @@ class _Loader:
             self.tri_normals.append(normals_world)
             self.tri_st.append(np.zeros((len(tris_world), 3, 2)) if st is None else st)
             self.tri_color.append(color)
+            if st is not None:
+                self._inst_st[len(self.instances) - 1] = st
         self.tri_local.append(local_ids.astype(np.int64))
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
@@ -765,6 +775,9 @@ class _Loader:
         if float(vals["clearcoat"]) > 0.0:
             self.warn("clearcoat is ignored", shader.GetPath())
         emission = np.maximum(np.asarray(vals["emissiveColor"], np.float64), 0)
+        emission_texture = textures.get("emissiveColor")  # (ImageTexture, st primvar): emission per hit
+        if emission_texture is not None:
+            emission = np.maximum(emission_texture[0].mean, 0.0)
         specular_workflow = bool(int(vals["useSpecularWorkflow"]))
         ior = float(vals["ior"])
         if not specular_workflow and ior <= 0.0:  # F0 = ((1 - ior) / (1 + ior))^2 has no meaning there (a pole at -1)
@@ -781,9 +794,10 @@ class _Loader:
                                     ((1.0 - ior) / (1.0 + ior)) ** 2, MIN_ALPHA,
                                     textures["normal"][0] if "normal" in textures else None)
         kd, f0, alpha = material.constants()
-        textured = material if set(textures) - {"opacity"} or primvar_color is not None else None
+        textured = material if set(textures) - {"opacity", "emissiveColor"} or primvar_color is not None else None
         self.mat_index[mpath] = len(self.mat_rows)
-        self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity))
+        self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity,
+                              None if emission_texture is None else (emission_texture[0], varname)))
         return self.mat_index[mpath]
 
     def _primvar_reader(self, producer, where) -> PrimvarColor | None:
@@ -1056,13 +1070,11 @@ class _Loader:
         back = self._back_material(prim)
         groups = self._face_groups(mesh, len(counts))  # [(prim path, material, faces or None)]
         # the texture coordinates of its first texture (colour or opacity) that reads them
-        tex = next((t for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:7]
-                    if (isinstance(t, Opacity) and t.texture is not None) or (isinstance(t, TexturedMaterial) and t.reads_st)),
-                   None)
+        varname = self._st_varname([g[1] for g in groups] + [back])
         layout = (tri, corner, face_of_tri, len(pts), len(counts), len(idx))
-        st = None if tex is None else self._primvar_corners(prim, tex.varname, 2, *layout)
-        if tex is not None and st is None:
-            self.warn(f"textured material but no usable primvar {tex.varname!r} (float2, finite, vertex / faceVarying / "
+        st = None if varname is None else self._primvar_corners(prim, varname, 2, *layout)
+        if varname is not None and st is None:
+            self.warn(f"textured material but no usable primvar {varname!r} (float2, finite, vertex / faceVarying / "
                       "uniform / constant): texture coordinates (0, 0)", prim.GetPath())
         # the colours of its first material that reads a primvar colour (spec/renderer.md#primvar-colors)
         reader = next((t.diffuse for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:6]
@@ -1082,6 +1094,20 @@ class _Loader:
                             back_material=back)
             self._add(inst, tris[sel], normals[sel], ids, None if st is None else st[sel], ng=nn[sel],
                       color=None if color is None else color[sel])
+
+    def _st_varname(self, materials) -> str | None:
+        """The st primvar of the first of ``materials`` (ids, -1 none) with an image texture (colour, roughness,
+        metallic, normal, opacity or emission), None when none reads texture coordinates."""
+        for m in materials:
+            row = self.mat_rows[m] if m >= 0 else ()
+            textured, opacity, emission = (tuple(row[5:8]) + (None, None, None))[:3]
+            if isinstance(textured, TexturedMaterial) and textured.reads_st:
+                return textured.varname
+            if isinstance(opacity, Opacity) and opacity.texture is not None:
+                return opacity.varname
+            if emission is not None:
+                return emission[1]
+        return None
 
     def _face_groups(self, mesh, n_faces: int) -> list:
         """The mesh's faces by material: [(prim path, material id, face indices)] (spec/renderer.md#materials).

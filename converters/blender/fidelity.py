@@ -330,6 +330,21 @@ def _light_temperature(bpy, folder: Path, size: int) -> None:
     _add(bpy, "cube", "Ember", glow, size=0.25, location=(0.7, -0.4, 0.125))
 
 
+def _emission_texture(bpy, folder: Path, size: int) -> None:
+    # an Emission shader whose Color is an Image Texture (an sRGB checker, strength 4) on a panel facing the floor and
+    # the camera, and a Principled Emission Color from the same image on a ball, under a dim sky
+    _new_scene(bpy, size, (0.0, -2.6, 1.6), (0.0, 0.0, 0.4))
+    _floor(bpy)
+    png = _checker_png(folder / "screen.png", [(240, 80, 40), (40, 120, 240)], squares=4)
+    screen = _material(bpy, "Screen", "emission", **{"Strength": 4.0})
+    _image_texture(bpy, screen, "Color", png, "sRGB")
+    _add(bpy, "plane", "Panel", screen, size=0.8, location=(0.0, 0.6, 0.7), rotation=(math.radians(-70.0), 0.0, 0.0))
+    lamp = _material(bpy, "Lamp", "principled", **{"Base Color": (0.1, 0.1, 0.1), "Emission Strength": 2.0})
+    _image_texture(bpy, lamp, "Emission Color", png, "sRGB")
+    _add(bpy, "uv_sphere", "Lamp", lamp, smooth=True, radius=0.25, location=(0.8, -0.2, 0.25))
+    _world(bpy, (0.05, 0.05, 0.06))
+
+
 def _alpha_png(path: Path, n: int = 64, squares: int = 4) -> Path:
     """An 8-bit RGBA PNG: orange, its alpha a checkerboard of 0 and 255 (a cut-out pattern)."""
     from PIL import Image
@@ -551,6 +566,8 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "Image Textures on Principled Roughness (a checker, "
                                   "0.15 / 0.85) and Metallic (0 / 1) under a low sun"),
+    "emission_texture": FidelityScene("emission_texture", _emission_texture, "Image Textures on an Emission colour "
+                                      "(a panel lighting the floor) and a Principled Emission Color (a ball)"),
     "light_temperature": FidelityScene("light_temperature", _light_temperature, "lights in Temperature colour mode: a "
                                        "3000 K sun and a 9000 K point light; a Blackbody (2000 K) emission cube"),
     "vertex_colors": FidelityScene("vertex_colors", _vertex_colors, "colour attributes: an Attribute node on Principled "
@@ -721,6 +738,10 @@ NOTES = """
   `fStop` / `focusDistance` (spec/renderer.md#cameras).
 - pbr_textures read MSE / noise 12 (64 x 64, 64 spp; 0.8 now): Image Textures on Roughness and Metallic were
   dropped (the sockets' defaults used) and the renderer textured diffuseColor only (spec/renderer.md#textures).
+- emission_texture read ratio 2.7 / 6.3 / 2.7 and MSE / noise 780 (32 x 32, 64 spp; 0.97 now): an Image Texture on
+  an Emission colour was dropped (white x strength) and on a Principled Emission Color removed the emission. Both
+  are now a textured emissiveColor, which the renderer reads per hit and per mesh-light sample
+  (spec/renderer.md#textures).
 - light_temperature read ratio 0.68 / 1.12 / 1.35 and MSE / noise 329 (32 x 32, 64 spp; 0.94 now): lights in
   Temperature colour mode were converted white and a Blackbody node on an Emission colour was dropped (white). They
   are now enableColorTemperature / colorTemperature, which the renderer tints by USD's blackbody RGB (it ignored

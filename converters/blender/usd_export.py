@@ -359,7 +359,8 @@ class _BlenderConverter(StageConverter):
         path = self._write_material(mat.name if mat is not None else "Default", inputs)
         self.record(path, f"material {mat.name if mat is not None else '(none)'}")
         self.materials[key] = path
-        if max(inputs.get("emissiveColor", (0.0,))) > 0:
+        em = inputs.get("emissiveColor", (0.0,))
+        if (em.image.max() if isinstance(em, TextureMap) else max(em)) > 0:
             self.emissive_materials.add(path)
         return path
 
@@ -671,14 +672,13 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         return out
     if node.bl_idname == "ShaderNodeEmission":
         col, c_linked = _socket(node, "Color", (1.0, 1.0, 1.0, 1.0))
-        if c_linked and (bb := _blackbody(node.inputs["Color"])) is not None:
-            col, c_linked = bb, False
+        col, c_linked = _emission_color(mat, node.inputs["Color"], col, c_linked, notes)
         strength, s_linked = _socket(node, "Strength", 1.0)
         if c_linked or s_linked:
             notes.append(f"material {mat.name}: linked emission {'Color' if c_linked else 'Strength'} dropped (its "
                          "default used)")
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
-                "roughness": 1.0, "emissiveColor": tuple(float(c) * float(strength) for c in col[:3])}
+                "roughness": 1.0, "emissiveColor": _scaled(col if isinstance(col, TextureMap) else col[:3], float(strength))}
     vals = {}
     for name, default in (("Base Color", (0.8, 0.8, 0.8, 1.0)), ("Roughness", 0.5), ("Metallic", 0.0), ("IOR", 1.5),
                           ("Specular IOR Level", 0.5), ("Alpha", 1.0), ("Normal", None)):
@@ -695,12 +695,11 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     emission = None
     e_strength, es_linked = _socket(node, "Emission Strength", 0.0)
     e_color, ec_linked = _socket(node, "Emission Color", (1.0, 1.0, 1.0, 1.0))
-    if ec_linked and (bb := _blackbody(node.inputs["Emission Color"])) is not None:
-        e_color, ec_linked = bb, False
+    e_color, ec_linked = _emission_color(mat, node.inputs["Emission Color"], e_color, ec_linked, notes)
     if es_linked or ec_linked:
         notes.append(f"material {mat.name}: linked Principled emission dropped")
     elif e_strength > 0:
-        emission = tuple(float(c) * float(e_strength) for c in e_color[:3])
+        emission = _scaled(e_color if isinstance(e_color, TextureMap) else e_color[:3], float(e_strength))
     for name, off in _DROPPED:
         v, linked = _socket(node, name, off)
         if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
@@ -785,7 +784,8 @@ def _specular_form(inputs: dict) -> tuple:
     kd = diffuseColor (1 - metallic), F0 = lerp(((1 - ior) / (1 + ior))^2, diffuseColor, metallic)); kd may be a
     TextureMap, F0 of a textured metal is its mean colour."""
     base = inputs["diffuseColor"]
-    emission = np.asarray(inputs.get("emissiveColor", (0.0, 0.0, 0.0)), np.float64)
+    emission = inputs.get("emissiveColor", (0.0, 0.0, 0.0))  # inside a mix a texture gives its mean
+    emission = emission.image.reshape(-1, 3).mean(0) if isinstance(emission, TextureMap) else np.asarray(emission, np.float64)
     if inputs.get("useSpecularWorkflow"):
         return base, np.asarray(inputs.get("specularColor", (0.0, 0.0, 0.0)), np.float64), _mean(inputs["roughness"]), emission
     m, ior = _mean(inputs.get("metallic", 0.0)), float(inputs.get("ior", 1.5))
@@ -869,6 +869,19 @@ def _scaled(color, k: float):
 _LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
 #: Image Texture extension -> UsdUVTexture wrap mode
 _WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "CLIP": "black", "MIRROR": "mirror"}
+
+
+def _emission_color(mat, socket, value, linked: bool, notes: list):
+    """(colour or TextureMap, still linked) of an emission colour socket: a Blackbody node's colour, an Image Texture
+    (renderer.md#textures: textured emission), else the socket's value, still linked."""
+    if not linked:
+        return value, False
+    if (bb := _blackbody(socket)) is not None:
+        return bb, False
+    if socket.links[0].from_node.bl_idname == "ShaderNodeTexImage":
+        tex = image_texture(mat, socket, notes)
+        return (tex, False) if tex is not None else (value, True)
+    return value, True
 
 
 def _blackbody(socket) -> tuple | None:
