@@ -1159,7 +1159,8 @@ class _Loader:
         return bool(attr and attr.HasAuthoredValue() and not attr.Get(self.time))
 
     def _point_instancer(self, prim) -> None:
-        """Every instance of a PointInstancer whose prototypes are meshes and implicit prims (spec/renderer.md#geometry):
+        """Every instance of a PointInstancer whose prototypes are meshes, curves, points and implicit prims
+        (spec/renderer.md#geometry):
         each prototype prim placed by ``ComputeInstanceTransformsAtTime`` (the prototype root's own transform
         included) under the instancer's world transform; masked (``invisibleIds``) instances are left out."""
         from pxr import Usd, UsdGeom
@@ -1192,9 +1193,9 @@ class _Loader:
                     continue
                 t = str(p.GetTypeName())
                 if asset_source(p) is not None or t in ("NeuralAsset", "PointInstancer"):
-                    raise self.err("SCENE_UNSUPPORTED", f"a {t or 'neural asset'} as a PointInstancer prototype (meshes "
-                                   "and implicit prims are rendered)", str(p.GetPath()))
-                if t == "Mesh" or t in IMPLICIT_PRIMS:
+                    raise self.err("SCENE_UNSUPPORTED", f"a {t or 'neural asset'} as a PointInstancer prototype (meshes, "
+                                   "curves, points and implicit prims are rendered)", str(p.GetPath()))
+                if t in ("Mesh", "BasisCurves", "Points") or t in IMPLICIT_PRIMS:
                     parts[k].append((p, t))
         roots = [_matrix(UsdGeom.Xformable(root), self.time) for root in protos]
         for root, m in zip(protos, roots, strict=True):
@@ -1208,7 +1209,12 @@ class _Loader:
             self._placement = inv_roots[k] @ np.array(xforms[int(i)], np.float64) @ world
             try:
                 for p, t in parts[k]:
-                    self._mesh(p) if t == "Mesh" else self._implicit(p, t)
+                    if t == "Mesh":
+                        self._mesh(p)
+                    elif t in IMPLICIT_PRIMS:
+                        self._implicit(p, t)
+                    else:
+                        self._curves_or_points(p, t)
             finally:
                 self._placement = None
             if self.n_tri - before > MAX_INSTANCED_TRIANGLES:

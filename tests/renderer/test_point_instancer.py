@@ -83,3 +83,26 @@ def test_more_instances_than_the_bound_are_refused_before_their_transforms(tmp_p
     with pytest.raises(SceneError) as exc:
         _scene(tmp_path, positions=[(x, 0, 0) for x in range(4)], proto_indices=[0] * 4)
     assert "more than 3" in str(exc.value)
+
+
+def test_points_and_curves_prototypes_are_placed_like_meshes(tmp_path):
+    """A Points prototype (one sphere of width 0.4 at the prototype's origin) instanced at x = -1 and 2: its spheres'
+    triangles are centred there. Before, curves and points prototypes were left out."""
+    b = SceneBuilder()
+    b.camera((0, 6, 0.001), (0, 0, 0), focal=20)
+    pi = UsdGeom.PointInstancer.Define(b.stage, "/World/Scatter")
+    dot = UsdGeom.Points.Define(b.stage, "/World/Scatter/Prototypes/Dot")
+    dot.CreatePointsAttr([(0.0, 0.0, 0.0)])
+    dot.CreateWidthsAttr([0.4])
+    pi.CreatePrototypesRel().SetTargets([dot.GetPath()])
+    pi.CreateProtoIndicesAttr(Vt.IntArray([0, 0]))
+    pi.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(-1, 0, 0), Gf.Vec3f(2, 0, 0)]))
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(b.write(tmp_path / "dots.usda"))
+    centres = sorted(float(scene.triangles[i.first_tri:i.first_tri + i.n_tri].reshape(-1, 3)[:, 0].mean())
+                     for i in scene.instances)
+    np.testing.assert_allclose(centres, [-1.0, 2.0], atol=1e-9)
+    assert {round(float(np.ptp(scene.triangles[i.first_tri:i.first_tri + i.n_tri].reshape(-1, 3)[:, 1])), 6)
+            for i in scene.instances} == {0.4}
