@@ -393,6 +393,7 @@ class _Loader:
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
+        self._mesh_sources: dict = {}  # prim path -> _mesh_source of a PointInstancer's prototype meshes
         self.instances: list[Instance] = []
         self.mat_rows: list = []
         self.mat_index: dict = {}
@@ -998,6 +999,22 @@ class _Loader:
         return None
 
     def _mesh(self, prim):
+        """A UsdGeom.Mesh as one instance per material group: its local data (:meth:`_mesh_source`, read once per
+        prim while a PointInstancer places it again and again) placed by its world transform."""
+        if self._placement is None:
+            src = self._mesh_source(prim)
+        else:
+            key = str(prim.GetPath())
+            if key not in self._mesh_sources:
+                self._mesh_sources[key] = self._mesh_source(prim)
+            src = self._mesh_sources[key]
+        if src is not None:
+            self._place_mesh(prim, src)
+
+    def _mesh_source(self, prim) -> dict | None:
+        """Everything of a mesh that does not depend on where it is placed (object space, corners in authored
+        winding): points, triangles, corner normals, texture coordinates and primvar colours, material groups; None
+        for a mesh without points or faces (warned)."""
         from pxr import UsdGeom
 
         from nasset_sdk.references import fallback_owner
@@ -1014,7 +1031,7 @@ class _Loader:
         idx = mesh.GetFaceVertexIndicesAttr().Get(self.time)
         if pts is None or counts is None or idx is None or len(pts) == 0 or len(counts) == 0:
             self.warn("mesh without points or faces skipped", path)
-            return
+            return None
         pts = np.asarray(pts, np.float64).reshape(-1, 3)
         counts = np.asarray(counts, np.int64)
         idx = np.asarray(idx, np.int64)
@@ -1030,14 +1047,8 @@ class _Loader:
         k = np.arange(nt.sum()) - np.repeat(np.cumsum(nt) - nt, nt)
         base = starts[face_of_tri]
         corner = np.stack([base, base + k + 1, base + k + 2], 1)  # face-vertex slots
-        M = self.matrix(mesh)
-        reversed_winding = self._reversed(mesh, M)
-        if reversed_winding:
-            corner = corner[:, [0, 2, 1]]
         tri = idx[corner]
-        pw = pts @ M[:3, :3] + M[3, :3]
-        tris = pw[tri]
-        # shading normals
+        # shading normals, object space
         normals = None
         nattr = mesh.GetNormalsAttr()
         pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
@@ -1048,7 +1059,6 @@ class _Loader:
             nvals, interp = nattr.Get(self.time), mesh.GetNormalsInterpolation()
         if nvals is not None and len(nvals):
             nv = np.asarray(nvals, np.float64).reshape(-1, 3)
-            nlin = np.linalg.inv(M[:3, :3]).T  # row-vector convention: normals by the inverse transpose
             if interp in ("vertex", "varying") and len(nv) == len(pts):
                 normals = nv[tri]
             elif interp == "faceVarying" and len(nv) == len(idx):
@@ -1057,19 +1067,11 @@ class _Loader:
                 normals = np.repeat(nv[face_of_tri][:, None], 3, 1)
             else:
                 self.warn(f"normals with interpolation {interp!r} and {len(nv)} values ignored", path)
-            if normals is not None:
-                normals = normals @ nlin
-                normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
-        nn = face_normals(tris)
-        if normals is None and subdivided:  # a subdivision surface's cage shades smooth, as usdview draws it
-            normals = smooth_vertex_normals(pw, counts, idx, reversed_winding)[tri]
-        if normals is None:
-            normals = np.repeat(nn[:, None], 3, 1)
-        tol = 1e-9 * (1 + np.abs(pw).max())
-        planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
+        smooth = normals is None and subdivided
+        if smooth:  # a subdivision surface's cage shades smooth, as usdview draws it
+            normals = smooth_vertex_normals(pts, counts, idx, False)[tri]
         back = self._back_material(prim)
         groups = self._face_groups(mesh, len(counts))  # [(prim path, material, faces or None)]
-        # the texture coordinates of its first texture (colour or opacity) that reads them
         varname = self._st_varname([g[1] for g in groups] + [back])
         layout = (tri, corner, face_of_tri, len(pts), len(counts), len(idx))
         st = None if varname is None else self._primvar_corners(prim, varname, 2, *layout)
@@ -1085,13 +1087,41 @@ class _Loader:
             if reader.varname != "displayColor":
                 self.warn(f"no usable color primvar {reader.varname!r} (float3, finite): its reader's fallback is used",
                           prim.GetPath())
-        for where, mat, faces in groups:
-            sel = slice(None) if faces is None else np.isin(face_of_tri, faces)
+        return {"pts": pts, "tri": tri, "face_of_tri": face_of_tri, "normals": normals, "st": st, "color": color,
+                "groups": groups, "back": back, "one_sided": self._one_sided(mesh), "smooth": smooth}
+
+    def _place_mesh(self, prim, src: dict) -> None:
+        """A mesh source (:meth:`_mesh_source`) in the world: triangles wound as the prim's effective orientation says
+        (spec/renderer.md#sidedness), normals by the inverse transpose, one instance per material group."""
+        from pxr import UsdGeom
+
+        mesh = UsdGeom.Mesh(prim)
+        M = self.matrix(mesh)
+        reverse = self._reversed(mesh, M)
+        flip = [0, 2, 1] if reverse else [0, 1, 2]
+        tri = src["tri"][:, flip]
+        pw = src["pts"] @ M[:3, :3] + M[3, :3]
+        tris = pw[tri]
+        nn = face_normals(tris)
+        normals = src["normals"]
+        if normals is None:
+            normals = np.repeat(nn[:, None], 3, 1)
+        else:
+            normals = normals[:, flip] @ np.linalg.inv(M[:3, :3]).T  # row-vector convention: the inverse transpose
+            normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
+            if src["smooth"] and reverse:  # computed ones follow the winding's front, as the geometric normals do
+                normals = -normals
+        st = None if src["st"] is None else src["st"][:, flip]
+        color = None if src["color"] is None else src["color"][:, flip]
+        tol = 1e-9 * (1 + np.abs(pw).max())
+        planar = bool(np.all(np.abs(nn @ nn[0]) > 1 - 1e-9) and np.all(np.abs((pw - pw[0]) @ nn[0]) < tol))
+        for where, mat, faces in src["groups"]:
+            sel = slice(None) if faces is None else np.isin(src["face_of_tri"], faces)
             ids = np.arange(len(tri))[sel]
             if not len(ids):
                 continue
-            inst = Instance("mesh", where, 0, 0, M, material=mat, planar=planar, one_sided=self._one_sided(mesh),
-                            back_material=back)
+            inst = Instance("mesh", where, 0, 0, M, material=mat, planar=planar, one_sided=src["one_sided"],
+                            back_material=src["back"])
             self._add(inst, tris[sel], normals[sel], ids, None if st is None else st[sel], ng=nn[sel],
                       color=None if color is None else color[sel])
 
