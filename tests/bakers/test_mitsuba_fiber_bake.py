@@ -128,10 +128,19 @@ def test_tiny_hair_bake_writes_a_fiber_asset(tmp_path):
     assert a.provenance["data"]["mask_disagreement"] == pytest.approx(s["mask_disagreement"])
 
 
-def test_scene_conversion_keeps_unreplaced_curves_out_and_says_how_to_bake_them(mi, tmp_path):
+def test_scene_conversion_writes_unreplaced_curves_as_tubes_and_says_how_to_bake_them(mi, tmp_path):
+    """Curves that no asset replaces become BasisCurves (the renderer's tubes, spec/renderer.md#curves-and-points) of
+    the control points and twice their radii; the warning says a hair is better baked."""
+    from pxr import Usd, UsdGeom
+
     from nasset_converters.mitsuba.usd_export import convert_scene
 
     xml, _ = _scene(mi, tmp_path, [np.c_[np.eye(3), [0.01] * 3]])
     res = convert_scene(xml, tmp_path / "out.usda", check_usd=False)
     text = "\n".join(res.warnings)
-    assert "shape hair: LinearCurve is not convertible" in text and "--kind rna --asset hair" in text
+    assert "shape hair: LinearCurve of 1 curves written as BasisCurves" in text and "--kind rna --asset hair" in text
+    stage = Usd.Stage.Open(str(res.output))
+    curves = [UsdGeom.BasisCurves(p) for p in stage.Traverse() if p.GetTypeName() == "BasisCurves"]
+    assert len(curves) == 1
+    np.testing.assert_allclose(np.asarray(curves[0].GetPointsAttr().Get()), np.eye(3), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(curves[0].GetWidthsAttr().Get()), [0.02] * 3, atol=1e-7)
