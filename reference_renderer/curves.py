@@ -45,12 +45,26 @@ def _curve_cvs(p: np.ndarray, w: np.ndarray, basis: str, wrap: str) -> tuple[np.
     return p, w, [k * step for k in range(n_seg)]
 
 
+def segment_count(counts, curve_type: str = "linear", basis: str = "bezier", wrap: str = "nonperiodic") -> int:
+    """Segments of the polylines :func:`polylines` makes of curves with vertex ``counts`` (an upper bound for cubic
+    curves whose counts do not fit), from the counts alone: a budget check before any evaluation."""
+    c = np.asarray(counts, np.int64)
+    if curve_type == "linear":
+        return int(np.maximum(c - 1 + (wrap == "periodic"), 0).sum())
+    step = BASES[basis][1] if basis in BASES else 1
+    return int((np.maximum(c // step + 3, 0) * SAMPLES_PER_SEGMENT).sum())
+
+
 def polylines(points, counts, widths, curve_type: str = "linear", basis: str = "bezier", wrap: str = "nonperiodic"):
     """(points [M,3], counts [C'], widths [M]) of linear polylines through the curves (``widths`` per vertex);
     a periodic linear curve is closed by repeating its first vertex."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     w = np.asarray(widths, np.float64).ravel()
     counts = np.asarray(counts, np.int64)
+    if curve_type == "linear" and wrap != "periodic":  # the polylines are the curves (no loop over them)
+        if (counts < 2).any():
+            raise CurveError(f"a linear curve of {int(counts.min())} vertex")
+        return p, counts, np.maximum(w, 0.0)
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     out_p, out_c, out_w = [], [], []
     ts = np.linspace(0.0, 1.0, SAMPLES_PER_SEGMENT + 1)

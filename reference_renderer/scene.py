@@ -23,7 +23,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
-from .curves import BASES, CurveError, polylines, sphere_mesh, tube_mesh
+from .curves import BASES, CurveError, polylines, segment_count, sphere_mesh, tube_mesh
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
@@ -1329,6 +1329,9 @@ class _Loader:
             wrap = str(geom.GetWrapAttr().Get(self.time) or "nonperiodic")
             if kind not in ("linear", "cubic") or basis not in BASES or wrap not in ("nonperiodic", "periodic", "pinned"):
                 raise self.err("SCENE_UNSUPPORTED", f"BasisCurves type {kind!r}, basis {basis!r}, wrap {wrap!r}", path, "basis")
+            if segment_count(counts, kind, basis, wrap) * (4 * TUBE_SIDES - 4) > MAX_INSTANCED_TRIANGLES:
+                raise self.err("SCENE_INVALID", f"{len(counts)} curves: their tubes would exceed {MAX_INSTANCED_TRIANGLES} "
+                               "triangles", path, "curveVertexCounts")
             try:
                 p, c, w = polylines(pts, counts, widths, kind, basis, wrap)
             except CurveError as exc:

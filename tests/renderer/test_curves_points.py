@@ -85,3 +85,16 @@ def test_curves_that_do_not_fit_are_scene_errors(tmp_path, attrs, code):
     with pytest.raises(SceneError) as exc:
         load_scene(_scene(tmp_path, "BasisCurves", "bad", **attrs))
     assert exc.value.code == code and "/World/Geo" in str(exc.value)
+
+
+def test_curves_beyond_the_triangle_budget_are_refused_before_evaluation(tmp_path):
+    """One cubic B-spline of 2^18 points: about 2^20 evaluated segments of 28 triangles, over the 2^24 budget
+    (spec/renderer.md#limits): SCENE_INVALID from the counts alone."""
+    n = 1 << 18
+    pts = np.zeros((n, 3), np.float32)
+    pts[:, 0] = np.linspace(0.0, 1.0, n)
+    path = _scene(tmp_path, "BasisCurves", "huge", points=pts, curveVertexCounts=[n], type="cubic", basis="bspline",
+                  widths=[0.01], widths_interp="constant")
+    with pytest.raises(SceneError) as exc:
+        load_scene(path)
+    assert exc.value.code == "SCENE_INVALID" and "triangles" in str(exc.value)
