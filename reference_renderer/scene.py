@@ -627,6 +627,9 @@ class _Loader:
                 self.warn(f"fStop {vals['fStop']:g} without a focusDistance: no depth of field (pinhole)", path)
             else:
                 lens_radius = LENS_UNIT * fl / (2.0 * vals["fStop"])
+                if not lens_radius <= MAX_WORLD_COORDINATE:  # a tiny f-number: a lens wider than the world's bound
+                    raise self.err("SCENE_INVALID", f"fStop {vals['fStop']!r} gives a lens radius of {lens_radius:.3g} "
+                                   f"(focalLength {fl:g}), beyond {MAX_WORLD_COORDINATE:g}", path, "fStop")
         M = self.matrix(cam)
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "camera transform is singular", path, "xformOpOrder")

@@ -139,6 +139,7 @@ def _camera_scene(tmp_path, **attrs):
     ({"fStop": 2.0, "focusDistance": float("nan")}, "focusDistance"),
     ({"exposure": float("inf")}, "exposure"),
     ({"exposure__time": -1.0}, "exposure"),
+    ({"fStop": 1e-30, "focusDistance": 5.0}, "fStop"),  # a lens radius of 2.5e30: rays from beyond the world's bound
 ])
 def test_invalid_lens_and_exposure_values_are_scene_errors(tmp_path, attrs, name):
     with pytest.raises(SceneError) as exc:
