@@ -79,6 +79,38 @@ class SceneBuilder:
         mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
         return mat
 
+    def texture(self, material: str, connections: dict, file: str, *, wrap: str = "clamp", space: str | None = None,
+                scale=None, bias=None, st=None, mesh=None):
+        """A UsdUVTexture reading ``file`` (relative to the scene) at primvar ``st`` of material ``material``'s
+        UsdPreviewSurface: ``connections`` {surface input: texture output} (e.g. ``{"roughness": "g"}``); optional
+        ``sourceColorSpace``, float4 ``scale`` / ``bias``; ``st`` [V, 2] per vertex written on ``mesh``."""
+        from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+        looks = f"/World/Looks/{material}"
+        surf = UsdShade.Shader(self.stage.GetPrimAtPath(f"{looks}/PreviewSurface"))
+        reader = UsdShade.Shader.Define(self.stage, f"{looks}/st")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        node = UsdShade.Shader.Define(self.stage, f"{looks}/tex_{len(surf.GetInputs())}")
+        node.CreateIdAttr("UsdUVTexture")
+        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./{file}")
+        for k in ("wrapS", "wrapT"):
+            node.CreateInput(k, Sdf.ValueTypeNames.Token).Set(wrap)
+        if space is not None:
+            node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
+        for name, v in (("scale", scale), ("bias", bias)):
+            if v is not None:
+                node.CreateInput(name, Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(*map(float, v)))
+        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        kinds = {"rgb": Sdf.ValueTypeNames.Color3f}
+        for inp, out in connections.items():
+            kind = Sdf.ValueTypeNames.Normal3f if inp == "normal" else kinds.get(out, Sdf.ValueTypeNames.Float)
+            (surf.GetInput(inp) or surf.CreateInput(inp, kind)).ConnectToSource(node.ConnectableAPI(), out)
+        if st is not None:
+            pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+            pv.Set(np.asarray(st, np.float32))
+        return node
+
     def mesh(self, name, points, faces, *, matrix=None, **material):
         from pxr import UsdGeom, UsdShade
 

@@ -56,7 +56,6 @@ def _alpha_card(tmp_path, alpha_output="a"):
     """A card whose opacity is a 2 x 1 RGBA PNG's alpha (left texel 0, right 255; colour 255 everywhere) through
     ``alpha_output``, nearest-texel sized: its left half is cut out (threshold 0.5) before the wall."""
     from PIL import Image
-    from pxr import Sdf, UsdGeom, UsdShade
 
     Image.fromarray(np.array([[[255, 255, 255, 0], [255, 255, 255, 255]]], np.uint8), "RGBA").save(tmp_path / "a.png")
     b = SceneBuilder()
@@ -64,19 +63,8 @@ def _alpha_card(tmp_path, alpha_output="a"):
     b.quad("Wall", (0, 0, -2), 10.0, normal=(0, 0, 1), diffuse=(0, 0, 0), specular=(0, 0, 0), emission=(3, 3, 3))
     card = b.quad("Card", (0, 0, 0), 1.0, normal=(0, 0, 1), diffuse=(0, 0, 0), specular=(0, 0, 0), emission=(1, 1, 1))
     pts = np.asarray(card.GetPointsAttr().Get())
-    st = np.stack([(pts[:, 0] + 0.5), (pts[:, 1] + 0.5)], 1).astype(np.float32)  # 0 .. 1 across the card
-    UsdGeom.PrimvarsAPI(card).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
-    surf = _set(b, "CardMat", opacityThreshold=0.5)
-    reader = UsdShade.Shader.Define(b.stage, "/World/Looks/CardMat/st")
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-    node = UsdShade.Shader.Define(b.stage, "/World/Looks/CardMat/tex")
-    node.CreateIdAttr("UsdUVTexture")
-    node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./a.png")
-    for k in ("wrapS", "wrapT"):
-        node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("clamp")
-    node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
-    surf.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(node.ConnectableAPI(), alpha_output)
+    _set(b, "CardMat", opacityThreshold=0.5)
+    b.texture("CardMat", {"opacity": alpha_output}, "a.png", st=pts[:, :2] + 0.5, mesh=card)  # st 0 .. 1 across the card
     return load_scene(b.write(tmp_path / f"alpha_{alpha_output}.usda"))
 
 

@@ -16,12 +16,9 @@ RED, BLUE = (4.0, 0.2, 0.2), (0.2, 0.2, 4.0)
 def _panel_over_floor(tmp_path, textured: bool):
     """A 1 x 1 panel 0.5 above a floor, emitting downward: one panel whose emissiveColor is a 64 x 1 texture (left half
     RED, right half BLUE; clamp), or two half panels of those constant colours."""
-    from pxr import Sdf, UsdGeom, UsdShade
-
     b = SceneBuilder()
     b.camera((0, 3.0, 0.001), (0, 0, 0), focal=30.0)
     b.quad("Floor", (0, 0, 0), 3.0, diffuse=(0.5, 0.5, 0.5), specular=(0, 0, 0), roughness=1.0)
-    down = dict(normal=(0, -1, 0), diffuse=(0, 0, 0), specular=(0, 0, 0))
     if not textured:
         for name, x, col in (("Left", -0.25, RED), ("Right", 0.25, BLUE)):
             pts = np.array([[x - 0.25, 0.5, -0.5], [x + 0.25, 0.5, -0.5], [x + 0.25, 0.5, 0.5], [x - 0.25, 0.5, 0.5]])
@@ -31,20 +28,8 @@ def _panel_over_floor(tmp_path, textured: bool):
     img[0, :32], img[0, 32:] = RED, BLUE
     write_exr(tmp_path / "e.exr", img)
     pts = np.array([[-0.5, 0.5, -0.5], [0.5, 0.5, -0.5], [0.5, 0.5, 0.5], [-0.5, 0.5, 0.5]])
-    panel = b.mesh("Panel", pts, [[0, 1, 2, 3]], **{k: v for k, v in down.items() if k != "normal"}, emission=(0.0, 0.0, 0.0))
-    st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
-    UsdGeom.PrimvarsAPI(panel).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
-    surf = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/PanelMat/PreviewSurface"))
-    reader = UsdShade.Shader.Define(b.stage, "/World/Looks/PanelMat/st")
-    reader.CreateIdAttr("UsdPrimvarReader_float2")
-    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-    node = UsdShade.Shader.Define(b.stage, "/World/Looks/PanelMat/tex")
-    node.CreateIdAttr("UsdUVTexture")
-    node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./e.exr")
-    for k in ("wrapS", "wrapT"):
-        node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("clamp")
-    node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
-    surf.GetInput("emissiveColor").ConnectToSource(node.ConnectableAPI(), "rgb")
+    panel = b.mesh("Panel", pts, [[0, 1, 2, 3]], diffuse=(0, 0, 0), specular=(0, 0, 0), emission=(0.0, 0.0, 0.0))
+    b.texture("PanelMat", {"emissiveColor": "rgb"}, "e.exr", st=[[0, 0], [1, 0], [1, 1], [0, 1]], mesh=panel)
     return load_scene(b.write(tmp_path / "textured.usda"))
 
 

@@ -446,7 +446,7 @@ def _orm_floor(tmp_path, textured: bool, rough=0.5, metal=0.0):
     """A glossy floor under a sun and a sky seen at an angle (the specular lobe shows). ``textured``: roughness from the
     ``g`` and metallic from the ``b`` output of one 2 x 1 OpenEXR (glTF's occlusion-roughness-metallic packing): left
     texel (1, 0.2, 0), right texel (1, 0.9, 1), clamp wrap; else the constants ``rough``, ``metal``."""
-    from pxr import Sdf, UsdGeom, UsdShade
+    from pxr import Sdf, UsdGeom
 
     b = SceneBuilder()
     b.camera((0, 1.2, 3.0), (0, 0, 0), focal=24)
@@ -458,18 +458,7 @@ def _orm_floor(tmp_path, textured: bool, rough=0.5, metal=0.0):
     UsdGeom.PrimvarsAPI(quad).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
     if textured:
         write_exr(tmp_path / "orm.exr", np.array([[[1.0, 0.2, 0.0], [1.0, 0.9, 1.0]]], np.float32))
-        surf = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface"))
-        reader = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/st")
-        reader.CreateIdAttr("UsdPrimvarReader_float2")
-        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-        node = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/orm")
-        node.CreateIdAttr("UsdUVTexture")
-        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./orm.exr")
-        for k in ("wrapS", "wrapT"):
-            node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("clamp")
-        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
-        surf.GetInput("roughness").ConnectToSource(node.ConnectableAPI(), "g")
-        surf.GetInput("metallic").ConnectToSource(node.ConnectableAPI(), "b")
+        b.texture("FloorMat", {"roughness": "g", "metallic": "b"}, "orm.exr")
     return load_scene(b.write(tmp_path / f"orm_{textured}_{rough}_{metal}.usda")), pts
 
 
@@ -500,7 +489,7 @@ def test_roughness_and_metallic_textures_shade_each_hit_like_their_constants(tmp
 def _normal_mapped_floor(tmp_path, toward, tilt_deg=20.0, mapped=True):
     """A diffuse floor whose normal map (one texel, stored (n + 1) / 2 with UsdUVTexture scale 2, bias -1) tilts the
     normal by ``tilt_deg`` toward +dP/ds, under a delta sun ``toward`` (unit)."""
-    from pxr import Gf, Sdf, UsdGeom, UsdShade
+    from pxr import Sdf, UsdGeom
 
     t = np.radians(tilt_deg)
     write_exr(tmp_path / "n.exr", ((np.array([[[np.sin(t), 0.0, np.cos(t)]]]) + 1) / 2).astype(np.float32))
@@ -512,20 +501,8 @@ def _normal_mapped_floor(tmp_path, toward, tilt_deg=20.0, mapped=True):
     st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
     UsdGeom.PrimvarsAPI(quad).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
     if mapped:
-        surf = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/PreviewSurface"))
-        reader = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/st")
-        reader.CreateIdAttr("UsdPrimvarReader_float2")
-        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
-        node = UsdShade.Shader.Define(b.stage, "/World/Looks/FloorMat/nmap")
-        node.CreateIdAttr("UsdUVTexture")
-        node.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("./n.exr")
-        node.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("raw")
-        for k in ("wrapS", "wrapT"):
-            node.CreateInput(k, Sdf.ValueTypeNames.Token).Set("repeat")
-        node.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(2, 2, 2, 1))
-        node.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-1, -1, -1, 0))
-        node.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
-        surf.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(node.ConnectableAPI(), "rgb")
+        b.texture("FloorMat", {"normal": "rgb"}, "n.exr", wrap="repeat", space="raw", scale=(2, 2, 2, 1),
+                  bias=(-1, -1, -1, 0))
     return load_scene(b.write(tmp_path / f"nmap_{mapped}_{np.round(toward, 3).tolist()}.usda")), pts
 
 
