@@ -253,12 +253,10 @@ class Accel:
             return
         if part.cutout and self.presence is not None:
             t, prim, u, v = self._closest_present(part, o[rows], d[rows], lim[rows])
-        elif len(rows) == len(o):  # every ray: no gathers
-            self.rays_cast += len(rows)
-            t, prim, u, v = part.backend.closest(o, d, lim)
         else:
             self.rays_cast += len(rows)
-            t, prim, u, v = part.backend.closest(o[rows], d[rows], lim[rows])
+            every = len(rows) == len(o)  # every ray: no gathers
+            t, prim, u, v = part.backend.closest(o, d, lim) if every else part.backend.closest(o[rows], d[rows], lim[rows])
         better = (prim >= 0) & (t < (hits.t if len(rows) == len(o) else hits.t[rows]))
         r = rows[better]
         hits.t[r], hits.prim[r], hits.u[r], hits.v[r] = t[better], part.ids[prim[better]], u[better], v[better]

@@ -130,14 +130,9 @@ class MaterialTable:
     def textured(self) -> bool:
         return any(t is not None for t in self.textures)
 
-    @property
-    def reads_colors(self) -> bool:
-        """Some material's diffuse colour is a mesh primvar: lookups need the hits' colours."""
-        return any(t is not None and t.reads_colors for t in self.textures)
-
     def lookup(self, m: np.ndarray, st: np.ndarray, colors: np.ndarray | None = None):
         """(kd [N,3], F0 [N,3], alpha [N]) of materials m [N] at texture coordinates st [N,2] and primvar colours
-        ``colors`` [N,3] (:attr:`reads_colors`; constants where untextured)."""
+        ``colors`` [N,3] (for materials whose diffuse colour is a primvar; constants where untextured)."""
         kd, f0, alpha = self.kd[m].copy(), self.f0[m].copy(), self.alpha[m].copy()
         for k, tex in enumerate(self.textures):
             if tex is None:

@@ -19,7 +19,7 @@ from .bsdf import bsdf_eval, bsdf_sample
 from .film import Film, check_image_size, pixel_offsets
 from .lights import MeshLight
 from .plan import RenderPlan, make_plan
-from .sampling import cross3, dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
+from .sampling import barycentric, cross3, dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading, shader_class, variant_of
 from .shaders.common import max3, unique
 from .shadow import aim_shadow
@@ -171,7 +171,7 @@ class PathIntegrator:
             if op.texture is not None:
                 cst = self.scene.tri_st[self.scene.corner_rows(tri[sel], inst[sel])]
                 bu, bv = u[sel], v[sel]
-                st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+                st = barycentric(cst, bu, bv)
             out[sel] = op.present(st, draws[sel])
         return out
 
@@ -267,7 +267,7 @@ class PathIntegrator:
             prim = hits.prim[sel]
             bu, bv = hits.u[sel], hits.v[sel]
             tri = self.scene.triangles[prim]
-            x = tri[:, 0] * (1 - bu - bv)[:, None] + tri[:, 1] * bu[:, None] + tri[:, 2] * bv[:, None]
+            x = barycentric(tri, bu, bv)
             inst = self.scene.tri_inst[prim]
             neural = self.inst_neural[inst]
             mesh = ~neural
@@ -316,7 +316,7 @@ class PathIntegrator:
         if not any(t is not None for t in self.mt.emission_textures):
             return self.mt.emission[mat]
         cst = self.scene.tri_st[self.scene.corner_rows(prim, inst)]
-        st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+        st = barycentric(cst, bu, bv)
         return self.mt.emission_at(mat, st)
 
     def _normal_mapped(self, ns, mat, prim, cst, st):
@@ -364,14 +364,14 @@ class PathIntegrator:
         mat = np.where(~seen_front & (back_mat >= 0), back_mat, mat)  # a two-sided material's back side
         looked_up = None  # (kd, f0, alpha) per hit of textured materials
         cn = self.scene.tri_normals[rows]
-        ns = normalize(cn[:, 0] * (1 - bu - bv)[:, None] + cn[:, 1] * bu[:, None] + cn[:, 2] * bv[:, None])
+        ns = normalize(barycentric(cn, bu, bv))
         if self.mt.textured:
             cst = self.scene.tri_st[rows]
-            st = cst[:, 0] * (1 - bu - bv)[:, None] + cst[:, 1] * bu[:, None] + cst[:, 2] * bv[:, None]
+            st = barycentric(cst, bu, bv)
             colors = None
             if self.scene.tri_color is not None:
                 cc = self.scene.tri_color[rows]
-                colors = cc[:, 0] * (1 - bu - bv)[:, None] + cc[:, 1] * bu[:, None] + cc[:, 2] * bv[:, None]
+                colors = barycentric(cc, bu, bv)
             looked_up = self.mt.lookup(mat, st, colors)
         smooth = None  # the interpolated normal under a normal map (the terminator term's reference)
         if looked_up is not None and self.normal_maps:

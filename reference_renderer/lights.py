@@ -27,6 +27,7 @@ import numpy as np
 from .sampling import (
     INV_4PI,
     Distribution2D,
+    barycentric,
     dot,
     frame,
     luminance,
@@ -373,7 +374,7 @@ class MeshLight(Light):
         su = np.sqrt(u0)
         b1, b2 = 1.0 - su, u[:, 1] * su
         t = self.tri[k]
-        q = t[:, 0] * (1.0 - b1 - b2)[:, None] + t[:, 1] * b1[:, None] + t[:, 2] * b2[:, None]
+        q = barycentric(t, b1, b2)
         v = q - p
         d2 = np.maximum(dot(v, v), 1e-300)
         dist = np.sqrt(d2)
@@ -382,7 +383,7 @@ class MeshLight(Light):
         if self.textures is not None:  # the emitting side's texture at the sample's texture coordinates
             st_c, front, back = self.textures
             c = st_c[k]
-            st = c[:, 0] * (1.0 - b1 - b2)[:, None] + c[:, 1] * b1[:, None] + c[:, 2] * b2[:, None]
+            st = barycentric(c, b1, b2)
             is_back = dot(self.n[k], wi) > 0
             for side, tex in ((~is_back, front), (is_back, back)):
                 if tex is not None and side.any():

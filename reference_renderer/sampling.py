@@ -45,6 +45,12 @@ def face_normals(tris):
     return normalize(cross3(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]))
 
 
+def barycentric(corners, b1, b2):
+    """Values [n,k] at barycentrics (b1, b2) [n] of triangle corner values ``corners`` [n,3,k]: corner 0 weighs
+    1 - b1 - b2, corner 1 b1, corner 2 b2 (Embree's u, v)."""
+    return corners[:, 0] * (1 - b1 - b2)[:, None] + corners[:, 1] * b1[:, None] + corners[:, 2] * b2[:, None]
+
+
 def normalize(v):
     if v.ndim == 2 and v.shape[1] == 3:
         # same sum in the same order as np.linalg.norm over the last axis, without its temporaries
