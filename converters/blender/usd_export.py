@@ -665,8 +665,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         if r_linked or rough > 0:
             notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
         out = {"diffuseColor": col if isinstance(col, (TextureMap, ColorPrimvar)) else col[:3], "roughness": 1.0,
-               "metallic": 0.0,
-               "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
+               "metallic": 0.0, "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
         if node.inputs["Normal"].is_linked and (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
             out["normal"] = nmap
         return out

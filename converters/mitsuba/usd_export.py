@@ -182,8 +182,9 @@ class TextureMap:
 
 @dataclass
 class ColorPrimvar:
-    """A diffuse colour read from a mesh's colour attribute (Blender) through a ``UsdPrimvarReader_float3``
-    (renderer.md#primvar-colors): the primvar ``primvar:NAME`` holds the attribute's values times ``scale``."""
+    """A diffuse colour read from a mesh attribute (a Blender colour attribute, a Mitsuba ``mesh_attribute``) through a
+    ``UsdPrimvarReader_float3`` (renderer.md#primvar-colors): the mesh's primvar :attr:`primvar` holds the attribute's
+    values times ``scale``."""
 
     attribute: str  # the source's attribute name ("" for its default colour attribute)
     scale: float = 1.0
@@ -386,7 +387,7 @@ class StageConverter:
                  for k in ("principal_point_offset_x", "principal_point_offset_y")]
         row = _FLIP_CAMERA @ _row(_matrix(p["to_world"]))
         scale = np.linalg.norm(row[:3, :3], axis=1)
-        row[:3, :3] /= scale[:, None]
+        row[:3, :3] /= np.maximum(scale, 1e-300)[:, None]
         path = self._name("/World", sensor.id() or "Camera")
         cam = UsdGeom.Camera.Define(self.stage, path)
         if cls == "OrthographicCamera":
