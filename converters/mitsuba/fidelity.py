@@ -249,6 +249,19 @@ def _curves(folder: Path, size: int) -> str:
             + SUN + SKY + "</scene>")
 
 
+def _emitter_texture(folder: Path, size: int) -> str:
+    # an area emitter whose radiance is an sRGB checker bitmap on a rectangle over a floor, seen by
+    # the camera and lighting the floor, and a dim sky
+    _checker_png(folder / "screen.png", [(240, 80, 40), (40, 120, 240)], squares=4)
+    emitter = ('<shape type="rectangle" id="screen"><transform name="to_world"><scale value="0.5"/><rotate x="1" '
+               'angle="60"/><translate y="0.8" z="-0.4"/></transform><bsdf type="diffuse"><rgb name="reflectance" '
+               'value="0, 0, 0"/></bsdf><emitter type="area"><texture type="bitmap" name="radiance"><string '
+               'name="filename" value="screen.png"/></texture></emitter></shape>\n')
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1.4, 2.4", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>')
+            + emitter + SKY.replace("0.3, 0.35, 0.45", "0.05, 0.05, 0.06") + "</scene>")
+
+
 def _cutouts(folder: Path, size: int) -> str:
     # a horizontal panel whose mask opacity is a black / white checker bitmap (holes), casting a patterned shadow on
     # the floor seen through it, and an upright panel of constant opacity 0.4; volpath (Mitsuba's path integrator
@@ -391,6 +404,8 @@ SCENES = {
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a sensor with its principal point offset (x 0.15, y -0.1)"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "principled BSDFs with a roughness bitmap (a raw "
                                   "checker, 0.15 / 0.85) and a metallic bitmap (0 / 1) under a low sun"),
+    "emitter_texture": FidelityScene("emitter_texture", _emitter_texture, "an area emitter with a bitmap radiance (an "
+                                     "sRGB checker) on a rectangle lighting a floor"),
     "curves": FidelityScene("curves", _curves, "a linearcurve of three arcs and a bsplinecurve of two loops (radius "
                             "0.03-0.05) over a floor"),
     "vertex_colors": FidelityScene("vertex_colors", _vertex_colors, "a PLY grid with a colour per vertex read by a "
@@ -550,6 +565,9 @@ NOTES = """
   written as their means and the renderer textured diffuseColor only. They are now grey textures on roughness and
   metallic, which the renderer reads per hit (spec/renderer.md#textures). What remains is the principled
   conversion's 1-2 % (the floor), not the textures.
+- emitter_texture read MSE / noise 71 (32 x 32, 64 spp; 0.92 now): an area emitter's bitmap radiance was written as
+  its mean (a RectLight). A textured emitter is now a mesh with a textured emissiveColor, which the renderer reads per
+  hit and per light sample (spec/renderer.md#textures).
 - curves read MSE / noise 5.7 (32 x 32, 64 spp; 1.04 now): linearcurve and bsplinecurve shapes were skipped (and a
   scene with BasisCurves was refused by the renderer). They are now BasisCurves (linear, or cubic B-spline) of their
   control points and radii, which the renderer draws as tubes (spec/renderer.md#curves-and-points).

@@ -461,15 +461,15 @@ class StageConverter:
     # -- materials ----------------------------------------------------------------------------
     def material(self, bsdf, shape_name: str, emission=None, back: bool = False) -> str:
         """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id); ``back``: a twosided BSDF's back."""
-        key = (bsdf.id() or f"@{shape_name}", None if emission is None else tuple(np.round(emission, 9)), back,
-               self.looks_root)
+        key = (bsdf.id() or f"@{shape_name}", None if emission is None else ("texture", id(emission))
+               if isinstance(emission, TextureMap) else tuple(np.round(emission, 9)), back, self.looks_root)
         if key in self.materials:
             return self.materials[key]
         inputs, notes = self.map_bsdf(bsdf, back=back)
         for n in notes:
             self.warn(f"shape {shape_name}: {n}")
         if emission is not None:
-            inputs["emissiveColor"] = tuple(float(x) for x in emission)
+            inputs["emissiveColor"] = emission if isinstance(emission, TextureMap) else tuple(float(x) for x in emission)
         path = self._write_material((bsdf.id() or f"{shape_name}_bsdf") + ("_back" if back else ""), inputs)
         self.record(path, f"bsdf {bsdf.id() or '(inline)'} ({_class_name(bsdf)})")
         self.materials[key] = path
@@ -755,14 +755,14 @@ class StageConverter:
                 "; its area emitter too (Mitsuba's path tracer does not show it to the camera and lights the scene from "
                 "it through emitter samples only, which no USD light reproduces)" if emitter is not None else ""))
             return
-        if emitter is not None and cls in ("Rectangle", "Disk", "Sphere"):
+        emission = None if emitter is None else self._textured_radiance(emitter)
+        if emitter is not None and emission is None and cls in ("Rectangle", "Disk", "Sphere"):
             self._area_light(shape, sid, cls, emitter)
             return
-        emission = None
-        if emitter is not None:
+        if emitter is not None:  # a mesh light, or a textured emitter on any shape (UsdLux lights have no texture)
             from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
 
-            emission = _Params(self.mi, emitter).rgb("radiance")
+            emission = _Params(self.mi, emitter).rgb("radiance") if emission is None else emission
             n_tri = int(np.asarray(self.mi.traverse(shape)["faces"]).size // 3) if "faces" in self.mi.traverse(shape) else 0
             if n_tri > MAX_MESH_LIGHT_TRIANGLES:
                 self.warn(f"shape {sid}: area emitter on a {cls} of {n_tri} triangles written as emissiveColor: the "
@@ -949,6 +949,18 @@ class StageConverter:
         light.CreateColorAttr(Gf.Vec3f(*(rgb / peak if peak > 0 else np.ones(3)).tolist()))
         light.CreateNormalizeAttr(False)
         self.record(prim_path, what)
+
+    def _textured_radiance(self, emitter) -> TextureMap | None:
+        """An area emitter's bitmap ``radiance`` as a :class:`TextureMap` (its ``to_uv`` as a UsdTransform2d): the
+        shape becomes a mesh with a textured emissiveColor (renderer.md#textures); None for a constant radiance."""
+        p = _Params(self.mi, emitter)
+        img = p.bitmap("radiance")
+        if img is None:
+            return None
+        tex = TextureMap(img, "emitter radiance")
+        if (to_uv := p.uv_transform("radiance")) is not None:
+            tex.uv = st_transform(to_uv)
+        return tex
 
     def _area_light(self, shape, sid, cls, emitter) -> None:
         from pxr import UsdLux
