@@ -211,10 +211,28 @@ def st_transform(to_uv: np.ndarray) -> tuple | None:
     return (sx, sy), math.degrees(theta), tuple(float(x) for x in offset)
 
 
+def blackbody_rgb(mi, kelvin: float) -> np.ndarray:
+    """Linear sRGB [3] of Mitsuba's ``blackbody`` spectrum at ``kelvin``: Planck's spectral radiance in W / (m^2 sr nm)
+    (Mitsuba's units) integrated against Mitsuba's own CIE 1931 table, 360-830 nm, divided by the integral of y, then
+    XYZ -> linear sRGB: what a spectral variant's RGB film records for it (measured: within 0.4 % of a 4096-spp
+    ``scalar_spectral`` render at 3000 K). The RGB variants the converter loads cannot evaluate it at all."""
+    lam = np.arange(360.0, 831.0, 1.0)
+    h, c, k = 6.62607004e-34, 2.99792458e8, 1.38064852e-23
+    m = lam * 1e-9
+    with np.errstate(over="ignore"):
+        planck = 2.0 * h * c * c * m ** -5 / np.expm1(h * c / (m * k * max(float(kelvin), 1.0))) * 1e-9
+    cmf = np.array([np.asarray(ch, np.float64) for ch in mi.cie1931_xyz(mi.Float(lam))])  # [3, N]
+    xyz = cmf @ planck / cmf[1].sum()
+    to_srgb = np.array([[3.240479, -1.537150, -0.498535], [-0.969256, 1.875991, 0.041556],
+                        [0.055648, -0.204043, 1.057311]])
+    return np.maximum(to_srgb @ xyz, 0.0)
+
+
 class _Params:
     """Reads Mitsuba parameter values by name: bitmaps kept as :class:`TextureMap`, other textures by their mean."""
 
     def __init__(self, mi, obj, prefix: str = "") -> None:
+        self.mi = mi
         self.p = mi.traverse(obj)
         self.obj = obj
         self.prefix = prefix
@@ -248,9 +266,11 @@ class _Params:
 
     def rgb(self, name: str, default=(0.0, 0.0, 0.0)) -> np.ndarray:
         """Constant colour [3] of a parameter; a bitmap gives its linear mean, a procedural texture the mean of
-        its constant colours (noted in ``textured``)."""
+        its constant colours (noted in ``textured``), a ``blackbody`` spectrum its linear sRGB (:func:`blackbody_rgb`)."""
         k = self.prefix + name
-        if k + ".value" in self.p:
+        if k + ".temperature" in self.p:  # a BlackBodySpectrum: Mitsuba's RGB variants cannot evaluate it
+            v = blackbody_rgb(self.mi, float(_np(self.p[k + ".temperature"]).ravel()[0]))
+        elif k + ".value" in self.p:
             v = _np(self.p[k + ".value"]).ravel()
         elif k + ".data" in self.p:
             v = self.bitmap(name).reshape(-1, 3).mean(0)
