@@ -237,6 +237,7 @@ class _Params:
         self.obj = obj
         self.prefix = prefix
         self.textured: list[str] = []  # procedural textures replaced by their mean
+        self.unread: list[str] = []  # parameters present but of a kind the reader cannot evaluate (default used)
         self.bitmaps: dict[str, TextureMap] = {}
 
     def keys(self):
@@ -279,6 +280,8 @@ class _Params:
         else:
             nested = [x for x in self.p.keys() if x.startswith(k + ".") and x.endswith(".value")]
             if not nested:
+                if any(x.startswith(k + ".") for x in self.p.keys()):  # present, but nothing the reader knows
+                    self.unread.append(name)
                 return _np(default).copy()
             # a procedural texture (checkerboard, ...): the mean of its constant colours, each linear
             v = np.mean([np.resize(_np(self.p[x]).ravel(), 3) for x in nested], axis=0)
@@ -697,6 +700,8 @@ class StageConverter:
                    "specularColor": (0.0, 0.0, 0.0), "roughness": 1.0}
         for t in p.textured:
             notes.append(f"{cls}.{t} is a procedural texture: replaced by the mean of its colours (linear)")
+        for t in p.unread:
+            notes.append(f"{cls}.{t} is a texture the converter cannot evaluate: Mitsuba's default for it is used")
         converted = {id(v) for v in out.values()}
         for t, tm in p.bitmaps.items():
             if id(tm) not in converted:
@@ -782,7 +787,10 @@ class StageConverter:
         if emitter is not None:  # a mesh light, or a textured emitter on any shape (UsdLux lights have no texture)
             from nasset_reference_renderer.lights import MAX_MESH_LIGHT_TRIANGLES
 
-            emission = _Params(self.mi, emitter).rgb("radiance") if emission is None else emission
+            if emission is None:
+                p = _Params(self.mi, emitter)
+                emission = p.rgb("radiance")
+                self._unread(f"shape {sid}", p)
             n_tri = int(np.asarray(self.mi.traverse(shape)["faces"]).size // 3) if "faces" in self.mi.traverse(shape) else 0
             if n_tri > MAX_MESH_LIGHT_TRIANGLES:
                 self.warn(f"shape {sid}: area emitter on a {cls} of {n_tri} triangles written as emissiveColor: the "
@@ -985,7 +993,9 @@ class StageConverter:
     def _area_light(self, shape, sid, cls, emitter) -> None:
         from pxr import UsdLux
 
-        radiance = _Params(self.mi, emitter).rgb("radiance")
+        p = _Params(self.mi, emitter)
+        radiance = p.rgb("radiance")
+        self._unread(f"shape {sid}", p)
         bsdf_params = _Params(self.mi, shape.bsdf())
         if any(k.endswith("reflectance.value") and np.any(bsdf_params.rgb(k[: -len(".value")]) > 0) for k in bsdf_params.keys()):
             self.warn(f"shape {sid}: the reflectance of the emitting {cls} is dropped (it becomes a light)")
@@ -1061,6 +1071,13 @@ class StageConverter:
             else:
                 self.warn(f"emitter {eid}: {cls} is not convertible (directional, point, spot, area on "
                           "rectangle/sphere, constant, envmap are): skipped")
+            self._unread(f"emitter {eid}", p)
+
+    def _unread(self, what: str, p) -> None:
+        """Warn about parameters of ``p`` (a :class:`_Params`) present in the scene but of a kind the reader cannot
+        evaluate: their default was written (a light would otherwise go dark without a word)."""
+        for name in p.unread:
+            self.warn(f"{what}: {name} is a texture or spectrum the converter cannot evaluate: its default is used")
 
     def _envmap(self, em, eid, p) -> None:
         from pxr import Gf, Sdf, UsdLux

@@ -52,3 +52,24 @@ def test_blackbody_emitter_converts_to_its_rgb(tmp_path):
     rgb = light.GetIntensityAttr().Get() * np.array(light.GetColorAttr().Get())
     np.testing.assert_allclose(rgb, blackbody_rgb(load_mitsuba(), 3000.0), rtol=1e-5)
     assert rgb[0] > 700  # W / (m^2 sr nm) integrated: a 3000 K surface is bright
+
+
+def test_parameters_the_converter_cannot_evaluate_are_warned(tmp_path):
+    """A light's radiance (and a BSDF input) of a texture the reader knows nothing of (a ``mesh_attribute`` on an area
+    emitter and on a conductor's specular reflectance) used to be written as the default without a word: a dark
+    light. Now each is named in a warning."""
+    from nasset_converters.mitsuba.examples import write_ply
+
+    write_ply(tmp_path / "m.ply", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), np.array([[0, 1, 2]], np.int64))
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><integrator type="path"/><sensor type="perspective"><float name="fov" '
+                   'value="40"/><transform name="to_world"><lookat origin="0, 1, 4" target="0, 0, 0" up="0, 1, 0"/>'
+                   '</transform><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>'
+                   '</film></sensor><shape type="ply" id="m"><string name="filename" value="m.ply"/><bsdf '
+                   'type="roughconductor"><texture type="mesh_attribute" name="specular_reflectance"><string name="name" '
+                   'value="vertex_color"/></texture></bsdf></shape><shape type="rectangle" id="lamp"><emitter type="area">'
+                   '<texture type="mesh_attribute" name="radiance"><string name="name" value="vertex_color"/></texture>'
+                   '</emitter></shape></scene>')
+    text = "\n".join(convert_scene(xml, tmp_path / "o.usda", check_usd=False).warnings)
+    assert "shape lamp: radiance is a texture or spectrum the converter cannot evaluate" in text
+    assert "RoughConductor.specular_reflectance is a texture the converter cannot evaluate" in text
