@@ -52,7 +52,7 @@ def camera_sensor(mi, sensor, width: int, height: int):
         if "aperture_radius" in p:
             d |= {"type": "thinlens", "aperture_radius": float(np.asarray(p["aperture_radius"]).ravel()[0]),
                   "focus_distance": float(np.asarray(p["focus_distance"]).ravel()[0])}
-    elif type(sensor).__name__ == "ProjectiveCamera" and str(sensor).startswith("OrthographicCamera"):
+    elif str(sensor).startswith("OrthographicCamera"):  # Mitsuba's class name (its Python type is ProjectiveCamera)
         d["type"] = "orthographic"
     else:
         return None

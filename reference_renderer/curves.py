@@ -13,6 +13,10 @@ import numpy as np
 
 from .shaders.rna_fiber import TUBE_SIDES, tessellate
 
+#: triangles of one segment's prism (the sides' 2 x TUBE_SIDES, two capping fans of TUBE_SIDES - 2) and of one point's
+#: sphere (an icosphere subdivided once)
+TUBE_TRIANGLES = 4 * TUBE_SIDES - 4
+SPHERE_TRIANGLES = 80
 #: evaluation points per cubic segment (its end shared with the next one)
 SAMPLES_PER_SEGMENT = 4
 #: cubic bases, row-vector form p(t) = [t^3, t^2, t, 1] @ M @ [P0, P1, P2, P3], and their vstep
@@ -98,7 +102,7 @@ def tube_mesh(points, counts, widths) -> tuple[np.ndarray, np.ndarray, np.ndarra
     tubes = tessellate(points, counts, widths, TUBE_SIDES)
     n = TUBE_SIDES
     seg = tubes.tri_seg
-    local = np.arange(len(tubes.faces)) % (4 * n - 4)  # the face's place in its segment: 2n sides, then two caps
+    local = np.arange(len(tubes.faces)) % TUBE_TRIANGLES  # the face's place in its segment: 2n sides, then two caps
     axis = tubes.p1 - tubes.p0
     axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-300)
     centre = np.where((tubes.faces % (2 * n) < n)[..., None], tubes.p0[seg][:, None], tubes.p1[seg][:, None])  # [F,3,3]
@@ -117,6 +121,7 @@ def sphere_mesh(points, widths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     ico = trimesh.creation.icosphere(subdivisions=1, radius=1.0)
     unit, tri = np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int64)
+    assert len(tri) == SPHERE_TRIANGLES
     p = np.asarray(points, np.float64).reshape(-1, 3)
     r = 0.5 * np.asarray(widths, np.float64).ravel()
     verts = (p[:, None] + r[:, None, None] * unit[None]).reshape(-1, 3)

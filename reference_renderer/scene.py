@@ -23,7 +23,7 @@ from nasset_sdk.errors import NassetError, SceneError, error
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
-from .curves import BASES, CurveError, polylines, segment_count, sphere_mesh, tube_mesh
+from .curves import BASES, SPHERE_TRIANGLES, TUBE_TRIANGLES, CurveError, polylines, segment_count, sphere_mesh, tube_mesh
 from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
@@ -40,7 +40,6 @@ from .lights import (
     SphereLight,
 )
 from .sampling import box3, cross3, face_normals
-from .shaders.rna_fiber import TUBE_SIDES
 from .textures import WRAP_MODES, ImageTexture, Opacity, PrimvarColor, TexturedMaterial, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -1322,7 +1321,7 @@ class _Loader:
         if not (np.isfinite(widths).all() and (widths >= 0).all() and widths.max() <= MAX_WORLD_COORDINATE):
             raise self.err("SCENE_INVALID", "widths must be finite and >= 0", path, "widths")
         if tname == "Points":
-            if len(pts) * 80 > MAX_INSTANCED_TRIANGLES:
+            if len(pts) * SPHERE_TRIANGLES > MAX_INSTANCED_TRIANGLES:
                 raise self.err("SCENE_INVALID", f"{len(pts)} points: their spheres would exceed {MAX_INSTANCED_TRIANGLES} "
                                "triangles", path, "points")
             local, faces, nrm = sphere_mesh(pts, widths)
@@ -1332,16 +1331,13 @@ class _Loader:
             wrap = str(geom.GetWrapAttr().Get(self.time) or "nonperiodic")
             if kind not in ("linear", "cubic") or basis not in BASES or wrap not in ("nonperiodic", "periodic", "pinned"):
                 raise self.err("SCENE_UNSUPPORTED", f"BasisCurves type {kind!r}, basis {basis!r}, wrap {wrap!r}", path, "basis")
-            if segment_count(counts, kind, basis, wrap) * (4 * TUBE_SIDES - 4) > MAX_INSTANCED_TRIANGLES:
+            if segment_count(counts, kind, basis, wrap) * TUBE_TRIANGLES > MAX_INSTANCED_TRIANGLES:  # >= the exact count
                 raise self.err("SCENE_INVALID", f"{len(counts)} curves: their tubes would exceed {MAX_INSTANCED_TRIANGLES} "
                                "triangles", path, "curveVertexCounts")
             try:
                 p, c, w = polylines(pts, counts, widths, kind, basis, wrap)
             except CurveError as exc:
                 raise self.err("SCENE_INVALID", f"curveVertexCounts do not fit: {exc}", path, "curveVertexCounts") from None
-            if (len(p) - len(c)) * (4 * TUBE_SIDES - 4) > MAX_INSTANCED_TRIANGLES:
-                raise self.err("SCENE_INVALID", f"{len(p) - len(c)} curve segments: their tubes would exceed "
-                               f"{MAX_INSTANCED_TRIANGLES} triangles", path, "points")
             local, faces, nrm = tube_mesh(p, c, w)
         if not len(faces):
             self.warn(f"{tname} of zero width or length skipped", path)

@@ -207,25 +207,21 @@ def _material_slots(bpy, folder: Path, size: int) -> None:
     _world(bpy)
 
 
+def _camera_objects(bpy, box_y: float = 0.9) -> None:
+    """A floor, a ball and a box (at ``box_y``) under a sun and a sky (the camera scenes)."""
+    _floor(bpy)
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Clay", **{"Color": (0.8, 0.4, 0.2)}), smooth=True, radius=0.3,
+         location=(0.3, 0.0, 0.3))
+    _add(bpy, "cube", "Box", _material(bpy, "Teal", **{"Color": (0.1, 0.6, 0.6)}), size=0.4, location=(-0.5, box_y, 0.2))
+    _sun(bpy)
+    _world(bpy)
+
+
 def _lens_shift(bpy, folder: Path, size: int) -> None:
     # a camera with lens shift (x 0.15, y -0.1 of the frame's width) over a floor and two balls
     _new_scene(bpy, size, (0.0, -2.8, 1.2), (0.0, 0.0, 0.4))
     bpy.context.scene.camera.data.shift_x, bpy.context.scene.camera.data.shift_y = 0.15, -0.1
-    _floor(bpy)
-    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Clay", **{"Color": (0.8, 0.4, 0.2)}), smooth=True, radius=0.3,
-         location=(0.3, 0.0, 0.3))
-    _add(bpy, "cube", "Box", _material(bpy, "Teal", **{"Color": (0.1, 0.6, 0.6)}), size=0.4, location=(-0.5, 0.3, 0.2))
-    _sun(bpy)
-    _world(bpy)
-
-
-def _camera_objects(bpy) -> None:
-    _floor(bpy)
-    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Clay", **{"Color": (0.8, 0.4, 0.2)}), smooth=True, radius=0.3,
-         location=(0.3, 0.0, 0.3))
-    _add(bpy, "cube", "Box", _material(bpy, "Teal", **{"Color": (0.1, 0.6, 0.6)}), size=0.4, location=(-0.5, 0.9, 0.2))
-    _sun(bpy)
-    _world(bpy)
+    _camera_objects(bpy, box_y=0.3)
 
 
 def _orthographic(bpy, folder: Path, size: int) -> None:

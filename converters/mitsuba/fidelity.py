@@ -119,36 +119,33 @@ def _orientation(folder: Path, size: int) -> str:
             + SKY + "</scene>")
 
 
+GREY_DIFFUSE = '<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>'
+
+
+def _objects(box_z: float = -0.9, floor_bsdf: str = GREY_DIFFUSE) -> str:
+    """A floor, a ball and a box (at ``box_z``) under a sun and a sky (the camera scenes)."""
+    return (FLOOR.format(bsdf=floor_bsdf)
+            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="0"/><float name="radius" value="0.3"/>'
+              '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.4, 0.2"/></bsdf></shape>\n'
+            + '<shape type="cube" id="box"><transform name="to_world"><scale value="0.2"/><translate x="-0.5" y="0.2" '
+              f'z="{box_z:g}"/></transform><bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.6, 0.6"/></bsdf></shape>\n'
+            + SUN + SKY + "</scene>")
+
+
 def _lens_shift(folder: Path, size: int) -> str:
     # the sensor's principal point moved by 0.15 film widths and -0.1 film heights, over a floor and two shapes
     return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1.4, 2.8", size=size).replace(
                 '<float name="fov" value="40"/>', '<float name="fov" value="40"/><float name="principal_point_offset_x" '
                 'value="0.15"/><float name="principal_point_offset_y" value="-0.1"/>')
-            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
-            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="0"/><float name="radius" value="0.3"/>'
-              '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.4, 0.2"/></bsdf></shape>\n'
-            + '<shape type="cube" id="box"><transform name="to_world"><scale value="0.2"/><translate x="-0.5" y="0.2" '
-              'z="-0.3"/></transform><bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.6, 0.6"/></bsdf></shape>\n'
-            + SUN + SKY + "</scene>")
-
-
-def _objects() -> str:
-    """A floor, a ball and a box under a sun and a sky (the camera scenes)."""
-    return (FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>')
-            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="0"/><float name="radius" value="0.3"/>'
-              '<bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.4, 0.2"/></bsdf></shape>\n'
-            + '<shape type="cube" id="box"><transform name="to_world"><scale value="0.2"/><translate x="-0.5" y="0.2" '
-              'z="-0.9"/></transform><bsdf type="diffuse"><rgb name="reflectance" value="0.1, 0.6, 0.6"/></bsdf></shape>\n'
-            + SUN + SKY + "</scene>")
+            + _objects(box_z=-0.3))
 
 
 def _orthographic(folder: Path, size: int) -> str:
     # an orthographic sensor whose to_world scale (1.3) sets the view's half-width, looking down at 30 degrees
     sensor = ('<sensor type="orthographic"><transform name="to_world"><scale x="1.3" y="1.3"/>'
               '<lookat origin="0.6, 1.6, 2.6" target="0, 0.3, 0" up="0, 1, 0"/></transform>')
-    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1, 2", size=size).split("<sensor")[0] + sensor
-            + HEADER.format(depth=3, rfilter=BOX, origin="0, 1, 2", size=size).split("</transform>", 1)[1]
-            + _objects())
+    head = HEADER.format(depth=3, rfilter=BOX, origin="0, 1, 2", size=size)
+    return head.split("<sensor")[0] + sensor + head.split("</transform>", 1)[1] + _objects()
 
 
 def _depth_of_field(folder: Path, size: int) -> str:
@@ -160,7 +157,7 @@ def _depth_of_field(folder: Path, size: int) -> str:
         '<float name="focus_distance" value="2.4"/>')
     checker = ('<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="floor.png"/>'
                '</texture></bsdf>')
-    return head + _objects().replace('<bsdf type="diffuse"><rgb name="reflectance" value="0.5, 0.5, 0.5"/></bsdf>', checker, 1)
+    return head + _objects(floor_bsdf=checker)
 
 
 def _pbr_textures(folder: Path, size: int) -> str:
