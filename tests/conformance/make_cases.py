@@ -421,6 +421,16 @@ def b_other_kind(asset):
     return build
 
 
+def b_8dna_near(ctx):
+    """A small SphereLight (out of view) about one asset radius above it: its distance to u_i spans 3x across the
+    box; the instance rotated, scaled and moved, the camera close: the neural term's light samples from u_i in world
+    space."""
+    ctx.camera(eye=(0.0, 0.3, 2.2), target=(-0.1, -0.05, 0.0))
+    ctx.floor()
+    ctx.sb.sphere_light("Bulb", (0.25, 0.7, 0.2), 0.12, 20.0, color=(1.0, 0.85, 0.7))
+    ctx.asset("Asset", "8dna.usdc", chain(rotate((0, 1, 0), 40.0), scale(0.8, 0.8, 0.8), translate(-0.15, -0.1, 0.0)))
+
+
 CASES = [
     Case("rna_distant_fp16", "rna surface asset (fp16 triplane, random networks) on a floor under a delta DistantLight: "
          "triplane lookup, decoder input order, both transport branches, shadow on the floor", b_distant("rna_rand.usdc")),
@@ -464,6 +474,8 @@ CASES = [
     Case("neupress_direct", "lone neupress surface asset under a delta DistantLight, no other objects (low noise): the "
          "subsurface network's w_i input and the GGX boundary reflection, its lobe width", b_neupress_direct, spp=256, ref_spp=4096),
     Case("8dna_distant", "8dna surface asset on a floor under a DistantLight", b_other_kind("8dna.usdc")),
+    Case("8dna_near", "8dna surface asset (rotated, scaled, moved) next to a small SphereLight: the near field, light "
+         "samples from the flow's u_i in world space, MIS with the flow's direction", b_8dna_near, spp=256, ref_spp=8192),
 ]
 
 

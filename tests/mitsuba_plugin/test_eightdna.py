@@ -146,15 +146,16 @@ def test_direct_lobe_matches_sdk(mi, pair, rng):
     np.testing.assert_allclose(_np(ws), w_ref, atol=2e-3)  # (its pdf is direct_pdf, checked above)
 
 
-def test_conformance_case_8dna_distant(tmp_path):
-    """The plugin's render of 8dna_distant (an 8dna asset on a floor under a DistantLight, max_depth 5)
-    passes through the ``nasset conformance`` machinery: reference by the reference renderer at 2048 spp,
-    tolerance twice the largest of its own 64-spp noise runs."""
+@pytest.mark.parametrize("name", ["8dna_distant", "8dna_near"])
+def test_conformance_case_8dna(tmp_path, name):
+    """The plugin's render of 8dna_distant (an 8dna asset on a floor under a DistantLight, max_depth 5) and of
+    8dna_near (the asset transformed, next to a small SphereLight) passes through the ``nasset conformance``
+    machinery: references by the reference renderer, tolerances from its own noise runs (spec/conformance.md)."""
     import sys
 
     from nasset_sdk.conformance import find_suite, load_cases, run_case
 
-    (case,) = load_cases(find_suite(), ["8dna_distant"])
+    (case,) = load_cases(find_suite(), [name])
     template = (f"{sys.executable} -m nasset_mitsuba_plugin.render {{scene}} {{out}} --spp {{spp}} --width {{width}}"
                 " --height {height} --seed {seed}")
     row = run_case(case, template, tmp_path, seed=0, timeout=300)

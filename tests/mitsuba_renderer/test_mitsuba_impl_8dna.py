@@ -121,9 +121,10 @@ def test_cubemap_is_continuous_across_seams():
         assert np.ptp(vals, axis=0).max() < 1e-4, c
 
 
-def test_8dna_conformance_case_via_cli(tmp_path):
+@pytest.mark.parametrize("case", ["8dna_distant", "8dna_near"])
+def test_8dna_conformance_case_via_cli(tmp_path, case):
     tpl = f"{sys.executable} -m nasset_mitsuba_renderer.render {{scene}} {{out}} {{spp}} --width {{width}} --height {{height}} --seed {{seed}}"
-    res = subprocess.run([sys.executable, "-m", "nasset_sdk.cli", "conformance", "--renderer", tpl, "--cases", "8dna_distant", "--json",
+    res = subprocess.run([sys.executable, "-m", "nasset_sdk.cli", "conformance", "--renderer", tpl, "--cases", case, "--json",
                           "--workdir", str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=300)
     report = json.loads(res.stdout)
     assert res.returncode == 0 and report["ok"], res.stdout[-2000:] + res.stderr[-2000:]

@@ -252,6 +252,49 @@ def eightdna_direction_flipped():
     EightDnaEvaluator.pdf_rgb_sampled = lambda self, fs, rows: orig_at(self, fs, rows, -fs.wi[np.asarray(rows, np.int64)])
 
 
+def eightdna_u_untransformed():
+    """8dna: the flow's u_i used in object space (not mapped by the instance transform) for its light samples, shadow
+    rays and continuations."""
+    from nasset_reference_renderer.shaders import common
+
+    common.Frames.point_to_world = lambda self, p, inst: np.array(p, np.float64)
+
+
+def eightdna_light_at_xo():
+    """8dna: the neural term's light samples drawn as seen from the hit point x_o instead of u_i (direction, distance,
+    radiance and pdf of a near light taken where a distant light would be); shadow rays still leave u_i."""
+    from nasset_reference_renderer.shaders import common, eightdna
+
+    orig_vertex, orig_world = eightdna.EightdnaShader.vertex, common.Frames.point_to_world
+
+    def vertex(self, r, idx, x, *a, **k):
+        x_o = x[r]
+        u_seen = []
+
+        def point_to_world(frames, p, inst):
+            u = orig_world(frames, p, inst)
+            u_seen.append(u)
+            return u
+
+        lights = self.integ.scene.lights
+        samplers = [light.sample for light in lights]
+
+        def at_xo(sample):
+            return lambda p, u: sample(x_o if any(p is s for s in u_seen) else p, u)
+
+        common.Frames.point_to_world = point_to_world
+        for light, sample in zip(lights, samplers, strict=True):
+            light.sample = at_xo(sample)
+        try:
+            return orig_vertex(self, r, idx, x, *a, **k)
+        finally:
+            common.Frames.point_to_world = orig_world
+            for light, sample in zip(lights, samplers, strict=True):
+                light.sample = sample
+
+    eightdna.EightdnaShader.vertex = vertex
+
+
 def fiber_h_sign():
     """rna fiber: the cross-fiber offset h handed to the network with the wrong sign."""
     from nasset_reference_renderer.shaders import rna_fiber as neural_fiber
@@ -277,7 +320,8 @@ MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, 
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
-                                   eightdna_pdf_scale, eightdna_direction_flipped,
+                                   eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
+                                   eightdna_light_at_xo,
                                    fiber_h_sign, fiber_exempt_stops_search)}
 
 
