@@ -253,6 +253,10 @@ def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFA
     max_as = ADDRESS_SPACE_BASE + 4 * size
     env = dict(os.environ)
     env.setdefault("PXR_WORK_THREAD_LIMIT", "1")
+    # crate's default zero-copy mapping: an uncompressed array's length comes from its header and none of its
+    # bytes is read (with USDC_USE_PREAD every array would be read whole: a reader that loads only the
+    # required components would pay for the optional ones in its probe)
+    env.pop("USDC_USE_PREAD", None)
     run = run_bounded([sys.executable, "-c", _CHILD, str(p), level], max_as=max_as, timeout=timeout, env=env)
     if run.status == "spawn-failed":
         return ProbeResult(False, "spawn-failed", run.stderr.decode("utf-8", "replace"), None, run.seconds)
