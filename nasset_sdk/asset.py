@@ -315,6 +315,9 @@ def atomic_export(layer, target: Path) -> None:
             os.close(dir_fd)
     except OSError as exc:
         raise error("WRITE_FAILED", f"{exc.strerror or exc}", file=str(target)) from None
+    from .safeopen import trust
+
+    trust(target)  # written from checked data by this process: reopened without a probe while unchanged
 
 
 # ----------------------------------------------------------------------------------------
@@ -395,13 +398,16 @@ class Asset:
         *,
         load: str | Iterable[str] = "required",
         quality: dict[str, str] | str | None = None,
-        probe: bool = False,
+        probe: bool | None = None,
     ) -> "Asset":
         """Open lazily (``Usd.Stage.LoadNone``) and load ``load``: 'required', 'all', 'none' or names.
 
         ``quality`` picks a quality variant ('hq', or {component: variant}) without editing the file.
-        ``probe`` first reads the whole file in a child process (nasset_sdk.safeopen): a corrupted
-        crate that would crash usd-core raises FILE_UNREADABLE instead (costs ~0.4 s + one read).
+        The file is untrusted: it is first read whole in a child process (nasset_sdk.safeopen, ~0.4 s +
+        one read), so a corrupted crate that would crash usd-core raises FILE_UNREADABLE and one that
+        decodes beyond its bounds ARRAY_TOO_LARGE, instead of taking this process down. ``probe=None``
+        skips that for a file this process wrote or already probed, unchanged since; ``True`` always
+        probes; ``False`` never does (the caller trusts the file with this process's memory).
         """
         register_schema()
         from pxr import Tf, Usd
@@ -411,13 +417,15 @@ class Asset:
         p = Path(path)
         if not os.path.isfile(outer_file(str(p))):  # a file, or a layer inside a package: 'scene.usdz[a.usdc]'
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
-        if probe:
-            from .safeopen import ensure_readable
+        from .safeopen import ensure_readable, ensure_safe
 
+        if probe:
             ensure_readable(p)
+        elif probe is None:
+            ensure_safe(p)
         try:
             # every sublayer / reference / payload / clip / asset path is checked before anything composes
-            stage = open_checked_stage(p, Usd.Stage.LoadNone)
+            stage = open_checked_stage(p, Usd.Stage.LoadNone, probe=probe is not False)
         except Tf.ErrorException as exc:
             raise error("FILE_UNREADABLE", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
         if stage is None:

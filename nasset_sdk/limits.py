@@ -28,6 +28,8 @@ MAX_ARRAY_ELEMENTS = 1 << 24  # any other array-valued field (extent, names, ...
 #: Reading a file may decode at most this many array bytes beyond DECODE_RATIO x its size (crate compresses
 #: integer and float arrays: a 34 KB file can otherwise decode to GBs).
 DECODE_BASE_BYTES = 64 << 20
+#: Dictionaries and lists inside one field nest at most this deep (a reader walks them).
+MAX_VALUE_DEPTH = 32
 DECODE_RATIO = 16
 _ARRAY_BOUNDS = {
     "points": MAX_GEOMETRY_POINTS, "normals": MAX_GEOMETRY_POINTS, "widths": MAX_GEOMETRY_POINTS,

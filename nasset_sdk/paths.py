@@ -322,14 +322,20 @@ def _is_asset_layer(layer) -> bool:
     return spec is not None and spec.typeName == "NeuralAsset"
 
 
-def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers: int = MAX_LAYERS) -> list[PathProblem]:
+def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers: int = MAX_LAYERS,
+                     probe: bool = True) -> list[PathProblem]:
     """Every path problem reachable from the layer file ``path``, found without composing anything.
 
     Asset layers (defaultPrim a NeuralAsset) keep every path inside their own folder; a scene
     (``scene=True``) may reference local USD files anywhere, and each asset it reaches is checked
-    as an asset. Only layers whose own path passed are opened, each alone.
+    as an asset. Only layers whose own path passed are opened, each alone, and each only after its
+    guarded probe passed (``probe``; :func:`nasset_sdk.safeopen.ensure_safe`, which raises
+    ``FILE_UNREADABLE`` / ``ARRAY_TOO_LARGE`` naming the layer): a layer that would crash usd-core,
+    or decode far beyond its size, is never opened in this process.
     """
     from pxr import Sdf
+
+    from .safeopen import ensure_safe
 
     root = os.path.realpath(os.fspath(path))
     problems: list[PathProblem] = []
@@ -348,6 +354,8 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
         if why:
             problems.append(PathProblem("sublayer", identifier, why, root))
             continue
+        if probe and os.path.isfile(outer_file(identifier)):
+            ensure_safe(identifier)
         try:
             layer = Sdf.Layer.FindOrOpen(identifier)
         except Exception:  # noqa: BLE001 - composition reports a layer that does not open
@@ -382,12 +390,13 @@ def ensure_regular_file(path: str | os.PathLike, *, code: str = "FILE_NOT_FOUND"
         raise error("FILE_UNREADABLE" if code == "FILE_NOT_FOUND" else code, f"the path {why[len('resolves to '):]}", file=p)
 
 
-def open_checked_stage(path: str | os.PathLike, load=None, *, scene: bool = False):
-    """Compose ``path`` only after :func:`check_layer_tree` found nothing; raises ASSET_PATH_ESCAPES (SCENE_INVALID for scenes)."""
+def open_checked_stage(path: str | os.PathLike, load=None, *, scene: bool = False, probe: bool = True):
+    """Compose ``path`` only after :func:`check_layer_tree` found nothing (every layer probed first unless ``probe``
+    is False); raises ASSET_PATH_ESCAPES (SCENE_INVALID for scenes)."""
     from pxr import Sdf, Usd
 
     ensure_regular_file(path, code="SCENE_INVALID" if scene else "FILE_NOT_FOUND")
-    problems = check_layer_tree(path, scene=scene)
+    problems = check_layer_tree(path, scene=scene, probe=probe)
     if problems:
         raise problems_error(problems, path, code="SCENE_INVALID" if scene else "ASSET_PATH_ESCAPES")
     layer = Sdf.Layer.FindOrOpen(os.fspath(path))

@@ -47,12 +47,13 @@ class ProbeResult:
     returncode: int | None
     seconds: float
     code: str = "FILE_UNREADABLE"  # the error code a failed probe maps to
+    measured: bool = False  # the child measured a bound (detail says which field); USD itself read the file
 
     def message(self) -> str:
+        if self.measured:
+            return self.detail
         if self.status == "memory":
             return f"reading it needs more memory than its bound ({self.detail}): arrays decompress beyond the format bounds"
-        if self.code == "ARRAY_TOO_LARGE":
-            return self.detail
         if self.status == "crashed":
             return f"USD crashed while reading it ({self.detail})"
         if self.status == "timeout":
@@ -61,57 +62,26 @@ class ProbeResult:
 
 
 _CHILD = r"""
-import json, sys
+import json, os, sys
+def _why(exc):  # the last informative line of a USD error (its message ends in a line holding a quote)
+    lines = [l.strip() for l in str(exc).splitlines() if len(l.strip(" '\t")) > 1]
+    return (lines or [type(exc).__name__])[-1][:300]
 def main(path, level):
     from pxr import Sdf, Tf, Usd
     import nasset_sdk  # registers the schema so the stage composes as in the parent
     try:
         layer = Sdf.Layer.FindOrOpen(path)
     except Exception as exc:
-        return {"ok": False, "detail": (str(exc).strip().splitlines() or [type(exc).__name__])[-1][:300]}
+        return {"ok": False, "detail": _why(exc)}
     if layer is None:
         return {"ok": False, "detail": "not a USD layer"}
     if level == "full":
-        from nasset_sdk.limits import array_bound, decoded_bound
-        from nasset_sdk.paths import has_external, strip_external
-        import os
-        total = [0]
-        big = []
-        def measure(spec_path, key, value):
-            if isinstance(value, dict):  # metadata dictionaries nest arrays too
-                for v in value.values():
-                    measure(spec_path, key, v)
-                return
-            tname = type(value).__name__
-            if not tname.endswith("Array") or tname == "AssetPathArray":
-                return
-            n = len(value)
-            lanes = int(tname[3]) if tname[:3] in ("Vec", "Qua") and tname[3:4].isdigit() else 16 if tname.startswith("Matrix4") else 1
-            scalar = tname[4:] if tname.startswith("Vec") else tname
-            item = lanes * (2 if "Half" in scalar or scalar[:1] == "h" else 1 if "UChar" in scalar or "Bool" in scalar
-                            else 8 if "Double" in scalar or "Int64" in scalar or scalar[:1] == "d" else 4)
-            total[0] += n * item
-            name = spec_path.name if spec_path.IsPropertyPath() else key
-            if n > array_bound(name, key):
-                big.append(f"{spec_path.StripAllVariantSelections()} {key}: {n} elements > {array_bound(name, key)}")
+        from nasset_sdk.paths import has_external, outer_file, strip_external
+        from nasset_sdk.safeopen import measure_layer
         try:
-            def visit(spec_path):
-                spec = layer.GetObjectAtPath(spec_path)
-                if spec is None:
-                    return
-                for key in spec.ListInfoKeys():
-                    try:
-                        measure(spec_path, key, spec.GetInfo(key))
-                    except TypeError:  # a value type without a Python converter (read in C++ all the same)
-                        pass
-                if spec_path.IsPropertyPath():
-                    for t in layer.ListTimeSamplesForPath(spec_path):
-                        measure(spec_path, "timeSamples", layer.QueryTimeSample(spec_path, t))
-            layer.Traverse(Sdf.Path.absoluteRootPath, visit)
-            bound = decoded_bound(os.path.getsize(path))
-            if big or total[0] > bound:
-                why = big[0] if big else f"arrays decode to {total[0]} bytes > {bound} (bound for a {os.path.getsize(path)}-byte file)"
-                return {"ok": False, "code": "ARRAY_TOO_LARGE", "detail": why[:300]}
+            over = measure_layer(layer, os.path.getsize(outer_file(path)))
+            if over:
+                return {"ok": False, "code": over[0], "detail": over[1][:300]}
             # never compose arcs to other files here: the parent checks their paths, and a v0.1 asset has none
             stage = Usd.Stage.Open(strip_external(layer) if has_external(layer) else layer, Usd.Stage.LoadAll)
             if stage is None:
@@ -119,12 +89,127 @@ def main(path, level):
             for prim in stage.TraverseAll():
                 prim.GetAttributes()
         except Exception as exc:
-            return {"ok": False, "detail": (str(exc).strip().splitlines() or [type(exc).__name__])[-1][:300]}
+            return {"ok": False, "detail": _why(exc)}
     return {"ok": True, "detail": ""}
 out = main(sys.argv[1], sys.argv[2])
 sys.stdout.write("\n@@probe@@" + json.dumps(out) + "\n")
 sys.stdout.flush()
 """
+
+
+#: Bytes one decoded ``std::string`` costs besides its characters (libstdc++), and one token or pointer.
+_STRING_BYTES = 32
+_POINTER_BYTES = 8
+_LIST_OP_PARTS = ("explicitItems", "addedItems", "prependedItems", "appendedItems", "deletedItems", "orderedItems")
+
+
+class _TooDeep(Exception):
+    pass
+
+
+def _text_bytes(s: str) -> int:
+    return _STRING_BYTES + (len(s) if s.isascii() else len(s.encode("utf-8", "surrogatepass")))
+
+
+def _item_bytes(type_name: str) -> int:
+    """Bytes of one element of a numeric ``Vt``/``Sdf`` array type (``Vec3fArray`` -> 12, ``HalfArray`` -> 2)."""
+    lanes = (int(type_name[3]) if type_name[:3] in ("Vec", "Qua") and type_name[3:4].isdigit()
+             else 16 if type_name.startswith("Matrix4") else 9 if type_name.startswith("Matrix3") else 1)
+    scalar = type_name[4:] if type_name.startswith("Vec") else type_name
+    width = (2 if "Half" in scalar or scalar[:1] == "h" else 1 if "UChar" in scalar or "Bool" in scalar
+             else 8 if "Double" in scalar or "Int64" in scalar or scalar[:1] == "d" or type_name.startswith("Matrix") else 4)
+    return lanes * width
+
+
+def decoded_bytes(value, depth: int = 0) -> int:
+    """Bytes usd-core holds for a field ``value`` once decoded.
+
+    A crate file stores each distinct string once (in a compressed table) and refers to it by index,
+    so every element of a string array, every list-op item and every dictionary entry that names it
+    holds a copy of its own: strings count their length plus a ``std::string`` wherever they occur.
+    Numeric arrays count their element width; tokens (interned) a pointer each. Raises
+    :class:`_TooDeep` for dictionaries or lists nested deeper than ``limits.MAX_VALUE_DEPTH``."""
+    from .limits import MAX_VALUE_DEPTH
+
+    if depth > MAX_VALUE_DEPTH:
+        raise _TooDeep
+    if isinstance(value, str):
+        return _text_bytes(value)
+    if isinstance(value, (bytes, bytearray)):
+        return len(value)
+    if isinstance(value, dict):
+        return sum(_text_bytes(str(k)) + decoded_bytes(v, depth + 1) for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return sum(_POINTER_BYTES + decoded_bytes(v, depth + 1) for v in value)
+    name = type(value).__name__
+    if name == "StringArray":
+        return sum(_text_bytes(s) for s in value)
+    if name == "TokenArray":
+        return _POINTER_BYTES * len(value)
+    if name == "AssetPathArray":  # authored, evaluated and resolved path strings
+        return sum(2 * _STRING_BYTES + _text_bytes(a.path) for a in value)
+    if name == "AssetPath":
+        return 2 * _STRING_BYTES + _text_bytes(value.path)
+    if name.endswith("ListOp"):
+        return sum(decoded_bytes(list(getattr(value, part)), depth + 1) for part in _LIST_OP_PARTS)
+    if name in ("Reference", "Payload"):
+        return _text_bytes(value.assetPath) + _text_bytes(str(value.primPath))
+    if name.endswith("Array"):
+        return len(value) * _item_bytes(name)
+    return _POINTER_BYTES
+
+
+def measure_layer(layer, file_bytes: int) -> tuple[str, str] | None:
+    """(code, why) when a field of ``layer`` (every spec, every variant, every time sample) is an array above its
+    bound, nests deeper than ``MAX_VALUE_DEPTH``, or all fields decode to more than ``decoded_bound(file_bytes)``
+    bytes; None when it is within the bounds. Reads every value: run it in the probe child only."""
+    from pxr import Sdf
+
+    from .limits import MAX_VALUE_DEPTH, array_bound, decoded_bound
+
+    total = 0
+    largest = (0, "")
+    problems: list[tuple[str, str]] = []
+
+    def measure(spec_path, key, value):
+        nonlocal total, largest
+        where = f"{spec_path.StripAllVariantSelections()} {key}"
+        name = type(value).__name__
+        if name.endswith("Array"):
+            n = len(value)
+            bound = array_bound(spec_path.name if spec_path.IsPropertyPath() else key, key)
+            if n > bound:
+                problems.append(("ARRAY_TOO_LARGE", f"{where}: {n} elements > {bound}"))
+                return
+        try:
+            size = decoded_bytes(value)
+        except _TooDeep:
+            problems.append(("FILE_UNREADABLE", f"{where}: dictionaries or lists nested more than {MAX_VALUE_DEPTH} levels deep"))
+            return
+        total += size
+        largest = max(largest, (size, where))
+
+    def visit(spec_path):
+        spec = layer.GetObjectAtPath(spec_path)
+        if spec is None or problems:
+            return
+        for key in spec.ListInfoKeys():
+            try:
+                measure(spec_path, key, spec.GetInfo(key))
+            except TypeError:  # a value type without a Python converter (read in C++ all the same)
+                pass
+        if spec_path.IsPropertyPath():
+            for t in layer.ListTimeSamplesForPath(spec_path):
+                measure(spec_path, "timeSamples", layer.QueryTimeSample(spec_path, t))
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    if problems:
+        return problems[0]
+    bound = decoded_bound(file_bytes)
+    if total > bound:
+        return ("ARRAY_TOO_LARGE", f"arrays and strings decode to {total} bytes > {bound} (bound for a {file_bytes}-byte file); "
+                f"largest: {largest[1]}, {largest[0]} bytes")
+    return None
 
 
 PR_SET_PDEATHSIG = 1
@@ -160,11 +245,18 @@ def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFA
     """Open ``path`` with USD in a child process; never raises for a bad file."""
     if level not in LEVELS:
         raise error("USAGE", f"probe level must be one of {LEVELS}, got {level!r}")
+    from .paths import outer_file
+
     p = Path(path)
-    size = p.stat().st_size if p.is_file() else 0
+    outer = outer_file(os.fspath(p))
+    size = os.path.getsize(outer) if os.path.isfile(outer) else 0
     max_as = ADDRESS_SPACE_BASE + 4 * size
     env = dict(os.environ)
     env.setdefault("PXR_WORK_THREAD_LIMIT", "1")
+    # crate's default zero-copy mapping: an uncompressed array's length comes from its header and none of its
+    # bytes is read (with USDC_USE_PREAD every array would be read whole: a reader that loads only the
+    # required components would pay for the optional ones in its probe)
+    env.pop("USDC_USE_PREAD", None)
     run = run_bounded([sys.executable, "-c", _CHILD, str(p), level], max_as=max_as, timeout=timeout, env=env)
     if run.status == "spawn-failed":
         return ProbeResult(False, "spawn-failed", run.stderr.decode("utf-8", "replace"), None, run.seconds)
@@ -191,7 +283,7 @@ def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFA
     except (ValueError, IndexError):
         return ProbeResult(False, "crashed", "unreadable probe output", run.returncode, seconds)
     return ProbeResult(bool(result.get("ok")), "ok" if result.get("ok") else "error", str(result.get("detail", "")),
-                       run.returncode, seconds, str(result.get("code") or "FILE_UNREADABLE"))
+                       run.returncode, seconds, str(result.get("code") or "FILE_UNREADABLE"), "code" in result)
 
 
 def _kill_group(proc) -> None:
@@ -218,14 +310,54 @@ def _out_of_memory(returncode, err: bytes) -> bool:
 
 
 def ensure_readable(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFAULT_TIMEOUT_S) -> ProbeResult:
-    """Raise ``FILE_NOT_FOUND`` / ``FILE_UNREADABLE`` unless the probe of ``path`` passes."""
+    """Raise ``FILE_NOT_FOUND`` / ``FILE_UNREADABLE`` / ``ARRAY_TOO_LARGE`` unless the probe of ``path`` passes
+    (a file, or a layer inside a package: ``a.usdz[b.usdc]``)."""
+    from .paths import outer_file
+
     p = Path(path)
-    if not p.is_file():
+    if not os.path.isfile(outer_file(os.fspath(p))):
         raise error("FILE_NOT_FOUND", "no such file", file=str(p))
     result = probe(p, level=level, timeout=timeout)
     if not result.ok:
         raise error(result.code, result.message(), file=str(p))
     return result
+
+
+#: Identities of the files this process wrote, or whose full probe passed: opened again without a probe.
+_SAFE: set[tuple] = set()
+
+
+def _identity(path: str | os.PathLike) -> tuple | None:
+    """(device, inode, size, mtime, ctime, inner path) of the file behind ``path``; None if it cannot be stat'ed.
+    Any change to the file (a rewrite, a replacement, a different link target) changes it."""
+    from .paths import outer_file
+
+    s = os.fspath(path)
+    outer = outer_file(s)
+    try:
+        st = os.stat(outer)
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns, s[len(outer):])
+
+
+def trust(path: str | os.PathLike) -> None:
+    """Record that this process just wrote ``path``: :func:`ensure_safe` opens it without a probe while it is unchanged."""
+    key = _identity(path)
+    if key is not None:
+        _SAFE.add(key)
+
+
+def ensure_safe(path: str | os.PathLike, *, timeout: float = DEFAULT_TIMEOUT_S) -> None:
+    """Probe ``path`` at level ``full`` (:func:`ensure_readable`) before it is opened in this process, unless this
+    process wrote it (:func:`trust`) or already probed it, unchanged since. Every reader of an untrusted layer calls
+    this first (spec/security.md#bounds)."""
+    key = _identity(path)
+    if key is not None and key in _SAFE:
+        return
+    ensure_readable(path, level="full", timeout=timeout)
+    if key is not None:
+        _SAFE.add(key)
 
 
 @dataclass(frozen=True)

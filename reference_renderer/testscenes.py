@@ -192,7 +192,10 @@ class SceneBuilder:
         return prim
 
     def write(self, path) -> str:
+        from nasset_sdk.safeopen import trust
+
         self.stage.GetRootLayer().Export(str(path))
+        trust(path)  # this process wrote it: rendered without a probe while unchanged
         return str(path)
 
 

@@ -39,6 +39,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     usd_check,
 )
 from nasset_sdk.errors import NassetError, UsageError, error
+from nasset_sdk.safeopen import trust
 
 from . import Z_UP_TO_Y_UP
 from .scene import render_visible
@@ -535,6 +536,7 @@ class _BlenderConverter(StageConverter):
                                      "resolution": Gf.Vec2i(*self.result.resolution)},
         }
         self.stage.GetRootLayer().Save()
+        trust(self.stage.GetRootLayer().realPath)  # this process wrote it: rendered without a probe while unchanged
         if self.check_usd:
             self.result.usd_checks = usd_check(self.output)
         return self.result

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.safeopen import trust
 
 from . import analytic
 from .scene import camera_medium, image_integrator, integrator_depths, refuse_emitter
@@ -1169,6 +1170,7 @@ class StageConverter:
                                      "resolution": Gf.Vec2i(*self.result.resolution)},
         }
         self.stage.GetRootLayer().Save()
+        trust(self.stage.GetRootLayer().realPath)  # this process wrote it: rendered without a probe while unchanged
         if self.check_usd:
             self.result.usd_checks = usd_check(self.output)
         return self.result

@@ -22,8 +22,9 @@ An asset is **valid** when no finding has severity `error`. Exit status: 0 valid
 ## Procedure
 
 1. The file is opened first in a child process with a time limit and an address-space limit
-   (`nasset_sdk.safeopen`, level `full`: every field of every spec read, each array's length and the
-   total decoded array size checked against the bounds, then the stage composed with all payloads
+   (`nasset_sdk.safeopen`, level `full`: every field of every spec read, each array's length, each
+   value's nesting and the total decoded size of arrays and strings checked against the bounds
+   ([security.md#bounds](security.md#bounds)), then the stage composed with all payloads
    from a copy of the layer without any arc to another file). usd-core's crate reader can crash
    (SIGSEGV) or allocate without bound on corrupted files; a probe that crashes, times out or fails
    gives `FILE_UNREADABLE` (`ARRAY_TOO_LARGE` for arrays over their bounds or a probe out of memory)

@@ -43,13 +43,17 @@ CHILD = textwrap.dedent('''
     def rchar():
         with open("/proc/self/io") as fh:
             return int(next(l for l in fh if l.startswith("rchar")).split()[1])
+    from nasset_sdk.safeopen import ensure_safe
     before = rchar()
-    asset = Asset.open(sys.argv[1], load=sys.argv[2])
+    ensure_safe(sys.argv[1])  # the guarded probe every reader runs first, in a child of its own (counted when reaped)
+    probe_bytes = rchar() - before
+    before = rchar()
+    asset = Asset.open(sys.argv[1], load=sys.argv[2])  # probed above: opened without a second probe
     grid = np.asarray(asset.tensor("core", "grid"), np.float32)
     y = asset.session("core", "decoder", intra_threads=1).run(None, {"x": grid[:4]})[0]
     if sys.argv[2] == "all":
         total = float(np.asarray(asset.tensor("prt", "coeffs"), np.float32).sum())
-    print(json.dumps({"bytes": rchar() - before, "y": float(y.sum())}))
+    print(json.dumps({"bytes": rchar() - before, "probe_bytes": probe_bytes, "y": float(y.sum())}))
 ''')
 
 
@@ -74,6 +78,7 @@ def lazy_asset(tmp_path_factory):
         prt.add_tensor("coeffs", rng.normal(size=(rows, 9)).astype(np.float32), dtype="float32")
         b.provenance = {"generator": "test"}
         path = b.write(tmp_path_factory.mktemp("lazy") / "lazy.usdc")
+        example_builder("rna", size="tiny").write(path.parent / "tiny.usdc")
         yield path, rows * 9 * 4
     finally:
         KINDS.pop("lazytest", None)
@@ -97,3 +102,16 @@ def test_required_only_reads_far_less_than_optional(lazy_asset):
     assert req["y"] == full["y"]  # same evaluation either way
     assert full["bytes"] > 0.9 * prt_bytes, "pread accounting did not see the optional tensor being read"
     assert req["bytes"] < 0.05 * prt_bytes, f"required-only open read {req['bytes']} bytes"
+    # the probe maps the file: it reads array headers, never the optional tensor (its own bytes: interpreter start-up)
+    tiny = _probe_bytes(path.parent / "tiny.usdc")
+    assert req["probe_bytes"] - tiny < 0.05 * prt_bytes, f"the probe read {req['probe_bytes']} bytes ({tiny} for a tiny asset)"
+
+
+def _probe_bytes(path) -> int:
+    code = ("from nasset_sdk.safeopen import ensure_safe\n"
+            "def rchar():\n    return int(next(l for l in open('/proc/self/io') if l.startswith('rchar')).split()[1])\n"
+            f"b = rchar(); ensure_safe({str(path)!r}); print(rchar() - b)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, USDC_USE_PREAD="1", PXR_WORK_THREAD_LIMIT="1"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    return int(r.stdout.split()[-1])

@@ -162,7 +162,7 @@ def test_readers_follow_checked_in_package_layers(tmp_path):
     from nasset_sdk.paths import check_layer_tree
 
     asset = example_builder("rna", size="tiny", quality_variants=True).write(tmp_path / "a.usdc")
-    (tmp_path / "side.usda").write_text('#usda 1.0\nover "Asset" { custom string note = "side" }\n')
+    (tmp_path / "side.usda").write_text('#usda 1.0\nover "Asset"\n{\n    custom string note = "side"\n}\n')
     scene = tmp_path / "s.usda"
     scene.write_text('#usda 1.0\n(\n subLayers = [@./side.usda@]\n)\ndef "World" {\n def "A" (prepend references = @./a.usdc@) {}\n'
                      f' def "B" (prepend references = @{asset}@) {{}}\n}}\n')
