@@ -689,11 +689,11 @@ class _Loader:
     def _material(self, prim, *, varying_colors: bool = True) -> int:
         """Material id of a prim's bound material, else of its displayColor (``varying_colors`` False: the mean of
         several values, for prims whose triangles carry no primvar colours)."""
-        from pxr import UsdGeom, UsdShade
+        from pxr import UsdGeom
 
-        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        mat = self._bound_material(prim)
         if not mat:
-            dc = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+            dc = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance("displayColor")  # a constant one may be an ancestor's
             with self._reading(prim.GetPath()):
                 val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
                 val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
@@ -713,6 +713,21 @@ class _Loader:
                 self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
             return self.mat_index[key]
         return self._material_of(mat)
+
+    def _bound_material(self, prim):
+        """The material a final render binds to ``prim`` (spec/renderer.md#materials): its ``full``-purpose binding,
+        else its all-purpose one (``ComputeBoundMaterial(full)``); a prim bound only for ``preview`` (a viewport's
+        binding) is unbound, with a warning."""
+        from pxr import UsdShade
+
+        api = UsdShade.MaterialBindingAPI(prim)
+        mat, _ = api.ComputeBoundMaterial(UsdShade.Tokens.full)
+        if not mat:
+            preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
+            if preview:
+                self.warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
+                          "reads full, else all-purpose bindings): rendered unbound", prim.GetPath())
+        return mat
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
@@ -982,7 +997,7 @@ class _Loader:
         (not finite, another width, or a length its interpolation does not give)."""
         from pxr import UsdGeom
 
-        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(varname)
+        pv = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance(varname)  # a constant one may be an ancestor's
         with self._reading(prim.GetPath()):
             vals = pv.ComputeFlattened(self.time) if pv and pv.HasAuthoredValue() else None
             v = np.asarray(vals, np.float64) if vals is not None and len(vals) else None
@@ -1157,7 +1172,7 @@ class _Loader:
             if subset.GetElementTypeAttr().Get(self.time) != UsdGeom.Tokens.face:
                 self.warn("GeomSubset of an element type other than face ignored", sub_path)
                 continue
-            mat, _ = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()
+            mat = self._bound_material(subset.GetPrim())
             if not mat:
                 continue
             ind = np.asarray(subset.GetIndicesAttr().Get(self.time) or [], np.int64)
