@@ -476,11 +476,13 @@ class _Loader:
                 elif tname in ("NurbsCurves", "NurbsPatch", "HermiteCurves", "TetMesh", "Volume"):
                     raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh, BasisCurves, "
                                    f"Points and the implicit {', '.join(IMPLICIT_PRIMS)} are)", path)
-        if not self.cameras:
+        settings = self._settings_prim()
+        chosen = self._settings_camera(settings)
+        if chosen is None and not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
-        with self._reading(str(self.cameras[0].GetPath())):
-            camera = self._camera(self.cameras[0])
-        if len(self.cameras) > 1:
+        with self._reading(str((chosen or self.cameras[0]).GetPath())):
+            camera = self._camera(chosen or self.cameras[0], settings)
+        if chosen is None and len(self.cameras) > 1:
             self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
             self.warn("the scene has no lights and no emissive materials; the image will be black")
@@ -504,7 +506,7 @@ class _Loader:
             tri_color=None if all(c is None for c in self.tri_color) else np.concatenate(
                 [np.zeros((len(st), 3, 3)) if c is None else c for c, st in zip(self.tri_color, self.tri_st, strict=True)]),
             tri_ng=np.concatenate(self.tri_ng) if n else np.zeros((0, 3)),
-            render_settings=self._render_settings(),
+            render_settings=self._render_settings(settings),
         )
 
     def _mesh_lights(self) -> None:
@@ -577,7 +579,7 @@ class _Loader:
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
     # -- camera ----------------------------------------------------------------------------
-    def _camera(self, prim) -> Camera:
+    def _camera(self, prim, settings=None) -> Camera:
         """The camera of spec/renderer.md#cameras: projection, apertures, lens shift, thin lens, exposure."""
         from pxr import UsdGeom
 
@@ -635,8 +637,10 @@ class _Loader:
         if np.abs(M[3, :3]).max() > MAX_WORLD_COORDINATE:
             raise self.err("SCENE_INVALID", f"camera position {M[3, :3].tolist()} beyond |coordinate| <= {MAX_WORLD_COORDINATE:g}",
                            path, "xformOpOrder")
-        return Camera(M, fl, ha, va, str(path), self._render_resolution(), *offsets, orthographic=ortho,
-                      lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
+        camera = Camera(M, fl, ha, va, str(path), self._render_resolution(settings), *offsets, orthographic=ortho,
+                        lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
+        self._conform_warning(settings, camera)
+        return camera
 
     def _exposure_scale(self, cam) -> float:
         """The camera's linear exposure scale (``UsdGeomCamera::ComputeLinearExposureScale``: 2^exposure x
@@ -649,27 +653,81 @@ class _Loader:
                            f"/ exposure:fStop^2) must be finite and in [0, {MAX_EXPOSURE_SCALE:g}]", path, "exposure")
         return scale
 
-    def _render_resolution(self) -> tuple[int, int] | None:
-        """Resolution of the stage's first UsdRender.Settings prim (None when absent or invalid)."""
+    def _settings_prim(self):
+        """The stage's render settings (spec/renderer.md#image-size): the prim the stage's ``renderSettingsPrimPath``
+        names, else the first active UsdRender.Settings prim in traversal order (instance proxies included); None."""
         from pxr import Usd, UsdRender
 
-        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
-            if prim.IsA(UsdRender.Settings):
-                res = UsdRender.Settings(prim).GetResolutionAttr().Get(self.time)
-                if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
-                    return int(res[0]), int(res[1])
-                self.warn(f"{prim.GetPath()}: resolution {res} ignored")
+        named = self.stage.GetMetadata("renderSettingsPrimPath")
+        if named:
+            prim = self.stage.GetPrimAtPath(named)
+            if prim and prim.IsActive() and prim.IsA(UsdRender.Settings):
+                return prim
+            self.warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used")
+        return next((p for p in self.stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
+
+    def _settings_camera(self, settings):
+        """The camera the render settings name (the ``camera`` of their first product that authors one, else their
+        own), None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
+        from pxr import UsdGeom, UsdRender
+
+        if settings is None:
+            return None
+        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
+        for owner in [p for p in products if p and p.IsA(UsdRender.Product)] + [settings]:
+            targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
+            if targets:
+                prim = self.stage.GetPrimAtPath(targets[0])
+                if not (prim and prim.IsA(UsdGeom.Camera)):
+                    raise self.err("SCENE_INVALID", f"camera {targets[0]} is not a UsdGeom.Camera", owner.GetPath(), "camera")
+                return prim
         return None
 
-    def _render_settings(self) -> dict:
-        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
-        ``nasset:pixelFilterStddev`` (pixels) of the first UsdRender.Settings prim; invalid values are warned and dropped."""
-        from pxr import Usd, UsdRender
+    def _render_resolution(self, settings) -> tuple[int, int] | None:
+        """Resolution of the render settings (their first product's when it authors one; None when absent or invalid).
+        Their UsdRender attributes the renderer does not honour are warned about by name."""
+        from pxr import Gf, UsdRender
 
+        if settings is None:
+            return None
+        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
+        owner = next((p for p in products if p and p.IsA(UsdRender.Product)
+                      and UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
+        base = UsdRender.SettingsBase(owner)
+        res = base.GetResolutionAttr().Get(self.time)
+        pixel_aspect = base.GetPixelAspectRatioAttr().Get(self.time)
+        if pixel_aspect is not None and pixel_aspect != 1.0:
+            self.warn(f"pixelAspectRatio {pixel_aspect:g} is ignored (square pixels)", owner.GetPath())
+        window = base.GetDataWindowNDCAttr().Get(self.time)
+        if window is not None and Gf.Vec4f(window) != Gf.Vec4f(0, 0, 1, 1):
+            self.warn(f"dataWindowNDC {tuple(window)} is ignored (the whole image is rendered)", owner.GetPath())
+        if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
+            return int(res[0]), int(res[1])
+        self.warn(f"{owner.GetPath()}: resolution {res} ignored")
+        return None
+
+    def _conform_warning(self, settings, camera: Camera) -> None:
+        """A warning when the settings' ``aspectRatioConformPolicy`` (USD's fallback ``expandAperture``) would frame the
+        settings' resolution otherwise than the spec's horizontal fit (spec/renderer.md#image-size)."""
+        from pxr import UsdRender
+
+        if settings is None or camera.resolution is None:
+            return
+        policy = str(UsdRender.SettingsBase(settings).GetAspectRatioConformPolicyAttr().Get(self.time) or "expandAperture")
+        wider = camera.resolution[0] * camera.vertical_aperture - camera.resolution[1] * camera.horizontal_aperture
+        if policy == "adjustApertureHeight" or abs(wider) <= 1e-6 * camera.resolution[1] * camera.horizontal_aperture:
+            return
+        if (policy == "expandAperture" and wider < 0) or (policy == "cropAperture" and wider > 0):
+            return
+        self.warn(f"aspectRatioConformPolicy {policy!r} is not applied: the horizontal aperture is kept and the vertical "
+                  f"extent follows the {camera.resolution[0]}x{camera.resolution[1]} image", settings.GetPath())
+
+    def _render_settings(self, settings) -> dict:
+        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
+        ``nasset:pixelFilterStddev`` (pixels) of the render settings (:meth:`_settings_prim`); invalid values are warned
+        and dropped."""
         out: dict = {}
-        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
-            if not prim.IsA(UsdRender.Settings):
-                continue
+        for prim in [settings] if settings is not None else []:
             for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
                                   ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
                                   ("nasset:pixelFilterStddev", "pixel_filter_stddev",
@@ -682,7 +740,6 @@ class _Loader:
                     out[key] = str(v) if key == "pixel_filter" else v
                 else:
                     self.warn(f"{name} = {v!r} ignored", prim.GetPath())
-            break
         return out
 
     # -- meshes and materials --------------------------------------------------------------

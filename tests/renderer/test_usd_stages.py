@@ -101,3 +101,90 @@ def test_display_color_of_an_ancestor_is_inherited(tmp_path):
     inherited = _unbound_floor(tmp_path, "inherited.usda", on_parent=True)
     np.testing.assert_array_equal(inherited, own)
     assert own[..., 0].mean() > 2 * own[..., 1].mean()  # red, not grey
+
+
+# -- render settings: which camera, which settings prim (UsdRender) ---------------------------------------------------
+
+def _two_camera_scene():
+    """Two cameras; ``Top`` (first in traversal) sees the lit floor, ``Below`` its unlit underside."""
+    b, _ = _floor_scene()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
+    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
+    b.stage.RemovePrim("/World/Camera")
+    return b
+
+
+def _settings(b, path, camera=None, resolution=(8, 8), **attrs):
+    from pxr import Gf, UsdRender
+
+    s = UsdRender.Settings.Define(b.stage, path)
+    s.CreateResolutionAttr(Gf.Vec2i(*resolution))
+    if camera:
+        s.CreateCameraRel().SetTargets([camera])
+    for name, value in attrs.items():
+        s.GetPrim().GetAttribute(name).Set(value)
+    return s
+
+
+def test_render_settings_camera_is_the_camera_rendered(tmp_path):
+    """``RenderSettings.camera`` names the camera (Houdini, Omniverse and the converters write it); the first camera
+    in traversal order was rendered instead, with a warning that there were two."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Below")
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert scene.camera.prim == "/World/Below"
+    assert not any("cameras" in m for m in scene.warnings)
+
+
+def test_render_product_camera_wins_over_the_settings_camera(tmp_path):
+    from pxr import UsdRender
+
+    b = _two_camera_scene()
+    settings = _settings(b, "/Render/Settings", "/World/Top")
+    product = UsdRender.Product.Define(b.stage, "/Render/Product")
+    product.CreateCameraRel().SetTargets(["/World/Below"])
+    settings.CreateProductsRel().SetTargets([product.GetPath()])
+    assert load_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+
+
+def test_render_settings_prim_path_chooses_the_settings(tmp_path):
+    """The stage's ``renderSettingsPrimPath`` metadata names the settings to use (several are common: preview and
+    final); the first in traversal order was used."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Preview", "/World/Top", resolution=(4, 4))
+    _settings(b, "/Render/Final", "/World/Below", resolution=(6, 3))
+    b.stage.SetMetadata("renderSettingsPrimPath", "/Render/Final")
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert (scene.camera.prim, scene.camera.resolution) == ("/World/Below", (6, 3))
+
+
+def test_inactive_render_settings_are_not_read(tmp_path):
+    """A deactivated settings prim is not part of the composed stage; its resolution was used."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Off", resolution=(4, 2)).GetPrim().SetActive(False)
+    _settings(b, "/Render/On", resolution=(6, 6))
+    assert load_scene(b.write(tmp_path / "s.usda")).camera.resolution == (6, 6)
+
+
+def test_render_settings_camera_that_is_not_a_camera_is_scene_invalid(tmp_path):
+    from nasset_sdk.errors import SceneError
+
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Floor")
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "/Render/Settings" in str(info.value) and "camera" in str(info.value)
+
+
+def test_unhonoured_render_settings_are_warned_by_name(tmp_path):
+    """``pixelAspectRatio``, ``dataWindowNDC`` and an aspect-ratio conform policy that would frame the image otherwise
+    than the horizontal fit were ignored without a word."""
+    from pxr import Gf
+
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Top", resolution=(16, 8), pixelAspectRatio=2.0,
+              dataWindowNDC=Gf.Vec4f(0.25, 0.25, 0.75, 0.75))  # a square aperture, a wide image: expandAperture differs
+    with pytest.warns(UserWarning):
+        said = load_scene(b.write(tmp_path / "s.usda")).warnings
+    for word in ("pixelAspectRatio", "dataWindowNDC", "aspectRatioConformPolicy 'expandAperture'"):
+        assert any(word in m and "/Render/Settings" in m for m in said), (word, said)
