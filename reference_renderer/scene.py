@@ -438,6 +438,7 @@ class _Loader:
 
         from nasset_sdk.references import asset_source
 
+        broken = self._composition_errors()
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
@@ -450,8 +451,8 @@ class _Loader:
             tname = str(prim.GetTypeName())
             with self._reading(path):
                 source = asset_source(prim)
-                if source is not None or tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
-                    self._neural(prim, source)
+                if source is not None or tname == "NeuralAsset" or (not tname and path in broken and self._reference_paths(prim)):
+                    self._neural(prim, source, broken.get(path))
                     it.PruneChildren()
                 elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
                     n = len(self.lights)
@@ -1437,7 +1438,18 @@ class _Loader:
                         out.append(spec.layer.ComputeAbsolutePath(ref.assetPath))
         return out
 
-    def _neural(self, prim, source):
+    def _composition_errors(self) -> dict:
+        """USD's composition errors (a reference, payload or sublayer that cannot be opened, an unresolved prim path),
+        each warned about naming its prim: {prim path: USD's message}. USD composes the scene without what failed."""
+        out: dict = {}
+        for error in self.stage.GetCompositionErrors():
+            where = str(error.rootSite.path)
+            out.setdefault(where, str(error).strip())
+            self.warn(f"composed without a layer or prim USD cannot reach: {str(error).strip()[:300]}",
+                      where if where != "/" else None)
+        return out
+
+    def _neural(self, prim, source, composition_error=None):
         from pxr import UsdGeom
 
         from nasset_sdk.references import open_source
@@ -1447,7 +1459,9 @@ class _Loader:
             refs = self._reference_paths(prim)
             if not refs:
                 raise self.err("SCENE_INVALID", "NeuralAsset prim does not reference an asset file", path)
-            raise self.err("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {refs[0]}", path)
+            why = f" ({composition_error})" if composition_error else ""
+            raise self.err("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {refs[0]}{why}",
+                           path)
         file = Path(source.display)
         key = source.display if "[" in source.display or source.embedded else os.path.realpath(source.layer)
         if key not in self.asset_index:

@@ -188,3 +188,64 @@ def test_unhonoured_render_settings_are_warned_by_name(tmp_path):
         said = load_scene(b.write(tmp_path / "s.usda")).warnings
     for word in ("pixelAspectRatio", "dataWindowNDC", "aspectRatioConformPolicy 'expandAperture'"):
         assert any(word in m and "/Render/Settings" in m for m in said), (word, said)
+
+
+# -- composition: what USD could not compose, and untyped prims placing plain USD -------------------------------------
+
+def _plain_geometry_layer(path):
+    """A layer whose default prim is an untyped ``def "World"`` holding the lit floor of :func:`_floor_scene` and its
+    material (no camera, no light)."""
+    b, _ = _floor_scene()
+    for child in ("Camera", "Sun"):
+        b.stage.RemovePrim(f"/World/{child}")
+    b.stage.GetPrimAtPath("/World").SetTypeName("")
+    b.stage.SetDefaultPrim(b.stage.GetPrimAtPath("/World"))
+    return b.write(path)
+
+
+@pytest.mark.parametrize("arc", ["reference", "payload"])
+def test_untyped_prim_referencing_plain_usd_renders_it(tmp_path, arc):
+    """An untyped ``def "Set" (references = @geo.usda@)`` whose layer is ordinary geometry (an asset library's
+    untyped root) renders that geometry, as in usdview; it was SCENE_INVALID ``referenced asset file not found, or
+    it is not a neural asset`` although the file exists."""
+    _plain_geometry_layer(tmp_path / "geo.usda")
+    b, floor = _floor_scene()
+    b.stage.RemovePrim(floor.GetPath())
+    prim = b.stage.DefinePrim("/World/Set")
+    arcs = prim.GetReferences() if arc == "reference" else prim.GetPayloads()
+    arcs.AddReference("./geo.usda") if arc == "reference" else arcs.AddPayload("./geo.usda")
+    image, _ = _render(b, tmp_path)  # the floor's own material: 0.6, not the unbound grey
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+def test_untyped_prim_with_a_missing_reference_stays_scene_invalid(tmp_path):
+    from nasset_sdk.errors import SceneError
+
+    b, _ = _floor_scene()
+    b.stage.DefinePrim("/World/Chair").GetReferences().AddReference("./chair.usdc")
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "/World/Chair" in str(info.value) and "chair.usdc" in str(info.value)
+
+
+@pytest.mark.parametrize("arc", ["reference", "payload", "sublayer", "prim path"])
+def test_what_usd_cannot_compose_is_warned_naming_the_prim(tmp_path, arc):
+    """A missing referenced, payloaded or sublayered file, or a reference to a prim the file lacks, leaves that part
+    out of the composed stage (USD's rule: usdview draws the rest); the renderer said nothing of it (USD's own
+    diagnostic went to stderr only)."""
+    _plain_geometry_layer(tmp_path / "geo.usda")
+    b, _ = _floor_scene()
+    prim = b.stage.DefinePrim("/World/Set", "Xform")
+    if arc == "reference":
+        prim.GetReferences().AddReference("./missing.usda")
+    elif arc == "payload":
+        prim.GetPayloads().AddPayload("./missing.usda")
+    elif arc == "sublayer":
+        b.stage.GetRootLayer().subLayerPaths.append("./missing.usda")
+    else:
+        prim.GetReferences().AddReference("./geo.usda", "/Nope")
+    with pytest.warns(UserWarning):
+        scene = load_scene(b.write(tmp_path / "s.usda"))
+    hit = [m for m in scene.warnings if "cannot reach" in m]
+    assert hit and ("/Nope" in hit[0] if arc == "prim path" else "missing.usda" in hit[0]), scene.warnings
+    assert arc == "sublayer" or "/World/Set" in hit[0]
