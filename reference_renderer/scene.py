@@ -1442,11 +1442,10 @@ class _Loader:
         """USD's composition errors (a reference, payload or sublayer that cannot be opened, an unresolved prim path),
         each warned about naming its prim: {prim path: USD's message}. USD composes the scene without what failed."""
         out: dict = {}
-        for error in self.stage.GetCompositionErrors():
-            where = str(error.rootSite.path)
-            out.setdefault(where, str(error).strip())
-            self.warn(f"composed without a layer or prim USD cannot reach: {str(error).strip()[:300]}",
-                      where if where != "/" else None)
+        for failure in self.stage.GetCompositionErrors():
+            where, text = str(failure.rootSite.path), str(failure).strip()
+            out.setdefault(where, text)
+            self.warn(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
         return out
 
     def _neural(self, prim, source, composition_error=None):
