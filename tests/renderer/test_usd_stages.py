@@ -249,3 +249,19 @@ def test_what_usd_cannot_compose_is_warned_naming_the_prim(tmp_path, arc):
     hit = [m for m in scene.warnings if "cannot reach" in m]
     assert hit and ("/Nope" in hit[0] if arc == "prim path" else "missing.usda" in hit[0]), scene.warnings
     assert arc == "sublayer" or "/World/Set" in hit[0]
+
+
+@pytest.mark.parametrize("body, names", [
+    ('def Mesh "M" {\n    point3f[] points = [(0, 0, 0), (1, 1)]\n  }', "</W/M.points>"),
+    ('def Mesh "M" {\n    float3 xformOp:rotateY = 30\n  }', "s.usda:4:"),
+])
+def test_usda_syntax_error_names_where(tmp_path, body, names):
+    """A hand-edited ``.usda`` that does not parse is SCENE_INVALID with the parser's message (prim, attribute, line
+    and column); the message was a lone quote or USD's generic ``Failed to open layer``."""
+    from nasset_sdk.errors import SceneError
+
+    path = tmp_path / "s.usda"
+    path.write_text(f'#usda 1.0\ndef Xform "W" {{\n  {body}\n}}\n')
+    with pytest.raises(SceneError) as info:
+        load_scene(str(path))
+    assert info.value.code == "SCENE_INVALID" and names in str(info.value), str(info.value)
