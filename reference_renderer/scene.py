@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import NassetError, SceneError, error
+from nasset_sdk.errors import NassetError, SceneError, error, usd_reason
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
@@ -245,23 +245,11 @@ def open_stage(path: str, context=None):
     try:
         stage = Usd.Stage.Open(str(p), context, Usd.Stage.LoadNone)
     except Tf.ErrorException as exc:
-        raise SceneError("SCENE_INVALID", f"USD cannot open it: {_usd_reason(exc)}", file=str(p)) from None
+        raise SceneError("SCENE_INVALID", f"USD cannot open it: {usd_reason(exc)}", file=str(p)) from None
     if stage is None:
         raise SceneError("SCENE_INVALID", "USD cannot open it", file=str(p))
     _load_scene_payloads(stage)
     return stage
-
-
-def _usd_reason(exc) -> str:
-    """The messages of a ``Tf.ErrorException`` without USD's source locations, the parser's (``file:line:column:
-    what``) first; the generic ``Failed to open layer`` only when there is nothing else."""
-    texts = []
-    for arg in exc.args:
-        text = str(arg).strip()
-        text = text.split(" : ", 1)[1].strip() if text.startswith("Error in ") and " : " in text else text
-        texts.append(text.strip("'").strip())
-    specific = [t for t in texts if t and not t.startswith("Failed to open layer")]
-    return "; ".join(specific or texts)[:400]
 
 
 def _load_scene_payloads(stage) -> None:
