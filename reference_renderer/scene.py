@@ -491,6 +491,7 @@ class _Loader:
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
         self._check_world_bounds()
+        self._clipping_warning(camera, tris)
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
@@ -642,6 +643,27 @@ class _Loader:
                         lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
         self._conform_warning(settings, camera)
         return camera
+
+    def _clipping_warning(self, camera: Camera, tris: np.ndarray) -> None:
+        """Clipping is not rendered (spec/renderer.md#cameras): a warning naming the camera when its
+        ``clippingPlanes`` are authored, or when triangle vertices in front of it lie nearer than its
+        ``clippingRange`` near distance or beyond its far one (a view USD would cut, the whole scene here)."""
+        from pxr import UsdGeom
+
+        cam = UsdGeom.Camera(self.stage.GetPrimAtPath(camera.prim))
+        with self._reading(camera.prim):
+            planes = cam.GetClippingPlanesAttr().Get(self.time)
+            near, far = (float(v) for v in (cam.GetClippingRangeAttr().Get(self.time) or (1.0, 1e6)))
+        if planes is not None and len(planes):
+            self.warn(f"{len(planes)} clippingPlanes ignored: nothing is clipped", camera.prim)
+        if not len(tris):
+            return
+        M = camera.to_world
+        depth = -((tris.reshape(-1, 3) - M[3, :3]) @ np.linalg.inv(M[:3, :3]))[:, 2]
+        depth = depth[depth > 0]
+        if len(depth) and (depth.min() < near or depth.max() > far):
+            self.warn(f"clippingRange ({near:g}, {far:g}) ignored: geometry in front of the camera lies at depths "
+                      f"{depth.min():.4g} to {depth.max():.4g}, and nothing is clipped", camera.prim)
 
     def _exposure_scale(self, cam) -> float:
         """The camera's linear exposure scale (``UsdGeomCamera::ComputeLinearExposureScale``: 2^exposure x
@@ -1546,6 +1568,13 @@ class _Loader:
             if n in known or n.startswith(_IGNORED_PREFIXES):
                 continue
             self.warn(f"attribute {n!r} is not used by the renderer", path)
+        connected = sorted(a.GetName() for a in prim.GetAuthoredAttributes() if a.HasAuthoredConnections())
+        if connected:  # a light shader network (a texture, a primvar reader) feeding the light's inputs
+            self.warn(f"{', '.join(connected)} connected: the input's own value (else its fallback) is used", path)
+        filters = prim.GetRelationship("light:filters")
+        if filters and filters.GetForwardedTargets():
+            self.warn(f"light:filters {', '.join(map(str, filters.GetForwardedTargets()))} ignored: the light is "
+                      "rendered unfiltered", path)
         for link in ("lightLink", "shadowLink"):  # a collection that leaves objects out: every object is lit all the same
             coll = Usd.CollectionAPI(prim, link)
             include_root = coll.GetIncludeRootAttr().Get(self.time) if coll.GetIncludeRootAttr() else None

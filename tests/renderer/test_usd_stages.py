@@ -265,3 +265,44 @@ def test_usda_syntax_error_names_where(tmp_path, body, names):
     with pytest.raises(SceneError) as info:
         load_scene(str(path))
     assert info.value.code == "SCENE_INVALID" and names in str(info.value), str(info.value)
+
+
+# -- what a light or camera authors that the renderer does not honour is said, by name --------------------------------
+
+def test_light_input_connected_to_a_shader_is_warned(tmp_path):
+    """A light input fed by a shader network (a texture or a primvar reader on ``inputs:color``, Houdini and RenderMan
+    light shaders) used its own value without a word."""
+    from pxr import Sdf, UsdShade
+
+    b, _ = _floor_scene()
+    tex = UsdShade.Shader.Define(b.stage, "/World/Looks/LightTex")
+    tex.CreateIdAttr("UsdUVTexture")
+    color = b.stage.GetPrimAtPath("/World/Sun").GetAttribute("inputs:color")
+    color.AddConnection(Sdf.Path("/World/Looks/LightTex.outputs:rgb"))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)  # the authored white
+    assert any("/World/Sun" in m and "inputs:color connected" in m for m in said), said
+
+
+def test_light_filters_are_warned(tmp_path):
+    from pxr import UsdLux
+
+    b, _ = _floor_scene()
+    UsdLux.LightFilter.Define(b.stage, "/World/Barn")
+    UsdLux.LightAPI(b.stage.GetPrimAtPath("/World/Sun")).GetFiltersRel().SetTargets(["/World/Barn"])
+    with pytest.warns(UserWarning):
+        _, said = _render(b, tmp_path)
+    assert any("/World/Sun" in m and "light:filters /World/Barn" in m for m in said), said
+
+
+@pytest.mark.parametrize("clip, warned", [((5.0, 100.0), True), ((0.1, 2.0), True), ((0.1, 100.0), False)])
+def test_camera_clipping_that_would_cut_geometry_is_warned(tmp_path, clip, warned):
+    """USD cuts what lies outside a camera's ``clippingRange``; the renderer clips nothing. It now says so when the
+    range would cut the scene's geometry (the floor lies 3 units below the camera), and stays quiet otherwise."""
+    from pxr import Gf, UsdGeom
+
+    b, _ = _floor_scene()
+    UsdGeom.Camera(b.stage.GetPrimAtPath("/World/Camera")).CreateClippingRangeAttr(Gf.Vec2f(*clip))
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert any("clippingRange" in m and "/World/Camera" in m for m in scene.warnings) == warned, scene.warnings
