@@ -992,6 +992,9 @@ class _Loader:
             self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
             return None
         resolved = asset.resolvedPath or ""
+        if not resolved:
+            self.warn(f"texture {asset.path} not found; the connected input's own value is used", tpath)
+            return None
         if not (_packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
             self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; the connected input's own "
                       "value is used", tpath)
@@ -1152,6 +1155,8 @@ class _Loader:
         nvals, interp = None, None
         if pv and pv.HasAuthoredValue():
             nvals, interp = pv.ComputeFlattened(self.time), pv.GetInterpolation()
+            if nvals is None:  # USD flattens nothing when an index is out of range
+                self.warn("primvars:normals has indices outside its values: ignored", path)
         elif nattr and nattr.HasAuthoredValue():
             nvals, interp = nattr.Get(self.time), mesh.GetNormalsInterpolation()
         if nvals is not None and len(nvals):

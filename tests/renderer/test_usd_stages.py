@@ -306,3 +306,28 @@ def test_camera_clipping_that_would_cut_geometry_is_warned(tmp_path, clip, warne
     UsdGeom.Camera(b.stage.GetPrimAtPath("/World/Camera")).CreateClippingRangeAttr(Gf.Vec2f(*clip))
     scene = load_scene(b.write(tmp_path / "s.usda"))
     assert any("clippingRange" in m and "/World/Camera" in m for m in scene.warnings) == warned, scene.warnings
+
+
+def test_missing_texture_file_is_said_to_be_missing(tmp_path):
+    """A UsdUVTexture whose PNG is not there was reported as a format the renderer does not read."""
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "gone.png")
+    with pytest.warns(UserWarning):
+        said = load_scene(b.write(tmp_path / "s.usda")).warnings
+    assert any("gone.png not found" in m and "/World/Looks/FloorMat/tex_" in m for m in said), said
+    assert not any("only OpenEXR" in m for m in said), said
+
+
+def test_normals_with_indices_out_of_range_are_warned(tmp_path):
+    """``primvars:normals:indices`` pointing past the values: USD flattens nothing (its diagnostic goes to stderr);
+    the renderer dropped the normals without a word."""
+    from pxr import Sdf, UsdGeom
+
+    b, floor = _floor_scene()
+    pv = UsdGeom.PrimvarsAPI(floor).CreatePrimvar("normals", Sdf.ValueTypeNames.Normal3fArray, UsdGeom.Tokens.faceVarying)
+    pv.Set([(0.0, 1.0, 0.0)])
+    pv.SetIndices([0, 0, 0, 5])
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+    assert any("/World/Floor" in m and "primvars:normals has indices" in m for m in said), said
