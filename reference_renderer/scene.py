@@ -439,6 +439,7 @@ class _Loader:
         from nasset_sdk.references import asset_source
 
         broken = self._composition_errors()
+        unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
@@ -474,9 +475,13 @@ class _Loader:
                     it.PruneChildren()  # prototypes beneath it render only as its instances
                 elif tname in ("BasisCurves", "Points"):
                     self._curves_or_points(prim, tname)
-                elif tname in ("NurbsCurves", "NurbsPatch", "HermiteCurves", "TetMesh", "Volume"):
+                elif prim.IsA(UsdGeom.Gprim):  # NurbsCurves, NurbsPatch, TetMesh, Volume, Cylinder_1, ...
                     raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh, BasisCurves, "
                                    f"Points and the implicit {', '.join(IMPLICIT_PRIMS)} are)", path)
+                elif tname and not prim.GetPrimTypeInfo().GetSchemaType() and tname not in unknown:
+                    unknown.add(tname)  # a DCC's own type, its plugin not here: said once per type
+                    self.warn(f"prim type {tname!r} has no schema here (a plugin's type, {path} the first): its prims "
+                              "are not rendered themselves, their children are traversed", None)
         settings = self._settings_prim()
         chosen = self._settings_camera(settings)
         if chosen is None and not self.cameras:

@@ -331,3 +331,30 @@ def test_normals_with_indices_out_of_range_are_warned(tmp_path):
         image, said = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
     assert any("/World/Floor" in m and "primvars:normals has indices" in m for m in said), said
+
+
+# -- prim types the renderer does not draw ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("tname", ["Cylinder_1", "Capsule_1", "ParticleField3DGaussianSplat", "Volume"])
+def test_every_other_geometry_type_is_scene_unsupported(tmp_path, tname):
+    """Any UsdGeom.Gprim the renderer does not draw is refused naming the prim; types newer than the renderer's list
+    (USD 24's Cylinder_1 and Capsule_1, Gaussian splats) rendered nothing without a word."""
+    from nasset_sdk.errors import SceneError
+
+    b, _ = _floor_scene()
+    b.stage.DefinePrim("/World/Thing", tname)
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_UNSUPPORTED" and "/World/Thing" in str(info.value) and tname in str(info.value)
+
+
+def test_prim_types_without_a_schema_are_warned_once_per_type(tmp_path):
+    """A DCC's own prim type (RealityKit's ``Preliminary_Text``, Houdini's ``HoudiniLayerInfo``) whose plugin is not
+    loaded is not drawn; that is said once per type, and its children are still traversed."""
+    b, floor = _floor_scene()
+    for name in ("A", "B"):
+        b.stage.DefinePrim(f"/World/{name}", "Preliminary_Text")
+    with pytest.warns(UserWarning):
+        scene = load_scene(b.write(tmp_path / "s.usda"))
+    said = [m for m in scene.warnings if "Preliminary_Text" in m]
+    assert len(said) == 1 and "/World/A" in said[0], scene.warnings
