@@ -143,7 +143,7 @@ def read_material(prim, path, t=None) -> Material:
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
-    mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+    mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)  # else all-purpose
     if mat:
         src = mat.ComputeSurfaceSource()
         shader = src[0] if src and src[0] else None
@@ -319,7 +319,7 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t) -> list:
     for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets():
         if subset.GetElementTypeAttr().Get(t) != UsdGeom.Tokens.face:
             continue
-        if not UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()[0]:
+        if not UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial(UsdShade.Tokens.full)[0]:
             continue
         ind = np.asarray(subset.GetIndicesAttr().Get(t) or [], np.int64)
         if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):

@@ -23,7 +23,7 @@ from typing import Iterable
 import numpy as np
 
 from . import limits
-from .errors import UsageError, error
+from .errors import UsageError, error, usd_reason
 from .geometry import CurvesGeometry, MeshGeometry
 from .networks import CheckedSession, NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
 from .plugin import register_schema
@@ -427,7 +427,7 @@ class Asset:
             # every sublayer / reference / payload / clip / asset path is checked before anything composes
             stage = open_checked_stage(p, Usd.Stage.LoadNone, probe=probe is not False)
         except Tf.ErrorException as exc:
-            raise error("FILE_UNREADABLE", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
+            raise error("FILE_UNREADABLE", f"USD cannot open it: {usd_reason(exc)}", file=str(p)) from None
         if stage is None:
             raise error("FILE_UNREADABLE", "USD cannot open it", file=str(p))
         return cls.from_stage(p, stage, load=load, quality=quality)

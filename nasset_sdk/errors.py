@@ -207,3 +207,16 @@ def error(code: str, message: str, **loc) -> NassetError:
     if cls is NassetError and code == "USAGE":
         return UsageError(message, **loc)
     return cls(code, message, **loc)
+
+
+def usd_reason(exc) -> str:
+    """The messages of a USD ``Tf.ErrorException`` without USD's source locations, for an error's message: the
+    parser's (``file:line:column: what``, the prim and attribute) first; USD's generic ``Failed to open layer`` only
+    when there is nothing else."""
+    texts = []
+    for arg in exc.args:
+        text = str(arg).strip()
+        text = text.split(" : ", 1)[1].strip() if text.startswith("Error in ") and " : " in text else text
+        texts.append(text.strip("'").strip())
+    specific = [t for t in texts if t and not t.startswith("Failed to open layer")]
+    return "; ".join(specific or texts)[:400]

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import NassetError, SceneError, error
+from nasset_sdk.errors import NassetError, SceneError, error, usd_reason
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
@@ -245,7 +245,7 @@ def open_stage(path: str, context=None):
     try:
         stage = Usd.Stage.Open(str(p), context, Usd.Stage.LoadNone)
     except Tf.ErrorException as exc:
-        raise SceneError("SCENE_INVALID", f"USD cannot open it: {str(exc).strip().splitlines()[-1][:200]}", file=str(p)) from None
+        raise SceneError("SCENE_INVALID", f"USD cannot open it: {usd_reason(exc)}", file=str(p)) from None
     if stage is None:
         raise SceneError("SCENE_INVALID", "USD cannot open it", file=str(p))
     _load_scene_payloads(stage)
@@ -441,6 +441,8 @@ class _Loader:
 
         from nasset_sdk.references import asset_source
 
+        broken = self._composition_errors()
+        unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
@@ -453,8 +455,8 @@ class _Loader:
             tname = str(prim.GetTypeName())
             with self._reading(path):
                 source = asset_source(prim)
-                if source is not None or tname == "NeuralAsset" or (not tname and self._reference_paths(prim)):
-                    self._neural(prim, source)
+                if source is not None or tname == "NeuralAsset" or (not tname and path in broken and self._reference_paths(prim)):
+                    self._neural(prim, source, broken.get(path))
                     it.PruneChildren()
                 elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
                     n = len(self.lights)
@@ -476,14 +478,20 @@ class _Loader:
                     it.PruneChildren()  # prototypes beneath it render only as its instances
                 elif tname in ("BasisCurves", "Points"):
                     self._curves_or_points(prim, tname)
-                elif tname in ("NurbsCurves", "NurbsPatch", "HermiteCurves", "TetMesh", "Volume"):
+                elif prim.IsA(UsdGeom.Gprim):  # NurbsCurves, NurbsPatch, TetMesh, Volume, Cylinder_1, ...
                     raise self.err("SCENE_UNSUPPORTED", f"geometry type {tname} is not supported (Mesh, BasisCurves, "
                                    f"Points and the implicit {', '.join(IMPLICIT_PRIMS)} are)", path)
-        if not self.cameras:
+                elif tname and not prim.GetPrimTypeInfo().GetSchemaType() and tname not in unknown:
+                    unknown.add(tname)  # a DCC's own type, its plugin not here: said once per type
+                    self.warn(f"prim type {tname!r} has no schema here (a plugin's type, {path} the first): its prims "
+                              "are not rendered themselves, their children are traversed", None)
+        settings = self._settings_prim()
+        chosen = self._settings_camera(settings)
+        if chosen is None and not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
-        with self._reading(str(self.cameras[0].GetPath())):
-            camera = self._camera(self.cameras[0])
-        if len(self.cameras) > 1:
+        with self._reading(str((chosen or self.cameras[0]).GetPath())):
+            camera = self._camera(chosen or self.cameras[0], settings)
+        if chosen is None and len(self.cameras) > 1:
             self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
             self.warn("the scene has no lights and no emissive materials; the image will be black")
@@ -491,6 +499,7 @@ class _Loader:
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
         self._check_world_bounds()
+        self._clipping_warning(camera, tris)
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
@@ -507,7 +516,7 @@ class _Loader:
             tri_color=None if all(c is None for c in self.tri_color) else np.concatenate(
                 [np.zeros((len(st), 3, 3)) if c is None else c for c, st in zip(self.tri_color, self.tri_st, strict=True)]),
             tri_ng=np.concatenate(self.tri_ng) if n else np.zeros((0, 3)),
-            render_settings=self._render_settings(),
+            render_settings=self._render_settings(settings),
         )
 
     def _mesh_lights(self) -> None:
@@ -580,7 +589,7 @@ class _Loader:
         self.tri_inst.append(np.full(len(tris_world), len(self.instances) - 1, np.int64))
 
     # -- camera ----------------------------------------------------------------------------
-    def _camera(self, prim) -> Camera:
+    def _camera(self, prim, settings=None) -> Camera:
         """The camera of spec/renderer.md#cameras: projection, apertures, lens shift, thin lens, exposure."""
         from pxr import UsdGeom
 
@@ -638,8 +647,31 @@ class _Loader:
         if np.abs(M[3, :3]).max() > MAX_WORLD_COORDINATE:
             raise self.err("SCENE_INVALID", f"camera position {M[3, :3].tolist()} beyond |coordinate| <= {MAX_WORLD_COORDINATE:g}",
                            path, "xformOpOrder")
-        return Camera(M, fl, ha, va, str(path), self._render_resolution(), *offsets, orthographic=ortho,
-                      lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
+        camera = Camera(M, fl, ha, va, str(path), self._render_resolution(settings), *offsets, orthographic=ortho,
+                        lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
+        self._conform_warning(settings, camera)
+        return camera
+
+    def _clipping_warning(self, camera: Camera, tris: np.ndarray) -> None:
+        """Clipping is not rendered (spec/renderer.md#cameras): a warning naming the camera when its
+        ``clippingPlanes`` are authored, or when triangle vertices in front of it lie nearer than its
+        ``clippingRange`` near distance or beyond its far one (a view USD would cut, the whole scene here)."""
+        from pxr import UsdGeom
+
+        cam = UsdGeom.Camera(self.stage.GetPrimAtPath(camera.prim))
+        with self._reading(camera.prim):
+            planes = cam.GetClippingPlanesAttr().Get(self.time)
+            near, far = (float(v) for v in (cam.GetClippingRangeAttr().Get(self.time) or (1.0, 1e6)))
+        if planes is not None and len(planes):
+            self.warn(f"{len(planes)} clippingPlanes ignored: nothing is clipped", camera.prim)
+        if not len(tris):
+            return
+        M = camera.to_world
+        depth = -((tris.reshape(-1, 3) - M[3, :3]) @ np.linalg.inv(M[:3, :3]))[:, 2]
+        depth = depth[depth > 0]
+        if len(depth) and (depth.min() < near or depth.max() > far):
+            self.warn(f"clippingRange ({near:g}, {far:g}) ignored: geometry in front of the camera lies at depths "
+                      f"{depth.min():.4g} to {depth.max():.4g}, and nothing is clipped", camera.prim)
 
     def _exposure_scale(self, cam) -> float:
         """The camera's linear exposure scale (``UsdGeomCamera::ComputeLinearExposureScale``: 2^exposure x
@@ -652,27 +684,81 @@ class _Loader:
                            f"/ exposure:fStop^2) must be finite and in [0, {MAX_EXPOSURE_SCALE:g}]", path, "exposure")
         return scale
 
-    def _render_resolution(self) -> tuple[int, int] | None:
-        """Resolution of the stage's first UsdRender.Settings prim (None when absent or invalid)."""
+    def _settings_prim(self):
+        """The stage's render settings (spec/renderer.md#image-size): the prim the stage's ``renderSettingsPrimPath``
+        names, else the first active UsdRender.Settings prim in traversal order (instance proxies included); None."""
         from pxr import Usd, UsdRender
 
-        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
-            if prim.IsA(UsdRender.Settings):
-                res = UsdRender.Settings(prim).GetResolutionAttr().Get(self.time)
-                if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
-                    return int(res[0]), int(res[1])
-                self.warn(f"{prim.GetPath()}: resolution {res} ignored")
+        named = self.stage.GetMetadata("renderSettingsPrimPath")
+        if named:
+            prim = self.stage.GetPrimAtPath(named)
+            if prim and prim.IsActive() and prim.IsA(UsdRender.Settings):
+                return prim
+            self.warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used")
+        return next((p for p in self.stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
+
+    def _settings_camera(self, settings):
+        """The camera the render settings name (the ``camera`` of their first product that authors one, else their
+        own), None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
+        from pxr import UsdGeom, UsdRender
+
+        if settings is None:
+            return None
+        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
+        for owner in [p for p in products if p and p.IsA(UsdRender.Product)] + [settings]:
+            targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
+            if targets:
+                prim = self.stage.GetPrimAtPath(targets[0])
+                if not (prim and prim.IsA(UsdGeom.Camera)):
+                    raise self.err("SCENE_INVALID", f"camera {targets[0]} is not a UsdGeom.Camera", owner.GetPath(), "camera")
+                return prim
         return None
 
-    def _render_settings(self) -> dict:
-        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
-        ``nasset:pixelFilterStddev`` (pixels) of the first UsdRender.Settings prim; invalid values are warned and dropped."""
-        from pxr import Usd, UsdRender
+    def _render_resolution(self, settings) -> tuple[int, int] | None:
+        """Resolution of the render settings (their first product's when it authors one; None when absent or invalid).
+        Their UsdRender attributes the renderer does not honour are warned about by name."""
+        from pxr import Gf, UsdRender
 
+        if settings is None:
+            return None
+        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
+        owner = next((p for p in products if p and p.IsA(UsdRender.Product)
+                      and UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
+        base = UsdRender.SettingsBase(owner)
+        res = base.GetResolutionAttr().Get(self.time)
+        pixel_aspect = base.GetPixelAspectRatioAttr().Get(self.time)
+        if pixel_aspect is not None and pixel_aspect != 1.0:
+            self.warn(f"pixelAspectRatio {pixel_aspect:g} is ignored (square pixels)", owner.GetPath())
+        window = base.GetDataWindowNDCAttr().Get(self.time)
+        if window is not None and Gf.Vec4f(window) != Gf.Vec4f(0, 0, 1, 1):
+            self.warn(f"dataWindowNDC {tuple(window)} is ignored (the whole image is rendered)", owner.GetPath())
+        if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
+            return int(res[0]), int(res[1])
+        self.warn(f"{owner.GetPath()}: resolution {res} ignored")
+        return None
+
+    def _conform_warning(self, settings, camera: Camera) -> None:
+        """A warning when the settings' ``aspectRatioConformPolicy`` (USD's fallback ``expandAperture``) would frame the
+        settings' resolution otherwise than the spec's horizontal fit (spec/renderer.md#image-size)."""
+        from pxr import UsdRender
+
+        if settings is None or camera.resolution is None:
+            return
+        policy = str(UsdRender.SettingsBase(settings).GetAspectRatioConformPolicyAttr().Get(self.time) or "expandAperture")
+        wider = camera.resolution[0] * camera.vertical_aperture - camera.resolution[1] * camera.horizontal_aperture
+        if policy == "adjustApertureHeight" or abs(wider) <= 1e-6 * camera.resolution[1] * camera.horizontal_aperture:
+            return
+        if (policy == "expandAperture" and wider < 0) or (policy == "cropAperture" and wider > 0):
+            return
+        self.warn(f"aspectRatioConformPolicy {policy!r} is not applied: the horizontal aperture is kept and the vertical "
+                  f"extent follows the {camera.resolution[0]}x{camera.resolution[1]} image", settings.GetPath())
+
+    def _render_settings(self, settings) -> dict:
+        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
+        ``nasset:pixelFilterStddev`` (pixels) of the render settings (:meth:`_settings_prim`); invalid values are warned
+        and dropped."""
         out: dict = {}
-        for prim in self.stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
-            if not prim.IsA(UsdRender.Settings):
-                continue
+        for prim in [settings] if settings is not None else []:
             for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
                                   ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
                                   ("nasset:pixelFilterStddev", "pixel_filter_stddev",
@@ -685,18 +771,17 @@ class _Loader:
                     out[key] = str(v) if key == "pixel_filter" else v
                 else:
                     self.warn(f"{name} = {v!r} ignored", prim.GetPath())
-            break
         return out
 
     # -- meshes and materials --------------------------------------------------------------
     def _material(self, prim, *, varying_colors: bool = True) -> int:
         """Material id of a prim's bound material, else of its displayColor (``varying_colors`` False: the mean of
         several values, for prims whose triangles carry no primvar colours)."""
-        from pxr import UsdGeom, UsdShade
+        from pxr import UsdGeom
 
-        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        mat = self._bound_material(prim)
         if not mat:
-            dc = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+            dc = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance("displayColor")  # a constant one may be an ancestor's
             with self._reading(prim.GetPath()):
                 val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
                 val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
@@ -716,6 +801,21 @@ class _Loader:
                 self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
             return self.mat_index[key]
         return self._material_of(mat)
+
+    def _bound_material(self, prim):
+        """The material a final render binds to ``prim`` (spec/renderer.md#materials): its ``full``-purpose binding,
+        else its all-purpose one (``ComputeBoundMaterial(full)``); a prim bound only for ``preview`` (a viewport's
+        binding) is unbound, with a warning."""
+        from pxr import UsdShade
+
+        api = UsdShade.MaterialBindingAPI(prim)
+        mat, _ = api.ComputeBoundMaterial(UsdShade.Tokens.full)
+        if not mat:
+            preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
+            if preview:
+                self.warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
+                          "reads full, else all-purpose bindings): rendered unbound", prim.GetPath())
+        return mat
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
@@ -900,6 +1000,9 @@ class _Loader:
             self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
             return None
         resolved = asset.resolvedPath or ""
+        if not resolved:
+            self.warn(f"texture {asset.path} not found; the connected input's own value is used", tpath)
+            return None
         if not (_packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
             self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; the connected input's own "
                       "value is used", tpath)
@@ -985,7 +1088,7 @@ class _Loader:
         (not finite, another width, or a length its interpolation does not give)."""
         from pxr import UsdGeom
 
-        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(varname)
+        pv = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance(varname)  # a constant one may be an ancestor's
         with self._reading(prim.GetPath()):
             vals = pv.ComputeFlattened(self.time) if pv and pv.HasAuthoredValue() else None
             v = np.asarray(vals, np.float64) if vals is not None and len(vals) else None
@@ -1060,6 +1163,8 @@ class _Loader:
         nvals, interp = None, None
         if pv and pv.HasAuthoredValue():
             nvals, interp = pv.ComputeFlattened(self.time), pv.GetInterpolation()
+            if nvals is None:  # USD flattens nothing when an index is out of range
+                self.warn("primvars:normals has indices outside its values: ignored", path)
         elif nattr and nattr.HasAuthoredValue():
             nvals, interp = nattr.Get(self.time), mesh.GetNormalsInterpolation()
         if nvals is not None and len(nvals):
@@ -1160,7 +1265,7 @@ class _Loader:
             if subset.GetElementTypeAttr().Get(self.time) != UsdGeom.Tokens.face:
                 self.warn("GeomSubset of an element type other than face ignored", sub_path)
                 continue
-            mat, _ = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()
+            mat = self._bound_material(subset.GetPrim())
             if not mat:
                 continue
             ind = np.asarray(subset.GetIndicesAttr().Get(self.time) or [], np.int64)
@@ -1368,7 +1473,17 @@ class _Loader:
                         out.append(spec.layer.ComputeAbsolutePath(ref.assetPath))
         return out
 
-    def _neural(self, prim, source):
+    def _composition_errors(self) -> dict:
+        """USD's composition errors (a reference, payload or sublayer that cannot be opened, an unresolved prim path),
+        each warned about naming its prim: {prim path: USD's message}. USD composes the scene without what failed."""
+        out: dict = {}
+        for failure in self.stage.GetCompositionErrors():
+            where, text = str(failure.rootSite.path), str(failure).strip()
+            out.setdefault(where, text)
+            self.warn(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
+        return out
+
+    def _neural(self, prim, source, composition_error=None):
         from pxr import UsdGeom
 
         from nasset_sdk.references import open_source
@@ -1378,7 +1493,9 @@ class _Loader:
             refs = self._reference_paths(prim)
             if not refs:
                 raise self.err("SCENE_INVALID", "NeuralAsset prim does not reference an asset file", path)
-            raise self.err("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {refs[0]}", path)
+            why = f" ({composition_error})" if composition_error else ""
+            raise self.err("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {refs[0]}{why}",
+                           path)
         file = Path(source.display)
         key = source.display if "[" in source.display or source.embedded else os.path.realpath(source.layer)
         if key not in self.asset_index:
@@ -1464,6 +1581,13 @@ class _Loader:
             if n in known or n.startswith(_IGNORED_PREFIXES):
                 continue
             self.warn(f"attribute {n!r} is not used by the renderer", path)
+        connected = sorted(a.GetName() for a in prim.GetAuthoredAttributes() if a.HasAuthoredConnections())
+        if connected:  # a light shader network (a texture, a primvar reader) feeding the light's inputs
+            self.warn(f"{', '.join(connected)} connected: the input's own value (else its fallback) is used", path)
+        filters = prim.GetRelationship("light:filters")
+        if filters and filters.GetForwardedTargets():
+            self.warn(f"light:filters {', '.join(map(str, filters.GetForwardedTargets()))} ignored: the light is "
+                      "rendered unfiltered", path)
         for link in ("lightLink", "shadowLink"):  # a collection that leaves objects out: every object is lit all the same
             coll = Usd.CollectionAPI(prim, link)
             include_root = coll.GetIncludeRootAttr().Get(self.time) if coll.GetIncludeRootAttr() else None
