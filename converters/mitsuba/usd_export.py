@@ -736,12 +736,7 @@ class StageConverter:
         group = m.group(1) if m else ""
         proto = self.prototypes.get(group)
         if proto is None:
-            params = self.mi.traverse(self.scene)
-            children = {}
-            for key in params.keys():
-                parts = key.split(".")
-                if len(parts) == 3 and parts[0] == group and parts[2] == "silhouette_sampling_weight":
-                    children[parts[1]] = params.properties[key][2]
+            children = shapegroup_children(self.mi, self.scene, group)
             from pxr import Tf
 
             proto = f"/Prototypes/{Tf.MakeValidIdentifier(group or 'group')}"
@@ -1203,6 +1198,17 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
             if np.ndim(out[k]) == 0:
                 out[k] = float(out[k])
     return out, "parameters blended linearly (an approximation of the blended lobes)"
+
+
+def shapegroup_children(mi, scene, group: str) -> dict:
+    """{child name: shape} of the ``shapegroup`` with id ``group``: the nodes whose parent is that group in the
+    hierarchy of Mitsuba's scene parameters. Ids may hold dots (Blender's ``Cube.001``), so no parameter key is split
+    on dots; an unnamed child is ``shape_N`` (N its place in the group), as an unnamed top-level shape."""
+    children = {}
+    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
+        if parent is not None and _class_name(parent) == "ShapeGroup" and parent.id() == group:
+            children[node.id() or f"shape_{len(children)}"] = node
+    return children
 
 
 def _is_one_sided(bsdf) -> bool:
