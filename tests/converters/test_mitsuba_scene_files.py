@@ -47,3 +47,31 @@ def test_shapegroup_children_with_dotted_ids_are_converted(tmp_path):
     assert protos == {"/Prototypes/Chair_v1": ["Seat_001", "shape_1"], "/Prototypes/Chair": ["Seat"]}
     assert stage.GetPrimAtPath("/World/Geometry/a_1").IsInstance()
     assert stage.GetPrimAtPath("/World/Geometry/a_1").GetPrototype().GetChildren()  # the instance shows its shapes
+
+
+@pytest.mark.parametrize("wrap", ["repeat", "mirror", "clamp"])
+@pytest.mark.parametrize("filt", ["bilinear", "nearest"])
+def test_bitmap_wrap_mode_and_nearest_filter_carry_over(tmp_path, wrap, filt):
+    # Mitsuba's description of a bitmap names neither its wrap_mode nor its filter_type: both were written as repeat
+    # and bilinear (a clamped or mirrored texture tiled by to_uv read MSE 44x the noise: fidelity scene texture_sampling)
+    import numpy as np
+    from pxr import UsdShade
+
+    from nasset_sdk.images import read_exr, write_png
+
+    y, x = np.mgrid[0:8, 0:8]
+    write_png(tmp_path / "grad.png", np.stack([x * 36, y * 36, 128 + 0 * x], -1).astype(np.uint8))
+    xml = tmp_path / "tex.xml"
+    xml.write_text(HEAD + f"""
+<shape type="rectangle" id="floor"><bsdf type="diffuse"><texture type="bitmap" name="reflectance">
+  <string name="filename" value="grad.png"/><string name="wrap_mode" value="{wrap}"/><string name="filter_type" value="{filt}"/>
+  <transform name="to_uv"><scale value="2.5"/><rotate z="1" angle="15"/><translate x="-0.7" y="-0.6"/></transform>
+</texture></bsdf></shape>
+</scene>""")
+    res = convert_scene(xml, tmp_path / "tex.usda", check_usd=False)
+    stage = _stage(res.output)
+    tex = next(UsdShade.Shader(p) for p in stage.Traverse()
+               if p.GetTypeName() == "Shader" and UsdShade.Shader(p).GetIdAttr().Get() == "UsdUVTexture")
+    assert tex.GetInput("wrapS").Get() == wrap and tex.GetInput("wrapT").Get() == wrap
+    image = read_exr(res.textures[0])
+    assert image.shape[:2] == ((64, 64) if filt == "nearest" else (8, 8))  # nearest: each texel repeated 8 x 8
