@@ -70,6 +70,26 @@ def _textures(folder: Path, size: int) -> str:
             + SUN + SKY + "</scene>")
 
 
+def _texture_sampling(folder: Path, size: int) -> str:
+    # a coarse 8 x 8 gradient bitmap scaled 2.5x by to_uv (most of each panel lies outside the unit square) on three
+    # panels seen from above: wrap_mode clamp, mirror (filter_type nearest) and repeat (nearest)
+    from nasset_sdk.images import write_png
+
+    y, x = np.mgrid[0:8, 0:8]
+    write_png(folder / "grad.png", np.stack([x * 255 // 7, y * 255 // 7, 128 + 0 * x], -1).astype(np.uint8))
+
+    def panel(sid, px, wrap, filt):
+        return (f'<shape type="rectangle" id="{sid}"><transform name="to_world"><scale value="0.31"/><rotate x="1" angle="-90"/>'
+                f'<translate x="{px}" y="0.01"/></transform><bsdf type="diffuse"><texture type="bitmap" name="reflectance">'
+                f'<string name="filename" value="grad.png"/><string name="wrap_mode" value="{wrap}"/>'
+                f'<string name="filter_type" value="{filt}"/><transform name="to_uv"><scale value="2.5"/>'
+                '<translate x="-0.7" y="-0.6"/></transform></texture></bsdf></shape>\n')
+
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 2.1, 0.3", size=size).replace('target="0, 0.3, 0"', 'target="0, 0, 0"')
+            + panel("clamped", -0.66, "clamp", "bilinear") + panel("mirrored", 0.0, "mirror", "nearest")
+            + panel("repeated", 0.66, "repeat", "nearest") + SKY + "</scene>")
+
+
 def _sidedness(folder: Path, size: int) -> str:
     # one-sided diffuse panels seen from the front and from behind (black in Mitsuba), a twosided one, and a
     # twosided one with a different back BSDF seen from behind
@@ -415,6 +435,8 @@ SCENES = {
                                   "a ball and a box"),
     "depth_of_field": FidelityScene("depth_of_field", _depth_of_field, "a thinlens sensor (aperture radius 0.35) focused on "
                                     "the ball, a box behind it and a checkered floor out of focus"),
+    "texture_sampling": FidelityScene("texture_sampling", _texture_sampling, "an 8 x 8 bitmap tiled 2.5x by to_uv on "
+                                      "three panels: wrap_mode clamp, mirror (filter_type nearest), repeat (nearest)"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
                                  "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }

@@ -229,6 +229,75 @@ def blackbody_rgb(mi, kelvin: float) -> np.ndarray:
     return np.maximum(to_srgb @ xyz, 0.0)
 
 
+#: a ``filter_type`` nearest bitmap is written with each texel repeated up to this many times per axis (the renderer
+#: filters bilinearly: the blend then spans 1 / NEAREST_REPEAT of a texel), at most TEXTURE_MAX_PIXELS texels
+NEAREST_REPEAT = 8
+TEXTURE_MAX_PIXELS = 1 << 22
+
+
+def _eval_texture(mi, tex, uv: np.ndarray) -> np.ndarray:
+    """Mitsuba's own value [N, 3] of texture ``tex`` at texture coordinates ``uv`` [N, 2] (before its ``to_uv``)."""
+    si = mi.SurfaceInteraction3f()
+    if mi.variant().startswith("scalar"):
+        out = []
+        for u, v in uv:
+            si.uv = mi.Point2f(float(u), float(v))
+            out.append(np.resize(_np(tex.eval(si)).ravel(), 3))
+        return np.array(out)
+    si.uv = mi.Point2f(*np.ascontiguousarray(uv.T, np.float32))
+    val = tex.eval(si)
+    return np.stack([np.asarray(val[c], np.float64).ravel() for c in range(3)], 1)
+
+
+def _on_axis(axis: int, x: float, other: float) -> tuple[float, float]:
+    """The point (u, v) with ``x`` on ``axis`` (0: u, 1: v) and ``other`` on the other."""
+    return (x, other) if axis == 0 else (other, x)
+
+
+def bitmap_sampling(mi, tex, shape_hw, to_uv) -> tuple[str, bool]:
+    """``(wrap, nearest)`` of a Mitsuba ``bitmap``: its ``wrap_mode`` (``repeat``, ``mirror`` or ``clamp``, the
+    UsdUVTexture wrap tokens of the same name) and whether its ``filter_type`` is ``nearest``. Mitsuba's description
+    of a bitmap names neither, so both are read off the texture itself: its values just outside the unit square
+    against the three wrap modes' images of those points inside it, and its jump across texel edges (nearest: the
+    whole step between neighbours; bilinear: half of it a quarter texel either side). A texture on which the modes
+    agree (uniform along its edges, say) is taken as Mitsuba's default, repeat and bilinear."""
+    h, w = shape_hw
+    inv = np.linalg.inv(np.asarray(to_uv, np.float64)) if to_uv is not None else np.eye(3)
+
+    def ev(pts):  # values at points [N, 2] of the unit square, i.e. after to_uv
+        pts = np.asarray(pts, np.float64)
+        before = (np.concatenate([pts, np.ones((len(pts), 1))], 1) @ inv.T)[:, :2]
+        return _eval_texture(mi, tex, before)
+
+    outside, images = [], {"repeat": [], "mirror": [], "clamp": []}
+    for f in (0.13, 0.31):  # beyond each edge by f, and where each mode takes that point inside (u or v)
+        for axis, n, m in ((0, w, h), (1, h, w)):
+            for beyond, inside in (((1.0 + f), {"repeat": f, "mirror": 1.0 - f, "clamp": 1.0 - 0.5 / n}),
+                                   ((-f), {"repeat": 1.0 - f, "mirror": f, "clamp": 0.5 / n})):
+                lines = (np.arange(min(m, 16)) + 0.5) / min(m, 16)  # across the other axis
+                outside += [_on_axis(axis, beyond, o) for o in lines]
+                for mode, x in inside.items():
+                    images[mode] += [_on_axis(axis, x, o) for o in lines]
+    at = ev(outside)
+    err = {mode: float(np.abs(ev(pts) - at).sum()) for mode, pts in images.items()}
+    best = min(err, key=err.get)
+    wrap = best if err[best] < err["repeat"] - 1e-6 * (1.0 + np.abs(at).sum()) else "repeat"
+    # texel edges along both axes, at the centre line of the other
+    k = np.arange(1, min(w, 32))
+    j = np.arange(1, min(h, 32))
+    xe, ye = k * (w // min(w, 32)) / w, j * (h // min(h, 32)) / h
+    q = (0.25 / w, 0.25 / h)
+    lo = [(x - q[0], 0.5) for x in xe] + [(0.5, y - q[1]) for y in ye]
+    hi = [(x + q[0], 0.5) for x in xe] + [(0.5, y + q[1]) for y in ye]
+    c_lo = [(x - 0.5 / w, 0.5) for x in xe] + [(0.5, y - 0.5 / h) for y in ye]
+    c_hi = [(x + 0.5 / w, 0.5) for x in xe] + [(0.5, y + 0.5 / h) for y in ye]
+    if not lo:
+        return wrap, False
+    jump = float(np.abs(ev(hi) - ev(lo)).sum())
+    step = float(np.abs(ev(c_hi) - ev(c_lo)).sum())
+    return wrap, bool(step > 1e-6 and jump > 0.75 * step)
+
+
 class _Params:
     """Reads Mitsuba parameter values by name: bitmaps kept as :class:`TextureMap`, other textures by their mean."""
 
@@ -257,6 +326,21 @@ class _Params:
         at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*[=:]\s*BitmapTexture\[", text)
         flag = re.search(r"raw\s*=\s*(\d)", text[at.end():]) if at else None
         return texel_values(self.p[k + ".data"], bool(flag and flag.group(1) == "1"))
+
+    def texture_map(self, name: str, texels: np.ndarray, what: str, scale_bias=None) -> TextureMap:
+        """A :class:`TextureMap` of the bitmap parameter ``name`` holding ``texels`` (its converted values) with the
+        bitmap's wrap mode; a nearest-filtered bitmap has each texel repeated (:data:`NEAREST_REPEAT`) so that the
+        renderer's bilinear lookup keeps its edges (:func:`bitmap_sampling`)."""
+        k = self.prefix + name + ".data"
+        tex = self.p.properties[k][2] if k in self.p else None
+        wrap, nearest = ("repeat", False) if tex is None else bitmap_sampling(
+            self.mi, tex, texels.shape[:2], self.uv_transform(name))
+        if nearest:
+            n = NEAREST_REPEAT
+            while n > 1 and texels.shape[0] * texels.shape[1] * n * n > TEXTURE_MAX_PIXELS:
+                n //= 2
+            texels = np.repeat(np.repeat(texels, n, 0), n, 1)
+        return TextureMap(texels, what, scale_bias, wrap)
 
     def uv_transform(self, name: str) -> np.ndarray | None:
         """The texture's ``to_uv`` 3x3 matrix, or None when it is the identity (or absent)."""
@@ -308,7 +392,7 @@ class _Params:
         img = self.bitmap(name)
         if img is None:
             return f(self.rgb(name, default))
-        self.bitmaps[name] = TextureMap(f(img), what)
+        self.bitmaps[name] = self.texture_map(name, f(img), what)
         return self.bitmaps[name]
 
     def scalar(self, name: str, default: float) -> float:
@@ -322,7 +406,7 @@ class _Params:
         if img is None:
             return float(f(self.scalar(name, default)))
         lum = img @ np.array([0.212671, 0.715160, 0.072169])
-        self.bitmaps[name] = TextureMap(np.repeat(f(np.maximum(lum, 0.0))[..., None], 3, -1), what)
+        self.bitmaps[name] = self.texture_map(name, np.repeat(f(np.maximum(lum, 0.0))[..., None], 3, -1), what)
         return self.bitmaps[name]
 
 
@@ -604,7 +688,7 @@ class StageConverter:
                     out["opacity"] = float(np.clip(p.scalar("opacity", 1.0), 0.0, 1.0))
                 else:  # a colour bitmap is read as its luminance, as Mitsuba's mask does
                     lum = np.clip(img @ np.array([0.212671, 0.715160, 0.072169]), 0.0, 1.0)
-                    out["opacity"] = TextureMap(np.repeat(lum[..., None], 3, -1), "mask opacity")
+                    out["opacity"] = p.texture_map("opacity", np.repeat(lum[..., None], 3, -1), "mask opacity")
                     to_uv = p.uv_transform("opacity")
                     if to_uv is not None:
                         out["opacity"].uv = st_transform(to_uv)
@@ -614,11 +698,11 @@ class StageConverter:
                     notes.append("mask: Mitsuba's path integrator stops shadow rays at a mask whatever its opacity "
                                  "(measured: no light through opacity 0.25); the converted surface lets 1 - opacity "
                                  "through, as volpath does")
-            elif cls == "NormalMap" and (img := _Params(mi, bsdf, prefix).bitmap("normalmap")) is not None:
+            elif cls == "NormalMap" and (img := (pn := _Params(mi, bsdf, prefix)).bitmap("normalmap")) is not None:
                 # tangent-space normals stored as (n + 1) / 2, as UsdPreviewSurface's normal input expects them; the
                 # renderer's frame is Mitsuba's (dP/du, N x dP/du, N: renderer.md#normal-maps)
-                out["normal"] = TextureMap(img, "normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))
-                to_uv = _Params(mi, bsdf, prefix).uv_transform("normalmap")
+                out["normal"] = pn.texture_map("normalmap", img, "normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)))
+                to_uv = pn.uv_transform("normalmap")
                 if to_uv is not None:
                     out["normal"].uv = st_transform(to_uv)
             else:
@@ -737,12 +821,7 @@ class StageConverter:
         group = m.group(1) if m else ""
         proto = self.prototypes.get(group)
         if proto is None:
-            params = self.mi.traverse(self.scene)
-            children = {}
-            for key in params.keys():
-                parts = key.split(".")
-                if len(parts) == 3 and parts[0] == group and parts[2] == "silhouette_sampling_weight":
-                    children[parts[1]] = params.properties[key][2]
+            children = shapegroup_children(self.mi, self.scene, group)
             from pxr import Tf
 
             proto = f"/Prototypes/{Tf.MakeValidIdentifier(group or 'group')}"
@@ -986,7 +1065,7 @@ class StageConverter:
         img = p.bitmap("radiance")
         if img is None:
             return None
-        tex = TextureMap(img, "emitter radiance")
+        tex = p.texture_map("radiance", img, "emitter radiance")
         if (to_uv := p.uv_transform("radiance")) is not None:
             tex.uv = st_transform(to_uv)
         return tex
@@ -1199,12 +1278,24 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
             if isinstance(va, TextureMap) and isinstance(vb, TextureMap) and ia.shape != ib.shape:
                 ib = ib.reshape(-1, 3).mean(0)  # different resolutions: the second by its mean
             what = va.what if isinstance(va, TextureMap) else vb.what
-            out[k] = TextureMap((1.0 - w) * ia + w * ib, f"blend of {what}")
+            wrap = va.wrap if isinstance(va, TextureMap) else vb.wrap
+            out[k] = TextureMap((1.0 - w) * ia + w * ib, f"blend of {what}", wrap=wrap)
         else:
             out[k] = (1.0 - w) * np.asarray(va, np.float64) + w * np.asarray(vb, np.float64)
             if np.ndim(out[k]) == 0:
                 out[k] = float(out[k])
     return out, "parameters blended linearly (an approximation of the blended lobes)"
+
+
+def shapegroup_children(mi, scene, group: str) -> dict:
+    """{child name: shape} of the ``shapegroup`` with id ``group``: the nodes whose parent is that group in the
+    hierarchy of Mitsuba's scene parameters. Ids may hold dots (Blender's ``Cube.001``), so no parameter key is split
+    on dots; an unnamed child is ``shape_N`` (N its place in the group), as an unnamed top-level shape."""
+    children = {}
+    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
+        if parent is not None and _class_name(parent) == "ShapeGroup" and parent.id() == group:
+            children[node.id() or f"shape_{len(children)}"] = node
+    return children
 
 
 def _is_one_sided(bsdf) -> bool:
