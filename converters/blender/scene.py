@@ -28,6 +28,7 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from . import load_bpy, quiet_stdout, to_y_up
+from .evaluation import evaluate_as_render
 
 #: Blender's default curve radius (m) where a Curves object has no ``radius`` attribute
 DEFAULT_RADIUS = 0.005
@@ -45,6 +46,7 @@ def open_blend(path):
     except Exception as exc:  # noqa: BLE001 - bpy raises RuntimeError for every load failure
         msg = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
         raise error("CONVERT_SCENE_LOAD", f"Blender cannot load the file: {msg}", file=str(path)) from None
+    evaluate_as_render(bpy)  # geometry as Cycles renders it, not as the viewport shows it
     return bpy.context.scene
 
 
@@ -197,7 +199,10 @@ def see_through(objects, share: float = SEE_THROUGH_SHARE) -> list[str]:
 
 
 def has_particle_hair(ob) -> bool:
-    return ob.type == "MESH" and any(ps.settings.type == "HAIR" for ps in ob.particle_systems)
+    """Whether a mesh carries particle hair Cycles renders as strands (a hair system rendered as Path; one rendered
+    as Object or Collection places instances, which the depsgraph lists)."""
+    return ob.type == "MESH" and any(ps.settings.type == "HAIR" and ps.settings.render_type == "PATH"
+                                     for ps in ob.particle_systems)
 
 
 def variant_of(objects, *, file: str | None = None) -> str:

@@ -41,6 +41,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
 from nasset_sdk.errors import NassetError, UsageError, error
 
 from . import Z_UP_TO_Y_UP
+from .evaluation import evaluate_as_render, hidden_original
 from .scene import render_visible
 
 _R4 = np.eye(4)
@@ -374,6 +375,12 @@ class _BlenderConverter(StageConverter):
         bpy = self.bpy
         renders = render_visible(bpy.context.view_layer)
         objects = [ob for ob in bpy.context.view_layer.objects if renders(ob) and ob.name not in self.replace]
+        for ob in objects:
+            if has_particle_hair(ob):
+                self.warn(f"object {ob.name}: particle hair dropped (bake it: --replace {ob.name}=ASSET)")
+        # an instancer's own surface with Show Instancer for Render off, and the originals a parent instances on its
+        # vertices or faces: Cycles leaves them out (before, they were written: one object too many)
+        objects = [ob for ob in objects if not hidden_original(ob)]
         users: dict = {}
         for ob in objects:
             if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
@@ -388,8 +395,6 @@ class _BlenderConverter(StageConverter):
                 self.warn(f"object {ob.name}: {ob.type} is not convertible (surfaces are: {', '.join(SURFACE_TYPES)}): "
                           "skipped")
                 continue
-            if has_particle_hair(ob):
-                self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
             self._ray_visibility(ob)
             if len(users.get(ob.data.name, ())) > 1:
                 self._instance(ob, np.array(ob.matrix_world, np.float64), ob.name, f"linked duplicate of mesh {ob.data.name}")
@@ -1048,12 +1053,15 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
     else:
         open_blend(scene)
         label = Path(scene)
-    bpy.context.view_layer.update()
+    viewport_notes = evaluate_as_render(bpy)
     _check_replace(bpy, rep, str(label))
     output.parent.mkdir(parents=True, exist_ok=True)
     if output.exists():
         output.unlink()
-    return _BlenderConverter(bpy, label, output, rep, check_usd).run()
+    converter = _BlenderConverter(bpy, label, output, rep, check_usd)
+    for note in viewport_notes:
+        converter.warn(note)
+    return converter.run()
 
 
 def run(args) -> int:

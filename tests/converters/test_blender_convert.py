@@ -236,3 +236,60 @@ def test_ray_visibility_holdout_and_shadow_catcher_are_warned(tmp_path):
     res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
     said = [w for w in res.warnings if "Floor" in w]
     assert said and "invisible to camera rays" in said[0] and "is_shadow_catcher" in said[0], res.warnings
+
+
+def test_geometry_is_evaluated_as_cycles_renders_it(tmp_path):
+    """Python reaches only the viewport depsgraph, which evaluated the fidelity suite's render_evaluation scene with
+    the viewport's settings: the Subdivision Surface at level 0 (12 triangles), the render-only Bevel left out, the
+    viewport-only Array's three boxes, the curve at resolution 1, the instances of an empty disabled in viewports
+    dropped, and the vertex instancer's grid and original stud written (Cycles renders neither). The render settings
+    are now copied onto the viewport ones (noise ratio 92 before, 1.1 after, 64 x 64, 64 spp)."""
+    from pxr import Usd, UsdGeom
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("render_evaluation", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    children = stage.GetPrimAtPath("/World/Geometry").GetChildren()
+    faces = {p.GetName(): len(UsdGeom.Mesh(p).GetFaceVertexCountsAttr().Get()) for p in children if p.IsA(UsdGeom.Mesh)}
+    assert faces["Rounded"] == 12 * 4 ** 3, faces  # render level 3
+    assert faces["Bevelled"] > 12 and faces["Row"] == 12, faces  # Bevel in renders only, Array in the viewport only
+    assert faces["Ring"] >= 4 * 16 * 4, faces  # render resolution 16 per segment
+    assert "HiddenInViewport" in faces and "Studs" not in faces and "Stud" not in faces, faces
+    placed = sorted(p.GetName() for p in children if p.IsInstance())
+    assert placed == ["PebblePlacer_Pebble"] + [f"Studs_Stud{s}" for s in ("", "_2", "_3", "_4")], placed
+    assert not res.warnings, res.warnings
+
+
+def test_particle_instances_and_viewport_only_node_branches(tmp_path):
+    """A hair particle system rendered as Object instances, displayed as nothing in the viewport at 20 %: Cycles
+    renders all its instances (they were dropped, with a warning about particle hair). A Geometry Nodes group that
+    reads Is Viewport is written as its viewport branch, warned by the modifier's name."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import _add, _new_scene
+
+    _new_scene(bpy, 8, (0.0, -6.0, 2.0), (0.0, 0.0, 0.0))
+    pebble = _add(bpy, "uv_sphere", "Pebble", None, radius=0.08, location=(5.0, 5.0, 5.0), segments=8, ring_count=4)
+    emitter = _add(bpy, "plane", "Emitter", None, size=1.0)
+    settings = emitter.modifiers.new("Particles", "PARTICLE_SYSTEM").particle_system.settings
+    settings.type, settings.count, settings.render_type, settings.instance_object = "HAIR", 10, "OBJECT", pebble
+    settings.display_method, settings.display_percentage = "NONE", 20
+    tree = bpy.data.node_groups.new("Switcher", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gin, gout = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    switch, viewport = tree.nodes.new("GeometryNodeSwitch"), tree.nodes.new("GeometryNodeIsViewport")
+    tree.links.new(viewport.outputs[0], switch.inputs["Switch"])
+    tree.links.new(gin.outputs[0], switch.inputs["False"])
+    tree.links.new(switch.outputs[0], gout.inputs[0])
+    box = _add(bpy, "cube", "Proxy", None, size=0.5, location=(0.0, 1.0, 0.5))
+    box.modifiers.new("ViewportProxy", "NODES").node_group = tree
+    blend = tmp_path / "particles.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    res = convert_scene(blend, tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    placed = [p for p in stage.GetPrimAtPath("/World/Geometry").GetChildren() if p.IsInstance()]
+    assert len(placed) == 10, [p.GetName() for p in placed]
+    assert not [w for w in res.warnings if "particle hair" in w], res.warnings
+    assert [w for w in res.warnings if "ViewportProxy" in w and "Is Viewport" in w], res.warnings
