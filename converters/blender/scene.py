@@ -73,6 +73,14 @@ def render_visible(view_layer):
     return lambda ob: not ob.hide_render and any(c.as_pointer() in rendered for c in ob.users_collection)
 
 
+def missing_library_note(bpy, lib) -> str:
+    """What a library Blender could not read leaves out: its objects, named, are empty placeholders."""
+    objects = sorted(o.name for o in bpy.data.objects if o.library == lib)
+    return (f"library {lib.name} ({lib.filepath}, resolved {bpy.path.abspath(lib.filepath, library=lib.library)}) is "
+            f"missing: its linked data are empty placeholders, as Blender renders them (objects not written: "
+            f"{', '.join(objects[:20]) or 'none'}{' ...' if len(objects) > 20 else ''})")
+
+
 def pick_objects(names, *, file: str | None = None) -> list:
     """The scene's objects with these names, in order; each must have a surface (SURFACE_TYPES), be a hair Curves
     object or a mesh carrying particle hair."""
@@ -88,6 +96,8 @@ def pick_objects(names, *, file: str | None = None) -> list:
         ob = objs.get(n)
         if ob is None:
             raise error("CONVERT_SHAPE_UNKNOWN", f"no object named {n!r}; the scene has {have}", file=file)
+        if ob.library is not None and ob.library.is_missing:
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r}: {missing_library_note(bpy, ob.library)}", file=file)
         if ob.type not in (*SURFACE_TYPES, "CURVES"):
             raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r} is a {ob.type}, not a surface (mesh, curve, "
                         "surface, metaball, text) or hair curves", file=file)

@@ -351,7 +351,8 @@ class _BlenderConverter(StageConverter):
 
     # -- materials ----------------------------------------------------------------------------
     def blender_material(self, mat, ob_name: str) -> str:
-        key = ("blender", mat.name if mat is not None else None, self.looks_root)
+        # name_full: a local and a linked datablock may share a name (Blender names are unique per library only)
+        key = ("blender", mat.name_full if mat is not None else None, self.looks_root)
         if key in self.materials:
             return self.materials[key]
         inputs, notes = map_material(mat)
@@ -366,6 +367,15 @@ class _BlenderConverter(StageConverter):
         return path
 
     # -- geometry -----------------------------------------------------------------------------
+    def libraries(self) -> None:
+        """Warn about each library Blender could not read: its linked datablocks are empty placeholders (an object
+        becomes an empty), which Cycles renders as nothing and the stage leaves out alike."""
+        from .scene import missing_library_note
+
+        for lib in self.bpy.data.libraries:
+            if lib.is_missing:
+                self.warn(missing_library_note(self.bpy, lib))
+
     def shapes(self) -> None:
         """Meshes of the view layer (world space), then instances: objects placed by collection instances
         (and other instancers) and linked duplicates (mesh objects sharing one mesh without modifiers) become
@@ -384,7 +394,7 @@ class _BlenderConverter(StageConverter):
         users: dict = {}
         for ob in objects:
             if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
-                users.setdefault(ob.data.name, []).append(ob)
+                users.setdefault(ob.data.name_full, []).append(ob)
         for ob in objects:
             if ob.type == "CURVES":
                 self.warn(f"object {ob.name}: hair curves outside an asset are dropped (bake them: --replace {ob.name}=ASSET)")
@@ -396,7 +406,7 @@ class _BlenderConverter(StageConverter):
                           "skipped")
                 continue
             self._ray_visibility(ob)
-            if len(users.get(ob.data.name, ())) > 1:
+            if len(users.get(ob.data.name_full, ())) > 1:
                 self._instance(ob, np.array(ob.matrix_world, np.float64), ob.name, f"linked duplicate of mesh {ob.data.name}")
             else:
                 self._mesh(ob, self._name(self.geometry_root, ob.name), local=False)
@@ -441,8 +451,8 @@ class _BlenderConverter(StageConverter):
         mesh (written once per mesh and material set, in object space)."""
         from pxr import Sdf, Tf
 
-        mats = tuple(s.material.name if s.material else "" for s in ob.material_slots)
-        key = (ob.data.name, mats)
+        mats = tuple(s.material.name_full if s.material else "" for s in ob.material_slots)
+        key = (ob.data.name_full, mats)  # full names: a linked mesh or material may share a local one's name
         proto = self.prototypes.get(key)
         if proto is None:
             self.stage.CreateClassPrim("/Prototypes")  # abstract: rendered only through instances
@@ -532,6 +542,7 @@ class _BlenderConverter(StageConverter):
         self.camera()
         self.integrator()
         self.lights()
+        self.libraries()
         self.shapes()
         self.assets()
         self.stage.GetRootLayer().customLayerData = {

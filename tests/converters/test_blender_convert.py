@@ -293,3 +293,64 @@ def test_particle_instances_and_viewport_only_node_branches(tmp_path):
     assert len(placed) == 10, [p.GetName() for p in placed]
     assert not [w for w in res.warnings if "particle hair" in w], res.warnings
     assert [w for w in res.warnings if "ViewportProxy" in w and "Is Viewport" in w], res.warnings
+
+
+def _linked_scene(tmp_path):
+    """main.blend: two red cubes sharing a local mesh "Cube" and material "Paint"; linked from lib.blend, two green
+    balls sharing the library's mesh also named "Cube" and its material also named "Paint"."""
+    from nasset_converters.blender.fidelity import _add, _material, _new_scene
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    paint = _material(bpy, "Paint", **{"Color": (0.1, 0.9, 0.1)})
+    ball = _add(bpy, "uv_sphere", "LibBall", paint, radius=0.3)
+    ball.data.name = "Cube"
+    twin = bpy.data.objects.new("LibBallTwin", ball.data)
+    bpy.context.scene.collection.objects.link(twin)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "lib.blend"))
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    cube = _add(bpy, "cube", "LocalCube", _material(bpy, "Paint", **{"Color": (0.9, 0.1, 0.1)}), size=0.3)
+    cube.data.name = "Cube"
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("LocalCubeTwin", cube.data))
+    with bpy.data.libraries.load(str(tmp_path / "lib.blend"), link=True, relative=True) as (_, linked):
+        linked.objects = ["LibBall", "LibBallTwin"]
+    for ob in linked.objects:
+        bpy.context.scene.collection.objects.link(ob)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "main.blend"))
+    return tmp_path / "main.blend"
+
+
+def test_linked_data_named_like_local_data_keeps_its_own_mesh_and_material(tmp_path):
+    """Blender names are unique per library only: a linked mesh and material named like local ones were taken for
+    them (the linked balls were written as instances of the local red cube). They are told apart by full name."""
+    from pxr import Usd, UsdGeom, UsdShade
+
+    res = convert_scene(_linked_scene(tmp_path), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    for name, triangles, rgb in (("LocalCube", 12, (0.9, 0.1, 0.1)), ("LibBall", 960, (0.1, 0.9, 0.1))):
+        placed = stage.GetPrimAtPath(f"/World/Geometry/{name}")
+        assert placed.IsInstance(), name
+        mesh = next(p for p in Usd.PrimRange(placed.GetPrototype()) if p.IsA(UsdGeom.Mesh))
+        assert len(UsdGeom.Mesh(mesh).GetFaceVertexCountsAttr().Get()) == triangles, name
+        material = UsdShade.MaterialBindingAPI(mesh).ComputeBoundMaterial()[0]
+        shader = stage.GetPrimAtPath(material.GetPath().AppendChild("PreviewSurface"))
+        assert np.allclose(shader.GetAttribute("inputs:diffuseColor").Get(), rgb, atol=1e-6), name
+
+
+def test_a_missing_library_is_warned_by_name(tmp_path):
+    """A library that is not where the file says: its objects are empty placeholders, which Cycles renders as nothing;
+    they were dropped without a word. The converter names the library and its objects; the bake refuses them."""
+    import shutil
+
+    from nasset_converters.blender.scene import open_blend, pick_objects
+
+    blend = _linked_scene(tmp_path)
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    shutil.copy(blend, moved / "main.blend")
+    res = convert_scene(moved / "main.blend", moved / "s.usda")
+    assert [w for w in res.warnings if "library lib.blend" in w and "missing" in w and "LibBall, LibBallTwin" in w], \
+        res.warnings
+    open_blend(moved / "main.blend")
+    with pytest.raises(NassetError) as e:
+        pick_objects(["LibBall"])
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "lib.blend" in str(e.value)
