@@ -279,7 +279,7 @@ class _BlenderConverter(StageConverter):
             self.warn(f"light {ob.name}: elliptic spot cone (object scale {sx:.3g} x {sy:.3g}) written as a round cone")
 
     def world(self) -> None:
-        from pxr import Gf, Sdf, UsdLux
+        from .shader_graph import resolved_copy
 
         world = self.bscene.world
         if world is None or not world.node_tree:
@@ -287,7 +287,13 @@ class _BlenderConverter(StageConverter):
                 self.warn(f"world {world.name}: colour without a node tree written as a constant dome")
                 self._dome_constant(np.array(world.color, np.float64), world.name)
             return
-        out = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+        with resolved_copy(self.bpy, world) as resolved:  # reroutes, muted nodes and links, constants as Cycles reads them
+            self._world_tree(world, resolved.node_tree)
+
+    def _world_tree(self, world, tree) -> None:
+        from pxr import Gf, Sdf, UsdLux
+
+        out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
         link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
         if link is None:
             return
@@ -617,12 +623,29 @@ def map_material(mat) -> tuple[dict, list]:
     if not mat.node_tree:
         return {"diffuseColor": tuple(mat.diffuse_color[:3]), "roughness": float(mat.roughness),
                 "metallic": float(mat.metallic)}, [f"material {mat.name}: viewport colours used (no node tree)"]
-    out = next((n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None)
-    if out is None or not out.inputs["Surface"].is_linked:
-        return grey, [f"material {mat.name}: no surface shader, grey used"]
-    notes: list = []
-    inputs = _map_shader(mat, out.inputs["Surface"].links[0].from_node, notes)
+    from types import SimpleNamespace
+
+    from . import load_bpy
+    from .shader_graph import resolved_copy
+
+    with resolved_copy(load_bpy(), mat) as resolved:  # reroutes, muted nodes and links, constants as Cycles reads them
+        nodes = resolved.node_tree.nodes
+        out = next((n for n in nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None)
+        if out is None:
+            return grey, [f"material {mat.name}: no material output node, grey used"]
+        if not out.inputs["Surface"].is_linked:  # Cycles: no surface closure is an opaque black surface; with a
+            if out.inputs["Volume"].is_linked:  # volume, a boundary light crosses
+                return dict(NO_SURFACE, opacity=0.0), [f"material {mat.name}: volume shader dropped (the object is "
+                                                       "written as its see-through boundary)"]
+            return dict(NO_SURFACE), []
+        notes: list = []
+        inputs = _map_shader(SimpleNamespace(name=mat.name), out.inputs["Surface"].links[0].from_node, notes)
     return (grey, notes) if inputs is None else (inputs, notes)
+
+
+#: a surface without a closure (an unlinked Surface, a muted shader), as Cycles renders it: opaque black
+NO_SURFACE = {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+              "roughness": 1.0}
 
 
 #: shader nodes :func:`_map_shader` converts
