@@ -594,6 +594,50 @@ def _render_evaluation(bpy, folder: Path, size: int) -> None:
     _world(bpy)
 
 
+def _group(bpy, name: str, inputs, build):
+    """A shader node group with a Shader output and ``inputs`` [(name, socket type, default)]; ``build(tree, gin,
+    gout)`` fills it."""
+    tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    tree.interface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    for sock_name, kind, default in inputs:
+        tree.interface.new_socket(sock_name, in_out="INPUT", socket_type=kind).default_value = default
+    build(tree, tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput"))
+    return tree
+
+
+def _grouped_material(bpy, image: Path):
+    """An Image Texture into a group whose nested group holds a Principled BSDF: Base Color from the outer group's
+    input, Roughness from the inner group's input (set on the inner group node inside the outer group)."""
+    def inner_build(tree, gin, gout):
+        bsdf = tree.nodes.new("ShaderNodeBsdfPrincipled")
+        tree.links.new(gin.outputs["Color"], bsdf.inputs["Base Color"])
+        tree.links.new(gin.outputs["Rough"], bsdf.inputs["Roughness"])
+        tree.links.new(bsdf.outputs[0], gout.inputs[0])
+
+    inner = _group(bpy, "InnerPaint", [("Color", "NodeSocketColor", (0.5, 0.5, 0.5, 1.0)),
+                                       ("Rough", "NodeSocketFloat", 0.5)], inner_build)
+
+    def outer_build(tree, gin, gout):
+        node = tree.nodes.new("ShaderNodeGroup")
+        node.node_tree = inner
+        node.inputs["Rough"].default_value = 0.8
+        tree.links.new(gin.outputs["Color"], node.inputs["Color"])
+        tree.links.new(node.outputs[0], gout.inputs[0])
+
+    outer = _group(bpy, "OuterPaint", [("Color", "NodeSocketColor", (0.5, 0.5, 0.5, 1.0))], outer_build)
+    mat = bpy.data.materials.new("Grouped")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    for node in [n for n in nt.nodes if n.bl_idname != "ShaderNodeOutputMaterial"]:
+        nt.nodes.remove(node)
+    group, tex = nt.nodes.new("ShaderNodeGroup"), nt.nodes.new("ShaderNodeTexImage")
+    group.node_tree = outer
+    tex.image = bpy.data.images.load(str(image))
+    nt.links.new(tex.outputs["Color"], group.inputs["Color"])
+    nt.links.new(group.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs["Surface"])
+    return mat
+
+
 def _node_links(bpy, folder: Path, size: int) -> None:
     # links Cycles reads otherwise than as drawn: reroutes and muted nodes pass through, muted links are ignored, RGB
     # and Value nodes are constants, a material without a surface shader (or with a muted one) is black
@@ -639,6 +683,8 @@ def _node_links(bpy, folder: Path, size: int) -> None:
     mat = _material(bpy, "MutedShader", **{"Color": (0.9, 0.9, 0.9)})  # a muted Diffuse BSDF: black
     next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfDiffuse").mute = True
     _add(bpy, "cube", "MutedShaderBox", mat, size=0.3, location=(0.0, 0.9, 0.15))
+    _add(bpy, "cube", "GroupedBox", _grouped_material(bpy, checker), size=0.4, location=(0.9, 0.8, 0.2),
+         rotation=(0.0, 0.0, math.radians(35.0)))
     _sun(bpy)
     _world(bpy)
 
@@ -689,7 +735,7 @@ SCENES = {
     "node_links": FidelityScene("node_links", _node_links, "links as Cycles reads them: an Image Texture through two "
                                 "Reroutes, through a muted Invert node, and through a muted link (ignored); RGB and "
                                 "Value nodes on Principled inputs; a material without a Surface link and a muted "
-                                "Diffuse BSDF (black)"),
+                                "Diffuse BSDF (black); a texture into nested node groups around a Principled BSDF"),
     "render_evaluation": FidelityScene("render_evaluation", _render_evaluation, "viewport and render settings apart: "
                                        "Subdivision Surface levels 0 / render 3, a Bevel in renders only, an Array in "
                                        "the viewport only, a ball and a collection instancer disabled in viewports, a "
@@ -856,11 +902,11 @@ NOTES = """
   (and the bake) evaluated geometry through the viewport depsgraph, with viewport subdivision levels, viewport-only
   modifiers, viewport curve resolutions, and without objects disabled in viewports or the instances they place. An
   opened file now evaluates with its render settings (spec/bake-blender.md#scene-conversion).
-- node_links read ratio 1.22 / 1.34 / 1.36 and MSE / noise 588 (64 x 64, 64 spp; 1.08 now): links through Reroute and
+- node_links read ratio 1.23 / 1.36 / 1.38 and MSE / noise 589 (64 x 64, 64 spp; 1.10 now): links through Reroute and
   muted nodes, and from RGB and Value nodes, were dropped (the socket's default), a muted link was followed (Cycles
-  ignores it), a world colour through a Reroute dropped the dome, and a material without a Surface link or with a
-  muted shader was grey where Cycles renders black. Node trees are now read with Cycles' link rules
-  (`converters/blender/shader_graph.py`).
+  ignores it), node groups were "not convertible" (grey), a world colour through a Reroute dropped the dome, and a
+  material without a Surface link or with a muted shader was grey where Cycles renders black. Node trees are now
+  read with Cycles' link rules, groups ungrouped (`converters/blender/shader_graph.py`).
 """
 
 

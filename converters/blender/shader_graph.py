@@ -85,9 +85,103 @@ def _fold(socket, const: _Constant) -> bool:
     return True
 
 
+#: node properties not copied when a group is ungrouped (layout and identity)
+_LAYOUT = {"name", "location", "location_absolute", "parent", "select", "width", "height", "dimensions", "hide",
+           "show_options", "show_preview", "show_texture", "use_custom_color", "color", "bl_idname", "bl_label",
+           "bl_description", "bl_icon", "bl_static_type", "bl_width_default", "bl_width_min", "bl_width_max",
+           "bl_height_default", "bl_height_min", "bl_height_max", "type", "warning_propagation"}
+#: group nesting deeper than this is left grouped (the mapping then names the group node)
+MAX_GROUP_DEPTH = 16
+
+
+def _same(socket, sockets):
+    """The socket of ``sockets`` with ``socket``'s identifier (a copied node's counterpart), or None."""
+    return next((s for s in sockets if s.identifier == socket.identifier), None)
+
+
+def _copy_node(src, dst) -> None:
+    """Copy a node's settings and socket values onto a new node of the same type in another tree."""
+    for prop in src.bl_rna.properties:
+        if prop.is_readonly or prop.identifier in _LAYOUT:
+            continue
+        try:
+            setattr(dst, prop.identifier, getattr(src, prop.identifier))
+        except (AttributeError, TypeError, ValueError, RuntimeError):
+            pass
+    ramp = getattr(src, "color_ramp", None)
+    if ramp is not None:
+        out = dst.color_ramp
+        out.interpolation, out.color_mode = ramp.interpolation, ramp.color_mode
+        while len(out.elements) < len(ramp.elements):
+            out.elements.new(0.0)
+        for a, b in zip(ramp.elements, out.elements, strict=False):
+            b.position, b.color = a.position, tuple(a.color)
+    for sockets, copies in ((src.inputs, dst.inputs), (src.outputs, dst.outputs)):
+        for sock in sockets:
+            twin = _same(sock, copies)
+            if twin is not None and hasattr(sock, "default_value") and hasattr(twin, "default_value"):
+                try:
+                    twin.default_value = sock.default_value
+                except (AttributeError, TypeError, ValueError):
+                    pass
+
+
+def _ungroup(tree, group) -> None:
+    """Replace group node ``group`` of ``tree`` by copies of its nodes: links into its Group Input come from what
+    feeds the group node's inputs (or their values), links to its Group Output go where the group's outputs went."""
+    inner = group.node_tree
+    copies = {n.name: tree.nodes.new(n.bl_idname) for n in inner.nodes
+              if n.bl_idname not in ("NodeGroupInput", "NodeGroupOutput", "NodeFrame")}
+    for name, node in copies.items():
+        _copy_node(inner.nodes[name], node)
+    outer_out: dict = {}  # group output identifier -> [outer target sockets]
+    for link in tree.links:
+        if link.from_node == group:
+            outer_out.setdefault(link.from_socket.identifier, []).append(link.to_socket)
+    for link in inner.links:
+        if link.is_muted or not link.is_valid:
+            continue
+        if link.from_node.bl_idname == "NodeGroupInput":
+            outer = _same(link.from_socket, group.inputs)
+            if outer is None:
+                continue
+            live = _live(outer)
+            src = live[0].from_socket if live else (_Constant(outer) if outer.type in _VALUE_TYPES else None)
+        else:
+            src = _same(link.from_socket, copies[link.from_node.name].outputs)
+        if link.to_node.bl_idname == "NodeGroupOutput":
+            targets = outer_out.get(link.to_socket.identifier, [])
+        elif link.to_node.name in copies:
+            targets = [_same(link.to_socket, copies[link.to_node.name].inputs)]
+        else:
+            continue
+        for target in targets:
+            if target is None or src is None:
+                continue
+            if isinstance(src, _Constant):
+                for old in list(target.links):
+                    tree.links.remove(old)
+                _fold(target, src)
+            else:
+                tree.links.new(src, target)
+    tree.nodes.remove(group)
+
+
+def ungroup_all(tree) -> None:
+    """Ungroup every (unmuted) group node of ``tree``, nested groups too, up to MAX_GROUP_DEPTH levels."""
+    for _ in range(MAX_GROUP_DEPTH):
+        groups = [n for n in tree.nodes if n.bl_idname == "ShaderNodeGroup" and n.node_tree is not None and not n.mute]
+        if not groups:
+            return
+        for group in groups:
+            _ungroup(tree, group)
+
+
 def resolve_links(tree) -> None:
-    """Rewrite ``tree`` in place (module docstring): muted and invalid links removed, links through Reroute and muted
-    nodes replaced by links from what feeds them, constants folded into the sockets they feed."""
+    """Rewrite ``tree`` in place (module docstring): node groups ungrouped, muted and invalid links removed, links
+    through Reroute and muted nodes replaced by links from what feeds them, constants folded into the sockets they
+    feed."""
+    ungroup_all(tree)
     for link in list(tree.links):
         if link.is_muted or not link.is_valid:
             tree.links.remove(link)

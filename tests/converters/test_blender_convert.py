@@ -401,3 +401,17 @@ def test_a_world_colour_through_a_reroute_from_an_rgb_node_is_the_dome(tmp_path)
     rgb = np.array(dome.GetAttribute("inputs:color").Get()) * dome.GetAttribute("inputs:intensity").Get()
     assert np.allclose(rgb, (0.4, 0.8, 1.2), rtol=1e-5), (rgb, res.warnings)
     assert len(bpy.data.worlds) == 1  # the resolved copy is gone
+
+
+def test_node_groups_are_read_through(tmp_path):
+    """An Image Texture into a node group whose nested group holds a Principled BSDF (Base Color from the outer
+    group's input, Roughness from a value set on the inner group node): the group node was "not convertible" (grey).
+    The groups are ungrouped in a temporary copy, so the texture and the roughness reach the mapping."""
+    from nasset_converters.blender.fidelity import build
+    from nasset_converters.mitsuba.usd_export import TextureMap
+
+    build("node_links", tmp_path, 8)
+    inputs, notes = map_material(bpy.data.materials["Grouped"])
+    assert isinstance(inputs["diffuseColor"], TextureMap) and np.isclose(inputs["roughness"], 0.8), (inputs, notes)
+    assert not [n for n in notes if "not convertible" in n], notes
+    assert sorted(bpy.data.node_groups.keys()) == ["InnerPaint", "OuterPaint"]  # the file's groups untouched
