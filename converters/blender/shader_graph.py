@@ -207,9 +207,10 @@ def resolve_links(tree) -> None:
 
 @contextmanager
 def resolved_copy(bpy, idblock):
-    """A temporary copy of a material or world with :func:`resolve_links` applied to its node tree (removed on
+    """A temporary copy of a material, world or light with :func:`resolve_links` applied to its node tree (removed on
     exit)."""
-    store = bpy.data.worlds if isinstance(idblock, bpy.types.World) else bpy.data.materials
+    store = (bpy.data.worlds if isinstance(idblock, bpy.types.World) else bpy.data.lights
+             if isinstance(idblock, bpy.types.Light) else bpy.data.materials)
     copy = idblock.copy()
     try:
         resolve_links(copy.node_tree)
