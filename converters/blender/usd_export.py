@@ -72,12 +72,27 @@ def _socket(node, name, default):
     return v, bool(s.is_linked)
 
 
+@dataclasses.dataclass
+class _Geometry:
+    """A Geometry Nodes instance's mesh, read during the depsgraph walk (its temporary object is gone after it):
+    object-space triangles and what :meth:`_BlenderConverter._mesh` writes with them."""
+
+    name: str
+    geo: object
+    uvs: list
+    slots: list
+    colors: list
+    materials: list
+
+
 class _BlenderConverter(StageConverter):
     def __init__(self, bpy, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
         super().__init__(None, None, scene_path, output, replace, check_usd)
         self.bpy = bpy
         self.bscene = bpy.context.scene
         self.emissive_materials: set[str] = set()
+        self.gn_meshes: dict = {}  # Geometry Nodes instance meshes read during the depsgraph walk
+        self.instancers: set[str] = set()  # objects that place instances
 
     # -- camera -----------------------------------------------------------------------------
     def camera(self) -> None:
@@ -431,6 +446,8 @@ class _BlenderConverter(StageConverter):
         # an instancer's own surface with Show Instancer for Render off, and the originals a parent instances on its
         # vertices or faces: Cycles leaves them out (before, they were written: one object too many)
         objects = [ob for ob in objects if not hidden_original(ob)]
+        self.instancers = {inst.parent.original.name for inst in bpy.context.evaluated_depsgraph_get().object_instances
+                           if inst.is_instance and inst.parent is not None}
         users: dict = {}
         for ob in objects:
             if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
@@ -452,16 +469,19 @@ class _BlenderConverter(StageConverter):
                 self._mesh(ob, self._name(self.geometry_root, ob.name), local=False)
         dg = bpy.context.evaluated_depsgraph_get()
         skipped = set()
+        placements = []  # written after the walk: writing materials adds datablocks, which re-evaluates the depsgraph
         for inst in dg.object_instances:
             if not inst.is_instance:
                 continue
             ob, parent = inst.object.original, inst.parent.original if inst.parent is not None else None
             if parent is not None and parent.name in self.replace:
                 continue  # the asset stands in for the instancer and what it places
-            if parent is not None and parent.name == ob.name:
-                continue  # a curve, text, surface or metaball's own evaluated mesh: written as the object itself
             if parent is not None and not renders(parent):
                 continue  # an instancer Cycles does not render places nothing
+            if parent is not None and parent.name == ob.name:
+                if ob.type == "MESH":  # instances a Geometry Nodes tree makes (not realized): read while they exist
+                    self._geometry_instance(inst, parent, placements, skipped)
+                continue  # else a curve, text, surface or metaball's own evaluated mesh: written as the object itself
             if ob.name in self.replace:
                 if ("replaced", ob.name) not in skipped:
                     skipped.add(("replaced", ob.name))
@@ -474,8 +494,41 @@ class _BlenderConverter(StageConverter):
                     self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (surfaces are: "
                               f"{', '.join(SURFACE_TYPES)}): skipped")
                 continue
-            self._instance(ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
-                           f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}")
+            placements.append((ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
+                               f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}"))
+        for ob, matrix, name, what in placements:
+            self._instance(ob, matrix, name, what)
+
+    def _geometry_instance(self, inst, parent, placements: list, skipped: set) -> None:
+        """Queue an instance of Geometry Nodes geometry (``inst.object`` is a temporary object holding it): its mesh is
+        read now, once per mesh, into a :class:`_Geometry`. Before, such instances were dropped (the instancer called
+        an object without faces)."""
+        from .scene import mesh_geometry
+
+        temp = inst.object
+        if temp.type != "MESH":
+            if (parent.name, temp.type) not in skipped:
+                skipped.add((parent.name, temp.type))
+                self.warn(f"object {parent.name}: Geometry Nodes instances of {temp.type} geometry are not converted "
+                          "(mesh instances are): skipped")
+            return
+        key = ("geometry", temp.data.as_pointer())
+        geometry = self.gn_meshes.get(key)
+        if geometry is None:
+            uvs: list = []
+            slots: list = []
+            colors: list = []
+            try:
+                geo = mesh_geometry([temp], local=True, uv_out=uvs, slot_out=slots, color_out=colors)
+            except NassetError as exc:
+                self.warn(f"object {parent.name}: a Geometry Nodes instance: {exc.message}: skipped")
+                geo = None
+            mats = [s.material.original if s.material is not None else None for s in temp.material_slots]
+            geometry = _Geometry(f"{parent.name}_{temp.data.name}", geo, uvs, slots, colors, mats)
+            self.gn_meshes[key] = geometry
+        if geometry.geo is not None:
+            placements.append((geometry, np.array(inst.matrix_world, np.float64), geometry.name,
+                               f"Geometry Nodes instance placed by {parent.name}"))
 
     def _ray_visibility(self, ob) -> None:
         """Warn about Cycles settings the stage cannot carry: ray visibility switched off, holdout, shadow catcher."""
@@ -491,21 +544,24 @@ class _BlenderConverter(StageConverter):
         mesh (written once per mesh and material set, in object space)."""
         from pxr import Sdf, Tf
 
-        mats = tuple(s.material.name_full if s.material else "" for s in ob.material_slots)
-        key = (ob.data.name_full, mats)  # full names: a linked mesh or material may share a local one's name
+        if isinstance(ob, _Geometry):
+            key, mesh_name = ("geometry", id(ob)), ob.name
+        else:
+            mats = tuple(s.material.name_full if s.material else "" for s in ob.material_slots)
+            key, mesh_name = (ob.data.name_full, mats), ob.data.name  # full names: linked data may share local names
         proto = self.prototypes.get(key)
         if proto is None:
             self.stage.CreateClassPrim("/Prototypes")  # abstract: rendered only through instances
-            proto = self._name("/Prototypes", Tf.MakeValidIdentifier(ob.data.name))
+            proto = self._name("/Prototypes", Tf.MakeValidIdentifier(mesh_name))
             self.stage.CreateClassPrim(proto)
             saved = (self.geometry_root, self.looks_root)
             self.geometry_root, self.looks_root = proto, f"{proto}/Looks"
             try:
-                self._mesh(ob, self._name(proto, ob.data.name), local=True)
+                self._mesh(ob, self._name(proto, mesh_name), local=True)
             finally:
                 self.geometry_root, self.looks_root = saved
             self.prototypes[key] = proto
-            self.record(proto, f"mesh {ob.data.name} (prototype)")
+            self.record(proto, f"mesh {mesh_name} (prototype)")
         path = self._name(self.geometry_root, name)
         prim = self.stage.DefinePrim(path, "Xform")
         prim.GetReferences().AddInternalReference(Sdf.Path(proto))
@@ -523,14 +579,21 @@ class _BlenderConverter(StageConverter):
 
         from .scene import mesh_geometry
 
-        uvs: list = []
-        slots: list = []
-        colors: list = []
-        try:
-            geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
-        except NassetError as exc:  # no faces, or a degenerate transform
-            self.warn(f"object {ob.name}: {exc.message}: skipped")
-            return
+        if isinstance(ob, _Geometry):  # read while the depsgraph walk held it
+            geo, uvs, slots, colors, slot_mats = ob.geo, ob.uvs, ob.slots, ob.colors, ob.materials or [None]
+        else:
+            uvs, slots, colors = [], [], []
+            try:
+                geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
+            except NassetError as exc:  # no faces, or a degenerate transform
+                if not (ob.name in self.instancers and "no faces" in exc.message):  # its instances are written
+                    self.warn(f"object {ob.name}: {exc.message}: skipped")
+                return
+            # the evaluated object's slots, as Cycles reads them: a modifier may change them (geometry a Geometry
+            # Nodes tree makes or realizes without materials shows the default surface, not the object's material)
+            evaluated = ob.evaluated_get(self.bpy.context.evaluated_depsgraph_get())
+            slot_mats = [s.material.original if s.material is not None else None
+                         for s in evaluated.material_slots] or [None]
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
@@ -540,7 +603,6 @@ class _BlenderConverter(StageConverter):
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
         # Cycles shades a triangle with its slot's material (slot indices past the last slot take the last one)
-        slot_mats = [s.material for s in ob.material_slots] or [None]
         tri_slot = np.minimum(slots[0] if slots else np.zeros(len(geo.faces), np.int32), len(slot_mats) - 1)
         used = np.unique(tri_slot)
         paths = {int(k): self.blender_material(slot_mats[k], ob.name) for k in used}
@@ -653,7 +715,7 @@ def map_material(mat) -> tuple[dict, list]:
     """UsdPreviewSurface inputs for a Blender material and notes on what the mapping loses."""
     grey = {"diffuseColor": (0.8, 0.8, 0.8), "roughness": 0.5, "metallic": 0.0}
     if mat is None:
-        return grey, ["no material: grey UsdPreviewSurface"]
+        return dict(DEFAULT_SURFACE), []
     if not mat.node_tree:
         return {"diffuseColor": tuple(mat.diffuse_color[:3]), "roughness": float(mat.roughness),
                 "metallic": float(mat.metallic)}, [f"material {mat.name}: viewport colours used (no node tree)"]
@@ -677,6 +739,10 @@ def map_material(mat) -> tuple[dict, list]:
     return (grey, notes) if inputs is None else (inputs, notes)
 
 
+#: Cycles' default surface, which it shows where no material is assigned: a Diffuse BSDF of colour 0.8 (before, the
+#: converter wrote a grey UsdPreviewSurface with its default specular lobe: about 1 % too bright)
+DEFAULT_SURFACE = {"diffuseColor": (0.8, 0.8, 0.8), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+                   "roughness": 1.0}
 #: a surface without a closure (an unlinked Surface, a muted shader), as Cycles renders it: opaque black
 NO_SURFACE = {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
               "roughness": 1.0}
