@@ -28,6 +28,7 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from . import load_bpy, quiet_stdout, to_y_up
+from .evaluation import evaluate_as_render
 
 #: Blender's default curve radius (m) where a Curves object has no ``radius`` attribute
 DEFAULT_RADIUS = 0.005
@@ -45,6 +46,7 @@ def open_blend(path):
     except Exception as exc:  # noqa: BLE001 - bpy raises RuntimeError for every load failure
         msg = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
         raise error("CONVERT_SCENE_LOAD", f"Blender cannot load the file: {msg}", file=str(path)) from None
+    evaluate_as_render(bpy)  # geometry as Cycles renders it, not as the viewport shows it
     return bpy.context.scene
 
 
@@ -71,6 +73,14 @@ def render_visible(view_layer):
     return lambda ob: not ob.hide_render and any(c.as_pointer() in rendered for c in ob.users_collection)
 
 
+def missing_library_note(bpy, lib) -> str:
+    """What a library Blender could not read leaves out: its objects, named, are empty placeholders."""
+    objects = sorted(o.name for o in bpy.data.objects if o.library == lib)
+    return (f"library {lib.name} ({lib.filepath}, resolved {bpy.path.abspath(lib.filepath, library=lib.library)}) is "
+            f"missing: its linked data are empty placeholders, as Blender renders them (objects not written: "
+            f"{', '.join(objects[:20]) or 'none'}{' ...' if len(objects) > 20 else ''})")
+
+
 def pick_objects(names, *, file: str | None = None) -> list:
     """The scene's objects with these names, in order; each must have a surface (SURFACE_TYPES), be a hair Curves
     object or a mesh carrying particle hair."""
@@ -86,6 +96,8 @@ def pick_objects(names, *, file: str | None = None) -> list:
         ob = objs.get(n)
         if ob is None:
             raise error("CONVERT_SHAPE_UNKNOWN", f"no object named {n!r}; the scene has {have}", file=file)
+        if ob.library is not None and ob.library.is_missing:
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r}: {missing_library_note(bpy, ob.library)}", file=file)
         if ob.type not in (*SURFACE_TYPES, "CURVES"):
             raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {n!r} is a {ob.type}, not a surface (mesh, curve, "
                         "surface, metaball, text) or hair curves", file=file)
@@ -197,7 +209,10 @@ def see_through(objects, share: float = SEE_THROUGH_SHARE) -> list[str]:
 
 
 def has_particle_hair(ob) -> bool:
-    return ob.type == "MESH" and any(ps.settings.type == "HAIR" for ps in ob.particle_systems)
+    """Whether a mesh carries particle hair Cycles renders as strands (a hair system rendered as Path; one rendered
+    as Object or Collection places instances, which the depsgraph lists)."""
+    return ob.type == "MESH" and any(ps.settings.type == "HAIR" and ps.settings.render_type == "PATH"
+                                     for ps in ob.particle_systems)
 
 
 def variant_of(objects, *, file: str | None = None) -> str:

@@ -42,6 +42,7 @@ from nasset_sdk.errors import NassetError, UsageError, error
 from nasset_sdk.safeopen import trust
 
 from . import Z_UP_TO_Y_UP
+from .evaluation import evaluate_as_render, hidden_original
 from .scene import render_visible
 
 _R4 = np.eye(4)
@@ -72,12 +73,27 @@ def _socket(node, name, default):
     return v, bool(s.is_linked)
 
 
+@dataclasses.dataclass
+class _Geometry:
+    """A Geometry Nodes instance's mesh, read during the depsgraph walk (its temporary object is gone after it):
+    object-space triangles and what :meth:`_BlenderConverter._mesh` writes with them."""
+
+    name: str
+    geo: object
+    uvs: list
+    slots: list
+    colors: list
+    materials: list
+
+
 class _BlenderConverter(StageConverter):
     def __init__(self, bpy, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
         super().__init__(None, None, scene_path, output, replace, check_usd)
         self.bpy = bpy
         self.bscene = bpy.context.scene
         self.emissive_materials: set[str] = set()
+        self.gn_meshes: dict = {}  # Geometry Nodes instance meshes read during the depsgraph walk
+        self.instancers: set[str] = set()  # objects that place instances
 
     # -- camera -----------------------------------------------------------------------------
     def camera(self) -> None:
@@ -196,7 +212,7 @@ class _BlenderConverter(StageConverter):
             if ob.type != "LIGHT" or not renders(ob):
                 continue
             lt = ob.data
-            color = np.array(lt.color, np.float64)
+            color = np.array(lt.color, np.float64) * self._light_nodes(ob)
             path = self._name("/World/Lights", ob.name)
             if lt.type == "SUN":
                 light = UsdLux.DistantLight.Define(self.stage, path)
@@ -256,6 +272,40 @@ class _BlenderConverter(StageConverter):
                 light.CreateColorTemperatureAttr(float(lt.temperature))
         self.world()
 
+    def _light_nodes(self, ob) -> np.ndarray:
+        """The factor [3] a light's node tree (Use Nodes) puts on its colour x power: Cycles multiplies the light by
+        the Emission node's Color x Strength on its Light Output (measured: Strength 3 triples a point, sun or area
+        light); a Blackbody node on the Color gives its colour. Before, the node tree was ignored (a light three times
+        too dark, or white instead of tinted). Other links and nodes (textures, IES, Light Falloff): warned, 1 used."""
+        from .shader_graph import resolved_copy
+
+        lt = ob.data
+        if not getattr(lt, "use_nodes", False) or lt.node_tree is None:
+            return np.ones(3)
+        with resolved_copy(self.bpy, lt) as resolved:
+            nodes = resolved.node_tree.nodes
+            out = next((n for n in nodes if n.bl_idname == "ShaderNodeOutputLight" and n.is_active_output), None)
+            if out is None or not out.inputs["Surface"].is_linked:
+                return np.zeros(3)  # no emission closure: the light gives nothing
+            em = out.inputs["Surface"].links[0].from_node
+            if em.bl_idname != "ShaderNodeEmission":
+                self.warn(f"light {ob.name}: its node tree's {em.bl_idname} is not converted (an Emission node is): "
+                          "the light's own colour and power used")
+                return np.ones(3)
+            color, c_linked = _socket(em, "Color", (1.0, 1.0, 1.0, 1.0))
+            strength, s_linked = _socket(em, "Strength", 1.0)
+            if c_linked:
+                body = _blackbody(em.inputs["Color"])
+                if body is None:
+                    self.warn(f"light {ob.name}: node tree Emission Color from "
+                              f"{em.inputs['Color'].links[0].from_node.bl_idname} dropped (white used)")
+                color = body or (1.0, 1.0, 1.0)
+            if s_linked:
+                self.warn(f"light {ob.name}: node tree Emission Strength from "
+                          f"{em.inputs['Strength'].links[0].from_node.bl_idname} dropped (1 used)")
+                strength = 1.0
+            return np.array(color[:3], np.float64) * float(strength)
+
     @staticmethod
     def _hidden_from_camera(light) -> None:
         """Cycles does not show point/spot/area light surfaces to camera rays (BSDF rays do reach them)."""
@@ -279,7 +329,7 @@ class _BlenderConverter(StageConverter):
             self.warn(f"light {ob.name}: elliptic spot cone (object scale {sx:.3g} x {sy:.3g}) written as a round cone")
 
     def world(self) -> None:
-        from pxr import Gf, Sdf, UsdLux
+        from .shader_graph import resolved_copy
 
         world = self.bscene.world
         if world is None or not world.node_tree:
@@ -287,7 +337,13 @@ class _BlenderConverter(StageConverter):
                 self.warn(f"world {world.name}: colour without a node tree written as a constant dome")
                 self._dome_constant(np.array(world.color, np.float64), world.name)
             return
-        out = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+        with resolved_copy(self.bpy, world) as resolved:  # reroutes, muted nodes and links, constants as Cycles reads them
+            self._world_tree(world, resolved.node_tree)
+
+    def _world_tree(self, world, tree) -> None:
+        from pxr import Gf, Sdf, UsdLux
+
+        out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
         link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
         if link is None:
             return
@@ -351,7 +407,8 @@ class _BlenderConverter(StageConverter):
 
     # -- materials ----------------------------------------------------------------------------
     def blender_material(self, mat, ob_name: str) -> str:
-        key = ("blender", mat.name if mat is not None else None, self.looks_root)
+        # name_full: a local and a linked datablock may share a name (Blender names are unique per library only)
+        key = ("blender", mat.name_full if mat is not None else None, self.looks_root)
         if key in self.materials:
             return self.materials[key]
         inputs, notes = map_material(mat)
@@ -366,6 +423,15 @@ class _BlenderConverter(StageConverter):
         return path
 
     # -- geometry -----------------------------------------------------------------------------
+    def libraries(self) -> None:
+        """Warn about each library Blender could not read: its linked datablocks are empty placeholders (an object
+        becomes an empty), which Cycles renders as nothing and the stage leaves out alike."""
+        from .scene import missing_library_note
+
+        for lib in self.bpy.data.libraries:
+            if lib.is_missing:
+                self.warn(missing_library_note(self.bpy, lib))
+
     def shapes(self) -> None:
         """Meshes of the view layer (world space), then instances: objects placed by collection instances
         (and other instancers) and linked duplicates (mesh objects sharing one mesh without modifiers) become
@@ -375,10 +441,18 @@ class _BlenderConverter(StageConverter):
         bpy = self.bpy
         renders = render_visible(bpy.context.view_layer)
         objects = [ob for ob in bpy.context.view_layer.objects if renders(ob) and ob.name not in self.replace]
+        for ob in objects:
+            if has_particle_hair(ob):
+                self.warn(f"object {ob.name}: particle hair dropped (bake it: --replace {ob.name}=ASSET)")
+        # an instancer's own surface with Show Instancer for Render off, and the originals a parent instances on its
+        # vertices or faces: Cycles leaves them out (before, they were written: one object too many)
+        objects = [ob for ob in objects if not hidden_original(ob)]
+        self.instancers = {inst.parent.original.name for inst in bpy.context.evaluated_depsgraph_get().object_instances
+                           if inst.is_instance and inst.parent is not None}
         users: dict = {}
         for ob in objects:
             if ob.type == "MESH" and not ob.modifiers and not has_particle_hair(ob):
-                users.setdefault(ob.data.name, []).append(ob)
+                users.setdefault(ob.data.name_full, []).append(ob)
         for ob in objects:
             if ob.type == "CURVES":
                 self.warn(f"object {ob.name}: hair curves outside an asset are dropped (bake them: --replace {ob.name}=ASSET)")
@@ -389,25 +463,26 @@ class _BlenderConverter(StageConverter):
                 self.warn(f"object {ob.name}: {ob.type} is not convertible (surfaces are: {', '.join(SURFACE_TYPES)}): "
                           "skipped")
                 continue
-            if has_particle_hair(ob):
-                self.warn(f"object {ob.name}: particle hair dropped (the emitter mesh is written)")
             self._ray_visibility(ob)
-            if len(users.get(ob.data.name, ())) > 1:
+            if len(users.get(ob.data.name_full, ())) > 1:
                 self._instance(ob, np.array(ob.matrix_world, np.float64), ob.name, f"linked duplicate of mesh {ob.data.name}")
             else:
                 self._mesh(ob, self._name(self.geometry_root, ob.name), local=False)
         dg = bpy.context.evaluated_depsgraph_get()
         skipped = set()
+        placements = []  # written after the walk: writing materials adds datablocks, which re-evaluates the depsgraph
         for inst in dg.object_instances:
             if not inst.is_instance:
                 continue
             ob, parent = inst.object.original, inst.parent.original if inst.parent is not None else None
             if parent is not None and parent.name in self.replace:
                 continue  # the asset stands in for the instancer and what it places
-            if parent is not None and parent.name == ob.name:
-                continue  # a curve, text, surface or metaball's own evaluated mesh: written as the object itself
             if parent is not None and not renders(parent):
                 continue  # an instancer Cycles does not render places nothing
+            if parent is not None and parent.name == ob.name:
+                if ob.type == "MESH":  # instances a Geometry Nodes tree makes (not realized): read while they exist
+                    self._geometry_instance(inst, parent, placements, skipped)
+                continue  # else a curve, text, surface or metaball's own evaluated mesh: written as the object itself
             if ob.name in self.replace:
                 if ("replaced", ob.name) not in skipped:
                     skipped.add(("replaced", ob.name))
@@ -420,8 +495,41 @@ class _BlenderConverter(StageConverter):
                     self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (surfaces are: "
                               f"{', '.join(SURFACE_TYPES)}): skipped")
                 continue
-            self._instance(ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
-                           f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}")
+            placements.append((ob, np.array(inst.matrix_world, np.float64), f"{parent.name if parent else 'instance'}_{ob.name}",
+                               f"instance of {ob.name} placed by {parent.name if parent else '(unknown)'}"))
+        for ob, matrix, name, what in placements:
+            self._instance(ob, matrix, name, what)
+
+    def _geometry_instance(self, inst, parent, placements: list, skipped: set) -> None:
+        """Queue an instance of Geometry Nodes geometry (``inst.object`` is a temporary object holding it): its mesh is
+        read now, once per mesh, into a :class:`_Geometry`. Before, such instances were dropped (the instancer called
+        an object without faces)."""
+        from .scene import mesh_geometry
+
+        temp = inst.object
+        if temp.type != "MESH":
+            if (parent.name, temp.type) not in skipped:
+                skipped.add((parent.name, temp.type))
+                self.warn(f"object {parent.name}: Geometry Nodes instances of {temp.type} geometry are not converted "
+                          "(mesh instances are): skipped")
+            return
+        key = ("geometry", temp.data.as_pointer())
+        geometry = self.gn_meshes.get(key)
+        if geometry is None:
+            uvs: list = []
+            slots: list = []
+            colors: list = []
+            try:
+                geo = mesh_geometry([temp], local=True, uv_out=uvs, slot_out=slots, color_out=colors)
+            except NassetError as exc:
+                self.warn(f"object {parent.name}: a Geometry Nodes instance: {exc.message}: skipped")
+                geo = None
+            mats = [s.material.original if s.material is not None else None for s in temp.material_slots]
+            geometry = _Geometry(f"{parent.name}_{temp.data.name}", geo, uvs, slots, colors, mats)
+            self.gn_meshes[key] = geometry
+        if geometry.geo is not None:
+            placements.append((geometry, np.array(inst.matrix_world, np.float64), geometry.name,
+                               f"Geometry Nodes instance placed by {parent.name}"))
 
     def _ray_visibility(self, ob) -> None:
         """Warn about Cycles settings the stage cannot carry: ray visibility switched off, holdout, shadow catcher."""
@@ -437,21 +545,24 @@ class _BlenderConverter(StageConverter):
         mesh (written once per mesh and material set, in object space)."""
         from pxr import Sdf, Tf
 
-        mats = tuple(s.material.name if s.material else "" for s in ob.material_slots)
-        key = (ob.data.name, mats)
+        if isinstance(ob, _Geometry):
+            key, mesh_name = ("geometry", id(ob)), ob.name
+        else:
+            mats = tuple(s.material.name_full if s.material else "" for s in ob.material_slots)
+            key, mesh_name = (ob.data.name_full, mats), ob.data.name  # full names: linked data may share local names
         proto = self.prototypes.get(key)
         if proto is None:
             self.stage.CreateClassPrim("/Prototypes")  # abstract: rendered only through instances
-            proto = self._name("/Prototypes", Tf.MakeValidIdentifier(ob.data.name))
+            proto = self._name("/Prototypes", Tf.MakeValidIdentifier(mesh_name))
             self.stage.CreateClassPrim(proto)
             saved = (self.geometry_root, self.looks_root)
             self.geometry_root, self.looks_root = proto, f"{proto}/Looks"
             try:
-                self._mesh(ob, self._name(proto, ob.data.name), local=True)
+                self._mesh(ob, self._name(proto, mesh_name), local=True)
             finally:
                 self.geometry_root, self.looks_root = saved
             self.prototypes[key] = proto
-            self.record(proto, f"mesh {ob.data.name} (prototype)")
+            self.record(proto, f"mesh {mesh_name} (prototype)")
         path = self._name(self.geometry_root, name)
         prim = self.stage.DefinePrim(path, "Xform")
         prim.GetReferences().AddInternalReference(Sdf.Path(proto))
@@ -469,14 +580,21 @@ class _BlenderConverter(StageConverter):
 
         from .scene import mesh_geometry
 
-        uvs: list = []
-        slots: list = []
-        colors: list = []
-        try:
-            geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
-        except NassetError as exc:  # no faces, or a degenerate transform
-            self.warn(f"object {ob.name}: {exc.message}: skipped")
-            return
+        if isinstance(ob, _Geometry):  # read while the depsgraph walk held it
+            geo, uvs, slots, colors, slot_mats = ob.geo, ob.uvs, ob.slots, ob.colors, ob.materials or [None]
+        else:
+            uvs, slots, colors = [], [], []
+            try:
+                geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
+            except NassetError as exc:  # no faces, or a degenerate transform
+                if not (ob.name in self.instancers and "no faces" in exc.message):  # its instances are written
+                    self.warn(f"object {ob.name}: {exc.message}: skipped")
+                return
+            # the evaluated object's slots, as Cycles reads them: a modifier may change them (geometry a Geometry
+            # Nodes tree makes or realizes without materials shows the default surface, not the object's material)
+            evaluated = ob.evaluated_get(self.bpy.context.evaluated_depsgraph_get())
+            slot_mats = [s.material.original if s.material is not None else None
+                         for s in evaluated.material_slots] or [None]
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(geo.points, np.float32)))
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(geo.faces), 3, np.int32)))
@@ -486,7 +604,6 @@ class _BlenderConverter(StageConverter):
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([geo.points.min(0), geo.points.max(0)])))
         # Cycles shades a triangle with its slot's material (slot indices past the last slot take the last one)
-        slot_mats = [s.material for s in ob.material_slots] or [None]
         tri_slot = np.minimum(slots[0] if slots else np.zeros(len(geo.faces), np.int32), len(slot_mats) - 1)
         used = np.unique(tri_slot)
         paths = {int(k): self.blender_material(slot_mats[k], ob.name) for k in used}
@@ -528,6 +645,7 @@ class _BlenderConverter(StageConverter):
         self.camera()
         self.integrator()
         self.lights()
+        self.libraries()
         self.shapes()
         self.assets()
         self.stage.GetRootLayer().customLayerData = {
@@ -599,16 +717,37 @@ def map_material(mat) -> tuple[dict, list]:
     """UsdPreviewSurface inputs for a Blender material and notes on what the mapping loses."""
     grey = {"diffuseColor": (0.8, 0.8, 0.8), "roughness": 0.5, "metallic": 0.0}
     if mat is None:
-        return grey, ["no material: grey UsdPreviewSurface"]
+        return dict(DEFAULT_SURFACE), []
     if not mat.node_tree:
         return {"diffuseColor": tuple(mat.diffuse_color[:3]), "roughness": float(mat.roughness),
                 "metallic": float(mat.metallic)}, [f"material {mat.name}: viewport colours used (no node tree)"]
-    out = next((n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None)
-    if out is None or not out.inputs["Surface"].is_linked:
-        return grey, [f"material {mat.name}: no surface shader, grey used"]
-    notes: list = []
-    inputs = _map_shader(mat, out.inputs["Surface"].links[0].from_node, notes)
+    from types import SimpleNamespace
+
+    from . import load_bpy
+    from .shader_graph import resolved_copy
+
+    with resolved_copy(load_bpy(), mat) as resolved:  # reroutes, muted nodes and links, constants as Cycles reads them
+        nodes = resolved.node_tree.nodes
+        out = next((n for n in nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output), None)
+        if out is None:
+            return grey, [f"material {mat.name}: no material output node, grey used"]
+        if not out.inputs["Surface"].is_linked:  # Cycles: no surface closure is an opaque black surface; with a
+            if out.inputs["Volume"].is_linked:  # volume, a boundary light crosses
+                return dict(NO_SURFACE, opacity=0.0), [f"material {mat.name}: volume shader dropped (the object is "
+                                                       "written as its see-through boundary)"]
+            return dict(NO_SURFACE), []
+        notes: list = []
+        inputs = _map_shader(SimpleNamespace(name=mat.name), out.inputs["Surface"].links[0].from_node, notes)
     return (grey, notes) if inputs is None else (inputs, notes)
+
+
+#: Cycles' default surface, which it shows where no material is assigned: a Diffuse BSDF of colour 0.8 (before, the
+#: converter wrote a grey UsdPreviewSurface with its default specular lobe: about 1 % too bright)
+DEFAULT_SURFACE = {"diffuseColor": (0.8, 0.8, 0.8), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+                   "roughness": 1.0}
+#: a surface without a closure (an unlinked Surface, a muted shader), as Cycles renders it: opaque black
+NO_SURFACE = {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
+              "roughness": 1.0}
 
 
 #: shader nodes :func:`_map_shader` converts
@@ -1050,12 +1189,15 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
     else:
         open_blend(scene)
         label = Path(scene)
-    bpy.context.view_layer.update()
+    viewport_notes = evaluate_as_render(bpy)
     _check_replace(bpy, rep, str(label))
     output.parent.mkdir(parents=True, exist_ok=True)
     if output.exists():
         output.unlink()
-    return _BlenderConverter(bpy, label, output, rep, check_usd).run()
+    converter = _BlenderConverter(bpy, label, output, rep, check_usd)
+    for note in viewport_notes:
+        converter.warn(note)
+    return converter.run()
 
 
 def run(args) -> int:

@@ -236,3 +236,232 @@ def test_ray_visibility_holdout_and_shadow_catcher_are_warned(tmp_path):
     res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
     said = [w for w in res.warnings if "Floor" in w]
     assert said and "invisible to camera rays" in said[0] and "is_shadow_catcher" in said[0], res.warnings
+
+
+def test_geometry_is_evaluated_as_cycles_renders_it(tmp_path):
+    """Python reaches only the viewport depsgraph, which evaluated the fidelity suite's render_evaluation scene with
+    the viewport's settings: the Subdivision Surface at level 0 (12 triangles), the render-only Bevel left out, the
+    viewport-only Array's three boxes, the curve at resolution 1, the instances of an empty disabled in viewports
+    dropped, and the vertex instancer's grid and original stud written (Cycles renders neither). The render settings
+    are now copied onto the viewport ones (noise ratio 92 before, 1.1 after, 64 x 64, 64 spp)."""
+    from pxr import Usd, UsdGeom
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("render_evaluation", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    children = stage.GetPrimAtPath("/World/Geometry").GetChildren()
+    faces = {p.GetName(): len(UsdGeom.Mesh(p).GetFaceVertexCountsAttr().Get()) for p in children if p.IsA(UsdGeom.Mesh)}
+    assert faces["Rounded"] == 12 * 4 ** 3, faces  # render level 3
+    assert faces["Bevelled"] > 12 and faces["Row"] == 12, faces  # Bevel in renders only, Array in the viewport only
+    assert faces["Ring"] >= 4 * 16 * 4, faces  # render resolution 16 per segment
+    assert "HiddenInViewport" in faces and "Studs" not in faces and "Stud" not in faces, faces
+    placed = sorted(p.GetName() for p in children if p.IsInstance())
+    assert placed == ["PebblePlacer_Pebble"] + [f"Studs_Stud{s}" for s in ("", "_2", "_3", "_4")], placed
+    assert not res.warnings, res.warnings
+
+
+def test_particle_instances_and_viewport_only_node_branches(tmp_path):
+    """A hair particle system rendered as Object instances, displayed as nothing in the viewport at 20 %: Cycles
+    renders all its instances (they were dropped, with a warning about particle hair). A Geometry Nodes group that
+    reads Is Viewport is written as its viewport branch, warned by the modifier's name."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import _add, _new_scene
+
+    _new_scene(bpy, 8, (0.0, -6.0, 2.0), (0.0, 0.0, 0.0))
+    pebble = _add(bpy, "uv_sphere", "Pebble", None, radius=0.08, location=(5.0, 5.0, 5.0), segments=8, ring_count=4)
+    emitter = _add(bpy, "plane", "Emitter", None, size=1.0)
+    settings = emitter.modifiers.new("Particles", "PARTICLE_SYSTEM").particle_system.settings
+    settings.type, settings.count, settings.render_type, settings.instance_object = "HAIR", 10, "OBJECT", pebble
+    settings.display_method, settings.display_percentage = "NONE", 20
+    tree = bpy.data.node_groups.new("Switcher", "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gin, gout = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    switch, viewport = tree.nodes.new("GeometryNodeSwitch"), tree.nodes.new("GeometryNodeIsViewport")
+    tree.links.new(viewport.outputs[0], switch.inputs["Switch"])
+    tree.links.new(gin.outputs[0], switch.inputs["False"])
+    tree.links.new(switch.outputs[0], gout.inputs[0])
+    box = _add(bpy, "cube", "Proxy", None, size=0.5, location=(0.0, 1.0, 0.5))
+    box.modifiers.new("ViewportProxy", "NODES").node_group = tree
+    blend = tmp_path / "particles.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    res = convert_scene(blend, tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    placed = [p for p in stage.GetPrimAtPath("/World/Geometry").GetChildren() if p.IsInstance()]
+    assert len(placed) == 10, [p.GetName() for p in placed]
+    assert not [w for w in res.warnings if "particle hair" in w], res.warnings
+    assert [w for w in res.warnings if "ViewportProxy" in w and "Is Viewport" in w], res.warnings
+
+
+def _linked_scene(tmp_path):
+    """main.blend: two red cubes sharing a local mesh "Cube" and material "Paint"; linked from lib.blend, two green
+    balls sharing the library's mesh also named "Cube" and its material also named "Paint"."""
+    from nasset_converters.blender.fidelity import _add, _material, _new_scene
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    paint = _material(bpy, "Paint", **{"Color": (0.1, 0.9, 0.1)})
+    ball = _add(bpy, "uv_sphere", "LibBall", paint, radius=0.3)
+    ball.data.name = "Cube"
+    twin = bpy.data.objects.new("LibBallTwin", ball.data)
+    bpy.context.scene.collection.objects.link(twin)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "lib.blend"))
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    cube = _add(bpy, "cube", "LocalCube", _material(bpy, "Paint", **{"Color": (0.9, 0.1, 0.1)}), size=0.3)
+    cube.data.name = "Cube"
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("LocalCubeTwin", cube.data))
+    with bpy.data.libraries.load(str(tmp_path / "lib.blend"), link=True, relative=True) as (_, linked):
+        linked.objects = ["LibBall", "LibBallTwin"]
+    for ob in linked.objects:
+        bpy.context.scene.collection.objects.link(ob)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "main.blend"))
+    return tmp_path / "main.blend"
+
+
+def test_linked_data_named_like_local_data_keeps_its_own_mesh_and_material(tmp_path):
+    """Blender names are unique per library only: a linked mesh and material named like local ones were taken for
+    them (the linked balls were written as instances of the local red cube). They are told apart by full name."""
+    from pxr import Usd, UsdGeom, UsdShade
+
+    res = convert_scene(_linked_scene(tmp_path), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    for name, triangles, rgb in (("LocalCube", 12, (0.9, 0.1, 0.1)), ("LibBall", 960, (0.1, 0.9, 0.1))):
+        placed = stage.GetPrimAtPath(f"/World/Geometry/{name}")
+        assert placed.IsInstance(), name
+        mesh = next(p for p in Usd.PrimRange(placed.GetPrototype()) if p.IsA(UsdGeom.Mesh))
+        assert len(UsdGeom.Mesh(mesh).GetFaceVertexCountsAttr().Get()) == triangles, name
+        material = UsdShade.MaterialBindingAPI(mesh).ComputeBoundMaterial()[0]
+        shader = stage.GetPrimAtPath(material.GetPath().AppendChild("PreviewSurface"))
+        assert np.allclose(shader.GetAttribute("inputs:diffuseColor").Get(), rgb, atol=1e-6), name
+
+
+def test_a_missing_library_is_warned_by_name(tmp_path):
+    """A library that is not where the file says: its objects are empty placeholders, which Cycles renders as nothing;
+    they were dropped without a word. The converter names the library and its objects; the bake refuses them."""
+    import shutil
+
+    from nasset_converters.blender.scene import open_blend, pick_objects
+
+    blend = _linked_scene(tmp_path)
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    shutil.copy(blend, moved / "main.blend")
+    res = convert_scene(moved / "main.blend", moved / "s.usda")
+    assert [w for w in res.warnings if "library lib.blend" in w and "missing" in w and "LibBall, LibBallTwin" in w], \
+        res.warnings
+    open_blend(moved / "main.blend")
+    with pytest.raises(NassetError) as e:
+        pick_objects(["LibBall"])
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "lib.blend" in str(e.value)
+
+
+def test_links_are_read_as_cycles_reads_them(tmp_path):
+    """The fidelity suite's node_links scene (MSE 588x its noise before, 64 x 64, 64 spp): a texture through Reroutes
+    or a muted node reached the BSDF as "dropped" (the socket's default), a muted link was followed (Cycles ignores
+    it), RGB and Value nodes were dropped, and a material without a Surface link or with a muted shader was grey
+    (Cycles: black)."""
+    from nasset_converters.blender.fidelity import build
+    from nasset_converters.mitsuba.usd_export import TextureMap
+
+    build("node_links", tmp_path, 8)
+    mats = {name: map_material(bpy.data.materials[name]) for name in ("Rerouted", "MutedInvert", "MutedLink",
+                                                                        "Constants", "NoSurface", "MutedShader")}
+    assert isinstance(mats["Rerouted"][0]["diffuseColor"], TextureMap), mats["Rerouted"]
+    assert isinstance(mats["MutedInvert"][0]["diffuseColor"], TextureMap), mats["MutedInvert"]
+    assert np.allclose(mats["MutedLink"][0]["diffuseColor"], (0.8, 0.15, 0.1)), mats["MutedLink"]
+    inputs, notes = mats["Constants"]
+    scale = principled_diffuse_scale(0.9, 1.5)
+    assert np.allclose(inputs["diffuseColor"], np.multiply((0.1, 0.6, 0.2), scale), atol=1e-4)
+    assert np.isclose(inputs["roughness"], 0.9)
+    for name in ("NoSurface", "MutedShader"):
+        inputs, notes = mats[name]
+        assert inputs["diffuseColor"] == (0.0, 0.0, 0.0) and inputs["specularColor"] == (0.0, 0.0, 0.0), (name, inputs)
+        assert not notes, notes
+    assert "Rerouted" in bpy.data.materials and len(bpy.data.materials) == len(set(bpy.data.materials.keys()))
+
+
+def test_a_world_colour_through_a_reroute_from_an_rgb_node_is_the_dome(tmp_path):
+    """An RGB node through a Reroute on the Background colour: the world was dropped ("background colour from
+    NodeReroute"), a black sky where Cycles lights the scene."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import _new_scene, _world
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    nt = _world(bpy, strength=2.0).node_tree
+    rgb, reroute = nt.nodes.new("ShaderNodeRGB"), nt.nodes.new("NodeReroute")
+    rgb.outputs[0].default_value = (0.2, 0.4, 0.6, 1.0)
+    nt.links.new(rgb.outputs[0], reroute.inputs[0])
+    nt.links.new(reroute.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground").inputs["Color"])
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "w.blend"))
+    res = convert_scene(tmp_path / "w.blend", tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    dome = stage.GetPrimAtPath("/World/Lights/World")
+    rgb = np.array(dome.GetAttribute("inputs:color").Get()) * dome.GetAttribute("inputs:intensity").Get()
+    assert np.allclose(rgb, (0.4, 0.8, 1.2), rtol=1e-5), (rgb, res.warnings)
+    assert len(bpy.data.worlds) == 1  # the resolved copy is gone
+
+
+def test_node_groups_are_read_through(tmp_path):
+    """An Image Texture into a node group whose nested group holds a Principled BSDF (Base Color from the outer
+    group's input, Roughness from a value set on the inner group node): the group node was "not convertible" (grey).
+    The groups are ungrouped in a temporary copy, so the texture and the roughness reach the mapping."""
+    from nasset_converters.blender.fidelity import build
+    from nasset_converters.mitsuba.usd_export import TextureMap
+
+    build("node_links", tmp_path, 8)
+    inputs, notes = map_material(bpy.data.materials["Grouped"])
+    assert isinstance(inputs["diffuseColor"], TextureMap) and np.isclose(inputs["roughness"], 0.8), (inputs, notes)
+    assert not [n for n in notes if "not convertible" in n], notes
+    assert sorted(bpy.data.node_groups.keys()) == ["InnerPaint", "OuterPaint"]  # the file's groups untouched
+
+
+def test_light_node_trees_scale_and_tint_the_lights(tmp_path):
+    """The fidelity suite's light_nodes scene: a light's node tree (Emission Strength, Color, a Blackbody node) was
+    ignored without a warning (MSE 294x its noise, 64 x 64, 64 spp); Cycles multiplies the light by it."""
+    from pxr import Usd, UsdLux
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("light_nodes", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+
+    def rgb(name):
+        prim = stage.GetPrimAtPath(f"/World/Lights/{name}")
+        return np.array(prim.GetAttribute("inputs:color").Get()) * prim.GetAttribute("inputs:intensity").Get()
+
+    assert np.allclose(rgb("Bulb"), 30.0 / (4.0 * math.pi), rtol=1e-5)
+    body = np.array(UsdLux.BlackbodyTemperatureAsRgb(3500.0))
+    assert np.allclose(rgb("Sun"), 1.5 * body, rtol=1e-5)
+    assert np.allclose(rgb("Panel"), 15.0 * np.array([0.3, 0.6, 1.0]) / (math.pi * 0.25), rtol=1e-5)
+    assert not res.warnings and len(bpy.data.lights) == 3, res.warnings
+
+
+def test_geometry_nodes_instances_and_evaluated_materials(tmp_path):
+    """The fidelity suite's gn_instances scene (MSE 171x its noise before, 64 x 64, 64 spp): instances a Geometry Nodes
+    tree makes (of its own geometry or of an object through Object Info) were dropped, the instancer called an object
+    "without faces"; realized geometry without materials took the object's material where Cycles shows its default
+    surface; and no material was a grey surface with a specular lobe where Cycles' default is a Diffuse BSDF of 0.8."""
+    from pxr import Usd, UsdGeom, UsdShade
+
+    from nasset_converters.blender.fidelity import build
+
+    res = convert_scene(build("gn_instances", tmp_path, 8), tmp_path / "s.usda")
+    assert not res.warnings, res.warnings
+    stage = Usd.Stage.Open(str(res.output))
+    children = stage.GetPrimAtPath("/World/Geometry").GetChildren()
+    placed = sorted(p.GetName().rstrip("_234") for p in children if p.IsInstance())
+    assert placed == ["Cubes_Cube"] * 4 + ["Spheres_Mesh"] * 4 + ["WithBase_Mesh"] * 4, placed
+
+    def surface(prim):
+        material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
+        shader = stage.GetPrimAtPath(material.GetPath().AppendChild("PreviewSurface"))
+        return {a.GetBaseName(): a.Get() for a in shader.GetPrim().GetAttributes() if a.GetNamespace() == "inputs"}
+
+    cube = next(p for p in Usd.PrimRange(stage.GetPrimAtPath("/World/Geometry/Cubes_Cube").GetPrototype())
+                if p.IsA(UsdGeom.Mesh))
+    assert np.allclose(surface(cube)["diffuseColor"], (0.8, 0.2, 0.15)), surface(cube)  # the object's own material
+    realized = surface(stage.GetPrimAtPath("/World/Geometry/Realized"))
+    assert np.allclose(realized["diffuseColor"], 0.8) and np.allclose(realized["specularColor"], 0.0), realized
+    assert realized["useSpecularWorkflow"] == 1

@@ -337,3 +337,21 @@ def test_particle_hair_with_children_matches_cycles_in_the_bake(tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     summary = bake(blend, ["Fuzz"], tmp_path / "fuzz.usdc", size="tiny", views=4, epochs=1, quiet=True)
     assert summary["mask_disagreement"] < 0.2, summary["mask_disagreement"]
+
+
+def test_a_baked_object_has_the_geometry_cycles_renders(tmp_path):
+    """The bake reads asset geometry through the viewport depsgraph; a cube under a Subdivision Surface of viewport
+    level 0 and render level 2 was exported as its 12 triangles while Cycles rendered (and the bake's ground truth
+    showed) the 192 of level 2. An opened file now evaluates with its render settings."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    box = bpy.context.active_object
+    box.name = "Rounded"
+    sub = box.modifiers.new("Subdivision", "SUBSURF")
+    sub.levels, sub.render_levels = 0, 2
+    blend = tmp_path / "rounded.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    bsc.open_blend(blend)
+    geo = bsc.mesh_geometry(bsc.pick_objects(["Rounded"]))
+    assert len(geo.faces) == 12 * 4 ** 2
+    assert np.abs(geo.points).max() < 0.5  # the subdivided surface lies inside the cube's corners
