@@ -120,10 +120,25 @@ def read_tensor(path, comp, name, shape_check=None) -> np.ndarray:
 def check_network(path, prim, data: bytes) -> None:
     """The security rules of spec/security.md#networks on untrusted model bytes, before onnxruntime sees them: no
     external data (onnxruntime would read it from files relative to the working folder), allowed operators only,
-    shapes [N, fixed width]; a typed error naming the network otherwise."""
-    from nasset_sdk.networks import check_model_bytes
+    shapes [N, fixed width], then the runtime probe (time and memory bound, finite outputs, independent rows, with
+    the kind's unit-vector input columns); a typed error naming the network otherwise."""
+    from nasset_sdk.errors import error
+    from nasset_sdk.kinds import get_kind
+    from nasset_sdk.netprobe import make_job, probe_once
+    from nasset_sdk.networks import check_model_bytes, info_from_model
 
-    check_model_bytes(data, file=str(path), prim=str(prim.GetPath()), attribute="onnx:model")
+    loc = dict(file=str(path), prim=str(prim.GetPath()), attribute="onnx:model")
+    check_model_bytes(data, **loc)
+    root = prim.GetStage().GetDefaultPrim()
+    kind, variant = (str(root.GetAttribute(a).Get()) for a in ("nasset:kind", "nasset:variant"))
+    component, network = prim.GetParent().GetName(), prim.GetName()
+    info = info_from_model(data)
+    units = tuple(get_kind(kind).probe_unit_columns(variant, component, network, n, int(w))
+                  for n, w in zip(info.input_names, info.input_widths, strict=True))
+    job = make_job(data, info, units)
+    found = probe_once([job])[job.key]
+    if found:
+        raise error(found[0][0], f"runtime probe: {found[0][1]}", **loc)
 
 
 def read_network(path, comp, name, threads: int, in_width: int, out_width: int):

@@ -666,6 +666,13 @@ class Asset:
             code, message = found[jobs[name].key][0]
             raise error(code, f"runtime probe: {message}", **self._loc(f"{COMPONENTS}/{component}/{name}", "onnx:model"))
 
+    def evaluable_bytes(self, component: str, name: str) -> bytes:
+        """Model bytes for an evaluator that runs them itself (not through :meth:`session`): :meth:`network_bytes`
+        after :meth:`check_runtime`."""
+        data = self.network_bytes(component, name)
+        self.check_runtime(component, name)
+        return data
+
     def session(self, component: str, name: str, *, intra_threads: int = 0, inter_threads: int = 1):
         """onnxruntime session for a network (cached per thread setting), after :meth:`check_runtime`."""
         key = (component, name, intra_threads, inter_threads)

@@ -72,3 +72,13 @@ def test_scene_whose_asset_sublayers_a_file_outside_its_folder_is_refused(tmp_pa
     assert exc.value.code == "SCENE_INVALID"
     assert "is absolute in layer" in exc.value.message and "nothing was composed" in exc.value.message
     assert Sdf.Layer.Find(str(outside / "evil.usda")) is None  # never opened
+
+
+def test_decoder_failing_the_runtime_probe_is_not_run(tmp_path):
+    from nasset_mitsuba_renderer.rna import RnaAsset
+    from tests.corpus.gen_networks import _output_family
+
+    path = _asset_with_decoder(tmp_path / "nan.usdc", _output_family()["out_log_negative_nan"].SerializeToString())
+    with pytest.raises(NassetError) as exc:
+        RnaAsset(str(path))
+    assert exc.value.code == "NETWORK_OUTPUT" and exc.value.prim.endswith("decoder")
