@@ -159,7 +159,7 @@ class EightDnaJit:
         refs = asset.network_refs("core")
         nets = {}
         for name in ("albedo",) + FLOWS:
-            nets[name] = DrJitNetwork(mi, asset.network_bytes("core", name), file=self.path, prim=f"/Asset/core/{name}")
+            nets[name] = DrJitNetwork(mi, asset.evaluable_bytes("core", name), file=self.path, prim=f"/Asset/core/{name}")
         self.albedo_net, self.flows = nets["albedo"], [nets[n] for n in FLOWS]
         for name in FLOWS:
             g = int(refs[name].info.output_widths[0])

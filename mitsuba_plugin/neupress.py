@@ -138,13 +138,13 @@ class NeupressJit:
         asset = open_asset(path, kinds=("neupress",))
         self.g = self._fourier(asset, "core", 7)
         self.ggx = GgxJit(mi, *boundary_params(asset.tensor("core", "boundary")))
-        self.appearance = DrJitNetwork(mi, asset.network_bytes("core", "appearance"), file=self.path,
+        self.appearance = DrJitNetwork(mi, asset.evaluable_bytes("core", "appearance"), file=self.path,
                                        prim=f"{COMPONENTS}/core/appearance")
         self.sigma_net = None
         if "sampling" in asset.components():
             asset.load(["sampling"])
             self.gs = self._fourier(asset, "sampling", 5)
-            self.sigma_net = DrJitNetwork(mi, asset.network_bytes("sampling", "sigma"), file=self.path,
+            self.sigma_net = DrJitNetwork(mi, asset.evaluable_bytes("sampling", "sigma"), file=self.path,
                                           prim=f"{COMPONENTS}/sampling/sigma")
         self.asset = asset
         self.prt = None  # (coefficients Float [V*T*P*27], T, P, V), read on first use (PRT mode only)

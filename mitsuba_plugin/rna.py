@@ -90,7 +90,7 @@ class RnaJit:
             raise error("TENSOR_CONTRACT", f"triplane shape {planes.shape} is not [3, R, R, C]", file=self.path)
         self.channels = int(planes.shape[-1])
         self.planes = plane_textures(mi, planes)
-        self.decoder = DrJitNetwork(mi, asset.network_bytes("core", "decoder"), file=self.path, prim="/Asset/core/decoder")
+        self.decoder = DrJitNetwork(mi, asset.evaluable_bytes("core", "decoder"), file=self.path, prim="/Asset/core/decoder")
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
         self.lo = lo
         self.span = np.maximum(hi - lo, 1e-30)

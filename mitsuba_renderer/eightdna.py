@@ -17,7 +17,7 @@ import numpy as np
 from nasset_sdk.errors import SceneError
 
 from .integrator import ray_eps, register_shader
-from .rna import safe_normalize, triplane
+from .rna import check_network, safe_normalize, triplane
 
 TWO_PI = 2.0 * np.pi
 
@@ -298,15 +298,16 @@ class EightDnaAsset:
         return SceneError(code, msg, file=self.path, prim=prim)
 
     def _read(self, threads):
-        from pxr import Usd, UsdGeom
+        from pxr import Tf, Usd, UsdGeom
 
-        from nasset_sdk.paths import outer_file
+        from nasset_sdk.paths import open_checked_stage, outer_file
 
         if not os.path.exists(outer_file(str(self.path))):  # a file, or a layer inside a usdz package
             raise self._fail("SCENE_INVALID", "referenced asset file does not exist")
         try:
-            stage = Usd.Stage.Open(self.path, Usd.Stage.LoadNone)
-        except Exception as exc:
+            # untrusted input (spec/security.md): probed in a child, every asset path checked, then composed
+            stage = open_checked_stage(self.path, Usd.Stage.LoadNone)
+        except Tf.ErrorException as exc:
             raise self._fail("SCENE_INVALID", f"asset does not open as a USD layer: {str(exc).splitlines()[0][:200]}") from None
         root = stage.GetDefaultPrim()
         if not root or root.GetTypeName() != "NeuralAsset":
@@ -382,6 +383,7 @@ class EightDnaAsset:
             digest = p.GetAttribute("onnx:sha256").Get()
             if not digest or hashlib.sha256(data).hexdigest() != str(digest).lower():
                 raise self._fail("SCENE_INVALID", f"network {name}: onnx:sha256 does not match the model bytes", str(p.GetPath()))
+            check_network(self.path, p, data)
             try:
                 sess = ort.InferenceSession(data, sess_options=so, providers=["CPUExecutionProvider"])
             except Exception as exc:

@@ -69,15 +69,16 @@ def _fail(path, code, msg, prim=None):
 def open_root(path: str):
     """(stage, root prim, attr(name) reader) of an asset file, checking existence, the NeuralAsset
     default prim and the spec major version (spec/format.md)."""
-    from pxr import Usd
+    from pxr import Tf, Usd
 
-    from nasset_sdk.paths import outer_file
+    from nasset_sdk.paths import open_checked_stage, outer_file
 
     if not os.path.exists(outer_file(str(path))):  # a file, or a layer inside a usdz package
         raise _fail(path, "SCENE_INVALID", "referenced asset file does not exist")
     try:
-        stage = Usd.Stage.Open(str(path), Usd.Stage.LoadNone)
-    except Exception as exc:  # pxr raises Tf errors
+        # untrusted input (spec/security.md): probed in a child, every asset path checked, then composed
+        stage = open_checked_stage(str(path), Usd.Stage.LoadNone)
+    except Tf.ErrorException as exc:
         raise _fail(path, "SCENE_INVALID", f"asset does not open as a USD layer: {str(exc).splitlines()[0][:200]}") from None
     root = stage.GetDefaultPrim()
     if not root or root.GetTypeName() != "NeuralAsset":
@@ -116,6 +117,30 @@ def read_tensor(path, comp, name, shape_check=None) -> np.ndarray:
     return np.asarray(vals, np.float32).reshape(shape).astype(np.float64)
 
 
+def check_network(path, prim, data: bytes) -> None:
+    """The security rules of spec/security.md#networks on untrusted model bytes, before onnxruntime sees them: no
+    external data (onnxruntime would read it from files relative to the working folder), allowed operators only,
+    shapes [N, fixed width], then the runtime probe (time and memory bound, finite outputs, independent rows, with
+    the kind's unit-vector input columns); a typed error naming the network otherwise."""
+    from nasset_sdk.errors import error
+    from nasset_sdk.kinds import get_kind
+    from nasset_sdk.netprobe import make_job, probe_once
+    from nasset_sdk.networks import check_model_bytes, info_from_model
+
+    loc = dict(file=str(path), prim=str(prim.GetPath()), attribute="onnx:model")
+    check_model_bytes(data, **loc)
+    root = prim.GetStage().GetDefaultPrim()
+    kind, variant = (str(root.GetAttribute(a).Get()) for a in ("nasset:kind", "nasset:variant"))
+    component, network = prim.GetParent().GetName(), prim.GetName()
+    info = info_from_model(data)
+    units = tuple(get_kind(kind).probe_unit_columns(variant, component, network, n, int(w))
+                  for n, w in zip(info.input_names, info.input_widths, strict=True))
+    job = make_job(data, info, units)
+    found = probe_once([job])[job.key]
+    if found:
+        raise error(found[0][0], f"runtime probe: {found[0][1]}", **loc)
+
+
 def read_network(path, comp, name, threads: int, in_width: int, out_width: int):
     """(onnxruntime session, input name, output name) of network ``name``: sha256-checked bytes, io widths."""
     dec = comp.GetChild(name)
@@ -128,6 +153,7 @@ def read_network(path, comp, name, threads: int, in_width: int, out_width: int):
     data = bytes(np.asarray(model, np.uint8).tobytes())
     if not digest or hashlib.sha256(data).hexdigest() != str(digest).lower():
         raise _fail(path, "SCENE_INVALID", f"{name} onnx:sha256 does not match the model bytes", str(dec.GetPath()))
+    check_network(path, dec, data)
     import onnxruntime as ort
 
     so = ort.SessionOptions()

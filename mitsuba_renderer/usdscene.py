@@ -203,6 +203,11 @@ def _asset_to_world(prim, cache) -> np.ndarray:
 def _looks_like_asset(file: str) -> bool:
     from pxr import Sdf
 
+    from nasset_sdk.safeopen import ensure_safe
+
+    if not os.path.isfile(file):  # never open a pipe or device
+        return False
+    ensure_safe(file)  # probed in a child first (spec/security.md#bounds)
     try:
         layer = Sdf.Layer.FindOrOpen(file)
     except Exception:
@@ -229,17 +234,19 @@ def _read_exr(path: str, light_prim: str, scene: str) -> np.ndarray:
 
 
 def read_scene(path: str) -> SceneDesc:
-    from pxr import Usd, UsdGeom, UsdLux
+    from pxr import Tf, Usd, UsdGeom, UsdLux
 
     import nasset_sdk  # noqa: F401  (registers the codeless schema so NeuralAsset is a known type)
+    from nasset_sdk.paths import open_checked_stage
     from nasset_sdk.references import asset_source
 
     path = str(path)
     if not os.path.exists(path):
         raise SceneError("SCENE_INVALID", "scene file does not exist", file=path)
     try:
-        stage = Usd.Stage.Open(path, Usd.Stage.LoadNone)
-    except Exception as exc:
+        # untrusted input (spec/security.md#paths): every layer the scene reaches is probed and its paths checked first
+        stage = open_checked_stage(path, Usd.Stage.LoadNone, scene=True)
+    except Tf.ErrorException as exc:
         raise SceneError("SCENE_INVALID", f"scene does not open: {str(exc).splitlines()[0][:200]}", file=path) from None
     # the render time of spec/renderer.md#traversal: the stage's start, else each attribute's default or first sample
     t = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.EarliestTime()

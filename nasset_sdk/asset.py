@@ -23,7 +23,7 @@ from typing import Iterable
 import numpy as np
 
 from . import limits
-from .errors import UsageError, error, usd_reason
+from .errors import NassetError, UsageError, error, usd_reason
 from .geometry import CurvesGeometry, MeshGeometry
 from .networks import CheckedSession, NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
 from .plugin import register_schema
@@ -385,10 +385,14 @@ class Asset:
     """
 
     def __init__(self, path: Path, stage) -> None:
+        from .safeopen import written_here
+
         self.path = path
         self.stage = stage
         self.root = stage.GetPrimAtPath(ROOT) if stage.GetDefaultPrim() else stage.GetDefaultPrim()
         self._sessions: dict = {}
+        self._runs: set[tuple[str, str]] = set()  # networks that passed the runtime probe
+        self._written_here = written_here(path)  # networks this process wrote are not probed again
 
     # -- opening ---------------------------------------------------------------------------
     @classmethod
@@ -633,11 +637,48 @@ class Asset:
         check_model_bytes(data, ref.info, **self._loc(path, "onnx:model"))
         return data
 
+    def check_runtime(self, component: str, name: str) -> None:
+        """Raise the runtime probe's finding for network ``name`` (spec/security.md#networks), as the validator does:
+        NETWORK_RUNTIME for a network that does not run within the probe's time and memory bound (a reader would
+        hang or run out of memory in it), NETWORK_OUTPUT for non-finite, huge or row-mixing outputs. The networks of
+        ``component`` are probed together in one bounded child, once per process (``netprobe.probe_once``); an
+        asset file this process wrote is trusted."""
+        from .netprobe import make_job, probe_once
+
+        if self._written_here or (component, name) in self._runs:
+            return
+        jobs = {}
+        for nname, ref in self.network_refs(component).items():
+            try:
+                data = self.network_bytes(component, nname)
+            except NassetError:
+                if nname == name:
+                    raise
+                continue  # raised when that network is asked for
+            units = tuple(self.contract.probe_unit_columns(self.variant, component, nname, n, int(w))
+                          for n, w in zip(ref.info.input_names, ref.info.input_widths, strict=True))
+            jobs[nname] = make_job(data, ref.info, units)
+        found = probe_once(list(jobs.values()))
+        for nname, job in jobs.items():
+            if not found[job.key]:
+                self._runs.add((component, nname))
+        if found[jobs[name].key]:
+            code, message = found[jobs[name].key][0]
+            raise error(code, f"runtime probe: {message}", **self._loc(f"{COMPONENTS}/{component}/{name}", "onnx:model"))
+
+    def evaluable_bytes(self, component: str, name: str) -> bytes:
+        """Model bytes for an evaluator that runs them itself (not through :meth:`session`): :meth:`network_bytes`
+        after :meth:`check_runtime`."""
+        data = self.network_bytes(component, name)
+        self.check_runtime(component, name)
+        return data
+
     def session(self, component: str, name: str, *, intra_threads: int = 0, inter_threads: int = 1):
-        """onnxruntime session for a network (cached per thread setting)."""
+        """onnxruntime session for a network (cached per thread setting), after :meth:`check_runtime`."""
         key = (component, name, intra_threads, inter_threads)
         if key not in self._sessions:
             data = self.network_bytes(component, name)
+            self.check_runtime(component, name)
             loc = self._loc(f"{COMPONENTS}/{component}/{name}", "onnx:model")
             try:
                 session = make_session(data, intra_threads=intra_threads, inter_threads=inter_threads)

@@ -188,6 +188,29 @@ def child_main() -> None:
     sys.stdout.flush()
 
 
+def make_job(data: bytes, info, unit_columns: tuple[tuple[int, ...], ...] = ()) -> ProbeJob:
+    """The probe job of model ``data`` declared by ``info`` (a :class:`~nasset_sdk.networks.NetworkInfo`); its key
+    names the bytes and the declared interface, so equal networks are probed once."""
+    from .networks import sha256_hex
+
+    key = f"{sha256_hex(data)}:{tuple(info.input_names)}:{tuple(info.input_widths)}:{tuple(info.output_names)}:{tuple(info.output_widths)}"
+    return ProbeJob(key, bytes(data), tuple(info.input_names), tuple(int(w) for w in info.input_widths),
+                    tuple(info.output_names), tuple(int(w) for w in info.output_widths), tuple(unit_columns))
+
+
+#: job key -> findings of the probes this process ran for readers ([] when the network passed)
+_READER_RESULTS: dict[str, list[tuple[str, str]]] = {}
+
+
+def probe_once(jobs: list[ProbeJob], *, timeout: float | None = None) -> dict[str, list[tuple[str, str]]]:
+    """:func:`probe_networks` for a reader (``timeout`` default :data:`PROBE_TIMEOUT_S`): ``jobs`` this process has
+    not probed yet run in one bounded child, the others answer from that earlier probe; key -> findings."""
+    todo = [j for j in jobs if j.key not in _READER_RESULTS]
+    if todo:
+        _READER_RESULTS.update(probe_networks(todo, timeout=PROBE_TIMEOUT_S if timeout is None else timeout))
+    return {j.key: _READER_RESULTS[j.key] for j in jobs}
+
+
 def probe_networks(jobs: list[ProbeJob], *, timeout: float = PROBE_TIMEOUT_S) -> dict[str, list[tuple[str, str]]]:
     """Probe all ``jobs`` in one bounded child; key -> findings ([] when the network passed)."""
     from .safeopen import run_bounded

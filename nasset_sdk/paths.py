@@ -25,7 +25,9 @@ from .errors import error
 
 #: Layers a reader follows from one root before giving up (cycles are cut by realpath).
 MAX_LAYERS = 64
-ARC_KINDS = ("sublayer", "reference", "payload", "clip")
+ARC_KINDS = ("sublayer", "reference", "payload", "clip", "clip template")
+#: clip-set keys (and legacy clip metadata) whose value is a template string, not an asset path: ``./c.#.usd``
+TEMPLATE_KEYS = ("templateAssetPath", "clipTemplateAssetPath")
 USD_LAYER_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 _SCHEME = re.compile(r"^[A-Za-z][A-Za-z0-9+.\-]*:")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
@@ -127,12 +129,13 @@ def outer_file(identifier: str) -> str:
     return s
 
 
-def resolve(asset_path: str, anchor: str | os.PathLike) -> str:
-    """Where ``asset_path`` authored in the layer file ``anchor`` resolves: Ar identifier, then realpath of its file part."""
+def resolve(asset_path: str, anchor: str | os.PathLike, identifier: str | None = None) -> str:
+    """Where ``asset_path`` authored in the layer file ``anchor`` resolves: Ar identifier (``identifier`` when the
+    caller computed it from the layer, :func:`arc_identifier`), then realpath of its file part."""
     from pxr import Ar
 
     resolver = Ar.GetResolver()
-    identifier = resolver.CreateIdentifier(str(asset_path), Ar.ResolvedPath(os.fspath(anchor)))
+    identifier = identifier or resolver.CreateIdentifier(str(asset_path), Ar.ResolvedPath(os.fspath(anchor)))
     resolved = str(resolver.Resolve(identifier)) if identifier else ""
     file = outer_file(resolved or identifier or str(asset_path))
     if not os.path.isabs(file):
@@ -140,11 +143,24 @@ def resolve(asset_path: str, anchor: str | os.PathLike) -> str:
     return os.path.realpath(file)
 
 
-def resolve_problem(asset_path: str, anchor: str | os.PathLike, package: str | os.PathLike) -> str | None:
+def arc_identifier(layer, asset_path: str, anchor: str) -> str:
+    """The identifier composition opens for ``asset_path`` authored in ``layer``: anchored as Sdf anchors it
+    (``Sdf.ComputeAssetPathRelativeToLayer``: inside a usdz package, relative to the package's root layer, so
+    ``./b.usda`` in ``a.usdz`` is ``a.usdz[b.usda]``, not a file beside the package); for an anonymous copy of a
+    layer, relative to its file ``anchor`` through Ar."""
+    from pxr import Ar, Sdf
+
+    if not layer.anonymous:
+        return Sdf.ComputeAssetPathRelativeToLayer(layer, str(asset_path))
+    return Ar.GetResolver().CreateIdentifier(str(asset_path), Ar.ResolvedPath(os.fspath(anchor)))
+
+
+def resolve_problem(asset_path: str, anchor: str | os.PathLike, package: str | os.PathLike,
+                    identifier: str | None = None) -> str | None:
     """Why ``asset_path`` (authored in layer file ``anchor``) resolves outside ``package`` or to a non-file."""
     if not str(asset_path):
         return None
-    target = resolve(asset_path, anchor)
+    target = resolve(asset_path, anchor, identifier)
     pkg = os.path.realpath(os.fspath(package))
     if not _inside(target, pkg):
         return f"resolves to {target}, outside the asset's folder {pkg}"
@@ -163,7 +179,8 @@ class PathProblem:
     field: str | None = None
 
     def message(self) -> str:
-        what = {"sublayer": "sublayer", "reference": "reference", "payload": "payload", "clip": "value clip"}.get(self.kind, "asset path")
+        what = {"sublayer": "sublayer", "reference": "reference", "payload": "payload", "clip": "value clip",
+                "clip template": "value clip template"}.get(self.kind, "asset path")
         where = f" ({self.field})" if self.field and self.kind == "asset" and self.field != "default" else ""
         return f"{what}{where} {self.path!r} {self.why}"
 
@@ -194,6 +211,16 @@ def _asset_strings(value):
     elif type(value).__name__ == "AssetPathArray" or isinstance(value, (list, tuple)):
         for v in value:
             yield from _asset_strings(v)
+
+
+def _clip_templates(key: str, value) -> list[str]:
+    """Template strings of value clips (``clips`` sets' ``templateAssetPath``, legacy ``clipTemplateAssetPath``):
+    plain strings from which USD generates the clip layers' paths when it reads a value."""
+    if key == "clipTemplateAssetPath" and isinstance(value, str):
+        return [value]
+    if key != "clips" or not isinstance(value, dict):
+        return []
+    return [str(v[t]) for v in value.values() if isinstance(v, dict) for t in TEMPLATE_KEYS if v.get(t)]
 
 
 _SKIP_KEYS = frozenset({"subLayers", "timeSamples", "typeName", "specifier", "variability", "custom", "documentation",
@@ -236,6 +263,8 @@ def layer_asset_paths(layer):
                 if key in ("clips", "clipAssetPaths", "clipManifestAssetPath"):
                     kind = "clip"
                 found.append((kind, s, prim, field or key))
+            for template in _clip_templates(key, value):
+                found.append(("clip template", template, prim, field or key))
         if asset_typed:
             for t in layer.ListTimeSamplesForPath(spec_path):
                 for kind, s in _asset_strings(layer.QueryTimeSample(spec_path, t)):
@@ -259,21 +288,24 @@ def scan_layer(layer, package: str | os.PathLike, *, scene: bool = False,
 
     ``anchor`` is the layer's file when the layer was opened anonymously from it.
     """
-    from pxr import Ar
-
     anchor = anchor or _anchor(layer)
     problems: list[PathProblem] = []
     follow: list[str] = []
     for kind, s, prim, field in layer_asset_paths(layer):
         if not s:
             continue
+        if kind == "clip template":  # USD expands it to layers only when a value is read: none of them checked here
+            problems.append(PathProblem(kind, s, "generates the paths of its layers when values are read, so they cannot "
+                                        "be checked before composing; list the clip layers in assetPaths", anchor, prim, field))
+            continue
         why = scene_path_problem(s, kind, anchor) if scene else path_problem(s)
+        identifier = arc_identifier(layer, s, anchor) if why is None else None
         if why is None:
-            why = _scene_resolve_problem(s, anchor) if scene else resolve_problem(s, anchor, package)
+            why = _not_regular(resolve(s, anchor, identifier)) if scene else resolve_problem(s, anchor, package, identifier)
         if why:
             problems.append(PathProblem(kind, s, why, anchor, prim, field))
         elif kind in ARC_KINDS:
-            follow.append(Ar.GetResolver().CreateIdentifier(s, Ar.ResolvedPath(anchor)))
+            follow.append(identifier)
     return problems, follow
 
 
@@ -310,10 +342,6 @@ def _resolves_to_file(asset_path: str, anchor) -> bool:
     resolver = Ar.GetResolver()
     resolved = str(resolver.Resolve(resolver.CreateIdentifier(asset_path, Ar.ResolvedPath(os.fspath(anchor)))))
     return bool(resolved) and os.path.isfile(outer_file(resolved))
-
-
-def _scene_resolve_problem(asset_path: str, anchor: str) -> str | None:
-    return _not_regular(resolve(asset_path, anchor))
 
 
 def _is_asset_layer(layer) -> bool:

@@ -325,6 +325,8 @@ def ensure_readable(path: str | os.PathLike, *, level: str = "full", timeout: fl
 
 #: Identities of the files this process wrote, or whose full probe passed: opened again without a probe.
 _SAFE: set[tuple] = set()
+#: Identities of the files this process wrote (their networks came from this process: no runtime probe).
+_WRITTEN: set[tuple] = set()
 
 
 def _identity(path: str | os.PathLike) -> tuple | None:
@@ -346,6 +348,13 @@ def trust(path: str | os.PathLike) -> None:
     key = _identity(path)
     if key is not None:
         _SAFE.add(key)
+        _WRITTEN.add(key)
+
+
+def written_here(path: str | os.PathLike) -> bool:
+    """True when this process wrote ``path`` (:func:`trust`) and it is unchanged since."""
+    key = _identity(path)
+    return key is not None and key in _WRITTEN
 
 
 def ensure_safe(path: str | os.PathLike, *, timeout: float = DEFAULT_TIMEOUT_S) -> None:

@@ -265,6 +265,8 @@ class EightDnaEvaluator(Evaluator):
         self.head_weight = self.head_bias = self.head = self.tails = None
         base_width = self.planes.shape[-1] + self.wo_cube.shape[-1] + 6
         refs = asset.network_refs("core")
+        for n in FLOWS:  # the split sessions run the networks' bytes too: the runtime probe first, as for asset.session
+            asset.check_runtime("core", n)
         try:
             splits = [split_first_layer(asset.network_bytes("core", n), base_width) for n in FLOWS]
         except Exception:  # any graph the splitter cannot read runs whole, which is always correct

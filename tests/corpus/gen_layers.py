@@ -12,6 +12,8 @@ Families (each case names the code it must yield):
 - ``amp_*``: crate-compressed arrays that decode to far more than the file size -> ARRAY_TOO_LARGE
   (validate with the probe: it is what bounds them).
 - ``shape_*``: shapes whose product wraps int64 or is zero -> TENSOR_TOO_LARGE / TENSOR_SHAPE.
+- ``amp_string_*``: one long string repeated by a string array (crate stores it once) -> ARRAY_TOO_LARGE;
+  ``nest_*``: values nested past limits.MAX_VALUE_DEPTH -> FILE_UNREADABLE.
 """
 
 from __future__ import annotations
@@ -96,13 +98,13 @@ def make_cases(out_dir: str | Path, *, amplification: bool = True) -> list[Case]
     model, digest = _other_network(probe)
     cases: list[Case] = []
 
-    def case(name, code, fn, *, base="surface"):
+    def case(name, code, fn, *, base="surface", probe=False):
         layer = Sdf.Layer.OpenAsAnonymous(str(bases[base]))
         fn(layer)
         path = out / f"{name}.usdc"
         if not layer.Export(str(path)):
             raise RuntimeError(f"case {name} did not export")
-        cases.append(Case(name, path, code, probe=code == "ARRAY_TOO_LARGE"))
+        cases.append(Case(name, path, code, probe=probe or code == "ARRAY_TOO_LARGE"))
 
     # -- hidden variant sets ------------------------------------------------------------------
     def vset_tensor_nan(layer):
@@ -261,6 +263,20 @@ def make_cases(out_dir: str | Path, *, amplification: bool = True) -> list[Case]
             layer.GetAttributeAtPath(GEO + ".faceVertexCounts").default = Vt.IntArray.FromNumpy(np.full((1 << 25) + 3, 3, np.int32))
 
         case("amp_face_counts_over_bound", "ARRAY_TOO_LARGE", amp_widths)
+
+        # crate stores a string once and a string array as indices into its table: each element decodes to a copy
+        def amp_string_array(layer):
+            layer.GetPrimAtPath("/Asset").SetInfo("customData", {"blob": Vt.StringArray(96, "a" * (1 << 20))})
+
+        case("amp_string_array_repeats_one_string", "ARRAY_TOO_LARGE", amp_string_array)
+
+    def nested_custom_data(layer):  # walkers of nested values recurse; usd-core's text parser overflows far deeper
+        value = {"leaf": 1}
+        for _ in range(40):
+            value = {"k": value}
+        layer.GetPrimAtPath("/Asset").SetInfo("customData", value)
+
+    case("nest_custom_data_40_deep", "FILE_UNREADABLE", nested_custom_data, probe=True)
     return cases
 
 

@@ -237,6 +237,25 @@ def test_invalid_asset_file(mi, tmp_path):
     assert exc.value.code == "FILE_UNREADABLE"
 
 
+def test_network_failing_the_runtime_probe_is_not_evaluated(mi, tmp_path):
+    """A decoder with NaN outputs on probe inputs: refused before DrJit evaluates it (spec/security.md#networks)."""
+    from pxr import Sdf, Usd
+
+    from tests.corpus.gen_networks import DEC, _output_family
+    from tests.corpus.make_corpus import _set_model
+
+    base = example_builder("rna", size="tiny", seed=0).write(tmp_path / "base.usdc")
+    layer = Sdf.Layer.OpenAsAnonymous(str(base))
+    stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+    with Usd.EditContext(stage, layer):
+        _set_model(stage, DEC, _output_family()["out_log_negative_nan"].SerializeToString())
+        stage.GetPrimAtPath(DEC).GetAttribute("onnx:opset").Set(17)
+    assert layer.Export(str(tmp_path / "nan.usdc"))
+    with pytest.raises(NassetError) as exc:
+        asset_shape(tmp_path / "nan.usdc", mi=mi)
+    assert exc.value.code == "NETWORK_OUTPUT" and exc.value.prim.endswith("/core/decoder")
+
+
 def test_wrong_kind(mi, tmp_path, monkeypatch):
     """Every kind of the format has a Dr.Jit class now; a kind without one (here neupress, taken out of the
     table as a future kind would be missing from it) is SCENE_UNSUPPORTED naming it, not a KeyError."""

@@ -124,14 +124,15 @@ def _layer_names():
 
     with tempfile.TemporaryDirectory() as d:
         return [c.name for c in gen_layers.make_cases(d, amplification=False)] + [
-            f"amp_face_indices_{n // 3 >> 20}M_faces" for n in gen_layers.AMP_SIZES] + ["amp_custom_data", "amp_face_counts_over_bound"]
+            f"amp_face_indices_{n // 3 >> 20}M_faces" for n in gen_layers.AMP_SIZES] + ["amp_custom_data", "amp_face_counts_over_bound",
+                                                                         "amp_string_array_repeats_one_string"]
 
 
 @pytest.mark.parametrize("name", _layer_names())
 def test_layer_case_yields_its_code(layer_cases, name):
     case = layer_cases[name]
     # amplification cases are bounded by the probe child: never read them in this process
-    report = validate_file(case.path, probe=name.startswith("amp_"))
+    report = validate_file(case.path, probe=case.probe or name.startswith("amp_"))
     assert case.code in report.codes("error"), report.format_text()
     assert "CHECK_FAILED" not in report.codes(), report.format_text()
 
@@ -240,8 +241,8 @@ def _fuzz(seed: int, n: int, out: str) -> None:
         v._open()
         v._asset_paths()
         v_codes = {f.code for f in v.report.findings}
-        try:
-            asset = Asset.open(target, load="all")
+        try:  # the path checks alone (probe=False): probing each layer costs a child each (tests/sdk/test_security_readers.py)
+            asset = Asset.open(target, load="all", probe=False)
         except NassetError as exc:
             assert exc.code == "ASSET_PATH_ESCAPES", (paths, exc)
             assert "ASSET_PATH_ESCAPES" in v_codes, (paths, v_codes)
@@ -314,3 +315,85 @@ def test_security_generators_cover_their_codes(layer_cases):
     from tests.sdk.test_validator import SECURITY_CORPUS_CODES
 
     assert SECURITY_CORPUS_CODES <= {c.code for c in layer_cases.values()}
+
+
+# -- arcs inside a usdz package are anchored inside it ----------------------------------------------------------
+def _usdz_with_inner_sublayer(tmp_path) -> tuple[Path, Path]:
+    """``pkg/a.usdz``: its root layer sublayers ``./inner.usda`` (inside the package), which sublayers a file outside."""
+    import zipfile
+
+    from pxr import Sdf
+
+    from nasset_sdk.examples import example_builder
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    evil = outside / "evil.usda"
+    evil.write_text('#usda 1.0\nover "Asset"\n{\n    custom string secret = "outside"\n}\n')
+    base = example_builder("rna", size="tiny").write(tmp_path / "base.usdc")
+    root = Sdf.Layer.OpenAsAnonymous(str(base))
+    root.subLayerPaths.append("./inner.usda")
+    assert root.Export(str(tmp_path / "root.usdc"))
+    inner = Sdf.Layer.CreateAnonymous(".usda")
+    inner.subLayerPaths.append(str(evil))
+    (tmp_path / "inner.usda").write_text(inner.ExportToString())
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    with zipfile.ZipFile(pkg / "a.usdz", "w", zipfile.ZIP_STORED) as z:  # the first file is the package's root layer
+        z.write(tmp_path / "root.usdc", "root.usdc")
+        z.write(tmp_path / "inner.usda", "inner.usda")
+    return pkg / "a.usdz", evil
+
+
+def test_arcs_of_layers_inside_a_usdz_are_checked_where_composition_anchors_them(tmp_path):
+    """Before: './inner.usda' in a.usdz was checked as the file beside the package (absent: skipped), so the inner
+    layer's absolute sublayer was never checked and Asset.open composed the outside file."""
+    from pxr import Sdf
+
+    from nasset_reference_renderer.scene import open_stage
+    from nasset_sdk.asset import Asset
+
+    usdz, evil = _usdz_with_inner_sublayer(tmp_path)
+    with pytest.raises(NassetError) as exc:
+        Asset.open(usdz)
+    assert exc.value.code == "ASSET_PATH_ESCAPES"
+    assert "a.usdz[inner.usda]" in exc.value.message and "is absolute" in exc.value.message
+    scene = tmp_path / "scene.usda"
+    scene.write_text('#usda 1.0\ndef Xform "World"\n{\n    def Xform "A" (\n        prepend references = @./pkg/a.usdz@\n    )\n'
+                     '    {\n    }\n}\n')
+    with pytest.raises(NassetError) as exc:
+        open_stage(str(scene))
+    assert exc.value.code == "SCENE_INVALID" and "a.usdz[inner.usda]" in exc.value.message
+    assert Sdf.Layer.Find(str(evil)) is None  # never opened
+    assert "LAYER_EXTERNAL" in validate_file(usdz).codes("error")
+
+
+def test_value_clip_templates_are_refused_before_anything_reads_through_them(tmp_path):
+    """``templateAssetPath`` is a plain string (not an asset path): the walker did not see it, the asset validated clean,
+    and reading the attribute through Asset.open composed the generated outside layer ('FROM-OUTSIDE-CLIP')."""
+    from pxr import Sdf
+
+    from nasset_sdk.asset import Asset
+    from nasset_sdk.examples import example_builder
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "clip.0.usda").write_text('#usda 1.0\ndef "Evil"\n{\n    custom string secret.timeSamples = {\n'
+                                         '        0: "FROM-OUTSIDE-CLIP",\n    }\n}\n')
+    base = example_builder("rna", size="tiny").write(tmp_path / "base.usdc")
+    layer = Sdf.Layer.OpenAsAnonymous(str(base))
+    spec = layer.GetPrimAtPath("/Asset/Looks/Fallback")
+    Sdf.AttributeSpec(spec, "secret", Sdf.ValueTypeNames.String)
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    for name, template in (("absolute", str(outside / "clip.#.usda")), ("inside", "./clip.#.usda")):
+        spec.SetInfo("clips", {"default": {"templateAssetPath": template, "primPath": "/Evil", "templateStartTime": 0.0,
+                                           "templateEndTime": 0.0, "templateStride": 1.0}})
+        path = pkg / f"{name}.usdc"
+        assert layer.Export(str(path))
+        codes = validate_file(path).codes("error")
+        assert {"ASSET_PATH_ESCAPES", "LAYER_EXTERNAL"} <= codes, (name, codes)
+        with pytest.raises(NassetError) as exc:
+            Asset.open(path)
+        assert exc.value.code == "ASSET_PATH_ESCAPES" and "value clip template" in exc.value.message
+    assert Sdf.Layer.Find(str(outside / "clip.0.usda")) is None  # never opened

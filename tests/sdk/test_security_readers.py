@@ -159,3 +159,43 @@ def test_a_written_file_is_trusted_only_while_unchanged(base, tmp_path):
     with pytest.raises(NassetError) as exc:
         Asset.open(path)
     assert exc.value.code == "ARRAY_TOO_LARGE"
+
+
+def _asset_with_decoder(base: Path, out: Path, model) -> Path:
+    from pxr import Sdf, Usd
+
+    from tests.corpus.gen_networks import DEC
+    from tests.corpus.make_corpus import _set_model
+
+    layer = Sdf.Layer.OpenAsAnonymous(str(base))
+    stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+    with Usd.EditContext(stage, layer):
+        _set_model(stage, DEC, model.SerializeToString())
+        stage.GetPrimAtPath(DEC).GetAttribute("onnx:opset").Set(17)
+    assert layer.Export(str(out))
+    return out
+
+
+def test_readers_run_the_network_runtime_probe_before_evaluating(base, tmp_path):
+    """A decoder whose outputs are NaN on probe inputs is refused by the reader as by the validator (before: evaluated)."""
+    from tests.corpus.gen_networks import _output_family
+
+    path = _asset_with_decoder(base, tmp_path / "nan.usdc", _output_family()["out_log_negative_nan"])
+    asset = Asset.open(path)
+    with pytest.raises(NassetError) as exc:
+        asset.session("core", "decoder")
+    assert exc.value.code == "NETWORK_OUTPUT" and exc.value.attribute == "onnx:model"
+    assert exc.value.prim.endswith("/core/decoder")
+
+
+def test_a_network_too_slow_for_the_probe_is_refused_not_run(base, tmp_path, monkeypatch):
+    """4000 Gemm layers of width 2048 (~9 TFLOP per 256 rows): before, rendering 8 x 8 pixels ran for minutes."""
+    from nasset_sdk import netprobe
+    from tests.corpus.gen_networks import TIME_CASE_TIMEOUT_S, _time_family
+
+    monkeypatch.setattr(netprobe, "PROBE_TIMEOUT_S", TIME_CASE_TIMEOUT_S)  # the bound the corpus uses for this family
+    path = _asset_with_decoder(base, tmp_path / "slow.usdc", _time_family()["time_deep_shared_weights"])
+    asset = Asset.open(path)
+    with pytest.raises(NassetError) as exc:
+        asset.evaluator()
+    assert exc.value.code == "NETWORK_RUNTIME" and "did not finish" in exc.value.message

@@ -1,0 +1,84 @@
+"""The Mitsuba implementation reads assets and scenes as untrusted input, like the SDK (spec/security.md).
+
+It used to open asset and scene files with ``Usd.Stage.Open`` and hand network bytes to onnxruntime after
+the digest check alone: a decoder whose initializer names external data was loaded, and onnxruntime read
+that file relative to the working folder into the weights (the bytes of ``secret.bin`` in the render);
+an asset's sublayer outside its folder was composed. Both are refused now, with the SDK's codes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+pytest.importorskip("onnxruntime")
+
+from nasset_sdk.errors import NassetError  # noqa: E402
+from nasset_sdk.examples import example_builder  # noqa: E402
+
+DEC = "/_NassetPayloads/core/decoder"
+
+
+def _asset_with_decoder(path, blob: bytes):
+    from pxr import Sdf, Usd, Vt
+
+    base = example_builder("rna", variant="surface", size="tiny", seed=0).write(path.parent / "_base.usdc")
+    layer = Sdf.Layer.OpenAsAnonymous(str(base))
+    stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+    with Usd.EditContext(stage, layer):
+        prim = stage.GetPrimAtPath(DEC)
+        prim.GetAttribute("onnx:model").Set(Vt.UCharArray.FromNumpy(np.frombuffer(blob, np.uint8)))
+        prim.GetAttribute("onnx:sha256").Set(hashlib.sha256(blob).hexdigest())
+        prim.GetAttribute("onnx:opset").Set(17)
+    assert layer.Export(str(path))
+    return path
+
+
+def test_decoder_with_external_data_never_reaches_onnxruntime(tmp_path, monkeypatch):
+    from nasset_mitsuba_renderer.rna import RnaAsset
+    from tests.corpus.gen_networks import IN_W, OUT_W, _ext_family
+
+    model = _ext_family()["ext_initializer"]  # W [16, 6] read from 'secret.bin', relative to the working folder
+    path = _asset_with_decoder(tmp_path / "asset.usdc", model.SerializeToString())
+    (tmp_path / "secret.bin").write_bytes(b"SECRET!!" * (IN_W * OUT_W * 4 // 8))
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(NassetError) as exc:
+        RnaAsset(str(path))
+    assert exc.value.code == "NETWORK_EXTERNAL_DATA"
+    assert exc.value.prim.endswith("decoder") and exc.value.attribute == "onnx:model"
+
+
+def test_scene_whose_asset_sublayers_a_file_outside_its_folder_is_refused(tmp_path):
+    from pxr import Sdf
+
+    from nasset_mitsuba_renderer.usdscene import read_scene
+
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "evil.usda").write_text('#usda 1.0\nover "Asset"\n{\n    custom string secret = "outside"\n}\n')
+    pkg = tmp_path / "pkg"
+    pkg.mkdir()
+    base = example_builder("rna", variant="surface", size="tiny", seed=0).write(tmp_path / "base.usdc")
+    layer = Sdf.Layer.OpenAsAnonymous(str(base))
+    layer.subLayerPaths.append(str(outside / "evil.usda"))
+    assert layer.Export(str(pkg / "asset.usdc"))
+    scene = tmp_path / "scene.usda"  # as text: a SceneBuilder stage would compose the reference while building it
+    scene.write_text('#usda 1.0\n(\n    defaultPrim = "World"\n)\ndef Xform "World"\n{\n    def Camera "Cam"\n    {\n    }\n'
+                     '    def Xform "A" (\n        prepend references = @./pkg/asset.usdc@\n    )\n    {\n    }\n}\n')
+    with pytest.raises(NassetError) as exc:
+        read_scene(scene)
+    assert exc.value.code == "SCENE_INVALID"
+    assert "is absolute in layer" in exc.value.message and "nothing was composed" in exc.value.message
+    assert Sdf.Layer.Find(str(outside / "evil.usda")) is None  # never opened
+
+
+def test_decoder_failing_the_runtime_probe_is_not_run(tmp_path):
+    from nasset_mitsuba_renderer.rna import RnaAsset
+    from tests.corpus.gen_networks import _output_family
+
+    path = _asset_with_decoder(tmp_path / "nan.usdc", _output_family()["out_log_negative_nan"].SerializeToString())
+    with pytest.raises(NassetError) as exc:
+        RnaAsset(str(path))
+    assert exc.value.code == "NETWORK_OUTPUT" and exc.value.prim.endswith("decoder")
