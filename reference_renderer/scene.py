@@ -839,11 +839,16 @@ class _Loader:
                 shader = src[0]
                 break
         if shader is None:
-            raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or "
-                           "outputs:mtlx:surface", mpath)
+            others = sorted(o.GetFullName() for o in mat.GetSurfaceOutputs() if o.HasConnectedSource())
+            raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface"
+                           + (f" (only {', '.join(others)}: another renderer's shading)" if others else ""), mpath)
         sid = shader.GetIdAttr().Get()
         if sid not in PREVIEW_SURFACES and sid not in MTLX_SURFACES:
-            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; supported: "
+            source = shader.GetImplementationSource()  # id, sourceAsset (MDL, OSL) or sourceCode
+            assets = [f"{a.GetName()} {a.Get().path}" for a in shader.GetPrim().GetAuthoredAttributes()
+                      if a.GetName().startswith("info:") and a.GetName().endswith(":sourceAsset")]
+            what = f"has id {sid!r}" if source == "id" else f"is implemented by {', '.join(assets) or source}"
+            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} {what}; supported: "
                            f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
         textures = {}  # input name -> (ImageTexture, st primvar name)

@@ -358,3 +358,64 @@ def test_prim_types_without_a_schema_are_warned_once_per_type(tmp_path):
         scene = load_scene(b.write(tmp_path / "s.usda"))
     said = [m for m in scene.warnings if "Preliminary_Text" in m]
     assert len(said) == 1 and "/World/A" in said[0], scene.warnings
+
+
+# -- Omniverse materials: MDL beside UsdPreviewSurface ----------------------------------------------------------------
+
+def _add_mdl_shader(b, material_path, *, universal: bool):
+    """Omniverse's pattern: an MDL shader named by a bare ``info:mdl:sourceAsset = @OmniPBR.mdl@`` (a built-in found on
+    MDL search paths, never a file next to the scene) on ``outputs:mdl:surface``; ``universal``: also on
+    ``outputs:surface`` instead of the UsdPreviewSurface."""
+    from pxr import Sdf, UsdShade
+
+    mat = UsdShade.Material(b.stage.GetPrimAtPath(material_path))
+    mdl = UsdShade.Shader.Define(b.stage, f"{material_path}/Omni")
+    mdl.SetSourceAsset(Sdf.AssetPath("OmniPBR.mdl"), "mdl")
+    out = mdl.CreateOutput("out", Sdf.ValueTypeNames.Token)
+    mat.CreateSurfaceOutput("mdl").ConnectToSource(out)
+    if universal:
+        mat.GetSurfaceOutput().ConnectToSource(out)
+
+
+def test_mdl_source_asset_beside_a_preview_surface_renders_the_preview(tmp_path):
+    """The bare ``OmniPBR.mdl`` is no arc (composition never opens it, nor does the renderer): it made the whole scene
+    SCENE_INVALID ``bare search-path form ... anchor it with './'``. The material's UsdPreviewSurface renders."""
+    b, _ = _floor_scene()
+    _add_mdl_shader(b, "/World/Looks/FloorMat", universal=False)
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+def test_mdl_only_material_is_unsupported_naming_the_mdl(tmp_path):
+    from nasset_sdk.errors import SceneError
+
+    b, _ = _floor_scene()
+    _add_mdl_shader(b, "/World/Looks/FloorMat", universal=True)
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_UNSUPPORTED" and "info:mdl:sourceAsset OmniPBR.mdl" in str(info.value), str(info.value)
+
+
+def test_bare_texture_path_that_resolves_nowhere_is_a_missing_texture(tmp_path):
+    """``inputs:file = @textures/wood.png@`` (a bare path, as DCCs write) whose file is not there: a missing texture
+    (warned, the input's own value), no longer a refusal of the scene."""
+    from pxr import Sdf
+
+    b, _ = _floor_scene()
+    node = b.texture("FloorMat", {"diffuseColor": "rgb"}, "x.png")
+    node.GetInput("file").Set(Sdf.AssetPath("textures/wood.png"))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+    assert any("textures/wood.png not found" in m for m in said), said
+
+
+def test_bare_reference_that_resolves_nowhere_stays_refused(tmp_path):
+    """Arcs keep the rule: a bare reference the resolver does not find is SCENE_INVALID before anything composes."""
+    from nasset_sdk.errors import SceneError
+
+    b, _ = _floor_scene()
+    b.stage.DefinePrim("/World/Set", "Xform").GetReferences().AddReference("sets/kitchen.usd")
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "bare search-path" in str(info.value)
