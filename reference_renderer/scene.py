@@ -392,6 +392,7 @@ class _Loader:
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
+        self._st_fallback: dict = {}  # st primvar name -> the first UsdPrimvarReader_float2 fallback read for it
         self._mesh_sources: dict = {}  # prim path -> _mesh_source of a PointInstancer's prototype meshes
         self.instances: list[Instance] = []
         self.mat_rows: list = []
@@ -1054,6 +1055,8 @@ class _Loader:
             rnode = source_of(rnode, "in")
         if rnode and rnode.GetIdAttr().Get() == "UsdPrimvarReader_float2":
             varname = str(self._value(rnode.GetInput("varname")) or "st")
+            self._st_fallback.setdefault(varname, self._finite(self._value(rnode.GetInput("fallback")), (0.0, 0.0),
+                                                               rnode.GetPath(), "fallback", bound=1e9))
         else:
             self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2 (directly or through a "
                       "UsdTransform2d); primvar 'st' is used", tpath)
@@ -1187,9 +1190,11 @@ class _Loader:
         varname = self._st_varname([g[1] for g in groups] + [back])
         layout = (tri, corner, face_of_tri, len(pts), len(counts), len(idx))
         st = None if varname is None else self._primvar_corners(prim, varname, 2, *layout)
-        if varname is not None and st is None:
+        if varname is not None and st is None:  # the primvar reader's fallback, as UsdPrimvarReader defines it
+            fallback = self._st_fallback.get(varname, np.zeros(2))
+            st = np.broadcast_to(fallback, (len(tri), 3, 2)).copy()
             self.warn(f"textured material but no usable primvar {varname!r} (float2, finite, vertex / faceVarying / "
-                      "uniform / constant): texture coordinates (0, 0)", prim.GetPath())
+                      f"uniform / constant): its reader's fallback {tuple(fallback.tolist())} is used", prim.GetPath())
         # the colours of its first material that reads a primvar colour (spec/renderer.md#primvar-colors)
         reader = next((t.diffuse for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:6]
                        if t is not None and t.reads_colors), None)

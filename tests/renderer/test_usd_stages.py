@@ -419,3 +419,22 @@ def test_bare_reference_that_resolves_nowhere_stays_refused(tmp_path):
     with pytest.raises(SceneError) as info:
         load_scene(b.write(tmp_path / "s.usda"))
     assert info.value.code == "SCENE_INVALID" and "bare search-path" in str(info.value)
+
+
+def test_primvar_reader_fallback_gives_st_where_the_mesh_has_none(tmp_path):
+    """``UsdPrimvarReader_float2.inputs:fallback`` is what the reader returns when the mesh lacks the primvar (USD's
+    definition); the renderer looked the texture up at (0, 0) instead. Texture: red texel left, blue right; fallback
+    st = (0.75, 0.5), the blue texel's centre."""
+    from pxr import Gf, Sdf, UsdShade
+
+    from nasset_reference_renderer.film import write_exr
+
+    write_exr(str(tmp_path / "rb.exr"), np.array([[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]], np.float32))
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "rb.exr")
+    reader = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/st"))
+    reader.CreateInput("fallback", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(0.75, 0.5))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.0, 0.0, 1.0)), rtol=1e-4, atol=1e-5)  # red, green: Fresnel < 1e-5
+    assert any("/World/Floor" in m and "fallback (0.75, 0.5)" in m for m in said), said
