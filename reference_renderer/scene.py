@@ -1003,6 +1003,10 @@ class _Loader:
             self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
             return None
         resolved = asset.resolvedPath or ""
+        if "<UDIM>" in asset.path:  # a tile set (1001 + u + 10 v), not one image
+            self.warn(f"UDIM texture {asset.path} is not read (one image per texture); the connected input's own value "
+                      "is used", tpath)
+            return None
         if not resolved:
             self.warn(f"texture {asset.path} not found; the connected input's own value is used", tpath)
             return None

@@ -438,3 +438,17 @@ def test_primvar_reader_fallback_gives_st_where_the_mesh_has_none(tmp_path):
         image, said = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit((0.0, 0.0, 1.0)), rtol=1e-4, atol=1e-5)  # red, green: Fresnel < 1e-5
     assert any("/World/Floor" in m and "fallback (0.75, 0.5)" in m for m in said), said
+
+
+def test_udim_texture_set_is_warned_as_udim(tmp_path):
+    """A ``<UDIM>`` tile set (Houdini, Maya, Substance) was reported as a file of an unsupported format."""
+    from pxr import Sdf
+
+    from nasset_reference_renderer.film import write_exr
+
+    write_exr(str(tmp_path / "wood.1001.exr"), np.full((2, 2, 3), 0.5, np.float32))
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "x.exr").GetInput("file").Set(Sdf.AssetPath("./wood.<UDIM>.exr"))
+    with pytest.warns(UserWarning):
+        said = load_scene(b.write(tmp_path / "s.usda")).warnings
+    assert any("UDIM texture ./wood.<UDIM>.exr is not read" in m for m in said), said
