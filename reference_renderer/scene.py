@@ -392,6 +392,7 @@ class _Loader:
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
+        self._purposes = {"included": {"default", "render"}, "material": "full"}  # of the render settings, load()
         self._st_fallback: dict = {}  # st primvar name -> the first UsdPrimvarReader_float2 fallback read for it
         self._mesh_sources: dict = {}  # prim path -> _mesh_source of a PointInstancer's prototype meshes
         self.instances: list[Instance] = []
@@ -440,6 +441,8 @@ class _Loader:
         from nasset_sdk.references import asset_source
 
         broken = self._composition_errors()
+        settings = self._settings_prim()
+        self._purposes = self._settings_purposes(settings)
         unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
@@ -447,7 +450,7 @@ class _Loader:
             if prim.IsA(UsdGeom.Imageable):
                 img = UsdGeom.Imageable(prim)
                 if img.ComputeVisibility(self.time) == UsdGeom.Tokens.invisible or \
-                        img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+                        img.ComputePurpose() not in self._purposes["included"]:
                     it.PruneChildren()
                     continue
             tname = str(prim.GetTypeName())
@@ -483,7 +486,6 @@ class _Loader:
                     unknown.add(tname)  # a DCC's own type, its plugin not here: said once per type
                     self.warn(f"prim type {tname!r} has no schema here (a plugin's type, {path} the first): its prims "
                               "are not rendered themselves, their children are traversed", None)
-        settings = self._settings_prim()
         chosen = self._settings_camera(settings)
         if chosen is None and not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
@@ -801,19 +803,37 @@ class _Loader:
         return self._material_of(mat)
 
     def _bound_material(self, prim):
-        """The material a final render binds to ``prim`` (spec/renderer.md#materials): its ``full``-purpose binding,
-        else its all-purpose one (``ComputeBoundMaterial(full)``); a prim bound only for ``preview`` (a viewport's
-        binding) is unbound, with a warning."""
+        """The material the render settings' ``materialBindingPurposes`` bind to ``prim`` (spec/renderer.md#materials;
+        fallback ``full``, then all-purpose: ``ComputeBoundMaterial(full)``); a prim bound only for a purpose the
+        settings do not read (``preview``, a viewport's binding) is unbound, with a warning."""
         from pxr import UsdShade
 
         api = UsdShade.MaterialBindingAPI(prim)
-        mat, _ = api.ComputeBoundMaterial(UsdShade.Tokens.full)
-        if not mat:
+        mat, _ = api.ComputeBoundMaterial(self._purposes["material"])
+        if not mat and self._purposes["material"] != UsdShade.Tokens.preview:
             preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
             if preview:
                 self.warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
                           "reads full, else all-purpose bindings): rendered unbound", prim.GetPath())
         return mat
+
+    def _settings_purposes(self, settings) -> dict:
+        """What the render settings render: ``included`` prim purposes (``includedPurposes``, fallback default and
+        render) and the ``material`` binding purpose to resolve (the first specific one of
+        ``materialBindingPurposes``, fallback full; ``ComputeBoundMaterial`` falls back to the all-purpose binding)."""
+        from pxr import UsdGeom, UsdRender, UsdShade
+
+        included, purposes = [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], [UsdShade.Tokens.full, ""]
+        if settings is not None:
+            api = UsdRender.Settings(settings)
+            included = list(api.GetIncludedPurposesAttr().Get(self.time) or included)
+            purposes = list(api.GetMaterialBindingPurposesAttr().Get(self.time) or purposes)
+        specific = [str(p) for p in purposes if p]
+        if len(specific) > 1:
+            self.warn(f"materialBindingPurposes {purposes}: bindings of {specific[0]!r}, else all-purpose ones, are read",
+                      settings.GetPath())
+        return {"included": {str(p) for p in included},
+                "material": specific[0] if specific else UsdShade.Tokens.allPurpose}
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
@@ -1339,7 +1359,7 @@ class _Loader:
             for p in walk:
                 img = UsdGeom.Imageable(p)
                 if img and (img.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible
-                            or img.GetPurposeAttr().Get(self.time) in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)):
+                            or img.GetPurposeAttr().Get(self.time) not in self._purposes["included"]):
                     walk.PruneChildren()
                     continue
                 t = str(p.GetTypeName())

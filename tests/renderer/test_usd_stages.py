@@ -452,3 +452,36 @@ def test_udim_texture_set_is_warned_as_udim(tmp_path):
     with pytest.warns(UserWarning):
         said = load_scene(b.write(tmp_path / "s.usda")).warnings
     assert any("UDIM texture ./wood.<UDIM>.exr is not read" in m for m in said), said
+
+
+# -- the render settings' purposes (UsdRender.Settings includedPurposes, materialBindingPurposes) --------------------
+
+def test_material_binding_purposes_of_the_settings_choose_the_binding(tmp_path):
+    """Settings that ask for ``preview`` bindings (a quick look-dev render) render the preview material; the renderer
+    always read the all-purpose one."""
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    red = b.material("Red", diffuse=RED, specular=(0, 0, 0))
+    UsdShade.MaterialBindingAPI(floor).Bind(red, materialPurpose=UsdShade.Tokens.preview)
+    _settings(b, "/Render/Settings").CreateMaterialBindingPurposesAttr(["preview", ""])
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit(RED), rtol=1e-4)
+
+
+def test_included_purposes_of_the_settings_choose_what_renders(tmp_path):
+    """A proxy-purpose quad (albedo 0.5) between the camera and the floor (0.6): left out by default, rendered when
+    the settings' ``includedPurposes`` list ``proxy``; the renderer always left proxies out."""
+    from pxr import UsdGeom
+
+    def floor_radiance(included):
+        b, _ = _floor_scene()
+        occluder = b.quad("Occluder", (0, 1, 0), 20.0)
+        UsdGeom.Imageable(occluder).CreatePurposeAttr(UsdGeom.Tokens.proxy)
+        settings = _settings(b, "/Render/Settings")
+        if included:
+            settings.CreateIncludedPurposesAttr(included)
+        return _render(b, tmp_path, f"s{len(included or [])}.usda")[0]
+
+    np.testing.assert_allclose(floor_radiance(None), _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+    np.testing.assert_allclose(floor_radiance(["default", "render", "proxy"]), _lit((0.5, 0.5, 0.5)), rtol=1e-4)
