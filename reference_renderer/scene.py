@@ -889,6 +889,8 @@ class _Loader:
                     tex = self._uv_texture(inp, shader.GetPath(), outputs=TEXTURED_INPUTS[name])
                     if tex is not None:
                         textures[name] = tex
+                    elif (fallback := self._texture_fallback(producer)) is not None:
+                        v = fallback  # an unread UsdUVTexture gives its authored inputs:fallback
                 else:
                     self.warn(f"input {name!r} is connected (only {', '.join(TEXTURED_INPUTS)} textures are rendered); "
                               "its own value is used", shader.GetPath())
@@ -1000,6 +1002,19 @@ class _Loader:
                            + (f" within {bound:g}" if np.isfinite(bound) else ""), shader_path, f"inputs:{name}")
         return out
 
+    def _texture_fallback(self, producer):
+        """The authored ``inputs:fallback`` of a UsdUVTexture (its ``rgb`` or one channel, as the output it feeds
+        through), the value USD gives a texture it cannot read; None when not authored or not a UsdUVTexture."""
+        node, out = producer
+        inp = node.GetInput("fallback") if node.GetIdAttr().Get() == "UsdUVTexture" else None
+        value = self._value(inp) if inp else None
+        if value is None:
+            return None
+        with self._reading(node.GetPath()):  # a shorter value keeps the schema fallback (0, 0, 0, 1) of the rest
+            v = np.asarray(value, np.float64).ravel()[:4]
+        rgba = self._finite(np.concatenate([v, [0.0, 0.0, 0.0, 1.0][len(v):]]), np.zeros(4), node.GetPath(), "fallback")
+        return rgba[:3] if str(out) == "rgb" else float(rgba["rgba".find(str(out))])
+
     def _uv_texture(self, inp, where, outputs=("rgb",)):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
         value is then used): a ``UsdUVTexture``'s output (one of ``outputs``: ``rgb``, or a channel ``r``, ``g``,
@@ -1018,21 +1033,21 @@ class _Loader:
             v = self._value(node.GetInput(name))
             return default if v is None else v
 
+        unread = ("its inputs:fallback is used" if node.GetInput("fallback") and self._value(node.GetInput("fallback"))
+                  is not None else "the connected input's own value is used")
         asset = value("file", None)
         if asset is None or not asset.path:
-            self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
+            self.warn(f"UsdUVTexture without inputs:file; {unread}", tpath)
             return None
         resolved = asset.resolvedPath or ""
         if "<UDIM>" in asset.path:  # a tile set (1001 + u + 10 v), not one image
-            self.warn(f"UDIM texture {asset.path} is not read (one image per texture); the connected input's own value "
-                      "is used", tpath)
+            self.warn(f"UDIM texture {asset.path} is not read (one image per texture); {unread}", tpath)
             return None
         if not resolved:
-            self.warn(f"texture {asset.path} not found; the connected input's own value is used", tpath)
+            self.warn(f"texture {asset.path} not found; {unread}", tpath)
             return None
         if not (_packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
-            self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; the connected input's own "
-                      "value is used", tpath)
+            self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; {unread}", tpath)
             return None
         if resolved not in self.images:  # one decode per file
             self.images[resolved] = self._read_image(asset, tpath, "inputs:file", "UsdUVTexture texture", ldr=True)

@@ -485,3 +485,19 @@ def test_included_purposes_of_the_settings_choose_what_renders(tmp_path):
 
     np.testing.assert_allclose(floor_radiance(None), _lit((0.6, 0.6, 0.6)), rtol=1e-4)
     np.testing.assert_allclose(floor_radiance(["default", "render", "proxy"]), _lit((0.5, 0.5, 0.5)), rtol=1e-4)
+
+
+@pytest.mark.parametrize("fallback", [(0.9, 0.2, 0.1, 1.0), (0.9, 0.2, 0.1)])  # float4, or float3 (alpha keeps 1)
+def test_unread_texture_gives_its_authored_fallback(tmp_path, fallback):
+    """A UsdUVTexture whose file is not there gives its ``inputs:fallback`` (USD's value for a texture that cannot
+    be read); the renderer used the connected input's own value (here the diffuse 0.6 grey)."""
+    from pxr import Gf, Sdf
+
+    b, _ = _floor_scene()
+    node = b.texture("FloorMat", {"diffuseColor": "rgb"}, "gone.png")
+    kind = Sdf.ValueTypeNames.Float4 if len(fallback) == 4 else Sdf.ValueTypeNames.Float3
+    node.CreateInput("fallback", kind).Set((Gf.Vec4f if len(fallback) == 4 else Gf.Vec3f)(*fallback))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit(RED), rtol=1e-4)
+    assert any("gone.png not found; its inputs:fallback is used" in m for m in said), said
