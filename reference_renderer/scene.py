@@ -1346,10 +1346,10 @@ class _Loader:
 
     def _point_instancer(self, prim) -> None:
         """Every instance of a PointInstancer whose prototypes are meshes, curves, points and implicit prims
-        (spec/renderer.md#geometry):
+        (spec/renderer.md#geometry; lights in prototypes are warned about, other geometry types refused):
         each prototype prim placed by ``ComputeInstanceTransformsAtTime`` (the prototype root's own transform
         included) under the instancer's world transform; masked (``invisibleIds``) instances are left out."""
-        from pxr import Usd, UsdGeom
+        from pxr import Usd, UsdGeom, UsdLux
 
         from nasset_sdk.references import asset_source
 
@@ -1383,6 +1383,12 @@ class _Loader:
                                    "curves, points and implicit prims are rendered)", str(p.GetPath()))
                 if t in ("Mesh", "BasisCurves", "Points") or t in IMPLICIT_PRIMS:
                     parts[k].append((p, t))
+                elif p.IsA(UsdGeom.Gprim):
+                    raise self.err("SCENE_UNSUPPORTED", f"geometry type {t} in a PointInstancer prototype is not supported",
+                                   str(p.GetPath()))
+                elif p.HasAPI(UsdLux.LightAPI) or t.endswith("Light"):
+                    self.warn("a light in a PointInstancer prototype is not instanced: it does not light the scene",
+                              str(p.GetPath()))
         roots = [_matrix(UsdGeom.Xformable(root), self.time) for root in protos]
         for root, m in zip(protos, roots, strict=True):
             if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-30:
