@@ -312,9 +312,11 @@ def scan_layer(layer, package: str | os.PathLike, *, scene: bool = False,
 def scene_path_problem(asset_path: str, kind: str, anchor: str | os.PathLike | None = None) -> str | None:
     """Text check for a scene layer: local files anywhere, but no URL, expression, home, search path or non-USD layer.
 
-    A bare relative path (``textures/a.exr``, as DCC tools write) is accepted when that file exists
+    A bare relative path (``textures/a.exr``, as DCC tools write) of an arc is accepted when that file exists
     next to the scene layer ``anchor``: USD's resolver then finds it there and never consults its
-    search paths."""
+    search paths. A bare path in a value (a texture, a shader's ``info:mdl:sourceAsset = @OmniPBR.mdl@``) is
+    not an arc: composition never opens it, and a reader opens only what Ar resolves, the same file a
+    search path would give an anchored arc (spec/security.md#paths)."""
     s = str(asset_path)
     if s.startswith("`"):
         return "is a variable expression"
@@ -325,7 +327,7 @@ def scene_path_problem(asset_path: str, kind: str, anchor: str | os.PathLike | N
         return "is a URL or drive path"
     if t.startswith("~"):
         return "is relative to a home folder"
-    if not (t.startswith("/") or t.startswith("./") or t.startswith("../")):
+    if kind in ARC_KINDS and not (t.startswith("/") or t.startswith("./") or t.startswith("../")):
         beside = os.path.join(os.path.dirname(os.fspath(anchor)), outer_file(t)) if anchor else ""
         if not (beside and os.path.isfile(beside)) and not (anchor and _resolves_to_file(s, anchor)):
             return "is a bare search-path form that the resolver (search paths, context) does not find; anchor it with './'"

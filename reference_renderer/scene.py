@@ -395,6 +395,8 @@ class _Loader:
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
+        self._purposes = {"included": {"default", "render"}, "material": "full"}  # of the render settings, load()
+        self._st_fallback: dict = {}  # st primvar name -> the first UsdPrimvarReader_float2 fallback read for it
         self._mesh_sources: dict = {}  # prim path -> _mesh_source of a PointInstancer's prototype meshes
         self.instances: list[Instance] = []
         self.mat_rows: list = []
@@ -442,6 +444,8 @@ class _Loader:
         from nasset_sdk.references import asset_source
 
         broken = self._composition_errors()
+        settings = self._settings_prim()
+        self._purposes = self._settings_purposes(settings)
         unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
@@ -449,7 +453,7 @@ class _Loader:
             if prim.IsA(UsdGeom.Imageable):
                 img = UsdGeom.Imageable(prim)
                 if img.ComputeVisibility(self.time) == UsdGeom.Tokens.invisible or \
-                        img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy):
+                        img.ComputePurpose() not in self._purposes["included"]:
                     it.PruneChildren()
                     continue
             tname = str(prim.GetTypeName())
@@ -485,7 +489,6 @@ class _Loader:
                     unknown.add(tname)  # a DCC's own type, its plugin not here: said once per type
                     self.warn(f"prim type {tname!r} has no schema here (a plugin's type, {path} the first): its prims "
                               "are not rendered themselves, their children are traversed", None)
-        settings = self._settings_prim()
         chosen = self._settings_camera(settings)
         if chosen is None and not self.cameras:
             raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
@@ -803,19 +806,37 @@ class _Loader:
         return self._material_of(mat)
 
     def _bound_material(self, prim):
-        """The material a final render binds to ``prim`` (spec/renderer.md#materials): its ``full``-purpose binding,
-        else its all-purpose one (``ComputeBoundMaterial(full)``); a prim bound only for ``preview`` (a viewport's
-        binding) is unbound, with a warning."""
+        """The material the render settings' ``materialBindingPurposes`` bind to ``prim`` (spec/renderer.md#materials;
+        fallback ``full``, then all-purpose: ``ComputeBoundMaterial(full)``); a prim bound only for a purpose the
+        settings do not read (``preview``, a viewport's binding) is unbound, with a warning."""
         from pxr import UsdShade
 
         api = UsdShade.MaterialBindingAPI(prim)
-        mat, _ = api.ComputeBoundMaterial(UsdShade.Tokens.full)
-        if not mat:
+        mat, _ = api.ComputeBoundMaterial(self._purposes["material"])
+        if not mat and self._purposes["material"] != UsdShade.Tokens.preview:
             preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
             if preview:
                 self.warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
                           "reads full, else all-purpose bindings): rendered unbound", prim.GetPath())
         return mat
+
+    def _settings_purposes(self, settings) -> dict:
+        """What the render settings render: ``included`` prim purposes (``includedPurposes``, fallback default and
+        render) and the ``material`` binding purpose to resolve (the first specific one of
+        ``materialBindingPurposes``, fallback full; ``ComputeBoundMaterial`` falls back to the all-purpose binding)."""
+        from pxr import UsdGeom, UsdRender, UsdShade
+
+        included, purposes = [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], [UsdShade.Tokens.full, ""]
+        if settings is not None:
+            api = UsdRender.Settings(settings)
+            included = list(api.GetIncludedPurposesAttr().Get(self.time) or included)
+            purposes = list(api.GetMaterialBindingPurposesAttr().Get(self.time) or purposes)
+        specific = [str(p) for p in purposes if p]
+        if len(specific) > 1:
+            self.warn(f"materialBindingPurposes {purposes}: bindings of {specific[0]!r}, else all-purpose ones, are read",
+                      settings.GetPath())
+        return {"included": {str(p) for p in included},
+                "material": specific[0] if specific else UsdShade.Tokens.allPurpose}
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
@@ -842,11 +863,16 @@ class _Loader:
                 shader = src[0]
                 break
         if shader is None:
-            raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or "
-                           "outputs:mtlx:surface", mpath)
+            others = sorted(o.GetFullName() for o in mat.GetSurfaceOutputs() if o.HasConnectedSource())
+            raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface"
+                           + (f" (only {', '.join(others)}: another renderer's shading)" if others else ""), mpath)
         sid = shader.GetIdAttr().Get()
         if sid not in PREVIEW_SURFACES and sid not in MTLX_SURFACES:
-            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} has id {sid!r}; supported: "
+            source = shader.GetImplementationSource()  # id, sourceAsset (MDL, OSL) or sourceCode
+            assets = [f"{a.GetName()} {a.Get().path}" for a in shader.GetPrim().GetAuthoredAttributes()
+                      if a.GetName().startswith("info:") and a.GetName().endswith(":sourceAsset")]
+            what = f"has id {sid!r}" if source == "id" else f"is implemented by {', '.join(assets) or source}"
+            raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} {what}; supported: "
                            f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
         textures = {}  # input name -> (ImageTexture, st primvar name)
@@ -866,6 +892,8 @@ class _Loader:
                     tex = self._uv_texture(inp, shader.GetPath(), outputs=TEXTURED_INPUTS[name])
                     if tex is not None:
                         textures[name] = tex
+                    elif (fallback := self._texture_fallback(producer)) is not None:
+                        v = fallback  # an unread UsdUVTexture gives its authored inputs:fallback
                 else:
                     self.warn(f"input {name!r} is connected (only {', '.join(TEXTURED_INPUTS)} textures are rendered); "
                               "its own value is used", shader.GetPath())
@@ -977,6 +1005,19 @@ class _Loader:
                            + (f" within {bound:g}" if np.isfinite(bound) else ""), shader_path, f"inputs:{name}")
         return out
 
+    def _texture_fallback(self, producer):
+        """The authored ``inputs:fallback`` of a UsdUVTexture (its ``rgb`` or one channel, as the output it feeds
+        through), the value USD gives a texture it cannot read; None when not authored or not a UsdUVTexture."""
+        node, out = producer
+        inp = node.GetInput("fallback") if node.GetIdAttr().Get() == "UsdUVTexture" else None
+        value = self._value(inp) if inp else None
+        if value is None:
+            return None
+        with self._reading(node.GetPath()):  # a shorter value keeps the schema fallback (0, 0, 0, 1) of the rest
+            v = np.asarray(value, np.float64).ravel()[:4]
+        rgba = self._finite(np.concatenate([v, [0.0, 0.0, 0.0, 1.0][len(v):]]), np.zeros(4), node.GetPath(), "fallback")
+        return rgba[:3] if str(out) == "rgb" else float(rgba["rgba".find(str(out))])
+
     def _uv_texture(self, inp, where, outputs=("rgb",)):
         """(ImageTexture, st primvar name) behind a connected input, or None with a warning (the input's own
         value is then used): a ``UsdUVTexture``'s output (one of ``outputs``: ``rgb``, or a channel ``r``, ``g``,
@@ -995,17 +1036,21 @@ class _Loader:
             v = self._value(node.GetInput(name))
             return default if v is None else v
 
+        unread = ("its inputs:fallback is used" if node.GetInput("fallback") and self._value(node.GetInput("fallback"))
+                  is not None else "the connected input's own value is used")
         asset = value("file", None)
         if asset is None or not asset.path:
-            self.warn("UsdUVTexture without inputs:file; the connected input's own value is used", tpath)
+            self.warn(f"UsdUVTexture without inputs:file; {unread}", tpath)
             return None
         resolved = asset.resolvedPath or ""
+        if "<UDIM>" in asset.path:  # a tile set (1001 + u + 10 v), not one image
+            self.warn(f"UDIM texture {asset.path} is not read (one image per texture); {unread}", tpath)
+            return None
         if not resolved:
-            self.warn(f"texture {asset.path} not found; the connected input's own value is used", tpath)
+            self.warn(f"texture {asset.path} not found; {unread}", tpath)
             return None
         if not (_packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
-            self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; the connected input's own "
-                      "value is used", tpath)
+            self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; {unread}", tpath)
             return None
         if resolved not in self.images:  # one decode per file
             self.images[resolved] = self._read_image(asset, tpath, "inputs:file", "UsdUVTexture texture", ldr=True)
@@ -1052,6 +1097,8 @@ class _Loader:
             rnode = source_of(rnode, "in")
         if rnode and rnode.GetIdAttr().Get() == "UsdPrimvarReader_float2":
             varname = str(self._value(rnode.GetInput("varname")) or "st")
+            self._st_fallback.setdefault(varname, self._finite(self._value(rnode.GetInput("fallback")), (0.0, 0.0),
+                                                               rnode.GetPath(), "fallback", bound=1e9))
         else:
             self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2 (directly or through a "
                       "UsdTransform2d); primvar 'st' is used", tpath)
@@ -1185,9 +1232,11 @@ class _Loader:
         varname = self._st_varname([g[1] for g in groups] + [back])
         layout = (tri, corner, face_of_tri, len(pts), len(counts), len(idx))
         st = None if varname is None else self._primvar_corners(prim, varname, 2, *layout)
-        if varname is not None and st is None:
+        if varname is not None and st is None:  # the primvar reader's fallback, as UsdPrimvarReader defines it
+            fallback = self._st_fallback.get(varname, np.zeros(2))
+            st = np.broadcast_to(fallback, (len(tri), 3, 2)).copy()
             self.warn(f"textured material but no usable primvar {varname!r} (float2, finite, vertex / faceVarying / "
-                      "uniform / constant): texture coordinates (0, 0)", prim.GetPath())
+                      f"uniform / constant): its reader's fallback {tuple(fallback.tolist())} is used", prim.GetPath())
         # the colours of its first material that reads a primvar colour (spec/renderer.md#primvar-colors)
         reader = next((t.diffuse for m in [g[1] for g in groups] + [back] if m >= 0 for t in self.mat_rows[m][5:6]
                        if t is not None and t.reads_colors), None)
@@ -1300,10 +1349,10 @@ class _Loader:
 
     def _point_instancer(self, prim) -> None:
         """Every instance of a PointInstancer whose prototypes are meshes, curves, points and implicit prims
-        (spec/renderer.md#geometry):
+        (spec/renderer.md#geometry; lights in prototypes are warned about, other geometry types refused):
         each prototype prim placed by ``ComputeInstanceTransformsAtTime`` (the prototype root's own transform
         included) under the instancer's world transform; masked (``invisibleIds``) instances are left out."""
-        from pxr import Usd, UsdGeom
+        from pxr import Usd, UsdGeom, UsdLux
 
         from nasset_sdk.references import asset_source
 
@@ -1328,7 +1377,7 @@ class _Loader:
             for p in walk:
                 img = UsdGeom.Imageable(p)
                 if img and (img.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible
-                            or img.GetPurposeAttr().Get(self.time) in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)):
+                            or img.GetPurposeAttr().Get(self.time) not in self._purposes["included"]):
                     walk.PruneChildren()
                     continue
                 t = str(p.GetTypeName())
@@ -1337,6 +1386,12 @@ class _Loader:
                                    "curves, points and implicit prims are rendered)", str(p.GetPath()))
                 if t in ("Mesh", "BasisCurves", "Points") or t in IMPLICIT_PRIMS:
                     parts[k].append((p, t))
+                elif p.IsA(UsdGeom.Gprim):
+                    raise self.err("SCENE_UNSUPPORTED", f"geometry type {t} in a PointInstancer prototype is not supported",
+                                   str(p.GetPath()))
+                elif p.HasAPI(UsdLux.LightAPI) or t.endswith("Light"):
+                    self.warn("a light in a PointInstancer prototype is not instanced: it does not light the scene",
+                              str(p.GetPath()))
         roots = [_matrix(UsdGeom.Xformable(root), self.time) for root in protos]
         for root, m in zip(protos, roots, strict=True):
             if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-30:

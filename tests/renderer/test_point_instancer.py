@@ -106,3 +106,36 @@ def test_points_and_curves_prototypes_are_placed_like_meshes(tmp_path):
     np.testing.assert_allclose(centres, [-1.0, 2.0], atol=1e-9)
     assert {round(float(np.ptp(scene.triangles[i.first_tri:i.first_tri + i.n_tri].reshape(-1, 3)[:, 1])), 6)
             for i in scene.instances} == {0.4}
+
+
+def _instancer_with_prototype(tmp_path, define):
+    """A PointInstancer of one prototype Xform under which ``define(stage, path)`` puts a child, over a lit floor."""
+    b = SceneBuilder()
+    b.camera((0, 6, 0.001), (0, 0, 0), focal=20)
+    b.quad("Floor", (0, 0, 0), 10.0)
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    pi = UsdGeom.PointInstancer.Define(b.stage, "/World/Scatter")
+    root = UsdGeom.Xform.Define(b.stage, "/World/Scatter/Prototypes/Lamp")
+    define(b.stage, "/World/Scatter/Prototypes/Lamp/Part")
+    pi.CreatePrototypesRel().SetTargets([root.GetPath()])
+    pi.CreateProtoIndicesAttr(Vt.IntArray([0, 0]))
+    pi.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 2, 0), Gf.Vec3f(1, 2, 0)]))
+    return b.write(tmp_path / "s.usda")
+
+
+def test_light_in_a_prototype_is_warned_by_name(tmp_path):
+    """A lamp prototype (an Xform holding a SphereLight) lit nothing, and nothing said so."""
+    from pxr import UsdLux
+
+    path = _instancer_with_prototype(tmp_path, lambda stage, p: UsdLux.SphereLight.Define(stage, p))
+    with pytest.warns(UserWarning):
+        said = load_scene(path).warnings
+    assert any("/World/Scatter/Prototypes/Lamp/Part" in m and "not instanced" in m for m in said), said
+
+
+def test_unsupported_geometry_in_a_prototype_is_scene_unsupported(tmp_path):
+    """A NURBS patch (any Gprim the renderer does not draw) inside a prototype rendered nothing without a word."""
+    path = _instancer_with_prototype(tmp_path, lambda stage, p: UsdGeom.NurbsPatch.Define(stage, p))
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    assert info.value.code == "SCENE_UNSUPPORTED" and "/World/Scatter/Prototypes/Lamp/Part" in str(info.value)

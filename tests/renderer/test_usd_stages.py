@@ -258,13 +258,13 @@ def test_what_usd_cannot_compose_is_warned_naming_the_prim(tmp_path, arc):
 def test_usda_syntax_error_names_where(tmp_path, body, names):
     """A hand-edited ``.usda`` that does not parse is SCENE_INVALID with the parser's message (prim, attribute, line
     and column); the message was a lone quote or USD's generic ``Failed to open layer``."""
-    from nasset_sdk.errors import SceneError
+    from nasset_sdk.errors import NassetError
 
     path = tmp_path / "s.usda"
     path.write_text(f'#usda 1.0\ndef Xform "W" {{\n  {body}\n}}\n')
-    with pytest.raises(SceneError) as info:
+    with pytest.raises(NassetError) as info:  # SCENE_INVALID, or FILE_UNREADABLE from a reader's probe of the file
         load_scene(str(path))
-    assert info.value.code == "SCENE_INVALID" and names in str(info.value), str(info.value)
+    assert info.value.code in ("SCENE_INVALID", "FILE_UNREADABLE") and names in str(info.value), str(info.value)
 
 
 # -- what a light or camera authors that the renderer does not honour is said, by name --------------------------------
@@ -358,3 +358,146 @@ def test_prim_types_without_a_schema_are_warned_once_per_type(tmp_path):
         scene = load_scene(b.write(tmp_path / "s.usda"))
     said = [m for m in scene.warnings if "Preliminary_Text" in m]
     assert len(said) == 1 and "/World/A" in said[0], scene.warnings
+
+
+# -- Omniverse materials: MDL beside UsdPreviewSurface ----------------------------------------------------------------
+
+def _add_mdl_shader(b, material_path, *, universal: bool):
+    """Omniverse's pattern: an MDL shader named by a bare ``info:mdl:sourceAsset = @OmniPBR.mdl@`` (a built-in found on
+    MDL search paths, never a file next to the scene) on ``outputs:mdl:surface``; ``universal``: also on
+    ``outputs:surface`` instead of the UsdPreviewSurface."""
+    from pxr import Sdf, UsdShade
+
+    mat = UsdShade.Material(b.stage.GetPrimAtPath(material_path))
+    mdl = UsdShade.Shader.Define(b.stage, f"{material_path}/Omni")
+    mdl.SetSourceAsset(Sdf.AssetPath("OmniPBR.mdl"), "mdl")
+    out = mdl.CreateOutput("out", Sdf.ValueTypeNames.Token)
+    mat.CreateSurfaceOutput("mdl").ConnectToSource(out)
+    if universal:
+        mat.GetSurfaceOutput().ConnectToSource(out)
+
+
+def test_mdl_source_asset_beside_a_preview_surface_renders_the_preview(tmp_path):
+    """The bare ``OmniPBR.mdl`` is no arc (composition never opens it, nor does the renderer): it made the whole scene
+    SCENE_INVALID ``bare search-path form ... anchor it with './'``. The material's UsdPreviewSurface renders."""
+    b, _ = _floor_scene()
+    _add_mdl_shader(b, "/World/Looks/FloorMat", universal=False)
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+def test_mdl_only_material_is_unsupported_naming_the_mdl(tmp_path):
+    from nasset_sdk.errors import SceneError
+
+    b, _ = _floor_scene()
+    _add_mdl_shader(b, "/World/Looks/FloorMat", universal=True)
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_UNSUPPORTED" and "info:mdl:sourceAsset OmniPBR.mdl" in str(info.value), str(info.value)
+
+
+def test_bare_texture_path_that_resolves_nowhere_is_a_missing_texture(tmp_path):
+    """``inputs:file = @textures/wood.png@`` (a bare path, as DCCs write) whose file is not there: a missing texture
+    (warned, the input's own value), no longer a refusal of the scene."""
+    from pxr import Sdf
+
+    b, _ = _floor_scene()
+    node = b.texture("FloorMat", {"diffuseColor": "rgb"}, "x.png")
+    node.GetInput("file").Set(Sdf.AssetPath("textures/wood.png"))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+    assert any("textures/wood.png not found" in m for m in said), said
+
+
+def test_bare_reference_that_resolves_nowhere_stays_refused(tmp_path):
+    """Arcs keep the rule: a bare reference the resolver does not find is SCENE_INVALID before anything composes."""
+    from nasset_sdk.errors import SceneError
+
+    b, _ = _floor_scene()
+    b.stage.DefinePrim("/World/Set", "Xform").GetReferences().AddReference("sets/kitchen.usd")
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "bare search-path" in str(info.value)
+
+
+def test_primvar_reader_fallback_gives_st_where_the_mesh_has_none(tmp_path):
+    """``UsdPrimvarReader_float2.inputs:fallback`` is what the reader returns when the mesh lacks the primvar (USD's
+    definition); the renderer looked the texture up at (0, 0) instead. Texture: red texel left, blue right; fallback
+    st = (0.75, 0.5), the blue texel's centre."""
+    from pxr import Gf, Sdf, UsdShade
+
+    from nasset_reference_renderer.film import write_exr
+
+    write_exr(str(tmp_path / "rb.exr"), np.array([[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]], np.float32))
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "rb.exr")
+    reader = UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/FloorMat/st"))
+    reader.CreateInput("fallback", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(0.75, 0.5))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.0, 0.0, 1.0)), rtol=1e-4, atol=1e-5)  # red, green: Fresnel < 1e-5
+    assert any("/World/Floor" in m and "fallback (0.75, 0.5)" in m for m in said), said
+
+
+def test_udim_texture_set_is_warned_as_udim(tmp_path):
+    """A ``<UDIM>`` tile set (Houdini, Maya, Substance) was reported as a file of an unsupported format."""
+    from pxr import Sdf
+
+    from nasset_reference_renderer.film import write_exr
+
+    write_exr(str(tmp_path / "wood.1001.exr"), np.full((2, 2, 3), 0.5, np.float32))
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "x.exr").GetInput("file").Set(Sdf.AssetPath("./wood.<UDIM>.exr"))
+    with pytest.warns(UserWarning):
+        said = load_scene(b.write(tmp_path / "s.usda")).warnings
+    assert any("UDIM texture ./wood.<UDIM>.exr is not read" in m for m in said), said
+
+
+# -- the render settings' purposes (UsdRender.Settings includedPurposes, materialBindingPurposes) --------------------
+
+def test_material_binding_purposes_of_the_settings_choose_the_binding(tmp_path):
+    """Settings that ask for ``preview`` bindings (a quick look-dev render) render the preview material; the renderer
+    always read the all-purpose one."""
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    red = b.material("Red", diffuse=RED, specular=(0, 0, 0))
+    UsdShade.MaterialBindingAPI(floor).Bind(red, materialPurpose=UsdShade.Tokens.preview)
+    _settings(b, "/Render/Settings").CreateMaterialBindingPurposesAttr(["preview", ""])
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit(RED), rtol=1e-4)
+
+
+def test_included_purposes_of_the_settings_choose_what_renders(tmp_path):
+    """A proxy-purpose quad (albedo 0.5) between the camera and the floor (0.6): left out by default, rendered when
+    the settings' ``includedPurposes`` list ``proxy``; the renderer always left proxies out."""
+    from pxr import UsdGeom
+
+    def floor_radiance(included):
+        b, _ = _floor_scene()
+        occluder = b.quad("Occluder", (0, 1, 0), 20.0)
+        UsdGeom.Imageable(occluder).CreatePurposeAttr(UsdGeom.Tokens.proxy)
+        settings = _settings(b, "/Render/Settings")
+        if included:
+            settings.CreateIncludedPurposesAttr(included)
+        return _render(b, tmp_path, f"s{len(included or [])}.usda")[0]
+
+    np.testing.assert_allclose(floor_radiance(None), _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+    np.testing.assert_allclose(floor_radiance(["default", "render", "proxy"]), _lit((0.5, 0.5, 0.5)), rtol=1e-4)
+
+
+@pytest.mark.parametrize("fallback", [(0.9, 0.2, 0.1, 1.0), (0.9, 0.2, 0.1)])  # float4, or float3 (alpha keeps 1)
+def test_unread_texture_gives_its_authored_fallback(tmp_path, fallback):
+    """A UsdUVTexture whose file is not there gives its ``inputs:fallback`` (USD's value for a texture that cannot
+    be read); the renderer used the connected input's own value (here the diffuse 0.6 grey)."""
+    from pxr import Gf, Sdf
+
+    b, _ = _floor_scene()
+    node = b.texture("FloorMat", {"diffuseColor": "rgb"}, "gone.png")
+    kind = Sdf.ValueTypeNames.Float4 if len(fallback) == 4 else Sdf.ValueTypeNames.Float3
+    node.CreateInput("fallback", kind).Set((Gf.Vec4f if len(fallback) == 4 else Gf.Vec3f)(*fallback))
+    with pytest.warns(UserWarning):
+        image, said = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit(RED), rtol=1e-4)
+    assert any("gone.png not found; its inputs:fallback is used" in m for m in said), said
