@@ -338,6 +338,23 @@ def image_integrator(integrator) -> str | None:
     return inner[0] if inner else (names[0] if names else str(integrator).strip())
 
 
+def hides_emitters(mi, integrator) -> bool:
+    """True when a loaded Mitsuba integrator has ``hide_emitters`` set: camera rays see no emitter (a black
+    background, light sources not shown). Mitsuba's description of an integrator does not name the flag, so it is
+    read off the integrator: the radiance it gives a ray escaping into a scene of one constant emitter (0 when
+    hidden). False for an integrator that does not sample rays that way (``ptracer``, None)."""
+    if integrator is None or not hasattr(integrator, "sample"):
+        return False
+    probe = mi.load_dict({"type": "scene", "sky": {"type": "constant"}})
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(0, 1)
+    try:
+        out = integrator.sample(probe, sampler, mi.Ray3f(mi.Point3f(0, 0, 0), mi.Vector3f(0, 0, 1)))
+    except (RuntimeError, TypeError):  # an integrator that cannot render a ray by itself
+        return False
+    return float(np.max(np.asarray(out[0], np.float64))) <= 0.0
+
+
 def ignored_media(scene, ids) -> str | None:
     """A warning when shapes ``ids`` have an interior or exterior medium that the scene's own integrator does not
     render: Mitsuba's ``path`` (and ``direct``, ``prb``, ...) shows such a shape as if it held no medium (a smooth

@@ -44,7 +44,7 @@ import numpy as np
 from nasset_sdk.errors import UsageError, error
 
 from . import analytic
-from .scene import camera_medium, image_integrator, integrator_depths, refuse_emitter
+from .scene import camera_medium, hides_emitters, image_integrator, integrator_depths, refuse_emitter
 from .sidedness import faces_facing_as_mitsuba, sampled_normal
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
@@ -423,6 +423,7 @@ class StageConverter:
         self.textured_materials: set[str] = set()
         self.color_primvars: dict = {}  # material path -> ColorPrimvar its meshes carry
         self.prototypes: dict[str, str] = {}  # shapegroup name -> class prim path
+        self.hide_emitters = False  # the integrator's hide_emitters (read by integrator())
         self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
         self.stage = Usd.Stage.CreateNew(str(output))
@@ -561,6 +562,9 @@ class StageConverter:
                 info["renderer_max_depth"])
             if md == 0:
                 self.warn("integrator max_depth 0 (black image) written as renderer depth 1")
+        self.hide_emitters = hides_emitters(self.mi, integ)
+        if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
+            info["hide_emitters"] = True
         self.result.integrator = info
         if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
@@ -871,6 +875,9 @@ class StageConverter:
                 emission = p.rgb("radiance")
                 self._unread(f"shape {sid}", p)
             n_tri = int(np.asarray(self.mi.traverse(shape)["faces"]).size // 3) if "faces" in self.mi.traverse(shape) else 0
+            if self.hide_emitters:
+                self.warn(f"shape {sid}: the integrator hides emitters from the camera, but an emitting mesh shows its "
+                          "emission to camera rays in the reference renderer (only UsdLux lights can be hidden)")
             if n_tri > MAX_MESH_LIGHT_TRIANGLES:
                 self.warn(f"shape {sid}: area emitter on a {cls} of {n_tri} triangles written as emissiveColor: the "
                           f"reference renderer light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} "
@@ -1055,6 +1062,10 @@ class StageConverter:
         light.CreateExposureAttr(0.0)
         light.CreateColorAttr(Gf.Vec3f(*(rgb / peak if peak > 0 else np.ones(3)).tolist()))
         light.CreateNormalizeAttr(False)
+        if self.hide_emitters:  # Mitsuba's hide_emitters: camera rays pass through (renderer.md#light-surfaces)
+            from pxr import Sdf
+
+            light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool, custom=True).Set(False)
         self.record(prim_path, what)
 
     def _textured_radiance(self, emitter) -> TextureMap | None:
@@ -1078,6 +1089,13 @@ class StageConverter:
         bsdf_params = _Params(self.mi, shape.bsdf())
         if any(k.endswith("reflectance.value") and np.any(bsdf_params.rgb(k[: -len(".value")]) > 0) for k in bsdf_params.keys()):
             self.warn(f"shape {sid}: the reflectance of the emitting {cls} is dropped (it becomes a light)")
+        if len(self.scene.emitters()) > 1:
+            self.warn(f"shape {sid}: the emitting {cls.lower()} becomes a UsdLux light, whose surface casts no shadow: in "
+                      "Mitsuba it is an opaque shape that shadows the scene's other lights (an obj or ply emitter becomes "
+                      "a mesh light, which keeps them)")
+        if self.hide_emitters:
+            self.warn(f"shape {sid}: hidden emitter: camera rays pass through the {cls.lower()} light, where Mitsuba shows "
+                      "its surface (black unless it has a BSDF)")
         m = _matrix(self.mi.traverse(shape)["to_world"])
         path = self._name("/World/Lights", sid)
         if cls in ("Rectangle", "Disk"):  # the local [-1, 1]^2 square or unit disk, as a RectLight or DiskLight
