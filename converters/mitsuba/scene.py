@@ -114,6 +114,35 @@ def ggx_dielectric(mi, shape, *, kind: str, file: str = "") -> tuple[float, floa
     return dielectric_eta(params), alpha
 
 
+def shapegroup_children(mi, scene, group: str) -> dict:
+    """{child name: shape} of the ``shapegroup`` with id ``group``: the nodes whose parent is that group in the
+    hierarchy of Mitsuba's scene parameters. Ids may hold dots (Blender's ``Cube.001``), so no parameter key is split
+    on dots; an unnamed child is ``shape_N`` (N its place in the group), as an unnamed top-level shape."""
+    children = {}
+    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
+        if parent is not None and str(parent).startswith("ShapeGroup[") and parent.id() == group:
+            children[node.id() or f"shape_{len(children)}"] = node
+    return children
+
+
+def no_such_shape(mi, scene, sid: str) -> str:
+    """The message for a shape id that is not one of the scene's shapes: the ids it has, or, for a shape inside a
+    ``shapegroup``, that the group places it through its instances (an asset is one object in the scene's world
+    space, so a shape that the scene draws through instances is not one)."""
+    ids = sorted(s.id() for s in scene.shapes() if s.id())
+    groups = {}
+    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
+        if parent is not None and str(parent).startswith("ShapeGroup[") and node.id() == sid:
+            groups[parent.id()] = [s.id() or "(unnamed)" for s in scene.shapes()
+                                   if str(s).startswith("Instance[") and f'name = "{parent.id()}"' in str(s)]
+    if not groups:
+        return f"no shape with id {sid!r}; the scene has {ids}"
+    group, instances = next(iter(groups.items()))
+    return (f"shape {sid!r} is inside shapegroup {group!r}, which the scene draws through its instances {instances}: an "
+            "asset is one object in the scene's world space; place one copy of the shape outside the group (with the "
+            "instance's to_world) and bake that")
+
+
 def refuse_emitter(shape, *, file: str | None = None) -> None:
     """CONVERT_SHAPE_UNSUPPORTED when a shape to bake or replace is an area emitter: a neural asset carries light
     transport (the response to light arriving, kinds/*.md), not emission, so its training targets would hold the
@@ -136,7 +165,9 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
     out = []
     for i in ids:
         if i not in by_id:
-            raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {i!r}; the scene has {sorted(by_id)}", file=file)
+            import mitsuba as mi
+
+            raise error("CONVERT_SHAPE_UNKNOWN", no_such_shape(mi, scene, i), file=file)
         shape = by_id[i]
         refuse_emitter(shape, file=file)
         cls = shape_class(shape)
@@ -148,6 +179,12 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
 
             out.append(as_mesh(mi, shape))
             continue
+        if cls == "Instance":
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is an instance of a shapegroup, drawn wherever the scene "
+                        "places the group: an asset is one object in the scene's world space; place a copy of the group's "
+                        "shapes (triangle meshes or analytic shapes: "
+                        f"{', '.join(c.lower() for c in ANALYTIC_CLASSES)}) outside the group (with this instance's "
+                        "to_world) and bake those", file=file)
         if not shape.is_mesh():
             hint = ("; curves make rna fiber assets only (--kind rna)" if cls in CURVE_CLASSES
                     else "; convert it to ply/obj" + (" or a linearcurve" if curves else ""))

@@ -44,7 +44,15 @@ import numpy as np
 from nasset_sdk.errors import UsageError, error
 
 from . import analytic
-from .scene import camera_medium, hides_emitters, image_integrator, integrator_depths, refuse_emitter
+from .scene import (
+    camera_medium,
+    hides_emitters,
+    image_integrator,
+    integrator_depths,
+    no_such_shape,
+    refuse_emitter,
+    shapegroup_children,
+)
 from .sidedness import faces_facing_as_mitsuba, sampled_normal
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
@@ -1303,17 +1311,6 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
     return out, "parameters blended linearly (an approximation of the blended lobes)"
 
 
-def shapegroup_children(mi, scene, group: str) -> dict:
-    """{child name: shape} of the ``shapegroup`` with id ``group``: the nodes whose parent is that group in the
-    hierarchy of Mitsuba's scene parameters. Ids may hold dots (Blender's ``Cube.001``), so no parameter key is split
-    on dots; an unnamed child is ``shape_N`` (N its place in the group), as an unnamed top-level shape."""
-    children = {}
-    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
-        if parent is not None and _class_name(parent) == "ShapeGroup" and parent.id() == group:
-            children[node.id() or f"shape_{len(children)}"] = node
-    return children
-
-
 def _is_one_sided(bsdf) -> bool:
     """True for a BSDF that Mitsuba shades on its front side only (not twosided, not a dielectric, not null)."""
     if bsdf is None:
@@ -1409,8 +1406,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     by_id = {s.id(): s for s in mscene.shapes() if s.id()}
     for sid, file in rep.items():
         if sid not in by_id:
-            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(by_id)}",
-                        file=str(scene))
+            raise error("CONVERT_SHAPE_UNKNOWN", "--replace: " + no_such_shape(mi, mscene, sid), file=str(scene))
         refuse_emitter(by_id[sid], file=str(scene))
         if not file.is_file() or not is_asset_file(str(file)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "

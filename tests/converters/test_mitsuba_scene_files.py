@@ -98,3 +98,40 @@ def test_hide_emitters_writes_lights_hidden_from_the_camera(tmp_path, integrator
         assert (attr.Get() is False) if hide else not attr.HasAuthoredValue(), light
     assert res.integrator.get("hide_emitters", False) is hide
     assert any("tri" in w and "hides emitters" in w for w in res.warnings) is hide  # a mesh light cannot be hidden
+
+
+GROUPED = HEAD + """
+<shape type="shapegroup" id="Chair.v1">
+  <shape type="cube" id="Seat.001"><bsdf type="diffuse"/></shape>
+</shape>
+<shape type="instance" id="left"><ref id="Chair.v1"/><transform name="to_world"><translate x="-1"/></transform></shape>
+<shape type="instance" id="right"><ref id="Chair.v1"/><transform name="to_world"><translate x="1"/></transform></shape>
+</scene>"""
+
+
+def test_asset_inside_a_shapegroup_or_an_instance_is_refused_with_the_reason(tmp_path):
+    # a shape inside a shapegroup is not a shape of the scene (Mitsuba lists the instances): the bake and --replace said
+    # "no shape with id" and listed the instances; an instance was "not a triangle mesh ... convert it to ply/obj"
+    import mitsuba as mi
+
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.scene import pick_shapes
+    from nasset_sdk.errors import NassetError
+
+    xml = tmp_path / "grouped.xml"
+    xml.write_text(GROUPED)
+    load_mitsuba()
+    scene = mi.load_file(str(xml), optimize=False)
+    with pytest.raises(NassetError) as e:
+        pick_shapes(scene, ["Seat.001"], file=str(xml))
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN"
+    assert "inside shapegroup 'Chair.v1'" in e.value.message and "['left', 'right']" in e.value.message
+    with pytest.raises(NassetError) as e:
+        convert_scene(xml, tmp_path / "o.usda", replace=[f"Seat.001={xml}"])
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "inside shapegroup 'Chair.v1'" in e.value.message
+    with pytest.raises(NassetError) as e:
+        pick_shapes(scene, ["left"], file=str(xml))
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "instance of a shapegroup" in e.value.message
+    with pytest.raises(NassetError) as e:
+        pick_shapes(scene, ["nothere"], file=str(xml))
+    assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "['left', 'right']" in e.value.message
