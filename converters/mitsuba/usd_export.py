@@ -466,6 +466,17 @@ class StageConverter:
             return
         UsdGeom.Xformable(prim).AddTransformOp().Set(Gf.Matrix4d(*m.ravel().tolist()))
 
+    def _texture_file(self, stem: str) -> Path:
+        """A new file ``OUTPUT_textures/STEM.exr`` for this conversion (``STEM_2.exr``, ... when taken: materials of one
+        name in two prototypes, ids that become one identifier, would otherwise overwrite each other's texels)."""
+        tex_dir = self.output.parent / f"{self.output.stem}_textures"
+        tex_dir.mkdir(parents=True, exist_ok=True)
+        file, k = tex_dir / f"{stem}.exr", 1
+        while str(file) in self.result.textures:
+            k += 1
+            file = tex_dir / f"{stem}_{k}.exr"
+        return file
+
     def record(self, path: str, what: str) -> None:
         self.result.prims[path] = what
 
@@ -635,9 +646,7 @@ class StageConverter:
 
         from nasset_sdk.images import write_exr
 
-        tex_dir = self.output.parent / f"{self.output.stem}_textures"
-        tex_dir.mkdir(parents=True, exist_ok=True)
-        file = tex_dir / f"{mat_path.rsplit('/', 1)[-1]}_{name}.exr"
+        file = self._texture_file(f"{mat_path.rsplit('/', 1)[-1]}_{name}")
         write_exr(file, tex.image.astype(np.float32))
         self.result.textures.append(str(file))
         reader = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_st")
@@ -1205,11 +1214,9 @@ class StageConverter:
             self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
         else:
             image = resampled
-        tex_dir = self.output.parent / f"{self.output.stem}_textures"
-        tex_dir.mkdir(parents=True, exist_ok=True)
         from pxr import Tf
 
-        tex = tex_dir / f"{Tf.MakeValidIdentifier(eid)}.exr"
+        tex = self._texture_file(Tf.MakeValidIdentifier(eid))
         write_exr(tex, image.astype(np.float32))
         rel = "./" + tex.relative_to(self.output.parent).as_posix()  # anchored: never a search-path lookup
         self.result.textures.append(str(tex))

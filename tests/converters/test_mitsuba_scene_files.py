@@ -135,3 +135,31 @@ def test_asset_inside_a_shapegroup_or_an_instance_is_refused_with_the_reason(tmp
     with pytest.raises(NassetError) as e:
         pick_shapes(scene, ["nothere"], file=str(xml))
     assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "['left', 'right']" in e.value.message
+
+
+def test_textures_of_same_named_materials_in_two_shapegroups_keep_their_own_files(tmp_path):
+    # unnamed shapes in two groups get materials of one name under each prototype; their textures were written to one
+    # file, the second group's texels over the first's (MSE 49x the noise at 32x32, 64 spp)
+    import numpy as np
+    from pxr import Usd, UsdShade
+
+    from nasset_sdk.images import read_exr, write_png
+
+    write_png(tmp_path / "red.png", np.full((4, 4, 3), (200, 30, 30), np.uint8))
+    write_png(tmp_path / "blue.png", np.full((4, 4, 3), (30, 30, 200), np.uint8))
+    group = ('<shape type="shapegroup" id="{g}"><shape type="rectangle"><bsdf type="diffuse"><texture type="bitmap" '
+             'name="reflectance"><string name="filename" value="{f}"/></texture></bsdf></shape></shape>\n'
+             '<shape type="instance" id="i{g}"><ref id="{g}"/></shape>\n')
+    xml = tmp_path / "groups.xml"
+    xml.write_text(HEAD + group.format(g="A", f="red.png") + group.format(g="B", f="blue.png") + "</scene>")
+    res = convert_scene(xml, tmp_path / "out.usda", check_usd=False)
+    stage = _stage(res.output)
+    files = {}
+    for g in ("A", "B"):  # the prototypes are abstract (class prims): walk them with the all-prims predicate
+        looks = stage.GetPrimAtPath(f"/Prototypes/{g}/Looks")
+        shader = next(UsdShade.Shader(p) for p in Usd.PrimRange(looks, Usd.PrimAllPrimsPredicate)
+                      if UsdShade.Shader(p) and UsdShade.Shader(p).GetIdAttr().Get() == "UsdUVTexture")
+        files[g] = shader.GetInput("file").Get().resolvedPath
+    assert files["A"] != files["B"]
+    red, blue = (read_exr(files[g]).reshape(-1, 3).mean(0) for g in ("A", "B"))
+    assert red[0] > 5 * red[2] and blue[2] > 5 * blue[0]
