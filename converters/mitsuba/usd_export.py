@@ -219,21 +219,39 @@ def st_transform(to_uv: np.ndarray) -> tuple | None:
     return (sx, sy), math.degrees(theta), tuple(float(x) for x in offset)
 
 
-def blackbody_rgb(mi, kelvin: float) -> np.ndarray:
-    """Linear sRGB [3] of Mitsuba's ``blackbody`` spectrum at ``kelvin``: Planck's spectral radiance in W / (m^2 sr nm)
-    (Mitsuba's units) integrated against Mitsuba's own CIE 1931 table, 360-830 nm, divided by the integral of y, then
-    XYZ -> linear sRGB: what a spectral variant's RGB film records for it (measured: within 0.4 % of a 4096-spp
-    ``scalar_spectral`` render at 3000 K). The RGB variants the converter loads cannot evaluate it at all."""
-    lam = np.arange(360.0, 831.0, 1.0)
-    h, c, k = 6.62607004e-34, 2.99792458e8, 1.38064852e-23
-    m = lam * 1e-9
-    with np.errstate(over="ignore"):
-        planck = 2.0 * h * c * c * m ** -5 / np.expm1(h * c / (m * k * max(float(kelvin), 1.0))) * 1e-9
+def emission_rgb(mi, lam: np.ndarray, radiance: np.ndarray) -> np.ndarray:
+    """Linear sRGB [3] that a spectral variant's RGB film records for an emission spectrum ``radiance`` sampled at the
+    wavelengths ``lam`` (nm, 1 nm apart over 360-830): integrated against Mitsuba's own CIE 1931 table, divided by the
+    integral of y, then XYZ -> linear sRGB."""
     cmf = np.array([np.asarray(ch, np.float64) for ch in mi.cie1931_xyz(mi.Float(lam))])  # [3, N]
-    xyz = cmf @ planck / cmf[1].sum()
+    xyz = cmf @ radiance / cmf[1].sum()
     to_srgb = np.array([[3.240479, -1.537150, -0.498535], [-0.969256, 1.875991, 0.041556],
                         [0.055648, -0.204043, 1.057311]])
     return np.maximum(to_srgb @ xyz, 0.0)
+
+
+#: the wavelengths (nm) emission spectra are integrated over (Mitsuba's CIE table)
+VISIBLE_NM = np.arange(360.0, 831.0, 1.0)
+
+
+def blackbody_rgb(mi, kelvin: float) -> np.ndarray:
+    """Linear sRGB [3] of Mitsuba's ``blackbody`` spectrum at ``kelvin``: Planck's spectral radiance in W / (m^2 sr nm)
+    (Mitsuba's units) through :func:`emission_rgb`: what a spectral variant's RGB film records for it (measured: within
+    0.4 % of a 4096-spp ``scalar_spectral`` render at 3000 K). The RGB variants the converter loads cannot evaluate it
+    at all."""
+    h, c, k = 6.62607004e-34, 2.99792458e8, 1.38064852e-23
+    m = VISIBLE_NM * 1e-9
+    with np.errstate(over="ignore"):
+        planck = 2.0 * h * c * c * m ** -5 / np.expm1(h * c / (m * k * max(float(kelvin), 1.0))) * 1e-9
+    return emission_rgb(mi, VISIBLE_NM, planck)
+
+
+def tabulated_rgb(mi, nodes: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Linear sRGB [3] of a tabulated emission spectrum (``irregular``: its wavelengths; ``regular``: evenly over its
+    range), linear between the nodes and 0 outside them as Mitsuba evaluates it, through :func:`emission_rgb`."""
+    nodes, values = np.asarray(nodes, np.float64).ravel(), np.asarray(values, np.float64).ravel()
+    inside = (VISIBLE_NM >= nodes[0]) & (VISIBLE_NM <= nodes[-1])
+    return emission_rgb(mi, VISIBLE_NM, np.where(inside, np.interp(VISIBLE_NM, nodes, values), 0.0))
 
 
 #: a ``filter_type`` nearest bitmap is written with each texel repeated up to this many times per axis (the renderer
@@ -363,6 +381,12 @@ class _Params:
         k = self.prefix + name
         if k + ".temperature" in self.p:  # a BlackBodySpectrum: Mitsuba's RGB variants cannot evaluate it
             v = blackbody_rgb(self.mi, float(_np(self.p[k + ".temperature"]).ravel()[0]))
+        elif k + ".values" in self.p and isinstance(self.obj, self.mi.Emitter) and (
+                k + ".wavelengths" in self.p or k + ".range" in self.p):  # an irregular / regular emission spectrum
+            values = _np(self.p[k + ".values"]).ravel()
+            nodes = (_np(self.p[k + ".wavelengths"]).ravel() if k + ".wavelengths" in self.p
+                     else np.linspace(*_np(self.p[k + ".range"]).ravel()[:2], len(values)))
+            v = tabulated_rgb(self.mi, nodes, values)
         elif k + ".value" in self.p:
             v = _np(self.p[k + ".value"]).ravel()
         elif k + ".data" in self.p:
