@@ -605,6 +605,9 @@ class StageConverter:
                 info["renderer_max_depth"])
             if md == 0:
                 self.warn("integrator max_depth 0 (black image) written as renderer depth 1")
+            elif md == 1:  # the renderer's least depth lights surfaces
+                self.warn("integrator max_depth 1 (only the emitters in view, surfaces black) written as renderer depth 1 "
+                          "(direct lighting)")
         self.hide_emitters = hides_emitters(self.mi, integ)
         if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
             info["hide_emitters"] = True

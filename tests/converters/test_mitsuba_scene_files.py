@@ -163,3 +163,15 @@ def test_textures_of_same_named_materials_in_two_shapegroups_keep_their_own_file
     assert files["A"] != files["B"]
     red, blue = (read_exr(files[g]).reshape(-1, 3).mean(0) for g in ("A", "B"))
     assert red[0] > 5 * red[2] and blue[2] > 5 * blue[0]
+
+
+@pytest.mark.parametrize("depth, warned", [(0, True), (1, True), (2, False)])
+def test_integrator_depths_the_renderer_cannot_draw_are_warned(tmp_path, depth, warned):
+    # Mitsuba's max_depth 1 shows the emitters in view only; the renderer's least depth (1) lights the surfaces: it was
+    # written as 1 without a word
+    xml = tmp_path / "d.xml"
+    xml.write_text(HEAD.replace("<sensor", f'<integrator type="path"><integer name="max_depth" value="{depth}"/>'
+                                           "</integrator>\n<sensor") + '<shape type="sphere"/></scene>')
+    res = convert_scene(xml, tmp_path / "d.usda", check_usd=False)
+    assert any(f"max_depth {depth}" in w for w in res.warnings) is warned
+    assert res.integrator["renderer_max_depth"] == max(depth - 1, 1)
