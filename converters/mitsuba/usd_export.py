@@ -569,6 +569,15 @@ class StageConverter:
             cam.CreateVerticalApertureOffsetAttr(-shift[1] * ha * size[1] / size[0])
         near, far = float(_np(p["near_clip"]).ravel()[0]), float(_np(p["far_clip"]).ravel()[0])
         cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
+        box = self.scene.bbox()
+        corners = np.array([[(box.min, box.max)[i >> k & 1][k] for k in range(3)] for i in range(8)], np.float64)
+        m = _matrix(p["to_world"])
+        view = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-300)  # Mitsuba's camera looks down local +Z
+        reach = float(((corners - m[:3, 3]) @ view).max()) if np.all(np.isfinite(corners)) else 0.0
+        if reach > far:  # the renderer ignores clipping ranges (renderer.md#cameras)
+            self.warn(f"sensor far_clip {far:g}: Mitsuba does not draw what lies farther along the view (the scene "
+                      f"reaches {reach:.4g}; Mitsuba's default is 10000, 10 m in a millimetre scene), the reference "
+                      "renderer draws it")
         self._xform(cam.GetPrim(), row)
         view = f"x_fov {x_fov:.4g} deg" if x_fov is not None else f"{0.1 * ha:.4g} units wide"
         self.record(path, f"sensor {sensor.id() or '(unnamed)'} ({cls}, {view})")

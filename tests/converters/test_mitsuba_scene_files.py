@@ -175,3 +175,14 @@ def test_integrator_depths_the_renderer_cannot_draw_are_warned(tmp_path, depth, 
     res = convert_scene(xml, tmp_path / "d.usda", check_usd=False)
     assert any(f"max_depth {depth}" in w for w in res.warnings) is warned
     assert res.integrator["renderer_max_depth"] == max(depth - 1, 1)
+
+
+@pytest.mark.parametrize("far, warned", [("", False), ('<float name="far_clip" value="20"/>', True)])
+def test_a_far_clip_that_cuts_the_scene_is_warned(tmp_path, far, warned):
+    # Mitsuba does not draw what lies beyond far_clip (default 10000: 10 m in a millimetre scene) and the renderer ignores
+    # clipping ranges: a tower beyond it showed in the converted scene without a word (MSE 2.3x the noise at 32x32)
+    xml = tmp_path / "far.xml"
+    xml.write_text(HEAD.replace('<float name="fov" value="45"/>', '<float name="fov" value="45"/>' + far)
+                   + '<shape type="cube"><transform name="to_world"><translate z="-40"/></transform></shape></scene>')
+    res = convert_scene(xml, tmp_path / "far.usda", check_usd=False)
+    assert any("far_clip 20" in w for w in res.warnings) is warned
