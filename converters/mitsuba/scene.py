@@ -37,16 +37,26 @@ from .analytic import ANALYTIC_CLASSES, as_mesh, shape_class
 DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
 
 
-def load_scene(mi, path: str | Path):
-    """mi.Scene from an XML file; CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on failure."""
+def load_scene(mi, path: str | Path, **kwargs):
+    """mi.Scene from an XML file (``kwargs`` to ``mi.load_file``); CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on
+    failure."""
     path = Path(path)
     if not path.is_file():
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(path))
     try:
-        return mi.load_file(str(path))
-    except Exception as exc:
-        first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
-        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(path)) from None
+        return mi.load_file(str(path), **kwargs)
+    except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
+        raise error("CONVERT_SCENE_LOAD", load_failure(exc), file=str(path)) from None
+
+
+def load_failure(exc: BaseException) -> str:
+    """The CONVERT_SCENE_LOAD message for Mitsuba's load error ``exc`` (its last line); a ``$name`` parameter without a
+    value gets the fix: these commands pass no parameters to the scene, so it needs a ``<default>``."""
+    first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
+    m = re.search(r"undefined parameter: \$(\w+)", first)
+    hint = (f" (the scene reads ${m.group(1)} and these commands pass no scene parameters: give it a default, "
+            f'<default name="{m.group(1)}" value="..."/>)') if m else ""
+    return f"Mitsuba cannot load the scene: {first}{hint}"
 
 
 def require_integrator(scene, file: str | Path) -> None:

@@ -49,6 +49,7 @@ from .scene import (
     hides_emitters,
     image_integrator,
     integrator_depths,
+    load_scene,
     no_such_shape,
     refuse_emitter,
     shapegroup_children,
@@ -1441,11 +1442,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene))
     mi = load_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
-    try:
-        mscene = mi.load_file(str(scene), optimize=False)
-    except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
-        first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
-        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(scene)) from None
+    mscene = load_scene(mi, scene, optimize=False)
     by_id = {s.id(): s for s in mscene.shapes() if s.id()}
     for sid, file in rep.items():
         if sid not in by_id:

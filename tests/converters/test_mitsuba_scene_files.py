@@ -186,3 +186,20 @@ def test_a_far_clip_that_cuts_the_scene_is_warned(tmp_path, far, warned):
                    + '<shape type="cube"><transform name="to_world"><translate z="-40"/></transform></shape></scene>')
     res = convert_scene(xml, tmp_path / "far.usda", check_usd=False)
     assert any("far_clip 20" in w for w in res.warnings) is warned
+
+
+def test_a_scene_parameter_without_a_default_is_refused_with_the_fix(tmp_path):
+    # the commands pass no scene parameters (Mitsuba's -D), so a $name without a <default> cannot load: the error now
+    # says which default to add (it gave Mitsuba's parser message only)
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.scene import load_scene
+    from nasset_sdk.errors import NassetError
+
+    (tmp_path / "cam.xml").write_text(HEAD.replace('value="16"', 'value="$res"') + "</scene>")
+    xml = tmp_path / "main.xml"
+    xml.write_text('<scene version="3.0.0"><include filename="cam.xml"/><shape type="sphere"/></scene>')
+    for load in (lambda: convert_scene(xml, tmp_path / "o.usda"), lambda: load_scene(load_mitsuba(), xml)):
+        with pytest.raises(NassetError) as e:
+            load()
+        assert e.value.code == "CONVERT_SCENE_LOAD"
+        assert "$res" in e.value.message and '<default name="res"' in e.value.message
