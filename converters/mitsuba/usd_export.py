@@ -348,9 +348,9 @@ class _Params:
         k = self.prefix + name
         if k + ".data" not in self.p:
             return None
-        text = str(self.obj)
-        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*[=:]\s*BitmapTexture\[", text)
-        flag = re.search(r"raw\s*=\s*(\d)", text[at.end():]) if at else None
+        # the texture's own description says whether it is raw (the owner's would name its first bitmap's flag: the
+        # front's for a twosided BSDF's back)
+        flag = re.search(r"raw\s*=\s*(\d)", str(self.p.properties[k + ".data"][2]))
         return texel_values(self.p[k + ".data"], bool(flag and flag.group(1) == "1"))
 
     def texture_map(self, name: str, texels: np.ndarray, what: str, scale_bias=None) -> TextureMap:
@@ -410,10 +410,30 @@ class _Params:
     def mesh_attribute(self, name: str) -> ColorPrimvar | None:
         """A ``mesh_attribute`` texture on parameter ``name`` as a :class:`ColorPrimvar` of its attribute and scale
         (the shape's meshes carry the values), else None."""
-        text = str(self.obj)
-        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*=\s*MeshAttribute\[\s*name\s*=\s*\"([^\"]+)\",\s*"
-                       r"scale\s*=\s*\"([^\"]+)\"", text)
+        k = self.prefix + name + ".scale"
+        if k not in self.p:
+            return None
+        at = re.search(r"MeshAttribute\[\s*name\s*=\s*\"([^\"]+)\",\s*scale\s*=\s*\"([^\"]+)\"", self.owner_text(name + ".scale"))
         return None if at is None else ColorPrimvar(at.group(1), float(at.group(2)))
+
+    def bsdf_text(self) -> str:
+        """The description of the BSDF at :attr:`prefix` itself: the owner of one of its parameters, up the parameter
+        hierarchy one level per dot of the parameter's name below the prefix (``alpha.value`` is held by a texture
+        nested in the BSDF). A wrapper's description (:attr:`obj`) would show its first nested BSDF's values."""
+        for k in self.p.keys():
+            if k.startswith(self.prefix):
+                node = self.p.properties[k][2]
+                for _ in range(k[len(self.prefix):].count(".")):
+                    node = self.p.hierarchy[node][0]
+                return str(node)
+        return str(self.obj)
+
+    def owner_text(self, name: str) -> str:
+        """The description of the object that holds parameter ``name`` (under :attr:`prefix`): a nested BSDF's or
+        texture's own, where the wrapper's (:attr:`obj`) would show the first of its nested objects' values (the front's
+        for a twosided BSDF's back). The wrapper's when there is no such parameter."""
+        k = self.prefix + name
+        return str(self.p.properties[k][2]) if k in self.p else str(self.obj)
 
     def texture_or_rgb(self, name: str, default, what: str, per_texel=None):
         """A :class:`TextureMap` for a bitmap parameter (texels through ``per_texel``), a :class:`ColorPrimvar` for a
@@ -781,14 +801,15 @@ class StageConverter:
         elif cls in ("RoughPlastic", "SmoothPlastic"):
             eta = p.scalar("eta", 1.49)
             r = p.rgb("diffuse_reflectance", (0.5,) * 3)
-            nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", text))
+            own = p.bsdf_text()
+            nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", own))
             kd = r * plastic_diffuse_scale(eta, r if nonlinear else None)
             diffuse = p.texture_or_rgb("diffuse_reflectance", (0.5,) * 3, "plastic diffuse reflectance",
                                        lambda c: np.clip(c * plastic_diffuse_scale(eta, c if nonlinear else None), 0, 1))
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
             if cls == "RoughPlastic":
                 rough = p.scalar_or_texture("alpha", 0.1, "roughplastic alpha", lambda a: np.sqrt(np.maximum(a, 0.0)))
-                if "beckmann" in text:
+                if "beckmann" in own:
                     notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
             else:
                 rough = 0.0
@@ -809,7 +830,7 @@ class StageConverter:
                     if abs(au - av) > 1e-6:
                         notes.append(f"anisotropic roughness ({au:.3g}, {av:.3g}) replaced by their mean")
                     rough = math.sqrt(max(0.5 * (au + av), 0.0))
-                if "beckmann" in text:
+                if "beckmann" in p.bsdf_text():
                     notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
             else:
                 rough = 0.0

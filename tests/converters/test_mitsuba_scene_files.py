@@ -203,3 +203,40 @@ def test_a_scene_parameter_without_a_default_is_refused_with_the_fix(tmp_path):
             load()
         assert e.value.code == "CONVERT_SCENE_LOAD"
         assert "$res" in e.value.message and '<default name="res"' in e.value.message
+
+
+def test_a_twosided_back_reads_its_own_texture_flags(tmp_path):
+    # raw flags and mesh_attribute names were read off the wrapper's description, whose first match is the front's: a raw
+    # back texture was decoded from sRGB as the front's is (MSE 11.8x the noise at 32x32, 64 spp), the back's mesh
+    # attribute was the front's
+    import numpy as np
+    from pxr import Usd, UsdShade
+
+    from nasset_reference_renderer.textures import srgb_to_linear
+    from nasset_sdk.images import read_exr, write_png
+
+    write_png(tmp_path / "g.png", np.full((4, 4, 3), 128, np.uint8))
+    tex = '<texture type="bitmap" name="reflectance"><string name="filename" value="g.png"/>{}</texture>'
+    attr = '<texture type="mesh_attribute" name="reflectance"><string name="name" value="{}"/></texture>'
+    xml = tmp_path / "two.xml"
+    xml.write_text(HEAD + f"""
+<shape type="rectangle" id="card"><bsdf type="twosided">
+  <bsdf type="diffuse">{tex.format("")}</bsdf>
+  <bsdf type="diffuse">{tex.format('<boolean name="raw" value="true"/>')}</bsdf></bsdf></shape>
+<shape type="rectangle" id="tag"><bsdf type="twosided">
+  <bsdf type="diffuse">{attr.format("vertex_front")}</bsdf><bsdf type="diffuse">{attr.format("vertex_back")}</bsdf></bsdf></shape>
+</scene>""")
+    res = convert_scene(xml, tmp_path / "two.usda", check_usd=False)
+    stage = _stage(res.output)
+
+    def shaders(material, shader_id):
+        return [UsdShade.Shader(p) for p in Usd.PrimRange(stage.GetPrimAtPath(material))
+                if UsdShade.Shader(p) and UsdShade.Shader(p).GetIdAttr().Get() == shader_id]
+
+    front, back = (read_exr(shaders(f"/World/Looks/{m}", "UsdUVTexture")[0].GetInput("file").Get().resolvedPath)
+                   for m in ("card_bsdf", "card_bsdf_back"))
+    np.testing.assert_allclose(front[0, 0], srgb_to_linear(np.full(3, 128 / 255)), rtol=1e-5)
+    np.testing.assert_allclose(back[0, 0], np.full(3, 128 / 255), rtol=1e-5)  # raw: the stored value
+    readers = {m: shaders(f"/World/Looks/{m}", "UsdPrimvarReader_float3")[0].GetInput("varname").Get()
+               for m in ("tag_bsdf", "tag_bsdf_back")}
+    assert readers == {"tag_bsdf": "color_vertex_front", "tag_bsdf_back": "color_vertex_back"}
