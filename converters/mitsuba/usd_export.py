@@ -416,17 +416,18 @@ class _Params:
         at = re.search(r"MeshAttribute\[\s*name\s*=\s*\"([^\"]+)\",\s*scale\s*=\s*\"([^\"]+)\"", self.owner_text(name + ".scale"))
         return None if at is None else ColorPrimvar(at.group(1), float(at.group(2)))
 
-    def bsdf_text(self) -> str:
+    def bsdf_text(self) -> str | None:
         """The description of the BSDF at :attr:`prefix` itself: the owner of one of its parameters, up the parameter
         hierarchy one level per dot of the parameter's name below the prefix (``alpha.value`` is held by a texture
-        nested in the BSDF). A wrapper's description (:attr:`obj`) would show its first nested BSDF's values."""
+        nested in the BSDF); None when it has no parameters. A wrapper's description (:attr:`obj`) would show its first
+        nested BSDF's values."""
         for k in self.p.keys():
             if k.startswith(self.prefix):
                 node = self.p.properties[k][2]
                 for _ in range(k[len(self.prefix):].count(".")):
                     node = self.p.hierarchy[node][0]
                 return str(node)
-        return str(self.obj)
+        return None
 
     def owner_text(self, name: str) -> str:
         """The description of the object that holds parameter ``name`` (under :attr:`prefix`): a nested BSDF's or
@@ -749,8 +750,10 @@ class StageConverter:
         """
         mi = self.mi
         notes: list[str] = []
-        cls = cls or _class_name(bsdf)
-        text = str(bsdf)
+        # a nested BSDF's own description (the top-level one shows the first nested BSDF of each kind, not this one)
+        own = _Params(mi, bsdf, prefix).bsdf_text() if prefix else None
+        text = own if own is not None else str(bsdf)
+        cls = _class_name(own) if own is not None else (cls or _class_name(bsdf))
         if cls == "TwoSided":
             k = 1 if back and _two_sides_differ(text) else 0
             inner = re.search(rf"brdf\[{k}\]\s*=\s*(\w+)", text)
@@ -801,15 +804,14 @@ class StageConverter:
         elif cls in ("RoughPlastic", "SmoothPlastic"):
             eta = p.scalar("eta", 1.49)
             r = p.rgb("diffuse_reflectance", (0.5,) * 3)
-            own = p.bsdf_text()
-            nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", own))
+            nonlinear = bool(re.search(r"nonlinear\s*=\s*(1|true)", text))
             kd = r * plastic_diffuse_scale(eta, r if nonlinear else None)
             diffuse = p.texture_or_rgb("diffuse_reflectance", (0.5,) * 3, "plastic diffuse reflectance",
                                        lambda c: np.clip(c * plastic_diffuse_scale(eta, c if nonlinear else None), 0, 1))
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
             if cls == "RoughPlastic":
                 rough = p.scalar_or_texture("alpha", 0.1, "roughplastic alpha", lambda a: np.sqrt(np.maximum(a, 0.0)))
-                if "beckmann" in own:
+                if "beckmann" in text:
                     notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
             else:
                 rough = 0.0
@@ -830,7 +832,7 @@ class StageConverter:
                     if abs(au - av) > 1e-6:
                         notes.append(f"anisotropic roughness ({au:.3g}, {av:.3g}) replaced by their mean")
                     rough = math.sqrt(max(0.5 * (au + av), 0.0))
-                if "beckmann" in p.bsdf_text():
+                if "beckmann" in text:
                     notes.append(f"{cls}: Beckmann distribution approximated by GGX of the same alpha")
             else:
                 rough = 0.0

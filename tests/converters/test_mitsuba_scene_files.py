@@ -240,3 +240,17 @@ def test_a_twosided_back_reads_its_own_texture_flags(tmp_path):
     readers = {m: shaders(f"/World/Looks/{m}", "UsdPrimvarReader_float3")[0].GetInput("varname").Get()
                for m in ("tag_bsdf", "tag_bsdf_back")}
     assert readers == {"tag_bsdf": "color_vertex_front", "tag_bsdf_back": "color_vertex_back"}
+
+
+def test_nested_bsdfs_are_mapped_as_their_own_class(tmp_path):
+    # a nested BSDF's class was read off the top-level description by the first match: in a blend of two twosided BSDFs
+    # the second's conductor was taken for the first's diffuse (blended as a grey diffuse, without a word)
+    xml = tmp_path / "blend.xml"
+    xml.write_text(HEAD + """
+<shape type="sphere" id="ball"><bsdf type="blendbsdf"><float name="weight" value="0.5"/>
+  <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.1, 0.1"/></bsdf></bsdf>
+  <bsdf type="twosided"><bsdf type="roughconductor"><string name="material" value="Au"/></bsdf></bsdf>
+</bsdf></shape></scene>""")
+    res = convert_scene(xml, tmp_path / "blend.usda", check_usd=False)
+    text = "\n".join(res.warnings)
+    assert "RoughConductor: complex Fresnel" in text and "different UsdPreviewSurface workflows" in text
