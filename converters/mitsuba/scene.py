@@ -37,14 +37,15 @@ from .analytic import ANALYTIC_CLASSES, as_mesh, shape_class
 DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
 
 
-def load_scene(mi, path: str | Path, **kwargs):
-    """mi.Scene from an XML file (``kwargs`` to ``mi.load_file``); CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on
-    failure."""
+def load_scene(mi, path: str | Path):
+    """mi.Scene from an XML file, its shapes as the file has them (``optimize=False``: Mitsuba's default merges the
+    meshes that share a BSDF into nameless ones, so a shape whose BSDF is a ``<ref>`` it shares could not be picked by
+    its id); CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on failure."""
     path = Path(path)
     if not path.is_file():
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(path))
     try:
-        return mi.load_file(str(path), **kwargs)
+        return mi.load_file(str(path), optimize=False)
     except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
         raise error("CONVERT_SCENE_LOAD", load_failure(exc), file=str(path)) from None
 

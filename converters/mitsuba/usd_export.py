@@ -1465,7 +1465,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene))
     mi = load_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
-    mscene = load_scene(mi, scene, optimize=False)
+    mscene = load_scene(mi, scene)
     by_id = {s.id(): s for s in mscene.shapes() if s.id()}
     for sid, file in rep.items():
         if sid not in by_id:

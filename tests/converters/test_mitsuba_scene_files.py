@@ -254,3 +254,21 @@ def test_nested_bsdfs_are_mapped_as_their_own_class(tmp_path):
     res = convert_scene(xml, tmp_path / "blend.usda", check_usd=False)
     text = "\n".join(res.warnings)
     assert "RoughConductor: complex Fresnel" in text and "different UsdPreviewSurface workflows" in text
+
+
+def test_shapes_sharing_a_bsdf_keep_their_ids_for_bakes_and_benches(tmp_path):
+    # Mitsuba's default load merges the meshes that share a BSDF (a <ref> to one material, as exporters write them)
+    # into nameless meshes: a bake or an accuracy bench of such a shape said "no shape with id 'seat'; the scene has []"
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.scene import load_scene, pick_shapes
+
+    (tmp_path / "q.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n")
+    xml = tmp_path / "shared.xml"
+    xml.write_text(HEAD + """<bsdf type="diffuse" id="wood"/>
+<shape type="cube" id="seat"><ref id="wood"/></shape>
+<shape type="obj" id="back"><string name="filename" value="q.obj"/><ref id="wood"/></shape>
+<shape type="obj"><string name="filename" value="q.obj"/><transform name="to_world"><translate y="3"/></transform>
+  <ref id="wood"/></shape>
+</scene>""")
+    scene = load_scene(load_mitsuba(), xml)
+    assert [s.id() for s in pick_shapes(scene, ["seat", "back"], file=str(xml))] == ["seat", "back"]
