@@ -523,6 +523,22 @@ class StageConverter:
             file = tex_dir / f"{stem}_{k}.exr"
         return file
 
+    def _to_world(self, shape) -> np.ndarray:
+        """A shape's ``to_world`` (4x4, column vectors) as Mitsuba draws the shape. A sphere stays round whatever its
+        scale: Mitsuba takes the scale along its x axis as the radius (and warns about a non-uniform one), so a
+        non-uniformly scaled sphere's matrix is rebuilt as that radius times the nearest rotation (mirror kept)."""
+        m = _matrix(self.mi.traverse(shape)["to_world"])
+        if _class_name(shape) != "Sphere":
+            return m
+        lin = m[:3, :3]
+        radius = float(np.linalg.norm(lin[:, 0]))
+        if np.allclose(np.linalg.norm(lin, axis=0), radius, rtol=1e-4):
+            return m
+        u, _, vt = np.linalg.svd(lin)
+        out = m.copy()
+        out[:3, :3] = radius * (u @ vt)
+        return out
+
     def record(self, path: str, what: str) -> None:
         self.result.prims[path] = what
 
@@ -935,6 +951,10 @@ class StageConverter:
                           "preview shading); bake the object into a neural asset (--replace)")
         bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
         emitter = shape.emitter()
+        if cls == "Sphere" and not np.array_equal(self._to_world(shape), _matrix(self.mi.traverse(shape)["to_world"])):
+            scales = np.linalg.norm(_matrix(self.mi.traverse(shape)["to_world"])[:3, :3], axis=0)
+            self.warn(f"shape {sid}: sphere to_world scales its axes by {np.round(scales, 4).tolist()}: written as Mitsuba "
+                      f"draws it, a sphere of radius {scales[0]:.4g} (the scale along its x axis)")
         if bsdf_cls == "Null":
             self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped" + (
                 "; its area emitter too (Mitsuba's path tracer does not show it to the camera and lights the scene from "
@@ -1047,7 +1067,7 @@ class StageConverter:
         vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
         from pxr import Sdf, UsdGeom, Vt
 
-        m = _matrix(self.mi.traverse(shape)["to_world"]) if local_to_world else np.eye(4)
+        m = self._to_world(shape) if local_to_world else np.eye(4)
         if self._sided(shape, emission) and abs(np.linalg.det(m[:3, :3])) > 1e-300:  # (a flat transform has no sides)
             world = pts @ m[:3, :3].T + m[:3, 3]
             wn = None if normals is None else normals @ np.linalg.inv(m[:3, :3])  # the inverse transpose, on rows
@@ -1119,7 +1139,7 @@ class StageConverter:
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
-        m = _matrix(self.mi.traverse(shape)["to_world"])
+        m = self._to_world(shape)
         self._xform(sph.GetPrim(), _row(m))
         self._bind(sph.GetPrim(), shape, sid, emission)
         self._one_sided(sph, shape)
@@ -1173,7 +1193,7 @@ class StageConverter:
         if self.hide_emitters:
             self.warn(f"shape {sid}: hidden emitter: camera rays pass through the {cls.lower()} light, where Mitsuba shows "
                       "its surface (black unless it has a BSDF)")
-        m = _matrix(self.mi.traverse(shape)["to_world"])
+        m = self._to_world(shape)
         path = self._name("/World/Lights", sid)
         if cls in ("Rectangle", "Disk"):  # the local [-1, 1]^2 square or unit disk, as a RectLight or DiskLight
             if cls == "Rectangle":
@@ -1189,11 +1209,8 @@ class StageConverter:
             self._xform(light.GetPrim(), rows)
             self._light_common(light, radiance, path, f"area emitter on {cls.lower()} {sid}")
         else:
-            scales = np.linalg.norm(m[:3, :3], axis=0)
-            if not np.allclose(scales, scales.mean(), rtol=1e-4):
-                self.warn(f"shape {sid}: non-uniformly scaled emitting sphere written with radius {scales.mean():.4g}")
             light = UsdLux.SphereLight.Define(self.stage, path)
-            light.CreateRadiusAttr(float(scales.mean()))
+            light.CreateRadiusAttr(float(np.linalg.norm(m[:3, 0])))
             light.CreateTreatAsPointAttr(False)
             self._xform(light.GetPrim(), _frame_row([0.0, 0.0, 1.0], m[:3, 3]))
             self._light_common(light, radiance, path, f"area emitter on sphere {sid}")
