@@ -524,20 +524,8 @@ class StageConverter:
         return file
 
     def _to_world(self, shape) -> np.ndarray:
-        """A shape's ``to_world`` (4x4, column vectors) as Mitsuba draws the shape. A sphere stays round whatever its
-        scale: Mitsuba takes the scale along its x axis as the radius (and warns about a non-uniform one), so a
-        non-uniformly scaled sphere's matrix is rebuilt as that radius times the nearest rotation (mirror kept)."""
-        m = _matrix(self.mi.traverse(shape)["to_world"])
-        if _class_name(shape) != "Sphere":
-            return m
-        lin = m[:3, :3]
-        radius = float(np.linalg.norm(lin[:, 0]))
-        if np.allclose(np.linalg.norm(lin, axis=0), radius, rtol=1e-4):
-            return m
-        u, _, vt = np.linalg.svd(lin)
-        out = m.copy()
-        out[:3, :3] = radius * (u @ vt)
-        return out
+        """A shape's ``to_world`` as Mitsuba draws it (a sphere round: :func:`.analytic.drawn_to_world`)."""
+        return analytic.drawn_to_world(self.mi, shape)
 
     def record(self, path: str, what: str) -> None:
         self.result.prims[path] = what
