@@ -206,14 +206,16 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
     replaced shapes' by more than BOX_TOLERANCE of the diagonal). BENCH_ASSET_KIND: a fiber asset
     for mesh shapes (or a surface asset for curves), or a neupress asset for shapes without a
     dielectric boundary (neupress carries subsurface transport behind a rough dielectric)."""
-    from nasset_converters.mitsuba.scene import refuse_emitter
+    import mitsuba as mi
+
+    from nasset_converters.mitsuba.scene import no_such_shape, refuse_emitter
     from nasset_sdk.asset import Asset
 
     by_id = {s.id(): s for s in scene.shapes() if s.id()}
     groups: dict[Path, list[str]] = {}
     for sid, file in replace.items():
         if sid not in by_id:
-            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(by_id)}", file=scene_file)
+            raise error("CONVERT_SHAPE_UNKNOWN", "--replace: " + no_such_shape(mi, scene, sid), file=scene_file)
         groups.setdefault(Path(file), []).append(sid)
     out = []
     for file, ids in groups.items():

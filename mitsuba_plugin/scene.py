@@ -111,7 +111,8 @@ def load_file(path: str, *, mi=None, replace: dict | None = None, own_integrator
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise error("SCENE_INVALID", f"not XML: {exc}", file=str(path)) from None
-    if replace:
+    if replace:  # a replaced shape may be declared in an included file
+        _inline_includes(root, path.parent.resolve(), str(path))
         _replace_shapes(root, replace, str(path))
     assets = [shape for shape in root.iter("shape") if shape.get("type") == "nasset"]
     for shape in assets:
@@ -141,6 +142,39 @@ def mitsuba_failure(exc: Exception, what: str, file: str):
         if m and m.group(1) in CODES:
             return error(m.group(1), m.group(2))
     return error("SCENE_INVALID", f"{what}: {str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__}", file=file)
+
+
+#: Mitsuba's limit on nested includes
+MAX_INCLUDE_DEPTH = 15
+
+
+def _inline_includes(root, folder: Path, scene_file: str, depth: int = 0) -> None:
+    """Replace each ``<include filename="F"/>`` under ``root`` by the elements of F's ``<scene>`` (F next to the
+    including file, ``folder``), recursively, as Mitsuba's parser includes them, so that ``replace`` finds shapes that
+    included files declare. The included elements' relative ``filename`` values that name files next to F are made
+    absolute (Mitsuba resolves them there). SCENE_INVALID for an unreadable file or more than Mitsuba's 15 levels."""
+    for parent in list(root.iter()):
+        for child in list(parent):
+            if child.tag != "include":
+                continue
+            file = (folder / child.get("filename", "")).resolve()
+            if depth >= MAX_INCLUDE_DEPTH:
+                raise error("SCENE_INVALID", f"includes nested deeper than {MAX_INCLUDE_DEPTH} levels (at {file.name})",
+                            file=scene_file)
+            try:
+                included = ET.parse(file).getroot()
+            except (OSError, ET.ParseError) as exc:
+                raise error("SCENE_INVALID", f"included file {child.get('filename')!r}: {exc}", file=scene_file) from None
+            _inline_includes(included, file.parent, scene_file, depth + 1)
+            for el in included.iter():
+                value = el.get("value")
+                if el.get("name") == "filename" and value and not Path(value).is_absolute() \
+                        and (file.parent / value).exists():
+                    el.set("value", str(file.parent / value))
+            at = list(parent).index(child)
+            parent.remove(child)
+            for k, el in enumerate(list(included)):
+                parent.insert(at + k, el)
 
 
 def _replace_shapes(root, replace: dict, scene_file: str) -> None:

@@ -79,11 +79,29 @@ def shape_class(shape) -> str:
     return str(shape).split("[")[0].strip()
 
 
+def drawn_to_world(mi, shape) -> np.ndarray:
+    """A shape's ``to_world`` (4x4, column vectors) as Mitsuba draws the shape. A sphere stays round whatever its
+    scale: Mitsuba takes the scale along its x axis as the radius (and warns about a non-uniform one), so a
+    non-uniformly scaled sphere's matrix is rebuilt as that radius times the nearest rotation (a mirror kept)."""
+    m = np.asarray(mi.traverse(shape)["to_world"].matrix, np.float64)
+    m = m.reshape(4, 4, -1)[:, :, 0] if m.size > 16 else m.reshape(4, 4)
+    if shape_class(shape) != "Sphere":
+        return m
+    lin = m[:3, :3]
+    radius = float(np.linalg.norm(lin[:, 0]))
+    if np.allclose(np.linalg.norm(lin, axis=0), radius, rtol=1e-4):
+        return m
+    u, _, vt = np.linalg.svd(lin)
+    out = m.copy()
+    out[:3, :3] = radius * (u @ vt)
+    return out
+
+
 def world_mesh(mi, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(points [V,3], faces [F,3], unit normals [V,3])`` of an analytic Mitsuba shape in world space
-    (its ``to_world``; normals by the inverse transpose)."""
+    (its ``to_world`` as Mitsuba draws it, :func:`drawn_to_world`; normals by the inverse transpose)."""
     pts, faces, nrm, _ = local_mesh(shape_class(shape))
-    m = np.array(mi.traverse(shape)["to_world"].matrix, np.float64).reshape(4, 4)
+    m = drawn_to_world(mi, shape)
     wp = pts @ m[:3, :3].T + m[:3, 3]
     wn = nrm @ np.linalg.inv(m[:3, :3])
     wn /= np.maximum(np.linalg.norm(wn, axis=1, keepdims=True), 1e-30)

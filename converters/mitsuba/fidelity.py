@@ -394,6 +394,23 @@ def _envmap(folder: Path, size: int) -> str:
             + "</scene>")
 
 
+def _hide_emitters(folder: Path, size: int) -> str:
+    # a path integrator with hide_emitters: the sky, a panel light and a light bulb in view are black to the camera,
+    # and they light the floor and the ball (no sun: the panel and the bulb would cast its shadows in Mitsuba)
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.5, 2.6", size=size)
+            .replace('<integer name="max_depth" value="4"/>', '<integer name="max_depth" value="4"/>'
+                     '<boolean name="hide_emitters" value="true"/>').replace('target="0, 0.3, 0"', 'target="0, 0.9, 0"')
+            + FLOOR.format(bsdf=GREY_DIFFUSE)
+            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.4" z="0"/><float name="radius" value="0.4"/>'
+              '<bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.5, 0.3"/></bsdf></shape>\n'
+            + '<shape type="rectangle" id="panel"><transform name="to_world"><scale value="0.3"/><rotate y="1" angle="30"/>'
+              '<translate x="-0.6" y="0.9" z="-0.3"/></transform><emitter type="area"><rgb name="radiance" value="4, 3.5, 3"/>'
+              '</emitter></shape>\n'
+            + '<shape type="sphere" id="bulb"><point name="center" x="0.6" y="1.1" z="-0.2"/><float name="radius" value="0.1"/>'
+              '<emitter type="area"><rgb name="radiance" value="6, 6, 5"/></emitter></shape>\n'
+            + SKY + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -437,6 +454,8 @@ SCENES = {
                                     "the ball, a box behind it and a checkered floor out of focus"),
     "texture_sampling": FidelityScene("texture_sampling", _texture_sampling, "an 8 x 8 bitmap tiled 2.5x by to_uv on "
                                       "three panels: wrap_mode clamp, mirror (filter_type nearest), repeat (nearest)"),
+    "hide_emitters": FidelityScene("hide_emitters", _hide_emitters, "a path integrator with hide_emitters: a sky, a panel "
+                                   "light and a light bulb in view, black to the camera, light a floor and a ball"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
                                  "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }

@@ -38,15 +38,26 @@ DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
 
 
 def load_scene(mi, path: str | Path):
-    """mi.Scene from an XML file; CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on failure."""
+    """mi.Scene from an XML file, its shapes as the file has them (``optimize=False``: Mitsuba's default merges the
+    meshes that share a BSDF into nameless ones, so a shape whose BSDF is a ``<ref>`` it shares could not be picked by
+    its id); CONVERT_SCENE_MISSING / CONVERT_SCENE_LOAD on failure."""
     path = Path(path)
     if not path.is_file():
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(path))
     try:
-        return mi.load_file(str(path))
-    except Exception as exc:
-        first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
-        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(path)) from None
+        return mi.load_file(str(path), optimize=False)
+    except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
+        raise error("CONVERT_SCENE_LOAD", load_failure(exc), file=str(path)) from None
+
+
+def load_failure(exc: BaseException) -> str:
+    """The CONVERT_SCENE_LOAD message for Mitsuba's load error ``exc`` (its last line); a ``$name`` parameter without a
+    value gets the fix: these commands pass no parameters to the scene, so it needs a ``<default>``."""
+    first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
+    m = re.search(r"undefined parameter: \$(\w+)", first)
+    hint = (f" (the scene reads ${m.group(1)} and these commands pass no scene parameters: give it a default, "
+            f'<default name="{m.group(1)}" value="..."/>)') if m else ""
+    return f"Mitsuba cannot load the scene: {first}{hint}"
 
 
 def require_integrator(scene, file: str | Path) -> None:
@@ -114,6 +125,35 @@ def ggx_dielectric(mi, shape, *, kind: str, file: str = "") -> tuple[float, floa
     return dielectric_eta(params), alpha
 
 
+def shapegroup_children(mi, scene, group: str) -> dict:
+    """{child name: shape} of the ``shapegroup`` with id ``group``: the nodes whose parent is that group in the
+    hierarchy of Mitsuba's scene parameters. Ids may hold dots (Blender's ``Cube.001``), so no parameter key is split
+    on dots; an unnamed child is ``shape_N`` (N its place in the group), as an unnamed top-level shape."""
+    children = {}
+    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
+        if parent is not None and str(parent).startswith("ShapeGroup[") and parent.id() == group:
+            children[node.id() or f"shape_{len(children)}"] = node
+    return children
+
+
+def no_such_shape(mi, scene, sid: str) -> str:
+    """The message for a shape id that is not one of the scene's shapes: the ids it has, or, for a shape inside a
+    ``shapegroup``, that the group places it through its instances (an asset is one object in the scene's world
+    space, so a shape that the scene draws through instances is not one)."""
+    ids = sorted(s.id() for s in scene.shapes() if s.id())
+    groups = {}
+    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
+        if parent is not None and str(parent).startswith("ShapeGroup[") and node.id() == sid:
+            groups[parent.id()] = [s.id() or "(unnamed)" for s in scene.shapes()
+                                   if str(s).startswith("Instance[") and f'name = "{parent.id()}"' in str(s)]
+    if not groups:
+        return f"no shape with id {sid!r}; the scene has {ids}"
+    group, instances = next(iter(groups.items()))
+    return (f"shape {sid!r} is inside shapegroup {group!r}, which the scene draws through its instances {instances}: an "
+            "asset is one object in the scene's world space; place one copy of the shape outside the group (with the "
+            "instance's to_world) and bake that")
+
+
 def refuse_emitter(shape, *, file: str | None = None) -> None:
     """CONVERT_SHAPE_UNSUPPORTED when a shape to bake or replace is an area emitter: a neural asset carries light
     transport (the response to light arriving, kinds/*.md), not emission, so its training targets would hold the
@@ -136,7 +176,9 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
     out = []
     for i in ids:
         if i not in by_id:
-            raise error("CONVERT_SHAPE_UNKNOWN", f"no shape with id {i!r}; the scene has {sorted(by_id)}", file=file)
+            import mitsuba as mi
+
+            raise error("CONVERT_SHAPE_UNKNOWN", no_such_shape(mi, scene, i), file=file)
         shape = by_id[i]
         refuse_emitter(shape, file=file)
         cls = shape_class(shape)
@@ -148,6 +190,12 @@ def pick_shapes(scene, ids, *, file: str | None = None, curves: bool = False) ->
 
             out.append(as_mesh(mi, shape))
             continue
+        if cls == "Instance":
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {i!r} is an instance of a shapegroup, drawn wherever the scene "
+                        "places the group: an asset is one object in the scene's world space; place a copy of the group's "
+                        "shapes (triangle meshes or analytic shapes: "
+                        f"{', '.join(c.lower() for c in ANALYTIC_CLASSES)}) outside the group (with this instance's "
+                        "to_world) and bake those", file=file)
         if not shape.is_mesh():
             hint = ("; curves make rna fiber assets only (--kind rna)" if cls in CURVE_CLASSES
                     else "; convert it to ply/obj" + (" or a linearcurve" if curves else ""))
@@ -336,6 +384,23 @@ def image_integrator(integrator) -> str | None:
     names = re.findall(r"\b(\w+)\[", str(integrator))
     inner = [n for n in names if n.endswith("Integrator") and n not in _WRAPPER_INTEGRATORS]
     return inner[0] if inner else (names[0] if names else str(integrator).strip())
+
+
+def hides_emitters(mi, integrator) -> bool:
+    """True when a loaded Mitsuba integrator has ``hide_emitters`` set: camera rays see no emitter (a black
+    background, light sources not shown). Mitsuba's description of an integrator does not name the flag, so it is
+    read off the integrator: the radiance it gives a ray escaping into a scene of one constant emitter (0 when
+    hidden). False for an integrator that does not sample rays that way (``ptracer``, None)."""
+    if integrator is None or not hasattr(integrator, "sample"):
+        return False
+    probe = mi.load_dict({"type": "scene", "sky": {"type": "constant"}})
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(0, 1)
+    try:
+        out = integrator.sample(probe, sampler, mi.Ray3f(mi.Point3f(0, 0, 0), mi.Vector3f(0, 0, 1)))
+    except (RuntimeError, TypeError):  # an integrator that cannot render a ray by itself
+        return False
+    return float(np.max(np.asarray(out[0], np.float64))) <= 0.0
 
 
 def ignored_media(scene, ids) -> str | None:

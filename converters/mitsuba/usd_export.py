@@ -45,7 +45,16 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.safeopen import trust
 
 from . import analytic
-from .scene import camera_medium, image_integrator, integrator_depths, refuse_emitter
+from .scene import (
+    camera_medium,
+    hides_emitters,
+    image_integrator,
+    integrator_depths,
+    load_scene,
+    no_such_shape,
+    refuse_emitter,
+    shapegroup_children,
+)
 from .sidedness import faces_facing_as_mitsuba, sampled_normal
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
@@ -212,21 +221,39 @@ def st_transform(to_uv: np.ndarray) -> tuple | None:
     return (sx, sy), math.degrees(theta), tuple(float(x) for x in offset)
 
 
-def blackbody_rgb(mi, kelvin: float) -> np.ndarray:
-    """Linear sRGB [3] of Mitsuba's ``blackbody`` spectrum at ``kelvin``: Planck's spectral radiance in W / (m^2 sr nm)
-    (Mitsuba's units) integrated against Mitsuba's own CIE 1931 table, 360-830 nm, divided by the integral of y, then
-    XYZ -> linear sRGB: what a spectral variant's RGB film records for it (measured: within 0.4 % of a 4096-spp
-    ``scalar_spectral`` render at 3000 K). The RGB variants the converter loads cannot evaluate it at all."""
-    lam = np.arange(360.0, 831.0, 1.0)
-    h, c, k = 6.62607004e-34, 2.99792458e8, 1.38064852e-23
-    m = lam * 1e-9
-    with np.errstate(over="ignore"):
-        planck = 2.0 * h * c * c * m ** -5 / np.expm1(h * c / (m * k * max(float(kelvin), 1.0))) * 1e-9
+def emission_rgb(mi, lam: np.ndarray, radiance: np.ndarray) -> np.ndarray:
+    """Linear sRGB [3] that a spectral variant's RGB film records for an emission spectrum ``radiance`` sampled at the
+    wavelengths ``lam`` (nm, 1 nm apart over 360-830): integrated against Mitsuba's own CIE 1931 table, divided by the
+    integral of y, then XYZ -> linear sRGB."""
     cmf = np.array([np.asarray(ch, np.float64) for ch in mi.cie1931_xyz(mi.Float(lam))])  # [3, N]
-    xyz = cmf @ planck / cmf[1].sum()
+    xyz = cmf @ radiance / cmf[1].sum()
     to_srgb = np.array([[3.240479, -1.537150, -0.498535], [-0.969256, 1.875991, 0.041556],
                         [0.055648, -0.204043, 1.057311]])
     return np.maximum(to_srgb @ xyz, 0.0)
+
+
+#: the wavelengths (nm) emission spectra are integrated over (Mitsuba's CIE table)
+VISIBLE_NM = np.arange(360.0, 831.0, 1.0)
+
+
+def blackbody_rgb(mi, kelvin: float) -> np.ndarray:
+    """Linear sRGB [3] of Mitsuba's ``blackbody`` spectrum at ``kelvin``: Planck's spectral radiance in W / (m^2 sr nm)
+    (Mitsuba's units) through :func:`emission_rgb`: what a spectral variant's RGB film records for it (measured: within
+    0.4 % of a 4096-spp ``scalar_spectral`` render at 3000 K). The RGB variants the converter loads cannot evaluate it
+    at all."""
+    h, c, k = 6.62607004e-34, 2.99792458e8, 1.38064852e-23
+    m = VISIBLE_NM * 1e-9
+    with np.errstate(over="ignore"):
+        planck = 2.0 * h * c * c * m ** -5 / np.expm1(h * c / (m * k * max(float(kelvin), 1.0))) * 1e-9
+    return emission_rgb(mi, VISIBLE_NM, planck)
+
+
+def tabulated_rgb(mi, nodes: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Linear sRGB [3] of a tabulated emission spectrum (``irregular``: its wavelengths; ``regular``: evenly over its
+    range), linear between the nodes and 0 outside them as Mitsuba evaluates it, through :func:`emission_rgb`."""
+    nodes, values = np.asarray(nodes, np.float64).ravel(), np.asarray(values, np.float64).ravel()
+    inside = (VISIBLE_NM >= nodes[0]) & (VISIBLE_NM <= nodes[-1])
+    return emission_rgb(mi, VISIBLE_NM, np.where(inside, np.interp(VISIBLE_NM, nodes, values), 0.0))
 
 
 #: a ``filter_type`` nearest bitmap is written with each texel repeated up to this many times per axis (the renderer
@@ -322,9 +349,9 @@ class _Params:
         k = self.prefix + name
         if k + ".data" not in self.p:
             return None
-        text = str(self.obj)
-        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*[=:]\s*BitmapTexture\[", text)
-        flag = re.search(r"raw\s*=\s*(\d)", text[at.end():]) if at else None
+        # the texture's own description says whether it is raw (the owner's would name its first bitmap's flag: the
+        # front's for a twosided BSDF's back)
+        flag = re.search(r"raw\s*=\s*(\d)", str(self.p.properties[k + ".data"][2]))
         return texel_values(self.p[k + ".data"], bool(flag and flag.group(1) == "1"))
 
     def texture_map(self, name: str, texels: np.ndarray, what: str, scale_bias=None) -> TextureMap:
@@ -356,6 +383,12 @@ class _Params:
         k = self.prefix + name
         if k + ".temperature" in self.p:  # a BlackBodySpectrum: Mitsuba's RGB variants cannot evaluate it
             v = blackbody_rgb(self.mi, float(_np(self.p[k + ".temperature"]).ravel()[0]))
+        elif k + ".values" in self.p and isinstance(self.obj, self.mi.Emitter) and (
+                k + ".wavelengths" in self.p or k + ".range" in self.p):  # an irregular / regular emission spectrum
+            values = _np(self.p[k + ".values"]).ravel()
+            nodes = (_np(self.p[k + ".wavelengths"]).ravel() if k + ".wavelengths" in self.p
+                     else np.linspace(*_np(self.p[k + ".range"]).ravel()[:2], len(values)))
+            v = tabulated_rgb(self.mi, nodes, values)
         elif k + ".value" in self.p:
             v = _np(self.p[k + ".value"]).ravel()
         elif k + ".data" in self.p:
@@ -378,10 +411,31 @@ class _Params:
     def mesh_attribute(self, name: str) -> ColorPrimvar | None:
         """A ``mesh_attribute`` texture on parameter ``name`` as a :class:`ColorPrimvar` of its attribute and scale
         (the shape's meshes carry the values), else None."""
-        text = str(self.obj)
-        at = re.search(rf"\b{re.escape(name.split('.')[-1])}\s*=\s*MeshAttribute\[\s*name\s*=\s*\"([^\"]+)\",\s*"
-                       r"scale\s*=\s*\"([^\"]+)\"", text)
+        k = self.prefix + name + ".scale"
+        if k not in self.p:
+            return None
+        at = re.search(r"MeshAttribute\[\s*name\s*=\s*\"([^\"]+)\",\s*scale\s*=\s*\"([^\"]+)\"", self.owner_text(name + ".scale"))
         return None if at is None else ColorPrimvar(at.group(1), float(at.group(2)))
+
+    def bsdf_text(self) -> str | None:
+        """The description of the BSDF at :attr:`prefix` itself: the owner of one of its parameters, up the parameter
+        hierarchy one level per dot of the parameter's name below the prefix (``alpha.value`` is held by a texture
+        nested in the BSDF); None when it has no parameters. A wrapper's description (:attr:`obj`) would show its first
+        nested BSDF's values."""
+        for k in self.p.keys():
+            if k.startswith(self.prefix):
+                node = self.p.properties[k][2]
+                for _ in range(k[len(self.prefix):].count(".")):
+                    node = self.p.hierarchy[node][0]
+                return str(node)
+        return None
+
+    def owner_text(self, name: str) -> str:
+        """The description of the object that holds parameter ``name`` (under :attr:`prefix`): a nested BSDF's or
+        texture's own, where the wrapper's (:attr:`obj`) would show the first of its nested objects' values (the front's
+        for a twosided BSDF's back). The wrapper's when there is no such parameter."""
+        k = self.prefix + name
+        return str(self.p.properties[k][2]) if k in self.p else str(self.obj)
 
     def texture_or_rgb(self, name: str, default, what: str, per_texel=None):
         """A :class:`TextureMap` for a bitmap parameter (texels through ``per_texel``), a :class:`ColorPrimvar` for a
@@ -424,6 +478,7 @@ class StageConverter:
         self.textured_materials: set[str] = set()
         self.color_primvars: dict = {}  # material path -> ColorPrimvar its meshes carry
         self.prototypes: dict[str, str] = {}  # shapegroup name -> class prim path
+        self.hide_emitters = False  # the integrator's hide_emitters (read by integrator())
         self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
         self.stage = Usd.Stage.CreateNew(str(output))
@@ -457,6 +512,21 @@ class StageConverter:
         if np.allclose(m, np.eye(4), atol=0, rtol=0):
             return
         UsdGeom.Xformable(prim).AddTransformOp().Set(Gf.Matrix4d(*m.ravel().tolist()))
+
+    def _texture_file(self, stem: str) -> Path:
+        """A new file ``OUTPUT_textures/STEM.exr`` for this conversion (``STEM_2.exr``, ... when taken: materials of one
+        name in two prototypes, ids that become one identifier, would otherwise overwrite each other's texels)."""
+        tex_dir = self.output.parent / f"{self.output.stem}_textures"
+        tex_dir.mkdir(parents=True, exist_ok=True)
+        file, k = tex_dir / f"{stem}.exr", 1
+        while str(file) in self.result.textures:
+            k += 1
+            file = tex_dir / f"{stem}_{k}.exr"
+        return file
+
+    def _to_world(self, shape) -> np.ndarray:
+        """A shape's ``to_world`` as Mitsuba draws it (a sphere round: :func:`.analytic.drawn_to_world`)."""
+        return analytic.drawn_to_world(self.mi, shape)
 
     def record(self, path: str, what: str) -> None:
         self.result.prims[path] = what
@@ -526,6 +596,15 @@ class StageConverter:
             cam.CreateVerticalApertureOffsetAttr(-shift[1] * ha * size[1] / size[0])
         near, far = float(_np(p["near_clip"]).ravel()[0]), float(_np(p["far_clip"]).ravel()[0])
         cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
+        box = self.scene.bbox()
+        corners = np.array([[(box.min, box.max)[i >> k & 1][k] for k in range(3)] for i in range(8)], np.float64)
+        m = _matrix(p["to_world"])
+        view = m[:3, 2] / max(float(np.linalg.norm(m[:3, 2])), 1e-300)  # Mitsuba's camera looks down local +Z
+        reach = float(((corners - m[:3, 3]) @ view).max()) if np.all(np.isfinite(corners)) else 0.0
+        if reach > far:  # the renderer ignores clipping ranges (renderer.md#cameras)
+            self.warn(f"sensor far_clip {far:g}: Mitsuba does not draw what lies farther along the view (the scene "
+                      f"reaches {reach:.4g}; Mitsuba's default is 10000, 10 m in a millimetre scene), the reference "
+                      "renderer draws it")
         self._xform(cam.GetPrim(), row)
         view = f"x_fov {x_fov:.4g} deg" if x_fov is not None else f"{0.1 * ha:.4g} units wide"
         self.record(path, f"sensor {sensor.id() or '(unnamed)'} ({cls}, {view})")
@@ -562,6 +641,12 @@ class StageConverter:
                 info["renderer_max_depth"])
             if md == 0:
                 self.warn("integrator max_depth 0 (black image) written as renderer depth 1")
+            elif md == 1:  # the renderer's least depth lights surfaces
+                self.warn("integrator max_depth 1 (only the emitters in view, surfaces black) written as renderer depth 1 "
+                          "(direct lighting)")
+        self.hide_emitters = hides_emitters(self.mi, integ)
+        if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
+            info["hide_emitters"] = True
         self.result.integrator = info
         if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
@@ -624,9 +709,7 @@ class StageConverter:
 
         from nasset_sdk.images import write_exr
 
-        tex_dir = self.output.parent / f"{self.output.stem}_textures"
-        tex_dir.mkdir(parents=True, exist_ok=True)
-        file = tex_dir / f"{mat_path.rsplit('/', 1)[-1]}_{name}.exr"
+        file = self._texture_file(f"{mat_path.rsplit('/', 1)[-1]}_{name}")
         write_exr(file, tex.image.astype(np.float32))
         self.result.textures.append(str(file))
         reader = UsdShade.Shader.Define(self.stage, f"{mat_path}/{name}_st")
@@ -672,8 +755,10 @@ class StageConverter:
         """
         mi = self.mi
         notes: list[str] = []
-        cls = cls or _class_name(bsdf)
-        text = str(bsdf)
+        # a nested BSDF's own description (the top-level one shows the first nested BSDF of each kind, not this one)
+        own = _Params(mi, bsdf, prefix).bsdf_text() if prefix else None
+        text = own if own is not None else str(bsdf)
+        cls = _class_name(own) if own is not None else (cls or _class_name(bsdf))
         if cls == "TwoSided":
             k = 1 if back and _two_sides_differ(text) else 0
             inner = re.search(rf"brdf\[{k}\]\s*=\s*(\w+)", text)
@@ -855,6 +940,10 @@ class StageConverter:
                           "preview shading); bake the object into a neural asset (--replace)")
         bsdf_cls = _class_name(shape.bsdf()) if shape.bsdf() is not None else ""
         emitter = shape.emitter()
+        if cls == "Sphere" and not np.array_equal(self._to_world(shape), _matrix(self.mi.traverse(shape)["to_world"])):
+            scales = np.linalg.norm(_matrix(self.mi.traverse(shape)["to_world"])[:3, :3], axis=0)
+            self.warn(f"shape {sid}: sphere to_world scales its axes by {np.round(scales, 4).tolist()}: written as Mitsuba "
+                      f"draws it, a sphere of radius {scales[0]:.4g} (the scale along its x axis)")
         if bsdf_cls == "Null":
             self.warn(f"shape {sid}: null BSDF (index-matched boundary): skipped" + (
                 "; its area emitter too (Mitsuba's path tracer does not show it to the camera and lights the scene from "
@@ -872,6 +961,9 @@ class StageConverter:
                 emission = p.rgb("radiance")
                 self._unread(f"shape {sid}", p)
             n_tri = int(np.asarray(self.mi.traverse(shape)["faces"]).size // 3) if "faces" in self.mi.traverse(shape) else 0
+            if self.hide_emitters:
+                self.warn(f"shape {sid}: the integrator hides emitters from the camera, but an emitting mesh shows its "
+                          "emission to camera rays in the reference renderer (only UsdLux lights can be hidden)")
             if n_tri > MAX_MESH_LIGHT_TRIANGLES:
                 self.warn(f"shape {sid}: area emitter on a {cls} of {n_tri} triangles written as emissiveColor: the "
                           f"reference renderer light-samples emissive meshes of at most {MAX_MESH_LIGHT_TRIANGLES} "
@@ -964,7 +1056,7 @@ class StageConverter:
         vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
         from pxr import Sdf, UsdGeom, Vt
 
-        m = _matrix(self.mi.traverse(shape)["to_world"]) if local_to_world else np.eye(4)
+        m = self._to_world(shape) if local_to_world else np.eye(4)
         if self._sided(shape, emission) and abs(np.linalg.det(m[:3, :3])) > 1e-300:  # (a flat transform has no sides)
             world = pts @ m[:3, :3].T + m[:3, 3]
             wn = None if normals is None else normals @ np.linalg.inv(m[:3, :3])  # the inverse transpose, on rows
@@ -1036,7 +1128,7 @@ class StageConverter:
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
-        m = _matrix(self.mi.traverse(shape)["to_world"])
+        m = self._to_world(shape)
         self._xform(sph.GetPrim(), _row(m))
         self._bind(sph.GetPrim(), shape, sid, emission)
         self._one_sided(sph, shape)
@@ -1056,6 +1148,10 @@ class StageConverter:
         light.CreateExposureAttr(0.0)
         light.CreateColorAttr(Gf.Vec3f(*(rgb / peak if peak > 0 else np.ones(3)).tolist()))
         light.CreateNormalizeAttr(False)
+        if self.hide_emitters:  # Mitsuba's hide_emitters: camera rays pass through (renderer.md#light-surfaces)
+            from pxr import Sdf
+
+            light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool, custom=True).Set(False)
         self.record(prim_path, what)
 
     def _textured_radiance(self, emitter) -> TextureMap | None:
@@ -1079,7 +1175,14 @@ class StageConverter:
         bsdf_params = _Params(self.mi, shape.bsdf())
         if any(k.endswith("reflectance.value") and np.any(bsdf_params.rgb(k[: -len(".value")]) > 0) for k in bsdf_params.keys()):
             self.warn(f"shape {sid}: the reflectance of the emitting {cls} is dropped (it becomes a light)")
-        m = _matrix(self.mi.traverse(shape)["to_world"])
+        if len(self.scene.emitters()) > 1:
+            self.warn(f"shape {sid}: the emitting {cls.lower()} becomes a UsdLux light, whose surface casts no shadow: in "
+                      "Mitsuba it is an opaque shape that shadows the scene's other lights (an obj or ply emitter becomes "
+                      "a mesh light, which keeps them)")
+        if self.hide_emitters:
+            self.warn(f"shape {sid}: hidden emitter: camera rays pass through the {cls.lower()} light, where Mitsuba shows "
+                      "its surface (black unless it has a BSDF)")
+        m = self._to_world(shape)
         path = self._name("/World/Lights", sid)
         if cls in ("Rectangle", "Disk"):  # the local [-1, 1]^2 square or unit disk, as a RectLight or DiskLight
             if cls == "Rectangle":
@@ -1095,11 +1198,8 @@ class StageConverter:
             self._xform(light.GetPrim(), rows)
             self._light_common(light, radiance, path, f"area emitter on {cls.lower()} {sid}")
         else:
-            scales = np.linalg.norm(m[:3, :3], axis=0)
-            if not np.allclose(scales, scales.mean(), rtol=1e-4):
-                self.warn(f"shape {sid}: non-uniformly scaled emitting sphere written with radius {scales.mean():.4g}")
             light = UsdLux.SphereLight.Define(self.stage, path)
-            light.CreateRadiusAttr(float(scales.mean()))
+            light.CreateRadiusAttr(float(np.linalg.norm(m[:3, 0])))
             light.CreateTreatAsPointAttr(False)
             self._xform(light.GetPrim(), _frame_row([0.0, 0.0, 1.0], m[:3, 3]))
             self._light_common(light, radiance, path, f"area emitter on sphere {sid}")
@@ -1180,11 +1280,9 @@ class StageConverter:
             self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
         else:
             image = resampled
-        tex_dir = self.output.parent / f"{self.output.stem}_textures"
-        tex_dir.mkdir(parents=True, exist_ok=True)
         from pxr import Tf
 
-        tex = tex_dir / f"{Tf.MakeValidIdentifier(eid)}.exr"
+        tex = self._texture_file(Tf.MakeValidIdentifier(eid))
         write_exr(tex, image.astype(np.float32))
         rel = "./" + tex.relative_to(self.output.parent).as_posix()  # anchored: never a search-path lookup
         self.result.textures.append(str(tex))
@@ -1287,17 +1385,6 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
     return out, "parameters blended linearly (an approximation of the blended lobes)"
 
 
-def shapegroup_children(mi, scene, group: str) -> dict:
-    """{child name: shape} of the ``shapegroup`` with id ``group``: the nodes whose parent is that group in the
-    hierarchy of Mitsuba's scene parameters. Ids may hold dots (Blender's ``Cube.001``), so no parameter key is split
-    on dots; an unnamed child is ``shape_N`` (N its place in the group), as an unnamed top-level shape."""
-    children = {}
-    for node, (parent, _depth) in mi.traverse(scene).hierarchy.items():
-        if parent is not None and _class_name(parent) == "ShapeGroup" and parent.id() == group:
-            children[node.id() or f"shape_{len(children)}"] = node
-    return children
-
-
 def _is_one_sided(bsdf) -> bool:
     """True for a BSDF that Mitsuba shades on its front side only (not twosided, not a dielectric, not null)."""
     if bsdf is None:
@@ -1385,16 +1472,11 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene))
     mi = load_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
-    try:
-        mscene = mi.load_file(str(scene), optimize=False)
-    except Exception as exc:  # noqa: BLE001 - Mitsuba raises plain RuntimeErrors for every load failure
-        first = str(exc).strip().splitlines()[-1][:300] if str(exc).strip() else type(exc).__name__
-        raise error("CONVERT_SCENE_LOAD", f"Mitsuba cannot load the scene: {first}", file=str(scene)) from None
+    mscene = load_scene(mi, scene)
     by_id = {s.id(): s for s in mscene.shapes() if s.id()}
     for sid, file in rep.items():
         if sid not in by_id:
-            raise error("CONVERT_SHAPE_UNKNOWN", f"--replace: no shape with id {sid!r}; the scene has {sorted(by_id)}",
-                        file=str(scene))
+            raise error("CONVERT_SHAPE_UNKNOWN", "--replace: " + no_such_shape(mi, mscene, sid), file=str(scene))
         refuse_emitter(by_id[sid], file=str(scene))
         if not file.is_file() or not is_asset_file(str(file)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "

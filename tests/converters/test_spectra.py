@@ -14,7 +14,7 @@ import pytest
 pytest.importorskip("mitsuba")
 
 from nasset_converters.mitsuba import load_mitsuba  # noqa: E402
-from nasset_converters.mitsuba.usd_export import blackbody_rgb, convert_scene  # noqa: E402
+from nasset_converters.mitsuba.usd_export import blackbody_rgb, convert_scene, tabulated_rgb  # noqa: E402
 
 SPECTRAL_RENDER = """
 import json, sys, numpy as np, mitsuba as mi
@@ -22,7 +22,7 @@ mi.set_variant("scalar_spectral")
 sc = mi.load_dict({"type": "scene", "integrator": {"type": "path"},
     "sensor": {"type": "perspective", "fov": 5, "to_world": mi.ScalarTransform4f().look_at([0, 0, 3], [0, 0, 0], [0, 1, 0]),
                "film": {"type": "hdrfilm", "width": 2, "height": 2, "rfilter": {"type": "box"}}},
-    "lamp": {"type": "rectangle", "emitter": {"type": "area", "radiance": {"type": "blackbody", "temperature": float(sys.argv[1])}}}})
+    "lamp": {"type": "rectangle", "emitter": {"type": "area", "radiance": json.loads(sys.argv[1])}}})
 print(json.dumps(np.asarray(mi.render(sc, spp=2048)).reshape(-1, 3).mean(0).tolist()))
 """
 
@@ -31,9 +31,52 @@ print(json.dumps(np.asarray(mi.render(sc, spp=2048)).reshape(-1, 3).mean(0).toli
 def test_blackbody_rgb_is_what_a_spectral_render_records(kelvin):
     """The emitter seen head-on by Mitsuba's scalar_spectral variant (its own spectral sampling and film) against
     Planck's law integrated with Mitsuba's CIE table: within 2 % per channel (the render's colour noise)."""
-    out = subprocess.run([sys.executable, "-c", SPECTRAL_RENDER, str(kelvin)], capture_output=True, text=True, check=True)
+    spectrum = json.dumps({"type": "blackbody", "temperature": kelvin})
+    out = subprocess.run([sys.executable, "-c", SPECTRAL_RENDER, spectrum], capture_output=True, text=True, check=True)
     render = np.array(json.loads(out.stdout.strip().splitlines()[-1]))
     np.testing.assert_allclose(blackbody_rgb(load_mitsuba(), kelvin), render, rtol=0.02)
+
+
+TABULATED = {"irregular": {"type": "irregular", "wavelengths": "420, 480, 560, 610, 690", "values": "2, 6, 3, 9, 4"},
+             "regular": {"type": "regular", "wavelength_min": 450, "wavelength_max": 650, "values": "8, 1, 5"}}
+
+
+@pytest.mark.parametrize("kind", list(TABULATED))
+def test_tabulated_emission_rgb_is_what_a_spectral_render_records(kind):
+    """``irregular`` and ``regular`` emission spectra (which Mitsuba's RGB variants cannot render either): linear
+    between the nodes, 0 outside them, through the CIE table, within 2 % of a scalar_spectral render."""
+    spec = TABULATED[kind]
+    out = subprocess.run([sys.executable, "-c", SPECTRAL_RENDER, json.dumps(spec)], capture_output=True, text=True,
+                         check=True)
+    render = np.array(json.loads(out.stdout.strip().splitlines()[-1]))
+    values = np.array([float(v) for v in spec["values"].split(",")])
+    nodes = (np.array([float(v) for v in spec["wavelengths"].split(",")]) if kind == "irregular"
+             else np.linspace(spec["wavelength_min"], spec["wavelength_max"], len(values)))
+    np.testing.assert_allclose(tabulated_rgb(load_mitsuba(), nodes, values), render, rtol=0.02, atol=0.01 * render.max())
+
+
+def test_tabulated_light_spectra_convert_to_their_rgb(tmp_path):
+    """A point light's ``irregular`` intensity and a sun's ``regular`` irradiance were written as 0 (warned): dark."""
+    from pxr import Usd, UsdLux
+
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><integrator type="path"/><sensor type="perspective"><float name="fov" '
+                   'value="40"/><film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>'
+                   '</film></sensor><emitter type="point" id="bulb"><spectrum type="irregular" name="intensity"><string '
+                   'name="wavelengths" value="400, 500, 600, 700"/><string name="values" value="5, 8, 10, 12"/></spectrum>'
+                   '</emitter><emitter type="directional" id="sun"><spectrum type="regular" name="irradiance"><float '
+                   'name="wavelength_min" value="400"/><float name="wavelength_max" value="700"/><string name="values" '
+                   'value="1, 2, 3"/></spectrum></emitter></scene>')
+    res = convert_scene(xml, tmp_path / "o.usda", check_usd=False)
+    assert not res.warnings
+    stage = Usd.Stage.Open(str(res.output))
+    mi = load_mitsuba()
+    for path, want in (("/World/Lights/bulb", tabulated_rgb(mi, [400, 500, 600, 700], [5, 8, 10, 12])),
+                       ("/World/Lights/sun", tabulated_rgb(mi, [400, 550, 700], [1, 2, 3]))):
+        light = UsdLux.LightAPI(stage.GetPrimAtPath(path))
+        rgb = light.GetIntensityAttr().Get() * np.array(light.GetColorAttr().Get())
+        np.testing.assert_allclose(rgb, want, rtol=1e-5)
+        assert rgb.min() > 0.5
 
 
 def test_blackbody_emitter_converts_to_its_rgb(tmp_path):

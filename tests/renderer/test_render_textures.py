@@ -312,6 +312,34 @@ def test_light_hidden_from_camera_still_lights_the_scene(tmp_path):
     assert hidden[~touches].mean() == pytest.approx(shown[~touches].mean(), rel=0.03)
 
 
+def test_dome_hidden_from_camera_is_black_behind_and_still_lights_the_scene(tmp_path):
+    """``nasset:cameraVisibility = false`` on a DomeLight (Mitsuba's ``hide_emitters``): camera rays that escape see
+    black, and the dome still lights the floor, seen directly and through a mirror-like reflection, as before."""
+    from pxr import Sdf, Usd
+
+    b = SceneBuilder()
+    b.camera((0, 1.0, 3.0), (0, 0.6, 0), focal=20)  # the upper half of the image is sky
+    b.quad("Floor", (0, 0, 0), 400.0, diffuse=(0.3, 0.3, 0.3), specular=(0.5, 0.5, 0.5), roughness=0.05)
+    b.dome("Sky", 0.8, color=(0.5, 0.7, 1.0))
+    path = b.write(tmp_path / "s.usda")
+    settings = RenderSettings(spp=32, width=24, height=24, max_depth=2, seed=3)
+    shown = render(load_scene(path), settings).image
+    stage = Usd.Stage.Open(path)
+    stage.GetPrimAtPath("/World/Sky").CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool,
+                                                       custom=True).Set(False)
+    stage.GetRootLayer().Save()
+    hidden = render(load_scene(path), settings).image
+    scene = load_scene(path)
+    ys, xs = np.mgrid[0:24, 0:24]
+    o, d = scene.camera.generate_rays(xs.ravel() + 0.5, ys.ravel() + 0.5, 24, 24)
+    sky = (d[:, 1] > 0.05).reshape(24, 24)  # rising rays: they miss the floor
+    floor = (d[:, 1] < -0.05).reshape(24, 24)  # they meet the (400 wide) floor
+    assert sky.sum() > 50 and floor.sum() > 50
+    np.testing.assert_allclose(shown[sky], np.broadcast_to([0.4, 0.56, 0.8], shown[sky].shape), rtol=1e-5)
+    assert np.all(hidden[sky] == 0.0)
+    np.testing.assert_allclose(hidden[floor].mean(0), shown[floor].mean(0), rtol=0.03)
+
+
 @pytest.mark.parametrize("file, code", [("https://example.com/t.exr", "SCENE_INVALID"), ("./bad.exr", "IMAGE_INVALID")])
 def test_texture_files_are_checked_like_other_asset_paths(tmp_path, file, code):
     from pxr import Sdf, Usd, UsdShade
