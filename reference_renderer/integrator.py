@@ -254,7 +254,9 @@ class PathIntegrator:
                 surf = ~esc
             if esc.any():
                 for k, light in enumerate(lights):
-                    if light.infinite and not light.delta:  # a delta light is never reached by a ray
+                    # a delta light is never reached by a ray; a dome hidden from the camera (nasset:cameraVisibility)
+                    # is reached by every other ray
+                    if light.infinite and not light.delta and (depth > 0 or light.camera_visible):
                         le = light.le_escaped(d[esc])
                         if le.any():
                             w = self._mis_light(k, prev_pdf[esc], specular[esc], o[esc], d[esc], no_mis[esc])

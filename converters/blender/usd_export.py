@@ -334,7 +334,7 @@ class _BlenderConverter(StageConverter):
         if world is None or not world.node_tree:
             if world is not None:
                 self.warn(f"world {world.name}: colour without a node tree written as a constant dome")
-                self._dome_constant(np.array(world.color, np.float64), world.name)
+                self._dome_constant(np.array(world.color, np.float64), world)
             return
         with resolved_copy(self.bpy, world) as resolved:  # reroutes, muted nodes and links, constants as Cycles reads them
             self._world_tree(world, resolved.node_tree)
@@ -358,7 +358,7 @@ class _BlenderConverter(StageConverter):
         if not col.is_linked:
             rgb = np.array(col.default_value[:3], np.float64) * float(strength)
             if rgb.max() > 0:
-                self._dome_constant(rgb, world.name)
+                self._dome_constant(rgb, world)
             return
         src = col.links[0].from_node
         if src.bl_idname != "ShaderNodeTexEnvironment" or src.image is None:
@@ -386,6 +386,7 @@ class _BlenderConverter(StageConverter):
         self.result.textures.append(str(tex))
         path = self._name("/World/Lights", world.name)
         light = UsdLux.DomeLight.Define(self.stage, path)
+        self._dome_camera_visibility(light, world)
         light.CreateTextureFileAttr(Sdf.AssetPath("./" + tex.relative_to(self.output.parent).as_posix()))  # anchored
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
         self._xform(light.GetPrim(), DOME_ROWS)
@@ -397,11 +398,20 @@ class _BlenderConverter(StageConverter):
             self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
                       "texels by the reference renderer (Cycles: linear)")
 
-    def _dome_constant(self, rgb, name) -> None:
+    def _dome_camera_visibility(self, light, world) -> None:
+        """Cycles' transparent film (Film > Transparent) and a world hidden from camera rays (its Ray Visibility >
+        Camera off) leave the background black in the rendered colours while the world still lights the scene: the
+        dome gets ``nasset:cameraVisibility = false``. Before, the converted render showed the sky behind everything."""
+        if self.bscene.render.film_transparent or not world.cycles_visibility.camera:
+            self._hidden_from_camera(light)
+
+    def _dome_constant(self, rgb, world) -> None:
         from pxr import UsdLux
 
+        name = world.name
         path = self._name("/World/Lights", name)
         light = UsdLux.DomeLight.Define(self.stage, path)
+        self._dome_camera_visibility(light, world)
         self._light_common(light, rgb, path, f"world {name} (constant colour)")
 
     # -- materials ----------------------------------------------------------------------------

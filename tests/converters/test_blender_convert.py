@@ -465,3 +465,23 @@ def test_geometry_nodes_instances_and_evaluated_materials(tmp_path):
     realized = surface(stage.GetPrimAtPath("/World/Geometry/Realized"))
     assert np.allclose(realized["diffuseColor"], 0.8) and np.allclose(realized["specularColor"], 0.0), realized
     assert realized["useSpecularWorkflow"] == 1
+
+
+@pytest.mark.parametrize("setting", ["world camera ray visibility", "transparent film"])
+def test_a_world_hidden_from_the_camera_is_a_dome_hidden_from_camera_rays(tmp_path, setting):
+    """Cycles' transparent film and a world whose camera ray visibility is off render a black background while the
+    world still lights the scene (the fidelity scene hidden_world read an MSE 3102x its noise: the sky was shown)."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import _new_scene, _world
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    world = _world(bpy)
+    if setting == "transparent film":
+        bpy.context.scene.render.film_transparent = True
+    else:
+        world.cycles_visibility.camera = False
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "w.blend"))
+    res = convert_scene(tmp_path / "w.blend", tmp_path / "s.usda")
+    dome = Usd.Stage.Open(str(res.output)).GetPrimAtPath("/World/Lights/World")
+    assert dome.GetAttribute("nasset:cameraVisibility").Get() is False

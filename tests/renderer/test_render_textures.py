@@ -312,6 +312,32 @@ def test_light_hidden_from_camera_still_lights_the_scene(tmp_path):
     assert hidden[~touches].mean() == pytest.approx(shown[~touches].mean(), rel=0.03)
 
 
+def test_dome_hidden_from_camera_still_lights_the_scene(tmp_path):
+    """``nasset:cameraVisibility = false`` on a DomeLight (Cycles' transparent film, a world hidden from the camera):
+    camera rays that escape see black, the floor the dome lights keeps its value. Domes ignored the attribute (the
+    Blender fidelity scene hidden_world read an MSE 3102x its noise)."""
+    from pxr import Sdf, Usd
+
+    b = SceneBuilder()
+    b.camera((0, 1.0, 3.0), (0, 0.6, 0), focal=20)  # the upper rows see the sky
+    b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0.5, 0.5, 0.5))
+    b.dome("Sky", 2.0)
+    path = b.write(tmp_path / "s.usda")
+    settings = RenderSettings(spp=32, width=16, height=16, max_depth=2, seed=3)
+    shown = render(load_scene(path), settings).image
+    stage = Usd.Stage.Open(path)
+    stage.GetPrimAtPath("/World/Sky").CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool,
+                                                       custom=True).Set(False)
+    stage.GetRootLayer().Save()
+    hidden = render(load_scene(path), settings).image
+    sky = np.all(np.isclose(shown, 2.0), axis=-1)  # pixels that see only the dome
+    assert 10 < sky.sum() < 16 * 16 - 10
+    assert np.all(hidden[sky] == 0.0)
+    assert np.all(hidden <= shown * (1 + 1e-6))  # pixels on the horizon lose their sky samples only
+    same = np.all(np.isclose(hidden, shown, rtol=1e-6, atol=0.0), axis=-1) & ~sky  # same seed, same paths: the floor the dome lights unchanged
+    assert same.sum() > 80, same.sum()
+
+
 @pytest.mark.parametrize("file, code", [("https://example.com/t.exr", "SCENE_INVALID"), ("./bad.exr", "IMAGE_INVALID")])
 def test_texture_files_are_checked_like_other_asset_paths(tmp_path, file, code):
     from pxr import Sdf, Usd, UsdShade
