@@ -483,5 +483,5 @@ def test_a_world_hidden_from_the_camera_is_a_dome_hidden_from_camera_rays(tmp_pa
         world.cycles_visibility.camera = False
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "w.blend"))
     res = convert_scene(tmp_path / "w.blend", tmp_path / "s.usda")
-    dome = Usd.Stage.Open(str(res.output)).GetPrimAtPath("/World/Lights/World")
-    assert dome.GetAttribute("nasset:cameraVisibility").Get() is False
+    stage = Usd.Stage.Open(str(res.output))
+    assert stage.GetPrimAtPath("/World/Lights/World").GetAttribute("nasset:cameraVisibility").Get() is False
