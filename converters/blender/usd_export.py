@@ -190,6 +190,7 @@ class _BlenderConverter(StageConverter):
         if lower:
             self.warn(f"render settings: per-type bounce limits {lower} below max bounces {int(c.max_bounces)} dropped "
                       f"(the reference renderer stops every path after {depth} scattering vertices)")
+        self._image_settings()
         prim = UsdRender.Settings.Define(self.stage, "/Render/Settings").GetPrim()
         prim.CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(depth)
         kind, stddev = cycles_pixel_filter(str(c.pixel_filter_type), float(c.filter_width))
@@ -201,6 +202,28 @@ class _BlenderConverter(StageConverter):
         prim.CreateAttribute("nasset:pixelFilter", Sdf.ValueTypeNames.Token, custom=True).Set(kind)
         if stddev is not None:
             prim.CreateAttribute("nasset:pixelFilterStddev", Sdf.ValueTypeNames.Float, custom=True).Set(stddev)
+
+    def _image_settings(self) -> None:
+        """Name the render settings that change Cycles' image and that the stage does not carry: its biased
+        shortcuts (clamping, Filter Glossy, caustics off; the stage renders unbiased, as the fidelity suite's Cycles
+        ground truth does), motion blur, a render border, non-square pixels. Before, they went without a word."""
+        c, r = self.bscene.cycles, self.bscene.render
+        biased = [f"{k.replace('sample_clamp_', '')} clamp {getattr(c, k):g}" for k in ("sample_clamp_direct",
+                                                                                         "sample_clamp_indirect")
+                  if float(getattr(c, k)) > 0]
+        if float(c.blur_glossy) > 0:
+            biased.append(f"Filter Glossy {c.blur_glossy:g}")
+        biased += [f"{kind} caustics off" for kind in ("reflective", "refractive") if not getattr(c, f"caustics_{kind}")]
+        if biased:
+            self.warn(f"render settings: Cycles' {', '.join(biased)} not carried (the stage renders unclamped, unfiltered "
+                      "light paths)")
+        if r.use_motion_blur:
+            self.warn("render settings: motion blur dropped (the stage is rendered at the current frame)")
+        if r.use_border:
+            self.warn(f"render settings: render border ({r.border_min_x:g}-{r.border_max_x:g} x {r.border_min_y:g}-"
+                      f"{r.border_max_y:g}{', cropped' if r.use_crop_to_border else ''}) dropped: the whole frame is written")
+        if abs(float(r.pixel_aspect_x) - float(r.pixel_aspect_y)) > 1e-6:
+            self.warn(f"render settings: pixel aspect {r.pixel_aspect_x:g}:{r.pixel_aspect_y:g} written as square pixels")
 
     # -- lights -------------------------------------------------------------------------------
     def lights(self) -> None:
@@ -1073,6 +1096,10 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
         return None
     img = tex.image
     w, h = img.size
+    if img.source in ("TILED", "SEQUENCE", "MOVIE"):  # img.pixels holds one tile or frame
+        kind = {"TILED": "UDIM tiles: the first tile", "SEQUENCE": "an image sequence: its current frame",
+                "MOVIE": "a movie: its current frame"}[img.source]
+        notes.append(f"material {mat.name}: image {img.name} is {kind} only is written")
     if w * h == 0 or img.channels < 1:
         notes.append(f"material {mat.name}: image {img.name} has no pixels (missing file?): {socket.name} default used")
         return None

@@ -485,3 +485,27 @@ def test_a_world_hidden_from_the_camera_is_a_dome_hidden_from_camera_rays(tmp_pa
     res = convert_scene(tmp_path / "w.blend", tmp_path / "s.usda")
     stage = Usd.Stage.Open(str(res.output))
     assert stage.GetPrimAtPath("/World/Lights/World").GetAttribute("nasset:cameraVisibility").Get() is False
+
+
+def test_render_settings_and_image_sources_the_stage_cannot_carry_are_named(tmp_path):
+    """Cycles' biased shortcuts (Blender's defaults clamp indirect light at 10 and filter glossy at 1), motion blur, a
+    render border and non-square pixels change Cycles' image and were dropped without a word; so were the tiles of a
+    UDIM image past the first."""
+    from nasset_converters.blender.fidelity import _add, _material, _new_scene
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    sc = bpy.context.scene
+    sc.cycles.sample_clamp_indirect, sc.cycles.blur_glossy, sc.cycles.caustics_refractive = 10.0, 1.0, False
+    sc.render.use_motion_blur, sc.render.use_border, sc.render.pixel_aspect_x = True, True, 2.0
+    mat = _material(bpy, "Tiles")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = bpy.data.images.new("Udim", 8, 8, tiled=True)
+    tex.image.tiles.new(1002)
+    mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Diffuse BSDF"].inputs["Color"])
+    _add(bpy, "plane", "Tiled", mat)
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "r.blend"))
+    res = convert_scene(tmp_path / "r.blend", tmp_path / "s.usda")
+    text = "\n".join(res.warnings)
+    for part in ("indirect clamp 10", "Filter Glossy 1", "refractive caustics off", "motion blur", "render border",
+                 "pixel aspect 2:1", "image Udim is UDIM tiles"):
+        assert part in text, (part, res.warnings)
