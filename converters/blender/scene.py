@@ -29,6 +29,7 @@ from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from . import load_bpy, quiet_stdout, to_y_up
 from .evaluation import evaluate_as_render
+from .shader_graph import resolved_copy
 
 #: Blender's default curve radius (m) where a Curves object has no ``radius`` attribute
 DEFAULT_RADIUS = 0.005
@@ -134,11 +135,12 @@ def refuse_emitter(ob, *, file: str | None = None) -> None:
         mat = slot.material
         if mat is None or mat.node_tree is None:
             continue
-        for node in mat.node_tree.nodes:
-            if _emits(node):
-                raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} emits light (material {mat.name!r}, node "
-                            f"{node.name!r}): a neural asset carries light transport, not emission; keep the emitter in "
-                            "the scene and bake the objects around it", file=file)
+        with resolved_copy(load_bpy(), mat) as resolved:  # node groups, reroutes, muted nodes as Cycles reads them
+            for node in resolved.node_tree.nodes:
+                if _emits(node):
+                    raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} emits light (material {mat.name!r}, "
+                                f"node {node.name!r}): a neural asset carries light transport, not emission; keep the "
+                                "emitter in the scene and bake the objects around it", file=file)
 
 
 #: roughness below which Cycles' glass, refraction or Principled transmission passes light along (near) one direction
@@ -188,14 +190,16 @@ def see_through(objects, share: float = SEE_THROUGH_SHARE) -> list[str]:
             mat = slot.material
             if mat is None or mat.node_tree is None:
                 continue
-            clear = next((c for c in map(_clear_lobe, mat.node_tree.nodes) if c), None)
+            with resolved_copy(load_bpy(), mat) as resolved:  # node groups, reroutes, muted nodes as Cycles reads them
+                nodes = resolved.node_tree.nodes
+                clear = next((c for c in map(_clear_lobe, nodes) if c), None)
+                density = 0.0
+                for node in nodes if clear is not None else ():
+                    if node.bl_idname in _VOLUME_NODES and any(out.is_linked for out in node.outputs):
+                        sock = node.inputs.get("Density")
+                        density += math.inf if sock is None or sock.is_linked else float(sock.default_value)
             if clear is None:
                 continue
-            density = 0.0
-            for node in mat.node_tree.nodes:
-                if node.bl_idname in _VOLUME_NODES and any(out.is_linked for out in node.outputs):
-                    sock = node.inputs.get("Density")
-                    density += math.inf if sock is None or sock.is_linked else float(sock.default_value)
             if density > 0.0:
                 geo = mesh_geometry([ob])
                 tri = geo.points[geo.faces].astype(np.float64)
