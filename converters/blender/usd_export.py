@@ -741,7 +741,8 @@ def cycles_pixel_filter(kind: str, width: float) -> tuple[str, float | None]:
 
 #: Principled BSDF inputs that UsdPreviewSurface cannot carry: (input, "off" value)
 _DROPPED = (("Subsurface Weight", 0.0), ("Transmission Weight", 0.0), ("Coat Weight", 0.0), ("Sheen Weight", 0.0),
-            ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
+            ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0), ("Diffuse Roughness", 0.0),
+            ("Specular Tint", (1.0, 1.0, 1.0, 1.0)))
 
 
 def map_material(mat) -> tuple[dict, list]:
@@ -873,7 +874,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         emission = _scaled(e_color if isinstance(e_color, TextureMap) else e_color[:3], float(e_strength))
     for name, off in _DROPPED:
         v, linked = _socket(node, name, off)
-        if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
+        if linked or not np.allclose(np.ravel(v)[:3], np.ravel(off)[:3], rtol=0.0, atol=1e-6):
             notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
                          "bake the object into a neural asset)")
     base = vals["Base Color"]

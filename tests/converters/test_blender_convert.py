@@ -509,3 +509,18 @@ def test_render_settings_and_image_sources_the_stage_cannot_carry_are_named(tmp_
     for part in ("indirect clamp 10", "Filter Glossy 1", "refractive caustics off", "motion blur", "render border",
                  "pixel aspect 2:1", "image Udim is UDIM tiles"):
         assert part in text, (part, res.warnings)
+
+
+@pytest.mark.parametrize("name, value", [("Diffuse Roughness", 0.8), ("Specular Tint", (1.0, 0.2, 0.2, 1.0)),
+                                         ("Coat Weight", 0.5)])
+def test_principled_inputs_without_a_counterpart_are_named(name, value):
+    """Principled BSDF v4 inputs UsdPreviewSurface cannot carry are warned by name: Diffuse Roughness and a coloured
+    Specular Tint were dropped without a word (only the float inputs were compared with their off values)."""
+    from nasset_converters.blender.fidelity import _material
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    mat = _material(bpy, "P", "principled", **{name: value})
+    inputs, notes = map_material(mat)
+    assert [n for n in notes if f"Principled {name} dropped" in n], notes
+    inputs, notes = map_material(_material(bpy, "Plain", "principled"))
+    assert not [n for n in notes if "dropped" in n], notes
