@@ -572,9 +572,13 @@ def _render_evaluation(bpy, folder: Path, size: int) -> None:
     bpy.context.view_layer.layer_collection.children["Pebbles"].exclude = True
     pebble = _add(bpy, "ico_sphere", "Pebble", _material(bpy, "Yellow", **{"Color": (0.9, 0.8, 0.2)}), radius=0.12,
                   subdivisions=2, location=(0.0, 0.0, 0.12))
-    for coll in list(pebble.users_collection):
-        coll.objects.unlink(pebble)
-    collection.objects.link(pebble)
+    hidden_pebble = _add(bpy, "cube", "PebbleNotRendered", _material(bpy, "Magenta", **{"Color": (0.8, 0.1, 0.8)}),
+                         size=0.25, location=(0.35, 0.0, 0.12))
+    hidden_pebble.hide_render = True  # disabled in renders: its collection's instances leave it out
+    for ob in (pebble, hidden_pebble):
+        for coll in list(ob.users_collection):
+            coll.objects.unlink(ob)
+        collection.objects.link(ob)
     empty = bpy.data.objects.new("PebblePlacer", None)
     empty.instance_type, empty.instance_collection = "COLLECTION", collection
     empty.location, empty.hide_viewport = (-0.3, 0.7, 0.0), True
@@ -829,7 +833,8 @@ SCENES = {
                                   "but hidden from camera rays: a black background"),
     "render_evaluation": FidelityScene("render_evaluation", _render_evaluation, "viewport and render settings apart: "
                                        "Subdivision Surface levels 0 / render 3, a Bevel in renders only, an Array in "
-                                       "the viewport only, a ball and a collection instancer disabled in viewports, a "
+                                       "the viewport only, a ball and a collection instancer disabled in viewports (an "
+                                       "object of the collection disabled in renders), a "
                                        "vertex instancer hidden in renders, a curve's render resolution 16 (viewport 1)"),
 }
 

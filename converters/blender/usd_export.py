@@ -511,6 +511,8 @@ class _BlenderConverter(StageConverter):
                 continue  # the asset stands in for the instancer and what it places
             if parent is not None and not renders(parent):
                 continue  # an instancer Cycles does not render places nothing
+            if parent is not None and parent.instance_type == "COLLECTION" and ob.hide_render:
+                continue  # Cycles leaves out a collection instance's objects disabled in renders (particles keep theirs)
             if parent is not None and parent.name == ob.name:
                 if ob.type == "MESH":  # instances a Geometry Nodes tree makes (not realized): read while they exist
                     self._geometry_instance(inst, parent, placements, skipped)
