@@ -234,6 +234,9 @@ class _BlenderConverter(StageConverter):
             if ob.type != "LIGHT" or not renders(ob):
                 continue
             lt = ob.data
+            if lt.type == "AREA" and lt.cycles.is_portal:
+                continue  # a portal guides Cycles' sampling of the world and emits nothing (measured): no light
+            self._light_settings(ob)
             color = np.array(lt.color, np.float64) * self._light_nodes(ob)
             path = self._name("/World/Lights", ob.name)
             if lt.type == "SUN":
@@ -293,6 +296,22 @@ class _BlenderConverter(StageConverter):
                 light.CreateEnableColorTemperatureAttr(True)
                 light.CreateColorTemperatureAttr(float(lt.temperature))
         self.world()
+
+    def _light_settings(self, ob) -> None:
+        """Warn about a light's Cycles settings the stage's lights cannot carry: shadows off, ray visibility off, a
+        bounce limit of its own below the scene's (before, dropped without a word)."""
+        lt, off = ob.data, []
+        if not lt.use_shadow:
+            off.append("casts no shadows")
+        rays = [k[len("visible_"):] for k in ("visible_diffuse", "visible_glossy", "visible_transmission",
+                                               "visible_volume_scatter") if not getattr(ob, k, True)]
+        if rays:
+            off.append(f"invisible to {', '.join(rays)} rays")
+        if int(lt.cycles.max_bounces) < int(self.bscene.cycles.max_bounces):
+            off.append(f"max bounces {lt.cycles.max_bounces}")
+        if off:
+            self.warn(f"light {ob.name}: {', '.join(off)} in Cycles: dropped (the stage's light lights every path and "
+                      "casts shadows)")
 
     def _light_nodes(self, ob) -> np.ndarray:
         """The factor [3] a light's node tree (Use Nodes) puts on its colour x power: Cycles multiplies the light by

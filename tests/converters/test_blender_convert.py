@@ -524,3 +524,24 @@ def test_principled_inputs_without_a_counterpart_are_named(name, value):
     assert [n for n in notes if f"Principled {name} dropped" in n], notes
     inputs, notes = map_material(_material(bpy, "Plain", "principled"))
     assert not [n for n in notes if "dropped" in n], notes
+
+
+def test_portals_are_not_lights_and_light_settings_are_named(tmp_path):
+    """An area light marked as a portal emits nothing in Cycles (measured: a 100 W portal under a grey world adds
+    nothing) and was written as a 100 W RectLight; a light's shadows off, ray visibility off or own bounce limit were
+    dropped without a word."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import _light, _new_scene, _world
+
+    _new_scene(bpy, 8, (0.0, 0.0, 4.0), (0.0, 0.0, 0.0))
+    _world(bpy)
+    _light(bpy, "Window", "AREA", (0.0, 0.0, 2.0), energy=100.0, size=1.0).data.cycles.is_portal = True
+    lamp = _light(bpy, "Lamp", "POINT", (1.0, 0.0, 2.0), energy=10.0)
+    lamp.data.use_shadow, lamp.visible_glossy, lamp.data.cycles.max_bounces = False, False, 1
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "p.blend"))
+    res = convert_scene(tmp_path / "p.blend", tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    assert not stage.GetPrimAtPath("/World/Lights/Window").IsValid()
+    assert [w for w in res.warnings if "Lamp" in w and "no shadows" in w and "glossy" in w and "max bounces 1" in w], \
+        res.warnings
