@@ -572,8 +572,11 @@ class _BlenderConverter(StageConverter):
             uvs: list = []
             slots: list = []
             colors: list = []
+            dropped: list = []
             try:
-                geo = mesh_geometry([temp], local=True, uv_out=uvs, slot_out=slots, color_out=colors)
+                geo = mesh_geometry([temp], local=True, uv_out=uvs, slot_out=slots, color_out=colors, dropped_out=dropped)
+                for note in dropped:
+                    self.warn(f"{note} (a Geometry Nodes instance placed by {parent.name})")
             except NassetError as exc:
                 self.warn(f"object {parent.name}: a Geometry Nodes instance: {exc.message}: skipped")
                 geo = None
@@ -636,9 +639,11 @@ class _BlenderConverter(StageConverter):
         if isinstance(ob, _Geometry):  # read while the depsgraph walk held it
             geo, uvs, slots, colors, slot_mats = ob.geo, ob.uvs, ob.slots, ob.colors, ob.materials or [None]
         else:
-            uvs, slots, colors = [], [], []
+            uvs, slots, colors, dropped = [], [], [], []
             try:
-                geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
+                geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors, dropped_out=dropped)
+                for note in dropped:
+                    self.warn(note)
             except NassetError as exc:  # no faces, or a degenerate transform
                 if not (ob.name in self.instancers and "no faces" in exc.message):  # its instances are written
                     self.warn(f"object {ob.name}: {exc.message}: skipped")

@@ -389,3 +389,27 @@ def test_emission_inside_a_node_group_is_found(muted):
             bsc.pick_objects([ob.name])
         assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "emits light" in str(e.value)
     assert sorted(m.name for m in bpy.data.materials if m.name.startswith("Glow")) == ["Glow"]
+
+
+def test_non_finite_and_huge_vertices_drop_their_triangles(tmp_path):
+    """A vertex at NaN, or at inf (which Blender stores as 3.4e38): the converter wrote them, and the renderer refused
+    the whole stage (SCENE_INVALID: "mesh topology invalid", or world coordinates beyond its bound). Their triangles
+    are left out with a warning naming the object; the rest renders, as in Cycles."""
+    from nasset_converters.blender.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    box = bpy.context.active_object
+    box.name = "Broken"
+    box.data.vertices[0].co = (float("nan"), 0.0, 0.0)
+    box.data.vertices[1].co = (float("inf"), 0.0, 0.0)
+    bpy.ops.object.camera_add(location=(0.0, -4.0, 0.0), rotation=(1.5708, 0.0, 0.0))
+    bpy.context.scene.camera = bpy.context.active_object
+    blend = tmp_path / "broken.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
+    assert [w for w in res.warnings if "Broken" in w and "6 triangles" in w], res.warnings
+    render(load_scene(str(res.output)), RenderSettings(spp=1, width=4, height=4))
+    geo = bsc.mesh_geometry(bsc.pick_objects(["Broken"]))
+    assert len(geo.faces) == 6 and np.isfinite(geo.points).all()
