@@ -1257,6 +1257,9 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
     if output.exists():
         output.unlink()
     converter = _BlenderConverter(bpy, label, output, rep, check_usd)
+    if len(bpy.data.scenes) > 1:  # Blender renders the file's active scene and view layer (as a command-line render)
+        converter.warn(f"the file has scenes {sorted(sc.name for sc in bpy.data.scenes)}: scene "
+                       f"{bpy.context.scene.name!r} (the active one), view layer {bpy.context.view_layer.name!r} converted")
     for note in viewport_notes:
         converter.warn(note)
     return converter.run()

@@ -545,3 +545,15 @@ def test_portals_are_not_lights_and_light_settings_are_named(tmp_path):
     assert not stage.GetPrimAtPath("/World/Lights/Window").IsValid()
     assert [w for w in res.warnings if "Lamp" in w and "no shadows" in w and "glossy" in w and "max bounces 1" in w], \
         res.warnings
+
+
+def test_a_file_with_several_scenes_names_the_one_converted(tmp_path):
+    """A .blend holding several scenes converts its active one (as a command-line render does); which one was taken
+    went unsaid."""
+    from nasset_converters.blender.fidelity import _new_scene
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    bpy.data.scenes.new("Alternate")
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "two.blend"))
+    res = convert_scene(tmp_path / "two.blend", tmp_path / "s.usda")
+    assert [w for w in res.warnings if "['Alternate', 'Scene']" in w and "'Scene' (the active one)" in w], res.warnings
