@@ -463,6 +463,12 @@ class _BlenderConverter(StageConverter):
         if key in self.materials:
             return self.materials[key]
         inputs, notes = map_material(mat)
+        for name in ("diffuseColor", "specularColor"):  # UsdPreviewSurface colours are reflectances in [0, 1]
+            value = inputs.get(name)
+            top = value.image.max() if isinstance(value, TextureMap) else max(value) if isinstance(value, tuple) else 0.0
+            if top > 1.0 + 1e-6:
+                notes.append(f"material {mat.name if mat is not None else '(none)'}: {name} up to {top:.3g} clamped to 1 "
+                             "(Cycles reflects more light than it receives there; UsdPreviewSurface cannot)")
         for n in notes:
             self.warn(f"object {ob_name}: {n}")
         path = self._write_material(mat.name if mat is not None else "Default", inputs)
@@ -914,6 +920,22 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         inputs["opacity"] = alpha if isinstance(alpha, TextureMap) else float(np.clip(alpha, 0.0, 1.0))
     if emission is not None:
         inputs["emissiveColor"] = emission
+    metal = inputs["metallic"]
+    if not isinstance(metal, TextureMap) and float(metal) > 0.0 and not isinstance(inputs["roughness"], TextureMap):
+        base = inputs["diffuseColor"]
+        mean = (base.image.reshape(-1, 3).mean(0) if isinstance(base, TextureMap) else
+                np.full(3, 0.5) if isinstance(base, ColorPrimvar) else np.asarray(base, np.float64))
+        k = 1.0 + float(metal) * (multiscatter_scale(float(inputs["roughness"]), mean) - 1.0)
+        if np.max(np.abs(k - 1.0)) > 1e-3:
+            inputs["diffuseColor"] = _scaled(base, k)
+            top = float(np.max(mean * k))
+            notes.append(f"material {mat.name}: Principled metal colour x ({', '.join(f'{v:.3f}' for v in k)}) for Cycles' "
+                         "multiple-scattering GGX (the stage's lobe scatters once)"
+                         + (f"; above 1 ({top:.3g}), clamped by UsdPreviewSurface: darker than Cycles" if top > 1.0 else ""))
+    elif isinstance(metal, TextureMap) or isinstance(inputs["roughness"], TextureMap):
+        if _mean(metal) > 0.0:
+            notes.append(f"material {mat.name}: textured metal or roughness: Cycles' multiple-scattering GGX energy not "
+                         "compensated (rough metal parts render darker)")
     level = float(vals["Specular IOR Level"])
     if level <= 1e-6 and _mean(inputs["metallic"]) <= 0.0:
         inputs.update(useSpecularWorkflow=1, specularColor=(0.0, 0.0, 0.0))
@@ -1054,13 +1076,46 @@ def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float
     return float(np.clip(1.0 - albedo, 0.0, 1.0))
 
 
-def _scaled(color, k: float):
-    """A colour [3], TextureMap or ColorPrimvar times ``k``."""
+def _scaled(color, k):
+    """A colour [3], TextureMap or ColorPrimvar times ``k`` (a number, or one per channel)."""
     if isinstance(color, TextureMap):
         return dataclasses.replace(color, image=color.image * k)
     if isinstance(color, ColorPrimvar):
         return dataclasses.replace(color, scale=color.scale * k)
-    return tuple(float(c) * k for c in color)
+    return tuple(float(c) * float(f) for c, f in zip(color, np.broadcast_to(k, 3), strict=False))
+
+
+def multiscatter_scale(roughness: float, f0, n: int = 24) -> np.ndarray:
+    """Per-channel factor [3] by which Cycles' Principled metal (multiple-scattering GGX) reflects more than the
+    renderer's single-scattering GGX lobe of the same roughness and Schlick ``f0`` [3], averaged over view angles
+    (cosine-weighted). Cycles scales its lobe by ``1 + F_ms (1 - E(mu)) / E(mu)`` (Turquin's energy compensation:
+    ``E`` the lobe's directional albedo with F = 1, ``F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg))``, ``F_ss`` the
+    hemispherical mean of Schlick's Fresnel); the factor is the mean of that times the single-scattering albedo over
+    the mean of the albedo, by the quadrature of :func:`principled_diffuse_scale` (1.04 / 1.10 / 1.77 in red for
+    F0 0.8 at roughness 0.35 / 0.5 / 0.94)."""
+    from nasset_reference_renderer.bsdf import MIN_ALPHA, ggx_lambda, ggx_sample_vndf, reflect
+
+    f0 = np.clip(np.asarray(f0, np.float64)[:3], 0.0, 1.0)
+    alpha = max(float(roughness) ** 2, MIN_ALPHA)
+    g = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    e, a = np.zeros(n), np.zeros((n, 3))
+    for k, mu in enumerate(g):
+        wo = np.tile([math.sqrt(1.0 - mu * mu), 0.0, mu], (len(u), 1))
+        h = ggx_sample_vndf(wo, alpha, u)
+        wi = reflect(wo, h)
+        up = wi[:, 2] > 0
+        lo, li = ggx_lambda(wo, alpha), ggx_lambda(np.where(up[:, None], wi, [[0.0, 0.0, 1.0]]), alpha)
+        g2g1 = np.where(up, (1.0 + lo) / (1.0 + lo + li), 0.0)
+        c = (1.0 - np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)) ** 5
+        e[k] = g2g1.mean()
+        a[k] = [(np.where(up, f + (1.0 - f) * c, 0.0) * g2g1).mean() for f in f0]
+    e_avg = 2.0 * float(np.mean(e * g))
+    f_ss = f0 + (1.0 - f0) / 21.0
+    f_ms = f_ss * e_avg / (1.0 - f_ss * (1.0 - e_avg))
+    boost = 1.0 + f_ms[None, :] * ((1.0 - e) / np.maximum(e, 1e-6))[:, None]
+    w = g[:, None] * a
+    return (w * boost).sum(0) / np.maximum(w.sum(0), 1e-12)
 
 
 #: Blender colour spaces whose texels are linear values as stored (others are decoded from sRGB or warned)
@@ -1114,10 +1169,17 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
     in the three channels."""
     from nasset_reference_renderer.textures import srgb_to_linear
 
-    link = socket.links[0]
+    from .texel_ops import apply_chain, describe, texel_chain
+
+    link, ops = texel_chain(socket)  # through colour and float nodes folded into the texels (texel_ops)
+    if link is None:
+        notes.append(f"material {mat.name}: {socket.name} from {ops.bl_idname} dropped (Image Texture outputs are "
+                     "converted, also through Mix, Math, Map Range, Color Ramp, Invert, Gamma, Brightness/Contrast, "
+                     "Separate Color and RGB to BW nodes with constant other inputs; its default value used)")
+        return None
     tex = link.from_node
-    outputs = ("Color", "Alpha") if scalar else ("Color",)
-    if tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or link.from_socket.name not in outputs:
+    outputs = ("Color", "Alpha") if scalar or ops else ("Color",)
+    if tex.image is None or link.from_socket.name not in outputs:
         notes.append(f"material {mat.name}: {socket.name} from {tex.bl_idname}.{link.from_socket.name} dropped (Image "
                      f"Texture {' / '.join(outputs)} outputs are converted; its default value used)")
         return None
@@ -1156,7 +1218,12 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
         if note:
             notes.append(f"material {mat.name}: image {img.name}: {note} (the active render UV map used)")
     rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
-    if scalar and link.from_socket.name == "Color":  # a colour into a float socket: its luminance (Rec. 709)
+    is_color = link.from_socket.name == "Color"
+    if ops:
+        rgb, is_color = apply_chain(ops, rgb, is_color)
+        rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
+        what = f"{what} through {describe(ops)}"
+    if scalar and is_color:  # a colour into a float socket: its luminance (Rec. 709)
         rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
     return TextureMap(rgb, what, wrap=wrap, uv=uv)
 
