@@ -852,10 +852,14 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         aniso, _ = _socket(node, "Anisotropy", 0.0)
         if c_linked or r_linked:
             notes.append(f"material {mat.name}: linked Glossy BSDF {'Color' if c_linked else 'Roughness'} dropped")
-        notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it, "
-                     "no multiple-scattering compensation)" + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
-        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": tuple(col[:3]),
-                "roughness": float(np.clip(rough, 0.0, 1.0))}
+        rough = float(np.clip(rough, 0.0, 1.0))
+        k = multiscatter_scale(rough, col[:3]) if node.distribution == "MULTI_GGX" else np.ones(3)
+        notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it"
+                     + (f"; x ({', '.join(f'{v:.3f}' for v in k)}) for Cycles' multiple-scattering GGX" if
+                        node.distribution == "MULTI_GGX" else "") + ")"
+                     + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
+        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
+                "roughness": rough}
     if node.bl_idname == "ShaderNodeBsdfTransparent":  # alone: nothing there (presence 0)
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
                 "roughness": 1.0, "opacity": 0.0}
