@@ -72,6 +72,17 @@ def _socket(node, name, default):
     return v, bool(s.is_linked)
 
 
+class _Placed:
+    """An object seen through one placement by an instancer: the object's own attributes, with the placement's
+    world matrix and name (lights in instanced collections; before, they were skipped with a warning)."""
+
+    def __init__(self, ob, matrix_world: np.ndarray, name: str) -> None:
+        self._ob, self.matrix_world, self.name = ob, matrix_world, name
+
+    def __getattr__(self, key):
+        return getattr(self._ob, key)
+
+
 @dataclasses.dataclass
 class _Geometry:
     """A Geometry Nodes instance's mesh, read during the depsgraph walk (its temporary object is gone after it):
@@ -230,9 +241,16 @@ class _BlenderConverter(StageConverter):
         from pxr import UsdLux
 
         renders = render_visible(self.bpy.context.view_layer)
-        for ob in self.bscene.objects:
-            if ob.type != "LIGHT" or not renders(ob):
+        placed = [ob for ob in self.bscene.objects if ob.type == "LIGHT" and renders(ob)]
+        for inst in self.bpy.context.evaluated_depsgraph_get().object_instances:  # lights placed by instancers
+            if not inst.is_instance or inst.object.type != "LIGHT" or inst.parent is None:
                 continue
+            ob, parent = inst.object.original, inst.parent.original
+            if not renders(parent) or parent.name in self.replace or (parent.instance_type == "COLLECTION"
+                                                                      and ob.hide_render):
+                continue
+            placed.append(_Placed(ob, np.array(inst.matrix_world, np.float64), f"{parent.name}_{ob.name}"))
+        for ob in placed:
             lt = ob.data
             if lt.type == "AREA" and lt.cycles.is_portal:
                 continue  # a portal guides Cycles' sampling of the world and emits nothing (measured): no light
@@ -549,7 +567,7 @@ class _BlenderConverter(StageConverter):
                               "in world space)")
                 continue
             if ob.type not in SURFACE_TYPES:
-                if ob.type not in ("EMPTY", "CAMERA") and ob.name not in skipped:
+                if ob.type not in ("EMPTY", "CAMERA", "LIGHT") and ob.name not in skipped:  # lights: lights()
                     skipped.add(ob.name)
                     self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (surfaces are: "
                               f"{', '.join(SURFACE_TYPES)}): skipped")
