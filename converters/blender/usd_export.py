@@ -425,8 +425,11 @@ class _BlenderConverter(StageConverter):
             self.warn(f"world {world.name}: background colour from {src.bl_idname} dropped (constant colour or an "
                       "Environment Texture are converted)")
             return
+        turn = 0.0
         if src.inputs["Vector"].is_linked:
-            self.warn(f"world {world.name}: the environment texture's vector input (mapping/rotation) is dropped")
+            turn, note = _environment_turn(src.inputs["Vector"].links[0])
+            if note:
+                self.warn(f"world {world.name}: {note}")
         if src.projection != "EQUIRECTANGULAR":
             self.warn(f"world {world.name}: {src.projection} environment projection is not converted")
             return
@@ -449,7 +452,9 @@ class _BlenderConverter(StageConverter):
         self._dome_camera_visibility(light, world)
         light.CreateTextureFileAttr(Sdf.AssetPath("./" + tex.relative_to(self.output.parent).as_posix()))  # anchored
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
-        self._xform(light.GetPrim(), DOME_ROWS)
+        c, s_ = math.cos(DOME_TURN_SIGN * turn), math.sin(DOME_TURN_SIGN * turn)  # about USD +Y (Blender +Z)
+        spin = np.array([[c, 0.0, -s_, 0.0], [0.0, 1.0, 0.0, 0.0], [s_, 0.0, c, 0.0], [0.0, 0.0, 0.0, 1.0]])
+        self._xform(light.GetPrim(), DOME_ROWS @ spin)
         self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
         if src.interpolation not in ("Linear", "Closest"):
@@ -1305,6 +1310,38 @@ def _uv_mapping(link) -> tuple[tuple | None, str]:
     if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6:
         return None, "Mapping node rotation about X or Y dropped"
     return ((float(scale[0]), float(scale[1])), math.degrees(float(rot[2])), (float(loc[0]), float(loc[1]))), ""
+
+
+#: the dome turns about the up axis opposite to a Mapping node's Z rotation of the lookup direction
+DOME_TURN_SIGN = -1.0
+
+
+def _environment_turn(link) -> tuple[float, str]:
+    """(angle about Blender's Z in radians, note) of the Mapping node feeding an Environment Texture's Vector:
+    a Point (or Texture: inverted) mapping of the Generated (view) direction, or of nothing linked, turning about Z
+    only, with unlinked values; its location shifts directions and is dropped, as is any other linked Vector (note).
+    Before, every mapping was dropped (an HDRI turned by the artist lit the scene from the wrong side)."""
+    node = link.from_node
+    if node.bl_idname != "ShaderNodeMapping" or node.vector_type not in ("POINT", "TEXTURE"):
+        return 0.0, f"environment Vector from {node.bl_idname} dropped (a Mapping node turning about Z converts)"
+    if any(node.inputs[k].is_linked for k in ("Location", "Rotation", "Scale")):
+        return 0.0, "a Mapping node with linked values on the environment dropped"
+    vec = node.inputs["Vector"]
+    if vec.is_linked and not (vec.links[0].from_node.bl_idname == "ShaderNodeTexCoord"
+                              and vec.links[0].from_socket.name == "Generated"):
+        return 0.0, (f"environment mapping of {vec.links[0].from_node.bl_idname}.{vec.links[0].from_socket.name} "
+                     "dropped (the Generated direction converts)")
+    rot = np.asarray(node.inputs["Rotation"].default_value, np.float64)
+    scale = np.asarray(node.inputs["Scale"].default_value, np.float64)
+    notes = []
+    if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6:
+        notes.append("environment rotation about X or Y dropped (about Z converts)")
+    if not np.allclose(scale, scale[0]) or scale[0] <= 0:
+        notes.append(f"environment mapping scale {tuple(round(float(v), 3) for v in scale)} dropped")
+    if np.abs(np.asarray(node.inputs["Location"].default_value)).max() > 1e-6:
+        notes.append("environment mapping location dropped")
+    turn = float(rot[2]) if node.vector_type == "POINT" else -float(rot[2])
+    return turn, "; ".join(notes)
 
 
 def _check_replace(bpy, rep: dict, file: str) -> None:
