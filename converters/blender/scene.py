@@ -29,6 +29,7 @@ from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from . import load_bpy, quiet_stdout, to_y_up
 from .evaluation import evaluate_as_render
+from .shader_graph import resolved_copy
 
 #: Blender's default curve radius (m) where a Curves object has no ``radius`` attribute
 DEFAULT_RADIUS = 0.005
@@ -134,11 +135,12 @@ def refuse_emitter(ob, *, file: str | None = None) -> None:
         mat = slot.material
         if mat is None or mat.node_tree is None:
             continue
-        for node in mat.node_tree.nodes:
-            if _emits(node):
-                raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} emits light (material {mat.name!r}, node "
-                            f"{node.name!r}): a neural asset carries light transport, not emission; keep the emitter in "
-                            "the scene and bake the objects around it", file=file)
+        with resolved_copy(load_bpy(), mat) as resolved:  # node groups, reroutes, muted nodes as Cycles reads them
+            for node in resolved.node_tree.nodes:
+                if _emits(node):
+                    raise error("CONVERT_SHAPE_UNSUPPORTED", f"object {ob.name!r} emits light (material {mat.name!r}, "
+                                f"node {node.name!r}): a neural asset carries light transport, not emission; keep the "
+                                "emitter in the scene and bake the objects around it", file=file)
 
 
 #: roughness below which Cycles' glass, refraction or Principled transmission passes light along (near) one direction
@@ -188,14 +190,16 @@ def see_through(objects, share: float = SEE_THROUGH_SHARE) -> list[str]:
             mat = slot.material
             if mat is None or mat.node_tree is None:
                 continue
-            clear = next((c for c in map(_clear_lobe, mat.node_tree.nodes) if c), None)
+            with resolved_copy(load_bpy(), mat) as resolved:  # node groups, reroutes, muted nodes as Cycles reads them
+                nodes = resolved.node_tree.nodes
+                clear = next((c for c in map(_clear_lobe, nodes) if c), None)
+                density = 0.0
+                for node in nodes if clear is not None else ():
+                    if node.bl_idname in _VOLUME_NODES and any(out.is_linked for out in node.outputs):
+                        sock = node.inputs.get("Density")
+                        density += math.inf if sock is None or sock.is_linked else float(sock.default_value)
             if clear is None:
                 continue
-            density = 0.0
-            for node in mat.node_tree.nodes:
-                if node.bl_idname in _VOLUME_NODES and any(out.is_linked for out in node.outputs):
-                    sock = node.inputs.get("Density")
-                    density += math.inf if sock is None or sock.is_linked else float(sock.default_value)
             if density > 0.0:
                 geo = mesh_geometry([ob])
                 tri = geo.points[geo.faces].astype(np.float64)
@@ -225,7 +229,7 @@ def variant_of(objects, *, file: str | None = None) -> str:
 
 
 def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None,
-                color_out: list | None = None):
+                color_out: list | None = None, dropped_out: list | None = None):
     """(points [V,3] world Blender, faces [F,3], normals [V,3] world) of an evaluated mesh; object space when
     ``local``. The normals are Blender's corner normals, as Cycles shades them: a vertex is split where its corners
     differ (flat faces, sharp edges, Smooth by Angle, custom normals), so a cube shades flat and a smooth sphere
@@ -296,19 +300,38 @@ def _mesh_world(ob, depsgraph, *, local: bool = False, uv_out: list | None = Non
             uv_out[-1] = uv_out[-1][:, ::-1].copy()
         if color_out is not None:
             color_out[-1] = {k: v[:, ::-1].copy() for k, v in color_out[-1].items()}
+    from nasset_reference_renderer.scene import MAX_WORLD_COORDINATE
+
+    # a non-finite point makes the whole mesh invalid USD, a huge one (Blender stores inf as 3.4e38) a scene the
+    # renderer refuses: Cycles draws the rest
+    bad = ~(np.isfinite(p).all(axis=1) & np.isfinite(n).all(axis=1)) | (np.abs(p) > MAX_WORLD_COORDINATE).any(axis=1)
+    if bad.any():
+        keep = ~bad[tri].any(axis=1)
+        tri = tri[keep]
+        p[bad], n[bad] = 0.0, (0.0, 0.0, 1.0)
+        for out in (uv_out, slot_out):
+            if out is not None and out[-1] is not None:
+                out[-1] = out[-1][keep]
+        if color_out is not None:
+            color_out[-1] = {k: v[keep] for k, v in color_out[-1].items()}
+        if dropped_out is not None:
+            dropped_out.append(f"object {ob.name}: {int((~keep).sum())} triangles with non-finite vertex positions "
+                               f"or normals, or coordinates beyond {MAX_WORLD_COORDINATE:g}, dropped")
     return p, tri, n
 
 
 def mesh_geometry(objects, *, local: bool = False, uv_out: list | None = None, slot_out: list | None = None,
-                  color_out: list | None = None) -> MeshGeometry:
+                  color_out: list | None = None, dropped_out: list | None = None) -> MeshGeometry:
     """World-space (+Y up) triangles of the evaluated meshes, merged; object space (+Y up) when ``local``.
     ``uv_out`` receives each object's UVs per triangle corner ([F,3,2] or None), ``slot_out`` each object's material
-    slot per triangle ([F]; see :func:`_mesh_world`)."""
+    slot per triangle ([F]; see :func:`_mesh_world`). Triangles with a non-finite vertex position or normal are left
+    out (Cycles draws the rest), with a note in ``dropped_out``."""
     bpy = load_bpy()
     dg = bpy.context.evaluated_depsgraph_get()
     pts, faces, normals, base = [], [], [], 0
     for ob in objects:
-        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out, slot_out=slot_out, color_out=color_out)
+        p, f, n = _mesh_world(ob, dg, local=local, uv_out=uv_out, slot_out=slot_out, color_out=color_out,
+                              dropped_out=dropped_out)
         pts.append(p)
         faces.append(f + base)
         normals.append(n)

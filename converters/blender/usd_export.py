@@ -73,6 +73,17 @@ def _socket(node, name, default):
     return v, bool(s.is_linked)
 
 
+class _Placed:
+    """An object seen through one placement by an instancer: the object's own attributes, with the placement's
+    world matrix and name (lights in instanced collections; before, they were skipped with a warning)."""
+
+    def __init__(self, ob, matrix_world: np.ndarray, name: str) -> None:
+        self._ob, self.matrix_world, self.name = ob, matrix_world, name
+
+    def __getattr__(self, key):
+        return getattr(self._ob, key)
+
+
 @dataclasses.dataclass
 class _Geometry:
     """A Geometry Nodes instance's mesh, read during the depsgraph walk (its temporary object is gone after it):
@@ -191,6 +202,7 @@ class _BlenderConverter(StageConverter):
         if lower:
             self.warn(f"render settings: per-type bounce limits {lower} below max bounces {int(c.max_bounces)} dropped "
                       f"(the reference renderer stops every path after {depth} scattering vertices)")
+        self._image_settings()
         prim = UsdRender.Settings.Define(self.stage, "/Render/Settings").GetPrim()
         prim.CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(depth)
         kind, stddev = cycles_pixel_filter(str(c.pixel_filter_type), float(c.filter_width))
@@ -203,15 +215,47 @@ class _BlenderConverter(StageConverter):
         if stddev is not None:
             prim.CreateAttribute("nasset:pixelFilterStddev", Sdf.ValueTypeNames.Float, custom=True).Set(stddev)
 
+    def _image_settings(self) -> None:
+        """Name the render settings that change Cycles' image and that the stage does not carry: its biased
+        shortcuts (clamping, Filter Glossy, caustics off; the stage renders unbiased, as the fidelity suite's Cycles
+        ground truth does), motion blur, a render border, non-square pixels. Before, they went without a word."""
+        c, r = self.bscene.cycles, self.bscene.render
+        biased = [f"{k.replace('sample_clamp_', '')} clamp {getattr(c, k):g}" for k in ("sample_clamp_direct",
+                                                                                         "sample_clamp_indirect")
+                  if float(getattr(c, k)) > 0]
+        if float(c.blur_glossy) > 0:
+            biased.append(f"Filter Glossy {c.blur_glossy:g}")
+        biased += [f"{kind} caustics off" for kind in ("reflective", "refractive") if not getattr(c, f"caustics_{kind}")]
+        if biased:
+            self.warn(f"render settings: Cycles' {', '.join(biased)} not carried (the stage renders unclamped, unfiltered "
+                      "light paths)")
+        if r.use_motion_blur:
+            self.warn("render settings: motion blur dropped (the stage is rendered at the current frame)")
+        if r.use_border:
+            self.warn(f"render settings: render border ({r.border_min_x:g}-{r.border_max_x:g} x {r.border_min_y:g}-"
+                      f"{r.border_max_y:g}{', cropped' if r.use_crop_to_border else ''}) dropped: the whole frame is written")
+        if abs(float(r.pixel_aspect_x) - float(r.pixel_aspect_y)) > 1e-6:
+            self.warn(f"render settings: pixel aspect {r.pixel_aspect_x:g}:{r.pixel_aspect_y:g} written as square pixels")
+
     # -- lights -------------------------------------------------------------------------------
     def lights(self) -> None:
         from pxr import UsdLux
 
         renders = render_visible(self.bpy.context.view_layer)
-        for ob in self.bscene.objects:
-            if ob.type != "LIGHT" or not renders(ob):
+        placed = [ob for ob in self.bscene.objects if ob.type == "LIGHT" and renders(ob)]
+        for inst in self.bpy.context.evaluated_depsgraph_get().object_instances:  # lights placed by instancers
+            if not inst.is_instance or inst.object.type != "LIGHT" or inst.parent is None:
                 continue
+            ob, parent = inst.object.original, inst.parent.original
+            if not renders(parent) or parent.name in self.replace or (parent.instance_type == "COLLECTION"
+                                                                      and ob.hide_render):
+                continue
+            placed.append(_Placed(ob, np.array(inst.matrix_world, np.float64), f"{parent.name}_{ob.name}"))
+        for ob in placed:
             lt = ob.data
+            if lt.type == "AREA" and lt.cycles.is_portal:
+                continue  # a portal guides Cycles' sampling of the world and emits nothing (measured): no light
+            self._light_settings(ob)
             color = np.array(lt.color, np.float64) * self._light_nodes(ob)
             path = self._name("/World/Lights", ob.name)
             if lt.type == "SUN":
@@ -271,6 +315,22 @@ class _BlenderConverter(StageConverter):
                 light.CreateEnableColorTemperatureAttr(True)
                 light.CreateColorTemperatureAttr(float(lt.temperature))
         self.world()
+
+    def _light_settings(self, ob) -> None:
+        """Warn about a light's Cycles settings the stage's lights cannot carry: shadows off, ray visibility off, a
+        bounce limit of its own below the scene's (before, dropped without a word)."""
+        lt, off = ob.data, []
+        if not lt.use_shadow:
+            off.append("casts no shadows")
+        rays = [k[len("visible_"):] for k in ("visible_diffuse", "visible_glossy", "visible_transmission",
+                                               "visible_volume_scatter") if not getattr(ob, k, True)]
+        if rays:
+            off.append(f"invisible to {', '.join(rays)} rays")
+        if int(lt.cycles.max_bounces) < int(self.bscene.cycles.max_bounces):
+            off.append(f"max bounces {lt.cycles.max_bounces}")
+        if off:
+            self.warn(f"light {ob.name}: {', '.join(off)} in Cycles: dropped (the stage's light lights every path and "
+                      "casts shadows)")
 
     def _light_nodes(self, ob) -> np.ndarray:
         """The factor [3] a light's node tree (Use Nodes) puts on its colour x power: Cycles multiplies the light by
@@ -335,7 +395,7 @@ class _BlenderConverter(StageConverter):
         if world is None or not world.node_tree:
             if world is not None:
                 self.warn(f"world {world.name}: colour without a node tree written as a constant dome")
-                self._dome_constant(np.array(world.color, np.float64), world.name)
+                self._dome_constant(np.array(world.color, np.float64), world)
             return
         with resolved_copy(self.bpy, world) as resolved:  # reroutes, muted nodes and links, constants as Cycles reads them
             self._world_tree(world, resolved.node_tree)
@@ -359,15 +419,18 @@ class _BlenderConverter(StageConverter):
         if not col.is_linked:
             rgb = np.array(col.default_value[:3], np.float64) * float(strength)
             if rgb.max() > 0:
-                self._dome_constant(rgb, world.name)
+                self._dome_constant(rgb, world)
             return
         src = col.links[0].from_node
         if src.bl_idname != "ShaderNodeTexEnvironment" or src.image is None:
             self.warn(f"world {world.name}: background colour from {src.bl_idname} dropped (constant colour or an "
                       "Environment Texture are converted)")
             return
+        turn = 0.0
         if src.inputs["Vector"].is_linked:
-            self.warn(f"world {world.name}: the environment texture's vector input (mapping/rotation) is dropped")
+            turn, note = _environment_turn(src.inputs["Vector"].links[0])
+            if note:
+                self.warn(f"world {world.name}: {note}")
         if src.projection != "EQUIRECTANGULAR":
             self.warn(f"world {world.name}: {src.projection} environment projection is not converted")
             return
@@ -387,9 +450,12 @@ class _BlenderConverter(StageConverter):
         self.result.textures.append(str(tex))
         path = self._name("/World/Lights", world.name)
         light = UsdLux.DomeLight.Define(self.stage, path)
+        self._dome_camera_visibility(light, world)
         light.CreateTextureFileAttr(Sdf.AssetPath("./" + tex.relative_to(self.output.parent).as_posix()))  # anchored
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
-        self._xform(light.GetPrim(), DOME_ROWS)
+        c, s_ = math.cos(DOME_TURN_SIGN * turn), math.sin(DOME_TURN_SIGN * turn)  # about USD +Y (Blender +Z)
+        spin = np.array([[c, 0.0, -s_, 0.0], [0.0, 1.0, 0.0, 0.0], [s_, 0.0, c, 0.0], [0.0, 0.0, 0.0, 1.0]])
+        self._xform(light.GetPrim(), DOME_ROWS @ spin)
         self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
         if src.interpolation not in ("Linear", "Closest"):
@@ -398,11 +464,20 @@ class _BlenderConverter(StageConverter):
             self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
                       "texels by the reference renderer (Cycles: linear)")
 
-    def _dome_constant(self, rgb, name) -> None:
+    def _dome_camera_visibility(self, light, world) -> None:
+        """Cycles' transparent film (Film > Transparent) and a world hidden from camera rays (its Ray Visibility >
+        Camera off) leave the background black in the rendered colours while the world still lights the scene: the
+        dome gets ``nasset:cameraVisibility = false``. Before, the converted render showed the sky behind everything."""
+        if self.bscene.render.film_transparent or not world.cycles_visibility.camera:
+            self._hidden_from_camera(light)
+
+    def _dome_constant(self, rgb, world) -> None:
         from pxr import UsdLux
 
+        name = world.name
         path = self._name("/World/Lights", name)
         light = UsdLux.DomeLight.Define(self.stage, path)
+        self._dome_camera_visibility(light, world)
         self._light_common(light, rgb, path, f"world {name} (constant colour)")
 
     # -- materials ----------------------------------------------------------------------------
@@ -412,6 +487,12 @@ class _BlenderConverter(StageConverter):
         if key in self.materials:
             return self.materials[key]
         inputs, notes = map_material(mat)
+        for name in ("diffuseColor", "specularColor"):  # UsdPreviewSurface colours are reflectances in [0, 1]
+            value = inputs.get(name)
+            top = value.image.max() if isinstance(value, TextureMap) else max(value) if isinstance(value, tuple) else 0.0
+            if top > 1.0 + 1e-6:
+                notes.append(f"material {mat.name if mat is not None else '(none)'}: {name} up to {top:.3g} clamped to 1 "
+                             "(Cycles reflects more light than it receives there; UsdPreviewSurface cannot)")
         for n in notes:
             self.warn(f"object {ob_name}: {n}")
         path = self._write_material(mat.name if mat is not None else "Default", inputs)
@@ -479,6 +560,8 @@ class _BlenderConverter(StageConverter):
                 continue  # the asset stands in for the instancer and what it places
             if parent is not None and not renders(parent):
                 continue  # an instancer Cycles does not render places nothing
+            if parent is not None and parent.instance_type == "COLLECTION" and ob.hide_render:
+                continue  # Cycles leaves out a collection instance's objects disabled in renders (particles keep theirs)
             if parent is not None and parent.name == ob.name:
                 if ob.type == "MESH":  # instances a Geometry Nodes tree makes (not realized): read while they exist
                     self._geometry_instance(inst, parent, placements, skipped)
@@ -490,7 +573,7 @@ class _BlenderConverter(StageConverter):
                               "in world space)")
                 continue
             if ob.type not in SURFACE_TYPES:
-                if ob.type not in ("EMPTY", "CAMERA") and ob.name not in skipped:
+                if ob.type not in ("EMPTY", "CAMERA", "LIGHT") and ob.name not in skipped:  # lights: lights()
                     skipped.add(ob.name)
                     self.warn(f"object {ob.name}: instances of a {ob.type} are not convertible (surfaces are: "
                               f"{', '.join(SURFACE_TYPES)}): skipped")
@@ -519,8 +602,11 @@ class _BlenderConverter(StageConverter):
             uvs: list = []
             slots: list = []
             colors: list = []
+            dropped: list = []
             try:
-                geo = mesh_geometry([temp], local=True, uv_out=uvs, slot_out=slots, color_out=colors)
+                geo = mesh_geometry([temp], local=True, uv_out=uvs, slot_out=slots, color_out=colors, dropped_out=dropped)
+                for note in dropped:
+                    self.warn(f"{note} (a Geometry Nodes instance placed by {parent.name})")
             except NassetError as exc:
                 self.warn(f"object {parent.name}: a Geometry Nodes instance: {exc.message}: skipped")
                 geo = None
@@ -583,9 +669,11 @@ class _BlenderConverter(StageConverter):
         if isinstance(ob, _Geometry):  # read while the depsgraph walk held it
             geo, uvs, slots, colors, slot_mats = ob.geo, ob.uvs, ob.slots, ob.colors, ob.materials or [None]
         else:
-            uvs, slots, colors = [], [], []
+            uvs, slots, colors, dropped = [], [], [], []
             try:
-                geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors)
+                geo = mesh_geometry([ob], local=local, uv_out=uvs, slot_out=slots, color_out=colors, dropped_out=dropped)
+                for note in dropped:
+                    self.warn(note)
             except NassetError as exc:  # no faces, or a degenerate transform
                 if not (ob.name in self.instancers and "no faces" in exc.message):  # its instances are written
                     self.warn(f"object {ob.name}: {exc.message}: skipped")
@@ -710,7 +798,8 @@ def cycles_pixel_filter(kind: str, width: float) -> tuple[str, float | None]:
 
 #: Principled BSDF inputs that UsdPreviewSurface cannot carry: (input, "off" value)
 _DROPPED = (("Subsurface Weight", 0.0), ("Transmission Weight", 0.0), ("Coat Weight", 0.0), ("Sheen Weight", 0.0),
-            ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0))
+            ("Anisotropic", 0.0), ("Thin Film Thickness", 0.0), ("Diffuse Roughness", 0.0),
+            ("Specular Tint", (1.0, 1.0, 1.0, 1.0)))
 
 
 def map_material(mat) -> tuple[dict, list]:
@@ -788,10 +877,14 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         aniso, _ = _socket(node, "Anisotropy", 0.0)
         if c_linked or r_linked:
             notes.append(f"material {mat.name}: linked Glossy BSDF {'Color' if c_linked else 'Roughness'} dropped")
-        notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it, "
-                     "no multiple-scattering compensation)" + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
-        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": tuple(col[:3]),
-                "roughness": float(np.clip(rough, 0.0, 1.0))}
+        rough = float(np.clip(rough, 0.0, 1.0))
+        k = multiscatter_scale(rough, col[:3]) if node.distribution == "MULTI_GGX" else np.ones(3)
+        notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it"
+                     + (f"; x ({', '.join(f'{v:.3f}' for v in k)}) for Cycles' multiple-scattering GGX" if
+                        node.distribution == "MULTI_GGX" else "") + ")"
+                     + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
+        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
+                "roughness": rough}
     if node.bl_idname == "ShaderNodeBsdfTransparent":  # alone: nothing there (presence 0)
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
                 "roughness": 1.0, "opacity": 0.0}
@@ -842,7 +935,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         emission = _scaled(e_color if isinstance(e_color, TextureMap) else e_color[:3], float(e_strength))
     for name, off in _DROPPED:
         v, linked = _socket(node, name, off)
-        if linked or (isinstance(v, float) and abs(v - off) > 1e-6):
+        if linked or not np.allclose(np.ravel(v)[:3], np.ravel(off)[:3], rtol=0.0, atol=1e-6):
             notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
                          "bake the object into a neural asset)")
     base = vals["Base Color"]
@@ -856,6 +949,22 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         inputs["opacity"] = alpha if isinstance(alpha, TextureMap) else float(np.clip(alpha, 0.0, 1.0))
     if emission is not None:
         inputs["emissiveColor"] = emission
+    metal = inputs["metallic"]
+    if not isinstance(metal, TextureMap) and float(metal) > 0.0 and not isinstance(inputs["roughness"], TextureMap):
+        base = inputs["diffuseColor"]
+        mean = (base.image.reshape(-1, 3).mean(0) if isinstance(base, TextureMap) else
+                np.full(3, 0.5) if isinstance(base, ColorPrimvar) else np.asarray(base, np.float64))
+        k = 1.0 + float(metal) * (multiscatter_scale(float(inputs["roughness"]), mean) - 1.0)
+        if np.max(np.abs(k - 1.0)) > 1e-3:
+            inputs["diffuseColor"] = _scaled(base, k)
+            top = float(np.max(mean * k))
+            notes.append(f"material {mat.name}: Principled metal colour x ({', '.join(f'{v:.3f}' for v in k)}) for Cycles' "
+                         "multiple-scattering GGX (the stage's lobe scatters once)"
+                         + (f"; above 1 ({top:.3g}), clamped by UsdPreviewSurface: darker than Cycles" if top > 1.0 else ""))
+    elif isinstance(metal, TextureMap) or isinstance(inputs["roughness"], TextureMap):
+        if _mean(metal) > 0.0:
+            notes.append(f"material {mat.name}: textured metal or roughness: Cycles' multiple-scattering GGX energy not "
+                         "compensated (rough metal parts render darker)")
     level = float(vals["Specular IOR Level"])
     if level <= 1e-6 and _mean(inputs["metallic"]) <= 0.0:
         inputs.update(useSpecularWorkflow=1, specularColor=(0.0, 0.0, 0.0))
@@ -996,13 +1105,46 @@ def principled_diffuse_scale(roughness: float, ior: float, n: int = 24) -> float
     return float(np.clip(1.0 - albedo, 0.0, 1.0))
 
 
-def _scaled(color, k: float):
-    """A colour [3], TextureMap or ColorPrimvar times ``k``."""
+def _scaled(color, k):
+    """A colour [3], TextureMap or ColorPrimvar times ``k`` (a number, or one per channel)."""
     if isinstance(color, TextureMap):
         return dataclasses.replace(color, image=color.image * k)
     if isinstance(color, ColorPrimvar):
         return dataclasses.replace(color, scale=color.scale * k)
-    return tuple(float(c) * k for c in color)
+    return tuple(float(c) * float(f) for c, f in zip(color, np.broadcast_to(k, 3), strict=False))
+
+
+def multiscatter_scale(roughness: float, f0, n: int = 24) -> np.ndarray:
+    """Per-channel factor [3] by which Cycles' Principled metal (multiple-scattering GGX) reflects more than the
+    renderer's single-scattering GGX lobe of the same roughness and Schlick ``f0`` [3], averaged over view angles
+    (cosine-weighted). Cycles scales its lobe by ``1 + F_ms (1 - E(mu)) / E(mu)`` (Turquin's energy compensation:
+    ``E`` the lobe's directional albedo with F = 1, ``F_ms = F_ss E_avg / (1 - F_ss (1 - E_avg))``, ``F_ss`` the
+    hemispherical mean of Schlick's Fresnel); the factor is the mean of that times the single-scattering albedo over
+    the mean of the albedo, by the quadrature of :func:`principled_diffuse_scale` (1.04 / 1.10 / 1.77 in red for
+    F0 0.8 at roughness 0.35 / 0.5 / 0.94)."""
+    from nasset_reference_renderer.bsdf import MIN_ALPHA, ggx_lambda, ggx_sample_vndf, reflect
+
+    f0 = np.clip(np.asarray(f0, np.float64)[:3], 0.0, 1.0)
+    alpha = max(float(roughness) ** 2, MIN_ALPHA)
+    g = (np.arange(n) + 0.5) / n
+    u = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    e, a = np.zeros(n), np.zeros((n, 3))
+    for k, mu in enumerate(g):
+        wo = np.tile([math.sqrt(1.0 - mu * mu), 0.0, mu], (len(u), 1))
+        h = ggx_sample_vndf(wo, alpha, u)
+        wi = reflect(wo, h)
+        up = wi[:, 2] > 0
+        lo, li = ggx_lambda(wo, alpha), ggx_lambda(np.where(up[:, None], wi, [[0.0, 0.0, 1.0]]), alpha)
+        g2g1 = np.where(up, (1.0 + lo) / (1.0 + lo + li), 0.0)
+        c = (1.0 - np.clip(np.einsum("ij,ij->i", wo, h), 0.0, 1.0)) ** 5
+        e[k] = g2g1.mean()
+        a[k] = [(np.where(up, f + (1.0 - f) * c, 0.0) * g2g1).mean() for f in f0]
+    e_avg = 2.0 * float(np.mean(e * g))
+    f_ss = f0 + (1.0 - f0) / 21.0
+    f_ms = f_ss * e_avg / (1.0 - f_ss * (1.0 - e_avg))
+    boost = 1.0 + f_ms[None, :] * ((1.0 - e) / np.maximum(e, 1e-6))[:, None]
+    w = g[:, None] * a
+    return (w * boost).sum(0) / np.maximum(w.sum(0), 1e-12)
 
 
 #: Blender colour spaces whose texels are linear values as stored (others are decoded from sRGB or warned)
@@ -1056,15 +1198,26 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
     in the three channels."""
     from nasset_reference_renderer.textures import srgb_to_linear
 
-    link = socket.links[0]
+    from .texel_ops import apply_chain, describe, texel_chain
+
+    link, ops = texel_chain(socket)  # through colour and float nodes folded into the texels (texel_ops)
+    if link is None:
+        notes.append(f"material {mat.name}: {socket.name} from {ops.bl_idname} dropped (Image Texture outputs are "
+                     "converted, also through Mix, Math, Map Range, Color Ramp, Invert, Gamma, Brightness/Contrast, "
+                     "Separate Color and RGB to BW nodes with constant other inputs; its default value used)")
+        return None
     tex = link.from_node
-    outputs = ("Color", "Alpha") if scalar else ("Color",)
-    if tex.bl_idname != "ShaderNodeTexImage" or tex.image is None or link.from_socket.name not in outputs:
+    outputs = ("Color", "Alpha") if scalar or ops else ("Color",)
+    if tex.image is None or link.from_socket.name not in outputs:
         notes.append(f"material {mat.name}: {socket.name} from {tex.bl_idname}.{link.from_socket.name} dropped (Image "
                      f"Texture {' / '.join(outputs)} outputs are converted; its default value used)")
         return None
     img = tex.image
     w, h = img.size
+    if img.source in ("TILED", "SEQUENCE", "MOVIE"):  # img.pixels holds one tile or frame
+        kind = {"TILED": "UDIM tiles: the first tile", "SEQUENCE": "an image sequence: its current frame",
+                "MOVIE": "a movie: its current frame"}[img.source]
+        notes.append(f"material {mat.name}: image {img.name} is {kind} only is written")
     if w * h == 0 or img.channels < 1:
         notes.append(f"material {mat.name}: image {img.name} has no pixels (missing file?): {socket.name} default used")
         return None
@@ -1094,7 +1247,12 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
         if note:
             notes.append(f"material {mat.name}: image {img.name}: {note} (the active render UV map used)")
     rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
-    if scalar and link.from_socket.name == "Color":  # a colour into a float socket: its luminance (Rec. 709)
+    is_color = link.from_socket.name == "Color"
+    if ops:
+        rgb, is_color = apply_chain(ops, rgb, is_color)
+        rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
+        what = f"{what} through {describe(ops)}"
+    if scalar and is_color:  # a colour into a float socket: its luminance (Rec. 709)
         rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
     return TextureMap(rgb, what, wrap=wrap, uv=uv)
 
@@ -1156,6 +1314,38 @@ def _uv_mapping(link) -> tuple[tuple | None, str]:
     return ((float(scale[0]), float(scale[1])), math.degrees(float(rot[2])), (float(loc[0]), float(loc[1]))), ""
 
 
+#: the dome turns about the up axis opposite to a Mapping node's Z rotation of the lookup direction
+DOME_TURN_SIGN = -1.0
+
+
+def _environment_turn(link) -> tuple[float, str]:
+    """(angle about Blender's Z in radians, note) of the Mapping node feeding an Environment Texture's Vector:
+    a Point (or Texture: inverted) mapping of the Generated (view) direction, or of nothing linked, turning about Z
+    only, with unlinked values; its location shifts directions and is dropped, as is any other linked Vector (note).
+    Before, every mapping was dropped (an HDRI turned by the artist lit the scene from the wrong side)."""
+    node = link.from_node
+    if node.bl_idname != "ShaderNodeMapping" or node.vector_type not in ("POINT", "TEXTURE"):
+        return 0.0, f"environment Vector from {node.bl_idname} dropped (a Mapping node turning about Z converts)"
+    if any(node.inputs[k].is_linked for k in ("Location", "Rotation", "Scale")):
+        return 0.0, "a Mapping node with linked values on the environment dropped"
+    vec = node.inputs["Vector"]
+    if vec.is_linked and not (vec.links[0].from_node.bl_idname == "ShaderNodeTexCoord"
+                              and vec.links[0].from_socket.name == "Generated"):
+        return 0.0, (f"environment mapping of {vec.links[0].from_node.bl_idname}.{vec.links[0].from_socket.name} "
+                     "dropped (the Generated direction converts)")
+    rot = np.asarray(node.inputs["Rotation"].default_value, np.float64)
+    scale = np.asarray(node.inputs["Scale"].default_value, np.float64)
+    notes = []
+    if abs(rot[0]) > 1e-6 or abs(rot[1]) > 1e-6:
+        notes.append("environment rotation about X or Y dropped (about Z converts)")
+    if not np.allclose(scale, scale[0]) or scale[0] <= 0:
+        notes.append(f"environment mapping scale {tuple(round(float(v), 3) for v in scale)} dropped")
+    if np.abs(np.asarray(node.inputs["Location"].default_value)).max() > 1e-6:
+        notes.append("environment mapping location dropped")
+    turn = float(rot[2]) if node.vector_type == "POINT" else -float(rot[2])
+    return turn, "; ".join(notes)
+
+
 def _check_replace(bpy, rep: dict, file: str) -> None:
     from nasset_reference_renderer.scene import is_asset_file
 
@@ -1195,6 +1385,9 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
     if output.exists():
         output.unlink()
     converter = _BlenderConverter(bpy, label, output, rep, check_usd)
+    if len(bpy.data.scenes) > 1:  # Blender renders the file's active scene and view layer (as a command-line render)
+        converter.warn(f"the file has scenes {sorted(sc.name for sc in bpy.data.scenes)}: scene "
+                       f"{bpy.context.scene.name!r} (the active one), view layer {bpy.context.view_layer.name!r} converted")
     for note in viewport_notes:
         converter.warn(note)
     return converter.run()

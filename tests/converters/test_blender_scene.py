@@ -355,3 +355,61 @@ def test_a_baked_object_has_the_geometry_cycles_renders(tmp_path):
     geo = bsc.mesh_geometry(bsc.pick_objects(["Rounded"]))
     assert len(geo.faces) == 12 * 4 ** 2
     assert np.abs(geo.points).max() < 0.5  # the subdivided surface lies inside the cube's corners
+
+
+@pytest.mark.parametrize("muted", [False, True])
+def test_emission_inside_a_node_group_is_found(muted):
+    """An Emission shader inside a node group was not seen (the object was baked as if it did not emit); a muted one
+    emits nothing in Cycles and is not refused."""
+    from nasset_converters.blender.fidelity import _group
+
+    names = build_example("blender-surface")
+    ob = bpy.context.scene.objects[names[0]]
+
+    def glow(tree, gin, gout):
+        em = tree.nodes.new("ShaderNodeEmission")
+        em.inputs["Strength"].default_value = 4.0
+        em.mute = muted
+        tree.links.new(em.outputs[0], gout.inputs[0])
+
+    mat = bpy.data.materials.new("Glow")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    for node in [n for n in nt.nodes if n.bl_idname != "ShaderNodeOutputMaterial"]:
+        nt.nodes.remove(node)
+    group = nt.nodes.new("ShaderNodeGroup")
+    group.node_tree = _group(bpy, "GlowGroup", [], glow)
+    nt.links.new(group.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    ob.data.materials.clear()
+    ob.data.materials.append(mat)
+    if muted:
+        assert bsc.pick_objects([ob.name]) == [ob]
+    else:
+        with pytest.raises(NassetError) as e:
+            bsc.pick_objects([ob.name])
+        assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "emits light" in str(e.value)
+    assert sorted(m.name for m in bpy.data.materials if m.name.startswith("Glow")) == ["Glow"]
+
+
+def test_non_finite_and_huge_vertices_drop_their_triangles(tmp_path):
+    """A vertex at NaN, or at inf (which Blender stores as 3.4e38): the converter wrote them, and the renderer refused
+    the whole stage (SCENE_INVALID: "mesh topology invalid", or world coordinates beyond its bound). Their triangles
+    are left out with a warning naming the object; the rest renders, as in Cycles."""
+    from nasset_converters.blender.usd_export import convert_scene
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    box = bpy.context.active_object
+    box.name = "Broken"
+    box.data.vertices[0].co = (float("nan"), 0.0, 0.0)
+    box.data.vertices[1].co = (float("inf"), 0.0, 0.0)
+    bpy.ops.object.camera_add(location=(0.0, -4.0, 0.0), rotation=(1.5708, 0.0, 0.0))
+    bpy.context.scene.camera = bpy.context.active_object
+    blend = tmp_path / "broken.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    res = convert_scene(blend, tmp_path / "s.usda", check_usd=False)
+    assert [w for w in res.warnings if "Broken" in w and "6 triangles" in w], res.warnings
+    render(load_scene(str(res.output)), RenderSettings(spp=1, width=4, height=4))
+    geo = bsc.mesh_geometry(bsc.pick_objects(["Broken"]))
+    assert len(geo.faces) == 6 and np.isfinite(geo.points).all()

@@ -313,7 +313,7 @@ def test_light_hidden_from_camera_still_lights_the_scene(tmp_path):
 
 
 def test_dome_hidden_from_camera_is_black_behind_and_still_lights_the_scene(tmp_path):
-    """``nasset:cameraVisibility = false`` on a DomeLight (Mitsuba's ``hide_emitters``): camera rays that escape see
+    """``nasset:cameraVisibility = false`` on a DomeLight (Mitsuba's ``hide_emitters``, Cycles' transparent film): camera rays that escape see
     black, and the dome still lights the floor, seen directly and through a mirror-like reflection, as before."""
     from pxr import Sdf, Usd
 
