@@ -441,6 +441,8 @@ class _Loader:
         from nasset_sdk.references import asset_source
 
         broken = self._composition_errors()
+        # a camera is rendered through whatever its visibility or purpose (they hide its gizmo in a viewport)
+        self.cameras = [p for p in Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Camera)]
         settings = self._settings_prim()
         self._purposes = self._settings_purposes(settings)
         unknown: set = set()  # prim type names without a schema
@@ -468,8 +470,6 @@ class _Loader:
                             raise self.err("SCENE_INVALID", "nasset:cameraVisibility must be a bool", str(prim.GetPath()),
                                            "nasset:cameraVisibility")
                         self.lights[n].camera_visible = bool(vis.Get(self.time))  # spec/renderer.md#light-surfaces
-                elif tname == "Camera":
-                    self.cameras.append(prim)
                 elif tname == "Mesh":
                     self._mesh(prim)
                 elif tname in IMPLICIT_PRIMS:

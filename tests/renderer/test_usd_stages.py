@@ -501,3 +501,21 @@ def test_unread_texture_gives_its_authored_fallback(tmp_path, fallback):
         image, said = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit(RED), rtol=1e-4)
     assert any("gone.png not found; its inputs:fallback is used" in m for m in said), said
+
+
+@pytest.mark.parametrize("hide", ["visibility", "purpose"])
+def test_hidden_camera_is_still_the_camera(tmp_path, hide):
+    """Visibility and purpose hide a camera's gizmo in a viewport (Maya exports hidden camera shapes invisible, rigs
+    put cameras under guide groups); rendering through it is unaffected. Such a camera was not found: 'the scene
+    has no UsdGeom.Camera'."""
+    from pxr import Sdf, UsdGeom
+
+    b, _ = _floor_scene()
+    if hide == "visibility":
+        UsdGeom.Imageable(b.stage.GetPrimAtPath("/World/Camera")).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    else:
+        UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
+        Sdf.CopySpec(b.stage.GetRootLayer(), "/World/Camera", b.stage.GetRootLayer(), "/World/Rig/Camera")
+        b.stage.RemovePrim("/World/Camera")
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
