@@ -697,6 +697,13 @@ class _Loader:
             self.warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used")
         return next((p for p in self.stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
 
+    def _products(self, settings) -> list:
+        """The UsdRender.Product prims of the render settings' ``products``, in order."""
+        from pxr import UsdRender
+
+        targets = UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()
+        return [p for p in map(self.stage.GetPrimAtPath, targets) if p and p.IsA(UsdRender.Product)]
+
     def _settings_camera(self, settings):
         """The camera the render settings name (the ``camera`` of their first product that authors one, else their
         own), None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
@@ -704,8 +711,7 @@ class _Loader:
 
         if settings is None:
             return None
-        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
-        for owner in [p for p in products if p and p.IsA(UsdRender.Product)] + [settings]:
+        for owner in self._products(settings) + [settings]:
             targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
             if targets:
                 prim = self.stage.GetPrimAtPath(targets[0])
@@ -721,9 +727,8 @@ class _Loader:
 
         if settings is None:
             return None
-        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
-        owner = next((p for p in products if p and p.IsA(UsdRender.Product)
-                      and UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
+        owner = next((p for p in self._products(settings)
+                      if UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
         base = UsdRender.SettingsBase(owner)
         res = base.GetResolutionAttr().Get(self.time)
         pixel_aspect = base.GetPixelAspectRatioAttr().Get(self.time)
@@ -1033,8 +1038,8 @@ class _Loader:
             v = self._value(node.GetInput(name))
             return default if v is None else v
 
-        unread = ("its inputs:fallback is used" if node.GetInput("fallback") and self._value(node.GetInput("fallback"))
-                  is not None else "the connected input's own value is used")
+        unread = ("its inputs:fallback is used" if self._texture_fallback(producer) is not None
+                  else "the connected input's own value is used")
         asset = value("file", None)
         if asset is None or not asset.path:
             self.warn(f"UsdUVTexture without inputs:file; {unread}", tpath)
