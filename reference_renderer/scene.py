@@ -786,24 +786,33 @@ class _Loader:
 
         mat = self._bound_material(prim)
         if not mat:
-            dc = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance("displayColor")  # a constant one may be an ancestor's
+            primvars = UsdGeom.PrimvarsAPI(prim)  # constant ones may be an ancestor's
+            dc, do = (primvars.FindPrimvarWithInheritance(n) for n in ("displayColor", "displayOpacity"))
             with self._reading(prim.GetPath()):
                 val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
                 val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
+                opacity = do.Get(self.time) if do and do.HasAuthoredValue() else None
+                opacity = np.asarray(opacity, np.float64).ravel() if opacity is not None and len(opacity) else None
+            presence = None  # displayOpacity as the presence of the fallback surface (spec #cutouts)
+            if opacity is not None and np.isfinite(opacity).all() and opacity.mean() < 1.0:
+                if len(opacity) > 1:
+                    self.warn(f"displayOpacity of {len(opacity)} values read as their mean", prim.GetPath())
+                presence = Opacity(float(np.clip(opacity.mean(), 0.0, 1.0)), 0.0)
             if val is not None and len(val) > 1 and varying_colors:  # interpolated per hit (spec #primvar-colors)
-                key = ("display", "primvar")
+                key = ("display", "primvar", presence and presence.value)
                 if key not in self.mat_index:
                     self.mat_index[key] = len(self.mat_rows)
                     material = TexturedMaterial("st", PrimvarColor("displayColor", np.full(3, 0.18)), np.asarray(0.5),
                                                 np.asarray(0.0), np.zeros(3), 0.04, MIN_ALPHA)
                     kd, f0, alpha = material.constants()
-                    self.mat_rows.append((kd, f0, alpha, np.zeros(3), "displayColor (primvar)", material, None))
+                    self.mat_rows.append((kd, f0, alpha, np.zeros(3), "displayColor (primvar)", material, presence))
                 return self.mat_index[key]
             color = tuple(np.clip(val.mean(0), 0, 1)) if val is not None and np.isfinite(val).all() else (0.18,) * 3
-            key = ("display", color)
+            key = ("display", color, presence and presence.value)
             if key not in self.mat_index:
                 self.mat_index[key] = len(self.mat_rows)
-                self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
+                self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}", None,
+                                      presence))
             return self.mat_index[key]
         return self._material_of(mat)
 

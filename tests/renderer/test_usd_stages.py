@@ -519,3 +519,19 @@ def test_hidden_camera_is_still_the_camera(tmp_path, hide):
         b.stage.RemovePrim("/World/Camera")
     image, _ = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+def test_display_opacity_of_an_unbound_mesh_is_its_presence(tmp_path):
+    """An unbound mesh's ``primvars:displayOpacity`` (usdview draws it translucent) is the presence of the fallback
+    surface, as a material's opacity is (spec/renderer.md#cutouts); it rendered opaque. An occluder of opacity 0 over
+    the floor leaves the floor's closed form."""
+    from pxr import Sdf, UsdGeom, UsdShade
+
+    b, _ = _floor_scene()
+    occluder = b.quad("Occluder", (0, 1, 0), 20.0)
+    UsdShade.MaterialBindingAPI(occluder.GetPrim()).UnbindAllBindings()
+    pv = UsdGeom.PrimvarsAPI(occluder).CreatePrimvar("displayOpacity", Sdf.ValueTypeNames.FloatArray,
+                                                     UsdGeom.Tokens.constant)
+    pv.Set([0.0])
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
