@@ -535,3 +535,19 @@ def test_display_opacity_of_an_unbound_mesh_is_its_presence(tmp_path):
     pv.Set([0.0])
     image, _ = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+@pytest.mark.parametrize("scale, warned", [(1.0, True), (100.0, False)])
+def test_asset_in_other_units_without_the_converting_scale_is_warned(tmp_path, scale, warned):
+    """A metre asset (metersPerUnit 1) placed in a centimetre stage (Maya's and Omniverse's metersPerUnit 0.01)
+    renders 100 x too small unless its placement scales it by 100; nothing said so."""
+    from pxr import UsdGeom
+
+    from nasset_reference_renderer.testscenes import constant_rna_asset
+
+    constant_rna_asset(tmp_path / "ball.usdc")
+    b, _ = _floor_scene()
+    UsdGeom.SetStageMetersPerUnit(b.stage, 0.01)
+    b.asset("Ball", "./ball.usdc", np.diag([scale, scale, scale, 1.0]), typed="Xform")
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert any("/World/Ball" in m and "metersPerUnit" in m for m in scene.warnings) == warned, scene.warnings
