@@ -444,6 +444,8 @@ class _Loader:
         from nasset_sdk.references import asset_source
 
         broken = self._composition_errors()
+        # a camera is rendered through whatever its visibility or purpose (they hide its gizmo in a viewport)
+        self.cameras = [p for p in Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Camera)]
         settings = self._settings_prim()
         self._purposes = self._settings_purposes(settings)
         unknown: set = set()  # prim type names without a schema
@@ -471,8 +473,6 @@ class _Loader:
                             raise self.err("SCENE_INVALID", "nasset:cameraVisibility must be a bool", str(prim.GetPath()),
                                            "nasset:cameraVisibility")
                         self.lights[n].camera_visible = bool(vis.Get(self.time))  # spec/renderer.md#light-surfaces
-                elif tname == "Camera":
-                    self.cameras.append(prim)
                 elif tname == "Mesh":
                     self._mesh(prim)
                 elif tname in IMPLICIT_PRIMS:
@@ -700,6 +700,13 @@ class _Loader:
             self.warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used")
         return next((p for p in self.stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
 
+    def _products(self, settings) -> list:
+        """The UsdRender.Product prims of the render settings' ``products``, in order."""
+        from pxr import UsdRender
+
+        targets = UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()
+        return [p for p in map(self.stage.GetPrimAtPath, targets) if p and p.IsA(UsdRender.Product)]
+
     def _settings_camera(self, settings):
         """The camera the render settings name (the ``camera`` of their first product that authors one, else their
         own), None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
@@ -707,8 +714,7 @@ class _Loader:
 
         if settings is None:
             return None
-        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
-        for owner in [p for p in products if p and p.IsA(UsdRender.Product)] + [settings]:
+        for owner in self._products(settings) + [settings]:
             targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
             if targets:
                 prim = self.stage.GetPrimAtPath(targets[0])
@@ -724,9 +730,8 @@ class _Loader:
 
         if settings is None:
             return None
-        products = [self.stage.GetPrimAtPath(t) for t in UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()]
-        owner = next((p for p in products if p and p.IsA(UsdRender.Product)
-                      and UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
+        owner = next((p for p in self._products(settings)
+                      if UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
         base = UsdRender.SettingsBase(owner)
         res = base.GetResolutionAttr().Get(self.time)
         pixel_aspect = base.GetPixelAspectRatioAttr().Get(self.time)
@@ -784,24 +789,33 @@ class _Loader:
 
         mat = self._bound_material(prim)
         if not mat:
-            dc = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance("displayColor")  # a constant one may be an ancestor's
+            primvars = UsdGeom.PrimvarsAPI(prim)  # constant ones may be an ancestor's
+            dc, do = (primvars.FindPrimvarWithInheritance(n) for n in ("displayColor", "displayOpacity"))
             with self._reading(prim.GetPath()):
                 val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
                 val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
+                opacity = do.Get(self.time) if do and do.HasAuthoredValue() else None
+                opacity = np.asarray(opacity, np.float64).ravel() if opacity is not None and len(opacity) else None
+            presence = None  # displayOpacity as the presence of the fallback surface (spec #cutouts)
+            if opacity is not None and np.isfinite(opacity).all() and opacity.mean() < 1.0:
+                if len(opacity) > 1:
+                    self.warn(f"displayOpacity of {len(opacity)} values read as their mean", prim.GetPath())
+                presence = Opacity(float(np.clip(opacity.mean(), 0.0, 1.0)), 0.0)
             if val is not None and len(val) > 1 and varying_colors:  # interpolated per hit (spec #primvar-colors)
-                key = ("display", "primvar")
+                key = ("display", "primvar", presence and presence.value)
                 if key not in self.mat_index:
                     self.mat_index[key] = len(self.mat_rows)
                     material = TexturedMaterial("st", PrimvarColor("displayColor", np.full(3, 0.18)), np.asarray(0.5),
                                                 np.asarray(0.0), np.zeros(3), 0.04, MIN_ALPHA)
                     kd, f0, alpha = material.constants()
-                    self.mat_rows.append((kd, f0, alpha, np.zeros(3), "displayColor (primvar)", material, None))
+                    self.mat_rows.append((kd, f0, alpha, np.zeros(3), "displayColor (primvar)", material, presence))
                 return self.mat_index[key]
             color = tuple(np.clip(val.mean(0), 0, 1)) if val is not None and np.isfinite(val).all() else (0.18,) * 3
-            key = ("display", color)
+            key = ("display", color, presence and presence.value)
             if key not in self.mat_index:
                 self.mat_index[key] = len(self.mat_rows)
-                self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}"))
+                self.mat_rows.append((np.array(color), np.full(3, 0.04), 0.25, np.zeros(3), f"displayColor{color}", None,
+                                      presence))
             return self.mat_index[key]
         return self._material_of(mat)
 
@@ -1036,8 +1050,8 @@ class _Loader:
             v = self._value(node.GetInput(name))
             return default if v is None else v
 
-        unread = ("its inputs:fallback is used" if node.GetInput("fallback") and self._value(node.GetInput("fallback"))
-                  is not None else "the connected input's own value is used")
+        unread = ("its inputs:fallback is used" if self._texture_fallback(producer) is not None
+                  else "the connected input's own value is used")
         asset = value("file", None)
         if asset is None or not asset.path:
             self.warn(f"UsdUVTexture without inputs:file; {unread}", tpath)
@@ -1585,6 +1599,7 @@ class _Loader:
         M = self.matrix(UsdGeom.Xformable(prim))
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
+        self._units_warning(path, data.asset.stage, M)
         pw = world_points(data.points, M)
         tris = pw[data.faces]
         if data.used_points is None:  # the box of the triangles is that of the points they use
@@ -1594,6 +1609,19 @@ class _Loader:
         inst = Instance("neural", path, 0, 0, M, asset=ai)
         box = box3(pw[data.used_points]) if len(data.faces) else None
         self._add(inst, tris, None, np.arange(len(data.faces)), ng=face_normals(tris), box=box)
+
+    def _units_warning(self, path: str, asset_stage, M: np.ndarray) -> None:
+        """A warning when a stage that authors ``metersPerUnit`` places an asset of other units without the scale that
+        converts them (USD converts nothing: spec/format.md#coordinates); the asset then renders at another size."""
+        from pxr import UsdGeom
+
+        if not self.stage.HasAuthoredMetadata("metersPerUnit"):
+            return
+        ratio = float(asset_stage.GetMetadata("metersPerUnit") or 1.0) / UsdGeom.GetStageMetersPerUnit(self.stage)
+        scale = float(np.cbrt(abs(np.linalg.det(M[:3, :3]))))
+        if not np.isclose(ratio, 1.0, rtol=1e-6) and not np.isclose(scale, ratio, rtol=0.01):
+            self.warn(f"the asset's metersPerUnit is {ratio:.4g} x the stage's and USD converts no units: its placement "
+                      f"scales it by {scale:.4g}, not {ratio:.4g}, so it renders {scale / ratio:.4g} x its size", path)
 
     # -- lights ----------------------------------------------------------------------------
     def _shaping(self, prim, M) -> dict:

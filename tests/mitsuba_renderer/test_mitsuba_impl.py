@@ -322,3 +322,17 @@ def test_camera_models_as_the_reference_renders_them(nr, tmp_path, which, render
     assert ref.max() > (1.9 if which == "ortho" else 0.9)
     np.testing.assert_allclose(mine[..., 0].mean(0), ref[..., 0].mean(0), atol=0.06)
     assert abs(mine.mean() - ref.mean()) < 0.01 * ref.mean() + 0.002
+
+
+def test_full_purpose_binding_is_read(tmp_path):
+    """The second implementation binds as the reference does (spec/renderer.md#materials): ``material:binding:full``
+    before the all-purpose binding; it read the all-purpose one."""
+    from pxr import UsdShade
+
+    from nasset_mitsuba_renderer.usdscene import read_material
+
+    b = SceneBuilder()
+    floor = b.quad("Floor", (0, 0, 0), 2.0, diffuse=(0.5, 0.5, 0.5))
+    red = b.material("Red", diffuse=(0.9, 0.2, 0.1), specular=(0, 0, 0))
+    UsdShade.MaterialBindingAPI(floor.GetPrim()).Bind(red, materialPurpose=UsdShade.Tokens.full)
+    np.testing.assert_allclose(read_material(floor.GetPrim(), "s.usda").kd, (0.9, 0.2, 0.1), rtol=1e-6)

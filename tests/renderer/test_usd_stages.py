@@ -501,3 +501,53 @@ def test_unread_texture_gives_its_authored_fallback(tmp_path, fallback):
         image, said = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit(RED), rtol=1e-4)
     assert any("gone.png not found; its inputs:fallback is used" in m for m in said), said
+
+
+@pytest.mark.parametrize("hide", ["visibility", "purpose"])
+def test_hidden_camera_is_still_the_camera(tmp_path, hide):
+    """Visibility and purpose hide a camera's gizmo in a viewport (Maya exports hidden camera shapes invisible, rigs
+    put cameras under guide groups); rendering through it is unaffected. Such a camera was not found: 'the scene
+    has no UsdGeom.Camera'."""
+    from pxr import Sdf, UsdGeom
+
+    b, _ = _floor_scene()
+    if hide == "visibility":
+        UsdGeom.Imageable(b.stage.GetPrimAtPath("/World/Camera")).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    else:
+        UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
+        Sdf.CopySpec(b.stage.GetRootLayer(), "/World/Camera", b.stage.GetRootLayer(), "/World/Rig/Camera")
+        b.stage.RemovePrim("/World/Camera")
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+def test_display_opacity_of_an_unbound_mesh_is_its_presence(tmp_path):
+    """An unbound mesh's ``primvars:displayOpacity`` (usdview draws it translucent) is the presence of the fallback
+    surface, as a material's opacity is (spec/renderer.md#cutouts); it rendered opaque. An occluder of opacity 0 over
+    the floor leaves the floor's closed form."""
+    from pxr import Sdf, UsdGeom, UsdShade
+
+    b, _ = _floor_scene()
+    occluder = b.quad("Occluder", (0, 1, 0), 20.0)
+    UsdShade.MaterialBindingAPI(occluder.GetPrim()).UnbindAllBindings()
+    pv = UsdGeom.PrimvarsAPI(occluder).CreatePrimvar("displayOpacity", Sdf.ValueTypeNames.FloatArray,
+                                                     UsdGeom.Tokens.constant)
+    pv.Set([0.0])
+    image, _ = _render(b, tmp_path)
+    np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
+
+
+@pytest.mark.parametrize("scale, warned", [(1.0, True), (100.0, False)])
+def test_asset_in_other_units_without_the_converting_scale_is_warned(tmp_path, scale, warned):
+    """A metre asset (metersPerUnit 1) placed in a centimetre stage (Maya's and Omniverse's metersPerUnit 0.01)
+    renders 100 x too small unless its placement scales it by 100; nothing said so."""
+    from pxr import UsdGeom
+
+    from nasset_reference_renderer.testscenes import constant_rna_asset
+
+    constant_rna_asset(tmp_path / "ball.usdc")
+    b, _ = _floor_scene()
+    UsdGeom.SetStageMetersPerUnit(b.stage, 0.01)
+    b.asset("Ball", "./ball.usdc", np.diag([scale, scale, scale, 1.0]), typed="Xform")
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    assert any("/World/Ball" in m and "metersPerUnit" in m for m in scene.warnings) == warned, scene.warnings
