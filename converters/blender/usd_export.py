@@ -327,6 +327,9 @@ class _BlenderConverter(StageConverter):
             off.append(f"invisible to {', '.join(rays)} rays")
         if int(lt.cycles.max_bounces) < int(self.bscene.cycles.max_bounces):
             off.append(f"max bounces {lt.cycles.max_bounces}")
+        links = getattr(ob, "light_linking", None)
+        if links is not None and (links.receiver_collection is not None or links.blocker_collection is not None):
+            off.append("light linking (it lights or shadows only some objects)")
         if off:
             self.warn(f"light {ob.name}: {', '.join(off)} in Cycles: dropped (the stage's light lights every path and "
                       "casts shadows)")
@@ -403,6 +406,8 @@ class _BlenderConverter(StageConverter):
         from pxr import Gf, Sdf, UsdLux
 
         out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+        if out is not None and out.inputs["Volume"].is_linked:
+            self.warn(f"world {world.name}: its volume (fog filling the scene) is dropped")
         link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
         if link is None:
             return
@@ -621,6 +626,9 @@ class _BlenderConverter(StageConverter):
         off = [k[len("visible_"):] for k in ("visible_camera", "visible_shadow", "visible_diffuse", "visible_glossy",
                                               "visible_transmission", "visible_volume_scatter") if not getattr(ob, k, True)]
         flags = [k for k in ("is_holdout", "is_shadow_catcher") if getattr(ob, k, False)]
+        links = getattr(ob, "light_linking", None)
+        if links is not None and (links.receiver_collection is not None or links.blocker_collection is not None):
+            flags.append("light linking")
         if off or flags:
             self.warn(f"object {ob.name}: " + ", ".join(([f"invisible to {', '.join(off)} rays"] if off else []) + flags)
                       + " dropped (the stage shows it to every ray as an ordinary surface)")
@@ -824,6 +832,11 @@ def map_material(mat) -> tuple[dict, list]:
                                                        "written as its see-through boundary)"]
             return dict(NO_SURFACE), []
         notes: list = []
+        if out.inputs["Volume"].is_linked:
+            notes.append(f"material {mat.name}: volume shader dropped (the surface alone is written)")
+        if out.inputs["Displacement"].is_linked:
+            notes.append(f"material {mat.name}: displacement ({mat.displacement_method.lower().replace('_', ' ')}) "
+                         "dropped (the undisplaced, unbumped surface is written)")
         inputs = _map_shader(SimpleNamespace(name=mat.name), out.inputs["Surface"].links[0].from_node, notes)
     return (grey, notes) if inputs is None else (inputs, notes)
 

@@ -655,3 +655,29 @@ def test_a_mapping_node_turning_the_environment_turns_the_dome(tmp_path, vector_
     c, s = math.cos(math.radians(-70.0)), math.sin(math.radians(-70.0))
     spin = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
     assert np.allclose(m, DOME_ROWS[:3, :3] @ spin, atol=1e-6), m
+
+
+def test_volumes_displacement_and_light_linking_are_named(tmp_path):
+    """A world volume (fog), a material's volume next to its surface, its displacement, and light linking (an object
+    receiving only some lights, a light lighting only some objects) change Cycles' image and were dropped without a
+    word."""
+    from nasset_converters.blender.fidelity import _add, _light, _material, _new_scene, _world
+
+    _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+    nt = _world(bpy).node_tree
+    fog = nt.nodes.new("ShaderNodeVolumePrincipled")
+    nt.links.new(fog.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputWorld").inputs["Volume"])
+    mat = _material(bpy, "Jelly")
+    out = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    mat.node_tree.links.new(mat.node_tree.nodes.new("ShaderNodeVolumeAbsorption").outputs[0], out.inputs["Volume"])
+    mat.node_tree.links.new(mat.node_tree.nodes.new("ShaderNodeDisplacement").outputs[0], out.inputs["Displacement"])
+    cube = _add(bpy, "cube", "Jelly", mat)
+    lamp = _light(bpy, "Lamp", "POINT", (1.0, -1.0, 2.0), energy=10.0)
+    only = bpy.data.collections.new("OnlyThese")
+    lamp.light_linking.receiver_collection = only
+    cube.light_linking.blocker_collection = only
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "v.blend"))
+    text = "\n".join(convert_scene(tmp_path / "v.blend", tmp_path / "s.usda").warnings)
+    for part in ("world World: its volume", "material Jelly: volume shader dropped", "material Jelly: displacement",
+                 "light Lamp: light linking", "object Jelly: light linking"):
+        assert part in text, (part, text)
