@@ -882,6 +882,19 @@ def _hdri_turned(bpy, folder: Path, size: int) -> None:
     nt.links.new(mapping.outputs["Vector"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeTexEnvironment").inputs["Vector"])
 
 
+def _sky_world(bpy, folder: Path, size: int) -> None:
+    # a Sky Texture world (Blender's default sky model, sun disc on) the only light: rendered into a lat-long map
+    _new_scene(bpy, size, (0.0, -2.8, 1.1), (0.0, 0.0, 0.5))
+    _floor(bpy)
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Grey", **{"Color": (0.7, 0.7, 0.7)}), smooth=True, radius=0.4,
+         location=(0.0, 0.0, 0.4))
+    world = _world(bpy, strength=0.3)
+    nt = world.node_tree
+    sky = nt.nodes.new("ShaderNodeTexSky")
+    sky.sun_elevation, sky.sun_rotation = math.radians(35.0), math.radians(60.0)
+    nt.links.new(sky.outputs["Color"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground").inputs["Color"])
+
+
 SCENES = {
     "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor (UVs through a Mapping node), "
                               "a Non-Color PNG as a Principled Base Color on a box"),
@@ -948,6 +961,8 @@ SCENES = {
                                       "placed twice (one turned 150 deg) by collection instances"),
     "hdri_turned": FidelityScene("hdri_turned", _hdri_turned, "the hdri scene's map turned 70 deg about Z by a Mapping "
                                  "node on the Generated direction"),
+    "sky_world": FidelityScene("sky_world", _sky_world, "a Sky Texture world (sun 35 deg high, strength 0.3), the only "
+                               "light, over a floor and a ball"),
     "render_evaluation": FidelityScene("render_evaluation", _render_evaluation, "viewport and render settings apart: "
                                        "Subdivision Surface levels 0 / render 3, a Bevel in renders only, an Array in "
                                        "the viewport only, a ball and a collection instancer disabled in viewports (an "
@@ -1152,6 +1167,10 @@ NOTES = """
 - hdri_turned read ratio 1.13 / 1.18 / 1.01 and MSE / noise 162 (64 x 64, 64 spp; 0.99 at 32 x 32 now): a Mapping node
   turning the environment about Z (how artists aim an HDRI) was dropped with a warning. The dome now turns by the
   opposite angle about USD +Y (a Texture-type mapping by the angle itself).
+- sky_world rendered black (ratio 0, MSE / noise 2809 at 64 x 64, 64 spp; 0.95 at 32 x 32 now): a world of other nodes
+  than a constant or an Environment Texture (Sky Texture, gradients, shader mixes, a Strength from nodes, a
+  mirror-ball projection) was dropped with a warning. Cycles now renders it with an equirectangular camera into a
+  1024 x 512 lat-long map for the dome (`converters/blender/world_bake.py`), warned by name.
 """
 
 

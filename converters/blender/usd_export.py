@@ -403,8 +403,6 @@ class _BlenderConverter(StageConverter):
             self._world_tree(world, resolved.node_tree)
 
     def _world_tree(self, world, tree) -> None:
-        from pxr import Gf, Sdf, UsdLux
-
         out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
         if out is not None and out.inputs["Volume"].is_linked:
             self.warn(f"world {world.name}: its volume (fog filling the scene) is dropped")
@@ -413,12 +411,10 @@ class _BlenderConverter(StageConverter):
             return
         bg = link.from_node
         if bg.bl_idname != "ShaderNodeBackground":
-            self.warn(f"world {world.name}: {bg.bl_idname} is not convertible (Background only): skipped")
-            return
+            return self._world_rendered(world, tree, f"its surface is a {bg.bl_idname}")
         strength, s_linked = _socket(bg, "Strength", 1.0)
         if s_linked:
-            self.warn(f"world {world.name}: linked Strength dropped (1 used)")
-            strength = 1.0
+            return self._world_rendered(world, tree, "its Strength comes from nodes")
         col = bg.inputs["Color"]
         if not col.is_linked:
             rgb = np.array(col.default_value[:3], np.float64) * float(strength)
@@ -427,26 +423,45 @@ class _BlenderConverter(StageConverter):
             return
         src = col.links[0].from_node
         if src.bl_idname != "ShaderNodeTexEnvironment" or src.image is None:
-            self.warn(f"world {world.name}: background colour from {src.bl_idname} dropped (constant colour or an "
-                      "Environment Texture are converted)")
-            return
+            return self._world_rendered(world, tree, f"its colour comes from {src.bl_idname}")
+        if src.projection != "EQUIRECTANGULAR":
+            return self._world_rendered(world, tree, f"its environment has {src.projection} projection")
         turn = 0.0
         if src.inputs["Vector"].is_linked:
             turn, note = _environment_turn(src.inputs["Vector"].links[0])
             if note:
-                self.warn(f"world {world.name}: {note}")
-        if src.projection != "EQUIRECTANGULAR":
-            self.warn(f"world {world.name}: {src.projection} environment projection is not converted")
-            return
-        from pxr import Tf
-
-        from nasset_reference_renderer.film import write_exr
-
+                return self._world_rendered(world, tree, note)
         img = src.image
         wid, hei = img.size
         px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
         # coarse maps made ENVMAP_MIN_WIDTH wide: at 8x, a 16 x 8 map's nearest texels still showed as steps
         px = _upsampled(px, min_width=ENVMAP_MIN_WIDTH) if src.interpolation != "Closest" else px
+        self._dome_map(world, px, float(strength), turn, f"environment {wid}x{hei}")
+        if src.interpolation not in ("Linear", "Closest"):
+            self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")
+        if px.shape[:2] == (hei, wid) and src.interpolation != "Closest":
+            self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
+                      "texels by the reference renderer (Cycles: linear)")
+
+    def _world_rendered(self, world, tree, why: str) -> None:
+        """A world whose nodes do not map to a constant or an Environment Texture: Cycles renders it into a lat-long
+        map (:mod:`world_bake`), which becomes the dome. Before, such worlds were dropped with a warning (a scene lit
+        by a Sky Texture rendered black)."""
+        from .world_bake import WORLD_WIDTH, reads_light_path, render_world
+
+        px = render_world(self.bpy, world)
+        self.warn(f"world {world.name}: {why}: rendered by Cycles into a {WORLD_WIDTH} x {WORLD_WIDTH // 2} lat-long map"
+                  + (" (it reads Light Path: the map is what camera rays see, also used for lighting)"
+                     if reads_light_path(tree) else ""))
+        self._dome_map(world, px, 1.0, 0.0, f"rendered {WORLD_WIDTH}x{WORLD_WIDTH // 2}")
+
+    def _dome_map(self, world, px: np.ndarray, strength: float, turn: float, what: str) -> None:
+        """A DomeLight of lat-long texels ``px`` [H, W, 3] (an Environment Texture's layout) times ``strength``,
+        turned by ``turn`` about Blender's Z (:func:`_environment_turn`)."""
+        from pxr import Gf, Sdf, Tf, UsdLux
+
+        from nasset_reference_renderer.film import write_exr
+
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         tex = tex_dir / f"{Tf.MakeValidIdentifier(world.name)}.exr"
@@ -460,13 +475,8 @@ class _BlenderConverter(StageConverter):
         c, s_ = math.cos(DOME_TURN_SIGN * turn), math.sin(DOME_TURN_SIGN * turn)  # about USD +Y (Blender +Z)
         spin = np.array([[c, 0.0, -s_, 0.0], [0.0, 1.0, 0.0, 0.0], [s_, 0.0, c, 0.0], [0.0, 0.0, 0.0, 1.0]])
         self._xform(light.GetPrim(), DOME_ROWS @ spin)
-        self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
+        self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} ({what})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
-        if src.interpolation not in ("Linear", "Closest"):
-            self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")
-        if px.shape[:2] == (hei, wid) and src.interpolation != "Closest":
-            self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
-                      "texels by the reference renderer (Cycles: linear)")
 
     def _dome_camera_visibility(self, light, world) -> None:
         """Cycles' transparent film (Film > Transparent) and a world hidden from camera rays (its Ray Visibility >
