@@ -1250,6 +1250,11 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
     if link.from_socket.name == "Alpha":  # straight alpha, linear whatever the colour space
         alpha = px[..., 3] if img.channels == 4 else np.ones((h, w))
         rgb, space, what = np.repeat(alpha[..., None], 3, -1), "Non-Color", f"alpha of image {img.name} ({w}x{h})"
+    if tex.interpolation == "Closest":  # nearest texels: repeated up to 64x (within the budget), so that the
+        f = 64  # renderer's bilinear lookup blends only the outer 1/128 of each texel
+        while f > 1 and rgb.shape[0] * rgb.shape[1] * f * f > TEXTURE_MAX_PIXELS:
+            f //= 2
+        rgb = rgb.repeat(f, 0).repeat(f, 1)
     if space == "sRGB":
         # Cycles interpolates 8-bit sRGB texels before decoding them: resampled finer in sRGB, then decoded, the
         # renderer's bilinear lookup of linear texels follows that
@@ -1258,7 +1263,7 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
         rgb = srgb_to_linear(np.clip(rgb, 0.0, 1.0))
     elif space not in _LINEAR_SPACES:
         notes.append(f"material {mat.name}: image {img.name} in colour space {space} taken as linear")
-    if tex.interpolation != "Linear":
+    if tex.interpolation not in ("Linear", "Closest"):
         notes.append(f"material {mat.name}: image {img.name}: {tex.interpolation} interpolation looked up bilinearly")
     if tex.projection != "FLAT":
         notes.append(f"material {mat.name}: image {img.name}: {tex.projection} projection dropped (UV mapped)")
