@@ -901,7 +901,7 @@ def _pixel_art(bpy, folder: Path, size: int) -> None:
 
     _new_scene(bpy, size, (0.0, -2.4, 1.6), (0.0, 0.0, 0.2))
     rng = np.random.default_rng(3)
-    for name, n, colorspace in (("floor", 8, "sRGB"), ("box", 4, "Non-Color")):
+    for name, n in (("floor", 8), ("box", 4)):
         write_png(folder / f"{name}.png", rng.integers(20, 250, (n, n, 3)).astype(np.uint8))
     floor = _material(bpy, "PixelFloor")
     _image_texture(bpy, floor, "Color", folder / "floor.png", "sRGB")
