@@ -432,10 +432,19 @@ class _BlenderConverter(StageConverter):
             if note:
                 return self._world_rendered(world, tree, note)
         img = src.image
+        space = img.colorspace_settings.name
+        if space != "sRGB" and space not in _LINEAR_SPACES:
+            return self._world_rendered(world, tree, f"its environment image is in colour space {space}")
         wid, hei = img.size
         px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
+        if img.channels < 3:
+            px = np.repeat(px[..., :1], 3, -1)
         # coarse maps made ENVMAP_MIN_WIDTH wide: at 8x, a 16 x 8 map's nearest texels still showed as steps
         px = _upsampled(px, min_width=ENVMAP_MIN_WIDTH) if src.interpolation != "Closest" else px
+        if space == "sRGB":  # an 8-bit (or sRGB-tagged) map: decoded after the resampling, as Cycles interpolates
+            from nasset_reference_renderer.textures import srgb_to_linear  # 8-bit texels before decoding them
+
+            px = srgb_to_linear(np.clip(px, 0.0, 1.0)).astype(np.float32)
         self._dome_map(world, px, float(strength), turn, f"environment {wid}x{hei}")
         if src.interpolation not in ("Linear", "Closest"):
             self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")

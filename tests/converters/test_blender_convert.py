@@ -721,3 +721,22 @@ def test_closest_interpolation_keeps_texels_sharp(tmp_path):
     tex = inputs["diffuseColor"]
     assert tex.image.shape[:2] == (4 * 64, 4 * 64) and not notes, (tex.image.shape, notes)
     assert len(np.unique(tex.image.reshape(-1, 3), axis=0)) == 16  # the 4 x 4 texels, nothing in between
+
+
+def test_an_srgb_environment_image_is_decoded(tmp_path):
+    """An 8-bit sRGB panorama (PNG, JPEG) on the world: its stored values were written as linear radiance (the
+    fidelity scene hdri_srgb: ratio 1.7-2.1, MSE 280x its noise at 64 x 64, 64 spp, without a warning). They are
+    decoded as Cycles decodes them."""
+    from pxr import Usd
+
+    from nasset_converters.blender.fidelity import build
+    from nasset_reference_renderer.film import read_exr
+    from nasset_reference_renderer.textures import srgb_to_linear
+
+    res = convert_scene(build("hdri_srgb", tmp_path, 8), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(res.output))
+    texture = stage.GetPrimAtPath("/World/Lights/World").GetAttribute("inputs:texture:file").Get().resolvedPath
+    dome = read_exr(texture)
+    image = bpy.data.images.load(str(tmp_path / "sky.png"))
+    stored = np.array(image.pixels[:]).reshape(-1, 4)[:, :3]
+    assert np.isclose(dome.max(), srgb_to_linear(stored).max(), rtol=1e-3), (dome.max(), stored.max())
