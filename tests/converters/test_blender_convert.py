@@ -740,3 +740,17 @@ def test_an_srgb_environment_image_is_decoded(tmp_path):
     image = bpy.data.images.load(str(tmp_path / "sky.png"))
     stored = np.array(image.pixels[:]).reshape(-1, 4)[:, :3]
     assert np.isclose(dome.max(), srgb_to_linear(stored).max(), rtol=1e-3), (dome.max(), stored.max())
+
+
+def test_soft_falloff_of_a_sphere_light_is_named(tmp_path):
+    """Cycles lights each point from a disk facing it when a point light of radius r has Soft Falloff (Blender's
+    default), dimmer near the light than the sphere the stage gets (measured: converted 17 % brighter, MSE 29x its
+    noise, with r = 0.3 at 0.5 m; exact with Soft Falloff off). It went without a word."""
+    from nasset_converters.blender.fidelity import _light, _new_scene
+
+    for soft in (True, False):
+        _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
+        _light(bpy, "Bulb", "POINT", (0.0, 0.0, 1.0), energy=10.0, shadow_soft_size=0.3).data.use_soft_falloff = soft
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "b.blend"))
+        warned = [w for w in convert_scene(tmp_path / "b.blend", tmp_path / "s.usda").warnings if "Soft Falloff" in w]
+        assert bool(warned) == soft, warned
