@@ -920,6 +920,9 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
                      + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
                 "roughness": rough}
+    if node.bl_idname == "ShaderNodeHoldout":  # Cycles: black to the camera (alpha 0), an absorbing black surface
+        notes.append(f"material {mat.name}: Holdout written as a black surface (the film's alpha 0 is not carried)")
+        return dict(NO_SURFACE)
     if node.bl_idname == "ShaderNodeBsdfTransparent":  # alone: nothing there (presence 0)
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
                 "roughness": 1.0, "opacity": 0.0}
