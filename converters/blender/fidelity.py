@@ -882,6 +882,69 @@ def _hdri_turned(bpy, folder: Path, size: int) -> None:
     nt.links.new(mapping.outputs["Vector"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeTexEnvironment").inputs["Vector"])
 
 
+def _sky_world(bpy, folder: Path, size: int) -> None:
+    # a Sky Texture world (Blender's default sky model, sun disc on) the only light: rendered into a lat-long map
+    _new_scene(bpy, size, (0.0, -2.8, 1.1), (0.0, 0.0, 0.5))
+    _floor(bpy)
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Grey", **{"Color": (0.7, 0.7, 0.7)}), smooth=True, radius=0.4,
+         location=(0.0, 0.0, 0.4))
+    world = _world(bpy, strength=0.3)
+    nt = world.node_tree
+    sky = nt.nodes.new("ShaderNodeTexSky")
+    sky.sun_elevation, sky.sun_rotation = math.radians(35.0), math.radians(60.0)
+    nt.links.new(sky.outputs["Color"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBackground").inputs["Color"])
+
+
+def _pixel_art(bpy, folder: Path, size: int) -> None:
+    # Image Textures with Closest interpolation (pixel art): an 8 x 8 sRGB image on the floor, a 4 x 4 one on a box
+    from nasset_sdk.images import write_png
+
+    _new_scene(bpy, size, (0.0, -2.4, 1.6), (0.0, 0.0, 0.2))
+    rng = np.random.default_rng(3)
+    for name, n in (("floor", 8), ("box", 4)):
+        write_png(folder / f"{name}.png", rng.integers(20, 250, (n, n, 3)).astype(np.uint8))
+    floor = _material(bpy, "PixelFloor")
+    _image_texture(bpy, floor, "Color", folder / "floor.png", "sRGB")
+    box = _material(bpy, "PixelBox")
+    _image_texture(bpy, box, "Color", folder / "box.png", "Non-Color")
+    for mat in (floor, box):
+        next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeTexImage").interpolation = "Closest"
+    _add(bpy, "plane", "Floor", floor, size=3.0)
+    _add(bpy, "cube", "Box", box, size=0.6, location=(0.0, 0.2, 0.3), rotation=(0.0, 0.0, math.radians(30.0)))
+    _sun(bpy)
+    _world(bpy)
+
+
+def _hdri_srgb(bpy, folder: Path, size: int) -> None:
+    # the hdri scene's map stored as an 8-bit sRGB PNG (a JPEG or PNG panorama), which Cycles decodes
+    from nasset_sdk.images import write_png
+
+    _hdri(bpy, folder, size)
+    h, w = 8, 16
+    v, u = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
+    img = np.stack([0.2 + 0.7 * ((np.floor(u * 4) + np.floor(v * 2)) % 2), 0.3 + 0.6 * u, 0.2 + 0.7 * (1 - v)], -1)
+    env = next(n for n in bpy.context.scene.world.node_tree.nodes if n.bl_idname == "ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(write_png(folder / "sky.png", np.round(255 * img).astype(np.uint8))))
+    env.image.colorspace_settings.name = "sRGB"
+
+
+def _holdout(bpy, folder: Path, size: int) -> None:
+    # a ball whose material is a Holdout: black to the camera, casting its shadow
+    _new_scene(bpy, size, (0.0, -2.6, 1.4), (0.0, 0.0, 0.3))
+    _floor(bpy)
+    mat = bpy.data.materials.new("Hold")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    for node in [n for n in nt.nodes if n.bl_idname != "ShaderNodeOutputMaterial"]:
+        nt.nodes.remove(node)
+    nt.links.new(nt.nodes.new("ShaderNodeHoldout").outputs[0],
+                 next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs["Surface"])
+    _add(bpy, "uv_sphere", "Ball", mat, smooth=True, radius=0.35, location=(0.0, 0.2, 0.35))
+    _add(bpy, "cube", "Box", _material(bpy, "Clay", **{"Color": (0.8, 0.5, 0.3)}), size=0.4, location=(0.6, 0.5, 0.2))
+    _sun(bpy)
+    _world(bpy)
+
+
 SCENES = {
     "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor (UVs through a Mapping node), "
                               "a Non-Color PNG as a Principled Base Color on a box"),
@@ -948,6 +1011,13 @@ SCENES = {
                                       "placed twice (one turned 150 deg) by collection instances"),
     "hdri_turned": FidelityScene("hdri_turned", _hdri_turned, "the hdri scene's map turned 70 deg about Z by a Mapping "
                                  "node on the Generated direction"),
+    "sky_world": FidelityScene("sky_world", _sky_world, "a Sky Texture world (sun 35 deg high, strength 0.3), the only "
+                               "light, over a floor and a ball"),
+    "pixel_art": FidelityScene("pixel_art", _pixel_art, "Image Textures with Closest interpolation: an 8 x 8 sRGB image "
+                               "on the floor, a 4 x 4 Non-Color one on a box"),
+    "hdri_srgb": FidelityScene("hdri_srgb", _hdri_srgb, "the hdri scene's map as an 8-bit sRGB PNG"),
+    "holdout": FidelityScene("holdout", _holdout, "a ball of Holdout material beside a box: black to the camera, casting "
+                             "its shadow"),
     "render_evaluation": FidelityScene("render_evaluation", _render_evaluation, "viewport and render settings apart: "
                                        "Subdivision Surface levels 0 / render 3, a Bevel in renders only, an Array in "
                                        "the viewport only, a ball and a collection instancer disabled in viewports (an "
@@ -1152,6 +1222,19 @@ NOTES = """
 - hdri_turned read ratio 1.13 / 1.18 / 1.01 and MSE / noise 162 (64 x 64, 64 spp; 0.99 at 32 x 32 now): a Mapping node
   turning the environment about Z (how artists aim an HDRI) was dropped with a warning. The dome now turns by the
   opposite angle about USD +Y (a Texture-type mapping by the angle itself).
+- sky_world rendered black (ratio 0, MSE / noise 2809 at 64 x 64, 64 spp; 0.95 at 32 x 32 now): a world of other nodes
+  than a constant or an Environment Texture (Sky Texture, gradients, shader mixes, a Strength from nodes, a
+  mirror-ball projection) was dropped with a warning. Cycles now renders it with an equirectangular camera into a
+  1024 x 512 lat-long map for the dome (`converters/blender/world_bake.py`), warned by name.
+- pixel_art read ratio 0.99 / 1.05 / 1.00 and MSE / noise 298 (64 x 64, 64 spp; 1.03 at 32 x 32 now): Closest
+  interpolation was looked up bilinearly (warned), blurring pixel art. Each texel is now repeated 64x (within the
+  texel budget); repeated 8x the scene still read 1.4 at 32 x 32.
+- hdri_srgb read ratio 1.7 / 2.1 / 1.8 and MSE / noise 280 (64 x 64, 64 spp; 1.0 at 32 x 32 now), without a warning: an
+  8-bit sRGB panorama's stored values were written as linear radiance. They are now decoded after the resampling
+  (as Cycles interpolates 8-bit texels before decoding); an environment in another non-linear colour space is
+  rendered by Cycles into the map.
+- holdout read ratio 1.17 and MSE / noise 512 (64 x 64, 64 spp; 0.96 at 32 x 32 now): a Holdout shader was grey ("not
+  convertible"); Cycles shows it black and it blocks light. It is a black surface now (the film's alpha 0 warned).
 """
 
 

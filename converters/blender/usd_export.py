@@ -272,6 +272,11 @@ class _BlenderConverter(StageConverter):
                     self.warn(f"light {ob.name}: spot of radius {r * scale:.3g} written as a point spot (hard shadows; "
                               "the reference renderer shapes point lights only)")
                     r = 0.0
+                if r * scale > 0 and getattr(lt, "use_soft_falloff", False):
+                    self.warn(f"light {ob.name}: Soft Falloff (Blender's default) makes Cycles light each point from a "
+                              f"disk of radius {r * scale:.3g} facing it, dimmer than the stage's sphere light by "
+                              "d^2 / (d^2 + r^2) at distance d (measured: 17 % brighter converted with r = 0.3 at "
+                              "0.5 m; switch Soft Falloff off for an exact conversion)")
                 if r * scale > 0:
                     rw = r * scale
                     light.CreateRadiusAttr(rw)
@@ -328,6 +333,9 @@ class _BlenderConverter(StageConverter):
             off.append(f"invisible to {', '.join(rays)} rays")
         if int(lt.cycles.max_bounces) < int(self.bscene.cycles.max_bounces):
             off.append(f"max bounces {lt.cycles.max_bounces}")
+        links = getattr(ob, "light_linking", None)
+        if links is not None and (links.receiver_collection is not None or links.blocker_collection is not None):
+            off.append("light linking (it lights or shadows only some objects)")
         if off:
             self.warn(f"light {ob.name}: {', '.join(off)} in Cycles: dropped (the stage's light lights every path and "
                       "casts shadows)")
@@ -401,20 +409,18 @@ class _BlenderConverter(StageConverter):
             self._world_tree(world, resolved.node_tree)
 
     def _world_tree(self, world, tree) -> None:
-        from pxr import Gf, Sdf, UsdLux
-
         out = next((n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputWorld" and n.is_active_output), None)
+        if out is not None and out.inputs["Volume"].is_linked:
+            self.warn(f"world {world.name}: its volume (fog filling the scene) is dropped")
         link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
         if link is None:
             return
         bg = link.from_node
         if bg.bl_idname != "ShaderNodeBackground":
-            self.warn(f"world {world.name}: {bg.bl_idname} is not convertible (Background only): skipped")
-            return
+            return self._world_rendered(world, tree, f"its surface is a {bg.bl_idname}")
         strength, s_linked = _socket(bg, "Strength", 1.0)
         if s_linked:
-            self.warn(f"world {world.name}: linked Strength dropped (1 used)")
-            strength = 1.0
+            return self._world_rendered(world, tree, "its Strength comes from nodes")
         col = bg.inputs["Color"]
         if not col.is_linked:
             rgb = np.array(col.default_value[:3], np.float64) * float(strength)
@@ -423,26 +429,54 @@ class _BlenderConverter(StageConverter):
             return
         src = col.links[0].from_node
         if src.bl_idname != "ShaderNodeTexEnvironment" or src.image is None:
-            self.warn(f"world {world.name}: background colour from {src.bl_idname} dropped (constant colour or an "
-                      "Environment Texture are converted)")
-            return
+            return self._world_rendered(world, tree, f"its colour comes from {src.bl_idname}")
+        if src.projection != "EQUIRECTANGULAR":
+            return self._world_rendered(world, tree, f"its environment has {src.projection} projection")
         turn = 0.0
         if src.inputs["Vector"].is_linked:
             turn, note = _environment_turn(src.inputs["Vector"].links[0])
             if note:
-                self.warn(f"world {world.name}: {note}")
-        if src.projection != "EQUIRECTANGULAR":
-            self.warn(f"world {world.name}: {src.projection} environment projection is not converted")
-            return
-        from pxr import Tf
+                return self._world_rendered(world, tree, note)
+        img = src.image
+        space = img.colorspace_settings.name
+        if space != "sRGB" and space not in _LINEAR_SPACES:
+            return self._world_rendered(world, tree, f"its environment image is in colour space {space}")
+        wid, hei = img.size
+        px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
+        if img.channels < 3:
+            px = np.repeat(px[..., :1], 3, -1)
+        # coarse maps made ENVMAP_MIN_WIDTH wide: at 8x, a 16 x 8 map's nearest texels still showed as steps
+        px = _upsampled(px, min_width=ENVMAP_MIN_WIDTH) if src.interpolation != "Closest" else px
+        if space == "sRGB":  # an 8-bit (or sRGB-tagged) map: decoded after the resampling, as Cycles interpolates
+            from nasset_reference_renderer.textures import srgb_to_linear  # 8-bit texels before decoding them
+
+            px = srgb_to_linear(np.clip(px, 0.0, 1.0)).astype(np.float32)
+        self._dome_map(world, px, float(strength), turn, f"environment {wid}x{hei}")
+        if src.interpolation not in ("Linear", "Closest"):
+            self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")
+        if px.shape[:2] == (hei, wid) and src.interpolation != "Closest":
+            self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
+                      "texels by the reference renderer (Cycles: linear)")
+
+    def _world_rendered(self, world, tree, why: str) -> None:
+        """A world whose nodes do not map to a constant or an Environment Texture: Cycles renders it into a lat-long
+        map (:mod:`world_bake`), which becomes the dome. Before, such worlds were dropped with a warning (a scene lit
+        by a Sky Texture rendered black)."""
+        from .world_bake import WORLD_WIDTH, reads_light_path, render_world
+
+        px = render_world(self.bpy, world)
+        self.warn(f"world {world.name}: {why}: rendered by Cycles into a {WORLD_WIDTH} x {WORLD_WIDTH // 2} lat-long map"
+                  + (" (it reads Light Path: the map is what camera rays see, also used for lighting)"
+                     if reads_light_path(tree) else ""))
+        self._dome_map(world, px, 1.0, 0.0, f"rendered {WORLD_WIDTH}x{WORLD_WIDTH // 2}")
+
+    def _dome_map(self, world, px: np.ndarray, strength: float, turn: float, what: str) -> None:
+        """A DomeLight of lat-long texels ``px`` [H, W, 3] (an Environment Texture's layout) times ``strength``,
+        turned by ``turn`` about Blender's Z (:func:`_environment_turn`)."""
+        from pxr import Gf, Sdf, Tf, UsdLux
 
         from nasset_reference_renderer.film import write_exr
 
-        img = src.image
-        wid, hei = img.size
-        px = np.array(img.pixels[:], np.float32).reshape(hei, wid, img.channels)[::-1, :, :3]  # Blender rows bottom-up
-        # coarse maps made ENVMAP_MIN_WIDTH wide: at 8x, a 16 x 8 map's nearest texels still showed as steps
-        px = _upsampled(px, min_width=ENVMAP_MIN_WIDTH) if src.interpolation != "Closest" else px
         tex_dir = self.output.parent / f"{self.output.stem}_textures"
         tex_dir.mkdir(parents=True, exist_ok=True)
         tex = tex_dir / f"{Tf.MakeValidIdentifier(world.name)}.exr"
@@ -456,13 +490,8 @@ class _BlenderConverter(StageConverter):
         c, s_ = math.cos(DOME_TURN_SIGN * turn), math.sin(DOME_TURN_SIGN * turn)  # about USD +Y (Blender +Z)
         spin = np.array([[c, 0.0, -s_, 0.0], [0.0, 1.0, 0.0, 0.0], [s_, 0.0, c, 0.0], [0.0, 0.0, 0.0, 1.0]])
         self._xform(light.GetPrim(), DOME_ROWS @ spin)
-        self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} (environment {wid}x{hei})")
+        self._light_common(light, np.full(3, float(strength)), path, f"world {world.name} ({what})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
-        if src.interpolation not in ("Linear", "Closest"):
-            self.warn(f"world {world.name}: {src.interpolation} environment interpolation written as linear")
-        if px.shape[:2] == (hei, wid) and src.interpolation != "Closest":
-            self.warn(f"world {world.name}: environment {wid}x{hei} too large to resample: looked up with nearest "
-                      "texels by the reference renderer (Cycles: linear)")
 
     def _dome_camera_visibility(self, light, world) -> None:
         """Cycles' transparent film (Film > Transparent) and a world hidden from camera rays (its Ray Visibility >
@@ -622,6 +651,9 @@ class _BlenderConverter(StageConverter):
         off = [k[len("visible_"):] for k in ("visible_camera", "visible_shadow", "visible_diffuse", "visible_glossy",
                                               "visible_transmission", "visible_volume_scatter") if not getattr(ob, k, True)]
         flags = [k for k in ("is_holdout", "is_shadow_catcher") if getattr(ob, k, False)]
+        links = getattr(ob, "light_linking", None)
+        if links is not None and (links.receiver_collection is not None or links.blocker_collection is not None):
+            flags.append("light linking")
         if off or flags:
             self.warn(f"object {ob.name}: " + ", ".join(([f"invisible to {', '.join(off)} rays"] if off else []) + flags)
                       + " dropped (the stage shows it to every ray as an ordinary surface)")
@@ -826,6 +858,11 @@ def map_material(mat) -> tuple[dict, list]:
                                                        "written as its see-through boundary)"]
             return dict(NO_SURFACE), []
         notes: list = []
+        if out.inputs["Volume"].is_linked:
+            notes.append(f"material {mat.name}: volume shader dropped (the surface alone is written)")
+        if out.inputs["Displacement"].is_linked:
+            notes.append(f"material {mat.name}: displacement ({mat.displacement_method.lower().replace('_', ' ')}) "
+                         "dropped (the undisplaced, unbumped surface is written)")
         inputs = _map_shader(SimpleNamespace(name=mat.name), out.inputs["Surface"].links[0].from_node, notes)
     return (grey, notes) if inputs is None else (inputs, notes)
 
@@ -885,6 +922,9 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
                      + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
                 "roughness": rough}
+    if node.bl_idname == "ShaderNodeHoldout":  # Cycles: black to the camera (alpha 0), an absorbing black surface
+        notes.append(f"material {mat.name}: Holdout written as a black surface (the film's alpha 0 is not carried)")
+        return dict(NO_SURFACE)
     if node.bl_idname == "ShaderNodeBsdfTransparent":  # alone: nothing there (presence 0)
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
                 "roughness": 1.0, "opacity": 0.0}
@@ -1229,6 +1269,11 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
     if link.from_socket.name == "Alpha":  # straight alpha, linear whatever the colour space
         alpha = px[..., 3] if img.channels == 4 else np.ones((h, w))
         rgb, space, what = np.repeat(alpha[..., None], 3, -1), "Non-Color", f"alpha of image {img.name} ({w}x{h})"
+    if tex.interpolation == "Closest":  # nearest texels: repeated up to 64x (within the budget), so that the
+        f = 64  # renderer's bilinear lookup blends only the outer 1/128 of each texel
+        while f > 1 and rgb.shape[0] * rgb.shape[1] * f * f > TEXTURE_MAX_PIXELS:
+            f //= 2
+        rgb = rgb.repeat(f, 0).repeat(f, 1)
     if space == "sRGB":
         # Cycles interpolates 8-bit sRGB texels before decoding them: resampled finer in sRGB, then decoded, the
         # renderer's bilinear lookup of linear texels follows that
@@ -1237,7 +1282,7 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
         rgb = srgb_to_linear(np.clip(rgb, 0.0, 1.0))
     elif space not in _LINEAR_SPACES:
         notes.append(f"material {mat.name}: image {img.name} in colour space {space} taken as linear")
-    if tex.interpolation != "Linear":
+    if tex.interpolation not in ("Linear", "Closest"):
         notes.append(f"material {mat.name}: image {img.name}: {tex.interpolation} interpolation looked up bilinearly")
     if tex.projection != "FLAT":
         notes.append(f"material {mat.name}: image {img.name}: {tex.projection} projection dropped (UV mapped)")
