@@ -1271,7 +1271,13 @@ class StageConverter:
         if image.shape[-1] == 1:
             image = np.repeat(image, 3, -1)
         m = _matrix(p.p["to_world"])
-        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
+        scales = np.linalg.norm(m[:3, :3], axis=0)
+        if not np.allclose(scales, 1.0, rtol=1e-4):
+            self.warn(f"emitter {eid}: envmap to_world scales its axes by {np.round(scales, 4).tolist()}: Mitsuba looks the "
+                      "map up with the unnormalised directions this gives, and its lighting does not follow that lookup "
+                      "(measured: scale 3 lit 10 % darker than the converted dome, which follows the lookup); remove the "
+                      "scale")
+        rot = m[:3, :3] / np.maximum(scales, 1e-300)
         row = np.eye(4)
         row[:3, :3] = rot.T
         resampled = self._envmap_resampled(em, image.shape[:2], (_FLIP_DOME @ row)[:3, :3], p.scalar("scale", 1.0))
