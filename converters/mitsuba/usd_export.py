@@ -647,7 +647,8 @@ class StageConverter:
         if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
             info["hide_emitters"] = True
         self.result.integrator = info
-        if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
+        if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator",
+                       "VolumetricMisPathIntegrator"):  # path tracers: the same image of surfaces
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
 
     # -- materials ----------------------------------------------------------------------------

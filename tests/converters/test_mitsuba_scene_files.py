@@ -77,7 +77,7 @@ def test_bitmap_wrap_mode_and_nearest_filter_carry_over(tmp_path, wrap, filt):
     assert image.shape[:2] == ((64, 64) if filt == "nearest" else (8, 8))  # nearest: each texel repeated 8 x 8
 
 
-@pytest.mark.parametrize("integrator", ["path", "volpath", "direct", "aov"])
+@pytest.mark.parametrize("integrator", ["path", "volpath", "volpathmis", "direct", "aov"])
 @pytest.mark.parametrize("hide", [True, False])
 def test_hide_emitters_writes_lights_hidden_from_the_camera(tmp_path, integrator, hide):
     # Mitsuba's hide_emitters (its description of the integrator does not name it) was dropped: the sky and the lights
@@ -98,6 +98,8 @@ def test_hide_emitters_writes_lights_hidden_from_the_camera(tmp_path, integrator
         assert (attr.Get() is False) if hide else not attr.HasAuthoredValue(), light
     assert res.integrator.get("hide_emitters", False) is hide
     assert any("tri" in w and "hides emitters" in w for w in res.warnings) is hide  # a mesh light cannot be hidden
+    # path tracers all (volpathmis too: it was said to have no USD counterpart); direct lighting is another image
+    assert any("no USD counterpart" in w for w in res.warnings) is (integrator == "direct")
 
 
 GROUPED = HEAD + """
