@@ -465,12 +465,13 @@ class _Params:
 
 # -- the converter ------------------------------------------------------------------------------
 class StageConverter:
-    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
+    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, layer: Path | None = None) -> None:
+        """Converts into a new stage at ``layer`` (default ``output``; a temporary file beside it that the caller
+        renames over ``output``); paths written into the stage are relative to ``output``'s folder."""
         from pxr import Usd, UsdGeom
 
         self.mi, self.scene, self.scene_path, self.output = mi, scene, scene_path, output
         self.replace = replace  # shape id -> asset Path
-        self.check_usd = check_usd
         self.result = ConvertResult(output)
         self.names: set[str] = set()
         self.materials: dict = {}
@@ -480,7 +481,7 @@ class StageConverter:
         self.hide_emitters = False  # the integrator's hide_emitters (read by integrator())
         self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
-        self.stage = Usd.Stage.CreateNew(str(output))
+        self.stage = Usd.Stage.CreateNew(str(layer or output))
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
         world = UsdGeom.Xform.Define(self.stage, "/World")
@@ -1353,8 +1354,6 @@ class StageConverter:
                                      "resolution": Gf.Vec2i(*self.result.resolution)},
         }
         self.stage.GetRootLayer().Save()
-        if self.check_usd:
-            self.result.usd_checks = usd_check(self.output)
         return self.result
 
 
@@ -1486,10 +1485,21 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
         if not file.is_file() or not is_asset_file(str(file)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "
                         "(defaultPrim of type NeuralAsset)", file=str(file))
-    output.parent.mkdir(parents=True, exist_ok=True)
-    if output.exists():
-        output.unlink()
-    return StageConverter(mi, mscene, scene, output, rep, check_usd).run()
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise error("WRITE_FAILED", f"cannot create the output folder: {exc.strerror or exc}", file=str(output)) from None
+    import os
+
+    from nasset_sdk.images import atomic_output
+
+    # written beside the output and renamed over it at the end: a failed conversion leaves an earlier output as it was
+    with atomic_output(output, "converted scene") as tmp:
+        os.unlink(tmp)  # USD creates the layer file itself
+        res = StageConverter(mi, mscene, scene, output, rep, layer=Path(tmp)).run()
+    if check_usd:
+        res.usd_checks = usd_check(output)
+    return res
 
 
 def report(res: "ConvertResult", *, as_json: bool) -> int:

@@ -3,6 +3,8 @@ exporters name objects, shape groups, ... Each element is converted, warned by n
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 pytest.importorskip("mitsuba")
@@ -334,3 +336,30 @@ def test_a_scaled_envmap_is_warned(tmp_path):
                        f'name="to_world"><scale value="{scale}"/><rotate y="1" angle="30"/></transform></emitter></scene>')
         res = convert_scene(xml, tmp_path / "env.usda", check_usd=False)
         assert any("envmap to_world scales" in w for w in res.warnings) is warned
+
+
+def test_the_converted_stage_is_written_atomically(tmp_path):
+    # the output was deleted first and written in place: a conversion failing half way lost the earlier stage, and an
+    # output folder that could not be created was a raw FileExistsError traceback
+    import numpy as np
+
+    from nasset_sdk.errors import NassetError
+    from nasset_sdk.images import write_png
+
+    write_png(tmp_path / "c.png", np.full((4, 4, 3), 90, np.uint8))
+    xml = tmp_path / "t.xml"
+    xml.write_text(HEAD + '<shape type="rectangle" id="floor"><bsdf type="diffuse"><texture type="bitmap" '
+                   'name="reflectance"><string name="filename" value="c.png"/></texture></bsdf></shape></scene>')
+    out = tmp_path / "out" / "t.usda"
+    res = convert_scene(xml, out, check_usd=False)
+    before = out.read_text()
+    for tex in res.textures:  # the next conversion cannot write its texture: a folder stands in its way
+        Path(tex).unlink()
+        Path(tex).mkdir()
+    with pytest.raises(NassetError) as e:
+        convert_scene(xml, out, check_usd=False)
+    assert e.value.code == "WRITE_FAILED"
+    assert out.read_text() == before and sorted(p.name for p in out.parent.iterdir()) == ["t.usda", "t_textures"]
+    with pytest.raises(NassetError) as e:
+        convert_scene(xml, xml / "o.usda", check_usd=False)  # the output folder would be a file
+    assert e.value.code == "WRITE_FAILED"
