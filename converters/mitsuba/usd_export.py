@@ -62,6 +62,8 @@ MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
 #: long as the written map stays within ENVMAP_MAX_PIXELS
 ENVMAP_UPSAMPLE = 8
 ENVMAP_MAX_PIXELS = 1 << 22
+#: the lat-long size a sunsky's sky is resampled at (times ENVMAP_UPSAMPLE): smooth, apart from its horizon
+SUNSKY_HW = (64, 128)
 #: latitude rings of the mesh written for a textured Mitsuba ``sphere`` (twice as many longitude segments)
 SPHERE_RINGS = 48
 #: focal length (mm) of the written camera; the apertures carry the field of view
@@ -1249,9 +1251,11 @@ class StageConverter:
                 self._light_common(light, p.rgb("radiance"), path, f"emitter {eid} (constant)")
             elif cls == "EnvironmentMapEmitter":
                 self._envmap(em, eid, p)
+            elif cls == "SunskyEmitter":
+                self._sunsky(em, eid)
             else:
                 self.warn(f"emitter {eid}: {cls} is not convertible (directional, point, spot, area on "
-                          "rectangle/sphere, constant, envmap are): skipped")
+                          "rectangle/sphere, constant, envmap, sunsky are): skipped")
             self._unread(f"emitter {eid}", p)
 
     def _unread(self, what: str, p) -> None:
@@ -1261,10 +1265,6 @@ class StageConverter:
             self.warn(f"{what}: {name} is a texture or spectrum the converter cannot evaluate: its default is used")
 
     def _envmap(self, em, eid, p) -> None:
-        from pxr import Gf, Sdf, UsdLux
-
-        from nasset_reference_renderer.film import write_exr
-
         data = _np(p.p["data"])
         if data.ndim != 3:
             self.warn(f"emitter {eid}: envmap data of shape {data.shape} not understood: skipped")
@@ -1287,7 +1287,14 @@ class StageConverter:
             self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
         else:
             image = resampled
-        from pxr import Tf
+        self._dome(eid, image, row, p.scalar("scale", 1.0), f"envmap {image.shape[1]}x{image.shape[0]}")
+
+    def _dome(self, eid: str, image: np.ndarray, row: np.ndarray, scale: float, what: str) -> None:
+        """A lat-long DomeLight of ``image`` [H, W, 3] (written as OpenEXR beside the output) times ``scale``, its
+        transform ``_FLIP_DOME @ row`` (the renderer's lookup of Mitsuba's, spec/bake.md#lights)."""
+        from pxr import Gf, Sdf, Tf, UsdLux
+
+        from nasset_reference_renderer.film import write_exr
 
         tex = self._texture_file(Tf.MakeValidIdentifier(eid))
         write_exr(tex, image.astype(np.float32))
@@ -1298,8 +1305,59 @@ class StageConverter:
         light.CreateTextureFileAttr(Sdf.AssetPath(rel))
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
         self._xform(light.GetPrim(), _FLIP_DOME @ row)
-        self._light_common(light, np.full(3, p.scalar("scale", 1.0)), path, f"emitter {eid} (envmap {image.shape[1]}x{image.shape[0]})")
+        self._light_common(light, np.full(3, scale), path, f"emitter {eid} ({what})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
+
+    def _sunsky(self, em, eid: str) -> None:
+        """Mitsuba's ``sunsky`` as it renders: its sky (``sun_scale`` 0) resampled with Mitsuba's own lookup into a
+        lat-long DomeLight, as an envmap is, and its sun (``sky_scale`` 0) a DistantLight of the sun's aperture whose
+        irradiance is the sun's radiance integrated over its disk (spec/bake.md#lights)."""
+        from pxr import UsdLux
+
+        params = self.mi.traverse(em)
+        sun_scale, sky_scale = float(params["sun_scale"]), float(params["sky_scale"])
+        aperture = float(re.search(r"Sun aperture\s*=\s*([0-9.eE+-]+)", str(em)).group(1))
+        sun = _np(params["sun_direction"]).ravel()[:3]
+        sun = sun / max(float(np.linalg.norm(sun)), 1e-300)  # world space (Mitsuba's to_world does not move it)
+        try:
+            params["sun_scale"] = 0.0
+            params.update()
+            sky = self._envmap_resampled(em, SUNSKY_HW, _FLIP_DOME[:3, :3], 1.0)  # world directions: no rotation
+            params["sun_scale"], params["sky_scale"] = sun_scale, 0.0
+            params.update()
+            irradiance = self._cap_irradiance(em, sun, math.radians(aperture) * 0.5 * 1.25)
+        finally:
+            params["sun_scale"], params["sky_scale"] = sun_scale, sky_scale
+            params.update()
+        if sky is None:
+            self.warn(f"emitter {eid}: sunsky is evaluated with Mitsuba's JIT variants only (this is a scalar one): "
+                      "skipped")
+            return
+        self._dome(eid, sky, np.eye(4), 1.0, f"sunsky's sky {sky.shape[1]}x{sky.shape[0]}")
+        path = self._name("/World/Lights", f"{eid}_sun")
+        light = UsdLux.DistantLight.Define(self.stage, path)
+        light.CreateAngleAttr(aperture)
+        self._xform(light.GetPrim(), _frame_row(sun))
+        self._light_common(light, irradiance, path, f"emitter {eid} (sunsky's sun, {aperture:.4g} deg)")
+
+    def _cap_irradiance(self, em, axis: np.ndarray, half_angle: float, n: int = 128) -> np.ndarray:
+        """Irradiance [3] at normal incidence from the directions within ``half_angle`` (radians) of ``axis``: the
+        emitter's own radiance (``em.eval``) on an n x 4n grid uniform in solid angle, times the cap's solid angle."""
+        mi = self.mi
+        u = (np.arange(n) + 0.5) / n
+        cos_t = 1.0 - u * (1.0 - math.cos(half_angle))
+        phi = (np.arange(4 * n) + 0.5) / (4 * n) * 2.0 * np.pi
+        ct, ph = np.meshgrid(cos_t, phi, indexing="ij")
+        st = np.sqrt(np.maximum(1.0 - ct * ct, 0.0))
+        t = np.cross(axis, [0.0, 1.0, 0.0] if abs(axis[1]) < 0.9 else [1.0, 0.0, 0.0])
+        t /= np.linalg.norm(t)
+        b = np.cross(axis, t)
+        d = (st * np.cos(ph))[..., None] * t + (st * np.sin(ph))[..., None] * b + ct[..., None] * axis
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d.reshape(-1, 3).T).astype(np.float32))
+        val = em.eval(si)
+        rgb = np.stack([np.asarray(val[c], np.float64).ravel() for c in range(3)], 1)
+        return rgb.mean(0) * 2.0 * np.pi * (1.0 - math.cos(half_angle))
 
     def _envmap_resampled(self, em, hw, rotation, scale: float) -> np.ndarray | None:
         """Mitsuba's own (bilinear) envmap radiance / ``scale`` at the texel centres of a lat-long map of

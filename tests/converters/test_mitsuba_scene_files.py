@@ -363,3 +363,26 @@ def test_the_converted_stage_is_written_atomically(tmp_path):
     with pytest.raises(NassetError) as e:
         convert_scene(xml, xml / "o.usda", check_usd=False)  # the output folder would be a file
     assert e.value.code == "WRITE_FAILED"
+
+
+def test_sunsky_becomes_a_sky_dome_and_a_sun(tmp_path):
+    # Mitsuba's sunsky was skipped with a warning (an outdoor scene went dark): it is now its sky resampled into a dome
+    # and its sun a DistantLight of its aperture (fidelity scene sunsky: MSE 1.03x the noise at 32x32, 64 spp)
+    import numpy as np
+    from pxr import Usd, UsdGeom, UsdLux
+
+    xml = tmp_path / "sun.xml"
+    xml.write_text(HEAD.replace('<emitter type="constant"><rgb name="radiance" value="0.5"/></emitter>', "")
+                   + '<emitter type="sunsky" id="sky"><vector name="sun_direction" value="0.4, 0.3, 0.6"/></emitter>'
+                   '<shape type="sphere"/></scene>')
+    res = convert_scene(xml, tmp_path / "sun.usda", check_usd=False)
+    assert not res.warnings
+    stage = _stage(res.output)
+    dome = UsdLux.DomeLight(stage.GetPrimAtPath("/World/Lights/sky"))
+    assert dome and dome.GetTextureFileAttr().Get().path.endswith(".exr")
+    sun = UsdLux.DistantLight(stage.GetPrimAtPath("/World/Lights/sky_sun"))
+    assert sun.GetAngleAttr().Get() == pytest.approx(0.5358, rel=1e-4)
+    m = np.array(UsdGeom.Xformable(sun.GetPrim()).ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
+    toward = np.array([0.4, 0.3, 0.6]) / np.linalg.norm([0.4, 0.3, 0.6])
+    np.testing.assert_allclose(m[2, :3] / np.linalg.norm(m[2, :3]), toward, atol=1e-6)  # +Z toward the sun
+    assert sun.GetIntensityAttr().Get() > 0.1
