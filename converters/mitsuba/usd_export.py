@@ -798,12 +798,16 @@ class StageConverter:
                              "renderer shades with the mesh normals)")
             return out, notes
         if cls == "BlendBSDF":
-            w = float(np.clip(_Params(mi, bsdf, prefix).scalar("weight", 0.5), 0.0, 1.0))
+            pw = _Params(mi, bsdf, prefix)
+            w = float(np.clip(pw.scalar("weight", 0.5), 0.0, 1.0))
             c0, c1 = (re.search(rf"nested_bsdf\[{k}\]\s*=\s*(\w+)", text) for k in (0, 1))
             a, na = self.map_bsdf(bsdf, f"{prefix}bsdf_0.", c0.group(1) if c0 else "SmoothDiffuse")
             b, nb = self.map_bsdf(bsdf, f"{prefix}bsdf_1.", c1.group(1) if c1 else "SmoothDiffuse")
             out, how = blend_inputs(a, b, w)
-            return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"]
+            textured = pw.bitmap("weight") is not None or bool(pw.textured or pw.unread)
+            return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"] + (
+                [f"blendbsdf weight is a texture: replaced by its mean {w:.3g} (the blend is one mix everywhere)"]
+                if textured else [])
         p = _Params(mi, bsdf, prefix)
         spec_wf = {"useSpecularWorkflow": 1}
         if cls == "SmoothDiffuse":

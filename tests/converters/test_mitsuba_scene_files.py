@@ -386,3 +386,21 @@ def test_sunsky_becomes_a_sky_dome_and_a_sun(tmp_path):
     toward = np.array([0.4, 0.3, 0.6]) / np.linalg.norm([0.4, 0.3, 0.6])
     np.testing.assert_allclose(m[2, :3] / np.linalg.norm(m[2, :3]), toward, atol=1e-6)  # +Z toward the sun
     assert sun.GetIntensityAttr().Get() > 0.1
+
+
+def test_a_textured_blend_weight_is_warned(tmp_path):
+    # a bitmap (or procedural) blendbsdf weight was replaced by its mean without a word (the blend branch returned before
+    # the per-parameter texture notes)
+    import numpy as np
+
+    from nasset_sdk.images import write_png
+
+    write_png(tmp_path / "w.png", np.where(np.arange(16)[:, None] % 2, 255, 0).repeat(16, 1)[..., None].repeat(3, -1)
+              .astype(np.uint8))
+    for weight, warned in (('<texture type="bitmap" name="weight"><string name="filename" value="w.png"/></texture>', True),
+                           ('<texture type="checkerboard" name="weight"/>', True), ('<float name="weight" value="0.3"/>', False)):
+        xml = tmp_path / "blend.xml"
+        xml.write_text(HEAD + f'<shape type="sphere"><bsdf type="blendbsdf">{weight}<bsdf type="diffuse"/>'
+                       '<bsdf type="diffuse"><rgb name="reflectance" value="0.9, 0.1, 0.1"/></bsdf></bsdf></shape></scene>')
+        res = convert_scene(xml, tmp_path / "blend.usda", check_usd=False)
+        assert any("blendbsdf weight is a texture" in w for w in res.warnings) is warned, weight
