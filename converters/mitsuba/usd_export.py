@@ -774,6 +774,9 @@ class StageConverter:
                 img = p.bitmap("opacity")
                 if img is None:
                     out["opacity"] = float(np.clip(p.scalar("opacity", 1.0), 0.0, 1.0))
+                    if p.textured or p.unread:  # a procedural opacity (a bitmap one is a texture below)
+                        notes.append(f"mask opacity is a texture the converter cannot map: replaced by its mean "
+                                     f"{out['opacity']:.3g}")
                 else:  # a colour bitmap is read as its luminance, as Mitsuba's mask does
                     lum = np.clip(img @ np.array([0.212671, 0.715160, 0.072169]), 0.0, 1.0)
                     out["opacity"] = p.texture_map("opacity", np.repeat(lum[..., None], 3, -1), "mask opacity")

@@ -404,3 +404,12 @@ def test_a_textured_blend_weight_is_warned(tmp_path):
                        '<bsdf type="diffuse"><rgb name="reflectance" value="0.9, 0.1, 0.1"/></bsdf></bsdf></shape></scene>')
         res = convert_scene(xml, tmp_path / "blend.usda", check_usd=False)
         assert any("blendbsdf weight is a texture" in w for w in res.warnings) is warned, weight
+
+
+def test_a_procedural_mask_opacity_is_warned(tmp_path):
+    # a checkerboard (any non-bitmap texture) opacity was replaced by its mean without a word
+    xml = tmp_path / "mask.xml"
+    xml.write_text(HEAD + '<shape type="rectangle"><bsdf type="mask"><texture type="checkerboard" name="opacity"/>'
+                   '<bsdf type="diffuse"/></bsdf></shape></scene>')
+    res = convert_scene(xml, tmp_path / "mask.usda", check_usd=False)
+    assert any("mask opacity is a texture the converter cannot map" in w for w in res.warnings)
