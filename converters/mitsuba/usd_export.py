@@ -467,13 +467,15 @@ class _Params:
 
 # -- the converter ------------------------------------------------------------------------------
 class StageConverter:
-    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, layer: Path | None = None) -> None:
+    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, check_usd: bool,
+                 layer: Path | None = None) -> None:
         """Converts into a new stage at ``layer`` (default ``output``; a temporary file beside it that the caller
-        renames over ``output``); paths written into the stage are relative to ``output``'s folder."""
+        renames over ``output``, and then checks); paths written into the stage are relative to ``output``'s folder."""
         from pxr import Usd, UsdGeom
 
         self.mi, self.scene, self.scene_path, self.output = mi, scene, scene_path, output
         self.replace = replace  # shape id -> asset Path
+        self.check_usd = check_usd
         self.result = ConvertResult(output)
         self.names: set[str] = set()
         self.materials: dict = {}
@@ -1419,6 +1421,8 @@ class StageConverter:
                                      "resolution": Gf.Vec2i(*self.result.resolution)},
         }
         self.stage.GetRootLayer().Save()
+        if self.check_usd:
+            self.result.usd_checks = usd_check(self.output)
         return self.result
 
 
@@ -1561,7 +1565,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     # written beside the output and renamed over it at the end: a failed conversion leaves an earlier output as it was
     with atomic_output(output, "converted scene") as tmp:
         os.unlink(tmp)  # USD creates the layer file itself
-        res = StageConverter(mi, mscene, scene, output, rep, layer=Path(tmp)).run()
+        res = StageConverter(mi, mscene, scene, output, rep, False, layer=Path(tmp)).run()  # checked once renamed
     if check_usd:
         res.usd_checks = usd_check(output)
     return res
