@@ -42,6 +42,7 @@ import numpy as np
 
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.images import output_folder
 
 from .common import camera_sensor
 
@@ -449,7 +450,7 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
     if not rep:
         raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     times: dict[str, float] = {}
     t0 = time.perf_counter()
     src = sources[suffix](scene_file, rep, out, res=res, spp=spp, seed=seed, quiet=quiet, say=say)

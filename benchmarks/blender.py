@@ -35,6 +35,7 @@ import numpy as np
 from nasset_converters.blender.cycles import render_cycles, setup_cycles
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
+from nasset_sdk.images import output_folder
 
 QUICK = {"res": 64, "gt_spp": 1024, "cy_spp": "4,16,64", "nr_spp": "1,4,16", "size": "tiny"}
 FULL = {"res": 128, "gt_spp": 4096, "cy_spp": "4,16,64,256", "nr_spp": "1,4,16,64", "size": "small"}
@@ -221,7 +222,7 @@ def run_bench(out_dir, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     if res < 4:
         raise UsageError(f"--res must be >= 4, got {res}")
     t0 = time.perf_counter()

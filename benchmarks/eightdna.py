@@ -41,6 +41,7 @@ import numpy as np
 from nasset_benchmarks.common import machine
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
+from nasset_sdk.images import output_folder
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
 PAPER = ("8DNA paper (Table 1): under near-field light the far-field baseline's MSE is several times 8DNA's; Table 2: "
@@ -329,7 +330,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     if res < 4 or spp < 2 or gt_spp < 2:
         raise UsageError("--res must be >= 4 and --spp, --gt-spp >= 2")
     t_all = time.perf_counter()

@@ -38,6 +38,7 @@ from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
 from nasset_converters.mitsuba.scene import integrator_depths, load_scene, media_caveats, require_integrator
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.images import output_folder
 
 
 def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt_spp: int = 4096, mi_spp=(1, 4, 16, 64),
@@ -56,7 +57,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     if not replace:
         raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     mi = jit_mitsuba(variant)
     mi.set_log_level(mi.LogLevel.Error)
     t_setup = time.perf_counter()

@@ -40,6 +40,7 @@ from nasset_benchmarks.accuracy import estimate_depth
 from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
+from nasset_sdk.images import output_folder
 
 QUICK = {"res": 64, "gt_spp": 1024, "mi_spp": "1,4,16,64", "nr_spp": "1,4,16"}
 PAPERS = ("Published figures: 8DNA renders volumetric assets roughly 2-20x faster than path tracing at 128 spp "
@@ -62,7 +63,7 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     if res < 4:
         raise UsageError(f"--res must be >= 4, got {res}")
     t_setup = time.perf_counter()

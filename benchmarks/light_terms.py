@@ -27,6 +27,7 @@ import numpy as np
 
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import NassetError, UsageError, error
+from nasset_sdk.images import output_folder
 
 #: a black diffuse BSDF for the shapes that are not replaced, in "direct" variants
 BLACK = '<bsdf type="diffuse"><rgb name="reflectance" value="0, 0, 0"/></bsdf>'
@@ -116,7 +117,7 @@ def light_terms(scene_file, replace, out_dir, *, res: int = 64, spp: int = 1024,
     if len(set(lights)) != len(lights):
         raise error("CONVERT_SCENE_LOAD", f"emitter labels are not unique: {lights}; give the emitters ids", file=str(scene_file))
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     variants = {"full": (None, False)}
     for k, label in enumerate(lights):
         variants[f"light{k}"] = (label, False)

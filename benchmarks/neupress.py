@@ -40,6 +40,7 @@ import numpy as np
 from nasset_benchmarks.common import ints
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
+from nasset_sdk.images import output_folder
 
 QUICK = {"res": 64, "gt_spp": 256, "spp": "1,4,16", "equal_spp": 4}
 FULL = {"res": 128, "gt_spp": 2048, "spp": "1,2,4,8,16,32", "equal_spp": 16}
@@ -150,7 +151,7 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    output_folder(out)
     if res < 8:
         raise UsageError(f"--res must be >= 8, got {res}")
     t_setup = time.perf_counter()

@@ -185,6 +185,10 @@ def _replace_shapes(root, replace: dict, scene_file: str) -> None:
     for parent in list(root.iter()):
         for child in list(parent):
             if child.tag == "shape" and child.get("id") in replace:
+                if parent.tag == "shape" and parent.get("type") == "shapegroup":
+                    raise error("CONVERT_SHAPE_UNKNOWN", f"shape {child.get('id')!r} is inside shapegroup "
+                                f"{parent.get('id')!r}, which the scene draws through its instances: an asset is one "
+                                "object in the scene's world space (spec/bake.md#errors)", file=scene_file)
                 if child.find("emitter") is not None:
                     raise error("CONVERT_SHAPE_UNSUPPORTED", f"shape {child.get('id')!r} is an area emitter: a neural "
                                 "asset carries light transport, not emission; keep the emitter in the scene",

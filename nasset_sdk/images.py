@@ -56,6 +56,17 @@ def atomic_output(path, what: str = "image"):
             os.unlink(tmp)
 
 
+def output_folder(path, what: str = "output folder") -> Path:
+    """Create the folder ``path`` (and its parents) for a command's outputs; ``WRITE_FAILED`` naming it when that is
+    not possible (a file in the way, a read-only parent), instead of the OSError's traceback."""
+    folder = Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise error("WRITE_FAILED", f"cannot create the {what}: {exc.strerror or exc}", file=str(folder)) from None
+    return folder
+
+
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)

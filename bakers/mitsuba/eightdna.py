@@ -30,6 +30,7 @@ from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import check_options, finite, progress_bar, times_line, warnings_said, worker_lines
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.images import output_folder
 
 SAMPLER_PRESETS = presets.EIGHTDNA_MITSUBA_SAMPLER  # the table lives in nasset_bakers/presets.py
 RENORM_PRESETS = presets.EIGHTDNA_RENORM
@@ -189,7 +190,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         job = dp.from_main(require_torch())
         scene, asset_ids, example, quiet = job["scene"], job["asset_ids"], None, True
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
-    work.mkdir(parents=True, exist_ok=True)
+    output_folder(work, "bake's work folder")
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
     t_all = time.perf_counter()

@@ -33,6 +33,7 @@ import numpy as np
 
 from nasset_converters.caster import agree
 from nasset_sdk.errors import error
+from nasset_sdk.images import output_folder
 
 from . import CONVERTER_VERSION, is_jit
 
@@ -356,7 +357,7 @@ class DatasetDir:
         self.root = Path(root)
 
     def prepare(self, meta: dict) -> None:
-        self.root.mkdir(parents=True, exist_ok=True)
+        output_folder(self.root, "bake's dataset folder")
         (self.root / "train").mkdir(exist_ok=True)
         (self.root / "val").mkdir(exist_ok=True)
         mp = self.root / "meta.json"

@@ -411,6 +411,15 @@ def _hide_emitters(folder: Path, size: int) -> str:
             + SKY + "</scene>")
 
 
+def _sunsky(folder: Path, size: int) -> str:
+    # Mitsuba's physical sun and sky (turbidity 3), a low sun casting long shadows; the sky and the horizon in view
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 1.4, 2.6", size=size).replace('target="0, 0.3, 0"', 'target="0, 0.9, 0"')
+            + _objects(box_z=-0.5).replace(SUN + SKY, "").replace("</scene>", "")  # their lights: the sunsky's
+            + '<emitter type="sunsky" id="sky"><vector name="sun_direction" value="-0.6, 0.35, -0.5"/>'
+              '<transform name="to_world"><rotate x="1" angle="-90"/></transform></emitter>\n'  # its up is local +Z
+            + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -456,6 +465,8 @@ SCENES = {
                                       "three panels: wrap_mode clamp, mirror (filter_type nearest), repeat (nearest)"),
     "hide_emitters": FidelityScene("hide_emitters", _hide_emitters, "a path integrator with hide_emitters: a sky, a panel "
                                    "light and a light bulb in view, black to the camera, light a floor and a ball"),
+    "sunsky": FidelityScene("sunsky", _sunsky, "Mitsuba's sunsky (a low sun, turbidity 3) over a floor, a ball and a box; "
+                                             "the sky in view"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
                                  "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }

@@ -63,6 +63,8 @@ MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
 #: long as the written map stays within ENVMAP_MAX_PIXELS
 ENVMAP_UPSAMPLE = 8
 ENVMAP_MAX_PIXELS = 1 << 22
+#: the lat-long size a sunsky's sky is resampled at (times ENVMAP_UPSAMPLE): smooth, apart from its horizon
+SUNSKY_HW = (64, 128)
 #: latitude rings of the mesh written for a textured Mitsuba ``sphere`` (twice as many longitude segments)
 SPHERE_RINGS = 48
 #: focal length (mm) of the written camera; the apertures carry the field of view
@@ -466,7 +468,10 @@ class _Params:
 
 # -- the converter ------------------------------------------------------------------------------
 class StageConverter:
-    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
+    def __init__(self, mi, scene, scene_path: Path, output: Path, replace: dict, check_usd: bool,
+                 layer: Path | None = None) -> None:
+        """Converts into a new stage at ``layer`` (default ``output``; a temporary file beside it that the caller
+        renames over ``output``, and then checks); paths written into the stage are relative to ``output``'s folder."""
         from pxr import Usd, UsdGeom
 
         self.mi, self.scene, self.scene_path, self.output = mi, scene, scene_path, output
@@ -481,7 +486,7 @@ class StageConverter:
         self.hide_emitters = False  # the integrator's hide_emitters (read by integrator())
         self.geometry_root, self.looks_root = "/World/Geometry", "/World/Looks"
         self.layer_path = output
-        self.stage = Usd.Stage.CreateNew(str(output))
+        self.stage = Usd.Stage.CreateNew(str(layer or output))
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
         world = UsdGeom.Xform.Define(self.stage, "/World")
@@ -648,7 +653,8 @@ class StageConverter:
         if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
             info["hide_emitters"] = True
         self.result.integrator = info
-        if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator"):
+        if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator",
+                       "VolumetricMisPathIntegrator"):  # path tracers: the same image of surfaces
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
 
     # -- materials ----------------------------------------------------------------------------
@@ -771,6 +777,9 @@ class StageConverter:
                 img = p.bitmap("opacity")
                 if img is None:
                     out["opacity"] = float(np.clip(p.scalar("opacity", 1.0), 0.0, 1.0))
+                    if p.textured or p.unread:  # a procedural opacity (a bitmap one is a texture below)
+                        notes.append(f"mask opacity is a texture the converter cannot map: replaced by its mean "
+                                     f"{out['opacity']:.3g}")
                 else:  # a colour bitmap is read as its luminance, as Mitsuba's mask does
                     lum = np.clip(img @ np.array([0.212671, 0.715160, 0.072169]), 0.0, 1.0)
                     out["opacity"] = p.texture_map("opacity", np.repeat(lum[..., None], 3, -1), "mask opacity")
@@ -795,12 +804,16 @@ class StageConverter:
                              "renderer shades with the mesh normals)")
             return out, notes
         if cls == "BlendBSDF":
-            w = float(np.clip(_Params(mi, bsdf, prefix).scalar("weight", 0.5), 0.0, 1.0))
+            pw = _Params(mi, bsdf, prefix)
+            w = float(np.clip(pw.scalar("weight", 0.5), 0.0, 1.0))
             c0, c1 = (re.search(rf"nested_bsdf\[{k}\]\s*=\s*(\w+)", text) for k in (0, 1))
             a, na = self.map_bsdf(bsdf, f"{prefix}bsdf_0.", c0.group(1) if c0 else "SmoothDiffuse")
             b, nb = self.map_bsdf(bsdf, f"{prefix}bsdf_1.", c1.group(1) if c1 else "SmoothDiffuse")
             out, how = blend_inputs(a, b, w)
-            return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"]
+            textured = pw.bitmap("weight") is not None or bool(pw.textured or pw.unread)
+            return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"] + (
+                [f"blendbsdf weight is a texture: replaced by its mean {w:.3g} (the blend is one mix everywhere)"]
+                if textured else [])
         p = _Params(mi, bsdf, prefix)
         spec_wf = {"useSpecularWorkflow": 1}
         if cls == "SmoothDiffuse":
@@ -1248,9 +1261,11 @@ class StageConverter:
                 self._light_common(light, p.rgb("radiance"), path, f"emitter {eid} (constant)")
             elif cls == "EnvironmentMapEmitter":
                 self._envmap(em, eid, p)
+            elif cls == "SunskyEmitter":
+                self._sunsky(em, eid)
             else:
                 self.warn(f"emitter {eid}: {cls} is not convertible (directional, point, spot, area on "
-                          "rectangle/sphere, constant, envmap are): skipped")
+                          "rectangle/sphere, constant, envmap, sunsky are): skipped")
             self._unread(f"emitter {eid}", p)
 
     def _unread(self, what: str, p) -> None:
@@ -1260,10 +1275,6 @@ class StageConverter:
             self.warn(f"{what}: {name} is a texture or spectrum the converter cannot evaluate: its default is used")
 
     def _envmap(self, em, eid, p) -> None:
-        from pxr import Gf, Sdf, UsdLux
-
-        from nasset_reference_renderer.film import write_exr
-
         data = _np(p.p["data"])
         if data.ndim != 3:
             self.warn(f"emitter {eid}: envmap data of shape {data.shape} not understood: skipped")
@@ -1272,7 +1283,13 @@ class StageConverter:
         if image.shape[-1] == 1:
             image = np.repeat(image, 3, -1)
         m = _matrix(p.p["to_world"])
-        rot = m[:3, :3] / np.maximum(np.linalg.norm(m[:3, :3], axis=0), 1e-300)
+        scales = np.linalg.norm(m[:3, :3], axis=0)
+        if not np.allclose(scales, 1.0, rtol=1e-4):
+            self.warn(f"emitter {eid}: envmap to_world scales its axes by {np.round(scales, 4).tolist()}: Mitsuba looks the "
+                      "map up with the unnormalised directions this gives, and its lighting does not follow that lookup "
+                      "(measured: scale 3 lit 10 % darker than the converted dome, which follows the lookup); remove the "
+                      "scale")
+        rot = m[:3, :3] / np.maximum(scales, 1e-300)
         row = np.eye(4)
         row[:3, :3] = rot.T
         resampled = self._envmap_resampled(em, image.shape[:2], (_FLIP_DOME @ row)[:3, :3], p.scalar("scale", 1.0))
@@ -1280,7 +1297,14 @@ class StageConverter:
             self.warn(f"emitter {eid}: envmap looked up with nearest texels by the reference renderer (Mitsuba: bilinear)")
         else:
             image = resampled
-        from pxr import Tf
+        self._dome(eid, image, row, p.scalar("scale", 1.0), f"envmap {image.shape[1]}x{image.shape[0]}")
+
+    def _dome(self, eid: str, image: np.ndarray, row: np.ndarray, scale: float, what: str) -> None:
+        """A lat-long DomeLight of ``image`` [H, W, 3] (written as OpenEXR beside the output) times ``scale``, its
+        transform ``_FLIP_DOME @ row`` (the renderer's lookup of Mitsuba's, spec/bake.md#lights)."""
+        from pxr import Gf, Sdf, Tf, UsdLux
+
+        from nasset_reference_renderer.film import write_exr
 
         tex = self._texture_file(Tf.MakeValidIdentifier(eid))
         write_exr(tex, image.astype(np.float32))
@@ -1291,8 +1315,59 @@ class StageConverter:
         light.CreateTextureFileAttr(Sdf.AssetPath(rel))
         light.CreateTextureFormatAttr(UsdLux.Tokens.latlong)
         self._xform(light.GetPrim(), _FLIP_DOME @ row)
-        self._light_common(light, np.full(3, p.scalar("scale", 1.0)), path, f"emitter {eid} (envmap {image.shape[1]}x{image.shape[0]})")
+        self._light_common(light, np.full(3, scale), path, f"emitter {eid} ({what})")
         light.GetColorAttr().Set(Gf.Vec3f(1.0, 1.0, 1.0))
+
+    def _sunsky(self, em, eid: str) -> None:
+        """Mitsuba's ``sunsky`` as it renders: its sky (``sun_scale`` 0) resampled with Mitsuba's own lookup into a
+        lat-long DomeLight, as an envmap is, and its sun (``sky_scale`` 0) a DistantLight of the sun's aperture whose
+        irradiance is the sun's radiance integrated over its disk (spec/bake.md#lights)."""
+        from pxr import UsdLux
+
+        params = self.mi.traverse(em)
+        sun_scale, sky_scale = float(params["sun_scale"]), float(params["sky_scale"])
+        aperture = float(re.search(r"Sun aperture\s*=\s*([0-9.eE+-]+)", str(em)).group(1))
+        sun = _np(params["sun_direction"]).ravel()[:3]
+        sun = sun / max(float(np.linalg.norm(sun)), 1e-300)  # world space (Mitsuba's to_world does not move it)
+        try:
+            params["sun_scale"] = 0.0
+            params.update()
+            sky = self._envmap_resampled(em, SUNSKY_HW, _FLIP_DOME[:3, :3], 1.0)  # world directions: no rotation
+            params["sun_scale"], params["sky_scale"] = sun_scale, 0.0
+            params.update()
+            irradiance = self._cap_irradiance(em, sun, math.radians(aperture) * 0.5 * 1.25)
+        finally:
+            params["sun_scale"], params["sky_scale"] = sun_scale, sky_scale
+            params.update()
+        if sky is None:
+            self.warn(f"emitter {eid}: sunsky is evaluated with Mitsuba's JIT variants only (this is a scalar one): "
+                      "skipped")
+            return
+        self._dome(eid, sky, np.eye(4), 1.0, f"sunsky's sky {sky.shape[1]}x{sky.shape[0]}")
+        path = self._name("/World/Lights", f"{eid}_sun")
+        light = UsdLux.DistantLight.Define(self.stage, path)
+        light.CreateAngleAttr(aperture)
+        self._xform(light.GetPrim(), _frame_row(sun))
+        self._light_common(light, irradiance, path, f"emitter {eid} (sunsky's sun, {aperture:.4g} deg)")
+
+    def _cap_irradiance(self, em, axis: np.ndarray, half_angle: float, n: int = 128) -> np.ndarray:
+        """Irradiance [3] at normal incidence from the directions within ``half_angle`` (radians) of ``axis``: the
+        emitter's own radiance (``em.eval``) on an n x 4n grid uniform in solid angle, times the cap's solid angle."""
+        mi = self.mi
+        u = (np.arange(n) + 0.5) / n
+        cos_t = 1.0 - u * (1.0 - math.cos(half_angle))
+        phi = (np.arange(4 * n) + 0.5) / (4 * n) * 2.0 * np.pi
+        ct, ph = np.meshgrid(cos_t, phi, indexing="ij")
+        st = np.sqrt(np.maximum(1.0 - ct * ct, 0.0))
+        t = np.cross(axis, [0.0, 1.0, 0.0] if abs(axis[1]) < 0.9 else [1.0, 0.0, 0.0])
+        t /= np.linalg.norm(t)
+        b = np.cross(axis, t)
+        d = (st * np.cos(ph))[..., None] * t + (st * np.sin(ph))[..., None] * b + ct[..., None] * axis
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d.reshape(-1, 3).T).astype(np.float32))
+        val = em.eval(si)
+        rgb = np.stack([np.asarray(val[c], np.float64).ravel() for c in range(3)], 1)
+        return rgb.mean(0) * 2.0 * np.pi * (1.0 - math.cos(half_angle))
 
     def _envmap_resampled(self, em, hw, rotation, scale: float) -> np.ndarray | None:
         """Mitsuba's own (bilinear) envmap radiance / ``scale`` at the texel centres of a lat-long map of
@@ -1481,10 +1556,21 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
         if not file.is_file() or not is_asset_file(str(file)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "
                         "(defaultPrim of type NeuralAsset)", file=str(file))
-    output.parent.mkdir(parents=True, exist_ok=True)
-    if output.exists():
-        output.unlink()
-    return StageConverter(mi, mscene, scene, output, rep, check_usd).run()
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise error("WRITE_FAILED", f"cannot create the output folder: {exc.strerror or exc}", file=str(output)) from None
+    import os
+
+    from nasset_sdk.images import atomic_output
+
+    # written beside the output and renamed over it at the end: a failed conversion leaves an earlier output as it was
+    with atomic_output(output, "converted scene") as tmp:
+        os.unlink(tmp)  # USD creates the layer file itself
+        res = StageConverter(mi, mscene, scene, output, rep, False, layer=Path(tmp)).run()  # checked once renamed
+    if check_usd:
+        res.usd_checks = usd_check(output)
+    return res
 
 
 def report(res: "ConvertResult", *, as_json: bool) -> int:

@@ -51,6 +51,20 @@ def test_wrong_id_is_unknown_shape(scene, tmp_path):
     assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "shell" in str(e.value)
 
 
+def test_an_output_folder_that_cannot_be_made_is_write_failed(scene, tmp_path):
+    """-o under a file was a raw NotADirectoryError traceback (the benches, the bakes' dataset and work folders alike:
+    nasset_sdk.images.output_folder)."""
+    from nasset_converters.mitsuba.dataset import DatasetDir
+
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    with pytest.raises(NassetError) as e:
+        _run(scene, [f"shell,jelly={a}"], a / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "WRITE_FAILED" and "a.usdc" in str(e.value)
+    with pytest.raises(NassetError) as e:
+        DatasetDir(a / "bake").prepare({})
+    assert e.value.code == "WRITE_FAILED"
+
+
 def test_asset_of_another_object_is_a_mismatch(scene, tmp_path):
     a = _asset(tmp_path, scene, ["shell", "jelly"])
     with pytest.raises(NassetError) as e:

@@ -370,3 +370,14 @@ def test_replace_finds_shapes_declared_in_included_files(mi, tmp_path, rna_asset
     scene = load_file(tmp_path / "s.xml", mi=mi, replace={"prop": str(rna_asset_path)})
     ids = sorted(s.id() for s in scene.shapes())
     assert "prop" not in ids and "kept" in ids and any(i.startswith("nasset_asset") for i in ids)
+
+
+def test_replace_refuses_a_shape_inside_a_shapegroup(mi, tmp_path, rna_asset_path):
+    """As convert-scene, bakes and the accuracy bench do (they do not see such a shape as one of the scene's): the XML
+    replacement took the shape out of the group, so every instance lost it."""
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0"><integrator type="nasset_path"/><shape type="shapegroup" id="g"><shape type="sphere" '
+        'id="ball"/></shape><shape type="instance" id="i"><ref id="g"/></shape></scene>')
+    with pytest.raises(SceneError) as exc:
+        load_file(tmp_path / "s.xml", mi=mi, replace={"ball": str(rna_asset_path)})
+    assert exc.value.code == "CONVERT_SHAPE_UNKNOWN" and "shapegroup 'g'" in exc.value.message
