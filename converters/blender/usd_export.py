@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     usd_check,
 )
 from nasset_sdk.errors import NassetError, UsageError, error
+from nasset_sdk.images import atomic_output, output_folder
 from nasset_sdk.safeopen import trust
 
 from . import Z_UP_TO_Y_UP
@@ -98,8 +100,8 @@ class _Geometry:
 
 
 class _BlenderConverter(StageConverter):
-    def __init__(self, bpy, scene_path: Path, output: Path, replace: dict, check_usd: bool) -> None:
-        super().__init__(None, None, scene_path, output, replace, check_usd)
+    def __init__(self, bpy, scene_path: Path, output: Path, replace: dict, *, layer: Path) -> None:
+        super().__init__(None, None, scene_path, output, replace, False, layer=layer)
         self.bpy = bpy
         self.bscene = bpy.context.scene
         self.emissive_materials: set[str] = set()
@@ -1426,16 +1428,20 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
         label = Path(scene)
     viewport_notes = evaluate_as_render(bpy)
     _check_replace(bpy, rep, str(label))
-    output.parent.mkdir(parents=True, exist_ok=True)
-    if output.exists():
-        output.unlink()
-    converter = _BlenderConverter(bpy, label, output, rep, check_usd)
-    if len(bpy.data.scenes) > 1:  # Blender renders the file's active scene and view layer (as a command-line render)
-        converter.warn(f"the file has scenes {sorted(sc.name for sc in bpy.data.scenes)}: scene "
-                       f"{bpy.context.scene.name!r} (the active one), view layer {bpy.context.view_layer.name!r} converted")
-    for note in viewport_notes:
-        converter.warn(note)
-    return converter.run()
+    output_folder(output.parent)
+    # written beside the output and renamed over it at the end: a failed conversion leaves an earlier output as it was
+    with atomic_output(output, "converted scene") as tmp:
+        os.unlink(tmp)  # USD creates the layer file itself
+        converter = _BlenderConverter(bpy, label, output, rep, layer=Path(tmp))  # checked once renamed
+        if len(bpy.data.scenes) > 1:  # Blender renders the file's active scene and view layer (as a command-line render)
+            converter.warn(f"the file has scenes {sorted(sc.name for sc in bpy.data.scenes)}: scene "
+                           f"{bpy.context.scene.name!r} (the active one), view layer {bpy.context.view_layer.name!r} converted")
+        for note in viewport_notes:
+            converter.warn(note)
+        res = converter.run()
+    if check_usd:
+        res.usd_checks = usd_check(output)
+    return res
 
 
 def run(args) -> int:

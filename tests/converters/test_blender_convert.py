@@ -765,3 +765,27 @@ def test_a_holdout_material_is_black(tmp_path):
     inputs, notes = map_material(bpy.data.materials["Hold"])
     assert inputs["diffuseColor"] == (0.0, 0.0, 0.0) and inputs["specularColor"] == (0.0, 0.0, 0.0), inputs
     assert [n for n in notes if "Holdout" in n and "alpha" in n], notes
+
+
+def test_the_converted_stage_is_written_atomically(tmp_path, monkeypatch):
+    # the output was deleted first and written in place: a conversion failing half way lost the earlier stage, and an
+    # output folder that could not be created was a raw FileExistsError traceback
+    from nasset_converters.blender import usd_export
+
+    out = tmp_path / "out" / "s.usda"
+    convert_scene(None, out, example="blender-surface", check_usd=False)
+    before = out.read_bytes()
+
+    def fail(self):
+        raise NassetError("CONVERT_SHAPE_UNSUPPORTED", "a shape the converter cannot write")
+
+    monkeypatch.setattr(usd_export._BlenderConverter, "shapes", fail)
+    with pytest.raises(NassetError) as e:
+        convert_scene(None, out, example="blender-surface", check_usd=False)
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED"
+    assert out.read_bytes() == before and [p.name for p in out.parent.iterdir() if p.suffix == ".usda"] == ["s.usda"]
+    monkeypatch.undo()
+    (tmp_path / "file").write_text("")
+    with pytest.raises(NassetError) as e:
+        convert_scene(None, tmp_path / "file" / "s.usda", example="blender-surface", check_usd=False)
+    assert e.value.code == "WRITE_FAILED"
