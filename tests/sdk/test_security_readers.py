@@ -115,16 +115,23 @@ def _child(code: str) -> subprocess.CompletedProcess:
 
 
 def test_readers_probe_a_layer_that_crashes_usd_before_opening_it(base, tmp_path):
-    """inspect, view and render (an asset alone and referenced from a scene) raise FILE_UNREADABLE; before: SIGSEGV."""
+    """inspect, view and render (an asset alone, referenced from a scene, found on a search path) raise FILE_UNREADABLE;
+    before: SIGSEGV."""
     asset = _nested_text_file(base, tmp_path / "deep.usda")
     scene = _scene(tmp_path, asset.name)
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    _nested_text_file(base, lib / "deep_lib.usda")
+    bare = tmp_path / "bare.usda"  # a bare reference the resolver finds on the render's search path
+    bare.write_text(_scene(tmp_path, "deep_lib.usda").read_text().replace("@./deep_lib.usda@", "@deep_lib.usda@"))
     code = f"""
 import sys
 from nasset_sdk.errors import NassetError
 from nasset_sdk.inspect import inspect_asset
 from nasset_reference_renderer.scene import load_scene
 for what, fn in (("inspect", lambda: inspect_asset({str(asset)!r})), ("asset", lambda: load_scene({str(asset)!r})),
-                 ("scene", lambda: load_scene({str(scene)!r}))):
+                 ("scene", lambda: load_scene({str(scene)!r})),
+                 ("search_path", lambda: load_scene({str(bare)!r}, search_paths=[{str(lib)!r}]))):
     try:
         fn()
         print(what, "opened")
@@ -134,7 +141,8 @@ for what, fn in (("inspect", lambda: inspect_asset({str(asset)!r})), ("asset", l
 """
     run = _child(code)
     assert run.returncode == 0, (run.returncode, run.stdout, run.stderr[-2000:])
-    assert run.stdout.split() == ["inspect", "FILE_UNREADABLE", "asset", "FILE_UNREADABLE", "scene", "FILE_UNREADABLE"]
+    assert run.stdout.split() == ["inspect", "FILE_UNREADABLE", "asset", "FILE_UNREADABLE", "scene", "FILE_UNREADABLE",
+                                  "search_path", "FILE_UNREADABLE"]
 
 
 def test_scene_referencing_an_amplified_asset_is_refused(base, tmp_path):
