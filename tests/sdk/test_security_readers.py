@@ -207,3 +207,17 @@ def test_a_network_too_slow_for_the_probe_is_refused_not_run(base, tmp_path, mon
     with pytest.raises(NassetError) as exc:
         asset.evaluator()
     assert exc.value.code == "NETWORK_RUNTIME" and "did not finish" in exc.value.message
+
+
+def test_decoded_bytes_counts_every_array_type_at_its_width():
+    from pxr import Gf, Vt
+
+    from nasset_sdk.safeopen import decoded_bytes
+
+    assert decoded_bytes(Vt.QuatdArray(10)) == 10 * 32
+    assert decoded_bytes(Vt.QuatfArray(10)) == 10 * 16
+    assert decoded_bytes(Vt.Matrix3dArray(10)) == 10 * 72
+    assert decoded_bytes(Vt.Matrix4dArray([Gf.Matrix4d(1)] * 3)) == 3 * 128
+    assert decoded_bytes(Vt.Vec3fArray(10)) == 10 * 12
+    assert decoded_bytes(Vt.HalfArray(10)) == 10 * 2
+    assert decoded_bytes(Vt.StringArray(4, "x" * 100)) == 4 * (32 + 100)  # one stored string, four decoded copies
