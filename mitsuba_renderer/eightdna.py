@@ -17,7 +17,7 @@ import numpy as np
 from nasset_sdk.errors import SceneError
 
 from .integrator import ray_eps, register_shader
-from .rna import check_network, safe_normalize, triplane
+from .rna import check_network, checked, safe_normalize, triplane
 
 TWO_PI = 2.0 * np.pi
 
@@ -388,7 +388,7 @@ class EightDnaAsset:
                 sess = ort.InferenceSession(data, sess_options=so, providers=["CPUExecutionProvider"])
             except Exception as exc:
                 raise self._fail("SCENE_INVALID", f"network {name} does not load: {str(exc)[:200]}", str(p.GetPath())) from None
-            self.nets[name] = (sess, sess.get_inputs()[0].name, sess.get_outputs()[0].name)
+            self.nets[name] = (checked(sess, self.path, p), sess.get_inputs()[0].name, sess.get_outputs()[0].name)
 
     # --- networks -----------------------------------------------------------------------------------
 

@@ -166,7 +166,15 @@ def read_network(path, comp, name, threads: int, in_width: int, out_width: int):
     ins, outs = session.get_inputs(), session.get_outputs()
     if len(ins) != 1 or len(outs) != 1 or ins[0].shape[-1] != in_width or outs[0].shape[-1] != out_width:
         raise _fail(path, "SCENE_INVALID", f"{name} io does not match the kind contract (x: {in_width}, y: {out_width})", str(dec.GetPath()))
-    return session, ins[0].name, outs[0].name
+    return checked(session, path, dec), ins[0].name, outs[0].name
+
+
+def checked(session, path, prim):
+    """``session`` run through the SDK's wrapper: at most the rows the runtime probe ran it at per run (memory grows
+    with the rows, spec/security.md#networks), failures typed NETWORK_RUNTIME naming the network."""
+    from nasset_sdk.networks import CheckedSession
+
+    return CheckedSession(session, None, file=str(path), prim=str(prim.GetPath()), attribute="onnx:model")
 
 
 def read_triangles(path, geom, rp):

@@ -49,6 +49,9 @@ def decoded_bound(file_bytes: int) -> int:
     """Most array bytes a file of ``file_bytes`` may decode to."""
     return DECODE_BASE_BYTES + DECODE_RATIO * int(file_bytes)
 MAX_NETWORK_NODES = 4096
+#: Most rows one run of a network is given: readers split larger batches (networks.CheckedSession), and the
+#: runtime probe runs every network once at this size under its memory bound (memory grows with the rows).
+MAX_NETWORK_ROWS = 4096
 #: A network output magnitude above this on the validator's probe inputs is rejected (NETWORK_OUTPUT).
 MAX_NETWORK_OUTPUT = 1e8
 #: Geometry (object space) that float32 ray casting resolves (GEOMETRY_SCALE, spec/security.md#bounds):

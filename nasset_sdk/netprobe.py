@@ -131,7 +131,13 @@ def check_outputs(run, job: ProbeJob, seed: int = 0, max_output: float | None = 
         return [bad]
     if differs([o[: big // 2] for o in mixed], [o[: big // 2] for o in ref]):
         return [("NETWORK_OUTPUT", "rows depend on each other: replacing the second half of a batch changes the first half")]
-    return []
+    # the largest run a reader makes (limits.MAX_NETWORK_ROWS), under this child's memory bound: a graph whose
+    # activations take megabytes per row passes at 256 rows and exhausts a renderer's memory at thousands
+    from . import limits
+
+    _, bad = call(probe_inputs(job.input_widths, job.unit_columns, limits.MAX_NETWORK_ROWS, rng),
+                  f"batch of {limits.MAX_NETWORK_ROWS}")
+    return [bad] if bad else []
 
 
 def run_jobs_here(jobs: list[ProbeJob], seed: int = 0) -> dict[str, list[tuple[str, str]]]:

@@ -530,6 +530,11 @@ class CheckedSession:
         self.loc = loc
 
     def run(self, output_names, input_feed, run_options=None):
+        rows = len(next(iter(input_feed.values()))) if input_feed else 0
+        if rows > limits.MAX_NETWORK_ROWS:  # the most rows the runtime probe ran it at: memory grows with the rows
+            parts = [self.run(output_names, {k: v[s:s + limits.MAX_NETWORK_ROWS] for k, v in input_feed.items()}, run_options)
+                     for s in range(0, rows, limits.MAX_NETWORK_ROWS)]
+            return [np.concatenate(outs) for outs in zip(*parts, strict=True)]
         try:
             outs = self.session.run(output_names, input_feed, run_options)
         except Exception as exc:  # onnxruntime raises its own exception types

@@ -363,7 +363,7 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
     ``FILE_UNREADABLE`` / ``ARRAY_TOO_LARGE`` naming the layer): a layer that would crash usd-core,
     or decode far beyond its size, is never opened in this process.
     """
-    from pxr import Sdf
+    from pxr import Ar, Sdf
 
     from .safeopen import ensure_safe
 
@@ -384,8 +384,10 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
         if why:
             problems.append(PathProblem("sublayer", identifier, why, root))
             continue
-        if probe and os.path.isfile(outer_file(identifier)):
-            ensure_safe(identifier)
+        if probe:  # the file the resolver finds (a search path, a resolver context): the probe child has neither
+            found = str(Ar.GetResolver().Resolve(identifier)) or identifier
+            if os.path.isfile(outer_file(found)):
+                ensure_safe(found)
         try:
             layer = Sdf.Layer.FindOrOpen(identifier)
         except Exception:  # noqa: BLE001 - composition reports a layer that does not open

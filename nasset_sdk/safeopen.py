@@ -111,14 +111,22 @@ def _text_bytes(s: str) -> int:
     return _STRING_BYTES + (len(s) if s.isascii() else len(s.encode("utf-8", "surrogatepass")))
 
 
+_SCALAR_BYTES = {"Bool": 1, "UChar": 1, "Half": 2, "Int": 4, "UInt": 4, "Float": 4}
+_LETTER_BYTES = {"h": 2, "f": 4, "i": 4, "d": 8}
+
+
 def _item_bytes(type_name: str) -> int:
-    """Bytes of one element of a numeric ``Vt``/``Sdf`` array type (``Vec3fArray`` -> 12, ``HalfArray`` -> 2)."""
-    lanes = (int(type_name[3]) if type_name[:3] in ("Vec", "Qua") and type_name[3:4].isdigit()
-             else 16 if type_name.startswith("Matrix4") else 9 if type_name.startswith("Matrix3") else 1)
-    scalar = type_name[4:] if type_name.startswith("Vec") else type_name
-    width = (2 if "Half" in scalar or scalar[:1] == "h" else 1 if "UChar" in scalar or "Bool" in scalar
-             else 8 if "Double" in scalar or "Int64" in scalar or scalar[:1] == "d" or type_name.startswith("Matrix") else 4)
-    return lanes * width
+    """Bytes of one element of a numeric ``Vt`` array type (``Vec3fArray`` -> 12, ``QuatdArray`` -> 32,
+    ``Matrix4dArray`` -> 128, ``HalfArray`` -> 2); 8 for any other (``Int64``, ``Double``, ``TimeCode``, ...)."""
+    base = type_name[: -len("Array")]
+    letter = _LETTER_BYTES.get(base[-1:], 8)
+    if base.startswith("Vec") and base[3:4].isdigit():
+        return int(base[3]) * letter
+    if base.startswith("Quat"):
+        return 4 * letter
+    if base.startswith("Matrix") and base[6:7].isdigit():
+        return int(base[6]) ** 2 * letter
+    return _SCALAR_BYTES.get(base, 8)
 
 
 def decoded_bytes(value, depth: int = 0) -> int:

@@ -129,7 +129,8 @@ def export(path: str | os.PathLike, out_dir: str | os.PathLike) -> dict:
                  "mesh")
     graphs = {}
     for name in asset.network_refs(COMPONENT):
-        _write_bytes(out / f"{name}.onnx", asset.network_bytes(COMPONENT, name), "portable graph")
+        # the page hands it to onnxruntime-web: the runtime probe first, as for any reader's runtime
+        _write_bytes(out / f"{name}.onnx", asset.evaluable_bytes(COMPONENT, name), "portable graph")
         info = asset.network_refs(COMPONENT)[name].info
         graphs[name] = {"file": f"{name}.onnx", "inputs": dict(zip(info.input_names, info.input_widths, strict=True)),
                         "outputs": dict(zip(info.output_names, info.output_widths, strict=True))}

@@ -13,6 +13,7 @@ and opset, so the network check is the only thing that fails. Families:
 * ``batch_*``   a fixed batch dimension on an input or output (NETWORK_IO)
 * ``out_*``     statically fine, but huge, Inf or NaN outputs on probe inputs (NETWORK_OUTPUT)
 * ``time_*``    statically fine, but too slow for the probe's time bound (NETWORK_RUNTIME)
+* ``mem_*``     statically fine and at 256 rows, but out of the probe's memory bound at the rows a reader runs (NETWORK_RUNTIME)
 """
 
 from __future__ import annotations
@@ -391,6 +392,20 @@ def _time_family() -> dict[str, object]:
     return {"time_deep_shared_weights": _model(nodes, inits)}
 
 
+def _memory_family() -> dict[str, object]:
+    """Statically fine and fine at 256 rows, but megabytes of live activations per row: 100 parallel [N, 4096] branches
+    summed at the end (~1.6 MB a row: 430 MB at 256 rows, 6.7 GB at the 4096 rows a reader runs at once)."""
+    from onnx import helper
+
+    rng = np.random.default_rng(3)
+    width, branches = 4096, 100
+    nodes = [helper.make_node("Gemm", ["x", "Wb", "Bb"], [f"h{i}"], alpha=1.0 + 1e-3 * i) for i in range(branches)]
+    nodes += [helper.make_node("Sum", [f"h{i}" for i in range(branches)], ["s"]), _gemm(inp="s", w="Wo", b="B")]
+    inits = [_t("Wb", rng.normal(0, 0.01, (IN_W, width)).astype(np.float32)), _t("Bb", np.zeros(width, np.float32)),
+             _t("Wo", rng.normal(0, 0.01, (width, OUT_W)).astype(np.float32)), _t("B", np.zeros(OUT_W, np.float32))]
+    return {"mem_wide_parallel_branches": _model(nodes, inits)}
+
+
 FAMILIES: dict[str, tuple[str, Callable[[], dict]]] = {
     "external data": ("NETWORK_EXTERNAL_DATA", _ext_family),
     "sparse tensors": ("NETWORK_OP_FORBIDDEN", _sparse_family),
@@ -400,6 +415,7 @@ FAMILIES: dict[str, tuple[str, Callable[[], dict]]] = {
     "fixed batch dimension": ("NETWORK_IO", _batch_family),
     "huge / non-finite outputs": ("NETWORK_OUTPUT", _output_family),
     "time bound": ("NETWORK_RUNTIME", _time_family),
+    "memory per row": ("NETWORK_RUNTIME", _memory_family),
 }
 
 

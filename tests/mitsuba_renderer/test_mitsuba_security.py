@@ -82,3 +82,18 @@ def test_decoder_failing_the_runtime_probe_is_not_run(tmp_path):
     with pytest.raises(NassetError) as exc:
         RnaAsset(str(path))
     assert exc.value.code == "NETWORK_OUTPUT" and exc.value.prim.endswith("decoder")
+
+
+def test_sessions_run_at_most_the_rows_the_probe_ran(tmp_path):
+    """The implementation's 65 536-row chunks reach onnxruntime as runs of at most limits.MAX_NETWORK_ROWS rows."""
+    from nasset_mitsuba_renderer.rna import RnaAsset
+    from nasset_sdk import limits
+    from nasset_sdk.networks import CheckedSession
+
+    path = example_builder("rna", variant="surface", size="tiny", seed=0).write(tmp_path / "a.usdc")
+    asset = RnaAsset(str(path))
+    assert isinstance(asset.session, CheckedSession)
+    n = 2 * limits.MAX_NETWORK_ROWS + 3
+    x = np.random.default_rng(0).uniform(-1, 1, (n, asset.session.get_inputs()[0].shape[-1])).astype(np.float32)
+    whole = asset.session.session.run([asset.output_name], {asset.input_name: x})[0]
+    assert np.allclose(asset.session.run([asset.output_name], {asset.input_name: x})[0], whole, rtol=1e-6, atol=1e-7)

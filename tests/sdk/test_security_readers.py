@@ -115,16 +115,23 @@ def _child(code: str) -> subprocess.CompletedProcess:
 
 
 def test_readers_probe_a_layer_that_crashes_usd_before_opening_it(base, tmp_path):
-    """inspect, view and render (an asset alone and referenced from a scene) raise FILE_UNREADABLE; before: SIGSEGV."""
+    """inspect, view and render (an asset alone, referenced from a scene, found on a search path) raise FILE_UNREADABLE;
+    before: SIGSEGV."""
     asset = _nested_text_file(base, tmp_path / "deep.usda")
     scene = _scene(tmp_path, asset.name)
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    _nested_text_file(base, lib / "deep_lib.usda")
+    bare = tmp_path / "bare.usda"  # a bare reference the resolver finds on the render's search path
+    bare.write_text(_scene(tmp_path, "deep_lib.usda").read_text().replace("@./deep_lib.usda@", "@deep_lib.usda@"))
     code = f"""
 import sys
 from nasset_sdk.errors import NassetError
 from nasset_sdk.inspect import inspect_asset
 from nasset_reference_renderer.scene import load_scene
 for what, fn in (("inspect", lambda: inspect_asset({str(asset)!r})), ("asset", lambda: load_scene({str(asset)!r})),
-                 ("scene", lambda: load_scene({str(scene)!r}))):
+                 ("scene", lambda: load_scene({str(scene)!r})),
+                 ("search_path", lambda: load_scene({str(bare)!r}, search_paths=[{str(lib)!r}]))):
     try:
         fn()
         print(what, "opened")
@@ -134,7 +141,8 @@ for what, fn in (("inspect", lambda: inspect_asset({str(asset)!r})), ("asset", l
 """
     run = _child(code)
     assert run.returncode == 0, (run.returncode, run.stdout, run.stderr[-2000:])
-    assert run.stdout.split() == ["inspect", "FILE_UNREADABLE", "asset", "FILE_UNREADABLE", "scene", "FILE_UNREADABLE"]
+    assert run.stdout.split() == ["inspect", "FILE_UNREADABLE", "asset", "FILE_UNREADABLE", "scene", "FILE_UNREADABLE",
+                                  "search_path", "FILE_UNREADABLE"]
 
 
 def test_scene_referencing_an_amplified_asset_is_refused(base, tmp_path):
@@ -199,3 +207,17 @@ def test_a_network_too_slow_for_the_probe_is_refused_not_run(base, tmp_path, mon
     with pytest.raises(NassetError) as exc:
         asset.evaluator()
     assert exc.value.code == "NETWORK_RUNTIME" and "did not finish" in exc.value.message
+
+
+def test_decoded_bytes_counts_every_array_type_at_its_width():
+    from pxr import Gf, Vt
+
+    from nasset_sdk.safeopen import decoded_bytes
+
+    assert decoded_bytes(Vt.QuatdArray(10)) == 10 * 32
+    assert decoded_bytes(Vt.QuatfArray(10)) == 10 * 16
+    assert decoded_bytes(Vt.Matrix3dArray(10)) == 10 * 72
+    assert decoded_bytes(Vt.Matrix4dArray([Gf.Matrix4d(1)] * 3)) == 3 * 128
+    assert decoded_bytes(Vt.Vec3fArray(10)) == 10 * 12
+    assert decoded_bytes(Vt.HalfArray(10)) == 10 * 2
+    assert decoded_bytes(Vt.StringArray(4, "x" * 100)) == 4 * (32 + 100)  # one stored string, four decoded copies

@@ -327,3 +327,35 @@ def test_page_shades_each_kind_as_its_evaluator(tmp_path, kind, variant):
     want = kind_radiance(Asset.open(tmp_path / "p.usdc", load="all"), q, irradiance)
     assert np.abs(want).max() > 0.1
     np.testing.assert_allclose(got, want, rtol=0, atol=ATOL[kind] * max(irradiance, 1.0) + 1e-6)
+
+
+def test_export_runs_the_runtime_probe_on_the_graphs_it_hands_to_the_browser(tmp_path):
+    """A portable graph whose output is NaN on probe inputs (static checks pass) is refused, not exported (before: written)."""
+    import hashlib
+
+    import numpy as np
+    from onnx import ModelProto, helper, numpy_helper
+    from pxr import Sdf, Vt
+
+    from nasset_sdk.errors import NassetError
+
+    path = portable_asset(tmp_path)
+    layer = Sdf.Layer.OpenAsAnonymous(str(path))
+    spec = layer.GetPrimAtPath("/_NassetPayloads/portable/decoder")
+    model = ModelProto()
+    model.ParseFromString(bytes(np.asarray(spec.attributes["onnx:model"].default, np.uint8)))
+    out = model.graph.output[0].name
+    for node in model.graph.node:
+        node.output[:] = [f"{o}_raw" if o == out else o for o in node.output]
+    model.graph.initializer.extend([numpy_helper.from_array(np.float32(0), "nan_zero"), numpy_helper.from_array(np.float32(1), "nan_one")])
+    model.graph.node.extend([helper.make_node("Mul", [f"{out}_raw", "nan_zero"], ["nan_t0"]),
+                             helper.make_node("Sub", ["nan_t0", "nan_one"], ["nan_t1"]), helper.make_node("Log", ["nan_t1"], [out])])
+    blob = model.SerializeToString()
+    spec.attributes["onnx:model"].default = Vt.UCharArray.FromNumpy(np.frombuffer(blob, np.uint8))
+    spec.attributes["onnx:sha256"].default = hashlib.sha256(blob).hexdigest()
+    assert layer.Export(str(tmp_path / "nan.usdc"))
+    site = tmp_path / "site"
+    with pytest.raises(NassetError) as exc:
+        web.export(tmp_path / "nan.usdc", site)
+    assert exc.value.code == "NETWORK_OUTPUT" and exc.value.prim.endswith("/portable/decoder")
+    assert not (site / "decoder.onnx").exists()
