@@ -63,9 +63,9 @@ class ProbeResult:
 
 _CHILD = r"""
 import json, os, sys
-def _why(exc):  # the last informative line of a USD error (its message ends in a line holding a quote)
-    lines = [l.strip() for l in str(exc).splitlines() if len(l.strip(" '\t")) > 1]
-    return (lines or [type(exc).__name__])[-1][:300]
+def _why(exc):  # USD's own messages (the parser's file:line:column and prim), without its source locations
+    from nasset_sdk.errors import usd_reason
+    return (usd_reason(exc) or type(exc).__name__)[:300]
 def main(path, level):
     from pxr import Sdf, Tf, Usd
     import nasset_sdk  # registers the schema so the stage composes as in the parent
