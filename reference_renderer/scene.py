@@ -283,7 +283,10 @@ def is_asset_file(path: str) -> bool:
 
     if not os.path.isfile(str(path)):  # regular files only (stat): a pipe or device is never opened
         return False  # never open a pipe or device, even alone; open_stage reports it
-    ensure_safe(path)  # the guarded probe first: a file that would crash usd-core or decode without bound is never opened here
+    try:
+        ensure_safe(path)  # the guarded probe first: a file that would crash usd-core or decode without bound is never opened here
+    except NassetError:  # not readable as USD within the bounds: not an asset (open_stage's own probe reports why)
+        return False
     try:
         layer = Sdf.Layer.FindOrOpen(str(path))
     except Exception:  # noqa: BLE001 - an unreadable file is not an asset; open_stage reports it
