@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk import stage_rules
 from nasset_sdk.errors import NassetError, SceneError, error, usd_reason
 
 from .bsdf import MIN_ALPHA, MaterialTable
@@ -395,7 +396,7 @@ class _Loader:
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
-        self._purposes = {"included": {"default", "render"}, "material": "full"}  # of the render settings, load()
+        self._purposes = stage_rules.Purposes(frozenset({"default", "render"}), "full")  # of the render settings, load()
         self._st_fallback: dict = {}  # st primvar name -> the first UsdPrimvarReader_float2 fallback read for it
         self._mesh_sources: dict = {}  # prim path -> _mesh_source of a PointInstancer's prototype meshes
         self.instances: list[Instance] = []
@@ -405,7 +406,6 @@ class _Loader:
         self.lights: list[Light] = []
         self.assets: list[NeuralAssetData] = []
         self.asset_index: dict = {}
-        self.cameras: list = []
 
     def err(self, code, msg, prim=None, attribute=None):
         return error(code, msg, file=self.file, prim=None if prim is None else str(prim), attribute=attribute)
@@ -445,19 +445,16 @@ class _Loader:
 
         broken = self._composition_errors()
         # a camera is rendered through whatever its visibility or purpose (they hide its gizmo in a viewport)
-        self.cameras = [p for p in Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Camera)]
+        cameras = stage_rules.stage_cameras(self.stage)
         settings = self._settings_prim()
-        self._purposes = self._settings_purposes(settings)
+        self._purposes = stage_rules.settings_purposes(settings, self.time, self.warn)
         unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
-            if prim.IsA(UsdGeom.Imageable):
-                img = UsdGeom.Imageable(prim)
-                if img.ComputeVisibility(self.time) == UsdGeom.Tokens.invisible or \
-                        img.ComputePurpose() not in self._purposes["included"]:
-                    it.PruneChildren()
-                    continue
+            if stage_rules.is_hidden(prim, self.time, self._purposes):
+                it.PruneChildren()
+                continue
             tname = str(prim.GetTypeName())
             with self._reading(path):
                 source = asset_source(prim)
@@ -489,13 +486,9 @@ class _Loader:
                     unknown.add(tname)  # a DCC's own type, its plugin not here: said once per type
                     self.warn(f"prim type {tname!r} has no schema here (a plugin's type, {path} the first): its prims "
                               "are not rendered themselves, their children are traversed", None)
-        chosen = self._settings_camera(settings)
-        if chosen is None and not self.cameras:
-            raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
-        with self._reading(str((chosen or self.cameras[0]).GetPath())):
-            camera = self._camera(chosen or self.cameras[0], settings)
-        if chosen is None and len(self.cameras) > 1:
-            self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
+        chosen = stage_rules.render_camera(self.stage, settings, self.file, self.warn, cameras)
+        with self._reading(str(chosen.GetPath())):
+            camera = self._camera(chosen, settings)
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
             self.warn("the scene has no lights and no emissive materials; the image will be black")
         self._mesh_lights()
@@ -652,7 +645,8 @@ class _Loader:
                            path, "xformOpOrder")
         camera = Camera(M, fl, ha, va, str(path), self._render_resolution(settings), *offsets, orthographic=ortho,
                         lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
-        self._conform_warning(settings, camera)
+        stage_rules.conform_warning(settings, self.time, camera.resolution, camera.horizontal_aperture,
+                                    camera.vertical_aperture, self.warn)
         return camera
 
     def _clipping_warning(self, camera: Camera, tris: np.ndarray) -> None:
@@ -688,78 +682,12 @@ class _Loader:
         return scale
 
     def _settings_prim(self):
-        """The stage's render settings (spec/renderer.md#image-size): the prim the stage's ``renderSettingsPrimPath``
-        names, else the first active UsdRender.Settings prim in traversal order (instance proxies included); None."""
-        from pxr import Usd, UsdRender
-
-        named = self.stage.GetMetadata("renderSettingsPrimPath")
-        if named:
-            prim = self.stage.GetPrimAtPath(named)
-            if prim and prim.IsActive() and prim.IsA(UsdRender.Settings):
-                return prim
-            self.warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used")
-        return next((p for p in self.stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
-
-    def _products(self, settings) -> list:
-        """The UsdRender.Product prims of the render settings' ``products``, in order."""
-        from pxr import UsdRender
-
-        targets = UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()
-        return [p for p in map(self.stage.GetPrimAtPath, targets) if p and p.IsA(UsdRender.Product)]
-
-    def _settings_camera(self, settings):
-        """The camera the render settings name (the ``camera`` of their first product that authors one, else their
-        own), None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
-        from pxr import UsdGeom, UsdRender
-
-        if settings is None:
-            return None
-        for owner in self._products(settings) + [settings]:
-            targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
-            if targets:
-                prim = self.stage.GetPrimAtPath(targets[0])
-                if not (prim and prim.IsA(UsdGeom.Camera)):
-                    raise self.err("SCENE_INVALID", f"camera {targets[0]} is not a UsdGeom.Camera", owner.GetPath(), "camera")
-                return prim
-        return None
+        """The stage's render settings (spec/renderer.md#image-size; nasset_sdk.stage_rules.settings_prim)."""
+        return stage_rules.settings_prim(self.stage, self.warn)
 
     def _render_resolution(self, settings) -> tuple[int, int] | None:
-        """Resolution of the render settings (their first product's when it authors one; None when absent or invalid).
-        Their UsdRender attributes the renderer does not honour are warned about by name."""
-        from pxr import Gf, UsdRender
-
-        if settings is None:
-            return None
-        owner = next((p for p in self._products(settings)
-                      if UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
-        base = UsdRender.SettingsBase(owner)
-        res = base.GetResolutionAttr().Get(self.time)
-        pixel_aspect = base.GetPixelAspectRatioAttr().Get(self.time)
-        if pixel_aspect is not None and pixel_aspect != 1.0:
-            self.warn(f"pixelAspectRatio {pixel_aspect:g} is ignored (square pixels)", owner.GetPath())
-        window = base.GetDataWindowNDCAttr().Get(self.time)
-        if window is not None and Gf.Vec4f(window) != Gf.Vec4f(0, 0, 1, 1):
-            self.warn(f"dataWindowNDC {tuple(window)} is ignored (the whole image is rendered)", owner.GetPath())
-        if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
-            return int(res[0]), int(res[1])
-        self.warn(f"{owner.GetPath()}: resolution {res} ignored")
-        return None
-
-    def _conform_warning(self, settings, camera: Camera) -> None:
-        """A warning when the settings' ``aspectRatioConformPolicy`` (USD's fallback ``expandAperture``) would frame the
-        settings' resolution otherwise than the spec's horizontal fit (spec/renderer.md#image-size)."""
-        from pxr import UsdRender
-
-        if settings is None or camera.resolution is None:
-            return
-        policy = str(UsdRender.SettingsBase(settings).GetAspectRatioConformPolicyAttr().Get(self.time) or "expandAperture")
-        wider = camera.resolution[0] * camera.vertical_aperture - camera.resolution[1] * camera.horizontal_aperture
-        if policy == "adjustApertureHeight" or abs(wider) <= 1e-6 * camera.resolution[1] * camera.horizontal_aperture:
-            return
-        if (policy == "expandAperture" and wider < 0) or (policy == "cropAperture" and wider > 0):
-            return
-        self.warn(f"aspectRatioConformPolicy {policy!r} is not applied: the horizontal aperture is kept and the vertical "
-                  f"extent follows the {camera.resolution[0]}x{camera.resolution[1]} image", settings.GetPath())
+        """Resolution of the render settings (nasset_sdk.stage_rules.settings_resolution)."""
+        return stage_rules.settings_resolution(self.stage, settings, self.time, self.warn, MAX_IMAGE_PIXELS)
 
     def _render_settings(self, settings) -> dict:
         """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
@@ -821,36 +749,8 @@ class _Loader:
 
     def _bound_material(self, prim):
         """The material the render settings' ``materialBindingPurposes`` bind to ``prim`` (spec/renderer.md#materials;
-        fallback ``full``, then all-purpose: ``ComputeBoundMaterial(full)``); a prim bound only for a purpose the
-        settings do not read (``preview``, a viewport's binding) is unbound, with a warning."""
-        from pxr import UsdShade
-
-        api = UsdShade.MaterialBindingAPI(prim)
-        mat, _ = api.ComputeBoundMaterial(self._purposes["material"])
-        if not mat and self._purposes["material"] != UsdShade.Tokens.preview:
-            preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
-            if preview:
-                self.warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
-                          "reads full, else all-purpose bindings): rendered unbound", prim.GetPath())
-        return mat
-
-    def _settings_purposes(self, settings) -> dict:
-        """What the render settings render: ``included`` prim purposes (``includedPurposes``, fallback default and
-        render) and the ``material`` binding purpose to resolve (the first specific one of
-        ``materialBindingPurposes``, fallback full; ``ComputeBoundMaterial`` falls back to the all-purpose binding)."""
-        from pxr import UsdGeom, UsdRender, UsdShade
-
-        included, purposes = [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], [UsdShade.Tokens.full, ""]
-        if settings is not None:
-            api = UsdRender.Settings(settings)
-            included = list(api.GetIncludedPurposesAttr().Get(self.time) or included)
-            purposes = list(api.GetMaterialBindingPurposesAttr().Get(self.time) or purposes)
-        specific = [str(p) for p in purposes if p]
-        if len(specific) > 1:
-            self.warn(f"materialBindingPurposes {purposes}: bindings of {specific[0]!r}, else all-purpose ones, are read",
-                      settings.GetPath())
-        return {"included": {str(p) for p in included},
-                "material": specific[0] if specific else UsdShade.Tokens.allPurpose}
+        nasset_sdk.stage_rules.bound_material)."""
+        return stage_rules.bound_material(prim, self._purposes, self.warn)
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
@@ -1391,7 +1291,7 @@ class _Loader:
             for p in walk:
                 img = UsdGeom.Imageable(p)
                 if img and (img.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible
-                            or img.GetPurposeAttr().Get(self.time) not in self._purposes["included"]):
+                            or img.GetPurposeAttr().Get(self.time) not in self._purposes.included):
                     walk.PruneChildren()
                     continue
                 t = str(p.GetTypeName())
@@ -1546,8 +1446,7 @@ class _Loader:
         """USD's composition errors (a reference, payload or sublayer that cannot be opened, an unresolved prim path),
         each warned about naming its prim: {prim path: USD's message}. USD composes the scene without what failed."""
         out: dict = {}
-        for failure in self.stage.GetCompositionErrors():
-            where, text = str(failure.rootSite.path), str(failure).strip()
+        for where, text in stage_rules.composition_errors(self.stage):
             out.setdefault(where, text)
             self.warn(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
         return out
