@@ -8,9 +8,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nasset_sdk import stage_rules
 from nasset_sdk.errors import SceneError
 
 _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
+MAX_SETTINGS_PIXELS = 1 << 26  # a render settings' resolution above it is ignored, as in the reference renderer
 _LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DomeLight"}
 
 
@@ -66,10 +68,13 @@ class Camera:
     lens_radius: float = 0.0  # thin lens (perspective): aperture radius in scene units; 0 is a pinhole
     focus_distance: float = 0.0  # scene units
     exposure: float = 1.0  # linear factor on the image
+    settings_resolution: tuple[int, int] | None = None  # of the stage's render settings (spec/renderer.md#image-size)
 
     def resolution(self, width: int | None, height: int | None) -> tuple[int, int]:
         aspect = self.v_aperture / self.h_aperture
         if width is None and height is None:
+            if self.settings_resolution is not None:
+                return self.settings_resolution
             width = 256
         if width is None:
             width = max(1, int(round(height / aspect)))
@@ -137,14 +142,43 @@ def _input(shader, name, default, t=None):
     return default if v is None else v
 
 
-def read_material(prim, path, t=None) -> Material:
-    from pxr import UsdShade
+def _display_color(prim, say, t) -> np.ndarray:
+    """An unbound prim's diffuse colour (spec/renderer.md#limits, unbound meshes): its ``displayColor`` primvar, else a
+    constant one of an ancestor; 0.18 grey without one. Several values are read as their mean, with a warning."""
+    from pxr import UsdGeom
 
+    primvars = UsdGeom.PrimvarsAPI(prim)
+    dc = primvars.FindPrimvarWithInheritance("displayColor")
+    val = dc.Get(t) if dc and dc.HasAuthoredValue() else None
+    val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
+    do = primvars.FindPrimvarWithInheritance("displayOpacity")
+    opacity = do.Get(t) if do and do.HasAuthoredValue() else None
+    if opacity is not None and len(opacity) and np.mean(np.asarray(opacity, np.float64)) < 1.0:
+        say("displayOpacity < 1 rendered opaque (its presence, spec/renderer.md#cutouts, is the reference renderer's)",
+            str(prim.GetPath()))
+    if val is None or not np.isfinite(val).all():
+        return np.full(3, 0.18)
+    if len(val) > 1:
+        say(f"displayColor of {len(val)} values read as their mean (not interpolated per hit)", str(prim.GetPath()))
+    return np.clip(val.mean(0), 0.0, 1.0)
+
+
+def _say(path: str):
+    """The ``warn(message, prim)`` of nasset_sdk.stage_rules for the scene ``path``."""
+    def say(message: str, prim: str | None) -> None:
+        warnings.warn(f"{path}:{prim}: {message}" if prim else f"{path}: {message}", stacklevel=3)
+    return say
+
+
+def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None) -> Material:
+    say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
-    mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)  # else all-purpose
-    if mat:
+    mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
+    if not mat:
+        kd = _display_color(prim, say, t)
+    else:
         src = mat.ComputeSurfaceSource()
         shader = src[0] if src and src[0] else None
         if shader is None:
@@ -170,6 +204,9 @@ def read_material(prim, path, t=None) -> Material:
         r0 = ((1.0 - ior) / (1.0 + ior)) ** 2
         f0 = r0 * (1.0 - metal) + kd * metal
     return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True)
+
+
+DEFAULT_PURPOSES = stage_rules.Purposes(frozenset({"default", "render"}), "full")
 
 
 def _asset_target(prim) -> str | None:
@@ -251,12 +288,20 @@ def read_scene(path: str) -> SceneDesc:
     # the render time of spec/renderer.md#traversal: the stage's start, else each attribute's default or first sample
     t = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.EarliestTime()
     cache = UsdGeom.XformCache(t)
-    camera = None
+    say = _say(path)
+    for where, text in stage_rules.composition_errors(stage):  # USD composes the stage without what failed
+        say(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
+    settings = stage_rules.settings_prim(stage, say)  # spec/renderer.md#image-size
+    purposes = stage_rules.settings_purposes(settings, t, say)
+    cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
     it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)))
     for prim in it:
         if prim.IsPseudoRoot():
+            continue
+        if stage_rules.is_hidden(prim, t, purposes):  # invisible, or a purpose the settings leave out
+            it.PruneChildren()
             continue
         tn = prim.GetTypeName()
         ppath = str(prim.GetPath())
@@ -273,8 +318,6 @@ def read_scene(path: str) -> SceneDesc:
                 assets.append(AssetInstance(ppath, file, _asset_to_world(prim, cache)))
                 continue
         if tn == "Camera":
-            if camera is None:
-                camera = _read_camera(prim, _m4(cache.GetLocalToWorldTransform(prim)), path, t)
             continue
         if tn in _LIGHTS:
             lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path, t))
@@ -302,20 +345,23 @@ def read_scene(path: str) -> SceneDesc:
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
-            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t):
-                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t), None if cn is None else cn[sel]))
+            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes):
+                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes),
+                                   None if cn is None else cn[sel]))
             continue
         if tn in _STRUCTURAL:
             continue
         if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim) or tn == "PointInstancer":
             raise SceneError("SCENE_UNSUPPORTED", f"prim type {tn!r} is not supported", file=path, prim=ppath)
         warnings.warn(f"{ppath}: prim type {tn!r} ignored", stacklevel=2)
-    if camera is None:
-        raise SceneError("SCENE_INVALID", "the scene has no UsdGeom.Camera", file=path)
+    chosen = stage_rules.render_camera(stage, settings, path, say, cameras)
+    camera = _read_camera(chosen, _m4(cache.GetLocalToWorldTransform(chosen)), path, t)
+    camera.settings_resolution = stage_rules.settings_resolution(stage, settings, t, say, MAX_SETTINGS_PIXELS)
+    stage_rules.conform_warning(settings, t, camera.settings_resolution, camera.h_aperture, camera.v_aperture, say)
     return SceneDesc(path, camera, meshes, lights, assets)
 
 
-def _face_groups(mesh, face_of, n_faces: int, path: str, t) -> list:
+def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:
     """[(prim path, prim whose binding shades them, triangle mask)] of a mesh (spec/renderer.md#materials): the faces of
     each ``materialBind`` GeomSubset of element type face with a bound material (the first subset listing a face
     wins), the rest under the mesh's own binding; ``holeIndices`` faces left out."""
@@ -326,7 +372,7 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t) -> list:
     for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets():
         if subset.GetElementTypeAttr().Get(t) != UsdGeom.Tokens.face:
             continue
-        if not UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial(UsdShade.Tokens.full)[0]:
+        if not stage_rules.bound_material(subset.GetPrim(), purposes, _say(path)):
             continue
         ind = np.asarray(subset.GetIndicesAttr().Get(t) or [], np.int64)
         if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):

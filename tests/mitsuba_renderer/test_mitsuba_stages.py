@@ -1,0 +1,241 @@
+"""The second implementation reads a stage by the rules of spec/renderer.md (render settings, camera, image size,
+prim purposes, visibility, material binding purposes, inherited displayColor, composition errors) as the reference
+renderer does: both call nasset_sdk.stage_rules.
+
+The probe is the reference's (tests/renderer/test_usd_stages.py): a diffuse floor seen from above under a delta
+DistantLight of irradiance E at angle theta, radiance ``albedo E cos(theta) / pi``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
+from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
+from nasset_sdk.errors import SceneError  # noqa: E402
+
+E, THETA = 3.0, np.radians(35)
+RED = (0.9, 0.2, 0.1)
+
+
+def _floor_scene(albedo=(0.6, 0.6, 0.6)):
+    b = SceneBuilder()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50)
+    floor = b.quad("Floor", (0, 0, 0), 10.0, diffuse=albedo)
+    b.distant("Sun", (np.sin(THETA), np.cos(THETA), 0), E)
+    return b, floor.GetPrim()
+
+
+def _two_camera_scene():
+    """Two cameras; ``Top`` (first in traversal) sees the lit floor, ``Below`` its unlit underside."""
+    b, _ = _floor_scene()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
+    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
+    b.stage.RemovePrim("/World/Camera")
+    return b
+
+
+def _settings(b, path, camera=None, resolution=(8, 8)):
+    from pxr import Gf, UsdRender
+
+    s = UsdRender.Settings.Define(b.stage, path)
+    s.CreateResolutionAttr(Gf.Vec2i(*resolution))
+    if camera:
+        s.CreateCameraRel().SetTargets([camera])
+    return s
+
+
+def _kd(desc, prim):
+    return [m.material.kd for m in desc.meshes if m.prim == prim]
+
+
+# -- render settings: camera, settings prim, image size -------------------------------------------------------------
+
+def test_render_settings_camera_is_the_camera_rendered(tmp_path):
+    """``RenderSettings.camera`` names the camera; the first camera in traversal was rendered instead."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Below")
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+
+
+def test_render_product_camera_wins_over_the_settings_camera(tmp_path):
+    from pxr import UsdRender
+
+    b = _two_camera_scene()
+    settings = _settings(b, "/Render/Settings", "/World/Top")
+    product = UsdRender.Product.Define(b.stage, "/Render/Product")
+    product.CreateCameraRel().SetTargets(["/World/Below"])
+    settings.CreateProductsRel().SetTargets([product.GetPath()])
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+
+
+def test_render_settings_prim_path_chooses_the_settings_and_their_size(tmp_path):
+    """The stage's ``renderSettingsPrimPath`` names the settings; without --width/--height their resolution is the
+    image size (the implementation rendered 256 wide through the first camera)."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Preview", "/World/Top", resolution=(4, 4))
+    _settings(b, "/Render/Final", "/World/Below", resolution=(6, 3))
+    b.stage.SetMetadata("renderSettingsPrimPath", "/Render/Final")
+    desc = read_scene(b.write(tmp_path / "s.usda"))
+    assert desc.camera.prim == "/World/Below"
+    assert desc.camera.resolution(None, None) == (6, 3)
+    assert desc.camera.resolution(16, 16) == (16, 16)  # the caller's size wins
+
+
+def test_inactive_render_settings_are_not_read(tmp_path):
+    b, _ = _floor_scene()
+    _settings(b, "/Render/Off", resolution=(4, 2)).GetPrim().SetActive(False)
+    _settings(b, "/Render/On", resolution=(6, 6))
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.resolution(None, None) == (6, 6)
+
+
+def test_render_settings_camera_that_is_not_a_camera_is_scene_invalid(tmp_path):
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Floor")
+    with pytest.raises(SceneError) as info:
+        read_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "/World/Floor" in str(info.value) and "/Render/Settings" in str(info.value)
+
+
+def test_several_cameras_without_settings_are_warned(tmp_path):
+    b = _two_camera_scene()
+    with pytest.warns(UserWarning, match="2 cameras; rendering through the first, /World/Top"):
+        assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Top"
+
+
+@pytest.mark.parametrize("hide", ["visibility", "purpose"])
+def test_hidden_camera_is_still_the_camera(tmp_path, hide):
+    from pxr import Sdf, UsdGeom
+
+    b, _ = _floor_scene()
+    where = "/World/Camera"
+    if hide == "visibility":
+        UsdGeom.Imageable(b.stage.GetPrimAtPath(where)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    else:
+        UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
+        Sdf.CopySpec(b.stage.GetRootLayer(), where, b.stage.GetRootLayer(), "/World/Rig/Camera")
+        b.stage.RemovePrim(where)
+        where = "/World/Rig/Camera"
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == where
+
+
+# -- traversal: visibility and prim purposes --------------------------------------------------------------------------
+
+def test_invisible_prims_are_left_out(tmp_path):
+    """An invisible mesh (or one under an invisible Xform) is not rendered; it was."""
+    from pxr import UsdGeom
+
+    b, _ = _floor_scene()
+    UsdGeom.Imageable(b.quad("Hidden", (0, 1, 0), 20.0)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    UsdGeom.Xform.Define(b.stage, "/World/Group").CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    b.mesh("Group/Inner", [(0, 1, 0), (1, 1, 0), (0, 1, 1)], [(0, 1, 2)])
+    prims = {m.prim for m in read_scene(b.write(tmp_path / "s.usda")).meshes}
+    assert prims == {"/World/Floor"}
+
+
+@pytest.mark.parametrize("included, rendered", [
+    (None, {"/World/Floor", "/World/Render"}),
+    (["default", "render", "proxy"], {"/World/Floor", "/World/Render", "/World/Proxy"}),
+    (["default"], {"/World/Floor"}),
+])
+def test_included_purposes_of_the_settings_choose_what_renders(tmp_path, included, rendered):
+    """Prims of purpose guide and proxy are left out unless the settings' ``includedPurposes`` list them (fallback
+    default, render); every purpose was rendered."""
+    from pxr import UsdGeom
+
+    b, _ = _floor_scene()
+    for name, purpose in (("Guide", "guide"), ("Proxy", "proxy"), ("Render", "render")):
+        UsdGeom.Imageable(b.quad(name, (0, 1, 0), 1.0)).CreatePurposeAttr(purpose)
+    settings = _settings(b, "/Render/Settings")
+    if included:
+        settings.CreateIncludedPurposesAttr(included)
+    assert {m.prim for m in read_scene(b.write(tmp_path / "s.usda")).meshes} == rendered
+
+
+# -- material binding purposes ------------------------------------------------------------------------------------
+
+def test_material_binding_purposes_of_the_settings_choose_the_binding(tmp_path):
+    """Settings asking for ``preview`` bindings render the preview material; the full/all-purpose one was read."""
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    red = b.material("Red", diffuse=RED, specular=(0, 0, 0))
+    UsdShade.MaterialBindingAPI(floor).Bind(red, materialPurpose=UsdShade.Tokens.preview)
+    _settings(b, "/Render/Settings").CreateMaterialBindingPurposesAttr(["preview", ""])
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED)
+
+
+def test_preview_only_binding_is_warned_by_name(tmp_path):
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    api = UsdShade.MaterialBindingAPI(floor)
+    api.UnbindAllBindings()
+    api.Bind(b.material("Red", diffuse=RED), materialPurpose=UsdShade.Tokens.preview)
+    with pytest.warns(UserWarning, match="/World/Floor: bound to /World/Looks/Red only for purpose preview"):
+        desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.18)
+
+
+# -- unbound meshes: displayColor, also an ancestor's --------------------------------------------------------------
+
+@pytest.mark.parametrize("on_parent", [False, True])
+def test_display_color_of_an_unbound_mesh(tmp_path, on_parent):
+    """An unbound mesh's constant ``displayColor`` (its own or an ancestor's) is its diffuse colour; it was 0.18 grey."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    b, floor = _floor_scene()
+    UsdShade.MaterialBindingAPI(floor).UnbindAllBindings()
+    holder = floor.GetParent() if on_parent else floor
+    pv = UsdGeom.PrimvarsAPI(holder).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.constant)
+    pv.Set([Gf.Vec3f(*RED)])
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
+
+
+# -- composition errors -----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("arc", ["reference", "sublayer"])
+def test_what_usd_cannot_compose_is_warned_naming_the_prim(tmp_path, arc):
+    b, _ = _floor_scene()
+    prim = b.stage.DefinePrim("/World/Set", "Xform")
+    if arc == "reference":
+        prim.GetReferences().AddReference("./missing.usda")
+    else:
+        b.stage.GetRootLayer().subLayerPaths.append("./missing.usda")
+    with pytest.warns(UserWarning, match="cannot reach.*missing.usda"):
+        read_scene(b.write(tmp_path / "s.usda"))
+
+
+# -- end to end: the rendered image agrees with the closed form and the reference renderer -------------------------
+
+def test_settings_camera_purposes_and_display_color_render_as_the_reference(tmp_path):
+    """One stage exercising the rules at once: the settings' camera (the second in traversal), an inherited red
+    displayColor on the unbound floor, a proxy quad the settings leave out between the camera and the floor."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    from nasset_mitsuba_renderer import render as mitsuba
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    b, floor = _floor_scene()
+    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
+    b.stage.RemovePrim("/World/Camera")
+    UsdShade.MaterialBindingAPI(floor).UnbindAllBindings()
+    pv = UsdGeom.PrimvarsAPI(floor.GetParent()).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                             UsdGeom.Tokens.constant)
+    pv.Set([Gf.Vec3f(*RED)])
+    UsdGeom.Imageable(b.quad("Occluder", (0, 1, 0), 20.0)).CreatePurposeAttr(UsdGeom.Tokens.proxy)
+    _settings(b, "/Render/Settings", "/World/Top", resolution=(8, 6))
+    scene = b.write(tmp_path / "s.usda")
+    img = mitsuba.render(scene, 2, seed=1)
+    ref = render(load_scene(scene), RenderSettings(spp=2)).image
+    assert img.shape == ref.shape == (6, 8, 3)
+    # red diffuse closed form plus the unbound fallback's GGX lobe (F0 0.04, roughness 0.5), which is grey
+    glossy = img - np.asarray(RED) * E * np.cos(THETA) / np.pi
+    np.testing.assert_allclose(glossy, np.broadcast_to(glossy[..., :1], glossy.shape), atol=1e-5)
+    assert 0.0 < glossy.min() and glossy.max() < 0.1
+    # the glossy lobe varies across a pixel, whose 2 jittered samples differ between the renderers
+    np.testing.assert_allclose(img, ref, atol=0.02)
+    np.testing.assert_allclose(img.mean((0, 1)), ref.mean((0, 1)), atol=2e-3)
