@@ -285,11 +285,16 @@ def read_scene(path: str) -> SceneDesc:
         stage = open_checked_stage(path, Usd.Stage.LoadNone, scene=True)
     except Tf.ErrorException as exc:
         raise SceneError("SCENE_INVALID", f"scene does not open: {str(exc).splitlines()[0][:200]}", file=path) from None
+    if stage is None:
+        raise SceneError("SCENE_INVALID", "USD cannot open it", file=path)
+    stage_rules.load_scene_payloads(stage)  # plain geometry placed with a payload is part of the scene
     # the render time of spec/renderer.md#traversal: the stage's start, else each attribute's default or first sample
     t = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.EarliestTime()
     cache = UsdGeom.XformCache(t)
     say = _say(path)
+    broken: dict = {}
     for where, text in stage_rules.composition_errors(stage):  # USD composes the stage without what failed
+        broken.setdefault(where, text)
         say(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
     settings = stage_rules.settings_prim(stage, say)  # spec/renderer.md#image-size
     purposes = stage_rules.settings_purposes(settings, t, say)
@@ -311,6 +316,9 @@ def read_scene(path: str) -> SceneDesc:
                 raise SceneError("SCENE_UNSUPPORTED", "an asset embedded in a flattened scene (render it with nasset render, "
                                  "or reference the asset file)", file=path, prim=ppath)
             file = source.layer if source is not None else _asset_target(prim)
+            if source is None and tn == "" and ppath in broken:  # spec/renderer.md#scene-input
+                raise SceneError("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {file} "
+                                 f"({broken[ppath]})", file=path, prim=ppath)
             if source is not None or tn == "NeuralAsset" or (file and _looks_like_asset(file)):
                 it.PruneChildren()
                 if not file:

@@ -24,6 +24,29 @@ class Purposes:
     material: str  # the binding purpose resolved, "" for all-purpose only (UsdRender materialBindingPurposes)
 
 
+def load_scene_payloads(stage) -> None:
+    """Load the scene's own payloads (a prim placed with a payload, spec/renderer.md#traversal), each
+    without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""
+    from pxr import Usd
+
+    from .references import asset_source
+
+    pred = Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
+    for _ in range(32):  # payloads may bring further payloads; bounded against cycles
+        todo = []
+        it = iter(Usd.PrimRange(stage.GetPseudoRoot(), pred))
+        for prim in it:
+            if prim.GetTypeName() == "NeuralAsset" or asset_source(prim) is not None:
+                it.PruneChildren()
+            elif prim.HasAuthoredPayloads() and not prim.IsLoaded():
+                todo.append(prim.GetPath())
+                it.PruneChildren()
+        if not todo:
+            return
+        for path in todo:
+            stage.Load(path, Usd.LoadWithoutDescendants)
+
+
 def settings_prim(stage, warn: Warn):
     """The stage's render settings: the prim the stage's ``renderSettingsPrimPath`` names, else the first active
     UsdRender.Settings prim in traversal order (instance proxies included); None."""

@@ -249,31 +249,8 @@ def open_stage(path: str, context=None):
         raise SceneError("SCENE_INVALID", f"USD cannot open it: {usd_reason(exc)}", file=str(p)) from None
     if stage is None:
         raise SceneError("SCENE_INVALID", "USD cannot open it", file=str(p))
-    _load_scene_payloads(stage)
+    stage_rules.load_scene_payloads(stage)
     return stage
-
-
-def _load_scene_payloads(stage) -> None:
-    """Load the scene's own payloads (a prim placed with a payload, spec/renderer.md#traversal), each
-    without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""
-    from pxr import Usd
-
-    from nasset_sdk.references import asset_source
-
-    pred = Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
-    for _ in range(32):  # payloads may bring further payloads; bounded against cycles
-        todo = []
-        it = iter(Usd.PrimRange(stage.GetPseudoRoot(), pred))
-        for prim in it:
-            if prim.GetTypeName() == "NeuralAsset" or asset_source(prim) is not None:
-                it.PruneChildren()
-            elif prim.HasAuthoredPayloads() and not prim.IsLoaded():
-                todo.append(prim.GetPath())
-                it.PruneChildren()
-        if not todo:
-            return
-        for path in todo:
-            stage.Load(path, Usd.LoadWithoutDescendants)
 
 
 def is_asset_file(path: str) -> bool:
