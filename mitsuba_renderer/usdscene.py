@@ -90,6 +90,7 @@ class SceneDesc:
     meshes: list[Mesh] = field(default_factory=list)
     lights: list[Light] = field(default_factory=list)
     assets: list[AssetInstance] = field(default_factory=list)
+    render_settings: dict = field(default_factory=dict)  # max_depth, pixel_filter, pixel_filter_stddev where authored
 
 
 def _read_camera(prim, to_world, path, t) -> Camera:
@@ -366,7 +367,7 @@ def read_scene(path: str) -> SceneDesc:
     camera = _read_camera(chosen, _m4(cache.GetLocalToWorldTransform(chosen)), path, t)
     camera.settings_resolution = stage_rules.settings_resolution(stage, settings, t, say, MAX_SETTINGS_PIXELS)
     stage_rules.conform_warning(settings, t, camera.settings_resolution, camera.h_aperture, camera.v_aperture, say)
-    return SceneDesc(path, camera, meshes, lights, assets)
+    return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
 
 
 def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:

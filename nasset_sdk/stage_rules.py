@@ -16,6 +16,9 @@ Warn = Callable[[str, "str | None"], None]
 
 #: largest side of a render settings' ``resolution`` (spec/renderer.md#image-size)
 MAX_SETTINGS_SIDE = 16384
+#: pixel filters of ``nasset:pixelFilter`` (spec/renderer.md#render-settings) and the largest ``nasset:pixelFilterStddev``
+PIXEL_FILTERS = ("box", "gaussian")
+MAX_FILTER_STDDEV = 8.0
 
 
 @dataclass(frozen=True)
@@ -147,6 +150,28 @@ def conform_warning(settings, time, resolution, h_aperture: float, v_aperture: f
         return
     warn(f"aspectRatioConformPolicy {policy!r} is not applied: the horizontal aperture is kept and the vertical "
          f"extent follows the {resolution[0]}x{resolution[1]} image", str(settings.GetPath()))
+
+
+def nasset_settings(settings, time, warn: Warn) -> dict:
+    """The custom attributes of the render settings (spec/renderer.md#render-settings): ``max_depth`` (int
+    ``nasset:maxDepth``, -1 unbounded), ``pixel_filter`` (``nasset:pixelFilter``: box | gaussian) and
+    ``pixel_filter_stddev`` (float ``nasset:pixelFilterStddev``, pixels), each only where authored and valid; invalid
+    values are warned about and dropped."""
+    out: dict = {}
+    for prim in [settings] if settings is not None else []:
+        for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
+                              ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
+                              ("nasset:pixelFilterStddev", "pixel_filter_stddev",
+                               lambda v: isinstance(v, float) and 0.0 < v <= MAX_FILTER_STDDEV)):
+            attr = prim.GetAttribute(name)
+            v = attr.Get(time) if attr and attr.HasAuthoredValue() else None
+            if v is None:
+                continue
+            if ok(v):
+                out[key] = str(v) if key == "pixel_filter" else v
+            else:
+                warn(f"{name} = {v!r} ignored", str(prim.GetPath()))
+    return out
 
 
 def settings_purposes(settings, time, warn: Warn) -> Purposes:

@@ -25,7 +25,7 @@ from nasset_sdk.errors import NassetError, SceneError, error, usd_reason
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
 from .curves import BASES, SPHERE_TRIANGLES, TUBE_TRIANGLES, CurveError, polylines, segment_count, sphere_mesh, tube_mesh
-from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
+from .film import MAX_IMAGE_PIXELS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
     MAX_MESH_LIGHT_TRIANGLES,
@@ -667,24 +667,8 @@ class _Loader:
         return stage_rules.settings_resolution(self.stage, settings, self.time, self.warn, MAX_IMAGE_PIXELS)
 
     def _render_settings(self, settings) -> dict:
-        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
-        ``nasset:pixelFilterStddev`` (pixels) of the render settings (:meth:`_settings_prim`); invalid values are warned
-        and dropped."""
-        out: dict = {}
-        for prim in [settings] if settings is not None else []:
-            for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
-                                  ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
-                                  ("nasset:pixelFilterStddev", "pixel_filter_stddev",
-                                   lambda v: isinstance(v, float) and 0.0 < v <= MAX_FILTER_STDDEV)):
-                attr = prim.GetAttribute(name)
-                v = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
-                if v is None:
-                    continue
-                if ok(v):
-                    out[key] = str(v) if key == "pixel_filter" else v
-                else:
-                    self.warn(f"{name} = {v!r} ignored", prim.GetPath())
-        return out
+        """The custom attributes of the render settings (nasset_sdk.stage_rules.nasset_settings)."""
+        return stage_rules.nasset_settings(settings, self.time, self.warn)
 
     # -- meshes and materials --------------------------------------------------------------
     def _material(self, prim, *, varying_colors: bool = True) -> int:
