@@ -290,7 +290,7 @@ def read_scene(path: str) -> SceneDesc:
         raise SceneError("SCENE_INVALID", "USD cannot open it", file=path)
     stage_rules.load_scene_payloads(stage)  # plain geometry placed with a payload is part of the scene
     # the render time of spec/renderer.md#traversal: the stage's start, else each attribute's default or first sample
-    t = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.EarliestTime()
+    t = stage_rules.render_time(stage)
     cache = UsdGeom.XformCache(t)
     say = _say(path)
     broken: dict = {}
@@ -380,6 +380,7 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rule
     groups = []
     for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets():
         if subset.GetElementTypeAttr().Get(t) != UsdGeom.Tokens.face:
+            _say(path)("GeomSubset of an element type other than face ignored", str(subset.GetPath()))
             continue
         if not stage_rules.bound_material(subset.GetPrim(), purposes, _say(path)):
             continue

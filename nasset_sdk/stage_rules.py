@@ -27,6 +27,25 @@ class Purposes:
     material: str  # the binding purpose resolved, "" for all-purpose only (UsdRender materialBindingPurposes)
 
 
+def render_time(stage, time=None):
+    """The ``Usd.TimeCode`` a scene renders at (spec/renderer.md#traversal): ``time`` (a number) when given, else the
+    stage's ``startTimeCode`` when it authors a time code range, else the earliest time: an attribute's default
+    value, or its first time sample where it has samples (an animation cache without defaults still renders)."""
+    import math
+
+    from pxr import Usd
+
+    if time is not None:
+        if isinstance(time, Usd.TimeCode):
+            return time
+        if not math.isfinite(float(time)):
+            raise SceneError("SCENE_INVALID", f"render time {time!r} is not finite")
+        return Usd.TimeCode(float(time))
+    if stage.HasAuthoredTimeCodeRange():
+        return Usd.TimeCode(stage.GetStartTimeCode())
+    return Usd.TimeCode.EarliestTime()
+
+
 def load_scene_payloads(stage) -> None:
     """Load the scene's own payloads (a prim placed with a payload, spec/renderer.md#traversal), each
     without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""

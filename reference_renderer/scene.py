@@ -297,22 +297,8 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
 
 
 def render_time(stage, time=None):
-    """The ``Usd.TimeCode`` a scene renders at (spec/renderer.md#traversal): ``time`` (a number) when given, else the
-    stage's ``startTimeCode`` when it authors a time code range, else the earliest time: an attribute's default
-    value, or its first time sample where it has samples (an animation cache without defaults still renders)."""
-    import math
-
-    from pxr import Usd
-
-    if time is not None:
-        if isinstance(time, Usd.TimeCode):
-            return time
-        if not math.isfinite(float(time)):
-            raise SceneError("SCENE_INVALID", f"render time {time!r} is not finite")
-        return Usd.TimeCode(float(time))
-    if stage.HasAuthoredTimeCodeRange():
-        return Usd.TimeCode(stage.GetStartTimeCode())
-    return Usd.TimeCode.EarliestTime()
+    """The ``Usd.TimeCode`` a scene renders at (nasset_sdk.stage_rules.render_time)."""
+    return stage_rules.render_time(stage, time)
 
 
 #: largest image file read out of a package (usdz) into a temporary file

@@ -354,3 +354,16 @@ def test_max_depth_of_the_settings_is_the_default(tmp_path):
     np.testing.assert_array_equal(mitsuba.render(one, 4, seed=2), direct)
     assert mitsuba.render(plain, 4, seed=2).mean() > 1.01 * direct.mean()  # the ceiling's bounce
     np.testing.assert_array_equal(mitsuba.render(one, 4, seed=2, max_depth=5), mitsuba.render(plain, 4, seed=2))
+
+
+def test_geom_subset_of_another_element_type_is_warned(tmp_path):
+    """A materialBind GeomSubset of element type point is not a per-face material: ignored, with a warning naming it
+    (spec/renderer.md#materials); it was ignored without a word."""
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    subset = UsdShade.MaterialBindingAPI(floor).CreateMaterialBindSubset("Points", [0], "point")
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(b.material("Red", diffuse=RED))
+    with pytest.warns(UserWarning, match="/World/Floor/Points: GeomSubset of an element type other than face ignored"):
+        desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
