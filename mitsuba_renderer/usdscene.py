@@ -238,6 +238,15 @@ def _asset_to_world(prim, cache) -> np.ndarray:
     return local @ _m4(cache.GetLocalToWorldTransform(prim.GetParent()))
 
 
+def _units_warning(stage, file: str, to_world, prim: str, say) -> None:
+    """nasset_sdk.stage_rules.units_warning with the metersPerUnit of the asset's layer (already open: composed)."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(file) if os.path.isfile(file) else None
+    if layer is not None:
+        stage_rules.units_warning(stage, float(layer.pseudoRoot.GetInfo("metersPerUnit") or 1.0), to_world, prim, say)
+
+
 def _looks_like_asset(file: str) -> bool:
     from pxr import Sdf
 
@@ -325,6 +334,7 @@ def read_scene(path: str) -> SceneDesc:
                 if not file:
                     raise SceneError("SCENE_INVALID", "NeuralAsset prim references no asset file", file=path, prim=ppath)
                 assets.append(AssetInstance(ppath, file, _asset_to_world(prim, cache)))
+                _units_warning(stage, file, assets[-1].to_world, ppath, say)
                 continue
         if tn == "Camera":
             continue

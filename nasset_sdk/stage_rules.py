@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from .errors import SceneError
 
 Warn = Callable[[str, "str | None"], None]
@@ -236,6 +238,21 @@ def bound_material(prim, purposes: Purposes, warn: Warn):
             warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
                  "reads full, else all-purpose bindings): rendered unbound", str(prim.GetPath()))
     return mat
+
+
+def units_warning(stage, asset_meters_per_unit: float, M, prim: str, warn: Warn) -> None:
+    """A warning when a stage that authors ``metersPerUnit`` places an asset of other units (the asset layer's
+    ``metersPerUnit``) without the scale that converts them (``cbrt |det M3|`` within 1 % of their ratio; USD converts
+    nothing: spec/format.md#coordinates, spec/renderer.md#traversal); the asset then renders at another size."""
+    from pxr import UsdGeom
+
+    if not stage.HasAuthoredMetadata("metersPerUnit"):
+        return
+    ratio = float(asset_meters_per_unit) / UsdGeom.GetStageMetersPerUnit(stage)
+    scale = float(np.cbrt(abs(np.linalg.det(np.asarray(M, np.float64)[:3, :3]))))
+    if not np.isclose(ratio, 1.0, rtol=1e-6) and not np.isclose(scale, ratio, rtol=0.01):
+        warn(f"the asset's metersPerUnit is {ratio:.4g} x the stage's and USD converts no units: its placement "
+             f"scales it by {scale:.4g}, not {ratio:.4g}, so it renders {scale / ratio:.4g} x its size", prim)
 
 
 def composition_errors(stage) -> list:

@@ -1445,7 +1445,8 @@ class _Loader:
         M = self.matrix(UsdGeom.Xformable(prim))
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
-        self._units_warning(path, data.asset.stage, M)
+        stage_rules.units_warning(self.stage, float(data.asset.stage.GetMetadata("metersPerUnit") or 1.0), M, path,
+                                  self.warn)
         pw = world_points(data.points, M)
         tris = pw[data.faces]
         if data.used_points is None:  # the box of the triangles is that of the points they use
@@ -1455,19 +1456,6 @@ class _Loader:
         inst = Instance("neural", path, 0, 0, M, asset=ai)
         box = box3(pw[data.used_points]) if len(data.faces) else None
         self._add(inst, tris, None, np.arange(len(data.faces)), ng=face_normals(tris), box=box)
-
-    def _units_warning(self, path: str, asset_stage, M: np.ndarray) -> None:
-        """A warning when a stage that authors ``metersPerUnit`` places an asset of other units without the scale that
-        converts them (USD converts nothing: spec/format.md#coordinates); the asset then renders at another size."""
-        from pxr import UsdGeom
-
-        if not self.stage.HasAuthoredMetadata("metersPerUnit"):
-            return
-        ratio = float(asset_stage.GetMetadata("metersPerUnit") or 1.0) / UsdGeom.GetStageMetersPerUnit(self.stage)
-        scale = float(np.cbrt(abs(np.linalg.det(M[:3, :3]))))
-        if not np.isclose(ratio, 1.0, rtol=1e-6) and not np.isclose(scale, ratio, rtol=0.01):
-            self.warn(f"the asset's metersPerUnit is {ratio:.4g} x the stage's and USD converts no units: its placement "
-                      f"scales it by {scale:.4g}, not {ratio:.4g}, so it renders {scale / ratio:.4g} x its size", path)
 
     # -- lights ----------------------------------------------------------------------------
     def _shaping(self, prim, M) -> dict:

@@ -367,3 +367,24 @@ def test_geom_subset_of_another_element_type_is_warned(tmp_path):
     with pytest.warns(UserWarning, match="/World/Floor/Points: GeomSubset of an element type other than face ignored"):
         desc = read_scene(b.write(tmp_path / "s.usda"))
     np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("scale, warned", [(1.0, True), (100.0, False)])
+def test_asset_in_other_units_without_the_converting_scale_is_warned(tmp_path, scale, warned):
+    """A metre asset placed in a centimetre stage without the scale 100 renders 100 x too small: said, naming the
+    prim (spec/renderer.md#traversal); it was not."""
+    import warnings
+
+    from pxr import UsdGeom
+
+    from nasset_reference_renderer.testscenes import constant_rna_asset
+
+    constant_rna_asset(tmp_path / "ball.usdc")
+    b, _ = _floor_scene()
+    UsdGeom.SetStageMetersPerUnit(b.stage, 0.01)
+    b.asset("Ball", "./ball.usdc", np.diag([scale, scale, scale, 1.0]), typed="Xform")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        read_scene(b.write(tmp_path / "s.usda"))
+    hit = [str(w.message) for w in said if "/World/Ball" in str(w.message) and "metersPerUnit" in str(w.message)]
+    assert bool(hit) == warned, [str(w.message) for w in said]
