@@ -439,6 +439,23 @@ def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
 
 
+def _unhonoured_light_features(prim, path, t) -> None:
+    """Warnings naming the light features this implementation does not render (spec/renderer.md#spot-lights,
+    #light-surfaces): a spot cone (UsdLux.ShapingAPI), a light hidden from camera rays, light filters."""
+    from pxr import UsdLux
+
+    say = _say(path)
+    where = str(prim.GetPath())
+    if prim.HasAPI(UsdLux.ShapingAPI):
+        say("UsdLux.ShapingAPI (spot cone) is not applied here: the light emits in every direction", where)
+    vis = prim.GetAttribute("nasset:cameraVisibility")
+    if vis and vis.HasAuthoredValue() and vis.Get(t) is False:
+        say("nasset:cameraVisibility = false is not applied here: camera rays see the light", where)
+    filters = UsdLux.LightAPI(prim).GetFiltersRel().GetForwardedTargets() if prim.HasAPI(UsdLux.LightAPI) else []
+    if filters:
+        say(f"light:filters {', '.join(map(str, filters))} ignored", where)
+
+
 def _read_light(prim, tn, mw, path, t) -> Light:
     from pxr import Sdf
 
@@ -460,6 +477,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             raise SceneError("SCENE_INVALID", "colorTemperature must be finite and > 0", file=path, prim=ppath)
         rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
+    _unhonoured_light_features(prim, path, t)
     if tn == "DistantLight":
         lt.angle = float(get("angle", 0.53))
     elif tn == "SphereLight":
