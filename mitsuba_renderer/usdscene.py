@@ -133,13 +133,15 @@ def _m4(gf) -> np.ndarray:
 
 
 def _input(shader, name, default, t=None):
-    inp = shader.GetInput(name)
-    if not inp:
+    """A UsdPreviewSurface input's value, followed through connections to a material's or node graph's interface
+    input (nasset_sdk.stage_rules.input_source); one fed by a shader output (a texture) gives ``default``, warned."""
+    from pxr import Usd
+
+    producer, v = stage_rules.input_source(shader.GetInput(name), Usd.TimeCode.Default() if t is None else t)
+    if producer is not None:
+        warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected to {producer[0].GetPath()}.outputs:{producer[1]}; "
+                      "its texture is ignored (default used)", stacklevel=3)
         return default
-    if inp.HasConnectedSource():
-        warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected; its texture is ignored (default used)", stacklevel=3)
-        return default
-    v = inp.Get() if t is None else inp.Get(t)
     return default if v is None else v
 
 

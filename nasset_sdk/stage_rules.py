@@ -240,6 +240,22 @@ def bound_material(prim, purposes: Purposes, warn: Warn):
     return mat
 
 
+def input_source(inp, time) -> tuple:
+    """(producer, value) of a shader input, followed through its connections (spec/renderer.md#materials: node graph
+    boundaries, a material's interface inputs, as in USD's own UsdPreviewSurface example): producer is the (shader,
+    output name) whose output feeds it, or None when a value does; value is that value, or the input's own when a
+    shader output feeds it (None when unset)."""
+    from pxr import UsdShade
+
+    if not inp:
+        return None, None
+    attrs = inp.GetValueProducingAttributes() if inp.HasConnectedSource() else [inp.GetAttr()]
+    if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Output:
+        return (UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]), \
+            inp.Get(time)
+    return None, (attrs[0].Get(time) if attrs else None)
+
+
 def units_warning(stage, asset_meters_per_unit: float, M, prim: str, warn: Warn) -> None:
     """A warning when a stage that authors ``metersPerUnit`` places an asset of other units (the asset layer's
     ``metersPerUnit``) without the scale that converts them (``cbrt |det M3|`` within 1 % of their ratio; USD converts

@@ -835,19 +835,8 @@ class _Loader:
                 "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}
 
     def _read_input(self, inp) -> tuple:
-        """(producer, value) of a shader input, followed through its connections (node graph boundaries, a
-        material's interface inputs, as in USD's own UsdPreviewSurface example): producer is the (shader, output
-        name) whose output feeds it, or None when a value does; value is that value, or the input's own when a
-        shader output feeds it (None when unset)."""
-        from pxr import UsdShade
-
-        if not inp:
-            return None, None
-        attrs = inp.GetValueProducingAttributes() if inp.HasConnectedSource() else [inp.GetAttr()]
-        if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Output:
-            return (UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]), \
-                inp.Get(self.time)
-        return None, (attrs[0].Get(self.time) if attrs else None)
+        """(producer, value) of a shader input (nasset_sdk.stage_rules.input_source)."""
+        return stage_rules.input_source(inp, self.time)
 
     def _value(self, inp):
         """The value feeding a shader input (:meth:`_read_input`); None when unset or fed by a shader's output."""

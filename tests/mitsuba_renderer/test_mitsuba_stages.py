@@ -412,3 +412,23 @@ def test_unrendered_light_features_are_warned_by_name(tmp_path, feature):
         expect = "/World/Bulb: light:filters /World/Barn ignored"
     with pytest.warns(UserWarning, match=expect):
         read_scene(b.write(tmp_path / "s.usda"))
+
+
+# -- shader inputs connected to a material's interface ----------------------------------------------------------------
+
+def test_input_connected_to_the_material_interface_reads_its_value(tmp_path):
+    """``inputs:diffuseColor.connect = </Mat.inputs:baseColor>`` (Houdini, Omniverse and USD's own UsdPreviewSurface
+    example expose inputs on the material) is the interface input's value; it was read as a texture: default 0.18
+    grey, warned as an ignored texture."""
+    from pxr import Sdf, UsdShade
+
+    b, floor = _floor_scene()
+    mat = UsdShade.Material.Define(b.stage, "/World/Looks/Exposed")
+    shader = UsdShade.Shader.Define(b.stage, "/World/Looks/Exposed/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    base = mat.CreateInput("baseColor", Sdf.ValueTypeNames.Color3f)
+    base.Set(RED)
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(base)
+    UsdShade.MaterialBindingAPI(floor).Bind(mat)
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
