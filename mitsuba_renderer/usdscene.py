@@ -134,15 +134,34 @@ def _m4(gf) -> np.ndarray:
 
 def _input(shader, name, default, t=None):
     """A UsdPreviewSurface input's value, followed through connections to a material's or node graph's interface
-    input (nasset_sdk.stage_rules.input_source); one fed by a shader output (a texture) gives ``default``, warned."""
+    input (nasset_sdk.stage_rules.input_source); one fed by a shader output (a texture) gives its own authored value,
+    else ``default``, with a warning."""
     from pxr import Usd
 
     producer, v = stage_rules.input_source(shader.GetInput(name), Usd.TimeCode.Default() if t is None else t)
-    if producer is not None:
+    if producer is not None:  # spec/renderer.md#limits, unsupported shading: the input's own value, else the fallback
         warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected to {producer[0].GetPath()}.outputs:{producer[1]}; "
-                      "its texture is ignored (default used)", stacklevel=3)
-        return default
+                      "its texture is not rendered here (the input's own value, else the fallback, is used)", stacklevel=3)
     return default if v is None else v
+
+
+#: surface shaders read as UsdPreviewSurface (spec/renderer.md#limits, surface shaders)
+PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
+
+
+def _checked(value, n: int, name: str, path: str, shader: str, top: float = np.inf) -> np.ndarray:
+    """A shader input as ``n`` float64 values clamped to [0, top] (spec/renderer.md#limits, input ranges; ``ior`` and
+    ``useSpecularWorkflow`` unclamped); ``SCENE_INVALID`` naming the input when it is not finite numbers."""
+    try:
+        v = np.asarray(value, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        v = np.full(1, np.nan)
+    if len(v) != n or not np.isfinite(v).all():
+        raise SceneError("SCENE_INVALID", f"{name} = {value!r} is not {n} finite number(s)", file=path, prim=shader,
+                         attribute=f"inputs:{name}")
+    if name in ("ior", "useSpecularWorkflow"):
+        return v
+    return np.clip(v, 0.0, top)
 
 
 def _display_color(prim, say, t) -> np.ndarray:
@@ -182,24 +201,27 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
     if not mat:
         kd = _display_color(prim, say, t)
     else:
-        src = mat.ComputeSurfaceSource()
-        shader = src[0] if src and src[0] else None
+        shader = stage_rules.surface_shader(mat)
         if shader is None:
-            warnings.warn(f"{prim.GetPath()}: material {mat.GetPath()} has no surface shader; default UsdPreviewSurface used", stacklevel=2)
-        else:
-            sid = shader.GetIdAttr().Get()
-            if sid != "UsdPreviewSurface":
-                raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not UsdPreviewSurface", file=path, prim=str(shader.GetPath()))
-            kd = np.asarray(_input(shader, "diffuseColor", kd, t), np.float64)
-            spec = np.asarray(_input(shader, "specularColor", spec, t), np.float64)
-            rough = float(_input(shader, "roughness", rough, t))
-            metal = float(_input(shader, "metallic", metal, t))
-            use_spec = int(_input(shader, "useSpecularWorkflow", use_spec, t))
-            ior = float(_input(shader, "ior", ior, t))
-            emis = np.asarray(_input(shader, "emissiveColor", emis, t), np.float64)
-            if float(_input(shader, "opacity", 1.0, t)) < 1.0:
-                warnings.warn(f"{shader.GetPath()}: opacity < 1 rendered opaque (cut-outs, spec/renderer.md#cutouts, are "
-                              "the reference renderer's)", stacklevel=2)
+            raise SceneError("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface",
+                             file=path, prim=str(mat.GetPath()))
+        sid = shader.GetIdAttr().Get()
+        if sid not in PREVIEW_SURFACES:
+            raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not one of {', '.join(PREVIEW_SURFACES)}", file=path,
+                             prim=str(shader.GetPath()))
+        where = str(shader.GetPath())
+        kd = _checked(_input(shader, "diffuseColor", kd, t), 3, "diffuseColor", path, where, 1.0)
+        spec = _checked(_input(shader, "specularColor", spec, t), 3, "specularColor", path, where, 1.0)
+        rough = float(_checked(_input(shader, "roughness", rough, t), 1, "roughness", path, where, 1.0)[0])
+        metal = float(_checked(_input(shader, "metallic", metal, t), 1, "metallic", path, where, 1.0)[0])
+        use_spec = int(_checked(_input(shader, "useSpecularWorkflow", use_spec, t), 1, "useSpecularWorkflow", path, where)[0])
+        ior = float(_checked(_input(shader, "ior", ior, t), 1, "ior", path, where)[0])
+        if ior <= 0:
+            raise SceneError("SCENE_INVALID", f"ior = {ior!r} must be > 0", file=path, prim=where, attribute="inputs:ior")
+        emis = _checked(_input(shader, "emissiveColor", emis, t), 3, "emissiveColor", path, where)
+        if float(_input(shader, "opacity", 1.0, t)) < 1.0:
+            warnings.warn(f"{shader.GetPath()}: opacity < 1 rendered opaque (cut-outs, spec/renderer.md#cutouts, are "
+                          "the reference renderer's)", stacklevel=2)
     if use_spec == 1:
         k, f0 = kd.copy(), spec
     else:

@@ -240,6 +240,16 @@ def bound_material(prim, purposes: Purposes, warn: Warn):
     return mat
 
 
+def surface_shader(mat):
+    """The surface shader of a UsdShade.Material (spec/renderer.md#limits, surface shaders): the shader on the universal
+    ``outputs:surface``, else on MaterialX's ``outputs:mtlx:surface``; None when neither has one."""
+    for context in ("", "mtlx"):
+        src = mat.ComputeSurfaceSource(context)
+        if src and src[0]:
+            return src[0]
+    return None
+
+
 def input_source(inp, time) -> tuple:
     """(producer, value) of a shader input, followed through its connections (spec/renderer.md#materials: node graph
     boundaries, a material's interface inputs, as in USD's own UsdPreviewSurface example): producer is the (shader,

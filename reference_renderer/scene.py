@@ -717,12 +717,7 @@ class _Loader:
         mpath = str(mat.GetPath())
         if mpath in self.mat_index:
             return self.mat_index[mpath]
-        shader = None
-        for context in ("", "mtlx"):  # the universal outputs:surface, else MaterialX's outputs:mtlx:surface
-            src = mat.ComputeSurfaceSource(context)
-            if src and src[0]:
-                shader = src[0]
-                break
+        shader = stage_rules.surface_shader(mat)  # outputs:surface, else outputs:mtlx:surface
         if shader is None:
             others = sorted(o.GetFullName() for o in mat.GetSurfaceOutputs() if o.HasConnectedSource())
             raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface"

@@ -432,3 +432,60 @@ def test_input_connected_to_the_material_interface_reads_its_value(tmp_path):
     shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(base)
     UsdShade.MaterialBindingAPI(floor).Bind(mat)
     np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
+
+
+# -- surface shaders and input values (spec/renderer.md#limits) ------------------------------------------------------
+
+def _material_with(b, floor, output: str, shader_id: str, **inputs):
+    from pxr import Sdf, UsdShade
+
+    mat = UsdShade.Material.Define(b.stage, "/World/Looks/Probe")
+    if shader_id:
+        shader = UsdShade.Shader.Define(b.stage, "/World/Looks/Probe/Surface")
+        shader.CreateIdAttr(shader_id)
+        for name, value in inputs.items():
+            kind = Sdf.ValueTypeNames.Color3f if isinstance(value, tuple) else Sdf.ValueTypeNames.Float
+            shader.CreateInput(name, kind).Set(value)
+        out = mat.CreateSurfaceOutput("mtlx") if output == "mtlx" else mat.CreateSurfaceOutput()
+        out.ConnectToSource(shader.ConnectableAPI(), "out" if output == "mtlx" else "surface")
+    UsdShade.MaterialBindingAPI(floor).Bind(mat)
+
+
+def test_materialx_preview_surface_on_the_mtlx_output_is_read(tmp_path):
+    """``outputs:mtlx:surface`` with ``ND_UsdPreviewSurface_surfaceshader`` (MaterialX's UsdPreviewSurface) is read
+    as the UsdPreviewSurface; the material was taken to have no surface (0.18 grey, a warning)."""
+    b, floor = _floor_scene()
+    _material_with(b, floor, "mtlx", "ND_UsdPreviewSurface_surfaceshader", diffuseColor=RED)
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
+
+
+def test_material_without_a_surface_shader_is_unsupported(tmp_path):
+    b, floor = _floor_scene()
+    _material_with(b, floor, "", "")
+    with pytest.raises(SceneError) as info:
+        read_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_UNSUPPORTED" and "/World/Looks/Probe" in str(info.value)
+
+
+@pytest.mark.parametrize("value, expect", [(2.5, 1.0), (-1.0, 0.0), (float("nan"), None)])
+def test_preview_surface_inputs_are_clamped_or_invalid(tmp_path, value, expect):
+    """diffuseColor outside [0, 1] is clamped, a NaN is SCENE_INVALID naming the input; it was used as authored."""
+    b, floor = _floor_scene()
+    _material_with(b, floor, "", "UsdPreviewSurface", diffuseColor=(value, value, value))
+    scene = b.write(tmp_path / "s.usda")
+    if expect is None:
+        with pytest.raises(SceneError) as info:
+            read_scene(scene)
+        assert info.value.code == "SCENE_INVALID" and "inputs:diffuseColor" in str(info.value)
+    else:
+        np.testing.assert_allclose(_kd(read_scene(scene), "/World/Floor")[0], expect)
+
+
+def test_connected_input_uses_its_own_authored_value(tmp_path):
+    """A diffuseColor fed by a texture this implementation does not render keeps the input's own authored value
+    (spec/renderer.md#limits, unsupported shading), with a warning; the 0.18 fallback was used."""
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "wood.png")
+    with pytest.warns(UserWarning, match="inputs:diffuseColor is connected"):
+        desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
