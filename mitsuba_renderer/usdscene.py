@@ -385,6 +385,7 @@ def read_scene(path: str) -> SceneDesc:
                 start += c
             mw = _m4(cache.GetLocalToWorldTransform(prim))
             wp = pts @ mw[:3, :3] + mw[3, :3]
+            _sidedness_warning(prim, say, t)
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
@@ -402,6 +403,20 @@ def read_scene(path: str) -> SceneDesc:
     camera.settings_resolution = stage_rules.settings_resolution(stage, settings, t, say, MAX_SETTINGS_PIXELS)
     stage_rules.conform_warning(settings, t, camera.settings_resolution, camera.h_aperture, camera.v_aperture, say)
     return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
+
+
+def _sidedness_warning(prim, say, t) -> None:
+    """spec/renderer.md#sidedness: a one-sided mesh (``doubleSided`` authored false) and a back material
+    (``nasset:backMaterial``) are not rendered here (both sides front-facing, the front material): said by name."""
+    from pxr import UsdGeom
+
+    attr = UsdGeom.Gprim(prim).GetDoubleSidedAttr()
+    if attr and attr.HasAuthoredValue() and not attr.Get(t):
+        say("doubleSided = false is not applied here: both sides are front-facing", str(prim.GetPath()))
+    rel = prim.GetRelationship("nasset:backMaterial")
+    if rel and rel.GetForwardedTargets():
+        say(f"nasset:backMaterial {rel.GetForwardedTargets()[0]} is not applied here: both sides take the front "
+            "material", str(prim.GetPath()))
 
 
 def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:

@@ -489,3 +489,20 @@ def test_connected_input_uses_its_own_authored_value(tmp_path):
     with pytest.warns(UserWarning, match="inputs:diffuseColor is connected"):
         desc = read_scene(b.write(tmp_path / "s.usda"))
     np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("feature", ["one-sided", "back material"])
+def test_sidedness_this_implementation_does_not_render_is_warned(tmp_path, feature):
+    """spec/renderer.md#sidedness: one-sided meshes and back materials are the reference renderer's; here both sides
+    are front-facing with the front material, which was not said."""
+    from pxr import UsdGeom
+
+    b, floor = _floor_scene()
+    if feature == "one-sided":
+        UsdGeom.Mesh(floor).CreateDoubleSidedAttr(False)
+        expect = "/World/Floor: doubleSided = false is not applied"
+    else:
+        floor.CreateRelationship("nasset:backMaterial").SetTargets([b.material("Back").GetPath()])
+        expect = "/World/Floor: nasset:backMaterial /World/Looks/Back is not applied"
+    with pytest.warns(UserWarning, match=expect):
+        read_scene(b.write(tmp_path / "s.usda"))
