@@ -1,6 +1,8 @@
-"""What a render reads of a composed stage (spec/renderer.md#image-size, #traversal, #materials): which render
-settings prim, which camera, which image size, which prim purposes and which material binding purpose. Every renderer
-calls these, so the rules live in one place; how the prims are shaded is each renderer's own.
+"""What a render reads of a composed stage (spec/renderer.md#scene-input, #traversal, #image-size, #render-settings,
+#materials): the render time, the scene's own payloads, the render settings prim and what it chooses (camera, image
+size, prim purposes, material binding purpose, custom nasset: settings), visibility, the bound material, its surface
+shader and where a shader input's value comes from, composition errors and the units of a placed asset. Both renderers
+call these, so each rule lives in one place; how the prims are shaded is each renderer's own.
 
 ``warn(message, prim)`` receives what a renderer says about a feature it reads otherwise than authored (``prim``: a
 path, or None when the message names its prim itself)."""
