@@ -4,7 +4,9 @@ Written from the specification text (spec/format.md, spec/kinds/rna.md, spec/kin
 spec/renderer.md) and independent of ``nasset_sdk``'s evaluators and of ``nasset_reference_renderer``:
 
 - :mod:`.usdscene` reads the USD scene (camera, meshes + UsdPreviewSurface, UsdLux lights,
-  NeuralAsset prims);
+  NeuralAsset prims); which prims, camera, image size and bindings a render reads (render settings, purposes,
+  visibility, payloads, time) are the scene rules of ``nasset_sdk.stage_rules``, shared with the reference
+  renderer; the shading is this package's own;
 - :mod:`.rna` reads an ``rna`` asset file (sha256-checked decoder, triplane; mesh or fiber curves
   tessellated into the spec's prisms) and evaluates its transport with its own triplane lookup and
   onnxruntime;

@@ -136,6 +136,23 @@ class Kind:
     MESH, ASSET, LIGHT = 0, 1, 2
 
 
+def _filter_offsets(rng, n: int, kind: str, stddev: float) -> np.ndarray:
+    """Offsets [n] from a pixel's left (top) edge distributed as the pixel filter along one axis: box, uniform in
+    [0, 1); gaussian, ``exp(-x^2/2s^2) - exp(-r^2/2s^2)`` on |x| < r = 4s around the pixel centre, by rejection
+    from the uniform density on (-r, r) (acceptance above 0.2 for every s)."""
+    if kind == "box":
+        return rng.random(n)
+    r, floor = 4.0 * stddev, np.exp(-8.0)
+    out = np.empty(n)
+    todo = np.arange(n)
+    while len(todo):
+        x = (2.0 * rng.random(len(todo)) - 1.0) * r
+        keep = rng.random(len(todo)) * (1.0 - floor) < np.exp(-x * x / (2.0 * stddev * stddev)) - floor
+        out[todo[keep]] = 0.5 + x[keep]
+        todo = todo[~keep]
+    return out
+
+
 class PathTracer:
     def __init__(self, mi, scene, objects, lights, camera, *, max_depth=5, rr_depth=3, log=None) -> None:
         """``objects``: list of dicts (kind, mesh/asset data, world triangles) indexed by Tracer object index."""
@@ -256,7 +273,9 @@ class PathTracer:
 
     # -- main loop ------------------------------------------------------------------------------------
 
-    def render(self, width, height, spp, seed, batch=1 << 17):
+    def render(self, width, height, spp, seed, batch=1 << 17, pixel_filter=("box", 0.5)):
+        """[H, W, 3] radiance; ``pixel_filter`` (kind, stddev in pixels) of spec/renderer.md#render-settings: each camera
+        sample's position is drawn from the filter (weight 1)."""
         rng = np.random.default_rng(seed)
         npix = width * height
         total = npix * spp
@@ -265,8 +284,8 @@ class PathTracer:
             e = min(total, s + batch)
             ids = np.arange(s, e)
             pix = ids % npix
-            px = (pix % width) + rng.random(len(ids))
-            py = (pix // width) + rng.random(len(ids))
+            px = (pix % width) + _filter_offsets(rng, len(ids), *pixel_filter)
+            py = (pix // width) + _filter_offsets(rng, len(ids), *pixel_filter)
             lens = rng.random((len(ids), 2)) if self.camera.lens_radius > 0 else None
             o, d = self.camera_rays(px, py, width, height, lens)
             contrib = self.radiance(o, d, rng)

@@ -85,7 +85,7 @@ def register(mi) -> None:
         def render(self, scene, sensor=0, seed=0, spp=0, develop=True, evaluate=True):
             ctx = _CONTEXTS[self.context]
             pt = PathTracer(mi, scene, ctx["objects"], ctx["lights"], ctx["camera"], max_depth=self.max_depth)
-            img = pt.render(ctx["width"], ctx["height"], int(spp), int(seed), batch=self.batch)
+            img = pt.render(ctx["width"], ctx["height"], int(spp), int(seed), batch=self.batch, pixel_filter=ctx["pixel_filter"])
             return mi.TensorXf(img.astype(np.float32))
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
@@ -131,14 +131,24 @@ def sensor_dict(mi, cam, width: int, height: int) -> dict:
     }
 
 
-def build(scene_path: str, width: int | None = None, height: int | None = None, *, max_depth: int = 5, threads: int = 0, batch: int = 1 << 17):
-    """USD scene -> (mitsuba module, mi.Scene, integrator, (width, height))."""
+#: ``nasset:maxDepth = -1`` (unbounded, spec/renderer.md#render-settings): this many bounces, with Russian roulette
+UNBOUNDED_DEPTH = 1024
+
+
+def build(scene_path: str, width: int | None = None, height: int | None = None, *, max_depth: int | None = None,
+          threads: int = 0, batch: int = 1 << 17):
+    """USD scene -> (mitsuba module, mi.Scene, integrator, (width, height)). ``max_depth`` None: the render settings'
+    ``nasset:maxDepth``, else 5."""
     mi = load_mitsuba()
     if not is_jit(mi):
         raise error("CONVERT_BACKEND", f"the neural renderer needs a vectorised Mitsuba variant (llvm_ad_rgb); got {mi.variant()}")
     register(mi)
     desc = read_scene(scene_path)
     w, h = desc.camera.resolution(width, height)
+    rs = desc.render_settings
+    if max_depth is None:
+        max_depth = rs.get("max_depth", 5)
+        max_depth = UNBOUNDED_DEPTH if max_depth == -1 else max_depth
     entries: dict = {"type": "scene"}
     objects = []
     for k, mesh in enumerate(desc.meshes):
@@ -175,12 +185,14 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
     except Exception as exc:
         raise SceneError("SCENE_INVALID", f"Mitsuba could not build the scene: {str(exc).splitlines()[0][:300]}", file=scene_path) from None
     key = f"ctx{len(_CONTEXTS)}"
-    _CONTEXTS[key] = {"objects": objects, "lights": lights, "camera": cam, "width": w, "height": h}
+    _CONTEXTS[key] = {"objects": objects, "lights": lights, "camera": cam, "width": w, "height": h,
+                      "pixel_filter": (rs.get("pixel_filter", "box"), rs.get("pixel_filter_stddev", 0.5))}
     integrator = mi.load_dict({"type": INTEGRATOR, "context": key, "max_depth": int(max_depth), "batch": int(batch)})
     return mi, scene, integrator, (w, h)
 
 
-def render(scene_path: str, spp: int, *, width: int | None = None, height: int | None = None, seed: int = 0, max_depth: int = 5,
+def render(scene_path: str, spp: int, *, width: int | None = None, height: int | None = None, seed: int = 0,
+           max_depth: int | None = None,
            threads: int = 0, batch: int = 1 << 17) -> np.ndarray:
     """Render ``scene_path``; returns float32 [H, W, 3] radiance."""
     if spp < 1:
@@ -206,7 +218,7 @@ def main(argv=None) -> int:
     ap.add_argument("--width", type=int, default=None)
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--seed", type=seed_arg, default=0)
-    ap.add_argument("--max-depth", type=int, default=5)
+    ap.add_argument("--max-depth", type=int, default=None, help="bounces (default: the render settings' nasset:maxDepth, else 5)")
     ap.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto)")
     ap.add_argument("--batch", type=int, default=1 << 17, help="paths per wavefront")
     ap.add_argument("--neupress-sampling", default="auto", choices=list(neupress.MODES), help="neupress techniques (spec/renderer.md#neupress)")

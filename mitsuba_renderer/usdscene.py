@@ -8,9 +8,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from nasset_sdk import stage_rules
 from nasset_sdk.errors import SceneError
 
 _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
+MAX_SETTINGS_PIXELS = 1 << 26  # a render settings' resolution above it is ignored, as in the reference renderer
 _LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DomeLight"}
 
 
@@ -66,10 +68,13 @@ class Camera:
     lens_radius: float = 0.0  # thin lens (perspective): aperture radius in scene units; 0 is a pinhole
     focus_distance: float = 0.0  # scene units
     exposure: float = 1.0  # linear factor on the image
+    settings_resolution: tuple[int, int] | None = None  # of the stage's render settings (spec/renderer.md#image-size)
 
     def resolution(self, width: int | None, height: int | None) -> tuple[int, int]:
         aspect = self.v_aperture / self.h_aperture
         if width is None and height is None:
+            if self.settings_resolution is not None:
+                return self.settings_resolution
             width = 256
         if width is None:
             width = max(1, int(round(height / aspect)))
@@ -85,6 +90,7 @@ class SceneDesc:
     meshes: list[Mesh] = field(default_factory=list)
     lights: list[Light] = field(default_factory=list)
     assets: list[AssetInstance] = field(default_factory=list)
+    render_settings: dict = field(default_factory=dict)  # max_depth, pixel_filter, pixel_filter_stddev where authored
 
 
 def _read_camera(prim, to_world, path, t) -> Camera:
@@ -127,42 +133,95 @@ def _m4(gf) -> np.ndarray:
 
 
 def _input(shader, name, default, t=None):
-    inp = shader.GetInput(name)
-    if not inp:
-        return default
-    if inp.HasConnectedSource():
-        warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected; its texture is ignored (default used)", stacklevel=3)
-        return default
-    v = inp.Get() if t is None else inp.Get(t)
+    """A UsdPreviewSurface input's value, followed through connections to a material's or node graph's interface
+    input (nasset_sdk.stage_rules.input_source); one fed by a shader output (a texture) gives its own authored value,
+    else ``default``, with a warning."""
+    from pxr import Usd
+
+    producer, v = stage_rules.input_source(shader.GetInput(name), Usd.TimeCode.Default() if t is None else t)
+    if producer is not None:  # spec/renderer.md#limits, unsupported shading: the input's own value, else the fallback
+        warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected to {producer[0].GetPath()}.outputs:{producer[1]}; "
+                      "its texture is not rendered here (the input's own value, else the fallback, is used)", stacklevel=3)
     return default if v is None else v
 
 
-def read_material(prim, path, t=None) -> Material:
-    from pxr import UsdShade
+#: surface shaders read as UsdPreviewSurface (spec/renderer.md#limits, surface shaders)
+PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
 
+
+def _checked(value, n: int, name: str, path: str, shader: str, top: float = np.inf) -> np.ndarray:
+    """A shader input as ``n`` float64 values clamped to [0, top] (spec/renderer.md#limits, input ranges; ``ior`` and
+    ``useSpecularWorkflow`` unclamped); ``SCENE_INVALID`` naming the input when it is not finite numbers."""
+    try:
+        v = np.asarray(value, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        v = np.full(1, np.nan)
+    if len(v) != n or not np.isfinite(v).all():
+        raise SceneError("SCENE_INVALID", f"{name} = {value!r} is not {n} finite number(s)", file=path, prim=shader,
+                         attribute=f"inputs:{name}")
+    if name in ("ior", "useSpecularWorkflow"):
+        return v
+    return np.clip(v, 0.0, top)
+
+
+def _display_color(prim, say, t) -> np.ndarray:
+    """An unbound prim's diffuse colour (spec/renderer.md#limits, unbound meshes): its ``displayColor`` primvar, else a
+    constant one of an ancestor; 0.18 grey without one. Several values are read as their mean, with a warning."""
+    from pxr import UsdGeom
+
+    primvars = UsdGeom.PrimvarsAPI(prim)
+    dc = primvars.FindPrimvarWithInheritance("displayColor")
+    val = dc.Get(t) if dc and dc.HasAuthoredValue() else None
+    val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
+    do = primvars.FindPrimvarWithInheritance("displayOpacity")
+    opacity = do.Get(t) if do and do.HasAuthoredValue() else None
+    if opacity is not None and len(opacity) and np.mean(np.asarray(opacity, np.float64)) < 1.0:
+        say("displayOpacity < 1 rendered opaque (its presence, spec/renderer.md#cutouts, is the reference renderer's)",
+            str(prim.GetPath()))
+    if val is None or not np.isfinite(val).all():
+        return np.full(3, 0.18)
+    if len(val) > 1:
+        say(f"displayColor of {len(val)} values read as their mean (not interpolated per hit)", str(prim.GetPath()))
+    return np.clip(val.mean(0), 0.0, 1.0)
+
+
+def _say(path: str):
+    """The ``warn(message, prim)`` of nasset_sdk.stage_rules for the scene ``path``."""
+    def say(message: str, prim: str | None) -> None:
+        warnings.warn(f"{path}:{prim}: {message}" if prim else f"{path}: {message}", stacklevel=3)
+    return say
+
+
+def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None) -> Material:
+    say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
-    mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)  # else all-purpose
-    if mat:
-        src = mat.ComputeSurfaceSource()
-        shader = src[0] if src and src[0] else None
+    mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
+    if not mat:
+        kd = _display_color(prim, say, t)
+    else:
+        shader = stage_rules.surface_shader(mat)
         if shader is None:
-            warnings.warn(f"{prim.GetPath()}: material {mat.GetPath()} has no surface shader; default UsdPreviewSurface used", stacklevel=2)
-        else:
-            sid = shader.GetIdAttr().Get()
-            if sid != "UsdPreviewSurface":
-                raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not UsdPreviewSurface", file=path, prim=str(shader.GetPath()))
-            kd = np.asarray(_input(shader, "diffuseColor", kd, t), np.float64)
-            spec = np.asarray(_input(shader, "specularColor", spec, t), np.float64)
-            rough = float(_input(shader, "roughness", rough, t))
-            metal = float(_input(shader, "metallic", metal, t))
-            use_spec = int(_input(shader, "useSpecularWorkflow", use_spec, t))
-            ior = float(_input(shader, "ior", ior, t))
-            emis = np.asarray(_input(shader, "emissiveColor", emis, t), np.float64)
-            if float(_input(shader, "opacity", 1.0, t)) < 1.0:
-                warnings.warn(f"{shader.GetPath()}: opacity < 1 rendered opaque (cut-outs, spec/renderer.md#cutouts, are "
-                              "the reference renderer's)", stacklevel=2)
+            raise SceneError("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface",
+                             file=path, prim=str(mat.GetPath()))
+        sid = shader.GetIdAttr().Get()
+        if sid not in PREVIEW_SURFACES:
+            raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not one of {', '.join(PREVIEW_SURFACES)}", file=path,
+                             prim=str(shader.GetPath()))
+        where = str(shader.GetPath())
+        kd = _checked(_input(shader, "diffuseColor", kd, t), 3, "diffuseColor", path, where, 1.0)
+        spec = _checked(_input(shader, "specularColor", spec, t), 3, "specularColor", path, where, 1.0)
+        rough = float(_checked(_input(shader, "roughness", rough, t), 1, "roughness", path, where, 1.0)[0])
+        metal = float(_checked(_input(shader, "metallic", metal, t), 1, "metallic", path, where, 1.0)[0])
+        use_spec = int(_checked(_input(shader, "useSpecularWorkflow", use_spec, t), 1, "useSpecularWorkflow", path, where)[0])
+        ior = float(_checked(_input(shader, "ior", ior, t), 1, "ior", path, where)[0])
+        if ior <= 0:
+            raise SceneError("SCENE_INVALID", f"ior = {ior!r} must be > 0", file=path, prim=where, attribute="inputs:ior")
+        emis = _checked(_input(shader, "emissiveColor", emis, t), 3, "emissiveColor", path, where)
+        if float(_input(shader, "opacity", 1.0, t)) < 1.0:
+            warnings.warn(f"{shader.GetPath()}: opacity < 1 rendered opaque (cut-outs, spec/renderer.md#cutouts, are "
+                          "the reference renderer's)", stacklevel=2)
     if use_spec == 1:
         k, f0 = kd.copy(), spec
     else:
@@ -170,6 +229,9 @@ def read_material(prim, path, t=None) -> Material:
         r0 = ((1.0 - ior) / (1.0 + ior)) ** 2
         f0 = r0 * (1.0 - metal) + kd * metal
     return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True)
+
+
+DEFAULT_PURPOSES = stage_rules.Purposes(frozenset({"default", "render"}), "full")
 
 
 def _asset_target(prim) -> str | None:
@@ -198,6 +260,15 @@ def _asset_to_world(prim, cache) -> np.ndarray:
     if xf.GetResetXformStack():
         return local
     return local @ _m4(cache.GetLocalToWorldTransform(prim.GetParent()))
+
+
+def _units_warning(stage, file: str, to_world, prim: str, say) -> None:
+    """nasset_sdk.stage_rules.units_warning with the metersPerUnit of the asset's layer (already open: composed)."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(file) if os.path.isfile(file) else None
+    if layer is not None:
+        stage_rules.units_warning(stage, float(layer.pseudoRoot.GetInfo("metersPerUnit") or 1.0), to_world, prim, say)
 
 
 def _looks_like_asset(file: str) -> bool:
@@ -248,15 +319,28 @@ def read_scene(path: str) -> SceneDesc:
         stage = open_checked_stage(path, Usd.Stage.LoadNone, scene=True)
     except Tf.ErrorException as exc:
         raise SceneError("SCENE_INVALID", f"scene does not open: {str(exc).splitlines()[0][:200]}", file=path) from None
+    if stage is None:
+        raise SceneError("SCENE_INVALID", "USD cannot open it", file=path)
+    stage_rules.load_scene_payloads(stage)  # plain geometry placed with a payload is part of the scene
     # the render time of spec/renderer.md#traversal: the stage's start, else each attribute's default or first sample
-    t = Usd.TimeCode(stage.GetStartTimeCode()) if stage.HasAuthoredTimeCodeRange() else Usd.TimeCode.EarliestTime()
+    t = stage_rules.render_time(stage)
     cache = UsdGeom.XformCache(t)
-    camera = None
+    say = _say(path)
+    broken: dict = {}
+    for where, text in stage_rules.composition_errors(stage):  # USD composes the stage without what failed
+        broken.setdefault(where, text)
+        say(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
+    settings = stage_rules.settings_prim(stage, say)  # spec/renderer.md#image-size
+    purposes = stage_rules.settings_purposes(settings, t, say)
+    cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
     it = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)))
     for prim in it:
         if prim.IsPseudoRoot():
+            continue
+        if stage_rules.is_hidden(prim, t, purposes):  # invisible, or a purpose the settings leave out
+            it.PruneChildren()
             continue
         tn = prim.GetTypeName()
         ppath = str(prim.GetPath())
@@ -266,15 +350,17 @@ def read_scene(path: str) -> SceneDesc:
                 raise SceneError("SCENE_UNSUPPORTED", "an asset embedded in a flattened scene (render it with nasset render, "
                                  "or reference the asset file)", file=path, prim=ppath)
             file = source.layer if source is not None else _asset_target(prim)
+            if source is None and tn == "" and ppath in broken:  # spec/renderer.md#scene-input
+                raise SceneError("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {file} "
+                                 f"({broken[ppath]})", file=path, prim=ppath)
             if source is not None or tn == "NeuralAsset" or (file and _looks_like_asset(file)):
                 it.PruneChildren()
                 if not file:
                     raise SceneError("SCENE_INVALID", "NeuralAsset prim references no asset file", file=path, prim=ppath)
                 assets.append(AssetInstance(ppath, file, _asset_to_world(prim, cache)))
+                _units_warning(stage, file, assets[-1].to_world, ppath, say)
                 continue
         if tn == "Camera":
-            if camera is None:
-                camera = _read_camera(prim, _m4(cache.GetLocalToWorldTransform(prim)), path, t)
             continue
         if tn in _LIGHTS:
             lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path, t))
@@ -299,23 +385,41 @@ def read_scene(path: str) -> SceneDesc:
                 start += c
             mw = _m4(cache.GetLocalToWorldTransform(prim))
             wp = pts @ mw[:3, :3] + mw[3, :3]
+            _sidedness_warning(prim, say, t)
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
-            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t):
-                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t), None if cn is None else cn[sel]))
+            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes):
+                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes),
+                                   None if cn is None else cn[sel]))
             continue
         if tn in _STRUCTURAL:
             continue
         if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim) or tn == "PointInstancer":
             raise SceneError("SCENE_UNSUPPORTED", f"prim type {tn!r} is not supported", file=path, prim=ppath)
         warnings.warn(f"{ppath}: prim type {tn!r} ignored", stacklevel=2)
-    if camera is None:
-        raise SceneError("SCENE_INVALID", "the scene has no UsdGeom.Camera", file=path)
-    return SceneDesc(path, camera, meshes, lights, assets)
+    chosen = stage_rules.render_camera(stage, settings, path, say, cameras)
+    camera = _read_camera(chosen, _m4(cache.GetLocalToWorldTransform(chosen)), path, t)
+    camera.settings_resolution = stage_rules.settings_resolution(stage, settings, t, say, MAX_SETTINGS_PIXELS)
+    stage_rules.conform_warning(settings, t, camera.settings_resolution, camera.h_aperture, camera.v_aperture, say)
+    return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
 
 
-def _face_groups(mesh, face_of, n_faces: int, path: str, t) -> list:
+def _sidedness_warning(prim, say, t) -> None:
+    """spec/renderer.md#sidedness: a one-sided mesh (``doubleSided`` authored false) and a back material
+    (``nasset:backMaterial``) are not rendered here (both sides front-facing, the front material): said by name."""
+    from pxr import UsdGeom
+
+    attr = UsdGeom.Gprim(prim).GetDoubleSidedAttr()
+    if attr and attr.HasAuthoredValue() and not attr.Get(t):
+        say("doubleSided = false is not applied here: both sides are front-facing", str(prim.GetPath()))
+    rel = prim.GetRelationship("nasset:backMaterial")
+    if rel and rel.GetForwardedTargets():
+        say(f"nasset:backMaterial {rel.GetForwardedTargets()[0]} is not applied here: both sides take the front "
+            "material", str(prim.GetPath()))
+
+
+def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:
     """[(prim path, prim whose binding shades them, triangle mask)] of a mesh (spec/renderer.md#materials): the faces of
     each ``materialBind`` GeomSubset of element type face with a bound material (the first subset listing a face
     wins), the rest under the mesh's own binding; ``holeIndices`` faces left out."""
@@ -325,8 +429,9 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t) -> list:
     groups = []
     for subset in UsdShade.MaterialBindingAPI(mesh.GetPrim()).GetMaterialBindSubsets():
         if subset.GetElementTypeAttr().Get(t) != UsdGeom.Tokens.face:
+            _say(path)("GeomSubset of an element type other than face ignored", str(subset.GetPath()))
             continue
-        if not UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial(UsdShade.Tokens.full)[0]:
+        if not stage_rules.bound_material(subset.GetPrim(), purposes, _say(path)):
             continue
         ind = np.asarray(subset.GetIndicesAttr().Get(t) or [], np.int64)
         if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):
@@ -373,6 +478,23 @@ def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
 
 
+def _unhonoured_light_features(prim, path, t) -> None:
+    """Warnings naming the light features this implementation does not render (spec/renderer.md#spot-lights,
+    #light-surfaces): a spot cone (UsdLux.ShapingAPI), a light hidden from camera rays, light filters."""
+    from pxr import UsdLux
+
+    say = _say(path)
+    where = str(prim.GetPath())
+    if prim.HasAPI(UsdLux.ShapingAPI):
+        say("UsdLux.ShapingAPI (spot cone) is not applied here: the light emits in every direction", where)
+    vis = prim.GetAttribute("nasset:cameraVisibility")
+    if vis and vis.HasAuthoredValue() and vis.Get(t) is False:
+        say("nasset:cameraVisibility = false is not applied here: camera rays see the light", where)
+    filters = UsdLux.LightAPI(prim).GetFiltersRel().GetForwardedTargets() if prim.HasAPI(UsdLux.LightAPI) else []
+    if filters:
+        say(f"light:filters {', '.join(map(str, filters))} ignored", where)
+
+
 def _read_light(prim, tn, mw, path, t) -> Light:
     from pxr import Sdf
 
@@ -394,6 +516,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             raise SceneError("SCENE_INVALID", "colorTemperature must be finite and > 0", file=path, prim=ppath)
         rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
+    _unhonoured_light_features(prim, path, t)
     if tn == "DistantLight":
         lt.angle = float(get("angle", 0.53))
     elif tn == "SphereLight":

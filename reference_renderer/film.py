@@ -41,11 +41,9 @@ def check_image_size(width, height, spp=None) -> tuple[int, int]:
     return w, h
 
 
-#: Pixel filters (spec/renderer.md#render-settings): ``box`` (uniform over the pixel) or a truncated
-#: Gaussian of standard deviation ``stddev`` pixels (Mitsuba's ``gaussian``: radius 4 stddev), applied by
-#: drawing each camera sample's offset from the filter (filter importance sampling, every weight 1).
-PIXEL_FILTERS = ("box", "gaussian")
-MAX_FILTER_STDDEV = 8.0
+#: Pixel filters (spec/renderer.md#render-settings, nasset_sdk.stage_rules.PIXEL_FILTERS): ``box`` (uniform over the
+#: pixel) or a truncated Gaussian of standard deviation ``stddev`` pixels (Mitsuba's ``gaussian``: radius 4 stddev),
+#: applied by drawing each camera sample's offset from the filter (filter importance sampling, every weight 1).
 
 
 def pixel_offsets(rng, n: int, kind: str = "box", stddev: float = 0.5) -> np.ndarray:

@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_sdk import stage_rules
 from nasset_sdk.errors import NassetError, SceneError, error, usd_reason
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
 from .curves import BASES, SPHERE_TRIANGLES, TUBE_TRIANGLES, CurveError, polylines, segment_count, sphere_mesh, tube_mesh
-from .film import MAX_FILTER_STDDEV, MAX_IMAGE_PIXELS, PIXEL_FILTERS
+from .film import MAX_IMAGE_PIXELS
 from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
     MAX_MESH_LIGHT_TRIANGLES,
@@ -248,31 +249,8 @@ def open_stage(path: str, context=None):
         raise SceneError("SCENE_INVALID", f"USD cannot open it: {usd_reason(exc)}", file=str(p)) from None
     if stage is None:
         raise SceneError("SCENE_INVALID", "USD cannot open it", file=str(p))
-    _load_scene_payloads(stage)
+    stage_rules.load_scene_payloads(stage)
     return stage
-
-
-def _load_scene_payloads(stage) -> None:
-    """Load the scene's own payloads (a prim placed with a payload, spec/renderer.md#traversal), each
-    without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""
-    from pxr import Usd
-
-    from nasset_sdk.references import asset_source
-
-    pred = Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
-    for _ in range(32):  # payloads may bring further payloads; bounded against cycles
-        todo = []
-        it = iter(Usd.PrimRange(stage.GetPseudoRoot(), pred))
-        for prim in it:
-            if prim.GetTypeName() == "NeuralAsset" or asset_source(prim) is not None:
-                it.PruneChildren()
-            elif prim.HasAuthoredPayloads() and not prim.IsLoaded():
-                todo.append(prim.GetPath())
-                it.PruneChildren()
-        if not todo:
-            return
-        for path in todo:
-            stage.Load(path, Usd.LoadWithoutDescendants)
 
 
 def is_asset_file(path: str) -> bool:
@@ -322,22 +300,8 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
 
 
 def render_time(stage, time=None):
-    """The ``Usd.TimeCode`` a scene renders at (spec/renderer.md#traversal): ``time`` (a number) when given, else the
-    stage's ``startTimeCode`` when it authors a time code range, else the earliest time: an attribute's default
-    value, or its first time sample where it has samples (an animation cache without defaults still renders)."""
-    import math
-
-    from pxr import Usd
-
-    if time is not None:
-        if isinstance(time, Usd.TimeCode):
-            return time
-        if not math.isfinite(float(time)):
-            raise SceneError("SCENE_INVALID", f"render time {time!r} is not finite")
-        return Usd.TimeCode(float(time))
-    if stage.HasAuthoredTimeCodeRange():
-        return Usd.TimeCode(stage.GetStartTimeCode())
-    return Usd.TimeCode.EarliestTime()
+    """The ``Usd.TimeCode`` a scene renders at (nasset_sdk.stage_rules.render_time)."""
+    return stage_rules.render_time(stage, time)
 
 
 #: largest image file read out of a package (usdz) into a temporary file
@@ -398,7 +362,7 @@ class _Loader:
         self.tri_st: list = []
         self.tri_color: list = []  # per mesh instance [k,3,3] or None
         self._inst_st: dict = {}  # instance index -> its triangles' texture coordinates [k,3,2] (emissive textures)
-        self._purposes = {"included": {"default", "render"}, "material": "full"}  # of the render settings, load()
+        self._purposes = stage_rules.Purposes(frozenset({"default", "render"}), "full")  # of the render settings, load()
         self._st_fallback: dict = {}  # st primvar name -> the first UsdPrimvarReader_float2 fallback read for it
         self._mesh_sources: dict = {}  # prim path -> _mesh_source of a PointInstancer's prototype meshes
         self.instances: list[Instance] = []
@@ -408,7 +372,6 @@ class _Loader:
         self.lights: list[Light] = []
         self.assets: list[NeuralAssetData] = []
         self.asset_index: dict = {}
-        self.cameras: list = []
 
     def err(self, code, msg, prim=None, attribute=None):
         return error(code, msg, file=self.file, prim=None if prim is None else str(prim), attribute=attribute)
@@ -448,19 +411,16 @@ class _Loader:
 
         broken = self._composition_errors()
         # a camera is rendered through whatever its visibility or purpose (they hide its gizmo in a viewport)
-        self.cameras = [p for p in Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Camera)]
+        cameras = stage_rules.stage_cameras(self.stage)
         settings = self._settings_prim()
-        self._purposes = self._settings_purposes(settings)
+        self._purposes = stage_rules.settings_purposes(settings, self.time, self.warn)
         unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
-            if prim.IsA(UsdGeom.Imageable):
-                img = UsdGeom.Imageable(prim)
-                if img.ComputeVisibility(self.time) == UsdGeom.Tokens.invisible or \
-                        img.ComputePurpose() not in self._purposes["included"]:
-                    it.PruneChildren()
-                    continue
+            if stage_rules.is_hidden(prim, self.time, self._purposes):
+                it.PruneChildren()
+                continue
             tname = str(prim.GetTypeName())
             with self._reading(path):
                 source = asset_source(prim)
@@ -492,13 +452,9 @@ class _Loader:
                     unknown.add(tname)  # a DCC's own type, its plugin not here: said once per type
                     self.warn(f"prim type {tname!r} has no schema here (a plugin's type, {path} the first): its prims "
                               "are not rendered themselves, their children are traversed", None)
-        chosen = self._settings_camera(settings)
-        if chosen is None and not self.cameras:
-            raise self.err("SCENE_INVALID", "the scene has no UsdGeom.Camera")
-        with self._reading(str((chosen or self.cameras[0]).GetPath())):
-            camera = self._camera(chosen or self.cameras[0], settings)
-        if chosen is None and len(self.cameras) > 1:
-            self.warn(f"{len(self.cameras)} cameras; rendering through the first, {camera.prim}")
+        chosen = stage_rules.render_camera(self.stage, settings, self.file, self.warn, cameras)
+        with self._reading(str(chosen.GetPath())):
+            camera = self._camera(chosen, settings)
         if not self.lights and not any(r[3].any() for r in self.mat_rows):
             self.warn("the scene has no lights and no emissive materials; the image will be black")
         self._mesh_lights()
@@ -655,7 +611,8 @@ class _Loader:
                            path, "xformOpOrder")
         camera = Camera(M, fl, ha, va, str(path), self._render_resolution(settings), *offsets, orthographic=ortho,
                         lens_radius=lens_radius, focus_distance=focus, exposure_scale=self._exposure_scale(cam))
-        self._conform_warning(settings, camera)
+        stage_rules.conform_warning(settings, self.time, camera.resolution, camera.horizontal_aperture,
+                                    camera.vertical_aperture, self.warn)
         return camera
 
     def _clipping_warning(self, camera: Camera, tris: np.ndarray) -> None:
@@ -691,98 +648,16 @@ class _Loader:
         return scale
 
     def _settings_prim(self):
-        """The stage's render settings (spec/renderer.md#image-size): the prim the stage's ``renderSettingsPrimPath``
-        names, else the first active UsdRender.Settings prim in traversal order (instance proxies included); None."""
-        from pxr import Usd, UsdRender
-
-        named = self.stage.GetMetadata("renderSettingsPrimPath")
-        if named:
-            prim = self.stage.GetPrimAtPath(named)
-            if prim and prim.IsActive() and prim.IsA(UsdRender.Settings):
-                return prim
-            self.warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used")
-        return next((p for p in self.stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
-
-    def _products(self, settings) -> list:
-        """The UsdRender.Product prims of the render settings' ``products``, in order."""
-        from pxr import UsdRender
-
-        targets = UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()
-        return [p for p in map(self.stage.GetPrimAtPath, targets) if p and p.IsA(UsdRender.Product)]
-
-    def _settings_camera(self, settings):
-        """The camera the render settings name (the ``camera`` of their first product that authors one, else their
-        own), None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
-        from pxr import UsdGeom, UsdRender
-
-        if settings is None:
-            return None
-        for owner in self._products(settings) + [settings]:
-            targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
-            if targets:
-                prim = self.stage.GetPrimAtPath(targets[0])
-                if not (prim and prim.IsA(UsdGeom.Camera)):
-                    raise self.err("SCENE_INVALID", f"camera {targets[0]} is not a UsdGeom.Camera", owner.GetPath(), "camera")
-                return prim
-        return None
+        """The stage's render settings (spec/renderer.md#image-size; nasset_sdk.stage_rules.settings_prim)."""
+        return stage_rules.settings_prim(self.stage, self.warn)
 
     def _render_resolution(self, settings) -> tuple[int, int] | None:
-        """Resolution of the render settings (their first product's when it authors one; None when absent or invalid).
-        Their UsdRender attributes the renderer does not honour are warned about by name."""
-        from pxr import Gf, UsdRender
-
-        if settings is None:
-            return None
-        owner = next((p for p in self._products(settings)
-                      if UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
-        base = UsdRender.SettingsBase(owner)
-        res = base.GetResolutionAttr().Get(self.time)
-        pixel_aspect = base.GetPixelAspectRatioAttr().Get(self.time)
-        if pixel_aspect is not None and pixel_aspect != 1.0:
-            self.warn(f"pixelAspectRatio {pixel_aspect:g} is ignored (square pixels)", owner.GetPath())
-        window = base.GetDataWindowNDCAttr().Get(self.time)
-        if window is not None and Gf.Vec4f(window) != Gf.Vec4f(0, 0, 1, 1):
-            self.warn(f"dataWindowNDC {tuple(window)} is ignored (the whole image is rendered)", owner.GetPath())
-        if res is not None and 0 < res[0] <= 16384 and 0 < res[1] <= 16384 and res[0] * res[1] <= MAX_IMAGE_PIXELS:
-            return int(res[0]), int(res[1])
-        self.warn(f"{owner.GetPath()}: resolution {res} ignored")
-        return None
-
-    def _conform_warning(self, settings, camera: Camera) -> None:
-        """A warning when the settings' ``aspectRatioConformPolicy`` (USD's fallback ``expandAperture``) would frame the
-        settings' resolution otherwise than the spec's horizontal fit (spec/renderer.md#image-size)."""
-        from pxr import UsdRender
-
-        if settings is None or camera.resolution is None:
-            return
-        policy = str(UsdRender.SettingsBase(settings).GetAspectRatioConformPolicyAttr().Get(self.time) or "expandAperture")
-        wider = camera.resolution[0] * camera.vertical_aperture - camera.resolution[1] * camera.horizontal_aperture
-        if policy == "adjustApertureHeight" or abs(wider) <= 1e-6 * camera.resolution[1] * camera.horizontal_aperture:
-            return
-        if (policy == "expandAperture" and wider < 0) or (policy == "cropAperture" and wider > 0):
-            return
-        self.warn(f"aspectRatioConformPolicy {policy!r} is not applied: the horizontal aperture is kept and the vertical "
-                  f"extent follows the {camera.resolution[0]}x{camera.resolution[1]} image", settings.GetPath())
+        """Resolution of the render settings (nasset_sdk.stage_rules.settings_resolution)."""
+        return stage_rules.settings_resolution(self.stage, settings, self.time, self.warn, MAX_IMAGE_PIXELS)
 
     def _render_settings(self, settings) -> dict:
-        """``nasset:maxDepth`` (int, -1 unbounded) and ``nasset:pixelFilter`` (``box`` | ``gaussian``) with
-        ``nasset:pixelFilterStddev`` (pixels) of the render settings (:meth:`_settings_prim`); invalid values are warned
-        and dropped."""
-        out: dict = {}
-        for prim in [settings] if settings is not None else []:
-            for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
-                                  ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
-                                  ("nasset:pixelFilterStddev", "pixel_filter_stddev",
-                                   lambda v: isinstance(v, float) and 0.0 < v <= MAX_FILTER_STDDEV)):
-                attr = prim.GetAttribute(name)
-                v = attr.Get(self.time) if attr and attr.HasAuthoredValue() else None
-                if v is None:
-                    continue
-                if ok(v):
-                    out[key] = str(v) if key == "pixel_filter" else v
-                else:
-                    self.warn(f"{name} = {v!r} ignored", prim.GetPath())
-        return out
+        """The custom attributes of the render settings (nasset_sdk.stage_rules.nasset_settings)."""
+        return stage_rules.nasset_settings(settings, self.time, self.warn)
 
     # -- meshes and materials --------------------------------------------------------------
     def _material(self, prim, *, varying_colors: bool = True) -> int:
@@ -824,36 +699,8 @@ class _Loader:
 
     def _bound_material(self, prim):
         """The material the render settings' ``materialBindingPurposes`` bind to ``prim`` (spec/renderer.md#materials;
-        fallback ``full``, then all-purpose: ``ComputeBoundMaterial(full)``); a prim bound only for a purpose the
-        settings do not read (``preview``, a viewport's binding) is unbound, with a warning."""
-        from pxr import UsdShade
-
-        api = UsdShade.MaterialBindingAPI(prim)
-        mat, _ = api.ComputeBoundMaterial(self._purposes["material"])
-        if not mat and self._purposes["material"] != UsdShade.Tokens.preview:
-            preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
-            if preview:
-                self.warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
-                          "reads full, else all-purpose bindings): rendered unbound", prim.GetPath())
-        return mat
-
-    def _settings_purposes(self, settings) -> dict:
-        """What the render settings render: ``included`` prim purposes (``includedPurposes``, fallback default and
-        render) and the ``material`` binding purpose to resolve (the first specific one of
-        ``materialBindingPurposes``, fallback full; ``ComputeBoundMaterial`` falls back to the all-purpose binding)."""
-        from pxr import UsdGeom, UsdRender, UsdShade
-
-        included, purposes = [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], [UsdShade.Tokens.full, ""]
-        if settings is not None:
-            api = UsdRender.Settings(settings)
-            included = list(api.GetIncludedPurposesAttr().Get(self.time) or included)
-            purposes = list(api.GetMaterialBindingPurposesAttr().Get(self.time) or purposes)
-        specific = [str(p) for p in purposes if p]
-        if len(specific) > 1:
-            self.warn(f"materialBindingPurposes {purposes}: bindings of {specific[0]!r}, else all-purpose ones, are read",
-                      settings.GetPath())
-        return {"included": {str(p) for p in included},
-                "material": specific[0] if specific else UsdShade.Tokens.allPurpose}
+        nasset_sdk.stage_rules.bound_material)."""
+        return stage_rules.bound_material(prim, self._purposes, self.warn)
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""
@@ -873,12 +720,7 @@ class _Loader:
         mpath = str(mat.GetPath())
         if mpath in self.mat_index:
             return self.mat_index[mpath]
-        shader = None
-        for context in ("", "mtlx"):  # the universal outputs:surface, else MaterialX's outputs:mtlx:surface
-            src = mat.ComputeSurfaceSource(context)
-            if src and src[0]:
-                shader = src[0]
-                break
+        shader = stage_rules.surface_shader(mat)  # outputs:surface, else outputs:mtlx:surface
         if shader is None:
             others = sorted(o.GetFullName() for o in mat.GetSurfaceOutputs() if o.HasConnectedSource())
             raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface"
@@ -991,19 +833,8 @@ class _Loader:
                 "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}
 
     def _read_input(self, inp) -> tuple:
-        """(producer, value) of a shader input, followed through its connections (node graph boundaries, a
-        material's interface inputs, as in USD's own UsdPreviewSurface example): producer is the (shader, output
-        name) whose output feeds it, or None when a value does; value is that value, or the input's own when a
-        shader output feeds it (None when unset)."""
-        from pxr import UsdShade
-
-        if not inp:
-            return None, None
-        attrs = inp.GetValueProducingAttributes() if inp.HasConnectedSource() else [inp.GetAttr()]
-        if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Output:
-            return (UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]), \
-                inp.Get(self.time)
-        return None, (attrs[0].Get(self.time) if attrs else None)
+        """(producer, value) of a shader input (nasset_sdk.stage_rules.input_source)."""
+        return stage_rules.input_source(inp, self.time)
 
     def _value(self, inp):
         """The value feeding a shader input (:meth:`_read_input`); None when unset or fed by a shader's output."""
@@ -1394,7 +1225,7 @@ class _Loader:
             for p in walk:
                 img = UsdGeom.Imageable(p)
                 if img and (img.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible
-                            or img.GetPurposeAttr().Get(self.time) not in self._purposes["included"]):
+                            or img.GetPurposeAttr().Get(self.time) not in self._purposes.included):
                     walk.PruneChildren()
                     continue
                 t = str(p.GetTypeName())
@@ -1549,8 +1380,7 @@ class _Loader:
         """USD's composition errors (a reference, payload or sublayer that cannot be opened, an unresolved prim path),
         each warned about naming its prim: {prim path: USD's message}. USD composes the scene without what failed."""
         out: dict = {}
-        for failure in self.stage.GetCompositionErrors():
-            where, text = str(failure.rootSite.path), str(failure).strip()
+        for where, text in stage_rules.composition_errors(self.stage):
             out.setdefault(where, text)
             self.warn(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
         return out
@@ -1602,7 +1432,8 @@ class _Loader:
         M = self.matrix(UsdGeom.Xformable(prim))
         if abs(np.linalg.det(M[:3, :3])) < 1e-12:
             raise self.err("SCENE_INVALID", "NeuralAsset transform is singular", path)
-        self._units_warning(path, data.asset.stage, M)
+        stage_rules.units_warning(self.stage, float(data.asset.stage.GetMetadata("metersPerUnit") or 1.0), M, path,
+                                  self.warn)
         pw = world_points(data.points, M)
         tris = pw[data.faces]
         if data.used_points is None:  # the box of the triangles is that of the points they use
@@ -1612,19 +1443,6 @@ class _Loader:
         inst = Instance("neural", path, 0, 0, M, asset=ai)
         box = box3(pw[data.used_points]) if len(data.faces) else None
         self._add(inst, tris, None, np.arange(len(data.faces)), ng=face_normals(tris), box=box)
-
-    def _units_warning(self, path: str, asset_stage, M: np.ndarray) -> None:
-        """A warning when a stage that authors ``metersPerUnit`` places an asset of other units without the scale that
-        converts them (USD converts nothing: spec/format.md#coordinates); the asset then renders at another size."""
-        from pxr import UsdGeom
-
-        if not self.stage.HasAuthoredMetadata("metersPerUnit"):
-            return
-        ratio = float(asset_stage.GetMetadata("metersPerUnit") or 1.0) / UsdGeom.GetStageMetersPerUnit(self.stage)
-        scale = float(np.cbrt(abs(np.linalg.det(M[:3, :3]))))
-        if not np.isclose(ratio, 1.0, rtol=1e-6) and not np.isclose(scale, ratio, rtol=0.01):
-            self.warn(f"the asset's metersPerUnit is {ratio:.4g} x the stage's and USD converts no units: its placement "
-                      f"scales it by {scale:.4g}, not {ratio:.4g}, so it renders {scale / ratio:.4g} x its size", path)
 
     # -- lights ----------------------------------------------------------------------------
     def _shaping(self, prim, M) -> dict:

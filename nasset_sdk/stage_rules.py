@@ -1,0 +1,290 @@
+"""What a render reads of a composed stage (spec/renderer.md#scene-input, #traversal, #image-size, #render-settings,
+#materials): the render time, the scene's own payloads, the render settings prim and what it chooses (camera, image
+size, prim purposes, material binding purpose, custom nasset: settings), visibility, the bound material, its surface
+shader and where a shader input's value comes from, composition errors and the units of a placed asset. Both renderers
+call these, so each rule lives in one place; how the prims are shaded is each renderer's own.
+
+``warn(message, prim)`` receives what a renderer says about a feature it reads otherwise than authored (``prim``: a
+path, or None when the message names its prim itself)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SceneError
+
+Warn = Callable[[str, "str | None"], None]
+
+#: largest side of a render settings' ``resolution`` (spec/renderer.md#image-size)
+MAX_SETTINGS_SIDE = 16384
+#: pixel filters of ``nasset:pixelFilter`` (spec/renderer.md#render-settings) and the largest ``nasset:pixelFilterStddev``
+PIXEL_FILTERS = ("box", "gaussian")
+MAX_FILTER_STDDEV = 8.0
+
+
+@dataclass(frozen=True)
+class Purposes:
+    included: frozenset  # prim purposes rendered (UsdRender includedPurposes)
+    material: str  # the binding purpose resolved, "" for all-purpose only (UsdRender materialBindingPurposes)
+
+
+def render_time(stage, time=None):
+    """The ``Usd.TimeCode`` a scene renders at (spec/renderer.md#traversal): ``time`` (a number) when given, else the
+    stage's ``startTimeCode`` when it authors a time code range, else the earliest time: an attribute's default
+    value, or its first time sample where it has samples (an animation cache without defaults still renders)."""
+    import math
+
+    from pxr import Usd
+
+    if time is not None:
+        if isinstance(time, Usd.TimeCode):
+            return time
+        if not math.isfinite(float(time)):
+            raise SceneError("SCENE_INVALID", f"render time {time!r} is not finite")
+        return Usd.TimeCode(float(time))
+    if stage.HasAuthoredTimeCodeRange():
+        return Usd.TimeCode(stage.GetStartTimeCode())
+    return Usd.TimeCode.EarliestTime()
+
+
+def load_scene_payloads(stage) -> None:
+    """Load the scene's own payloads (a prim placed with a payload, spec/renderer.md#traversal), each
+    without descendants, never inside a NeuralAsset: its components are loaded later by the render plan."""
+    from pxr import Usd
+
+    from .references import asset_source
+
+    pred = Usd.TraverseInstanceProxies(Usd.PrimIsActive & Usd.PrimIsDefined & ~Usd.PrimIsAbstract)
+    for _ in range(32):  # payloads may bring further payloads; bounded against cycles
+        todo = []
+        it = iter(Usd.PrimRange(stage.GetPseudoRoot(), pred))
+        for prim in it:
+            if prim.GetTypeName() == "NeuralAsset" or asset_source(prim) is not None:
+                it.PruneChildren()
+            elif prim.HasAuthoredPayloads() and not prim.IsLoaded():
+                todo.append(prim.GetPath())
+                it.PruneChildren()
+        if not todo:
+            return
+        for path in todo:
+            stage.Load(path, Usd.LoadWithoutDescendants)
+
+
+def settings_prim(stage, warn: Warn):
+    """The stage's render settings: the prim the stage's ``renderSettingsPrimPath`` names, else the first active
+    UsdRender.Settings prim in traversal order (instance proxies included); None."""
+    from pxr import Usd, UsdRender
+
+    named = stage.GetMetadata("renderSettingsPrimPath")
+    if named:
+        prim = stage.GetPrimAtPath(named)
+        if prim and prim.IsActive() and prim.IsA(UsdRender.Settings):
+            return prim
+        warn(f"renderSettingsPrimPath {named} is not an active UsdRender.Settings prim: the first one is used", None)
+    return next((p for p in stage.Traverse(Usd.TraverseInstanceProxies()) if p.IsA(UsdRender.Settings)), None)
+
+
+def render_products(stage, settings) -> list:
+    """The UsdRender.Product prims of the render settings' ``products``, in order."""
+    from pxr import UsdRender
+
+    targets = UsdRender.Settings(settings).GetProductsRel().GetForwardedTargets()
+    return [p for p in map(stage.GetPrimAtPath, targets) if p and p.IsA(UsdRender.Product)]
+
+
+def stage_cameras(stage) -> list:
+    """Every UsdGeom.Camera prim in traversal order (instance proxies included), whatever its visibility and purpose
+    (they hide a camera's gizmo in a viewport, not the view through it)."""
+    from pxr import Usd, UsdGeom
+
+    return [p for p in Usd.PrimRange.Stage(stage, Usd.TraverseInstanceProxies()) if p.IsA(UsdGeom.Camera)]
+
+
+def settings_camera(stage, settings, file: str):
+    """The camera the render settings name (the ``camera`` of their first product that authors one, else their own),
+    None when they name none; ``SCENE_INVALID`` when the target is not a UsdGeom.Camera."""
+    from pxr import UsdGeom, UsdRender
+
+    if settings is None:
+        return None
+    for owner in render_products(stage, settings) + [settings]:
+        targets = UsdRender.SettingsBase(owner).GetCameraRel().GetForwardedTargets()
+        if targets:
+            prim = stage.GetPrimAtPath(targets[0])
+            if not (prim and prim.IsA(UsdGeom.Camera)):
+                raise SceneError("SCENE_INVALID", f"camera {targets[0]} is not a UsdGeom.Camera", file=file,
+                                 prim=str(owner.GetPath()), attribute="camera")
+            return prim
+    return None
+
+
+def render_camera(stage, settings, file: str, warn: Warn, cameras: list | None = None):
+    """The camera rendered through: the settings' (:func:`settings_camera`), else the first of :func:`stage_cameras`
+    (several are warned about); ``SCENE_INVALID`` when the stage has none."""
+    chosen = settings_camera(stage, settings, file)
+    if chosen is not None:
+        return chosen
+    cameras = stage_cameras(stage) if cameras is None else cameras
+    if not cameras:
+        raise SceneError("SCENE_INVALID", "the scene has no UsdGeom.Camera", file=file)
+    if len(cameras) > 1:
+        warn(f"{len(cameras)} cameras; rendering through the first, {cameras[0].GetPath()}", None)
+    return cameras[0]
+
+
+def settings_resolution(stage, settings, time, warn: Warn, max_pixels: int) -> tuple[int, int] | None:
+    """Resolution of the render settings (their first product's when it authors one; None when absent or invalid).
+    A ``pixelAspectRatio`` other than 1 and a ``dataWindowNDC`` other than the whole image are warned about."""
+    from pxr import Gf, UsdRender
+
+    if settings is None:
+        return None
+    owner = next((p for p in render_products(stage, settings)
+                  if UsdRender.SettingsBase(p).GetResolutionAttr().HasAuthoredValue()), settings)
+    base = UsdRender.SettingsBase(owner)
+    res = base.GetResolutionAttr().Get(time)
+    pixel_aspect = base.GetPixelAspectRatioAttr().Get(time)
+    if pixel_aspect is not None and pixel_aspect != 1.0:
+        warn(f"pixelAspectRatio {pixel_aspect:g} is ignored (square pixels)", str(owner.GetPath()))
+    window = base.GetDataWindowNDCAttr().Get(time)
+    if window is not None and Gf.Vec4f(window) != Gf.Vec4f(0, 0, 1, 1):
+        warn(f"dataWindowNDC {tuple(window)} is ignored (the whole image is rendered)", str(owner.GetPath()))
+    if res is not None and 0 < res[0] <= MAX_SETTINGS_SIDE and 0 < res[1] <= MAX_SETTINGS_SIDE and res[0] * res[1] <= max_pixels:
+        return int(res[0]), int(res[1])
+    warn(f"{owner.GetPath()}: resolution {res} ignored", None)
+    return None
+
+
+def conform_warning(settings, time, resolution, h_aperture: float, v_aperture: float, warn: Warn) -> None:
+    """A warning when the settings' ``aspectRatioConformPolicy`` (USD's fallback ``expandAperture``) would frame the
+    settings' ``resolution`` otherwise than the spec's horizontal fit."""
+    from pxr import UsdRender
+
+    if settings is None or resolution is None:
+        return
+    policy = str(UsdRender.SettingsBase(settings).GetAspectRatioConformPolicyAttr().Get(time) or "expandAperture")
+    wider = resolution[0] * v_aperture - resolution[1] * h_aperture
+    if policy == "adjustApertureHeight" or abs(wider) <= 1e-6 * resolution[1] * h_aperture:
+        return
+    if (policy == "expandAperture" and wider < 0) or (policy == "cropAperture" and wider > 0):
+        return
+    warn(f"aspectRatioConformPolicy {policy!r} is not applied: the horizontal aperture is kept and the vertical "
+         f"extent follows the {resolution[0]}x{resolution[1]} image", str(settings.GetPath()))
+
+
+def nasset_settings(settings, time, warn: Warn) -> dict:
+    """The custom attributes of the render settings (spec/renderer.md#render-settings): ``max_depth`` (int
+    ``nasset:maxDepth``, -1 unbounded), ``pixel_filter`` (``nasset:pixelFilter``: box | gaussian) and
+    ``pixel_filter_stddev`` (float ``nasset:pixelFilterStddev``, pixels), each only where authored and valid; invalid
+    values are warned about and dropped."""
+    out: dict = {}
+    for prim in [settings] if settings is not None else []:
+        for name, key, ok in (("nasset:maxDepth", "max_depth", lambda v: isinstance(v, int) and v >= -1),
+                              ("nasset:pixelFilter", "pixel_filter", lambda v: str(v) in PIXEL_FILTERS),
+                              ("nasset:pixelFilterStddev", "pixel_filter_stddev",
+                               lambda v: isinstance(v, float) and 0.0 < v <= MAX_FILTER_STDDEV)):
+            attr = prim.GetAttribute(name)
+            v = attr.Get(time) if attr and attr.HasAuthoredValue() else None
+            if v is None:
+                continue
+            if ok(v):
+                out[key] = str(v) if key == "pixel_filter" else v
+            else:
+                warn(f"{name} = {v!r} ignored", str(prim.GetPath()))
+    return out
+
+
+def settings_purposes(settings, time, warn: Warn) -> Purposes:
+    """What the render settings render: ``included`` prim purposes (``includedPurposes``, fallback default and
+    render) and the ``material`` binding purpose to resolve (the first specific one of ``materialBindingPurposes``,
+    fallback full; ``ComputeBoundMaterial`` falls back to the all-purpose binding)."""
+    from pxr import UsdGeom, UsdRender, UsdShade
+
+    included, purposes = [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], [UsdShade.Tokens.full, ""]
+    if settings is not None:
+        api = UsdRender.Settings(settings)
+        included = list(api.GetIncludedPurposesAttr().Get(time) or included)
+        purposes = list(api.GetMaterialBindingPurposesAttr().Get(time) or purposes)
+    specific = [str(p) for p in purposes if p]
+    if len(specific) > 1:
+        warn(f"materialBindingPurposes {purposes}: bindings of {specific[0]!r}, else all-purpose ones, are read",
+             str(settings.GetPath()))
+    return Purposes(frozenset(str(p) for p in included), specific[0] if specific else str(UsdShade.Tokens.allPurpose))
+
+
+def is_hidden(prim, time, purposes: Purposes) -> bool:
+    """True for an imageable prim whose computed visibility is ``invisible`` or whose computed purpose the settings
+    do not include: the prim is skipped with its subtree (cameras are found by :func:`stage_cameras` regardless)."""
+    from pxr import UsdGeom
+
+    if not prim.IsA(UsdGeom.Imageable):
+        return False
+    img = UsdGeom.Imageable(prim)
+    return img.ComputeVisibility(time) == UsdGeom.Tokens.invisible or img.ComputePurpose() not in purposes.included
+
+
+def bound_material(prim, purposes: Purposes, warn: Warn):
+    """The material bound to ``prim`` for the settings' binding purpose (else its all-purpose binding; an invalid
+    ``UsdShade.Material`` when unbound); a prim bound only for ``preview`` while the settings do not read it is
+    unbound, with a warning naming the prim and the material."""
+    from pxr import UsdShade
+
+    api = UsdShade.MaterialBindingAPI(prim)
+    mat, _ = api.ComputeBoundMaterial(purposes.material)
+    if not mat and purposes.material != UsdShade.Tokens.preview:
+        preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
+        if preview:
+            warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
+                 "reads full, else all-purpose bindings): rendered unbound", str(prim.GetPath()))
+    return mat
+
+
+def surface_shader(mat):
+    """The surface shader of a UsdShade.Material (spec/renderer.md#limits, surface shaders): the shader on the universal
+    ``outputs:surface``, else on MaterialX's ``outputs:mtlx:surface``; None when neither has one."""
+    for context in ("", "mtlx"):
+        src = mat.ComputeSurfaceSource(context)
+        if src and src[0]:
+            return src[0]
+    return None
+
+
+def input_source(inp, time) -> tuple:
+    """(producer, value) of a shader input, followed through its connections (spec/renderer.md#materials: node graph
+    boundaries, a material's interface inputs, as in USD's own UsdPreviewSurface example): producer is the (shader,
+    output name) whose output feeds it, or None when a value does; value is that value, or the input's own when a
+    shader output feeds it (None when unset)."""
+    from pxr import UsdShade
+
+    if not inp:
+        return None, None
+    attrs = inp.GetValueProducingAttributes() if inp.HasConnectedSource() else [inp.GetAttr()]
+    if attrs and UsdShade.Utils.GetType(attrs[0].GetName()) == UsdShade.AttributeType.Output:
+        return (UsdShade.Shader(attrs[0].GetPrim()), UsdShade.Utils.GetBaseNameAndType(attrs[0].GetName())[0]), \
+            inp.Get(time)
+    return None, (attrs[0].Get(time) if attrs else None)
+
+
+def units_warning(stage, asset_meters_per_unit: float, M, prim: str, warn: Warn) -> None:
+    """A warning when a stage that authors ``metersPerUnit`` places an asset of other units (the asset layer's
+    ``metersPerUnit``) without the scale that converts them (``cbrt |det M3|`` within 1 % of their ratio; USD converts
+    nothing: spec/format.md#coordinates, spec/renderer.md#traversal); the asset then renders at another size."""
+    from pxr import UsdGeom
+
+    if not stage.HasAuthoredMetadata("metersPerUnit"):
+        return
+    ratio = float(asset_meters_per_unit) / UsdGeom.GetStageMetersPerUnit(stage)
+    scale = float(np.cbrt(abs(np.linalg.det(np.asarray(M, np.float64)[:3, :3]))))
+    if not np.isclose(ratio, 1.0, rtol=1e-6) and not np.isclose(scale, ratio, rtol=0.01):
+        warn(f"the asset's metersPerUnit is {ratio:.4g} x the stage's and USD converts no units: its placement "
+             f"scales it by {scale:.4g}, not {ratio:.4g}, so it renders {scale / ratio:.4g} x its size", prim)
+
+
+def composition_errors(stage) -> list:
+    """USD's composition errors (a reference, payload or sublayer that cannot be opened, an unresolved prim path):
+    [(prim path, USD's message)] in USD's order. USD composes the stage without what failed; a renderer warns about
+    each, naming the prim."""
+    return [(str(f.rootSite.path), str(f).strip()) for f in stage.GetCompositionErrors()]

@@ -1,0 +1,508 @@
+"""The second implementation reads a stage by the rules of spec/renderer.md (render settings, camera, image size,
+prim purposes, visibility, material binding purposes, inherited displayColor, composition errors) as the reference
+renderer does: both call nasset_sdk.stage_rules.
+
+The probe is the reference's (tests/renderer/test_usd_stages.py): a diffuse floor seen from above under a delta
+DistantLight of irradiance E at angle theta, radiance ``albedo E cos(theta) / pi``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mitsuba")
+
+from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
+from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
+from nasset_sdk.errors import SceneError  # noqa: E402
+
+E, THETA = 3.0, np.radians(35)
+RED = (0.9, 0.2, 0.1)
+
+
+def _floor_scene(albedo=(0.6, 0.6, 0.6)):
+    b = SceneBuilder()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50)
+    floor = b.quad("Floor", (0, 0, 0), 10.0, diffuse=albedo)
+    b.distant("Sun", (np.sin(THETA), np.cos(THETA), 0), E)
+    return b, floor.GetPrim()
+
+
+def _two_camera_scene():
+    """Two cameras; ``Top`` (first in traversal) sees the lit floor, ``Below`` its unlit underside."""
+    b, _ = _floor_scene()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
+    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
+    b.stage.RemovePrim("/World/Camera")
+    return b
+
+
+def _settings(b, path, camera=None, resolution=(8, 8)):
+    from pxr import Gf, UsdRender
+
+    s = UsdRender.Settings.Define(b.stage, path)
+    s.CreateResolutionAttr(Gf.Vec2i(*resolution))
+    if camera:
+        s.CreateCameraRel().SetTargets([camera])
+    return s
+
+
+def _kd(desc, prim):
+    return [m.material.kd for m in desc.meshes if m.prim == prim]
+
+
+# -- render settings: camera, settings prim, image size -------------------------------------------------------------
+
+def test_render_settings_camera_is_the_camera_rendered(tmp_path):
+    """``RenderSettings.camera`` names the camera; the first camera in traversal was rendered instead."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Below")
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+
+
+def test_render_product_camera_wins_over_the_settings_camera(tmp_path):
+    from pxr import UsdRender
+
+    b = _two_camera_scene()
+    settings = _settings(b, "/Render/Settings", "/World/Top")
+    product = UsdRender.Product.Define(b.stage, "/Render/Product")
+    product.CreateCameraRel().SetTargets(["/World/Below"])
+    settings.CreateProductsRel().SetTargets([product.GetPath()])
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+
+
+def test_render_settings_prim_path_chooses_the_settings_and_their_size(tmp_path):
+    """The stage's ``renderSettingsPrimPath`` names the settings; without --width/--height their resolution is the
+    image size (the implementation rendered 256 wide through the first camera)."""
+    b = _two_camera_scene()
+    _settings(b, "/Render/Preview", "/World/Top", resolution=(4, 4))
+    _settings(b, "/Render/Final", "/World/Below", resolution=(6, 3))
+    b.stage.SetMetadata("renderSettingsPrimPath", "/Render/Final")
+    desc = read_scene(b.write(tmp_path / "s.usda"))
+    assert desc.camera.prim == "/World/Below"
+    assert desc.camera.resolution(None, None) == (6, 3)
+    assert desc.camera.resolution(16, 16) == (16, 16)  # the caller's size wins
+
+
+def test_inactive_render_settings_are_not_read(tmp_path):
+    b, _ = _floor_scene()
+    _settings(b, "/Render/Off", resolution=(4, 2)).GetPrim().SetActive(False)
+    _settings(b, "/Render/On", resolution=(6, 6))
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.resolution(None, None) == (6, 6)
+
+
+def test_render_settings_camera_that_is_not_a_camera_is_scene_invalid(tmp_path):
+    b = _two_camera_scene()
+    _settings(b, "/Render/Settings", "/World/Floor")
+    with pytest.raises(SceneError) as info:
+        read_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "/World/Floor" in str(info.value) and "/Render/Settings" in str(info.value)
+
+
+def test_several_cameras_without_settings_are_warned(tmp_path):
+    b = _two_camera_scene()
+    with pytest.warns(UserWarning, match="2 cameras; rendering through the first, /World/Top"):
+        assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Top"
+
+
+@pytest.mark.parametrize("hide", ["visibility", "purpose"])
+def test_hidden_camera_is_still_the_camera(tmp_path, hide):
+    from pxr import Sdf, UsdGeom
+
+    b, _ = _floor_scene()
+    where = "/World/Camera"
+    if hide == "visibility":
+        UsdGeom.Imageable(b.stage.GetPrimAtPath(where)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    else:
+        UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
+        Sdf.CopySpec(b.stage.GetRootLayer(), where, b.stage.GetRootLayer(), "/World/Rig/Camera")
+        b.stage.RemovePrim(where)
+        where = "/World/Rig/Camera"
+    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == where
+
+
+# -- traversal: visibility and prim purposes --------------------------------------------------------------------------
+
+def test_invisible_prims_are_left_out(tmp_path):
+    """An invisible mesh (or one under an invisible Xform) is not rendered; it was."""
+    from pxr import UsdGeom
+
+    b, _ = _floor_scene()
+    UsdGeom.Imageable(b.quad("Hidden", (0, 1, 0), 20.0)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    UsdGeom.Xform.Define(b.stage, "/World/Group").CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+    b.mesh("Group/Inner", [(0, 1, 0), (1, 1, 0), (0, 1, 1)], [(0, 1, 2)])
+    prims = {m.prim for m in read_scene(b.write(tmp_path / "s.usda")).meshes}
+    assert prims == {"/World/Floor"}
+
+
+@pytest.mark.parametrize("included, rendered", [
+    (None, {"/World/Floor", "/World/Render"}),
+    (["default", "render", "proxy"], {"/World/Floor", "/World/Render", "/World/Proxy"}),
+    (["default"], {"/World/Floor"}),
+])
+def test_included_purposes_of_the_settings_choose_what_renders(tmp_path, included, rendered):
+    """Prims of purpose guide and proxy are left out unless the settings' ``includedPurposes`` list them (fallback
+    default, render); every purpose was rendered."""
+    from pxr import UsdGeom
+
+    b, _ = _floor_scene()
+    for name, purpose in (("Guide", "guide"), ("Proxy", "proxy"), ("Render", "render")):
+        UsdGeom.Imageable(b.quad(name, (0, 1, 0), 1.0)).CreatePurposeAttr(purpose)
+    settings = _settings(b, "/Render/Settings")
+    if included:
+        settings.CreateIncludedPurposesAttr(included)
+    assert {m.prim for m in read_scene(b.write(tmp_path / "s.usda")).meshes} == rendered
+
+
+# -- material binding purposes ------------------------------------------------------------------------------------
+
+def test_material_binding_purposes_of_the_settings_choose_the_binding(tmp_path):
+    """Settings asking for ``preview`` bindings render the preview material; the full/all-purpose one was read."""
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    red = b.material("Red", diffuse=RED, specular=(0, 0, 0))
+    UsdShade.MaterialBindingAPI(floor).Bind(red, materialPurpose=UsdShade.Tokens.preview)
+    _settings(b, "/Render/Settings").CreateMaterialBindingPurposesAttr(["preview", ""])
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED)
+
+
+def test_preview_only_binding_is_warned_by_name(tmp_path):
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    api = UsdShade.MaterialBindingAPI(floor)
+    api.UnbindAllBindings()
+    api.Bind(b.material("Red", diffuse=RED), materialPurpose=UsdShade.Tokens.preview)
+    with pytest.warns(UserWarning, match="/World/Floor: bound to /World/Looks/Red only for purpose preview"):
+        desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.18)
+
+
+# -- unbound meshes: displayColor, also an ancestor's --------------------------------------------------------------
+
+@pytest.mark.parametrize("on_parent", [False, True])
+def test_display_color_of_an_unbound_mesh(tmp_path, on_parent):
+    """An unbound mesh's constant ``displayColor`` (its own or an ancestor's) is its diffuse colour; it was 0.18 grey."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    b, floor = _floor_scene()
+    UsdShade.MaterialBindingAPI(floor).UnbindAllBindings()
+    holder = floor.GetParent() if on_parent else floor
+    pv = UsdGeom.PrimvarsAPI(holder).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.constant)
+    pv.Set([Gf.Vec3f(*RED)])
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
+
+
+# -- composition errors -----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("arc", ["reference", "sublayer"])
+def test_what_usd_cannot_compose_is_warned_naming_the_prim(tmp_path, arc):
+    b, _ = _floor_scene()
+    prim = b.stage.DefinePrim("/World/Set", "Xform")
+    if arc == "reference":
+        prim.GetReferences().AddReference("./missing.usda")
+    else:
+        b.stage.GetRootLayer().subLayerPaths.append("./missing.usda")
+    with pytest.warns(UserWarning, match="cannot reach.*missing.usda"):
+        read_scene(b.write(tmp_path / "s.usda"))
+
+
+# -- end to end: the rendered image agrees with the closed form and the reference renderer -------------------------
+
+def test_settings_camera_purposes_and_display_color_render_as_the_reference(tmp_path):
+    """One stage exercising the rules at once: the settings' camera (the second in traversal), an inherited red
+    displayColor on the unbound floor, a proxy quad the settings leave out between the camera and the floor."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    from nasset_mitsuba_renderer import render as mitsuba
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    b, floor = _floor_scene()
+    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
+    b.stage.RemovePrim("/World/Camera")
+    UsdShade.MaterialBindingAPI(floor).UnbindAllBindings()
+    pv = UsdGeom.PrimvarsAPI(floor.GetParent()).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                             UsdGeom.Tokens.constant)
+    pv.Set([Gf.Vec3f(*RED)])
+    UsdGeom.Imageable(b.quad("Occluder", (0, 1, 0), 20.0)).CreatePurposeAttr(UsdGeom.Tokens.proxy)
+    _settings(b, "/Render/Settings", "/World/Top", resolution=(8, 6))
+    scene = b.write(tmp_path / "s.usda")
+    img = mitsuba.render(scene, 2, seed=1)
+    ref = render(load_scene(scene), RenderSettings(spp=2)).image
+    assert img.shape == ref.shape == (6, 8, 3)
+    # red diffuse closed form plus the unbound fallback's GGX lobe (F0 0.04, roughness 0.5), which is grey
+    glossy = img - np.asarray(RED) * E * np.cos(THETA) / np.pi
+    np.testing.assert_allclose(glossy, np.broadcast_to(glossy[..., :1], glossy.shape), atol=1e-5)
+    assert 0.0 < glossy.min() and glossy.max() < 0.1
+    # the glossy lobe varies across a pixel, whose 2 jittered samples differ between the renderers
+    np.testing.assert_allclose(img, ref, atol=0.02)
+    np.testing.assert_allclose(img.mean((0, 1)), ref.mean((0, 1)), atol=2e-3)
+
+
+# -- payloads and references of plain USD -----------------------------------------------------------------------------
+
+def _plain_geometry_layer(path):
+    """A layer whose default prim ``World`` holds the lit floor of :func:`_floor_scene` and its material."""
+    b, _ = _floor_scene()
+    for child in ("Camera", "Sun"):
+        b.stage.RemovePrim(f"/World/{child}")
+    b.stage.SetDefaultPrim(b.stage.GetPrimAtPath("/World"))
+    return b.write(path)
+
+
+@pytest.mark.parametrize("type_name", ["", "Xform"])
+@pytest.mark.parametrize("arc", ["reference", "payload"])
+def test_plain_geometry_placed_with_a_payload_renders(tmp_path, arc, type_name):
+    """Geometry a scene places with a payload is part of the scene (spec/renderer.md#traversal, every payload loaded);
+    the stage was opened with payloads unloaded and the floor left out without a word."""
+    _plain_geometry_layer(tmp_path / "geo.usda")
+    b, floor = _floor_scene()
+    b.stage.RemovePrim(floor.GetPath())
+    prim = b.stage.DefinePrim("/World/Set", type_name)
+    prim.GetReferences().AddReference("./geo.usda") if arc == "reference" else prim.GetPayloads().AddPayload("./geo.usda")
+    desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Set/Floor")[0], 0.6, rtol=1e-6)
+
+
+def test_untyped_prim_with_a_missing_reference_is_scene_invalid(tmp_path):
+    """An untyped prim whose reference USD cannot compose is a NeuralAsset prim whose asset is missing
+    (spec/renderer.md#scene-input); it was left out without a word."""
+    b, _ = _floor_scene()
+    b.stage.DefinePrim("/World/Chair").GetReferences().AddReference("./chair.usdc")
+    with pytest.warns(UserWarning), pytest.raises(SceneError) as info:
+        read_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_INVALID" and "/World/Chair" in str(info.value) and "chair.usdc" in str(info.value)
+
+
+def test_asset_placed_with_a_payload_renders_as_with_a_reference(tmp_path):
+    from nasset_mitsuba_renderer import render as mitsuba
+    from nasset_reference_renderer.testscenes import constant_rna_asset
+
+    asset = str(constant_rna_asset(tmp_path / "const.usda", unshadowed=(1.0, 0.5, 0.25), shadowed=(0.1, 0.2, 0.3)))
+    images = []
+    for arc in ("reference", "payload"):
+        b = SceneBuilder()
+        b.camera((0, 0, 3), (0, 0, 0))
+        b.distant("Sun", (0, 0, 1), 2.0)
+        prim = b.stage.DefinePrim("/World/A", "Xform")
+        prim.GetReferences().AddReference(asset) if arc == "reference" else prim.GetPayloads().AddPayload(asset)
+        images.append(mitsuba.render(b.write(tmp_path / f"{arc}.usda"), 2, width=16, height=16, seed=1))
+    assert images[0].max() > 0
+    np.testing.assert_array_equal(images[1], images[0])
+
+
+# -- custom render settings (spec/renderer.md#render-settings) ------------------------------------------------------
+
+def _edge_scene(tmp_path, **attrs):
+    """An emissive (radiance 1) half plane x < 0 at z = -1 in front of a camera at the origin: its edge projects onto
+    the vertical line through the image centre."""
+    b = SceneBuilder()
+    b.camera((0, 0, 0), (0, 0, -1))
+    b.mesh("Half", [(-50, -50, -1), (0, -50, -1), (0, 50, -1), (-50, 50, -1)], [(0, 1, 2, 3)], diffuse=(0, 0, 0),
+           specular=(0, 0, 0), emission=(1, 1, 1))
+    s = _settings(b, "/Render/Settings", resolution=(8, 4))
+    for name, (kind, value) in attrs.items():
+        s.GetPrim().CreateAttribute(name, kind).Set(value)
+    return b.write(tmp_path / "edge.usda")
+
+
+def test_gaussian_pixel_filter_of_the_settings_is_applied(tmp_path):
+    """``nasset:pixelFilter = "gaussian"`` spreads the edge over the columns beside it as the truncated Gaussian's
+    CDF says (each column a mean of H x spp Bernoulli samples: checked within 5 sigma); the box filter was used."""
+    from pxr import Sdf
+
+    from nasset_mitsuba_renderer import render as mitsuba
+
+    s, spp = 0.5, 256
+    scene = _edge_scene(tmp_path, **{"nasset:pixelFilter": (Sdf.ValueTypeNames.Token, "gaussian"),
+                                     "nasset:pixelFilterStddev": (Sdf.ValueTypeNames.Float, s)})
+    img = mitsuba.render(scene, spp, seed=5)
+    assert img.shape == (4, 8, 3)
+    x = np.linspace(-4 * s, 4 * s, 200001)
+    density = np.exp(-x * x / (2 * s * s)) - np.exp(-8.0)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(x))])
+    cdf /= cdf[-1]
+    expect = np.interp(4.0 - (np.arange(8) + 0.5), x, cdf)  # a sample of column j lands left of the edge
+    n = 4 * spp
+    got = img[..., 0].mean(0)
+    sigma = np.maximum(np.sqrt(expect * (1 - expect) / n), 1.0 / n)
+    assert np.all(np.abs(got - expect) <= 5 * sigma), (got, expect)
+    assert 0.05 < got[4] < 0.3 and 0.7 < got[3] < 0.95  # neither the box's 0 / 1 step
+
+
+def test_max_depth_of_the_settings_is_the_default(tmp_path):
+    """``nasset:maxDepth`` is the bounce limit when the caller gives none (the CLI's --max-depth absent); a caller's
+    limit wins. It was ignored (5 bounces)."""
+    from pxr import Sdf
+
+    from nasset_mitsuba_renderer import render as mitsuba
+
+    def scene(name, depth=None):
+        b, _ = _floor_scene()
+        b.quad("Ceiling", (0, 5, 0), 10.0, normal=(0, -1, 0), diffuse=(0.8, 0.8, 0.8))
+        b.sphere_light("Bulb", (2, 1.5, 0), 0.2, 20.0)  # outside the view
+        b.stage.RemovePrim("/World/Sun")
+        s = _settings(b, "/Render/Settings", resolution=(8, 8))
+        if depth is not None:
+            s.GetPrim().CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int).Set(depth)
+        return b.write(tmp_path / name)
+
+    plain, one = scene("plain.usda"), scene("one.usda", 1)
+    direct = mitsuba.render(plain, 4, seed=2, max_depth=1)
+    np.testing.assert_array_equal(mitsuba.render(one, 4, seed=2), direct)
+    assert mitsuba.render(plain, 4, seed=2).mean() > 1.01 * direct.mean()  # the ceiling's bounce
+    np.testing.assert_array_equal(mitsuba.render(one, 4, seed=2, max_depth=5), mitsuba.render(plain, 4, seed=2))
+
+
+def test_geom_subset_of_another_element_type_is_warned(tmp_path):
+    """A materialBind GeomSubset of element type point is not a per-face material: ignored, with a warning naming it
+    (spec/renderer.md#materials); it was ignored without a word."""
+    from pxr import UsdShade
+
+    b, floor = _floor_scene()
+    subset = UsdShade.MaterialBindingAPI(floor).CreateMaterialBindSubset("Points", [0], "point")
+    UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(b.material("Red", diffuse=RED))
+    with pytest.warns(UserWarning, match="/World/Floor/Points: GeomSubset of an element type other than face ignored"):
+        desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("scale, warned", [(1.0, True), (100.0, False)])
+def test_asset_in_other_units_without_the_converting_scale_is_warned(tmp_path, scale, warned):
+    """A metre asset placed in a centimetre stage without the scale 100 renders 100 x too small: said, naming the
+    prim (spec/renderer.md#traversal); it was not."""
+    import warnings
+
+    from pxr import UsdGeom
+
+    from nasset_reference_renderer.testscenes import constant_rna_asset
+
+    constant_rna_asset(tmp_path / "ball.usdc")
+    b, _ = _floor_scene()
+    UsdGeom.SetStageMetersPerUnit(b.stage, 0.01)
+    b.asset("Ball", "./ball.usdc", np.diag([scale, scale, scale, 1.0]), typed="Xform")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        read_scene(b.write(tmp_path / "s.usda"))
+    hit = [str(w.message) for w in said if "/World/Ball" in str(w.message) and "metersPerUnit" in str(w.message)]
+    assert bool(hit) == warned, [str(w.message) for w in said]
+
+
+# -- light features this implementation does not render are warned by name ------------------------------------------
+
+@pytest.mark.parametrize("feature", ["shaping", "camera visibility", "filters"])
+def test_unrendered_light_features_are_warned_by_name(tmp_path, feature):
+    """A spot cone, a light hidden from camera rays and light filters are read by the reference renderer; this
+    implementation renders none of them, and said nothing."""
+    from pxr import Sdf, UsdLux
+
+    b, _ = _floor_scene()
+    bulb = b.sphere_light("Bulb", (0, 2, 0), 0.0, 5.0).GetPrim()
+    if feature == "shaping":
+        UsdLux.ShapingAPI.Apply(bulb).CreateShapingConeAngleAttr(30.0)
+        expect = "/World/Bulb: UsdLux.ShapingAPI"
+    elif feature == "camera visibility":
+        bulb.CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool).Set(False)
+        expect = "/World/Bulb: nasset:cameraVisibility = false"
+    else:
+        UsdLux.LightFilter.Define(b.stage, "/World/Barn")
+        UsdLux.LightAPI(bulb).GetFiltersRel().SetTargets(["/World/Barn"])
+        expect = "/World/Bulb: light:filters /World/Barn ignored"
+    with pytest.warns(UserWarning, match=expect):
+        read_scene(b.write(tmp_path / "s.usda"))
+
+
+# -- shader inputs connected to a material's interface ----------------------------------------------------------------
+
+def test_input_connected_to_the_material_interface_reads_its_value(tmp_path):
+    """``inputs:diffuseColor.connect = </Mat.inputs:baseColor>`` (Houdini, Omniverse and USD's own UsdPreviewSurface
+    example expose inputs on the material) is the interface input's value; it was read as a texture: default 0.18
+    grey, warned as an ignored texture."""
+    from pxr import Sdf, UsdShade
+
+    b, floor = _floor_scene()
+    mat = UsdShade.Material.Define(b.stage, "/World/Looks/Exposed")
+    shader = UsdShade.Shader.Define(b.stage, "/World/Looks/Exposed/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    base = mat.CreateInput("baseColor", Sdf.ValueTypeNames.Color3f)
+    base.Set(RED)
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(base)
+    UsdShade.MaterialBindingAPI(floor).Bind(mat)
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
+
+
+# -- surface shaders and input values (spec/renderer.md#limits) ------------------------------------------------------
+
+def _material_with(b, floor, output: str, shader_id: str, **inputs):
+    from pxr import Sdf, UsdShade
+
+    mat = UsdShade.Material.Define(b.stage, "/World/Looks/Probe")
+    if shader_id:
+        shader = UsdShade.Shader.Define(b.stage, "/World/Looks/Probe/Surface")
+        shader.CreateIdAttr(shader_id)
+        for name, value in inputs.items():
+            kind = Sdf.ValueTypeNames.Color3f if isinstance(value, tuple) else Sdf.ValueTypeNames.Float
+            shader.CreateInput(name, kind).Set(value)
+        out = mat.CreateSurfaceOutput("mtlx") if output == "mtlx" else mat.CreateSurfaceOutput()
+        out.ConnectToSource(shader.ConnectableAPI(), "out" if output == "mtlx" else "surface")
+    UsdShade.MaterialBindingAPI(floor).Bind(mat)
+
+
+def test_materialx_preview_surface_on_the_mtlx_output_is_read(tmp_path):
+    """``outputs:mtlx:surface`` with ``ND_UsdPreviewSurface_surfaceshader`` (MaterialX's UsdPreviewSurface) is read
+    as the UsdPreviewSurface; the material was taken to have no surface (0.18 grey, a warning)."""
+    b, floor = _floor_scene()
+    _material_with(b, floor, "mtlx", "ND_UsdPreviewSurface_surfaceshader", diffuseColor=RED)
+    np.testing.assert_allclose(_kd(read_scene(b.write(tmp_path / "s.usda")), "/World/Floor")[0], RED, rtol=1e-6)
+
+
+def test_material_without_a_surface_shader_is_unsupported(tmp_path):
+    b, floor = _floor_scene()
+    _material_with(b, floor, "", "")
+    with pytest.raises(SceneError) as info:
+        read_scene(b.write(tmp_path / "s.usda"))
+    assert info.value.code == "SCENE_UNSUPPORTED" and "/World/Looks/Probe" in str(info.value)
+
+
+@pytest.mark.parametrize("value, expect", [(2.5, 1.0), (-1.0, 0.0), (float("nan"), None)])
+def test_preview_surface_inputs_are_clamped_or_invalid(tmp_path, value, expect):
+    """diffuseColor outside [0, 1] is clamped, a NaN is SCENE_INVALID naming the input; it was used as authored."""
+    b, floor = _floor_scene()
+    _material_with(b, floor, "", "UsdPreviewSurface", diffuseColor=(value, value, value))
+    scene = b.write(tmp_path / "s.usda")
+    if expect is None:
+        with pytest.raises(SceneError) as info:
+            read_scene(scene)
+        assert info.value.code == "SCENE_INVALID" and "inputs:diffuseColor" in str(info.value)
+    else:
+        np.testing.assert_allclose(_kd(read_scene(scene), "/World/Floor")[0], expect)
+
+
+def test_connected_input_uses_its_own_authored_value(tmp_path):
+    """A diffuseColor fed by a texture this implementation does not render keeps the input's own authored value
+    (spec/renderer.md#limits, unsupported shading), with a warning; the 0.18 fallback was used."""
+    b, _ = _floor_scene()
+    b.texture("FloorMat", {"diffuseColor": "rgb"}, "wood.png")
+    with pytest.warns(UserWarning, match="inputs:diffuseColor is connected"):
+        desc = read_scene(b.write(tmp_path / "s.usda"))
+    np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
+
+
+@pytest.mark.parametrize("feature", ["one-sided", "back material"])
+def test_sidedness_this_implementation_does_not_render_is_warned(tmp_path, feature):
+    """spec/renderer.md#sidedness: one-sided meshes and back materials are the reference renderer's; here both sides
+    are front-facing with the front material, which was not said."""
+    from pxr import UsdGeom
+
+    b, floor = _floor_scene()
+    if feature == "one-sided":
+        UsdGeom.Mesh(floor).CreateDoubleSidedAttr(False)
+        expect = "/World/Floor: doubleSided = false is not applied"
+    else:
+        floor.CreateRelationship("nasset:backMaterial").SetTargets([b.material("Back").GetPath()])
+        expect = "/World/Floor: nasset:backMaterial /World/Looks/Back is not applied"
+    with pytest.warns(UserWarning, match=expect):
+        read_scene(b.write(tmp_path / "s.usda"))
