@@ -14,7 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from nasset_sdk.errors import UsageError
+from nasset_sdk.errors import UsageError, error
+from nasset_sdk.images import output_folder
 
 
 def progress_bar(**kw):
@@ -123,6 +124,11 @@ def check_options(size: str, presets, output, **counts) -> Path:
     output = Path(output)
     if output.suffix not in (".usdc", ".usda", ".usd"):
         raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
+    if output.is_dir():
+        raise error("WRITE_FAILED", "the output names a folder", file=str(output))
+    # at the start, not when the asset is written after the whole bake (a --resume folder elsewhere kept a missing or
+    # uncreatable one unnoticed until then)
+    output_folder(output.parent, "asset's folder")
     return output
 
 

@@ -30,6 +30,7 @@ from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, see_through_line, times_line, worker_lines
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.images import output_folder
 
 DATA_PRESETS = presets.RNA_BLENDER_DATA  # the table lives in nasset_bakers/presets.py
 DEFAULT_LIGHT_ANGLE = 0.5
@@ -63,6 +64,7 @@ def bake(
     if not dp.is_main:
         return train_share(dp, _load_split)
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
+    output_folder(work, "bake's work folder")  # before the scene: an example scene is written into it
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
     t_all = time.perf_counter()

@@ -33,6 +33,7 @@ from nasset_bakers.stages import (
     worker_lines,
 )
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.images import output_folder
 
 DATA_PRESETS = presets.RNA_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
 
@@ -89,6 +90,7 @@ def bake(
     if not dp.is_main:
         return train_share(dp)
     work = Path(resume) if resume else output.with_name(output.name + ".bake")
+    output_folder(work, "bake's work folder")  # before the scene: an example scene is written into it
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     times: dict[str, float] = {}
     t_all = time.perf_counter()

@@ -32,6 +32,7 @@ from nasset_sdk.errors import NassetError, UsageError, error
 from nasset_sdk.geometry import CurvesGeometry, MeshGeometry
 
 from .analytic import ANALYTIC_CLASSES, as_mesh, shape_class
+from .sidedness import front_sign
 
 #: BSDF classes through which a delta light is never reached by next-event estimation.
 DELTA_BLOCKING_BSDFS = ("SmoothDielectric", "ThinDielectric")
@@ -277,7 +278,10 @@ def mesh_geometry(mi, shapes) -> MeshGeometry:
         p = np.asarray(params["vertex_positions"], np.float32).reshape(-1, 3)
         f = np.asarray(params["faces"], np.int64).reshape(-1, 3)
         n = np.asarray(params["vertex_normals"], np.float32).reshape(-1, 3) if "vertex_normals" in params else None
-        meshes.append((p, f, n if n is not None and n.size and n.shape == p.shape else None))
+        n = n if n is not None and n.size and n.shape == p.shape else None
+        if len(f) and front_sign(mi, s, p, f, n) < 0:  # flip_normals: Mitsuba shades (and the data holds) the other side
+            f, n = f[:, ::-1].copy(), None if n is None else -n
+        meshes.append((p, f, n))
     some_normals = any(n is not None for _, _, n in meshes)
     pts, faces, normals, base = [], [], [], 0
     for p, f, n in meshes:

@@ -245,3 +245,57 @@ def test_resume_with_other_settings_is_refused(tmp_path):
     with pytest.raises(SceneError) as e:
         bake(None, None, tmp_path / "b.usdc", size="tiny", example=True, quiet=True, resume=work, res=16, epochs=1)
     assert _code(e) == "CONVERT_DATASET"
+
+
+@pytest.mark.parametrize("kind", ["rna", "8dna"])
+def test_output_folder_that_cannot_be_made_fails_before_any_work(tmp_path, kind):
+    """``-o`` under a file (or a read-only folder): WRITE_FAILED naming it at the start. Before, the default
+    dataset folder's mkdir raised a raw NotADirectoryError, and with ``--resume`` elsewhere the whole bake ran
+    and failed only when the asset was written."""
+    import nasset_bakers  # noqa: F401  (registers the bakers)
+    from nasset_bakers.registry import baker_for
+
+    (tmp_path / "afile").write_text("")
+    for resume in (None, tmp_path / "data"):
+        with pytest.raises(NassetError) as e:
+            baker_for(kind, None, None)(None, None, tmp_path / "afile" / "a.usdc", size="tiny", example="default", quiet=True,
+                                resume=resume)
+        assert _code(e) == "WRITE_FAILED" and "afile" in str(e.value)
+        assert not (tmp_path / "data").exists()  # nothing was started
+
+
+def test_dataset_folder_that_cannot_be_made_is_typed(tmp_path):
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(NassetError) as e:
+        bake(None, None, tmp_path / "a.usdc", size="tiny", example=True, quiet=True, resume=tmp_path / "afile" / "d")
+    assert _code(e) == "WRITE_FAILED" and "afile" in str(e.value)
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_a_flip_normals_shape_keeps_the_side_mitsuba_shades(tmp_path, flip):
+    """``flip_normals``: Mitsuba shades the inside, so the training data's ``n`` points inwards; the asset's normals
+    and winding must too. They pointed outwards (the file's), so every render queried the network with normals it
+    never saw: a twosided diffuse cube read 81 / 175 / 162 %, 13.1 dB in its scene (``tiny``) against
+    102 / 134 / 102 %, 16.5 dB now (the same cube unflipped: 92 / 129 / 124 %, 17.8 dB)."""
+    from nasset_converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
+
+    mi = cm.load_mitsuba()
+    f = f'<boolean name="flip_normals" value="{str(flip).lower()}"/>'
+    (tmp_path / "t.obj").write_text("v 3 0 0\nv 4 0 0\nv 3 1 0\nv 3 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n")
+    (tmp_path / "c.xml").write_text(
+        f'<scene version="3.0.0"><shape type="cube" id="c">{f}</shape><shape type="obj" id="t">{f}'
+        '<string name="filename" value="t.obj"/><boolean name="face_normals" value="true"/></shape></scene>')
+    scene = load_scene(mi, tmp_path / "c.xml")
+    shapes = pick_shapes(scene, ["c", "t"])
+    sign = -1.0 if flip else 1.0
+    for shape in shapes:
+        geo = mesh_geometry(mi, [shape])
+        tri = geo.points[geo.faces]
+        outward = tri.mean(1) - geo.points.mean(0)
+        winding = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        assert (sign * np.sum(winding * outward, axis=1) > 0).all()
+        if geo.normals is not None:
+            assert (sign * np.sum(geo.normals[geo.faces].mean(1) * outward, axis=1) > 0).all()
+        origin = [float(v) for v in geo.points.mean(0) + [0, 0, 5]]
+        si = scene.ray_intersect(mi.Ray3f(mi.Point3f(*origin), mi.Vector3f(0, 0, -1)))
+        assert sign * float(np.asarray(si.sh_frame.n)[2].ravel()[0]) > 0  # Mitsuba's own shading normal, for reference
