@@ -529,11 +529,14 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
 def markdown(r: dict) -> str:
     o, f = r["object"], r["image"]
 
+    def num(x, scale=1.0, digits=1) -> str:  # None: undefined (a black reference: stored as null, accuracy.md#metrics)
+        return "n/a" if x is None else f"{scale * x:.{digits}f}"
+
     def row(name, a):
-        e = " / ".join(f"{100 * x:.1f}" for x in a["energy_ratio"])
-        se = " / ".join(f"{100 * x:.1f}" for x in a["energy_se"])
+        e = " / ".join(num(x, 100) for x in a["energy_ratio"])
+        se = " / ".join(num(x, 100) for x in a["energy_se"])
         fl = "—" if a.get("flip") is None else f"{a['flip']:.3f}"
-        return (f"| {name} | {a['pixels']} | {e} (± {se}) | {a['psnr_db']:.2f} | {a['ceiling_db']:.2f} | "
+        return (f"| {name} | {a['pixels']} | {e} (± {se}) | {num(a['psnr_db'], digits=2)} | {num(a['ceiling_db'], digits=2)} | "
                 f"{a['claimed_psnr']} | {fl} |")
 
     ref = r["reference"]

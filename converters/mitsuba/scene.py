@@ -61,12 +61,23 @@ def load_failure(exc: BaseException) -> str:
     return f"Mitsuba cannot load the scene: {first}{hint}"
 
 
+#: integrators whose image is not radiance (a distance): nothing to measure an asset against; so is a wrapper
+#: (``aov``, ...) with no integrator nested
+NO_RADIANCE_INTEGRATORS = ("DepthIntegrator",)
+
+
 def require_integrator(scene, file: str | Path) -> None:
-    """CONVERT_SCENE_LOAD unless the scene names an integrator: Mitsuba 3 renders no scene without one, so a
-    benchmark has no reference to compare with (a bake needs none: it renders with its own)."""
+    """CONVERT_SCENE_LOAD unless the scene names an integrator that renders radiance: Mitsuba 3 renders no scene
+    without one, and ``depth`` or a wrapper with no integrator nested (``aov`` of AOVs alone) renders something
+    else, so a benchmark has no reference to compare with (a bake needs none: it renders with its own)."""
     if scene.integrator() is None:
         raise error("CONVERT_SCENE_LOAD", "the scene has no <integrator>, and Mitsuba renders none without one: there is no "
                     "reference to measure against; add one, e.g. <integrator type=\"volpath\"/>", file=str(file))
+    image = image_integrator(scene.integrator())
+    if image in NO_RADIANCE_INTEGRATORS or image in _WRAPPER_INTEGRATORS or not str(image).endswith("Integrator"):
+        raise error("CONVERT_SCENE_LOAD", f"the scene's integrator ({image}) renders no radiance (a depth or AOV image): "
+                    "there is no reference to measure against; use <integrator type=\"volpath\"/> (or nest one in the "
+                    "wrapper)", file=str(file))
 
 
 def integrator_depths(integrator) -> dict:
@@ -81,7 +92,14 @@ def integrator_depths(integrator) -> dict:
         if m:
             v = int(m.group(1))
             out[key] = -1 if v >= 2 ** 31 or v < 0 else v
+    if "max_depth" not in out and integrator is not None and image_integrator(integrator) in FIXED_DEPTHS:
+        out["max_depth"] = FIXED_DEPTHS[image_integrator(integrator)]
     return out
+
+
+#: integrators of a fixed depth that state none: ``direct`` renders the emitters in view and direct light at the first
+#: hit, Mitsuba's path of 2 segments (``direct_projective`` states max_depth 2)
+FIXED_DEPTHS = {"DirectIntegrator": 2}
 
 
 #: the depth training views are rendered with for a scene whose integrator is unbounded (Russian roulette ends paths)

@@ -654,7 +654,7 @@ class StageConverter:
             info["hide_emitters"] = True
         self.result.integrator = info
         if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator",
-                       "VolumetricMisPathIntegrator"):  # path tracers: the same image of surfaces
+                       "VolumetricMisPathIntegrator", "DirectIntegrator"):  # path tracers; direct: depth 2
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
 
     # -- materials ----------------------------------------------------------------------------

@@ -116,6 +116,54 @@ def test_scene_without_integrator(scene, tmp_path):
     assert e.value.code == "CONVERT_SCENE_LOAD" and "integrator" in str(e.value) and "bare.xml" in str(e.value)
 
 
+def _with_integrator(scene, integrator: str, name: str):
+    """The example scene with another <integrator>, beside it (its meshes are relative paths)."""
+    import re
+
+    path = scene.parent / name
+    path.write_text(re.sub(r"<integrator.*?</integrator>", integrator, scene.read_text(), count=1, flags=re.S))
+    return path
+
+
+@pytest.mark.parametrize("integrator", ['<integrator type="depth"/>',
+                                        '<integrator type="aov"><string name="aovs" value="dd.y:depth"/></integrator>',
+                                        '<integrator type="moment"/>'])
+def test_scene_whose_integrator_renders_no_radiance(scene, tmp_path, integrator):
+    """A depth image, or a wrapper with nothing nested, is no reference: typed, before any rendering. Before, the bench
+    compared the asset's radiance with distances (energy 13 / 8 / 5 % of a ``depth`` image)."""
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    bad = _with_integrator(scene, integrator, "noradiance.xml")
+    with pytest.raises(NassetError) as e:
+        _run(bad, [f"shell,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert e.value.code == "CONVERT_SCENE_LOAD" and "radiance" in str(e.value) and "noradiance.xml" in str(e.value)
+    assert not (tmp_path / "o" / "reference_a.exr").exists()
+
+
+def test_direct_integrator_is_depth_two(scene, tmp_path):
+    """Mitsuba's ``direct`` is emitters in view plus direct light at the first hit (a path of 2 segments); the estimate
+    path-traced it at depth 24 instead (a tiny diffuse cube read 116 / 160 / 152 % against a ``direct`` reference, and
+    93 / 133 / 118 % against ``path`` max_depth 2; now the same as the latter), and the converter warned it away."""
+    from nasset_converters.mitsuba.usd_export import convert_scene
+
+    direct = _with_integrator(scene, '<integrator type="direct"/>', "direct.xml")
+    res = convert_scene(direct, tmp_path / "s.usda")
+    assert res.integrator["max_depth"] == 2 and res.integrator["renderer_max_depth"] == 1
+    assert not [w for w in res.warnings if "integrator" in w]
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    report = _run(direct, [f"shell,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert report["estimate"]["max_depth"] == 1
+
+
+def test_black_reference_is_reported_not_a_traceback(scene, tmp_path):
+    """``max_depth`` 1: Mitsuba shows only the emitters, the object is black, every ratio undefined (null). The report
+    used to fail formatting them after all the rendering (TypeError in accuracy.md's table)."""
+    a = _asset(tmp_path, scene, ["shell", "jelly"])
+    black = _with_integrator(scene, '<integrator type="path"><integer name="max_depth" value="1"/></integrator>', "black.xml")
+    report = _run(black, [f"shell,jelly={a}"], tmp_path / "o", res=8, spp=2, nr_spp=1)
+    assert report["object"]["energy_ratio"] == [None, None, None]
+    assert "n/a" in (tmp_path / "o" / "accuracy.md").read_text()
+
+
 @pytest.mark.parametrize("sensor", ["radiancemeter", None])
 def test_scene_without_a_camera(scene, tmp_path, sensor):
     """The bench compares images seen from the scene's own camera: a sensor that is no camera (a radiance meter) or

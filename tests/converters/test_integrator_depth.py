@@ -22,7 +22,7 @@ def _integrator(mi, xml: str):
     ('<integrator type="path"><integer name="max_depth" value="-1"/></integrator>', {"max_depth": -1, "rr_depth": 5}),
     ('<integrator type="path"><integer name="max_depth" value="7"/><integer name="rr_depth" value="3"/></integrator>',
      {"max_depth": 7, "rr_depth": 3}),
-    ('<integrator type="direct"/>', {}),  # no depth setting
+    ('<integrator type="direct"/>', {"max_depth": 2}),  # no depth setting: emitters in view + direct light, 2 segments
     ("", {}),  # no integrator
 ])
 def test_integrator_depths(mi, xml, want):
