@@ -148,6 +148,14 @@ def bake(
         say(f"warning: {warning}")
     if clear := msc.see_through(mi, shapes):
         say(see_through_line("shape(s)", clear, msc.SEE_THROUGH_SHARE))
+    if mirrors := msc.mirror_shapes(mi, shapes):
+        why = (f"their BSDFs ({', '.join(sorted(set(msc.bsdf_names([s for s in shapes if s.id() in mirrors]))))}) reflect "
+               "light along mirror directions only: rna stores smooth transport, and a distant light reaches a camera "
+               "off a mirror along one direction alone (spec/bake.md#mirrors)")
+        if len(mirrors) == len(shapes):
+            raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shape(s) {mirrors}: {why}; every training view would be "
+                        "black. Bake a rough one (roughconductor)", file=str(scene))
+        say(f"warning: shape(s) {mirrors}: {why}; they will render black, without what they mirror of the scene")
     if workers is None:
         views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
     else:  # each worker loads the scene itself

@@ -548,6 +548,21 @@ def scene_of(mi, shapes, **extra):
     return scene
 
 
+def mirror_shapes(mi, shapes) -> list[str]:
+    """Ids of ``shapes`` whose BSDF scatters light along mirror directions only (no smooth lobe, nothing transmitted:
+    ``conductor``, a ``twosided`` one) and that hold no medium: a distant light reaches a camera off them along one
+    direction alone, so every rna training pixel is black, and what they mirror of the scene no network holds
+    (spec/bake.md#mirrors)."""
+    flags = mi.BSDFFlags
+    out = []
+    for s in shapes:
+        f = s.bsdf().flags() if s.bsdf() is not None else 0
+        if not (mi.has_flag(f, flags.Smooth) or mi.has_flag(f, flags.Transmission) or mi.has_flag(f, flags.Null)
+                or has_medium(s)):
+            out.append(s.id())
+    return out
+
+
 #: the share of straight-through light above which a shape counts as see-through (:func:`see_through`)
 SEE_THROUGH_SHARE = 0.01
 
