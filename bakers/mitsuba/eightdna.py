@@ -171,6 +171,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     from nasset_bakers.train.eightdna import TRAIN_PRESETS, TrainSettings, export, heldout_nll, parity_with_sdk, train
     from nasset_bakers.train.parallel import data_parallel
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
+    from nasset_converters.mitsuba import dataset as ds
     from nasset_converters.mitsuba import scene as msc
     from nasset_converters.mitsuba.eightdna_sampler import OnlineBuffer, PathSampler, ShardedTuples, local_runner
     from nasset_sdk.asset import AssetBuilder
@@ -236,7 +237,9 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
         key = {"scene_sha256": scene_sha, "shapes": asset_ids, "train": tset.__dict__, "sampler": sp, "version": BAKE_VERSION,
                "domain": [list(map(float, lo)), list(map(float, hi))], "variant": mi.variant()}
         say(f"held-out tuples: {sp['heldout']}")
-        if dp.is_main:
+        if dp.is_main:  # the folder's cached tuples are this scene's, shapes' and sampler's, or it is refused
+            ds.DatasetDir(work).claim({"kind": "8dna", "converter": CONVERTER_VERSION, "scene": str(scene.resolve()),
+                                       **{k: key[k] for k in ("scene_sha256", "shapes", "sampler", "version", "domain")}})
             with tuple_bar(sp["heldout"], "trace held-out", quiet) as held_progress:
                 held = heldout_tuples(tuples, sp["heldout"], work / f"heldout_{size}_{seed}.npz", progress=held_progress)
             dp.from_main(require_torch(), {"scene": str(scene), "asset_ids": list(asset_ids)})

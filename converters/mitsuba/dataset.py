@@ -357,9 +357,17 @@ class DatasetDir:
         self.root = Path(root)
 
     def prepare(self, meta: dict) -> None:
+        """:meth:`claim` the folder for ``meta`` and make its ``train`` and ``val`` folders."""
+        self.claim(meta)
+        output_folder(self.root / "train", "bake's dataset folder")
+        output_folder(self.root / "val", "bake's dataset folder")
+
+    def claim(self, meta: dict) -> None:
+        """Create the folder and record ``meta`` in ``meta.json``, or check that the one there matches (the Mitsuba
+        variant aside): ``CONVERT_DATASET`` naming the keys that differ (another scene, other shapes or settings,
+        another kind's folder), before anything in it is used or overwritten."""
+        meta = json.loads(json.dumps(meta))  # as it reads back (tuples as lists)
         output_folder(self.root, "bake's dataset folder")
-        (self.root / "train").mkdir(exist_ok=True)
-        (self.root / "val").mkdir(exist_ok=True)
         mp = self.root / "meta.json"
         if mp.exists():
             try:

@@ -344,6 +344,29 @@ def test_rerun_resumes_from_checkpoint(tiny):
         np.testing.assert_array_equal(a.tensor("core", name), b.tensor("core", name))
 
 
+def test_a_folder_of_another_scene_or_kind_is_refused(tiny, tmp_path):
+    """The folder's held-out tuples and renormalisation points were reused by file name alone (size, seed): a bake
+    of an edited scene, other shapes or another example into the same folder validated and renormalised with the
+    old scene's tuples, and an rna bake overwrote its training state. Now its meta.json must match."""
+    import shutil
+
+    from nasset_bakers.mitsuba.eightdna import bake
+    from nasset_bakers.mitsuba.rna import bake as bake_rna
+    from nasset_sdk.errors import NassetError
+
+    work = tmp_path / "work"
+    shutil.copytree(tiny[1]["work_dir"], work)
+    before = {p.name: p.stat().st_mtime_ns for p in work.glob("*.npz")}
+    with pytest.raises(NassetError) as e:
+        bake(None, None, tmp_path / "h.usdc", size="tiny", example="heterogeneous", epochs=EPOCHS, spp=6, quiet=True,
+             resume=work)
+    assert e.value.code == "CONVERT_DATASET" and "scene_sha256" in str(e.value)
+    with pytest.raises(NassetError) as e:
+        bake_rna(work / "example_scene" / "scene.xml", ["blob"], tmp_path / "r.usdc", size="tiny", quiet=True, resume=work)
+    assert e.value.code == "CONVERT_DATASET" and "kind" in str(e.value)
+    assert {p.name: p.stat().st_mtime_ns for p in work.glob("*.npz")} == before  # nothing of it was rewritten
+
+
 def test_heterogeneous_example_tiny_bakes_loads_and_renders(tmp_path):
     """Default-suite version of the slow heterogeneous bake below, at the smallest size (1 epoch, 1 spp): a valid
     asset that loads, evaluates and renders finite and lit in the reference renderer, and whose held-out mean
