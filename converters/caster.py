@@ -30,10 +30,11 @@ class Caster:
             self.faces = np.asarray(geo.faces, np.int64)
             pts = np.asarray(geo.points, np.float64)
             tris = pts[self.faces]
-            self.corner_n = np.asarray(geo.normals, np.float64)[self.faces]
             e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
             ng = np.cross(e1, e2)
             self.ng = ng / np.maximum(np.linalg.norm(ng, axis=1, keepdims=True), 1e-300)
+            self.corner_n = (np.asarray(geo.normals, np.float64)[self.faces] if geo.normals is not None
+                             else np.repeat(self.ng[:, None], 3, axis=1))  # flat: the face normal at every corner
         self.accel = Accel(tris, np.zeros(len(tris), np.int64))
 
     def hits(self, o, d) -> dict:
@@ -68,11 +69,20 @@ class Caster:
         if self.variant == "fiber":
             res = self.accel.trace(x, wi, ignore=ignore, exempt=self.tubes.exempt[hit["seg"]])
         else:
-            ng = self.ng[hit["prim"]]
-            scale = self.accel.eps * (1.0 + np.max(np.abs(x), axis=1) / self.accel.scale)
-            o = x + ng * (np.sign((ng * wi).sum(1)) * scale)[:, None]
-            res = self.accel.trace(o, wi, ignore=ignore)
+            return self.shadow(x, self.ng[hit["prim"]], wi)
         return ~res.self_hit
+
+    def shadow(self, x, ng, wi) -> np.ndarray:
+        """1 where wi is not blocked by the asset from surface points ``x`` [N, 3] of geometric normals ``ng`` [N, 3]
+        (either side), the shadow ray offset off the surface as the reference renderer offsets it (a share of the
+        scene's scale, spec/renderer.md#neural-vertex): the rule the renderer computes the input V with."""
+        x, ng = np.asarray(x, np.float64), np.asarray(ng, np.float64)
+        if len(x) == 0:
+            return np.zeros(0, bool)
+        wi = np.broadcast_to(np.asarray(wi, np.float64), x.shape)
+        scale = self.accel.eps * (1.0 + np.max(np.abs(x), axis=1) / self.accel.scale)
+        o = x + ng * (np.sign((ng * wi).sum(1)) * scale)[:, None]
+        return ~self.accel.trace(o, wi, ignore=np.zeros(len(x), np.int64)).self_hit
 
 
 def agree(hit: dict, pixels: int, keep: np.ndarray, theirs: np.ndarray) -> tuple[dict, int, int]:

@@ -289,8 +289,9 @@ def _view_renderer(mi, shapes, geo, center, radius, dset):
     from nasset_sdk.geometry import CurvesGeometry
 
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
-    caster = Caster("fiber", geo) if isinstance(geo, CurvesGeometry) else None
-    renderer = ds.Renderer(mi, iso, dset, caster=caster)
+    fibers = isinstance(geo, CurvesGeometry)  # surfaces: V offset as the renderer offsets it (spec/bake.md#data)
+    renderer = ds.Renderer(mi, iso, dset, caster=Caster("fiber", geo) if fibers else None,
+                           shadows=None if fibers else Caster("surface", geo))
     return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
 
 

@@ -92,10 +92,11 @@ class Renderer:
     (:class:`nasset_converters.caster.Caster`, fiber assets): the geometric inputs and the visibility come from
     the fiber prisms the reference renderer traces, the transport from Mitsuba's own curves."""
 
-    def __init__(self, mi, iso, settings: DataSettings, caster=None) -> None:
+    def __init__(self, mi, iso, settings: DataSettings, caster=None, shadows=None) -> None:
         self.mi, self.iso, self.s = mi, iso, settings
         self.jit = is_jit(mi)
         self.caster = caster
+        self.shadows = shadows  # a surface Caster: V from Mitsuba's hit, offset as the renderer offsets it
 
     # -- helpers -------------------------------------------------------------------------------
     def _ray(self, o, d):
@@ -149,6 +150,8 @@ class Renderer:
         n = len(o)
         size = self._bucket(n)
         si = self.iso.geometry_scene.ray_intersect(self._ray(self._pad(o, size), self._pad(d, size)))
+        if self.shadows is not None:
+            return self.shadows.shadow(self._np3(si.p)[:n], self._np3(si.n)[:n], wi)
         w = np.ascontiguousarray(self._pad(np.asarray(wi, np.float32), size))
         shadow = si.spawn_ray(mi.Vector3f(w[:, 0], w[:, 1], w[:, 2]))
         blocked = np.asarray(self.iso.geometry_scene.ray_test(shadow), bool)[:n]
@@ -214,10 +217,14 @@ class Renderer:
     def _vis_scalar(self, o, d, wi):
         mi = self.mi
         out = np.zeros(len(o), bool)
+        x, ng = np.zeros((len(o), 3)), np.zeros((len(o), 3))
         for i in range(len(o)):
             si = self.iso.geometry_scene.ray_intersect(self._sray(o[i], d[i]))
-            out[i] = not self.iso.geometry_scene.ray_test(si.spawn_ray(mi.Vector3f(*map(float, wi[i]))))
-        return out
+            if self.shadows is not None:
+                x[i], ng[i] = list(si.p), list(si.n)
+            else:
+                out[i] = not self.iso.geometry_scene.ray_test(si.spawn_ray(mi.Vector3f(*map(float, wi[i]))))
+        return self.shadows.shadow(x, ng, wi) if self.shadows is not None else out
 
     def _transport_scalar(self, o, d, spp, seed, clamp, stats=None):
         mi = self.mi

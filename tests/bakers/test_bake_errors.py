@@ -321,3 +321,29 @@ def test_a_mirror_is_refused_before_rendering(tmp_path):
             bake(tmp_path / "m.xml", ids, tmp_path / "o.usdc", size="tiny", quiet=True)
         assert _code(e) == "CONVERT_SHAPE_UNSUPPORTED" and "chrome" in str(e.value) and "SmoothConductor" in str(e.value)
         assert not (tmp_path / "o.usdc.bake" / "train").exists()  # refused before any view
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e4])
+def test_light_visibility_far_from_the_origin_is_the_renderers(tmp_path, offset):
+    """V of a convex cube is 1 exactly where the light is above the face. 10^4 units from the origin Mitsuba's
+    spawn_ray moves the shadow ray's origin by (1 + |p|) x 8.9e-5 ~ 0.9 units, through the 0.6-unit cube: every V
+    was 1, the renderer's (its own offset, 0.2 there) half 0, and the asset read 127 / 127 / 270 %, 8.4 dB in its
+    scene (``tiny``) against 91 / 129 / 124 %, 17.8 dB at the origin; now V is cast as the renderer casts it
+    (91 / 127 / 121 %, 18.2 dB)."""
+    from dataclasses import replace
+
+    from nasset_bakers.mitsuba.rna import _view_renderer
+    from nasset_converters.mitsuba.scene import bounding_sphere, load_scene, mesh_geometry, pick_shapes
+
+    mi = cm.load_mitsuba()
+    (tmp_path / "c.xml").write_text(
+        '<scene version="3.0.0"><shape type="cube" id="c"><transform name="to_world"><scale value="0.3"/>'
+        f'<translate x="{offset}" z="{offset}"/></transform></shape></scene>')
+    shapes = pick_shapes(load_scene(mi, tmp_path / "c.xml"), ["c"])
+    geo = mesh_geometry(mi, shapes)
+    center, radius = bounding_sphere(geo)
+    dset = replace(ds.DataSettings(), **DATA_PRESETS["tiny"])
+    view = _view_renderer(mi, shapes, geo, center, radius, dset)("train", 0)
+    above = np.sum(view["n"] * view["wi"], axis=1) > 0
+    assert 0.2 < above.mean() < 0.8
+    assert np.mean(view["vis"].astype(bool) == above) > 0.99
