@@ -59,6 +59,10 @@ def boundary_of(mi, shapes) -> tuple[float, float]:
         found.add((round(eta, 6), round(alpha, 6)))
     if len(found) != 1:
         raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes have different boundaries {sorted(found)}; 8dna stores one")
+    if all(s.interior_medium() is None for s in shapes):  # a clear, empty dielectric: nothing scatters inside
+        raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shapes {[s.id() for s in shapes]} have no interior medium: an 8dna "
+                    "asset stores the light a medium scatters inside a dielectric boundary (spec/bake-8dna.md); give "
+                    "the shape an <medium name=\"interior\">, or bake an empty glass object as rna")
     return next(iter(found))
 
 

@@ -423,6 +423,27 @@ def test_bake_rejects_meaningless_options_and_unsupported_boundaries(mi, tmp_pat
     assert abs(eta - 1.33) < 1e-3 and abs(alpha - 0.3) < 1e-6  # Mitsuba's default exterior is air (1.000277)
 
 
+def test_a_boundary_without_a_medium_is_refused(mi, tmp_path):
+    """An empty glass ball (no interior medium) baked a whole 8dna asset without a word, though the spec names one
+    interior medium as required; now refused before any tuple is traced."""
+    import trimesh
+
+    from nasset_bakers.mitsuba.eightdna import bake
+    from nasset_converters.mitsuba.examples import write_ply
+    from nasset_sdk.errors import NassetError
+
+    m = trimesh.creation.icosphere(subdivisions=2, radius=0.2)
+    write_ply(tmp_path / "ball.ply", m.vertices, m.faces, np.asarray(m.vertex_normals))
+    (tmp_path / "s.xml").write_text(
+        '<scene version="3.0.0"><shape type="ply" id="glass"><string name="filename" value="ball.ply"/>'
+        '<bsdf type="roughdielectric"><string name="distribution" value="ggx"/><float name="alpha" value="0.2"/></bsdf>'
+        '</shape></scene>')
+    with pytest.raises(NassetError) as e:
+        bake(tmp_path / "s.xml", ["glass"], tmp_path / "a.usdc", size="tiny", quiet=True)
+    assert e.value.code == "CONVERT_SHAPE_UNSUPPORTED" and "glass" in str(e.value) and "medium" in str(e.value)
+    assert not list((tmp_path / "a.usdc.bake").glob("heldout_*"))
+
+
 # ----------------------------------------------------------------------------------------
 # the trained flow: normalisation and sampling
 
