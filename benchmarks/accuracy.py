@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_converters.mitsuba.scene import BOX_TOLERANCE
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
@@ -52,8 +53,6 @@ CHUNK_SPP = 256
 MASK_SUBSAMPLES = 4
 QUICK = {"res": 48, "spp": 512, "nr_spp": 16}
 DEFAULT = {"res": 128, "spp": 8192, "nr_spp": 64}
-#: tolerance on the asset's bounding box against the replaced shapes' (fraction of the box diagonal)
-BOX_TOLERANCE = 0.05
 
 
 def _say(quiet: bool):
@@ -186,16 +185,6 @@ def object_mask(mi, scene, sensor, shape_ids, shape_hw, sub: int = MASK_SUBSAMPL
     return cov.reshape(h, w, sub * sub).mean(-1)
 
 
-def _shape_bounds(mi, shapes) -> np.ndarray:
-    lo = np.full(3, np.inf)
-    hi = np.full(3, -np.inf)
-    for s in shapes:
-        b = s.bbox()
-        lo = np.minimum(lo, np.asarray(list(b.min), np.float64))
-        hi = np.maximum(hi, np.asarray(list(b.max), np.float64))
-    return np.stack([lo, hi])
-
-
 def _is_curve(shape) -> bool:
     return "curve" in str(shape).split("[")[0].lower()
 
@@ -209,7 +198,7 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
     dielectric boundary (neupress carries subsurface transport behind a rough dielectric)."""
     import mitsuba as mi
 
-    from nasset_converters.mitsuba.scene import no_such_shape, refuse_emitter
+    from nasset_converters.mitsuba.scene import bounds_offset, no_such_shape, refuse_emitter
     from nasset_sdk.asset import Asset
 
     by_id = {s.id(): s for s in scene.shapes() if s.id()}
@@ -241,11 +230,7 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
             if not any("dielectric" in str(s.bsdf()).split("[")[0].lower() for s in shapes):
                 raise error("BENCH_ASSET_KIND", f"{file.name} is a neupress asset (subsurface behind a rough dielectric) but "
                             f"none of {ids} has a dielectric boundary", file=str(file))
-        geo = asset.geometry()
-        a = np.stack([geo.points.min(0), geo.points.max(0)]).astype(np.float64)
-        b = _shape_bounds(mi, shapes)
-        diag = float(np.linalg.norm(b[1] - b[0])) or 1.0
-        off = float(np.abs(a - b).max()) / diag
+        off = bounds_offset(shapes, asset.geometry().points)
         if off > BOX_TOLERANCE:
             src = (asset.provenance or {}).get("source", {}).get("shapes")
             raise error("BENCH_ASSET_MISMATCH", f"{file.name} was not baked from {ids}: its bounds differ from theirs by "

@@ -548,6 +548,24 @@ def scene_of(mi, shapes, **extra):
     return scene
 
 
+#: how far (a share of the replaced shapes' box diagonal) an asset's geometry box may lie from theirs
+BOX_TOLERANCE = 0.05
+
+
+def bounds_offset(shapes, points) -> float:
+    """The largest difference between the world bounding box of ``shapes`` and that of ``points`` [N, 3] (an asset's
+    geometry), as a share of the shapes' box diagonal: above BOX_TOLERANCE the asset was not baked from them."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for s in shapes:
+        b = s.bbox()
+        lo = np.minimum(lo, np.asarray(list(b.min), np.float64))
+        hi = np.maximum(hi, np.asarray(list(b.max), np.float64))
+    pts = np.asarray(points, np.float64)
+    a = np.stack([pts.min(0), pts.max(0)])
+    diag = float(np.linalg.norm(hi - lo)) or 1.0
+    return float(np.abs(a - np.stack([lo, hi])).max()) / diag
+
+
 def mirror_shapes(mi, shapes) -> list[str]:
     """Ids of ``shapes`` whose BSDF scatters light along mirror directions only (no smooth lobe, nothing transmitted:
     ``conductor``, a ``twosided`` one) and that hold no medium: a distant light reaches a camera off them along one

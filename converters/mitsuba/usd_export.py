@@ -46,6 +46,8 @@ from nasset_sdk.safeopen import trust
 
 from . import analytic
 from .scene import (
+    BOX_TOLERANCE,
+    bounds_offset,
     camera_medium,
     hides_emitters,
     image_integrator,
@@ -1556,6 +1558,7 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
         if not file.is_file() or not is_asset_file(str(file)):
             raise error("CONVERT_ASSET_REFERENCE", f"--replace {sid}: {file} is not an existing neural asset file "
                         "(defaultPrim of type NeuralAsset)", file=str(file))
+    misfits = replacement_misfits(mscene, rep)
     try:
         output.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -1568,9 +1571,31 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     with atomic_output(output, "converted scene") as tmp:
         os.unlink(tmp)  # USD creates the layer file itself
         res = StageConverter(mi, mscene, scene, output, rep, False, layer=Path(tmp)).run()  # checked once renamed
+    res.warnings.extend(misfits)
     if check_usd:
         res.usd_checks = usd_check(output)
     return res
+
+
+def replacement_misfits(mscene, rep: dict) -> list[str]:
+    """A warning per ``--replace`` asset whose geometry's box lies off the replaced shapes' by more than
+    BOX_TOLERANCE of their diagonal: it was baked from other shapes (a wrong id, another object), and the stage would
+    show it where they are not (``bench accuracy`` refuses the same, BENCH_ASSET_MISMATCH)."""
+    from nasset_sdk.asset import Asset
+
+    by_id = {s.id(): s for s in mscene.shapes() if s.id()}
+    groups: dict[Path, list[str]] = {}
+    for sid, file in rep.items():
+        groups.setdefault(Path(file), []).append(sid)
+    out = []
+    for file, ids in groups.items():
+        asset = Asset.open(file, load="none")
+        off = bounds_offset([by_id[i] for i in ids], asset.geometry().points)
+        if off > BOX_TOLERANCE:
+            src = (asset.provenance or {}).get("source", {}).get("shapes")
+            out.append(f"--replace {','.join(ids)}: {file.name} was not baked from them: its bounds differ from theirs by "
+                       f"{100 * off:.0f} % of their diagonal" + (f" (it was baked from {src})" if src else ""))
+    return out
 
 
 def report(res: "ConvertResult", *, as_json: bool) -> int:

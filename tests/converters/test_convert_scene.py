@@ -382,6 +382,23 @@ def test_typed_errors(simple_scene, tmp_path):
     assert e.value.code == "CONVERT_SCENE_LOAD"
 
 
+def test_an_asset_of_other_shapes_is_warned(simple_scene, tmp_path):
+    """``--replace ground=ASSET`` with an asset baked from ``obj``: the stage showed the object where the ground was,
+    without a word (only ``bench accuracy`` checked the bounds); now a warning names the ids and the asset's shapes."""
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_sdk.examples import example_builder
+
+    mi = load_mitsuba()
+    b = example_builder("rna", size="tiny", seed=2)
+    b.set_geometry(msc.mesh_geometry(mi, msc.pick_shapes(msc.load_scene(mi, simple_scene), ["obj"])))
+    asset = b.write(tmp_path / "obj_asset.usdc")
+    good = convert_scene(simple_scene, tmp_path / "a.usda", replace=[f"obj={asset}"])
+    assert not [w for w in good.warnings if "baked from" in w]
+    bad = convert_scene(simple_scene, tmp_path / "b.usda", replace=[f"ground={asset}"])
+    assert [w for w in bad.warnings if "ground" in w and "not baked from" in w]
+
+
 def test_cli_json_and_exit_codes(simple_scene, tmp_path, capsys):
     from nasset_sdk.cli import main
 
