@@ -110,8 +110,15 @@ def world_mesh(mi, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def as_mesh(mi, shape):
     """A Mitsuba triangle mesh in place of the analytic ``shape``: its tessellation in world space with the
-    shape's id, BSDF and interior / exterior media (an emitter is not carried: an asset emits nothing)."""
+    shape's id, BSDF and interior / exterior media (an emitter is not carried: an asset emits nothing). It faces the
+    side Mitsuba shades the shape on (``flip_normals``, or a mirroring ``to_world`` turns an analytic shape's normal
+    over): its normals negated and each face wound on that side where needed, so the data and the asset do too."""
+    from .sidedness import faces_facing_as_mitsuba, front_sign
+
     pts, faces, nrm = world_mesh(mi, shape)
+    sign = front_sign(mi, shape, pts, faces, nrm)
+    faces = faces_facing_as_mitsuba(mi, shape, pts, faces, nrm)
+    nrm = nrm * sign
     props = mi.Properties()
     props.set_id(shape.id())
     for key, obj in (("bsdf", shape.bsdf()), ("interior", shape.interior_medium()), ("exterior", shape.exterior_medium())):

@@ -273,23 +273,27 @@ def test_dataset_folder_that_cannot_be_made_is_typed(tmp_path):
 
 @pytest.mark.parametrize("flip", [False, True])
 def test_a_flip_normals_shape_keeps_the_side_mitsuba_shades(tmp_path, flip):
-    """``flip_normals``: Mitsuba shades the inside, so the training data's ``n`` points inwards; the asset's normals
-    and winding must too. They pointed outwards (the file's), so every render queried the network with normals it
+    """``flip_normals`` (or a mirroring ``to_world`` on an analytic shape): Mitsuba shades the inside, so the training
+    data's ``n`` points inwards; the asset's normals and winding must too (and an analytic shape's tessellation, which
+    the data is rendered from, lost the flip). They pointed outwards (the file's), so every render queried the network with normals it
     never saw: a twosided diffuse cube read 81 / 175 / 162 %, 13.1 dB in its scene (``tiny``) against
     102 / 134 / 102 %, 16.5 dB now (the same cube unflipped: 92 / 129 / 124 %, 17.8 dB)."""
-    from nasset_converters.mitsuba.scene import load_scene, mesh_geometry, pick_shapes
+    from nasset_converters.mitsuba.scene import asset_geometry, load_scene, pick_shapes
 
     mi = cm.load_mitsuba()
     f = f'<boolean name="flip_normals" value="{str(flip).lower()}"/>'
     (tmp_path / "t.obj").write_text("v 3 0 0\nv 4 0 0\nv 3 1 0\nv 3 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 3 1 4\n")
     (tmp_path / "c.xml").write_text(
         f'<scene version="3.0.0"><shape type="cube" id="c">{f}</shape><shape type="obj" id="t">{f}'
-        '<string name="filename" value="t.obj"/><boolean name="face_normals" value="true"/></shape></scene>')
+        '<string name="filename" value="t.obj"/><boolean name="face_normals" value="true"/></shape>'
+        f'<shape type="sphere" id="s">{f}<transform name="to_world"><translate x="-4"/></transform></shape>'
+        f'<shape type="sphere" id="m">{f}<transform name="to_world"><scale x="-1"/><translate x="8"/></transform></shape>'
+        '</scene>')
     scene = load_scene(mi, tmp_path / "c.xml")
-    shapes = pick_shapes(scene, ["c", "t"])
-    sign = -1.0 if flip else 1.0
+    shapes = pick_shapes(scene, ["c", "t", "s", "m"])  # analytic spheres: tessellated; "m" mirrored (Mitsuba turns it)
     for shape in shapes:
-        geo = mesh_geometry(mi, [shape])
+        sign = (-1.0 if flip else 1.0) * (-1.0 if shape.id() == "m" else 1.0)
+        _, geo = asset_geometry(mi, [shape])  # analytic shapes: their tessellation
         tri = geo.points[geo.faces]
         outward = tri.mean(1) - geo.points.mean(0)
         winding = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
