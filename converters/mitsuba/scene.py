@@ -166,7 +166,10 @@ def no_such_shape(mi, scene, sid: str) -> str:
             groups[parent.id()] = [s.id() or "(unnamed)" for s in scene.shapes()
                                    if str(s).startswith("Instance[") and f'name = "{parent.id()}"' in str(s)]
     if not groups:
-        return f"no shape with id {sid!r}; the scene has {ids}"
+        kind = next((what for what, objs in (("an emitter", scene.emitters()), ("a sensor", scene.sensors()))
+                     if any(o.id() == sid for o in objs)), None)
+        what = f"; {sid!r} is {kind}, and an asset is made of shapes" if kind else ""
+        return f"no shape with id {sid!r}{what}; the scene has {ids}"
     group, instances = next(iter(groups.items()))
     return (f"shape {sid!r} is inside shapegroup {group!r}, which the scene draws through its instances {instances}: an "
             "asset is one object in the scene's world space; place one copy of the shape outside the group (with the "

@@ -42,6 +42,15 @@ def test_unknown_shape_id(example_xml, tmp_path):
     assert "teapot" in str(e.value) and "jelly" in str(e.value)  # names the known ids
 
 
+def test_an_emitter_id_is_named_as_one(tmp_path):
+    """``--asset sun`` where ``sun`` is the scene's directional light: said to be an emitter (it read as a typo)."""
+    (tmp_path / "s.xml").write_text('<scene version="3.0.0"><emitter type="directional" id="sun"/>'
+                                    '<shape type="cube" id="box"/></scene>')
+    with pytest.raises(SceneError) as e:
+        bake(tmp_path / "s.xml", ["sun"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert _code(e) == "CONVERT_SHAPE_UNKNOWN" and "is an emitter" in str(e.value) and "box" in str(e.value)
+
+
 def test_non_mesh_shape_is_unsupported(tmp_path):
     """An instance of a shape group is neither a mesh nor an analytic shape (those bake: test_analytic_shapes.py)."""
     xml = tmp_path / "s.xml"
