@@ -296,7 +296,7 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     """The Mitsuba side: check the assets fit, convert, render the reference halves (reusing a cached
     pair for the same scene, size, spp and seed) and the object mask from Mitsuba's camera rays."""
     from nasset_converters.mitsuba import load_mitsuba
-    from nasset_converters.mitsuba.scene import load_scene, media_caveats, require_integrator
+    from nasset_converters.mitsuba.scene import far_from_origin, load_scene, media_caveats, require_integrator
     from nasset_converters.mitsuba.usd_export import convert_scene
 
     mi = load_mitsuba()  # CONVERT_BACKEND when mitsuba is missing
@@ -310,7 +310,9 @@ def mitsuba_reference(scene_file, rep: dict, out: Path, *, res: int, spp: int, s
     cov = object_mask(mi, mscene, sensor, list(rep), hw)
     reference = {"renderer": f"mitsuba {mi.__version__}", "variant": mi.variant(), "integrator": converted.integrator,
                  **conversion_notes(converted, say)}
-    caveats = [c for c in (delta_light_caveat(mi, mscene, list(rep)),) if c] + media_caveats(mi, mscene, rep)
+    replaced = [s for s in mscene.shapes() if s.id() in rep]
+    caveats = [c for c in (delta_light_caveat(mi, mscene, list(rep)), far_from_origin(mi, replaced)) if c] + media_caveats(
+        mi, mscene, rep)
     for caveat in caveats:
         say(f"warning: {caveat}")
     if caveats:

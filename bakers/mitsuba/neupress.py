@@ -151,6 +151,8 @@ def bake(
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
         say(f"warning: {warning}")
+    if far := msc.far_from_origin(mi, shapes):
+        say(f"warning: {far}")
     if workers is None:
         views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
     else:  # each worker loads the scene itself

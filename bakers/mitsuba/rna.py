@@ -148,6 +148,8 @@ def bake(
         say(f"warning: {warning}")
     if clear := msc.see_through(mi, shapes):
         say(see_through_line("shape(s)", clear, msc.SEE_THROUGH_SHARE))
+    if far := msc.far_from_origin(mi, shapes):
+        say(f"warning: {far}")
     if mirrors := msc.mirror_shapes(mi, shapes):
         why = (f"their BSDFs ({', '.join(sorted(set(msc.bsdf_names([s for s in shapes if s.id() in mirrors]))))}) reflect "
                "light along mirror directions only: rna stores smooth transport, and a distant light reaches a camera "

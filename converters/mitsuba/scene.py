@@ -569,6 +569,33 @@ def bounds_offset(shapes, points) -> float:
     return float(np.abs(a - np.stack([lo, hi])).max()) / diag
 
 
+#: Mitsuba's secondary-ray offset, as a share of the asset's bounding radius, above which :func:`far_from_origin` warns
+FAR_OFFSET_SHARE = 0.01
+
+
+def far_from_origin(mi, shapes) -> str | None:
+    """A warning when ``shapes`` lie so far from the origin for their size that Mitsuba's self-intersection offset,
+    (1 + max |p|) x RayEpsilon (8.9e-5) along the normal, exceeds FAR_OFFSET_SHARE of their bounding radius: Mitsuba then
+    starts secondary rays that far off the surface, through thin parts, so their shadows on themselves and their
+    interreflections go missing in its images (the bake's transport targets and the benches' reference alike). Found
+    on a 0.6-unit cube 10^4 units from the origin: an offset of 0.9 units."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for s in shapes:
+        b = s.bbox()
+        lo = np.minimum(lo, np.asarray(list(b.min), np.float64))
+        hi = np.maximum(hi, np.asarray(list(b.max), np.float64))
+    if not np.isfinite(lo).all():
+        return None
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    offset = (1.0 + float(np.max(np.abs(np.stack([lo, hi]))))) * float(mi.math.RayEpsilon)
+    if offset <= FAR_OFFSET_SHARE * radius:
+        return None
+    return (f"shapes {[s.id() for s in shapes]} lie {float(np.max(np.abs(np.stack([lo, hi])))):.3g} units from the origin "
+            f"for a radius of {radius:.3g}: Mitsuba offsets the rays it spawns off a surface by {offset:.3g} there "
+            f"({100 * offset / radius:.0f} % of the radius), so their shadows on themselves and their interreflections are "
+            "missing from its images (training targets and references); move the scene towards the origin")
+
+
 def mirror_shapes(mi, shapes) -> list[str]:
     """Ids of ``shapes`` whose BSDF scatters light along mirror directions only (no smooth lobe, nothing transmitted:
     ``conductor``, a ``twosided`` one) and that hold no medium: a distant light reaches a camera off them along one

@@ -360,3 +360,18 @@ def test_light_visibility_far_from_the_origin_is_the_renderers(tmp_path, offset)
     above = np.sum(view["n"] * view["wi"], axis=1) > 0
     assert 0.2 < above.mean() < 0.8
     assert np.mean(view["vis"].astype(bool) == above) > 0.99
+
+
+@pytest.mark.parametrize("place, warns", [('<scale value="0.3"/>', False),
+                                          ('<scale value="300"/><translate y="300"/>', False),  # a millimetre scene
+                                          ('<scale value="0.3"/><translate x="10000"/>', True)])
+def test_shapes_far_from_the_origin_for_their_size_are_warned(tmp_path, place, warns):
+    """Mitsuba's own ray offset there (0.9 units at 10^4) crosses the asset: its images lose the asset's
+    self-shadowing and interreflections, in the training targets and in the benches' reference alike."""
+    from nasset_converters.mitsuba.scene import far_from_origin, load_scene, pick_shapes
+
+    mi = cm.load_mitsuba()
+    (tmp_path / "c.xml").write_text(f'<scene version="3.0.0"><shape type="cube" id="c"><transform name="to_world">{place}'
+                                    '</transform></shape></scene>')
+    msg = far_from_origin(mi, pick_shapes(load_scene(mi, tmp_path / "c.xml"), ["c"]))
+    assert bool(msg) == warns and (not warns or "'c'" in msg and "origin" in msg)
