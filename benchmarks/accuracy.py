@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_converters.mitsuba.scene import BOX_TOLERANCE
+from nasset_converters.mitsuba.scene import BOX_TOLERANCE, box_offset
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
@@ -368,10 +368,8 @@ def blender_asset_fits(rep: dict, *, scene_file: str = "") -> list[dict]:
         if asset.variant != variant:
             raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} {asset.variant} asset but {ids} need a "
                         f"{variant} asset", file=str(file))
-        pts = np.asarray(asset.geometry().points, np.float64)
         src = np.asarray(geo.points, np.float64)
-        a, b = np.stack([pts.min(0), pts.max(0)]), np.stack([src.min(0), src.max(0)])
-        off = float(np.abs(a - b).max()) / (float(np.linalg.norm(b[1] - b[0])) or 1.0)
+        off = box_offset(np.stack([src.min(0), src.max(0)]), asset.geometry().points)
         if off > BOX_TOLERANCE:
             raise error("BENCH_ASSET_MISMATCH", f"{file.name} was not baked from {ids}: its bounds differ from theirs by "
                         f"{100 * off:.0f} % of the diagonal", file=str(file))

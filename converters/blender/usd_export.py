@@ -1428,6 +1428,7 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
         label = Path(scene)
     viewport_notes = evaluate_as_render(bpy)
     _check_replace(bpy, rep, str(label))
+    misfits = _replacement_misfits(rep, str(label))
     output_folder(output.parent)
     # written beside the output and renamed over it at the end: a failed conversion leaves an earlier output as it was
     with atomic_output(output, "converted scene") as tmp:
@@ -1436,12 +1437,37 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
         if len(bpy.data.scenes) > 1:  # Blender renders the file's active scene and view layer (as a command-line render)
             converter.warn(f"the file has scenes {sorted(sc.name for sc in bpy.data.scenes)}: scene "
                            f"{bpy.context.scene.name!r} (the active one), view layer {bpy.context.view_layer.name!r} converted")
-        for note in viewport_notes:
+        for note in viewport_notes + misfits:
             converter.warn(note)
         res = converter.run()
     if check_usd:
         res.usd_checks = usd_check(output)
     return res
+
+
+def _replacement_misfits(rep: dict, file: str) -> list[str]:
+    """A warning per ``--replace`` asset whose geometry's box lies off the replaced objects' by more than
+    BOX_TOLERANCE of their diagonal (baked from other objects), as for Mitsuba scenes (``bench accuracy`` refuses it)."""
+    from nasset_converters.mitsuba.scene import BOX_TOLERANCE, box_offset
+    from nasset_sdk.asset import Asset
+
+    from . import scene as bsc
+
+    groups: dict[Path, list[str]] = {}
+    for name, path in rep.items():
+        groups.setdefault(Path(path), []).append(name)
+    out = []
+    for path, names in groups.items():
+        try:
+            _, geo, _ = bsc.asset_geometry(bsc.pick_objects(names, file=file), file=file)
+        except NassetError:  # objects no bake takes (an empty, a lamp): nothing to compare
+            continue
+        src = np.asarray(geo.points, np.float64)
+        off = box_offset(np.stack([src.min(0), src.max(0)]), Asset.open(path, load="none").geometry().points)
+        if off > BOX_TOLERANCE:
+            out.append(f"--replace {','.join(names)}: {path.name} was not baked from them: its bounds differ from theirs "
+                       f"by {100 * off:.0f} % of their diagonal")
+    return out
 
 
 def run(args) -> int:

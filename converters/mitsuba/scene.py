@@ -563,10 +563,15 @@ def bounds_offset(shapes, points) -> float:
         b = s.bbox()
         lo = np.minimum(lo, np.asarray(list(b.min), np.float64))
         hi = np.maximum(hi, np.asarray(list(b.max), np.float64))
-    pts = np.asarray(points, np.float64)
+    return box_offset(np.stack([lo, hi]), points)
+
+
+def box_offset(box, points) -> float:
+    """:func:`bounds_offset` against a box ``[[lo], [hi]]`` (the replaced objects' own geometry's, Blender)."""
+    box, pts = np.asarray(box, np.float64), np.asarray(points, np.float64)
     a = np.stack([pts.min(0), pts.max(0)])
-    diag = float(np.linalg.norm(hi - lo)) or 1.0
-    return float(np.abs(a - np.stack([lo, hi])).max()) / diag
+    diag = float(np.linalg.norm(box[1] - box[0])) or 1.0
+    return float(np.abs(a - box).max()) / diag
 
 
 #: Mitsuba's secondary-ray offset, as a share of the asset's bounding radius, above which :func:`far_from_origin` warns

@@ -147,6 +147,23 @@ def test_replace_and_errors(tmp_path):
     assert e.value.code == "CONVERT_SCENE_MISSING"
 
 
+def test_an_asset_of_other_objects_is_warned(tmp_path):
+    """``--replace Ground=ASSET`` with an asset baked from ``Monkey``: placed without a word before; now warned."""
+    from nasset_converters.blender import scene as bsc
+    from nasset_converters.blender.scene import open_blend
+    from nasset_sdk.examples import example_builder
+
+    blend = write_example_blend("blender-surface", tmp_path)
+    open_blend(blend)
+    b = example_builder("rna", size="tiny", seed=2)
+    b.set_geometry(bsc.asset_geometry(bsc.pick_objects(["Monkey"]))[1])
+    asset = b.write(tmp_path / "monkey.usdc")
+    good = convert_scene(blend, tmp_path / "a.usda", replace=[f"Monkey={asset}"])
+    assert not [w for w in good.warnings if "baked from" in w]
+    bad = convert_scene(blend, tmp_path / "b.usda", replace=[f"Ground={asset}"])
+    assert [w for w in bad.warnings if "Ground" in w and "not baked from" in w]
+
+
 def test_principled_diffuse_scale_against_smooth_limit():
     """A smooth lobe (alpha at the renderer's minimum) has the cosine-weighted mean Schlick reflectance as albedo:
     2 int_0^1 (f0 + (1 - f0)(1 - mu)^5) mu dmu = f0 + (1 - f0) / 21; rougher lobes lose albedo (G2 < G1)."""
