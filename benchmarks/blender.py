@@ -244,8 +244,11 @@ def run_bench(out_dir, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_
 
 
 def _accuracy_line(a: dict) -> str:
-    e = "/".join(f"{100 * x:.1f}" for x in a["energy_ratio"])
-    return f"energy {e} % (RGB), PSNR {a['psnr_db']:.2f} dB, ground-truth noise ceiling {a['ceiling_db']:.2f} dB"
+    def num(x, scale=1.0, digits=1) -> str:  # None: undefined (a black reference: stored as null, accuracy.md#metrics)
+        return "n/a" if x is None else f"{scale * x:.{digits}f}"
+
+    e = "/".join(num(x, 100) for x in a["energy_ratio"])
+    return f"energy {e} % (RGB), PSNR {num(a['psnr_db'], digits=2)} dB, ground-truth noise ceiling {num(a['ceiling_db'], digits=2)} dB"
 
 
 def summary_text(r: dict) -> str:

@@ -198,7 +198,8 @@ def summary_text(r: dict) -> str:
         lines.append(f"over the object's {o['pixels']} pixels (reference noise variance {o['reference_noise_variance']:.2e} "
                      f"subtracted): asset bias floor MSE {o['bias_floor_mse']:.3e} (relative RMSE {o['bias_floor_relative_rmse']:.1%})")
         if o.get("energy_ratio"):
-            lines.append("  asset energy / reference over the object (R/G/B): " + " / ".join(f"{100 * e:.1f} %" for e in o["energy_ratio"]))
+            lines.append("  asset energy / reference over the object (R/G/B): "
+                         + " / ".join("n/a" if e is None else f"{100 * e:.1f} %" for e in o["energy_ratio"]))  # None: black
         for s in o["equal_error"]:
             lines.append(f"  asset {s['spp']:4d} spp: object MSE {s['mse']:.3e}, " + (
                 "within the reference's noise" if s["speedup"] is None else

@@ -325,3 +325,12 @@ def test_in_scene_estimate_depth(record, want):
 
     assert MAX_DEPTH == 1024
     assert estimate_depth(record) == want
+
+
+def test_blender_bench_line_of_a_black_reference():
+    """The Blender bench's accuracy line formats undefined ratios (a black reference: null) as n/a (a TypeError before)."""
+    from nasset_benchmarks.blender import _accuracy_line
+
+    line = _accuracy_line({"energy_ratio": [None, None, None], "psnr_db": None, "ceiling_db": 31.5})
+    assert line == "energy n/a/n/a/n/a % (RGB), PSNR n/a dB, ground-truth noise ceiling 31.50 dB"
+    assert "99.5/100.0" in _accuracy_line({"energy_ratio": [0.995, 1.0, 1.01], "psnr_db": 30.0, "ceiling_db": 31.5})
