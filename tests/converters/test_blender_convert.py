@@ -806,3 +806,21 @@ def test_the_converted_stage_is_written_atomically(tmp_path, monkeypatch):
     with pytest.raises(NassetError) as e:
         convert_scene(None, tmp_path / "file" / "s.usda", example="blender-surface", check_usd=False)
     assert e.value.code == "WRITE_FAILED"
+
+
+def test_a_textured_roughness_scales_a_principled_base_colour_per_texel(tmp_path):
+    """Cycles layers a dielectric Principled BSDF's diffuse under its specular lobe, whose albedo depends on the
+    roughness. With a roughness texture the factor was taken at the texture's mean (a checker of 0.15 / 0.85 then
+    rendered its smooth squares 3 % too bright, its rough ones 3 % too dark); it is now applied per texel."""
+    from nasset_converters.blender.fidelity import build
+    from nasset_converters.mitsuba.usd_export import TextureMap
+
+    build("pbr_textures", tmp_path, 8)
+    floor, notes = map_material(bpy.data.materials["RoughFloor"])
+    base, rough = floor["diffuseColor"], floor["roughness"]
+    assert isinstance(base, TextureMap) and base.image.shape == rough.image.shape, (floor, notes)
+    r = rough.image[..., 0].ravel()
+    for value in (r.min(), r.max()):
+        k = principled_diffuse_scale(float(value), 1.5)
+        texel = base.image.reshape(-1, 3)[np.argmin(np.abs(r - value))]
+        assert np.allclose(texel, np.array([0.5, 0.45, 0.4]) * k, rtol=2e-3), (value, texel, k)
