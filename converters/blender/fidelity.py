@@ -259,6 +259,43 @@ def _pbr_textures(bpy, folder: Path, size: int) -> None:
     _world(bpy, (0.5, 0.55, 0.6), 1.0)
 
 
+def _procedural_textures(bpy, folder: Path, size: int) -> None:
+    # procedural textures on Principled inputs, baked by Cycles per object: a Noise texture (Generated coordinates)
+    # into the Base Color of two balls sharing the material, a Checker (UV) into a floor's Roughness, a Voronoi
+    # (Object coordinates) through a Color Ramp into a box's Base Color
+    _new_scene(bpy, size, (0.0, -2.0, 2.2), (0.0, 0.2, 0.2))
+
+    def shader(mat):
+        return next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+
+    floor = _material(bpy, "CheckerRough", "principled", **{"Base Color": (0.55, 0.5, 0.45)})
+    nt = floor.node_tree
+    checker, coords = nt.nodes.new("ShaderNodeTexChecker"), nt.nodes.new("ShaderNodeTexCoord")
+    checker.inputs["Scale"].default_value = 6.0
+    checker.inputs["Color1"].default_value, checker.inputs["Color2"].default_value = (0.4,) * 3 + (1.0,), (0.9,) * 3 + (1.0,)
+    nt.links.new(coords.outputs["UV"], checker.inputs["Vector"])
+    nt.links.new(checker.outputs["Color"], shader(floor).inputs["Roughness"])
+    _add(bpy, "plane", "Floor", floor, size=4.0)
+    noisy = _material(bpy, "Noisy", "principled", **{"Roughness": 0.6})
+    nt = noisy.node_tree
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 4.0
+    nt.links.new(noise.outputs["Color"], shader(noisy).inputs["Base Color"])
+    _add(bpy, "uv_sphere", "NoiseBall", noisy, smooth=True, radius=0.35, location=(-0.55, 0.3, 0.35))
+    _add(bpy, "uv_sphere", "NoiseBall2", noisy, smooth=True, radius=0.25, location=(0.2, 0.7, 0.25))
+    cells = _material(bpy, "Cells", "principled", **{"Roughness": 0.5})
+    nt = cells.node_tree
+    voronoi, ramp, coords = nt.nodes.new("ShaderNodeTexVoronoi"), nt.nodes.new("ShaderNodeValToRGB"), nt.nodes.new("ShaderNodeTexCoord")
+    voronoi.inputs["Scale"].default_value = 5.0
+    ramp.color_ramp.elements[0].color, ramp.color_ramp.elements[1].color = (0.9, 0.3, 0.1, 1.0), (0.1, 0.5, 0.9, 1.0)
+    nt.links.new(coords.outputs["Object"], voronoi.inputs["Vector"])
+    nt.links.new(voronoi.outputs["Distance"], ramp.inputs["Fac"])
+    nt.links.new(ramp.outputs["Color"], shader(cells).inputs["Base Color"])
+    _add(bpy, "cube", "CellBox", cells, size=0.5, location=(0.6, 0.0, 0.25), rotation=(0.0, 0.0, math.radians(30.0)))
+    _sun(bpy)
+    _world(bpy)
+
+
 def _normal_maps(bpy, folder: Path, size: int) -> None:
     # a floor whose Diffuse BSDF Normal is a tangent-space Normal Map node (strength 0.8) reading a Non-Color image of
     # stripes leaning +-35 deg along U, lit by a low sun along +X
@@ -956,6 +993,10 @@ SCENES = {
     "material_slots": FidelityScene("material_slots", _material_slots, "one mesh with three material slots: red upper "
                                     "half, blue lower half, an emitting band"),
     "lens_shift": FidelityScene("lens_shift", _lens_shift, "a camera with lens shift (x 0.15, y -0.1)"),
+    "procedural_textures": FidelityScene("procedural_textures", _procedural_textures, "procedural textures baked by "
+                                         "Cycles per object: a Noise texture on the Base Color of two balls sharing a "
+                                         "material, a Checker on a floor's Roughness, a Voronoi through a Color Ramp "
+                                         "(Object coordinates) on a box"),
     "pbr_textures": FidelityScene("pbr_textures", _pbr_textures, "Image Textures on Principled Roughness (a checker, "
                                   "0.15 / 0.85) and Metallic (0 / 1) under a low sun"),
     "emission_texture": FidelityScene("emission_texture", _emission_texture, "Image Textures on an Emission colour "

@@ -106,6 +106,7 @@ class _BlenderConverter(StageConverter):
         self.bpy = bpy
         self.bscene = bpy.context.scene
         self.emissive_materials: set[str] = set()
+        self.baked_materials: set[str] = set()  # materials with an input baked by Cycles: written per object
         self.gn_meshes: dict = {}  # Geometry Nodes instance meshes read during the depsgraph walk
         self.instancers: set[str] = set()  # objects that place instances
 
@@ -513,12 +514,25 @@ class _BlenderConverter(StageConverter):
         self._light_common(light, rgb, path, f"world {name} (constant colour)")
 
     # -- materials ----------------------------------------------------------------------------
-    def blender_material(self, mat, ob_name: str) -> str:
+    def blender_material(self, mat, ob_name: str, ob=None) -> str:
+        """The path of ``mat``'s UsdPreviewSurface, written once per material, or once per object (``ob``, the
+        original mesh object) where an input is baked by Cycles (:meth:`_bake`)."""
         # name_full: a local and a linked datablock may share a name (Blender names are unique per library only)
         key = ("blender", mat.name_full if mat is not None else None, self.looks_root)
+        if mat is not None and mat.name_full in self.baked_materials:
+            key = (*key, ob_name)
         if key in self.materials:
             return self.materials[key]
-        inputs, notes = map_material(mat)
+        baked: list = []
+
+        def bake(resolved, socket, node, scalar: bool, notes: list):
+            baked.append(socket.name)
+            return self._bake(ob, ob_name, mat.name, resolved, socket, node, scalar, notes)
+
+        inputs, notes = map_material(mat, bake)
+        if baked:  # Generated coordinates, UV layouts: per object
+            self.baked_materials.add(mat.name_full)
+            key = (*key, ob_name)
         for name in ("diffuseColor", "specularColor"):  # UsdPreviewSurface colours are reflectances in [0, 1]
             value = inputs.get(name)
             top = value.image.max() if isinstance(value, TextureMap) else max(value) if isinstance(value, tuple) else 0.0
@@ -527,13 +541,51 @@ class _BlenderConverter(StageConverter):
                              "(Cycles reflects more light than it receives there; UsdPreviewSurface cannot)")
         for n in notes:
             self.warn(f"object {ob_name}: {n}")
-        path = self._write_material(mat.name if mat is not None else "Default", inputs)
-        self.record(path, f"material {mat.name if mat is not None else '(none)'}")
+        path = self._write_material(f"{mat.name}_{ob_name}" if baked else mat.name if mat is not None else "Default",
+                                    inputs)
+        self.record(path, f"material {mat.name if mat is not None else '(none)'}" + (f" of object {ob_name}" if baked
+                                                                                       else ""))
         self.materials[key] = path
         em = inputs.get("emissiveColor", (0.0,))
         if (em.image.max() if isinstance(em, TextureMap) else max(em)) > 0:
             self.emissive_materials.add(path)
         return path
+
+    def _bake(self, ob, ob_name: str, mat_name: str, resolved, socket, node, scalar: bool, notes: list):
+        """A :class:`TextureMap` of ``socket``'s value over ``ob``'s UV map, baked by Cycles (procedural_bake), or None
+        with a note naming why not (no mesh object, no UV map, Cycles' error)."""
+        import time
+
+        from .procedural_bake import bake_input, bake_size, reads_placement
+
+        what = f"material {mat_name}: {socket.name} from {node.bl_idname}"
+        if ob is None or ob.type != "MESH":
+            notes.append(f"{what} dropped: only mesh objects are baked by Cycles (this is "
+                         f"{'a Geometry Nodes instance' if ob is None else ob.type}); its default value used")
+            return None
+        data = ob.evaluated_get(self.bpy.context.evaluated_depsgraph_get()).data
+        uv = next((layer.name for layer in data.uv_layers if layer.active_render), None)  # read before the bake
+        if uv is None:
+            notes.append(f"{what} dropped: object {ob_name} has no UV map to bake into (add one; its default value used)")
+            return None
+        if self.geometry_root.startswith("/Prototypes") and reads_placement(socket):
+            notes.append(f"{what} reads where the object is placed (world position, camera): its instances differ in "
+                         f"Cycles; baked for {ob_name} and used for every instance")
+        size = bake_size(self.bpy, ob)
+        start = time.perf_counter()
+        try:
+            rgb = bake_input(self.bpy, ob, resolved, socket, size)
+        except RuntimeError as exc:
+            notes.append(f"{what} dropped: Cycles could not bake object {ob_name} ({str(exc).strip()}); its default "
+                         "value used")
+            return None
+        notes.append(f"{what} baked by Cycles over UV map {uv!r} into a {size} x {size} linear image "
+                     f"({time.perf_counter() - start:.1f} s)")
+        if scalar:  # a colour into a float socket: its luminance (Rec. 709)
+            rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
+        # clamped: a UV map within [0, 1] reads no texel of the far edge at its own edges (repeat blended them in)
+        return TextureMap(rgb, f"Cycles bake of {socket.name} from {node.bl_idname} ({size}x{size}, object {ob_name})",
+                          wrap="clamp")
 
     # -- geometry -----------------------------------------------------------------------------
     def libraries(self) -> None:
@@ -729,7 +781,8 @@ class _BlenderConverter(StageConverter):
         # Cycles shades a triangle with its slot's material (slot indices past the last slot take the last one)
         tri_slot = np.minimum(slots[0] if slots else np.zeros(len(geo.faces), np.int32), len(slot_mats) - 1)
         used = np.unique(tri_slot)
-        paths = {int(k): self.blender_material(slot_mats[k], ob.name) for k in used}
+        paths = {int(k): self.blender_material(slot_mats[k], ob.name, None if isinstance(ob, _Geometry) else ob)
+                 for k in used}
         binding = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
         binding.Bind(UsdShade.Material(self.stage.GetPrimAtPath(paths[int(used[0])])))
         for k in used[1:]:  # the first slot in use is the mesh's binding, each other one a GeomSubset of its faces
@@ -837,8 +890,10 @@ _DROPPED = (("Subsurface Weight", 0.0), ("Transmission Weight", 0.0), ("Coat Wei
             ("Specular Tint", (1.0, 1.0, 1.0, 1.0)))
 
 
-def map_material(mat) -> tuple[dict, list]:
-    """UsdPreviewSurface inputs for a Blender material and notes on what the mapping loses."""
+def map_material(mat, bake=None) -> tuple[dict, list]:
+    """UsdPreviewSurface inputs for a Blender material and notes on what the mapping loses. ``bake(resolved material,
+    socket, node, scalar, notes)``: a TextureMap (or None) for a BSDF input fed by nodes no mapping converts, called
+    with the temporary copy of the material whose links are resolved (:mod:`shader_graph`)."""
     grey = {"diffuseColor": (0.8, 0.8, 0.8), "roughness": 0.5, "metallic": 0.0}
     if mat is None:
         return dict(DEFAULT_SURFACE), []
@@ -866,7 +921,10 @@ def map_material(mat) -> tuple[dict, list]:
         if out.inputs["Displacement"].is_linked:
             notes.append(f"material {mat.name}: displacement ({mat.displacement_method.lower().replace('_', ' ')}) "
                          "dropped (the undisplaced, unbumped surface is written)")
-        inputs = _map_shader(SimpleNamespace(name=mat.name), out.inputs["Surface"].links[0].from_node, notes)
+        # ``bake`` rides on the material record that every mapping function receives (read by image_texture)
+        record = SimpleNamespace(name=mat.name, bake=None if bake is None else
+                                 (lambda socket, node, scalar, notes: bake(resolved, socket, node, scalar, notes)))
+        inputs = _map_shader(record, out.inputs["Surface"].links[0].from_node, notes)
     return (grey, notes) if inputs is None else (inputs, notes)
 
 
@@ -1046,8 +1104,6 @@ def _diffuse_scale_table(ior: float, n: int = 33) -> tuple:
     return grid, np.array([principled_diffuse_scale(r, ior) for r in grid])
 
 
-
-
 def _presence_mix(mat, node, socks, notes: list, depth: int) -> dict | None:
     """A Mix Shader of a Transparent BSDF and a shader S: S with presence (UsdPreviewSurface ``opacity``, threshold 0;
     renderer.md#cutouts) = S's weight, the Factor or 1 - Factor, a texture where the Factor is an Image Texture's
@@ -1215,6 +1271,9 @@ def multiscatter_scale(roughness: float, f0, n: int = 24) -> np.ndarray:
     return (w * boost).sum(0) / np.maximum(w.sum(0), 1e-12)
 
 
+#: shader nodes and inputs whose unmappable node chains are baked by Cycles (procedural_bake)
+BAKED_NODES = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeEmission")
+BAKED_INPUTS = ("Base Color", "Color", "Roughness", "Metallic", "Emission Color", "Alpha")
 #: Blender colour spaces whose texels are linear values as stored (others are decoded from sRGB or warned)
 _LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
 #: Image Texture extension -> UsdUVTexture wrap mode
@@ -1228,7 +1287,7 @@ def _emission_color(mat, socket, value, linked: bool, notes: list):
         return value, False
     if (bb := _blackbody(socket)) is not None:
         return bb, False
-    if socket.links[0].from_node.bl_idname == "ShaderNodeTexImage":
+    if socket.links[0].from_node.bl_idname == "ShaderNodeTexImage" or getattr(mat, "bake", None) is not None:
         tex = image_texture(mat, socket, notes)
         return (tex, False) if tex is not None else (value, True)
     return value, True
@@ -1270,6 +1329,9 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
 
     link, ops = texel_chain(socket)  # through colour and float nodes folded into the texels (texel_ops)
     if link is None:
+        bake = getattr(mat, "bake", None)  # the converter's Cycles bake for one object (procedural_bake)
+        if bake is not None and socket.node.bl_idname in BAKED_NODES and socket.name in BAKED_INPUTS:
+            return bake(socket, ops, scalar, notes)
         notes.append(f"material {mat.name}: {socket.name} from {ops.bl_idname} dropped (Image Texture outputs are "
                      "converted, also through Mix, Math, Map Range, Color Ramp, Invert, Gamma, Brightness/Contrast, "
                      "Separate Color and RGB to BW nodes with constant other inputs; its default value used)")

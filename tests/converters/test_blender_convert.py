@@ -808,6 +808,48 @@ def test_the_converted_stage_is_written_atomically(tmp_path, monkeypatch):
     assert e.value.code == "WRITE_FAILED"
 
 
+def test_procedural_textures_are_baked_by_cycles_per_object(tmp_path):
+    """The fidelity suite's procedural_textures scene (ratio 1.13 / 1.15 / 1.13 and MSE 197x its noise before,
+    64 x 64, 128 spp): a Noise, Checker or Voronoi (through a Color Ramp) texture on a Principled input was dropped
+    with a warning and the input's own value used. Cycles now bakes each such input over the object's UV map into a
+    texture of its own per object (Generated coordinates follow each object's bounds); an object without a UV map
+    keeps the warning, naming it."""
+    from pxr import Usd, UsdShade
+
+    from nasset_converters.blender.fidelity import build
+    from nasset_sdk.images import read_exr
+
+    blend = build("procedural_textures", tmp_path, 8)
+    bare = bpy.data.objects["NoiseBall2"].copy()  # the shared Noise material on a mesh without a UV map
+    bare.name, bare.data = "Bare", bare.data.copy()
+    bare.location.x -= 1.2
+    bare.data.uv_layers.remove(bare.data.uv_layers[0])
+    bpy.context.scene.collection.objects.link(bare)
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), check_existing=False)
+    res = convert_scene(blend, tmp_path / "out.usda", check_usd=False)
+    baked = [w for w in res.warnings if "baked by Cycles" in w]
+    assert len(baked) == 4 and not [w for w in res.warnings if "dropped" in w and "Bare" not in w], res.warnings
+    assert [w for w in res.warnings if w.startswith("object Bare:") and "no UV map to bake into" in w], res.warnings
+    stage = Usd.Stage.Open(str(tmp_path / "out.usda"))
+
+    def texels(material, name):
+        surface = UsdShade.Shader.Get(stage, f"/World/Looks/{material}/PreviewSurface")
+        source = surface.GetInput(name).GetConnectedSources()[0][0].source
+        file = UsdShade.Shader(source.GetPrim()).GetInput("file").Get().resolvedPath
+        return read_exr(file)
+
+    one, two = texels("Noisy_NoiseBall", "diffuseColor"), texels("Noisy_NoiseBall2", "diffuseColor")
+    assert one.std(axis=(0, 1)).min() > 0.02 and two.std(axis=(0, 1)).min() > 0.02  # a texture, not a flat colour
+    assert not stage.GetPrimAtPath("/World/Looks/Noisy_Bare/PreviewSurface").GetAttribute("inputs:diffuseColor") \
+        .HasAuthoredConnections()
+    rough = texels("CheckerRough_Floor", "roughness")[..., 0]
+    assert np.allclose(np.percentile(rough, [2, 98]), [0.4, 0.9], atol=2e-3), np.percentile(rough, [2, 98])
+    assert 0.3 < (rough < 0.65).mean() < 0.7  # half the squares of each
+    cells = texels("Cells_CellBox", "diffuseColor").reshape(-1, 3)
+    cells = cells[cells.max(1) > 0.02]  # the cube's UV islands (the rest of the image is unused)
+    assert cells[:, 0].max() > 0.5 and cells[:, 2].max() > 0.5  # the ramp's red and blue ends
+
+
 def test_a_textured_roughness_scales_a_principled_base_colour_per_texel(tmp_path):
     """Cycles layers a dielectric Principled BSDF's diffuse under its specular lobe, whose albedo depends on the
     roughness. With a roughness texture the factor was taken at the texture's mean (a checker of 0.15 / 0.85 then
