@@ -77,7 +77,10 @@ def bake_input(bpy, ob, material, socket, size: int) -> np.ndarray:
     active, engine = layer.objects.active, scene.render.engine
     c = scene.cycles
     settings = (c.samples, c.use_denoising, c.use_adaptive_sampling, c.device)
+    outside = ob.name not in layer.objects  # a collection instance's object: linked into the scene for the bake
     try:
+        if outside:
+            scene.collection.objects.link(ob)
         nt = tmp.node_tree
         src = next(s for s in nt.nodes[socket.node.name].inputs if s.identifier == socket.identifier)
         feed = src.links[0].from_socket
@@ -106,7 +109,10 @@ def bake_input(bpy, ob, material, socket, size: int) -> np.ndarray:
     finally:
         for s, m in zip(ob.material_slots, slots, strict=False):
             s.material = m
-        ob.select_set(False)
+        if outside:
+            scene.collection.objects.unlink(ob)
+        else:
+            ob.select_set(False)
         for o in selected:
             o.select_set(True)
         layer.objects.active = active

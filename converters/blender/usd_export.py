@@ -575,7 +575,7 @@ class _BlenderConverter(StageConverter):
         start = time.perf_counter()
         try:
             rgb = bake_input(self.bpy, ob, resolved, socket, size)
-        except RuntimeError as exc:
+        except (RuntimeError, AttributeError) as exc:  # Cycles' error; linked (read-only) data
             notes.append(f"{what} dropped: Cycles could not bake object {ob_name} ({str(exc).strip()}); its default "
                          "value used")
             return None

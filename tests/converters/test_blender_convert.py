@@ -866,3 +866,24 @@ def test_a_textured_roughness_scales_a_principled_base_colour_per_texel(tmp_path
         k = principled_diffuse_scale(float(value), 1.5)
         texel = base.image.reshape(-1, 3)[np.argmin(np.abs(r - value))]
         assert np.allclose(texel, np.array([0.5, 0.45, 0.4]) * k, rtol=2e-3), (value, texel, k)
+
+
+def test_a_procedural_on_a_collection_instance_is_baked_on_its_object(tmp_path):
+    """An object placed only by collection instances (its collection excluded from the view layer) is not in the view
+    layer, where Cycles bakes: its procedural was dropped ("cannot be selected"). It is now linked into the scene for
+    the bake, and the prototype's material reads the image."""
+    from pxr import Usd, UsdShade
+
+    from nasset_converters.blender.fidelity import build
+
+    blend = build("instances", tmp_path, 8)
+    nt = bpy.data.materials["Orange"].node_tree
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    nt.links.new(noise.outputs["Color"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfDiffuse").inputs["Color"])
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), check_existing=False)
+    res = convert_scene(blend, tmp_path / "out.usda", check_usd=False)
+    assert [w for w in res.warnings if w.startswith("object Head:") and "baked by Cycles" in w], res.warnings
+    stage = Usd.Stage.Open(str(tmp_path / "out.usda"))
+    surfaces = [UsdShade.Shader(p) for p in stage.TraverseAll() if "Orange" in str(p.GetPath()) and p.GetName() == "PreviewSurface"]
+    assert len(surfaces) == 1 and surfaces[0].GetInput("diffuseColor").HasConnectedSource(), surfaces
+    assert "Head" not in [o.name for o in bpy.data.scenes[0].collection.objects]  # put back
