@@ -121,3 +121,65 @@ def bake_input(bpy, ob, material, socket, size: int) -> np.ndarray:
         bpy.data.materials.remove(tmp)
         bpy.data.images.remove(img)
     return np.nan_to_num(px, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def uv_triangles(mesh, uv_name: str, slots, n_slots: int) -> np.ndarray:
+    """UVs [T, 3, 2] of an (evaluated) mesh's triangles whose material slot is one of ``slots`` (of ``n_slots``;
+    indices past the last slot read the last one, as Cycles does)."""
+    mesh.calc_loop_triangles()
+    n = len(mesh.loop_triangles)
+    loops, index = np.zeros(3 * n, np.int64), np.zeros(n, np.int64)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    mesh.loop_triangles.foreach_get("material_index", index)
+    uv = np.zeros(2 * len(mesh.loops))
+    mesh.uv_layers[uv_name].data.foreach_get("uv", uv)
+    keep = np.isin(np.minimum(index, max(n_slots, 1) - 1), list(slots))
+    return uv.reshape(-1, 2)[loops].reshape(-1, 3, 2)[keep]
+
+
+#: texels of the grid :func:`uv_overlap` tests (at most; fewer when the triangles' boxes would cover more than
+#: OVERLAP_BUDGET texel tests)
+OVERLAP_GRID = 256
+OVERLAP_BUDGET = 1 << 24
+
+
+def uv_overlap(tris: np.ndarray) -> float:
+    """The fraction of the texel centres covered by UV triangles ``tris`` [T, 3, 2] that more than one triangle
+    covers: mirrored or stacked UV islands, whose texels a bake fills with one part's values only. A grid of
+    OVERLAP_GRID texels a side (coarser when the triangles' boxes are large), tested in chunks of bounded size."""
+    tris = np.asarray(tris, np.float64)
+    tris = tris[np.abs(_cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])) > 1e-12]
+    if not len(tris):
+        return 0.0
+    res = OVERLAP_GRID
+    while res > 16 and _box_texels(tris, res).sum() > OVERLAP_BUDGET:
+        res //= 2
+    p = tris * res - 0.5 + np.array([1.3e-4, 1.7e-4])  # texel centres at integer coordinates, off any shared edge
+    lo = np.ceil(p.min(1)).astype(np.int64)
+    size = np.maximum(np.floor(p.max(1)).astype(np.int64) - lo + 1, 0)
+    count = np.zeros(res * res, np.int64)
+    kind = 2 ** np.ceil(np.log2(np.maximum(size.max(1), 1))).astype(np.int64)
+    for k in np.unique(kind):  # triangles by box size class
+        idx = np.nonzero(kind == k)[0]
+        off = np.stack(np.meshgrid(np.arange(k), np.arange(k), indexing="xy"), -1).reshape(-1, 2)
+        step = max(1, (1 << 22) // len(off))
+        for s in range(0, len(idx), step):
+            j = idx[s:s + step]
+            q = lo[j, None, :] + off[None]  # [t, k*k, 2] candidate texel centres
+            a, b, c = (p[j, n, None, :] for n in range(3))
+            e = np.stack([_cross(b - a, q - a), _cross(c - b, q - b), _cross(a - c, q - c)], -1)
+            inside = (np.all(e >= 0, -1) | np.all(e <= 0, -1)) & np.all((q >= 0) & (q < res), -1)
+            inside &= np.all(q < lo[j, None, :] + size[j, None, :], -1)
+            hits = q[inside]
+            count += np.bincount(hits[:, 1] * res + hits[:, 0], minlength=res * res)
+    covered = int((count > 0).sum())
+    return float((count > 1).sum()) / covered if covered else 0.0
+
+
+def _cross(u, v):
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def _box_texels(tris, res: int) -> np.ndarray:
+    ext = (tris.max(1) - tris.min(1)) * res + 1.0
+    return ext[:, 0] * ext[:, 1]

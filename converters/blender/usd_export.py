@@ -527,7 +527,7 @@ class _BlenderConverter(StageConverter):
 
         def bake(resolved, socket, node, scalar: bool, notes: list):
             baked.append(socket.name)
-            return self._bake(ob, ob_name, mat.name, resolved, socket, node, scalar, notes)
+            return self._bake(ob, ob_name, mat, resolved, socket, node, scalar, notes)
 
         inputs, notes = map_material(mat, bake)
         if baked:  # Generated coordinates, UV layouts: per object
@@ -551,23 +551,31 @@ class _BlenderConverter(StageConverter):
             self.emissive_materials.add(path)
         return path
 
-    def _bake(self, ob, ob_name: str, mat_name: str, resolved, socket, node, scalar: bool, notes: list):
+    def _bake(self, ob, ob_name: str, mat, resolved, socket, node, scalar: bool, notes: list):
         """A :class:`TextureMap` of ``socket``'s value over ``ob``'s UV map, baked by Cycles (procedural_bake), or None
-        with a note naming why not (no mesh object, no UV map, Cycles' error)."""
+        with a note naming why not (no mesh object, no UV map, Cycles' error); UV islands of ``mat``'s faces that
+        overlap are noted."""
         import time
 
-        from .procedural_bake import bake_input, bake_size, reads_placement
+        from .procedural_bake import bake_input, bake_size, reads_placement, uv_overlap, uv_triangles
 
-        what = f"material {mat_name}: {socket.name} from {node.bl_idname}"
+        what = f"material {mat.name}: {socket.name} from {node.bl_idname}"
         if ob is None or ob.type != "MESH":
             notes.append(f"{what} dropped: only mesh objects are baked by Cycles (this is "
                          f"{'a Geometry Nodes instance' if ob is None else ob.type}); its default value used")
             return None
-        data = ob.evaluated_get(self.bpy.context.evaluated_depsgraph_get()).data
+        evaluated = ob.evaluated_get(self.bpy.context.evaluated_depsgraph_get())
+        data = evaluated.data
         uv = next((layer.name for layer in data.uv_layers if layer.active_render), None)  # read before the bake
         if uv is None:
             notes.append(f"{what} dropped: object {ob_name} has no UV map to bake into (add one; its default value used)")
             return None
+        slots = [k for k, s in enumerate(evaluated.material_slots) if s.material is not None and s.material.original == mat]
+        shared = uv_overlap(uv_triangles(data, uv, slots or [0], len(evaluated.material_slots)))
+        if shared > OVERLAP_WARN:
+            notes.append(f"{what}: UV map {uv!r} of object {ob_name} overlaps itself ({100 * shared:.0f} % of the texels "
+                         "its faces cover are covered more than once, e.g. mirrored halves): those faces share one "
+                         "baked value, where Cycles shades each by its own coordinates")
         if self.geometry_root.startswith("/Prototypes") and reads_placement(socket):
             notes.append(f"{what} reads where the object is placed (world position, camera): its instances differ in "
                          f"Cycles; baked for {ob_name} and used for every instance")
@@ -1271,6 +1279,8 @@ def multiscatter_scale(roughness: float, f0, n: int = 24) -> np.ndarray:
     return (w * boost).sum(0) / np.maximum(w.sum(0), 1e-12)
 
 
+#: a baked UV map sharing more than this fraction of its texels between faces is warned (procedural_bake.uv_overlap)
+OVERLAP_WARN = 0.02
 #: shader nodes and inputs whose unmappable node chains are baked by Cycles (procedural_bake)
 BAKED_NODES = ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse", "ShaderNodeEmission")
 BAKED_INPUTS = ("Base Color", "Color", "Roughness", "Metallic", "Emission Color", "Alpha")

@@ -887,3 +887,23 @@ def test_a_procedural_on_a_collection_instance_is_baked_on_its_object(tmp_path):
     surfaces = [UsdShade.Shader(p) for p in stage.TraverseAll() if "Orange" in str(p.GetPath()) and p.GetName() == "PreviewSurface"]
     assert len(surfaces) == 1 and surfaces[0].GetInput("diffuseColor").HasConnectedSource(), surfaces
     assert "Head" not in [o.name for o in bpy.data.scenes[0].collection.objects]  # put back
+
+
+def test_a_baked_uv_map_that_overlaps_itself_is_named(tmp_path):
+    """A bake fills texels that several faces share (mirrored halves, stacked islands) with one face's values, where
+    Cycles shades each face by its own coordinates; before, nothing said so. The share of such texels is measured
+    (exactly 0 for a square split along a diagonal through texel centres, 1 for two stacked copies) and warned."""
+    from nasset_converters.blender.fidelity import build
+    from nasset_converters.blender.procedural_bake import OVERLAP_GRID, uv_overlap
+
+    square = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], np.float64)
+    assert uv_overlap(square) == 0.0
+    assert uv_overlap(square * (OVERLAP_GRID - 1) / OVERLAP_GRID + 0.5 / OVERLAP_GRID) == 0.0  # edges on centres
+    assert uv_overlap(np.concatenate([square, square * 0.5])) == pytest.approx(0.25 / 1.0, abs=0.02)
+    assert uv_overlap(np.concatenate([square, square])) == 1.0
+    blend = build("procedural_textures", tmp_path, 8)
+    bpy.data.objects["CellBox"].modifiers.new("Mirror", "MIRROR")  # mirrored halves on the same UVs
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), check_existing=False)
+    res = convert_scene(blend, tmp_path / "out.usda", check_usd=False)
+    shared = [w for w in res.warnings if "overlaps itself" in w]
+    assert len(shared) == 1 and shared[0].startswith("object CellBox:"), res.warnings
