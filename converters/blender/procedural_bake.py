@@ -8,7 +8,8 @@ point of the surface lands in a linear float image (a colour as it is, a float g
 ``st`` like any image texture. The object's own Texture Coordinate (Generated, Object, UV) is what Cycles evaluates
 during the bake, on the object itself: the image is right for those coordinates, once per object (Generated
 coordinates follow each object's bounds). Resolution: twice the object's extent on screen in render pixels, a power
-of two within BAKE_MIN..BAKE_MAX (BAKE_MAX without a camera). Cost measured on two cores: 0.01-0.02 s per object at
+of two within BAKE_MIN..BAKE_MAX (BAKE_MAX without a camera or for an object reaching behind it, BAKE_BEHIND
+for one wholly behind it). Cost measured on two cores: 0.01-0.02 s per object at
 64 x 64, 0.1-0.2 s at 256 x 256, 1.5-3.1 s at 1024 x 1024 (spec/bake-blender.md#scene-conversion).
 """
 
@@ -20,6 +21,8 @@ import numpy as np
 
 #: baked image sizes (square, power of two)
 BAKE_MIN, BAKE_MAX = 64, 1024
+#: size for an object wholly behind the camera
+BAKE_BEHIND = 256
 #: Cycles samples per texel (anti-aliasing within the texel)
 BAKE_SAMPLES = 4
 #: Texture Coordinate outputs and nodes whose values depend on where an object is placed, not on its mesh
@@ -29,7 +32,8 @@ _PLACED_NODES = ("ShaderNodeNewGeometry", "ShaderNodeCameraData", "ShaderNodeLig
 
 def bake_size(bpy, ob) -> int:
     """Twice the longest side of ``ob``'s bounding box on screen (render pixels), a power of two in
-    [BAKE_MIN, BAKE_MAX]; BAKE_MAX when the scene has no camera or the box is behind it."""
+    [BAKE_MIN, BAKE_MAX]; BAKE_MAX when the scene has no camera or the box reaches behind it, BAKE_BEHIND when it lies
+    wholly behind it."""
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
 
@@ -40,7 +44,9 @@ def bake_size(bpy, ob) -> int:
     res = np.array([r.resolution_x, r.resolution_y]) * r.resolution_percentage / 100.0
     pts = np.array([tuple(world_to_camera_view(scene, scene.camera, ob.matrix_world @ Vector(c)))
                     for c in ob.bound_box])
-    if np.any(pts[:, 2] <= 0.0):
+    if np.all(pts[:, 2] <= 0.0):  # behind the camera: seen in reflections and lighting only
+        return BAKE_BEHIND
+    if np.any(pts[:, 2] <= 0.0):  # reaching behind the camera (a floor under it): close to it
         return BAKE_MAX
     extent = float(((pts[:, :2].max(0) - pts[:, :2].min(0)).clip(0.0, 2.0) * res).max())
     return int(np.clip(2 ** math.ceil(math.log2(max(2.0 * extent, 1.0))), BAKE_MIN, BAKE_MAX))

@@ -907,3 +907,22 @@ def test_a_baked_uv_map_that_overlaps_itself_is_named(tmp_path):
     res = convert_scene(blend, tmp_path / "out.usda", check_usd=False)
     shared = [w for w in res.warnings if "overlaps itself" in w]
     assert len(shared) == 1 and shared[0].startswith("object CellBox:"), res.warnings
+
+
+def test_the_bake_size_follows_the_object_on_screen(tmp_path):
+    """Twice the object's extent on screen, a power of two within 64-1024; 256 for an object wholly behind the
+    camera (before: 1024, a 16x larger bake for an object seen only in reflections and lighting); 1024 without a
+    camera."""
+    from nasset_converters.blender.fidelity import build
+    from nasset_converters.blender.procedural_bake import BAKE_BEHIND, BAKE_MAX, BAKE_MIN, bake_size
+
+    build("procedural_textures", tmp_path, 64)
+    ball, scene = bpy.data.objects["NoiseBall"], bpy.context.scene
+    assert bake_size(bpy, ball) == BAKE_MIN  # about 20 pixels wide at 64 x 64
+    scene.render.resolution_x = scene.render.resolution_y = 1024
+    assert bake_size(bpy, ball) == 1024  # about 330 pixels wide
+    ball.location = (0.0, -4.0, 2.0)  # behind the camera at (0, -2, 2.2)
+    bpy.context.view_layer.update()
+    assert bake_size(bpy, ball) == BAKE_BEHIND
+    scene.camera = None
+    assert bake_size(bpy, ball) == BAKE_MAX
