@@ -200,6 +200,20 @@ class PathTracer:
             ng[sel] = self.objects[k]["face_normals"][prim[sel]]
         return ng
 
+    def _surface_points(self, obj, prim, b1, b2, fallback):
+        """World hit points [n,3] on triangles (obj, prim) at barycentrics (b1, b2), from the float64 vertices: exactly on
+        the surface, however many surfaces the ray was carried past (:meth:`Tracer.trace` offsets each restart off the
+        skipped surface, sideways of the ray). ``fallback`` rows where the object has no triangles (light shapes)."""
+        p = np.array(fallback, np.float64)
+        for k in np.unique(obj):
+            ob = self.objects[k] if k >= 0 else {}
+            if "points" not in ob:
+                continue
+            sel = obj == k
+            v = ob["points"][ob["faces"][prim[sel]]]
+            p[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * v[:, 0] + b1[sel][:, None] * v[:, 1] + b2[sel][:, None] * v[:, 2]
+        return p
+
     def _continues(self, obj, depth):
         cont = depth < self.max_depth
         if self.n_reflective <= 1:
@@ -327,6 +341,7 @@ class PathTracer:
         while len(idx):
             tr = self.tracer.trace(o, d, ignore=ignore)
             p = o + d * np.where(np.isfinite(tr["t"]), tr["t"], 0.0)[:, None]
+            p = self._surface_points(tr["obj"], tr["prim"], tr["b1"], tr["b2"], p)
             # escaped: infinite lights
             miss = ~tr["hit"]
             if np.any(miss):
