@@ -173,7 +173,8 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         name = f"nasset_inst_{j}"
         entries[name] = mi_mesh(mi, name, pts, asset.faces)
         objects.append({"id": name, "kind": Kind.ASSET, "asset": asset, "to_world": mw, "m3_inv": np.linalg.inv(mw[:3, :3]),
-                        "face_normals": _face_normals(pts, asset.faces), "points": pts, "faces": np.asarray(asset.faces, np.int64), "prim": inst.prim, "bbox": (pts.min(0), pts.max(0))})
+                        "face_normals": _face_normals(pts, asset.faces), "points": pts, "faces": np.asarray(asset.faces, np.int64),
+                        "prim": inst.prim, "bbox": (pts.min(0), pts.max(0))})
     lights, light_entries = build_lights(desc.lights, scene_path)
     for lt in lights:
         if getattr(lt, "has_shape", False):
