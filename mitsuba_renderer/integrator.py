@@ -186,6 +186,9 @@ class PathTracer:
         # light shapes are seen by camera and continuation rays but do not block shadow rays
         self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
         self.n_reflective = len(reflective)
+        # nasset:cameraVisibility = false (spec/renderer.md#light-surfaces): camera rays pass through the light's shape
+        hidden = [o["kind"] == Kind.LIGHT and not getattr(o["light"].desc, "camera_visible", True) for o in objects]
+        self.hidden_shapes = np.array(hidden + [False]) if any(hidden) else None
         self.log = log
         kinds = {o_["asset"].kind for o_ in objects if o_["kind"] == Kind.ASSET}
         self.shaders = {kd: ASSET_SHADERS[kd](self) for kd in sorted(kinds)}
@@ -339,7 +342,8 @@ class PathTracer:
         prev_p = o.copy()
         ignore = np.full(m, -1, np.int64)
         while len(idx):
-            tr = self.tracer.trace(o, d, ignore=ignore)
+            camera = depth == 0  # camera rays: every ray of the first pass, none after
+            tr = self.tracer.trace(o, d, ignore=ignore, transparent=self.hidden_shapes if camera.all() else None)
             p = o + d * np.where(np.isfinite(tr["t"]), tr["t"], 0.0)[:, None]
             p = self._surface_points(tr["obj"], tr["prim"], tr["b1"], tr["b2"], p)
             # escaped: infinite lights
@@ -350,6 +354,8 @@ class PathTracer:
                 for lt in self.lights:
                     if getattr(lt, "infinite", False):
                         w = mis_weight(prev_pdf[miss], lt.pdf_dir(dm))
+                        if not getattr(lt.desc, "camera_visible", True):  # a dome hidden from camera rays: they see black
+                            w = np.where(camera[miss], 0.0, w)
                         le += lt.eval_dir(dm) * w[:, None]
                 np.add.at(L, idx[miss], beta[miss] * le)
             obj = tr["obj"]

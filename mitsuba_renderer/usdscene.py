@@ -46,6 +46,7 @@ class Light:
     height: float = 0.0
     normalize: bool = False
     texture: np.ndarray | None = None  # [H, W, 3] lat-long
+    camera_visible: bool = True  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
 
 
 @dataclass
@@ -479,20 +480,30 @@ def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
 
 
 def _unhonoured_light_features(prim, path, t) -> None:
-    """Warnings naming the light features this implementation does not render (spec/renderer.md#spot-lights,
-    #light-surfaces): a spot cone (UsdLux.ShapingAPI), a light hidden from camera rays, light filters."""
+    """Warnings naming the light features this implementation does not render (spec/renderer.md#spot-lights):
+    a spot cone (UsdLux.ShapingAPI), light filters."""
     from pxr import UsdLux
 
     say = _say(path)
     where = str(prim.GetPath())
     if prim.HasAPI(UsdLux.ShapingAPI):
         say("UsdLux.ShapingAPI (spot cone) is not applied here: the light emits in every direction", where)
-    vis = prim.GetAttribute("nasset:cameraVisibility")
-    if vis and vis.HasAuthoredValue() and vis.Get(t) is False:
-        say("nasset:cameraVisibility = false is not applied here: camera rays see the light", where)
     filters = UsdLux.LightAPI(prim).GetFiltersRel().GetForwardedTargets() if prim.HasAPI(UsdLux.LightAPI) else []
     if filters:
         say(f"light:filters {', '.join(map(str, filters))} ignored", where)
+
+
+def _camera_visible(prim, path, t) -> bool:
+    """``nasset:cameraVisibility`` of a light (spec/renderer.md#light-surfaces): fallback true; a bool, else
+    SCENE_INVALID naming the attribute."""
+    attr = prim.GetAttribute("nasset:cameraVisibility")
+    if not attr or not attr.HasAuthoredValue():
+        return True
+    v = attr.Get(t)
+    if not isinstance(v, bool):
+        raise SceneError("SCENE_INVALID", f"nasset:cameraVisibility must be a bool (got {attr.GetTypeName()} {v!r})", file=path,
+                         prim=str(prim.GetPath()), attribute="nasset:cameraVisibility")
+    return v
 
 
 def _read_light(prim, tn, mw, path, t) -> Light:
@@ -517,6 +528,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
     _unhonoured_light_features(prim, path, t)
+    lt.camera_visible = _camera_visible(prim, path, t)
     if tn == "DistantLight":
         lt.angle = float(get("angle", 0.53))
     elif tn == "SphereLight":

@@ -352,3 +352,52 @@ def test_points_reached_through_fibres_lie_on_the_surface(nr):
     img = nr.render(str(case / "scene.usda"), 64, width=48, height=48, seed=0, threads=1)
     ratio = img.reshape(-1, 3).mean(0) / ref
     assert np.all(np.abs(ratio - 1.0) < 0.015), ratio
+
+
+def _hidden_light_scene(tmp_path, which, visible=False):
+    from pxr import Sdf
+
+    b = SceneBuilder()
+    b.camera((0, 0.6, 3), (0, 0, 0))
+    b.quad("Floor", (0, -0.5, 0), 4, diffuse=(0.6, 0.5, 0.4))
+    if which == "dome":
+        lt = b.dome("Sky", 0.8, color=(0.4, 0.6, 1.0))
+        b.distant("Sun", (0.3, 1.0, 0.4), 2.0)
+    else:  # a sphere light in front of the floor, in view of the camera
+        lt = b.sphere_light("Bulb", (0.0, 0.1, 0.5), 0.35, 3.0, color=(1.0, 0.8, 0.6))
+    lt.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool).Set(visible)
+    return b.write(tmp_path / f"{which}_{visible}.usda")
+
+
+@pytest.mark.parametrize("which", ["dome", "sphere"])
+def test_light_hidden_from_camera_rays_as_the_reference_renders_it(nr, tmp_path, which):
+    """nasset:cameraVisibility = false (spec/renderer.md#light-surfaces): camera rays pass through a sphere light and
+    see the floor behind it (which it still lights); escaping camera rays see black where a dome hides itself, while
+    the floor keeps its dome light. Per-channel image means against the reference renderer within 4 standard errors
+    (from two reference seeds; at least 1.5 % of the mean): the light shown to the camera is 30-80 % of the mean."""
+    scene = _hidden_light_scene(tmp_path, which)
+    size, spp = 24, 32
+    ref1 = _reference(scene, tmp_path / "r1.exr", spp, 1, size)
+    ref2 = _reference(scene, tmp_path / "r2.exr", spp, 2, size)
+    mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
+    ref = 0.5 * (ref1 + ref2)
+    se = np.abs(ref1.mean((0, 1)) - ref2.mean((0, 1))) / np.sqrt(2)
+    bound = 4.0 * np.maximum(se, 0.015 * ref.mean((0, 1)) / 4.0)
+    assert np.all(np.abs(mine.mean((0, 1)) - ref.mean((0, 1))) < bound), (mine.mean((0, 1)), ref.mean((0, 1)))
+    shown = nr.render(_hidden_light_scene(tmp_path, which, visible=True), spp, width=size, height=size, seed=7, threads=1)
+    assert np.all(shown.mean((0, 1)) > mine.mean((0, 1)) * 1.3)  # the scene does show the light when it is visible
+    if which == "dome":
+        assert np.all(mine[0] == 0.0)  # the top row sees only the sky: black
+
+
+def test_camera_visibility_of_another_type_is_scene_invalid(nr, tmp_path):
+    from pxr import Sdf, Usd
+
+    path = _hidden_light_scene(tmp_path, "sphere")
+    stage = Usd.Stage.Open(path)
+    stage.GetPrimAtPath("/World/Bulb").RemoveProperty("nasset:cameraVisibility")
+    stage.GetPrimAtPath("/World/Bulb").CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Int).Set(0)
+    stage.GetRootLayer().Save()
+    with pytest.raises(SceneError) as info:
+        nr.render(path, 1, width=8, height=8)
+    assert info.value.code == "SCENE_INVALID" and "nasset:cameraVisibility" in str(info.value)
