@@ -47,6 +47,7 @@ class Light:
     normalize: bool = False
     texture: np.ndarray | None = None  # [H, W, 3] lat-long
     camera_visible: bool = True  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
+    shaping: tuple | None = None  # (cone angle, softness, profile) of UsdLux.ShapingAPI (spec/renderer.md#spot-lights)
 
 
 @dataclass
@@ -480,17 +481,41 @@ def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
 
 
 def _unhonoured_light_features(prim, path, t) -> None:
-    """Warnings naming the light features this implementation does not render (spec/renderer.md#spot-lights):
-    a spot cone (UsdLux.ShapingAPI), light filters."""
+    """Warnings naming the light features this implementation does not render: light filters."""
     from pxr import UsdLux
 
     say = _say(path)
     where = str(prim.GetPath())
-    if prim.HasAPI(UsdLux.ShapingAPI):
-        say("UsdLux.ShapingAPI (spot cone) is not applied here: the light emits in every direction", where)
     filters = UsdLux.LightAPI(prim).GetFiltersRel().GetForwardedTargets() if prim.HasAPI(UsdLux.LightAPI) else []
     if filters:
         say(f"light:filters {', '.join(map(str, filters))} ignored", where)
+
+
+def _shaping(prim, get, path, t) -> tuple | None:
+    """(cone angle in degrees, softness in [0, 1], profile) of a light's UsdLux.ShapingAPI (spec/renderer.md#spot-lights),
+    or None without it; ``shaping:focus`` and IES profiles are warned as ignored; a ``nasset:shaping:falloff`` other
+    than ``linear`` / ``smoothstep`` is SCENE_INVALID. Whether the light is a point light is decided with its world
+    radius (lights.build_lights)."""
+    from pxr import UsdLux
+
+    if not prim.HasAPI(UsdLux.ShapingAPI):
+        return None
+    say, where = _say(path), str(prim.GetPath())
+    cone = float(get("shaping:cone:angle", 90.0))
+    soft = float(np.clip(float(get("shaping:cone:softness", 0.0)), 0.0, 1.0))
+    if not (np.isfinite(cone) and np.isfinite(soft)):
+        raise SceneError("SCENE_INVALID", "shaping:cone:angle and shaping:cone:softness must be finite", file=path, prim=where)
+    attr = prim.GetAttribute("nasset:shaping:falloff")
+    profile = str(attr.Get(t)) if attr and attr.HasAuthoredValue() else "linear"
+    if profile not in ("linear", "smoothstep"):
+        raise SceneError("SCENE_INVALID", f"nasset:shaping:falloff {profile!r}: linear or smoothstep", file=path, prim=where,
+                         attribute="nasset:shaping:falloff")
+    if float(get("shaping:focus", 0.0)) != 0.0:
+        say("shaping:focus ignored", where)
+    ies = get("shaping:ies:file", None)
+    if ies is not None and str(getattr(ies, "path", ies)):
+        say("shaping:ies:file (IES profile) ignored", where)
+    return cone, soft, profile
 
 
 def _camera_visible(prim, path, t) -> bool:
@@ -552,4 +577,9 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             if not os.path.exists(resolved):
                 raise SceneError("SCENE_INVALID", f"dome texture {resolved} does not exist", file=path, prim=ppath)
             lt.texture = _read_exr(resolved, ppath, path)
+    lt.shaping = _shaping(prim, get, path, t)
+    point = tn == "SphereLight" and lt.radius * float(np.cbrt(abs(np.linalg.det(mw[:3, :3])))) <= 0  # world radius 0
+    if lt.shaping is not None and not point:
+        _say(path)("UsdLux.ShapingAPI ignored: a spot cone applies to point lights only", ppath)
+        lt.shaping = None
     return lt
