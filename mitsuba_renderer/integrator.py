@@ -276,16 +276,34 @@ class PathTracer:
         fc, pdf = self.bsdf_eval(mat, n, wo, wi)
         return normalized(wi), fc, pdf
 
-    def _materials(self, obj):
+    def _backs(self, obj, prim, wo):
+        """[n] bool: mesh hits seen from their back (spec/renderer.md#sidedness: the front normal faces away from wo)."""
+        back = np.zeros(len(obj), bool)
+        for k in np.unique(obj):
+            ob = self.objects[k] if k >= 0 else {}
+            if ob.get("kind") == Kind.MESH and (ob.get("one_sided") or ob.get("back_material") is not None):
+                sel = obj == k
+                back[sel] = dot(ob["face_normals"][prim[sel]] * ob["front_sign"], wo[sel]) < 0
+        return back
+
+    def _side_material(self, k, back_rows):
+        """The material of object k's hits: its back material on back rows where it has one."""
+        ob = self.objects[k]
+        return ob["back_material"] if back_rows and ob.get("back_material") is not None else ob["material"]
+
+    def _materials(self, obj, back):
         m = len(obj)
         kd, f0, alpha, ps, spec = np.zeros((m, 3)), np.zeros((m, 3)), np.ones(m), np.zeros(m), np.zeros(m, bool)
         for k in np.unique(obj):
-            sel = obj == k
-            mt = self.objects[k]["material"]
-            kd[sel], f0[sel], alpha[sel], spec[sel] = mt.kd, mt.f0, mt.alpha, mt.specular
-            if mt.specular:
-                a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
-                ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
+            for side in (False, True):
+                sel = (obj == k) & (back == side)
+                if not np.any(sel):
+                    continue
+                mt = self._side_material(k, side)
+                kd[sel], f0[sel], alpha[sel], spec[sel] = mt.kd, mt.f0, mt.alpha, mt.specular
+                if mt.specular:
+                    a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
+                    ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
         return {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
 
     # -- main loop ------------------------------------------------------------------------------------
@@ -368,8 +386,13 @@ class PathTracer:
             hm = kinds == Kind.MESH
             if np.any(hm):
                 em = np.zeros((len(idx), 3))
+                back = self._backs(np.where(hm, obj, -1), tr["prim"], -d)
                 for k in np.unique(obj[hm]):
-                    em[obj == k] = self.objects[k]["material"].emission
+                    ob = self.objects[k]
+                    em[(obj == k) & ~back] = ob["material"].emission
+                    # a back side emits its back material's emission; a one-sided mesh's back nothing
+                    if ob.get("back_material") is not None or not ob.get("one_sided"):
+                        em[(obj == k) & back] = self._side_material(k, True).emission
                 np.add.at(L, idx[hm], beta[hm] * em[hm])
             surf = hm | (kinds == Kind.ASSET)
             # compact to surface vertices
@@ -468,7 +491,10 @@ class PathTracer:
             ns[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * cn[:, 0] + b1[sel][:, None] * cn[:, 1] + b2[sel][:, None] * cn[:, 2]
         ns = normalized(np.where(flip[:, None], -ns, ns))
         n = np.where((dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
-        mat = self._materials(obj)
+        back = self._backs(obj, prim, wo)
+        mat = self._materials(obj, back)
+        one_sided = np.array([bool(o_.get("one_sided")) for o_ in self.objects] + [False])[obj]
+        beta = np.where((one_sided & back)[:, None], 0.0, beta)  # the back of a one-sided mesh: the path ends
         for wi, lw, pl, delta, vis, _ in self._nee(p, ng, n, rng, None):
             fc, pb = self.bsdf_eval(mat, n, wo, wi)
             above = dot(wi, ngf) > 0

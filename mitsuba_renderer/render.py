@@ -158,6 +158,7 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         cn = mesh.corner_normals if mesh.corner_normals is not None else np.repeat(fn[:, None], 3, 1)
         objects.append({"id": name, "kind": Kind.MESH, "material": mesh.material, "face_normals": fn, "corner_normals": cn,
                         "points": np.asarray(mesh.points, np.float64), "faces": np.asarray(mesh.faces, np.int64),
+                        "one_sided": mesh.one_sided, "back_material": mesh.back_material, "front_sign": mesh.front_sign,
                         "planar": _planar(mesh.points, fn), "prim": mesh.prim, "bbox": (mesh.points.min(0), mesh.points.max(0))})
     cache: dict = {}
     for j, inst in enumerate(desc.assets):

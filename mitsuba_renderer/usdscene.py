@@ -32,6 +32,9 @@ class Mesh:
     faces: np.ndarray  # [F, 3]
     material: Material
     corner_normals: np.ndarray | None = None  # [F, 3, 3] world shading normals at the triangle corners
+    one_sided: bool = False  # doubleSided authored false (spec/renderer.md#sidedness)
+    back_material: Material | None = None  # nasset:backMaterial
+    front_sign: float = 1.0  # -1 where the front is against (v1 - v0) x (v2 - v0) of the world triangle
 
 
 @dataclass
@@ -194,12 +197,13 @@ def _say(path: str):
     return say
 
 
-def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None) -> Material:
+def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None, material=None) -> Material:
+    """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself)."""
     say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
-    mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
+    mat = material if material is not None else stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
     if not mat:
         kd = _display_color(prim, say, t)
     else:
@@ -387,13 +391,13 @@ def read_scene(path: str) -> SceneDesc:
                 start += c
             mw = _m4(cache.GetLocalToWorldTransform(prim))
             wp = pts @ mw[:3, :3] + mw[3, :3]
-            _sidedness_warning(prim, say, t)
+            one_sided, back, sign = _sidedness(prim, mw, path, t, purposes)
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
             for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes):
                 meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes),
-                                   None if cn is None else cn[sel]))
+                                   None if cn is None else cn[sel], one_sided, back, sign))
             continue
         if tn in _STRUCTURAL:
             continue
@@ -407,18 +411,27 @@ def read_scene(path: str) -> SceneDesc:
     return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
 
 
-def _sidedness_warning(prim, say, t) -> None:
-    """spec/renderer.md#sidedness: a one-sided mesh (``doubleSided`` authored false) and a back material
-    (``nasset:backMaterial``) are not rendered here (both sides front-facing, the front material): said by name."""
-    from pxr import UsdGeom
+def _sidedness(prim, mw, path, t, purposes):
+    """(one-sided, back material or None, front sign) of a mesh (spec/renderer.md#sidedness): ``doubleSided`` authored
+    false; the Material of ``nasset:backMaterial`` (another target is SCENE_INVALID); the front is the world winding's
+    normal, reversed when ``orientation`` is leftHanded or the world transform mirrors (not both)."""
+    from pxr import UsdGeom, UsdShade
 
-    attr = UsdGeom.Gprim(prim).GetDoubleSidedAttr()
-    if attr and attr.HasAuthoredValue() and not attr.Get(t):
-        say("doubleSided = false is not applied here: both sides are front-facing", str(prim.GetPath()))
+    gp = UsdGeom.Gprim(prim)
+    attr = gp.GetDoubleSidedAttr()
+    one_sided = bool(attr and attr.HasAuthoredValue() and not attr.Get(t))
+    back = None
     rel = prim.GetRelationship("nasset:backMaterial")
-    if rel and rel.GetForwardedTargets():
-        say(f"nasset:backMaterial {rel.GetForwardedTargets()[0]} is not applied here: both sides take the front "
-            "material", str(prim.GetPath()))
+    targets = rel.GetForwardedTargets() if rel else []
+    if targets:
+        mat = UsdShade.Material(prim.GetStage().GetPrimAtPath(targets[0]))
+        if not mat:
+            raise SceneError("SCENE_INVALID", f"nasset:backMaterial {targets[0]} is not a Material", file=path, prim=str(prim.GetPath()),
+                             attribute="nasset:backMaterial")
+        back = read_material(prim, path, t, purposes, material=mat)
+    left = (gp.GetOrientationAttr().Get(t) or UsdGeom.Tokens.rightHanded) == UsdGeom.Tokens.leftHanded
+    mirrored = float(np.linalg.det(mw[:3, :3])) < 0
+    return one_sided, back, -1.0 if left != mirrored else 1.0
 
 
 def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:
