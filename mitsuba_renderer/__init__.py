@@ -13,8 +13,8 @@ spec/renderer.md) and independent of ``nasset_sdk``'s evaluators and of ``nasset
 - :mod:`.neupress` reads a ``neupress`` asset (Fourier features, appearance and sigma networks,
   GGX boundary) and shades its far-field vertex (light sampling + lobe / uniform technique, MIS);
 - :mod:`.lights` wraps Mitsuba emitters (point, directional, sphere and rectangle area lights)
-  and adds the two light types Mitsuba lacks with the spec's exact conventions (cone distant
-  light, nearest-texel lat-long dome);
+  and adds what Mitsuba lacks with the spec's exact conventions (cone distant light, nearest-texel
+  lat-long dome, the spot cone's linear and smoothstep falloffs on point lights);
 - :mod:`.eightdna` reads an ``8dna`` asset (encodings, spline flow) and shades its vertices
   (direct lobe + neural estimator, spec/renderer.md#8dna);
 - :mod:`.integrator` is the wavefront path tracer (Mitsuba ray tracing on whole batches, shading

@@ -186,6 +186,9 @@ class PathTracer:
         # light shapes are seen by camera and continuation rays but do not block shadow rays
         self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
         self.n_reflective = len(reflective)
+        # nasset:cameraVisibility = false (spec/renderer.md#light-surfaces): camera rays pass through the light's shape
+        hidden = [o["kind"] == Kind.LIGHT and not getattr(o["light"].desc, "camera_visible", True) for o in objects]
+        self.hidden_shapes = np.array(hidden + [False]) if any(hidden) else None
         self.log = log
         kinds = {o_["asset"].kind for o_ in objects if o_["kind"] == Kind.ASSET}
         self.shaders = {kd: ASSET_SHADERS[kd](self) for kd in sorted(kinds)}
@@ -199,6 +202,20 @@ class PathTracer:
             sel = obj == k
             ng[sel] = self.objects[k]["face_normals"][prim[sel]]
         return ng
+
+    def _surface_points(self, obj, prim, b1, b2, fallback):
+        """World hit points [n,3] on triangles (obj, prim) at barycentrics (b1, b2), from the float64 vertices: exactly on
+        the surface, however many surfaces the ray was carried past (:meth:`Tracer.trace` offsets each restart off the
+        skipped surface, sideways of the ray). ``fallback`` rows where the object has no triangles (light shapes)."""
+        p = np.array(fallback, np.float64)
+        for k in np.unique(obj):
+            ob = self.objects[k] if k >= 0 else {}
+            if "points" not in ob:
+                continue
+            sel = obj == k
+            v = ob["points"][ob["faces"][prim[sel]]]
+            p[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * v[:, 0] + b1[sel][:, None] * v[:, 1] + b2[sel][:, None] * v[:, 2]
+        return p
 
     def _continues(self, obj, depth):
         cont = depth < self.max_depth
@@ -259,16 +276,34 @@ class PathTracer:
         fc, pdf = self.bsdf_eval(mat, n, wo, wi)
         return normalized(wi), fc, pdf
 
-    def _materials(self, obj):
+    def _backs(self, obj, prim, wo):
+        """[n] bool: mesh hits seen from their back (spec/renderer.md#sidedness: the front normal faces away from wo)."""
+        back = np.zeros(len(obj), bool)
+        for k in np.unique(obj):
+            ob = self.objects[k] if k >= 0 else {}
+            if ob.get("kind") == Kind.MESH and (ob.get("one_sided") or ob.get("back_material") is not None):
+                sel = obj == k
+                back[sel] = dot(ob["face_normals"][prim[sel]] * ob["front_sign"], wo[sel]) < 0
+        return back
+
+    def _side_material(self, k, back_rows):
+        """The material of object k's hits: its back material on back rows where it has one."""
+        ob = self.objects[k]
+        return ob["back_material"] if back_rows and ob.get("back_material") is not None else ob["material"]
+
+    def _materials(self, obj, back):
         m = len(obj)
         kd, f0, alpha, ps, spec = np.zeros((m, 3)), np.zeros((m, 3)), np.ones(m), np.zeros(m), np.zeros(m, bool)
         for k in np.unique(obj):
-            sel = obj == k
-            mt = self.objects[k]["material"]
-            kd[sel], f0[sel], alpha[sel], spec[sel] = mt.kd, mt.f0, mt.alpha, mt.specular
-            if mt.specular:
-                a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
-                ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
+            for side in (False, True):
+                sel = (obj == k) & (back == side)
+                if not np.any(sel):
+                    continue
+                mt = self._side_material(k, side)
+                kd[sel], f0[sel], alpha[sel], spec[sel] = mt.kd, mt.f0, mt.alpha, mt.specular
+                if mt.specular:
+                    a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
+                    ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
         return {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
 
     # -- main loop ------------------------------------------------------------------------------------
@@ -325,8 +360,10 @@ class PathTracer:
         prev_p = o.copy()
         ignore = np.full(m, -1, np.int64)
         while len(idx):
-            tr = self.tracer.trace(o, d, ignore=ignore)
+            camera = depth == 0  # camera rays: every ray of the first pass, none after
+            tr = self.tracer.trace(o, d, ignore=ignore, transparent=self.hidden_shapes if camera.all() else None)
             p = o + d * np.where(np.isfinite(tr["t"]), tr["t"], 0.0)[:, None]
+            p = self._surface_points(tr["obj"], tr["prim"], tr["b1"], tr["b2"], p)
             # escaped: infinite lights
             miss = ~tr["hit"]
             if np.any(miss):
@@ -335,6 +372,8 @@ class PathTracer:
                 for lt in self.lights:
                     if getattr(lt, "infinite", False):
                         w = mis_weight(prev_pdf[miss], lt.pdf_dir(dm))
+                        if not getattr(lt.desc, "camera_visible", True):  # a dome hidden from camera rays: they see black
+                            w = np.where(camera[miss], 0.0, w)
                         le += lt.eval_dir(dm) * w[:, None]
                 np.add.at(L, idx[miss], beta[miss] * le)
             obj = tr["obj"]
@@ -347,8 +386,13 @@ class PathTracer:
             hm = kinds == Kind.MESH
             if np.any(hm):
                 em = np.zeros((len(idx), 3))
+                back = self._backs(np.where(hm, obj, -1), tr["prim"], -d)
                 for k in np.unique(obj[hm]):
-                    em[obj == k] = self.objects[k]["material"].emission
+                    ob = self.objects[k]
+                    em[(obj == k) & ~back] = ob["material"].emission
+                    # a back side emits its back material's emission; a one-sided mesh's back nothing
+                    if ob.get("back_material") is not None or not ob.get("one_sided"):
+                        em[(obj == k) & back] = self._side_material(k, True).emission
                 np.add.at(L, idx[hm], beta[hm] * em[hm])
             surf = hm | (kinds == Kind.ASSET)
             # compact to surface vertices
@@ -447,7 +491,10 @@ class PathTracer:
             ns[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * cn[:, 0] + b1[sel][:, None] * cn[:, 1] + b2[sel][:, None] * cn[:, 2]
         ns = normalized(np.where(flip[:, None], -ns, ns))
         n = np.where((dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
-        mat = self._materials(obj)
+        back = self._backs(obj, prim, wo)
+        mat = self._materials(obj, back)
+        one_sided = np.array([bool(o_.get("one_sided")) for o_ in self.objects] + [False])[obj]
+        beta = np.where((one_sided & back)[:, None], 0.0, beta)  # the back of a one-sided mesh: the path ends
         for wi, lw, pl, delta, vis, _ in self._nee(p, ng, n, rng, None):
             fc, pb = self.bsdf_eval(mat, n, wo, wi)
             above = dot(wi, ngf) > 0

@@ -72,6 +72,37 @@ class MitsubaLight:
         return wi, dist, le, np.where(ok, pdf, 1.0)
 
 
+def spot_falloff(cos_theta, cone_deg: float, softness: float, profile: str):
+    """spec/renderer.md#spot-lights: the factor of a point light's intensity at angle theta from its axis; ``linear``
+    (in the angle, 1 inside the beam c (1 - softness), 0 outside the cone c) or ``smoothstep`` (Cycles' spot)."""
+    ct = np.clip(np.asarray(cos_theta, np.float64), -1.0, 1.0)
+    c = np.radians(cone_deg)
+    if profile == "smoothstep":
+        cc = np.cos(c)
+        if softness <= 0.0:
+            return np.where(ct > cc, 1.0, 0.0)
+        x = np.clip((ct - cc) / max((1.0 - cc) * softness, 1e-300), 0.0, 1.0)
+        return x * x * (3.0 - 2.0 * x)
+    b = c * (1.0 - softness)
+    th = np.arccos(ct)
+    ramp = (c - th) / max(c - b, 1e-300)
+    return np.where(th <= b, 1.0, np.where(th < c, ramp, 0.0))
+
+
+class SpotLight(MitsubaLight):
+    """A point light with a UsdLux.ShapingAPI cone: Mitsuba's point emitter, its samples scaled by :func:`spot_falloff`
+    of the emitted direction against the prim's local -Z axis."""
+
+    def __init__(self, desc: Light, key: str, mi_dict: dict) -> None:
+        super().__init__(desc, key, mi_dict, delta=True, has_shape=False)
+        self.axis = -_norm(desc.to_world[2, :3][None])[0]
+
+    def sample(self, mi, p, n, u):
+        wi, dist, le, pdf = super().sample(mi, p, n, u)
+        f = spot_falloff(-(_norm(wi) @ self.axis), *self.desc.shaping)
+        return wi, dist, le * f[:, None], pdf
+
+
 class ConeDistantLight:
     """DistantLight with angle > 0: uniform cone of half-angle t around +Z, radiance E / (pi sin^2 t)."""
 
@@ -219,7 +250,7 @@ def build_lights(desc_lights: list[Light], scene_path: str):
             c = mw[3, :3]
             if r <= 0:
                 ent = {"type": "point", "position": c.tolist(), "intensity": {"type": "rgb", "value": rad.tolist()}}
-                lights.append(MitsubaLight(d, key, ent, delta=True, has_shape=False))
+                lights.append(MitsubaLight(d, key, ent, delta=True, has_shape=False) if d.shaping is None else SpotLight(d, key, ent))
             else:
                 le = rad / (4.0 * np.pi * r * r) if d.normalize else rad
                 area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}

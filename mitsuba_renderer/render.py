@@ -157,6 +157,8 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         entries[name] = mi_mesh(mi, name, mesh.points, mesh.faces)
         cn = mesh.corner_normals if mesh.corner_normals is not None else np.repeat(fn[:, None], 3, 1)
         objects.append({"id": name, "kind": Kind.MESH, "material": mesh.material, "face_normals": fn, "corner_normals": cn,
+                        "points": np.asarray(mesh.points, np.float64), "faces": np.asarray(mesh.faces, np.int64),
+                        "one_sided": mesh.one_sided, "back_material": mesh.back_material, "front_sign": mesh.front_sign,
                         "planar": _planar(mesh.points, fn), "prim": mesh.prim, "bbox": (mesh.points.min(0), mesh.points.max(0))})
     cache: dict = {}
     for j, inst in enumerate(desc.assets):
@@ -172,7 +174,8 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         name = f"nasset_inst_{j}"
         entries[name] = mi_mesh(mi, name, pts, asset.faces)
         objects.append({"id": name, "kind": Kind.ASSET, "asset": asset, "to_world": mw, "m3_inv": np.linalg.inv(mw[:3, :3]),
-                        "face_normals": _face_normals(pts, asset.faces), "prim": inst.prim, "bbox": (pts.min(0), pts.max(0))})
+                        "face_normals": _face_normals(pts, asset.faces), "points": pts, "faces": np.asarray(asset.faces, np.int64),
+                        "prim": inst.prim, "bbox": (pts.min(0), pts.max(0))})
     lights, light_entries = build_lights(desc.lights, scene_path)
     for lt in lights:
         if getattr(lt, "has_shape", False):

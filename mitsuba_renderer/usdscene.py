@@ -32,6 +32,9 @@ class Mesh:
     faces: np.ndarray  # [F, 3]
     material: Material
     corner_normals: np.ndarray | None = None  # [F, 3, 3] world shading normals at the triangle corners
+    one_sided: bool = False  # doubleSided authored false (spec/renderer.md#sidedness)
+    back_material: Material | None = None  # nasset:backMaterial
+    front_sign: float = 1.0  # -1 where the front is against (v1 - v0) x (v2 - v0) of the world triangle
 
 
 @dataclass
@@ -46,6 +49,8 @@ class Light:
     height: float = 0.0
     normalize: bool = False
     texture: np.ndarray | None = None  # [H, W, 3] lat-long
+    camera_visible: bool = True  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
+    shaping: tuple | None = None  # (cone angle, softness, profile) of UsdLux.ShapingAPI (spec/renderer.md#spot-lights)
 
 
 @dataclass
@@ -192,12 +197,13 @@ def _say(path: str):
     return say
 
 
-def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None) -> Material:
+def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None, material=None) -> Material:
+    """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself)."""
     say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
-    mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
+    mat = material if material is not None else stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
     if not mat:
         kd = _display_color(prim, say, t)
     else:
@@ -385,13 +391,13 @@ def read_scene(path: str) -> SceneDesc:
                 start += c
             mw = _m4(cache.GetLocalToWorldTransform(prim))
             wp = pts @ mw[:3, :3] + mw[3, :3]
-            _sidedness_warning(prim, say, t)
+            one_sided, back, sign = _sidedness(prim, mw, path, t, purposes)
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
             for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes):
                 meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes),
-                                   None if cn is None else cn[sel]))
+                                   None if cn is None else cn[sel], one_sided, back, sign))
             continue
         if tn in _STRUCTURAL:
             continue
@@ -405,18 +411,27 @@ def read_scene(path: str) -> SceneDesc:
     return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
 
 
-def _sidedness_warning(prim, say, t) -> None:
-    """spec/renderer.md#sidedness: a one-sided mesh (``doubleSided`` authored false) and a back material
-    (``nasset:backMaterial``) are not rendered here (both sides front-facing, the front material): said by name."""
-    from pxr import UsdGeom
+def _sidedness(prim, mw, path, t, purposes):
+    """(one-sided, back material or None, front sign) of a mesh (spec/renderer.md#sidedness): ``doubleSided`` authored
+    false; the Material of ``nasset:backMaterial`` (another target is SCENE_INVALID); the front is the world winding's
+    normal, reversed when ``orientation`` is leftHanded or the world transform mirrors (not both)."""
+    from pxr import UsdGeom, UsdShade
 
-    attr = UsdGeom.Gprim(prim).GetDoubleSidedAttr()
-    if attr and attr.HasAuthoredValue() and not attr.Get(t):
-        say("doubleSided = false is not applied here: both sides are front-facing", str(prim.GetPath()))
+    gp = UsdGeom.Gprim(prim)
+    attr = gp.GetDoubleSidedAttr()
+    one_sided = bool(attr and attr.HasAuthoredValue() and not attr.Get(t))
+    back = None
     rel = prim.GetRelationship("nasset:backMaterial")
-    if rel and rel.GetForwardedTargets():
-        say(f"nasset:backMaterial {rel.GetForwardedTargets()[0]} is not applied here: both sides take the front "
-            "material", str(prim.GetPath()))
+    targets = rel.GetForwardedTargets() if rel else []
+    if targets:
+        mat = UsdShade.Material(prim.GetStage().GetPrimAtPath(targets[0]))
+        if not mat:
+            raise SceneError("SCENE_INVALID", f"nasset:backMaterial {targets[0]} is not a Material", file=path, prim=str(prim.GetPath()),
+                             attribute="nasset:backMaterial")
+        back = read_material(prim, path, t, purposes, material=mat)
+    left = (gp.GetOrientationAttr().Get(t) or UsdGeom.Tokens.rightHanded) == UsdGeom.Tokens.leftHanded
+    mirrored = float(np.linalg.det(mw[:3, :3])) < 0
+    return one_sided, back, -1.0 if left != mirrored else 1.0
 
 
 def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:
@@ -479,20 +494,54 @@ def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
 
 
 def _unhonoured_light_features(prim, path, t) -> None:
-    """Warnings naming the light features this implementation does not render (spec/renderer.md#spot-lights,
-    #light-surfaces): a spot cone (UsdLux.ShapingAPI), a light hidden from camera rays, light filters."""
+    """Warnings naming the light features this implementation does not render: light filters."""
     from pxr import UsdLux
 
     say = _say(path)
     where = str(prim.GetPath())
-    if prim.HasAPI(UsdLux.ShapingAPI):
-        say("UsdLux.ShapingAPI (spot cone) is not applied here: the light emits in every direction", where)
-    vis = prim.GetAttribute("nasset:cameraVisibility")
-    if vis and vis.HasAuthoredValue() and vis.Get(t) is False:
-        say("nasset:cameraVisibility = false is not applied here: camera rays see the light", where)
     filters = UsdLux.LightAPI(prim).GetFiltersRel().GetForwardedTargets() if prim.HasAPI(UsdLux.LightAPI) else []
     if filters:
         say(f"light:filters {', '.join(map(str, filters))} ignored", where)
+
+
+def _shaping(prim, get, path, t) -> tuple | None:
+    """(cone angle in degrees, softness in [0, 1], profile) of a light's UsdLux.ShapingAPI (spec/renderer.md#spot-lights),
+    or None without it; ``shaping:focus`` and IES profiles are warned as ignored; a ``nasset:shaping:falloff`` other
+    than ``linear`` / ``smoothstep`` is SCENE_INVALID. Whether the light is a point light is decided with its world
+    radius (lights.build_lights)."""
+    from pxr import UsdLux
+
+    if not prim.HasAPI(UsdLux.ShapingAPI):
+        return None
+    say, where = _say(path), str(prim.GetPath())
+    cone = float(get("shaping:cone:angle", 90.0))
+    soft = float(np.clip(float(get("shaping:cone:softness", 0.0)), 0.0, 1.0))
+    if not (np.isfinite(cone) and np.isfinite(soft)):
+        raise SceneError("SCENE_INVALID", "shaping:cone:angle and shaping:cone:softness must be finite", file=path, prim=where)
+    attr = prim.GetAttribute("nasset:shaping:falloff")
+    profile = str(attr.Get(t)) if attr and attr.HasAuthoredValue() else "linear"
+    if profile not in ("linear", "smoothstep"):
+        raise SceneError("SCENE_INVALID", f"nasset:shaping:falloff {profile!r}: linear or smoothstep", file=path, prim=where,
+                         attribute="nasset:shaping:falloff")
+    if float(get("shaping:focus", 0.0)) != 0.0:
+        say("shaping:focus ignored", where)
+    ies = get("shaping:ies:file", None)
+    if ies is not None and str(getattr(ies, "path", ies)):
+        say("shaping:ies:file (IES profile) ignored", where)
+    return cone, soft, profile
+
+
+def _camera_visible(prim, path, t) -> bool:
+    """``nasset:cameraVisibility`` of a light (spec/renderer.md#light-surfaces): fallback true; a bool, else
+    SCENE_INVALID naming the attribute."""
+    attr = prim.GetAttribute("nasset:cameraVisibility")
+    if not attr or not attr.HasAuthoredValue():
+        return True
+    v = attr.Get(t)
+    if not isinstance(v, bool):
+        raise SceneError("SCENE_INVALID", f"nasset:cameraVisibility must be a bool (got {attr.GetTypeName()} {v!r})", file=path,
+                         prim=str(prim.GetPath()), attribute="nasset:cameraVisibility")
+    return v
 
 
 def _read_light(prim, tn, mw, path, t) -> Light:
@@ -517,6 +566,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
     _unhonoured_light_features(prim, path, t)
+    lt.camera_visible = _camera_visible(prim, path, t)
     if tn == "DistantLight":
         lt.angle = float(get("angle", 0.53))
     elif tn == "SphereLight":
@@ -540,4 +590,9 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             if not os.path.exists(resolved):
                 raise SceneError("SCENE_INVALID", f"dome texture {resolved} does not exist", file=path, prim=ppath)
             lt.texture = _read_exr(resolved, ppath, path)
+    lt.shaping = _shaping(prim, get, path, t)
+    point = tn == "SphereLight" and lt.radius * float(np.cbrt(abs(np.linalg.det(mw[:3, :3])))) <= 0  # world radius 0
+    if lt.shaping is not None and not point:
+        _say(path)("UsdLux.ShapingAPI ignored: a spot cone applies to point lights only", ppath)
+        lt.shaping = None
     return lt
