@@ -65,6 +65,16 @@ def normalize(v):
     return v / np.where(n > 0, n, 1.0)
 
 
+def unit_or(v, alt):
+    """Rows [N,3]: ``v``'s unit rows, ``alt`` (a row [3] or rows [N,3]) where a row of ``v`` is not a unit vector (a zero
+    or degenerate one): the axis a lobe turns about must be a direction."""
+    return np.where((dot(v, v) > 0.5)[:, None], v, alt)
+
+
+#: an axis for rows that have none (a degenerate normal, tangent and viewing direction together)
+Z_AXIS = np.array([0.0, 0.0, 1.0])
+
+
 def frame(n):
     """Orthonormal tangent frame (t, b) for unit normals n [N,3] (Duff et al. 2017)."""
     sign = np.where(n[:, 2] >= 0, 1.0, -1.0)

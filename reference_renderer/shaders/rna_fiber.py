@@ -23,6 +23,7 @@ import numpy as np
 
 from ..sampling import (
     INV_4PI,
+    Z_AXIS,
     around,
     cross3,
     dot,
@@ -30,6 +31,7 @@ from ..sampling import (
     sample_mixture,
     square_to_uniform_sphere,
     square_to_vmf,
+    unit_or,
     vmf_pdf,
 )
 from .common import Frames
@@ -142,8 +144,8 @@ class FiberContinuation:
     ``sample`` and ``pdf`` take the hit rows they are for."""
 
     def __init__(self, wo: np.ndarray, t: np.ndarray) -> None:
-        self.fwd = -wo
-        self.t = np.where((dot(t, t) > 0.5)[:, None], t, wo)  # no tangent (a degenerate one): the band about wo
+        self.fwd = unit_or(-wo, Z_AXIS)
+        self.t = unit_or(unit_or(t, wo), Z_AXIS)  # no tangent (a degenerate one): the band about wo, or +z without either
         s_o = np.clip(dot(wo, self.t), -1.0, 1.0)
         self.lo = np.maximum(-1.0, -s_o - CONE_HALF_WIDTH)
         self.hi = np.minimum(1.0, -s_o + CONE_HALF_WIDTH)  # hi - lo >= CONE_HALF_WIDTH

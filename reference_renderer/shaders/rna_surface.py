@@ -15,6 +15,7 @@ import numpy as np
 from ..sampling import (
     INV_4PI,
     INV_PI,
+    Z_AXIS,
     around,
     dot,
     normalize,
@@ -23,6 +24,7 @@ from ..sampling import (
     square_to_cosine_hemisphere,
     square_to_uniform_sphere,
     square_to_vmf,
+    unit_or,
     vmf_pdf,
 )
 from ..shadow import aim_shadow
@@ -47,9 +49,9 @@ class SurfaceContinuation:
     ``wo``, ``n`` [n,3]: unit world directions toward the viewer and shading normals, one row per hit."""
 
     def __init__(self, wo: np.ndarray, n: np.ndarray) -> None:
-        n = np.where((dot(n, n) > 0.5)[:, None], n, wo)  # no normal (a degenerate one): lobes about wo
+        n = unit_or(unit_or(n, wo), Z_AXIS)  # no normal (a degenerate one): lobes about wo, or +z without either
         self.n = np.where((dot(n, wo) < 0)[:, None], -n, n)
-        self.mirror = normalize(2.0 * dot(wo, self.n)[:, None] * self.n - wo)
+        self.mirror = unit_or(normalize(2.0 * dot(wo, self.n)[:, None] * self.n - wo), self.n)  # n for a zero wo
 
     def sample(self, rows: np.ndarray, u: np.ndarray) -> np.ndarray:
         n, mirror = self.n[rows], self.mirror[rows]

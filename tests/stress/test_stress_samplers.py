@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -224,9 +224,14 @@ _axes = [(0, 0, 1), (1, 0, 0), (0, 0, -1), (0, 0, 0), (1e-300, 0, 1), (1, 1, TIN
 
 @FAST
 @given(wo=up_dirs, u=uniforms, pick=st.floats(0, 1), fiber=st.booleans(), axis=st.sampled_from(_axes))
+@example(wo=np.zeros((1, 3)), u=np.zeros((1, 2)), pick=1.0, fiber=False, axis=(0, 0, 1))  # a zero wo (up_dirs draws it)
+@example(wo=np.zeros((1, 3)), u=np.zeros((1, 2)), pick=1.0, fiber=False, axis=(0, 0, 0))
+@example(wo=np.zeros((1, 3)), u=np.zeros((1, 2)), pick=0.5, fiber=False, axis=(0, 0, 0))
+@example(wo=np.zeros((1, 3)), u=np.zeros((1, 2)), pick=0.6, fiber=True, axis=(0, 0, 0))
+@example(wo=np.zeros((1, 3)), u=np.zeros((1, 2)), pick=1.0, fiber=True, axis=(0, 0, 0))
 def test_rna_continuation_mixtures(counts, wo, u, pick, fiber, axis):
-    """The continuation mixtures at normal incidence, grazing, wo along the fiber and a missing normal or
-    tangent: unit directions, finite densities, never below the uniform part's 0.4 / 4 pi."""
+    """The continuation mixtures at normal incidence, grazing, wo along the fiber, a missing normal or
+    tangent, and a zero wo: unit directions, finite densities, never below the uniform part's 0.4 / 4 pi."""
     from nasset_reference_renderer.shaders.rna_fiber import FiberContinuation
     from nasset_reference_renderer.shaders.rna_surface import SurfaceContinuation
 
