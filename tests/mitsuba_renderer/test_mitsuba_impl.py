@@ -107,6 +107,22 @@ def _reference(scene, out, spp, seed, size):
     return _read_exr(out)
 
 
+def _means_match_reference(nr, scene, tmp_path, spp, size):
+    """Render ``scene`` with this implementation and twice with the reference renderer (seeds 1, 2); assert the image
+    means agree per channel within 4 standard errors (from the two reference images; at least 1.5 % of the mean).
+    Returns (mine, reference average)."""
+    ref1 = _reference(scene, tmp_path / "r1.exr", spp, 1, size)
+    ref2 = _reference(scene, tmp_path / "r2.exr", spp, 2, size)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # rendered, not warned
+        mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
+    ref = 0.5 * (ref1 + ref2)
+    se = np.abs(ref1.mean((0, 1)) - ref2.mean((0, 1))) / np.sqrt(2)
+    bound = 4.0 * np.maximum(se, 0.015 * ref.mean((0, 1)) / 4.0)
+    assert np.all(np.abs(mine.mean((0, 1)) - ref.mean((0, 1))) < bound), (mine.mean((0, 1)), ref.mean((0, 1)))
+    return mine, ref
+
+
 def test_random_asset_agrees_with_reference(nr, tmp_path):
     """Random rna asset on a floor, delta sun + sphere light: NEE, MIS with continuation rays,
     branch choice, shadows on the floor. Tolerance from the reference renderer's own noise."""
@@ -378,13 +394,7 @@ def test_light_hidden_from_camera_rays_as_the_reference_renders_it(nr, tmp_path,
     (from two reference seeds; at least 1.5 % of the mean): the light shown to the camera is 30-80 % of the mean."""
     scene = _hidden_light_scene(tmp_path, which)
     size, spp = 24, 32
-    ref1 = _reference(scene, tmp_path / "r1.exr", spp, 1, size)
-    ref2 = _reference(scene, tmp_path / "r2.exr", spp, 2, size)
-    mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
-    ref = 0.5 * (ref1 + ref2)
-    se = np.abs(ref1.mean((0, 1)) - ref2.mean((0, 1))) / np.sqrt(2)
-    bound = 4.0 * np.maximum(se, 0.015 * ref.mean((0, 1)) / 4.0)
-    assert np.all(np.abs(mine.mean((0, 1)) - ref.mean((0, 1))) < bound), (mine.mean((0, 1)), ref.mean((0, 1)))
+    mine, ref = _means_match_reference(nr, scene, tmp_path, spp, size)
     shown = nr.render(_hidden_light_scene(tmp_path, which, visible=True), spp, width=size, height=size, seed=7, threads=1)
     assert np.all(shown.mean((0, 1)) > mine.mean((0, 1)) * 1.3)  # the scene does show the light when it is visible
     if which == "dome":
@@ -427,13 +437,7 @@ def test_spot_cone_as_the_reference_renders_it(nr, tmp_path, profile):
     prim.CreateAttribute("nasset:shaping:falloff", Sdf.ValueTypeNames.Token).Set(profile)
     scene = b.write(tmp_path / "spot.usda")
     size, spp = 24, 16
-    ref1 = _reference(scene, tmp_path / "r1.exr", spp, 1, size)
-    ref2 = _reference(scene, tmp_path / "r2.exr", spp, 2, size)
-    mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
-    ref = 0.5 * (ref1 + ref2)
-    se = np.abs(ref1.mean((0, 1)) - ref2.mean((0, 1))) / np.sqrt(2)
-    bound = 4.0 * np.maximum(se, 0.015 * ref.mean((0, 1)) / 4.0)
-    assert np.all(np.abs(mine.mean((0, 1)) - ref.mean((0, 1))) < bound), (mine.mean((0, 1)), ref.mean((0, 1)))
+    mine, ref = _means_match_reference(nr, scene, tmp_path, spp, size)
     lit = ref.mean(-1) > 1e-3 * ref.max()
     assert 0.1 < lit.mean() < 0.9  # the cone's edge is in view
 
@@ -490,14 +494,6 @@ def test_sidedness_as_the_reference_renders_it(nr, tmp_path, feature):
         UsdGeom.Mesh(card).CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
     scene = b.write(tmp_path / "card.usda")
     size, spp = 24, 16
-    ref1 = _reference(scene, tmp_path / "r1.exr", spp, 1, size)
-    ref2 = _reference(scene, tmp_path / "r2.exr", spp, 2, size)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # rendered, not warned
-        mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
-    ref = 0.5 * (ref1 + ref2)
-    se = np.abs(ref1.mean((0, 1)) - ref2.mean((0, 1))) / np.sqrt(2)
-    bound = 4.0 * np.maximum(se, 0.015 * ref.mean((0, 1)) / 4.0)
-    assert np.all(np.abs(mine.mean((0, 1)) - ref.mean((0, 1))) < bound), (mine.mean((0, 1)), ref.mean((0, 1)))
+    mine, ref = _means_match_reference(nr, scene, tmp_path, spp, size)
     if feature != "back material":
         assert np.all(mine[size // 2, size // 2] == 0.0)  # the card's top: black

@@ -15,36 +15,16 @@ pytest.importorskip("mitsuba")
 from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
 from nasset_sdk.errors import SceneError  # noqa: E402
-
-E, THETA = 3.0, np.radians(35)
-RED = (0.9, 0.2, 0.1)
-
-
-def _floor_scene(albedo=(0.6, 0.6, 0.6)):
-    b = SceneBuilder()
-    b.camera((0, 3, 0.01), (0, 0, 0), focal=50)
-    floor = b.quad("Floor", (0, 0, 0), 10.0, diffuse=albedo)
-    b.distant("Sun", (np.sin(THETA), np.cos(THETA), 0), E)
-    return b, floor.GetPrim()
+from tests.stage_scenes import RED, THETA, E  # noqa: E402, F401
+from tests.stage_scenes import floor_scene as _floor_scene  # noqa: E402
+from tests.stage_scenes import render_settings as _settings  # noqa: E402
+from tests.stage_scenes import two_camera_scene as _two_camera_scene  # noqa: E402
 
 
-def _two_camera_scene():
-    """Two cameras; ``Top`` (first in traversal) sees the lit floor, ``Below`` its unlit underside."""
-    b, _ = _floor_scene()
-    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
-    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
-    b.stage.RemovePrim("/World/Camera")
-    return b
+def _plain_geometry_layer(path):
+    from tests.stage_scenes import plain_geometry_layer
 
-
-def _settings(b, path, camera=None, resolution=(8, 8)):
-    from pxr import Gf, UsdRender
-
-    s = UsdRender.Settings.Define(b.stage, path)
-    s.CreateResolutionAttr(Gf.Vec2i(*resolution))
-    if camera:
-        s.CreateCameraRel().SetTargets([camera])
-    return s
+    return plain_geometry_layer(path, untyped=False)
 
 
 def _kd(desc, prim):
@@ -242,15 +222,6 @@ def test_settings_camera_purposes_and_display_color_render_as_the_reference(tmp_
 
 
 # -- payloads and references of plain USD -----------------------------------------------------------------------------
-
-def _plain_geometry_layer(path):
-    """A layer whose default prim ``World`` holds the lit floor of :func:`_floor_scene` and its material."""
-    b, _ = _floor_scene()
-    for child in ("Camera", "Sun"):
-        b.stage.RemovePrim(f"/World/{child}")
-    b.stage.SetDefaultPrim(b.stage.GetPrimAtPath("/World"))
-    return b.write(path)
-
 
 @pytest.mark.parametrize("type_name", ["", "Xform"])
 @pytest.mark.parametrize("arc", ["reference", "payload"])

@@ -12,18 +12,11 @@ import numpy as np
 import pytest
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
-from nasset_reference_renderer.testscenes import SceneBuilder
-
-E, THETA = 3.0, np.radians(35)
-RED = (0.9, 0.2, 0.1)
-
-
-def _floor_scene(albedo=(0.6, 0.6, 0.6)):
-    b = SceneBuilder()
-    b.camera((0, 3, 0.01), (0, 0, 0), focal=50)
-    floor = b.quad("Floor", (0, 0, 0), 10.0, diffuse=albedo)
-    b.distant("Sun", (np.sin(THETA), np.cos(THETA), 0), E)
-    return b, floor.GetPrim()
+from tests.stage_scenes import RED, THETA, E  # noqa: F401
+from tests.stage_scenes import floor_scene as _floor_scene
+from tests.stage_scenes import plain_geometry_layer as _plain_geometry_layer
+from tests.stage_scenes import render_settings as _settings
+from tests.stage_scenes import two_camera_scene as _two_camera_scene
 
 
 def _render(b, tmp_path, name="s.usda", expect_warning=False):
@@ -105,27 +98,6 @@ def test_display_color_of_an_ancestor_is_inherited(tmp_path):
 
 # -- render settings: which camera, which settings prim (UsdRender) ---------------------------------------------------
 
-def _two_camera_scene():
-    """Two cameras; ``Top`` (first in traversal) sees the lit floor, ``Below`` its unlit underside."""
-    b, _ = _floor_scene()
-    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
-    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
-    b.stage.RemovePrim("/World/Camera")
-    return b
-
-
-def _settings(b, path, camera=None, resolution=(8, 8), **attrs):
-    from pxr import Gf, UsdRender
-
-    s = UsdRender.Settings.Define(b.stage, path)
-    s.CreateResolutionAttr(Gf.Vec2i(*resolution))
-    if camera:
-        s.CreateCameraRel().SetTargets([camera])
-    for name, value in attrs.items():
-        s.GetPrim().GetAttribute(name).Set(value)
-    return s
-
-
 def test_render_settings_camera_is_the_camera_rendered(tmp_path):
     """``RenderSettings.camera`` names the camera (Houdini, Omniverse and the converters write it); the first camera
     in traversal order was rendered instead, with a warning that there were two."""
@@ -191,17 +163,6 @@ def test_unhonoured_render_settings_are_warned_by_name(tmp_path):
 
 
 # -- composition: what USD could not compose, and untyped prims placing plain USD -------------------------------------
-
-def _plain_geometry_layer(path):
-    """A layer whose default prim is an untyped ``def "World"`` holding the lit floor of :func:`_floor_scene` and its
-    material (no camera, no light)."""
-    b, _ = _floor_scene()
-    for child in ("Camera", "Sun"):
-        b.stage.RemovePrim(f"/World/{child}")
-    b.stage.GetPrimAtPath("/World").SetTypeName("")
-    b.stage.SetDefaultPrim(b.stage.GetPrimAtPath("/World"))
-    return b.write(path)
-
 
 @pytest.mark.parametrize("arc", ["reference", "payload"])
 def test_untyped_prim_referencing_plain_usd_renders_it(tmp_path, arc):

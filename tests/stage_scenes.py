@@ -1,0 +1,55 @@
+"""Small USD stages that both renderers' stage-reading tests build (tests/renderer/test_usd_stages.py and
+tests/mitsuba_renderer/test_mitsuba_stages.py): a diffuse floor seen from above under a delta DistantLight of
+irradiance E at angle THETA, whose radiance is ``albedo E cos(THETA) / pi``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nasset_reference_renderer.testscenes import SceneBuilder
+
+E, THETA = 3.0, np.radians(35)
+RED = (0.9, 0.2, 0.1)
+
+
+def floor_scene(albedo=(0.6, 0.6, 0.6)):
+    """(SceneBuilder, the floor prim): camera /World/Camera above the floor, the sun /World/Sun."""
+    b = SceneBuilder()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50)
+    floor = b.quad("Floor", (0, 0, 0), 10.0, diffuse=albedo)
+    b.distant("Sun", (np.sin(THETA), np.cos(THETA), 0), E)
+    return b, floor.GetPrim()
+
+
+def two_camera_scene():
+    """Two cameras; ``Top`` (first in traversal) sees the lit floor, ``Below`` its unlit underside."""
+    b, _ = floor_scene()
+    b.camera((0, 3, 0.01), (0, 0, 0), focal=50, name="Top")
+    b.camera((0, -3, 0.01), (0, 0, 0), focal=50, name="Below")
+    b.stage.RemovePrim("/World/Camera")
+    return b
+
+
+def render_settings(b, path, camera=None, resolution=(8, 8), **attrs):
+    """A UsdRender.Settings prim at ``path`` with ``resolution``, its ``camera`` rel, and schema attributes ``attrs``."""
+    from pxr import Gf, UsdRender
+
+    s = UsdRender.Settings.Define(b.stage, path)
+    s.CreateResolutionAttr(Gf.Vec2i(*resolution))
+    if camera:
+        s.CreateCameraRel().SetTargets([camera])
+    for name, value in attrs.items():
+        s.GetPrim().GetAttribute(name).Set(value)
+    return s
+
+
+def plain_geometry_layer(path, *, untyped: bool = True):
+    """A layer whose default prim ``World`` (untyped, or the builder's Xform) holds the lit floor of
+    :func:`floor_scene` and its material (no camera, no light)."""
+    b, _ = floor_scene()
+    for child in ("Camera", "Sun"):
+        b.stage.RemovePrim(f"/World/{child}")
+    if untyped:
+        b.stage.GetPrimAtPath("/World").SetTypeName("")
+    b.stage.SetDefaultPrim(b.stage.GetPrimAtPath("/World"))
+    return b.write(path)
