@@ -100,6 +100,34 @@ def test_torch_triplane_lookup_matches_sdk_encoding():
     assert np.max(np.abs(f_torch - f_sdk)) < 1e-5
 
 
+def test_decoder_features_are_the_documented_functions():
+    """The exported decoder's parameter-free feature step (encoding "lobes", spec/bake.md#training) appends
+    n.wi, n.wo, n.h, wo.wi and exp(k (n.h - 1)), h = normalise(wo + wi): checked against numpy on rows with
+    grazing, below-horizon and opposite directions (h undefined), and through onnxruntime (the graph assets store)."""
+    from nasset_bakers.train.rna import LOBE_SHARPNESS, export_onnx, onnx_parity
+
+    rng = np.random.default_rng(5)
+    unit = lambda a: a / np.linalg.norm(a, axis=1, keepdims=True)  # noqa: E731
+    n, wo, wi = (unit(rng.normal(size=(400, 3))) for _ in range(3))
+    n[0], wo[0], wi[0] = [0, 0, 1], [1, 0, 0], [0, 1, 0]  # both grazing
+    n[1], wo[1], wi[1] = [0, 0, 1], [0, 0, -1], [0, 0, 1]  # wo below the horizon
+    wi[2] = -wo[2]  # wo + wi = 0
+    model = build_model("tiny", seed=1).eval()
+    c = model.in_width - 12
+    row = np.concatenate([rng.normal(size=(400, c + 3)), n, wo, wi], 1).astype(np.float32)
+    with torch.no_grad():
+        got = model.decoder[0](torch.from_numpy(row)).numpy()
+    assert np.array_equal(got[:, :model.in_width], row)  # the contract's row passes through unchanged
+    h = wo + wi
+    h = h / np.sqrt((h * h).sum(1, keepdims=True) + 1e-8)
+    dot = lambda a, b: (a * b).sum(1)  # noqa: E731
+    nh = dot(n, h)
+    want = [dot(n, wi), dot(n, wo), nh, dot(wo, wi)] + [np.exp(k * (nh - 1)) for k in LOBE_SHARPNESS]
+    assert np.all(np.isfinite(got))
+    np.testing.assert_allclose(got[:, model.in_width:], np.stack(want, 1), atol=2e-6)
+    assert onnx_parity(model, export_onnx(model)) < 1e-5
+
+
 def test_unit_box_matches_domain(tiny_bake):
     out, _ = tiny_bake
     asset = Asset.open(out)
