@@ -151,7 +151,7 @@ def bake(
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
         say(f"warning: {warning}")
-    if far := msc.far_from_origin(mi, shapes):
+    if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
     if workers is None:
         views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
@@ -316,7 +316,8 @@ def _view_renderer(mi, shapes, bshapes, center, radius, dset):
     from nasset_converters.mitsuba import neupress_dataset as nd
     from nasset_converters.mitsuba import scene as msc
 
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth)
+    origin = msc.move_to_origin(mi, shapes)  # Mitsuba's ray offset far from the origin (spec/bake.md#far-from-the-origin)
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth, origin=origin)
     renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
     return lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val")
 

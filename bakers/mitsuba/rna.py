@@ -148,7 +148,7 @@ def bake(
         say(f"warning: {warning}")
     if clear := msc.see_through(mi, shapes):
         say(see_through_line("shape(s)", clear, msc.SEE_THROUGH_SHARE))
-    if far := msc.far_from_origin(mi, shapes):
+    if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
     if mirrors := msc.mirror_shapes(mi, shapes):
         why = (f"their BSDFs ({', '.join(sorted(set(msc.bsdf_names([s for s in shapes if s.id() in mirrors]))))}) reflect "
@@ -290,7 +290,9 @@ def _view_renderer(mi, shapes, geo, center, radius, dset):
     from nasset_converters.mitsuba import scene as msc
     from nasset_sdk.geometry import CurvesGeometry
 
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
+    origin = msc.move_to_origin(mi, shapes)  # Mitsuba's ray offset far from the origin (spec/bake.md#far-from-the-origin)
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth,
+                            origin=origin)
     fibers = isinstance(geo, CurvesGeometry)  # surfaces: V offset as the renderer offsets it (spec/bake.md#data)
     renderer = ds.Renderer(mi, iso, dset, caster=Caster("fiber", geo) if fibers else None,
                            shadows=None if fibers else Caster("surface", geo))
