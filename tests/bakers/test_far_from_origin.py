@@ -155,3 +155,26 @@ def test_a_grid_medium_far_out_stays_and_is_warned(tmp_path):
     assert msc.far_from_origin(mi, shapes)
     np.testing.assert_array_equal(msc.move_to_origin(mi, shapes), np.zeros(3))
     assert float(shapes[0].bbox().min[0]) > 9000
+
+
+def test_fibers_far_out_keep_mitsubas_curves_on_the_prisms(tmp_path):
+    """An rna fiber bake far out: Mitsuba's moved curves and the prisms the inputs are cast on (scene frame) cover the
+    same pixels, the hit points are Mitsuba's within a fibre width, and the targets see light."""
+    from nasset_bakers.mitsuba.rna import _view_renderer
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba.hair_example import write_example_scene
+
+    mi = cm.load_mitsuba()
+    xml = write_example_scene(tmp_path / "ex", "tiny")
+    text = xml.read_text().replace('<string name="filename" value="curves/hair.txt"/>',
+                                   '<string name="filename" value="curves/hair.txt"/><transform name="to_world">'
+                                   '<translate x="5000" z="-5000"/></transform>')
+    xml.write_text(text)
+    shapes = msc.pick_shapes(msc.load_scene(mi, xml), ["hair"], curves=True)
+    assert msc.far_from_origin(mi, shapes) and msc.far_for_bake(mi, shapes) is None
+    _, geo = msc.asset_geometry(mi, shapes)
+    center, radius = msc.bounding_sphere(geo)
+    v = _view_renderer(mi, shapes, geo, center, radius, ds.DataSettings(views=1, val_views=1, res=48, spp=4))("train", 0)
+    assert len(v["pix"]) > 50 and 0 <= int(v["disagree"]) < 0.1 * int(v["covered"])
+    assert np.abs(np.asarray(shapes[0].bbox().min)).max() < 100 and np.abs(v["x"]).max() > 4000
+    assert np.isfinite(v["rgb"]).all() and v["rgb"].mean() > 0
