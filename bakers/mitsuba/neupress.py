@@ -24,6 +24,7 @@ from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import (
     accuracy_lines,
+    check_geometry_scale,
     check_options,
     clamp_lines,
     clamp_removed,
@@ -136,6 +137,7 @@ def bake(
     bshapes, eta, alpha = nd.boundary_of(mi, shapes, file=str(scene))
     with warnings_said(say):
         geo = msc.mesh_geometry(mi, bshapes)
+    check_geometry_scale(geo, [b.id() for b in bshapes], scene)
     center, radius = msc.bounding_sphere(geo)
     dset = replace(nd.NeupressDataSettings(), **DATA_PRESETS[size], seed=seed)
     if views is not None:

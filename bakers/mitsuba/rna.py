@@ -21,6 +21,7 @@ from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import (
     accuracy_lines,
+    check_geometry_scale,
     check_options,
     clamp_lines,
     clamp_removed,
@@ -123,6 +124,7 @@ def bake(
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
     with warnings_said(say):
         asset_variant, geo = msc.asset_geometry(mi, shapes)
+    check_geometry_scale(geo, asset_ids, scene)
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)
     if light_angle is None:

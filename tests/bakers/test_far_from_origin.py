@@ -30,7 +30,7 @@ TRANSLUCENT = """<scene version="3.0.0">
 <transform name="to_world"><scale value="{s}"/>{place}</transform></shape></scene>"""
 #: (unit, offset): the 0.6-unit asset 10^4 units out (Mitsuba's offset 0.89 units, about 270 % of its radius), and the
 #: same asset in centimetres (9.6 cm) 5000 cm out (offset 0.45 cm, 8 %)
-PLACEMENTS = [(1.0, 1e4), (16.0, 5000.0)]
+PLACEMENTS = [(1.0, 800.0), (16.0, 5000.0)]
 
 
 def _scene(tmp_path, kind: str, unit: float, offset: float):
@@ -178,3 +178,23 @@ def test_fibers_far_out_keep_mitsubas_curves_on_the_prisms(tmp_path):
     assert len(v["pix"]) > 50 and 0 <= int(v["disagree"]) < 0.1 * int(v["covered"])
     assert np.abs(np.asarray(shapes[0].bbox().min)).max() < 100 and np.abs(v["x"]).max() > 4000
     assert np.isfinite(v["rgb"]).all() and v["rgb"].mean() > 0
+
+
+@pytest.mark.parametrize("kind", ["rna", "neupress", "8dna"])
+def test_an_asset_beyond_float32_rendering_is_refused_before_rendering(tmp_path, kind):
+    """The asset's object space is the scene's: 10^4 units out, a 0.6-unit object's geometry fails the validator's
+    GEOMETRY_SCALE (diagonal >= 1e-3 x the largest coordinate; a float32 renderer loses it). Before, rna and neupress
+    rendered, trained and wrote an asset `nasset validate` refuses; 8dna refused it only after training
+    (CONVERT_TRAINING). Now every Mitsuba bake stops in its first stage, naming the shapes, before any view."""
+    import nasset_bakers.mitsuba.eightdna  # noqa: F401 - each baker module registers itself
+    import nasset_bakers.mitsuba.neupress  # noqa: F401
+    import nasset_bakers.mitsuba.rna  # noqa: F401
+    from nasset_bakers.registry import baker_for
+    from nasset_sdk.errors import NassetError
+
+    scene = _scene(tmp_path, "rna" if kind == "rna" else "neupress", 1.0, 1e4)
+    ids = ["plate", "block"] if kind == "rna" else ["c"]
+    with pytest.raises(NassetError) as exc:
+        baker_for(kind, scene, None)(scene, ids, tmp_path / "a.usdc", size="tiny", quiet=True)
+    assert exc.value.code == "GEOMETRY_SCALE" and repr(ids[0]) in str(exc.value) and "origin" in str(exc.value)
+    assert not (tmp_path / "a.usdc").exists() and not (tmp_path / "a.usdc.bake" / "train").exists()
