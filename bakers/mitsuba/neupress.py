@@ -153,6 +153,7 @@ def bake(
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
         say(f"warning: {warning}")
+    origin = msc.render_origin(mi, shapes)  # where _view_renderer moves them from (spec/bake.md#far-from-the-origin)
     if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
     if workers is None:
@@ -167,6 +168,8 @@ def bake(
     t = time.perf_counter()
     store = ds.DatasetDir(work)
     meta = {**ds.settings_digest(scene, asset_ids, dset, mi.variant()), "kind": "neupress"}
+    if origin.any():  # views rendered moved (spec/bake.md#far-from-the-origin) are not those of a folder made before
+        meta["render_origin"] = origin.tolist()
     store.prepare(meta)
     per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="render views", work=work, quiet=quiet,
                               say=say, workers=workers, cluster=cluster)

@@ -150,6 +150,7 @@ def bake(
         say(f"warning: {warning}")
     if clear := msc.see_through(mi, shapes):
         say(see_through_line("shape(s)", clear, msc.SEE_THROUGH_SHARE))
+    origin = msc.render_origin(mi, shapes)  # where _view_renderer moves them from (spec/bake.md#far-from-the-origin)
     if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
     if mirrors := msc.mirror_shapes(mi, shapes):
@@ -172,6 +173,8 @@ def bake(
     t = time.perf_counter()
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(scene, asset_ids, dset, mi.variant())
+    if origin.any():  # views rendered moved (spec/bake.md#far-from-the-origin) are not those of a folder made before
+        meta["render_origin"] = origin.tolist()
     store.prepare(meta)
     per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="render views", work=work, quiet=quiet,
                               say=say, workers=workers, cluster=cluster)

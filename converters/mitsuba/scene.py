@@ -651,34 +651,41 @@ def exact_origin(points: np.ndarray) -> np.ndarray:
     return np.where(exact, c, 0.0)
 
 
-def _positions_key(params) -> str:
-    return "vertex_positions" if "vertex_positions" in params else "control_points"
+def _positions(mi, shape) -> tuple[object, str, int]:
+    """``(parameters, key, width)`` of a shape's positions: mesh vertices [N, 3] or curve control points [N, 4]."""
+    params = mi.traverse(shape)
+    key = "vertex_positions" if "vertex_positions" in params else "control_points"
+    return params, key, 4 if key == "control_points" else 3
 
 
-def move_to_origin(mi, shapes) -> np.ndarray:
-    """Translate ``shapes`` in place by ``-c`` and return c [3] when they lie far from the origin for their size
-    (:func:`_far`) and nothing of them depends on where they lie (:func:`unmovable`); else leave them and return zeros.
-
-    Mitsuba offsets the rays it spawns off a surface by (1 + max |p|) x RayEpsilon: far out, through thin parts of the
-    asset (a 0.6-unit two-part object 10^4 units out lost its shadows and read +9 % of the energy of its held-out
-    targets at the origin, a translucent cube 99.6 % less, spec/bake.md#far-from-the-origin). Moved, the asset renders
-    as at the origin: callers give rays in the scene's frame minus c and add c to the points Mitsuba returns
-    (:class:`IsolatedAsset` ``origin``). c is :func:`exact_origin` of the shapes' positions (mesh vertices, curve
-    control points), so the moved shapes are the same float32 surface; directions, normals and media do not change
-    (a mesh's vertex normals are put back: Mitsuba recomputes them when its positions change). Call it once per
-    loaded scene: it moves the shapes again on a second call."""
+def render_origin(mi, shapes) -> np.ndarray:
+    """Where :func:`move_to_origin` moves ``shapes`` from: c [3] when they lie far from the origin for their size
+    (:func:`_far`) and nothing of them depends on where they lie (:func:`unmovable`), else zeros. c is
+    :func:`exact_origin` of their positions (mesh vertices, curve control points)."""
     if _far(mi, shapes) is None or unmovable(shapes):
         return np.zeros(3)
     pts = []
     for s in shapes:
-        params = mi.traverse(s)
-        key = _positions_key(params)
-        pts.append(np.asarray(params[key], np.float32).reshape(-1, 4 if key == "control_points" else 3)[:, :3])
-    c = exact_origin(np.concatenate(pts))
+        params, key, width = _positions(mi, s)
+        pts.append(np.asarray(params[key], np.float32).reshape(-1, width)[:, :3])
+    return exact_origin(np.concatenate(pts))
+
+
+def move_to_origin(mi, shapes) -> np.ndarray:
+    """Translate ``shapes`` in place by ``-c`` (c = :func:`render_origin`; zeros: left where they are) and return c.
+
+    Mitsuba offsets the rays it spawns off a surface by (1 + max |p|) x RayEpsilon: far out, through thin parts of the
+    asset (a 0.6-unit two-part object 800 units out read +3.1 % of the energy of its held-out targets at the origin, a
+    translucent slab -95 %, spec/bake.md#far-from-the-origin). Moved, the asset renders as at the origin: callers give
+    rays in the scene's frame minus c and add c to the points Mitsuba returns (:class:`IsolatedAsset` ``origin``). c
+    keeps every position exact, so the moved shapes are the same float32 surface; directions, normals and media do not
+    change (a mesh's vertex normals are put back: Mitsuba recomputes them when its positions change). Call it once per
+    loaded scene: it moves the shapes again on a second call."""
+    c = render_origin(mi, shapes)
+    if not c.any():
+        return c
     for s in shapes:
-        params = mi.traverse(s)
-        key = _positions_key(params)
-        width = 4 if key == "control_points" else 3
+        params, key, width = _positions(mi, s)
         p = np.asarray(params[key], np.float64).reshape(-1, width)
         p[:, :3] -= c
         normals = np.array(params["vertex_normals"], np.float32) if "vertex_normals" in params else None

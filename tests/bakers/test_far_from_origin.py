@@ -201,3 +201,23 @@ def test_an_asset_beyond_float32_rendering_is_refused_before_rendering(tmp_path,
         baker_for(kind, scene, None)(scene, ids, tmp_path / "a.usdc", size="tiny", quiet=True)
     assert exc.value.code == "GEOMETRY_SCALE" and repr(ids[0]) in str(exc.value) and "origin" in str(exc.value)
     assert not (tmp_path / "a.usdc").exists() and not (tmp_path / "a.usdc.bake" / "train").exists()
+
+
+def test_a_dataset_folder_rendered_in_place_is_not_resumed_moved(tmp_path):
+    """A far asset's views are rendered moved to the origin: a work folder from before (its views rendered in place,
+    its meta.json without ``render_origin``) is refused on resume (CONVERT_DATASET naming the key), not mixed in."""
+    import json
+
+    from nasset_bakers.mitsuba.rna import bake
+    from nasset_sdk.errors import NassetError
+
+    scene = _scene(tmp_path, "rna", 16.0, 5000.0)
+    out = tmp_path / "a.usdc"
+    bake(scene, ["plate", "block"], out, size="tiny", views=1, res=8, epochs=1, quiet=True)
+    meta_path = tmp_path / "a.usdc.bake" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    assert np.abs(np.array(meta.pop("render_origin")) - [5000, 1250, -5000]).max() < 5
+    meta_path.write_text(json.dumps(meta))
+    with pytest.raises(NassetError) as exc:
+        bake(scene, ["plate", "block"], out, size="tiny", views=1, res=8, epochs=1, quiet=True)
+    assert exc.value.code == "CONVERT_DATASET" and "render_origin" in str(exc.value)
