@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from nasset_sdk.errors import UsageError, error
+from nasset_sdk.geometry import scale_problem
 from nasset_sdk.images import output_folder
 
 
@@ -133,6 +134,17 @@ def check_options(size: str, presets, output, **counts) -> Path:
 
 
 # -- summary lines every baker prints ---------------------------------------------------------------
+def check_geometry_scale(geo, shapes, file) -> None:
+    """Refuse, before any rendering, shapes whose geometry (the asset's object space is the scene's) the validator
+    would refuse as ``GEOMETRY_SCALE`` (:func:`nasset_sdk.geometry.scale_problem`: an object farther from the origin
+    than 1000 x its size, beyond what a float32 renderer resolves): before, the bake rendered and trained and then
+    wrote an asset that ``nasset validate`` refuses (8dna: refused it after training)."""
+    if why := scale_problem(*geo.bounds()):
+        raise error("GEOMETRY_SCALE", f"asset shapes {list(shapes)} would make an invalid asset: {why} "
+                    "(spec/security.md#bounds); move the scene towards the origin, or bake the object placed there and "
+                    "place the asset back in the scene with a transform", file=str(file))
+
+
 def dataset_line(s: dict) -> str:
     """``  dataset: V views at R^2, S spp + H held-out at ... -> N train / M held-out samples`` of a summary dict."""
     return (f"  dataset: {s['views']} views at {s['res']}^2, {s['spp']} spp + {s['val_views']} held-out at "

@@ -9,7 +9,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import limits
 from .errors import UsageError
+
+
+def scale_problem(lo, hi) -> str | None:
+    """Why geometry of bounding box ``lo``..``hi`` (object space) is beyond float32 ray casting, the GEOMETRY_SCALE rule
+    of spec/security.md#bounds: a coordinate above MAX_GEOMETRY_COORDINATE, or a diagonal below MIN_GEOMETRY_SIZE or below
+    MIN_GEOMETRY_SIZE_RATIO x the largest |coordinate| (an asset far from its origin for its size); None when within."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    reach = float(max(np.abs(lo).max(), np.abs(hi).max()))
+    diag = float(np.linalg.norm(hi - lo))
+    if reach > limits.MAX_GEOMETRY_COORDINATE or diag < limits.MIN_GEOMETRY_SIZE or diag < limits.MIN_GEOMETRY_SIZE_RATIO * reach:
+        return (f"bounding box {[lo.tolist(), hi.tolist()]} (diagonal {diag:.3g}): coordinates must stay within "
+                f"{limits.MAX_GEOMETRY_COORDINATE:g} and the diagonal be >= {limits.MIN_GEOMETRY_SIZE:g} and >= "
+                f"{limits.MIN_GEOMETRY_SIZE_RATIO:g} x the largest |coordinate|")
+    return None
 
 
 @dataclass

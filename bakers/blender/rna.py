@@ -28,7 +28,7 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import accuracy_lines, dataset_line, psnr_line, see_through_line, times_line, worker_lines
+from nasset_bakers.stages import accuracy_lines, check_geometry_scale, dataset_line, psnr_line, see_through_line, times_line, worker_lines
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
@@ -89,6 +89,7 @@ def bake(
         source_key, scene_label = ds.file_sha256(scene), str(scene)
     objs = bsc.pick_objects(asset_ids or [], file=scene_label)
     variant, geo, notes = bsc.asset_geometry(objs, file=scene_label)
+    check_geometry_scale(geo, asset_ids, scene_label)
     for n in notes:
         say(f"warning: {n}")
     if clear := (bsc.see_through(objs) if variant == "surface" else []):

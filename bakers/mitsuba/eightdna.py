@@ -28,7 +28,7 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import check_options, finite, progress_bar, times_line, warnings_said, worker_lines
+from nasset_bakers.stages import check_geometry_scale, check_options, finite, progress_bar, times_line, warnings_said, worker_lines
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
@@ -212,6 +212,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
                                             baked_depth=SAMPLER_PRESETS[size]["max_depth"])
     with warnings_said(say):
         geo = msc.mesh_geometry(mi, shapes)
+    check_geometry_scale(geo, asset_ids, scene)
     eta, alpha = boundary_of(mi, shapes)
     builder = AssetBuilder("8dna", variant="surface")
     builder.set_geometry(geo)

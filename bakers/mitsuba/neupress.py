@@ -24,6 +24,7 @@ from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import (
     accuracy_lines,
+    check_geometry_scale,
     check_options,
     clamp_lines,
     clamp_removed,
@@ -136,6 +137,7 @@ def bake(
     bshapes, eta, alpha = nd.boundary_of(mi, shapes, file=str(scene))
     with warnings_said(say):
         geo = msc.mesh_geometry(mi, bshapes)
+    check_geometry_scale(geo, [b.id() for b in bshapes], scene)
     center, radius = msc.bounding_sphere(geo)
     dset = replace(nd.NeupressDataSettings(), **DATA_PRESETS[size], seed=seed)
     if views is not None:
@@ -151,7 +153,8 @@ def bake(
     dset = replace(dset, max_depth=msc.training_depth(msc_scene.integrator(), dset.max_depth))
     for warning in msc.bake_media_warnings(msc_scene, asset_ids, dset.max_depth):
         say(f"warning: {warning}")
-    if far := msc.far_from_origin(mi, shapes):
+    origin = msc.render_origin(mi, shapes)  # where _view_renderer moves them from (spec/bake.md#far-from-the-origin)
+    if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
     if workers is None:
         views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
@@ -165,6 +168,8 @@ def bake(
     t = time.perf_counter()
     store = ds.DatasetDir(work)
     meta = {**ds.settings_digest(scene, asset_ids, dset, mi.variant()), "kind": "neupress"}
+    if origin.any():  # views rendered moved (spec/bake.md#far-from-the-origin) are not those of a folder made before
+        meta["render_origin"] = origin.tolist()
     store.prepare(meta)
     per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="render views", work=work, quiet=quiet,
                               say=say, workers=workers, cluster=cluster)
@@ -316,7 +321,8 @@ def _view_renderer(mi, shapes, bshapes, center, radius, dset):
     from nasset_converters.mitsuba import neupress_dataset as nd
     from nasset_converters.mitsuba import scene as msc
 
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth)
+    origin = msc.move_to_origin(mi, shapes)  # Mitsuba's ray offset far from the origin (spec/bake.md#far-from-the-origin)
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth, origin=origin)
     renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
     return lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val")
 

@@ -21,6 +21,7 @@ from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import (
     accuracy_lines,
+    check_geometry_scale,
     check_options,
     clamp_lines,
     clamp_removed,
@@ -123,6 +124,7 @@ def bake(
     shapes = msc.pick_shapes(msc_scene, asset_ids or [], file=str(scene), curves=True)
     with warnings_said(say):
         asset_variant, geo = msc.asset_geometry(mi, shapes)
+    check_geometry_scale(geo, asset_ids, scene)
     center, radius = msc.bounding_sphere(geo)
     blocks = msc.blocks_delta_light(shapes)
     if light_angle is None:
@@ -148,7 +150,8 @@ def bake(
         say(f"warning: {warning}")
     if clear := msc.see_through(mi, shapes):
         say(see_through_line("shape(s)", clear, msc.SEE_THROUGH_SHARE))
-    if far := msc.far_from_origin(mi, shapes):
+    origin = msc.render_origin(mi, shapes)  # where _view_renderer moves them from (spec/bake.md#far-from-the-origin)
+    if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
     if mirrors := msc.mirror_shapes(mi, shapes):
         why = (f"their BSDFs ({', '.join(sorted(set(msc.bsdf_names([s for s in shapes if s.id() in mirrors]))))}) reflect "
@@ -170,6 +173,8 @@ def bake(
     t = time.perf_counter()
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(scene, asset_ids, dset, mi.variant())
+    if origin.any():  # views rendered moved (spec/bake.md#far-from-the-origin) are not those of a folder made before
+        meta["render_origin"] = origin.tolist()
     store.prepare(meta)
     per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="render views", work=work, quiet=quiet,
                               say=say, workers=workers, cluster=cluster)
@@ -290,7 +295,9 @@ def _view_renderer(mi, shapes, geo, center, radius, dset):
     from nasset_converters.mitsuba import scene as msc
     from nasset_sdk.geometry import CurvesGeometry
 
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth)
+    origin = msc.move_to_origin(mi, shapes)  # Mitsuba's ray offset far from the origin (spec/bake.md#far-from-the-origin)
+    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth,
+                            origin=origin)
     fibers = isinstance(geo, CurvesGeometry)  # surfaces: V offset as the renderer offsets it (spec/bake.md#data)
     renderer = ds.Renderer(mi, iso, dset, caster=Caster("fiber", geo) if fibers else None,
                            shadows=None if fibers else Caster("surface", geo))

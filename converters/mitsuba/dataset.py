@@ -100,8 +100,9 @@ class Renderer:
 
     # -- helpers -------------------------------------------------------------------------------
     def _ray(self, o, d):
+        """Rays from scene-frame origins ``o`` (moved into the isolated scenes' frame, IsolatedAsset.origin)."""
         mi = self.mi
-        o = np.ascontiguousarray(o, np.float32)
+        o = np.ascontiguousarray(self.iso.to_render(o), np.float32)
         d = np.ascontiguousarray(d, np.float32)
         return mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
 
@@ -140,7 +141,7 @@ class Renderer:
         valid = si.is_valid()
         dr.eval(valid, si.p, si.sh_frame.n)
         mask = np.asarray(valid, bool)[:n]
-        return mask, self._np3(si.p)[:n], self._np3(si.sh_frame.n)[:n]
+        return mask, self.iso.to_scene(self._np3(si.p)[:n]).astype(np.float32), self._np3(si.sh_frame.n)[:n]
 
     def visibility(self, o, d, wi) -> np.ndarray:
         """1 where the light direction wi is not blocked by the asset at the primary hit of (o, d)."""
@@ -151,7 +152,7 @@ class Renderer:
         size = self._bucket(n)
         si = self.iso.geometry_scene.ray_intersect(self._ray(self._pad(o, size), self._pad(d, size)))
         if self.shadows is not None:
-            return self.shadows.shadow(self._np3(si.p)[:n], self._np3(si.n)[:n], wi)
+            return self.shadows.shadow(self.iso.to_scene(self._np3(si.p)[:n]), self._np3(si.n)[:n], wi)
         w = np.ascontiguousarray(self._pad(np.asarray(wi, np.float32), size))
         shadow = si.spawn_ray(mi.Vector3f(w[:, 0], w[:, 1], w[:, 2]))
         blocked = np.asarray(self.iso.geometry_scene.ray_test(shadow), bool)[:n]
@@ -199,7 +200,7 @@ class Renderer:
     # -- scalar fallback (slow: one ray per call) ----------------------------------------------
     def _sray(self, o, d):
         mi = self.mi
-        return mi.Ray3f(mi.Point3f(*map(float, o)), mi.Vector3f(*map(float, d)))
+        return mi.Ray3f(mi.Point3f(*map(float, self.iso.to_render(o))), mi.Vector3f(*map(float, d)))
 
     def _hits_scalar(self, o, d):
         n = len(o)
@@ -210,7 +211,7 @@ class Renderer:
             si = self.iso.geometry_scene.ray_intersect(self._sray(o[i], d[i]))
             if si.is_valid():
                 mask[i] = True
-                x[i] = list(si.p)
+                x[i] = self.iso.to_scene(list(si.p))
                 nn[i] = list(si.sh_frame.n)
         return mask, x, nn
 
@@ -221,7 +222,7 @@ class Renderer:
         for i in range(len(o)):
             si = self.iso.geometry_scene.ray_intersect(self._sray(o[i], d[i]))
             if self.shadows is not None:
-                x[i], ng[i] = list(si.p), list(si.n)
+                x[i], ng[i] = self.iso.to_scene(list(si.p)), list(si.n)
             else:
                 out[i] = not self.iso.geometry_scene.ray_test(si.spawn_ray(mi.Vector3f(*map(float, wi[i]))))
         return self.shadows.shadow(x, ng, wi) if self.shadows is not None else out

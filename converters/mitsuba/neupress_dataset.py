@@ -108,8 +108,9 @@ class SubsurfaceRenderer:
         return np.concatenate([a, pad])
 
     def _ray(self, o, d):
+        """Rays from scene-frame origins ``o`` (moved into the isolated scenes' frame, IsolatedAsset.origin)."""
         mi = self.mi
-        o = np.ascontiguousarray(o, np.float32)
+        o = np.ascontiguousarray(self.iso.to_render(o), np.float32)
         d = np.ascontiguousarray(d, np.float32)
         return mi.Ray3f(mi.Point3f(o[:, 0], o[:, 1], o[:, 2]), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
 
@@ -129,7 +130,8 @@ class SubsurfaceRenderer:
         si = self.iso.geometry_scene.ray_intersect(self._ray(self._pad(o, size), self._pad(d, size)))
         valid = si.is_valid()
         dr.eval(valid, si.p, si.sh_frame.n)
-        return np.asarray(valid, bool)[:n], self._np3(si.p)[:n].astype(np.float32), self._np3(si.sh_frame.n)[:n].astype(np.float32)
+        x = self.iso.to_scene(self._np3(si.p)[:n]).astype(np.float32)
+        return np.asarray(valid, bool)[:n], x, self._np3(si.sh_frame.n)[:n].astype(np.float32)
 
     def transport(self, o, d, wi, spp: int, seed: int, *, clamp: float | None = None, stats: dict | None = None) -> np.ndarray:
         """Mean subsurface-only radiance [N,3] over ``spp`` paths per pixel; ``wi`` [N,3] each pixel's light.

@@ -574,16 +574,14 @@ def box_offset(box, points) -> float:
     return float(np.abs(a - box).max()) / diag
 
 
-#: Mitsuba's secondary-ray offset, as a share of the asset's bounding radius, above which :func:`far_from_origin` warns
+#: Mitsuba's secondary-ray offset, as a share of the asset's bounding radius, above which shapes lie far from the origin
 FAR_OFFSET_SHARE = 0.01
 
 
-def far_from_origin(mi, shapes) -> str | None:
-    """A warning when ``shapes`` lie so far from the origin for their size that Mitsuba's self-intersection offset,
-    (1 + max |p|) x RayEpsilon (8.9e-5) along the normal, exceeds FAR_OFFSET_SHARE of their bounding radius: Mitsuba then
-    starts secondary rays that far off the surface, through thin parts, so their shadows on themselves and their
-    interreflections go missing in its images (the bake's transport targets and the benches' reference alike). Found
-    on a 0.6-unit cube 10^4 units from the origin: an offset of 0.9 units."""
+def _far(mi, shapes) -> tuple[np.ndarray, np.ndarray, float, float] | None:
+    """``(lo, hi, radius, offset)`` of ``shapes`` whose world box lies so far from the origin for its size that Mitsuba's
+    self-intersection offset (1 + max |p|) x RayEpsilon (8.9e-5) along the normal exceeds FAR_OFFSET_SHARE of their
+    bounding radius; None otherwise."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for s in shapes:
         b = s.bbox()
@@ -593,12 +591,110 @@ def far_from_origin(mi, shapes) -> str | None:
         return None
     radius = 0.5 * float(np.linalg.norm(hi - lo))
     offset = (1.0 + float(np.max(np.abs(np.stack([lo, hi]))))) * float(mi.math.RayEpsilon)
-    if offset <= FAR_OFFSET_SHARE * radius:
-        return None
+    return None if offset <= FAR_OFFSET_SHARE * radius else (lo, hi, radius, offset)
+
+
+def _far_words(shapes, far) -> str:
+    lo, hi, radius, offset = far
     return (f"shapes {[s.id() for s in shapes]} lie {float(np.max(np.abs(np.stack([lo, hi])))):.3g} units from the origin "
             f"for a radius of {radius:.3g}: Mitsuba offsets the rays it spawns off a surface by {offset:.3g} there "
-            f"({100 * offset / radius:.0f} % of the radius), so their shadows on themselves and their interreflections are "
-            "missing from its images (training targets and references); move the scene towards the origin")
+            f"({100 * offset / radius:.0f} % of the radius)")
+
+
+def far_from_origin(mi, shapes) -> str | None:
+    """A warning when ``shapes`` lie so far from the origin for their size (:func:`_far`) that Mitsuba starts secondary
+    rays off them through thin parts, so that their shadows on themselves and their interreflections go missing in its
+    images of the scene (the in-scene benches' reference). Found on a 0.6-unit cube 10^4 units from the origin: an
+    offset of 0.9 units. The bakers render the shapes moved to the origin instead (:func:`move_to_origin`)."""
+    far = _far(mi, shapes)
+    return None if far is None else (f"{_far_words(shapes, far)}, so their shadows on themselves and their "
+                                     "interreflections are missing from its images of the scene (the reference); move "
+                                     "the scene towards the origin")
+
+
+def unmovable(shapes) -> str | None:
+    """Why Mitsuba cannot render ``shapes`` translated as they are: an interior or exterior medium that is not
+    homogeneous (a grid placed in world space, which traversal cannot move) or a BSDF that reads a volume (looked up at
+    world positions); None when nothing of them depends on where they lie."""
+    for s in shapes:
+        for side, medium in (("interior", s.interior_medium()), ("exterior", s.exterior_medium())):
+            if medium is not None and not medium.is_homogeneous():
+                return f"shape {s.id()!r} has a heterogeneous {side} medium, placed in world space"
+        if s.bsdf() is not None and "Volume" in str(s.bsdf()):
+            return f"shape {s.id()!r} has a BSDF that reads a volume at world positions"
+    return None
+
+
+def far_for_bake(mi, shapes) -> str | None:
+    """A bake's warning for ``shapes`` far from the origin (:func:`_far`) that :func:`move_to_origin` leaves in place
+    (:func:`unmovable`): their training targets are Mitsuba's images there; None when not far, or when they move."""
+    far = _far(mi, shapes)
+    why = None if far is None else unmovable(shapes)
+    return None if why is None else (f"{_far_words(shapes, far)}, and they cannot be rendered moved to the origin ({why}): "
+                                     "their shadows on themselves and their interreflections are missing from the "
+                                     "training targets; move the scene towards the origin")
+
+
+def exact_origin(points: np.ndarray) -> np.ndarray:
+    """A translation c [3] near the centre of the box of float32 ``points`` [N, 3] such that every ``p - c`` is a
+    float32 number exactly, so ``(p - c) + c`` gives ``p`` back bit for bit: per axis the box centre rounded to a
+    multiple of the float32 spacing at the axis's largest coordinate; an axis where that is not exact (an object that
+    straddles 0 there, so not far along it) keeps c = 0."""
+    p = np.asarray(points, np.float32).reshape(-1, 3)
+    if not len(p):
+        return np.zeros(3)
+    lo, hi = p.min(0).astype(np.float64), p.max(0).astype(np.float64)
+    step = np.spacing(np.maximum(np.abs(lo), np.abs(hi)).astype(np.float32)).astype(np.float64)
+    c = np.round(0.5 * (lo + hi) / step) * step
+    p64 = p.astype(np.float64)
+    exact = ((p64 - c).astype(np.float32).astype(np.float64) + c == p64).all(0)
+    return np.where(exact, c, 0.0)
+
+
+def _positions(mi, shape) -> tuple[object, str, int]:
+    """``(parameters, key, width)`` of a shape's positions: mesh vertices [N, 3] or curve control points [N, 4]."""
+    params = mi.traverse(shape)
+    key = "vertex_positions" if "vertex_positions" in params else "control_points"
+    return params, key, 4 if key == "control_points" else 3
+
+
+def render_origin(mi, shapes) -> np.ndarray:
+    """Where :func:`move_to_origin` moves ``shapes`` from: c [3] when they lie far from the origin for their size
+    (:func:`_far`) and nothing of them depends on where they lie (:func:`unmovable`), else zeros. c is
+    :func:`exact_origin` of their positions (mesh vertices, curve control points)."""
+    if _far(mi, shapes) is None or unmovable(shapes):
+        return np.zeros(3)
+    pts = []
+    for s in shapes:
+        params, key, width = _positions(mi, s)
+        pts.append(np.asarray(params[key], np.float32).reshape(-1, width)[:, :3])
+    return exact_origin(np.concatenate(pts))
+
+
+def move_to_origin(mi, shapes) -> np.ndarray:
+    """Translate ``shapes`` in place by ``-c`` (c = :func:`render_origin`; zeros: left where they are) and return c.
+
+    Mitsuba offsets the rays it spawns off a surface by (1 + max |p|) x RayEpsilon: far out, through thin parts of the
+    asset (a 0.6-unit two-part object 800 units out read +3.1 % of the energy of its held-out targets at the origin, a
+    translucent slab -95 %, spec/bake.md#far-from-the-origin). Moved, the asset renders as at the origin: callers give
+    rays in the scene's frame minus c and add c to the points Mitsuba returns (:class:`IsolatedAsset` ``origin``). c
+    keeps every position exact, so the moved shapes are the same float32 surface; directions, normals and media do not
+    change (a mesh's vertex normals are put back: Mitsuba recomputes them when its positions change). Call it once per
+    loaded scene: it moves the shapes again on a second call."""
+    c = render_origin(mi, shapes)
+    if not c.any():
+        return c
+    for s in shapes:
+        params, key, width = _positions(mi, s)
+        p = np.asarray(params[key], np.float64).reshape(-1, width)
+        p[:, :3] -= c
+        normals = np.array(params["vertex_normals"], np.float32) if "vertex_normals" in params else None
+        params[key] = mi.Float(p.astype(np.float32).ravel())
+        params.update()
+        if normals is not None and normals.size:
+            params["vertex_normals"] = mi.Float(normals)
+            params.update()
+    return c
 
 
 def mirror_shapes(mi, shapes) -> list[str]:
@@ -756,7 +852,9 @@ def _frame_to_world(mi, z: np.ndarray, origin: np.ndarray | None = None, scale: 
 
 @dataclass
 class IsolatedAsset:
-    """The asset's shapes alone, plus a unit-irradiance distant light (see module docstring)."""
+    """The asset's shapes alone, plus a unit-irradiance distant light (see module docstring). ``center`` is in the
+    scene's frame; ``origin``: where the shapes were moved from (:func:`move_to_origin`; default none), so that a point
+    p of the scene is ``p - origin`` in the Mitsuba scenes here (:meth:`to_render`, :meth:`to_scene`)."""
 
     mi: object
     shapes: list
@@ -764,6 +862,7 @@ class IsolatedAsset:
     radius: float
     angle_deg: float = 0.0
     max_depth: int = 24
+    origin: np.ndarray | None = None
     geometry_scene: object = field(init=False)
     lit_scene: object = field(init=False)
     lane_scene: object = field(init=False, default=None)
@@ -771,6 +870,7 @@ class IsolatedAsset:
 
     def __post_init__(self) -> None:
         mi = self.mi
+        self.origin = np.zeros(3) if self.origin is None else np.asarray(self.origin, np.float64)
         self.geometry_scene = scene_of(mi, self.shapes)
         if self.angle_deg > 0:
             theta = math.radians(self.angle_deg)
@@ -793,8 +893,16 @@ class IsolatedAsset:
         kind = ("volpathmis" if chromatic_media(mi, self.shapes) else "volpath") if has_media else "path"
         self.integrator = mi.load_dict({"type": kind, "max_depth": int(self.max_depth), "rr_depth": 8})
 
+    def to_render(self, p) -> np.ndarray:
+        """Points [N, 3] of the scene's frame in the frame of the Mitsuba scenes here (float64)."""
+        return np.asarray(p, np.float64) - self.origin
+
+    def to_scene(self, p) -> np.ndarray:
+        """Points [N, 3] Mitsuba returned here back in the scene's frame (float64)."""
+        return np.asarray(p, np.float64) + self.origin
+
     def _sphere_to_world(self, wi: np.ndarray):
-        pos = np.asarray(self.center, np.float64) + self._dist * np.asarray(wi, np.float64)
+        pos = self.to_render(self.center) + self._dist * np.asarray(wi, np.float64)
         return self.mi.ScalarTransform4f().translate(pos.tolist()) @ self.mi.ScalarTransform4f().scale(self._light_radius)
 
     def set_light(self, wi) -> None:

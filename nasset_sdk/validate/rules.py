@@ -610,7 +610,7 @@ class Validation:
     # -- geometry --------------------------------------------------------------------------
     def _geometry(self) -> None:
         from ..asset import GEOMETRY, ROOT
-        from ..geometry import MeshGeometry
+        from ..geometry import MeshGeometry, scale_problem
 
         geo = self.asset.geometry()  # typed errors for missing / malformed arrays
         prim = self.stage.GetPrimAtPath(GEOMETRY)
@@ -638,12 +638,8 @@ class Validation:
             if not (seg[seg_mask] > 1e-12 * scale).any():
                 self.emit("GEOMETRY_DEGENERATE", "every curve has zero length", GEOMETRY, "points")
             lo, hi = (np.asarray(b, np.float64) for b in geo.bounds())
-        reach = float(max(np.abs(lo).max(), np.abs(hi).max()))
-        diag = float(np.linalg.norm(hi - lo))
-        if reach > limits.MAX_GEOMETRY_COORDINATE or diag < limits.MIN_GEOMETRY_SIZE or diag < limits.MIN_GEOMETRY_SIZE_RATIO * reach:
-            self.emit("GEOMETRY_SCALE", f"bounding box {[lo.tolist(), hi.tolist()]} (diagonal {diag:.3g}): coordinates must stay within "
-                      f"{limits.MAX_GEOMETRY_COORDINATE:g} and the diagonal be >= {limits.MIN_GEOMETRY_SIZE:g} and >= "
-                      f"{limits.MIN_GEOMETRY_SIZE_RATIO:g} x the largest |coordinate|", GEOMETRY, "points")
+        if why := scale_problem(lo, hi):
+            self.emit("GEOMETRY_SCALE", why, GEOMETRY, "points")
         scale = max(float(np.max(hi - lo)), 1e-12)
         tol = 1e-5 * scale + 1e-7
         extent = prim.GetAttribute("extent").Get() if prim.GetAttribute("extent").HasAuthoredValue() else None

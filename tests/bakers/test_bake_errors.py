@@ -366,8 +366,9 @@ def test_light_visibility_far_from_the_origin_is_the_renderers(tmp_path, offset)
                                           ('<scale value="300"/><translate y="300"/>', False),  # a millimetre scene
                                           ('<scale value="0.3"/><translate x="10000"/>', True)])
 def test_shapes_far_from_the_origin_for_their_size_are_warned(tmp_path, place, warns):
-    """Mitsuba's own ray offset there (0.9 units at 10^4) crosses the asset: its images lose the asset's
-    self-shadowing and interreflections, in the training targets and in the benches' reference alike."""
+    """Mitsuba's own ray offset there (0.9 units at 10^4) crosses the asset: its images of the scene lose the asset's
+    self-shadowing and interreflections (the benches' reference; the bakers move the shapes to the origin,
+    tests/bakers/test_far_from_origin.py)."""
     from nasset_converters.mitsuba.scene import far_from_origin, load_scene, pick_shapes
 
     mi = cm.load_mitsuba()

@@ -115,6 +115,23 @@ def test_bake_typed_errors(tmp_path):
     assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
 
 
+def test_an_object_beyond_float32_rendering_is_refused_before_rendering(tmp_path):
+    """The asset's object space is the scene's: the example's monkey moved 10^5 units out fails the validator's
+    GEOMETRY_SCALE (diagonal >= 1e-3 x the largest coordinate). Before, the bake rendered with Cycles, trained and
+    wrote an asset ``nasset validate`` refuses; now it stops before any view, naming the object
+    (spec/bake.md#far-from-the-origin)."""
+    from nasset_converters.blender.examples import write_example_blend
+
+    blend = write_example_blend("blender-surface", tmp_path)
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    bpy.data.objects["Monkey"].location.x += 1e5
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), check_existing=False)
+    with pytest.raises(NassetError) as e:
+        bake(blend, ["Monkey"], tmp_path / "a.usdc", size="tiny", quiet=True)
+    assert e.value.code == "GEOMETRY_SCALE" and "Monkey" in str(e.value)
+    assert not (tmp_path / "a.usdc").exists() and not (tmp_path / "a.usdc.bake" / "train").exists()
+
+
 def test_fiber_assets_get_more_views_and_a_wider_decoder_at_small():
     """Fibers render 400 training views at `small` and train a 4 x 128 decoder, surfaces 160 views and
     4 x 64; everything else of the preset is shared (spec/accuracy.md#dense-hair measured both)."""
