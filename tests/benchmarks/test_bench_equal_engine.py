@@ -42,7 +42,8 @@ def test_equal_engine_smoke(tmp_path, rna_asset_path, capsys):
     for p in r["path_tracing_points"] + r["asset_points"]:
         assert p["time_s"] > 0 and math.isfinite(p["mse"]) and p["mse_raw"] - p["mse"] == pytest.approx(var)
     assert r["mitsuba"]["settings"] == {"max_depth": 4, "rr_depth": 5}
-    assert r["per_sample_cost"]["spp"] == 4 and r["per_sample_cost"]["ratio"] > 0
+    c = r["per_sample_cost"]
+    assert c["spp"] == 4 and c["ratio"] > 0 and c["pairs"] == 3 and c["paired_median"] > 0
     # the random asset is not the ball: its render converges elsewhere, a floor well above the reference's noise
     assert r["bias_floor_mse"] > 10 * var
     assert (tmp_path / "out" / "error_vs_time.png").is_file() and (tmp_path / "out" / "error_vs_time.json").is_file()
@@ -52,6 +53,27 @@ def test_equal_engine_smoke(tmp_path, rna_asset_path, capsys):
     assert 0.05 * 256 < o["pixels"] < 0.25 * 256
     assert len(o["equal_error"]) == 2 and o["bias_floor_mse"] > r["bias_floor_mse"]
     assert len(o["energy_ratio"]) == 3 and all(math.isfinite(e) and e > 0 for e in o["energy_ratio"])
+
+
+def test_per_sample_cost_alternates_the_two_renders():
+    """The cost is timed in pairs (path tracing, then asset), so a burst of another job lands on both sides of a
+    pair. On a clock where the asset takes twice as long and the second pair runs 4x slower, the pairs' median
+    and the least-of ratio are both exactly 2; timing the two sides in blocks, with the burst on the asset's
+    block only, would read 4 or more."""
+    from nasset_benchmarks.equal_engine import alternating_cost
+
+    now, calls = [0.0], []
+
+    def render(name, seconds):
+        def f(spp, seed):
+            calls.append(name)
+            now[0] += seconds * (4 if len(calls) in (3, 4) else 1)
+        return f
+
+    c = alternating_cost(render("pt", 1.0), render("na", 2.0), 16, 3, clock=lambda: now[0])
+    assert calls == ["pt", "na"] * 3
+    assert c["pairs"] == 3 and c["spp"] == 16
+    assert c["paired_median"] == 2.0 and c["ratio"] == 2.0
 
 
 def test_equal_engine_unknown_shape(tmp_path, rna_asset_path):
