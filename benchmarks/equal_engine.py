@@ -20,8 +20,8 @@ the **equal-error speedup** at each asset point and at the bias floor (``common.
 and the **per-sample cost ratio** (asset time per spp / path tracing time per spp, at the largest spp
 both ran, timed in alternating pairs: :func:`alternating_cost`). The MSE, floor and speedups are given
 twice: over the whole image, and over the **object's pixels** (mask from Mitsuba's camera rays on the replaced
-shapes, ``accuracy.object_mask``, half coverage), where the asset does its work; the whole image adds the rest of the scene's noise, which both renders
-share. Plot (PNG) + JSON in the output folder.
+shapes, ``accuracy.object_mask``, half coverage), where the asset does its work; the whole image adds the rest
+of the scene's noise, which both renders share. Plot (PNG) + JSON in the output folder.
 """
 
 from __future__ import annotations
