@@ -386,8 +386,8 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
             continue
         if probe:  # the file the resolver finds (a search path, a resolver context): the probe child has neither
             found = str(Ar.GetResolver().Resolve(identifier)) or identifier
-            if os.path.isfile(outer_file(found)):
-                ensure_safe(found)
+            if os.path.isfile(outer_file(found)):  # held to the asset bounds unless it is a scene's own layer
+                ensure_safe(found, asset=not scene or package is not None)
         try:
             layer = Sdf.Layer.FindOrOpen(identifier)
         except Exception:  # noqa: BLE001 - composition reports a layer that does not open
