@@ -400,7 +400,21 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
         found, follow = scan_layer(layer, package or "/", scene=scene and package is None)
         problems.extend(found)
         queue.extend((f, package) for f in follow)
+    if probe and not problems and len(seen) > 1:
+        # each layer passed its probe alone; arcs between layers can still repeat subtrees without bound
+        # (ten prims each referencing a file of ten that reference the next file, six files: 10^6 prims)
+        from .safeopen import ensure_readable
+
+        ensure_readable(root, level="compose", asset=not scene, search_paths=_context_search_paths())
     return problems
+
+
+def _context_search_paths() -> list[str]:
+    """The search paths of the bound resolver context (a default resolver's), for a probe child to compose with."""
+    from pxr import Ar
+
+    return [folder for ctx in Ar.GetResolver().GetCurrentContext().Get() if hasattr(ctx, "GetSearchPath")
+            for folder in ctx.GetSearchPath()]
 
 
 def problems_error(problems: list[PathProblem], file: str | os.PathLike, *, code: str = "ASSET_PATH_ESCAPES"):

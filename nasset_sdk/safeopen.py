@@ -15,6 +15,8 @@ Levels:
              fields, paths, specs). Cheap; catches the crashes and hangs observed.
 ``"full"``   also read every field value of every spec (tensor and network arrays included,
              every variant) and compose the stage with all payloads loaded. Reads the whole file.
+``"compose"`` compose the stage with its arcs to other files followed and all payloads loaded (a tree of
+             layers that each passed ``"full"``: arcs between them can repeat subtrees without bound).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from pathlib import Path
 
 from .errors import error
 
-LEVELS = ("layer", "full")
+LEVELS = ("layer", "full", "compose")
 DEFAULT_TIMEOUT_S = 120.0
 #: Address-space cap for the probe child, on top of the file size (a corrupted count must not
 #: let the child allocate the machine's memory). usd-core + numpy start at ~1.5 GiB of VM.
@@ -54,7 +56,8 @@ class ProbeResult:
         if self.measured:
             return self.detail
         if self.status == "memory":
-            return f"reading it needs more memory than its bound ({self.detail}): arrays decompress beyond the format bounds"
+            return (f"reading it needs more memory than its bound ({self.detail}): arrays decompress, or arcs repeat subtrees, "
+                    "beyond the format bounds")
         if self.status == "crashed":
             return f"USD crashed while reading it ({self.detail})"
         if self.status == "timeout":
@@ -67,8 +70,8 @@ import json, os, sys
 def _why(exc):  # USD's own messages (the parser's file:line:column and prim), without its source locations
     from nasset_sdk.errors import usd_reason
     return (usd_reason(exc) or type(exc).__name__)[:300]
-def main(path, level, asset):
-    from pxr import Sdf, Tf, Usd
+def main(path, level, asset, search):
+    from pxr import Ar, Sdf, Tf, Usd
     import nasset_sdk  # registers the schema so the stage composes as in the parent
     try:
         layer = Sdf.Layer.FindOrOpen(path)
@@ -97,8 +100,24 @@ def main(path, level, asset):
         except Exception as exc:
             return {"ok": False, "detail": _why(exc)}
         return {"ok": True, "detail": "", "asset": as_asset}
+    if level == "compose":
+        from nasset_sdk.limits import MAX_ASSET_SPECS
+        folders = json.loads(search)
+        context = Ar.DefaultResolverContext(folders) if folders else Ar.GetResolver().CreateDefaultContextForAsset(path)
+        try:
+            stage = Usd.Stage.Open(layer, context, Usd.Stage.LoadAll)
+            if stage is None:
+                return {"ok": False, "detail": "the stage does not compose"}
+            n = 0
+            for prim in stage.TraverseAll():
+                n += 1
+                if asset == "asset" and n > MAX_ASSET_SPECS:
+                    return {"ok": False, "code": "ARRAY_TOO_LARGE", "detail": "its layers compose to more than "
+                            f"{MAX_ASSET_SPECS} prims, the bound of an asset"}
+        except Exception as exc:
+            return {"ok": False, "detail": _why(exc)}
     return {"ok": True, "detail": ""}
-out = main(sys.argv[1], sys.argv[2], sys.argv[3])
+out = main(sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4])
 sys.stdout.write("\n@@probe@@" + json.dumps(out) + "\n")
 sys.stdout.flush()
 """
@@ -372,10 +391,11 @@ def _limit_child(max_as: int):
 
 
 def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFAULT_TIMEOUT_S,
-          asset: bool = False) -> ProbeResult:
+          asset: bool = False, search_paths: list[str] | None = None) -> ProbeResult:
     """Open ``path`` with USD in a child process; never raises for a bad file. At level 'full' a layer that is an
     asset (defaultPrim a NeuralAsset), or any layer when ``asset`` (the caller reads it as an asset), is held to
-    the asset structure bounds (:func:`structure_problem`) before anything else reads it."""
+    the asset structure bounds (:func:`structure_problem`) before anything else reads it. ``search_paths``: the
+    folders of the resolver context the caller composes with (level 'compose')."""
     if level not in LEVELS:
         raise error("USAGE", f"probe level must be one of {LEVELS}, got {level!r}")
     from .paths import outer_file
@@ -390,7 +410,8 @@ def probe(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFA
     # bytes is read (with USDC_USE_PREAD every array would be read whole: a reader that loads only the
     # required components would pay for the optional ones in its probe)
     env.pop("USDC_USE_PREAD", None)
-    run = run_bounded([sys.executable, "-c", _CHILD, str(p), level, "asset" if asset else "any"], max_as=max_as, timeout=timeout, env=env)
+    run = run_bounded([sys.executable, "-c", _CHILD, str(p), level, "asset" if asset else "any",
+                       json.dumps(list(search_paths or []))], max_as=max_as, timeout=timeout, env=env)
     if run.status == "spawn-failed":
         return ProbeResult(False, "spawn-failed", run.stderr.decode("utf-8", "replace"), None, run.seconds)
     if run.status == "timeout":
@@ -444,7 +465,7 @@ def _out_of_memory(returncode, err: bytes) -> bool:
 
 
 def ensure_readable(path: str | os.PathLike, *, level: str = "full", timeout: float = DEFAULT_TIMEOUT_S,
-                    asset: bool = False) -> ProbeResult:
+                    asset: bool = False, search_paths: list[str] | None = None) -> ProbeResult:
     """Raise ``FILE_NOT_FOUND`` / ``FILE_UNREADABLE`` / ``ARRAY_TOO_LARGE`` unless the probe of ``path`` passes
     (a file, or a layer inside a package: ``a.usdz[b.usdc]``); ``asset``: held to the asset bounds (:func:`probe`)."""
     from .paths import outer_file
@@ -452,7 +473,7 @@ def ensure_readable(path: str | os.PathLike, *, level: str = "full", timeout: fl
     p = Path(path)
     if not os.path.isfile(outer_file(os.fspath(p))):
         raise error("FILE_NOT_FOUND", "no such file", file=str(p))
-    result = probe(p, level=level, timeout=timeout, asset=asset)
+    result = probe(p, level=level, timeout=timeout, asset=asset, search_paths=search_paths)
     if not result.ok:
         raise error(result.code, result.message(), file=str(p))
     return result

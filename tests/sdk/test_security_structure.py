@@ -211,3 +211,52 @@ def test_a_scene_is_not_held_to_the_asset_bound(tmp_path):
     path = tmp_path / "scene.usdc"
     assert layer.Export(str(path))
     assert check_layer_tree(path, scene=True) == []
+
+
+def _layer_chain(folder: Path, levels: int, fan: int = 10) -> str:
+    """b1.usda ... b<levels>.usda: /L holds ``fan`` prims, each referencing the next file's /L. Returns b1's name."""
+    from pxr import Sdf
+
+    for k in range(1, levels + 1):
+        layer = Sdf.Layer.CreateNew(str(folder / f"b{k}.usda"))
+        top = Sdf.PrimSpec(layer, "L", Sdf.SpecifierDef, "Xform")
+        layer.defaultPrim = "L"
+        for i in range(fan):
+            child = Sdf.PrimSpec(top, f"c{i}", Sdf.SpecifierDef, "Xform")
+            if k < levels:
+                child.referenceList.prependedItems.append(Sdf.Reference(f"./b{k + 1}.usda", "/L"))
+        assert layer.Save()
+    return "./b1.usda"
+
+
+def test_an_asset_whose_layers_repeat_each_other_is_refused_before_composing_in_process(base, tmp_path):
+    """Each in-package layer passes its own probe (arcs to other files are stripped there): before, Asset.open composed
+    ten references to a chain of three files of ten prims (11 110 prims; a chain of seven: 10^8) in-process. Now the
+    tree is composed once in a bounded child first, held to the asset bound."""
+    from pxr import Sdf
+
+    layer = _layer(base)
+    target = _layer_chain(tmp_path, 3)
+    junk = _junk(layer)
+    for i in range(10):
+        Sdf.PrimSpec(junk, f"r{i}", Sdf.SpecifierDef).referenceList.prependedItems.append(Sdf.Reference(target, "/L"))
+    path = tmp_path / "asset.usda"
+    assert layer.Export(str(path))
+    with pytest.raises(NassetError) as exc:
+        Asset.open(path)
+    assert exc.value.code == "ARRAY_TOO_LARGE" and f"more than {limits.MAX_ASSET_SPECS} prims" in str(exc.value)
+
+
+def test_a_scene_whose_layers_repeat_each_other_is_composed_once_in_a_child_and_not_held_to_the_asset_bound(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    from nasset_sdk.paths import open_checked_stage
+
+    target = _layer_chain(tmp_path, 3)
+    stage = Usd.Stage.CreateNew(str(tmp_path / "scene.usda"))
+    UsdGeom.Xform.Define(stage, "/World")
+    for i in range(10):
+        stage.DefinePrim(f"/World/r{i}", "Xform").GetReferences().AddReference(target, "/L")
+    stage.GetRootLayer().Save()
+    opened = open_checked_stage(tmp_path / "scene.usda", Usd.Stage.LoadAll, scene=True)
+    assert sum(1 for _ in opened.Traverse()) > limits.MAX_ASSET_SPECS
