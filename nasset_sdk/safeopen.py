@@ -526,6 +526,20 @@ def ensure_safe(path: str | os.PathLike, *, timeout: float = DEFAULT_TIMEOUT_S, 
         _SAFE[key] = asset or result.asset_bounds
 
 
+#: Trees of layers whose whole composition passed its probe: (asset, search paths, identities of every file).
+_COMPOSED: set[tuple] = set()
+
+
+def ensure_composes(root: str | os.PathLike, files, *, asset: bool, search_paths: list[str]) -> None:
+    """Compose the tree of layer ``files`` rooted at ``root`` in a probe child (level ``compose``) unless this process
+    already did, every file unchanged since; raises as :func:`ensure_readable`."""
+    key = (asset, tuple(search_paths), tuple(sorted(map(str, (_identity(f) for f in files)))))
+    if key in _COMPOSED:
+        return
+    ensure_readable(root, level="compose", asset=asset, search_paths=search_paths)
+    _COMPOSED.add(key)
+
+
 @dataclass(frozen=True)
 class ChildRun:
     """How a bounded child ended: status "ok" (exit 0), "failed" (non-zero exit), "crashed" (signal),
