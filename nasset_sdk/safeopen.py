@@ -109,9 +109,9 @@ def main(path, level, asset, search):
             if stage is None:
                 return {"ok": False, "detail": "the stage does not compose"}
             n = 0
-            for prim in stage.TraverseAll():
+            for prim in stage.TraverseAll() if asset == "asset" else ():
                 n += 1
-                if asset == "asset" and n > MAX_ASSET_SPECS:
+                if n > MAX_ASSET_SPECS:
                     return {"ok": False, "code": "ARRAY_TOO_LARGE", "detail": "its layers compose to more than "
                             f"{MAX_ASSET_SPECS} prims, the bound of an asset"}
         except Exception as exc:
