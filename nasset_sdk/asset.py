@@ -409,7 +409,7 @@ class Asset:
         ``quality`` picks a quality variant ('hq', or {component: variant}) without editing the file.
         The file is untrusted: it is first read whole in a child process (nasset_sdk.safeopen, ~0.4 s +
         one read), so a corrupted crate that would crash usd-core raises FILE_UNREADABLE and one that
-        decodes beyond its bounds ARRAY_TOO_LARGE, instead of taking this process down. ``probe=None``
+        decodes beyond its bounds, or holds more specs than an asset may, ARRAY_TOO_LARGE, instead of taking this process down. ``probe=None``
         skips that for a file this process wrote or already probed, unchanged since; ``True`` always
         probes; ``False`` never does (the caller trusts the file with this process's memory).
         """
@@ -424,9 +424,9 @@ class Asset:
         from .safeopen import ensure_readable, ensure_safe
 
         if probe:
-            ensure_readable(p)
+            ensure_readable(p, asset=True)
         elif probe is None:
-            ensure_safe(p)
+            ensure_safe(p, asset=True)
         try:
             # every sublayer / reference / payload / clip / asset path is checked before anything composes
             stage = open_checked_stage(p, Usd.Stage.LoadNone, probe=probe is not False)

@@ -92,7 +92,8 @@ CODES: dict[str, Code] = _codes(
     ("LAYER_EXTERNAL", "format", "the asset has a sublayer, value clips, or a reference or payload to another file", "format.md#files"),
     ("VARIANT_SET_UNEXPECTED", "security", "a variant set other than a component's quality variant set", "security.md#layer-content"),
     ("TIME_SAMPLES", "format", "an attribute carries time samples", "security.md#layer-content"),
-    ("ARRAY_TOO_LARGE", "security", "a geometry or other array is above the format bound, or reading it exceeds the memory bound",
+    ("ARRAY_TOO_LARGE", "security", "a geometry or other array is above the format bound, an asset layer holds or composes to more "
+     "specs than its bound, or reading it exceeds the memory bound",
      "security.md#bounds"),
     # networks (allow-list and runtime probe)
     ("NETWORK_OP_FORBIDDEN", "security", "the model uses an operator, attribute, input or construct outside the network allow-list",

@@ -370,6 +370,7 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
     root = os.path.realpath(os.fspath(path))
     problems: list[PathProblem] = []
     seen: set[str] = set()
+    files: list[str] = []  # the files of the layers probed
     queue: list[tuple[str, str | None]] = [(root, None)]
     while queue:
         identifier, package = queue.pop(0)
@@ -386,8 +387,9 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
             continue
         if probe:  # the file the resolver finds (a search path, a resolver context): the probe child has neither
             found = str(Ar.GetResolver().Resolve(identifier)) or identifier
-            if os.path.isfile(outer_file(found)):
-                ensure_safe(found)
+            if os.path.isfile(outer_file(found)):  # held to the asset bounds unless it is a scene's own layer
+                ensure_safe(found, asset=not scene or package is not None)
+                files.append(found)
         try:
             layer = Sdf.Layer.FindOrOpen(identifier)
         except Exception:  # noqa: BLE001 - composition reports a layer that does not open
@@ -400,7 +402,21 @@ def check_layer_tree(path: str | os.PathLike, *, scene: bool = False, max_layers
         found, follow = scan_layer(layer, package or "/", scene=scene and package is None)
         problems.extend(found)
         queue.extend((f, package) for f in follow)
+    if probe and not problems and len(files) > 1:
+        # each layer passed its probe alone; arcs between layers can still repeat subtrees without bound
+        # (ten prims each referencing a file of ten that reference the next file, six files: 10^6 prims)
+        from .safeopen import ensure_composes
+
+        ensure_composes(root, files, asset=not scene, search_paths=_context_search_paths())
     return problems
+
+
+def _context_search_paths() -> list[str]:
+    """The search paths of the bound resolver context (a default resolver's), for a probe child to compose with."""
+    from pxr import Ar
+
+    return [folder for ctx in Ar.GetResolver().GetCurrentContext().Get() if hasattr(ctx, "GetSearchPath")
+            for folder in ctx.GetSearchPath()]
 
 
 def problems_error(problems: list[PathProblem], file: str | os.PathLike, *, code: str = "ASSET_PATH_ESCAPES"):

@@ -42,10 +42,12 @@ class Report:
     kind: str | None = None
     variant: str | None = None
     checked: dict = field(default_factory=dict)  # what was covered: components, qualities, networks, tensors
+    _keys: set = field(default_factory=set, repr=False, compare=False)  # of the findings: one lookup per add
 
     def add(self, finding: Finding) -> None:
         key = (finding.code, finding.prim, finding.attribute, finding.message)
-        if all((f.code, f.prim, f.attribute, f.message) != key for f in self.findings):
+        if key not in self._keys:
+            self._keys.add(key)
             self.findings.append(finding)
 
     @property

@@ -93,7 +93,8 @@ RULES: tuple[Rule, ...] = (
     Rule("VARIANT_SET_UNEXPECTED", "error", "no variant set other than a component's 'quality' set (none on other prims, none nested)"),
     Rule("TIME_SAMPLES", "error", "no attribute carries time samples"),
     Rule("ARRAY_TOO_LARGE", "error",
-         "geometry and other arrays are within the format bounds, and reading the file stays within its memory bound"),
+         "geometry and other arrays are within the format bounds, the layer's specs, nesting and the prims it composes to "
+         "within the asset bounds, and reading the file stays within its memory bound"),
     Rule("METADATA_MISSING", "error", "nasset:provenance is authored and has the required keys specVersion, kind and generator"),
     Rule("METADATA_INVALID", "error", "nasset:provenance is a JSON object whose specVersion and kind equal the root's"),
     Rule("FALLBACK_MISSING", "warning", "the geometry is bound to a material whose surface is a UsdPreviewSurface"),
@@ -193,7 +194,7 @@ class Validation:
             self.emit("FILE_UNREADABLE", "the file is empty")
             raise _Abort
         if self.probe:
-            result = probe(self.path, level="full", timeout=self.probe_timeout)
+            result = probe(self.path, level="full", timeout=self.probe_timeout, asset=True)
             self.checked["probe_s"] = round(result.seconds, 3)
             if not result.ok:
                 self.emit(result.code, result.message(), "/" if result.code != "FILE_UNREADABLE" else None)

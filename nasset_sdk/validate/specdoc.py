@@ -22,12 +22,13 @@ An asset is **valid** when no finding has severity `error`. Exit status: 0 valid
 ## Procedure
 
 1. The file is opened first in a child process with a time limit and an address-space limit
-   (`nasset_sdk.safeopen`, level `full`: every field of every spec read, each array's length, each
-   value's nesting and the total decoded size of arrays and strings checked against the bounds
+   (`nasset_sdk.safeopen`, level `full`: first the layer's specs counted and its nesting and the prims
+   it composes to bounded from its specs, stopping at the asset bounds; then every field of every spec
+   read, each array's length, each value's nesting and the total decoded size of arrays and strings checked against the bounds
    ([security.md#bounds](security.md#bounds)), then the stage composed with all payloads
    from a copy of the layer without any arc to another file). usd-core's crate reader can crash
    (SIGSEGV) or allocate without bound on corrupted files; a probe that crashes, times out or fails
-   gives `FILE_UNREADABLE` (`ARRAY_TOO_LARGE` for arrays over their bounds or a probe out of memory)
+   gives `FILE_UNREADABLE` (`ARRAY_TOO_LARGE` for arrays or structure over their bounds or a probe out of memory)
    and nothing else is checked.
 2. The root layer alone is scanned (`nasset_sdk.paths`) for asset paths (sublayers, references,
    payloads, value clips, every asset-valued attribute, time sample and metadata value), each checked

@@ -14,6 +14,8 @@ Families (each case names the code it must yield):
 - ``shape_*``: shapes whose product wraps int64 or is zero -> TENSOR_TOO_LARGE / TENSOR_SHAPE.
 - ``amp_string_*``: one long string repeated by a string array (crate stores it once) -> ARRAY_TOO_LARGE;
   ``nest_*``: values nested past limits.MAX_VALUE_DEPTH -> FILE_UNREADABLE.
+- ``struct_*``: more specs than limits.MAX_ASSET_SPECS (empty prims, properties, time samples), prims nested
+  past limits.MAX_ASSET_DEPTH, internal arcs that repeat a subtree past the composed-prim bound -> ARRAY_TOO_LARGE.
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ def make_cases(out_dir: str | Path, *, amplification: bool = True) -> list[Case]
     from pxr import Sdf, Vt
 
     from nasset_sdk.examples import example_builder
+    from nasset_sdk.limits import MAX_ASSET_DEPTH, MAX_ASSET_SPECS
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -277,6 +280,44 @@ def make_cases(out_dir: str | Path, *, amplification: bool = True) -> list[Case]
         layer.GetPrimAtPath("/Asset").SetInfo("customData", value)
 
     case("nest_custom_data_40_deep", "FILE_UNREADABLE", nested_custom_data, probe=True)
+
+    # -- structural amplification: specs a crate stores in a few bytes each, arcs that repeat subtrees ---------------
+    def struct(fill):
+        def make(layer):
+            junk = Sdf.PrimSpec(layer.GetPrimAtPath("/Asset"), "Junk", Sdf.SpecifierDef, "Scope")
+            with Sdf.ChangeBlock():
+                fill(layer, junk)
+        return make
+
+    over = MAX_ASSET_SPECS + 1
+    case("struct_empty_prims", "ARRAY_TOO_LARGE", struct(lambda layer, junk: [Sdf.PrimSpec(junk, f"p{i}", Sdf.SpecifierDef)
+                                                                              for i in range(over)]))
+    case("struct_properties", "ARRAY_TOO_LARGE", struct(lambda layer, junk: [
+        Sdf.AttributeSpec(junk, f"a{i}", Sdf.ValueTypeNames.Float) for i in range(over)]))
+
+    def samples(layer, junk):
+        attr = Sdf.AttributeSpec(junk, "a", Sdf.ValueTypeNames.Float)
+        for i in range(over):
+            layer.SetTimeSample(attr.path, float(i), 1.0)
+
+    case("struct_time_samples", "ARRAY_TOO_LARGE", struct(samples))
+
+    def nested(layer, junk):
+        for _ in range(MAX_ASSET_DEPTH):
+            junk = Sdf.PrimSpec(junk, "d", Sdf.SpecifierDef)
+
+    case("struct_prims_nested_deep", "ARRAY_TOO_LARGE", struct(nested))
+
+    def arcs(layer, junk):  # ten prims per class, each referencing the next class: 10^5 composed prims from ~60 specs
+        for k in range(5):
+            cls = Sdf.PrimSpec(layer, f"L{k}", Sdf.SpecifierClass)
+            for i in range(10):
+                child = Sdf.PrimSpec(cls, f"c{i}", Sdf.SpecifierDef)
+                if k < 4:
+                    child.referenceList.prependedItems.append(Sdf.Reference("", f"/L{k + 1}"))
+        junk.referenceList.prependedItems.append(Sdf.Reference("", "/L0"))
+
+    case("struct_arcs_repeat_a_class", "ARRAY_TOO_LARGE", struct(arcs))
     return cases
 
 
