@@ -338,6 +338,7 @@ def read_scene(path: str) -> SceneDesc:
         say(f"composed without a layer or prim USD cannot reach: {text[:300]}", where if where != "/" else None)
     settings = stage_rules.settings_prim(stage, say)  # spec/renderer.md#image-size
     purposes = stage_rules.settings_purposes(settings, t, say)
+    hiding = stage_rules.Hiding(t, purposes)
     cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
@@ -345,7 +346,7 @@ def read_scene(path: str) -> SceneDesc:
     for prim in it:
         if prim.IsPseudoRoot():
             continue
-        if stage_rules.is_hidden(prim, t, purposes):  # invisible, or a purpose the settings leave out
+        if hiding.is_hidden(prim):  # invisible, or a purpose the settings leave out
             it.PruneChildren()
             continue
         tn = prim.GetTypeName()

@@ -414,11 +414,12 @@ class _Loader:
         cameras = stage_rules.stage_cameras(self.stage)
         settings = self._settings_prim()
         self._purposes = stage_rules.settings_purposes(settings, self.time, self.warn)
+        hiding = stage_rules.Hiding(self.time, self._purposes)
         unknown: set = set()  # prim type names without a schema
         it = iter(Usd.PrimRange.Stage(self.stage, Usd.TraverseInstanceProxies()))
         for prim in it:
             path = str(prim.GetPath())
-            if stage_rules.is_hidden(prim, self.time, self._purposes):
+            if hiding.is_hidden(prim):
                 it.PruneChildren()
                 continue
             tname = str(prim.GetTypeName())

@@ -53,3 +53,52 @@ def plain_geometry_layer(path, *, untyped: bool = True):
         b.stage.GetPrimAtPath("/World").SetTypeName("")
     b.stage.SetDefaultPrim(b.stage.GetPrimAtPath("/World"))
     return b.write(path)
+
+
+def nested_scene(path, depth: int, *, mesh_every: int = 0) -> str:
+    """The lit floor of :func:`floor_scene` under ``depth`` nested Xforms (``/World/Chain/X/X/...``), a small triangle
+    at the bottom and, with ``mesh_every``, one beside every ``mesh_every``-th Xform of the chain."""
+    from pxr import Sdf
+
+    b, _ = floor_scene()
+    layer = b.stage.GetRootLayer()
+
+    def triangle(where):
+        spec = Sdf.CreatePrimInLayer(layer, where)
+        spec.specifier, spec.typeName = Sdf.SpecifierDef, "Mesh"
+        for name, kind, value in (("points", Sdf.ValueTypeNames.Point3fArray, [(-1, 1, -1), (1, 1, -1), (0, 1, 1)]),
+                                  ("faceVertexCounts", Sdf.ValueTypeNames.IntArray, [3]),
+                                  ("faceVertexIndices", Sdf.ValueTypeNames.IntArray, [0, 1, 2])):
+            Sdf.AttributeSpec(spec, name, kind).default = value
+
+    with Sdf.ChangeBlock():
+        where = Sdf.Path("/World/Chain")
+        for level in range(depth):
+            spec = Sdf.CreatePrimInLayer(layer, where)
+            spec.specifier, spec.typeName = Sdf.SpecifierDef, "Xform"
+            if mesh_every and level % mesh_every == 0:
+                triangle(where.AppendChild("Leaf"))
+            where = where.AppendChild("X")
+        triangle(where.GetParentPath().AppendChild("Bottom"))
+    return b.write(path)
+
+
+class AncestorVisits:
+    """Counts the ancestors that USD's per-prim inherited-state queries walk while a scene loads (a USD method
+    wrapped to count, USD still answering): each ``ComputeVisibility`` / ``ComputePurpose`` / parentless
+    ``ComputePurposeInfo`` call walks the prim's ancestors (its depth counted); ``ComputePurposeInfo(parent info)``
+    and the rest count 1. A traversal whose count grows faster than its prims is quadratic in depth."""
+
+    def __init__(self, monkeypatch):
+        from pxr import UsdGeom
+
+        self.count = 0
+        for name in ("ComputeVisibility", "ComputePurpose", "ComputePurposeInfo"):
+            monkeypatch.setattr(UsdGeom.Imageable, name, self._counted(getattr(UsdGeom.Imageable, name), name))
+
+    def _counted(self, method, name):
+        def counted(imageable, *args):
+            walks = name != "ComputePurposeInfo" or not args
+            self.count += imageable.GetPath().pathElementCount if walks else 1
+            return method(imageable, *args)
+        return counted

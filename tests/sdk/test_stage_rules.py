@@ -1,0 +1,65 @@
+"""nasset_sdk.stage_rules.Hiding: each prim's visibility and purpose passed down from its parent's equal USD's own
+per-prim computation (which walks every ancestor) on random stages."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from nasset_sdk.stage_rules import Hiding, Purposes
+
+_TYPES = ("Xform", "Xform", "Scope", "", "Mesh", "Cube", "GeomSubset", "Material")
+
+
+def _random_stage(seed: int):
+    """Prims of imageable and non-imageable types 1-12 deep; visibility and purpose authored at random on some
+    (non-imageable prims included, as plain attributes; a few visibilities only as time samples)."""
+    from pxr import Sdf, Usd, UsdGeom
+
+    rng = random.Random(seed)
+    stage = Usd.Stage.CreateInMemory()
+    paths = [Sdf.Path.absoluteRootPath]
+    for i in range(300):
+        parent = rng.choice(paths)
+        if parent.pathElementCount >= 12:
+            continue
+        prim = stage.DefinePrim(parent.AppendChild(f"P{i}"), rng.choice(_TYPES))
+        paths.append(prim.GetPath())
+        if rng.random() < 0.15:
+            attr = prim.CreateAttribute("visibility", Sdf.ValueTypeNames.Token)
+            value = rng.choice((UsdGeom.Tokens.invisible, UsdGeom.Tokens.inherited))
+            attr.Set(value, 1.0) if rng.random() < 0.3 else attr.Set(value)
+        if rng.random() < 0.2:
+            prim.CreateAttribute("purpose", Sdf.ValueTypeNames.Token).Set(
+                rng.choice(("default", "render", "proxy", "guide")))
+    return stage
+
+
+def _hidden_by_usd(prim, time, purposes) -> bool:
+    """The per-prim rule as USD computes it, every ancestor walked."""
+    from pxr import UsdGeom
+
+    if not prim.IsA(UsdGeom.Imageable):
+        return False
+    img = UsdGeom.Imageable(prim)
+    return img.ComputeVisibility(time) == UsdGeom.Tokens.invisible or img.ComputePurpose() not in purposes.included
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_hiding_equals_usds_per_prim_computation(seed):
+    from pxr import Usd
+
+    stage = _random_stage(seed)
+    prims = list(stage.Traverse())
+    rng = random.Random(seed)
+    for included in ({"default", "render"}, {"default", "proxy"}, {"render", "guide"}):
+        purposes = Purposes(frozenset(included), "full")
+        for time in (Usd.TimeCode.Default(), Usd.TimeCode(1.0)):
+            want = {p.GetPath(): _hidden_by_usd(p, time, purposes) for p in prims}
+            in_order = Hiding(time, purposes)  # traversal order: each parent already known
+            assert {p.GetPath(): in_order.is_hidden(p) for p in prims} == want
+            shuffled = Hiding(time, purposes)  # any order: a prim's unknown ancestors computed on the way
+            order = rng.sample(prims, len(prims))
+            assert {p.GetPath(): shuffled.is_hidden(p) for p in order} == want
+    assert any(_hidden_by_usd(p, Usd.TimeCode.Default(), Purposes(frozenset({"default"}), "")) for p in prims)
