@@ -169,17 +169,14 @@ def _checked(value, n: int, name: str, path: str, shader: str, top: float = np.i
     return np.clip(v, 0.0, top)
 
 
-def _display_color(prim, say, t) -> np.ndarray:
+def _display_color(prim, say, t, primvars: stage_rules.InheritedPrimvars) -> np.ndarray:
     """An unbound prim's diffuse colour (spec/renderer.md#limits, unbound meshes): its ``displayColor`` primvar, else a
     constant one of an ancestor; 0.18 grey without one. Several values are read as their mean, with a warning."""
-    from pxr import UsdGeom
-
-    primvars = UsdGeom.PrimvarsAPI(prim)
-    dc = primvars.FindPrimvarWithInheritance("displayColor")
-    val = dc.Get(t) if dc and dc.HasAuthoredValue() else None
+    dc = primvars.find(prim, "displayColor")
+    val = dc.Get(t) if dc is not None else None
     val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
-    do = primvars.FindPrimvarWithInheritance("displayOpacity")
-    opacity = do.Get(t) if do and do.HasAuthoredValue() else None
+    do = primvars.find(prim, "displayOpacity")
+    opacity = do.Get(t) if do is not None else None
     if opacity is not None and len(opacity) and np.mean(np.asarray(opacity, np.float64)) < 1.0:
         say("displayOpacity < 1 rendered opaque (its presence, spec/renderer.md#cutouts, is the reference renderer's)",
             str(prim.GetPath()))
@@ -197,15 +194,17 @@ def _say(path: str):
     return say
 
 
-def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None, material=None) -> Material:
-    """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself)."""
+def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None, material=None,
+                  primvars: stage_rules.InheritedPrimvars | None = None) -> Material:
+    """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself); ``primvars``: the scene's
+    inherited primvars, remembered across the meshes of one traversal."""
     say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
     mat = material if material is not None else stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
     if not mat:
-        kd = _display_color(prim, say, t)
+        kd = _display_color(prim, say, t, primvars or stage_rules.InheritedPrimvars())
     else:
         shader = stage_rules.surface_shader(mat)
         if shader is None:
@@ -339,6 +338,7 @@ def read_scene(path: str) -> SceneDesc:
     settings = stage_rules.settings_prim(stage, say)  # spec/renderer.md#image-size
     purposes = stage_rules.settings_purposes(settings, t, say)
     hiding = stage_rules.Hiding(t, purposes)
+    inherited = stage_rules.InheritedPrimvars()  # displayColor of unbound meshes, O(1) per mesh however deep
     cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
@@ -397,7 +397,7 @@ def read_scene(path: str) -> SceneDesc:
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
             for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes):
-                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes),
+                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes, primvars=inherited),
                                    None if cn is None else cn[sel], one_sided, back, sign))
             continue
         if tn in _STRUCTURAL:

@@ -261,6 +261,41 @@ class Hiding:
         return state
 
 
+class InheritedPrimvars:
+    """``UsdGeom.PrimvarsAPI.FindPrimvarWithInheritance`` with what each prim passes down of a name remembered by
+    (prim, name): a mesh N deep costs O(1) per name asked, where USD's walks its N ancestors (a chain of meshes N
+    deep cost O(N^2)). USD's rule: a prim's own primvar with an authored value, else the nearest ancestor's that
+    authors a value, when that one is constant (a non-constant one blocks inheritance)."""
+
+    def __init__(self):
+        self._state: dict = {}  # (prim, name) -> the primvar its children inherit, or None (prims of any stage)
+
+    def find(self, prim, name: str):
+        """The primvar ``name`` that ``prim`` reads, with an authored value (its own or inherited); None."""
+        from pxr import UsdGeom
+
+        own = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+        if own and own.HasAuthoredValue():
+            return own
+        return self._inherited(prim.GetParent(), name)
+
+    def _inherited(self, prim, name: str):
+        """The primvar ``name`` that ``prim``'s children inherit (None), from the nearest remembered ancestor down."""
+        from pxr import UsdGeom
+
+        chain = []
+        while prim and not prim.IsPseudoRoot() and (prim, name) not in self._state:
+            chain.append(prim)
+            prim = prim.GetParent()
+        inherited = self._state.get((prim, name)) if prim else None
+        for p in reversed(chain):
+            pv = UsdGeom.PrimvarsAPI(p).GetPrimvar(name)
+            if pv and pv.HasAuthoredValue():
+                inherited = pv if pv.GetInterpolation() == UsdGeom.Tokens.constant else None
+            self._state[(p, name)] = inherited
+        return inherited
+
+
 def bound_material(prim, purposes: Purposes, warn: Warn):
     """The material bound to ``prim`` for the settings' binding purpose (else its all-purpose binding; an invalid
     ``UsdShade.Material`` when unbound); a prim bound only for ``preview`` while the settings do not read it is

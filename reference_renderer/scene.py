@@ -214,8 +214,10 @@ def world_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
     return points @ M[:3, :3] + M[3, :3]
 
 
-def _matrix(xformable, time):
-    return np.array(xformable.ComputeLocalToWorldTransform(time), np.float64)
+def _matrix(xformable, cache):
+    """World transform of ``xformable`` from a ``UsdGeom.XformCache``: each prim's parent's is remembered, so a mesh at
+    depth N costs O(1), not the O(N) of ``ComputeLocalToWorldTransform``."""
+    return np.array(cache.GetLocalToWorldTransform(xformable.GetPrim()), np.float64)
 
 
 def _warn(scene_warnings: list, message: str) -> None:
@@ -347,7 +349,11 @@ def _local_copy(resolved: str, packaged: str):
 
 class _Loader:
     def __init__(self, stage, file: str, time) -> None:
+        from pxr import UsdGeom
+
         self.stage, self.file, self.time = stage, file, time
+        self._xforms = UsdGeom.XformCache(time)  # world transforms at the render time, each parent's remembered
+        self._primvars = stage_rules.InheritedPrimvars()  # inherited constant primvars, each parent's remembered
         self._said: set[str] = set()
         self._placement: np.ndarray | None = None  # inv(prototype root) @ instance @ PointInstancer, while expanding one
         self.warnings: list[str] = []
@@ -379,7 +385,7 @@ class _Loader:
     def matrix(self, xformable) -> np.ndarray:
         """The prim's world transform (4x4, row vectors); ``SCENE_INVALID`` when it is not finite or exceeds
         MAX_TRANSFORM (a NaN transform would otherwise pass every later test and render nothing)."""
-        M = _matrix(xformable, self.time)
+        M = _matrix(xformable, self._xforms)
         if self._placement is not None:  # a PointInstancer's prototype: relative to its root, then the instance
             M = M @ self._placement
         if not np.isfinite(M).all() or np.abs(M).max() > MAX_TRANSFORM:
@@ -664,16 +670,14 @@ class _Loader:
     def _material(self, prim, *, varying_colors: bool = True) -> int:
         """Material id of a prim's bound material, else of its displayColor (``varying_colors`` False: the mean of
         several values, for prims whose triangles carry no primvar colours)."""
-        from pxr import UsdGeom
 
         mat = self._bound_material(prim)
         if not mat:
-            primvars = UsdGeom.PrimvarsAPI(prim)  # constant ones may be an ancestor's
-            dc, do = (primvars.FindPrimvarWithInheritance(n) for n in ("displayColor", "displayOpacity"))
+            dc, do = (self._primvars.find(prim, n) for n in ("displayColor", "displayOpacity"))  # or an ancestor's
             with self._reading(prim.GetPath()):
-                val = dc.Get(self.time) if dc and dc.HasAuthoredValue() else None
+                val = dc.Get(self.time) if dc is not None else None
                 val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
-                opacity = do.Get(self.time) if do and do.HasAuthoredValue() else None
+                opacity = do.Get(self.time) if do is not None else None
                 opacity = np.asarray(opacity, np.float64).ravel() if opacity is not None and len(opacity) else None
             presence = None  # displayOpacity as the presence of the fallback surface (spec #cutouts)
             if opacity is not None and np.isfinite(opacity).all() and opacity.mean() < 1.0:
@@ -982,11 +986,10 @@ class _Loader:
     def _primvar_corners(self, prim, varname: str, width: int, tri, corner, face_of_tri, n_points, n_faces, n_corners):
         """Values [T,3,width] of primvar ``varname`` at the triangles' corners, or None when it is missing or unusable
         (not finite, another width, or a length its interpolation does not give)."""
-        from pxr import UsdGeom
 
-        pv = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance(varname)  # a constant one may be an ancestor's
+        pv = self._primvars.find(prim, varname)  # a constant one may be an ancestor's
         with self._reading(prim.GetPath()):
-            vals = pv.ComputeFlattened(self.time) if pv and pv.HasAuthoredValue() else None
+            vals = pv.ComputeFlattened(self.time) if pv is not None else None
             v = np.asarray(vals, np.float64) if vals is not None and len(vals) else None
         interp = pv.GetInterpolation() if pv else None
         if v is None or v.size % width or not np.isfinite(v).all():
@@ -1241,7 +1244,7 @@ class _Loader:
                 elif p.HasAPI(UsdLux.LightAPI) or t.endswith("Light"):
                     self.warn("a light in a PointInstancer prototype is not instanced: it does not light the scene",
                               str(p.GetPath()))
-        roots = [_matrix(UsdGeom.Xformable(root), self.time) for root in protos]
+        roots = [_matrix(UsdGeom.Xformable(root), self._xforms) for root in protos]
         for root, m in zip(protos, roots, strict=True):
             if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-30:
                 raise self.err("SCENE_INVALID", "a prototype root's transform is singular or not finite", root.GetPath(),

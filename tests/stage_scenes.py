@@ -84,21 +84,26 @@ def nested_scene(path, depth: int, *, mesh_every: int = 0) -> str:
 
 
 class AncestorVisits:
-    """Counts the ancestors that USD's per-prim inherited-state queries walk while a scene loads (a USD method
-    wrapped to count, USD still answering): each ``ComputeVisibility`` / ``ComputePurpose`` / parentless
-    ``ComputePurposeInfo`` call walks the prim's ancestors (its depth counted); ``ComputePurposeInfo(parent info)``
-    and the rest count 1. A traversal whose count grows faster than its prims is quadratic in depth."""
+    """Counts the ancestors that USD's per-prim inherited-state queries walk while a scene loads (USD methods wrapped
+    to count, USD still answering): each ``ComputeVisibility`` / ``ComputePurpose`` / parentless
+    ``ComputePurposeInfo`` / ``ComputeLocalToWorldTransform`` / ``FindPrimvarWithInheritance(name)`` call walks the
+    prim's ancestors (its depth counted); the same queries given the parent's answer count 1. A traversal whose
+    count grows faster than its prims is quadratic in depth."""
 
     def __init__(self, monkeypatch):
         from pxr import UsdGeom
 
         self.count = 0
-        for name in ("ComputeVisibility", "ComputePurpose", "ComputePurposeInfo"):
-            monkeypatch.setattr(UsdGeom.Imageable, name, self._counted(getattr(UsdGeom.Imageable, name), name))
+        for owner, name in ((UsdGeom.Imageable, "ComputeVisibility"), (UsdGeom.Imageable, "ComputePurpose"),
+                            (UsdGeom.Imageable, "ComputePurposeInfo"), (UsdGeom.Imageable, "ComputeLocalToWorldTransform"),
+                            (UsdGeom.PrimvarsAPI, "FindPrimvarWithInheritance")):
+            monkeypatch.setattr(owner, name, self._counted(getattr(owner, name), name))
 
     def _counted(self, method, name):
-        def counted(imageable, *args):
-            walks = name != "ComputePurposeInfo" or not args
-            self.count += imageable.GetPath().pathElementCount if walks else 1
-            return method(imageable, *args)
+        given_parent = {"ComputePurposeInfo": 0, "FindPrimvarWithInheritance": 1}.get(name)
+
+        def counted(schema, *args):
+            walks = given_parent is None or len(args) <= given_parent
+            self.count += schema.GetPrim().GetPath().pathElementCount if walks else 1
+            return method(schema, *args)
         return counted

@@ -15,10 +15,15 @@ def _visits(tmp_path, monkeypatch, depth, **kw) -> int:
     with monkeypatch.context() as m:
         visits = AncestorVisits(m)
         scene = read_scene(path)
-    assert len(scene.meshes) == 2  # the floor and the triangle at the bottom
+    assert len(scene.meshes) == 2 + (depth if kw.get("mesh_every") == 1 else 0)  # the floor, the bottom's, the leaves
     return visits.count
 
 
 def test_visibility_and_purpose_of_a_deep_chain_cost_linear_time(tmp_path, monkeypatch):
     small, large = (_visits(tmp_path, monkeypatch, n) for n in (200, 400))
     assert large <= 2.2 * small, (small, large)  # each prim's ancestors walked again: 4x
+
+
+def test_transforms_and_inherited_primvars_of_meshes_at_every_depth_cost_linear_time(tmp_path, monkeypatch):
+    small, large = (_visits(tmp_path, monkeypatch, n, mesh_every=1) for n in (200, 400))
+    assert large <= 2.2 * small, (small, large)  # each mesh's ancestors walked again: 4x

@@ -63,3 +63,50 @@ def test_hiding_equals_usds_per_prim_computation(seed):
             order = rng.sample(prims, len(prims))
             assert {p.GetPath(): shuffled.is_hidden(p) for p in order} == want
     assert any(_hidden_by_usd(p, Usd.TimeCode.Default(), Purposes(frozenset({"default"}), "")) for p in prims)
+
+
+def _random_primvar_stage(seed: int):
+    """Prims 1-12 deep with primvars of three names authored at random: constant or vertex, with a value or only
+    declared, on imageable and non-imageable prims."""
+    from pxr import Sdf, Usd, UsdGeom
+
+    rng = random.Random(seed)
+    stage = Usd.Stage.CreateInMemory()
+    paths = [Sdf.Path.absoluteRootPath]
+    for i in range(300):
+        parent = rng.choice(paths)
+        if parent.pathElementCount >= 12:
+            continue
+        prim = stage.DefinePrim(parent.AppendChild(f"P{i}"), rng.choice(_TYPES))
+        paths.append(prim.GetPath())
+        for name in _PRIMVARS:
+            if rng.random() < 0.15:
+                interpolation = rng.choice((UsdGeom.Tokens.constant, UsdGeom.Tokens.constant, UsdGeom.Tokens.vertex))
+                kind, value = {"displayColor": (Sdf.ValueTypeNames.Color3fArray, [(rng.random(), 0.0, 0.0)]),
+                               "displayOpacity": (Sdf.ValueTypeNames.FloatArray, [rng.random()]),
+                               "st": (Sdf.ValueTypeNames.TexCoord2fArray, [(rng.random(), 0.0)])}[name]
+                pv = UsdGeom.PrimvarsAPI(prim).CreatePrimvar(name, kind, interpolation)
+                if rng.random() < 0.8:
+                    pv.Set(value)
+    return stage
+
+
+_PRIMVARS = ("displayColor", "displayOpacity", "st")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_inherited_primvars_equal_usds_per_prim_search(seed):
+    from pxr import UsdGeom
+
+    from nasset_sdk.stage_rules import InheritedPrimvars
+
+    stage = _random_primvar_stage(seed)
+    prims = list(stage.Traverse())
+    for order in (prims, random.Random(seed).sample(prims, len(prims))):
+        primvars = InheritedPrimvars()
+        for prim in order:
+            for name in _PRIMVARS:
+                want = UsdGeom.PrimvarsAPI(prim).FindPrimvarWithInheritance(name)
+                want = want.GetAttr().GetPath() if want and want.HasAuthoredValue() else None
+                got = primvars.find(prim, name)
+                assert (got.GetAttr().GetPath() if got is not None else None) == want, (prim.GetPath(), name)
