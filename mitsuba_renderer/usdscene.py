@@ -195,14 +195,17 @@ def _say(path: str):
 
 
 def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None, material=None,
-                  primvars: stage_rules.InheritedPrimvars | None = None) -> Material:
-    """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself); ``primvars``: the scene's
-    inherited primvars, remembered across the meshes of one traversal."""
+                  primvars: stage_rules.InheritedPrimvars | None = None,
+                  bindings: stage_rules.MaterialBindings | None = None) -> Material:
+    """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself); ``primvars`` and ``bindings``:
+    the scene's inherited primvars and material bindings, remembered across the meshes of one traversal."""
     say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
-    mat = material if material is not None else stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say)
+    mat = material
+    if mat is None:
+        mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say, bindings)
     if not mat:
         kd = _display_color(prim, say, t, primvars or stage_rules.InheritedPrimvars())
     else:
@@ -339,6 +342,7 @@ def read_scene(path: str) -> SceneDesc:
     purposes = stage_rules.settings_purposes(settings, t, say)
     hiding = stage_rules.Hiding(t, purposes)
     inherited = stage_rules.InheritedPrimvars()  # displayColor of unbound meshes, O(1) per mesh however deep
+    bindings = stage_rules.MaterialBindings()  # bound materials, O(1) per mesh however deep
     cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
@@ -396,8 +400,9 @@ def read_scene(path: str) -> SceneDesc:
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
             cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
-            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes):
-                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes, primvars=inherited),
+            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes, bindings):
+                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes, primvars=inherited,
+                                                 bindings=bindings),
                                    None if cn is None else cn[sel], one_sided, back, sign))
             continue
         if tn in _STRUCTURAL:
@@ -435,7 +440,8 @@ def _sidedness(prim, mw, path, t, purposes):
     return one_sided, back, -1.0 if left != mirrored else 1.0
 
 
-def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes) -> list:
+def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rules.Purposes,
+                 bindings: stage_rules.MaterialBindings | None = None) -> list:
     """[(prim path, prim whose binding shades them, triangle mask)] of a mesh (spec/renderer.md#materials): the faces of
     each ``materialBind`` GeomSubset of element type face with a bound material (the first subset listing a face
     wins), the rest under the mesh's own binding; ``holeIndices`` faces left out."""
@@ -447,7 +453,7 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rule
         if subset.GetElementTypeAttr().Get(t) != UsdGeom.Tokens.face:
             _say(path)("GeomSubset of an element type other than face ignored", str(subset.GetPath()))
             continue
-        if not stage_rules.bound_material(subset.GetPrim(), purposes, _say(path)):
+        if not stage_rules.bound_material(subset.GetPrim(), purposes, _say(path), bindings):
             continue
         ind = np.asarray(subset.GetIndicesAttr().Get(t) or [], np.int64)
         if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):

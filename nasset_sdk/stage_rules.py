@@ -296,16 +296,66 @@ class InheritedPrimvars:
         return inherited
 
 
-def bound_material(prim, purposes: Purposes, warn: Warn):
+class MaterialBindings:
+    """``UsdShade.MaterialBindingAPI.ComputeBoundMaterial`` with what each prim passes down remembered by (prim,
+    purpose): a mesh N deep costs O(1), where USD's walks its N ancestors (a chain of meshes N deep cost O(N^2)).
+    USD's rule, each prim's own binding read by USD's calls: the specific purpose's bindings first, then the
+    all-purpose ones; of the direct bindings to a Material on the prim and its ancestors, the nearest wins, unless
+    an ancestor's is ``strongerThanDescendants`` (the one nearest the root of those). Below a collection-based
+    binding (membership depends on the prim asked about) USD's own walk answers."""
+
+    def __init__(self):
+        self._state: dict = {}  # (prim, purpose) -> (nearest bound path, root-most stronger one, collections above)
+
+    def compute(self, prim, purpose: str):
+        """The Material bound to ``prim`` for ``purpose``, else its all-purpose one (an invalid Material: none)."""
+        from pxr import UsdShade
+
+        for each in dict.fromkeys((purpose, str(UsdShade.Tokens.allPurpose))):
+            nearest, stronger, collections = self._computed(prim, each)
+            if collections:
+                return UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(purpose)[0]
+            if stronger or nearest:  # a binding to what is not a Material binds nothing, and ends the search
+                return UsdShade.Material(prim.GetStage().GetPrimAtPath(stronger or nearest))
+        return UsdShade.Material()
+
+    def _computed(self, prim, purpose: str) -> tuple:
+        from pxr import UsdShade
+
+        chain = []
+        while prim and not prim.IsPseudoRoot() and (prim, purpose) not in self._state:
+            chain.append(prim)
+            prim = prim.GetParent()
+        state = self._state.get((prim, purpose)) if prim else None
+        state = state or (None, None, False)
+        for p in reversed(chain):
+            nearest, stronger, collections = state
+            names = [n for n in p.GetAuthoredPropertyNames() if n.startswith("material:binding")]
+            if names:
+                binding = UsdShade.MaterialBindingAPI(p).GetDirectBinding(purpose)
+                target = binding.GetMaterialPath()
+                if not target.isEmpty:
+                    nearest = target
+                    if stronger is None and UsdShade.MaterialBindingAPI.GetMaterialBindingStrength(
+                            binding.GetBindingRel()) == UsdShade.Tokens.strongerThanDescendants:
+                        stronger = target
+                collections = collections or any(n.startswith("material:binding:collection") for n in names)
+            state = (nearest, stronger, collections)
+            self._state[(p, purpose)] = state
+        return state
+
+
+def bound_material(prim, purposes: Purposes, warn: Warn, bindings: MaterialBindings | None = None):
     """The material bound to ``prim`` for the settings' binding purpose (else its all-purpose binding; an invalid
     ``UsdShade.Material`` when unbound); a prim bound only for ``preview`` while the settings do not read it is
-    unbound, with a warning naming the prim and the material."""
+    unbound, with a warning naming the prim and the material. ``bindings``: what a traversal remembers of the
+    ancestors' bindings (:class:`MaterialBindings`)."""
     from pxr import UsdShade
 
-    api = UsdShade.MaterialBindingAPI(prim)
-    mat, _ = api.ComputeBoundMaterial(purposes.material)
+    bindings = bindings or MaterialBindings()
+    mat = bindings.compute(prim, purposes.material)
     if not mat and purposes.material != UsdShade.Tokens.preview:
-        preview, _ = api.ComputeBoundMaterial(UsdShade.Tokens.preview)
+        preview = bindings.compute(prim, str(UsdShade.Tokens.preview))
         if preview:
             warn(f"bound to {preview.GetPath()} only for purpose preview (a viewport's binding; a final render "
                  "reads full, else all-purpose bindings): rendered unbound", str(prim.GetPath()))

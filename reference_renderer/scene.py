@@ -354,6 +354,7 @@ class _Loader:
         self.stage, self.file, self.time = stage, file, time
         self._xforms = UsdGeom.XformCache(time)  # world transforms at the render time, each parent's remembered
         self._primvars = stage_rules.InheritedPrimvars()  # inherited constant primvars, each parent's remembered
+        self._bindings = stage_rules.MaterialBindings()  # bound materials, each parent's bindings remembered
         self._said: set[str] = set()
         self._placement: np.ndarray | None = None  # inv(prototype root) @ instance @ PointInstancer, while expanding one
         self.warnings: list[str] = []
@@ -705,7 +706,7 @@ class _Loader:
     def _bound_material(self, prim):
         """The material the render settings' ``materialBindingPurposes`` bind to ``prim`` (spec/renderer.md#materials;
         nasset_sdk.stage_rules.bound_material)."""
-        return stage_rules.bound_material(prim, self._purposes, self.warn)
+        return stage_rules.bound_material(prim, self._purposes, self.warn, self._bindings)
 
     def _back_material(self, prim) -> int:
         """Material id of the ``nasset:backMaterial`` relationship (the back side's material, -1 when absent)."""

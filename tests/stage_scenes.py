@@ -86,17 +86,18 @@ def nested_scene(path, depth: int, *, mesh_every: int = 0) -> str:
 class AncestorVisits:
     """Counts the ancestors that USD's per-prim inherited-state queries walk while a scene loads (USD methods wrapped
     to count, USD still answering): each ``ComputeVisibility`` / ``ComputePurpose`` / parentless
-    ``ComputePurposeInfo`` / ``ComputeLocalToWorldTransform`` / ``FindPrimvarWithInheritance(name)`` call walks the
-    prim's ancestors (its depth counted); the same queries given the parent's answer count 1. A traversal whose
-    count grows faster than its prims is quadratic in depth."""
+    ``ComputePurposeInfo`` / ``ComputeLocalToWorldTransform`` / ``FindPrimvarWithInheritance(name)`` /
+    ``ComputeBoundMaterial`` call walks the prim's ancestors (its depth counted); the same queries given the
+    parent's answer count 1. A traversal whose count grows faster than its prims is quadratic in depth."""
 
     def __init__(self, monkeypatch):
-        from pxr import UsdGeom
+        from pxr import UsdGeom, UsdShade
 
         self.count = 0
         for owner, name in ((UsdGeom.Imageable, "ComputeVisibility"), (UsdGeom.Imageable, "ComputePurpose"),
                             (UsdGeom.Imageable, "ComputePurposeInfo"), (UsdGeom.Imageable, "ComputeLocalToWorldTransform"),
-                            (UsdGeom.PrimvarsAPI, "FindPrimvarWithInheritance")):
+                            (UsdGeom.PrimvarsAPI, "FindPrimvarWithInheritance"),
+                            (UsdShade.MaterialBindingAPI, "ComputeBoundMaterial")):
             monkeypatch.setattr(owner, name, self._counted(getattr(owner, name), name))
 
     def _counted(self, method, name):

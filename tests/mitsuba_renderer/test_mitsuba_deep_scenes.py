@@ -24,6 +24,6 @@ def test_visibility_and_purpose_of_a_deep_chain_cost_linear_time(tmp_path, monke
     assert large <= 2.2 * small, (small, large)  # each prim's ancestors walked again: 4x
 
 
-def test_transforms_and_inherited_primvars_of_meshes_at_every_depth_cost_linear_time(tmp_path, monkeypatch):
+def test_transforms_primvars_and_materials_of_meshes_at_every_depth_cost_linear_time(tmp_path, monkeypatch):
     small, large = (_visits(tmp_path, monkeypatch, n, mesh_every=1) for n in (200, 400))
     assert large <= 2.2 * small, (small, large)  # each mesh's ancestors walked again: 4x

@@ -110,3 +110,58 @@ def test_inherited_primvars_equal_usds_per_prim_search(seed):
                 want = want.GetAttr().GetPath() if want and want.HasAuthoredValue() else None
                 got = primvars.find(prim, name)
                 assert (got.GetAttr().GetPath() if got is not None else None) == want, (prim.GetPath(), name)
+
+
+def _random_binding_stage(seed: int, collections: bool):
+    """Prims 1-12 deep with direct bindings at random: all-purpose, full or preview, weaker or stronger than
+    descendants, to a Material, to a prim that is not one or to nothing there; through the MaterialBindingAPI or as
+    a bare relationship; with ``collections``, a few collection-based bindings too."""
+    from pxr import Sdf, Usd, UsdShade
+
+    rng = random.Random(seed)
+    stage = Usd.Stage.CreateInMemory()
+    targets = [UsdShade.Material.Define(stage, f"/Looks/M{i}").GetPath() for i in range(4)]
+    targets += [stage.DefinePrim("/Looks/NotAMaterial", "Xform").GetPath(), Sdf.Path("/Looks/Missing")]
+    paths = [Sdf.Path("/World")]
+    stage.DefinePrim(paths[0], "Xform")
+    for i in range(300):
+        parent = rng.choice(paths)
+        if parent.pathElementCount >= 12:
+            continue
+        prim = stage.DefinePrim(parent.AppendChild(f"P{i}"), rng.choice(_TYPES))
+        paths.append(prim.GetPath())
+        for purpose in ("", "full", "preview"):
+            if rng.random() < 0.12:
+                name = "material:binding" + (f":{purpose}" if purpose else "")
+                if rng.random() < 0.8:
+                    UsdShade.MaterialBindingAPI.Apply(prim)
+                rel = prim.CreateRelationship(name, False)
+                rel.SetTargets([rng.choice(targets)])
+                if rng.random() < 0.3:
+                    UsdShade.MaterialBindingAPI.SetMaterialBindingStrength(rel, UsdShade.Tokens.strongerThanDescendants)
+        if collections and rng.random() < 0.02:
+            members = [p for p in paths if p.HasPrefix(prim.GetPath())]
+            coll = Usd.CollectionAPI.Apply(prim, f"c{i}")
+            coll.CreateIncludesRel().SetTargets(rng.sample(members, min(3, len(members))))
+            api = UsdShade.MaterialBindingAPI.Apply(prim)
+            api.Bind(coll, UsdShade.Material(stage.GetPrimAtPath(targets[rng.randrange(4)])), f"b{i}")
+    return stage
+
+
+@pytest.mark.parametrize("seed", range(6))
+@pytest.mark.parametrize("collections", [False, True])
+def test_material_bindings_equal_usds_per_prim_computation(seed, collections):
+    from pxr import UsdShade
+
+    from nasset_sdk.stage_rules import MaterialBindings
+
+    stage = _random_binding_stage(seed, collections)
+    prims = list(stage.Traverse())
+    for purpose in ("", "full", "preview"):
+        want = {p.GetPath(): UsdShade.MaterialBindingAPI(p).ComputeBoundMaterial(purpose)[0] for p in prims}
+        want = {k: m.GetPath() if m else None for k, m in want.items()}
+        for order in (prims, random.Random(seed).sample(prims, len(prims))):
+            bindings = MaterialBindings()
+            got = {p.GetPath(): bindings.compute(p, purpose) for p in order}
+            assert {k: m.GetPath() if m else None for k, m in got.items()} == want
+    assert len(set(want.values())) > 2  # several materials, and unbound prims
