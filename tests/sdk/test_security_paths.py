@@ -397,3 +397,37 @@ def test_value_clip_templates_are_refused_before_anything_reads_through_them(tmp
             Asset.open(path)
         assert exc.value.code == "ASSET_PATH_ESCAPES" and "value clip template" in exc.value.message
     assert Sdf.Layer.Find(str(outside / "clip.0.usda")) is None  # never opened
+
+
+def test_asset_path_scan_of_a_deep_layer_spells_prim_paths_only_where_found(monkeypatch):
+    """A layer's asset paths are listed in time linear in its specs: a prim's path (as long as its depth) is spelled
+    only for a spec that holds an asset path, not for each of the specs of a chain nested thousands deep (counted)."""
+    from pxr import Sdf
+
+    from nasset_sdk.paths import layer_asset_paths
+
+    spelled = [0]
+    prim_path = Sdf.Path.GetPrimPath
+
+    def counted(path):
+        spelled[0] += path.pathElementCount
+        return prim_path(path)
+
+    monkeypatch.setattr(Sdf.Path, "GetPrimPath", counted)
+
+    def scan(depth):
+        layer = Sdf.Layer.CreateAnonymous(".usda")
+        where = Sdf.Path("/Chain")
+        for _ in range(depth):
+            spec = Sdf.CreatePrimInLayer(layer, where)
+            spec.specifier = Sdf.SpecifierDef
+            Sdf.AttributeSpec(spec, "size", Sdf.ValueTypeNames.Double).default = 1.0
+            where = where.AppendChild("X")
+        spec.referenceList.Prepend(Sdf.Reference("./bottom.usda"))  # the one asset path, at the bottom
+        spelled[0] = 0
+        found = layer_asset_paths(layer)
+        assert [(s, prim) for _, s, prim, _ in found] == [("./bottom.usda", str(spec.path))]
+        return spelled[0]
+
+    small, large = scan(200), scan(400)
+    assert large <= 2.2 * small, (small, large)  # every spec's path spelled: 4x
