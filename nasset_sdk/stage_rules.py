@@ -215,6 +215,17 @@ def settings_purposes(settings, time, warn: Warn) -> Purposes:
     return Purposes(frozenset(str(p) for p in included), specific[0] if specific else str(UsdShade.Tokens.allPurpose))
 
 
+def is_hidden(prim, time, purposes: Purposes) -> bool:
+    """:meth:`Hiding.is_hidden` of one prim on its own (spec/implementers.md lets implementations call this module):
+    USD's per-prim ``ComputeVisibility`` / ``ComputePurpose``, O(depth) per call; a traversal uses :class:`Hiding`."""
+    from pxr import UsdGeom
+
+    if not prim.IsA(UsdGeom.Imageable):
+        return False
+    img = UsdGeom.Imageable(prim)
+    return img.ComputeVisibility(time) == UsdGeom.Tokens.invisible or img.ComputePurpose() not in purposes.included
+
+
 class Hiding:
     """Which prims a render skips (:meth:`is_hidden`), each prim's computed visibility and purpose found from its
     parent's, remembered by path: a traversal costs O(prims), where USD's ``ComputeVisibility`` and

@@ -7,7 +7,7 @@ import random
 
 import pytest
 
-from nasset_sdk.stage_rules import Hiding, Purposes
+from nasset_sdk.stage_rules import Hiding, Purposes, is_hidden
 
 _TYPES = ("Xform", "Xform", "Scope", "", "Mesh", "Cube", "GeomSubset", "Material")
 
@@ -36,16 +36,6 @@ def _random_stage(seed: int):
     return stage
 
 
-def _hidden_by_usd(prim, time, purposes) -> bool:
-    """The per-prim rule as USD computes it, every ancestor walked."""
-    from pxr import UsdGeom
-
-    if not prim.IsA(UsdGeom.Imageable):
-        return False
-    img = UsdGeom.Imageable(prim)
-    return img.ComputeVisibility(time) == UsdGeom.Tokens.invisible or img.ComputePurpose() not in purposes.included
-
-
 @pytest.mark.parametrize("seed", range(6))
 def test_hiding_equals_usds_per_prim_computation(seed):
     from pxr import Usd
@@ -56,13 +46,13 @@ def test_hiding_equals_usds_per_prim_computation(seed):
     for included in ({"default", "render"}, {"default", "proxy"}, {"render", "guide"}):
         purposes = Purposes(frozenset(included), "full")
         for time in (Usd.TimeCode.Default(), Usd.TimeCode(1.0)):
-            want = {p.GetPath(): _hidden_by_usd(p, time, purposes) for p in prims}
+            want = {p.GetPath(): is_hidden(p, time, purposes) for p in prims}
             in_order = Hiding(time, purposes)  # traversal order: each parent already known
             assert {p.GetPath(): in_order.is_hidden(p) for p in prims} == want
             shuffled = Hiding(time, purposes)  # any order: a prim's unknown ancestors computed on the way
             order = rng.sample(prims, len(prims))
             assert {p.GetPath(): shuffled.is_hidden(p) for p in order} == want
-    assert any(_hidden_by_usd(p, Usd.TimeCode.Default(), Purposes(frozenset({"default"}), "")) for p in prims)
+    assert any(is_hidden(p, Usd.TimeCode.Default(), Purposes(frozenset({"default"}), "")) for p in prims)
 
 
 def _random_primvar_stage(seed: int):
