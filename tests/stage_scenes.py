@@ -108,3 +108,16 @@ class AncestorVisits:
             self.count += schema.GetPrim().GetPath().pathElementCount if walks else 1
             return method(schema, *args)
         return counted
+
+
+def ancestor_visits_ratio(tmp_path, monkeypatch, read, **kw) -> tuple[int, int]:
+    """(visits at depth 200, visits at depth 400) of USD's ancestor-walking calls while ``read(path)`` loads
+    :func:`nested_scene` (``kw``: its options). Linear cost doubles them; a walk per prim quadruples them."""
+    counts = []
+    for depth in (200, 400):
+        path = nested_scene(tmp_path / f"nested{depth}.usda", depth, **kw)
+        with monkeypatch.context() as m:
+            visits = AncestorVisits(m)
+            read(path, depth)
+        counts.append(visits.count)
+    return counts[0], counts[1]

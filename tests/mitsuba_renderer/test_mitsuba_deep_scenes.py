@@ -7,23 +7,13 @@ import pytest
 
 pytest.importorskip("mitsuba")
 from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
-from tests.stage_scenes import AncestorVisits, nested_scene  # noqa: E402
+from tests.stage_scenes import ancestor_visits_ratio  # noqa: E402
 
 
-def _visits(tmp_path, monkeypatch, depth, **kw) -> int:
-    path = nested_scene(tmp_path / f"nested{depth}.usda", depth, **kw)
-    with monkeypatch.context() as m:
-        visits = AncestorVisits(m)
-        scene = read_scene(path)
-    assert len(scene.meshes) == 2 + (depth if kw.get("mesh_every") == 1 else 0)  # the floor, the bottom's, the leaves
-    return visits.count
+@pytest.mark.parametrize("mesh_every", [0, 1], ids=["visibility-and-purpose", "transforms-primvars-materials"])
+def test_a_deep_chain_loads_in_linear_time(tmp_path, monkeypatch, mesh_every):
+    def read(path, depth):  # the floor, the bottom's mesh, and with mesh_every one beside every Xform
+        assert len(read_scene(path).meshes) == 2 + (depth if mesh_every else 0)
 
-
-def test_visibility_and_purpose_of_a_deep_chain_cost_linear_time(tmp_path, monkeypatch):
-    small, large = (_visits(tmp_path, monkeypatch, n) for n in (200, 400))
-    assert large <= 2.2 * small, (small, large)  # each prim's ancestors walked again: 4x
-
-
-def test_transforms_primvars_and_materials_of_meshes_at_every_depth_cost_linear_time(tmp_path, monkeypatch):
-    small, large = (_visits(tmp_path, monkeypatch, n, mesh_every=1) for n in (200, 400))
-    assert large <= 2.2 * small, (small, large)  # each mesh's ancestors walked again: 4x
+    small, large = ancestor_visits_ratio(tmp_path, monkeypatch, read, mesh_every=mesh_every)
+    assert large <= 2.2 * small, (small, large)  # each prim's (mesh's) ancestors walked again: 4x

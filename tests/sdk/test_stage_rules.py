@@ -12,20 +12,32 @@ from nasset_sdk.stage_rules import Hiding, Purposes, is_hidden
 _TYPES = ("Xform", "Xform", "Scope", "", "Mesh", "Cube", "GeomSubset", "Material")
 
 
-def _random_stage(seed: int):
-    """Prims of imageable and non-imageable types 1-12 deep; visibility and purpose authored at random on some
-    (non-imageable prims included, as plain attributes; a few visibilities only as time samples)."""
-    from pxr import Sdf, Usd, UsdGeom
+def _random_tree(seed: int, decorate, root: str | None = None):
+    """(stage, rng): 300 prims of imageable and non-imageable types 1-12 deep under ``root`` (default the pseudo-root),
+    each new prim passed to ``decorate(stage, prim, rng, paths, i)`` as it is defined."""
+    from pxr import Sdf, Usd
 
     rng = random.Random(seed)
     stage = Usd.Stage.CreateInMemory()
-    paths = [Sdf.Path.absoluteRootPath]
+    paths = [Sdf.Path(root) if root else Sdf.Path.absoluteRootPath]
+    if root:
+        stage.DefinePrim(paths[0], "Xform")
     for i in range(300):
         parent = rng.choice(paths)
         if parent.pathElementCount >= 12:
             continue
         prim = stage.DefinePrim(parent.AppendChild(f"P{i}"), rng.choice(_TYPES))
         paths.append(prim.GetPath())
+        decorate(stage, prim, rng, paths, i)
+    return stage, rng
+
+
+def _random_stage(seed: int):
+    """Visibility and purpose authored at random on some prims (non-imageable prims included, as plain
+    attributes; a few visibilities only as time samples)."""
+    from pxr import Sdf, UsdGeom
+
+    def decorate(stage, prim, rng, paths, i):
         if rng.random() < 0.15:
             attr = prim.CreateAttribute("visibility", Sdf.ValueTypeNames.Token)
             value = rng.choice((UsdGeom.Tokens.invisible, UsdGeom.Tokens.inherited))
@@ -33,7 +45,8 @@ def _random_stage(seed: int):
         if rng.random() < 0.2:
             prim.CreateAttribute("purpose", Sdf.ValueTypeNames.Token).Set(
                 rng.choice(("default", "render", "proxy", "guide")))
-    return stage
+
+    return _random_tree(seed, decorate)[0]
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -56,19 +69,11 @@ def test_hiding_equals_usds_per_prim_computation(seed):
 
 
 def _random_primvar_stage(seed: int):
-    """Prims 1-12 deep with primvars of three names authored at random: constant or vertex, with a value or only
-    declared, on imageable and non-imageable prims."""
-    from pxr import Sdf, Usd, UsdGeom
+    """Primvars of three names authored at random: constant or vertex, with a value or only declared, on imageable
+    and non-imageable prims."""
+    from pxr import Sdf, UsdGeom
 
-    rng = random.Random(seed)
-    stage = Usd.Stage.CreateInMemory()
-    paths = [Sdf.Path.absoluteRootPath]
-    for i in range(300):
-        parent = rng.choice(paths)
-        if parent.pathElementCount >= 12:
-            continue
-        prim = stage.DefinePrim(parent.AppendChild(f"P{i}"), rng.choice(_TYPES))
-        paths.append(prim.GetPath())
+    def decorate(stage, prim, rng, paths, i):
         for name in _PRIMVARS:
             if rng.random() < 0.15:
                 interpolation = rng.choice((UsdGeom.Tokens.constant, UsdGeom.Tokens.constant, UsdGeom.Tokens.vertex))
@@ -78,7 +83,8 @@ def _random_primvar_stage(seed: int):
                 pv = UsdGeom.PrimvarsAPI(prim).CreatePrimvar(name, kind, interpolation)
                 if rng.random() < 0.8:
                     pv.Set(value)
-    return stage
+
+    return _random_tree(seed, decorate)[0]
 
 
 _PRIMVARS = ("displayColor", "displayOpacity", "st")
@@ -103,23 +109,17 @@ def test_inherited_primvars_equal_usds_per_prim_search(seed):
 
 
 def _random_binding_stage(seed: int, collections: bool):
-    """Prims 1-12 deep with direct bindings at random: all-purpose, full or preview, weaker or stronger than
-    descendants, to a Material, to a prim that is not one or to nothing there; through the MaterialBindingAPI or as
-    a bare relationship; with ``collections``, a few collection-based bindings too."""
+    """Direct bindings at random: all-purpose, full or preview, weaker or stronger than descendants, to a Material,
+    to a prim that is not one or to nothing there; through the MaterialBindingAPI or as a bare relationship; with
+    ``collections``, a few collection-based bindings too."""
     from pxr import Sdf, Usd, UsdShade
 
-    rng = random.Random(seed)
-    stage = Usd.Stage.CreateInMemory()
-    targets = [UsdShade.Material.Define(stage, f"/Looks/M{i}").GetPath() for i in range(4)]
-    targets += [stage.DefinePrim("/Looks/NotAMaterial", "Xform").GetPath(), Sdf.Path("/Looks/Missing")]
-    paths = [Sdf.Path("/World")]
-    stage.DefinePrim(paths[0], "Xform")
-    for i in range(300):
-        parent = rng.choice(paths)
-        if parent.pathElementCount >= 12:
-            continue
-        prim = stage.DefinePrim(parent.AppendChild(f"P{i}"), rng.choice(_TYPES))
-        paths.append(prim.GetPath())
+    targets: list = []
+
+    def decorate(stage, prim, rng, paths, i):
+        if not targets:
+            targets.extend(UsdShade.Material.Define(stage, f"/Looks/M{k}").GetPath() for k in range(4))
+            targets.extend([stage.DefinePrim("/Looks/NotAMaterial", "Xform").GetPath(), Sdf.Path("/Looks/Missing")])
         for purpose in ("", "full", "preview"):
             if rng.random() < 0.12:
                 name = "material:binding" + (f":{purpose}" if purpose else "")
@@ -135,7 +135,8 @@ def _random_binding_stage(seed: int, collections: bool):
             coll.CreateIncludesRel().SetTargets(rng.sample(members, min(3, len(members))))
             api = UsdShade.MaterialBindingAPI.Apply(prim)
             api.Bind(coll, UsdShade.Material(stage.GetPrimAtPath(targets[rng.randrange(4)])), f"b{i}")
-    return stage
+
+    return _random_tree(seed, decorate, root="/World")[0]
 
 
 @pytest.mark.parametrize("seed", range(6))
