@@ -43,6 +43,35 @@ def render_settings(b, path, camera=None, resolution=(8, 8), **attrs):
     return s
 
 
+def product_camera_scene():
+    """:func:`two_camera_scene` whose settings name ``Top`` and whose render product names ``Below`` (the product's
+    camera is the one rendered)."""
+    from pxr import UsdRender
+
+    b = two_camera_scene()
+    settings = render_settings(b, "/Render/Settings", "/World/Top")
+    product = UsdRender.Product.Define(b.stage, "/Render/Product")
+    product.CreateCameraRel().SetTargets(["/World/Below"])
+    settings.CreateProductsRel().SetTargets([product.GetPath()])
+    return b
+
+
+def hidden_camera_scene(hide: str):
+    """(builder, camera path): :func:`floor_scene` with its camera made invisible (``hide`` "visibility") or moved
+    under a guide-purpose Xform (``hide`` "purpose"); a render still looks through it."""
+    from pxr import Sdf, UsdGeom
+
+    b, _ = floor_scene()
+    where = "/World/Camera"
+    if hide == "visibility":
+        UsdGeom.Imageable(b.stage.GetPrimAtPath(where)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+        return b, where
+    UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
+    Sdf.CopySpec(b.stage.GetRootLayer(), where, b.stage.GetRootLayer(), "/World/Rig/Camera")
+    b.stage.RemovePrim(where)
+    return b, "/World/Rig/Camera"
+
+
 def plain_geometry_layer(path, *, untyped: bool = True):
     """A layer whose default prim ``World`` (untyped, or the builder's Xform) holds the lit floor of
     :func:`floor_scene` and its material (no camera, no light)."""

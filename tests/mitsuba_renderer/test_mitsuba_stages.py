@@ -15,7 +15,7 @@ pytest.importorskip("mitsuba")
 from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
 from nasset_sdk.errors import SceneError  # noqa: E402
-from tests.stage_scenes import RED, THETA, E  # noqa: E402, F401
+from tests.stage_scenes import RED, THETA, E, hidden_camera_scene, product_camera_scene  # noqa: E402, F401
 from tests.stage_scenes import floor_scene as _floor_scene  # noqa: E402
 from tests.stage_scenes import render_settings as _settings  # noqa: E402
 from tests.stage_scenes import two_camera_scene as _two_camera_scene  # noqa: E402
@@ -41,14 +41,7 @@ def test_render_settings_camera_is_the_camera_rendered(tmp_path):
 
 
 def test_render_product_camera_wins_over_the_settings_camera(tmp_path):
-    from pxr import UsdRender
-
-    b = _two_camera_scene()
-    settings = _settings(b, "/Render/Settings", "/World/Top")
-    product = UsdRender.Product.Define(b.stage, "/Render/Product")
-    product.CreateCameraRel().SetTargets(["/World/Below"])
-    settings.CreateProductsRel().SetTargets([product.GetPath()])
-    assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+    assert read_scene(product_camera_scene().write(tmp_path / "s.usda")).camera.prim == "/World/Below"
 
 
 def test_render_settings_prim_path_chooses_the_settings_and_their_size(tmp_path):
@@ -87,17 +80,7 @@ def test_several_cameras_without_settings_are_warned(tmp_path):
 
 @pytest.mark.parametrize("hide", ["visibility", "purpose"])
 def test_hidden_camera_is_still_the_camera(tmp_path, hide):
-    from pxr import Sdf, UsdGeom
-
-    b, _ = _floor_scene()
-    where = "/World/Camera"
-    if hide == "visibility":
-        UsdGeom.Imageable(b.stage.GetPrimAtPath(where)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
-    else:
-        UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
-        Sdf.CopySpec(b.stage.GetRootLayer(), where, b.stage.GetRootLayer(), "/World/Rig/Camera")
-        b.stage.RemovePrim(where)
-        where = "/World/Rig/Camera"
+    b, where = hidden_camera_scene(hide)
     assert read_scene(b.write(tmp_path / "s.usda")).camera.prim == where
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
-from tests.stage_scenes import RED, THETA, E  # noqa: F401
+from tests.stage_scenes import RED, THETA, E, hidden_camera_scene, product_camera_scene  # noqa: F401
 from tests.stage_scenes import floor_scene as _floor_scene
 from tests.stage_scenes import plain_geometry_layer as _plain_geometry_layer
 from tests.stage_scenes import render_settings as _settings
@@ -109,14 +109,7 @@ def test_render_settings_camera_is_the_camera_rendered(tmp_path):
 
 
 def test_render_product_camera_wins_over_the_settings_camera(tmp_path):
-    from pxr import UsdRender
-
-    b = _two_camera_scene()
-    settings = _settings(b, "/Render/Settings", "/World/Top")
-    product = UsdRender.Product.Define(b.stage, "/Render/Product")
-    product.CreateCameraRel().SetTargets(["/World/Below"])
-    settings.CreateProductsRel().SetTargets([product.GetPath()])
-    assert load_scene(b.write(tmp_path / "s.usda")).camera.prim == "/World/Below"
+    assert load_scene(product_camera_scene().write(tmp_path / "s.usda")).camera.prim == "/World/Below"
 
 
 def test_render_settings_prim_path_chooses_the_settings(tmp_path):
@@ -469,15 +462,7 @@ def test_hidden_camera_is_still_the_camera(tmp_path, hide):
     """Visibility and purpose hide a camera's gizmo in a viewport (Maya exports hidden camera shapes invisible, rigs
     put cameras under guide groups); rendering through it is unaffected. Such a camera was not found: 'the scene
     has no UsdGeom.Camera'."""
-    from pxr import Sdf, UsdGeom
-
-    b, _ = _floor_scene()
-    if hide == "visibility":
-        UsdGeom.Imageable(b.stage.GetPrimAtPath("/World/Camera")).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
-    else:
-        UsdGeom.Xform.Define(b.stage, "/World/Rig").CreatePurposeAttr(UsdGeom.Tokens.guide)
-        Sdf.CopySpec(b.stage.GetRootLayer(), "/World/Camera", b.stage.GetRootLayer(), "/World/Rig/Camera")
-        b.stage.RemovePrim("/World/Camera")
+    b, _ = hidden_camera_scene(hide)
     image, _ = _render(b, tmp_path)
     np.testing.assert_allclose(image, _lit((0.6, 0.6, 0.6)), rtol=1e-4)
 
