@@ -249,7 +249,7 @@ def layer_asset_paths(layer):
         if spec is None:
             return
         field = spec_path.name if spec_path.IsPropertyPath() else None
-        found_before = len(found)
+        here: list = []  # (kind, path, field) of this spec
         # values are read only where an asset path can live: array data (tensors, geometry) is never materialised
         asset_typed = spec_path.IsPropertyPath() and _is_asset_type(spec)
         for key in spec.ListInfoKeys():
@@ -262,16 +262,16 @@ def layer_asset_paths(layer):
             for kind, s in _asset_strings(value):
                 if key in ("clips", "clipAssetPaths", "clipManifestAssetPath"):
                     kind = "clip"
-                found.append((kind, s, None, field or key))
+                here.append((kind, s, field or key))
             for template in _clip_templates(key, value):
-                found.append(("clip template", template, None, field or key))
+                here.append(("clip template", template, field or key))
         if asset_typed:
             for t in layer.ListTimeSamplesForPath(spec_path):
                 for kind, s in _asset_strings(layer.QueryTimeSample(spec_path, t)):
-                    found.append((kind, s, None, f"{field} @ time {t}"))
-        if len(found) > found_before:  # the prim spelled only where it is named: a path is as long as its depth
+                    here.append((kind, s, f"{field} @ time {t}"))
+        if here:  # the prim spelled only where it is named: a path is as long as its depth
             prim = "/" if spec_path.IsAbsoluteRootPath() else str(spec_path.GetPrimPath().StripAllVariantSelections())
-            found[found_before:] = [(kind, s, prim, where) for kind, s, _, where in found[found_before:]]
+            found.extend((kind, s, prim, where) for kind, s, where in here)
 
     layer.Traverse(Sdf.Path.absoluteRootPath, visit)
     listed = {s for _, s, _, _ in found}
