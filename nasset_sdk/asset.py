@@ -37,6 +37,26 @@ QUALITY_SET = "quality"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
+#: root attribute of rna assets, format 0.3 (spec/kinds/rna.md#near-field-fetch)
+NEAR_FIELD_FETCH = "nasset:nearFieldFetch"
+
+
+def check_near_field_fetch(value, kind: str, where: dict) -> float:
+    """The near-field fetch fraction as a float: ``value`` None (not authored) is 0; else it must be a finite real in
+    [0, 1] on an rna asset, or NEAR_FIELD_INVALID is raised with the location ``where`` (file, prim, attribute)."""
+    if value is None:
+        return 0.0
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        f = float("nan")
+    if isinstance(value, (bool, str)) or not 0.0 <= f <= 1.0:  # NaN fails both comparisons
+        raise error("NEAR_FIELD_INVALID", f"{NEAR_FIELD_FETCH} = {value!r} must be a number in [0, 1]", **where)
+    if f > 0 and kind != "rna":
+        raise error("NEAR_FIELD_INVALID", f"{NEAR_FIELD_FETCH} is defined for kind rna only, not {kind!r}", **where)
+    return f
+
+
 def _check_name(what: str, name: str) -> None:
     if not isinstance(name, str) or not _NAME.match(name) or "__" in name:
         raise UsageError(f"{what} name {name!r} must match [A-Za-z_][A-Za-z0-9_]* without '__'")
@@ -89,6 +109,9 @@ class AssetBuilder:
         self.fallback_color = (0.5, 0.5, 0.5)
         self.fallback_roughness = 0.5
         self.meters_per_unit = 1.0
+        #: rna only: the fraction f of the way from a hit to the encoding box's centre at which light is fetched
+        #: (spec/kinds/rna.md#near-field-fetch); 0 (the distant-light rule) is not written
+        self.near_field_fetch = 0.0
         # name -> {quality or "": ComponentData}
         self.components: dict[str, dict[str, ComponentData]] = {}
         self.default_quality: dict[str, str] = {}
@@ -139,6 +162,7 @@ class AssetBuilder:
         b.geometry = geo
         b.domain = (np.array(asset.domain[0], np.float64), np.array(asset.domain[1], np.float64))
         b.meters_per_unit = float(asset.stage.GetMetadata("metersPerUnit") or 1.0)
+        b.near_field_fetch = asset.near_field_fetch
         shader = asset.stage.GetPrimAtPath(FALLBACK + "/PreviewSurface")
         color = shader.GetAttribute("inputs:diffuseColor").Get() if shader else None
         roughness = shader.GetAttribute("inputs:roughness").Get() if shader else None
@@ -178,6 +202,7 @@ class AssetBuilder:
         from .kinds import get_kind
 
         get_kind(self.kind).check_builder(self)
+        fetch = check_near_field_fetch(self.near_field_fetch, self.kind, {"attribute": NEAR_FIELD_FETCH})
         layer = Sdf.Layer.CreateAnonymous(".usdc")
         stage = Usd.Stage.Open(layer)
         stage.SetMetadata("upAxis", "Y")
@@ -186,12 +211,14 @@ class AssetBuilder:
         stage.SetDefaultPrim(root)
         Usd.ModelAPI(root).SetKind("component")
         root.CreateAttribute("nasset:kind", Sdf.ValueTypeNames.Token).Set(self.kind)
-        version = limits.written_version(self.components)
+        version = limits.written_version(self.components, [NEAR_FIELD_FETCH] if fetch > 0 else [])
         root.CreateAttribute("nasset:specVersion", Sdf.ValueTypeNames.String).Set(version)
         root.CreateAttribute("nasset:variant", Sdf.ValueTypeNames.Token).Set(self.variant)
         lo, hi = self.domain
         root.CreateAttribute("nasset:domainMin", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*map(float, lo)))
         root.CreateAttribute("nasset:domainMax", Sdf.ValueTypeNames.Float3).Set(Gf.Vec3f(*map(float, hi)))
+        if fetch > 0:
+            root.CreateAttribute(NEAR_FIELD_FETCH, Sdf.ValueTypeNames.Float).Set(fetch)
         prov = {**self.provenance, "specVersion": version, "kind": self.kind}  # required keys win
         root.CreateAttribute("nasset:provenance", Sdf.ValueTypeNames.String).Set(json.dumps(prov, sort_keys=True))
 
@@ -486,6 +513,13 @@ class Asset:
         if lo.shape != (3,) or hi.shape != (3,) or not (np.isfinite(lo).all() and np.isfinite(hi).all()) or not (hi > lo).all():
             raise error("DOMAIN_INVALID", f"domain {lo} .. {hi} must be finite with max > min", **self._loc(ROOT, "nasset:domainMin"))
         self.domain = (lo, hi)
+
+    @property
+    def near_field_fetch(self) -> float:
+        """f in [0, 1]: a renderer fetches the light of an rna hit x at x + f (c - x), c the encoding box's centre
+        (spec/kinds/rna.md#near-field-fetch); 0 where the attribute is not authored (the distant-light rule)."""
+        return check_near_field_fetch(self._attr(self.root, NEAR_FIELD_FETCH, required=False), self.kind,
+                                      self._loc(ROOT, NEAR_FIELD_FETCH))
 
     @property
     def provenance(self) -> dict:

@@ -112,6 +112,9 @@ CODES: dict[str, Code] = _codes(
     ("EXTRA_MISSING", "usage", "a verb needs packages of an optional extra that are not installed", "README.md#extras"),
     ("SPEC_VERSION_NEWER", "format", "specVersion has a MINOR newer than this SDK knows: newer content is not validated",
      "format.md#versioning"),
+    # near-field light (format 0.3)
+    ("NEAR_FIELD_INVALID", "format", "nasset:nearFieldFetch is not a number in [0, 1], or is authored on a kind other than rna",
+     "kinds/rna.md#near-field-fetch"),
 )
 
 

@@ -1,16 +1,20 @@
 """Bounds applied to untrusted assets (spec/security.md#bounds) and the version this SDK writes."""
 
-SPEC_VERSION = "0.2"  # the newest version this SDK writes
+SPEC_VERSION = "0.3"  # the newest version this SDK writes
 #: the version a written file declares: the lowest one that describes it (a 0.1 reader keeps reading
 #: every file that uses nothing newer), spec/format.md#versioning
 VERSION_OF_COMPONENT = {"portable": "0.2"}
+#: root attributes added by a minor version (written only when they say something: spec/format.md#versioning)
+VERSION_OF_ATTRIBUTE = {"nasset:nearFieldFetch": "0.3"}
 BASE_SPEC_VERSION = "0.1"
 
 
-def written_version(components) -> str:
-    """specVersion for a file with these component names: the highest minor any of them needs."""
-    return max((VERSION_OF_COMPONENT.get(c, BASE_SPEC_VERSION) for c in components),
-               key=lambda v: tuple(int(x) for x in v.split(".")), default=BASE_SPEC_VERSION)
+def written_version(components, attributes=()) -> str:
+    """specVersion for a file with these component names and these optional root attributes authored: the highest
+    minor any of them needs."""
+    needed = [VERSION_OF_COMPONENT.get(c, BASE_SPEC_VERSION) for c in components]
+    needed += [VERSION_OF_ATTRIBUTE.get(a, BASE_SPEC_VERSION) for a in attributes]
+    return max(needed, key=lambda v: tuple(int(x) for x in v.split(".")), default=BASE_SPEC_VERSION)
 #: MAJOR versions this SDK reads; any MINOR of a known MAJOR is read (spec/format.md#versioning).
 SUPPORTED_MAJOR = 0
 MAX_TENSOR_ELEMENTS = 1 << 27  # 134 M elements (256 MiB at fp16)

@@ -85,6 +85,7 @@ RULES: tuple[Rule, ...] = (
          ">= MIN_GEOMETRY_SIZE_RATIO x the largest |coordinate|"),
     Rule("EXTENT_MISMATCH", "error", "the geometry's extent is authored and equals its bounds (widths included for curves)"),
     Rule("DOMAIN_INVALID", "error", "the encoding box is authored, finite, non-empty and contains the geometry"),
+    Rule("NEAR_FIELD_INVALID", "error", "nasset:nearFieldFetch, when authored, is a float in [0, 1], and non-zero only on kind rna"),
     Rule("ASSET_PATH_ESCAPES", "error",
          "no asset path (sublayer, reference, payload, clip, attribute value, metadata, time sample; every variant) is absolute, "
          "a URL, an expression, a bare search path, malformed, or resolves (Ar, then realpath) outside the package or to a "
@@ -296,7 +297,7 @@ class Validation:
         return attr.Get() if attr and attr.HasAuthoredValue() else None
 
     def _header(self) -> None:
-        from ..asset import ROOT, Asset
+        from ..asset import NEAR_FIELD_FETCH, ROOT, Asset
         from ..kinds import KINDS
 
         stage = self.stage
@@ -346,6 +347,10 @@ class Validation:
                 domain_ok = True
         self.asset = Asset(self.path, stage)
         self.asset.kind, self.asset.variant, self.asset.spec_version = self.kind, self.variant, self.report.spec_version
+        try:
+            self.asset.near_field_fetch  # noqa: B018 (read for its check)
+        except NassetError as exc:
+            self.emit(exc.code, exc.message, ROOT, NEAR_FIELD_FETCH)
         self.asset.domain = self.domain if domain_ok else (np.full(3, -1.0), np.full(3, 1.0))
 
     def _schema_types(self) -> None:

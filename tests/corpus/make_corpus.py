@@ -140,6 +140,8 @@ def make_corpus(out_dir: str | Path) -> list[Case]:
     edit("spec_version_newer_minor", "SPEC_VERSION_NEWER",
          lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Set("0.7"), severity="warning")
     edit("spec_version_missing", "SPEC_VERSION", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:specVersion").Clear())
+    edit("near_field_fetch_above_one", "NEAR_FIELD_INVALID", lambda s, l: s.GetPrimAtPath("/Asset").CreateAttribute(
+        "nasset:nearFieldFetch", Sdf.ValueTypeNames.Float).Set(3.0))
     edit("kind_unknown", "KIND_UNKNOWN", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:kind").Set("gaussians"))
     edit("variant_unknown", "VARIANT_UNKNOWN", lambda s, l: s.GetPrimAtPath("/Asset").GetAttribute("nasset:variant").Set("volume"))
     edit("domain_nan", "DOMAIN_INVALID",

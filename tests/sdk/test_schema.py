@@ -261,3 +261,49 @@ def test_written_version_is_the_lowest_that_describes_the_file(tmp_path):
     add_portable(plain, tmp_path / "b.usdc")
     b = ns.Asset.open(tmp_path / "b.usdc", load="none")
     assert b.spec_version == "0.2" and b.provenance["specVersion"] == "0.2"
+
+
+def test_near_field_fetch_is_written_read_and_declares_0_3(tmp_path):
+    """nasset:nearFieldFetch (spec/kinds/rna.md#near-field-fetch): authored only when non-zero, read back exactly,
+    kept by from_asset, and the file declares 0.3 (the lowest version that describes it)."""
+    import nasset_sdk as ns
+    from nasset_sdk.examples import example_builder
+
+    b = example_builder("rna", size="tiny")
+    assert ns.Asset.open(b.write(tmp_path / "zero.usdc"), load="none").near_field_fetch == 0.0
+    b.near_field_fetch = 0.375
+    a = ns.Asset.open(b.write(tmp_path / "f.usdc"), load="none")
+    assert a.near_field_fetch == 0.375 and a.spec_version == "0.3" and a.provenance["specVersion"] == "0.3"
+    copy = ns.AssetBuilder.from_asset(a)
+    assert ns.Asset.open(copy.write(tmp_path / "copy.usdc"), load="none").near_field_fetch == 0.375
+    assert ns.Asset.open(tmp_path / "zero.usdc", load="none").spec_version == "0.1"
+
+
+@pytest.mark.parametrize("value, kind", [(float("nan"), "rna"), (1.5, "rna"), (-0.25, "rna"), (float("inf"), "rna"),
+                                          (0.5, "neupress")])
+def test_near_field_fetch_out_of_range_or_on_another_kind_is_refused(tmp_path, value, kind):
+    """The writer refuses the value, and a file carrying it fails Asset.open and the validator with NEAR_FIELD_INVALID
+    naming the attribute."""
+    from pxr import Sdf, Usd
+
+    import nasset_sdk as ns
+    from nasset_sdk.errors import NassetError
+    from nasset_sdk.examples import example_builder
+    from nasset_sdk.validate import validate_file
+
+    b = example_builder(kind, size="tiny")
+    b.near_field_fetch = value
+    with pytest.raises(NassetError) as info:
+        b.write(tmp_path / "refused.usdc")
+    assert info.value.code == "NEAR_FIELD_INVALID"
+    b.near_field_fetch = 0.0
+    path = b.write(tmp_path / "a.usdc")
+    stage = Usd.Stage.Open(str(path))
+    stage.GetPrimAtPath("/Asset").CreateAttribute("nasset:nearFieldFetch", Sdf.ValueTypeNames.Float).Set(value)
+    stage.GetRootLayer().Save()
+    with pytest.raises(NassetError) as info:
+        ns.Asset.open(path, load="none").near_field_fetch  # noqa: B018
+    assert info.value.code == "NEAR_FIELD_INVALID" and info.value.attribute == "nasset:nearFieldFetch"
+    report = validate_file(path)
+    found = [f for f in report.findings if f.code == "NEAR_FIELD_INVALID"]
+    assert found and found[0].attribute == "nasset:nearFieldFetch" and not report.ok
