@@ -158,19 +158,21 @@ class Renderer:
         blocked = np.asarray(self.iso.geometry_scene.ray_test(shadow), bool)[:n]
         return ~blocked
 
-    def transport(self, o, d, spp: int, seed: int, wi=None, *, clamp: float | None = None, stats: dict | None = None) -> np.ndarray:
+    def transport(self, o, d, spp: int, seed: int, wi=None, *, clamp: float | None = None, stats: dict | None = None,
+                  scene=None) -> np.ndarray:
         """Mean radiance [N,3] over spp paths. ``wi`` [N,3]: each pixel's own light direction (needs
-        ``iso.per_path_lights``); without it, the current light (set with iso.set_light). ``clamp``:
+        ``iso.per_path_lights``); without it, the current light (set with iso.set_light), or ``scene``'s lights
+        (the asset's shapes lit otherwise, e.g. :class:`near_field.SphereLight`; JIT variants). ``clamp``:
         per-path-sample clamp (default the settings'); ``stats``: a dict whose ``removed`` and
         ``energy`` [3] accumulate the pixel means' energy the clamp removed and the unclamped energy."""
         clamp = self.s.clamp if clamp is None else clamp
         if not self.jit:
-            return self._transport_scalar(o, d, spp, seed, clamp, stats)
+            return self._transport_scalar(o, d, spp, seed, clamp, stats, scene)
         mi = self.mi
         lanes = wi is not None
         if lanes and not self.iso.per_path_lights:
             raise ValueError("per-pixel light directions need a delta light and a JIT variant")
-        scene = self.iso.lane_scene if lanes else self.iso.lit_scene
+        scene = self.iso.lane_scene if lanes else (self.iso.lit_scene if scene is None else scene)
         n = len(o)
         out = np.zeros((n, 3), np.float64)
         per = max(1, self.s.chunk // max(spp, 1))
@@ -227,7 +229,7 @@ class Renderer:
                 out[i] = not self.iso.geometry_scene.ray_test(si.spawn_ray(mi.Vector3f(*map(float, wi[i]))))
         return self.shadows.shadow(x, ng, wi) if self.shadows is not None else out
 
-    def _transport_scalar(self, o, d, spp, seed, clamp, stats=None):
+    def _transport_scalar(self, o, d, spp, seed, clamp, stats=None, scene=None):
         mi = self.mi
         sampler = mi.load_dict({"type": "independent"})
         out = np.zeros((len(o), 3), np.float64)
@@ -236,7 +238,7 @@ class Renderer:
             ray = mi.RayDifferential3f(self._sray(o[i], d[i]))
             acc, acc_raw = np.zeros(3), np.zeros(3)
             for _ in range(spp):
-                spec, _, _ = self.iso.integrator.sample(self.iso.lit_scene, sampler, ray, None, True)
+                spec, _, _ = self.iso.integrator.sample(self.iso.lit_scene if scene is None else scene, sampler, ray, None, True)
                 v = np.nan_to_num(np.asarray(list(spec), np.float64))
                 acc += np.minimum(v, clamp) if clamp > 0 else v
                 acc_raw += v
