@@ -199,8 +199,10 @@ class SceneBuilder:
         return str(path)
 
 
-def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), radius=0.5, subdivisions=3):
-    """An rna asset (icosphere) whose decoder returns constant transports: handy for exact tests."""
+def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), radius=0.5, subdivisions=3,
+                       near_field_fetch=0.0):
+    """An rna asset (icosphere) whose decoder returns constant transports: handy for exact tests. ``near_field_fetch``:
+    its f (spec/kinds/rna.md#near-field-fetch; 0 is not written)."""
     import trimesh
 
     from nasset_sdk.asset import AssetBuilder
@@ -216,6 +218,7 @@ def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25
     bias = np.array(list(unshadowed) + list(shadowed), np.float32)
     core.add_network("decoder", mlp_onnx([w], [bias]))
     b.provenance = {"generator": "constant"}
+    b.near_field_fetch = near_field_fetch
     return b.write(path)
 
 
