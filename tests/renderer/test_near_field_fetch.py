@@ -10,7 +10,13 @@ import pytest
 pytest.importorskip("embreex")
 
 from nasset_reference_renderer import RenderSettings, load_scene, render  # noqa: E402
-from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_asset, random_rna_asset  # noqa: E402
+from nasset_reference_renderer.testscenes import (  # noqa: E402
+    SceneBuilder,
+    constant_rna_asset,
+    constant_rna_fiber_asset,
+    random_rna_asset,
+)
+from nasset_sdk.errors import SceneError  # noqa: E402
 
 TU, TS = 0.3, 0.1  # constant transports (1/sr)
 LIGHT = np.array([0.0, 3.0, 0.0])
@@ -150,3 +156,48 @@ def test_continuation_from_the_fetch_point_sees_past_the_contact_shadow(tmp_path
 
     assert change(np.s_[19:25, 10:22]) > 6  # the sphere's lower part, just above its contact with the floor
     assert change(np.s_[2:10, 10:22]) < 0
+
+
+def test_fiber_hits_fetch_at_the_box_centre_too(tmp_path):
+    """Fiber assets: f = 1 gives every fully covered fibre pixel the light at c_w (rays from p without offset); the
+    centre is that of the asset's encoding box (domainMin, domainMax), moved by the instance."""
+    from nasset_sdk.asset import Asset
+
+    curves = [np.array([[x, -0.4, 0.0], [x + 0.05, 0.0, 0.1], [x, 0.4, 0.0]]) for x in (-0.3, 0.0, 0.3)]
+    images = {}
+    for f in (0.0, 1.0):
+        asset = constant_rna_fiber_asset(tmp_path / f"fib{f}.usdc", curves, 0.12, unshadowed=(TU,) * 3,
+                                         shadowed=(TU,) * 3, near_field_fetch=f)
+        b = SceneBuilder()
+        b.camera((0.0, 0.0, 2.0), (0.0, 0.0, 0.0), focal=50.0)
+        _point_light(b, LIGHT, 20.0)
+        b.asset("Obj", "./" + asset.name, np.eye(4) + _shift(0.05, 0.1, 0.0))
+        scene = load_scene(b.write(tmp_path / f"fib{f}.usda"))
+        images[f] = render(scene, RenderSettings(width=32, height=32, spp=4, seed=1)).image[..., 0]
+    lo, hi = Asset.open(tmp_path / "fib1.0.usdc", load="none").domain
+    centre = 0.5 * (lo + hi) + [0.05, 0.1, 0.0]
+    expected = TU * scene.lights[0].I[0] / np.sum((LIGHT - centre) ** 2)
+    v1, v0 = images[1.0][images[1.0] > 0], images[0.0][images[0.0] > 0]
+    assert v1.max() <= expected * (1 + 1e-6)
+    assert np.isclose(v1, expected, rtol=1e-6).sum() > 20
+    assert np.isclose(v0, expected, rtol=1e-6).mean() < 0.05
+
+
+def _shift(x, y, z):
+    m = np.zeros((4, 4))
+    m[3, :3] = (x, y, z)
+    return m
+
+
+def test_invalid_fetch_in_a_referenced_asset_is_scene_invalid(tmp_path):
+    """An asset file whose nasset:nearFieldFetch is outside [0, 1] (untrusted input) is SCENE_INVALID naming the prim,
+    with the SDK's NEAR_FIELD_INVALID message."""
+    bad = _with_fetch(constant_rna_asset(tmp_path / "c.usdc"), tmp_path / "bad.usdc", 1.5)
+    b = SceneBuilder()
+    b.camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0))
+    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+    b.asset("Obj", "./" + bad.name)
+    with pytest.raises(SceneError) as info:
+        load_scene(b.write(tmp_path / "bad.usda"))
+    assert info.value.code == "SCENE_INVALID"
+    assert "/World/Obj" in str(info.value) and "nearFieldFetch" in str(info.value)
