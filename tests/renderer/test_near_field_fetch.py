@@ -201,3 +201,21 @@ def test_invalid_fetch_in_a_referenced_asset_is_scene_invalid(tmp_path):
         load_scene(b.write(tmp_path / "bad.usda"))
     assert info.value.code == "SCENE_INVALID"
     assert "/World/Obj" in str(info.value) and "nearFieldFetch" in str(info.value)
+
+
+def test_plan_explains_the_fetch(tmp_path):
+    """``--explain`` says where an asset with f > 0 takes its light; an asset without the attribute keeps its note."""
+    from nasset_reference_renderer.plan import make_plan
+
+    notes = {}
+    for f in (0.0, 0.25):
+        asset = constant_rna_asset(tmp_path / f"e{f}.usdc", near_field_fetch=f)
+        b = SceneBuilder()
+        b.camera((0.0, 0.0, 3.0), (0.0, 0.0, 0.0))
+        b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
+        b.asset("Obj", "./" + asset.name)
+        plan = make_plan(load_scene(b.write(tmp_path / f"e{f}.usda")), width=8, height=8, spp=1, max_depth=5, tile=64,
+                         batch=65536)
+        notes[f] = plan.explain()
+    assert "light fetched at x + 0.25 (c_w - x), branch from x" in notes[0.25]
+    assert "near-field" not in notes[0.0]
