@@ -261,22 +261,17 @@ class Accel:
         r = rows[better]
         hits.t[r], hits.prim[r], hits.u[r], hits.v[r] = t[better], part.ids[prim[better]], u[better], v[better]
 
-    def trace(self, o, d, tmax=None, ignore=None, exempt=None) -> Hits:
+    def trace(self, o, d, tmax=None, ignore=None, exempt=None, self_rows=None) -> Hits:
         """Closest hit along each ray that is not on instance ``ignore[i]`` (-1: none).
 
         ``self_hit`` is set where the ray passed through the ignored instance before that hit (or
         before tmax). ``exempt`` ([n, 2] triangle index ranges [lo, hi), or None): ignored triangles in
-        row i's range do not set ``self_hit`` (a fiber hit's own segment and its neighbours).
+        row i's range do not set ``self_hit`` (a fiber hit's own segment and its neighbours). ``self_rows``
+        ([n] bool, or None: every row): the rows whose ``self_hit`` is wanted; the others are left False and
+        cost no query on their instance's structure (rays whose branch was chosen elsewhere).
         """
-        o = np.asarray(o, np.float64)
-        d = np.asarray(d, np.float64)
+        o, d, tmax, ignore, same, ids = self._rays(o, d, tmax, ignore)
         n = len(o)
-        tmax = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,))
-        ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
-        same = n > 0 and bool((ignore == ignore[0]).all())  # one value (all camera rays, one asset's rays): no searches
-        ids = ignore[:1] if same else np.unique(ignore)
-        if np.any(ids >= len(self.inst_part)) or np.any(self.inst_part[ids[ids >= 0]] < 0):
-            raise UsageError("Accel.trace: an ignored instance has no acceleration structure of its own (Accel separate=...)")
         hits = Hits(n)
         all_rows = np.arange(n)
         inv = reciprocal(d)
@@ -287,20 +282,52 @@ class Accel:
                 rows = all_rows[:0] if same else np.nonzero(ignore != part.inst)[0]
             self._closest_in(part, o, d, inv, tmax, rows, hits)
         own = (all_rows if ids[0] >= 0 else all_rows[:0]) if same else np.nonzero(ignore >= 0)[0]
-        if len(own):
-            lim = np.minimum(tmax, hits.t)
-            part_of = self.inst_part[ignore[own]]
-            exempt = None if exempt is None else np.asarray(exempt, np.int64)
-            stepping = None if exempt is None else exempt[own, 0] < exempt[own, 1]
-            for p in (self.inst_part[ids[:1]] if same else np.unique(part_of)):
-                mine = own if same else own[part_of == p]
-                step = None if stepping is None else (stepping if same else stepping[part_of == p])
-                rows = mine if step is None else mine[~step]  # nothing exempt: one occlusion query
-                hits.self_hit[rows] = self._occluded_in(self.parts[p], o, d, inv, lim, rows)
-                if step is not None and step.any():
-                    rows = mine[step]
-                    hits.self_hit[rows] = self._passes_outside(self.parts[p], o, d, inv, lim, rows, exempt)
+        if self_rows is not None:
+            own = own[np.asarray(self_rows, bool)[own]]
+        self._own_hits(o, d, inv, np.minimum(tmax, hits.t), ignore, exempt, own, same, ids, hits.self_hit)
         return hits
+
+    def passes_own(self, o, d, tmax, inst, exempt=None) -> np.ndarray:
+        """[n] bool: the ray segment [0, tmax] meets a triangle of instance ``inst[i]`` (outside row i's
+        ``exempt`` range, as :meth:`trace`'s ``self_hit``), other objects not considered: the rna branch test
+        alone (spec/kinds/rna.md#near-field-fetch)."""
+        o, d, tmax, inst, same, ids = self._rays(o, d, tmax, inst)
+        out = np.zeros(len(o), bool)
+        own = np.arange(len(o)) if same else np.nonzero(inst >= 0)[0]
+        if same and (not len(o) or ids[0] < 0):
+            own = own[:0]
+        self._own_hits(o, d, reciprocal(d), tmax, inst, exempt, own, same, ids, out)
+        return out
+
+    def _rays(self, o, d, tmax, ignore):
+        """(o, d, tmax [n], ignore [n], same, ids) of a query: float64 rays, tmax and ignore filled in; ``same``:
+        one ignored instance for every row (no searches), ``ids`` the ignored instances (the first row's when same)."""
+        o = np.asarray(o, np.float64)
+        d = np.asarray(d, np.float64)
+        n = len(o)
+        tmax = np.full(n, np.inf) if tmax is None else np.broadcast_to(np.asarray(tmax, np.float64), (n,))
+        ignore = np.full(n, -1, np.int64) if ignore is None else np.asarray(ignore, np.int64)
+        same = n > 0 and bool((ignore == ignore[0]).all())  # one value (all camera rays, one asset's rays): no searches
+        ids = ignore[:1] if same else np.unique(ignore)
+        if np.any(ids >= len(self.inst_part)) or np.any(self.inst_part[ids[ids >= 0]] < 0):
+            raise UsageError("Accel.trace: an ignored instance has no acceleration structure of its own (Accel separate=...)")
+        return o, d, tmax, ignore, same, ids
+
+    def _own_hits(self, o, d, inv, lim, ignore, exempt, own, same, ids, out) -> None:
+        """Set ``out[own]``: the ray segment [0, lim] of row i meets instance ``ignore[i]`` outside its exempt range."""
+        if not len(own):
+            return
+        part_of = self.inst_part[ignore[own]]
+        exempt = None if exempt is None else np.asarray(exempt, np.int64)
+        stepping = None if exempt is None else exempt[own, 0] < exempt[own, 1]
+        for p in (self.inst_part[ids[:1]] if same else np.unique(part_of)):
+            mine = own if same else own[part_of == p]
+            step = None if stepping is None else (stepping if same else stepping[part_of == p])
+            rows = mine if step is None else mine[~step]  # nothing exempt: one occlusion query
+            out[rows] = self._occluded_in(self.parts[p], o, d, inv, lim, rows)
+            if step is not None and step.any():
+                rows = mine[step]
+                out[rows] = self._passes_outside(self.parts[p], o, d, inv, lim, rows, exempt)
 
     def _closest_present(self, part, o, d, tmax):
         """(t, prim, u, v) [n] of the closest hit on the cut-out ``part`` where the surface is present: absent hits

@@ -152,6 +152,16 @@ class PathIntegrator:
                 n = face_normals(data.points[data.faces])
                 cn = np.repeat(n[:, None], 3, 1)
             self.asset_corner_n.append(cn)
+        # near-field fetch (spec/kinds/rna.md#near-field-fetch): per instance f (0 but on rna instances whose asset
+        # has one) and the world centre c_w of its asset's encoding box; ``fetching``: some instance has f > 0
+        self.inst_fetch = np.zeros(len(insts))
+        self.inst_centre = np.zeros((len(insts), 3))
+        for i, inst in enumerate(insts):
+            if inst.kind == "neural" and scene.assets[inst.asset].near_field_fetch > 0:
+                lo, hi = scene.assets[inst.asset].asset.domain
+                self.inst_fetch[i] = scene.assets[inst.asset].near_field_fetch
+                self.inst_centre[i] = np.append(0.5 * (lo + hi), 1.0) @ inst.to_world[:, :3]
+        self.fetching = bool((self.inst_fetch > 0).any())
         self.shading = NeuralShading(self)  # the shaders of the scene's neural assets
 
     # -- helpers ---------------------------------------------------------------------------
@@ -175,9 +185,28 @@ class PathIntegrator:
             out[sel] = op.present(st, draws[sel])
         return out
 
-    def trace(self, o, d, tmax=None, ignore=None, exempt=None):
+    def trace(self, o, d, tmax=None, ignore=None, exempt=None, self_rows=None):
         with _Timer(self.stats, "trace"):
-            return self.accel.trace(o, d, tmax, ignore, exempt)
+            return self.accel.trace(o, d, tmax, ignore, exempt, self_rows)
+
+    def passes_own(self, o, d, tmax, inst, exempt=None):
+        """[n] bool: the ray meets instance inst[i] itself before tmax (the rna branch test alone)."""
+        with _Timer(self.stats, "trace"):
+            return self.accel.passes_own(o, d, tmax, inst, exempt)
+
+    def fetch_points(self, x, inst):
+        """(p [n,3], far [n] bool) of rna hits x [n,3] on instances ``inst``: the points their incident light is
+        fetched at, x + f (c_w - x), and where f > 0 (spec/kinds/rna.md#near-field-fetch); None where no instance
+        of the scene has f > 0 (every p is x: the rule of format 0.2, on its code path)."""
+        if not self.fetching:
+            return None
+        f = self.inst_fetch[inst]
+        far = f > 0
+        if not far.any():
+            return None
+        p = x.copy()
+        p[far] = x[far] + f[far, None] * (self.inst_centre[inst[far]] - x[far])
+        return p, far
 
     def occluded(self, o, d, tmax):
         with _Timer(self.stats, "trace"):
@@ -210,13 +239,16 @@ class PathIntegrator:
         prev_pdf = np.zeros(n0)
         specular = np.ones(n0, bool)  # camera rays: emitters seen directly, weight 1
         ignore = np.full(n0, -1, np.int64)
-        pend = None  # (mask, T_unshadowed/pdf, T_shadowed/pdf) of neural continuations
+        pend = None  # (mask, T_unshadowed/pdf, T_shadowed/pdf of the rows in mask) of neural continuations
         exempt = None  # [n,2] triangle ranges that do not count as self hits (fiber continuations), or None
         lights = self.scene.lights
         has_area = any(light.area for light in lights)
         depth = 0
         while len(idx):
-            hits = self.trace(o, d, None, ignore) if exempt is None else self.trace(o, d, None, ignore, exempt)
+            # rows whose continuation branch is still to choose (pend's mask); all rows unless an instance fetches
+            # its light elsewhere (those rays start inside the asset, their branch was chosen at the hit)
+            need = pend[0] if pend is not None and self.fetching else None
+            hits = self.trace(o, d, None, ignore, exempt, need)
             if pend is not None:
                 m, tu, ts = pend
                 beta[m] *= np.where(hits.self_hit[m][:, None], ts, tu)

@@ -97,8 +97,11 @@ def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, 
     if a.kind == "rna":
         lobes = "forward lobe + specular-cone band" if a.variant == "fiber" else "cosine lobe + mirror lobe"
         what = "the uniform sphere" if rna_continuation == "uniform" else f"uniform sphere + {lobes}"
+        fetch = data.near_field_fetch
+        near = (f"; light fetched at x + {fetch:g} (c_w - x), branch from x (near-field fetch, kinds/rna.md)"
+                if fetch > 0 else "")
         return ({"kind": a.kind}, [], f"rna {a.variant} {data.path.name}: continuation directions from {what} "
-                                      "(MIS with the same density)")
+                                      f"(MIS with the same density){near}")
     return {"kind": a.kind}, [], ""
 
 

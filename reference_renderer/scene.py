@@ -118,6 +118,7 @@ class NeuralAssetData:
     prims: list = field(default_factory=list)
     fiber: object = None  # shaders.rna_fiber.FiberTubes of an rna fiber asset (points/faces are then its prisms)
     used_points: object = None  # points referenced by faces (an index array, or slice(None) for all), set at load
+    near_field_fetch: float = 0.0  # f of an rna asset: where its hits fetch their light (spec/kinds/rna.md#near-field-fetch)
 
 
 @dataclass
@@ -1419,6 +1420,7 @@ class _Loader:
                                "fiber for rna)", path)
             try:
                 geo = asset.geometry()
+                fetch = asset.near_field_fetch  # NEAR_FIELD_INVALID for a bad value, or one on another kind
             except NassetError as exc:
                 raise self.err("SCENE_INVALID", f"referenced asset {file} is invalid: {exc}", path) from None
             self.asset_index[key] = len(self.assets)
@@ -1426,11 +1428,12 @@ class _Loader:
                 from .shaders.rna_fiber import tessellate
 
                 tubes = tessellate(geo.points, geo.counts, geo.widths)
-                self.assets.append(NeuralAssetData(file, asset, tubes.points, tubes.faces, None, fiber=tubes))
+                self.assets.append(NeuralAssetData(file, asset, tubes.points, tubes.faces, None, fiber=tubes,
+                                                   near_field_fetch=fetch))
             else:
                 nrm = None if geo.normals is None else np.asarray(geo.normals, np.float64)
                 self.assets.append(NeuralAssetData(file, asset, np.asarray(geo.points, np.float64),
-                                                   np.asarray(geo.faces, np.int64), nrm))
+                                                   np.asarray(geo.faces, np.int64), nrm, near_field_fetch=fetch))
         ai = self.asset_index[key]
         data = self.assets[ai]
         data.prims.append(path)

@@ -199,8 +199,10 @@ class SceneBuilder:
         return str(path)
 
 
-def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), radius=0.5, subdivisions=3):
-    """An rna asset (icosphere) whose decoder returns constant transports: handy for exact tests."""
+def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), radius=0.5, subdivisions=3,
+                       near_field_fetch=0.0):
+    """An rna asset (icosphere) whose decoder returns constant transports: handy for exact tests. ``near_field_fetch``:
+    its f (spec/kinds/rna.md#near-field-fetch; 0 is not written)."""
     import trimesh
 
     from nasset_sdk.asset import AssetBuilder
@@ -216,6 +218,7 @@ def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25
     bias = np.array(list(unshadowed) + list(shadowed), np.float32)
     core.add_network("decoder", mlp_onnx([w], [bias]))
     b.provenance = {"generator": "constant"}
+    b.near_field_fetch = near_field_fetch
     return b.write(path)
 
 
@@ -225,12 +228,14 @@ def random_rna_asset(path, *, seed=0, size="tiny"):
     return example_builder("rna", size=size, seed=seed).write(path)
 
 
-def constant_rna_fiber_asset(path, curves, widths, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), h_probe=False):
+def constant_rna_fiber_asset(path, curves, widths, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25, 0.25), h_probe=False,
+                             near_field_fetch=0.0):
     """An rna fiber asset whose decoder returns constant transports (exact tests).
 
     ``curves``: list of [k, 3] polylines; ``widths``: one width per curve or per point. With
     ``h_probe`` the transports are affine in the network's h input instead: unshadowed
-    ``(1 + h, 1 - h, 1)``, shadowed ``(0.5 + 0.5 h, 0.5 - 0.5 h, 0.5)``."""
+    ``(1 + h, 1 - h, 1)``, shadowed ``(0.5 + 0.5 h, 0.5 - 0.5 h, 0.5)``. ``near_field_fetch``: its f
+    (spec/kinds/rna.md#near-field-fetch; 0 is not written)."""
     from nasset_sdk.asset import AssetBuilder
     from nasset_sdk.geometry import CurvesGeometry
     from nasset_sdk.networks import mlp_onnx
@@ -253,6 +258,7 @@ def constant_rna_fiber_asset(path, curves, widths, *, unshadowed=(1.0, 1.0, 1.0)
         bias = np.array(list(unshadowed) + list(shadowed), np.float32)
     core.add_network("decoder", mlp_onnx([weights], [bias]))
     b.provenance = {"generator": "constant"}
+    b.near_field_fetch = near_field_fetch
     return b.write(path)
 
 

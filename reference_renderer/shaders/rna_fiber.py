@@ -36,7 +36,7 @@ from ..sampling import (
 )
 from .common import Frames
 from .registry import register_shader
-from .rna_surface import rna_sample_rows
+from .rna_surface import fetch_continuations, rna_sample_rows
 
 #: sides of the prism built around each curve segment
 TUBE_SIDES = 8
@@ -214,8 +214,9 @@ class FiberShading:
         continuation = None  # the uniform sphere
         if self.lobes and indirect.any():
             continuation = FiberContinuation(-d, self.frames.dir_to_world(t_obj, inst))
+        fetch = integ.fetch_points(x, inst)  # None: every hit fetches its light at x (f = 0)
         ray, wi_all, w_all, self_all, is_cont, cont, wi_c, pdf_c = rna_sample_rows(
-            integ, x, inst, indirect, rng, lambda s, wi_s: (x[s], exempt[s]), continuation)
+            integ, x, inst, indirect, rng, lambda s, wi_s, at: (at, exempt[s]), continuation, fetch)
         tu = np.zeros((len(ray), 3))
         ts = np.zeros((len(ray), 3))
         if len(ray):
@@ -238,8 +239,9 @@ class FiberShading:
         if not len(cont):
             return None
         cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
-        mask = np.ones(len(cont), bool)
-        return (ridx[cont], x[cont], wi_c, beta[cont], pdf_c, inst[cont], (mask, cu, cs),
+        origin, beta_c, pend = fetch_continuations(integ, fetch, cont, x[cont], None, wi_c, inst[cont], beta[cont], cu,
+                                                   cs, exempt[cont])
+        return (ridx[cont], origin, wi_c, beta_c, pdf_c, inst[cont], pend,
                 np.zeros(len(cont), bool), exempt[cont])
 
 

@@ -1,7 +1,10 @@
 """Shading vertex of rna surface assets (spec/renderer.md#neural-assets).
 
 Transport T is evaluated at the hit; the light-sample rows pick T_shadowed or T_unshadowed by whether
-the asset itself blocks the direction, and the continuation carries both until its ray is traced.
+the asset itself blocks the direction, and the continuation carries both until its ray is traced. Assets with a
+near-field fetch f > 0 take their incident light at the fetch point p = x + f (c_w - x) instead
+(spec/kinds/rna.md#near-field-fetch): light samples drawn at p, other objects looked for by rays from p, the
+branch chosen by rays from x along the same directions (one more query per light sample and continuation).
 Scenes holding only rna assets shade every rna surface instance in one call
 (:class:`nasset_reference_renderer.shaders.NeuralShading`).
 """
@@ -65,31 +68,46 @@ class SurfaceContinuation:
                 + SURFACE_CONT_MIX[2] * vmf_pdf(dot(wi, self.mirror[rows]), MIRROR_KAPPA))
 
 
-def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=None):
+def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=None, fetch=None):
     """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
     blocks it; ``self_hit`` says whether the asset itself does) and one continuation where ``indirect``.
-    ``shadow_origin(s, wi_s) -> (origins, exempt or None)`` places the shadow rays of rows s; they are aimed at
-    the light sample point (:func:`nasset_reference_renderer.shadow.aim_shadow`). ``continuation``: the
+    ``shadow_origin(s, wi_s, at) -> (origins, exempt or None)`` places the shadow rays of rows s leaving the points
+    ``at`` [len(s),3] (the hits x[s] or their fetch points); they are aimed at the light sample point
+    (:func:`nasset_reference_renderer.shadow.aim_shadow`). ``continuation``: the
     continuation's direction sampler, an object with ``sample(rows, u [m,3]) -> wi [m,3]`` and ``pdf(rows, wi)
     -> [m]`` (world solid angle, > 0 everywhere; spec/renderer.md#neural-assets); None: the uniform sphere.
+    ``fetch``: None, or (p [n,3], far [n] bool) from ``integ.fetch_points``: the lights are sampled at p; where
+    ``far`` other objects are looked for from p and the branch by the ray from x toward x + wi dist
+    (spec/kinds/rna.md#near-field-fetch). The continuation directions are sampled at x either way.
 
     Returns (ray index, wi world [m,3], weight [m,3], self_hit [m], is_continuation [m], continuation rows, their
     wi, their pdf).
     """
     n = len(x)
     rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
+    at = x if fetch is None else fetch[0]
     for k in integ.nee:
         light = integ.scene.lights[k]
-        wi, dist, li, pdf = light.sample(x, rng.random((n, 2)))
+        wi, dist, li, pdf = light.sample(at, rng.random((n, 2)))
         ok = (pdf > 0) & (max3(li) > 0)
         s = np.nonzero(ok)[0]
         if not len(s):
             continue
         full = len(s) == n
         x_s, wi_s, dist_s, inst_s = (x, wi, dist, inst) if full else (x[s], wi[s], dist[s], inst[s])
-        origin, exempt = shadow_origin(s, wi_s)
+        origin, exempt = shadow_origin(s, wi_s, x_s)
         d_s, tmax = aim_shadow(x_s, origin, wi_s, dist_s, integ.eps)
-        h = integ.trace(origin, d_s, tmax, inst_s) if exempt is None else integ.trace(origin, d_s, tmax, inst_s, exempt)
+        if fetch is None:
+            h = integ.trace(origin, d_s, tmax, inst_s, exempt)
+            self_hit = h.self_hit
+        else:  # other objects from p (its rows: the same offset as from x); the branch from x where f > 0
+            p_s, far_s = (fetch[0], fetch[1]) if full else (fetch[0][s], fetch[1][s])
+            o_p, _ = shadow_origin(s, wi_s, p_s)
+            d_p, tmax_p = aim_shadow(p_s, o_p, wi_s, dist_s, integ.eps)
+            h = integ.trace(o_p, d_p, tmax_p, inst_s, exempt, ~far_s)
+            self_hit = h.self_hit
+            b = np.nonzero(far_s & (h.prim < 0))[0]  # a blocked sample contributes 0 whatever its branch
+            self_hit[b] = integ.passes_own(origin[b], d_s[b], tmax[b], inst_s[b], None if exempt is None else exempt[b])
         free = h.prim < 0  # no other object in the way
         s = s[free]
         if light.delta:
@@ -100,7 +118,7 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=N
         rows_ray.append(s)
         rows_wi.append(wi[s])
         rows_w.append(li[s] * (w / pdf[s])[:, None])
-        rows_self.append(h.self_hit[free])
+        rows_self.append(self_hit[free])
         rows_kind.append(np.zeros(len(s), bool))
     cont = np.nonzero(indirect)[0]
     if continuation is None:
@@ -117,6 +135,28 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=N
         rows_kind.append(np.ones(len(cont), bool))
     cat = (lambda parts: parts[0]) if len(rows_ray) == 1 else np.concatenate  # one part: no copies
     return cat(rows_ray), cat(rows_wi), cat(rows_w), cat(rows_self), cat(rows_kind), cont, wi_c, pdf_c
+
+
+def fetch_continuations(integ, fetch, cont, origin, offset, wi_c, inst_c, beta_c, cu, cs, exempt_c=None):
+    """Continuation rays of rna hits ``cont`` under a near-field fetch (spec/kinds/rna.md#near-field-fetch):
+    where f > 0 the branch is chosen now, by the ray from the offset hit ``origin`` [m,3] along wi_c, its
+    transport folded into beta, and the ray moved to start at the fetch point plus ``offset`` ([m,3], None: no
+    offset, fiber hits). Returns (origin, beta, pend): pend = (mask, cu, cs) for the integrator, mask the rows whose
+    branch is still chosen by the traced ray and cu, cs [mask.sum(), 3] their weights of either branch."""
+    mask = np.ones(len(cont), bool)
+    if fetch is None:
+        return origin, beta_c, (mask, cu, cs)
+    p, far = fetch
+    fr = np.nonzero(far[cont])[0]
+    if not len(fr):
+        return origin, beta_c, (mask, cu, cs)
+    own = integ.passes_own(origin[fr], wi_c[fr], np.full(len(fr), np.inf), inst_c[fr],
+                           None if exempt_c is None else exempt_c[fr])
+    beta_c, origin = beta_c.copy(), origin.copy()
+    beta_c[fr] *= np.where(own[:, None], cs[fr], cu[fr])
+    origin[fr] = p[cont[fr]] if offset is None else p[cont[fr]] + offset[fr]
+    mask[fr] = False
+    return origin, beta_c, (mask, cu[mask], cs[mask])
 
 
 @register_shader("rna", "surface")
@@ -151,15 +191,16 @@ class RnaSurfaceShader:
                 cn = integ.asset_corner_n[a][local[m]]
                 n_obj[m] = normalize(cn[:, 0] * w0[m][:, None] + cn[:, 1] * bu[m][:, None] + cn[:, 2] * bv[m][:, None])
         indirect = integ.indirect[inst]
-        def shadow_origin(s, wi_s):  # offset along the geometric normal, to the side wi leaves
-            ng_s, x_s, scale_s = (ng, x, scale) if len(s) == n else (ng[s], x[s], scale[s])
-            return x_s + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
+        def shadow_origin(s, wi_s, at):  # offset along the geometric normal, to the side wi leaves
+            ng_s, scale_s = (ng, scale) if len(s) == n else (ng[s], scale[s])
+            return at + ng_s * np.sign(dot(ng_s, wi_s))[:, None] * scale_s, None
 
         continuation = None  # the uniform sphere
         if self.lobes and indirect.any():
             continuation = SurfaceContinuation(-d, self.frames.normal_to_world(n_obj, inst))
+        fetch = integ.fetch_points(x, inst)  # None: every hit fetches its light at x (f = 0)
         ray, wi_all, w_all, self_all, is_cont, cont, wi_c, pdf_c = rna_sample_rows(integ, x, inst, indirect, rng,
-                                                                                   shadow_origin, continuation)
+                                                                                   shadow_origin, continuation, fetch)
         # one light sample per hit that nothing else blocks, no continuation: rows are the hits in order
         every = len(ray) == n and not len(cont) and len(integ.nee) == 1
         tu = ts = np.zeros((len(ray), 3), np.float32)
@@ -200,6 +241,7 @@ class RnaSurfaceShader:
         if not len(cont):
             return None
         cu, cs = tu[is_cont] * w_all[is_cont], ts[is_cont] * w_all[is_cont]
-        origin = x[cont] + ng[cont] * np.sign(dot(ng[cont], wi_c))[:, None] * scale[cont]
-        mask = np.ones(len(cont), bool)
-        return ridx[cont], origin, wi_c, beta[cont], pdf_c, inst[cont], (mask, cu, cs)
+        offset = ng[cont] * np.sign(dot(ng[cont], wi_c))[:, None] * scale[cont]
+        origin, beta_c, pend = fetch_continuations(integ, fetch, cont, x[cont] + offset, offset, wi_c, inst[cont],
+                                                   beta[cont], cu, cs)
+        return ridx[cont], origin, wi_c, beta_c, pdf_c, inst[cont], pend

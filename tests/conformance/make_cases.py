@@ -129,6 +129,13 @@ def asset_rand_fp32(path):
     return _rna_random(11, dtype="float32").write(path)
 
 
+def asset_rand_near_field(path):
+    """The asset of rna_point_light with nasset:nearFieldFetch = 0.5 (format 0.3, spec/kinds/rna.md#near-field-fetch)."""
+    b = _rna_random(11)
+    b.near_field_fetch = 0.5
+    return b.write(path)
+
+
 def asset_fiber(path):
     return _rna_random(13, variant="fiber").write(path)
 
@@ -175,6 +182,7 @@ def asset_example(kind, variant="surface", seed=5):
 ASSETS: dict[str, Callable] = {
     "rna_rand.usdc": asset_rand,
     "rna_rand_fp32.usdc": asset_rand_fp32,
+    "rna_rand_near_field.usdc": asset_rand_near_field,
     "rna_const.usdc": asset_const,
     "rna_fiber.usdc": asset_fiber,
     "rna_fiber_dense.usdc": asset_fiber_dense,
@@ -296,6 +304,19 @@ def b_point(ctx):
     lt = ctx.sb.sphere_light("Point", (-1.0, 1.3, 1.0), 0.0, 10.0)
     UsdLux.SphereLight(lt.GetPrim()).CreateTreatAsPointAttr(True)
     ctx.asset("Asset", "rna_rand.usdc")
+
+
+def b_near_field(ctx):
+    """A point light low beside the asset, 0.3 above the floor and about 0.4 from the asset's nearest side: its
+    distance, direction and visibility differ between a hit and its fetch point; the floor around the asset is lit
+    unevenly (its own shadow), so the continuations from p see another bounce than those from x."""
+    from pxr import UsdLux
+
+    ctx.camera()
+    ctx.floor()
+    lt = ctx.sb.sphere_light("Point", (0.9, -0.2, 0.7), 0.0, 3.0)
+    UsdLux.SphereLight(lt.GetPrim()).CreateTreatAsPointAttr(True)
+    ctx.asset("Asset", "rna_rand_near_field.usdc")
 
 
 def b_rect(ctx):
@@ -439,6 +460,9 @@ CASES = [
          "sampled cone, soft terminator (per-sample branch choice) and a wide penumbra", b_distant_angle),
     Case("rna_sphere_light", "SphereLight (radius 0.3): area light sampling at the asset, MIS with continuation rays", b_sphere),
     Case("rna_point_light", "SphereLight with treatAsPoint: point light, inverse-square falloff, delta-light weight 1", b_point),
+    Case("rna_near_field_fetch", "rna surface asset with nasset:nearFieldFetch = 0.5 (format 0.3) on a floor, a point light "
+         "low and close beside it: light samples drawn at the fetch point p = x + f (c_w - x), other objects seen from p, "
+         "the branch from x, continuations (the floor's bounce) leaving from p", b_near_field),
     Case("rna_rect_light", "RectLight emitting toward its local -Z, tilted: one-sided emitter, area sampling", b_rect),
     Case("rna_dome_exr", "DomeLight with an asymmetric lat-long OpenEXR texture, rotated 25 degrees about +Y: texture "
          "orientation and importance sampling", b_dome),

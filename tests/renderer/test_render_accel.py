@@ -366,3 +366,35 @@ def test_shared_vertex_structure_gives_the_same_hits(fast):
         for k in ("prim", "t", "u", "v", "self_hit"):
             np.testing.assert_array_equal(getattr(h1, k), getattr(h2, k), err_msg=k)
     assert (tri_inst[flat.trace(o, d).prim] == 0).mean() > 0.5 and 0.1 < h1.self_hit.mean() < 0.9
+
+
+def test_branch_query_alone_and_self_rows():
+    """``passes_own`` (the rna branch test of the near-field fetch, spec/kinds/rna.md#near-field-fetch) answers
+    whether a ray meets its instance's own triangles outside the exempt range, other objects not considered: where
+    the floor is not in the way it is ``trace``'s self_hit. ``trace`` with
+    ``self_rows`` leaves self_hit False elsewhere, computes the same flags on those rows, and casts no ray on the
+    instance's structure for the others."""
+    tri, tri_inst, tubes = _hair_scene()
+    rng = np.random.default_rng(6)
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([True, False]))
+    x, _, seg = _first_fiber_hits(acc, tri_inst, tubes, rng)
+    exempt = tubes.exempt[seg].copy()
+    exempt[::5] = -1
+    wi = rng.normal(size=(len(x), 3))
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    tmax = np.full(len(x), np.inf)
+    ignore = np.zeros(len(x), np.int64)
+    h = acc.trace(x, wi, tmax, ignore, exempt)
+    own = acc.passes_own(x, wi, tmax, ignore, exempt)
+    assert h.self_hit.any() and (h.prim >= 0).any()
+    assert np.array_equal(own[h.prim < 0], h.self_hit[h.prim < 0])
+    assert (own >= h.self_hit).all()
+    rows = rng.random(len(x)) < 0.5
+    acc.rays_cast = 0
+    hr = acc.trace(x, wi, tmax, ignore, exempt, rows)
+    partial = acc.rays_cast
+    acc.rays_cast = 0
+    acc.trace(x, wi, tmax, ignore, exempt)
+    assert np.array_equal(hr.self_hit[rows], h.self_hit[rows]) and not hr.self_hit[~rows].any()
+    assert np.array_equal(hr.prim, h.prim) and partial < acc.rays_cast
+    assert not acc.passes_own(x, wi, tmax, np.full(len(x), -1), None).any()  # no instance: nothing to meet

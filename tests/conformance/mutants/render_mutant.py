@@ -88,8 +88,8 @@ def other_shadows_ignored():
 
     orig = PathIntegrator.trace
 
-    def trace(self, o, d, tmax=None, ignore=None):
-        h = orig(self, o, d, tmax, ignore)
+    def trace(self, o, d, tmax=None, ignore=None, *rest):
+        h = orig(self, o, d, tmax, ignore, *rest)
         if tmax is not None and ignore is not None and sys._getframe(1).f_code.co_name == "rna_sample_rows":
             h.prim[:] = -1
         return h
@@ -134,10 +134,10 @@ def other_instance_is_self():
         self._canon = canon
         self.accel = Accel(scene.triangles, canon[scene.tri_inst], backend=settings.backend, separate=self.inst_neural)
 
-    def trace(self, o, d, tmax=None, ignore=None):
+    def trace(self, o, d, tmax=None, ignore=None, *rest):
         if ignore is not None:
             ignore = np.where(ignore >= 0, self._canon[np.maximum(ignore, 0)], ignore)
-        return orig_trace(self, o, d, tmax, ignore)
+        return orig_trace(self, o, d, tmax, ignore, *rest)
 
     PathIntegrator.__init__ = init
     PathIntegrator.trace = trace
@@ -308,6 +308,13 @@ def fiber_h_sign():
     neural_fiber.fiber_frame = fiber_frame
 
 
+def near_field_ignored():
+    """rna: nasset:nearFieldFetch ignored (every hit's light taken at the hit, the rule of format 0.2)."""
+    from nasset_reference_renderer.integrator import PathIntegrator
+
+    PathIntegrator.fetch_points = lambda self, x, inst: None
+
+
 def fiber_exempt_stops_search():
     """rna fiber: a ray leaving a fiber whose first asset triangle is exempt (its own segment or a neighbour's)
     stops looking for the asset there, so fibres further along never pick the shadowed branch."""
@@ -322,7 +329,7 @@ MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, 
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
                                    eightdna_light_at_xo,
-                                   fiber_h_sign, fiber_exempt_stops_search)}
+                                   fiber_h_sign, fiber_exempt_stops_search, near_field_ignored)}
 
 
 def main(argv=None) -> int:
