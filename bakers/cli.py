@@ -29,6 +29,10 @@ def add_args(p) -> None:
     p.add_argument("--clamp", type=float, default=None, metavar="C",
                    help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
                         "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
+    p.add_argument("--near-field-fetch", default=None, metavar="auto|F",
+                   help="rna from Mitsuba: where renderers fetch a hit's light, F in [0, 1] of the way to the asset's centre "
+                        "(spec/kinds/rna.md#near-field-fetch); default auto: measured after training under lights near the "
+                        "asset (surfaces; fibers keep 0), spec/bake.md#near-field")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="render the views (8dna: trace the tuples) on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
@@ -39,6 +43,21 @@ def add_args(p) -> None:
                         "each process trains on cuda:LOCAL_RANK (spec/bake.md#training-devices)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+def near_field_arg(text: str) -> str | float:
+    """``--near-field-fetch``: 'auto' or a number in [0, 1]."""
+    from nasset_sdk.errors import UsageError
+
+    if text == "auto":
+        return "auto"
+    try:
+        f = float(text)
+    except ValueError:
+        f = float("nan")
+    if not 0.0 <= f <= 1.0:
+        raise UsageError(f"--near-field-fetch must be auto or a number in [0, 1], got {text!r}")
+    return f
 
 
 def run(args) -> int:
@@ -61,11 +80,17 @@ def run(args) -> int:
     pick_device(require_torch(), args.device)  # a bad --device fails before any rendering
     if getattr(args, "clamp", None) is not None and args.kind == "8dna":
         raise UsageError("--clamp applies to rna and neupress bakes only")
+    near = getattr(args, "near_field_fetch", None)
+    if near is not None:
+        if args.kind != "rna" or source_of(args.scene, args.example) != "mitsuba":
+            raise UsageError("--near-field-fetch applies to rna bakes from Mitsuba scenes only")
+        near = near_field_arg(near)
     summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
         seed=args.seed, device=args.device, quiet=args.quiet,
         **({"clamp": args.clamp} if getattr(args, "clamp", None) is not None else {}),
+        **({"near_field_fetch": near} if near is not None else {}),
         **({"workers": args.workers, "cluster": args.cluster} if args.workers is not None or args.cluster else {}),
         summary_stream=sys.stderr if getattr(args, "json", False) else sys.stdout,
     )

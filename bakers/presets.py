@@ -21,6 +21,15 @@ RNA_MITSUBA_DATA = {
     "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
 }
 
+#: near-field calibration of rna surface bakes (nasset_converters.mitsuba.near_field.NearFieldSettings fields). Measured
+#: on the high-albedo pebble (spec/bake.md#near-field): f from 32 views of 32^2 at 512 spp moved by +-0.06 between
+#: view seeds (the two halves of one set agree within 0.01-0.04), so `small` takes 64 views (~40 s)
+RNA_MITSUBA_NEAR_FIELD = {
+    "tiny": dict(views=8, res=16, spp=64),
+    "small": dict(views=64, res=32, spp=512),
+    "hq": dict(views=128, res=32, spp=1024),
+}
+
 #: data presets (nasset_converters.blender.dataset.DataSettings fields); one sun per view (Cycles has no
 #: per-pixel light), so presets use many small views to see many light directions
 RNA_BLENDER_DATA = {

@@ -224,6 +224,18 @@ def clamp_lines(s: dict) -> list[str]:
             + " % of the targets' energy (RGB)"]
 
 
+def near_field_line(near: dict) -> str:
+    """Where renderers fetch the baked rna asset's light (spec/bake.md#near-field)."""
+    f = near["fetch"]
+    if not near.get("measured"):
+        return f"  near-field fetch f = {f:g}: {near.get('why', 'given')}"
+    pct = "/".join(f"{100 * r:.1f}" for r in near["energy_ratio_f0"])
+    return (f"  near-field fetch f = {f:.2f} (halves {near['fetch_halves'][0]:.2f} / {near['fetch_halves'][1]:.2f}): under "
+            f"lights near the asset it kept {pct} % of Mitsuba's energy (RGB) with the distant-light rule, "
+            + "/".join(f"{100 * r:.1f}" for r in near["energy_ratio"]) + " % with f, against "
+            + "/".join(f"{100 * r:.1f}" for r in near["target_ratio"]) + " % under its held-out distant lights")
+
+
 def send_job(dp, *, work: Path, views: int, val_views: int, domain, settings, checkpoint, **extra) -> None:
     """Rank 0 of a torchrun bake: send the other processes (:func:`train_share`) what they train with:
     the dataset folder and its view counts, the domain, the training settings (a dataclass) and the

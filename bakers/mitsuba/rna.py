@@ -27,6 +27,7 @@ from nasset_bakers.stages import (
     clamp_removed,
     dataset_line,
     finite,
+    near_field_line,
     psnr_line,
     see_through_line,
     times_line,
@@ -67,12 +68,14 @@ def bake(
     loss: str | None = None,
     workers: int | None = None,
     cluster: str | None = None,
+    near_field_fetch: str | float = "auto",
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
 
     ``clamp``: per-path-sample clamp of the training targets (default 0: none; the energy it removes
     is measured and stored, spec/bake.md#clamp); ``loss``: training loss (default: TrainSettings');
-    ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster)."""
+    ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster); ``near_field_fetch``: 'auto'
+    (measured after training, surface assets; fibers keep 0, spec/bake.md#near-field) or f in [0, 1] to store."""
     from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import render_views, send_job, train_share, train_with_progress
     from nasset_bakers.train.common import TorchCheckpoint, require_torch
@@ -161,8 +164,10 @@ def bake(
             raise error("CONVERT_SHAPE_UNSUPPORTED", f"asset shape(s) {mirrors}: {why}; every training view would be "
                         "black. Bake a rough one (roughconductor)", file=str(scene))
         say(f"warning: shape(s) {mirrors}: {why}; they will render black, without what they mirror of the scene")
+    renderer = None  # the Mitsuba queries of this process (views, near-field calibration)
     if workers is None:
-        views_from = _view_renderer(mi, shapes, geo, center, radius, dset)
+        renderer = _renderer(mi, shapes, geo, center, radius, dset)
+        views_from = _views_of(renderer, center, radius)
     else:  # each worker loads the scene itself
         views_from = ViewSource("nasset_bakers.mitsuba.rna:view_renderer",
                                 {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant(),
@@ -235,6 +240,16 @@ def bake(
     t = time.perf_counter()
     check = check_asset(path, val_data, result)
     times["check_s"] = time.perf_counter() - t
+
+    # -- stage 6: where renderers fetch the asset's light (spec/bake.md#near-field) ------------------
+    t = time.perf_counter()
+    near = _near_field(near_field_fetch, asset_variant, size, seed, check, domain, quiet,
+                       lambda: renderer or _renderer(mi, shapes, geo, center, radius, dset), path, center, radius)
+    if near["fetch"] > 0 or near["measured"]:  # the asset written again, with f and how it was measured
+        builder.near_field_fetch = near["fetch"]
+        builder.provenance = finite({**prov, "near_field": near})
+        path = builder.write(output)
+    times["near_field_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t_all
     summary = {
         "asset": str(path),
@@ -251,6 +266,7 @@ def bake(
         "val_accuracy": result.val.get("accuracy"),
         "sdk_val_accuracy": check.get("accuracy"),
         "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
+        "near_field": near,
         "sdk_val_psnr_db": check["psnr_db"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
@@ -273,6 +289,7 @@ def _print_summary(s: dict, stream) -> None:
         *accuracy_lines(s.get("sdk_val_accuracy")),
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
         *clamp_lines(s),
+        near_field_line(s["near_field"]),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
         *worker_lines(s.get("workers")),
@@ -287,9 +304,9 @@ def _mask_statistics(data: dict) -> dict:
     return {"mask_disagreement": float(data["disagree"]) / max(int(data["covered"]), 1)}
 
 
-def _view_renderer(mi, shapes, geo, center, radius, dset):
-    """``render_one(split, i)`` of the dataset stage: the shapes isolated under the bake's light (curves: the
-    geometric inputs from the prisms the renderer traces, spec/bake.md#mitsuba-curves)."""
+def _renderer(mi, shapes, geo, center, radius, dset):
+    """The Mitsuba queries on the shapes isolated under the bake's light (curves: the geometric inputs from the prisms
+    the renderer traces, spec/bake.md#mitsuba-curves). Moves the shapes to the origin (once per process)."""
     from nasset_converters.caster import Caster
     from nasset_converters.mitsuba import dataset as ds
     from nasset_converters.mitsuba import scene as msc
@@ -299,9 +316,48 @@ def _view_renderer(mi, shapes, geo, center, radius, dset):
     iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=dset.light_angle_deg, max_depth=dset.max_depth,
                             origin=origin)
     fibers = isinstance(geo, CurvesGeometry)  # surfaces: V offset as the renderer offsets it (spec/bake.md#data)
-    renderer = ds.Renderer(mi, iso, dset, caster=Caster("fiber", geo) if fibers else None,
-                           shadows=None if fibers else Caster("surface", geo))
+    return ds.Renderer(mi, iso, dset, caster=Caster("fiber", geo) if fibers else None,
+                       shadows=None if fibers else Caster("surface", geo))
+
+
+def _views_of(renderer, center, radius):
+    """``render_one(split, i)`` of the dataset stage."""
+    from nasset_converters.mitsuba import dataset as ds
+
     return lambda split, i: ds.render_view(renderer, center, radius, i, validation=split == "val")
+
+
+def _view_renderer(mi, shapes, geo, center, radius, dset):
+    """``render_one(split, i)`` of the dataset stage, on a renderer of its own."""
+    return _views_of(_renderer(mi, shapes, geo, center, radius, dset), center, radius)
+
+
+def _near_field(option, asset_variant: str, size: str, seed: int, check: dict, domain, quiet: bool, renderer_of, path,
+                center, radius) -> dict:
+    """The near-field fetch fraction to store: ``option`` f as given, or 'auto': measured on surface assets
+    (:func:`nasset_converters.mitsuba.near_field.calibrate` with the preset's settings, against the held-out energy
+    ratio the SDK measured on the written asset), 0 on fibers. Returns {fetch, measured, ...}."""
+    from nasset_bakers.stages import progress_bar
+    from nasset_bakers.train.common import reopen_asset
+    from nasset_converters.mitsuba import near_field as nf
+
+    if option != "auto":
+        return {"fetch": float(option), "measured": False, "why": "given (--near-field-fetch)"}
+    if asset_variant != "surface":
+        return {"fetch": 0.0, "measured": False, "why": "fiber assets are not measured (spec/bake.md#near-field)"}
+    acc = check.get("accuracy") or {}
+    ratio, se = acc.get("energy_ratio"), acc.get("energy_se")
+    if not (ratio and se and all(r > 0 for r in ratio) and max(se) <= nf.TARGET_SE):
+        ratio = [1.0, 1.0, 1.0]  # the held-out ratio is too noisy to separate the network's bias from the near field
+    settings = nf.NearFieldSettings(**presets.RNA_MITSUBA_NEAR_FIELD[size], seed=seed)
+    _, ev = reopen_asset(path)
+    bar = progress_bar(total=settings.views, desc="near field", unit="view", disable=quiet)
+    try:
+        out = nf.calibrate(renderer_of(), center, radius, settings, ev.evaluate, 0.5 * (domain[0] + domain[1]), ratio,
+                           progress=lambda: bar.update(1))
+    finally:
+        bar.close()
+    return {**out, "measured": True}
 
 
 def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):

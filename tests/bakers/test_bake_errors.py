@@ -192,6 +192,27 @@ def test_cli_exit_codes(tmp_path, capsys):
     assert "CONVERT_SCENE_MISSING" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("extra", [["--near-field-fetch", "2"], ["--near-field-fetch", "nan"], ["--near-field-fetch", "far"],
+                                   ["--near-field-fetch", "0.3", "--kind", "neupress"],
+                                   ["--near-field-fetch", "0.3", "--example", "blender-surface"]])
+def test_near_field_fetch_option_is_checked_before_any_work(tmp_path, capsys, extra):
+    """--near-field-fetch: auto or a number in [0, 1], rna bakes from Mitsuba only; a usage error (exit 2) otherwise."""
+    args = ["bake", "-o", str(tmp_path / "o.usdc"), "--quiet", "--size", "tiny", *extra]
+    rc = main(args if "--example" in extra else args + ["--example"])
+    assert rc == 2, capsys.readouterr().err
+    assert "--near-field-fetch" in capsys.readouterr().err
+    assert not (tmp_path / "o.usdc.bake").exists()
+
+
+def test_near_field_fetch_given_is_stored_without_measuring(tmp_path):
+    from nasset_sdk.asset import Asset
+
+    assert main(["bake", "--example", "-o", str(tmp_path / "o.usdc"), "--quiet", "--size", "tiny",
+                 "--near-field-fetch", "0.25"]) == 0
+    a = Asset.open(tmp_path / "o.usdc", load="none")
+    assert a.near_field_fetch == 0.25 and a.provenance["near_field"]["measured"] is False and a.spec_version == "0.3"
+
+
 def test_llvm_missing_falls_back_to_scalar_with_warning(monkeypatch):
     """load_mitsuba: when llvm_ad_rgb cannot be set, scalar_rgb is used and a RuntimeWarning says so."""
     state = {"variant": None}

@@ -75,3 +75,17 @@ def test_old_clamped_bake_misses_the_bound(tmp_path):
     assert m["summary"]["clamp_removed"]["fraction"][0] > 0.1  # the clamp removes a large share of the energy
     lo, hi = ENERGY_BOUNDS
     assert any(not (lo <= r <= hi) for r in m["report"]["object"]["energy_ratio"])
+
+
+def test_near_field_fetch_is_measured_and_stored(measured):
+    """The bake's near-field stage (spec/bake.md#near-field) measured f on this surface asset and stored it in the file
+    and in provenance with what it was measured against."""
+    from nasset_sdk.asset import Asset
+
+    s = measured["summary"]
+    asset = Asset.open(s["asset"], load="none")
+    near = asset.provenance["near_field"]
+    assert near["measured"] and near == {**s["near_field"]}
+    assert 0.0 <= near["fetch"] <= 1.0 and asset.near_field_fetch == pytest.approx(near["fetch"], abs=1e-6)
+    assert near["pixels"] > 0 and len(near["energy_ratio_f0"]) == 3 and len(near["fetch_halves"]) == 2
+    assert asset.spec_version == ("0.3" if near["fetch"] > 0 else "0.1")
