@@ -23,7 +23,7 @@ RNA_MITSUBA_DATA = {
 
 #: near-field calibration of rna surface bakes (nasset_converters.mitsuba.near_field.NearFieldSettings fields). Measured
 #: on the high-albedo pebble (spec/bake.md#near-field): f from 32 views of 32^2 at 512 spp moved by +-0.06 between
-#: view seeds (the two halves of one set agree within 0.01-0.04), so `small` takes 64 views (~40 s)
+#: view seeds, so `small` takes 64 views (40-70 s; its two halves of 256 spp gave f within 0.03-0.08 of each other)
 RNA_MITSUBA_NEAR_FIELD = {
     "tiny": dict(views=8, res=16, spp=64),
     "small": dict(views=64, res=32, spp=512),
