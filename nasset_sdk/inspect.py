@@ -105,6 +105,10 @@ def describe_asset(asset: Asset, path: str | os.PathLike) -> dict:
         "domain": {"min": _vec(lo), "max": _vec(hi)},
         "geometry": _geometry(asset),
     }
+    try:  # rna, format 0.3 (spec/kinds/rna.md#near-field-fetch); 0 when not authored
+        report["nearFieldFetch"] = asset.near_field_fetch
+    except NassetError as exc:
+        report["nearFieldFetch"] = {"error": exc.to_dict()}
     try:
         report["provenance"] = asset.provenance
     except NassetError as exc:
@@ -145,6 +149,11 @@ def format_report(r: dict) -> str:
         f"  upAxis {r['upAxis']}  metersPerUnit {r['metersPerUnit']:g}",
         f"  domain {_fmt_vec(r['domain']['min'])} .. {_fmt_vec(r['domain']['max'])}",
     ]
+    near = r.get("nearFieldFetch")
+    if isinstance(near, dict):
+        lines.append(f"  near-field fetch: [{near['error']['code']}] {near['error']['message']}")
+    elif near:
+        lines.append(f"  near-field fetch f = {near:g} (light fetched at x + f (c - x), spec/kinds/rna.md#near-field-fetch)")
     g = r["geometry"]
     if "error" in g:
         lines.append(f"  geometry: [{g['error']['code']}] {g['error']['message']}")

@@ -57,6 +57,7 @@ def test_json_matches_construction(known, capsys):
     assert (r["kind"], r["variant"], r["specVersion"]) == ("rna", "surface", "0.1")  # nothing newer than 0.1 in it
     assert (r["upAxis"], r["metersPerUnit"]) == ("Y", 1.0)
     assert r["fileBytes"] == path.stat().st_size
+    assert r["nearFieldFetch"] == 0.0  # not authored: the distant-light rule
 
     g = r["geometry"]
     assert (g["type"], g["points"], g["faces"], g["normals"]) == ("Mesh", 8, 12, True)
@@ -196,3 +197,15 @@ def test_optional_component_not_loaded_with_load_required(two_component_asset):
     full = inspect_asset(two_component_asset, load="all")
     assert full["components"]["sampling"]["networks"]["lobe"]["parameters"] == 9 * 5 + 5 + 5 * 1 + 1
     assert full["totals"]["loaded"] == 2
+
+
+def test_near_field_fetch_is_reported(tmp_path, capsys):
+    from nasset_sdk.examples import example_builder
+
+    b = example_builder("rna", size="tiny")
+    b.near_field_fetch = 0.4
+    path = b.write(tmp_path / "f.usdc")
+    r = _cli_json(capsys, path)
+    assert r["nearFieldFetch"] == pytest.approx(0.4) and r["specVersion"] == "0.3"
+    assert main(["inspect", str(path)]) == 0
+    assert "near-field fetch f = 0.4" in capsys.readouterr().out
