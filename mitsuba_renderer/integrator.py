@@ -460,25 +460,34 @@ class PathTracer:
                 w = np.where(cam, 1.0, mis_weight(prev_pdf[sel], pl))
             np.add.at(L, idx[sel], beta[sel] * le * w[:, None])
 
-    def _nee(self, p, ng, n_for_light, rng, ignore):
-        """Yield (wi, le/pdf, pdf_light, delta, visible, passed) per light (one sample of every light)."""
+    def _nee(self, p, ng, n_for_light, rng, ignore, at=None):
+        """Yield (wi, le/pdf, pdf_light, delta, visible, passed) per light (one sample of every light).
+
+        ``at`` [m, 3]: where each row's incident light is fetched (spec/kinds/rna.md#near-field-fetch; None: at p):
+        the light is sampled there and other objects' blocking is a ray from there (with the offset the ray from p
+        gets); ``passed`` (the ignored asset lies on the ray) is still a ray from p along the sample's direction."""
         m = len(p)
+        fetch = p if at is None else at
+        moved = np.zeros(m, bool) if at is None else np.any(at != p, axis=1)
         for lt in self.lights:
             u = rng.random((m, 2))
-            wi, dist, le, pdf = lt.sample(self.mi, p, n_for_light, u)
+            wi, dist, le, pdf = lt.sample(self.mi, fetch, n_for_light, u)
             wi = normalized(wi)
             valid = (pdf > 0) & np.any(le > 0, axis=1)
             side = np.sign(dot(wi, ng))[:, None]
             side[side == 0] = 1.0
-            origin = p + ng * side * ray_eps(p)[:, None]
+            offset = ng * side * ray_eps(p)[:, None]
             maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
             vis = np.zeros(m, bool)
             passed = np.zeros(m, bool)
             v = np.nonzero(valid)[0]
             if len(v):
-                tr = self.tracer.trace(origin[v], wi[v], maxt[v], None if ignore is None else ignore[v], transparent=self.light_shapes)
+                tr = self.tracer.trace(fetch[v] + offset[v], wi[v], maxt[v], None if ignore is None else ignore[v], transparent=self.light_shapes)
                 vis[v] = ~tr["hit"]
                 passed[v] = tr["passed"]
+            b = np.nonzero(valid & moved)[0]
+            if len(b):  # the branch: from p itself
+                passed[b] = self.tracer.trace(p[b] + offset[b], wi[b], maxt[b], ignore[b], transparent=self.light_shapes)["passed"]
             yield wi, le / np.maximum(pdf, 1e-300)[:, None] * valid[:, None], pdf, lt.delta, vis & valid, passed
 
     def _shade_mesh(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
@@ -509,7 +518,8 @@ class PathTracer:
 
 
 class RnaShader:
-    """The rna vertex (spec/renderer.md#neural-assets; fibers: #fibers)."""
+    """The rna vertex (spec/renderer.md#neural-assets; fibers: #fibers): T and the branch at x, the incident light at
+    the fetch point (spec/kinds/rna.md#near-field-fetch; the hit itself for f = 0)."""
 
     def __init__(self, pt: PathTracer) -> None:
         self.pt = pt
@@ -536,8 +546,9 @@ class RnaShader:
                     out[4][r] = res[4]
             return tuple(out)
         m = len(p)
+        at, moved = self.fetch_points(p, obj)
         entries = []  # (wi, weight [m, 3], valid mask, shadowed branch)
-        for wi, lw, pl, delta, vis, passed in self.pt._nee(p, ng, ng, rng, obj):
+        for wi, lw, pl, delta, vis, passed in self.pt._nee(p, ng, ng, rng, obj, at):
             w = np.ones(m) if delta else np.where(cont, power(pl, INV_FOUR_PI), 1.0)
             entries.append((wi, lw * w[:, None], vis, passed))
         # continuation: uniform sphere
@@ -548,17 +559,33 @@ class RnaShader:
         wc = np.stack([s * np.cos(ph), s * np.sin(ph), z], 1)
         cidx = np.nonzero(cont)[0]
         cpassed = np.zeros(m, bool)
+        new_o = np.full_like(p, np.nan)  # NaN: the integrator's origin, x offset to wc's side
         if len(cidx):
             side = np.sign(dot(wc[cidx], ng[cidx]))[:, None]
-            origin = p[cidx] + ng[cidx] * side * ray_eps(p[cidx])[:, None]
-            tr = self.pt.tracer.trace(origin, wc[cidx], None, obj[cidx])
+            offset = ng[cidx] * side * ray_eps(p[cidx])[:, None]
+            tr = self.pt.tracer.trace(p[cidx] + offset, wc[cidx], None, obj[cidx])  # the branch: from x
             cpassed[cidx] = tr["passed"]
+            mc = moved[cidx]
+            new_o[cidx[mc]] = at[cidx[mc]] + offset[mc]  # the radiance: a ray from the fetch point
         entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = self._transport(entries, p, wo, obj, prim, b1, b2)
         for (_, lw, vis, _), t in zip(entries[:-1], T[:-1], strict=True):
             np.add.at(L, idx, beta * t * lw * vis[:, None])
         nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
-        return nb, wc, np.full(m, INV_FOUR_PI), cont, None
+        return nb, wc, np.full(m, INV_FOUR_PI), cont, new_o if moved.any() else None
+
+    def fetch_points(self, p, obj):
+        """(fetch points [m, 3], rows where they differ from p) of rna hits p on instances ``obj``:
+        p + f (c_w - p), c_w the instance's encoding box centre in world space (spec/kinds/rna.md#near-field-fetch)."""
+        at = p.copy()
+        for k in np.unique(obj):
+            inst = self.pt.objects[k]
+            f = inst["asset"].fetch
+            if f > 0:
+                sel = obj == k
+                c_w = inst["asset"].centre @ inst["to_world"][:3, :3] + inst["to_world"][3, :3]
+                at[sel] = p[sel] + f * (c_w - p[sel])
+        return at, np.any(at != p, axis=1)
 
     def _transport(self, entries, p, wo, obj, prim, b1, b2):
         """Evaluate T for every entry where its mask is set, grouped by asset file."""
@@ -601,18 +628,22 @@ class RnaShader:
             x = (p[sel] - inst["to_world"][3, :3]) @ minv
             wo_o[sel] = normalized(wo[sel] @ minv)
             t_o[sel], h[sel], exempt[sel] = inst["asset"].fiber_frame(prim[sel], x, wo_o[sel])
+        at, moved = self.fetch_points(p, obj)  # rays from the fetch point, like those from x, without offset
         rows = []  # (wi, weight [m, 3], valid, shadowed branch)
         for lt in pt.lights:
             u = rng.random((m, 2))
-            wi, dist, le, pdf = lt.sample(pt.mi, p, ng, u)
+            wi, dist, le, pdf = lt.sample(pt.mi, at, ng, u)
             wi = normalized(wi)
             valid = (pdf > 0) & np.any(le > 0, axis=1)
             maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
             vis, passed = np.zeros(m, bool), np.zeros(m, bool)
             v = np.nonzero(valid)[0]
             if len(v):
-                tr = pt.tracer.trace(p[v], wi[v], maxt[v], obj[v], transparent=pt.light_shapes, exempt=exempt[v])
+                tr = pt.tracer.trace(at[v], wi[v], maxt[v], obj[v], transparent=pt.light_shapes, exempt=exempt[v])
                 vis[v], passed[v] = ~tr["hit"], tr["passed"]
+            b = np.nonzero(valid & moved)[0]
+            if len(b):  # the branch: from x itself
+                passed[b] = pt.tracer.trace(p[b], wi[b], maxt[b], obj[b], transparent=pt.light_shapes, exempt=exempt[b])["passed"]
             w = np.ones(m) if lt.delta else np.where(cont, power(pdf, INV_FOUR_PI), 1.0)
             rows.append((wi, le / np.maximum(pdf, 1e-300)[:, None] * (valid * w)[:, None], vis & valid, passed))
         u = rng.random((m, 2))
@@ -645,7 +676,7 @@ class RnaShader:
         for (_, lw, vis, _), t in zip(rows[:-1], T[:-1], strict=True):
             np.add.at(L, idx, beta * t * lw * vis[:, None])
         nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
-        return nb, wc, np.full(m, INV_FOUR_PI), cont, p.copy()
+        return nb, wc, np.full(m, INV_FOUR_PI), cont, at
 
 
 #: kind -> shader class of the asset vertex. A shader class has ``open(path, threads)`` (static: the

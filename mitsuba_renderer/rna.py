@@ -15,6 +15,7 @@ import re
 
 import numpy as np
 
+from nasset_sdk.asset import NEAR_FIELD_FETCH, check_near_field_fetch
 from nasset_sdk.errors import SceneError
 
 KNOWN_KINDS = ("rna", "neupress", "8dna")
@@ -262,6 +263,11 @@ class RnaAsset:
         self.hi = np.asarray(attr("nasset:domainMax"), np.float32).astype(np.float64)
         if not (np.all(np.isfinite(self.lo)) and np.all(np.isfinite(self.hi)) and np.all(self.hi > self.lo)):
             raise self._fail("SCENE_INVALID", "invalid encoding box", rp)
+        # spec/kinds/rna.md#near-field-fetch: f (0 when not authored) and the encoding box's centre c
+        a = root.GetAttribute(NEAR_FIELD_FETCH)
+        self.fetch = check_near_field_fetch(a.Get() if a and a.HasAuthoredValue() else None, kind,
+                                            {"file": self.path, "prim": rp, "attribute": NEAR_FIELD_FETCH})
+        self.centre = 0.5 * (self.lo + self.hi)
 
         geom = root.GetChild("Geometry")
         self.normals = None
