@@ -82,14 +82,15 @@ class Tracer:
         ng = si.n.numpy().T.astype(np.float64)
         return valid & (obj >= 0), obj, t, si.prim_index.numpy().astype(np.int64), si.uv.numpy().T.astype(np.float64), ng
 
-    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None):
+    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None, until_passed=False):
         """-> dict(hit, obj, t, prim, b1, b2, passed).
 
         ``ignore[i]``: object index ray i passes through, recording it in ``passed`` (-1: none);
         ``exempt[i]``: triangle range [lo, hi) of the ignored object passed through without record
         (a fiber hit's own segment and its neighbours: spec/renderer.md#fibers);
         ``transparent``: bool per object index, objects every ray passes through without record
-        (light shapes for shadow rays).
+        (light shapes for shadow rays); ``until_passed``: a ray ends where it first passes through its ignored
+        object (with ``transparent`` everything: whether the ray meets that object's own triangles at all).
         """
         m = len(o)
         o = np.array(o, np.float64)
@@ -111,6 +112,8 @@ class Tracer:
                 through = through & ~((prim >= exempt[todo, 0]) & (prim < exempt[todo, 1]))
             if transparent is not None:
                 skip = skip | (hit & transparent[np.maximum(obj, 0)])
+            if until_passed:
+                skip = skip & ~through
             fin = ~skip
             idx = todo[fin]
             res["hit"][idx] = hit[fin]
@@ -185,6 +188,7 @@ class PathTracer:
         reflective = [k for k, o in enumerate(objects) if o["kind"] != Kind.LIGHT]
         # light shapes are seen by camera and continuation rays but do not block shadow rays
         self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
+        self.every_shape = np.ones(len(objects) + 1, bool)
         self.n_reflective = len(reflective)
         # nasset:cameraVisibility = false (spec/renderer.md#light-surfaces): camera rays pass through the light's shape
         hidden = [o["kind"] == Kind.LIGHT and not getattr(o["light"].desc, "camera_visible", True) for o in objects]
@@ -486,9 +490,15 @@ class PathTracer:
                 vis[v] = ~tr["hit"]
                 passed[v] = tr["passed"]
             b = np.nonzero(valid & moved)[0]
-            if len(b):  # the branch: from p itself
-                passed[b] = self.tracer.trace(p[b] + offset[b], wi[b], maxt[b], ignore[b], transparent=self.light_shapes)["passed"]
+            if len(b):
+                passed[b] = self.own_branch(p[b] + offset[b], wi[b], maxt[b], ignore[b])
             yield wi, le / np.maximum(pdf, 1e-300)[:, None] * valid[:, None], pdf, lt.delta, vis & valid, passed
+
+    def own_branch(self, o, d, maxt, obj, exempt=None):
+        """[n] bool: whether the rays meet a triangle of object ``obj[i]`` (outside ``exempt[i]``) before ``maxt``, every
+        other surface passed through: the branch from x of a hit whose light is fetched elsewhere
+        (spec/kinds/rna.md#near-field-fetch: only the asset's own triangles count on that ray)."""
+        return self.tracer.trace(o, d, maxt, obj, transparent=self.every_shape, exempt=exempt, until_passed=True)["passed"]
 
     def _shade_mesh(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
         flip = dot(ng, wo) < 0
@@ -563,10 +573,13 @@ class RnaShader:
         if len(cidx):
             side = np.sign(dot(wc[cidx], ng[cidx]))[:, None]
             offset = ng[cidx] * side * ray_eps(p[cidx])[:, None]
-            tr = self.pt.tracer.trace(p[cidx] + offset, wc[cidx], None, obj[cidx])  # the branch: from x
-            cpassed[cidx] = tr["passed"]
             mc = moved[cidx]
-            new_o[cidx[mc]] = at[cidx[mc]] + offset[mc]  # the radiance: a ray from the fetch point
+            cx, cm = cidx[~mc], cidx[mc]  # the branch: from x (with a fetch point, the asset's own triangles alone)
+            if len(cx):
+                cpassed[cx] = self.pt.tracer.trace(p[cx] + offset[~mc], wc[cx], None, obj[cx])["passed"]
+            if len(cm):  # the radiance: a ray from the fetch point
+                cpassed[cm] = self.pt.own_branch(p[cm] + offset[mc], wc[cm], np.full(len(cm), np.inf), obj[cm])
+                new_o[cm] = at[cm] + offset[mc]
         entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = self._transport(entries, p, wo, obj, prim, b1, b2)
         for (_, lw, vis, _), t in zip(entries[:-1], T[:-1], strict=True):
@@ -643,7 +656,7 @@ class RnaShader:
                 vis[v], passed[v] = ~tr["hit"], tr["passed"]
             b = np.nonzero(valid & moved)[0]
             if len(b):  # the branch: from x itself
-                passed[b] = pt.tracer.trace(p[b], wi[b], maxt[b], obj[b], transparent=pt.light_shapes, exempt=exempt[b])["passed"]
+                passed[b] = pt.own_branch(p[b], wi[b], maxt[b], obj[b], exempt[b])
             w = np.ones(m) if lt.delta else np.where(cont, power(pdf, INV_FOUR_PI), 1.0)
             rows.append((wi, le / np.maximum(pdf, 1e-300)[:, None] * (valid * w)[:, None], vis & valid, passed))
         u = rng.random((m, 2))
@@ -653,8 +666,11 @@ class RnaShader:
         wc = np.stack([sz * np.cos(ph), sz * np.sin(ph), z], 1)
         cpassed = np.zeros(m, bool)
         cidx = np.nonzero(cont)[0]
-        if len(cidx):
-            cpassed[cidx] = pt.tracer.trace(p[cidx], wc[cidx], None, obj[cidx], exempt=exempt[cidx])["passed"]
+        cx, cm = cidx[~moved[cidx]], cidx[moved[cidx]]
+        if len(cx):
+            cpassed[cx] = pt.tracer.trace(p[cx], wc[cx], None, obj[cx], exempt=exempt[cx])["passed"]
+        if len(cm):
+            cpassed[cm] = pt.own_branch(p[cm], wc[cm], np.full(len(cm), np.inf), obj[cm], exempt[cm])
         rows.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = [np.zeros((m, 3)) for _ in rows]
         for k in np.unique(obj):

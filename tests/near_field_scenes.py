@@ -8,7 +8,9 @@ from CAMERA:
   f = 1 every hit fetches its light at c, so a fully covered pixel shows T I / |LIGHT - c|^2, T the unshadowed
   transport on the upper half (the ray from x toward the light leaves the asset) and the shadowed one on the lower
   half; with f = 0 it falls off as 1 / |LIGHT - x|^2. Black occluders: ``"centre"`` blocks the line c -> LIGHT and no
-  line x -> LIGHT of the hits in view, ``"side"`` blocks lines x -> LIGHT of part of them but not c -> LIGHT.
+  line x -> LIGHT of the hits in view, ``"side"`` blocks lines x -> LIGHT of part of them but not c -> LIGHT,
+  ``"inside"`` lies inside the asset, hidden from the camera, on the upward lines of some hits of its lower half and
+  not on c -> LIGHT (the branch from x counts only the asset's own triangles: it stays shadowed).
 - :func:`dome_square_scene`: under a white dome of radiance 1 with a black square just below the asset, every path
   length (continuations reach the dome, the square or nothing). T is 1 unshadowed, 0 shadowed, so a hit x shows
   the solid angle of the directions w that leave the asset at x (n . w > 0 on the convex mesh) and along which a ray
@@ -74,6 +76,8 @@ def point_light_scene(tmp_path, asset: str, occluder: str | None = None) -> str:
         b.quad("Occluder", (0.0, 1.0, 0.0), 0.12, **black)
     elif occluder == "side":
         b.quad("Occluder", (0.25, 0.8, 0.25), 0.3, **black)
+    elif occluder == "inside":
+        b.quad("Occluder", (0.0, -0.2, 0.3), 0.15, **black)
     return b.write(tmp_path / f"point_{occluder}_{Path(asset).stem}.usda")
 
 
