@@ -220,7 +220,7 @@ def register(mi) -> None:
                 if dr.hint(near, mode="scalar"):
                     ray_x = si.spawn_ray(ds_em.d)
                     ray_x.maxt = ds_em.dist * (1.0 - mi.math.ShadowEpsilon)
-                    passed_sh = dr.select(moved, _trace(mi, scene, ray_x, sid, ex_lo, ex_hi, active_em & moved)[1], passed_sh)
+                    passed_sh = dr.select(moved, _crosses(mi, scene, ray_x, sid, ex_lo, ex_hi, active_em & moved), passed_sh)
                 val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
                 L[on_plain & active_em] += beta * dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, pdf)) * val * em_weight
 
@@ -252,7 +252,7 @@ def register(mi) -> None:
                 ray = si.spawn_ray(d_next)
                 if dr.hint(near, mode="scalar"):  # the branch from x now, the radiance from p at the next trace
                     c_moved = moved & active_next
-                    c_passed = _trace(mi, scene, ray, sid, ex_lo, ex_hi, c_moved)[1]
+                    c_passed = _crosses(mi, scene, ray, sid, ex_lo, ex_hi, c_moved)
                     ray.o = dr.select(c_moved, p_f + _offset(mi, si, d_next), ray.o)
                     prev_si.p = dr.select(c_moved, p_f, prev_si.p)  # light pdfs of MIS seen from p
                 if dr.hint(len(eight) > 0, mode="scalar"):
@@ -319,6 +319,40 @@ def _trace(mi, scene, ray, ignore, lo, hi, active):
         si = dr.select(mine, si_j, si)
         passed |= _branch(mi, own, ray, dr.select(si_j.is_valid(), si_j.t, ray.maxt), lo, hi, mine)
     return si, passed
+
+
+def _crosses(mi, scene, ray, own, lo, hi, active):
+    """Whether ``ray`` meets a triangle of shape ``own`` (registry id) outside its exempt range [lo, hi) before its
+    maxt, every other surface passed through: the branch ray from x of a hit whose light is fetched elsewhere
+    (spec/kinds/rna.md#near-field-fetch: only the asset's own triangles count on it). On the instance's own
+    structure where the scene has split structures for it (:func:`split_scenes`), else stepping over the others."""
+    split = split_scenes(mi, scene) or []
+    on_split = mi.Bool(False)
+    passed = mi.Bool(False)
+    for rid, _, own_scene in split:
+        mine = active & (own == rid)
+        on_split |= mine
+        passed |= _branch(mi, own_scene, ray, ray.maxt, lo, hi, mine)
+    return passed | _crosses_skipping(mi, scene, ray, own, lo, hi, active & ~on_split)
+
+
+@dr.syntax
+def _crosses_skipping(mi, scene, ray, own, lo, hi, active):
+    """:func:`_crosses` on the whole scene: re-trace past every hit that is not an own triangle outside [lo, hi)."""
+    si = scene.ray_intersect(ray, active)
+    mine = (dr.reinterpret_array(mi.UInt32, si.shape) == own) & ((si.prim_index < lo) | (si.prim_index >= hi))
+    passed = active & si.is_valid() & mine
+    go = active & si.is_valid() & ~mine
+    r = mi.Ray3f(ray)
+    i = mi.UInt32(0)
+    while dr.hint(go & (i < MAX_SKIPS), max_iterations=-1, label="nasset_crosses"):
+        r = _beyond(r, si)
+        si = scene.ray_intersect(r, go)
+        mine = (dr.reinterpret_array(mi.UInt32, si.shape) == own) & ((si.prim_index < lo) | (si.prim_index >= hi))
+        passed |= go & si.is_valid() & mine
+        go = go & si.is_valid() & ~mine
+        i += 1
+    return passed
 
 
 def _beyond(ray, si):

@@ -60,11 +60,12 @@ def test_point_light_is_fetched_at_the_fetch_point(tmp_path):
     assert upper.mean() > lower.mean()
 
 
-@pytest.mark.parametrize("occluder", ["centre", "side"])
+@pytest.mark.parametrize("occluder", ["centre", "side", "inside"])
 def test_occlusion_is_tested_from_the_fetch_point(tmp_path, occluder):
     """A black occluder on the line c -> light that no line x -> light of the hits in view meets turns the f = 1
     asset off and leaves f = 0 lit; one that shadows part of the asset seen from x (not c) darkens f = 0 there and
-    leaves f = 1 as without it."""
+    leaves f = 1 as without it; one inside the asset (hidden from the camera) between hits of its lower half and the
+    asset's upper half leaves f = 1 as without it too (the branch from x counts only the asset's own triangles)."""
     imgs = {}
     for f in (0.0, 1.0):
         asset = nf.constant_asset(tmp_path, f)
@@ -76,10 +77,12 @@ def test_occlusion_is_tested_from_the_fetch_point(tmp_path, occluder):
         assert np.all(imgs[1.0, "centre"] == 0.0)
         kept = imgs[0.0, "centre"][lit0][:, 0] == imgs[0.0, None][lit0][:, 0]
         assert kept.mean() > 0.8
-    else:
+    elif occluder == "side":
         np.testing.assert_array_equal(imgs[1.0, "side"], imgs[1.0, None])
         dark = (imgs[0.0, "side"][..., 0] == 0.0) & lit0
         assert dark.sum() >= 4
+    else:
+        np.testing.assert_array_equal(imgs[1.0, "inside"], imgs[1.0, None])
 
 
 @pytest.mark.parametrize("f", [0.0, 0.5, 1.0])
