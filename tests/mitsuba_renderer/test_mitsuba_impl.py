@@ -123,10 +123,16 @@ def _means_match_reference(nr, scene, tmp_path, spp, size):
     return mine, ref
 
 
-def test_random_asset_agrees_with_reference(nr, tmp_path):
+@pytest.mark.parametrize("fetch", [0.0, 0.5])
+def test_random_asset_agrees_with_reference(nr, tmp_path, fetch):
     """Random rna asset on a floor, delta sun + sphere light: NEE, MIS with continuation rays,
-    branch choice, shadows on the floor. Tolerance from the reference renderer's own noise."""
+    branch choice, shadows on the floor; with f = 0.5 its light fetched half-way to the encoding box's centre
+    (spec/kinds/rna.md#near-field-fetch). Tolerance from the reference renderer's own noise."""
     asset = random_rna_asset(tmp_path / "rand.usda", seed=1, size="tiny")
+    if fetch > 0:
+        from tests.near_field_scenes import with_fetch
+
+        asset = with_fetch(asset, tmp_path / "rand_fetch.usda", fetch)
     b = SceneBuilder()
     b.camera((0, 1, 3), (0, 0, 0))
     b.distant("Sun", (0.3, 1.0, 0.5), 2.0)
