@@ -136,7 +136,10 @@ def test_random_asset_agrees_with_reference(nr, tmp_path, fetch):
     b = SceneBuilder()
     b.camera((0, 1, 3), (0, 0, 0))
     b.distant("Sun", (0.3, 1.0, 0.5), 2.0)
-    b.sphere_light("Bulb", (1.0, 2.0, 1.0), 0.3, 5.0)
+    if fetch > 0:  # a small bulb close beside the asset: where the fetch point changes the light
+        b.sphere_light("Bulb", (0.75, 0.0, 0.6), 0.1, 40.0)
+    else:
+        b.sphere_light("Bulb", (1.0, 2.0, 1.0), 0.3, 5.0)
     b.asset("A", asset)
     b.quad("Floor", (0, -0.6, 0), 4, diffuse=(0.6, 0.5, 0.4))
     scene = b.write(tmp_path / "scene.usda")
