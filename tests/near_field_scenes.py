@@ -43,9 +43,9 @@ def with_fetch(src, dst, f: float) -> str:
     return str(b.write(dst))
 
 
-def with_zero_fetch_authored(src, dst) -> str:
-    """A copy of ``src`` (a .usda path) at ``dst`` with ``nasset:nearFieldFetch = 0`` authored (format 0.3); the
-    builder writes no attribute for 0, so the value is set on the written layer."""
+def with_fetch_authored(src, dst, value) -> str:
+    """A copy of ``src`` (a .usda path) at ``dst`` whose ``nasset:nearFieldFetch`` is ``value`` as authored, whatever
+    it is (the builder writes no attribute for 0 and refuses values outside [0, 1])."""
     from pxr import Usd
 
     from nasset_sdk.asset import NEAR_FIELD_FETCH
@@ -55,7 +55,7 @@ def with_zero_fetch_authored(src, dst) -> str:
     stage = Usd.Stage.Open(str(dst))
     attr = stage.GetDefaultPrim().GetAttribute(NEAR_FIELD_FETCH)
     assert attr and attr.HasAuthoredValue()
-    attr.Set(0.0)
+    attr.Set(float(value))
     stage.GetRootLayer().Save()
     trust(dst)
     return str(dst)

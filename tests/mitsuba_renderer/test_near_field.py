@@ -40,7 +40,7 @@ def test_zero_fetch_authored_renders_as_unauthored(nr, tmp_path):
     """``nasset:nearFieldFetch = 0`` authored (a 0.3 file) gives the image of the same asset without it, bit for bit
     (same seed): f = 0 is the rule of format 0.2 exactly."""
     plain = random_rna_asset(tmp_path / "rand.usda", seed=2, size="tiny")
-    zero = nf.with_zero_fetch_authored(plain, tmp_path / "rand_f0.usda")
+    zero = nf.with_fetch_authored(plain, tmp_path / "rand_f0.usda", 0.0)
     a = nr.render(_random_scene(tmp_path, plain), 4, width=16, height=16, seed=5, threads=1)
     b = nr.render(_random_scene(tmp_path, zero), 4, width=16, height=16, seed=5, threads=1)
     assert a.max() > 0
@@ -139,3 +139,17 @@ def test_fiber_light_is_fetched_at_the_fetch_point(nr, tmp_path):
             assert cover.max() <= 1.0 + 1e-4 and (cover[..., 0] > 1.0 - 1e-4).sum() >= 10
         else:
             assert cover.max() > 1.03  # |l - x| down to about 2.88
+
+
+@pytest.mark.parametrize("value", [1.5, -0.25, float("nan")])
+def test_fetch_outside_the_unit_interval_is_a_typed_error(nr, tmp_path, value):
+    """``nasset:nearFieldFetch`` outside [0, 1] (or NaN): NEAR_FIELD_INVALID naming the asset file and the attribute,
+    before anything is rendered."""
+    from nasset_sdk.errors import NassetError
+
+    base = nf.constant_asset(tmp_path, 0.0)
+    bad = nf.with_fetch_authored(base, tmp_path / "bad.usda", value)
+    with pytest.raises(NassetError) as err:
+        nr.render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8, threads=1)
+    assert err.value.code == "NEAR_FIELD_INVALID", err.value
+    assert "bad.usda" in str(err.value) and "nasset:nearFieldFetch" in str(err.value)
