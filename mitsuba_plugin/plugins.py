@@ -61,12 +61,15 @@ _REGISTERED: set[str] = set()
 
 def asset_for(mi, filename: str):
     """The asset of ``filename`` read once per process and variant, by its kind (:data:`JIT_KINDS`; typed
-    errors from the SDK, SCENE_UNSUPPORTED for other kinds)."""
+    errors from the SDK, SCENE_UNSUPPORTED for other kinds; NEAR_FIELD_INVALID for a bad ``nasset:nearFieldFetch``, or
+    one on a kind other than rna)."""
     from nasset_sdk.asset import Asset
 
     key = (mi.variant(), str(filename))
     if key not in _ASSETS:
-        kind = Asset.open(filename).kind
+        asset = Asset.open(filename)
+        kind = asset.kind
+        asset.near_field_fetch  # noqa: B018 (read for its check: spec/kinds/rna.md#near-field-fetch)
         if kind not in JIT_KINDS:
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders kinds {', '.join(JIT_KINDS)}, not {kind!r}",
                         file=str(filename))

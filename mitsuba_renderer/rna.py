@@ -95,7 +95,18 @@ def open_root(path: str):
     version = str(attr("nasset:specVersion"))
     if not re.fullmatch(r"[0-9]+\.[0-9]+", version) or int(version.split(".")[0]) != 0:
         raise _fail(path, "SCENE_UNSUPPORTED", f"nasset:specVersion {version!r}: this renderer reads major 0", rp)
+    near_field_fetch(path, root)
     return stage, root, attr
+
+
+def near_field_fetch(path, root) -> float:
+    """``nasset:nearFieldFetch`` of an asset's root prim (spec/kinds/rna.md#near-field-fetch): 0 when not authored;
+    NEAR_FIELD_INVALID naming the file and attribute for a value outside [0, 1], of another type, or non-zero on a
+    kind other than rna."""
+    a = root.GetAttribute(NEAR_FIELD_FETCH)
+    k = root.GetAttribute("nasset:kind")
+    return check_near_field_fetch(a.Get() if a and a.HasAuthoredValue() else None, str(k.Get()) if k else "",
+                                  {"file": str(path), "prim": str(root.GetPath()), "attribute": NEAR_FIELD_FETCH})
 
 
 def asset_kind(path: str) -> str:
@@ -264,9 +275,7 @@ class RnaAsset:
         if not (np.all(np.isfinite(self.lo)) and np.all(np.isfinite(self.hi)) and np.all(self.hi > self.lo)):
             raise self._fail("SCENE_INVALID", "invalid encoding box", rp)
         # spec/kinds/rna.md#near-field-fetch: f (0 when not authored) and the encoding box's centre c
-        a = root.GetAttribute(NEAR_FIELD_FETCH)
-        self.fetch = check_near_field_fetch(a.Get() if a and a.HasAuthoredValue() else None, kind,
-                                            {"file": self.path, "prim": rp, "attribute": NEAR_FIELD_FETCH})
+        self.fetch = near_field_fetch(self.path, root)
         self.centre = 0.5 * (self.lo + self.hi)
 
         geom = root.GetChild("Geometry")

@@ -44,17 +44,21 @@ def with_fetch(src, dst, f: float) -> str:
 
 
 def with_fetch_authored(src, dst, value) -> str:
-    """A copy of ``src`` (a .usda path) at ``dst`` whose ``nasset:nearFieldFetch`` is ``value`` as authored, whatever
-    it is (the builder writes no attribute for 0 and refuses values outside [0, 1])."""
-    from pxr import Usd
+    """A copy of the asset ``src`` at ``dst`` (a .usda path) whose ``nasset:nearFieldFetch`` is ``value`` as authored,
+    whatever it is and whatever the asset's kind (the builder writes no attribute for 0, refuses values outside
+    [0, 1] and any f > 0 on kinds other than rna). An rna copy declares format 0.3, as the builder writes it."""
+    from pxr import Sdf, Usd
 
-    from nasset_sdk.asset import NEAR_FIELD_FETCH
+    from nasset_sdk.asset import NEAR_FIELD_FETCH, Asset, AssetBuilder
     from nasset_sdk.safeopen import trust
 
-    with_fetch(src, dst, 0.5)
+    b = AssetBuilder.from_asset(Asset.open(src))
+    if b.kind == "rna":
+        b.near_field_fetch = 0.5
+    b.write(dst)
     stage = Usd.Stage.Open(str(dst))
-    attr = stage.GetDefaultPrim().GetAttribute(NEAR_FIELD_FETCH)
-    assert attr and attr.HasAuthoredValue()
+    root = stage.GetDefaultPrim()
+    attr = root.GetAttribute(NEAR_FIELD_FETCH) or root.CreateAttribute(NEAR_FIELD_FETCH, Sdf.ValueTypeNames.Float)
     attr.Set(float(value))
     stage.GetRootLayer().Save()
     trust(dst)

@@ -140,3 +140,19 @@ def test_fetch_outside_the_unit_interval_is_a_typed_error(tmp_path, value):
         render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8)
     assert err.value.code == "NEAR_FIELD_INVALID", err.value
     assert "bad.usda" in str(err.value) and "nasset:nearFieldFetch" in str(err.value)
+
+
+@pytest.mark.parametrize("kind", ["neupress", "8dna"])
+def test_fetch_on_another_kind_is_a_typed_error(tmp_path, kind):
+    """A non-zero ``nasset:nearFieldFetch`` on a neupress or 8dna asset (the attribute is rna's): NEAR_FIELD_INVALID
+    naming the asset file and the attribute, as the reference renderer reports it, not an asset rendered as if it
+    were absent."""
+    from nasset_sdk.errors import NassetError
+    from nasset_sdk.examples import example_builder
+
+    src = example_builder(kind, size="tiny", seed=1).write(tmp_path / f"{kind}.usda")
+    bad = nf.with_fetch_authored(src, tmp_path / "bad.usda", 0.5)
+    with pytest.raises(NassetError) as err:
+        render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8)
+    assert err.value.code == "NEAR_FIELD_INVALID", err.value
+    assert "bad.usda" in str(err.value) and "nasset:nearFieldFetch" in str(err.value)
