@@ -70,11 +70,11 @@ def constant_asset(tmp_path, f: float, unshadowed=UNSHADOWED, shadowed=SHADOWED)
     return with_fetch(base, tmp_path / f"const_{unshadowed[0]}_{shadowed[0]}_f{f}.usda", f)
 
 
-def point_light_scene(tmp_path, asset: str, occluder: str | None = None) -> str:
+def point_light_scene(tmp_path, asset: str, occluder: str | None = None, matrix=None) -> str:
     b = SceneBuilder()
     b.camera(CAMERA, (0, 0, 0))
     b.sphere_light("Point", tuple(LIGHT), 0.0, INTENSITY)
-    b.asset("A", asset)
+    b.asset("A", asset, matrix)
     black = dict(diffuse=(0.0, 0.0, 0.0), specular=(0.0, 0.0, 0.0))
     if occluder == "centre":
         b.quad("Occluder", (0.0, 1.0, 0.0), 0.12, **black)
@@ -83,6 +83,28 @@ def point_light_scene(tmp_path, asset: str, occluder: str | None = None) -> str:
     elif occluder == "inside":
         b.quad("Occluder", (0.0, -0.2, 0.3), 0.15, **black)
     return b.write(tmp_path / f"point_{occluder}_{Path(asset).stem}.usda")
+
+
+def moved_constant_asset(tmp_path, f: float):
+    """(asset, instance matrix M [4x4, USD row vectors], world centre c_w): the constant icosphere moved off its object
+    origin (centre c = (0.4, -0.2, 0.1)), instanced rotated 30 degrees about y, scaled (0.8, 1.2, 0.9) and translated so
+    that c_w = c M lies near the origin, in view."""
+    from nasset_sdk.asset import Asset, AssetBuilder
+    from nasset_sdk.geometry import MeshGeometry
+
+    a = Asset.open(constant_asset(tmp_path, f))
+    g = a.geometry()
+    b = AssetBuilder.from_asset(a)
+    b.set_geometry(MeshGeometry(np.asarray(g.points, np.float32) + np.float32([0.4, -0.2, 0.1]), g.faces, g.normals))
+    path = str(b.write(tmp_path / f"moved_f{f}.usda"))
+    lo, hi = (np.asarray(v, np.float64) for v in Asset.open(path).domain)
+    c = 0.5 * (lo + hi)
+    t = np.radians(30.0)
+    rot = np.array([[np.cos(t), 0.0, -np.sin(t)], [0.0, 1.0, 0.0], [np.sin(t), 0.0, np.cos(t)]])
+    m = np.eye(4)
+    m[:3, :3] = np.diag([0.8, 1.2, 0.9]) @ rot
+    m[3, :3] = np.array([0.05, 0.1, -0.05]) - c @ m[:3, :3]
+    return path, m, c @ m[:3, :3] + m[3, :3]
 
 
 def dome_square_scene(tmp_path, asset: str) -> str:

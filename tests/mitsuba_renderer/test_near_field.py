@@ -72,6 +72,19 @@ def test_point_light_is_fetched_at_the_fetch_point(nr, tmp_path):
     assert upper.mean() > lower.mean()
 
 
+
+def test_fetch_point_follows_the_instance_transform(nr, tmp_path):
+    """The same closed form under an instance that rotates, scales non-uniformly and translates an asset whose encoding
+    box is off its object origin: every whole pixel is T I / |l - c_w|^2 with c_w = c M (c in object space would
+    put it 24 % off)."""
+    asset, m, c_w = nf.moved_constant_asset(tmp_path, 1.0)
+    e_c = nf.INTENSITY / float(np.sum((nf.LIGHT - c_w) ** 2))
+    img = nr.render(nf.point_light_scene(tmp_path, asset, matrix=m), 4, width=16, height=16, seed=3, max_depth=1, threads=1)
+    whole_un = np.all(np.isclose(img, np.asarray(nf.UNSHADOWED) * e_c, rtol=1e-4), -1)
+    whole_sh = np.all(np.isclose(img, np.asarray(nf.SHADOWED) * e_c, rtol=1e-4), -1)
+    assert whole_un.sum() >= 20 and whole_sh.sum() >= 10, (whole_un.sum(), whole_sh.sum())
+    assert img[..., 0].max() <= nf.UNSHADOWED[0] * e_c * (1 + 1e-4)
+
 @pytest.mark.parametrize("occluder", ["centre", "side", "inside"])
 def test_occlusion_is_tested_from_the_fetch_point(nr, tmp_path, occluder):
     """A black occluder on the line c -> light that no line x -> light of the hits in view meets turns the f = 1
