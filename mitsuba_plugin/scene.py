@@ -246,6 +246,7 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
         if np.any(np.asarray(m.material.emission) > 0):
             entries[f"mesh_{k}"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": np.asarray(m.material.emission).tolist()}}
+        _warn_sidedness(m, str(path))
     for j, inst in enumerate(desc.assets):
         mw = np.asarray(inst.to_world, np.float64)
         if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
@@ -266,6 +267,27 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries
+
+
+def _warn_sidedness(mesh, file: str) -> None:
+    """Warn by prim what of spec/renderer.md#sidedness the plugin does not render for this mesh: both sides of a mesh
+    reflect its front material (``doubleSided = false`` and ``nasset:backMaterial`` are not read), and an emissive mesh
+    emits from the side its world triangles' winding faces only (Mitsuba's area emitter), not from both sides nor
+    from a front that a mirroring transform or ``leftHanded`` turns (the second implementation renders all of it)."""
+    import warnings
+
+    def say(what):
+        warnings.warn(f"{file}:{mesh.prim}: {what} (the Mitsuba plugin, spec/renderer.md#sidedness)", stacklevel=3)
+
+    if mesh.one_sided:
+        say("doubleSided = false is not rendered: both sides reflect")
+    if mesh.back_material is not None:
+        say("nasset:backMaterial is not rendered: both sides are shaded with the front material")
+    emissive = np.any(np.asarray(mesh.material.emission) > 0)
+    back_emits = mesh.back_material is not None and np.any(np.asarray(mesh.back_material.emission) > 0)
+    front_only = mesh.one_sided or mesh.back_material is not None  # the spec's emission leaves the front alone
+    if back_emits or (emissive and (not front_only or mesh.front_sign < 0)):
+        say("emission is rendered from the side the triangles' winding faces only, not from both sides or a turned front")
 
 
 def _column_transform(m3_rows: np.ndarray) -> list:

@@ -17,7 +17,7 @@ pytest.importorskip("mitsuba")
 from nasset_mitsuba_plugin.plugins import register  # noqa: E402
 from nasset_mitsuba_plugin.render import render  # noqa: E402
 from nasset_mitsuba_plugin.rna import RnaJit  # noqa: E402
-from nasset_mitsuba_plugin.scene import asset_shape, load_file  # noqa: E402
+from nasset_mitsuba_plugin.scene import asset_shape, load_file, usd_scene  # noqa: E402
 from nasset_mitsuba_plugin.variant import jit_mitsuba  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_asset  # noqa: E402
 from nasset_sdk.asset import Asset  # noqa: E402
@@ -220,6 +220,41 @@ def test_mixed_scene_with_two_instances(mi, tmp_path):
     # the floor below each instance lies in its shadow (the sun is overhead)
     assert lum[20:24, 8:18].mean() < 0.6 * np.median(lum[6:8]) and lum[20:24, 30:40].mean() < 0.6 * np.median(lum[6:8])
 
+
+
+def test_sidedness_the_plugin_does_not_render_is_warned_by_prim(mi, tmp_path):
+    """spec/renderer.md#sidedness features the plugin's meshes do not render are warned naming the prim, not dropped
+    silently: ``doubleSided = false`` (both sides reflect), ``nasset:backMaterial`` (the front material on both
+    sides) and emission from both sides (Mitsuba's area emitter emits from the winding's side only; measured: the
+    back of a double-sided emissive quad rendered 0 where the spec and the second implementation give its emission).
+    A one-sided emissive mesh says nothing of its emission (it leaves the front alone, as Mitsuba renders it), a plain
+    mesh nothing at all."""
+    import warnings
+
+    from pxr import UsdGeom
+
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0))
+    b.distant("Sun", (0, 0, 1), 1.0)
+    b.quad("Lamp", (-1, 0, 0), 0.5, emission=(1.0, 1.0, 1.0))
+    front_lamp = b.quad("FrontLamp", (1, 0, 0), 0.5, emission=(1.0, 1.0, 1.0))
+    one = b.quad("OneSided", (0, 1, 0), 0.5)
+    backed = b.quad("Backed", (0, -1, 0), 0.5)
+    b.quad("Plain", (0, 0, -1), 0.5)
+    for m in (front_lamp, one):
+        UsdGeom.Mesh(m.GetPrim()).CreateDoubleSidedAttr(False)
+    backed.GetPrim().CreateRelationship("nasset:backMaterial").AddTarget(b.material("BackLook", diffuse=(0.1, 0.1, 0.1)).GetPath())
+    path = b.write(tmp_path / "sides.usda")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        usd_scene(path, mi=mi)
+    said = [str(w.message) for w in caught if "sidedness" in str(w.message)]
+    assert len(said) == 4, "\n".join(said)
+    assert any("/World/Lamp" in m and "emission" in m for m in said)
+    assert any("/World/OneSided" in m and "doubleSided" in m for m in said)
+    assert any("/World/FrontLamp" in m and "doubleSided" in m for m in said)  # its back reflects
+    assert any("/World/Backed" in m and "backMaterial" in m for m in said)
+    assert not any("/World/FrontLamp" in m and "emission" in m or "/World/Plain" in m for m in said)
 
 # -- bad input -------------------------------------------------------------------------------------
 
