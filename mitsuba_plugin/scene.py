@@ -244,8 +244,10 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         bsdf = mi.load_dict({"type": preview.NAME, "kd": mi.ScalarColor3f(np.clip(m.material.kd, 0, 1).tolist()),
                              "f0": mi.ScalarColor3f(np.clip(m.material.f0, 0, 1).tolist()), "alpha": float(m.material.alpha)})
         entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
-        if np.any(np.asarray(m.material.emission) > 0):
-            entries[f"mesh_{k}"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": np.asarray(m.material.emission).tolist()}}
+        front, back = _emission_sides(m)
+        if np.any(front > 0) or np.any(back > 0):
+            entries[f"mesh_{k}"]["emitter"] = {"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
+                                               "back": mi.ScalarColor3f(back.tolist())}
         _warn_sidedness(m, str(path))
     for j, inst in enumerate(desc.assets):
         mw = np.asarray(inst.to_world, np.float64)
@@ -269,25 +271,33 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     return entries
 
 
+def _emission_sides(mesh) -> tuple:
+    """(emission on the side its world triangles' winding faces, on the other side) of a mesh (spec/renderer.md#sidedness):
+    the front emits its material's emissiveColor, the back its back material's, nothing on a one-sided prim, the
+    material's own otherwise; ``front_sign`` < 0 (a mirroring transform or leftHanded) puts the front against the winding."""
+    front = np.asarray(mesh.material.emission, np.float64)
+    if mesh.one_sided:
+        back = np.zeros(3)
+    elif mesh.back_material is not None:
+        back = np.asarray(mesh.back_material.emission, np.float64)
+    else:
+        back = front
+    return (front, back) if mesh.front_sign > 0 else (back, front)
+
+
 def _warn_sidedness(mesh, file: str) -> None:
     """Warn by prim what of spec/renderer.md#sidedness the plugin does not render for this mesh: both sides of a mesh
-    reflect its front material (``doubleSided = false`` and ``nasset:backMaterial`` are not read), and an emissive mesh
-    emits from the side its world triangles' winding faces only (Mitsuba's area emitter), not from both sides nor
-    from a front that a mirroring transform or ``leftHanded`` turns (the second implementation renders all of it)."""
+    reflect its front material (``doubleSided = false`` and ``nasset:backMaterial`` shape the emission only,
+    :func:`_emission_sides`; the second implementation renders both)."""
     import warnings
 
     def say(what):
         warnings.warn(f"{file}:{mesh.prim}: {what} (the Mitsuba plugin, spec/renderer.md#sidedness)", stacklevel=3)
 
     if mesh.one_sided:
-        say("doubleSided = false is not rendered: both sides reflect")
+        say("doubleSided = false is rendered for emission only: both sides reflect")
     if mesh.back_material is not None:
-        say("nasset:backMaterial is not rendered: both sides are shaded with the front material")
-    emissive = np.any(np.asarray(mesh.material.emission) > 0)
-    back_emits = mesh.back_material is not None and np.any(np.asarray(mesh.back_material.emission) > 0)
-    front_only = mesh.one_sided or mesh.back_material is not None  # the spec's emission leaves the front alone
-    if back_emits or (emissive and (not front_only or mesh.front_sign < 0)):
-        say("emission is rendered from the side the triangles' winding faces only, not from both sides or a turned front")
+        say("nasset:backMaterial is rendered for emission only: both sides reflect the front material")
 
 
 def _column_transform(m3_rows: np.ndarray) -> list:

@@ -108,15 +108,12 @@ def moved_constant_asset(tmp_path, f: float):
 
 
 def dome_square_scene(tmp_path, asset: str) -> str:
-    import trimesh
     from pxr import UsdGeom
 
     b = SceneBuilder()
     b.camera(CAMERA, (0, 0, 0))
-    # the sky: an emissive shell of 320 triangles, too many to be light-sampled (spec/renderer.md#mesh-lights), its
-    # front inside (the JIT plugin's area emitters emit from the front only)
-    shell = trimesh.creation.icosphere(subdivisions=2, radius=20.0)
-    b.mesh("Shell", shell.vertices, shell.faces[:, ::-1], diffuse=(0.0, 0.0, 0.0), emission=(1.0, 1.0, 1.0))
+    # the sky: an emissive shell of 320 triangles, too many to be light-sampled (spec/renderer.md#mesh-lights)
+    b.sphere_mesh("Shell", (0.0, 0.0, 0.0), 20.0, subdivisions=2, diffuse=(0.0, 0.0, 0.0), emission=(1.0, 1.0, 1.0))
     b.asset("A", asset)
     # one-sided and facing down: rays from above meet its back, which ends the path (no Fresnel glint of a black mesh)
     square = b.quad("Square", (0.0, SQUARE_Y, 0.0), SQUARE, normal=(0.0, -1.0, 0.0), diffuse=(0.0, 0.0, 0.0))
