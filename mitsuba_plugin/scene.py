@@ -241,14 +241,12 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
     for k, m in enumerate(desc.meshes):
         mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
-        bsdf = mi.load_dict({"type": preview.NAME, "kd": mi.ScalarColor3f(np.clip(m.material.kd, 0, 1).tolist()),
-                             "f0": mi.ScalarColor3f(np.clip(m.material.f0, 0, 1).tolist()), "alpha": float(m.material.alpha)})
+        bsdf = mi.load_dict({"type": preview.NAME, **_preview_props(mi, m)})
         entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
         front, back = _emission_sides(m)
         if np.any(front > 0) or np.any(back > 0):
             entries[f"mesh_{k}"]["emitter"] = {"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
                                                "back": mi.ScalarColor3f(back.tolist())}
-        _warn_sidedness(m, str(path))
     for j, inst in enumerate(desc.assets):
         mw = np.asarray(inst.to_world, np.float64)
         if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
@@ -285,19 +283,16 @@ def _emission_sides(mesh) -> tuple:
     return (front, back) if mesh.front_sign > 0 else (back, front)
 
 
-def _warn_sidedness(mesh, file: str) -> None:
-    """Warn by prim what of spec/renderer.md#sidedness the plugin does not render for this mesh: both sides of a mesh
-    reflect its front material (``doubleSided = false`` and ``nasset:backMaterial`` shape the emission only,
-    :func:`_emission_sides`; the second implementation renders both)."""
-    import warnings
+def _preview_props(mi, mesh) -> dict:
+    """``nasset_preview`` properties of a mesh: its material, and its sides (spec/renderer.md#sidedness)."""
+    def material(mat, prefix=""):
+        return {f"{prefix}kd": mi.ScalarColor3f(np.clip(mat.kd, 0, 1).tolist()),
+                f"{prefix}f0": mi.ScalarColor3f(np.clip(mat.f0, 0, 1).tolist()), f"{prefix}alpha": float(mat.alpha)}
 
-    def say(what):
-        warnings.warn(f"{file}:{mesh.prim}: {what} (the Mitsuba plugin, spec/renderer.md#sidedness)", stacklevel=3)
-
-    if mesh.one_sided:
-        say("doubleSided = false is rendered for emission only: both sides reflect")
-    if mesh.back_material is not None:
-        say("nasset:backMaterial is rendered for emission only: both sides reflect the front material")
+    props = {**material(mesh.material), "one_sided": bool(mesh.one_sided), "front_sign": float(mesh.front_sign)}
+    if mesh.back_material is not None and not mesh.one_sided:
+        props.update(material(mesh.back_material, "back_"))
+    return props
 
 
 def _column_transform(m3_rows: np.ndarray) -> list:

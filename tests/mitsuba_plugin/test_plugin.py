@@ -17,7 +17,7 @@ pytest.importorskip("mitsuba")
 from nasset_mitsuba_plugin.plugins import register  # noqa: E402
 from nasset_mitsuba_plugin.render import render  # noqa: E402
 from nasset_mitsuba_plugin.rna import RnaJit  # noqa: E402
-from nasset_mitsuba_plugin.scene import asset_shape, load_file, usd_scene  # noqa: E402
+from nasset_mitsuba_plugin.scene import asset_shape, load_file  # noqa: E402
 from nasset_mitsuba_plugin.variant import jit_mitsuba  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder, constant_rna_asset  # noqa: E402
 from nasset_sdk.asset import Asset  # noqa: E402
@@ -222,32 +222,36 @@ def test_mixed_scene_with_two_instances(mi, tmp_path):
 
 
 
-def test_sidedness_the_plugin_does_not_render_is_warned_by_prim(mi, tmp_path):
-    """spec/renderer.md#sidedness reflection the plugin's meshes do not render is warned naming the prim, not dropped
-    silently: ``doubleSided = false`` and ``nasset:backMaterial`` (both sides reflect the front material; their
-    emission is rendered, :func:`test_emission_leaves_the_sides_the_spec_says`). A plain or double-sided emissive mesh
-    says nothing."""
-    import warnings
-
+@pytest.mark.parametrize("sides", ["double", "one", "back_material", "mirrored"])
+def test_reflection_of_each_side_as_the_spec_says(tmp_path, sides):
+    """A Lambertian quad lit and seen along its normal, from its front and from its back, shows rho E / pi on a side
+    that reflects (spec/renderer.md#sidedness): both sides of a double-sided quad, the front alone of a one-sided one
+    (its back ends the path: 0), the back material's rho_b on the back, and the front of its own space on a mirrored
+    one-sided prim. The plugin shaded both sides with the front material before (doubleSided and backMaterial
+    dropped silently)."""
     from pxr import UsdGeom
 
-    b = SceneBuilder()
-    b.camera((0, 0, 3), (0, 0, 0))
-    b.distant("Sun", (0, 0, 1), 1.0)
-    b.quad("Lamp", (-1, 0, 0), 0.5, emission=(1.0, 1.0, 1.0))
-    one = b.quad("OneSided", (0, 1, 0), 0.5)
-    backed = b.quad("Backed", (0, -1, 0), 0.5)
-    b.quad("Plain", (0, 0, -1), 0.5)
-    UsdGeom.Mesh(one.GetPrim()).CreateDoubleSidedAttr(False)
-    backed.GetPrim().CreateRelationship("nasset:backMaterial").AddTarget(b.material("BackLook", diffuse=(0.1, 0.1, 0.1)).GetPath())
-    path = b.write(tmp_path / "sides.usda")
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        usd_scene(path, mi=mi)
-    said = [str(w.message) for w in caught if "sidedness" in str(w.message)]
-    assert len(said) == 2, "\n".join(said)
-    assert any("/World/OneSided" in m and "doubleSided" in m for m in said)
-    assert any("/World/Backed" in m and "backMaterial" in m for m in said)
+    rho, rho_b, e = 0.5, 0.2, 2.0
+    out = {}
+    for toward in (1.0, -1.0):  # the quad's own front (+z, counter-clockwise winding) toward the camera, then away
+        b = SceneBuilder()
+        b.camera((0, 0, 3), (0, 0, 0))
+        b.distant("Sun", (0, 0, 1), e)
+        m = np.eye(4)
+        if sides == "mirrored":
+            m[0, 0] = -1.0
+        pts = np.array([[-0.5, -0.5, 0.0], [0.5, -0.5, 0.0], [0.5, 0.5, 0.0], [-0.5, 0.5, 0.0]])
+        q = b.mesh("Quad", pts, [[0, 1, 2, 3]] if toward > 0 else [[0, 3, 2, 1]], matrix=m, diffuse=(rho, rho, rho),
+                   specular=(0.0, 0.0, 0.0))
+        if sides in ("one", "mirrored"):
+            UsdGeom.Mesh(q.GetPrim()).CreateDoubleSidedAttr(False)
+        if sides == "back_material":
+            back = b.material("BackLook", diffuse=(rho_b, rho_b, rho_b))
+            q.GetPrim().CreateRelationship("nasset:backMaterial").AddTarget(back.GetPath())
+        out[toward] = render(b.write(tmp_path / f"quad_{toward}.usda"), 4, width=8, height=8, seed=1, max_depth=1)[4, 4]
+    expect_back = {"double": rho, "one": 0.0, "back_material": rho_b, "mirrored": 0.0}[sides] * e / np.pi
+    np.testing.assert_allclose(out[1.0], rho * e / np.pi, rtol=1e-4)
+    np.testing.assert_allclose(out[-1.0], expect_back, rtol=1e-4, atol=1e-7)
 
 
 @pytest.mark.parametrize("sides", ["double", "one", "back_material", "mirrored"])
