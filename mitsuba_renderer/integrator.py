@@ -394,8 +394,8 @@ class PathTracer:
                 for k in np.unique(obj[hm]):
                     ob = self.objects[k]
                     em[(obj == k) & ~back] = ob["material"].emission
-                    # a back side emits its back material's emission; a one-sided mesh's back nothing
-                    if ob.get("back_material") is not None or not ob.get("one_sided"):
+                    # a back side emits its back material's emission; a one-sided mesh's back nothing, back material or not
+                    if not ob.get("one_sided"):
                         em[(obj == k) & back] = self._side_material(k, True).emission
                 np.add.at(L, idx[hm], beta[hm] * em[hm])
             surf = hm | (kinds == Kind.ASSET)
