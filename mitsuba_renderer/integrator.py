@@ -469,7 +469,8 @@ class PathTracer:
 
         ``at`` [m, 3]: where each row's incident light is fetched (spec/kinds/rna.md#near-field-fetch; None: at p):
         the light is sampled there and other objects' blocking is a ray from there (with the offset the ray from p
-        gets); ``passed`` (the ignored asset lies on the ray) is still a ray from p along the sample's direction."""
+        gets); ``passed`` (the ignored asset lies on the ray) is then a ray from p along the sample's direction on which
+        only the asset's own triangles count (:meth:`own_branch`)."""
         m = len(p)
         fetch = p if at is None else at
         moved = np.zeros(m, bool) if at is None else np.any(at != p, axis=1)
