@@ -1,4 +1,4 @@
-"""Infinite emitters of spec/renderer.md#lights in Dr.Jit, which Mitsuba has no emitter for:
+"""Emitters of spec/renderer.md#lights in Dr.Jit, which Mitsuba has no emitter for:
 
 - ``nasset_cone``: the DistantLight with ``angle > 0``. Uniform cone of half-angle t around
   ``direction`` (toward the light), radiance ``E / (pi sin^2 t)`` (``irradiance`` E at normal
@@ -13,6 +13,10 @@
   ``pmf W H / (2 pi^2 sin theta)``; the constant dome uniformly on the sphere.
 
 Sample points lie :data:`FAR` along the direction (shadow rays end there).
+
+- ``nasset_area``: the emission of a mesh (spec/renderer.md#sidedness, #mesh-lights), attached to its shape:
+  ``front`` radiance on the side its triangles' winding faces, ``back`` radiance on the other (Mitsuba's
+  ``area`` emits from the front alone). Sampled by the shape's area (pdf ``d^2 / (A |cos theta_l|)``).
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from nasset_sdk.errors import error
 
 NAME = "nasset_cone"
 DOME = "nasset_dome"
+AREA = "nasset_area"
 #: distance of the sample point along a direction (shadow rays end there): far beyond any scene the
 #: renderer accepts (spec/renderer.md#limits), still exact enough in float32 for the ray direction
 FAR = 1e9
@@ -196,6 +201,43 @@ def register(mi) -> None:
         def to_string(self):
             return f"NassetDomeLight[{'constant' if self.tex is None else f'{self.w}x{self.h} lat-long'}]"
 
+    class AreaLight(mi.Emitter):
+        """Emission of a mesh on both sides of its triangles: ``front`` (the winding's side) and ``back`` RGB."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.front, self.back = (mi.Color3f(*np.asarray(props.get(k, mi.ScalarColor3f(0.0)), np.float64).reshape(3).tolist())
+                                     for k in ("front", "back"))
+            self.m_flags = mi.EmitterFlags.Surface
+
+        def _side(self, seen_from_front, active):
+            return dr.select(active, dr.select(seen_from_front, self.front, self.back), mi.Color3f(0))
+
+        def eval(self, si, active=True):
+            return self._side(mi.Frame3f.cos_theta(si.wi) > 0, active)
+
+        def sample_direction(self, it, sample, active=True):
+            ds = self.get_shape().sample_direction(it, sample, active)
+            ok = active & (ds.pdf != 0.0)
+            ds.emitter = mi.EmitterPtr(self)
+            return ds, self._side(dr.dot(ds.d, ds.n) < 0, ok) / dr.select(ok, ds.pdf, 1.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            return self.get_shape().pdf_direction(it, ds, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self._side(dr.dot(ds.d, ds.n) < 0, active)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return "NassetAreaLight"
+
     mi.register_emitter(NAME, lambda props: ConeLight(props))
     mi.register_emitter(DOME, lambda props: DomeLight(props))
+    mi.register_emitter(AREA, lambda props: AreaLight(props))
     _REGISTERED.add(mi.variant())

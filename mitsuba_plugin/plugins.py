@@ -12,6 +12,9 @@
   by the asset technique: the kind's object-space sampler mapped to world, p_A = pdf_obj J (rna: the
   continuation mixture of :mod:`.lobes`; neupress: its Gaussian lobe, spec/renderer.md#neupress), or the
   uniform world sphere (p_A = 1/4pi; neupress without ``sampling``, and every asset with ``lobe`` false).
+  An rna asset with a near-field fetch f > 0 (spec/kinds/rna.md#near-field-fetch) takes its light sample at
+  the fetch point p (the shadow ray from p, the branch a second ray from x) and its continuation's radiance
+  from p (the branch traced from x at the vertex); scenes without one trace the kernel they always did.
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
   of that segment and its neighbours do not count as crossing the instance; a ray leaving a fiber
   instance costs O(1) queries on split structures (:func:`_trace`), not one per prism surface it crosses. 8dna assets
@@ -58,12 +61,15 @@ _REGISTERED: set[str] = set()
 
 def asset_for(mi, filename: str):
     """The asset of ``filename`` read once per process and variant, by its kind (:data:`JIT_KINDS`; typed
-    errors from the SDK, SCENE_UNSUPPORTED for other kinds)."""
+    errors from the SDK, SCENE_UNSUPPORTED for other kinds; NEAR_FIELD_INVALID for a bad ``nasset:nearFieldFetch``, or
+    one on a kind other than rna)."""
     from nasset_sdk.asset import Asset
 
     key = (mi.variant(), str(filename))
     if key not in _ASSETS:
-        kind = Asset.open(filename).kind
+        asset = Asset.open(filename)
+        kind = asset.kind
+        asset.near_field_fetch  # noqa: B018 (read for its check: spec/kinds/rna.md#near-field-fetch)
         if kind not in JIT_KINDS:
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders kinds {', '.join(JIT_KINDS)}, not {kind!r}",
                         file=str(filename))
@@ -158,11 +164,18 @@ def register(mi) -> None:
             t_un = mi.Spectrum(0)
             t_sh = mi.Spectrum(0)
             valid = mi.Bool(False)
+            # spec/kinds/rna.md#near-field-fetch: with an instance that fetches its light off the hit, a continuation
+            # leaving its fetch point (c_moved) takes its branch from the ray traced from x (c_passed)
+            near = any(getattr(a, "fetch", 0.0) > 0 for a in assets)
+            c_moved = mi.Bool(False)
+            c_passed = mi.Bool(False)
             # held out of the loop state (not a Dr.Jit tree): the queue's buffers are written, never carried
             queue = LightQueue(mi, dr.width(ray)) if self.defer and shaded else None
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
                 si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
+                if dr.hint(near, mode="scalar"):
+                    passed = dr.select(c_moved, c_passed, passed)
                 beta[pending] *= dr.select(passed, t_sh, t_un)
                 valid |= active & si.is_valid()
 
@@ -192,11 +205,25 @@ def register(mi) -> None:
                     if on_prt:  # symbolic: the gathers run only in packets with a lane on a PRT asset
                         L = _prt_vertex(mi, prt, tab, k, si, wo_o, on_prt, L, beta)
 
-                # light sample; at an asset the shadow ray ignores the instance and records crossing it
-                ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_next)
+                # light sample; at an asset the shadow ray ignores the instance and records crossing it. An instance
+                # with a near-field fetch: the light is sampled at the fetch point p and the shadow ray leaves p, the
+                # branch is a second ray from x along the sample's direction
+                si_l, moved = si, mi.Bool(False)
+                if dr.hint(near, mode="scalar"):
+                    moved, p_f = _fetch_point(mi, tab, k, si, on_asset & ~on_8)
+                    si_l = mi.SurfaceInteraction3f(si)
+                    si_l.p = p_f
+                ds_em, em_weight = scene.sample_emitter_direction(si_l, sampler.next_2d(), False, active_next)
                 active_em = active_next & (ds_em.pdf != 0.0) & ~on_8
-                si_sh, passed_sh = _trace(mi, scene, si.spawn_ray_to(ds_em.p), dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em)
+                ray_em = si.spawn_ray_to(ds_em.p)
+                if dr.hint(near, mode="scalar"):
+                    ray_em = dr.select(moved, _ray_to_from(mi, si, p_f, ds_em.p), ray_em)
+                si_sh, passed_sh = _trace(mi, scene, ray_em, dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em)
                 active_em &= ~si_sh.is_valid()
+                if dr.hint(near, mode="scalar"):
+                    ray_x = si.spawn_ray(ds_em.d)
+                    ray_x.maxt = ds_em.dist * (1.0 - mi.math.ShadowEpsilon)
+                    passed_sh = dr.select(moved, _crosses(mi, scene, ray_x, sid, ex_lo, ex_hi, active_em & moved), passed_sh)
                 val, pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), on_plain & active_em)
                 L[on_plain & active_em] += beta * dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, pdf)) * val * em_weight
 
@@ -226,6 +253,11 @@ def register(mi) -> None:
                     prev_pdf = dr.select(on_8, pdf8, prev_pdf)
                     active_next &= ~on_8 | alive8
                 ray = si.spawn_ray(d_next)
+                if dr.hint(near, mode="scalar"):  # the branch from x now, the radiance from p at the next trace
+                    c_moved = moved & active_next
+                    c_passed = _crosses(mi, scene, ray, sid, ex_lo, ex_hi, c_moved)
+                    ray.o = dr.select(c_moved, p_f + _offset(mi, si, d_next), ray.o)
+                    prev_si.p = dr.select(c_moved, p_f, prev_si.p)  # light pdfs of MIS seen from p
                 if dr.hint(len(eight) > 0, mode="scalar"):
                     from_u = on_8 & from_u8  # a flow continuation leaves u_i M itself (no offset)
                     ray.o = dr.select(from_u, origin8, ray.o)
@@ -290,6 +322,40 @@ def _trace(mi, scene, ray, ignore, lo, hi, active):
         si = dr.select(mine, si_j, si)
         passed |= _branch(mi, own, ray, dr.select(si_j.is_valid(), si_j.t, ray.maxt), lo, hi, mine)
     return si, passed
+
+
+def _crosses(mi, scene, ray, own, lo, hi, active):
+    """Whether ``ray`` meets a triangle of shape ``own`` (registry id) outside its exempt range [lo, hi) before its
+    maxt, every other surface passed through: the branch ray from x of a hit whose light is fetched elsewhere
+    (spec/kinds/rna.md#near-field-fetch: only the asset's own triangles count on it). On the instance's own
+    structure where the scene has split structures for it (:func:`split_scenes`), else stepping over the others."""
+    split = split_scenes(mi, scene) or []
+    on_split = mi.Bool(False)
+    passed = mi.Bool(False)
+    for rid, _, own_scene in split:
+        mine = active & (own == rid)
+        on_split |= mine
+        passed |= _branch(mi, own_scene, ray, ray.maxt, lo, hi, mine)
+    return passed | _crosses_skipping(mi, scene, ray, own, lo, hi, active & ~on_split)
+
+
+@dr.syntax
+def _crosses_skipping(mi, scene, ray, own, lo, hi, active):
+    """:func:`_crosses` on the whole scene: re-trace past every hit that is not an own triangle outside [lo, hi)."""
+    si = scene.ray_intersect(ray, active)
+    mine = (dr.reinterpret_array(mi.UInt32, si.shape) == own) & ((si.prim_index < lo) | (si.prim_index >= hi))
+    passed = active & si.is_valid() & mine
+    go = active & si.is_valid() & ~mine
+    r = mi.Ray3f(ray)
+    i = mi.UInt32(0)
+    while dr.hint(go & (i < MAX_SKIPS), max_iterations=-1, label="nasset_crosses"):
+        r = _beyond(r, si)
+        si = scene.ray_intersect(r, go)
+        mine = (dr.reinterpret_array(mi.UInt32, si.shape) == own) & ((si.prim_index < lo) | (si.prim_index >= hi))
+        passed |= go & si.is_valid() & mine
+        go = go & si.is_valid() & ~mine
+        i += 1
+    return passed
 
 
 def _beyond(ray, si):
@@ -419,6 +485,30 @@ def _asset_vertex(mi, assets, tab, k, x_o, n_o, wo_o, h_o, ds_em, em_weight, pas
     return L, tc_un * inv_p, tc_sh * inv_p, wi_c, p_c
 
 
+def _fetch_point(mi, tab, k, si, active):
+    """(lanes whose light is fetched off the hit, the fetch point p = x + f (c_w - x), x elsewhere) of hits si on
+    instances k (spec/kinds/rna.md#near-field-fetch)."""
+    f = dr.gather(mi.Float, tab["fetch"], k, active)
+    c_w = dr.gather(mi.Point3f, tab["centre"], k, active)
+    moved = active & (f > 0)
+    return moved, dr.select(moved, dr.fma(f, c_w - si.p, si.p), si.p)
+
+
+def _offset(mi, si, d):
+    """The offset Mitsuba gives a ray leaving the hit si along d (``Interaction::offset_p(d) - p``)."""
+    mag = (1.0 + dr.max(dr.abs(si.p))) * mi.math.RayEpsilon
+    return dr.mulsign(mag, dr.dot(si.n, d)) * si.n
+
+
+def _ray_to_from(mi, si, p, target):
+    """The shadow ray from p toward ``target`` with the offset a ray from the hit si in that direction gets
+    (``si.spawn_ray_to(target)`` moved to p: spec/kinds/rna.md#near-field-fetch)."""
+    o = p + _offset(mi, si, target - p)
+    d = target - o
+    dist = dr.norm(d)
+    return mi.Ray3f(o, d / dist, dist * (1.0 - mi.math.ShadowEpsilon), si.time, si.wavelengths)
+
+
 def _prt_lanes(mi, prt, tab, k, active):
     """Lanes of ``active`` whose instance k is an instance of a PRT-shaded (neupress) asset."""
     mine = mi.Bool(False)
@@ -457,11 +547,13 @@ def _instance_tables(mi, scene):
     Returns (assets [JIT_KINDS instances], lut UInt32 [max registry id + 1] -> instance index + 1, tables dict of
     Float / UInt32 arrays per instance: 'inv' 12 (world -> object affine, row-major 3x4), 'nt' 9
     (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'fwd' 12
-    (the object -> world affine map M, 3 x 4 row-major), 'kind8' (1 for 8dna instances), 'jdet' 1 (|det M3^-1|), 'asset')."""
+    (the object -> world affine map M, 3 x 4 row-major), 'kind8' (1 for 8dna instances), 'jdet' 1 (|det M3^-1|), 'asset',
+    'fetch' 1 (the near-field fetch f, 0 but for rna assets that author one) and 'centre' 3 (the encoding box's centre c_w
+    in world space, spec/kinds/rna.md#near-field-fetch))."""
     import drjit as dr
 
     assets: list = []
-    ids, inv, nt, fwd, jdet, which = [], [], [], [], [], []
+    ids, inv, nt, fwd, jdet, which, fetch, centre = [], [], [], [], [], [], [], []
     for sh in scene.shapes():
         b = sh.bsdf()
         filename = getattr(b, "filename", None)
@@ -482,6 +574,8 @@ def _instance_tables(mi, scene):
         fwd.append(m[:3, :].ravel())
         jdet.append(1.0 / abs(det))
         which.append(assets.index(b.asset))
+        fetch.append(float(getattr(b.asset, "fetch", 0.0)))
+        centre.append(m3 @ np.asarray(getattr(b.asset, "centre", np.zeros(3)), np.float64) + m[:3, 3])
     lut = np.zeros(max(ids, default=0) + 1, np.uint32)
     for j, rid in enumerate(ids):
         lut[rid] = j + 1
@@ -490,7 +584,9 @@ def _instance_tables(mi, scene):
            "fwd": mi.Float(np.asarray(fwd, np.float32).ravel()) if ids else mi.Float(0),
            "jdet": mi.Float(np.asarray(jdet, np.float32)) if ids else mi.Float(0),
            "kind8": mi.UInt32(np.asarray([assets[w].kind == "8dna" for w in which], np.uint32)) if ids else mi.UInt32(0),
-           "asset": mi.UInt32(np.asarray(which, np.uint32)) if ids else mi.UInt32(0)}
+           "asset": mi.UInt32(np.asarray(which, np.uint32)) if ids else mi.UInt32(0),
+           "fetch": mi.Float(np.asarray(fetch, np.float32)) if ids else mi.Float(0),
+           "centre": mi.Float(np.asarray(centre, np.float32).ravel()) if ids else mi.Float(0)}
     return assets, mi.UInt32(lut), tab
 
 

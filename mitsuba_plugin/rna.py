@@ -93,6 +93,9 @@ class RnaJit:
         self.decoder = DrJitNetwork(mi, asset.evaluable_bytes("core", "decoder"), file=self.path, prim="/Asset/core/decoder")
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
         self.lo = lo
+        # spec/kinds/rna.md#near-field-fetch: f (0 when not authored) and the encoding box's centre (object space)
+        self.fetch = asset.near_field_fetch
+        self.centre = 0.5 * (lo + hi)
         self.span = np.maximum(hi - lo, 1e-30)
         self.fiber = asset.variant == "fiber"
         g = asset.geometry()

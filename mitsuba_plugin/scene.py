@@ -241,11 +241,12 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
     for k, m in enumerate(desc.meshes):
         mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
-        bsdf = mi.load_dict({"type": preview.NAME, "kd": mi.ScalarColor3f(np.clip(m.material.kd, 0, 1).tolist()),
-                             "f0": mi.ScalarColor3f(np.clip(m.material.f0, 0, 1).tolist()), "alpha": float(m.material.alpha)})
+        bsdf = mi.load_dict({"type": preview.NAME, **_preview_props(mi, m)})
         entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
-        if np.any(np.asarray(m.material.emission) > 0):
-            entries[f"mesh_{k}"]["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": np.asarray(m.material.emission).tolist()}}
+        front, back = _emission_sides(m)
+        if np.any(front > 0) or np.any(back > 0):
+            entries[f"mesh_{k}"]["emitter"] = {"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
+                                               "back": mi.ScalarColor3f(back.tolist())}
     for j, inst in enumerate(desc.assets):
         mw = np.asarray(inst.to_world, np.float64)
         if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
@@ -266,6 +267,32 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries
+
+
+def _emission_sides(mesh) -> tuple:
+    """(emission on the side its world triangles' winding faces, on the other side) of a mesh (spec/renderer.md#sidedness):
+    the front emits its material's emissiveColor, the back its back material's, nothing on a one-sided prim, the
+    material's own otherwise; ``front_sign`` < 0 (a mirroring transform or leftHanded) puts the front against the winding."""
+    front = np.asarray(mesh.material.emission, np.float64)
+    if mesh.one_sided:
+        back = np.zeros(3)
+    elif mesh.back_material is not None:
+        back = np.asarray(mesh.back_material.emission, np.float64)
+    else:
+        back = front
+    return (front, back) if mesh.front_sign > 0 else (back, front)
+
+
+def _preview_props(mi, mesh) -> dict:
+    """``nasset_preview`` properties of a mesh: its material, and its sides (spec/renderer.md#sidedness)."""
+    def material(mat, prefix=""):
+        return {f"{prefix}kd": mi.ScalarColor3f(np.clip(mat.kd, 0, 1).tolist()),
+                f"{prefix}f0": mi.ScalarColor3f(np.clip(mat.f0, 0, 1).tolist()), f"{prefix}alpha": float(mat.alpha)}
+
+    props = {**material(mesh.material), "one_sided": bool(mesh.one_sided), "front_sign": float(mesh.front_sign)}
+    if mesh.back_material is not None and not mesh.one_sided:
+        props.update(material(mesh.back_material, "back_"))
+    return props
 
 
 def _column_transform(m3_rows: np.ndarray) -> list:

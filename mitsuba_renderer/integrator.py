@@ -82,14 +82,15 @@ class Tracer:
         ng = si.n.numpy().T.astype(np.float64)
         return valid & (obj >= 0), obj, t, si.prim_index.numpy().astype(np.int64), si.uv.numpy().T.astype(np.float64), ng
 
-    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None):
+    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None, until_passed=False):
         """-> dict(hit, obj, t, prim, b1, b2, passed).
 
         ``ignore[i]``: object index ray i passes through, recording it in ``passed`` (-1: none);
         ``exempt[i]``: triangle range [lo, hi) of the ignored object passed through without record
         (a fiber hit's own segment and its neighbours: spec/renderer.md#fibers);
         ``transparent``: bool per object index, objects every ray passes through without record
-        (light shapes for shadow rays).
+        (light shapes for shadow rays); ``until_passed``: a ray ends where it first passes through its ignored
+        object (with ``transparent`` everything: whether the ray meets that object's own triangles at all).
         """
         m = len(o)
         o = np.array(o, np.float64)
@@ -111,6 +112,8 @@ class Tracer:
                 through = through & ~((prim >= exempt[todo, 0]) & (prim < exempt[todo, 1]))
             if transparent is not None:
                 skip = skip | (hit & transparent[np.maximum(obj, 0)])
+            if until_passed:
+                skip = skip & ~through
             fin = ~skip
             idx = todo[fin]
             res["hit"][idx] = hit[fin]
@@ -185,6 +188,7 @@ class PathTracer:
         reflective = [k for k, o in enumerate(objects) if o["kind"] != Kind.LIGHT]
         # light shapes are seen by camera and continuation rays but do not block shadow rays
         self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
+        self.every_shape = np.ones(len(objects) + 1, bool)
         self.n_reflective = len(reflective)
         # nasset:cameraVisibility = false (spec/renderer.md#light-surfaces): camera rays pass through the light's shape
         hidden = [o["kind"] == Kind.LIGHT and not getattr(o["light"].desc, "camera_visible", True) for o in objects]
@@ -390,8 +394,8 @@ class PathTracer:
                 for k in np.unique(obj[hm]):
                     ob = self.objects[k]
                     em[(obj == k) & ~back] = ob["material"].emission
-                    # a back side emits its back material's emission; a one-sided mesh's back nothing
-                    if ob.get("back_material") is not None or not ob.get("one_sided"):
+                    # a back side emits its back material's emission; a one-sided mesh's back nothing, back material or not
+                    if not ob.get("one_sided"):
                         em[(obj == k) & back] = self._side_material(k, True).emission
                 np.add.at(L, idx[hm], beta[hm] * em[hm])
             surf = hm | (kinds == Kind.ASSET)
@@ -460,26 +464,42 @@ class PathTracer:
                 w = np.where(cam, 1.0, mis_weight(prev_pdf[sel], pl))
             np.add.at(L, idx[sel], beta[sel] * le * w[:, None])
 
-    def _nee(self, p, ng, n_for_light, rng, ignore):
-        """Yield (wi, le/pdf, pdf_light, delta, visible, passed) per light (one sample of every light)."""
+    def _nee(self, p, ng, n_for_light, rng, ignore, at=None):
+        """Yield (wi, le/pdf, pdf_light, delta, visible, passed) per light (one sample of every light).
+
+        ``at`` [m, 3]: where each row's incident light is fetched (spec/kinds/rna.md#near-field-fetch; None: at p):
+        the light is sampled there and other objects' blocking is a ray from there (with the offset the ray from p
+        gets); ``passed`` (the ignored asset lies on the ray) is then a ray from p along the sample's direction on which
+        only the asset's own triangles count (:meth:`own_branch`)."""
         m = len(p)
+        fetch = p if at is None else at
+        moved = np.zeros(m, bool) if at is None else np.any(at != p, axis=1)
         for lt in self.lights:
             u = rng.random((m, 2))
-            wi, dist, le, pdf = lt.sample(self.mi, p, n_for_light, u)
+            wi, dist, le, pdf = lt.sample(self.mi, fetch, n_for_light, u)
             wi = normalized(wi)
             valid = (pdf > 0) & np.any(le > 0, axis=1)
             side = np.sign(dot(wi, ng))[:, None]
             side[side == 0] = 1.0
-            origin = p + ng * side * ray_eps(p)[:, None]
+            offset = ng * side * ray_eps(p)[:, None]
             maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
             vis = np.zeros(m, bool)
             passed = np.zeros(m, bool)
             v = np.nonzero(valid)[0]
             if len(v):
-                tr = self.tracer.trace(origin[v], wi[v], maxt[v], None if ignore is None else ignore[v], transparent=self.light_shapes)
+                tr = self.tracer.trace(fetch[v] + offset[v], wi[v], maxt[v], None if ignore is None else ignore[v], transparent=self.light_shapes)
                 vis[v] = ~tr["hit"]
                 passed[v] = tr["passed"]
+            b = np.nonzero(valid & moved)[0]
+            if len(b):
+                passed[b] = self.own_branch(p[b] + offset[b], wi[b], maxt[b], ignore[b])
             yield wi, le / np.maximum(pdf, 1e-300)[:, None] * valid[:, None], pdf, lt.delta, vis & valid, passed
+
+    def own_branch(self, o, d, maxt, obj, exempt=None):
+        """[n] bool: whether the rays meet a triangle of object ``obj[i]`` (outside ``exempt[i]``) before ``maxt``, every
+        other surface passed through: the branch from x of a hit whose light is fetched elsewhere
+        (spec/kinds/rna.md#near-field-fetch: only the asset's own triangles count on that ray)."""
+        return self.tracer.trace(o, d, maxt, obj, transparent=self.every_shape, exempt=exempt, until_passed=True)["passed"]
 
     def _shade_mesh(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
         flip = dot(ng, wo) < 0
@@ -509,7 +529,8 @@ class PathTracer:
 
 
 class RnaShader:
-    """The rna vertex (spec/renderer.md#neural-assets; fibers: #fibers)."""
+    """The rna vertex (spec/renderer.md#neural-assets; fibers: #fibers): T and the branch at x, the incident light at
+    the fetch point (spec/kinds/rna.md#near-field-fetch; the hit itself for f = 0)."""
 
     def __init__(self, pt: PathTracer) -> None:
         self.pt = pt
@@ -536,8 +557,9 @@ class RnaShader:
                     out[4][r] = res[4]
             return tuple(out)
         m = len(p)
+        at, moved = self.fetch_points(p, obj)
         entries = []  # (wi, weight [m, 3], valid mask, shadowed branch)
-        for wi, lw, pl, delta, vis, passed in self.pt._nee(p, ng, ng, rng, obj):
+        for wi, lw, pl, delta, vis, passed in self.pt._nee(p, ng, ng, rng, obj, at):
             w = np.ones(m) if delta else np.where(cont, power(pl, INV_FOUR_PI), 1.0)
             entries.append((wi, lw * w[:, None], vis, passed))
         # continuation: uniform sphere
@@ -548,17 +570,36 @@ class RnaShader:
         wc = np.stack([s * np.cos(ph), s * np.sin(ph), z], 1)
         cidx = np.nonzero(cont)[0]
         cpassed = np.zeros(m, bool)
+        new_o = np.full_like(p, np.nan)  # NaN: the integrator's origin, x offset to wc's side
         if len(cidx):
             side = np.sign(dot(wc[cidx], ng[cidx]))[:, None]
-            origin = p[cidx] + ng[cidx] * side * ray_eps(p[cidx])[:, None]
-            tr = self.pt.tracer.trace(origin, wc[cidx], None, obj[cidx])
-            cpassed[cidx] = tr["passed"]
+            offset = ng[cidx] * side * ray_eps(p[cidx])[:, None]
+            mc = moved[cidx]
+            cx, cm = cidx[~mc], cidx[mc]  # the branch: from x (with a fetch point, the asset's own triangles alone)
+            if len(cx):
+                cpassed[cx] = self.pt.tracer.trace(p[cx] + offset[~mc], wc[cx], None, obj[cx])["passed"]
+            if len(cm):  # the radiance: a ray from the fetch point
+                cpassed[cm] = self.pt.own_branch(p[cm] + offset[mc], wc[cm], np.full(len(cm), np.inf), obj[cm])
+                new_o[cm] = at[cm] + offset[mc]
         entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = self._transport(entries, p, wo, obj, prim, b1, b2)
         for (_, lw, vis, _), t in zip(entries[:-1], T[:-1], strict=True):
             np.add.at(L, idx, beta * t * lw * vis[:, None])
         nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
-        return nb, wc, np.full(m, INV_FOUR_PI), cont, None
+        return nb, wc, np.full(m, INV_FOUR_PI), cont, new_o if moved.any() else None
+
+    def fetch_points(self, p, obj):
+        """(fetch points [m, 3], rows where they differ from p) of rna hits p on instances ``obj``:
+        p + f (c_w - p), c_w the instance's encoding box centre in world space (spec/kinds/rna.md#near-field-fetch)."""
+        at = p.copy()
+        for k in np.unique(obj):
+            inst = self.pt.objects[k]
+            f = inst["asset"].fetch
+            if f > 0:
+                sel = obj == k
+                c_w = inst["asset"].centre @ inst["to_world"][:3, :3] + inst["to_world"][3, :3]
+                at[sel] = p[sel] + f * (c_w - p[sel])
+        return at, np.any(at != p, axis=1)
 
     def _transport(self, entries, p, wo, obj, prim, b1, b2):
         """Evaluate T for every entry where its mask is set, grouped by asset file."""
@@ -601,18 +642,22 @@ class RnaShader:
             x = (p[sel] - inst["to_world"][3, :3]) @ minv
             wo_o[sel] = normalized(wo[sel] @ minv)
             t_o[sel], h[sel], exempt[sel] = inst["asset"].fiber_frame(prim[sel], x, wo_o[sel])
+        at, moved = self.fetch_points(p, obj)  # rays from the fetch point, like those from x, without offset
         rows = []  # (wi, weight [m, 3], valid, shadowed branch)
         for lt in pt.lights:
             u = rng.random((m, 2))
-            wi, dist, le, pdf = lt.sample(pt.mi, p, ng, u)
+            wi, dist, le, pdf = lt.sample(pt.mi, at, ng, u)
             wi = normalized(wi)
             valid = (pdf > 0) & np.any(le > 0, axis=1)
             maxt = np.where(np.isfinite(dist), dist * (1.0 - 1e-3), np.inf)
             vis, passed = np.zeros(m, bool), np.zeros(m, bool)
             v = np.nonzero(valid)[0]
             if len(v):
-                tr = pt.tracer.trace(p[v], wi[v], maxt[v], obj[v], transparent=pt.light_shapes, exempt=exempt[v])
+                tr = pt.tracer.trace(at[v], wi[v], maxt[v], obj[v], transparent=pt.light_shapes, exempt=exempt[v])
                 vis[v], passed[v] = ~tr["hit"], tr["passed"]
+            b = np.nonzero(valid & moved)[0]
+            if len(b):  # the branch: from x itself
+                passed[b] = pt.own_branch(p[b], wi[b], maxt[b], obj[b], exempt[b])
             w = np.ones(m) if lt.delta else np.where(cont, power(pdf, INV_FOUR_PI), 1.0)
             rows.append((wi, le / np.maximum(pdf, 1e-300)[:, None] * (valid * w)[:, None], vis & valid, passed))
         u = rng.random((m, 2))
@@ -622,8 +667,11 @@ class RnaShader:
         wc = np.stack([sz * np.cos(ph), sz * np.sin(ph), z], 1)
         cpassed = np.zeros(m, bool)
         cidx = np.nonzero(cont)[0]
-        if len(cidx):
-            cpassed[cidx] = pt.tracer.trace(p[cidx], wc[cidx], None, obj[cidx], exempt=exempt[cidx])["passed"]
+        cx, cm = cidx[~moved[cidx]], cidx[moved[cidx]]
+        if len(cx):
+            cpassed[cx] = pt.tracer.trace(p[cx], wc[cx], None, obj[cx], exempt=exempt[cx])["passed"]
+        if len(cm):
+            cpassed[cm] = pt.own_branch(p[cm], wc[cm], np.full(len(cm), np.inf), obj[cm], exempt[cm])
         rows.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = [np.zeros((m, 3)) for _ in rows]
         for k in np.unique(obj):
@@ -645,7 +693,7 @@ class RnaShader:
         for (_, lw, vis, _), t in zip(rows[:-1], T[:-1], strict=True):
             np.add.at(L, idx, beta * t * lw * vis[:, None])
         nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
-        return nb, wc, np.full(m, INV_FOUR_PI), cont, p.copy()
+        return nb, wc, np.full(m, INV_FOUR_PI), cont, at
 
 
 #: kind -> shader class of the asset vertex. A shader class has ``open(path, threads)`` (static: the

@@ -15,6 +15,7 @@ import re
 
 import numpy as np
 
+from nasset_sdk.asset import NEAR_FIELD_FETCH, check_near_field_fetch
 from nasset_sdk.errors import SceneError
 
 KNOWN_KINDS = ("rna", "neupress", "8dna")
@@ -94,7 +95,18 @@ def open_root(path: str):
     version = str(attr("nasset:specVersion"))
     if not re.fullmatch(r"[0-9]+\.[0-9]+", version) or int(version.split(".")[0]) != 0:
         raise _fail(path, "SCENE_UNSUPPORTED", f"nasset:specVersion {version!r}: this renderer reads major 0", rp)
+    near_field_fetch(path, root)
     return stage, root, attr
+
+
+def near_field_fetch(path, root) -> float:
+    """``nasset:nearFieldFetch`` of an asset's root prim (spec/kinds/rna.md#near-field-fetch): 0 when not authored;
+    NEAR_FIELD_INVALID naming the file and attribute for a value outside [0, 1], of another type, or non-zero on a
+    kind other than rna."""
+    a = root.GetAttribute(NEAR_FIELD_FETCH)
+    k = root.GetAttribute("nasset:kind")
+    return check_near_field_fetch(a.Get() if a and a.HasAuthoredValue() else None, str(k.Get()) if k else "",
+                                  {"file": str(path), "prim": str(root.GetPath()), "attribute": NEAR_FIELD_FETCH})
 
 
 def asset_kind(path: str) -> str:
@@ -262,6 +274,9 @@ class RnaAsset:
         self.hi = np.asarray(attr("nasset:domainMax"), np.float32).astype(np.float64)
         if not (np.all(np.isfinite(self.lo)) and np.all(np.isfinite(self.hi)) and np.all(self.hi > self.lo)):
             raise self._fail("SCENE_INVALID", "invalid encoding box", rp)
+        # spec/kinds/rna.md#near-field-fetch: f (0 when not authored) and the encoding box's centre c
+        self.fetch = near_field_fetch(self.path, root)
+        self.centre = 0.5 * (self.lo + self.hi)
 
         geom = root.GetChild("Geometry")
         self.normals = None

@@ -107,15 +107,20 @@ def _reference(scene, out, spp, seed, size):
     return _read_exr(out)
 
 
-def _means_match_reference(nr, scene, tmp_path, spp, size):
-    """Render ``scene`` with this implementation and twice with the reference renderer (seeds 1, 2); assert the image
-    means agree per channel within 4 standard errors (from the two reference images; at least 1.5 % of the mean).
-    Returns (mine, reference average)."""
+def _means_match_reference(nr, scene, tmp_path, spp, size, plugin=False):
+    """Render ``scene`` with this implementation (``plugin``: with the JIT plugin) and twice with the reference renderer
+    (seeds 1, 2); assert the image means agree per channel within 4 standard errors (from the two reference images; at
+    least 1.5 % of the mean). Returns (mine, reference average)."""
     ref1 = _reference(scene, tmp_path / "r1.exr", spp, 1, size)
     ref2 = _reference(scene, tmp_path / "r2.exr", spp, 2, size)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # rendered, not warned
-        mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
+        if plugin:
+            from nasset_mitsuba_plugin import render as plugin_render
+
+            mine = np.asarray(plugin_render.render(scene, spp, width=size, height=size, seed=7), np.float64)[..., :3]
+        else:
+            mine = nr.render(scene, spp, width=size, height=size, seed=7, threads=1)
     ref = 0.5 * (ref1 + ref2)
     se = np.abs(ref1.mean((0, 1)) - ref2.mean((0, 1))) / np.sqrt(2)
     bound = 4.0 * np.maximum(se, 0.015 * ref.mean((0, 1)) / 4.0)
@@ -123,14 +128,23 @@ def _means_match_reference(nr, scene, tmp_path, spp, size):
     return mine, ref
 
 
-def test_random_asset_agrees_with_reference(nr, tmp_path):
+@pytest.mark.parametrize("fetch", [0.0, 0.5])
+def test_random_asset_agrees_with_reference(nr, tmp_path, fetch):
     """Random rna asset on a floor, delta sun + sphere light: NEE, MIS with continuation rays,
-    branch choice, shadows on the floor. Tolerance from the reference renderer's own noise."""
+    branch choice, shadows on the floor; with f = 0.5 its light fetched half-way to the encoding box's centre
+    (spec/kinds/rna.md#near-field-fetch). Tolerance from the reference renderer's own noise."""
     asset = random_rna_asset(tmp_path / "rand.usda", seed=1, size="tiny")
+    if fetch > 0:
+        from tests.near_field_scenes import with_fetch
+
+        asset = with_fetch(asset, tmp_path / "rand_fetch.usda", fetch)
     b = SceneBuilder()
     b.camera((0, 1, 3), (0, 0, 0))
     b.distant("Sun", (0.3, 1.0, 0.5), 2.0)
-    b.sphere_light("Bulb", (1.0, 2.0, 1.0), 0.3, 5.0)
+    if fetch > 0:  # a small bulb close beside the asset: where the fetch point changes the light
+        b.sphere_light("Bulb", (0.75, 0.0, 0.6), 0.1, 40.0)
+    else:
+        b.sphere_light("Bulb", (1.0, 2.0, 1.0), 0.3, 5.0)
     b.asset("A", asset)
     b.quad("Floor", (0, -0.6, 0), 4, diffuse=(0.6, 0.5, 0.4))
     scene = b.write(tmp_path / "scene.usda")
@@ -470,13 +484,16 @@ def test_unknown_spot_falloff_is_scene_invalid(nr, tmp_path):
     assert info.value.code == "SCENE_INVALID" and "nasset:shaping:falloff" in str(info.value)
 
 
-@pytest.mark.parametrize("feature", ["one-sided", "leftHanded one-sided", "back material"])
-def test_sidedness_as_the_reference_renders_it(nr, tmp_path, feature):
+@pytest.mark.parametrize("renderer", ["second", "plugin"])
+@pytest.mark.parametrize("feature", ["one-sided", "leftHanded one-sided", "back material", "one-sided back material"])
+def test_sidedness_as_the_reference_renders_it(nr, tmp_path, feature, renderer):
     """spec/renderer.md#sidedness: a card over a floor under a sun, the camera seeing its top. One-sided with its front
     down (by its winding, or by a leftHanded orientation of an upward winding): the top reflects and emits nothing and
     the card still shadows the floor. A back material (green, emissive) on a card facing down: the top is shaded and
-    emits with it. Per-channel means against the reference renderer within 4 standard errors (two reference seeds; at
-    least 1.5 % of the mean); both sides front-facing with the front material was 20-60 % off."""
+    emits with it; on a one-sided card the back material changes nothing (its top emitted the back material's emission
+    before). The second implementation and the JIT plugin: per-channel means against the reference renderer within 4
+    standard errors (two reference seeds; at least 1.5 % of the mean); both sides front-facing with the front material
+    was 20-60 % off (the plugin before its sidedness: all four fail)."""
     from pxr import UsdGeom
 
     b = SceneBuilder()
@@ -485,15 +502,15 @@ def test_sidedness_as_the_reference_renders_it(nr, tmp_path, feature):
     b.quad("Floor", (0, -0.5, 0), 4, diffuse=(0.5, 0.5, 0.5))
     up = feature == "leftHanded one-sided"
     card = b.quad("Card", (0, 0.0, 0), 1.4, normal=(0.0, 1.0 if up else -1.0, 0.0), diffuse=(0.8, 0.3, 0.2)).GetPrim()
-    if feature == "back material":
+    if feature.endswith("back material"):
         back = b.material("Back", diffuse=(0.2, 0.8, 0.3), emission=(0.1, 0.3, 0.05))
         card.CreateRelationship("nasset:backMaterial").SetTargets([back.GetPath()])
-    else:
+    if feature != "back material":
         UsdGeom.Mesh(card).CreateDoubleSidedAttr(False)
     if up:
         UsdGeom.Mesh(card).CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
     scene = b.write(tmp_path / "card.usda")
     size, spp = 24, 16
-    mine, ref = _means_match_reference(nr, scene, tmp_path, spp, size)
+    mine, ref = _means_match_reference(nr, scene, tmp_path, spp, size, plugin=renderer == "plugin")
     if feature != "back material":
         assert np.all(mine[size // 2, size // 2] == 0.0)  # the card's top: black
