@@ -162,7 +162,7 @@ class Renderer:
                   scene=None) -> np.ndarray:
         """Mean radiance [N,3] over spp paths. ``wi`` [N,3]: each pixel's own light direction (needs
         ``iso.per_path_lights``); without it, the current light (set with iso.set_light), or ``scene``'s lights
-        (the asset's shapes lit otherwise, e.g. :class:`near_field.SphereLight`; JIT variants). ``clamp``:
+        (the asset's shapes lit otherwise, e.g. :class:`near_field.SphereLight`). ``clamp``:
         per-path-sample clamp (default the settings'); ``stats``: a dict whose ``removed`` and
         ``energy`` [3] accumulate the pixel means' energy the clamp removed and the unclamped energy."""
         clamp = self.s.clamp if clamp is None else clamp
