@@ -1,5 +1,5 @@
 """Scenes with closed forms for the near-field fetch of rna assets (spec/kinds/rna.md#near-field-fetch), shared by the
-tests of both Mitsuba-based renderers (tests/mitsuba_renderer/test_near_field.py, tests/mitsuba_plugin/test_near_field.py).
+tests of both Mitsuba-based renderers (tests/mitsuba_renderer/test_near_field.py, each test on both).
 
 A constant-transport icosphere (radius 0.5, centred on the origin: the encoding box's centre c is the origin) seen
 from CAMERA:

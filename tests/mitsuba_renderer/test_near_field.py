@@ -1,4 +1,5 @@
-"""The second implementation's near-field fetch of rna assets (spec/kinds/rna.md#near-field-fetch): f = 0 authored
+"""Both Mitsuba-based implementations' near-field fetch of rna assets (the second implementation and the JIT plugin,
+each test run on both) (spec/kinds/rna.md#near-field-fetch): f = 0 authored
 renders as no attribute; light samples are drawn and tested for occlusion at the fetch point p while the branch is
 chosen from x; continuations find their radiance from p. Scenes and closed forms: tests/near_field_scenes.py."""
 
@@ -17,13 +18,29 @@ from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset 
 from tests import near_field_scenes as nf  # noqa: E402
 
 
-@pytest.fixture(scope="module")
-def nr():
-    mi = load_mitsuba()
-    assert is_jit(mi), f"Mitsuba loaded the {mi.variant()} variant: the implementation needs llvm_ad_rgb"
-    from nasset_mitsuba_renderer import render as neural_render
+class _Renderer:
+    """``render(scene, spp, **options)`` of one implementation on one thread (its own name in test ids)."""
 
-    return neural_render
+    def __init__(self, name: str) -> None:
+        self.name = name
+        mi = load_mitsuba()
+        assert is_jit(mi), f"Mitsuba loaded the {mi.variant()} variant: the implementations need llvm_ad_rgb"
+        if name == "second":
+            from nasset_mitsuba_renderer import render as second
+
+            self._render, self._extra = second.render, {"threads": 1}
+        else:
+            from nasset_mitsuba_plugin.render import render as plugin
+
+            self._render, self._extra = plugin, {}
+
+    def render(self, scene, spp, **options):
+        return self._render(scene, spp, **options, **self._extra)
+
+
+@pytest.fixture(scope="module", params=["second", "plugin"])
+def nr(request):
+    return _Renderer(request.param)
 
 
 def _random_scene(tmp_path, asset):
@@ -41,8 +58,8 @@ def test_zero_fetch_authored_renders_as_unauthored(nr, tmp_path):
     (same seed): f = 0 is the rule of format 0.2 exactly."""
     plain = random_rna_asset(tmp_path / "rand.usda", seed=2, size="tiny")
     zero = nf.with_fetch_authored(plain, tmp_path / "rand_f0.usda", 0.0)
-    a = nr.render(_random_scene(tmp_path, plain), 4, width=16, height=16, seed=5, threads=1)
-    b = nr.render(_random_scene(tmp_path, zero), 4, width=16, height=16, seed=5, threads=1)
+    a = nr.render(_random_scene(tmp_path, plain), 4, width=16, height=16, seed=5)
+    b = nr.render(_random_scene(tmp_path, zero), 4, width=16, height=16, seed=5)
     assert a.max() > 0
     np.testing.assert_array_equal(a, b)
 
@@ -55,7 +72,7 @@ def test_point_light_is_fetched_at_the_fetch_point(nr, tmp_path):
     e_c = nf.INTENSITY / float(np.sum(nf.LIGHT ** 2))  # c is the origin
     unsh, sh = np.asarray(nf.UNSHADOWED), np.asarray(nf.SHADOWED)
     img1 = nr.render(nf.point_light_scene(tmp_path, nf.constant_asset(tmp_path, 1.0)), 4, width=16, height=16, seed=3,
-                     max_depth=1, threads=1)
+                     max_depth=1)
     whole_un = np.all(np.isclose(img1, unsh * e_c, rtol=1e-4), -1)
     whole_sh = np.all(np.isclose(img1, sh * e_c, rtol=1e-4), -1)
     assert whole_un.sum() >= 20 and whole_sh.sum() >= 10, (whole_un.sum(), whole_sh.sum())
@@ -65,7 +82,7 @@ def test_point_light_is_fetched_at_the_fetch_point(nr, tmp_path):
     assert cover[..., 0].max() <= 1.0 + 1e-4  # nothing brighter than a whole pixel
 
     img0 = nr.render(nf.point_light_scene(tmp_path, nf.constant_asset(tmp_path, 0.0)), 4, width=16, height=16, seed=3,
-                     max_depth=1, threads=1)
+                     max_depth=1)
     lit = img0[whole_un][:, 0] / unsh[0]  # E = I / |l - x|^2 at the same pixels
     assert lit.max() / lit.min() > 1.15  # the falloff over the asset (|l - x| from about 2.6 to 3.1)
     upper, lower = lit[rows[whole_un] <= np.median(rows[whole_un])], lit[rows[whole_un] > np.median(rows[whole_un])]
@@ -79,7 +96,7 @@ def test_fetch_point_follows_the_instance_transform(nr, tmp_path):
     put it 24 % off)."""
     asset, m, c_w = nf.moved_constant_asset(tmp_path, 1.0)
     e_c = nf.INTENSITY / float(np.sum((nf.LIGHT - c_w) ** 2))
-    img = nr.render(nf.point_light_scene(tmp_path, asset, matrix=m), 4, width=16, height=16, seed=3, max_depth=1, threads=1)
+    img = nr.render(nf.point_light_scene(tmp_path, asset, matrix=m), 4, width=16, height=16, seed=3, max_depth=1)
     whole_un = np.all(np.isclose(img, np.asarray(nf.UNSHADOWED) * e_c, rtol=1e-4), -1)
     whole_sh = np.all(np.isclose(img, np.asarray(nf.SHADOWED) * e_c, rtol=1e-4), -1)
     assert whole_un.sum() >= 20 and whole_sh.sum() >= 10, (whole_un.sum(), whole_sh.sum())
@@ -95,8 +112,7 @@ def test_occlusion_is_tested_from_the_fetch_point(nr, tmp_path, occluder):
     for f in (0.0, 1.0):
         asset = nf.constant_asset(tmp_path, f)
         for occ in (None, occluder):
-            imgs[f, occ] = nr.render(nf.point_light_scene(tmp_path, asset, occ), 4, width=16, height=16, seed=3, max_depth=1,
-                                     threads=1)
+            imgs[f, occ] = nr.render(nf.point_light_scene(tmp_path, asset, occ), 4, width=16, height=16, seed=3, max_depth=1)
     lit0, lit1 = imgs[0.0, None][..., 0] > 0, imgs[1.0, None][..., 0] > 0
     assert lit0.sum() > 40 and lit1.sum() > 40
     if occluder == "centre":
@@ -113,8 +129,9 @@ def test_occlusion_is_tested_from_the_fetch_point(nr, tmp_path, occluder):
 
 @pytest.mark.parametrize("f", [0.0, 0.5, 1.0])
 def test_continuations_start_at_the_fetch_point(nr, tmp_path, f):
-    """Constant asset (T 1 unshadowed, 0 shadowed) inside an emissive shell (which this implementation does not
-    light-sample: only continuations reach it), a black square just below it: a pixel's expectation is the solid
+    """Constant asset (T 1 unshadowed, 0 shadowed) inside an emissive shell (the plugin light-samples it: its light
+    samples and continuations see it from p; the second implementation reaches it by continuations only), a black
+    square just below it: a pixel's expectation is the solid
     angle of the directions that leave the asset at x and along which a ray from p misses the square
     (tests/near_field_scenes.py). Moving p toward the centre darkens the front (the square's near half comes into
     view) and brightens the bottom (the square shrinks); over each of these two regions the image agrees with the
@@ -122,7 +139,7 @@ def test_continuations_start_at_the_fetch_point(nr, tmp_path, f):
     expectations at f = 0 and f = 1 are more than 5 standard errors apart."""
     size = 48
     asset = nf.constant_asset(tmp_path, f, (1.0, 1.0, 1.0), (0.0, 0.0, 0.0))
-    img = nr.render(nf.dome_square_scene(tmp_path, asset), 64, width=size, height=size, seed=11, max_depth=2, threads=1)
+    img = nr.render(nf.dome_square_scene(tmp_path, asset), 64, width=size, height=size, seed=11, max_depth=2)
     rows, cols, expected = nf.dome_square_expected(asset, f, size, size)
     e0, e1 = (nf.dome_square_expected(asset, g, size, size)[2] for g in (0.0, 1.0))
     got = img[rows, cols, 0].astype(np.float64)
@@ -145,7 +162,7 @@ def test_fiber_light_is_fetched_at_the_fetch_point(nr, tmp_path):
     unsh = np.asarray(nf.UNSHADOWED)
     for f in (1.0, 0.0):
         asset = nf.with_fetch(base, tmp_path / f"fiber_f{f}.usda", f)
-        img = nr.render(nf.point_light_scene(tmp_path, asset), 4, width=16, height=16, seed=3, max_depth=1, threads=1)
+        img = nr.render(nf.point_light_scene(tmp_path, asset), 4, width=16, height=16, seed=3, max_depth=1)
         cover = img / (unsh * e_c)
         assert np.allclose(cover, cover[..., :1], atol=1e-4)  # unshadowed everywhere
         if f == 1.0:
@@ -163,7 +180,7 @@ def test_fetch_outside_the_unit_interval_is_a_typed_error(nr, tmp_path, value):
     base = nf.constant_asset(tmp_path, 0.0)
     bad = nf.with_fetch_authored(base, tmp_path / "bad.usda", value)
     with pytest.raises(NassetError) as err:
-        nr.render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8, threads=1)
+        nr.render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8)
     assert err.value.code == "NEAR_FIELD_INVALID", err.value
     assert "bad.usda" in str(err.value) and "nasset:nearFieldFetch" in str(err.value)
 
@@ -179,6 +196,6 @@ def test_fetch_on_another_kind_is_a_typed_error(nr, tmp_path, kind):
     src = example_builder(kind, size="tiny", seed=1).write(tmp_path / f"{kind}.usda")
     bad = nf.with_fetch_authored(src, tmp_path / "bad.usda", 0.5)
     with pytest.raises(NassetError) as err:
-        nr.render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8, threads=1)
+        nr.render(nf.point_light_scene(tmp_path, bad), 1, width=8, height=8)
     assert err.value.code == "NEAR_FIELD_INVALID", err.value
     assert "bad.usda" in str(err.value) and "nasset:nearFieldFetch" in str(err.value)
