@@ -37,13 +37,15 @@ QUALITY_SET = "quality"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
-#: root attribute of rna assets, format 0.3 (spec/kinds/rna.md#near-field-fetch)
+#: root attribute of rna and neupress assets, format 0.3 (spec/kinds/rna.md#near-field-fetch)
 NEAR_FIELD_FETCH = "nasset:nearFieldFetch"
+#: the kinds whose transport is a response to distant light, which the fetch point applies to
+NEAR_FIELD_KINDS = ("rna", "neupress")
 
 
 def check_near_field_fetch(value, kind: str, where: dict) -> float:
     """The near-field fetch fraction as a float: ``value`` None (not authored) is 0; else it must be a finite real in
-    [0, 1] on an rna asset, or NEAR_FIELD_INVALID is raised with the location ``where`` (file, prim, attribute)."""
+    [0, 1], non-zero only on NEAR_FIELD_KINDS, or NEAR_FIELD_INVALID is raised with the location ``where`` (file, prim, attribute)."""
     if value is None:
         return 0.0
     try:
@@ -52,8 +54,9 @@ def check_near_field_fetch(value, kind: str, where: dict) -> float:
         f = float("nan")
     if isinstance(value, (bool, str)) or not 0.0 <= f <= 1.0:  # NaN fails both comparisons
         raise error("NEAR_FIELD_INVALID", f"{NEAR_FIELD_FETCH} = {value!r} must be a number in [0, 1]", **where)
-    if f > 0 and kind != "rna":
-        raise error("NEAR_FIELD_INVALID", f"{NEAR_FIELD_FETCH} is defined for kind rna only, not {kind!r}", **where)
+    if f > 0 and kind not in NEAR_FIELD_KINDS:
+        raise error("NEAR_FIELD_INVALID", f"{NEAR_FIELD_FETCH} is defined for kinds {' and '.join(NEAR_FIELD_KINDS)} only, "
+                    f"not {kind!r}", **where)
     return f
 
 
@@ -109,7 +112,7 @@ class AssetBuilder:
         self.fallback_color = (0.5, 0.5, 0.5)
         self.fallback_roughness = 0.5
         self.meters_per_unit = 1.0
-        #: rna only: the fraction f of the way from a hit to the encoding box's centre at which light is fetched
+        #: rna and neupress: the fraction f of the way from a hit to the encoding box's centre at which light is fetched
         #: (spec/kinds/rna.md#near-field-fetch); 0 (the distant-light rule) is not written
         self.near_field_fetch = 0.0
         # name -> {quality or "": ComponentData}
@@ -516,7 +519,7 @@ class Asset:
 
     @property
     def near_field_fetch(self) -> float:
-        """f in [0, 1]: a renderer fetches the light of an rna hit x at x + f (c - x), c the encoding box's centre
+        """f in [0, 1]: a renderer fetches the light of an rna or neupress hit x at x + f (c - x), c the encoding box's centre
         (spec/kinds/rna.md#near-field-fetch); 0 where the attribute is not authored (the distant-light rule)."""
         return check_near_field_fetch(self._attr(self.root, NEAR_FIELD_FETCH, required=False), self.kind,
                                       self._loc(ROOT, NEAR_FIELD_FETCH))

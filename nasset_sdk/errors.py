@@ -113,7 +113,7 @@ CODES: dict[str, Code] = _codes(
     ("SPEC_VERSION_NEWER", "format", "specVersion has a MINOR newer than this SDK knows: newer content is not validated",
      "format.md#versioning"),
     # near-field light (format 0.3)
-    ("NEAR_FIELD_INVALID", "format", "nasset:nearFieldFetch is not a number in [0, 1], or is authored on a kind other than rna",
+    ("NEAR_FIELD_INVALID", "format", "nasset:nearFieldFetch is not a number in [0, 1], or is non-zero on a kind without it (8dna)",
      "kinds/rna.md#near-field-fetch"),
 )
 

@@ -85,7 +85,7 @@ RULES: tuple[Rule, ...] = (
          ">= MIN_GEOMETRY_SIZE_RATIO x the largest |coordinate|"),
     Rule("EXTENT_MISMATCH", "error", "the geometry's extent is authored and equals its bounds (widths included for curves)"),
     Rule("DOMAIN_INVALID", "error", "the encoding box is authored, finite, non-empty and contains the geometry"),
-    Rule("NEAR_FIELD_INVALID", "error", "nasset:nearFieldFetch, when authored, is a float in [0, 1], and non-zero only on kind rna"),
+    Rule("NEAR_FIELD_INVALID", "error", "nasset:nearFieldFetch, when authored, is a float in [0, 1], and non-zero only on kinds rna and neupress"),
     Rule("ASSET_PATH_ESCAPES", "error",
          "no asset path (sublayer, reference, payload, clip, attribute value, metadata, time sample; every variant) is absolute, "
          "a URL, an expression, a bare search path, malformed, or resolves (Ar, then realpath) outside the package or to a "

@@ -277,10 +277,13 @@ def test_near_field_fetch_is_written_read_and_declares_0_3(tmp_path):
     copy = ns.AssetBuilder.from_asset(a)
     assert ns.Asset.open(copy.write(tmp_path / "copy.usdc"), load="none").near_field_fetch == 0.375
     assert ns.Asset.open(tmp_path / "zero.usdc", load="none").spec_version == "0.1"
+    n = example_builder("neupress", size="tiny")
+    n.near_field_fetch = 0.25
+    assert ns.Asset.open(n.write(tmp_path / "n.usdc"), load="none").near_field_fetch == 0.25  # neupress has it too
 
 
 @pytest.mark.parametrize("value, kind", [(float("nan"), "rna"), (1.5, "rna"), (-0.25, "rna"), (float("inf"), "rna"),
-                                          (0.5, "neupress")])
+                                          (1.5, "neupress"), (0.5, "8dna")])
 def test_near_field_fetch_out_of_range_or_on_another_kind_is_refused(tmp_path, value, kind):
     """The writer refuses the value, and a file carrying it fails Asset.open and the validator with NEAR_FIELD_INVALID
     naming the attribute."""
