@@ -30,9 +30,9 @@ def add_args(p) -> None:
                    help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
                         "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
     p.add_argument("--near-field-fetch", default=None, metavar="auto|F",
-                   help="rna from Mitsuba: where renderers fetch a hit's light, F in [0, 1] of the way to the asset's centre "
-                        "(spec/kinds/rna.md#near-field-fetch); default auto: measured after training under lights near the "
-                        "asset (surfaces; fibers keep 0), spec/bake.md#near-field")
+                   help="rna and neupress from Mitsuba: where renderers fetch a hit's light, F in [0, 1] of the way to the "
+                        "asset's centre (spec/kinds/rna.md#near-field-fetch); default auto: measured after training under "
+                        "lights near the asset (rna fibers keep 0), spec/bake.md#near-field")
     p.add_argument("--workers", type=int, default=None, metavar="N",
                    help="render the views (8dna: trace the tuples) on N Ray workers (pip install 'nasset-sdk[cluster]'; default: this process)")
     p.add_argument("--cluster", default=None, metavar="ADDRESS",
@@ -82,8 +82,8 @@ def run(args) -> int:
         raise UsageError("--clamp applies to rna and neupress bakes only")
     near = getattr(args, "near_field_fetch", None)
     if near is not None:
-        if args.kind != "rna" or source_of(args.scene, args.example) != "mitsuba":
-            raise UsageError("--near-field-fetch applies to rna bakes from Mitsuba scenes only")
+        if args.kind not in ("rna", "neupress") or source_of(args.scene, args.example) != "mitsuba":
+            raise UsageError("--near-field-fetch applies to rna and neupress bakes from Mitsuba scenes only")
         near = near_field_arg(near)
     summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,

@@ -21,10 +21,11 @@ RNA_MITSUBA_DATA = {
     "hq": dict(views=200, val_views=16, res=160, spp=128, val_res=96, val_spp=2048, lights_per_view=0),
 }
 
-#: near-field calibration of rna surface bakes (nasset_converters.mitsuba.near_field.NearFieldSettings fields). Measured
+#: near-field calibration of Mitsuba rna surface and neupress bakes (nasset_converters.mitsuba.near_field.NearFieldSettings
+#: fields). Measured
 #: on the high-albedo pebble (spec/bake.md#near-field): f from 32 views of 32^2 at 512 spp moved by +-0.06 between
 #: view seeds, so `small` takes 64 views (40-70 s; its two halves of 256 spp gave f within 0.03-0.08 of each other)
-RNA_MITSUBA_NEAR_FIELD = {
+MITSUBA_NEAR_FIELD = {
     "tiny": dict(views=8, res=16, spp=64),
     "small": dict(views=64, res=32, spp=512),
     "hq": dict(views=128, res=32, spp=1024),

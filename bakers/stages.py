@@ -224,6 +224,31 @@ def clamp_lines(s: dict) -> list[str]:
             + " % of the targets' energy (RGB)"]
 
 
+def near_field_stage(option, check: dict, size: str, seed: int, quiet: bool, measure) -> dict:
+    """Stage 6 of the Mitsuba rna and neupress bakes (spec/bake.md#near-field): the near-field fetch fraction to store.
+    ``option``: f given (stored as is) or 'auto': ``measure(settings, target_ratio, progress)``
+    (:func:`nasset_converters.mitsuba.near_field.calibrate` on the baker's renderer and transport) with the preset's
+    settings, against the held-out distant-light energy ratio the SDK measured on the written asset (``check``'s
+    accuracy; 1 where it is known no better than TARGET_SE per channel). Returns {fetch, measured, ...}."""
+    from nasset_converters.mitsuba import near_field as nf
+
+    from . import presets
+
+    if option != "auto":
+        return {"fetch": float(option), "measured": False, "why": "given (--near-field-fetch)"}
+    acc = check.get("accuracy") or {}
+    ratio, se = acc.get("energy_ratio"), acc.get("energy_se")
+    known = ratio and se and all(isinstance(r, float) and r > 0 for r in ratio) \
+        and all(isinstance(e, float) and e <= nf.TARGET_SE for e in se)  # one held-out view: no standard error
+    settings = nf.NearFieldSettings(**presets.MITSUBA_NEAR_FIELD[size], seed=seed)
+    bar = progress_bar(total=settings.views, desc="near field", unit="view", disable=quiet)
+    try:
+        out = measure(settings, ratio if known else [1.0, 1.0, 1.0], lambda: bar.update(1))
+    finally:
+        bar.close()
+    return {**out, "measured": True}
+
+
 def near_field_line(near: dict) -> str:
     """Where renderers fetch the baked rna asset's light (spec/bake.md#near-field)."""
     f = near["fetch"]

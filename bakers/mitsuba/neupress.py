@@ -30,6 +30,8 @@ from nasset_bakers.stages import (
     clamp_removed,
     dataset_line,
     finite,
+    near_field_line,
+    near_field_stage,
     psnr_line,
     times_line,
     warnings_said,
@@ -70,8 +72,10 @@ def bake(
     clamp: float | None = None,
     workers: int | None = None,
     cluster: str | None = None,
+    near_field_fetch: str | float = "auto",
 ) -> dict:
     """Run the whole neupress bake; returns the summary dict (also stored in the asset's provenance).
+    ``near_field_fetch``: 'auto' (measured after training, spec/bake.md#near-field) or f in [0, 1] to store.
 
     ``clamp``: per-path-sample clamp of the training targets (default 0: none; removed energy stored).
     ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster).
@@ -156,8 +160,10 @@ def bake(
     origin = msc.render_origin(mi, shapes)  # where _view_renderer moves them from (spec/bake.md#far-from-the-origin)
     if far := msc.far_for_bake(mi, shapes):  # far shapes render moved to the origin, unless they cannot move
         say(f"warning: {far}")
+    iso = None  # the shapes isolated in this process (views, near-field calibration)
     if workers is None:
-        views_from = _view_renderer(mi, shapes, bshapes, center, radius, dset)
+        iso = _isolated(mi, shapes, center, radius, dset)
+        views_from = _views_of(mi, iso, bshapes, center, radius, dset)
     else:  # each worker loads the scene itself
         views_from = ViewSource("nasset_bakers.mitsuba.neupress:view_renderer",
                                 {"scene": scene, "asset_ids": list(asset_ids or []), "dset": dset, "variant": mi.variant(),
@@ -261,6 +267,18 @@ def bake(
     t = time.perf_counter()
     check = check_asset(path, val_data, app, samp, sh)
     times["check_s"] = time.perf_counter() - t
+
+    # -- stage 6: where renderers fetch the asset's light (spec/bake.md#near-field) ------------------
+    t = time.perf_counter()
+    near = near_field_stage(near_field_fetch, check, size, seed, quiet,
+                            lambda settings, target, progress: _calibrate(mi, iso or _isolated(mi, shapes, center, radius, dset),
+                                                                          geo, dset, path, center, radius, settings, target,
+                                                                          progress))
+    if near["fetch"] > 0 or near["measured"]:  # the asset written again, with f and how it was measured
+        builder.near_field_fetch = near["fetch"]
+        builder.provenance = finite({**prov, "near_field": near})
+        path = builder.write(output)
+    times["near_field_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t_all
     summary = {
         "asset": str(path),
@@ -280,6 +298,7 @@ def bake(
         "sdk_val_psnr_db": check["psnr_db"],
         "val_accuracy": app.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
+        "near_field": near,
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "sigma_sdk_vs_torch_max_abs_log": check["sigma_max_abs_log_diff"],
         "prt_roundtrip_max_abs": check["prt_max_abs"],
@@ -303,6 +322,7 @@ def _print_summary(s: dict, stream) -> None:
         *accuracy_lines(s.get("sdk_val_accuracy"), "held-out subsurface S (unclamped reference)"),
         psnr_line(s, "held-out display PSNR (subsurface S; 99.5th pct, clipped)"),
         *clamp_lines(s),
+        near_field_line(s["near_field"]),
         f"  sampling lobe KL: {s['sampling_kl_nats']:.3f} nats (uniform {s['sampling_kl_uniform_nats']:.3f}, "
         f"best single sigma per record {s['sampling_kl_best_sigma_nats']:.3f})",
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; log sigma {s['sigma_sdk_vs_torch_max_abs_log']:.2e}; "
@@ -316,15 +336,45 @@ def _print_summary(s: dict, stream) -> None:
 register_baker("mitsuba", "neupress", bake)
 
 
-def _view_renderer(mi, shapes, bshapes, center, radius, dset):
-    """``render_one(split, i)`` of the dataset stage: the shapes isolated, subsurface transport behind the boundary."""
-    from nasset_converters.mitsuba import neupress_dataset as nd
+def _isolated(mi, shapes, center, radius, dset):
+    """The shapes alone (moved to the origin: Mitsuba's ray offset far from it, spec/bake.md#far-from-the-origin)."""
     from nasset_converters.mitsuba import scene as msc
 
-    origin = msc.move_to_origin(mi, shapes)  # Mitsuba's ray offset far from the origin (spec/bake.md#far-from-the-origin)
-    iso = msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth, origin=origin)
+    origin = msc.move_to_origin(mi, shapes)
+    return msc.IsolatedAsset(mi, shapes, center, radius, angle_deg=0.0, max_depth=dset.max_depth, origin=origin)
+
+
+def _views_of(mi, iso, bshapes, center, radius, dset):
+    """``render_one(split, i)`` of the dataset stage: subsurface transport behind the boundary."""
+    from nasset_converters.mitsuba import neupress_dataset as nd
+
     renderer = nd.SubsurfaceRenderer(mi, iso, dset, bshapes[0].interior_medium())
     return lambda split, i: nd.render_view(renderer, center, radius, i, validation=split == "val")
+
+
+def _view_renderer(mi, shapes, bshapes, center, radius, dset):
+    """``render_one(split, i)`` of the dataset stage on shapes isolated for it."""
+    return _views_of(mi, _isolated(mi, shapes, center, radius, dset), bshapes, center, radius, dset)
+
+
+def _calibrate(mi, iso, geo, dset, path, center, radius, settings, target, progress) -> dict:
+    """Stage 6 (:func:`nasset_bakers.stages.near_field_stage`): the written asset's whole integrand, S^ + f_r |n.wi|
+    (the shadowed branch S^ alone: V_self = 0), against Mitsuba's radiance of the shapes (boundary reflection and
+    subsurface transport) under the calibration's lights."""
+    from nasset_bakers.train.common import reopen_asset
+    from nasset_converters.caster import Caster
+    from nasset_converters.mitsuba import dataset as ds
+    from nasset_converters.mitsuba import near_field as nf
+
+    asset, ev = reopen_asset(path)
+    renderer = ds.Renderer(mi, iso, ds.DataSettings(max_depth=dset.max_depth), shadows=Caster("surface", geo))
+
+    def transport(x, n, wo, wi):
+        s = ev.evaluate(x, n, wo, wi)
+        return s + ev.surface_reflection(n, wo, wi), s
+
+    lo, hi = asset.domain
+    return nf.calibrate(renderer, center, radius, settings, transport, 0.5 * (lo + hi), target, progress=progress)
 
 
 def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):

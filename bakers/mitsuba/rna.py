@@ -28,6 +28,7 @@ from nasset_bakers.stages import (
     dataset_line,
     finite,
     near_field_line,
+    near_field_stage,
     psnr_line,
     see_through_line,
     times_line,
@@ -334,32 +335,20 @@ def _view_renderer(mi, shapes, geo, center, radius, dset):
 
 def _near_field(option, asset_variant: str, size: str, seed: int, check: dict, domain, quiet: bool, renderer_of, path,
                 center, radius) -> dict:
-    """The near-field fetch fraction to store: ``option`` f as given, or 'auto': measured on surface assets
-    (:func:`nasset_converters.mitsuba.near_field.calibrate` with the preset's settings, against the held-out energy
-    ratio the SDK measured on the written asset), 0 on fibers. Returns {fetch, measured, ...}."""
-    from nasset_bakers.stages import progress_bar
+    """Stage 6 (:func:`nasset_bakers.stages.near_field_stage`): T of the written asset against Mitsuba's radiance of
+    the shapes; fiber assets keep 0 unless f is given."""
     from nasset_bakers.train.common import reopen_asset
     from nasset_converters.mitsuba import near_field as nf
 
-    if option != "auto":
-        return {"fetch": float(option), "measured": False, "why": "given (--near-field-fetch)"}
-    if asset_variant != "surface":
+    if option == "auto" and asset_variant != "surface":
         return {"fetch": 0.0, "measured": False, "why": "fiber assets are not measured (spec/bake.md#near-field)"}
-    acc = check.get("accuracy") or {}
-    ratio, se = acc.get("energy_ratio"), acc.get("energy_se")
-    known = ratio and se and all(isinstance(r, float) and r > 0 for r in ratio) \
-        and all(isinstance(e, float) and e <= nf.TARGET_SE for e in se)  # one held-out view: no standard error
-    if not known:
-        ratio = [1.0, 1.0, 1.0]  # the held-out ratio is too noisy to separate the network's bias from the near field
-    settings = nf.NearFieldSettings(**presets.RNA_MITSUBA_NEAR_FIELD[size], seed=seed)
-    _, ev = reopen_asset(path)
-    bar = progress_bar(total=settings.views, desc="near field", unit="view", disable=quiet)
-    try:
-        out = nf.calibrate(renderer_of(), center, radius, settings, ev.evaluate, 0.5 * (domain[0] + domain[1]), ratio,
-                           progress=lambda: bar.update(1))
-    finally:
-        bar.close()
-    return {**out, "measured": True}
+
+    def measure(settings, target, progress):
+        _, ev = reopen_asset(path)
+        return nf.calibrate(renderer_of(), center, radius, settings, ev.evaluate, 0.5 * (domain[0] + domain[1]), target,
+                            progress=progress)
+
+    return near_field_stage(option, check, size, seed, quiet, measure)
 
 
 def view_renderer(scene, asset_ids, dset, variant=None, threads: int = 0):

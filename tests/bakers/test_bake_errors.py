@@ -193,10 +193,11 @@ def test_cli_exit_codes(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("extra", [["--near-field-fetch", "2"], ["--near-field-fetch", "nan"], ["--near-field-fetch", "far"],
-                                   ["--near-field-fetch", "0.3", "--kind", "neupress"],
+                                   ["--near-field-fetch", "0.3", "--kind", "8dna"],
                                    ["--near-field-fetch", "0.3", "--example", "blender-surface"]])
 def test_near_field_fetch_option_is_checked_before_any_work(tmp_path, capsys, extra):
-    """--near-field-fetch: auto or a number in [0, 1], rna bakes from Mitsuba only; a usage error (exit 2) otherwise."""
+    """--near-field-fetch: auto or a number in [0, 1], rna and neupress bakes from Mitsuba only; a usage error (exit 2)
+    otherwise."""
     args = ["bake", "-o", str(tmp_path / "o.usdc"), "--quiet", "--size", "tiny", *extra]
     rc = main(args if "--example" in extra else args + ["--example"])
     assert rc == 2, capsys.readouterr().err

@@ -39,6 +39,10 @@ def test_tiny_bake_validates_and_reports(baked):
     assert prov["ground_truth"]["quantity"].startswith("subsurface only")
     for v in s["times_s"].values():
         assert np.isfinite(v)
+    # stage 6 measured where renderers fetch the light (spec/bake.md#near-field) and the file says what it found
+    near, asset = prov["near_field"], Asset.open(path, load="none")
+    assert near["measured"] and near["pixels"] > 0 and near == s["near_field"]
+    assert 0.0 <= near["fetch"] <= 1.0 and asset.near_field_fetch == pytest.approx(near["fetch"], abs=1e-6)
 
 
 def test_held_out_error_beats_constant_predictor(baked):
