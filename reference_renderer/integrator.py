@@ -152,8 +152,8 @@ class PathIntegrator:
                 n = face_normals(data.points[data.faces])
                 cn = np.repeat(n[:, None], 3, 1)
             self.asset_corner_n.append(cn)
-        # near-field fetch (spec/kinds/rna.md#near-field-fetch): per instance f (0 but on rna instances whose asset
-        # has one) and the world centre c_w of its asset's encoding box; ``fetching``: some instance has f > 0
+        # near-field fetch (spec/kinds/rna.md#near-field-fetch, kinds/neupress.md): per instance f (0 but on rna and
+        # neupress instances whose asset has one) and the world centre c_w of its asset's encoding box; ``fetching``: some instance has f > 0
         self.inst_fetch = np.zeros(len(insts))
         self.inst_centre = np.zeros((len(insts), 3))
         for i, inst in enumerate(insts):
