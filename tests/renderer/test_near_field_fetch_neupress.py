@@ -214,3 +214,22 @@ def test_plan_explains_the_fetch(tmp_path):
         notes[f] = plan.explain()
     assert "light fetched at x + 0.25 (c_w - x)" in notes[0.25] and "kinds/neupress.md" in notes[0.25]
     assert "near-field" not in notes[0.0]
+
+
+def test_prt_mode_is_unchanged(tmp_path):
+    """PRT mode (a dome is the same from every point) renders the same bits with f = 0.5 as without the attribute,
+    and ``--explain`` says the fetch is unused there."""
+    plain = example_builder("neupress", size="tiny", seed=5).write(tmp_path / "plain.usdc")
+    files = {"plain": plain, "half": _with_fetch(plain, tmp_path / "half.usdc", 0.5)}
+    images, notes = {}, {}
+    for name, file in files.items():
+        b = SceneBuilder()
+        b.camera((0.0, 0.3, 3.0), (0.0, 0.0, 0.0))
+        b.dome("Dome", 0.6, color=(1.0, 0.8, 0.6))
+        b.asset("Obj", "./" + file.name)
+        scene = b.write(tmp_path / f"{name}.usda")
+        images[name] = render(load_scene(scene), RenderSettings(width=16, height=16, spp=2, seed=5, prt=True)).image
+        notes[name] = make_plan(load_scene(scene), width=8, height=8, spp=1, max_depth=5, tile=64, batch=65536,
+                                prt=True).explain()
+    assert images["plain"].max() > 0 and np.array_equal(images["plain"], images["half"])
+    assert "near-field fetch unused" in notes["half"] and "near-field" not in notes["plain"]
