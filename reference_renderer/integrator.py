@@ -195,7 +195,7 @@ class PathIntegrator:
             return self.accel.passes_own(o, d, tmax, inst, exempt)
 
     def fetch_points(self, x, inst):
-        """(p [n,3], far [n] bool) of rna hits x [n,3] on instances ``inst``: the points their incident light is
+        """(p [n,3], far [n] bool) of rna or neupress hits x [n,3] on instances ``inst``: the points their incident light is
         fetched at, x + f (c_w - x), and where f > 0 (spec/kinds/rna.md#near-field-fetch); None where no instance
         of the scene has f > 0 (every p is x: the rule of format 0.2, on its code path)."""
         if not self.fetching:
