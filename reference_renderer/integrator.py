@@ -152,8 +152,8 @@ class PathIntegrator:
                 n = face_normals(data.points[data.faces])
                 cn = np.repeat(n[:, None], 3, 1)
             self.asset_corner_n.append(cn)
-        # near-field fetch (spec/kinds/rna.md#near-field-fetch): per instance f (0 but on rna instances whose asset
-        # has one) and the world centre c_w of its asset's encoding box; ``fetching``: some instance has f > 0
+        # near-field fetch (spec/kinds/rna.md#near-field-fetch, kinds/neupress.md): per instance f (0 but on rna and
+        # neupress instances whose asset has one) and the world centre c_w of its asset's encoding box; ``fetching``: some instance has f > 0
         self.inst_fetch = np.zeros(len(insts))
         self.inst_centre = np.zeros((len(insts), 3))
         for i, inst in enumerate(insts):
@@ -195,7 +195,7 @@ class PathIntegrator:
             return self.accel.passes_own(o, d, tmax, inst, exempt)
 
     def fetch_points(self, x, inst):
-        """(p [n,3], far [n] bool) of rna hits x [n,3] on instances ``inst``: the points their incident light is
+        """(p [n,3], far [n] bool) of rna or neupress hits x [n,3] on instances ``inst``: the points their incident light is
         fetched at, x + f (c_w - x), and where f > 0 (spec/kinds/rna.md#near-field-fetch); None where no instance
         of the scene has f > 0 (every p is x: the rule of format 0.2, on its code path)."""
         if not self.fetching:

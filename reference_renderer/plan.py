@@ -76,7 +76,8 @@ def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, 
             if not has_dome:
                 raise UsageError("--prt needs a DomeLight in the scene (the PRT lighting is the dome's SH projection)")
             return ({"kind": "neupress", "prt": True, "sampling": None, "lobe": False}, ["prt"],
-                    f"neupress {data.path.name}: PRT (SH2 transport . dome SH projection; other lights and shadow rays unused)")
+                    f"neupress {data.path.name}: PRT (SH2 transport . dome SH projection; other lights and shadow rays unused"
+                    + ("; near-field fetch unused: a dome is the same from every point)" if data.near_field_fetch > 0 else ")"))
         mode = neupress_sampling
         has_s = "sampling" in present
         if mode == "auto":
@@ -85,9 +86,12 @@ def asset_mode(data, neupress_sampling: str, prt: bool, eightdna_sampling: str, 
         tech = "Gaussian lobe (sampling network)" if lobe else "uniform sphere"
         what = {"dome": "light sampling only", "lobe": f"{tech} sampling only (delta lights light-sampled)",
                 "mis": f"light sampling + {tech} sampling, power heuristic"}[mode]
+        fetch = data.near_field_fetch
+        near = (f"; light fetched at x + {fetch:g} (c_w - x), S, f_r, lobe and asset-visibility at x (near-field "
+                "fetch, kinds/neupress.md)" if fetch > 0 else "")
         return ({"kind": "neupress", "prt": False, "sampling": mode, "lobe": lobe}, ["sampling"] if lobe else [],
                 f"neupress {data.path.name}: far-field transport, {what}; shadow rays ignore the asset (surface "
-                f"reflection: asset-visibility from the same ray)")
+                f"reflection: asset-visibility from the same ray){near}")
     if a.kind == "8dna":
         what = {"light": "emitter sampling only", "flow": "GGX lobe / flow direction sampling only (delta lights emitter-sampled)",
                 "mis": "emitter sampling + GGX lobe / flow direction sampling, power heuristic"}[eightdna_sampling]

@@ -118,7 +118,7 @@ class NeuralAssetData:
     prims: list = field(default_factory=list)
     fiber: object = None  # shaders.rna_fiber.FiberTubes of an rna fiber asset (points/faces are then its prisms)
     used_points: object = None  # points referenced by faces (an index array, or slice(None) for all), set at load
-    near_field_fetch: float = 0.0  # f of an rna asset: where its hits fetch their light (spec/kinds/rna.md#near-field-fetch)
+    near_field_fetch: float = 0.0  # f of an rna / neupress asset: where its hits fetch their light (kinds/rna.md)
 
 
 @dataclass

@@ -222,6 +222,29 @@ def constant_rna_asset(path, *, unshadowed=(1.0, 1.0, 1.0), shadowed=(0.25, 0.25
     return b.write(path)
 
 
+def constant_neupress_asset(path, *, subsurface=(0.2, 0.2, 0.2), boundary=(1.5, 0.2), radius=0.5, subdivisions=3,
+                            near_field_fetch=0.0):
+    """A neupress asset (icosphere, ``core`` only) whose network returns the constant S ``subsurface`` (1/sr) and whose
+    surface reflection is the GGX dielectric of ``boundary`` (eta, alpha): handy for exact tests.
+    ``near_field_fetch``: its f (spec/kinds/neupress.md#near-field-fetch; 0 is not written)."""
+    import trimesh
+
+    from nasset_sdk.asset import AssetBuilder
+    from nasset_sdk.geometry import MeshGeometry
+    from nasset_sdk.networks import mlp_onnx
+
+    b = AssetBuilder("neupress", variant="surface")
+    b.set_geometry(MeshGeometry.from_trimesh(trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)))
+    core = b.component("core", required=True, purpose="evaluation")
+    m = 4
+    core.add_tensor("fourier", np.zeros((m, 7)), dtype="float32", layout="frequency,input")
+    core.add_tensor("boundary", np.asarray(boundary, np.float64), dtype="float32", layout="parameter")
+    core.add_network("appearance", mlp_onnx([np.zeros((2 * m, 3), np.float32)], [np.asarray(subsurface, np.float32)]))
+    b.provenance = {"generator": "constant"}
+    b.near_field_fetch = near_field_fetch
+    return b.write(path)
+
+
 def random_rna_asset(path, *, seed=0, size="tiny"):
     from nasset_sdk.examples import example_builder
 

@@ -11,6 +11,11 @@ unloaded). Shadow rays ignore the asset (S contains the self-shadowing); the sam
 whether the asset itself lies on it, which zeroes the surface-reflection term (V_self). The asset
 technique's sample continues the path (as the rna continuation), with weight (S + f_r V_self) / p_a.
 
+An asset with a near-field fetch f > 0 takes the light of the whole integrand at p = x + f (c_w - x)
+(spec/kinds/neupress.md#near-field-fetch), with rna's machinery: light samples drawn at p and tested
+against other objects from p, the A sample's ray leaving p; S, f_r, the lobe and V_self (rays from x,
+only the asset's own triangles counting) evaluated at x as with f = 0.
+
 PRT mode replaces all of it by the dot product of the ``prt`` SH coefficients (barycentric blend of
 the three vertices of the hit triangle) with the SH projection of the dome lights (object space).
 """
@@ -26,9 +31,9 @@ from nasset_sdk.kinds.neupress import gaussian_lobe_pdf, gaussian_lobe_sample
 
 from ..lights import DomeLight
 from ..sampling import INV_4PI, dot, normalize, power_heuristic, square_to_uniform_sphere
-from ..shadow import aim_shadow
 from .common import Frames, gather_hit, max3
 from .registry import register_shader
+from .rna_surface import fetch_continuations, light_shadows
 
 
 def dome_sh_world(lights, min_rows: int = 128):
@@ -128,19 +133,21 @@ class NeupressShader:
             t0 = time.perf_counter()
             sigma = ev.sigma(h.x_obj, h.wo_obj)
             integ.stats.time["network"] += time.perf_counter() - t0
+        def shadow_origin(s, wi_s, at):  # offset along the geometric normal, to the side wi leaves
+            return at + h.ng[s] * np.sign(dot(h.ng[s], wi_s))[:, None] * h.scale[s], None
+
+        fetch = integ.fetch_points(h.x, h.inst)  # None: every hit fetches its light at x (f = 0)
+        at = h.x if fetch is None else fetch[0]
         rows, wis, wgt, selfh = [], [], [], []
         for k in integ.nee:
             light = integ.scene.lights[k]
             if smode == "lobe" and not light.delta:  # reached by the lobe samples instead
                 continue
-            wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
+            wi, dist, li, pdf = light.sample(at, rng.random((n, 2)))
             s = np.nonzero((pdf > 0) & (max3(li) > 0))[0]
             if not len(s):
                 continue
-            side = np.sign(dot(h.ng[s], wi[s]))[:, None]
-            origin = h.x[s] + h.ng[s] * side * h.scale[s]
-            d_s, tmax = aim_shadow(h.x[s], origin, wi[s], dist[s], integ.eps)
-            hh = integ.trace(origin, d_s, tmax, h.inst[s])
+            hh, self_hit = light_shadows(integ, s, h.x[s], wi[s], dist[s], h.inst[s], shadow_origin, fetch)
             free = hh.prim < 0
             s = s[free]
             wi_obj, jac = self.frames.dir_to_object(wi[s], h.inst[s])
@@ -152,7 +159,7 @@ class NeupressShader:
             rows.append(s)
             wis.append(wi_obj)
             wgt.append(li[s] * (w / pdf[s])[:, None])
-            selfh.append(hh.self_hit[free])
+            selfh.append(self_hit[free])
         n_nee = sum(len(s) for s in rows)
         c = np.nonzero(cont_on)[0]
         u2 = rng.random((len(c), 2))
@@ -187,10 +194,13 @@ class NeupressShader:
         inv_p = (1.0 / p_c)[:, None]
         ts = S[n_nee:] * inv_p
         tu = (S[n_nee:] + fr[n_nee:]) * inv_p
-        origin = h.x[c] + h.ng[c] * np.sign(dot(h.ng[c], wc))[:, None] * h.scale[c]
+        offset = h.ng[c] * np.sign(dot(h.ng[c], wc))[:, None] * h.scale[c]
+        # f > 0: the branch (V_self) chosen now by the ray from x, the ray itself leaving p
+        origin, beta_c, pend = fetch_continuations(integ, fetch, c, h.x[c] + offset, offset, wc, h.inst[c], h.beta[c],
+                                                   tu, ts)
         prev = p_c if smode == "mis" else np.zeros(len(c))  # dome: lights reached get weight 0 (light-sampled)
         specular = np.full(len(c), smode == "lobe")  # lobe only: lights reached get weight 1
-        return (h.ridx[c], origin, wc, h.beta[c], prev, h.inst[c].astype(np.int64), (np.ones(len(c), bool), tu, ts), specular)
+        return (h.ridx[c], origin, wc, beta_c, prev, h.inst[c].astype(np.int64), pend, specular)
 
 
 register_shader("neupress")(NeupressShader)

@@ -68,6 +68,29 @@ class SurfaceContinuation:
                 + SURFACE_CONT_MIX[2] * vmf_pdf(dot(wi, self.mirror[rows]), MIRROR_KAPPA))
 
 
+def light_shadows(integ, s, x_s, wi_s, dist_s, inst_s, shadow_origin, fetch):
+    """Shadow rays of the light samples ``s`` (rows of the hits, wi_s, dist_s from the point the light was sampled
+    at) of neural hits x_s [m,3] on instances inst_s, ignoring the asset. ``shadow_origin(s, wi_s, at) ->
+    (origins, exempt or None)`` offsets rays leaving the points ``at``. ``fetch``: None, or (p [n,3], far [n] bool)
+    from ``integ.fetch_points`` (n hits, s indexing them): where ``far`` other objects are looked for by rays from
+    p, and whether the asset itself lies on the way by the ray from x toward x + wi dist, only its own triangles
+    counting (spec/kinds/rna.md#near-field-fetch). Returns (hits of the other objects, self_hit [m] bool)."""
+    origin, exempt = shadow_origin(s, wi_s, x_s)
+    d_s, tmax = aim_shadow(x_s, origin, wi_s, dist_s, integ.eps)
+    if fetch is None:
+        h = integ.trace(origin, d_s, tmax, inst_s, exempt)
+        return h, h.self_hit
+    # other objects from p (its rows: the same offset as from x); the branch from x where f > 0
+    p_s, far_s = (fetch[0], fetch[1]) if len(s) == len(fetch[0]) else (fetch[0][s], fetch[1][s])
+    o_p, _ = shadow_origin(s, wi_s, p_s)
+    d_p, tmax_p = aim_shadow(p_s, o_p, wi_s, dist_s, integ.eps)
+    h = integ.trace(o_p, d_p, tmax_p, inst_s, exempt, ~far_s)
+    self_hit = h.self_hit
+    b = np.nonzero(far_s & (h.prim < 0))[0]  # a blocked sample contributes 0 whatever its branch
+    self_hit[b] = integ.passes_own(origin[b], d_s[b], tmax[b], inst_s[b], None if exempt is None else exempt[b])
+    return h, self_hit
+
+
 def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=None, fetch=None):
     """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
     blocks it; ``self_hit`` says whether the asset itself does) and one continuation where ``indirect``.
@@ -95,19 +118,7 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=N
             continue
         full = len(s) == n
         x_s, wi_s, dist_s, inst_s = (x, wi, dist, inst) if full else (x[s], wi[s], dist[s], inst[s])
-        origin, exempt = shadow_origin(s, wi_s, x_s)
-        d_s, tmax = aim_shadow(x_s, origin, wi_s, dist_s, integ.eps)
-        if fetch is None:
-            h = integ.trace(origin, d_s, tmax, inst_s, exempt)
-            self_hit = h.self_hit
-        else:  # other objects from p (its rows: the same offset as from x); the branch from x where f > 0
-            p_s, far_s = (fetch[0], fetch[1]) if full else (fetch[0][s], fetch[1][s])
-            o_p, _ = shadow_origin(s, wi_s, p_s)
-            d_p, tmax_p = aim_shadow(p_s, o_p, wi_s, dist_s, integ.eps)
-            h = integ.trace(o_p, d_p, tmax_p, inst_s, exempt, ~far_s)
-            self_hit = h.self_hit
-            b = np.nonzero(far_s & (h.prim < 0))[0]  # a blocked sample contributes 0 whatever its branch
-            self_hit[b] = integ.passes_own(origin[b], d_s[b], tmax[b], inst_s[b], None if exempt is None else exempt[b])
+        h, self_hit = light_shadows(integ, s, x_s, wi_s, dist_s, inst_s, shadow_origin, fetch)
         free = h.prim < 0  # no other object in the way
         s = s[free]
         if light.delta:

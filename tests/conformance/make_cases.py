@@ -136,6 +136,15 @@ def asset_rand_near_field(path):
     return b.write(path)
 
 
+def asset_neupress_near_field(path):
+    """The asset of the neupress cases with nasset:nearFieldFetch = 0.5 (format 0.3, kinds/neupress.md#near-field-fetch)."""
+    from nasset_sdk.examples import example_builder
+
+    b = example_builder("neupress", size="tiny", seed=5)
+    b.near_field_fetch = 0.5
+    return b.write(path)
+
+
 def asset_fiber(path):
     return _rna_random(13, variant="fiber").write(path)
 
@@ -190,6 +199,7 @@ ASSETS: dict[str, Callable] = {
     "rna_quality.usdc": asset_quality,
     "neupress.usdc": asset_example("neupress"),
     "8dna.usdc": asset_example("8dna"),
+    "neupress_near_field.usdc": asset_neupress_near_field,
 }
 
 
@@ -317,6 +327,19 @@ def b_near_field(ctx):
     lt = ctx.sb.sphere_light("Point", (0.9, -0.2, 0.7), 0.0, 3.0)
     UsdLux.SphereLight(lt.GetPrim()).CreateTreatAsPointAttr(True)
     ctx.asset("Asset", "rna_rand_near_field.usdc")
+
+
+def b_neupress_near_field(ctx):
+    """rna_near_field_fetch's light and floor around the neupress asset: the point light's distance, direction and
+    visibility differ between a hit and its fetch point; the A samples (Gaussian lobe, MIS) leaving p see another
+    bounce of the unevenly lit floor than those from x."""
+    from pxr import UsdLux
+
+    ctx.camera(eye=(0.0, 0.6, 2.2))
+    ctx.floor()
+    lt = ctx.sb.sphere_light("Point", (0.9, -0.2, 0.7), 0.0, 3.0)
+    UsdLux.SphereLight(lt.GetPrim()).CreateTreatAsPointAttr(True)
+    ctx.asset("Asset", "neupress_near_field.usdc")
 
 
 def b_rect(ctx):
@@ -497,6 +520,10 @@ CASES = [
          "cross-fibre offset h: the sign and range of h across the fibre", b_fiber_closeup),
     Case("neupress_direct", "lone neupress surface asset under a delta DistantLight, no other objects (low noise): the "
          "subsurface network's w_i input and the GGX boundary reflection, its lobe width", b_neupress_direct, spp=256, ref_spp=4096),
+    Case("neupress_near_field_fetch", "neupress surface asset with nasset:nearFieldFetch = 0.5 (format 0.3) on a floor, a "
+         "point light low and close beside it: the light of S^ and of the surface reflection drawn at the fetch point "
+         "p = x + f (c_w - x), other objects seen from p, V_self from x, the A samples (the floor's bounce) leaving from p",
+         b_neupress_near_field, spp=256, ref_spp=4096),
     Case("8dna_distant", "8dna surface asset on a floor under a DistantLight", b_other_kind("8dna.usdc")),
     Case("8dna_near", "8dna surface asset (rotated, scaled, moved) next to a small SphereLight: the near field, light "
          "samples from the flow's u_i in world space, MIS with the flow's direction", b_8dna_near, spp=256, ref_spp=8192),

@@ -49,7 +49,7 @@ MUTANT_CASES = {
     "neupress_lobe_width": ["neupress_direct"],
     # a fibre 1-2 pixels wide averages h away inside a block (rna_fiber_distant: 0.025 vs 0.045); the close-up resolves it
     "fiber_h_sign": ["rna_fiber_closeup"],
-    "near_field_ignored": ["rna_near_field_fetch"],
+    "near_field_ignored": ["rna_near_field_fetch", "neupress_near_field_fetch"],
 }
 
 

@@ -309,7 +309,7 @@ def fiber_h_sign():
 
 
 def near_field_ignored():
-    """rna: nasset:nearFieldFetch ignored (every hit's light taken at the hit, the rule of format 0.2)."""
+    """rna and neupress: nasset:nearFieldFetch ignored (every hit's light taken at the hit, the rule of format 0.2)."""
     from nasset_reference_renderer.integrator import PathIntegrator
 
     PathIntegrator.fetch_points = lambda self, x, inst: None
