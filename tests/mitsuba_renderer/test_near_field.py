@@ -326,3 +326,22 @@ def test_neupress_sampling_modes_agree_with_the_fetch(tmp_path, monkeypatch):
     noise = (imgs[1.0, "mis"] - imgs[1.0, "mis", 8])[cover].sum(-1)
     gap = (imgs[1.0, "mis"] - imgs[0.0, "mis"])[cover].sum(-1).mean()
     assert abs(gap) > 6.0 * noise.std() / np.sqrt(len(noise)), (gap, noise.std() / np.sqrt(len(noise)))
+
+
+def test_neupress_prt_mode_ignores_the_fetch(tmp_path):
+    """The plugin's PRT mode (spec/kinds/neupress.md#near-field-fetch: a dome is the same from every point): a neupress
+    asset with f = 0.5 renders bit for bit as without the attribute, the floor's paths included."""
+    from nasset_mitsuba_plugin.render import render
+    from nasset_sdk.examples import example_builder
+
+    plain = example_builder("neupress", size="tiny", seed=2).write(tmp_path / "np.usda")
+    imgs = []
+    for asset in (plain, nf.with_fetch_authored(plain, tmp_path / "np_f05.usda", 0.5)):
+        b = SceneBuilder()
+        b.camera((0, 1, 3), (0, 0, 0))
+        b.dome("Sky", color=(1.0, 0.9, 0.8))
+        b.asset("A", asset)
+        b.quad("Floor", (0, -0.6, 0), 4, diffuse=(0.6, 0.5, 0.4))
+        imgs.append(render(b.write(tmp_path / f"prt_{Path(asset).stem}.usda"), 4, width=16, height=16, seed=1, prt=True))
+    assert imgs[0].max() > 0
+    np.testing.assert_array_equal(imgs[0], imgs[1])
