@@ -150,6 +150,10 @@ class NeupressJit:
         self.prt = None  # (coefficients Float [V*T*P*27], T, P, V), read on first use (PRT mode only)
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
         self.lo = lo
+        # spec/kinds/neupress.md#near-field-fetch: f (0 when not authored) and the encoding box's centre (object
+        # space); the integrator fetches the light of rna and neupress hits alike (plugins.py)
+        self.fetch = asset.near_field_fetch
+        self.centre = 0.5 * (lo + hi)
         self.span = np.maximum(hi - lo, 1e-30)
         self.geometry = asset.geometry()
 

@@ -12,7 +12,7 @@
   by the asset technique: the kind's object-space sampler mapped to world, p_A = pdf_obj J (rna: the
   continuation mixture of :mod:`.lobes`; neupress: its Gaussian lobe, spec/renderer.md#neupress), or the
   uniform world sphere (p_A = 1/4pi; neupress without ``sampling``, and every asset with ``lobe`` false).
-  An rna asset with a near-field fetch f > 0 (spec/kinds/rna.md#near-field-fetch) takes its light sample at
+  An rna or neupress asset with a near-field fetch f > 0 (spec/kinds/rna.md#near-field-fetch) takes its light sample at
   the fetch point p (the shadow ray from p, the branch a second ray from x) and its continuation's radiance
   from p (the branch traced from x at the vertex); scenes without one trace the kernel they always did.
   Fiber assets (spec/renderer.md#fibers): tangent and h inputs from the hit's segment, and the triangles
@@ -62,7 +62,7 @@ _REGISTERED: set[str] = set()
 def asset_for(mi, filename: str):
     """The asset of ``filename`` read once per process and variant, by its kind (:data:`JIT_KINDS`; typed
     errors from the SDK, SCENE_UNSUPPORTED for other kinds; NEAR_FIELD_INVALID for a bad ``nasset:nearFieldFetch``, or
-    one on a kind other than rna)."""
+    a non-zero one on kind 8dna)."""
     from nasset_sdk.asset import Asset
 
     key = (mi.variant(), str(filename))
@@ -548,7 +548,7 @@ def _instance_tables(mi, scene):
     Float / UInt32 arrays per instance: 'inv' 12 (world -> object affine, row-major 3x4), 'nt' 9
     (object normal = normalize(M3^T n_world) times sign(det M3) when the asset has no normals), 'fwd' 12
     (the object -> world affine map M, 3 x 4 row-major), 'kind8' (1 for 8dna instances), 'jdet' 1 (|det M3^-1|), 'asset',
-    'fetch' 1 (the near-field fetch f, 0 but for rna assets that author one) and 'centre' 3 (the encoding box's centre c_w
+    'fetch' 1 (the near-field fetch f, 0 but for rna and neupress assets that author one) and 'centre' 3 (the encoding box's centre c_w
     in world space, spec/kinds/rna.md#near-field-fetch))."""
     import drjit as dr
 

@@ -325,7 +325,7 @@ class EightDnaAsset:
             raise self._fail("SCENE_UNSUPPORTED", f"nasset:specVersion {version!r}: this renderer reads major 0", rp)
         if str(attr("nasset:kind")) != "8dna":
             raise self._fail("SCENE_INVALID", "not an 8dna asset", rp)
-        near_field_fetch(self.path, root)  # NEAR_FIELD_INVALID: an rna-only attribute authored non-zero
+        near_field_fetch(self.path, root)  # NEAR_FIELD_INVALID: authored non-zero (rna and neupress only)
         if str(attr("nasset:variant")) != "surface":
             raise self._fail("SCENE_UNSUPPORTED", "8dna variant other than surface", rp)
         self.lo = np.asarray(attr("nasset:domainMin"), np.float32).astype(np.float64)

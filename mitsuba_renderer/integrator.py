@@ -501,6 +501,19 @@ class PathTracer:
         (spec/kinds/rna.md#near-field-fetch: only the asset's own triangles count on that ray)."""
         return self.tracer.trace(o, d, maxt, obj, transparent=self.every_shape, exempt=exempt, until_passed=True)["passed"]
 
+    def fetch_points(self, p, obj):
+        """(fetch points [m, 3], rows where they differ from p) of rna and neupress hits p on instances ``obj``:
+        p + f (c_w - p), c_w the instance's encoding box centre in world space (spec/kinds/rna.md#near-field-fetch)."""
+        at = p.copy()
+        for k in np.unique(obj):
+            inst = self.objects[k]
+            f = inst["asset"].fetch
+            if f > 0:
+                sel = obj == k
+                c_w = inst["asset"].centre @ inst["to_world"][:3, :3] + inst["to_world"][3, :3]
+                at[sel] = p[sel] + f * (c_w - p[sel])
+        return at, np.any(at != p, axis=1)
+
     def _shade_mesh(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, rng):
         flip = dot(ng, wo) < 0
         ngf = np.where(flip[:, None], -ng, ng)
@@ -557,7 +570,7 @@ class RnaShader:
                     out[4][r] = res[4]
             return tuple(out)
         m = len(p)
-        at, moved = self.fetch_points(p, obj)
+        at, moved = self.pt.fetch_points(p, obj)
         entries = []  # (wi, weight [m, 3], valid mask, shadowed branch)
         for wi, lw, pl, delta, vis, passed in self.pt._nee(p, ng, ng, rng, obj, at):
             w = np.ones(m) if delta else np.where(cont, power(pl, INV_FOUR_PI), 1.0)
@@ -587,19 +600,6 @@ class RnaShader:
             np.add.at(L, idx, beta * t * lw * vis[:, None])
         nb = np.where(cont[:, None], beta * T[-1] * FOUR_PI, 0.0)
         return nb, wc, np.full(m, INV_FOUR_PI), cont, new_o if moved.any() else None
-
-    def fetch_points(self, p, obj):
-        """(fetch points [m, 3], rows where they differ from p) of rna hits p on instances ``obj``:
-        p + f (c_w - p), c_w the instance's encoding box centre in world space (spec/kinds/rna.md#near-field-fetch)."""
-        at = p.copy()
-        for k in np.unique(obj):
-            inst = self.pt.objects[k]
-            f = inst["asset"].fetch
-            if f > 0:
-                sel = obj == k
-                c_w = inst["asset"].centre @ inst["to_world"][:3, :3] + inst["to_world"][3, :3]
-                at[sel] = p[sel] + f * (c_w - p[sel])
-        return at, np.any(at != p, axis=1)
 
     def _transport(self, entries, p, wo, obj, prim, b1, b2):
         """Evaluate T for every entry where its mask is set, grouped by asset file."""
@@ -642,7 +642,7 @@ class RnaShader:
             x = (p[sel] - inst["to_world"][3, :3]) @ minv
             wo_o[sel] = normalized(wo[sel] @ minv)
             t_o[sel], h[sel], exempt[sel] = inst["asset"].fiber_frame(prim[sel], x, wo_o[sel])
-        at, moved = self.fetch_points(p, obj)  # rays from the fetch point, like those from x, without offset
+        at, moved = self.pt.fetch_points(p, obj)  # rays from the fetch point, like those from x, without offset
         rows = []  # (wi, weight [m, 3], valid, shadowed branch)
         for lt in pt.lights:
             u = rng.random((m, 2))

@@ -6,7 +6,10 @@ subsurface transport S (Fourier features of encodings.md#fourier + onnxruntime),
 rough-dielectric reflection of encodings.md#ggx and the Gaussian lobe of neupress.md#lobe.
 :class:`NeupressShader` is the far-field vertex: one light sample per light and one technique-A
 sample (lobe or uniform sphere) that continues the path, combined per ``--neupress-sampling``
-(``auto`` | ``dome`` | ``lobe`` | ``mis``). PRT mode is not implemented.
+(``auto`` | ``dome`` | ``lobe`` | ``mis``). With a near-field fetch f > 0 (neupress.md#near-field-fetch)
+the light samples and the A sample's radiance ray use the fetch point (:meth:`.PathTracer.fetch_points`), the branch
+rays from x count only the asset's own triangles (:meth:`.PathTracer.own_branch`), as for rna. PRT mode is not
+implemented.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ import numpy as np
 from nasset_sdk.errors import SceneError
 
 from .integrator import INV_FOUR_PI, dot, normalized, power, ray_eps, register_shader
-from .rna import open_root, read_network, read_tensor, read_triangles, safe_normalize
+from .rna import near_field_fetch, open_root, read_network, read_tensor, read_triangles, safe_normalize
 
 #: sampling mode of every neupress vertex (set by the CLI's --neupress-sampling)
 SAMPLING = ["auto"]
@@ -106,6 +109,9 @@ class NeupressAsset:
         self.hi = np.asarray(attr("nasset:domainMax"), np.float32).astype(np.float64)
         if not (np.all(np.isfinite(self.lo)) and np.all(np.isfinite(self.hi)) and np.all(self.hi > self.lo)):
             raise SceneError("SCENE_INVALID", "invalid encoding box", file=self.path, prim=rp)
+        # spec/kinds/neupress.md#near-field-fetch: f (0 when not authored) and the encoding box's centre c
+        self.fetch = near_field_fetch(self.path, root)
+        self.centre = 0.5 * (self.lo + self.hi)
         self.points, self.faces, self.normals = read_triangles(self.path, root.GetChild("Geometry"), rp)
         p0, p1, p2 = (self.points[self.faces[:, k]] for k in range(3))
         self.face_normals = safe_normalize(np.cross(p1 - p0, p2 - p0))
@@ -186,13 +192,15 @@ class NeupressShader:
 
     def vertex(self, L, idx, p, ng, wo, obj, prim, b1, b2, beta, cont, depth, rng):
         m = len(p)
-        out = [np.zeros_like(beta), np.zeros_like(p), np.zeros(m), np.zeros(m, bool), None]
+        out = [np.zeros_like(beta), np.zeros_like(p), np.zeros(m), np.zeros(m, bool), np.full_like(p, np.nan)]
+        moved = False
         for k in np.unique(obj):
             r = np.nonzero(obj == k)[0]
             res = self._instance(k, L, idx[r], p[r], ng[r], wo[r], prim[r], b1[r], b2[r], beta[r], depth[r], rng)
-            for j in range(4):
+            for j in range(5):
                 out[j][r] = res[j]
-        return tuple(out)
+            moved |= bool(np.any(~np.isnan(res[4])))
+        return tuple(out[:4]) + (out[4] if moved else None,)
 
     def _instance(self, k, L, idx, p, ng, wo, prim, b1, b2, beta, depth, rng):
         pt = self.pt
@@ -201,6 +209,9 @@ class NeupressShader:
         det_b = abs(float(np.linalg.det(B)))
         mode, lobe = self._mode(asset)
         m = len(p)
+        # spec/kinds/neupress.md#near-field-fetch: the light is taken at the fetch point `at` (p itself for f = 0);
+        # S^, f_r, the lobe and the branch stay at the hit p
+        at, moved = pt.fetch_points(p, np.full(m, k))
         x = (p - inst["to_world"][3, :3]) @ B
         wo_o = normalized(wo @ B)
         n_o = asset.shading_normal(prim, b1, b2)
@@ -220,18 +231,21 @@ class NeupressShader:
         for lt in pt.lights:
             if mode == "lobe" and not lt.delta:
                 continue
-            wi, dist, le, pdf = lt.sample(pt.mi, p, ng, rng.random((m, 2)))
+            wi, dist, le, pdf = lt.sample(pt.mi, at, ng, rng.random((m, 2)))
             wi = normalized(wi)
             s = np.nonzero((pdf > 0) & np.any(le > 0, axis=1))[0]
             if not len(s):
                 continue
             side = np.sign(dot(wi[s], ng[s]))[:, None]
             side[side == 0] = 1.0
-            origin = p[s] + ng[s] * side * ray_eps(p[s])[:, None]
+            offset = ng[s] * side * ray_eps(p[s])[:, None]
             maxt = np.where(np.isfinite(dist[s]), dist[s] * (1.0 - 1e-3), np.inf)
-            tr = pt.tracer.trace(origin, wi[s], maxt, np.full(len(s), k), transparent=pt.light_shapes)
+            tr = pt.tracer.trace(at[s] + offset, wi[s], maxt, np.full(len(s), k), transparent=pt.light_shapes)
             free = ~tr["hit"]
-            s, passed = s[free], tr["passed"][free]
+            s, passed, offset, maxt = s[free], tr["passed"][free], offset[free], maxt[free]
+            b = np.nonzero(moved[s])[0]
+            if len(b):  # the branch: from x, the asset's own triangles alone
+                passed[b] = pt.own_branch(p[s[b]] + offset[b], wi[s[b]], maxt[b], np.full(len(b), k))
             wi_o, jac = to_obj(wi[s])
             if lt.delta or mode == "dome":
                 w = np.ones(len(s))
@@ -257,8 +271,9 @@ class NeupressShader:
         nd = np.zeros_like(p)
         npdf = np.zeros(m)
         alive = np.zeros(m, bool)
+        new_o = np.full_like(p, np.nan)  # NaN: the integrator's origin, x offset to the direction's side
         if not len(ray):
-            return nb, nd, npdf, alive
+            return nb, nd, npdf, alive, new_o
         wi_all = np.concatenate([*wis, wc_o])
         S = asset.subsurface(x[ray], wo_o[ray], wi_all)
         fr = ggx_reflection(n_o[ray], wo_o[ray], wi_all, asset.eta, asset.alpha)
@@ -269,15 +284,21 @@ class NeupressShader:
         if len(c):
             side = np.sign(dot(wc, ng[c]))[:, None]
             side[side == 0] = 1.0
-            origin = p[c] + ng[c] * side * ray_eps(p[c])[:, None]
-            passed = pt.tracer.trace(origin, wc, None, np.full(len(c), k))["passed"]
+            offset = ng[c] * side * ray_eps(p[c])[:, None]
+            mc = moved[c]
+            passed = np.zeros(len(c), bool)
+            if np.any(~mc):
+                passed[~mc] = pt.tracer.trace(p[c[~mc]] + offset[~mc], wc[~mc], None, np.full(int((~mc).sum()), k))["passed"]
+            if np.any(mc):  # the branch from x (own triangles alone, unbounded); the radiance from the fetch point
+                passed[mc] = pt.own_branch(p[c[mc]] + offset[mc], wc[mc], np.full(int(mc.sum()), np.inf), np.full(int(mc.sum()), k))
+                new_o[c[mc]] = at[c[mc]] + offset[mc]
             t = S[n_nee:] + np.where(passed[:, None], 0.0, fr[n_nee:])
             nb[c] = beta[c] * t / np.maximum(pc, 1e-300)[:, None]
             nd[c] = wc
             # mis: power heuristic at lights reached; dome: lights are light-sampled (weight 0); lobe: weight 1
             npdf[c] = pc if mode == "mis" else (-1.0 if mode == "dome" else 0.0)
             alive[c] = pc > 0
-        return nb, nd, npdf, alive
+        return nb, nd, npdf, alive, new_o
 
 
 register_shader("neupress", NeupressShader)

@@ -102,7 +102,7 @@ def open_root(path: str):
 def near_field_fetch(path, root) -> float:
     """``nasset:nearFieldFetch`` of an asset's root prim (spec/kinds/rna.md#near-field-fetch): 0 when not authored;
     NEAR_FIELD_INVALID naming the file and attribute for a value outside [0, 1], of another type, or non-zero on a
-    kind other than rna."""
+    kind other than rna and neupress."""
     a = root.GetAttribute(NEAR_FIELD_FETCH)
     k = root.GetAttribute("nasset:kind")
     return check_near_field_fetch(a.Get() if a and a.HasAuthoredValue() else None, str(k.Get()) if k else "",

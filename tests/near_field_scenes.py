@@ -46,14 +46,14 @@ def with_fetch(src, dst, f: float) -> str:
 def with_fetch_authored(src, dst, value) -> str:
     """A copy of the asset ``src`` at ``dst`` (a .usda path) whose ``nasset:nearFieldFetch`` is ``value`` as authored,
     whatever it is and whatever the asset's kind (the builder writes no attribute for 0, refuses values outside
-    [0, 1] and any f > 0 on kinds other than rna). An rna copy declares format 0.3, as the builder writes it."""
+    [0, 1] and any f > 0 on 8dna). An rna or neupress copy declares format 0.3, as the builder writes it."""
     from pxr import Sdf, Usd
 
-    from nasset_sdk.asset import NEAR_FIELD_FETCH, Asset, AssetBuilder
+    from nasset_sdk.asset import NEAR_FIELD_FETCH, NEAR_FIELD_KINDS, Asset, AssetBuilder
     from nasset_sdk.safeopen import trust
 
     b = AssetBuilder.from_asset(Asset.open(src))
-    if b.kind == "rna":
+    if b.kind in NEAR_FIELD_KINDS:
         b.near_field_fetch = 0.5
     b.write(dst)
     stage = Usd.Stage.Open(str(dst))
@@ -68,6 +68,33 @@ def with_fetch_authored(src, dst, value) -> str:
 def constant_asset(tmp_path, f: float, unshadowed=UNSHADOWED, shadowed=SHADOWED) -> str:
     base = constant_rna_asset(tmp_path / f"const_{unshadowed[0]}_{shadowed[0]}.usda", unshadowed=unshadowed, shadowed=shadowed)
     return with_fetch(base, tmp_path / f"const_{unshadowed[0]}_{shadowed[0]}_f{f}.usda", f)
+
+
+#: the constant neupress asset: S^ (1/sr, every input) and the boundary (eta, alpha) of core/boundary
+NEUPRESS_S, NEUPRESS_BOUNDARY = (0.02, 0.015, 0.01), (3.0, 0.5)
+
+
+def constant_neupress_asset(tmp_path, f: float, s=NEUPRESS_S, boundary=NEUPRESS_BOUNDARY) -> str:
+    """A neupress icosphere like :func:`constant_asset`'s (radius 0.5, centred on the origin) whose appearance network
+    returns the constant S^ ``s``, with GGX boundary ``boundary`` = (eta, alpha) (eta = 1: no surface reflection), no
+    vertex normals (the shading normal is the face normal) and no ``sampling`` component (the A sample is the uniform
+    sphere); ``nasset:nearFieldFetch`` = f (spec/kinds/neupress.md#near-field-fetch)."""
+    import trimesh
+
+    from nasset_sdk.asset import AssetBuilder
+    from nasset_sdk.geometry import MeshGeometry
+    from nasset_sdk.networks import mlp_onnx
+
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.5)
+    b = AssetBuilder("neupress", variant="surface")
+    b.set_geometry(MeshGeometry(np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int32), None))
+    core = b.component("core", required=True, purpose="evaluation", quality=None)
+    core.add_tensor("fourier", np.zeros((2, 7)), dtype="float32", layout="frequency,input")
+    core.add_tensor("boundary", np.asarray(boundary, np.float64), dtype="float32", layout="parameter")
+    core.add_network("appearance", mlp_onnx([np.zeros((4, 3), np.float32)], [np.asarray(s, np.float32)]))
+    b.provenance = {"generator": "constant"}
+    b.near_field_fetch = float(f)
+    return str(b.write(tmp_path / f"neupress_{s[0]}_{boundary[0]}_f{f}.usda"))
 
 
 def point_light_scene(tmp_path, asset: str, occluder: str | None = None, matrix=None) -> str:
@@ -152,6 +179,38 @@ def first_hits(points, faces, o, d):
     return origin + d * np.where(np.isfinite(tt), tt, 0.0)[:, None], n, np.isfinite(tt)
 
 
+def point_light_neupress_expected(asset: str, width: int, height: int, sub: int = 8):
+    """(rows, cols, expected [n, 3]) of the point-light scene's pixels that the constant neupress asset covers whole, at
+    f = 1: the light sample of every hit is fetched at c, so a hit x with face normal n shows
+    (S^ + f_r(n, w_o, w_c) V_self) I / |LIGHT - c|^2, w_c = (LIGHT - c) / |LIGHT - c| (V_self = 1 exactly where
+    n . w_c > 0 on the convex mesh, where f_r is non-zero), f_r from the SDK's NeupressEvaluator.surface_reflection;
+    box-filtered over sub x sub film positions."""
+    from nasset_sdk.asset import Asset
+
+    a = Asset.open(asset)
+    ev = a.evaluator()
+    g = a.geometry()
+    pts, faces = np.asarray(g.points, np.float64), np.asarray(g.faces, np.int64).reshape(-1, 3)
+    e_c = INTENSITY / float(np.sum(LIGHT ** 2))
+    w_c = LIGHT / np.linalg.norm(LIGHT)
+    s = (np.arange(sub) + 0.5) / sub
+    rows, cols, out = [], [], []
+    for row in range(height):
+        for col in range(width):
+            px, py = (col + s[None, :] + 0 * s[:, None]).ravel(), (row + s[:, None] + 0 * s[None, :]).ravel()
+            d = camera_dirs(px, py, width, height)
+            x, n, hit = first_hits(pts, faces, np.asarray(CAMERA), d)
+            if not hit.all():
+                continue
+            wi = np.broadcast_to(w_c, n.shape)
+            s_hat = ev.evaluate(x, n, -d, wi)
+            fr = ev.surface_reflection(n, -d, wi) * (n @ w_c > 0)[:, None]
+            rows.append(row)
+            cols.append(col)
+            out.append(e_c * np.mean(s_hat + fr, 0))
+    return np.asarray(rows), np.asarray(cols), np.asarray(out)
+
+
 def fibonacci_sphere(n: int) -> np.ndarray:
     i = np.arange(n) + 0.5
     z = 1.0 - 2.0 * i / n
@@ -160,10 +219,11 @@ def fibonacci_sphere(n: int) -> np.ndarray:
     return np.stack([r * np.cos(ph), r * np.sin(ph), z], 1)
 
 
-def dome_square_expected(asset: str, f: float, width: int, height: int, sub: int = 3, dirs: int = 4000):
+def dome_square_expected(asset: str, f: float, width: int, height: int, sub: int = 3, dirs: int = 4000, leaving=True):
     """(rows, cols, expected values) of the dome scene's pixels that the asset covers whole, at fetch fraction f: the
     box-filtered average over sub x sub film positions of the solid angle of {w : n . w > 0, the ray p + s w misses
-    the square} (n the hit triangle's outward normal, p = x + f (c - x))."""
+    the square} (n the hit triangle's outward normal, p = x + f (c - x)); ``leaving`` False: of all w whose ray from p
+    misses the square (a transport that is the same on both branches, the constant neupress asset without reflection)."""
     from nasset_sdk.asset import Asset
 
     a = Asset.open(asset)
@@ -180,7 +240,7 @@ def dome_square_expected(asset: str, f: float, width: int, height: int, sub: int
             if not hit.all():
                 continue
             p = x + f * (centre - x)
-            leaves = n @ w.T > 0  # [sub^2, dirs]
+            leaves = n @ w.T > 0 if leaving else np.ones((len(x), len(w)), bool)  # [sub^2, dirs]
             with np.errstate(divide="ignore", invalid="ignore"):
                 t = (SQUARE_Y - p[:, 1:2]) / w[None, :, 1]
                 q = p[:, None, :] + t[..., None] * w[None]
