@@ -37,6 +37,14 @@ class _Renderer:
     def render(self, scene, spp, **options):
         return self._render(scene, spp, **options, **self._extra)
 
+    def assert_same(self, a, b):
+        """The same image: bit for bit from the second implementation; from the plugin to float32 rounding, whose
+        deferred light rows of one lane are added atomically in either order (docs/bench-mitsuba-jit.md)."""
+        if self.name == "second":
+            np.testing.assert_array_equal(a, b)
+        else:
+            np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-12)
+
 
 @pytest.fixture(scope="module", params=["second", "plugin"])
 def nr(request):
@@ -61,7 +69,7 @@ def test_zero_fetch_authored_renders_as_unauthored(nr, tmp_path):
     a = nr.render(_random_scene(tmp_path, plain), 4, width=16, height=16, seed=5)
     b = nr.render(_random_scene(tmp_path, zero), 4, width=16, height=16, seed=5)
     assert a.max() > 0
-    np.testing.assert_array_equal(a, b)
+    nr.assert_same(a, b)
 
 
 def test_point_light_is_fetched_at_the_fetch_point(nr, tmp_path):
@@ -120,11 +128,11 @@ def test_occlusion_is_tested_from_the_fetch_point(nr, tmp_path, occluder):
         kept = imgs[0.0, "centre"][lit0][:, 0] == imgs[0.0, None][lit0][:, 0]
         assert kept.mean() > 0.8
     elif occluder == "side":
-        np.testing.assert_array_equal(imgs[1.0, "side"], imgs[1.0, None])
+        nr.assert_same(imgs[1.0, "side"], imgs[1.0, None])
         dark = (imgs[0.0, "side"][..., 0] == 0.0) & lit0
         assert dark.sum() >= 4
     else:
-        np.testing.assert_array_equal(imgs[1.0, "inside"], imgs[1.0, None])
+        nr.assert_same(imgs[1.0, "inside"], imgs[1.0, None])
 
 
 @pytest.mark.parametrize("f", [0.0, 0.5, 1.0])
@@ -214,7 +222,7 @@ def test_neupress_zero_fetch_authored_renders_as_unauthored(nr, tmp_path):
     half = nf.with_fetch_authored(plain, tmp_path / "np_f05.usda", 0.5)
     a, b, c = (nr.render(_random_scene(tmp_path, x), 4, width=16, height=16, seed=5) for x in (plain, zero, half))
     assert a.max() > 0
-    np.testing.assert_array_equal(a, b)
+    nr.assert_same(a, b)
     assert not np.array_equal(a, c)
 
 
@@ -262,11 +270,11 @@ def test_neupress_occlusion_is_tested_from_the_fetch_point(nr, tmp_path, occlude
         kept = imgs[0.0, "centre"][lit0][:, 0] == imgs[0.0, None][lit0][:, 0]
         assert kept.mean() > 0.8
     elif occluder == "side":
-        np.testing.assert_array_equal(imgs[1.0, "side"], imgs[1.0, None])
+        nr.assert_same(imgs[1.0, "side"], imgs[1.0, None])
         dark = (imgs[0.0, "side"][..., 0] == 0.0) & lit0
         assert dark.sum() >= 4
     else:
-        np.testing.assert_array_equal(imgs[1.0, "inside"], imgs[1.0, None])
+        nr.assert_same(imgs[1.0, "inside"], imgs[1.0, None])
 
 
 @pytest.mark.parametrize("f", [0.0, 1.0])
