@@ -249,6 +249,16 @@ def near_field_stage(option, check: dict, size: str, seed: int, quiet: bool, mea
     return {**out, "measured": True}
 
 
+def write_near_field(builder, prov: dict, near: dict, output) -> Path | None:
+    """Write the baked asset again with stage 6's fetch fraction and its provenance ``near_field`` (where f > 0 or it
+    was measured); returns the path written, None when the first write stands."""
+    if not (near["fetch"] > 0 or near["measured"]):
+        return None
+    builder.near_field_fetch = near["fetch"]
+    builder.provenance = finite({**prov, "near_field": near})
+    return builder.write(output)
+
+
 def near_field_line(near: dict) -> str:
     """Where renderers fetch the baked rna asset's light (spec/bake.md#near-field)."""
     f = near["fetch"]

@@ -36,6 +36,7 @@ from nasset_bakers.stages import (
     times_line,
     warnings_said,
     worker_lines,
+    write_near_field,
 )
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
@@ -274,10 +275,7 @@ def bake(
                             lambda settings, target, progress: _calibrate(mi, iso or _isolated(mi, shapes, center, radius, dset),
                                                                           geo, dset, path, center, radius, settings, target,
                                                                           progress))
-    if near["fetch"] > 0 or near["measured"]:  # the asset written again, with f and how it was measured
-        builder.near_field_fetch = near["fetch"]
-        builder.provenance = finite({**prov, "near_field": near})
-        path = builder.write(output)
+    path = write_near_field(builder, prov, near, output) or path
     times["near_field_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t_all
     summary = {
