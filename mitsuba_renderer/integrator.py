@@ -468,9 +468,7 @@ class PathTracer:
         """Yield (wi, le/pdf, pdf_light, delta, visible, passed) per light (one sample of every light).
 
         ``at`` [m, 3]: where each row's incident light is fetched (spec/kinds/rna.md#near-field-fetch; None: at p):
-        the light is sampled there and other objects' blocking is a ray from there (with the offset the ray from p
-        gets); ``passed`` (the ignored asset lies on the ray) is then a ray from p along the sample's direction on which
-        only the asset's own triangles count (:meth:`own_branch`)."""
+        the light is sampled there (:meth:`light_rays`)."""
         m = len(p)
         fetch = p if at is None else at
         moved = np.zeros(m, bool) if at is None else np.any(at != p, axis=1)
@@ -487,13 +485,36 @@ class PathTracer:
             passed = np.zeros(m, bool)
             v = np.nonzero(valid)[0]
             if len(v):
-                tr = self.tracer.trace(fetch[v] + offset[v], wi[v], maxt[v], None if ignore is None else ignore[v], transparent=self.light_shapes)
-                vis[v] = ~tr["hit"]
-                passed[v] = tr["passed"]
-            b = np.nonzero(valid & moved)[0]
-            if len(b):
-                passed[b] = self.own_branch(p[b] + offset[b], wi[b], maxt[b], ignore[b])
+                vis[v], passed[v] = self.light_rays(p[v] + offset[v], fetch[v] + offset[v], moved[v], wi[v], maxt[v],
+                                                    None if ignore is None else ignore[v])
             yield wi, le / np.maximum(pdf, 1e-300)[:, None] * valid[:, None], pdf, lt.delta, vis & valid, passed
+
+    def light_rays(self, o, at, moved, wi, maxt, obj, exempt=None):
+        """(visible [n], passed [n]) of light-sample rays wi from hits ``o`` [n, 3] (ray origins) whose light is
+        fetched at ``at`` (spec/kinds/rna.md#near-field-fetch; ``moved``: rows where ``at`` differs from ``o``).
+
+        Blocking by other objects is a ray from ``at``, object ``obj[i]`` (None: no asset) passed through; ``passed``
+        (the asset lies on the ray) is, where visible and moved, the branch from ``o`` (:meth:`own_branch`)."""
+        tr = self.tracer.trace(at, wi, maxt, obj, transparent=self.light_shapes, exempt=exempt)
+        vis, passed = ~tr["hit"], tr["passed"]
+        b = np.nonzero(vis & moved)[0]
+        if len(b):
+            passed[b] = self.own_branch(o[b], wi[b], maxt[b], obj[b], None if exempt is None else exempt[b])
+        return vis, passed
+
+    def continuation_rays(self, o, moved, wc, obj, exempt=None):
+        """[n] bool passed: whether continuations wc from hits ``o`` [n, 3] (ray origins) on asset ``obj[i]`` meet
+        it; where the light is fetched elsewhere (``moved``) only the asset's own triangles count (:meth:`own_branch`;
+        the radiance ray leaves the fetch point, spec/kinds/rna.md#near-field-fetch)."""
+        passed = np.zeros(len(o), bool)
+        here, away = np.nonzero(~moved)[0], np.nonzero(moved)[0]
+        if len(here):
+            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here],
+                                             exempt=None if exempt is None else exempt[here])["passed"]
+        if len(away):
+            passed[away] = self.own_branch(o[away], wc[away], np.full(len(away), np.inf), obj[away],
+                                           None if exempt is None else exempt[away])
+        return passed
 
     def own_branch(self, o, d, maxt, obj, exempt=None):
         """[n] bool: whether the rays meet a triangle of object ``obj[i]`` (outside ``exempt[i]``) before ``maxt``, every
@@ -588,12 +609,8 @@ class RnaShader:
             side = np.sign(dot(wc[cidx], ng[cidx]))[:, None]
             offset = ng[cidx] * side * ray_eps(p[cidx])[:, None]
             mc = moved[cidx]
-            cx, cm = cidx[~mc], cidx[mc]  # the branch: from x (with a fetch point, the asset's own triangles alone)
-            if len(cx):
-                cpassed[cx] = self.pt.tracer.trace(p[cx] + offset[~mc], wc[cx], None, obj[cx])["passed"]
-            if len(cm):  # the radiance: a ray from the fetch point
-                cpassed[cm] = self.pt.own_branch(p[cm] + offset[mc], wc[cm], np.full(len(cm), np.inf), obj[cm])
-                new_o[cm] = at[cm] + offset[mc]
+            cpassed[cidx] = self.pt.continuation_rays(p[cidx] + offset, mc, wc[cidx], obj[cidx])
+            new_o[cidx[mc]] = at[cidx[mc]] + offset[mc]  # the radiance: a ray from the fetch point
         entries.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = self._transport(entries, p, wo, obj, prim, b1, b2)
         for (_, lw, vis, _), t in zip(entries[:-1], T[:-1], strict=True):
@@ -653,11 +670,7 @@ class RnaShader:
             vis, passed = np.zeros(m, bool), np.zeros(m, bool)
             v = np.nonzero(valid)[0]
             if len(v):
-                tr = pt.tracer.trace(at[v], wi[v], maxt[v], obj[v], transparent=pt.light_shapes, exempt=exempt[v])
-                vis[v], passed[v] = ~tr["hit"], tr["passed"]
-            b = np.nonzero(valid & moved)[0]
-            if len(b):  # the branch: from x itself
-                passed[b] = pt.own_branch(p[b], wi[b], maxt[b], obj[b], exempt[b])
+                vis[v], passed[v] = pt.light_rays(p[v], at[v], moved[v], wi[v], maxt[v], obj[v], exempt[v])
             w = np.ones(m) if lt.delta else np.where(cont, power(pdf, INV_FOUR_PI), 1.0)
             rows.append((wi, le / np.maximum(pdf, 1e-300)[:, None] * (valid * w)[:, None], vis & valid, passed))
         u = rng.random((m, 2))
@@ -667,11 +680,8 @@ class RnaShader:
         wc = np.stack([sz * np.cos(ph), sz * np.sin(ph), z], 1)
         cpassed = np.zeros(m, bool)
         cidx = np.nonzero(cont)[0]
-        cx, cm = cidx[~moved[cidx]], cidx[moved[cidx]]
-        if len(cx):
-            cpassed[cx] = pt.tracer.trace(p[cx], wc[cx], None, obj[cx], exempt=exempt[cx])["passed"]
-        if len(cm):
-            cpassed[cm] = pt.own_branch(p[cm], wc[cm], np.full(len(cm), np.inf), obj[cm], exempt[cm])
+        if len(cidx):
+            cpassed[cidx] = pt.continuation_rays(p[cidx], moved[cidx], wc[cidx], obj[cidx], exempt[cidx])
         rows.append((wc, np.full((m, 3), FOUR_PI), cont, cpassed))
         T = [np.zeros((m, 3)) for _ in rows]
         for k in np.unique(obj):

@@ -240,12 +240,8 @@ class NeupressShader:
             side[side == 0] = 1.0
             offset = ng[s] * side * ray_eps(p[s])[:, None]
             maxt = np.where(np.isfinite(dist[s]), dist[s] * (1.0 - 1e-3), np.inf)
-            tr = pt.tracer.trace(at[s] + offset, wi[s], maxt, np.full(len(s), k), transparent=pt.light_shapes)
-            free = ~tr["hit"]
-            s, passed, offset, maxt = s[free], tr["passed"][free], offset[free], maxt[free]
-            b = np.nonzero(moved[s])[0]
-            if len(b):  # the branch: from x, the asset's own triangles alone
-                passed[b] = pt.own_branch(p[s[b]] + offset[b], wi[s[b]], maxt[b], np.full(len(b), k))
+            free, passed = pt.light_rays(p[s] + offset, at[s] + offset, moved[s], wi[s], maxt, np.full(len(s), k))
+            s, passed = s[free], passed[free]
             wi_o, jac = to_obj(wi[s])
             if lt.delta or mode == "dome":
                 w = np.ones(len(s))
@@ -286,12 +282,8 @@ class NeupressShader:
             side[side == 0] = 1.0
             offset = ng[c] * side * ray_eps(p[c])[:, None]
             mc = moved[c]
-            passed = np.zeros(len(c), bool)
-            if np.any(~mc):
-                passed[~mc] = pt.tracer.trace(p[c[~mc]] + offset[~mc], wc[~mc], None, np.full(int((~mc).sum()), k))["passed"]
-            if np.any(mc):  # the branch from x (own triangles alone, unbounded); the radiance from the fetch point
-                passed[mc] = pt.own_branch(p[c[mc]] + offset[mc], wc[mc], np.full(int(mc.sum()), np.inf), np.full(int(mc.sum()), k))
-                new_o[c[mc]] = at[c[mc]] + offset[mc]
+            passed = pt.continuation_rays(p[c] + offset, mc, wc, np.full(len(c), k))
+            new_o[c[mc]] = at[c[mc]] + offset[mc]  # the radiance: a ray from the fetch point
             t = S[n_nee:] + np.where(passed[:, None], 0.0, fr[n_nee:])
             nb[c] = beta[c] * t / np.maximum(pc, 1e-300)[:, None]
             nd[c] = wc
