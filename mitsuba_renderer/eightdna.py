@@ -9,15 +9,13 @@ equations of 8dna.md#spline, so it checks that text independently of any other i
 from __future__ import annotations
 
 import hashlib
-import os
-import re
 
 import numpy as np
 
 from nasset_sdk.errors import SceneError
 
 from .integrator import ray_eps, register_shader
-from .rna import check_network, checked, near_field_fetch, safe_normalize, triplane
+from .rna import check_network, checked, open_root, read_triangles, safe_normalize, triplane
 
 TWO_PI = 2.0 * np.pi
 
@@ -298,34 +296,10 @@ class EightDnaAsset:
         return SceneError(code, msg, file=self.path, prim=prim)
 
     def _read(self, threads):
-        from pxr import Tf, Usd, UsdGeom
-
-        from nasset_sdk.paths import open_checked_stage, outer_file
-
-        if not os.path.exists(outer_file(str(self.path))):  # a file, or a layer inside a usdz package
-            raise self._fail("SCENE_INVALID", "referenced asset file does not exist")
-        try:
-            # untrusted input (spec/security.md): probed in a child, every asset path checked, then composed
-            stage = open_checked_stage(self.path, Usd.Stage.LoadNone)
-        except Tf.ErrorException as exc:
-            raise self._fail("SCENE_INVALID", f"asset does not open as a USD layer: {str(exc).splitlines()[0][:200]}") from None
-        root = stage.GetDefaultPrim()
-        if not root or root.GetTypeName() != "NeuralAsset":
-            raise self._fail("SCENE_INVALID", "asset has no NeuralAsset default prim")
+        stage, root, attr = open_root(self.path)  # existence, the default prim, the major version, the fetch
         rp = str(root.GetPath())
-
-        def attr(name):
-            a = root.GetAttribute(name)
-            if not a or not a.HasAuthoredValue():
-                raise self._fail("SCENE_INVALID", f"required attribute {name} is not authored", rp)
-            return a.Get()
-
-        version = str(attr("nasset:specVersion"))
-        if not re.fullmatch(r"[0-9]+\.[0-9]+", version) or int(version.split(".")[0]) != 0:
-            raise self._fail("SCENE_UNSUPPORTED", f"nasset:specVersion {version!r}: this renderer reads major 0", rp)
         if str(attr("nasset:kind")) != "8dna":
             raise self._fail("SCENE_INVALID", "not an 8dna asset", rp)
-        near_field_fetch(self.path, root)  # NEAR_FIELD_INVALID: authored non-zero (rna and neupress only)
         if str(attr("nasset:variant")) != "surface":
             raise self._fail("SCENE_UNSUPPORTED", "8dna variant other than surface", rp)
         self.lo = np.asarray(attr("nasset:domainMin"), np.float32).astype(np.float64)
@@ -335,19 +309,8 @@ class EightDnaAsset:
         self.center = 0.5 * (self.lo + self.hi)
         self.half = 0.5 * (self.hi - self.lo)
 
-        geom = root.GetChild("Geometry")
-        if not geom or geom.GetTypeName() != "Mesh":
-            raise self._fail("SCENE_INVALID", "asset has no Mesh geometry", rp + "/Geometry")
-        mesh = UsdGeom.Mesh(geom)
-        pts = np.asarray(mesh.GetPointsAttr().Get(), np.float64).reshape(-1, 3)
-        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(), np.int64)
-        idx = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), np.int64)
-        if len(pts) == 0 or len(counts) == 0 or np.any(counts != 3) or len(idx) != 3 * len(counts) or idx.min() < 0 or idx.max() >= len(pts):
-            raise self._fail("SCENE_INVALID", "asset geometry is not a valid triangle mesh", str(geom.GetPath()))
-        self.points, self.faces = pts, idx.reshape(-1, 3)
-        nrm = mesh.GetNormalsAttr().Get()
-        self.normals = np.asarray(nrm, np.float64).reshape(-1, 3) if nrm is not None and len(nrm) == len(pts) else None
-        p0, p1, p2 = (pts[self.faces[:, k]] for k in range(3))
+        self.points, self.faces, self.normals = read_triangles(self.path, root.GetChild("Geometry"), rp)
+        p0, p1, p2 = (self.points[self.faces[:, k]] for k in range(3))
         self.face_normals = safe_normalize(np.cross(p1 - p0, p2 - p0))
 
         core = stage.GetPrimAtPath(rp + "/Components/core")
