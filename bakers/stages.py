@@ -18,6 +18,8 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.geometry import scale_problem
 from nasset_sdk.images import output_folder
 
+from .train.common import MAX_GAIN_SE
+
 
 def progress_bar(**kw):
     """A tqdm bar (``disable=True`` for quiet runs)."""
@@ -257,6 +259,22 @@ def write_near_field(builder, prov: dict, near: dict, output) -> Path | None:
     builder.near_field_fetch = near["fetch"]
     builder.provenance = finite({**prov, "near_field": near})
     return builder.write(output)
+
+
+def energy_gain_line(gain: dict | None) -> str | None:
+    """The output gain a bake applied after training (spec/bake.md#energy-gain): one dict of
+    ``train.common.energy_gain``, or rna's {"unshadowed": ..., "shadowed": ...}; None when it was off."""
+    if not gain:
+        return None
+    parts = {"": gain} if "gain" in gain else {k: g for k, g in gain.items() if g}
+
+    def one(label, g):
+        se = "" if g.get("se") is None else " ± " + "/".join(f"{100 * e:.1f}" for e in g["se"])
+        kept = "" if all(g["applied"]) else f", 1 where ± > {100 * MAX_GAIN_SE:g} %"
+        return (f"{label}{'/'.join(f'{x:.3f}' for x in g['gain'])} (the network kept "
+                + "/".join(f"{100 * r:.1f}" for r in g["ratio"]) + f" %{se} of its training set's energy{kept})")
+
+    return "  energy gain (RGB): " + "; ".join(one(f"{k} " if k else "", g) for k, g in parts.items())
 
 
 def near_field_line(near: dict) -> str:

@@ -28,7 +28,16 @@ import numpy as np
 
 from nasset_bakers import presets
 from nasset_bakers.registry import register_baker
-from nasset_bakers.stages import accuracy_lines, check_geometry_scale, dataset_line, psnr_line, see_through_line, times_line, worker_lines
+from nasset_bakers.stages import (
+    accuracy_lines,
+    check_geometry_scale,
+    dataset_line,
+    energy_gain_line,
+    psnr_line,
+    see_through_line,
+    times_line,
+    worker_lines,
+)
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
@@ -46,7 +55,7 @@ def bake(
     ``workers``/``cluster``: render the views on Ray workers (nasset_bakers.cluster), one Cycles thread each."""
     from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import check_options, finite, render_views, send_job, train_share, train_with_progress
-    from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.common import TorchCheckpoint, require_torch, training_key
     from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TrainSettings, check_asset, train
     from nasset_converters.blender import CONVERTER_VERSION, load_bpy
@@ -150,7 +159,7 @@ def bake(
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
     ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
-                           {"data": meta, "train": tset.__dict__, "h_input": h_input,
+                           {"data": meta, "train": training_key(tset), "h_input": h_input,
                             "domain": [list(map(float, d)) for d in domain]})
     send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt, **job)
     result = train_with_progress(
@@ -177,7 +186,7 @@ def bake(
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
                  "mask_disagreement": disagree, "h_input": h_input},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
-                     "final_loss": result.history[-1]["loss"] if result.history else None},
+                     "final_loss": result.history[-1]["loss"] if result.history else None, "energy_gain": result.energy_gain},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
         "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
         "size": size,
@@ -202,6 +211,7 @@ def bake(
         **{k: result.val.get(k) for k in ("kept_epoch", "epochs", "keep")}, "sdk_val_psnr_db": check["psnr_db"],
         "val_accuracy": result.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "sdk_vs_torch_max_abs": check["max_abs_diff"], "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
+        "energy_gain": result.energy_gain,
         "times_s": {k: round(v, 2) for k, v in times.items()},
         "workers": per_worker,
     }
@@ -228,6 +238,7 @@ def _print_summary(s: dict, stream) -> None:
         dataset_line(s) + f" (mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
         *accuracy_lines(s.get("sdk_val_accuracy")),
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
+        *filter(None, [energy_gain_line(s.get("energy_gain"))]),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
         *worker_lines(s.get("workers")),

@@ -29,6 +29,7 @@ from nasset_bakers.stages import (
     clamp_lines,
     clamp_removed,
     dataset_line,
+    energy_gain_line,
     finite,
     near_field_line,
     near_field_stage,
@@ -84,7 +85,7 @@ def bake(
     ``light_angle``: only 0 (delta lights) is supported -- the boundary must be a rough dielectric."""
     from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import progress_bar, render_views, send_job, train_share, train_with_progress
-    from nasset_bakers.train.common import require_torch
+    from nasset_bakers.train.common import require_torch, training_key
     from nasset_bakers.train.neupress import (
         TRAIN_PRESETS,
         NeupressTrainSettings,
@@ -194,7 +195,7 @@ def bake(
     tset = NeupressTrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
-    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
+    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": training_key(tset),
                                                       "domain": [list(map(float, d)) for d in domain]})
     send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     app = train_with_progress(
@@ -255,7 +256,8 @@ def bake(
                  "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
         "training": {**tset.__dict__, "device": app.device, "framework": f"torch {torch.__version__}",
                      "final_loss": app.history[-1]["loss"] if app.history else None,
-                     "sampling_kl": samp.kl, "sampling_kl_uniform": samp.kl_uniform, "sampling_kl_best_sigma": samp.kl_best},
+                     "sampling_kl": samp.kl, "sampling_kl_uniform": samp.kl_uniform, "sampling_kl_best_sigma": samp.kl_best,
+                     "energy_gain": app.energy_gain},
         "validation": {**app.val, "psnr_definition": "spec/bake.md#psnr"},
         "size": size,
         "timings_s": {k: round(v, 3) for k, v in times.items()},
@@ -297,6 +299,7 @@ def bake(
         "val_accuracy": app.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
         "near_field": near,
+        "energy_gain": app.energy_gain,
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "sigma_sdk_vs_torch_max_abs_log": check["sigma_max_abs_log_diff"],
         "prt_roundtrip_max_abs": check["prt_max_abs"],
@@ -320,6 +323,7 @@ def _print_summary(s: dict, stream) -> None:
         *accuracy_lines(s.get("sdk_val_accuracy"), "held-out subsurface S (unclamped reference)"),
         psnr_line(s, "held-out display PSNR (subsurface S; 99.5th pct, clipped)"),
         *clamp_lines(s),
+        *filter(None, [energy_gain_line(s.get("energy_gain"))]),
         near_field_line(s["near_field"]),
         f"  sampling lobe KL: {s['sampling_kl_nats']:.3f} nats (uniform {s['sampling_kl_uniform_nats']:.3f}, "
         f"best single sigma per record {s['sampling_kl_best_sigma_nats']:.3f})",

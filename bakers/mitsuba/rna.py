@@ -26,6 +26,7 @@ from nasset_bakers.stages import (
     clamp_lines,
     clamp_removed,
     dataset_line,
+    energy_gain_line,
     finite,
     near_field_line,
     near_field_stage,
@@ -80,7 +81,7 @@ def bake(
     (measured after training, surface assets; fibers keep 0, spec/bake.md#near-field) or f in [0, 1] to store."""
     from nasset_bakers.cluster import ViewSource, check_workers
     from nasset_bakers.stages import render_views, send_job, train_share, train_with_progress
-    from nasset_bakers.train.common import TorchCheckpoint, require_torch
+    from nasset_bakers.train.common import TorchCheckpoint, require_torch, training_key
     from nasset_bakers.train.parallel import data_parallel
     from nasset_bakers.train.rna import TRAIN_PRESETS, TrainSettings, check_asset, train
     from nasset_converters.mitsuba import CONVERTER_VERSION, load_mitsuba
@@ -202,7 +203,7 @@ def bake(
         tset = replace(tset, epochs=int(epochs))
     if loss is not None:
         tset = replace(tset, loss=str(loss))
-    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": tset.__dict__,
+    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": training_key(tset),
                                                       "domain": [list(map(float, d)) for d in domain]})
     send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     result = train_with_progress(
@@ -228,7 +229,7 @@ def bake(
                  "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves",
                  **_mask_statistics(train_data)},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
-                     "final_loss": result.history[-1]["loss"] if result.history else None},
+                     "final_loss": result.history[-1]["loss"] if result.history else None, "energy_gain": result.energy_gain},
         "validation": {**result.val, "psnr_definition": "spec/bake.md#psnr"},
         "onnx": {"opset": 17, "max_abs_diff_vs_torch": result.onnx_max_abs_diff},
         "size": size,
@@ -269,6 +270,7 @@ def bake(
         "sdk_val_psnr_db": check["psnr_db"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
         "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
+        "energy_gain": result.energy_gain,
         "times_s": {k: round(v, 2) for k, v in times.items()},
         "workers": per_worker,
     }
@@ -287,6 +289,7 @@ def _print_summary(s: dict, stream) -> None:
            "covered training pixels"] if s.get("mask_disagreement") is not None else []),
         *accuracy_lines(s.get("sdk_val_accuracy")),
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
+        *filter(None, [energy_gain_line(s.get("energy_gain"))]),
         *clamp_lines(s),
         near_field_line(s["near_field"]),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",

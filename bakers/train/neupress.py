@@ -6,7 +6,8 @@ Three fits, all against the format contract of ``nasset_sdk.kinds.neupress``:
   v = [xn, theta_o/pi, phi_o/2pi, theta_i/pi, phi_i/2pi] (7; G [M, 7] ~ N(0, 0.25) by default, the paper's N(18, 1) as a setting),
   a ReLU MLP with skip connections between alternate layers (the input of hidden layer i is
   concatenated to the input of layer i + 2, exactly ``nasset_sdk.networks.mlp_onnx``'s layout), no
-  output activation, L2 loss, Adam with the learning rate halved every 20 % of the epochs.
+  output activation, L2 loss, Adam with the learning rate halved every 20 % of the epochs; then the output
+  layer scaled per channel so the network keeps its training set's energy (spec/bake.md#energy-gain).
 * **sampling**: log sigma of the Gaussian lobe around n from the Fourier features of [xn, theta_o, phi_o]
   (5). Target: the trained appearance network's luminance on B x B bins of the azimuthal-equidistant
   disk |p| <= pi around n, turned into a distribution over bins (times the projection's area factor
@@ -34,7 +35,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import BestEpoch, TorchCheckpoint, check_against_torch, display_psnr, held_out_accuracy, require_torch
+from .common import BestEpoch, TorchCheckpoint, check_against_torch, display_psnr, energy_gain, held_out_accuracy, require_torch
 from .parallel import data_parallel
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
@@ -60,6 +61,7 @@ class NeupressTrainSettings:
     seed: int = 0
     device: str = "auto"
     keep: str = "last"  # appearance network: the last epoch, or "best": the highest held-out display PSNR (spec/accuracy.md#best-epoch)
+    energy_gain: bool = True  # scale the output to the training set's energy after training (spec/bake.md#energy-gain)
 
 
 TRAIN_PRESETS = presets.NEUPRESS_TRAIN  # the table lives in nasset_bakers/presets.py
@@ -171,6 +173,7 @@ class AppearanceResult:
     val: dict
     seconds: float
     device: str
+    energy_gain: dict | None = None  # common.energy_gain of the kept network, before the gain; None when off
 
 
 def predict_appearance(model, G: np.ndarray, v: np.ndarray, batch: int = 65536) -> np.ndarray:
@@ -258,6 +261,14 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
             progress(epoch, mean_loss, val_psnr)
     kept = best.restore(model) if settings.keep == "best" and best.state is not None else settings.epochs - 1
     model = model.cpu().eval()
+    gain = None
+    if settings.energy_gain:  # the output layer is linear: scaling its rows scales the clamped output
+        gain = energy_gain(np.maximum(predict_appearance(model, G, v), 0.0), y, train_data.get("view"))
+        out = model.lin[-1]
+        with torch.no_grad():
+            g = torch.as_tensor(np.asarray(gain["gain"], np.float32))
+            out.weight.mul_(g[:, None])
+            out.bias.mul_(g)
     pred = predict_appearance(model, G, v_val)
     psnr, mse, peak = display_psnr(np.maximum(pred, 0.0), val_data["rgb"])
     val = {"psnr_db": psnr, "mse": mse, "peak": peak, "samples": int(len(v_val)),
@@ -265,7 +276,7 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
            "mean_pred": float(np.mean(np.maximum(pred, 0.0))) if len(v_val) else float("nan"),
            "accuracy": held_out_accuracy(np.maximum(pred, 0.0), val_data),
            "kept_epoch": kept + 1, "epochs": settings.epochs, "keep": settings.keep}
-    return AppearanceResult(model, G, history, val, time.perf_counter() - t0, str(dev))
+    return AppearanceResult(model, G, history, val, time.perf_counter() - t0, str(dev), gain)
 
 
 # ----------------------------------------------------------------------------------------

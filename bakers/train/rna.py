@@ -14,7 +14,8 @@ targets' mean, spec/accuracy.md#loss), only on the output matching the sample's 
 exp(E log(1 + y)) - 1 < E[y]) and kept for ablations; ``"rel"`` is L2 relative to the detached
 prediction (Noise2Noise), also unbiased. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
 to 1 texel over the first 20 % of epochs, then kept at 1 texel; the exported planes are the
-blurred planes the decoder was trained with. Adam, learning rate halved every 20 % of epochs.
+blurred planes the decoder was trained with. Adam, learning rate halved every 20 % of epochs; then each branch's output
+scaled per channel so the decoder keeps its training set's energy (spec/bake.md#energy-gain).
 
 This module is the only place that imports torch; the SDK itself never does.
 """
@@ -34,7 +35,7 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import BestEpoch, check_against_torch, display_psnr, held_out_accuracy, require_torch
+from .common import BestEpoch, check_against_torch, display_psnr, energy_gain, held_out_accuracy, require_torch
 from .parallel import data_parallel
 
 
@@ -59,6 +60,7 @@ class TrainSettings:
     seed: int = 0
     device: str = "auto"
     keep: str = "last"  # "last" epoch, or "best": the highest held-out display PSNR (the paper's best checkpoint; spec/accuracy.md#best-epoch)
+    energy_gain: bool = True  # scale each branch's output to the training set's energy after training (spec/bake.md#energy-gain)
 
 
 TRAIN_PRESETS = presets.RNA_TRAIN  # the table lives in nasset_bakers/presets.py
@@ -216,6 +218,7 @@ class TrainResult:
     onnx_max_abs_diff: float
     seconds: float
     device: str
+    energy_gain: dict | None = None  # apply_energy_gain's figures; None when off
 
 
 def _tensors(torch, data: dict, lo, hi, device):
@@ -351,6 +354,7 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         model.freeze_planes(torch.from_numpy(planes16.astype(np.float32)).permute(0, 3, 1, 2).to(device))
     if not np.isfinite(planes16.astype(np.float32)).all():
         raise error("CONVERT_TRAINING", "feature planes overflow float16")
+    gain = apply_energy_gain(model, T, train_data) if settings.energy_gain else None
     yv = np.maximum(predict(model, V), 0.0)
     pv = select_branch(yv, val_data["vis"])
     psnr, mse_lin, peak = display_psnr(pv, val_data["rgb"])
@@ -364,8 +368,31 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         model=model, planes=planes16, onnx=onnx_bytes, history=history,
         val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv)), "accuracy": acc,
              "kept_epoch": kept + 1, "epochs": settings.epochs, "keep": settings.keep},
-        onnx_max_abs_diff=diff, seconds=train_s, device=str(device),
+        onnx_max_abs_diff=diff, seconds=train_s, device=str(device), energy_gain=gain,
     )
+
+
+def apply_energy_gain(model, T: dict, train_data: dict) -> dict:
+    """Scale the decoder's output rows so that each branch keeps its training samples' energy (spec/bake.md#energy-gain):
+    the unshadowed outputs by the gain over the samples whose light was visible, the shadowed ones over the others.
+    Returns {"unshadowed": ..., "shadowed": ...} (``common.energy_gain`` before the gain; None for a branch without
+    samples)."""
+    torch = require_torch()
+    y = np.maximum(predict(model, T), 0.0)
+    vis = np.asarray(train_data["vis"]).astype(bool)
+    views = train_data.get("view")
+    out, gains = {}, []
+    for name, rows, cols in (("unshadowed", vis, slice(0, 3)), ("shadowed", ~vis, slice(3, 6))):
+        g = energy_gain(y[rows, cols], train_data["rgb"][rows], None if views is None else np.asarray(views)[rows]) \
+            if rows.any() else None
+        out[name] = g
+        gains.extend(g["gain"] if g else [1.0, 1.0, 1.0])
+    last = model.decoder[-1]  # the output layer is linear: scaling its rows scales the clamped outputs
+    with torch.no_grad():
+        g = torch.as_tensor(np.asarray(gains, np.float32), device=last.weight.device)
+        last.weight.mul_(g[:, None])
+        last.bias.mul_(g)
+    return out
 
 
 def settings_dict(settings: TrainSettings) -> dict:

@@ -30,14 +30,16 @@ TRAIN, VAL = _samples(64, 0.6, 0.6, 0), _samples(128, 0.2, 0.5, 1)
 
 
 def _rna(keep: str):
-    s = tr.TrainSettings(size="tiny", epochs=EPOCHS, batch=16, lr=3e-3, plane_lr=3e-3, decay_every=1.0, device="cpu", keep=keep)
+    s = tr.TrainSettings(size="tiny", epochs=EPOCHS, batch=16, lr=3e-3, plane_lr=3e-3, decay_every=1.0, device="cpu", keep=keep,
+                         energy_gain=False)  # the kept epoch as trained
     r = tr.train(TRAIN, VAL, DOMAIN, s)
     pred = tr.select_branch(np.maximum(tr.predict(r.model, tr._tensors(tr.require_torch(), VAL, *DOMAIN, "cpu")), 0.0), VAL["vis"])
     return r, display_psnr(pred, VAL["rgb"])[0]
 
 
 def _neupress(keep: str):
-    s = tn.NeupressTrainSettings(size="tiny", epochs=EPOCHS, batch=16, lr=2e-2, decay_every=1.0, device="cpu", keep=keep)
+    s = tn.NeupressTrainSettings(size="tiny", epochs=EPOCHS, batch=16, lr=2e-2, decay_every=1.0, device="cpu", keep=keep,
+                                 energy_gain=False)
     a = tn.train_appearance(TRAIN, VAL, DOMAIN, s)
     v = tn.appearance_inputs(VAL["x"], VAL["wo"], VAL["wi"], *DOMAIN)
     return a, display_psnr(np.maximum(tn.predict_appearance(a.model, a.G, v), 0.0), VAL["rgb"])[0]
