@@ -174,6 +174,16 @@ def energy_gain(pred: np.ndarray, target: np.ndarray, views: np.ndarray | None, 
             "se": se.tolist() if np.isfinite(se).all() else None, "applied": applied.tolist(), "samples": int(len(p))}
 
 
+def scale_output_layer(layer, gain) -> None:
+    """Multiply a torch ``Linear`` output layer's rows (weights and bias) by ``gain`` [out] (the energy gain: a linear
+    output scaled by a positive gain scales its clamped value too)."""
+    torch = require_torch()
+    with torch.no_grad():
+        g = torch.as_tensor(np.asarray(gain, np.float32), device=layer.weight.device)
+        layer.weight.mul_(g[:, None])
+        layer.bias.mul_(g)
+
+
 def reopen_asset(path):
     """(asset, evaluator) of the written asset, re-opened with the SDK and fully loaded."""
     from nasset_sdk.asset import Asset

@@ -35,7 +35,16 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import azimuthal_equidistant_inverse, from_local, sh9, spherical_coords, to_unit_box
 from nasset_sdk.kinds.neupress import FOURIER_MEAN, FOURIER_STD, SIGMA_MAX, SIGMA_MIN, SIZES  # noqa: F401 (paper's G)
 
-from .common import BestEpoch, TorchCheckpoint, check_against_torch, display_psnr, energy_gain, held_out_accuracy, require_torch
+from .common import (
+    BestEpoch,
+    TorchCheckpoint,
+    check_against_torch,
+    display_psnr,
+    energy_gain,
+    held_out_accuracy,
+    require_torch,
+    scale_output_layer,
+)
 from .parallel import data_parallel
 
 __all__ = ["TRAIN_PRESETS", "NeupressTrainSettings", "TorchCheckpoint", "train_appearance", "train_sampling",
@@ -262,13 +271,9 @@ def train_appearance(train_data: dict, val_data: dict, domain, settings: Neupres
     kept = best.restore(model) if settings.keep == "best" and best.state is not None else settings.epochs - 1
     model = model.cpu().eval()
     gain = None
-    if settings.energy_gain:  # the output layer is linear: scaling its rows scales the clamped output
+    if settings.energy_gain:
         gain = energy_gain(np.maximum(predict_appearance(model, G, v), 0.0), y, train_data.get("view"))
-        out = model.lin[-1]
-        with torch.no_grad():
-            g = torch.as_tensor(np.asarray(gain["gain"], np.float32))
-            out.weight.mul_(g[:, None])
-            out.bias.mul_(g)
+        scale_output_layer(model.lin[-1], gain["gain"])
     pred = predict_appearance(model, G, v_val)
     psnr, mse, peak = display_psnr(np.maximum(pred, 0.0), val_data["rgb"])
     val = {"psnr_db": psnr, "mse": mse, "peak": peak, "samples": int(len(v_val)),

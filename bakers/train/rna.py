@@ -35,7 +35,15 @@ from nasset_sdk.errors import error
 from nasset_sdk.kinds.encodings import TRIPLANE_AXES
 from nasset_sdk.kinds.rna import SIZES
 
-from .common import BestEpoch, check_against_torch, display_psnr, energy_gain, held_out_accuracy, require_torch
+from .common import (
+    BestEpoch,
+    check_against_torch,
+    display_psnr,
+    energy_gain,
+    held_out_accuracy,
+    require_torch,
+    scale_output_layer,
+)
 from .parallel import data_parallel
 
 
@@ -377,7 +385,6 @@ def apply_energy_gain(model, T: dict, train_data: dict) -> dict:
     the unshadowed outputs by the gain over the samples whose light was visible, the shadowed ones over the others.
     Returns {"unshadowed": ..., "shadowed": ...} (``common.energy_gain`` before the gain; None for a branch without
     samples)."""
-    torch = require_torch()
     y = np.maximum(predict(model, T), 0.0)
     vis = np.asarray(train_data["vis"]).astype(bool)
     views = train_data.get("view")
@@ -387,11 +394,7 @@ def apply_energy_gain(model, T: dict, train_data: dict) -> dict:
             if rows.any() else None
         out[name] = g
         gains.extend(g["gain"] if g else [1.0, 1.0, 1.0])
-    last = model.decoder[-1]  # the output layer is linear: scaling its rows scales the clamped outputs
-    with torch.no_grad():
-        g = torch.as_tensor(np.asarray(gains, np.float32), device=last.weight.device)
-        last.weight.mul_(g[:, None])
-        last.bias.mul_(g)
+    scale_output_layer(model.decoder[-1], gains)
     return out
 
 
