@@ -277,6 +277,16 @@ def energy_gain_line(gain: dict | None) -> str | None:
     return "  energy gain (RGB): " + "; ".join(one(f"{k} " if k else "", g) for k, g in parts.items())
 
 
+def plane_blur_line(blur: dict | None) -> str | None:
+    """The final blur of an rna bake's feature planes (spec/bake.md#plane-blur); None when it was not chosen."""
+    if not blur:
+        return None
+    mse = dict(zip(blur["footprints"], blur["mse"], strict=True))
+    why = ("the schedule's" if blur["chosen"] == blur["schedule"]
+           else f"held-out MSE {mse[blur['chosen']]:.3g} against {mse[blur['schedule']]:.3g} at the schedule's {blur['schedule']:g}")
+    return f"  plane blur: footprint {blur['chosen']:g} texels ({why}; tried {', '.join(f'{f:g}' for f in blur['footprints'])})"
+
+
 def near_field_line(near: dict) -> str:
     """Where renderers fetch the baked rna asset's light (spec/bake.md#near-field)."""
     f = near["fetch"]

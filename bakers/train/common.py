@@ -83,8 +83,9 @@ class BestEpoch:
 
 def training_key(settings) -> dict:
     """The training settings (a dataclass) that shape the training state, for a checkpoint's key: all but
-    ``energy_gain``, which acts after the last epoch, so a bake interrupted before it existed still resumes."""
-    return {k: v for k, v in settings.__dict__.items() if k != "energy_gain"}
+    ``energy_gain`` and ``plane_blur``, which act after the last epoch, so a bake interrupted before they existed
+    still resumes."""
+    return {k: v for k, v in settings.__dict__.items() if k not in ("energy_gain", "plane_blur")}
 
 
 class TorchCheckpoint:

@@ -68,6 +68,7 @@ class TrainSettings:
     seed: int = 0
     device: str = "auto"
     keep: str = "last"  # "last" epoch, or "best": the highest held-out display PSNR (the paper's best checkpoint; spec/accuracy.md#best-epoch)
+    plane_blur: str = "select"  # "select": the final blur footprint chosen on the held-out views (spec/bake.md#plane-blur); "schedule": blur_end
     energy_gain: bool = True  # scale each branch's output to the training set's energy after training (spec/bake.md#energy-gain)
 
 
@@ -227,6 +228,7 @@ class TrainResult:
     seconds: float
     device: str
     energy_gain: dict | None = None  # apply_energy_gain's figures; None when off
+    plane_blur: dict | None = None  # choose_plane_blur's figures; None when off
 
 
 def _tensors(torch, data: dict, lo, hi, device):
@@ -315,6 +317,8 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
     best = BestEpoch(state.get("best") if state else None)
     if settings.keep not in ("best", "last"):
         raise error("CONVERT_TRAINING", f"keep must be 'best' or 'last', got {settings.keep!r}")
+    if settings.plane_blur not in ("select", "schedule"):
+        raise error("CONVERT_TRAINING", f"plane_blur must be 'select' or 'schedule', got {settings.plane_blur!r}")
     net = dp.wrap(torch, model)
     n = len(T["xn"])
     g = torch.Generator(device="cpu").manual_seed(settings.seed)
@@ -354,10 +358,14 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
 
     # the kept state: the best epoch's (its blur) or the last one's
     kept = best.restore(model) if settings.keep == "best" and best.state is not None else settings.epochs - 1
-    # freeze what is stored: blurred planes rounded to float16
     model.eval()
+    footprint = 2.0 * blur_sigma(settings, kept)
+    blur = choose_plane_blur(model, V, val_data, footprint) if settings.plane_blur == "select" else None
+    if blur is not None:
+        footprint = blur["chosen"]
+    # freeze what is stored: blurred planes rounded to float16
     with torch.no_grad():
-        eff = blur_planes(model.planes, blur_sigma(settings, kept)).detach()
+        eff = blur_planes(model.planes, 0.5 * footprint).detach()
         planes16 = eff.permute(0, 2, 3, 1).cpu().numpy().astype(np.float16)  # [3, R(v), R(u), C]
         model.freeze_planes(torch.from_numpy(planes16.astype(np.float32)).permute(0, 3, 1, 2).to(device))
     if not np.isfinite(planes16.astype(np.float32)).all():
@@ -376,8 +384,51 @@ def train(train_data: dict, val_data: dict, domain, settings: TrainSettings, *, 
         model=model, planes=planes16, onnx=onnx_bytes, history=history,
         val={"psnr_db": psnr, "mse": mse_lin, "log_mse": log_mse, "peak": peak, "samples": int(len(pv)), "accuracy": acc,
              "kept_epoch": kept + 1, "epochs": settings.epochs, "keep": settings.keep},
-        onnx_max_abs_diff=diff, seconds=train_s, device=str(device), energy_gain=gain,
+        onnx_max_abs_diff=diff, seconds=train_s, device=str(device), energy_gain=gain, plane_blur=blur,
     )
+
+
+#: blur footprints (texels; Gaussian sigma = footprint / 2) tried on the planes after training, up to R / 4
+#: (spec/bake.md#plane-blur)
+PLANE_BLUR_FOOTPRINTS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0)
+
+
+def choose_plane_blur(model, V: dict, val_data: dict, footprint: float, sigmas: float = 2.0) -> dict | None:
+    """The final blur of the trained planes (spec/bake.md#plane-blur): the schedule's ``footprint`` or a wider one
+    from PLANE_BLUR_FOOTPRINTS, whichever predicts the held-out views with the lowest squared error, where it beats
+    the schedule's by more than ``sigmas`` standard errors (held-out views as the independent units; a wider blur
+    averages away the noise of the training targets that the planes learned, and the held-out references decide
+    whether it also averages away the asset's detail). ``V``: the held-out tensors of ``_tensors``. Returns
+    {"footprints", "mse" (per footprint, linear, against the held-out mean), "schedule", "chosen", "views"}, or None
+    with fewer than 2 held-out views. The model's planes are left as they were."""
+    torch = require_torch()
+    views = val_data.get("view")
+    if views is None or len(np.unique(views)) < 2:
+        return None
+    _, unit = np.unique(np.asarray(views), return_inverse=True)
+    res = int(model.planes.shape[-1])
+    fps = [float(footprint)] + [f for f in PLANE_BLUR_FOOTPRINTS if footprint + 1e-9 < f <= res / 4]
+    y = np.asarray(val_data["rgb"], np.float64)
+    raw = model.planes.detach().clone()
+    per_view = []
+    try:
+        for f in fps:
+            with torch.no_grad():
+                model.planes.copy_(blur_planes(raw, 0.5 * f))
+            p = select_branch(np.maximum(predict(model, V), 0.0), val_data["vis"]).astype(np.float64)
+            per_view.append(np.bincount(unit, ((p - y) ** 2).sum(1)))
+    finally:
+        with torch.no_grad():
+            model.planes.copy_(raw)
+    per_view = np.asarray(per_view)  # [F, views]
+    d = per_view - per_view[0]  # paired by view against the schedule's footprint
+    se = np.sqrt(d.shape[1]) * d.std(1, ddof=1)  # standard error of the summed difference (views independent)
+    better = d.sum(1) + sigmas * se < 0
+    total = per_view.sum(1)
+    chosen = int(np.argmin(np.where(better, total, np.inf))) if better.any() else 0
+    count = y.size
+    return {"footprints": fps, "mse": [float(t / count) for t in total], "schedule": fps[0], "chosen": fps[chosen],
+            "views": int(d.shape[1])}
 
 
 def apply_energy_gain(model, T: dict, train_data: dict) -> dict:
