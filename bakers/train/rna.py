@@ -13,8 +13,9 @@ targets' mean, spec/accuracy.md#loss), only on the output matching the sample's 
 ``loss = "log"`` (the paper's L2 of log(1 + T)) is biased on noisy targets (its minimiser is
 exp(E log(1 + y)) - 1 < E[y]) and kept for ablations; ``"rel"`` is L2 relative to the detached
 prediction (Noise2Noise), also unbiased. Early feature-grid blur: a Gaussian of footprint 4 texels shrinking
-to 1 texel over the first 20 % of epochs, then kept at 1 texel; the exported planes are the
-blurred planes the decoder was trained with. Adam, learning rate halved every 20 % of epochs; then each branch's output
+to 1 texel over the first 20 % of epochs, then kept at 1 texel; the exported planes are the trained planes
+blurred with that footprint or with a wider one where the held-out views show it helps (spec/bake.md#plane-blur).
+Adam, learning rate halved every 20 % of epochs; then each branch's output
 scaled per channel so the decoder keeps its training set's energy (spec/bake.md#energy-gain).
 
 This module is the only place that imports torch; the SDK itself never does.
