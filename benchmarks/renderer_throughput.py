@@ -28,6 +28,9 @@ light at about one box size (near field: light samples at x_o and at every flow 
 camera samples/s (median), onnxruntime calls and network rows per camera sample and the time split
 (trace, onnx, network = the rest of the evaluator: encodings and spline math, other).
 
+The process's heap is set as the ``nasset`` command sets it (``--allocator nasset``, the default:
+nasset_sdk.process.tune_allocator) or left at glibc's defaults (``--allocator default``).
+
 ``--usd SCENE`` (:func:`main_usd`): any scene, e.g. one from ``nasset convert-scene``: the setup's CPU time
 by phase and peak memory (on dense hair the setup, not the render loop, is what a short render waits for),
 then camera samples/s and Embree queries per camera sample of the render loop.
@@ -357,10 +360,17 @@ def main(argv=None) -> int:
     ap.add_argument("--segments", type=int, default=4)
     ap.add_argument("--clock", default="cpu", choices=("cpu", "wall"),
                     help="rates per second of this process's CPU time (steady under other jobs) or of wall time")
+    ap.add_argument("--allocator", default="nasset", choices=("nasset", "default"),
+                    help="the heap settings the `nasset` command runs with (nasset_sdk.process), or glibc's defaults")
     a = ap.parse_args(argv)
     global _clock
     _clock = time.process_time if a.clock == "cpu" else time.perf_counter
     print(f"rates per second of {'CPU time of this process' if a.clock == 'cpu' else 'wall time'}")
+    if a.allocator == "nasset":
+        from nasset_sdk.process import tune_allocator
+
+        tuned = tune_allocator()
+        print("allocator: " + ("the nasset command's heap settings" if tuned else "unchanged (not glibc, or set by the user)"))
     if a.scene == "8dna-near":
         print(f"scene: 8dna '{a.size}' example asset, sphere light in the near field, {a.res}x{a.res} x {a.spp} spp "
               f"(median of {a.repeat} renders per thread setting)")

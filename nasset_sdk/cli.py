@@ -252,5 +252,14 @@ def main(argv: list[str] | None = None) -> int:
         return 1
 
 
+def console_main() -> int:
+    """The ``nasset`` console script: :func:`main` in a process tuned for numpy wavefronts
+    (:func:`nasset_sdk.process.tune_allocator`; in-process callers of :func:`main` keep their own settings)."""
+    from .process import tune_allocator
+
+    tune_allocator()
+    return main()
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console_main())
