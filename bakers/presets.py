@@ -58,6 +58,15 @@ NEUPRESS_MITSUBA_DATA = {
     "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
 }
 
+#: the data-noise rule of neupress bakes (spec/bake.md#data-noise): where the training set's relative noise is above
+#: ``target``, more training views (at most ``max_factor`` x the preset's) bring it down; None: views as the preset.
+#: Measured on the high-albedo pebble and the built-in example (spec/accuracy.md#data-noise)
+NEUPRESS_MITSUBA_DATA_NOISE = {
+    "tiny": None,
+    "small": dict(target=4.5e-6, max_factor=2.0),
+    "hq": None,
+}
+
 #: sampler presets: held-out tuples, Russian-roulette start, depth cap
 EIGHTDNA_MITSUBA_SAMPLER = {
     "tiny": dict(heldout=2048, rr_depth=4, max_depth=256),

@@ -29,7 +29,8 @@ def progress_bar(**kw):
 
 
 def render_views(store, views: int, val_views: int, render_one, *, desc: str, work: Path, quiet: bool,
-                 say: Callable[..., None], workers: int | None = None, cluster: str | None = None) -> dict | None:
+                 say: Callable[..., None], workers: int | None = None, cluster: str | None = None,
+                 say_resume: bool = True) -> dict | None:
     """Render and save every training and held-out view ``store`` lacks.
 
     ``render_one``: ``(split, i) -> dict of arrays``, or a :class:`nasset_bakers.cluster.ViewSource`
@@ -40,7 +41,7 @@ def render_views(store, views: int, val_views: int, render_one, *, desc: str, wo
 
     jobs = [("train", i) for i in range(views)] + [("val", i) for i in range(val_views)]
     todo = [j for j in jobs if not store.has(*j)]
-    if len(todo) < len(jobs):
+    if len(todo) < len(jobs) and say_resume:
         say(f"resuming: {len(jobs) - len(todo)} of {len(jobs)} views already in {work}")
     bar = progress_bar(total=len(jobs), initial=len(jobs) - len(todo), desc=desc, unit="view", disable=quiet)
     try:
@@ -199,6 +200,71 @@ def clamp_removed(train_data: dict) -> dict | None:
     e = np.asarray(train_data["energy"], np.float64)
     r = np.asarray(train_data["clamp_removed"], np.float64)
     return {"fraction": [float(x) for x in r / np.where(e > 0, e, np.nan)], "energy": [float(x) for x in e]}
+
+
+def data_noise(train_samples: int, spp: int, val_data: dict, val_spp: int) -> dict | None:
+    """The relative Monte Carlo noise of a training set (spec/bake.md#data-noise).
+
+    From the held-out views' two independent halves (``rgb_a``, ``rgb_b`` [M, 3], each of ``val_spp // 2`` paths):
+    the variance of one path sample per pixel and channel, sigma^2 = (val_spp // 2) (a - b)^2 / 2, and the
+    path samples' relative variance r = mean sigma^2 / (mean radiance)^2; the training set's ``train_samples``
+    targets of ``spp`` paths then carry ``noise`` = r / (train_samples spp), the relative variance of their
+    mean. None without halves, samples or signal."""
+    if "rgb_a" not in val_data or not len(val_data["rgb_a"]) or train_samples <= 0 or spp <= 0:
+        return None
+    a = np.asarray(val_data["rgb_a"], np.float64)
+    b = np.asarray(val_data["rgb_b"], np.float64)
+    mean = float(np.mean(0.5 * (a + b)))
+    if not (np.isfinite(a).all() and np.isfinite(b).all()) or mean <= 0:
+        return None
+    half = max(1, int(val_spp) // 2)
+    rel = float(np.mean(half * (a - b) ** 2 / 2)) / mean ** 2
+    return {"path_relative_variance": rel, "train_samples": int(train_samples), "spp": int(spp),
+            "noise": rel / (train_samples * spp)}
+
+
+def views_for_noise(views: int, noise: float, target: float, max_factor: float) -> int:
+    """Training views that bring a training set's ``noise`` (:func:`data_noise`, of ``views`` views) down to
+    ``target``, the noise falling as 1 / views: ``views`` where it is already there, at most
+    ``floor(views * max_factor)``."""
+    if not (noise > target > 0) or not math.isfinite(noise):
+        return int(views)
+    return int(min(math.ceil(views * noise / target), math.floor(views * max_factor)))
+
+
+def reach_noise_target(dset, train_data: dict, val_data: dict, rule: dict | None, *, render_more, load_train, say):
+    """The data-noise stage of a bake (spec/bake.md#data-noise), after its views are rendered: measure the training
+    set's :func:`data_noise`; where a ``rule`` {target, max_factor} is given and the noise is above its target,
+    ``render_more(views)`` renders the views up to the count :func:`views_for_noise` asks for and
+    ``load_train(views)`` reads them. Returns (the provenance record or None, the views to train on, train_data)."""
+    noise = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
+    if noise is None:
+        return None, dset.views, train_data
+    noise = {**noise, "views": dset.views, "target": rule["target"] if rule else None, "views_used": dset.views,
+             "noise_used": noise["noise"], "capped": False}
+    more = views_for_noise(dset.views, noise["noise"], rule["target"], rule["max_factor"]) if rule else dset.views
+    if more > dset.views:
+        say(f"data noise {noise['noise']:.2e} above the target {rule['target']:.1e}: {more - dset.views} more training views")
+        render_more(more)
+        train_data = load_train(more)
+        again = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
+        noise.update(views_used=more, noise_used=again["noise"] if again else None,
+                     capped=more >= math.floor(dset.views * rule["max_factor"]))
+    return noise, more, train_data
+
+
+def data_noise_line(noise: dict | None) -> str | None:
+    """``  data noise: ...`` of a bake that measured it (spec/bake.md#data-noise)."""
+    if not noise:
+        return None
+    line = (f"  data noise: {noise['noise']:.2e} at {noise['views']} training views (path samples' relative variance "
+            f"{noise['path_relative_variance']:.0f})")
+    if noise.get("target") is None:
+        return line
+    if noise["views_used"] == noise["views"]:
+        return line + f", within the target {noise['target']:.1e}"
+    capped = ", the most views allowed" if noise["capped"] else ""
+    return line + f" -> {noise['noise_used']:.2e} at {noise['views_used']} views (target {noise['target']:.1e}{capped})"
 
 
 def accuracy_lines(acc: dict | None, label: str = "held-out (unclamped reference)") -> list[str]:

@@ -28,12 +28,14 @@ from nasset_bakers.stages import (
     check_options,
     clamp_lines,
     clamp_removed,
+    data_noise_line,
     dataset_line,
     energy_gain_line,
     finite,
     near_field_line,
     near_field_stage,
     psnr_line,
+    reach_noise_target,
     times_line,
     warnings_said,
     worker_lines,
@@ -43,6 +45,7 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
 DATA_PRESETS = presets.NEUPRESS_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
+DATA_NOISE = presets.NEUPRESS_MITSUBA_DATA_NOISE
 EXAMPLES = ("default", "high-albedo")
 
 
@@ -183,9 +186,20 @@ def bake(
                               say=say, workers=workers, cluster=cluster)
     train_data = nd.load_split(store, "train", dset.views)
     val_data = nd.load_split(store, "val", dset.val_views)
-    times["dataset_s"] = time.perf_counter() - t
     if len(val_data["x"]) == 0 or len(train_data["x"]) == 0:
         raise error("CONVERT_TRAINING", "no samples: no camera ray hit the asset", file=str(scene))
+    # more training views where the targets are too noisy for the network to average out (spec/bake.md#data-noise);
+    # a count given with --views is the user's
+    def render_more(n: int) -> None:
+        nonlocal per_worker
+        per_worker = render_views(store, n, dset.val_views, views_from, desc="render views (data noise)", work=work,
+                                  quiet=quiet, say=say, workers=workers, cluster=cluster, say_resume=False) or per_worker
+
+    noise, train_views, train_data = reach_noise_target(dset, train_data, val_data, DATA_NOISE[size] if views is None else None,
+                                                        render_more=render_more, say=say,
+                                                        load_train=lambda n: nd.load_split(store, "train", n))
+    dset = replace(dset, views=train_views)
+    times["dataset_s"] = time.perf_counter() - t
 
     # -- stage 3: train ---------------------------------------------------------------------------
     t = time.perf_counter()
@@ -195,7 +209,8 @@ def bake(
     tset = NeupressTrainSettings(size=size, seed=seed, device=device, **TRAIN_PRESETS[size])
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
-    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": training_key(tset),
+    data_key = {**meta, "settings": {**meta["settings"], "views": dset.views}}  # the views trained on (data noise)
+    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": data_key, "train": training_key(tset),
                                                       "domain": [list(map(float, d)) for d in domain]})
     send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     app = train_with_progress(
@@ -253,7 +268,8 @@ def bake(
                                      "(spec/bake-neupress.md#data)",
                          "light": {"type": "directional", "irradiance": 1.0, "directions": "uniform full sphere, per pixel"}},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
-                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves"},
+                 "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves",
+                 "noise": noise},
         "training": {**tset.__dict__, "device": app.device, "framework": f"torch {torch.__version__}",
                      "final_loss": app.history[-1]["loss"] if app.history else None,
                      "sampling_kl": samp.kl, "sampling_kl_uniform": samp.kl_uniform, "sampling_kl_best_sigma": samp.kl_best,
@@ -298,6 +314,7 @@ def bake(
         "sdk_val_psnr_db": check["psnr_db"],
         "val_accuracy": app.val.get("accuracy"), "sdk_val_accuracy": check.get("accuracy"),
         "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
+        "data_noise": noise,
         "near_field": near,
         "energy_gain": app.energy_gain,
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
@@ -323,7 +340,7 @@ def _print_summary(s: dict, stream) -> None:
         *accuracy_lines(s.get("sdk_val_accuracy"), "held-out subsurface S (unclamped reference)"),
         psnr_line(s, "held-out display PSNR (subsurface S; 99.5th pct, clipped)"),
         *clamp_lines(s),
-        *filter(None, [energy_gain_line(s.get("energy_gain"))]),
+        *filter(None, [data_noise_line(s.get("data_noise")), energy_gain_line(s.get("energy_gain"))]),
         near_field_line(s["near_field"]),
         f"  sampling lobe KL: {s['sampling_kl_nats']:.3f} nats (uniform {s['sampling_kl_uniform_nats']:.3f}, "
         f"best single sigma per record {s['sampling_kl_best_sigma_nats']:.3f})",
