@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import warnings
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -232,25 +233,30 @@ def views_for_noise(views: int, noise: float, target: float, max_factor: float) 
     return int(min(math.ceil(views * noise / target), math.floor(views * max_factor)))
 
 
-def reach_noise_target(dset, train_data: dict, val_data: dict, rule: dict | None, *, render_more, load_train, say):
+def data_noise_stage(store, dset, train_data: dict, val_data: dict, rule: dict | None, render_one, load_train, *,
+                     work: Path, quiet: bool, say: Callable[..., None], workers: int | None = None,
+                     cluster: str | None = None):
     """The data-noise stage of a bake (spec/bake.md#data-noise), after its views are rendered: measure the training
-    set's :func:`data_noise`; where a ``rule`` {target, max_factor} is given and the noise is above its target,
-    ``render_more(views)`` renders the views up to the count :func:`views_for_noise` asks for and
-    ``load_train(views)`` reads them. Returns (the provenance record or None, the views to train on, train_data)."""
+    set's :func:`data_noise`; where a ``rule`` {target, max_factor} is given and the noise is above its target, render
+    (:func:`render_views` with ``render_one``) the training views up to the count :func:`views_for_noise` asks for and
+    read them (``load_train(views)``). Returns (the provenance record or None, ``dset`` with the views trained on,
+    train_data, the cluster summary of the views added or None)."""
     noise = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
     if noise is None:
-        return None, dset.views, train_data
+        return None, dset, train_data, None
     noise = {**noise, "views": dset.views, "target": rule["target"] if rule else None, "views_used": dset.views,
              "noise_used": noise["noise"], "capped": False}
     more = views_for_noise(dset.views, noise["noise"], rule["target"], rule["max_factor"]) if rule else dset.views
-    if more > dset.views:
-        say(f"data noise {noise['noise']:.2e} above the target {rule['target']:.1e}: {more - dset.views} more training views")
-        render_more(more)
-        train_data = load_train(more)
-        again = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
-        noise.update(views_used=more, noise_used=again["noise"] if again else None,
-                     capped=more >= math.floor(dset.views * rule["max_factor"]))
-    return noise, more, train_data
+    if more <= dset.views:
+        return noise, dset, train_data, None
+    say(f"data noise {noise['noise']:.2e} above the target {rule['target']:.1e}: {more - dset.views} more training views")
+    summary = render_views(store, more, dset.val_views, render_one, desc="render views (data noise)", work=work, quiet=quiet,
+                           say=say, workers=workers, cluster=cluster, say_resume=False)
+    train_data = load_train(more)
+    again = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
+    noise.update(views_used=more, noise_used=again["noise"] if again else None,
+                 capped=more >= math.floor(dset.views * rule["max_factor"]))
+    return noise, replace(dset, views=more), train_data, summary
 
 
 def data_noise_line(noise: dict | None) -> str | None:

@@ -29,13 +29,13 @@ from nasset_bakers.stages import (
     clamp_lines,
     clamp_removed,
     data_noise_line,
+    data_noise_stage,
     dataset_line,
     energy_gain_line,
     finite,
     near_field_line,
     near_field_stage,
     psnr_line,
-    reach_noise_target,
     times_line,
     warnings_said,
     worker_lines,
@@ -190,15 +190,10 @@ def bake(
         raise error("CONVERT_TRAINING", "no samples: no camera ray hit the asset", file=str(scene))
     # more training views where the targets are too noisy for the network to average out (spec/bake.md#data-noise);
     # a count given with --views is the user's
-    def render_more(n: int) -> None:
-        nonlocal per_worker
-        per_worker = render_views(store, n, dset.val_views, views_from, desc="render views (data noise)", work=work,
-                                  quiet=quiet, say=say, workers=workers, cluster=cluster, say_resume=False) or per_worker
-
-    noise, train_views, train_data = reach_noise_target(dset, train_data, val_data, DATA_NOISE[size] if views is None else None,
-                                                        render_more=render_more, say=say,
-                                                        load_train=lambda n: nd.load_split(store, "train", n))
-    dset = replace(dset, views=train_views)
+    noise, dset, train_data, more = data_noise_stage(store, dset, train_data, val_data, DATA_NOISE[size] if views is None else None,
+                                                     views_from, lambda n: nd.load_split(store, "train", n), work=work, quiet=quiet, say=say,
+                                                     workers=workers, cluster=cluster)
+    per_worker = more or per_worker
     times["dataset_s"] = time.perf_counter() - t
 
     # -- stage 3: train ---------------------------------------------------------------------------

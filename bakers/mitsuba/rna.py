@@ -25,6 +25,8 @@ from nasset_bakers.stages import (
     check_options,
     clamp_lines,
     clamp_removed,
+    data_noise_line,
+    data_noise_stage,
     dataset_line,
     energy_gain_line,
     finite,
@@ -42,6 +44,7 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
 DATA_PRESETS = presets.RNA_MITSUBA_DATA  # the table lives in nasset_bakers/presets.py
+DATA_NOISE = presets.RNA_MITSUBA_DATA_NOISE
 
 
 #: default angular radius (deg) of the distant light for assets behind smooth dielectrics: measured
@@ -189,9 +192,16 @@ def bake(
                               say=say, workers=workers, cluster=cluster)
     train_data = store.load_split("train", dset.views)
     val_data = store.load_split("val", dset.val_views)
-    times["dataset_s"] = time.perf_counter() - t
     if len(val_data["x"]) == 0:
         raise error("CONVERT_TRAINING", "no validation samples: no validation camera ray hit the asset")
+
+    # more training views where the targets are too noisy for the network to average out (spec/bake.md#data-noise);
+    # a count given with --views is the user's
+    noise, dset, train_data, more = data_noise_stage(store, dset, train_data, val_data, DATA_NOISE[size] if views is None else None,
+                                                     views_from, lambda n: store.load_split("train", n), work=work, quiet=quiet, say=say,
+                                                     workers=workers, cluster=cluster)
+    per_worker = more or per_worker
+    times["dataset_s"] = time.perf_counter() - t
 
     # -- stage 3: train ---------------------------------------------------------------------------
     t = time.perf_counter()
@@ -204,7 +214,8 @@ def bake(
         tset = replace(tset, epochs=int(epochs))
     if loss is not None:
         tset = replace(tset, loss=str(loss))
-    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": meta, "train": training_key(tset),
+    data_key = {**meta, "settings": {**meta["settings"], "views": dset.views}}  # the views trained on (data noise)
+    ckpt = TorchCheckpoint(work / "train_state.pt", {"data": data_key, "train": training_key(tset),
                                                       "domain": [list(map(float, d)) for d in domain]})
     send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt)
     result = train_with_progress(
@@ -228,7 +239,7 @@ def bake(
                   "angular_radius_deg": dset.light_angle_deg, "irradiance": 1.0},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
                  "clamp_removed": clamp_removed(train_data), "reference": "held-out views unclamped, two independent halves",
-                 **_mask_statistics(train_data)},
+                 "noise": noise, **_mask_statistics(train_data)},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None, "energy_gain": result.energy_gain,
                      "plane_blur_selection": result.plane_blur},
@@ -267,7 +278,7 @@ def bake(
         **{k: result.val.get(k) for k in ("kept_epoch", "epochs", "keep")},
         "val_accuracy": result.val.get("accuracy"),
         "sdk_val_accuracy": check.get("accuracy"),
-        "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"],
+        "clamp": dset.clamp, "clamp_removed": prov["data"]["clamp_removed"], "data_noise": noise,
         "near_field": near,
         "sdk_val_psnr_db": check["psnr_db"],
         "sdk_vs_torch_max_abs": check["max_abs_diff"],
@@ -292,7 +303,8 @@ def _print_summary(s: dict, stream) -> None:
            "covered training pixels"] if s.get("mask_disagreement") is not None else []),
         *accuracy_lines(s.get("sdk_val_accuracy")),
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
-        *filter(None, [plane_blur_line(s.get("plane_blur")), energy_gain_line(s.get("energy_gain"))]),
+        *filter(None, [data_noise_line(s.get("data_noise")), plane_blur_line(s.get("plane_blur")),
+                       energy_gain_line(s.get("energy_gain"))]),
         *clamp_lines(s),
         near_field_line(s["near_field"]),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",

@@ -64,19 +64,24 @@ def test_summary_line():
     assert data_noise_line(None) is None
 
 
-def test_neupress_bake_renders_the_views_the_noise_asks_for(tmp_path, monkeypatch):
-    """A tiny bake with a target no dataset meets: 1.5x the preset's views, recorded; a bake with --views keeps its
-    count; resuming the first folder renders nothing new."""
+@pytest.mark.parametrize("kind", ["neupress", "rna"])
+def test_bake_renders_the_views_the_noise_asks_for(kind, tmp_path, monkeypatch):
+    """A tiny Mitsuba bake with a target no dataset meets: 1.5x the preset's views, recorded; a bake with --views keeps
+    its count; resuming the first folder renders nothing new."""
     pytest.importorskip("mitsuba")
     pytest.importorskip("torch")
+    import importlib
+
     from nasset_bakers import presets
-    from nasset_bakers.mitsuba.neupress import bake
     from nasset_sdk.asset import Asset
     from tests.bakers.bake_counting import count_rendered_views
 
-    monkeypatch.setitem(presets.NEUPRESS_MITSUBA_DATA_NOISE, "tiny", dict(target=1e-12, max_factor=1.5))
-    views = presets.NEUPRESS_MITSUBA_DATA["tiny"]["views"]
-    s = bake(None, None, tmp_path / "a.usdc", size="tiny", example="default", quiet=True, near_field_fetch=0.0)
+    bake = importlib.import_module(f"nasset_bakers.mitsuba.{kind}").bake
+    rules = {"neupress": presets.NEUPRESS_MITSUBA_DATA_NOISE, "rna": presets.RNA_MITSUBA_DATA_NOISE}[kind]
+    monkeypatch.setitem(rules, "tiny", dict(target=1e-12, max_factor=1.5))
+    views = {"neupress": presets.NEUPRESS_MITSUBA_DATA, "rna": presets.RNA_MITSUBA_DATA}[kind]["tiny"]["views"]
+    opts = dict(size="tiny", example="default", quiet=True, near_field_fetch=0.0)
+    s = bake(None, None, tmp_path / "a.usdc", **opts)
     noise = s["data_noise"]
     assert noise["views"] == views and noise["views_used"] == math.floor(1.5 * views) == s["views"] and noise["capped"]
     assert noise["noise_used"] < noise["noise"] and noise["target"] == 1e-12
@@ -84,10 +89,8 @@ def test_neupress_bake_renders_the_views_the_noise_asks_for(tmp_path, monkeypatc
     assert Asset.open(s["asset"], load="none").provenance["data"]["noise"] == noise
 
     rendered = count_rendered_views(monkeypatch)
-    again = bake(None, None, tmp_path / "b.usdc", size="tiny", example="default", quiet=True, near_field_fetch=0.0,
-                 resume=s["dataset_dir"])
+    again = bake(None, None, tmp_path / "b.usdc", resume=s["dataset_dir"], **opts)
     assert rendered == [] and again["data_noise"] == noise and again["train_samples"] == s["train_samples"]
 
-    fixed = bake(None, None, tmp_path / "c.usdc", size="tiny", example="default", quiet=True, near_field_fetch=0.0,
-                 views=views)
+    fixed = bake(None, None, tmp_path / "c.usdc", views=views, **opts)
     assert fixed["views"] == views and fixed["data_noise"]["target"] is None and fixed["data_noise"]["views_used"] == views
