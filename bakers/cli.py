@@ -21,7 +21,7 @@ def add_args(p) -> None:
                         "8dna: default, heterogeneous)")
     p.add_argument("--resume", default=None, metavar="DIR", help="dataset folder to continue (default OUTPUT.bake)")
     p.add_argument("--views", type=int, default=None,
-                   help="training views, fixed (without it a Mitsuba rna or neupress bake adds views where its data is too noisy, "
+                   help="training views, fixed (without it an rna or neupress bake adds views where its data is too noisy, "
                         "spec/bake.md#data-noise); held-out views: views/8 (rna), /16 (neupress), /12 (Blender)")
     p.add_argument("--res", type=int, default=None, help="image resolution per view")
     p.add_argument("--epochs", type=int, default=None)

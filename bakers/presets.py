@@ -58,11 +58,12 @@ NEUPRESS_MITSUBA_DATA = {
     "hq": dict(views=400, val_views=16, res=128, spp=64, val_res=96, val_spp=4096),
 }
 
-#: the data-noise rule of Mitsuba rna and neupress bakes (spec/bake.md#data-noise): where the training set's relative
+#: the data-noise rule of rna and neupress bakes (spec/bake.md#data-noise): where the training set's relative
 #: noise is above ``target``, more training views (at most ``max_factor`` x the preset's) bring it down; None: views as
 #: the preset. Measured on the high-albedo pebble and the built-in examples (spec/accuracy.md#data-noise)
 DATA_NOISE_SMALL = dict(target=4.5e-6, max_factor=2.0)
 RNA_MITSUBA_DATA_NOISE = {"tiny": None, "small": DATA_NOISE_SMALL, "hq": None}
+RNA_BLENDER_DATA_NOISE = {"tiny": None, "small": DATA_NOISE_SMALL, "hq": None}
 NEUPRESS_MITSUBA_DATA_NOISE = {"tiny": None, "small": DATA_NOISE_SMALL, "hq": None}
 
 #: sampler presets: held-out tuples, Russian-roulette start, depth cap

@@ -31,6 +31,8 @@ from nasset_bakers.registry import register_baker
 from nasset_bakers.stages import (
     accuracy_lines,
     check_geometry_scale,
+    data_noise_line,
+    data_noise_stage,
     dataset_line,
     energy_gain_line,
     plane_blur_line,
@@ -43,6 +45,7 @@ from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
 DATA_PRESETS = presets.RNA_BLENDER_DATA  # the table lives in nasset_bakers/presets.py
+DATA_NOISE = presets.RNA_BLENDER_DATA_NOISE
 DEFAULT_LIGHT_ANGLE = 0.5
 
 
@@ -137,18 +140,25 @@ def bake(
     store = ds.DatasetDir(work)
     meta = ds.settings_digest(source_key, asset_ids, variant, dset)
     store.prepare(meta)
+    job = {"fiber": variant == "fiber", "h_input": h_input}
     try:
         per_worker = render_views(store, dset.views, dset.val_views, views_from, desc="cycles views", work=work,
                                   quiet=quiet, say=say, workers=workers, cluster=cluster)
+        train_data = _load_split(store, "train", dset.views, job)
+        val_data = _load_split(store, "val", dset.val_views, job)
+        if len(val_data["x"]) == 0:
+            raise error("CONVERT_TRAINING", "no validation samples: no held-out camera ray hit the asset", file=scene_label)
+        # more training views where the targets are too noisy for the network to average out (spec/bake.md#data-noise);
+        # a count given with --views is the user's
+        noise, dset, train_data, more = data_noise_stage(store, dset, train_data, val_data,
+                                                         DATA_NOISE[size] if views is None else None, views_from,
+                                                         lambda n: _load_split(store, "train", n, job), work=work,
+                                                         quiet=quiet, say=say, workers=workers, cluster=cluster)
+        per_worker = more or per_worker
     finally:
         if workers is None:
             views_from.close()
-    job = {"fiber": variant == "fiber", "h_input": h_input}
-    train_data = _load_split(store, "train", dset.views, job)
-    val_data = _load_split(store, "val", dset.val_views, job)
     times["dataset_s"] = time.perf_counter() - t
-    if len(val_data["x"]) == 0:
-        raise error("CONVERT_TRAINING", "no validation samples: no held-out camera ray hit the asset", file=scene_label)
     disagree = (train_data["disagree"] + val_data["disagree"]) / max(1, train_data["covered"] + val_data["covered"])
 
     # -- stage 3: train ---------------------------------------------------------------------------
@@ -159,8 +169,9 @@ def bake(
     tset = TrainSettings(size=size, seed=seed, device=device, **train_fields)
     if epochs is not None:
         tset = replace(tset, epochs=int(epochs))
+    data_key = {**meta, "settings": {**meta["settings"], "views": dset.views}}  # the views trained on (data noise)
     ckpt = TorchCheckpoint(work / ("train_state.pt" if h_input else "train_state_no_h.pt"),
-                           {"data": meta, "train": training_key(tset), "h_input": h_input,
+                           {"data": data_key, "train": training_key(tset), "h_input": h_input,
                             "domain": [list(map(float, d)) for d in domain]})
     send_job(dp, work=work, views=dset.views, val_views=dset.val_views, domain=domain, settings=tset, checkpoint=ckpt, **job)
     result = train_with_progress(
@@ -185,7 +196,7 @@ def bake(
                   "clamp_direct": dset.clamp_direct, "clamp_indirect": dset.clamp_indirect,
                   "clamp_removed": None if (dset.clamp_direct or dset.clamp_indirect) else 0.0},
         "data": {**dset.__dict__, "train_samples": int(len(train_data["x"])), "val_samples": int(len(val_data["x"])),
-                 "mask_disagreement": disagree, "h_input": h_input},
+                 "mask_disagreement": disagree, "h_input": h_input, "noise": noise},
         "training": {**tset.__dict__, "device": result.device, "framework": f"torch {require_torch().__version__}",
                      "final_loss": result.history[-1]["loss"] if result.history else None, "energy_gain": result.energy_gain,
                      "plane_blur_selection": result.plane_blur},
@@ -215,6 +226,7 @@ def bake(
         "sdk_vs_torch_max_abs": check["max_abs_diff"], "onnx_vs_torch_max_abs": result.onnx_max_abs_diff,
         "energy_gain": result.energy_gain,
         "plane_blur": result.plane_blur,
+        "data_noise": noise,
         "times_s": {k: round(v, 2) for k, v in times.items()},
         "workers": per_worker,
     }
@@ -241,7 +253,8 @@ def _print_summary(s: dict, stream) -> None:
         dataset_line(s) + f" (mask disagreement {s['mask_disagreement']:.2%}; kept in {s['dataset_dir']})",
         *accuracy_lines(s.get("sdk_val_accuracy")),
         psnr_line(s, "held-out display PSNR (99.5th pct, clipped)"),
-        *filter(None, [plane_blur_line(s.get("plane_blur")), energy_gain_line(s.get("energy_gain"))]),
+        *filter(None, [data_noise_line(s.get("data_noise")), plane_blur_line(s.get("plane_blur")),
+                       energy_gain_line(s.get("energy_gain"))]),
         f"  parity: SDK vs torch max |diff| {s['sdk_vs_torch_max_abs']:.2e}; ONNX vs torch {s['onnx_vs_torch_max_abs']:.2e}",
         times_line(t),
         *worker_lines(s.get("workers")),

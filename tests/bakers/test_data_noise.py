@@ -64,29 +64,39 @@ def test_summary_line():
     assert data_noise_line(None) is None
 
 
-@pytest.mark.parametrize("kind", ["neupress", "rna"])
+BAKERS = {  # kind -> (baker module, example, data presets, data-noise rules, resume and --views checked too)
+    "neupress": ("nasset_bakers.mitsuba.neupress", "default", "NEUPRESS_MITSUBA_DATA", "NEUPRESS_MITSUBA_DATA_NOISE", True),
+    "rna": ("nasset_bakers.mitsuba.rna", "default", "RNA_MITSUBA_DATA", "RNA_MITSUBA_DATA_NOISE", True),
+    "blender": ("nasset_bakers.blender.rna", "blender-surface", "RNA_BLENDER_DATA", "RNA_BLENDER_DATA_NOISE", False),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAKERS))
 def test_bake_renders_the_views_the_noise_asks_for(kind, tmp_path, monkeypatch):
-    """A tiny Mitsuba bake with a target no dataset meets: 1.5x the preset's views, recorded; a bake with --views keeps
-    its count; resuming the first folder renders nothing new."""
-    pytest.importorskip("mitsuba")
+    """A tiny bake with a target no dataset meets: 1.5x the preset's views, recorded; a bake with --views keeps its
+    count; resuming the first folder renders nothing new (the last two shared by the bakers: checked on Mitsuba's)."""
     pytest.importorskip("torch")
+    pytest.importorskip("bpy" if kind == "blender" else "mitsuba")
     import importlib
 
     from nasset_bakers import presets
     from nasset_sdk.asset import Asset
     from tests.bakers.bake_counting import count_rendered_views
 
-    bake = importlib.import_module(f"nasset_bakers.mitsuba.{kind}").bake
-    rules = {"neupress": presets.NEUPRESS_MITSUBA_DATA_NOISE, "rna": presets.RNA_MITSUBA_DATA_NOISE}[kind]
-    monkeypatch.setitem(rules, "tiny", dict(target=1e-12, max_factor=1.5))
-    views = {"neupress": presets.NEUPRESS_MITSUBA_DATA, "rna": presets.RNA_MITSUBA_DATA}[kind]["tiny"]["views"]
-    opts = dict(size="tiny", example="default", quiet=True, near_field_fetch=0.0)
+    module, example, data, rules, full = BAKERS[kind]
+    bake = importlib.import_module(module).bake
+    monkeypatch.setitem(getattr(presets, rules), "tiny", dict(target=1e-12, max_factor=1.5))
+    views = getattr(presets, data)["tiny"]["views"]
+    # Cycles views at 16^2 and 4 spp: the rule reads whatever noise there is
+    opts = dict(size="tiny", example=example, quiet=True) | (dict(res=16, spp=4) if kind == "blender" else dict(near_field_fetch=0.0))
     s = bake(None, None, tmp_path / "a.usdc", **opts)
     noise = s["data_noise"]
     assert noise["views"] == views and noise["views_used"] == math.floor(1.5 * views) == s["views"] and noise["capped"]
     assert noise["noise_used"] < noise["noise"] and noise["target"] == 1e-12
     assert len(list((tmp_path / "a.usdc.bake" / "train").glob("*.npz"))) == noise["views_used"]
     assert Asset.open(s["asset"], load="none").provenance["data"]["noise"] == noise
+    if not full:
+        return
 
     rendered = count_rendered_views(monkeypatch)
     again = bake(None, None, tmp_path / "b.usdc", resume=s["dataset_dir"], **opts)
