@@ -253,8 +253,7 @@ def data_noise_stage(store, dset, train_data: dict, val_data: dict, rule: dict |
     summary = render_views(store, more, dset.val_views, render_one, desc="render views (data noise)", work=work, quiet=quiet,
                            say=say, workers=workers, cluster=cluster, say_resume=False)
     train_data = load_train(more)
-    again = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
-    noise.update(views_used=more, noise_used=again["noise"] if again else None,
+    noise.update(views_used=more, noise_used=noise["path_relative_variance"] / (len(train_data["x"]) * dset.spp),
                  capped=more >= math.floor(dset.views * rule["max_factor"]))
     return noise, replace(dset, views=more), train_data, summary
 

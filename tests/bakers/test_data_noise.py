@@ -1,5 +1,5 @@
 """The data-noise rule of bakes (spec/bake.md#data-noise): the training set's relative noise measured from the held-out
-halves, the views it asks for, and a neupress bake that renders them."""
+halves, the views it asks for, and the bakes (Mitsuba rna and neupress, Blender rna) that render them."""
 
 from __future__ import annotations
 
