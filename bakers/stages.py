@@ -203,7 +203,7 @@ def clamp_removed(train_data: dict) -> dict | None:
     return {"fraction": [float(x) for x in r / np.where(e > 0, e, np.nan)], "energy": [float(x) for x in e]}
 
 
-def data_noise(train_samples: int, spp: int, val_data: dict, val_spp: int) -> dict | None:
+def data_noise(train_samples: int, spp: float, val_data: dict, val_spp: int) -> dict | None:
     """The relative Monte Carlo noise of a training set (spec/bake.md#data-noise).
 
     From the held-out views' two independent halves (``rgb_a``, ``rgb_b`` [M, 3], each of ``val_spp // 2`` paths):
@@ -220,7 +220,7 @@ def data_noise(train_samples: int, spp: int, val_data: dict, val_spp: int) -> di
         return None
     half = max(1, int(val_spp) // 2)
     rel = float(np.mean(half * (a - b) ** 2 / 2)) / mean ** 2
-    return {"path_relative_variance": rel, "train_samples": int(train_samples), "spp": int(spp),
+    return {"path_relative_variance": rel, "train_samples": int(train_samples), "spp": float(spp),
             "noise": rel / (train_samples * spp)}
 
 
@@ -241,7 +241,8 @@ def data_noise_stage(store, dset, train_data: dict, val_data: dict, rule: dict |
     (:func:`render_views` with ``render_one``) the training views up to the count :func:`views_for_noise` asks for and
     read them (``load_train(views)``). Returns (the provenance record or None, ``dset`` with the views trained on,
     train_data, the cluster summary of the views added or None)."""
-    noise = data_noise(len(train_data["x"]), dset.spp, val_data, dset.val_spp)
+    spp = getattr(dset, "spp_per_target", dset.spp)  # several suns per render: each target gets a share of the paths
+    noise = data_noise(len(train_data["x"]), spp, val_data, dset.val_spp)
     if noise is None:
         return None, dset, train_data, None
     noise = {**noise, "views": dset.views, "target": rule["target"] if rule else None, "views_used": dset.views,
@@ -253,7 +254,7 @@ def data_noise_stage(store, dset, train_data: dict, val_data: dict, rule: dict |
     summary = render_views(store, more, dset.val_views, render_one, desc="render views (data noise)", work=work, quiet=quiet,
                            say=say, workers=workers, cluster=cluster, say_resume=False)
     train_data = load_train(more)
-    noise.update(views_used=more, noise_used=noise["path_relative_variance"] / (len(train_data["x"]) * dset.spp),
+    noise.update(views_used=more, noise_used=noise["path_relative_variance"] / (len(train_data["x"]) * spp),
                  capped=more >= math.floor(dset.views * rule["max_factor"]))
     return noise, replace(dset, views=more), train_data, summary
 

@@ -52,7 +52,7 @@ DEFAULT_LIGHT_ANGLE = 0.5
 def bake(
     scene, asset_ids, output, *, size: str = "small", example: str | None = None, resume=None, views=None, res=None,
     epochs=None, spp=None, light_angle=None, seed: int = 0, device: str = "auto", quiet: bool = False,
-    summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int = 1, clamp: float | None = None,
+    summary_stream=None, h_input: bool = True, threads: int = 0, lights_per_view: int | None = None, clamp: float | None = None,
     workers: int | None = None, cluster: str | None = None, **_ignored,
 ) -> dict:
     """Run the whole bake; returns the summary dict (also stored in the asset's provenance).
@@ -71,6 +71,9 @@ def bake(
     check_workers(workers, cluster)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
+    if lights_per_view is not None and (isinstance(lights_per_view, bool) or not isinstance(lights_per_view, int)
+                                        or lights_per_view < 1):
+        raise UsageError(f"lights_per_view must be an integer >= 1, got {lights_per_view!r}")
     if example is not None and scene is not None:
         raise UsageError("give a .blend scene or --example, not both")
     dp = data_parallel(require_torch(), device)  # under torchrun: this process's rank (spec/bake.md#training-devices)
@@ -121,8 +124,8 @@ def bake(
         dset = replace(dset, res=int(res))
     if spp is not None:
         dset = replace(dset, spp=int(spp))
-    if lights_per_view != 1:
-        dset = replace(dset, lights_per_view=int(lights_per_view))
+    if lights_per_view is not None:  # suns per training view (spec/bake-blender.md#light-groups); None: the preset's
+        dset = replace(dset, lights_per_view=lights_per_view)
     if clamp is not None:
         if not clamp >= 0:
             raise UsageError(f"clamp must be >= 0 (0: none), got {clamp}")

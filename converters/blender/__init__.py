@@ -12,7 +12,8 @@ import numpy as np
 
 from nasset_sdk.errors import error
 
-CONVERTER_VERSION = "0.3"  # 0.2: held-out views unclamped, in two halves; 0.3: training views unclamped by default
+CONVERTER_VERSION = "0.4"  # 0.2: held-out views unclamped, in two halves; 0.3: training views unclamped by default;
+#                            0.4: several suns of a view in Cycles light groups (one render, every pixel a sample per sun)
 
 #: Blender world (+Z up) -> asset / USD space (+Y up), column-vector form p_usd = R @ p_blender
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])

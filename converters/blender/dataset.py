@@ -2,9 +2,10 @@
 
 Per view: a square pinhole camera on a sphere of ``distance`` bounding radii around the asset
 looks at its centre; a sun lamp of angular radius ``light_angle_deg`` (Blender ``angle`` = twice
-that) and irradiance 1 W/m^2 shines from a random direction wi (one per view: Cycles has no
-per-pixel light, spec/bake-blender.md#deviations; ``lights_per_view = k`` renders a training view
-k times at spp // k with k suns and gives random pixel groups their own). The asset is rendered alone (every other object
+that) and irradiance 1 W/m^2 shines from a random direction wi (Cycles has no per-pixel light,
+spec/bake-blender.md#deviations). ``lights_per_view = k`` puts k suns in a training view, each in its own Cycles
+light group, so one render gives every pixel k samples, one per sun (spec/bake-blender.md#light-groups); held-out
+views have one sun. The asset is rendered alone (every other object
 hidden, black world, transparent film) by Cycles on the CPU with a 0.01-pixel filter, so each
 pixel is point-sampled at its centre, unclamped (Cycles' sample clamps off by default; ``--clamp C`` sets both) for training
 views; held-out views are unclamped, rendered as two independent halves (``rgb_a``, ``rgb_b``; the
@@ -58,7 +59,13 @@ class DataSettings:
     max_bounces: int = 32
     alpha_min: float = 0.99
     seed: int = 0
-    lights_per_view: int = 1  # k > 1: training views rendered k times (one sun each, spp // k samples), pixels split in k random groups
+    lights_per_view: int = 1  # k suns per training view, each its own light group: k samples per pixel from one render
+
+    @property
+    def spp_per_target(self) -> float:
+        """The paths behind one training target: k suns share a render's spp (each path's light sample picks one sun),
+        so each sun's target is about as noisy as a one-sun render of spp / k (spec/bake-blender.md#light-groups)."""
+        return self.spp / max(1, int(self.lights_per_view))
 
 
 class CyclesRig:
@@ -76,21 +83,18 @@ class CyclesRig:
         self.cam = bpy.data.objects.new("nasset_camera", cam)
         sc.collection.objects.link(self.cam)
         sc.camera = self.cam
-        sun = bpy.data.lights.new("nasset_sun", "SUN")
-        sun.energy = 1.0  # irradiance, W/m^2
-        sun.angle = math.radians(2.0 * settings.light_angle_deg)
-        self.sun = bpy.data.objects.new("nasset_sun", sun)
-        sc.collection.objects.link(self.sun)
+        self.layer = bpy.context.view_layer
+        self.suns: list = []  # sun i lights the layer's light group LIGHT_GROUP.format(i)
         self.cam.hide_render = False
-        self.sun.hide_render = False
         r = sc.render
         r.engine = "CYCLES"
         r.film_transparent = True
         r.resolution_percentage = 100
         r.use_persistent_data = True
-        r.image_settings.file_format = "OPEN_EXR"
+        r.use_single_layer = True  # the active view layer only: one Combined pass and its light groups
+        r.image_settings.media_type = "MULTI_LAYER_IMAGE"
+        r.image_settings.file_format = "OPEN_EXR_MULTILAYER"
         r.image_settings.color_depth = "32"
-        r.image_settings.color_mode = "RGBA"
         if threads:
             r.threads_mode = "FIXED"
             r.threads = int(threads)
@@ -127,15 +131,32 @@ class CyclesRig:
         self.cam.data.angle = 2.0 * half_fov
         self.scene.render.resolution_x = self.scene.render.resolution_y = int(res)
 
-    def place_sun(self, wi) -> None:
-        """The sun shines from direction wi (asset space, unit, towards the light)."""
+    def place_suns(self, wis) -> None:
+        """Suns shining from directions ``wis`` [k, 3] (asset space, unit, towards the light), sun i in light group i;
+        suns beyond k are switched off."""
         from mathutils import Vector
 
-        z = Vector(to_z_up(np.asarray(wi, np.float64)[None])[0].tolist())
-        self.sun.rotation_euler = z.to_track_quat("Z", "Y").to_euler()
+        bpy = self.bpy
+        wis = np.asarray(wis, np.float64).reshape(-1, 3)
+        while len(self.suns) < len(wis):
+            i = len(self.suns)
+            sun = bpy.data.lights.new(f"nasset_sun_{i}", "SUN")
+            sun.energy = 1.0  # irradiance, W/m^2
+            sun.angle = math.radians(2.0 * self.s.light_angle_deg)
+            ob = bpy.data.objects.new(f"nasset_sun_{i}", sun)
+            self.scene.collection.objects.link(ob)
+            group = self.layer.lightgroups.add()
+            group.name = ob.lightgroup = LIGHT_GROUP.format(i)
+            self.suns.append(ob)
+        for i, ob in enumerate(self.suns):
+            ob.hide_render = i >= len(wis)
+            if i < len(wis):
+                z = Vector(to_z_up(wis[i][None])[0].tolist())
+                ob.rotation_euler = z.to_track_quat("Z", "Y").to_euler()
 
-    def render(self, spp: int, seed: int) -> np.ndarray:
-        """RGBA [res, res, 4] float32, row 0 at the top."""
+    def render(self, spp: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """(RGBA [res, res, 4], the light groups' RGB [k, res, res, 3]) float32 for the k suns placed, row 0 at the
+        top: every light reaching the film, and each sun's own share of it."""
         import OpenEXR
 
         sc = self.scene
@@ -146,17 +167,35 @@ class CyclesRig:
         with quiet_stdout():
             self.bpy.ops.render.render(write_still=True)
         with OpenEXR.File(str(path)) as f:
-            ch = f.parts[0].channels
-            img = np.asarray(ch["RGBA"].pixels, np.float32) if "RGBA" in ch else np.stack(
-                [np.asarray(ch[k].pixels, np.float32) for k in ("R", "G", "B", "A")], -1)
+            passes = {p.name().rsplit(".", 1)[-1]: p.channels for p in f.parts}
+            k = sum(not ob.hide_render for ob in self.suns)
+            try:
+                rgba = _pixels(passes["Combined"], 4)
+                groups = np.stack([_pixels(passes["Combined_" + LIGHT_GROUP.format(i)], 3) for i in range(k)])
+            except KeyError as exc:
+                raise error("CONVERT_BACKEND", f"Cycles wrote no {exc.args[0]} pass (passes: {', '.join(passes)})",
+                            file=str(path)) from None
         os.remove(path)
-        return np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
+        return (np.nan_to_num(rgba, nan=0.0, posinf=0.0, neginf=0.0),
+                np.nan_to_num(groups, nan=0.0, posinf=0.0, neginf=0.0))
 
     def close(self) -> None:
         try:
             os.rmdir(self.tmp)
         except OSError:
             pass
+
+
+#: the light group of sun i (``CyclesRig.place_suns``)
+LIGHT_GROUP = "nasset_sun_{}"
+
+
+def _pixels(channels: dict, n: int) -> np.ndarray:
+    """One pass of an OpenEXR part as [h, w, n] float32 (one interleaved channel, or one per letter)."""
+    if len(channels) == 1:
+        return np.asarray(next(iter(channels.values())).pixels, np.float32)[..., :n]
+    names = sorted(channels, key=lambda c: "RGBA".find(c.rsplit(".", 1)[-1]))
+    return np.stack([np.asarray(channels[c].pixels, np.float32) for c in names[:n]], -1)
 
 
 def view_camera(s: DataSettings, center, radius: float, view_id: int, validation: bool):
@@ -175,11 +214,11 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
     rng, eye, half_fov, res = view_camera(s, center, radius, view_id, validation)
     o, d = camera_rays(eye, np.asarray(center, np.float64), half_fov, res)
     hit = caster.hits(o, d)
-    wi = unit_sphere(rng, 1, s.upper_hemisphere)[0]
-    rig.place_camera(eye, center, half_fov, res)
-    rig.place_sun(wi)
-    spp = s.val_spp if validation else s.spp
     k = 1 if validation else max(1, int(s.lights_per_view))
+    wis = unit_sphere(rng, k, s.upper_hemisphere)  # k = 1 draws what one sun per view always drew
+    rig.place_camera(eye, center, half_fov, res)
+    rig.place_suns(wis)
+    spp = s.val_spp if validation else s.spp
     vseed = hash((s.seed, int(validation), view_id)) & 0xFFFFFF
     halves = None
     if validation:  # held-out: unclamped, two independent halves (spec/accuracy.md#metrics)
@@ -187,37 +226,38 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
         saved = (c.sample_clamp_direct, c.sample_clamp_indirect)
         c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
         try:
-            halves = [rig.render(max(1, spp // 2), seed=hs).reshape(-1, 4) for hs in (vseed, vseed ^ 0x800000)]
+            halves = [rig.render(max(1, spp // 2), seed=hs) for hs in (vseed, vseed ^ 0x800000)]
         finally:
             c.sample_clamp_direct, c.sample_clamp_indirect = saved
-        rgba = 0.5 * (halves[0] + halves[1])
+        rgba = 0.5 * (halves[0][0] + halves[1][0])
+        suns = 0.5 * (halves[0][1] + halves[1][1])
     else:
-        rgba = rig.render(spp if k == 1 else max(1, spp // k), seed=vseed).reshape(-1, 4)
-    wi_pix = np.repeat(wi[None], len(o), 0)
-    if k > 1:  # more light directions at the same sample budget: pixel group g takes render g's values
-        group = rng.integers(0, k, len(o))
-        for g in range(1, k):
-            wg = unit_sphere(rng, 1, s.upper_hemisphere)[0]
-            rig.place_sun(wg)
-            sel = group == g
-            rgba[sel] = rig.render(max(1, spp // k), seed=hash((s.seed, int(validation), view_id, g)) & 0xFFFFFF).reshape(-1, 4)[sel]
-            wi_pix[sel] = wg
+        rgba, suns = rig.render(spp, seed=vseed)
+    rgba = rgba.reshape(-1, 4)
     alpha = rgba[:, 3]
     sel, disagree, covered = agree(hit, len(o), alpha >= s.alpha_min, alpha > 0.5)
     pix = sel["pix"]
-    vis = caster.visibility(sel, wi_pix[pix])
-    rgb = rgba[pix, :3] / np.maximum(alpha[pix], 1e-6)[:, None]
+    inv_alpha = 1.0 / np.maximum(alpha[pix], 1e-6)[:, None]
+
+    def sun_rgb(groups):  # [k, res, res, 3] -> [k * kept, 3], sun-major, divided by the combined alpha
+        g = groups.reshape(len(wis), -1, 3)[:, pix]
+        return np.maximum(g * inv_alpha[None], 0.0).reshape(-1, 3).astype(np.float32)
+
+    wi_all = np.repeat(wis, len(pix), 0)  # sample j of sun i at row i * kept + j
+    tile = (lambda a: np.concatenate([a] * len(wis))) if len(wis) > 1 else (lambda a: a)
+    vis = caster.visibility({key: tile(v) if isinstance(v, np.ndarray) and len(v) == len(pix) else v
+                             for key, v in sel.items()}, wi_all)
     out = {
-        "x": sel["x"].astype(np.float32), "n": sel["frame"].astype(np.float32), "wo": (-d[pix]).astype(np.float32),
-        "wi": wi_pix[pix].astype(np.float32), "vis": vis.astype(np.uint8),
-        "rgb": np.maximum(rgb, 0.0).astype(np.float32), "pix": pix.astype(np.int32), "res": np.int32(res),
+        "x": tile(sel["x"]).astype(np.float32), "n": tile(sel["frame"]).astype(np.float32),
+        "wo": tile(-d[pix]).astype(np.float32), "wi": wi_all.astype(np.float32), "vis": vis.astype(np.uint8),
+        "rgb": sun_rgb(suns), "pix": tile(pix).astype(np.int32), "res": np.int32(res),
         "disagree": np.int32(disagree), "covered": np.int32(covered),
     }
     if caster.variant == "fiber":
-        out["h"] = sel["h"].astype(np.float32)
+        out["h"] = tile(sel["h"]).astype(np.float32)
     if halves is not None:
-        for name, hv in zip(("rgb_a", "rgb_b"), halves, strict=True):
-            out[name] = np.maximum(hv[pix, :3] / np.maximum(alpha[pix], 1e-6)[:, None], 0.0).astype(np.float32)
+        for name, (_, hv) in zip(("rgb_a", "rgb_b"), halves, strict=True):
+            out[name] = sun_rgb(hv)
     return out
 
 

@@ -17,7 +17,7 @@ from nasset_bakers.blender.rna import bake  # noqa: E402
 from nasset_bakers.train.rna import display_psnr  # noqa: E402
 from nasset_converters.blender.dataset import DatasetDir, load_split  # noqa: E402
 from nasset_sdk.asset import Asset  # noqa: E402
-from nasset_sdk.errors import NassetError  # noqa: E402
+from nasset_sdk.errors import NassetError, UsageError  # noqa: E402
 
 #: held-out display PSNR floors of the tiny bakes (spec/bake.md#psnr), seed 0. Measured 19.3 dB
 #: (surface) and 18.9 dB (hair) here; the floors leave ~4-5 dB for platform differences in Cycles'
@@ -113,6 +113,9 @@ def test_bake_typed_errors(tmp_path):
     with pytest.raises(NassetError) as e:
         bake(blend, ["NotThere"], tmp_path / "a.usdc", size="tiny", quiet=True)
     assert e.value.code == "CONVERT_SHAPE_UNKNOWN" and "Monkey" in str(e.value)
+    for bad in (0, -1, 2.5, True):  # suns per training view
+        with pytest.raises(UsageError, match="lights_per_view"):
+            bake(blend, ["Monkey"], tmp_path / "a.usdc", size="tiny", quiet=True, lights_per_view=bad)
 
 
 def test_an_object_beyond_float32_rendering_is_refused_before_rendering(tmp_path):
@@ -133,14 +136,15 @@ def test_an_object_beyond_float32_rendering_is_refused_before_rendering(tmp_path
 
 
 def test_fiber_assets_get_more_views_and_a_wider_decoder_at_small():
-    """Fibers render 400 training views at `small` and train a 4 x 128 decoder, surfaces 160 views and
-    4 x 64; everything else of the preset is shared (spec/accuracy.md#dense-hair measured both)."""
+    """Fibers render 200 training views of 8 suns each at `small` and train a 4 x 128 decoder, surfaces 160 views of
+    one sun and 4 x 64; everything else of the preset is shared (spec/accuracy.md#dense-hair, #light-groups)."""
     from nasset_bakers.blender.rna import variant_preset
     from nasset_bakers.train.rna import TrainSettings, build_model
 
     (surface, surface_train), (fiber, fiber_train) = variant_preset("small", "surface"), variant_preset("small", "fiber")
-    assert (surface["views"], fiber["views"]) == (160, 400)
-    assert {**fiber, "views": 160} == surface
+    assert (surface["views"], fiber["views"]) == (160, 200) and fiber["lights_per_view"] == 8
+    assert "lights_per_view" not in surface  # DataSettings' one sun
+    assert {k: v for k, v in fiber.items() if k != "lights_per_view"} | {"views": 160} == surface
     assert {**fiber_train, "hidden": 0} == {**surface_train, "hidden": 0} and fiber_train["hidden"] == 128
     assert variant_preset("tiny", "fiber") == variant_preset("tiny", "surface")
     widths = {h: {p.shape[0] for p in build_model("small", hidden_width=h, fiber=True).parameters() if p.ndim == 2}

@@ -87,10 +87,14 @@ def test_bake_renders_the_views_the_noise_asks_for(kind, tmp_path, monkeypatch):
     bake = importlib.import_module(module).bake
     monkeypatch.setitem(getattr(presets, rules), "tiny", dict(target=1e-12, max_factor=1.5))
     views = getattr(presets, data)["tiny"]["views"]
-    # Cycles views at 16^2 and 4 spp: the rule reads whatever noise there is
-    opts = dict(size="tiny", example=example, quiet=True) | (dict(res=16, spp=4) if kind == "blender" else dict(near_field_fetch=0.0))
+    # Cycles views at 16^2 and 4 spp, two suns each: the rule reads whatever noise there is
+    opts = dict(size="tiny", example=example, quiet=True) | (
+        dict(res=16, spp=4, lights_per_view=2) if kind == "blender" else dict(near_field_fetch=0.0))
     s = bake(None, None, tmp_path / "a.usdc", **opts)
     noise = s["data_noise"]
+    if kind == "blender":  # two suns share a render's 4 paths: each target is about as noisy as 2 paths of one sun
+        assert noise["spp"] == 2.0
+    assert noise["noise"] == pytest.approx(noise["path_relative_variance"] / (noise["train_samples"] * noise["spp"]))
     assert noise["views"] == views and noise["views_used"] == math.floor(1.5 * views) == s["views"] and noise["capped"]
     assert noise["noise_used"] < noise["noise"] and noise["target"] == 1e-12
     assert len(list((tmp_path / "a.usdc.bake" / "train").glob("*.npz"))) == noise["views_used"]

@@ -52,7 +52,7 @@ def test_blender_data_table():
         expect = [d["views"], d["res"], d["spp"]]
         if size in presets.RNA_BLENDER_FIBER_DATA:
             fd = {**d, **presets.RNA_BLENDER_FIBER_DATA[size]}
-            expect += [fd["views"], fd["res"], fd["spp"]]
+            expect += [fd["views"], fd["res"], fd["spp"], fd.get("lights_per_view", 1)]
         expect += [d["val_views"], d["val_res"], d["val_spp"], layers, width]
         if size in presets.RNA_BLENDER_FIBER_TRAIN:
             expect += [layers, presets.RNA_BLENDER_FIBER_TRAIN[size]["hidden"]]

@@ -48,9 +48,11 @@ def test_sun_units_and_camera_alignment(tmp_path):
     hit = caster.hits(o, d)
     rig.place_camera(eye, np.zeros(3), math.radians(25.0), 24)
     wi = np.array([math.sin(theta), math.cos(theta), 0.0])
-    rig.place_sun(wi)
-    rgba = rig.render(64, seed=1).reshape(-1, 4)
+    rig.place_suns([wi])
+    rgba, suns = rig.render(64, seed=1)
+    rgba = rgba.reshape(-1, 4)
     rig.close()
+    assert suns.shape == (1, 24, 24, 3) and np.allclose(suns[0].reshape(-1, 3), rgba[:, :3], rtol=1e-5, atol=1e-7)
     covered = rgba[:, 3] > 0.5
     ours = np.zeros(len(o), bool)
     ours[hit["pix"]] = True
@@ -93,26 +95,59 @@ def test_fiber_view_inputs(tmp_path):
     assert np.isfinite(rgb).all() and (rgb >= 0).all() and rgb.mean() > 0
 
 
-def test_lights_per_view_groups(tmp_path):
-    """k suns per training view: exactly k light directions, each pixel's visibility cast toward its own."""
+def test_light_groups_give_each_sun_its_own_radiance(tmp_path):
+    """k suns in one render, each in its own light group: every group carries its own sun's light, the analytic
+    a cos(theta_i) / pi of a Lambertian quad, though each path's light sample picks one of the k suns."""
+    albedo = 0.6
+    thetas = np.radians([0.0, 35.0, 65.0])
+    ob = _diffuse_quad(albedo)
+    variant, geo, _ = bsc.asset_geometry([ob])
+    bsc.isolate([ob])
+    rig = bds.CyclesRig(bds.DataSettings(res=24, spp=64, light_angle_deg=0.0), tmp_path)
+    hit = Caster(variant, geo).hits(*bds.camera_rays(np.array([0.3, 1.5, 0.2]), np.zeros(3), math.radians(25.0), 24))
+    rig.place_camera(np.array([0.3, 1.5, 0.2]), np.zeros(3), math.radians(25.0), 24)
+    rig.place_suns(np.stack([np.sin(thetas), np.cos(thetas), np.zeros(3)], 1))
+    rgba, suns = rig.render(256, seed=3)
+    rig.close()
+    assert suns.shape == (3, 24, 24, 3)
+    L = suns.reshape(3, -1, 3)[:, hit["pix"]].mean(axis=(1, 2))
+    expect = albedo * np.cos(thetas) / math.pi
+    assert np.all(np.abs(L - expect) < 0.03 * expect[0]), (L, expect)  # within 3 % of the brightest sun's radiance
+    assert np.allclose(suns.sum(0), rgba[..., :3], rtol=1e-4, atol=1e-6)  # the groups add up to every light
+
+
+def test_lights_per_view_samples(tmp_path):
+    """k suns per training view: every kept pixel gives k samples, one per sun (its own light direction, visibility
+    cast toward it, and the same geometry); held-out views keep one sun."""
     names = build_example("blender-surface")
     objs = bsc.pick_objects(names)
     variant, geo, _ = bsc.asset_geometry(objs)
     center, radius = bsc.bounding_sphere(geo)
     bsc.isolate(objs)
     s = bds.DataSettings(res=24, spp=6, lights_per_view=3)
+    assert s.spp_per_target == 2.0
     rig = bds.CyclesRig(s, tmp_path)
     caster = Caster(variant, geo)
     v = bds.render_view(rig, caster, center, radius, 0, validation=False)
     val = bds.render_view(rig, caster, center, radius, 0, validation=True)
     rig.close()
     assert len(np.unique(v["wi"], axis=0)) == 3 and len(np.unique(val["wi"], axis=0)) == 1
+    kept = len(v["pix"]) // 3
+    assert kept > 50 and len(v["pix"]) == 3 * kept and len(v["rgb"]) == 3 * kept
+    for i in range(1, 3):  # sun i's rows repeat sun 0's pixels and geometry
+        rows = slice(i * kept, (i + 1) * kept)
+        assert np.array_equal(v["pix"][rows], v["pix"][:kept]) and np.array_equal(v["x"][rows], v["x"][:kept])
+        assert not np.array_equal(v["wi"][rows], v["wi"][:kept])
     _, eye, half_fov, res = bds.view_camera(s, center, radius, 0, False)
     hit = caster.hits(*bds.camera_rays(eye, np.asarray(center), half_fov, res))
     keep = np.isin(hit["pix"], v["pix"])
     sel = {k: (a[keep] if isinstance(a, np.ndarray) and len(a) == len(hit["pix"]) else a) for k, a in hit.items()}
-    assert np.array_equal(caster.visibility(sel, v["wi"]).astype(np.uint8), v["vis"])
+    for i in range(3):
+        rows = slice(i * kept, (i + 1) * kept)
+        assert np.array_equal(caster.visibility(sel, v["wi"][rows]).astype(np.uint8), v["vis"][rows])
     assert np.isfinite(v["rgb"]).all() and (v["rgb"] >= 0).all()
+    lit = [float(v["rgb"][i * kept:(i + 1) * kept].mean()) for i in range(3)]
+    assert len(set(lit)) == 3 and min(lit) >= 0  # three suns, three different images
 
 
 def test_isolate_renders_an_asset_object_of_a_hidden_or_excluded_collection():
