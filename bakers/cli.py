@@ -31,6 +31,9 @@ def add_args(p) -> None:
     p.add_argument("--clamp", type=float, default=None, metavar="C",
                    help="clamp training path samples at C /sr (rna, neupress; default 0: none; Mitsuba bakes measure and "
                         "store the energy removed, spec/accuracy.md; Blender sets Cycles' direct and indirect clamps)")
+    p.add_argument("--suns-per-view", type=int, default=None, metavar="K",
+                   help="Blender: suns per training view, each in its own Cycles light group, so one render gives every "
+                        "pixel K samples (default: the preset's, small 8, tiny and hq 1; spec/bake-blender.md#light-groups)")
     p.add_argument("--near-field-fetch", default=None, metavar="auto|F",
                    help="rna and neupress from Mitsuba: where renderers fetch a hit's light, F in [0, 1] of the way to the "
                         "asset's centre (spec/kinds/rna.md#near-field-fetch); default auto: measured after training under "
@@ -87,12 +90,19 @@ def run(args) -> int:
         if args.kind not in ("rna", "neupress") or source_of(args.scene, args.example) != "mitsuba":
             raise UsageError("--near-field-fetch applies to rna and neupress bakes from Mitsuba scenes only")
         near = near_field_arg(near)
+    suns = getattr(args, "suns_per_view", None)
+    if suns is not None:
+        if source_of(args.scene, args.example) != "blender":
+            raise UsageError("--suns-per-view applies to bakes from Blender scenes only")
+        if suns < 1:
+            raise UsageError(f"--suns-per-view must be >= 1, got {suns}")
     summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,
         seed=args.seed, device=args.device, quiet=args.quiet,
         **({"clamp": args.clamp} if getattr(args, "clamp", None) is not None else {}),
         **({"near_field_fetch": near} if near is not None else {}),
+        **({"lights_per_view": suns} if suns is not None else {}),
         **({"workers": args.workers, "cluster": args.cluster} if args.workers is not None or args.cluster else {}),
         summary_stream=sys.stderr if getattr(args, "json", False) else sys.stdout,
     )

@@ -205,6 +205,29 @@ def test_near_field_fetch_option_is_checked_before_any_work(tmp_path, capsys, ex
     assert not (tmp_path / "o.usdc.bake").exists()
 
 
+@pytest.mark.parametrize("extra", [["--suns-per-view", "4", "--example"], ["--suns-per-view", "4", "--kind", "neupress", "--example"],
+                                   ["--suns-per-view", "0", "--example", "blender-surface"]])
+def test_suns_per_view_option_is_checked_before_any_work(tmp_path, capsys, extra):
+    """--suns-per-view: an integer >= 1, bakes from Blender scenes only; a usage error (exit 2) otherwise."""
+    if "blender-surface" in extra:
+        pytest.importorskip("bpy")
+    rc = main(["bake", "-o", str(tmp_path / "o.usdc"), "--quiet", "--size", "tiny", *extra])
+    assert rc == 2, capsys.readouterr().err
+    assert "--suns-per-view" in capsys.readouterr().err
+    assert not (tmp_path / "o.usdc.bake").exists()
+
+
+def test_suns_per_view_given_reaches_the_blender_dataset(tmp_path):
+    """``nasset bake --example blender-surface --suns-per-view 3``: three suns per training view, recorded."""
+    pytest.importorskip("bpy")
+    from nasset_sdk.asset import Asset
+
+    assert main(["bake", "--example", "blender-surface", "-o", str(tmp_path / "o.usdc"), "--quiet", "--size", "tiny",
+                 "--res", "16", "--spp", "3", "--epochs", "1", "--suns-per-view", "3"]) == 0
+    data = Asset.open(tmp_path / "o.usdc", load="none").provenance["data"]
+    assert data["lights_per_view"] == 3 and data["noise"]["spp"] == 1.0
+
+
 def test_near_field_fetch_given_is_stored_without_measuring(tmp_path):
     from nasset_sdk.asset import Asset
 
