@@ -90,12 +90,9 @@ def run(args) -> int:
         if args.kind not in ("rna", "neupress") or source_of(args.scene, args.example) != "mitsuba":
             raise UsageError("--near-field-fetch applies to rna and neupress bakes from Mitsuba scenes only")
         near = near_field_arg(near)
-    suns = getattr(args, "suns_per_view", None)
-    if suns is not None:
-        if source_of(args.scene, args.example) != "blender":
-            raise UsageError("--suns-per-view applies to bakes from Blender scenes only")
-        if suns < 1:
-            raise UsageError(f"--suns-per-view must be >= 1, got {suns}")
+    suns = getattr(args, "suns_per_view", None)  # its value is checked by the Blender baker, before any work
+    if suns is not None and source_of(args.scene, args.example) != "blender":
+        raise UsageError("--suns-per-view applies to bakes from Blender scenes only")
     summary = fn(
         args.scene, args.asset, args.output, size=args.size, example=args.example, resume=args.resume,
         views=args.views, res=args.res, epochs=args.epochs, spp=args.spp, light_angle=args.light_angle,

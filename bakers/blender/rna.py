@@ -73,7 +73,7 @@ def bake(
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")
     if lights_per_view is not None and (isinstance(lights_per_view, bool) or not isinstance(lights_per_view, int)
                                         or lights_per_view < 1):
-        raise UsageError(f"lights_per_view must be an integer >= 1, got {lights_per_view!r}")
+        raise UsageError(f"lights_per_view (--suns-per-view) must be an integer >= 1, got {lights_per_view!r}")
     if example is not None and scene is not None:
         raise UsageError("give a .blend scene or --example, not both")
     dp = data_parallel(require_torch(), device)  # under torchrun: this process's rank (spec/bake.md#training-devices)

@@ -240,21 +240,21 @@ def render_view(rig: CyclesRig, caster: Caster, center, radius: float, view_id: 
     inv_alpha = 1.0 / np.maximum(alpha[pix], 1e-6)[:, None]
 
     def sun_rgb(groups):  # [k, res, res, 3] -> [k * kept, 3], sun-major, divided by the combined alpha
-        g = groups.reshape(len(wis), -1, 3)[:, pix]
+        g = groups.reshape(k, -1, 3)[:, pix]
         return np.maximum(g * inv_alpha[None], 0.0).reshape(-1, 3).astype(np.float32)
 
     wi_all = np.repeat(wis, len(pix), 0)  # sample j of sun i at row i * kept + j
-    tile = (lambda a: np.concatenate([a] * len(wis))) if len(wis) > 1 else (lambda a: a)
-    vis = caster.visibility({key: tile(v) if isinstance(v, np.ndarray) and len(v) == len(pix) else v
-                             for key, v in sel.items()}, wi_all)
+    rows = {key: np.concatenate([v] * k) if isinstance(v, np.ndarray) and len(v) == len(pix) else v
+            for key, v in sel.items()}  # the kept hits, once per sun
+    vis = caster.visibility(rows, wi_all)
     out = {
-        "x": tile(sel["x"]).astype(np.float32), "n": tile(sel["frame"]).astype(np.float32),
-        "wo": tile(-d[pix]).astype(np.float32), "wi": wi_all.astype(np.float32), "vis": vis.astype(np.uint8),
-        "rgb": sun_rgb(suns), "pix": tile(pix).astype(np.int32), "res": np.int32(res),
+        "x": rows["x"].astype(np.float32), "n": rows["frame"].astype(np.float32),
+        "wo": np.tile(-d[pix], (k, 1)).astype(np.float32), "wi": wi_all.astype(np.float32), "vis": vis.astype(np.uint8),
+        "rgb": sun_rgb(suns), "pix": rows["pix"].astype(np.int32), "res": np.int32(res),
         "disagree": np.int32(disagree), "covered": np.int32(covered),
     }
     if caster.variant == "fiber":
-        out["h"] = tile(sel["h"]).astype(np.float32)
+        out["h"] = rows["h"].astype(np.float32)
     if halves is not None:
         for name, (_, hv) in zip(("rgb_a", "rgb_b"), halves, strict=True):
             out[name] = sun_rgb(hv)
