@@ -20,6 +20,8 @@ through an edge on its way in still meets the prism's far side.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from nasset_sdk.errors import UsageError
@@ -244,6 +246,13 @@ class Accel:
         else:
             self.scale = 1.0
         self.eps = 1e-5 * max(self.scale, 1e-6)
+
+    def view(self) -> "Accel":
+        """This accelerator for one render thread: the same acceleration structures (Embree's queries are
+        thread-safe), its own ray counter and :attr:`presence` callback (None until set)."""
+        v = copy.copy(self)
+        v.rays_cast, v.presence = 0, None
+        return v
 
     def _closest_in(self, part, o, d, inv, tmax, rows, hits) -> None:
         """Update ``hits`` rows with closer hits on ``part`` (rays limited to the current closest hit)."""

@@ -65,7 +65,8 @@ def run(args) -> int:
     if not str(args.output).lower().endswith(".exr"):
         raise UsageError(f"output must be an .exr file: {args.output}")
     settings = RenderSettings(spp=args.spp, seed=args.seed, width=args.width, height=args.height, max_depth=args.max_depth,
-                              batch=args.batch, tile=args.tile, threads=args.threads, progress=not args.quiet,
+                              batch=args.batch, tile=args.tile, threads=args.threads, workers=getattr(args, "workers", 0),
+                              progress=not args.quiet,
                               neupress_sampling=getattr(args, "neupress_sampling", "auto"), prt=bool(getattr(args, "prt", False)),
                               eightdna_sampling=getattr(args, "eightdna_sampling", "mis"),
                               rna_continuation=getattr(args, "rna_continuation", "lobes"))
@@ -121,7 +122,9 @@ def add_args(p) -> None:
     p.add_argument("--png", default=None, help="also write a tone-mapped PNG preview")
     p.add_argument("--variance", default=None, help="also write a per-pixel variance EXR")
     p.add_argument("--explain", action="store_true", help="print the render plan")
-    p.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto)")
+    p.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto: 1 with several workers)")
+    p.add_argument("--workers", type=int, default=0,
+                   help="render threads, each tracing whole tiles (0 = one per core; the image does not depend on it)")
     p.add_argument("--batch", type=int, default=65536,
                    help="camera rays in flight per pass over a tile (traced in wavefronts of at most 8192)")
     p.add_argument("--tile", type=int, default=64, help="tile edge in pixels")

@@ -6,8 +6,12 @@ assets are shaded by :mod:`nasset_reference_renderer.shaders` (spec/renderer.md#
 
 from __future__ import annotations
 
+import copy
 import os
+import queue
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,6 +39,7 @@ class RenderSettings:
     batch: int = 65536
     tile: int = 64
     threads: int = 0
+    workers: int = 0  # render threads, each tracing whole (tile, pass) jobs; 0: one per usable core, at most MAX_AUTO_WORKERS
     rr_depth: int = 3
     progress: bool = False
     backend: str = "embree"
@@ -51,7 +56,9 @@ class RenderStats:
     network_evals: int = 0
     time_total: float = 0.0  # wall seconds of the render loop (after the plan, integrator and Embree setup)
     cpu_total: float = 0.0  # CPU seconds of this process over the same loop
+    # seconds summed over the render threads (with one thread they add up to time_total)
     time: dict = field(default_factory=lambda: {"trace": 0.0, "network": 0.0, "other": 0.0})
+    workers: int = 1  # render threads used
 
 
 @dataclass
@@ -121,8 +128,8 @@ class PathIntegrator:
         self.scene, self.plan, self.s = scene, plan, settings
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
-        self.accel, self.tri_ng = scene_accel(scene, settings.backend, self.inst_neural)
-        self.accel.rays_cast = 0  # counts this render's rays
+        accel, self.tri_ng = scene_accel(scene, settings.backend, self.inst_neural)
+        self.accel = accel.view()  # its own ray counter (this render's rays) and cut-out callback
         self.accel.presence = self._present  # cut-out surfaces (spec/renderer.md#cutouts)
         self.presence_rng = np.random.default_rng(settings.seed)  # replaced by each wavefront's generator
         self.eps = self.accel.eps
@@ -163,6 +170,16 @@ class PathIntegrator:
                 self.inst_centre[i] = np.append(0.5 * (lo + hi), 1.0) @ inst.to_world[:, :3]
         self.fetching = bool((self.inst_fetch > 0).any())
         self.shading = NeuralShading(self)  # the shaders of the scene's neural assets
+
+    def worker_copy(self) -> "PathIntegrator":
+        """Another integrator of the same scene and plan for a render thread: it shares the read-only arrays and
+        the acceleration structures, and has its own accelerator view, statistics and shaders (their caches)."""
+        twin = copy.copy(self)
+        twin.accel = self.accel.view()
+        twin.accel.presence = twin._present
+        twin.stats = RenderStats()
+        twin.shading = NeuralShading(twin)
+        return twin
 
     # -- helpers ---------------------------------------------------------------------------
     def _present(self, tri, u, v) -> np.ndarray:
@@ -487,7 +504,11 @@ WAVEFRONT = 8192
 
 def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | None = None,
            load_components: bool = True) -> RenderResult:
-    """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`)."""
+    """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`).
+
+    The image is a sum over jobs, one per (tile, pass) with its own random numbers; ``settings.workers`` threads
+    trace them (numpy, onnxruntime and Embree release the interpreter lock) and the film adds their results in
+    job order, so the image does not depend on the number of threads."""
     s = resolve_settings(settings or RenderSettings(), scene)
     check_settings(s)
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
@@ -495,52 +516,105 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
         plan = make_plan(scene, width=width, height=height, spp=s.spp, max_depth=s.max_depth, tile=s.tile, batch=s.batch,
                          neupress_sampling=s.neupress_sampling, prt=s.prt, eightdna_sampling=s.eightdna_sampling,
                          rna_continuation=s.rna_continuation)
-    if load_components:
-        prepare_assets(scene, plan, s)
-    integ = PathIntegrator(scene, plan, s)
-    film = Film(width, height)
     tile = max(1, s.tile)
-    rs = scene.render_settings
-    filt = (rs.get("pixel_filter", "box"), rs.get("pixel_filter_stddev", 0.5))
     tiles = [(x0, y0) for y0 in range(0, height, tile) for x0 in range(0, width, tile)]
     passes = [(p0, min(s.spp, p0 + plan.spp_per_pass)) for p0 in range(0, s.spp, plan.spp_per_pass)]
+    jobs = [(ti, x0, y0, pi, p0, p1) for ti, (x0, y0) in enumerate(tiles) for pi, (p0, p1) in enumerate(passes)]
+    n_workers = render_workers(s.workers, len(jobs))
+    if load_components:
+        prepare_assets(scene, plan, s, workers=n_workers)
+    integ = PathIntegrator(scene, plan, s)
+    integs = [integ] + [integ.worker_copy() for _ in range(n_workers - 1)]
+    free = queue.SimpleQueue()  # the integrators not tracing a job now
+    for it in integs:
+        free.put(it)
+    rs = scene.render_settings
+    filt = (rs.get("pixel_filter", "box"), rs.get("pixel_filter_stddev", 0.5))
+
+    def run(job):
+        it = free.get()
+        try:
+            return _render_job(it, scene, s, job, width, height, tile, filt)
+        finally:
+            free.put(it)
+
+    film = Film(width, height)
     bar = None
     if s.progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(tiles) * len(passes), unit="pass", desc="render", leave=False)
+        bar = tqdm(total=len(jobs), unit="pass", desc="render", leave=False)
     t_start, c_start = time.perf_counter(), time.process_time()
-    for ti, (x0, y0) in enumerate(tiles):
-        x1, y1 = min(width, x0 + tile), min(height, y0 + tile)
-        ys, xs = np.mgrid[y0:y1, x0:x1]
-        pix_tile = (ys * width + xs).ravel()
-        for pi, (p0, p1) in enumerate(passes):
-            rng = np.random.default_rng([s.seed, ti, pi])
-            band = max(1, WAVEFRONT // (p1 - p0))  # pixels per wavefront: bands of the tile's rows
-            for b0 in range(0, len(pix_tile), band):
-                pix_band = pix_tile[b0:b0 + band]
-                pix = np.tile(pix_band, p1 - p0)
-                jit = pixel_offsets(rng, len(pix), *filt)
-                px = (pix % width) + jit[:, 0]
-                py = (pix // width) + jit[:, 1]
-                cam = scene.camera
-                lens = rng.random((len(pix), 2)) if cam.needs_lens_samples else None
-                o, d = cam.generate_rays(px, py, width, height, lens)
-                L = integ.radiance(o, d, rng)
-                if cam.exposure_scale != 1.0:
-                    L *= cam.exposure_scale
-                film.add_passes(pix_band, L)  # pix is pix_band repeated p1 - p0 times
-                integ.stats.camera_samples += len(pix)
-            if bar is not None:
-                bar.update(1)
+    camera_samples, busy = 0, 0.0
+    for bands, seconds in _in_order(run, jobs, n_workers):
+        for pix_band, L, n_samples in bands:
+            film.add_passes(pix_band, L)  # L: pix_band's samples, the band repeated once per spp of the pass
+            camera_samples += n_samples
+        busy += seconds
+        if bar is not None:
+            bar.update(1)
     if bar is not None:
         bar.close()
     st = integ.stats
+    for other in integs[1:]:
+        st.network_evals += other.stats.network_evals
+        for key in ("trace", "network"):
+            st.time[key] += other.stats.time[key]
+    st.camera_samples, st.workers = camera_samples, n_workers
     st.time_total = time.perf_counter() - t_start
     st.cpu_total = time.process_time() - c_start
-    st.rays = integ.accel.rays_cast
-    st.time["other"] = st.time_total - st.time["trace"] - st.time["network"]
+    st.rays = sum(it.accel.rays_cast for it in integs)
+    st.time["other"] = max(0.0, (st.time_total if n_workers == 1 else busy) - st.time["trace"] - st.time["network"])
     return RenderResult(film, plan, st)
+
+
+def _render_job(integ: PathIntegrator, scene, s: RenderSettings, job, width: int, height: int, tile: int, filt):
+    """([(pixels [m], radiance [m * spp of the pass, 3], samples)] per band of the tile's rows, seconds) of one
+    (tile, pass) job: its camera rays traced in wavefronts of at most WAVEFRONT rays."""
+    t0 = time.perf_counter()
+    ti, x0, y0, pi, p0, p1 = job
+    x1, y1 = min(width, x0 + tile), min(height, y0 + tile)
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    pix_tile = (ys * width + xs).ravel()
+    rng = np.random.default_rng([s.seed, ti, pi])
+    band = max(1, WAVEFRONT // (p1 - p0))  # pixels per wavefront: bands of the tile's rows
+    cam = scene.camera
+    out = []
+    for b0 in range(0, len(pix_tile), band):
+        pix_band = pix_tile[b0:b0 + band]
+        pix = np.tile(pix_band, p1 - p0)
+        jit = pixel_offsets(rng, len(pix), *filt)
+        px = (pix % width) + jit[:, 0]
+        py = (pix // width) + jit[:, 1]
+        lens = rng.random((len(pix), 2)) if cam.needs_lens_samples else None
+        o, d = cam.generate_rays(px, py, width, height, lens)
+        L = integ.radiance(o, d, rng)
+        if cam.exposure_scale != 1.0:
+            L *= cam.exposure_scale
+        out.append((pix_band, L, len(pix)))
+    return out, time.perf_counter() - t0
+
+
+def _in_order(fn, items: list, workers: int):
+    """fn(item) for each item, yielded in the items' order; with several workers computed on that many threads, at
+    most 2 * workers ahead of the consumer (their results' memory). An exception is raised when its item's turn comes,
+    and the items not started by then are dropped."""
+    if workers <= 1:
+        for item in items:
+            yield fn(item)
+        return
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="nasset-render") as pool:
+        pending = deque()
+        try:
+            for item in items:
+                pending.append(pool.submit(fn, item))
+                if len(pending) >= 2 * workers:
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for f in pending:
+                f.cancel()
 
 
 DEFAULT_MAX_DEPTH = 5
@@ -565,34 +639,52 @@ MAX_THREADS = 1024
 
 
 def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
-    """``USAGE`` error unless max_depth (min_depth ..), batch, tile and threads are integers within their bounds."""
+    """``USAGE`` error unless max_depth (min_depth ..), batch, tile, threads and workers are integers within their bounds."""
     for name, value, lo, hi in (("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("batch", s.batch, 1, MAX_BATCH),
-                                ("tile", s.tile, 1, MAX_TILE), ("threads", s.threads, 0, MAX_THREADS)):
+                                ("tile", s.tile, 1, MAX_TILE), ("threads", s.threads, 0, MAX_THREADS),
+                                ("workers", s.workers, 0, MAX_THREADS)):
         if name == "max_depth" and value is None:
             continue  # filled in from the scene by resolve_settings
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
             raise UsageError(f"{name} = {value!r} outside {lo} .. {hi} (--{name.replace('_', '-')})")
 
 
-def decoder_threads(threads: int) -> int:
-    """onnxruntime intra-op threads for ``RenderSettings.threads`` (0: automatic).
+def usable_cores() -> int:
+    """The CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on every platform
+        return os.cpu_count() or 1
 
-    Automatic is onnxruntime's own default (one per core), except on machines with at most two
-    usable cores: there one thread is faster, because the render's numpy work between decoder runs
+
+#: the most render threads ``RenderSettings.workers = 0`` picks
+MAX_AUTO_WORKERS = 16
+
+
+def render_workers(workers: int, jobs: int) -> int:
+    """Render threads for ``RenderSettings.workers`` (0: one per usable core, at most MAX_AUTO_WORKERS), never more
+    than the render's (tile, pass) jobs."""
+    n = int(workers) if workers > 0 else min(usable_cores(), MAX_AUTO_WORKERS)
+    return max(1, min(n, jobs))
+
+
+def decoder_threads(threads: int, workers: int = 1) -> int:
+    """onnxruntime intra-op threads for ``RenderSettings.threads`` (0: automatic) with ``workers`` render threads.
+
+    Automatic is onnxruntime's own default (one per core) for a single render thread, except on machines with at
+    most two usable cores: there one thread is faster, because the render's numpy work between decoder runs
     shares the cores with onnxruntime's spinning worker threads (measured with
     ``python -m nasset_benchmarks.renderer_throughput --threads 1,2``: about 2x slower renders with 2 threads).
+    With several render threads it is one: the threads already keep the cores busy.
     """
     if threads > 0:
         return int(threads)
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on every platform
-        cores = os.cpu_count() or 1
-    return 1 if cores <= 2 else 0
+    return 1 if workers > 1 or usable_cores() <= 2 else 0
 
 
-def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings) -> None:
-    """Load what the plan needs of each asset and build its evaluator (once per file)."""
+def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings, workers: int = 1) -> None:
+    """Load what the plan needs of each asset and build its evaluator (once per file; ``workers``: the render
+    threads that will share it, for its onnxruntime thread count)."""
     from nasset_sdk.errors import NassetError, SceneError
 
     for data in scene.assets:
@@ -602,7 +694,7 @@ def prepare_assets(scene, plan: RenderPlan, settings: RenderSettings) -> None:
         options = getattr(shader_class(data.asset.kind, variant_of(data)), "evaluator_options", {})
         try:
             data.asset.load(loaded)
-            data.evaluator = data.asset.evaluator(intra_threads=decoder_threads(settings.threads), batch=max(1024, settings.batch),
+            data.evaluator = data.asset.evaluator(intra_threads=decoder_threads(settings.threads, workers), batch=max(1024, settings.batch),
                                                   **options)
         except NassetError as exc:
             raise SceneError("SCENE_INVALID", f"referenced asset {data.path} is invalid: {exc}", file=scene.file,

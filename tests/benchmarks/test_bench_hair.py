@@ -13,7 +13,7 @@ def test_hair_benchmark_small():
     scene = hair_scene(300, 3, floor=False)
     mem = tessellation_bytes(scene)
     assert mem["segments"] == 300 * 3 and mem["triangles"] == 28 * 300 * 3  # 2N + 2 (N - 2) triangles, N = 8
-    r = run_hair(scene, argparse.Namespace(spp=1, res=24, batch=65536))
+    r = run_hair(scene, argparse.Namespace(spp=1, res=24, batch=65536, workers=1))
     assert r["samples"] == 24 * 18
     assert np.isfinite([r["rate"], r["rays"], r["setup"], r["first_setup"]]).all() and r["rate"] > 0
     # camera ray (one query where it meets the hair's box) + one branch test per hair hit (+ exempt steps)

@@ -345,7 +345,9 @@ def main(argv=None) -> int:
     MUTANTS[name]()
     from nasset_sdk.cli import main as nasset
 
-    return nasset(["render", scene, "-o", out, "--spp", spp, "--width", width, "--height", height, "--seed", seed, "--quiet"])
+    # one render thread: some mutants patch shared objects for the length of one call (eightdna_light_at_xo)
+    return nasset(["render", scene, "-o", out, "--spp", spp, "--width", width, "--height", height, "--seed", seed, "--quiet",
+                   "--workers", "1"])
 
 
 if __name__ == "__main__":
