@@ -56,7 +56,8 @@ def test_blender_data_table():
             expect += [fd["views"], fd["res"], fd["spp"], *suns]
         expect += [d["val_views"], d["val_res"], d["val_spp"], layers, width]
         if size in presets.RNA_BLENDER_FIBER_TRAIN:
-            expect += [layers, presets.RNA_BLENDER_FIBER_TRAIN[size]["hidden"]]
+            ft = presets.RNA_BLENDER_FIBER_TRAIN[size]
+            expect += [layers, ft["hidden"], *([ft["epochs"]] if "epochs" in ft else [])]  # "fibers 4 × 128, 24 epochs"
         assert rows[size] == expect + [r, c], size
 
 
