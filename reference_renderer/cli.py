@@ -124,7 +124,7 @@ def add_args(p) -> None:
     p.add_argument("--explain", action="store_true", help="print the render plan")
     p.add_argument("--threads", type=int, default=0, help="onnxruntime intra-op threads (0 = auto: 1 with several workers)")
     p.add_argument("--workers", type=int, default=0,
-                   help="render threads, each tracing whole tiles (0 = one per core; the image does not depend on it)")
+                   help="render threads, each tracing whole wavefronts (0 = one per core; the image does not depend on it)")
     p.add_argument("--batch", type=int, default=65536,
                    help="camera rays in flight per pass over a tile (traced in wavefronts of at most 8192)")
     p.add_argument("--tile", type=int, default=64, help="tile edge in pixels")

@@ -39,7 +39,7 @@ class RenderSettings:
     batch: int = 65536
     tile: int = 64
     threads: int = 0
-    workers: int = 0  # render threads, each tracing whole (tile, pass) jobs; 0: one per usable core, at most MAX_AUTO_WORKERS
+    workers: int = 0  # render threads, each tracing whole jobs (wavefronts); 0: one per usable core, at most MAX_AUTO_WORKERS
     rr_depth: int = 3
     progress: bool = False
     backend: str = "embree"
@@ -506,9 +506,10 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
            load_components: bool = True) -> RenderResult:
     """Render ``scene`` (from :func:`nasset_reference_renderer.scene.load_scene`).
 
-    The image is a sum over jobs, one per (tile, pass) with its own random numbers; ``settings.workers`` threads
-    trace them (numpy, onnxruntime and Embree release the interpreter lock) and the film adds their results in
-    job order, so the image does not depend on the number of threads."""
+    The image is a sum over jobs, one per wavefront (a band of a tile's rows, for the samples of one pass) with its
+    own random numbers; ``settings.workers`` threads trace them (numpy, onnxruntime and Embree release the
+    interpreter lock) and the film adds their results in job order, so the image does not depend on the number of
+    threads."""
     s = resolve_settings(settings or RenderSettings(), scene)
     check_settings(s)
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
@@ -519,8 +520,9 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     tile = max(1, s.tile)
     tiles = [(x0, y0) for y0 in range(0, height, tile) for x0 in range(0, width, tile)]
     passes = [(p0, min(s.spp, p0 + plan.spp_per_pass)) for p0 in range(0, s.spp, plan.spp_per_pass)]
-    jobs = [(ti, x0, y0, pi, p0, p1) for ti, (x0, y0) in enumerate(tiles) for pi, (p0, p1) in enumerate(passes)]
-    n_workers = render_workers(s.workers, len(jobs))
+    n_jobs = sum(-(-(min(width, x0 + tile) - x0) * (min(height, y0 + tile) - y0) // _band(p0, p1))
+                 for x0, y0 in tiles for p0, p1 in passes)
+    n_workers = render_workers(s.workers, n_jobs)
     if load_components:
         prepare_assets(scene, plan, s, workers=n_workers)
     integ = PathIntegrator(scene, plan, s)
@@ -534,7 +536,7 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     def run(job):
         it = free.get()
         try:
-            return _render_job(it, scene, s, job, width, height, tile, filt)
+            return _render_job(it, scene, s, job, width, height, filt)
         finally:
             free.put(it)
 
@@ -543,13 +545,12 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     if s.progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(jobs), unit="pass", desc="render", leave=False)
+        bar = tqdm(total=n_jobs, unit="wavefront", desc="render", leave=False)
     t_start, c_start = time.perf_counter(), time.process_time()
     camera_samples, busy = 0, 0.0
-    for bands, seconds in _in_order(run, jobs, n_workers):
-        for pix_band, L, n_samples in bands:
-            film.add_passes(pix_band, L)  # L: pix_band's samples, the band repeated once per spp of the pass
-            camera_samples += n_samples
+    for pix_band, L, seconds in _in_order(run, _jobs(tiles, passes, width, height, tile), n_workers):
+        film.add_passes(pix_band, L)  # L: pix_band's samples, the band repeated once per spp of the pass
+        camera_samples += len(L)
         busy += seconds
         if bar is not None:
             bar.update(1)
@@ -568,34 +569,44 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     return RenderResult(film, plan, st)
 
 
-def _render_job(integ: PathIntegrator, scene, s: RenderSettings, job, width: int, height: int, tile: int, filt):
-    """([(pixels [m], radiance [m * spp of the pass, 3], samples)] per band of the tile's rows, seconds) of one
-    (tile, pass) job: its camera rays traced in wavefronts of at most WAVEFRONT rays."""
+def _band(p0: int, p1: int) -> int:
+    """Pixels per wavefront of a pass of spp p1 - p0: at most WAVEFRONT camera rays."""
+    return max(1, WAVEFRONT // (p1 - p0))
+
+
+def _jobs(tiles, passes, width: int, height: int, tile: int):
+    """The render's jobs in film order: (tile index, pass index, band index, pixels of the band [m], p0, p1), tile by
+    tile, each tile's passes in turn, each pass in bands of the tile's rows (one wavefront each)."""
+    for ti, (x0, y0) in enumerate(tiles):
+        x1, y1 = min(width, x0 + tile), min(height, y0 + tile)
+        ys, xs = np.mgrid[y0:y1, x0:x1]
+        pix_tile = (ys * width + xs).ravel()
+        for pi, (p0, p1) in enumerate(passes):
+            band = _band(p0, p1)
+            for bi, b0 in enumerate(range(0, len(pix_tile), band)):
+                yield ti, pi, bi, pix_tile[b0:b0 + band], p0, p1
+
+
+def _render_job(integ: PathIntegrator, scene, s: RenderSettings, job, width: int, height: int, filt):
+    """(pixels [m], radiance [m * (p1 - p0), 3]: the band repeated once per spp of the pass, seconds) of one job of
+    :func:`_jobs`: one wavefront, its random numbers seeded by (seed, tile, pass, band)."""
     t0 = time.perf_counter()
-    ti, x0, y0, pi, p0, p1 = job
-    x1, y1 = min(width, x0 + tile), min(height, y0 + tile)
-    ys, xs = np.mgrid[y0:y1, x0:x1]
-    pix_tile = (ys * width + xs).ravel()
-    rng = np.random.default_rng([s.seed, ti, pi])
-    band = max(1, WAVEFRONT // (p1 - p0))  # pixels per wavefront: bands of the tile's rows
+    ti, pi, bi, pix_band, p0, p1 = job
+    rng = np.random.default_rng([s.seed, ti, pi, bi])
+    pix = np.tile(pix_band, p1 - p0)
+    jit = pixel_offsets(rng, len(pix), *filt)
+    px = (pix % width) + jit[:, 0]
+    py = (pix // width) + jit[:, 1]
     cam = scene.camera
-    out = []
-    for b0 in range(0, len(pix_tile), band):
-        pix_band = pix_tile[b0:b0 + band]
-        pix = np.tile(pix_band, p1 - p0)
-        jit = pixel_offsets(rng, len(pix), *filt)
-        px = (pix % width) + jit[:, 0]
-        py = (pix // width) + jit[:, 1]
-        lens = rng.random((len(pix), 2)) if cam.needs_lens_samples else None
-        o, d = cam.generate_rays(px, py, width, height, lens)
-        L = integ.radiance(o, d, rng)
-        if cam.exposure_scale != 1.0:
-            L *= cam.exposure_scale
-        out.append((pix_band, L, len(pix)))
-    return out, time.perf_counter() - t0
+    lens = rng.random((len(pix), 2)) if cam.needs_lens_samples else None
+    o, d = cam.generate_rays(px, py, width, height, lens)
+    L = integ.radiance(o, d, rng)
+    if cam.exposure_scale != 1.0:
+        L *= cam.exposure_scale
+    return pix_band, L, time.perf_counter() - t0
 
 
-def _in_order(fn, items: list, workers: int):
+def _in_order(fn, items, workers: int):
     """fn(item) for each item, yielded in the items' order; with several workers computed on that many threads, at
     most 2 * workers ahead of the consumer (their results' memory). An exception is raised when its item's turn comes,
     and the items not started by then are dropped."""
@@ -663,7 +674,7 @@ MAX_AUTO_WORKERS = 16
 
 def render_workers(workers: int, jobs: int) -> int:
     """Render threads for ``RenderSettings.workers`` (0: one per usable core, at most MAX_AUTO_WORKERS), never more
-    than the render's (tile, pass) jobs."""
+    than the render's jobs (wavefronts)."""
     n = int(workers) if workers > 0 else min(usable_cores(), MAX_AUTO_WORKERS)
     return max(1, min(n, jobs))
 
