@@ -287,10 +287,12 @@ def _view_renderer(variant, geo, center, radius, dset, work, threads: int = 0):
 
 def variant_preset(size: str, variant: str) -> tuple[dict, dict]:
     """The DataSettings and TrainSettings fields of preset ``size`` for a ``variant`` ("surface" or "fiber")
-    asset: fibers render more views and train a wider decoder (presets.RNA_BLENDER_FIBER_DATA, _TRAIN)."""
+    asset: Blender's training length (presets.RNA_BLENDER_TRAIN); fibers render more views and train a wider decoder
+    (presets.RNA_BLENDER_FIBER_DATA, _TRAIN)."""
     fiber = variant == "fiber"
     return ({**DATA_PRESETS[size], **(presets.RNA_BLENDER_FIBER_DATA.get(size, {}) if fiber else {})},
-            {**presets.RNA_TRAIN[size], **(presets.RNA_BLENDER_FIBER_TRAIN.get(size, {}) if fiber else {})})
+            {**presets.RNA_TRAIN[size], **presets.RNA_BLENDER_TRAIN.get(size, {}),
+             **(presets.RNA_BLENDER_FIBER_TRAIN.get(size, {}) if fiber else {})})
 
 
 def view_renderer(scene, example, asset_ids, dset, work, threads: int = 1):

@@ -54,10 +54,10 @@ def test_blender_data_table():
         if size in presets.RNA_BLENDER_FIBER_DATA:
             fd = {**d, **presets.RNA_BLENDER_FIBER_DATA[size]}
             expect += [fd["views"], fd["res"], fd["spp"], *suns]
-        expect += [d["val_views"], d["val_res"], d["val_spp"], layers, width]
+        epochs = presets.RNA_BLENDER_TRAIN.get(size, {}).get("epochs")
+        expect += [d["val_views"], d["val_res"], d["val_spp"], layers, width, *([epochs] if epochs else [])]  # "24 epochs"
         if size in presets.RNA_BLENDER_FIBER_TRAIN:
-            ft = presets.RNA_BLENDER_FIBER_TRAIN[size]
-            expect += [layers, ft["hidden"], *([ft["epochs"]] if "epochs" in ft else [])]  # "fibers 4 × 128, 24 epochs"
+            expect += [layers, presets.RNA_BLENDER_FIBER_TRAIN[size]["hidden"]]
         assert rows[size] == expect + [r, c], size
 
 
