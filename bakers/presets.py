@@ -52,7 +52,7 @@ RNA_BLENDER_FIBER_DATA = {"small": dict(views=200)}
 RNA_BLENDER_FIBER_TRAIN = {"small": dict(hidden=128)}
 #: what Blender bakes change in RNA_TRAIN: at `small` 24 epochs for the eight samples per pixel of 8-sun views. Measured
 #: in the scene (spec/accuracy.md#light-groups): the surface example 32.3 against 31.1 dB, the dense hair example 29.4
-#: against 28.7 dB, an unseen groom +1.4 to +1.8 % and 28.7 dB against +2.8 to +7.0 % and 27.0 dB, for 80-240 s more
+#: against 28.7 dB, an unseen groom +1.4 to +1.8 % and 28.7 dB against +2.8 to +7.0 % and 27.0 dB, for 80-140 s more
 #: training
 RNA_BLENDER_TRAIN = {"small": dict(epochs=24)}
 #: what Mitsuba fiber bakes (curve shapes) change in RNA_TRAIN: the Blender fibers' wider decoder; their views keep
