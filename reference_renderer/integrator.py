@@ -509,7 +509,7 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     The image is a sum over jobs, one per wavefront (a band of a tile's rows, for the samples of one pass) with its
     own random numbers; ``settings.workers`` threads trace them (numpy, onnxruntime and Embree release the
     interpreter lock) and the film adds their results in job order, so the image does not depend on the number of
-    threads (to the last bits of a few values, spec/renderer.md#film)."""
+    threads (spec/renderer.md#film)."""
     s = resolve_settings(settings or RenderSettings(), scene)
     check_settings(s)
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)

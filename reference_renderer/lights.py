@@ -439,7 +439,7 @@ class DomeLight(Light):
     # direction <-> lat-long uv in the local frame
     @staticmethod
     def dir_to_uv(d):
-        u = 0.5 + np.arctan2(d[:, 0], -d[:, 2]) / (2.0 * np.pi)
+        u = 0.5 + np.arctan2(np.ascontiguousarray(d[:, 0]), -d[:, 2]) / (2.0 * np.pi)  # contiguous: the same bits in every thread
         v = np.arccos(np.clip(d[:, 1], -1.0, 1.0)) / np.pi
         return np.stack([np.mod(u, 1.0), v], 1)
 

@@ -119,6 +119,13 @@ def _norm_no_overflow(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # frames and direction parameterisations (spec/kinds/encodings.md#frames)
 
 
+def atan2_columns(a: np.ndarray, i: int, j: int) -> np.ndarray:
+    """atan2(a[:, i], a[:, j]) [N] of a [N, k], on contiguous copies of the columns: on strided ones numpy's arctan2
+    goes through per-call buffers and its last bits depend on where they land, which concurrent render threads
+    change (docs/benchmarks.md#render-threads)."""
+    return np.arctan2(np.ascontiguousarray(a[:, i]), np.ascontiguousarray(a[:, j]))
+
+
 def unit64(v: np.ndarray, fallback=(0.0, 0.0, 1.0)) -> np.ndarray:
     """float64 unit vectors [N,3]; zero / non-finite input becomes ``fallback``."""
     v = np.atleast_2d(np.asarray(v, np.float64))
@@ -173,7 +180,7 @@ def spherical_coords(w: np.ndarray) -> np.ndarray:
     """
     w = unit64(w)
     theta = np.arccos(np.clip(w[:, 2], -1.0, 1.0))
-    phi = np.arctan2(w[:, 1], w[:, 0])
+    phi = atan2_columns(w, 1, 0)
     return np.stack([theta / np.pi, phi / (2.0 * np.pi)], axis=1).astype(np.float32)
 
 
@@ -185,7 +192,7 @@ def azimuthal_equidistant(w: np.ndarray, n: np.ndarray) -> np.ndarray:
     """
     loc = to_local(unit64(w), n)
     r = np.arccos(np.clip(loc[:, 2], -1.0, 1.0))
-    phi = np.arctan2(loc[:, 1], loc[:, 0])
+    phi = atan2_columns(loc, 1, 0)
     return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
 
 
@@ -196,7 +203,7 @@ def azimuthal_equidistant_inverse(p: np.ndarray, n: np.ndarray) -> np.ndarray:
     """
     p = np.nan_to_num(np.asarray(p, np.float64))
     r = np.minimum(np.hypot(p[:, 0], p[:, 1]), np.pi)
-    phi = np.arctan2(p[:, 1], p[:, 0])
+    phi = atan2_columns(p, 1, 0)
     sr = np.sin(r)
     loc = np.stack([sr * np.cos(phi), sr * np.sin(phi), np.cos(r)], axis=1)
     return from_local(loc, n)

@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import UsageError
 from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
 from .boundary import boundary_params, ggx_reflection
-from .encodings import fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box, unit64
+from .encodings import atan2_columns, fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box, unit64
 from .query import Evaluator, Query
 
 #: preset -> (M appearance frequencies, hidden layers, hidden width, Ms sampling frequencies,
@@ -291,7 +291,7 @@ class NeupressEvaluator(Evaluator):
         loc = to_local(unit64(wo), n)
         t_bins, p_bins = a.shape[1], a.shape[2]
         ti = np.clip(np.floor((1.0 - np.clip(loc[:, 2], 0.0, 1.0)) * t_bins), 0, t_bins - 1).astype(np.int64)
-        pi_ = np.clip(np.floor((np.arctan2(loc[:, 1], loc[:, 0]) + np.pi) / (2 * np.pi) * p_bins), 0, p_bins - 1).astype(np.int64)
+        pi_ = np.clip(np.floor((atan2_columns(loc, 1, 0) + np.pi) / (2 * np.pi) * p_bins), 0, p_bins - 1).astype(np.int64)
         coeff = a[vertex, ti, pi_].astype(np.float64)  # [N, 9, 3]
         return (coeff * b[None]).sum(1).astype(np.float32)
 

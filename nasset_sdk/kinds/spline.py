@@ -241,10 +241,10 @@ def cylindrical_to_direction(z: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 def direction_to_cylindrical(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit-normalised d [N,3] (zero -> +Z) -> (z in [-1, 1], phi = atan2(d_y, d_x) in [-pi, pi])."""
-    from .encodings import unit64
+    from .encodings import atan2_columns, unit64
 
     d = unit64(d)
-    return np.clip(d[:, 2], -1.0, 1.0), np.arctan2(d[:, 1], d[:, 0])
+    return np.clip(d[:, 2], -1.0, 1.0), atan2_columns(d, 1, 0)
 
 
 class BoxParam:
