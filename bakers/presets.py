@@ -58,7 +58,7 @@ RNA_BLENDER_TRAIN = {"small": dict(epochs=24)}
 #: what Mitsuba fiber bakes (curve shapes) change in RNA_TRAIN: the Blender fibers' wider decoder; their views keep
 #: RNA_MITSUBA_DATA, whose per-pixel lights already give every pixel its own light direction (12 epochs: 40 moved the
 #: Mitsuba hair by +0.8 dB, within the seed spread; docs/bench-mitsuba-jit.md#hair-dense)
-RNA_MITSUBA_FIBER_TRAIN = {"small": dict(hidden=128)}
+RNA_MITSUBA_FIBER_TRAIN = RNA_BLENDER_FIBER_TRAIN
 
 #: data presets (neupress_dataset.NeupressDataSettings fields); measured in spec/bake-neupress.md
 NEUPRESS_MITSUBA_DATA = {

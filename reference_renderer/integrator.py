@@ -129,8 +129,7 @@ class PathIntegrator:
         insts = scene.instances
         self.inst_neural = np.array([i.kind == "neural" for i in insts], bool)
         accel, self.tri_ng = scene_accel(scene, settings.backend, self.inst_neural)
-        self.accel = accel.view()  # its own ray counter (this render's rays) and cut-out callback
-        self.accel.presence = self._present  # cut-out surfaces (spec/renderer.md#cutouts)
+        self._bind_accel(accel)
         self.presence_rng = np.random.default_rng(settings.seed)  # replaced by each wavefront's generator
         self.eps = self.accel.eps
         self.stats = RenderStats()
@@ -175,11 +174,16 @@ class PathIntegrator:
         """Another integrator of the same scene and plan for a render thread: it shares the read-only arrays and
         the acceleration structures, and has its own accelerator view, statistics and shaders (their caches)."""
         twin = copy.copy(self)
-        twin.accel = self.accel.view()
-        twin.accel.presence = twin._present
+        twin._bind_accel(self.accel)
         twin.stats = RenderStats()
         twin.shading = NeuralShading(twin)
         return twin
+
+    def _bind_accel(self, accel) -> None:
+        """Trace with a view of ``accel``: its own ray counter (this integrator's rays) and this integrator's
+        cut-out test (spec/renderer.md#cutouts)."""
+        self.accel = accel.view()
+        self.accel.presence = self._present
 
     # -- helpers ---------------------------------------------------------------------------
     def _present(self, tri, u, v) -> np.ndarray:

@@ -49,11 +49,11 @@ def test_blender_data_table():
     rows = table_rows("bake-blender.md", "| preset | train views")
     for size, d in presets.RNA_BLENDER_DATA.items():
         r, c, layers, width = rna.SIZES[size]
-        suns = [d["lights_per_view"]] if d.get("lights_per_view", 1) != 1 else []  # "8 suns"; one sun: not written
-        expect = [d["views"], d["res"], d["spp"], *suns]
+        suns = lambda s: [s["lights_per_view"]] if s.get("lights_per_view", 1) != 1 else []  # noqa: E731 ("8 suns"; one: not written)
+        expect = [d["views"], d["res"], d["spp"], *suns(d)]
         if size in presets.RNA_BLENDER_FIBER_DATA:
             fd = {**d, **presets.RNA_BLENDER_FIBER_DATA[size]}
-            expect += [fd["views"], fd["res"], fd["spp"], *suns]
+            expect += [fd["views"], fd["res"], fd["spp"], *suns(fd)]
         epochs = presets.RNA_BLENDER_TRAIN.get(size, {}).get("epochs")
         expect += [d["val_views"], d["val_res"], d["val_spp"], layers, width, *([epochs] if epochs else [])]  # "24 epochs"
         if size in presets.RNA_BLENDER_FIBER_TRAIN:
