@@ -7,7 +7,9 @@ Per sample, all in Dr.Jit arrays of the active Mitsuba variant, object space:
 - the boundary reflection f_r |n.w_i| (1/sr, grey): GGX rough dielectric of ``core/boundary`` (encodings.md#ggx);
 - the asset technique: the Gaussian lobe of neupress.md#lobe around n with sigma from the ``sampling``
   network (:class:`GaussianLobe`), or none (the integrator's uniform world sphere) when the asset has no
-  ``sampling`` component.
+  ``sampling`` component. The render reads sigma from a table of that network (:class:`SigmaTable`, built once
+  per asset): only the variance depends on sigma (spec/renderer.md#neupress), and the network cost 0.56 of a
+  path-traced sample, a quarter of the asset's render (docs/bench-mitsuba-jit.md#sigma-table).
 
 Precision: float32 throughout (the SDK computes phases, angles, GGX and the lobe in float64). The Fourier
 phase is reduced to its fractional cycle before the sine and cosine (|G v| reaches ~100 cycles); theta is
@@ -32,6 +34,8 @@ from .rna import RnaJit, open_asset, safe_normalize
 
 TWO_PI = 2.0 * math.pi
 LOG_SIGMA = (math.log(SIGMA_MIN), math.log(SIGMA_MAX))
+#: :class:`SigmaTable`'s resolution: nodes per axis of the encoding box, theta_o and phi_o bins
+SIGMA_TABLE = (16, 8, 16)
 
 
 def _dr():
@@ -120,6 +124,54 @@ class GaussianLobe:
         return w, self.pdf(w)
 
 
+class SigmaTable:
+    """The lobe width sigma(x, w_o) of a ``sigma(xn, theta / pi, phi / 2 pi) -> log sigma`` function, tabulated once:
+    log sigma at R^3 nodes spanning the encoding box (xn in [-1, 1]^3, trilinear between them) times the centres of
+    N_theta x N_phi equal-angle w_o bins (nearest bin). Lookups are 8 gathers instead of the network; the lobe
+    sampled and the pdf used are those of the table's sigma, so the estimate is unbiased whatever the table's
+    error (spec/renderer.md#neupress)."""
+
+    def __init__(self, mi, log_sigma, res=SIGMA_TABLE) -> None:
+        dr = _dr()
+        self.mi, (self.r, self.nt, self.np) = mi, (int(v) for v in res)
+        r, nt, npb = self.r, self.nt, self.np
+        if r < 2 or nt < 1 or npb < 1:
+            raise error("USAGE", f"sigma table resolution {res} needs >= 2 nodes per axis and >= 1 bin")
+        i = np.arange(r, dtype=np.float64) * (2.0 / (r - 1)) - 1.0
+        th = (np.arange(nt) + 0.5) / nt  # theta / pi at the bin centres
+        ph = (np.arange(npb) + 0.5) / npb - 0.5  # phi / (2 pi)
+        # row ((d * r + iz) * r + iy) * r + ix, d = theta bin * N_phi + phi bin
+        t, p, z, y, x = np.meshgrid(th, ph, i, i, i, indexing="ij")
+        cols = [mi.Float(np.ascontiguousarray(a).ravel().astype(np.float32)) for a in (x, y, z, t, p)]
+        self.table = mi.Float(log_sigma(cols))
+        dr.eval(self.table)
+
+    def __call__(self, xn, wo):
+        """sigma [Float, radians] at unit-box points xn [Vector3f] and object-space directions wo [Vector3f]."""
+        dr, mi = _dr(), self.mi
+        r = self.r
+        f = [(dr.clip(dr.select(dr.isfinite(c), c, 0.0), -1.0, 1.0) + 1.0) * (0.5 * (r - 1)) for c in (xn.x, xn.y, xn.z)]
+        i0 = [dr.minimum(mi.UInt32(c), r - 2) for c in f]
+        fr = [c - mi.Float(i) for c, i in zip(f, i0, strict=True)]
+        w = safe_normalize(mi, mi.Vector3f(wo))
+        theta = dr.atan2(dr.sqrt(dr.square(w.x) + dr.square(w.y)), w.z)
+        phi = dr.atan2(w.y, w.x)
+        it = dr.minimum(mi.UInt32(dr.clip(dr.select(dr.isfinite(theta), theta, 0.0) * (self.nt / math.pi), 0.0, self.nt - 1)),
+                        self.nt - 1)
+        ip = dr.minimum(mi.UInt32(dr.clip((dr.select(dr.isfinite(phi), phi, 0.0) + math.pi) * (self.np / TWO_PI), 0.0,
+                                          self.np - 1)), self.np - 1)
+        base = (it * self.np + ip) * (r * r * r)
+        out = None
+        for dz in (0, 1):
+            for dy in (0, 1):
+                for dx in (0, 1):
+                    idx = base + ((i0[2] + dz) * r + (i0[1] + dy)) * r + (i0[0] + dx)
+                    wgt = (fr[0] if dx else 1.0 - fr[0]) * (fr[1] if dy else 1.0 - fr[1]) * (fr[2] if dz else 1.0 - fr[2])
+                    term = dr.gather(mi.Float, self.table, idx) * wgt
+                    out = term if out is None else out + term
+        return dr.exp(out)
+
+
 class NeupressJit:
     """A neupress surface asset ready for Dr.Jit.
 
@@ -146,6 +198,7 @@ class NeupressJit:
             self.gs = self._fourier(asset, "sampling", 5)
             self.sigma_net = DrJitNetwork(mi, asset.evaluable_bytes("sampling", "sigma"), file=self.path,
                                           prim=f"{COMPONENTS}/sampling/sigma")
+            self.sigma_table = SigmaTable(mi, self._log_sigma)
         self.asset = asset
         self.prt = None  # (coefficients Float [V*T*P*27], T, P, V), read on first use (PRT mode only)
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
@@ -181,18 +234,28 @@ class NeupressJit:
         s = self.mi.Color3f(*self.subsurface(x, wo, wi))
         return s + self.reflection(n, wo, wi), s
 
+    def _log_sigma(self, v: list):
+        """clamp(y, ln 1e-3, ln 1e3) [Float] of the ``sampling`` network at v = [xn (3), theta_o / pi, phi_o / 2 pi],
+        NaN y -> 0."""
+        dr = _dr()
+        (y,) = self.sigma_net(fourier_features(self.gs, v))
+        return dr.clip(dr.select(dr.isnan(y), 0.0, y), *LOG_SIGMA)
+
     def sigma(self, x, wo):
         """Lobe width [Float, radians] from the ``sampling`` network: exp(clamp(y, ln 1e-3, ln 1e3)), NaN y -> 1."""
-        dr = _dr()
         xn = self.to_unit_box(x)
-        (y,) = self.sigma_net(fourier_features(self.gs, [xn.x, xn.y, xn.z] + spherical(self.mi, wo)))
-        return dr.exp(dr.clip(dr.select(dr.isnan(y), 0.0, y), *LOG_SIGMA))
+        return _dr().exp(self._log_sigma([xn.x, xn.y, xn.z] + spherical(self.mi, wo)))
+
+    #: False: the technique evaluates the ``sampling`` network at every vertex instead of :class:`SigmaTable`
+    tabulate_sigma = True
 
     def technique(self, x, n, wo):
-        """The asset's direction sampler at a vertex: :class:`GaussianLobe` around n, or None (uniform world sphere)."""
+        """The asset's direction sampler at a vertex: :class:`GaussianLobe` around n with sigma from the table (or
+        the network, :attr:`tabulate_sigma`), or None (uniform world sphere)."""
         if self.sigma_net is None:
             return None
-        return GaussianLobe(self.mi, safe_normalize(self.mi, n), self.sigma(x, wo))
+        sigma = self.sigma_table(self.to_unit_box(x), wo) if self.tabulate_sigma else self.sigma(x, wo)
+        return GaussianLobe(self.mi, safe_normalize(self.mi, n), sigma)
 
     def _prt_table(self):
         if self.prt is None:

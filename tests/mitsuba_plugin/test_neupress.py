@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("mitsuba")
 
-from nasset_mitsuba_plugin.neupress import GaussianLobe, NeupressJit  # noqa: E402
+from nasset_mitsuba_plugin.neupress import GaussianLobe, NeupressJit, SigmaTable  # noqa: E402
 from nasset_mitsuba_plugin.plugins import register  # noqa: E402
 from nasset_mitsuba_plugin.scene import asset_shape  # noqa: E402
 from nasset_mitsuba_plugin.variant import jit_mitsuba  # noqa: E402
@@ -39,7 +39,7 @@ def _np3(v):
 @pytest.mark.parametrize("size", ["tiny", pytest.param("small", marks=pytest.mark.slow)])
 def test_neupress_matches_sdk_evaluator(mi, tmp_path, rng, size):
     """S (appearance network on Fourier features), f_r |n.wi| (GGX boundary), sigma (sampling network), and
-    the lobe's samples from the same u and its pdf (with that sigma) equal the SDK on random inputs
+    the lobe's samples from the same u and its pdf (with the lobe's own, tabulated sigma) equal the SDK on random inputs
     (points up to 20 % outside the encoding box, unnormalised and zero directions). Tolerances: S 5e-4 abs +
     1e-3 rel (float32 Fourier phases of up to ~100 cycles: ~1e-4 measured); f_r, sigma and pdfs 1e-3 rel;
     sampled directions 1e-3 abs (float32 against the SDK's float64)."""
@@ -63,11 +63,11 @@ def test_neupress_matches_sdk_evaluator(mi, tmp_path, rng, size):
     assert fr_ref.max() > 0.5
     np.testing.assert_allclose(_np3(un) - _np3(sh), fr_ref, atol=1e-5, rtol=1e-3)
 
+    np.testing.assert_allclose(jit.sigma(xj, woj).numpy(), sdk.sigma(x, wo), rtol=1e-3)
     lobe = jit.technique(xj, nj, woj)
     sigma = np.asarray(lobe.sigma.numpy(), np.float64)
-    np.testing.assert_allclose(sigma, sdk.sigma(x, wo), rtol=1e-3)
-    # the lobe with the plugin's own sigma: in the tails (r / sigma ~ 3) the pdf's relative error is
-    # (r / sigma)^2 times sigma's, which the sigma check above already bounds
+    np.testing.assert_allclose(sigma, jit.sigma_table(jit.to_unit_box(xj), woj).numpy(), rtol=1e-6)
+    # the lobe with the plugin's own sigma (its table's; only the variance depends on it)
     u = rng.random((n, 2))
     w_ref, p_ref = gaussian_lobe_sample(nrm, sigma, u)
     w, p = lobe.sample(mi.Point2f(*[mi.Float(u[:, k].astype(np.float32)) for k in range(2)]))
@@ -93,6 +93,64 @@ def test_prt_radiance_matches_sdk(mi, tmp_path, rng):
     out = _np3(jit.prt_radiance(b, mi.UInt32(v.astype(np.uint32)), _vec(mi, nrm), _vec(mi, wo)))
     assert np.abs(ref).max() > 0.1
     np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-6)
+
+
+def _cols(mi, a: np.ndarray) -> list:
+    return [mi.Float(np.ascontiguousarray(c).astype(np.float32)) for c in a.T]
+
+
+def test_sigma_table_interpolates_trilinear_in_x_nearest_in_w_o(mi, rng):
+    """SigmaTable of a function linear in xn plus a function of the w_o bin: trilinear interpolation reproduces
+    the linear part exactly anywhere in the box, and the direction part is that of the bin holding w_o (equal-angle
+    theta, phi bins), computed here independently; points outside the box clamp to it; the poles, a zero
+    direction and NaN inputs give finite widths."""
+    a = np.array([0.7, -0.4, 0.25])
+
+    def dir_part(t, p):  # t = theta / pi, p = phi / (2 pi) at the bin centres
+        return 0.3 * np.cos(2 * np.pi * p) * np.sin(np.pi * t) - 0.5 * t
+
+    def log_sigma(cols):
+        x, y, z, t, p = (np.asarray(c, np.float64) for c in cols)
+        return (a[0] * x + a[1] * y + a[2] * z + dir_part(t, p)).astype(np.float32)
+
+    nt, npb = 5, 7
+    table = SigmaTable(mi, log_sigma, res=(6, nt, npb))
+    n = 5000
+    xn = rng.uniform(-1.3, 1.3, (n, 3))
+    wo = rng.normal(size=(n, 3)) * rng.uniform(0.01, 10, (n, 1))
+    got = np.log(np.asarray(table(mi.Vector3f(*_cols(mi, xn)), mi.Vector3f(*_cols(mi, wo))).numpy(), np.float64))
+    w = wo / np.linalg.norm(wo, axis=1, keepdims=True)
+    theta, phi = np.arctan2(np.hypot(w[:, 0], w[:, 1]), w[:, 2]), np.arctan2(w[:, 1], w[:, 0])
+    it = np.minimum((theta / np.pi * nt).astype(int), nt - 1)
+    ip = np.minimum(((phi + np.pi) / (2 * np.pi) * npb).astype(int), npb - 1)
+    want = np.clip(xn, -1, 1) @ a + dir_part((it + 0.5) / nt, (ip + 0.5) / npb - 0.5)
+    np.testing.assert_allclose(got, want, atol=2e-5)
+    odd_x = np.array([[np.nan, 0, 0], [0, np.inf, 0], [0.2, 0.1, -0.3], [0.2, 0.1, -0.3], [0.2, 0.1, -0.3]])
+    odd_w = np.array([[0, 0, 1], [0, 0, -1], [0, 0, 0], [np.nan, 1, 0], [1e-30, 0, -1]])
+    s = np.asarray(table(mi.Vector3f(*_cols(mi, odd_x)), mi.Vector3f(*_cols(mi, odd_w))).numpy())
+    assert np.isfinite(s).all() and (s > 0).all()
+
+
+def test_sigma_table_holds_the_network_at_its_nodes(mi, tmp_path):
+    """NeupressJit's table holds the ``sampling`` network's width at its box nodes and w_o bin centres (a tiny
+    random asset, whose widths vary over two orders of magnitude; between the nodes the table interpolates,
+    which only changes the variance)."""
+    path = tmp_path / "np.usdc"
+    example_builder("neupress", size="tiny", seed=3).write(path)
+    jit = NeupressJit(mi, str(path))
+    r, nt, npb = jit.sigma_table.r, jit.sigma_table.nt, jit.sigma_table.np
+    g = np.linspace(-1, 1, r)
+    rng = np.random.default_rng(1)
+    n = 2000
+    xn = g[rng.integers(0, r, (n, 3))]
+    it, ip = rng.integers(0, nt, n), rng.integers(0, npb, n)
+    theta, phi = (it + 0.5) / nt * np.pi, ((ip + 0.5) / npb - 0.5) * 2 * np.pi
+    wo = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=1)
+    x = jit.lo + (xn + 1) * 0.5 * jit.span
+    want = jit.sigma(mi.Point3f(*_cols(mi, x)), mi.Vector3f(*_cols(mi, wo))).numpy()
+    got = jit.sigma_table(mi.Vector3f(*_cols(mi, xn)), mi.Vector3f(*_cols(mi, wo))).numpy()
+    assert np.ptp(np.log(want)) > 0.5  # the widths vary
+    np.testing.assert_allclose(got, want, rtol=2e-3)
 
 
 @pytest.mark.parametrize("sigma", [0.3, 2.0])
