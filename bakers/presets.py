@@ -101,12 +101,12 @@ NEUPRESS_TRAIN = {
     "hq": dict(epochs=80, batch=4096, sampling_epochs=40, sampling_samples=16384, sampling_bins=24, prt_dirs=1024),
 }
 
-#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 3000 steps with each buffer
-#: used 4 times, in-scene bias^2 2.0e-5 against 5.6e-5 for 1200 steps used twice, bake 7-11 min
-#: (spec/bake-8dna.md#small-budget)
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 9000 steps with each buffer
+#: used 4 times, in-scene bias^2 2.15e-5 on the mean of three seeds against 3.91e-5 for 3000 steps (four seeds), bake
+#: 5 min on an idle 2-core machine (spec/bake-8dna.md#seeds)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
-    "small": dict(steps=3000, batch=2048, buffer=1 << 18, reuse=4),
+    "small": dict(steps=9000, batch=2048, buffer=1 << 18, reuse=4),
     "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
 }
 

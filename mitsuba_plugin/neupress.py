@@ -8,8 +8,8 @@ Per sample, all in Dr.Jit arrays of the active Mitsuba variant, object space:
 - the asset technique: the Gaussian lobe of neupress.md#lobe around n with sigma from the ``sampling``
   network (:class:`GaussianLobe`), or none (the integrator's uniform world sphere) when the asset has no
   ``sampling`` component. The render reads sigma from a table of that network (:class:`SigmaTable`, built once
-  per asset): only the variance depends on sigma (spec/renderer.md#neupress), and the network cost 0.56 of a
-  path-traced sample, a quarter of the asset's render (docs/bench-mitsuba-jit.md#sigma-table).
+  per asset): only the variance depends on sigma (spec/renderer.md#neupress), and evaluating the network at every
+  vertex cost 0.34-0.36 of a path-traced sample, a sixth of the asset's render (docs/bench-mitsuba-jit.md#sigma-table).
 
 Precision: float32 throughout (the SDK computes phases, angles, GGX and the lobe in float64). The Fourier
 phase is reduced to its fractional cycle before the sine and cosine (|G v| reaches ~100 cycles); theta is
