@@ -524,8 +524,7 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     tile = max(1, s.tile)
     tiles = [(x0, y0) for y0 in range(0, height, tile) for x0 in range(0, width, tile)]
     passes = [(p0, min(s.spp, p0 + plan.spp_per_pass)) for p0 in range(0, s.spp, plan.spp_per_pass)]
-    n_jobs = sum(-(-(min(width, x0 + tile) - x0) * (min(height, y0 + tile) - y0) // _band(p0, p1))
-                 for x0, y0 in tiles for p0, p1 in passes)
+    n_jobs = sum(1 for _ in _jobs(tiles, passes, width, height, tile))  # the bands' pixel slices are views: cheap
     n_workers = render_workers(s.workers, n_jobs)
     if load_components:
         prepare_assets(scene, plan, s, workers=n_workers)
