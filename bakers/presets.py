@@ -102,7 +102,7 @@ NEUPRESS_TRAIN = {
 }
 
 #: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 9000 steps with each buffer
-#: used 4 times, in-scene bias^2 2.15e-5 on the mean of three seeds against 3.91e-5 for 3000 steps (four seeds), bake
+#: used 4 times, in-scene bias^2 2.24e-5 on the mean of four seeds against 3.91e-5 for 3000 steps, bake
 #: 5 min on an idle 2-core machine (spec/bake-8dna.md#seeds)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
