@@ -92,10 +92,25 @@ def data_parallel(torch, want: str = "auto") -> DataParallel:
     return DataParallel(rank, world, device)
 
 
+#: how long a process leaving the group waits for the others at exit (:func:`_leave_group`)
+LEAVE_WAIT = timedelta(seconds=60)
+
+
 def _leave_group(dist) -> None:
-    """Destroy the process group at exit while the interpreter is still whole. Left to interpreter
-    finalisation, gloo's worker threads can still be joinable when they are destroyed, and the process
-    aborts ("terminate called without an active exception", SIGABRT): a rank that finished its share
-    and exited then took down rank 0 while it was writing the asset."""
-    if dist.is_initialized():
-        dist.destroy_process_group()
+    """Destroy the process group at exit while the interpreter is still whole, once every process has come
+    to its exit. Left to interpreter finalisation, gloo's worker threads can still be joinable when they are
+    destroyed, and the process aborts ("terminate called without an active exception", SIGABRT): a rank
+    that finished its share and exited then took down rank 0 while it was writing the asset. Destroying
+    the group while another rank was still working aborted the same way (about one torchrun launch in 20 of
+    tests/bakers/test_train_parallel.py), hence the barrier first; a rank that never comes (it failed) is
+    waited for :data:`LEAVE_WAIT` at most."""
+    if not dist.is_initialized():
+        return
+    try:
+        if dist.get_backend() == "gloo":
+            dist.monitored_barrier(timeout=LEAVE_WAIT)
+        else:
+            dist.barrier()
+    except Exception:  # noqa: BLE001 - a peer that failed or left: leave anyway
+        pass
+    dist.destroy_process_group()
