@@ -156,10 +156,8 @@ class SigmaTable:
         w = safe_normalize(mi, mi.Vector3f(wo))
         theta = dr.atan2(dr.sqrt(dr.square(w.x) + dr.square(w.y)), w.z)
         phi = dr.atan2(w.y, w.x)
-        it = dr.minimum(mi.UInt32(dr.clip(dr.select(dr.isfinite(theta), theta, 0.0) * (self.nt / math.pi), 0.0, self.nt - 1)),
-                        self.nt - 1)
-        ip = dr.minimum(mi.UInt32(dr.clip((dr.select(dr.isfinite(phi), phi, 0.0) + math.pi) * (self.np / TWO_PI), 0.0,
-                                          self.np - 1)), self.np - 1)
+        it = mi.UInt32(dr.clip(dr.select(dr.isfinite(theta), theta, 0.0) * (self.nt / math.pi), 0.0, self.nt - 1))
+        ip = mi.UInt32(dr.clip((dr.select(dr.isfinite(phi), phi, 0.0) + math.pi) * (self.np / TWO_PI), 0.0, self.np - 1))
         base = (it * self.np + ip) * (r * r * r)
         out = None
         for dz in (0, 1):
