@@ -8,7 +8,7 @@ Per sample, all in Dr.Jit arrays of the active Mitsuba variant, object space:
 - the asset technique: the Gaussian lobe of neupress.md#lobe around n with sigma from the ``sampling``
   network (:class:`GaussianLobe`), or none (the integrator's uniform world sphere) when the asset has no
   ``sampling`` component. The render reads sigma from a table of that network (:class:`SigmaTable`, built once
-  per asset): only the variance depends on sigma (spec/renderer.md#neupress), and evaluating the network at every
+  per asset, on first use): only the variance depends on sigma (spec/renderer.md#neupress), and evaluating the network at every
   vertex cost 0.34-0.36 of a path-traced sample, a sixth of the asset's render (docs/bench-mitsuba-jit.md#sigma-table).
 
 Precision: float32 throughout (the SDK computes phases, angles, GGX and the lobe in float64). The Fourier
@@ -196,7 +196,7 @@ class NeupressJit:
             self.gs = self._fourier(asset, "sampling", 5)
             self.sigma_net = DrJitNetwork(mi, asset.evaluable_bytes("sampling", "sigma"), file=self.path,
                                           prim=f"{COMPONENTS}/sampling/sigma")
-            self.sigma_table = SigmaTable(mi, self._log_sigma)
+        self._sigma_table = None  # SigmaTable, built on first use (a render that samples the lobe)
         self.asset = asset
         self.prt = None  # (coefficients Float [V*T*P*27], T, P, V), read on first use (PRT mode only)
         lo, hi = (np.asarray(a, np.float64) for a in asset.domain)
@@ -246,6 +246,17 @@ class NeupressJit:
 
     #: False: the technique evaluates the ``sampling`` network at every vertex instead of :class:`SigmaTable`
     tabulate_sigma = True
+
+    @property
+    def sigma_table(self) -> SigmaTable:
+        """The :class:`SigmaTable` of the ``sampling`` network, built on first use: renders that never sample the
+        lobe (``lobe`` false, PRT) do not pay for it (0.2 s at ``small``, 2.6 s at ``hq``)."""
+        if self.sigma_net is None:
+            raise error("COMPONENT_MISSING", "the asset has no sampling component to tabulate", file=self.path,
+                        prim=f"{COMPONENTS}/sampling")
+        if self._sigma_table is None:
+            self._sigma_table = SigmaTable(self.mi, self._log_sigma)
+        return self._sigma_table
 
     def technique(self, x, n, wo):
         """The asset's direction sampler at a vertex: :class:`GaussianLobe` around n with sigma from the table (or

@@ -210,3 +210,24 @@ def test_asset_without_the_appearance_network(mi, tmp_path):
     with pytest.raises(NassetError) as exc:
         asset_shape(_asset_without(tmp_path, "neupress", "appearance"), mi=mi)
     assert exc.value.code == "NETWORK_MISSING" and "appearance" in exc.value.message
+
+
+def test_sigma_table_is_built_on_first_use(mi, tmp_path):
+    """Loading an asset builds no table (renders with ``lobe`` false or PRT never read it); the first lobe builds it
+    once; an asset without the ``sampling`` component has none to build: COMPONENT_MISSING naming the prim."""
+    path = tmp_path / "np.usdc"
+    example_builder("neupress", size="tiny", seed=5).write(path)
+    jit = NeupressJit(mi, str(path))
+    assert jit._sigma_table is None
+    n = mi.Vector3f(0.0, 0.0, 1.0)
+    jit.technique(mi.Point3f(0.0, 0.0, 0.0), n, n)
+    table = jit._sigma_table
+    assert isinstance(table, SigmaTable)
+    jit.technique(mi.Point3f(0.1, 0.0, 0.0), n, n)
+    assert jit._sigma_table is table
+
+    bare = NeupressJit(mi, str(_asset_without(tmp_path, "neupress", "sampling")))
+    assert bare.technique(mi.Point3f(0.0, 0.0, 0.0), n, n) is None
+    with pytest.raises(NassetError) as exc:
+        _ = bare.sigma_table
+    assert exc.value.code == "COMPONENT_MISSING" and "sampling" in str(exc.value)
