@@ -40,7 +40,7 @@ import numpy as np
 
 from nasset_benchmarks.common import machine
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
-from nasset_sdk.errors import UsageError
+from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
@@ -320,6 +320,46 @@ def _open(path):
     return a
 
 
+def check_given_asset(path, *, far_field: bool) -> Path:
+    """``--asset`` (far_field False) or ``--farfield`` checked before any bake or render: an existing, readable 8dna
+    surface asset (CONVERT_ASSET_REFERENCE otherwise), and not the other model of the pair where its provenance says
+    which it is (BENCH_ASSET_KIND: the 6D baseline given as the 8D asset, or the reverse)."""
+    from nasset_sdk.asset import Asset
+
+    flag = "--farfield" if far_field else "--asset"
+    file = Path(path)
+    if not file.is_file():
+        raise error("CONVERT_ASSET_REFERENCE", f"{flag}: {file} does not exist", file=str(file))
+    try:
+        asset = Asset.open(file, load="none")
+    except Exception as exc:  # noqa: BLE001 - any unreadable asset is the same user error here
+        raise error("CONVERT_ASSET_REFERENCE", f"{flag}: {file} is not a readable neural asset "
+                    f"({getattr(exc, 'code', type(exc).__name__)})", file=str(file)) from None
+    if asset.kind != "8dna" or asset.variant != "surface":
+        raise error("BENCH_ASSET_KIND", f"{flag}: {file.name} is a {asset.kind} {asset.variant} asset; the 8dna bench needs "
+                    "an 8dna surface asset baked from its example", file=str(file))
+    model = str((asset.provenance or {}).get("model", ""))
+    if model and model.startswith("6D") != far_field:
+        want = "the 6D far-field baseline" if far_field else "an 8D asset"
+        raise error("BENCH_ASSET_KIND", f"{flag}: {file.name} holds the model '{model.split(' (')[0]}', not {want}", file=str(file))
+    return file
+
+
+def _reference_npz(path, res: int) -> tuple:
+    """(reference [res, res, 3], its noise variance, its spp) stored by an earlier run (``--reference-npz``)."""
+    file = Path(path)
+    try:
+        with np.load(file, allow_pickle=False) as z:
+            gt, var_gt, gt_spp = z["reference"].astype(np.float64), float(z["reference_noise_variance"]), int(z["reference_spp"])
+    except (OSError, KeyError, ValueError) as exc:
+        raise UsageError(f"--reference-npz {file}: not the images file of an earlier run ({exc})") from None
+    if gt.shape != (res, res, 3):
+        raise UsageError(f"--reference-npz {file} holds a {'x'.join(map(str, gt.shape[:2]))} image, not {res}x{res}")
+    if not np.isfinite(gt).all() or not math.isfinite(var_gt) or gt_spp < 1:
+        raise UsageError(f"--reference-npz {file}: its reference is not finite")
+    return gt, var_gt, gt_spp
+
+
 def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: int = 64, spp: int = 128, gt_spp: int = 4096,
                seed: int = 0, reference_renderer_spp: int = 0, reference_npz=None, converged_spp: int = 0,
                example: str = "default", quiet: bool = False) -> dict:
@@ -327,12 +367,20 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     from nasset_bakers.mitsuba.eightdna import bake
     from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba.eightdna_example import CAMERA, EXAMPLE_ASSET_IDS, LIGHT_CENTER, LIGHT_RADIANCE, LIGHT_RADIUS, write_example_scene
+    from nasset_converters.mitsuba.scene import BOX_TOLERANCE, bounds_offset
+    from nasset_sdk.asset import Asset
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
     output_folder(out)
     if res < 4 or spp < 2 or gt_spp < 2:
         raise UsageError("--res must be >= 4 and --spp, --gt-spp >= 2")
+    if example not in ("default", "heterogeneous"):
+        raise UsageError(f"--example must be default or heterogeneous, got {example!r}")
+    # what was given is checked before anything is baked or rendered
+    asset = None if asset is None else check_given_asset(asset, far_field=False)
+    farfield = None if farfield is None else check_given_asset(farfield, far_field=True)
+    stored = None if reference_npz is None else _reference_npz(reference_npz, res)
     t_all = time.perf_counter()
     setup: dict[str, float] = {}
     bakes = {}
@@ -346,8 +394,6 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
                 bakes[name] = bake(None, None, path, size=size, example=example, seed=seed, far_field=ff, quiet=quiet,
                                    summary_stream=sys.stderr)
                 setup[f"bake_{name}_s"] = time.perf_counter() - t
-        if not Path(path).is_file():
-            raise UsageError(f"asset {path} does not exist")
         if name == "8dna":
             asset = Path(path)
         else:
@@ -355,21 +401,21 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
 
     mi = load_mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
-    if example not in ("default", "heterogeneous"):
-        raise UsageError(f"--example must be default or heterogeneous, got {example!r}")
     xml = write_example_scene(out / "scene", res=res, heterogeneous=example == "heterogeneous")
     mscene = mi.load_file(str(xml))
     sensor = _mi_sensor(mi, res, CAMERA)
     shapes = [s for s in mscene.shapes() if s.id() in EXAMPLE_ASSET_IDS]
     light = SphereLight(LIGHT_CENTER, LIGHT_RADIUS, LIGHT_RADIANCE)
+    for path in (asset, farfield):  # a given asset of another object: its bounds are not the example's
+        off = bounds_offset(shapes, Asset.open(path, load="none").geometry().points)
+        if off > BOX_TOLERANCE:
+            raise error("BENCH_ASSET_MISMATCH", f"{Path(path).name} was not baked from the 8dna example: its bounds differ "
+                        f"from the example's by {100 * off:.0f} % of the diagonal", file=str(path))
 
     # reference (or the one an earlier run stored, for the same resolution)
     t = time.perf_counter()
-    if reference_npz is not None:
-        with np.load(reference_npz, allow_pickle=False) as z:
-            gt, var_gt, gt_spp = z["reference"].astype(np.float64), float(z["reference_noise_variance"]), int(z["reference_spp"])
-        if gt.shape != (res, res, 3):
-            raise UsageError(f"--reference-npz {reference_npz} holds a {gt.shape[0]}x{gt.shape[1]} image, not {res}x{res}")
+    if stored is not None:
+        gt, var_gt, gt_spp = stored
         say(f"reference: {reference_npz} ({gt_spp} spp)")
     else:
         say(f"reference: Mitsuba {mi.variant()} volpath {gt_spp} spp at {res}x{res}")
