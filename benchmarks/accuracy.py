@@ -189,17 +189,21 @@ def _is_curve(shape) -> bool:
     return "curve" in str(shape).split("[")[0].lower()
 
 
-def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[dict]:
+def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "", flag: str = "--replace",
+                     kinds: tuple | None = None) -> list[dict]:
     """Per distinct asset file: {asset, ids, kind, variant}; typed errors when scene and asset do not match.
 
-    BENCH_ASSET_MISMATCH: an id the asset was not baked from (its bounding box differs from the
-    replaced shapes' by more than BOX_TOLERANCE of the diagonal). BENCH_ASSET_KIND: a fiber asset
-    for mesh shapes (or a surface asset for curves), or a neupress asset for shapes without a
-    dielectric boundary (neupress carries subsurface transport behind a rough dielectric)."""
+    CONVERT_ASSET_REFERENCE: a missing or unreadable file. BENCH_ASSET_MISMATCH: an id the asset was not
+    baked from (its bounding box differs from the replaced shapes' by more than BOX_TOLERANCE of the
+    diagonal). BENCH_ASSET_KIND: a fiber asset for mesh shapes (or a surface asset for curves), a neupress
+    asset for shapes without a dielectric boundary (neupress carries subsurface transport behind a rough
+    dielectric), or, with ``kinds`` (a bench built for them), an asset of another kind. ``flag``: the option
+    that named the asset, for the messages."""
     import mitsuba as mi
 
     from nasset_converters.mitsuba.scene import bounds_offset, no_such_shape, refuse_emitter
-    from nasset_sdk.asset import Asset
+
+    from .common import open_given_asset, require_kind
 
     by_id = {s.id(): s for s in scene.shapes() if s.id()}
     groups: dict[Path, list[str]] = {}
@@ -209,13 +213,9 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "") -> list[
         groups.setdefault(Path(file), []).append(sid)
     out = []
     for file, ids in groups.items():
-        if not file.is_file():
-            raise error("CONVERT_ASSET_REFERENCE", f"--replace {','.join(ids)}: {file} does not exist", file=str(file))
-        try:
-            asset = Asset.open(file, load="none")
-        except Exception as exc:  # noqa: BLE001 - any unreadable asset is the same user error here
-            raise error("CONVERT_ASSET_REFERENCE", f"--replace {','.join(ids)}: {file} is not a readable neural asset "
-                        f"({getattr(exc, 'code', type(exc).__name__)})", file=str(file)) from None
+        asset = open_given_asset(file, f"{flag} {','.join(ids)}")
+        if kinds is not None:
+            require_kind(asset, file, kinds, flag)
         shapes = [by_id[i] for i in ids]
         for shape in shapes:
             refuse_emitter(shape, file=scene_file)
@@ -356,14 +356,15 @@ def delta_light_caveat(mi, scene, ids: list[str]) -> str | None:
 def blender_asset_fits(rep: dict, *, scene_file: str = "") -> list[dict]:
     """As check_asset_fits, for the objects of the open .blend (the geometry the Blender bake exports)."""
     from nasset_converters.blender import scene as bsc
-    from nasset_sdk.asset import Asset
+
+    from .common import open_given_asset
 
     groups: dict[Path, list[str]] = {}
     for name, file in rep.items():
         groups.setdefault(Path(file), []).append(name)
     out = []
     for file, ids in groups.items():
-        asset = Asset.open(file, load="none")
+        asset = open_given_asset(file, f"--replace {','.join(ids)}")
         variant, geo, _ = bsc.asset_geometry(bsc.pick_objects(ids, file=scene_file), file=scene_file)
         if asset.variant != variant:
             raise error("BENCH_ASSET_KIND", f"{file.name} is a {asset.kind} {asset.variant} asset but {ids} need a "

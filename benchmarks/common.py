@@ -36,6 +36,28 @@ def ints(text: str, name: str) -> list[int]:
     return vals
 
 
+def open_given_asset(path, what: str):
+    """The asset a user named (``what``: the option and the shapes it stands in for, for the message), opened without
+    its payloads: CONVERT_ASSET_REFERENCE where the file is missing or not a readable neural asset."""
+    from nasset_sdk.asset import Asset
+
+    file = Path(path)
+    if not file.is_file():
+        raise error("CONVERT_ASSET_REFERENCE", f"{what}: {file} does not exist", file=str(file))
+    try:
+        return Asset.open(file, load="none")
+    except Exception as exc:  # noqa: BLE001 - any unreadable asset is the same user error here
+        raise error("CONVERT_ASSET_REFERENCE", f"{what}: {file} is not a readable neural asset "
+                    f"({getattr(exc, 'code', type(exc).__name__)})", file=str(file)) from None
+
+
+def require_kind(asset, path, kinds: tuple, what: str) -> None:
+    """BENCH_ASSET_KIND unless ``asset`` is a surface asset of one of ``kinds`` (a bench built for them)."""
+    if asset.kind not in kinds or asset.variant != "surface":
+        raise error("BENCH_ASSET_KIND", f"{what}: {Path(path).name} is a {asset.kind} {asset.variant} asset; this bench needs "
+                    f"a {' or '.join(kinds)} surface asset", file=str(path))
+
+
 def camera_sensor(mi, sensor, width: int, height: int):
     """A box-filtered ``width`` x ``height`` copy of a Mitsuba ``sensor``'s camera: its pose and its model
     (``perspective`` with its horizontal field of view, ``thinlens`` with its aperture and focus distance, or

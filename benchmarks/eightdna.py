@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.common import machine
+from nasset_benchmarks.common import machine, open_given_asset, require_kind
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
@@ -321,28 +321,19 @@ def _open(path):
 
 
 def check_given_asset(path, *, far_field: bool) -> Path:
-    """``--asset`` (far_field False) or ``--farfield`` checked before any bake or render: an existing, readable 8dna
-    surface asset (CONVERT_ASSET_REFERENCE otherwise), and not the other model of the pair where its provenance says
-    which it is (BENCH_ASSET_KIND: the 6D baseline given as the 8D asset, or the reverse)."""
-    from nasset_sdk.asset import Asset
-
+    """``--asset`` (far_field False) or ``--farfield``, checked before any bake or render: an existing, readable 8dna
+    surface asset (CONVERT_ASSET_REFERENCE, BENCH_ASSET_KIND), and not the other model of the pair where its provenance
+    says which it is (BENCH_ASSET_KIND: the 6D baseline given as the 8D asset, or the reverse). Its bounds are checked
+    against the example's blob once the scene is loaded (:func:`nasset_benchmarks.accuracy.check_asset_fits`)."""
     flag = "--farfield" if far_field else "--asset"
-    file = Path(path)
-    if not file.is_file():
-        raise error("CONVERT_ASSET_REFERENCE", f"{flag}: {file} does not exist", file=str(file))
-    try:
-        asset = Asset.open(file, load="none")
-    except Exception as exc:  # noqa: BLE001 - any unreadable asset is the same user error here
-        raise error("CONVERT_ASSET_REFERENCE", f"{flag}: {file} is not a readable neural asset "
-                    f"({getattr(exc, 'code', type(exc).__name__)})", file=str(file)) from None
-    if asset.kind != "8dna" or asset.variant != "surface":
-        raise error("BENCH_ASSET_KIND", f"{flag}: {file.name} is a {asset.kind} {asset.variant} asset; the 8dna bench needs "
-                    "an 8dna surface asset baked from its example", file=str(file))
+    asset = open_given_asset(path, flag)
+    require_kind(asset, path, ("8dna",), flag)
     model = str((asset.provenance or {}).get("model", ""))
     if model and model.startswith("6D") != far_field:
         want = "the 6D far-field baseline" if far_field else "an 8D asset"
-        raise error("BENCH_ASSET_KIND", f"{flag}: {file.name} holds the model '{model.split(' (')[0]}', not {want}", file=str(file))
-    return file
+        raise error("BENCH_ASSET_KIND", f"{flag}: {Path(path).name} holds the model '{model.split(' (')[0]}', not {want}",
+                    file=str(path))
+    return Path(path)
 
 
 def _reference_npz(path, res: int) -> tuple:
@@ -365,10 +356,9 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
                example: str = "default", quiet: bool = False) -> dict:
     """Run the benchmark; writes ``bench_8dna.json``, ``bench_8dna.md`` and ``8dna_*.png`` into ``out_dir``."""
     from nasset_bakers.mitsuba.eightdna import bake
+    from nasset_benchmarks.accuracy import check_asset_fits
     from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba.eightdna_example import CAMERA, EXAMPLE_ASSET_IDS, LIGHT_CENTER, LIGHT_RADIANCE, LIGHT_RADIUS, write_example_scene
-    from nasset_converters.mitsuba.scene import BOX_TOLERANCE, bounds_offset
-    from nasset_sdk.asset import Asset
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
@@ -383,6 +373,13 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     stored = None if reference_npz is None else _reference_npz(reference_npz, res)
     t_all = time.perf_counter()
     setup: dict[str, float] = {}
+    mi = load_mitsuba()
+    mi.set_log_level(mi.LogLevel.Error)
+    xml = write_example_scene(out / "scene", res=res, heterogeneous=example == "heterogeneous")
+    mscene = mi.load_file(str(xml))
+    for flag, path in (("--asset", asset), ("--farfield", farfield)):  # a given asset of another object: not the blob's bounds
+        if path is not None:
+            check_asset_fits(mi, mscene, {sid: path for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag=flag, kinds=("8dna",))
     bakes = {}
     for name, path, ff in (("8dna", asset, False), ("far-field", farfield, True)):
         if path is None:
@@ -399,18 +396,9 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
         else:
             farfield = Path(path)
 
-    mi = load_mitsuba()
-    mi.set_log_level(mi.LogLevel.Error)
-    xml = write_example_scene(out / "scene", res=res, heterogeneous=example == "heterogeneous")
-    mscene = mi.load_file(str(xml))
     sensor = _mi_sensor(mi, res, CAMERA)
     shapes = [s for s in mscene.shapes() if s.id() in EXAMPLE_ASSET_IDS]
     light = SphereLight(LIGHT_CENTER, LIGHT_RADIUS, LIGHT_RADIANCE)
-    for path in (asset, farfield):  # a given asset of another object: its bounds are not the example's
-        off = bounds_offset(shapes, Asset.open(path, load="none").geometry().points)
-        if off > BOX_TOLERANCE:
-            raise error("BENCH_ASSET_MISMATCH", f"{Path(path).name} was not baked from the 8dna example: its bounds differ "
-                        f"from the example's by {100 * off:.0f} % of the diagonal", file=str(path))
 
     # reference (or the one an earlier run stored, for the same resolution)
     t = time.perf_counter()

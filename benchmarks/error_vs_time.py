@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.accuracy import estimate_depth
+from nasset_benchmarks.accuracy import check_asset_fits, estimate_depth
 from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
@@ -69,8 +69,14 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
     t_setup = time.perf_counter()
     times: dict[str, float] = {}
 
-    # asset
-    if asset is None:
+    # the example scene; a given asset must stand in for its shapes (checked before anything is rendered)
+    xml = write_example_scene(out / "scene")
+    mi = load_mitsuba()
+    mi.set_log_level(mi.LogLevel.Error)
+    mscene = mi.load_file(str(xml))
+    if asset is not None:
+        check_asset_fits(mi, mscene, {sid: asset for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag="--asset")
+    else:
         from nasset_bakers.mitsuba.rna import bake
 
         asset = out / f"example_{size}.usdc"
@@ -80,16 +86,8 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
             bake(None, None, asset, size=size, example=True, quiet=quiet, seed=seed, summary_stream=sys.stderr)
             times["bake_s"] = time.perf_counter() - t
     asset = Path(asset)
-    if not asset.is_file():
-        raise UsageError(f"--asset {asset} does not exist")
-
-    # scenes
-    xml = write_example_scene(out / "scene")
     converted = convert_scene(xml, out / "scene" / "scene_neural.usda",
                               replace={sid: asset for sid in EXAMPLE_ASSET_IDS}, check_usd=False)
-    mi = load_mitsuba()
-    mi.set_log_level(mi.LogLevel.Error)
-    mscene = mi.load_file(str(xml))
     sensor = mi_sensor(mi, mscene, res)
     if max_depth is None:
         max_depth = estimate_depth(converted.integrator)

@@ -39,7 +39,7 @@ import numpy as np
 
 from nasset_benchmarks.common import ints
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
-from nasset_sdk.errors import UsageError
+from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder
 
 QUICK = {"res": 64, "gt_spp": 256, "spp": "1,4,16", "equal_spp": 4}
@@ -141,7 +141,8 @@ def lazy_loading(scene_usd: Path) -> dict:
 def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, gt_spp: int = 2048, spp=(1, 2, 4, 8, 16, 32),
                    equal_spp: int = 16, max_depth: int = 16, repeat: int = 2, seed: int = 0, quiet: bool = False) -> dict:
     """Run the benchmark; writes neupress_table.{json,md}, neupress_error_vs_time.png, neupress_images.png into out_dir."""
-    from nasset_benchmarks.common import ground_truth, machine, mi_render, mi_sensor
+    from nasset_benchmarks.accuracy import check_asset_fits
+    from nasset_benchmarks.common import ground_truth, machine, mi_render, mi_sensor, open_given_asset
     from nasset_converters.mitsuba import load_mitsuba
     from nasset_converters.mitsuba.neupress_example import EXAMPLE_ASSET_IDS, write_example_scene
     from nasset_converters.mitsuba.usd_export import convert_scene
@@ -167,19 +168,20 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
             bake(None, None, asset, size=size, example="default", quiet=quiet, seed=seed, summary_stream=sys.stderr)
             setup["bake_s"] = time.perf_counter() - t
     asset = Path(asset)
-    if not asset.is_file():
-        raise UsageError(f"--asset {asset} does not exist")
-    prov = Asset.open(asset, load="none").provenance or {}
+    prov = open_given_asset(asset, "--asset").provenance or {}
     a_size = prov.get("size", size)
     if (prov.get("source") or {}).get("example") is None and prov.get("generator") == "nasset bake":
-        raise UsageError(f"--asset {asset} was not baked from the neupress example (its geometry would not match the scene)")
+        raise error("BENCH_ASSET_MISMATCH", f"--asset {asset} was not baked from the neupress example (its geometry would not "
+                    "match the scene)", file=str(asset))
 
     xml = write_example_scene(out / "scene", a_size if a_size in ("tiny", "small", "hq") else "small")
-    converted = convert_scene(xml, out / "scene" / "scene_neural.usda", replace={sid: asset for sid in EXAMPLE_ASSET_IDS},
-                              check_usd=False)
     mi = load_mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
     mscene = mi.load_file(str(xml))
+    check_asset_fits(mi, mscene, {sid: asset for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag="--asset",
+                     kinds=("neupress",))
+    converted = convert_scene(xml, out / "scene" / "scene_neural.usda", replace={sid: asset for sid in EXAMPLE_ASSET_IDS},
+                              check_usd=False)
     sensor = mi_sensor(mi, mscene, res)
 
     say(f"ground truth: Mitsuba {mi.variant()} {gt_spp} spp at {res}x{res}")
