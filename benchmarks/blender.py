@@ -307,6 +307,8 @@ def run(args) -> int:
     for e in examples:
         if e not in EXAMPLES:
             raise UsageError(f"--examples: unknown example {e!r} ({', '.join(EXAMPLES)})")
+    if not examples:
+        raise UsageError(f"--examples names no example ({', '.join(EXAMPLES)})")
     report = run_bench(
         args.output, size=args.size or d["size"], res=args.res or d["res"], gt_spp=args.gt_spp or d["gt_spp"],
         cy_spp=ints(args.cy_spp or d["cy_spp"], "cy-spp"), nr_spp=ints(args.nr_spp or d["nr_spp"], "nr-spp"),

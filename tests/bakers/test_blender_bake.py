@@ -154,6 +154,15 @@ def test_fiber_assets_get_more_views_and_a_wider_decoder_at_small():
     assert 64 in widths[0] and 128 not in widths[0] and 128 in widths[128] and 64 not in widths[128]
 
 
+@pytest.mark.parametrize("examples", ["nope", ",", " , "])
+def test_bench_blender_refuses_examples_it_does_not_know_or_none(tmp_path, examples):
+    """An empty --examples used to run the h ablation's bakes alone; it is a usage error, before any work."""
+    from nasset_sdk.cli import main
+
+    assert main(["bench", "blender", "--examples", examples, "-o", str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
 @pytest.mark.slow
 def test_bench_blender_quick_runs(tmp_path):
     """``nasset bench blender`` end to end at toy sizes: report, plot, images, finite numbers."""
