@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.accuracy import mitsuba_halves, object_mask, sensor_for
+from nasset_benchmarks.accuracy import check_asset_fits, mitsuba_halves, object_mask, sensor_for
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
 from nasset_converters.mitsuba.scene import integrator_depths, load_scene, media_caveats, require_integrator
 from nasset_sdk.errors import UsageError, error
@@ -63,6 +63,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
     t_setup = time.perf_counter()
     original = load_scene(mi, scene_file)
     require_integrator(original, scene_file)
+    check_asset_fits(mi, original, replace, scene_file=str(scene_file))  # ids, files, kinds, the shapes they were baked from
     caveats = media_caveats(mi, original, replace)
     for caveat in caveats:
         say(f"warning: {caveat}")

@@ -1,7 +1,7 @@
 """Smoke test of ``nasset bench error-vs-time SCENE.xml --replace ID=ASSET`` (the equal-engine benchmark)
-at toy scale (16x16), and its typed errors. conftest's tiny random rna asset stands in for a bake, so the
-numbers mean nothing; the pipeline (reference halves, both curves, variance subtraction, floor, cost
-ratio, plot, JSON) runs whole."""
+at toy scale (16x16), and its typed errors. A tiny random rna asset with the ball's geometry stands in for a
+bake, so the numbers mean nothing; the pipeline (reference halves, both curves, variance subtraction, floor,
+cost ratio, plot, JSON) runs whole."""
 
 from __future__ import annotations
 
@@ -27,6 +27,21 @@ SCENE = textwrap.dedent("""\
       <emitter type="directional"><vector name="direction" value="0.3,-1,-0.2"/></emitter>
       <emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>
     </scene>""")
+
+
+@pytest.fixture
+def rna_asset_path(tmp_path):
+    """A random-network rna asset whose geometry is SCENE's ball (as a bake of it stores it)."""
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba import scene as msc
+    from nasset_sdk.examples import example_builder
+
+    mi = load_mitsuba()
+    (tmp_path / "ball_scene.xml").write_text(SCENE)
+    sc = msc.load_scene(mi, tmp_path / "ball_scene.xml")
+    b = example_builder("rna", size="tiny", seed=1)
+    b.set_geometry(msc.mesh_geometry(mi, msc.pick_shapes(sc, ["ball"])))
+    return b.write(tmp_path / "ball_rna.usdc")
 
 
 def test_equal_engine_smoke(tmp_path, rna_asset_path, capsys):
@@ -114,3 +129,19 @@ def test_equal_engine_unbounded_scene_depth(tmp_path, rna_asset_path):
     r = bench_equal_engine(tmp_path / "scene.xml", {"ball": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,),
                            quiet=True)
     assert r["mitsuba"]["settings"] == {"max_depth": -1, "rr_depth": 5}
+
+
+def test_equal_engine_refuses_an_asset_of_another_object_or_kind(tmp_path, rna_asset_path):
+    """Before: any readable asset stood in for the shape, and the benchmark measured it against the wrong object."""
+    from nasset_benchmarks.equal_engine import bench_equal_engine
+    from nasset_sdk.examples import example_builder
+
+    (tmp_path / "scene.xml").write_text(SCENE)
+    with pytest.raises(NassetError) as exc:
+        bench_equal_engine(tmp_path / "scene.xml", {"floor": rna_asset_path}, tmp_path / "out", res=8, gt_spp=4,
+                           mi_spp=(1,), nr_spp=(1,))
+    assert exc.value.code == "BENCH_ASSET_MISMATCH" and "floor" in exc.value.message
+    fiber = example_builder("rna", variant="fiber", size="tiny", seed=1).write(tmp_path / "fiber.usdc")
+    with pytest.raises(NassetError) as exc:
+        bench_equal_engine(tmp_path / "scene.xml", {"ball": fiber}, tmp_path / "out", res=8, gt_spp=4, mi_spp=(1,), nr_spp=(1,))
+    assert exc.value.code == "BENCH_ASSET_KIND"
