@@ -64,7 +64,9 @@ def decoded_bound(file_bytes: int) -> int:
 MAX_NETWORK_NODES = 4096
 #: Most rows one run of a network is given: readers split larger batches (networks.CheckedSession), and the
 #: runtime probe runs every network once at this size under its memory bound (memory grows with the rows).
-MAX_NETWORK_ROWS = 4096
+#: 16 384 holds a reference-renderer wavefront (8 192 camera rays) and its light rows for two lights in one run
+#: (4 096 split it: the 8dna near-field render 1.036x slower, docs/benchmarks.md#network-rows).
+MAX_NETWORK_ROWS = 16384
 #: A network output magnitude above this on the validator's probe inputs is rejected (NETWORK_OUTPUT).
 MAX_NETWORK_OUTPUT = 1e8
 #: Geometry (object space) that float32 ray casting resolves (GEOMETRY_SCALE, spec/security.md#bounds):
