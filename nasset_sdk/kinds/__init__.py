@@ -199,9 +199,12 @@ class KindContract:
 def rows3(*arrays) -> list[np.ndarray]:
     """Evaluator argument check: each array as float64 [N, 3], all with the same N (UsageError otherwise)."""
     from ..errors import UsageError
+    from .query import real_dtype
 
     out, n = [], None
     for i, a in enumerate(arrays):
+        if real_dtype(a) is None:
+            raise UsageError(f"points and directions must be real number arrays [N, 3]; argument {i + 1} of {len(arrays)} is not")
         a = np.atleast_2d(np.asarray(a, np.float64))
         if a.ndim != 2 or a.shape[1] != 3 or (n is not None and len(a) != n):
             shapes = ", ".join(str(tuple(np.shape(b))) for b in arrays)

@@ -72,11 +72,23 @@ class Query:
         return Query(**out)
 
 
+def real_dtype(value) -> np.dtype | None:
+    """The dtype of ``value`` (an array, or what numpy makes of a list) when it holds real numbers (integer or
+    floating), else None: booleans, strings, objects, complex numbers."""
+    dt = getattr(value, "dtype", None)
+    if not isinstance(dt, np.dtype):
+        try:
+            dt = np.asarray(value).dtype
+        except (ValueError, TypeError):  # ragged nesting
+            return None
+    return dt if dt.kind in "fiu" else None
+
+
 def _numeric(name: str, value, file) -> np.ndarray:
-    a = np.asarray(value)
-    if a.dtype == bool or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
-        raise UsageError(f"query field {name!r}: expected a real number array, got dtype {a.dtype}", file=file)
-    return a.astype(np.float64)
+    if real_dtype(value) is None:
+        raise UsageError(f"query field {name!r}: expected a real number array, got dtype {np.asarray(value, object).dtype}",
+                         file=file)
+    return np.asarray(value).astype(np.float64)
 
 
 def _rows1(name: str, a: np.ndarray, n_rows: int, file) -> np.ndarray:
@@ -87,13 +99,15 @@ def _rows1(name: str, a: np.ndarray, n_rows: int, file) -> np.ndarray:
 
 
 def check_shapes(file: str | None = None, **fields) -> int:
-    """Shape check for the per-kind methods: every field [N, 3] of one N (None fields skipped); returns N.
+    """Shape check for the per-kind methods: every field a real number [N, 3] of one N (None fields skipped); returns N.
 
     Cheap (no copy, no finiteness pass), so hot render loops can afford it; UsageError names the field."""
     n_rows = None
     for name, value in fields.items():
         if value is None:
             continue
+        if real_dtype(value) is None:
+            raise UsageError(f"argument {name!r}: expected a real number array [N, 3]", file=file)
         shape = np.shape(value)
         if len(shape) != 2 or shape[1] != 3 or (n_rows is not None and shape[0] != n_rows):
             want = "[N, 3]" if n_rows is None else f"[N, 3] with N = {n_rows} (the rows of the first argument)"

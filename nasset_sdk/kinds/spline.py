@@ -498,6 +498,10 @@ class BoxFlow:
 
     @staticmethod
     def _prep(x, wo):
+        from .query import real_dtype
+
+        if real_dtype(x) is None or real_dtype(wo) is None:
+            raise UsageError("x_o and w_o must be real number arrays [N, 3]")
         x = np.atleast_2d(np.asarray(x, np.float64))
         wo = np.atleast_2d(np.asarray(wo, np.float64))
         if x.shape[1:] != (3,) or wo.shape != x.shape:

@@ -160,3 +160,21 @@ def test_rna_evaluate_refuses_a_single_direction_for_many_rows(assets):
         ev.evaluate(q.x, q.n, q.wo[0], q.wi)
     with pytest.raises(ns.UsageError, match=r"'h': expected shape \[N\]"):
         ns.Asset.open(assets["rna", "fiber"]).evaluator().evaluate(q.x, q.n, q.wo, q.wi, np.zeros(3))
+
+
+@pytest.mark.parametrize("bad", [[["a", "b", "c"]] * 3, np.zeros((3, 3), complex), np.zeros((3, 3), bool), np.full((3, 3), None)])
+def test_per_kind_methods_refuse_arrays_that_hold_no_real_numbers(assets, bad):
+    """The per-kind methods (rna and neupress ``evaluate``, 8dna ``albedo`` / ``sample``) name the argument as
+    USAGE for strings, complex numbers, booleans and objects; strings used to fail as a bare numpy ValueError."""
+    q = _query(3)
+    rna = ns.Asset.open(assets["rna", "surface"]).evaluator()
+    with pytest.raises(ns.UsageError, match="'x': expected a real number array"):
+        rna.evaluate(bad, q.n, q.wo, q.wi)
+    with pytest.raises(ns.UsageError, match="real number arrays"):
+        ns.Asset.open(assets["neupress", "surface"]).evaluator().evaluate(q.x, q.n, bad, q.wi)
+    e8 = ns.Asset.open(assets["8dna", "surface"]).evaluator()
+    with pytest.raises(ns.UsageError, match="real number arrays"):
+        e8.albedo(bad, q.wo)
+    with pytest.raises(ns.UsageError, match="real number arrays"):
+        e8.sample(q.x, bad, 0)
+    assert np.isfinite(rna.evaluate(q.x.astype(np.float32), q.n, q.wo.astype(np.int64) + 1, q.wi)[0]).all()  # real dtypes pass
