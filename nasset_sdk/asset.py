@@ -79,6 +79,10 @@ class ComponentData:
         _check_name("tensor", name)
         if dtype not in limits.TENSOR_DTYPES:
             raise UsageError(f"tensor {name!r}: dtype must be one of {limits.TENSOR_DTYPES}")
+        from .kinds.query import real_dtype
+
+        if real_dtype(array) is None:
+            raise UsageError(f"tensor {name!r}: expected a real number array")
         arr = np.asarray(array)
         if arr.size > limits.MAX_TENSOR_ELEMENTS or arr.ndim > limits.MAX_TENSOR_RANK or arr.ndim == 0:
             raise UsageError(f"tensor {name!r}: shape {arr.shape} outside the format bounds")
@@ -448,6 +452,8 @@ class Asset:
 
         from .paths import open_checked_stage, outer_file
 
+        if not isinstance(path, (str, os.PathLike)):
+            raise UsageError(f"Asset.open: path must be a str or os.PathLike, got {type(path).__name__}")
         p = Path(path)
         if not os.path.isfile(outer_file(str(p))):  # a file, or a layer inside a package: 'scene.usdz[a.usdc]'
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
@@ -764,5 +770,14 @@ class Asset:
         return CurvesGeometry(pts, counts.astype(np.int32), widths)
 
     def evaluator(self, **options):
-        """The kind's numpy + onnxruntime evaluator over the loaded components."""
-        return self.contract.evaluator(self, **options)
+        """The kind's numpy + onnxruntime evaluator over the loaded components; ``options`` are its keyword arguments
+        (USAGE for one it does not take)."""
+        try:
+            return self.contract.evaluator(self, **options)
+        except TypeError as exc:  # raised binding the options to the evaluator, in the contract's own frame?
+            tb = exc.__traceback__
+            while tb.tb_next is not None:
+                tb = tb.tb_next
+            if options and tb.tb_frame.f_code is type(self.contract).evaluator.__code__:
+                raise UsageError(f"the {self.kind} evaluator does not take these options ({exc})", file=str(self.path)) from None
+            raise

@@ -43,8 +43,13 @@ class MeshGeometry:
         normals = np.asarray(mesh.vertex_normals, np.float32)
         return cls(pts, faces, normals)
 
+    def __post_init__(self) -> None:  # numpy arrays from here on; USAGE for what holds no numbers
+        self.points, self.faces = _real("mesh points", self.points), _index("mesh faces", self.faces)
+        if self.normals is not None:
+            self.normals = _real("mesh normals", self.normals)
+
     def validate(self) -> None:
-        p, f = np.asarray(self.points), np.asarray(self.faces)
+        p, f = self.points, self.faces
         if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
             raise UsageError(f"mesh points must be [V,3], got {p.shape}")
         if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
@@ -68,8 +73,12 @@ class CurvesGeometry:
     counts: np.ndarray
     widths: np.ndarray
 
+    def __post_init__(self) -> None:  # numpy arrays from here on; USAGE for what holds no numbers
+        self.points, self.widths = _real("curve points", self.points), _real("curve widths", self.widths)
+        self.counts = _index("curve counts", self.counts)
+
     def validate(self) -> None:
-        p, c, w = np.asarray(self.points), np.asarray(self.counts), np.asarray(self.widths)
+        p, c, w = self.points, self.counts, self.widths
         if p.ndim != 2 or p.shape[1] != 3 or len(p) == 0:
             raise UsageError(f"curve points must be [P,3], got {p.shape}")
         if c.ndim != 1 or len(c) == 0 or (c < 2).any() or int(c.sum()) != len(p):
@@ -82,3 +91,23 @@ class CurvesGeometry:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         r = self.widths[:, None] * 0.5
         return (self.points - r).min(0), (self.points + r).max(0)
+
+
+def _real(what: str, value) -> np.ndarray:
+    """``value`` as a numpy array of its own real dtype, or USAGE naming ``what`` when it holds no real numbers
+    (strings, booleans, objects, complex numbers)."""
+    from .kinds.query import real_dtype
+
+    if real_dtype(value) is None:
+        raise UsageError(f"{what} must be a real number array")
+    return np.asarray(value)
+
+
+def _index(what: str, value) -> np.ndarray:
+    """``value`` as a numpy integer array, or USAGE naming ``what`` when it does not hold integers."""
+    from .kinds.query import real_dtype
+
+    dt = real_dtype(value)
+    if dt is None or dt.kind not in "iu":
+        raise UsageError(f"{what} must be an integer array")
+    return np.asarray(value)

@@ -44,6 +44,38 @@ def test_builder_rejects_bad_arguments(rng):
         ns.AssetBuilder("rna", variant="volume")
 
 
+@pytest.mark.parametrize("bad", [[["a", "b", "c"]] * 3, np.zeros((3, 3), bool), np.full((3, 3), None), np.zeros((3, 3), complex)])
+def test_api_arrays_that_hold_no_real_numbers_are_usage_errors(bad):
+    """Tensors, mesh and curve arrays built from strings, booleans, objects or complex numbers: USAGE naming the
+    array (strings and lists used to fail as bare numpy ValueError / TypeError / AttributeError)."""
+    core = ns.AssetBuilder("rna").component("core", required=True)
+    with pytest.raises(UsageError, match="tensor 't': expected a real number array"):
+        core.add_tensor("t", bad, dtype="float32")
+    with pytest.raises(UsageError, match="mesh points must be a real number array"):
+        ns.MeshGeometry(bad, np.array([[0, 1, 2]], np.int32))
+    with pytest.raises(UsageError, match="mesh faces must be an integer array"):
+        ns.MeshGeometry(np.eye(3), bad)
+    with pytest.raises(UsageError, match="curve widths must be a real number array"):
+        ns.CurvesGeometry(np.zeros((3, 3)), np.array([3]), bad)
+    # plain lists of numbers are arrays like any other
+    g = ns.MeshGeometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    g.validate()
+    lo, hi = g.bounds()
+    assert list(hi) == [1, 1, 0] and list(lo) == [0, 0, 0]
+
+
+def test_open_and_evaluator_refuse_arguments_of_the_wrong_type(tmp_path):
+    for bad in (5, None, 1.5):
+        with pytest.raises(UsageError, match="path must be a str or os.PathLike"):
+            ns.Asset.open(bad)
+    path = example_builder("rna", size="tiny", seed=1).write(tmp_path / "a.usdc")
+    asset = ns.Asset.open(path, load="all")
+    with pytest.raises(UsageError, match="does not take these options.*bogus") as info:
+        asset.evaluator(bogus=1)
+    assert info.value.file == str(path)
+    assert asset.evaluator() is not None
+
+
 def test_builder_enforces_kind_contract(tmp_path, rng):
     b = example_builder("rna", size="tiny")
     core = b.components["core"][""]
