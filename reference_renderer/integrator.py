@@ -20,7 +20,7 @@ from nasset_sdk.errors import UsageError
 
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
-from .film import Film, check_image_size, pixel_offsets
+from .film import MAX_SPP, Film, check_image_size, pixel_offsets
 from .lights import MeshLight
 from .plan import RenderPlan, make_plan
 from .sampling import barycentric, cross3, dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
@@ -514,6 +514,11 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     own random numbers; ``settings.workers`` threads trace them (numpy, onnxruntime and Embree release the
     interpreter lock) and the film adds their results in job order, so the image does not depend on the number of
     threads (spec/renderer.md#film)."""
+    from .scene import Scene
+
+    if not isinstance(scene, Scene):
+        raise UsageError(f"render: scene must be a Scene (nasset_reference_renderer.load_scene), got {type(scene).__name__}")
+    check_settings(settings or RenderSettings())
     s = resolve_settings(settings or RenderSettings(), scene)
     check_settings(s)
     width, height = check_image_size(*scene.camera.default_resolution(s.width, s.height), s.spp)
@@ -652,15 +657,28 @@ MAX_TILE = 1 << 16
 MAX_THREADS = 1024
 
 
+#: ``RenderSettings.backend`` values: Embree, or the brute-force numpy ray caster (tests and tiny scenes only)
+BACKENDS = ("embree", "numpy")
+
+
 def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
-    """``USAGE`` error unless max_depth (min_depth ..), batch, tile, threads and workers are integers within their bounds."""
-    for name, value, lo, hi in (("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("batch", s.batch, 1, MAX_BATCH),
-                                ("tile", s.tile, 1, MAX_TILE), ("threads", s.threads, 0, MAX_THREADS),
-                                ("workers", s.workers, 0, MAX_THREADS)):
-        if name == "max_depth" and value is None:
-            continue  # filled in from the scene by resolve_settings
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
-            raise UsageError(f"{name} = {value!r} outside {lo} .. {hi} (--{name.replace('_', '-')})")
+    """``USAGE`` error unless ``s`` is a RenderSettings whose spp, seed, max_depth (min_depth ..), rr_depth, batch, tile,
+    threads and workers are integers within their bounds, width and height integers or None (their bounds:
+    film.check_image_size) and backend one of :data:`BACKENDS`."""
+    if not isinstance(s, RenderSettings):
+        raise UsageError(f"render settings must be a RenderSettings, got {type(s).__name__}")
+    for name, value, lo, hi in (("spp", s.spp, 1, MAX_SPP), ("seed", s.seed, 0, (1 << 64) - 1),
+                                ("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("rr_depth", s.rr_depth, 0, MAX_DEPTH),
+                                ("batch", s.batch, 1, MAX_BATCH), ("tile", s.tile, 1, MAX_TILE),
+                                ("threads", s.threads, 0, MAX_THREADS), ("workers", s.workers, 0, MAX_THREADS),
+                                ("width", s.width, 1, None), ("height", s.height, 1, None)):
+        if value is None and name in ("max_depth", "width", "height"):
+            continue  # filled in from the scene (resolve_settings, the camera's own resolution)
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo or (hi is not None and value > hi):
+            bound = f"{lo} .." if hi is None else f"{lo} .. {hi}"
+            raise UsageError(f"{name} = {value!r} is not an integer in {bound} (--{name.replace('_', '-')})")
+    if s.backend not in BACKENDS:
+        raise UsageError(f"backend must be one of {BACKENDS}, got {s.backend!r}")
 
 
 def usable_cores() -> int:

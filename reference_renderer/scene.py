@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from nasset_sdk import stage_rules
-from nasset_sdk.errors import NassetError, SceneError, error, usd_reason
+from nasset_sdk.errors import NassetError, SceneError, UsageError, error, usd_reason
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
@@ -296,6 +296,10 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
             stage = open_stage(str(source), resolver_context(search_paths))
             file = str(source)
     else:
+        from pxr import Usd
+
+        if not isinstance(source, Usd.Stage):
+            raise UsageError(f"load_scene: source must be a path or a Usd.Stage, got {type(source).__name__}")
         stage = source
         file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
     with Ar.ResolverContextBinder(stage.GetPathResolverContext()):
