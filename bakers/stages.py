@@ -7,6 +7,7 @@ Both keep what is done on Ctrl-C (views on disk, the training checkpoint) and sa
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from contextlib import contextmanager
 from dataclasses import replace
@@ -115,17 +116,29 @@ def finite(v):
 MAX_COUNTS = {"res": 4096, "views": 65536, "spp": 1 << 20, "epochs": 100_000}
 
 
-def check_options(size: str, presets, output, **counts) -> Path:
-    """Argument checks every baker shares: a known preset, counts in 1 .. MAX_COUNTS where given, an asset file name.
+def check_options(size: str, presets, output, *, seed: int = 0, scene=None, **counts) -> Path:
+    """Argument checks every baker shares: a known preset, counts integers in 1 .. MAX_COUNTS where given, a seed in
+    0 .. MAX_SEED, a scene file given as a path (or None), an asset file name.
 
     Returns ``output`` as a Path; raises UsageError."""
+    from nasset_sdk.cli import MAX_SEED
+
     if size not in presets:
         raise UsageError(f"--size must be one of {sorted(presets)}, got {size!r}")
     for name, val in counts.items():
-        if val is not None and int(val) < 1:
+        if val is None:
+            continue
+        if isinstance(val, bool) or not isinstance(val, (int, np.integer)):
+            raise UsageError(f"--{name} must be an integer, got {val!r}")
+        if val < 1:
             raise UsageError(f"--{name} must be >= 1, got {val}")
-        if val is not None and int(val) > MAX_COUNTS[name]:
+        if val > MAX_COUNTS[name]:
             raise UsageError(f"--{name} must be <= {MAX_COUNTS[name]}, got {val}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
+        raise UsageError(f"--seed must be an integer in 0 .. {MAX_SEED}, got {seed!r}")
+    for what, value in (("the scene", scene), ("the output", output)):
+        if not (value is None and what == "the scene") and not isinstance(value, (str, os.PathLike)):
+            raise UsageError(f"{what} must be a file path, got {type(value).__name__}")
     output = Path(output)
     if output.suffix not in (".usdc", ".usda", ".usd"):
         raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")

@@ -42,7 +42,7 @@ import numpy as np
 
 from nasset_converters.mitsuba.scene import BOX_TOLERANCE, box_offset
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
-from nasset_sdk.errors import UsageError, error
+from nasset_sdk.errors import UsageError, error, path_arg
 from nasset_sdk.images import output_folder
 
 from .common import camera_sensor
@@ -210,7 +210,7 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "", flag: st
     for sid, file in replace.items():
         if sid not in by_id:
             raise error("CONVERT_SHAPE_UNKNOWN", "--replace: " + no_such_shape(mi, scene, sid), file=scene_file)
-        groups.setdefault(Path(file), []).append(sid)
+        groups.setdefault(path_arg(file, f"{flag} {sid}: the asset"), []).append(sid)
     out = []
     for file, ids in groups.items():
         asset = open_given_asset(file, f"{flag} {','.join(ids)}")
@@ -432,7 +432,7 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
         from nasset_converters.mitsuba.usd_export import parse_replace
     else:
         from nasset_converters.blender.usd_export import parse_replace
-    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    rep = parse_replace(replace)
     if not rep:
         raise UsageError("give at least one --replace ID[,ID]=ASSET.usdc")
     out = Path(out_dir)

@@ -106,7 +106,7 @@ def light_terms(scene_file, replace, out_dir, *, res: int = 64, spp: int = 1024,
         raise UsageError(f"light terms need a Mitsuba 3 .xml scene, got {scene_file.name!r}")
     if not scene_file.is_file():
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene_file))
-    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    rep = parse_replace(replace)
     ids = set(rep)
     try:
         lights = [label for label, _, _ in emitters(ET.parse(scene_file).getroot())]

@@ -213,6 +213,17 @@ def error(code: str, message: str, **loc) -> NassetError:
     return cls(code, message, **loc)
 
 
+def path_arg(value, what: str):
+    """``value`` as a ``pathlib.Path`` when it is a str or os.PathLike, else USAGE naming ``what`` (a Python API's
+    file argument: None or a number used to fail as a bare TypeError deep inside)."""
+    import os
+    from pathlib import Path
+
+    if not isinstance(value, (str, os.PathLike)):
+        raise UsageError(f"{what} must be a file path, got {type(value).__name__}")
+    return Path(value)
+
+
 def usd_reason(exc) -> str:
     """The messages of a USD ``Tf.ErrorException`` without USD's source locations, for an error's message: the
     parser's (``file:line:column: what``, the prim and attribute) first; USD's generic ``Failed to open layer`` only

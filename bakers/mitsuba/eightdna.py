@@ -181,7 +181,7 @@ def bake(scene, asset_ids, output, *, size: str = "small", example=None, resume=
     from nasset_sdk.asset import AssetBuilder
     from nasset_sdk.validate import validate_file
 
-    output = check_options(size, TRAIN_PRESETS, output, epochs=epochs, spp=spp)
+    output = check_options(size, TRAIN_PRESETS, output, seed=seed, scene=scene, epochs=epochs, spp=spp)
     for name, val in (("views", views), ("res", res), ("light-angle", light_angle)):
         if val is not None:
             raise UsageError(f"--{name} has no meaning for kind 8dna (forward path sampling needs no views or light; "

@@ -108,7 +108,7 @@ def bake(
     from nasset_converters.mitsuba import scene as msc
     from nasset_sdk.asset import AssetBuilder
 
-    output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
+    output = check_options(size, DATA_PRESETS, output, seed=seed, scene=scene, views=views, res=res, epochs=epochs, spp=spp)
     check_workers(workers, cluster)
     if light_angle not in (None, 0, 0.0):
         raise UsageError("--light-angle is not used by neupress bakes (delta lights through a rough boundary); leave it unset")

@@ -93,7 +93,7 @@ def bake(
     from nasset_converters.mitsuba import scene as msc
     from nasset_sdk.asset import AssetBuilder
 
-    output = check_options(size, DATA_PRESETS, output, views=views, res=res, epochs=epochs, spp=spp)
+    output = check_options(size, DATA_PRESETS, output, seed=seed, scene=scene, views=views, res=res, epochs=epochs, spp=spp)
     check_workers(workers, cluster)
     if light_angle is not None and not (0.0 <= light_angle < 45.0):
         raise UsageError(f"--light-angle must be in [0, 45) degrees, got {light_angle}")

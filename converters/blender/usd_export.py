@@ -1514,7 +1514,7 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
     output = Path(output)
     if output.suffix not in (".usda", ".usdc", ".usd"):
         raise UsageError(f"output must end in .usda/.usdc/.usd, got {output.name!r}")
-    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
+    rep = parse_replace(replace)
     bpy = load_bpy()
     if example is not None:
         from .examples import build_example

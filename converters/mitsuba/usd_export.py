@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import UsageError, error
+from nasset_sdk.errors import UsageError, error, path_arg
 from nasset_sdk.safeopen import trust
 
 from . import analytic
@@ -1515,7 +1515,10 @@ def usd_check(path) -> list[dict]:
 
 
 def parse_replace(items) -> dict[str, Path]:
-    """``["ID[,ID...]=ASSET", ...]`` -> {shape id: asset path}; USAGE on malformed items."""
+    """``["ID[,ID...]=ASSET", ...]`` (the CLI's) or ``{shape id: asset file}`` (the Python API's) -> {shape id: asset
+    path}; USAGE on malformed items and on files that are not paths."""
+    if isinstance(items, dict):
+        return {str(k): path_arg(v, f"--replace {k}: the asset") for k, v in items.items()}
     out: dict[str, Path] = {}
     for item in items or []:
         ids, sep, file = str(item).partition("=")
@@ -1540,11 +1543,11 @@ def convert_scene(scene, output, *, replace=None, variant: str | None = None, ch
     from nasset_converters.mitsuba import load_mitsuba
     from nasset_reference_renderer.scene import is_asset_file
 
-    output = Path(output)
+    output = path_arg(output, "convert_scene: the output")
     if output.suffix not in (".usda", ".usdc", ".usd"):
         raise UsageError(f"output must end in .usda/.usdc/.usd, got {output.name!r}")
-    rep = parse_replace(replace) if not isinstance(replace, dict) else {k: Path(v) for k, v in replace.items()}
-    scene = Path(scene)
+    rep = parse_replace(replace)
+    scene = path_arg(scene, "convert_scene: the scene")
     if not scene.is_file():
         raise error("CONVERT_SCENE_MISSING", "scene file does not exist", file=str(scene))
     mi = load_mitsuba(variant)

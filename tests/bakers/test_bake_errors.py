@@ -186,6 +186,25 @@ def test_usage_errors(tmp_path):
     assert not (tmp_path / "o.usdc.bake").exists()
 
 
+@pytest.mark.parametrize("kind", ["rna", "neupress", "8dna"])
+def test_python_api_arguments_of_the_wrong_type_fail_before_any_work(tmp_path, kind):
+    """The bake functions (the CLI's checks are argparse's) refuse a seed outside 0 .. 2^32 - 1, a count that is not an
+    integer, and a scene or output that is not a path as USAGE before any work. A None output or an int scene used to
+    fail as a bare TypeError; a string count trained on."""
+    import importlib
+
+    run = importlib.import_module(f"nasset_bakers.mitsuba.{'eightdna' if kind == '8dna' else kind}").bake
+    cases = [dict(seed=-1), dict(seed=1 << 40), dict(seed=1.5), dict(epochs="3"), dict(epochs=2.0), dict(epochs=True)]
+    for extra in cases:
+        with pytest.raises(UsageError, match="seed|epochs"):
+            run(None, None, tmp_path / "o.usdc", size="tiny", example=True, quiet=True, **extra)
+    with pytest.raises(UsageError, match="the output must be a file path"):
+        run(None, None, None, size="tiny", example=True, quiet=True)
+    with pytest.raises(UsageError, match="the scene must be a file path"):
+        run(5, ["a"], tmp_path / "o.usdc", size="tiny", quiet=True)
+    assert not (tmp_path / "o.usdc.bake").exists()
+
+
 def test_cli_exit_codes(tmp_path, capsys):
     rc = main(["bake", str(tmp_path / "missing.xml"), "--asset", "a", "-o", str(tmp_path / "o.usdc"), "--quiet"])
     assert rc == 1

@@ -516,3 +516,23 @@ def test_renderer_takes_resolution_from_render_settings(converted):
     camera = load_scene(str(res.output)).camera
     assert camera.default_resolution(None, None) == (64, 32)
     assert camera.default_resolution(20, None) == (20, 10)  # explicit size wins, aspect from the aperture
+
+
+def test_python_api_paths_that_are_not_paths_are_usage_errors(tmp_path):
+    """convert_scene's scene, output and replace files, and bench accuracy's replace files, given as None: USAGE naming
+    the argument (they were bare TypeErrors)."""
+    from nasset_benchmarks.accuracy import bench_accuracy
+    from nasset_converters.mitsuba.usd_export import convert_scene
+    from nasset_sdk.errors import UsageError
+
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><sensor type="perspective"/><shape type="sphere" id="ball"/></scene>')
+    with pytest.raises(UsageError, match="convert_scene: the scene must be a file path"):
+        convert_scene(None, tmp_path / "o.usda")
+    with pytest.raises(UsageError, match="convert_scene: the output must be a file path"):
+        convert_scene(xml, None)
+    for run in (lambda: convert_scene(xml, tmp_path / "o.usda", replace={"ball": None}),
+                lambda: bench_accuracy(xml, {"ball": None}, tmp_path / "acc", quiet=True)):
+        with pytest.raises(UsageError, match="--replace ball: the asset must be a file path"):
+            run()
+    assert convert_scene(xml, tmp_path / "o.usda").output.is_file()

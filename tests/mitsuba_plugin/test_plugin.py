@@ -310,6 +310,19 @@ def test_missing_asset_file(mi, tmp_path):
     assert exc.value.code == "FILE_NOT_FOUND" and "nope.usdc" in str(exc.value)
 
 
+def test_load_file_refuses_arguments_that_are_not_paths(mi, tmp_path, rna_asset_path):
+    """``load_file(None)`` and a ``replace`` value that is not a path were bare TypeErrors."""
+    from nasset_mitsuba_plugin.scene import load_file
+    from nasset_sdk.errors import UsageError
+
+    (tmp_path / "s.xml").write_text('<scene version="3.0.0"><shape type="sphere" id="ball"/></scene>')
+    with pytest.raises(UsageError, match="the scene must be a file path"):
+        load_file(None, mi=mi)
+    with pytest.raises(UsageError, match=r"replace\['ball'\] must be an asset file path"):
+        load_file(tmp_path / "s.xml", mi=mi, replace={"ball": None})
+    assert load_file(tmp_path / "s.xml", mi=mi, replace={"ball": str(rna_asset_path)}) is not None
+
+
 def test_invalid_asset_file(mi, tmp_path):
     bad = tmp_path / "bad.usdc"
     bad.write_bytes(b"PXR-USDC not really a crate")
