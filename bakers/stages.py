@@ -7,7 +7,6 @@ Both keep what is done on Ctrl-C (views on disk, the training checkpoint) and sa
 from __future__ import annotations
 
 import math
-import os
 import warnings
 from contextlib import contextmanager
 from dataclasses import replace
@@ -16,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from nasset_sdk.errors import UsageError, error
+from nasset_sdk.errors import UsageError, error, path_arg
 from nasset_sdk.geometry import scale_problem
 from nasset_sdk.images import output_folder
 
@@ -136,10 +135,9 @@ def check_options(size: str, presets, output, *, seed: int = 0, scene=None, **co
             raise UsageError(f"--{name} must be <= {MAX_COUNTS[name]}, got {val}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed <= MAX_SEED:
         raise UsageError(f"--seed must be an integer in 0 .. {MAX_SEED}, got {seed!r}")
-    for what, value in (("the scene", scene), ("the output", output)):
-        if not (value is None and what == "the scene") and not isinstance(value, (str, os.PathLike)):
-            raise UsageError(f"{what} must be a file path, got {type(value).__name__}")
-    output = Path(output)
+    if scene is not None:
+        path_arg(scene, "the scene")
+    output = path_arg(output, "the output")
     if output.suffix not in (".usdc", ".usda", ".usd"):
         raise UsageError(f"output must end in .usdc/.usda/.usd, got {output.name!r}")
     if output.is_dir():

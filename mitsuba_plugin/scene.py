@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk.errors import UsageError, error
+from nasset_sdk.errors import error, path_arg
 
 from . import lights as lights_jit
 from . import preview
@@ -100,16 +100,13 @@ def load_file(path: str, *, mi=None, replace: dict | None = None, own_integrator
     its object space, spec/bake.md#stages). ``own_integrator``: the caller renders with a ``nasset_path`` of its
     own, so the scene's integrator is not checked (otherwise one that is not ``nasset_path`` is warned about: it
     renders the assets black). ``params``: XML ``$name`` parameters."""
-    if not isinstance(path, (str, os.PathLike)):
-        raise UsageError(f"load_file: the scene must be a file path, got {type(path).__name__}")
+    path = path_arg(path, "load_file: the scene")
     for sid, file in (replace or {}).items():
-        if not isinstance(file, (str, os.PathLike)):
-            raise UsageError(f"load_file: replace[{sid!r}] must be an asset file path, got {type(file).__name__}")
+        path_arg(file, f"load_file: replace[{sid!r}]")
     mi = mi or jit_mitsuba()
     register(mi)
     preview.register(mi)
     lights_jit.register(mi)
-    path = Path(path)
     if not path.is_file():
         raise error("FILE_NOT_FOUND", "no such scene file", file=str(path))
     try:

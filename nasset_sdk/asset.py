@@ -23,7 +23,7 @@ from typing import Iterable
 import numpy as np
 
 from . import limits
-from .errors import NassetError, UsageError, error, usd_reason
+from .errors import NassetError, UsageError, error, path_arg, usd_reason
 from .geometry import CurvesGeometry, MeshGeometry
 from .networks import CheckedSession, NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
 from .plugin import register_schema
@@ -452,9 +452,7 @@ class Asset:
 
         from .paths import open_checked_stage, outer_file
 
-        if not isinstance(path, (str, os.PathLike)):
-            raise UsageError(f"Asset.open: path must be a str or os.PathLike, got {type(path).__name__}")
-        p = Path(path)
+        p = path_arg(path, "Asset.open: the asset")
         if not os.path.isfile(outer_file(str(p))):  # a file, or a layer inside a package: 'scene.usdz[a.usdc]'
             raise error("FILE_NOT_FOUND", "no such file", file=str(p))
         from .safeopen import ensure_readable, ensure_safe

@@ -318,7 +318,7 @@ def test_load_file_refuses_arguments_that_are_not_paths(mi, tmp_path, rna_asset_
     (tmp_path / "s.xml").write_text('<scene version="3.0.0"><shape type="sphere" id="ball"/></scene>')
     with pytest.raises(UsageError, match="the scene must be a file path"):
         load_file(None, mi=mi)
-    with pytest.raises(UsageError, match=r"replace\['ball'\] must be an asset file path"):
+    with pytest.raises(UsageError, match=r"replace\['ball'\] must be a file path"):
         load_file(tmp_path / "s.xml", mi=mi, replace={"ball": None})
     assert load_file(tmp_path / "s.xml", mi=mi, replace={"ball": str(rna_asset_path)}) is not None
 

@@ -66,7 +66,7 @@ def test_api_arrays_that_hold_no_real_numbers_are_usage_errors(bad):
 
 def test_open_and_evaluator_refuse_arguments_of_the_wrong_type(tmp_path):
     for bad in (5, None, 1.5):
-        with pytest.raises(UsageError, match="path must be a str or os.PathLike"):
+        with pytest.raises(UsageError, match="Asset.open: the asset must be a file path"):
             ns.Asset.open(bad)
     path = example_builder("rna", size="tiny", seed=1).write(tmp_path / "a.usdc")
     asset = ns.Asset.open(path, load="all")
