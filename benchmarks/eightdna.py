@@ -379,7 +379,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     mscene = mi.load_file(str(xml))
     for flag, path in (("--asset", asset), ("--farfield", farfield)):  # a given asset of another object: not the blob's bounds
         if path is not None:
-            check_asset_fits(mi, mscene, {sid: path for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag=flag, kinds=("8dna",))
+            check_asset_fits(mi, mscene, {sid: path for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag=flag)
     bakes = {}
     for name, path, ff in (("8dna", asset, False), ("far-field", farfield, True)):
         if path is None:

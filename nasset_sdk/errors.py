@@ -106,8 +106,8 @@ CODES: dict[str, Code] = _codes(
      "security.md#bounds"),
     ("IMAGE_INVALID", "read", "an image the renderer reads (dome texture) is corrupt, unsupported or above the size bound", "renderer.md#limits"),
     # benchmarks (in-scene accuracy)
-    ("BENCH_ASSET_MISMATCH", "scene", "a --replace (or bench 8dna) asset was not baked from the shapes it replaces", "accuracy.md#errors"),
-    ("BENCH_ASSET_KIND", "scene", "a --replace (or bench 8dna) asset's kind or variant cannot stand in for those shapes", "accuracy.md#errors"),
+    ("BENCH_ASSET_MISMATCH", "scene", "a bench's --replace or --asset asset was not baked from the shapes it replaces", "accuracy.md#errors"),
+    ("BENCH_ASSET_KIND", "scene", "a bench's --replace or --asset asset's kind or variant cannot stand in for those shapes", "accuracy.md#errors"),
     # installation and versions
     ("EXTRA_MISSING", "usage", "a verb needs packages of an optional extra that are not installed", "README.md#extras"),
     ("SPEC_VERSION_NEWER", "format", "specVersion has a MINOR newer than this SDK knows: newer content is not validated",

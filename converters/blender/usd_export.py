@@ -40,7 +40,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     report,
     usd_check,
 )
-from nasset_sdk.errors import NassetError, UsageError, error
+from nasset_sdk.errors import NassetError, UsageError, error, path_arg
 from nasset_sdk.images import atomic_output, output_folder
 from nasset_sdk.safeopen import trust
 
@@ -1511,7 +1511,7 @@ def convert_scene(scene, output, *, replace=None, check_usd: bool = True, exampl
     from . import load_bpy
     from .scene import open_blend
 
-    output = Path(output)
+    output = path_arg(output, "convert_scene: the output")
     if output.suffix not in (".usda", ".usdc", ".usd"):
         raise UsageError(f"output must end in .usda/.usdc/.usd, got {output.name!r}")
     rep = parse_replace(replace)
