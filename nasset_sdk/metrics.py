@@ -112,6 +112,10 @@ def _finite(v):
 
 
 def _as3(x, name: str) -> np.ndarray:
+    from .kinds.query import real_dtype
+
+    if real_dtype(x) is None:
+        raise UsageError(f"{name} must be a real number array [..., 3]")
     a = np.asarray(x, np.float64)
     if a.ndim < 2 or a.shape[-1] != 3:
         raise UsageError(f"{name} must have 3 channels in its last axis, got shape {a.shape}")
@@ -127,7 +131,11 @@ def _psnr(peak: float, mse: float) -> float:
 def noise_variance(a, b, mask=None) -> float:
     """v = mean((a - b)^2) / 4 over the mask: the mean noise variance of (a + b) / 2."""
     a, b = _as3(a, "a"), _as3(b, "b")
+    if a.shape != b.shape:
+        raise UsageError(f"a and b shapes differ: {a.shape}, {b.shape}")
     m = np.ones(a.shape[:-1], bool) if mask is None else np.asarray(mask, bool)
+    if m.shape != a.shape[:-1]:
+        raise UsageError(f"mask shape {m.shape} does not match images {a.shape[:-1]}")
     d = (a[m] - b[m]) ** 2
     return float(d.mean() / 4.0) if d.size else float("nan")
 
@@ -175,8 +183,20 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
     m = np.ones(est.shape[:-1], bool) if mask is None else np.asarray(mask, bool)
     if m.shape != est.shape[:-1]:
         raise UsageError(f"mask shape {m.shape} does not match images {est.shape[:-1]}")
+    if peak is not None and not (isinstance(peak, (int, float, np.number)) and math.isfinite(peak) and peak > 0):
+        raise UsageError(f"peak must be a finite number > 0, got {peak!r}")
     e, aa, bb = est[m], a[m], b[m]
-    ev = None if est_var is None else np.broadcast_to(np.asarray(est_var, np.float64), est.shape)[m]
+    ev = None
+    if est_var is not None:
+        from .kinds.query import real_dtype
+
+        try:
+            if real_dtype(est_var) is None:
+                raise ValueError("not real numbers")
+            ev = np.broadcast_to(np.asarray(est_var, np.float64), est.shape)[m]
+        except ValueError:
+            raise UsageError(f"est_var of shape {np.shape(est_var)} is not real numbers that broadcast to the images "
+                             f"{est.shape}") from None
     for name, x in (("est", e), ("ref_a", aa), ("ref_b", bb)) + ((("est_var", ev),) if ev is not None else ()):
         if not np.isfinite(x).all():
             raise UsageError(f"{name} has non-finite values inside the mask")
@@ -223,6 +243,9 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
 
 def flip_map(est, ref):
     """HDR-FLIP error map [H, W] of ``est`` against ``ref`` (linear images), or None without flip-evaluator."""
+    est_a, ref_a = _as3(est, "est"), _as3(ref, "ref")
+    if est_a.ndim != 3 or est_a.shape != ref_a.shape:
+        raise UsageError(f"est and ref must be images [H, W, 3] of one shape, got {est_a.shape}, {ref_a.shape}")
     try:
         import flip_evaluator
     except ImportError:

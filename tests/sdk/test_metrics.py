@@ -156,6 +156,26 @@ def test_bad_input_is_a_usage_error():
         accuracy(np.ones((4, 4)), np.ones((4, 4)), np.ones((4, 4)))
 
 
+def test_bad_input_types_and_shapes_are_usage_errors():
+    """Strings, a peak that is not a positive number, an estimate variance that does not broadcast, and two halves
+    or FLIP images of other shapes: USAGE (they were numpy ValueError / IndexError and flip-evaluator's
+    RuntimeError, or a silently undefined PSNR)."""
+    from nasset_sdk.metrics import flip_mean, noise_variance
+
+    x = np.ones((8, 8, 3))
+    for call, words in ((lambda: accuracy([["a", "b", "c"]], x, x), "est must be a real number array"),
+                        (lambda: accuracy(x, x, x, peak=0.0), "peak must be a finite number > 0"),
+                        (lambda: accuracy(x, x, x, peak=float("nan")), "peak must be a finite number > 0"),
+                        (lambda: accuracy(x, x, x, est_var=np.zeros((2, 2))), "est_var of shape"),
+                        (lambda: noise_variance(x, x[:4]), "a and b shapes differ"),
+                        (lambda: noise_variance(x, x, np.ones((4, 4), bool)), "mask shape"),
+                        (lambda: flip_mean(x, x[:4]), "images \\[H, W, 3\\] of one shape")):
+        with pytest.raises(UsageError, match=words):
+            call()
+    r = accuracy(x, x, x, est_var=np.zeros(3), peak=1.0)  # a variance per channel broadcasts
+    assert r.pixels == 64
+
+
 def _grouped(rng, groups=8, per=200, spread=0.07, sigma=0.02):
     """Samples [G*per, 3] of an estimate whose error is one multiplicative bias per group (N(0, spread)),
     against a two-half reference with independent noise sigma; returns (est, a, b, labels)."""
