@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import NassetError, error
+from .errors import NassetError, UsageError, error, path_arg
 
 #: Largest magnitude any float image file holds: float32 max (spec/renderer.md#limits).
 IMAGE_VALUE_MAX = float(np.finfo(np.float32).max)
@@ -27,6 +27,10 @@ MAX_TEXTURE_VALUES = 1 << 28  # pixels x channels (1 GiB as float32)
 def finite_float32(image) -> np.ndarray:
     """``image`` as a contiguous float32 array with NaN -> 0 and every value clamped to
     [-IMAGE_VALUE_MAX, IMAGE_VALUE_MAX], so no Inf/NaN ever reaches a file (same shape)."""
+    from .kinds.query import real_dtype
+
+    if real_dtype(image) is None:
+        raise UsageError("an image must be a real number array")
     a = np.asarray(image, np.float64)
     a = np.nan_to_num(a, nan=0.0, posinf=IMAGE_VALUE_MAX, neginf=-IMAGE_VALUE_MAX)
     return np.ascontiguousarray(np.clip(a, -IMAGE_VALUE_MAX, IMAGE_VALUE_MAX), np.float32)
@@ -39,7 +43,7 @@ def atomic_output(path, what: str = "image"):
     Any failure (missing or unwritable folder, full disk, the writer raising) leaves ``path``
     untouched and raises ``WRITE_FAILED`` naming the file; the temporary file is removed.
     """
-    target = Path(path)
+    target = path_arg(path, f"the {what}'s file")
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.stem}.tmp-", suffix=target.suffix, dir=target.parent)
@@ -75,6 +79,7 @@ def _umask() -> int:
 
 def png_bytes(rgb8: np.ndarray) -> bytes:
     """An [H, W, 3] uint8 image as 8-bit RGB PNG bytes (filter type 0 on every row)."""
+    _check_rgb(rgb8, "a PNG image")
     rgb8 = np.ascontiguousarray(rgb8, np.uint8)
     h, w, _ = rgb8.shape
     raw = b"".join(b"\x00" + rgb8[r].tobytes() for r in range(h))
@@ -84,6 +89,15 @@ def png_bytes(rgb8: np.ndarray) -> bytes:
 
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
     return png + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
+
+
+def _check_rgb(image, what: str) -> None:
+    """USAGE unless ``image`` is a real number array [H, W, 3] with H, W >= 1."""
+    from .kinds.query import real_dtype
+
+    shape = np.shape(image)
+    if real_dtype(image) is None or len(shape) != 3 or shape[2] != 3 or min(shape[:2]) < 1:
+        raise UsageError(f"{what} must be a real number array [H, W, 3] (H, W >= 1), got shape {shape}")
 
 
 def write_png(path, rgb8: np.ndarray) -> Path:
@@ -99,6 +113,7 @@ def write_exr(path, image: np.ndarray) -> None:
     """Write [H, W, 3] as float32 RGB OpenEXR atomically; values pass :func:`finite_float32` (``WRITE_FAILED``)."""
     import OpenEXR
 
+    _check_rgb(image, "an OpenEXR image")
     img = finite_float32(image)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with atomic_output(path, "OpenEXR image") as tmp:
@@ -108,6 +123,8 @@ def write_exr(path, image: np.ndarray) -> None:
 def exr_header_size(path) -> tuple[int, int, int]:
     """(width, height, channels) from an OpenEXR file's header, read with bounded reads before any
     decoder sees the file. ``IMAGE_INVALID`` for a file that is not a single-part scanline/tiled EXR."""
+    path = path_arg(path, "the OpenEXR image's file")
+
     def bad(msg):
         return error("IMAGE_INVALID", msg, file=str(path))
 
