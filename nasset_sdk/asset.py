@@ -592,7 +592,10 @@ class Asset:
         elif isinstance(which, str):
             names = [which]
         else:
-            names = list(which)
+            try:
+                names = list(which)
+            except TypeError:
+                raise UsageError(f"load: 'required', 'all', 'none' or component names, got {which!r}") from None
         for n in names:
             if n not in comps:
                 raise error("COMPONENT_MISSING", f"no component {n!r}", **self._loc(f"{COMPONENTS}/{n}"))

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .asset import GEOMETRY, Asset
-from .errors import NassetError
+from .errors import NassetError, path_arg
 from .geometry import MeshGeometry
 from .networks import parameter_count
 
@@ -86,7 +86,7 @@ def _component(asset: Asset, info) -> dict:
 
 def inspect_asset(path: str | os.PathLike, load: str = "all") -> dict:
     """Summary of the asset at ``path`` as a JSON-ready dict; ``load``: 'all', 'required' or 'none'."""
-    return describe_asset(Asset.open(Path(path), load=load), path)
+    return describe_asset(Asset.open(path_arg(path, "inspect: the asset"), load=load), path)
 
 
 def describe_asset(asset: Asset, path: str | os.PathLike) -> dict:

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import limits
 from .asset import Asset, AssetBuilder
-from .errors import UsageError
+from .errors import UsageError, path_arg
 from .geometry import MeshGeometry
 from .kinds.query import Query
 
@@ -176,7 +176,9 @@ def compare(before: Asset, after: Asset, *, samples: int = QUERY_ROWS, preview: 
 def optimize(src: str | os.PathLike, dst: str | os.PathLike, opts: OptimizeOptions | None = None) -> dict:
     """Rewrite ``src`` as ``dst`` with ``opts`` applied; return the report (see :func:`format_report`)."""
     opts = opts or OptimizeOptions()
-    src, dst = Path(src), Path(dst)
+    if not isinstance(opts, OptimizeOptions):
+        raise UsageError(f"optimize: opts must be an OptimizeOptions, got {type(opts).__name__}")
+    src, dst = path_arg(src, "optimize: the input"), path_arg(dst, "optimize: the output")
     where = {"file": str(src)}
     if opts.dtype not in (None, *limits.TENSOR_DTYPES):
         raise UsageError(f"--dtype must be one of {limits.TENSOR_DTYPES}, got {opts.dtype!r}", **where)

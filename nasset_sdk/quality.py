@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .asset import Asset, AssetBuilder, read_component
-from .errors import UsageError
+from .errors import UsageError, path_arg
 from .geometry import MeshGeometry
 
 
@@ -19,8 +19,10 @@ def merge_quality(levels: dict[str, str | os.PathLike], output: str | os.PathLik
     The inputs must be of one kind and variant with identical geometry and encoding domain (bakes of the
     same scene at different presets). Optional components are taken from the first input.
     """
-    if len(levels) < 2:
-        raise UsageError("merge-quality needs at least two LEVEL=ASSET inputs")
+    if not isinstance(levels, dict) or len(levels) < 2:
+        raise UsageError("merge-quality needs at least two LEVEL=ASSET inputs ({level: asset file})")
+    levels = {q: path_arg(p, f"merge-quality: level {q!r}") for q, p in levels.items()}
+    output = path_arg(output, "merge-quality: the output")
     assets = {q: Asset.open(p, load="all") for q, p in levels.items()}
     names = list(assets)
     first = assets[names[0]]

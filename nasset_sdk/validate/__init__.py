@@ -21,6 +21,9 @@ def validate_file(path: str | os.PathLike, *, usd_checks: bool = False, probe: b
     for files this process wrote. ``usd_checks`` adds OpenUSD's own validators (USD_CHECK).
     ``network_probe_timeout`` bounds the child that runs every network (nasset_sdk.netprobe).
     """
+    from ..errors import path_arg
+
+    path = path_arg(path, "validate_file: the asset")
     kw = {} if probe_timeout is None else {"probe_timeout": float(probe_timeout)}
     if network_probe_timeout is not None:
         kw["network_probe_timeout"] = float(network_probe_timeout)

@@ -121,3 +121,30 @@ def test_usda_and_usd_extensions(tmp_path):
     assert (tmp_path / "a.usd").read_bytes()[:8] == b"PXR-USDC"  # .usd is written as crate
     with pytest.raises(UsageError):
         b.write(tmp_path / "a.txt")
+
+
+def test_sdk_entry_points_refuse_paths_that_are_not_paths(tmp_path):
+    """validate_file, inspect_asset, optimize, merge_quality and the web export given None (or a number) for a file:
+    USAGE naming the argument (they were bare TypeErrors); optimize's options must be an OptimizeOptions."""
+    from nasset_sdk.inspect import inspect_asset
+    from nasset_sdk.optimize import optimize
+    from nasset_sdk.quality import merge_quality
+    from nasset_sdk.validate import validate_file
+    from nasset_sdk.web import export
+
+    a = example_builder("rna", size="tiny", seed=1).write(tmp_path / "a.usdc")
+    b = example_builder("rna", size="tiny", seed=2).write(tmp_path / "b.usdc")
+    for call, words in ((lambda: validate_file(None), "validate_file: the asset must be a file path"),
+                        (lambda: validate_file(5), "validate_file: the asset must be a file path"),
+                        (lambda: inspect_asset(None), "inspect: the asset must be a file path"),
+                        (lambda: optimize(None, tmp_path / "o.usdc"), "optimize: the input must be a file path"),
+                        (lambda: optimize(a, None), "optimize: the output must be a file path"),
+                        (lambda: optimize(a, tmp_path / "o.usdc", {"dtype": "float16"}), "opts must be an OptimizeOptions"),
+                        (lambda: merge_quality(None, tmp_path / "m.usdc"), "at least two"),
+                        (lambda: merge_quality({"small": a, "hq": None}, tmp_path / "m.usdc"), "level 'hq' must be a file path"),
+                        (lambda: merge_quality({"small": a, "hq": b}, None), "the output must be a file path"),
+                        (lambda: export(None, tmp_path / "w"), "web: the asset must be a file path"),
+                        (lambda: ns.Asset.open(a, load=5), "load: 'required', 'all', 'none' or component names")):
+        with pytest.raises(UsageError, match=words):
+            call()
+    assert validate_file(a).ok
