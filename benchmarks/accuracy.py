@@ -43,7 +43,7 @@ import numpy as np
 from nasset_converters.mitsuba.scene import BOX_TOLERANCE, box_offset
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error, path_arg
-from nasset_sdk.images import output_folder
+from nasset_sdk.images import output_folder, write_text_atomic
 
 from .common import camera_sensor
 
@@ -489,7 +489,7 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
         png8(out / "flip.png", np.stack([255 * v, 255 * v * v, 255 * (1 - v) * v], -1).astype(np.uint8))
         files.append(str(out / "flip.png"))
     if src.cache_key is not None:
-        (out / "reference_key.json").write_text(json.dumps(src.cache_key))
+        write_text_atomic(out / "reference_key.json", json.dumps(src.cache_key))
     times["total_s"] = time.perf_counter() - t0
     report = {
         "benchmark": "accuracy",
@@ -507,8 +507,8 @@ def bench_accuracy(scene_file, replace, out_dir, *, res: int = 128, spp: int = 8
         "times_s": {k: round(v, 2) for k, v in times.items()},
         "definitions": "spec/accuracy.md#metrics",
     }
-    (out / "accuracy.json").write_text(json.dumps(report, indent=2))
-    (out / "accuracy.md").write_text(markdown(report))
+    write_text_atomic(out / "accuracy.json", json.dumps(report, indent=2))
+    write_text_atomic(out / "accuracy.md", markdown(report))
     return report
 
 

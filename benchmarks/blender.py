@@ -35,7 +35,7 @@ import numpy as np
 from nasset_converters.blender.cycles import render_cycles, setup_cycles
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
-from nasset_sdk.images import output_folder
+from nasset_sdk.images import output_folder, write_text_atomic
 
 QUICK = {"res": 64, "gt_spp": 1024, "cy_spp": "4,16,64", "nr_spp": "1,4,16", "size": "tiny"}
 FULL = {"res": 128, "gt_spp": 4096, "cy_spp": "4,16,64,256", "nr_spp": "1,4,16,64", "size": "small"}
@@ -239,7 +239,7 @@ def run_bench(out_dir, *, size: str, res: int, gt_spp: int, cy_spp, nr_spp, max_
     }
     plot(out / "blender_error_vs_time.png", reports)
     report["files"] = [str(out / "blender_error_vs_time.json"), str(out / "blender_error_vs_time.png")]
-    (out / "blender_error_vs_time.json").write_text(json.dumps(report, indent=2))
+    write_text_atomic(out / "blender_error_vs_time.json", json.dumps(report, indent=2))
     return report
 
 

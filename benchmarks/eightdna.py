@@ -41,7 +41,7 @@ import numpy as np
 from nasset_benchmarks.common import machine, open_given_asset, require_kind
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
-from nasset_sdk.images import output_folder
+from nasset_sdk.images import output_folder, write_text_atomic
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
 PAPER = ("8DNA paper (Table 1): under near-field light the far-field baseline's MSE is several times 8DNA's; Table 2: "
@@ -486,8 +486,8 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     }
     report["files"] = [str(out / n) for n in ("bench_8dna.json", "bench_8dna.md", "8dna_images.png", "8dna_tables.png")]
     _plots(out, gt, rows, table, spp)
-    (out / "bench_8dna.json").write_text(json.dumps(report, indent=2))
-    (out / "bench_8dna.md").write_text(summary_markdown(report))
+    write_text_atomic(out / "bench_8dna.json", json.dumps(report, indent=2))
+    write_text_atomic(out / "bench_8dna.md", summary_markdown(report))
     np.savez_compressed(out / "bench_8dna_images.npz", reference=gt.astype(np.float32), reference_spp=gt_spp,
                         reference_noise_variance=var_gt,
                         **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})

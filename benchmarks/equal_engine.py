@@ -38,7 +38,7 @@ from nasset_benchmarks.accuracy import check_asset_fits, mitsuba_halves, object_
 from nasset_benchmarks.common import equal_error_speedup, machine, mi_render, plot
 from nasset_converters.mitsuba.scene import integrator_depths, load_scene, media_caveats, require_integrator
 from nasset_sdk.errors import UsageError, error
-from nasset_sdk.images import output_folder
+from nasset_sdk.images import output_folder, write_text_atomic
 
 
 def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt_spp: int = 4096, mi_spp=(1, 4, 16, 64),
@@ -86,7 +86,7 @@ def bench_equal_engine(scene_file, replace: dict, out_dir, *, res: int = 128, gt
 
         for name, img in (("reference_a", a), ("reference_b", b)):
             write_exr(out / f"{name}.exr", img.astype(np.float32))
-        (out / "reference_key.json").write_text(json.dumps(key))
+        write_text_atomic(out / "reference_key.json", json.dumps(key))
     t_ref = time.perf_counter() - t
     ref = 0.5 * (a + b)
     var_ref = float(np.mean((a - b) ** 2) / 4.0)

@@ -40,7 +40,7 @@ from nasset_benchmarks.accuracy import check_asset_fits, estimate_depth
 from nasset_benchmarks.common import equal_error_speedup, ground_truth, ints, machine, mi_render, mi_sensor, plot
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
-from nasset_sdk.images import output_folder
+from nasset_sdk.images import output_folder, write_text_atomic
 
 QUICK = {"res": 64, "gt_spp": 1024, "mi_spp": "1,4,16,64", "nr_spp": "1,4,16"}
 PAPERS = ("Published figures: 8DNA renders volumetric assets roughly 2-20x faster than path tracing at 128 spp "
@@ -162,11 +162,11 @@ def bench_error_vs_time(out_dir, *, asset=None, size: str = "tiny", res: int = 1
         "setup_times_s": {**{k: round(v, 2) for k, v in times.items()}, "total_s": round(time.perf_counter() - t_setup, 2)},
         "papers": PAPERS,
     }
-    (out / "error_vs_time.json").write_text(json.dumps(report, indent=2))
+    write_text_atomic(out / "error_vs_time.json", json.dumps(report, indent=2))
     report["plot_backend"] = plot(out / "error_vs_time.png", mi_points, nr_points, floor,
                                   f"example scene {res}x{res}, asset {asset.name}")
     report["files"] = [str(out / "error_vs_time.json"), str(out / "error_vs_time.png")]
-    (out / "error_vs_time.json").write_text(json.dumps(report, indent=2))
+    write_text_atomic(out / "error_vs_time.json", json.dumps(report, indent=2))
     return report
 
 

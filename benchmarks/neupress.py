@@ -40,7 +40,7 @@ import numpy as np
 from nasset_benchmarks.common import ints
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
-from nasset_sdk.images import output_folder
+from nasset_sdk.images import output_folder, write_text_atomic
 
 QUICK = {"res": 64, "gt_spp": 256, "spp": "1,4,16", "equal_spp": 4}
 FULL = {"res": 128, "gt_spp": 2048, "spp": "1,2,4,8,16,32", "equal_spp": 16}
@@ -301,13 +301,13 @@ def bench_neupress(out_dir, *, asset=None, size: str = "small", res: int = 128, 
         "paper": PAPER,
         "bake": {k: prov.get(k) for k in ("timings_s", "validation", "size")},
     }
-    (out / "neupress_table.json").write_text(json.dumps(report, indent=2))
-    (out / "neupress_table.md").write_text(markdown_table(report))
+    write_text_atomic(out / "neupress_table.json", json.dumps(report, indent=2))
+    write_text_atomic(out / "neupress_table.md", markdown_table(report))
     plot(out / "neupress_error_vs_time.png", sweep, eq_time, f"neupress example {res}x{res}, GT {gt_spp} spp")
     image_strip(out / "neupress_images.png", gt, images, equal_spp)
     report["files"] = [str(out / f) for f in ("neupress_table.json", "neupress_table.md", "neupress_error_vs_time.png",
                                               "neupress_images.png")]
-    (out / "neupress_table.json").write_text(json.dumps(report, indent=2))
+    write_text_atomic(out / "neupress_table.json", json.dumps(report, indent=2))
     return report
 
 

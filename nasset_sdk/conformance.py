@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import UsageError
+from .images import write_text_atomic
 
 DEFAULT_RENDERER = "nasset render {scene} -o {out} --spp {spp} --seed {seed} --width {width} --height {height} --quiet"
 PLACEHOLDERS = ("scene", "out", "spp", "width", "height", "seed")
@@ -167,7 +168,7 @@ def run_tool(cmd: list[str], row: dict, what: str, log_path: Path, *, timeout: f
         return False
     row["seconds"] = round(time.perf_counter() - t0, 2)
     log = proc.stdout.decode("utf-8", "replace")
-    log_path.write_text(log)
+    write_text_atomic(log_path, log)
     if proc.returncode != 0:
         row["message"] = f"{what} exited with status {proc.returncode}: " + " | ".join(log.strip().splitlines()[-3:])[-400:]
         return False

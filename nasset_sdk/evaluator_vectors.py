@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import UsageError
+from .images import write_text_atomic
 
 #: the vectors shipped with the SDK (package data)
 VECTORS_DIR = Path(__file__).resolve().parent / "evaluator_cases"
@@ -217,6 +218,6 @@ def generate(out_dir, names=None) -> list[Path]:
             q: {"arguments": list(args), "outputs": {o: dict(zip(("atol", "rtol"), tolerance(q, o), strict=True)) for o in outs},
                 "network_input": f"{q}.{NETWORK_INPUT}" in expected}
             for q, (args, outs) in queries.items()}}
-        (folder / "case.json").write_text(json.dumps(info, indent=1, sort_keys=True) + "\n")
+        write_text_atomic(folder / "case.json", json.dumps(info, indent=1, sort_keys=True) + "\n")
         folders.append(folder)
     return folders

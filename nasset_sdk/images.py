@@ -60,6 +60,14 @@ def atomic_output(path, what: str = "image"):
             os.unlink(tmp)
 
 
+def write_text_atomic(path, text: str, what: str = "report") -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`atomic_output`: a reader never sees half a report, a
+    failure leaves the old file and raises ``WRITE_FAILED``); returns the path."""
+    with atomic_output(path, what) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+    return Path(path)
+
+
 def output_folder(path, what: str = "output folder") -> Path:
     """Create the folder ``path`` (and its parents) for a command's outputs; ``WRITE_FAILED`` naming it when that is
     not possible (a file in the way, a read-only parent), instead of the OSError's traceback."""

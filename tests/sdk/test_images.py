@@ -31,3 +31,25 @@ def test_paths_that_are_not_paths_and_string_images_are_refused(tmp_path):
         tonemap([["a"]])
     write_exr(tmp_path / "ok.exr", img)
     np.testing.assert_allclose(read_exr(tmp_path / "ok.exr"), img, rtol=1e-6)
+
+
+def test_reports_are_written_atomically(tmp_path, monkeypatch):
+    """write_text_atomic (every bench's JSON and markdown report, the conformance logs): a failed write leaves the old
+    file whole and raises WRITE_FAILED, with no temporary file left behind."""
+    from pathlib import Path
+
+    from nasset_sdk.errors import NassetError
+    from nasset_sdk.images import write_text_atomic
+
+    target = tmp_path / "report.json"
+    write_text_atomic(target, '{"old": 1}')
+
+    def fail(self, *a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", fail)
+    with pytest.raises(NassetError) as exc:
+        write_text_atomic(target, '{"new": 2}')
+    monkeypatch.undo()
+    assert exc.value.code == "WRITE_FAILED" and "No space left" in exc.value.message
+    assert target.read_text() == '{"old": 1}' and [p.name for p in tmp_path.iterdir()] == ["report.json"]
