@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nasset_benchmarks.common import save_figure
 from nasset_converters.blender.cycles import render_cycles, setup_cycles
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError
@@ -212,7 +213,7 @@ def plot(path: Path, reports: list) -> None:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 

@@ -58,6 +58,14 @@ def require_kind(asset, path, kinds: tuple, what: str) -> None:
                     f"a {' or '.join(kinds)} surface asset", file=str(path))
 
 
+def save_figure(fig, path) -> None:
+    """Write a matplotlib figure to ``path`` (format from its suffix) atomically (nasset_sdk.images.atomic_output)."""
+    from nasset_sdk.images import atomic_output
+
+    with atomic_output(path, "plot") as tmp:
+        fig.savefig(tmp)
+
+
 def camera_sensor(mi, sensor, width: int, height: int):
     """A box-filtered ``width`` x ``height`` copy of a Mitsuba ``sensor``'s camera: its pose and its model
     (``perspective`` with its horizontal field of view, ``thinlens`` with its aperture and focus distance, or
@@ -169,7 +177,7 @@ def plot(path: Path, mi_points, nr_points, floor, title: str,
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
     return "matplotlib"
 

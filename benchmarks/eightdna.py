@@ -38,10 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.common import machine, open_given_asset, require_kind
+from nasset_benchmarks.common import machine, open_given_asset, require_kind, save_figure
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
-from nasset_sdk.images import output_folder, write_text_atomic
+from nasset_sdk.images import atomic_output, output_folder, write_text_atomic
 
 QUICK = {"res": 32, "gt_spp": 512, "spp": 32, "size": "tiny", "converged_spp": 0}
 PAPER = ("8DNA paper (Table 1): under near-field light the far-field baseline's MSE is several times 8DNA's; Table 2: "
@@ -488,9 +488,9 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     _plots(out, gt, rows, table, spp)
     write_text_atomic(out / "bench_8dna.json", json.dumps(report, indent=2))
     write_text_atomic(out / "bench_8dna.md", summary_markdown(report))
-    np.savez_compressed(out / "bench_8dna_images.npz", reference=gt.astype(np.float32), reference_spp=gt_spp,
-                        reference_noise_variance=var_gt,
-                        **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})
+    with atomic_output(out / "bench_8dna_images.npz", "images file") as tmp:  # reused as --reference-npz: never half written
+        np.savez_compressed(tmp, reference=gt.astype(np.float32), reference_spp=gt_spp, reference_noise_variance=var_gt,
+                            **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})
     return report
 
 
@@ -565,7 +565,7 @@ def _plots(out: Path, gt, rows: dict, table: list, spp: int) -> None:
         a.set_yticks([])
     fig.colorbar(im, ax=ax[1, -1], fraction=0.046)
     fig.tight_layout()
-    fig.savefig(out / "8dna_images.png")
+    save_figure(fig, out / "8dna_images.png")
     plt.close(fig)
     fig, ax = plt.subplots(1, 3, figsize=(11, 3.4), dpi=110)
     labels = [t["method"].split(" (")[0] for t in table]
@@ -587,7 +587,7 @@ def _plots(out: Path, gt, rows: dict, table: list, spp: int) -> None:
         a.set_title(title, fontsize=9)
         a.grid(True, axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(out / "8dna_tables.png")
+    save_figure(fig, out / "8dna_tables.png")
     plt.close(fig)
 
 

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_benchmarks.common import ints
+from nasset_benchmarks.common import ints, save_figure
 from nasset_sdk.cli import MAX_IMAGE_SIDE, MAX_SPP, count_arg, seed_arg
 from nasset_sdk.errors import UsageError, error
 from nasset_sdk.images import output_folder, write_text_atomic
@@ -352,7 +352,7 @@ def plot(path: Path, sweep: dict, eq_time: list, title: str) -> None:
     axes[0].legend(fontsize=7)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -371,7 +371,7 @@ def image_strip(path: Path, gt: np.ndarray, images: dict, spp: int) -> None:
         ax.set_title(name, fontsize=7)
         ax.axis("off")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
