@@ -104,10 +104,15 @@ def _real(what: str, value) -> np.ndarray:
 
 
 def _index(what: str, value) -> np.ndarray:
-    """``value`` as a numpy integer array, or USAGE naming ``what`` when it does not hold integers."""
+    """``value`` as a numpy integer array (whole-number floats converted), or USAGE naming ``what`` when it does not
+    hold integers."""
     from .kinds.query import real_dtype
 
     dt = real_dtype(value)
+    if dt is not None and dt.kind == "f":  # whole numbers stored as floats (a text file's columns) are indices too
+        a = np.asarray(value)
+        if np.isfinite(a).all() and (a == np.round(a)).all():
+            return a.astype(np.int64)
     if dt is None or dt.kind not in "iu":
         raise UsageError(f"{what} must be an integer array")
     return np.asarray(value)

@@ -57,7 +57,10 @@ def test_api_arrays_that_hold_no_real_numbers_are_usage_errors(bad):
         ns.MeshGeometry(np.eye(3), bad)
     with pytest.raises(UsageError, match="curve widths must be a real number array"):
         ns.CurvesGeometry(np.zeros((3, 3)), np.array([3]), bad)
-    # plain lists of numbers are arrays like any other
+    with pytest.raises(UsageError, match="mesh faces must be an integer array"):
+        ns.MeshGeometry(np.eye(3), np.array([[0, 1, 2.5]]))
+    # plain lists of numbers are arrays like any other, and whole-number float indices are indices
+    assert ns.MeshGeometry(np.eye(3), np.array([[0.0, 1.0, 2.0]])).faces.dtype.kind == "i"
     g = ns.MeshGeometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
     g.validate()
     lo, hi = g.bounds()
