@@ -190,7 +190,7 @@ def _is_curve(shape) -> bool:
 
 
 def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "", flag: str = "--replace",
-                     kinds: tuple | None = None) -> list[dict]:
+                     kinds: tuple | None = None, opened: dict | None = None) -> list[dict]:
     """Per distinct asset file: {asset, ids, kind, variant}; typed errors when scene and asset do not match.
 
     CONVERT_ASSET_REFERENCE: a missing or unreadable file. BENCH_ASSET_MISMATCH: an id the asset was not
@@ -198,7 +198,8 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "", flag: st
     diagonal). BENCH_ASSET_KIND: a fiber asset for mesh shapes (or a surface asset for curves), a neupress
     asset for shapes without a dielectric boundary (neupress carries subsurface transport behind a rough
     dielectric), or, with ``kinds`` (a bench built for them), an asset of another kind. ``flag``: the option
-    that named the asset, for the messages."""
+    that named the asset, for the messages. ``opened``: {path: asset} the caller has already opened (without payloads)
+    and checked as readable, so each file is opened once."""
     import mitsuba as mi
 
     from nasset_converters.mitsuba.scene import bounds_offset, no_such_shape, refuse_emitter
@@ -213,7 +214,7 @@ def check_asset_fits(mi, scene, replace: dict, *, scene_file: str = "", flag: st
         groups.setdefault(path_arg(file, f"{flag} {sid}: the asset"), []).append(sid)
     out = []
     for file, ids in groups.items():
-        asset = open_given_asset(file, f"{flag} {','.join(ids)}")
+        asset = (opened or {}).get(file) or open_given_asset(file, f"{flag} {','.join(ids)}")
         if kinds is not None:
             require_kind(asset, file, kinds, flag)
         shapes = [by_id[i] for i in ids]

@@ -320,11 +320,12 @@ def _open(path):
     return a
 
 
-def check_given_asset(path, *, far_field: bool) -> Path:
+def check_given_asset(path, *, far_field: bool):
     """``--asset`` (far_field False) or ``--farfield``, checked before any bake or render: an existing, readable 8dna
     surface asset (CONVERT_ASSET_REFERENCE, BENCH_ASSET_KIND), and not the other model of the pair where its provenance
     says which it is (BENCH_ASSET_KIND: the 6D baseline given as the 8D asset, or the reverse). Its bounds are checked
-    against the example's blob once the scene is loaded (:func:`nasset_benchmarks.accuracy.check_asset_fits`)."""
+    against the example's blob once the scene is loaded (:func:`nasset_benchmarks.accuracy.check_asset_fits`).
+    Returns the asset, opened without its payloads, for that check."""
     flag = "--farfield" if far_field else "--asset"
     asset = open_given_asset(path, flag)
     require_kind(asset, path, ("8dna",), flag)
@@ -333,7 +334,7 @@ def check_given_asset(path, *, far_field: bool) -> Path:
         want = "the 6D far-field baseline" if far_field else "an 8D asset"
         raise error("BENCH_ASSET_KIND", f"{flag}: {Path(path).name} holds the model '{model.split(' (')[0]}', not {want}",
                     file=str(path))
-    return Path(path)
+    return asset
 
 
 def _reference_npz(path, res: int) -> tuple:
@@ -368,8 +369,11 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     if example not in ("default", "heterogeneous"):
         raise UsageError(f"--example must be default or heterogeneous, got {example!r}")
     # what was given is checked before anything is baked or rendered
-    asset = None if asset is None else check_given_asset(asset, far_field=False)
-    farfield = None if farfield is None else check_given_asset(farfield, far_field=True)
+    checked = {}  # path -> the asset opened for the checks (opened once)
+    for path, ff in ((asset, False), (farfield, True)):
+        if path is not None:
+            checked[Path(path)] = check_given_asset(path, far_field=ff)
+    asset, farfield = (None if p is None else Path(p) for p in (asset, farfield))
     stored = None if reference_npz is None else _reference_npz(reference_npz, res)
     t_all = time.perf_counter()
     setup: dict[str, float] = {}
@@ -379,7 +383,8 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     mscene = mi.load_file(str(xml))
     for flag, path in (("--asset", asset), ("--farfield", farfield)):  # a given asset of another object: not the blob's bounds
         if path is not None:
-            check_asset_fits(mi, mscene, {sid: path for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag=flag)
+            check_asset_fits(mi, mscene, {sid: path for sid in EXAMPLE_ASSET_IDS}, scene_file=str(xml), flag=flag,
+                             opened=checked)
     bakes = {}
     for name, path, ff in (("8dna", asset, False), ("far-field", farfield, True)):
         if path is None:

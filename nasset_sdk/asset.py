@@ -23,6 +23,7 @@ from typing import Iterable
 import numpy as np
 
 from . import limits
+from .arrays import real_array
 from .errors import NassetError, UsageError, error, path_arg, usd_reason
 from .geometry import CurvesGeometry, MeshGeometry
 from .networks import CheckedSession, NetworkInfo, check_model_bytes, info_from_model, make_session, sha256_hex
@@ -79,11 +80,7 @@ class ComponentData:
         _check_name("tensor", name)
         if dtype not in limits.TENSOR_DTYPES:
             raise UsageError(f"tensor {name!r}: dtype must be one of {limits.TENSOR_DTYPES}")
-        from .kinds.query import real_dtype
-
-        if real_dtype(array) is None:
-            raise UsageError(f"tensor {name!r}: expected a real number array")
-        arr = np.asarray(array)
+        arr = real_array(array, f"tensor {name!r}: expected a real number array")
         if arr.size > limits.MAX_TENSOR_ELEMENTS or arr.ndim > limits.MAX_TENSOR_RANK or arr.ndim == 0:
             raise UsageError(f"tensor {name!r}: shape {arr.shape} outside the format bounds")
         with np.errstate(over="ignore", invalid="ignore"):
@@ -772,13 +769,5 @@ class Asset:
 
     def evaluator(self, **options):
         """The kind's numpy + onnxruntime evaluator over the loaded components; ``options`` are its keyword arguments
-        (USAGE for one it does not take)."""
-        try:
-            return self.contract.evaluator(self, **options)
-        except TypeError as exc:  # raised binding the options to the evaluator, in the contract's own frame?
-            tb = exc.__traceback__
-            while tb.tb_next is not None:
-                tb = tb.tb_next
-            if options and tb.tb_frame.f_code is type(self.contract).evaluator.__code__:
-                raise UsageError(f"the {self.kind} evaluator does not take these options ({exc})", file=str(self.path)) from None
-            raise
+        (USAGE for one it does not take, :func:`nasset_sdk.kinds.new_evaluator`)."""
+        return self.contract.evaluator(self, **options)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import limits
+from .arrays import real_array, real_dtype
 from .errors import UsageError
 
 
@@ -44,9 +45,10 @@ class MeshGeometry:
         return cls(pts, faces, normals)
 
     def __post_init__(self) -> None:  # numpy arrays from here on; USAGE for what holds no numbers
-        self.points, self.faces = _real("mesh points", self.points), _index("mesh faces", self.faces)
+        self.points = real_array(self.points, "mesh points must be a real number array")
+        self.faces = _index("mesh faces", self.faces)
         if self.normals is not None:
-            self.normals = _real("mesh normals", self.normals)
+            self.normals = real_array(self.normals, "mesh normals must be a real number array")
 
     def validate(self) -> None:
         p, f = self.points, self.faces
@@ -74,7 +76,8 @@ class CurvesGeometry:
     widths: np.ndarray
 
     def __post_init__(self) -> None:  # numpy arrays from here on; USAGE for what holds no numbers
-        self.points, self.widths = _real("curve points", self.points), _real("curve widths", self.widths)
+        self.points = real_array(self.points, "curve points must be a real number array")
+        self.widths = real_array(self.widths, "curve widths must be a real number array")
         self.counts = _index("curve counts", self.counts)
 
     def validate(self) -> None:
@@ -93,21 +96,9 @@ class CurvesGeometry:
         return (self.points - r).min(0), (self.points + r).max(0)
 
 
-def _real(what: str, value) -> np.ndarray:
-    """``value`` as a numpy array of its own real dtype, or USAGE naming ``what`` when it holds no real numbers
-    (strings, booleans, objects, complex numbers)."""
-    from .kinds.query import real_dtype
-
-    if real_dtype(value) is None:
-        raise UsageError(f"{what} must be a real number array")
-    return np.asarray(value)
-
-
 def _index(what: str, value) -> np.ndarray:
     """``value`` as a numpy integer array (whole-number floats converted), or USAGE naming ``what`` when it does not
     hold integers."""
-    from .kinds.query import real_dtype
-
     dt = real_dtype(value)
     if dt is not None and dt.kind == "f":  # whole numbers stored as floats (a text file's columns) are indices too
         a = np.asarray(value)

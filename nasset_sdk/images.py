@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .arrays import real_array, real_dtype
 from .errors import NassetError, UsageError, error, path_arg
 
 #: Largest magnitude any float image file holds: float32 max (spec/renderer.md#limits).
@@ -27,11 +28,7 @@ MAX_TEXTURE_VALUES = 1 << 28  # pixels x channels (1 GiB as float32)
 def finite_float32(image) -> np.ndarray:
     """``image`` as a contiguous float32 array with NaN -> 0 and every value clamped to
     [-IMAGE_VALUE_MAX, IMAGE_VALUE_MAX], so no Inf/NaN ever reaches a file (same shape)."""
-    from .kinds.query import real_dtype
-
-    if real_dtype(image) is None:
-        raise UsageError("an image must be a real number array")
-    a = np.asarray(image, np.float64)
+    a = real_array(image, "an image must be a real number array", dtype=np.float64)
     a = np.nan_to_num(a, nan=0.0, posinf=IMAGE_VALUE_MAX, neginf=-IMAGE_VALUE_MAX)
     return np.ascontiguousarray(np.clip(a, -IMAGE_VALUE_MAX, IMAGE_VALUE_MAX), np.float32)
 
@@ -101,8 +98,6 @@ def png_bytes(rgb8: np.ndarray) -> bytes:
 
 def _check_rgb(image, what: str) -> None:
     """USAGE unless ``image`` is a real number array [H, W, 3] with H, W >= 1."""
-    from .kinds.query import real_dtype
-
     shape = np.shape(image)
     if real_dtype(image) is None or len(shape) != 3 or shape[2] != 3 or min(shape[:2]) < 1:
         raise UsageError(f"{what} must be a real number array [H, W, 3] (H, W >= 1), got shape {shape}")

@@ -42,6 +42,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .arrays import real_array, real_dtype
 from .errors import UsageError
 
 #: percentile of the reference (over the mask, all channels) used as the PSNR peak
@@ -112,11 +113,7 @@ def _finite(v):
 
 
 def _as3(x, name: str) -> np.ndarray:
-    from .kinds.query import real_dtype
-
-    if real_dtype(x) is None:
-        raise UsageError(f"{name} must be a real number array [..., 3]")
-    a = np.asarray(x, np.float64)
+    a = real_array(x, f"{name} must be a real number array [..., 3]", dtype=np.float64)
     if a.ndim < 2 or a.shape[-1] != 3:
         raise UsageError(f"{name} must have 3 channels in its last axis, got shape {a.shape}")
     return a
@@ -188,8 +185,6 @@ def accuracy(est, ref_a, ref_b, mask=None, *, est_var=None, peak: float | None =
     e, aa, bb = est[m], a[m], b[m]
     ev = None
     if est_var is not None:
-        from .kinds.query import real_dtype
-
         try:
             if real_dtype(est_var) is None:
                 raise ValueError("not real numbers")

@@ -196,10 +196,28 @@ class KindContract:
         raise NotImplementedError
 
 
+def new_evaluator(cls, asset, options: dict):
+    """``cls(asset, **options)``, with USAGE naming the options ``cls`` does not take: they are bound to its signature
+    first, so a TypeError raised inside the constructor stays what it is."""
+    import inspect
+
+    from ..errors import UsageError
+
+    signature = inspect.signature(cls)
+    try:
+        signature.bind(asset, **options)
+    except TypeError as exc:
+        takes = ", ".join(p for p in list(signature.parameters)[1:]) or "no options"
+        path = getattr(asset, "path", None)
+        raise UsageError(f"the {getattr(asset, 'kind', cls.__name__)} evaluator does not take these options ({exc}); "
+                         f"it takes {takes}", file=None if path is None else str(path)) from None
+    return cls(asset, **options)
+
+
 def rows3(*arrays) -> list[np.ndarray]:
     """Evaluator argument check: each array as float64 [N, 3], all with the same N (UsageError otherwise)."""
+    from ..arrays import real_dtype
     from ..errors import UsageError
-    from .query import real_dtype
 
     out, n = [], None
     for i, a in enumerate(arrays):

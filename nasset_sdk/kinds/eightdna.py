@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import UsageError, error
 from ..networks import CheckedSession, make_session, mlp_onnx, split_first_layer
-from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
+from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, new_evaluator, register_kind, rows3
 from .boundary import boundary_params, ggx_pdf, ggx_reflection, ggx_reflection_pdf, ggx_sample
 from .encodings import cube_table, cubemap, grid_1d, to_unit_box, triplane, unit64
 from .query import Evaluator, Query
@@ -164,7 +164,7 @@ class EightDnaKind(KindContract):
         return (2 * c + 3,) + ((3 * c + 6,) if network in ("flow3", "flow4") else ())
 
     def evaluator(self, asset, **options):
-        return EightDnaEvaluator(asset, **options)
+        return new_evaluator(EightDnaEvaluator, asset, options)
 
 
 class FlowContext:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError
-from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, register_kind, rows3
+from . import ComponentSpec, Finding, KindContract, NetworkSpec, TensorSpec, new_evaluator, register_kind, rows3
 from .boundary import boundary_params, ggx_reflection
 from .encodings import atan2_columns, fourier_features, from_local, sh9, spherical_coords, to_local, to_unit_box, unit64
 from .query import Evaluator, Query
@@ -195,7 +195,7 @@ class NeupressKind(KindContract):
         return b
 
     def evaluator(self, asset, **options):
-        return NeupressEvaluator(asset, **options)
+        return new_evaluator(NeupressEvaluator, asset, options)
 
 
 class NeupressEvaluator(Evaluator):

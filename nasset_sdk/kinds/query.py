@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..arrays import real_dtype
 from ..errors import UsageError
 
 #: the [N, 3] fields of a query, in order
@@ -70,18 +71,6 @@ class Query:
                 raise UsageError("query field 'h' [N] must be finite and in [-1, 1]", file=file)
             out["h"] = h
         return Query(**out)
-
-
-def real_dtype(value) -> np.dtype | None:
-    """The dtype of ``value`` (an array, or what numpy makes of a list) when it holds real numbers (integer or
-    floating), else None: booleans, strings, objects, complex numbers."""
-    dt = getattr(value, "dtype", None)
-    if not isinstance(dt, np.dtype):
-        try:
-            dt = np.asarray(value).dtype
-        except (ValueError, TypeError):  # ragged nesting
-            return None
-    return dt if dt.kind in "fiu" else None
 
 
 def _numeric(name: str, value, file) -> np.ndarray:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import UsageError
-from . import ComponentSpec, KindContract, NetworkSpec, TensorSpec, register_kind
+from . import ComponentSpec, KindContract, NetworkSpec, TensorSpec, new_evaluator, register_kind
 from .encodings import safe_normalize, to_unit_box, triplane
 from .query import Evaluator, Query, check_shapes
 
@@ -81,7 +81,7 @@ class RnaKind(KindContract):
         return (c + 3, c + 6 + f, c + 9 + f) if component == "core" and c >= 0 else ()
 
     def evaluator(self, asset, **options):
-        return RnaEvaluator(asset, **options)
+        return new_evaluator(RnaEvaluator, asset, options)
 
 
 #: rows per onnxruntime call and per input-assembly pass: small enough that the [rows, C + 12] input,

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..arrays import real_array
 from ..errors import UsageError
 
 #: Durkan et al.'s defaults; the 8DNA asset stores its own values in core/splineMinimums.
@@ -498,12 +499,9 @@ class BoxFlow:
 
     @staticmethod
     def _prep(x, wo):
-        from .query import real_dtype
-
-        if real_dtype(x) is None or real_dtype(wo) is None:
-            raise UsageError("x_o and w_o must be real number arrays [N, 3]")
-        x = np.atleast_2d(np.asarray(x, np.float64))
-        wo = np.atleast_2d(np.asarray(wo, np.float64))
+        message = "x_o and w_o must be real number arrays [N, 3]"
+        x = np.atleast_2d(real_array(x, message, dtype=np.float64))
+        wo = np.atleast_2d(real_array(wo, message, dtype=np.float64))
         if x.shape[1:] != (3,) or wo.shape != x.shape:
             raise UsageError(f"x_o {x.shape} and w_o {wo.shape} must both be [N, 3]")
         return x, wo

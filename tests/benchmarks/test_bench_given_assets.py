@@ -7,6 +7,8 @@ The assets here have random networks (nasset_sdk.examples); none is trained, and
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -85,8 +87,9 @@ def test_8dna_the_pair_swapped_is_bench_asset_kind(blob_asset, tmp_path):
     from nasset_benchmarks.eightdna import check_given_asset
 
     unsaid = blob_asset("unsaid.usdc", None)
-    assert check_given_asset(unsaid, far_field=True) == unsaid
-    assert check_given_asset(unsaid, far_field=False) == unsaid
+    for far_field in (True, False):
+        checked = check_given_asset(unsaid, far_field=far_field)
+        assert checked.kind == "8dna" and Path(checked.path) == Path(unsaid)
 
 
 def test_8dna_an_asset_of_another_object_is_a_mismatch_before_any_bake(blob_asset, tmp_path):

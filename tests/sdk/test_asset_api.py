@@ -73,10 +73,25 @@ def test_open_and_evaluator_refuse_arguments_of_the_wrong_type(tmp_path):
             ns.Asset.open(bad)
     path = example_builder("rna", size="tiny", seed=1).write(tmp_path / "a.usdc")
     asset = ns.Asset.open(path, load="all")
-    with pytest.raises(UsageError, match="does not take these options.*bogus") as info:
+    with pytest.raises(UsageError, match="does not take these options.*bogus.*it takes intra_threads, batch") as info:
         asset.evaluator(bogus=1)
     assert info.value.file == str(path)
     assert asset.evaluator() is not None
+
+
+def test_new_evaluator_tells_a_bad_option_from_a_type_error_inside():
+    """Options are bound to the constructor's signature before it runs: an option it does not take is USAGE, a
+    TypeError raised by the constructor's own code is not turned into one."""
+    from nasset_sdk.kinds import new_evaluator
+
+    class Broken:
+        def __init__(self, asset, *, batch: int = 1) -> None:
+            raise TypeError("inside the constructor")
+
+    with pytest.raises(UsageError, match="does not take these options.*it takes batch"):
+        new_evaluator(Broken, object(), {"bogus": 1})
+    with pytest.raises(TypeError, match="inside the constructor"):
+        new_evaluator(Broken, object(), {"batch": 2})
 
 
 def test_builder_enforces_kind_contract(tmp_path, rng):
