@@ -298,18 +298,20 @@ def _looks_like_asset(file: str) -> bool:
 
 
 def _read_exr(path: str, light_prim: str, scene: str) -> np.ndarray:
-    try:
-        import OpenEXR
+    """A dome texture [H, W, 3] float64 through the SDK's bounded reader (nasset_sdk.images.read_exr: header, size
+    and chunk table checked before OpenEXR decodes): ``IMAGE_INVALID`` for a file it refuses, ``SCENE_INVALID`` for
+    pixels that are not finite and >= 0, as the reference renderer."""
+    from nasset_sdk.errors import NassetError
+    from nasset_sdk.images import read_exr
 
-        with OpenEXR.File(path) as f:
-            ch = f.channels()
-            if "RGB" in ch:
-                img = np.asarray(ch["RGB"].pixels, np.float64)
-            else:
-                img = np.stack([np.asarray(ch[c].pixels, np.float64) for c in "RGB"], -1)
-    except Exception as exc:
-        raise SceneError("SCENE_INVALID", f"dome texture {path} cannot be read as RGB OpenEXR: {exc}", file=scene, prim=light_prim) from None
-    return img[..., :3]
+    where = dict(file=scene, prim=light_prim, attribute="inputs:texture:file")
+    try:
+        img = read_exr(path)
+    except NassetError as exc:
+        raise SceneError("IMAGE_INVALID", f"dome texture {path}: {exc.message}", **where) from None
+    if not np.isfinite(img).all() or (img < 0).any():
+        raise SceneError("SCENE_INVALID", f"dome texture {path} holds NaN/Inf or negative values", **where)
+    return img.astype(np.float64)
 
 
 def read_scene(path: str) -> SceneDesc:

@@ -23,6 +23,11 @@ IMAGE_VALUE_MAX = float(np.finfo(np.float32).max)
 MAX_TEXTURE_SIDE = 1 << 15
 MAX_TEXTURE_PIXELS = 1 << 26
 MAX_TEXTURE_VALUES = 1 << 28  # pixels x channels (1 GiB as float32)
+#: Scan lines per chunk of each OpenEXR compression id (none, rle, zips, zip, piz, pxr24, b44, b44a, dwaa, dwab);
+#: another id is counted at 256, the most any takes, so the chunk count is never overestimated.
+EXR_LINES_PER_CHUNK = (1, 1, 1, 16, 32, 16, 32, 32, 32, 256)
+#: Offsets of the chunk table read and checked one by one (8 MiB); a longer table is checked for its size only.
+MAX_EXR_OFFSETS_CHECKED = 1 << 20
 
 
 def finite_float32(image) -> np.ndarray:
@@ -125,7 +130,10 @@ def write_exr(path, image: np.ndarray) -> None:
 
 def exr_header_size(path) -> tuple[int, int, int]:
     """(width, height, channels) from an OpenEXR file's header, read with bounded reads before any
-    decoder sees the file. ``IMAGE_INVALID`` for a file that is not a single-part scanline/tiled EXR."""
+    decoder sees the file. ``IMAGE_INVALID`` for a file that is not a single-part scanline/tiled EXR, or whose
+    chunk table (one file offset per chunk, after the header) does not fit the file or points outside it: a header
+    without its pixels, a truncated file. OpenEXR's own reader was left to find those, and on a header-only file
+    it once did not return under load."""
     path = path_arg(path, "the OpenEXR image's file")
 
     def bad(msg):
@@ -141,7 +149,7 @@ def exr_header_size(path) -> tuple[int, int, int]:
     flags = struct.unpack("<I", head[4:8])[0]
     if flags & 0xFF != 2 or flags & (0x800 | 0x1000):  # version 2; no deep data, no multi-part
         raise bad(f"unsupported OpenEXR version/flags 0x{flags:x} (single-part scanline or tiled images only)")
-    pos, window, channels = 8, None, None
+    pos, window, channels, compression, tiles = 8, None, None, None, None
     while True:
         end = head.find(b"\0", pos)
         if end < 0:
@@ -163,12 +171,42 @@ def exr_header_size(path) -> tuple[int, int, int]:
             window = struct.unpack("<4i", value)
         elif name == b"channels":
             channels = sum(1 for _ in _chlist_names(value))
+        elif name == b"compression" and size == 1:
+            compression = value[0]
+        elif name == b"tiles" and size == 9:
+            tiles = struct.unpack("<II", value[:8])
         pos = vstart + size
     if window is None or channels is None:
         raise bad("header lacks dataWindow or channels")
     x0, y0, x1, y1 = window
     w, h = x1 - x0 + 1, y1 - y0 + 1
+    if 1 <= w <= MAX_TEXTURE_SIDE and 1 <= h <= MAX_TEXTURE_SIDE:  # (beyond: read_exr's bounds say so)
+        if flags & 0x200:  # tiled: the first level's tiles (mipmaps and ripmaps have more)
+            if tiles is None or min(tiles) < 1:
+                raise bad("a tiled image without a valid tile size")
+            chunks = -(-w // tiles[0]) * -(-h // tiles[1])
+        else:
+            per = EXR_LINES_PER_CHUNK[compression] if compression is not None and compression < len(EXR_LINES_PER_CHUNK) else 256
+            chunks = -(-h // per)
+        _check_chunk_table(path, pos + 1, chunks, bad)
     return w, h, channels
+
+
+def _check_chunk_table(path, start: int, chunks: int, bad) -> None:
+    """The ``chunks`` offsets at ``start`` (a lower bound of the file's count) fit the file, and each points past the
+    table to at least a chunk header (8 bytes) inside it."""
+    size = os.path.getsize(path)
+    end = start + 8 * chunks
+    if end > size:
+        raise bad(f"the file ends at {size} bytes, before its table of {chunks} chunk offsets (pixels missing or truncated)")
+    n = min(chunks, MAX_EXR_OFFSETS_CHECKED)
+    with open(path, "rb") as fh:
+        fh.seek(start)
+        offsets = np.frombuffer(fh.read(8 * n), "<u8")
+    outside = (offsets < end) | (offsets > size - 8)
+    if outside.any():
+        i = int(np.argmax(outside))
+        raise bad(f"chunk offset {i} ({int(offsets[i])}) points outside the file's {size} bytes (pixels missing or truncated)")
 
 
 def _chlist_names(value: bytes):

@@ -97,3 +97,29 @@ def test_sessions_run_at_most_the_rows_the_probe_ran(tmp_path):
     x = np.random.default_rng(0).uniform(-1, 1, (n, asset.session.get_inputs()[0].shape[-1])).astype(np.float32)
     whole = asset.session.session.run([asset.output_name], {asset.input_name: x})[0]
     assert np.allclose(asset.session.run([asset.output_name], {asset.input_name: x})[0], whole, rtol=1e-6, atol=1e-7)
+
+
+def test_dome_textures_go_through_the_sdks_bounded_reader(tmp_path):
+    """The Mitsuba implementation read dome textures with OpenEXR directly: a header declaring 10^12 pixels went to
+    the decoder unchecked, and NaN pixels reached the light. Now its reader is the SDK's (header bounds, chunk table,
+    IMAGE_INVALID naming the prim), and pixels must be finite and >= 0 (SCENE_INVALID), as the reference renderer."""
+    from nasset_mitsuba_renderer.usdscene import read_scene
+    from tests.corpus.gen_render import make_cases
+
+    cases = {c.path.stem: c for c in make_cases(tmp_path) if c.path.stem.startswith("r8_dome_")}
+    ok = read_scene(str(cases.pop("r8_dome_ok").path))
+    assert [lt.texture.shape for lt in ok.lights if getattr(lt, "texture", None) is not None] == [(8, 16, 3)]
+    assert {"r8_dome_huge_header", "r8_dome_pixels_missing", "r8_dome_truncated"} <= set(cases)
+    for name, case in cases.items():
+        with pytest.raises(NassetError) as exc:
+            read_scene(str(case.path))
+        assert exc.value.code == "IMAGE_INVALID" and exc.value.prim == "/World/Dome", (name, exc.value)
+    nan = np.full((8, 16, 3), 0.5, np.float32)
+    nan[2, 3] = np.nan
+    texture = tmp_path / "_dome_ok.exr"  # the ok scene's texture, now with a NaN pixel written as-is
+    import OpenEXR
+
+    OpenEXR.File({"type": OpenEXR.scanlineimage, "compression": OpenEXR.ZIP_COMPRESSION}, {"RGB": nan}).write(str(texture))
+    with pytest.raises(NassetError) as exc:
+        read_scene(str(tmp_path / "r8_dome_ok.usda"))
+    assert exc.value.code == "SCENE_INVALID" and "NaN" in exc.value.message
