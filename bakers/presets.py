@@ -106,7 +106,7 @@ NEUPRESS_TRAIN = {
 #: 5 min on an idle 2-core machine (spec/bake-8dna.md#seeds)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
-    "small": dict(steps=9000, batch=2048, buffer=1 << 18, reuse=4),
+    "small": dict(steps=9000, batch=2048, buffer=1 << 18, reuse=4, average=0.999),
     "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
 }
 

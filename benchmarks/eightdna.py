@@ -338,24 +338,89 @@ def check_given_asset(path, *, far_field: bool):
 
 
 def _reference_npz(path, res: int) -> tuple:
-    """(reference [res, res, 3], its noise variance, its spp) stored by an earlier run (``--reference-npz``)."""
+    """(reference [res, res, 3], its noise variance, its spp, its per-pixel noise [res, res, 3] or None for a file from
+    before it was stored) of an earlier run (``--reference-npz``)."""
     file = Path(path)
     try:
         with np.load(file, allow_pickle=False) as z:
             gt, var_gt, gt_spp = z["reference"].astype(np.float64), float(z["reference_noise_variance"]), int(z["reference_spp"])
+            noise_map = z["reference_noise_map"].astype(np.float64) if "reference_noise_map" in z.files else None
     except (OSError, KeyError, ValueError) as exc:
         raise UsageError(f"--reference-npz {file}: not the images file of an earlier run ({exc})") from None
     if gt.shape != (res, res, 3):
         raise UsageError(f"--reference-npz {file} holds a {'x'.join(map(str, gt.shape[:2]))} image, not {res}x{res}")
     if not np.isfinite(gt).all() or not math.isfinite(var_gt) or gt_spp < 1:
         raise UsageError(f"--reference-npz {file}: its reference is not finite")
-    return gt, var_gt, gt_spp
+    if noise_map is not None and (noise_map.shape != gt.shape or not np.isfinite(noise_map).all()):
+        raise UsageError(f"--reference-npz {file}: its noise map is not finite or not {res}x{res}")
+    return gt, var_gt, gt_spp, noise_map
+
+
+def light_arg(text: str) -> tuple:
+    """argparse type of ``--light X,Y,Z``: three numbers (range checked by :func:`check_light`)."""
+    import argparse
+
+    parts = text.split(",")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        return tuple(float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three numbers X,Y,Z, got {text!r}") from None
+
+
+def check_light(center) -> tuple:
+    """``center`` as three finite floats (m), outside the blob's box by more than the lamp's radius (USAGE otherwise:
+    the near-field renderer and the bench assume the lamp outside the object)."""
+    from nasset_converters.mitsuba.eightdna_example import LIGHT_RADIUS, blob_mesh
+
+    try:
+        c = tuple(float(v) for v in center)
+    except (TypeError, ValueError):
+        raise UsageError(f"--light must be three numbers X,Y,Z, got {center!r}") from None
+    if len(c) != 3 or not all(math.isfinite(v) for v in c):
+        raise UsageError(f"--light must be three finite numbers X,Y,Z, got {center!r}")
+    lo, hi = blob_mesh().bounds
+    gap = float(np.linalg.norm(np.maximum(np.maximum(lo - c, np.asarray(c) - hi), 0.0)))
+    if gap <= LIGHT_RADIUS:
+        raise UsageError(f"--light {','.join(f'{v:g}' for v in c)}: the lamp (radius {LIGHT_RADIUS} m) must lie outside "
+                         f"the blob's box {np.round(lo, 3).tolist()} .. {np.round(hi, 3).tolist()}")
+    return c
+
+
+def blob_pixels(mi, mscene, sensor, res: int, sub: int = 4) -> np.ndarray:
+    """[res, res] bool: the pixels whose ``sub`` x ``sub`` camera rays all hit the blob first (not the lamp, not
+    the background), so that figures over them hold neither the lamp's edge nor a silhouette."""
+    n = res * sub
+    ij = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="xy"), -1).reshape(-1, 2)
+    pos = mi.Point2f(*((ij + 0.5) / n).T.astype(np.float32))
+    rays, _ = sensor.sample_ray(0.0, 0.5, pos, mi.Point2f(0.5, 0.5))
+    si = mscene.ray_intersect(rays)
+    hit = np.asarray(si.is_valid(), bool) & ~np.asarray(si.shape.is_emitter(), bool)
+    return hit.reshape(res, sub, res, sub).transpose(0, 2, 1, 3).reshape(res, res, sub * sub).all(-1)
+
+
+def blob_figures(img, var, gt, noise_map, blob) -> dict:
+    """Over the ``blob`` pixels of a render ``img`` (its per-pixel variance ``var``) against the reference ``gt``:
+    the energy ratio per channel and the bias² (MSE minus the render's variance and the reference's own noise over
+    those pixels; None where the reference's noise map is unknown, then ``mse_minus_variance`` holds it)."""
+    if not blob.any():
+        return {"pixels": 0}
+    e, g = np.asarray(img)[blob], gt[blob]
+    mse_var = float(np.mean((e - g) ** 2) - np.mean(np.asarray(var)[blob]))
+    return {"pixels": int(blob.sum()), "energy": (e.sum(0) / np.maximum(g.sum(0), 1e-30)).tolist(),
+            "mse_minus_variance": mse_var,
+            "bias2": None if noise_map is None else mse_var - float(np.mean(noise_map[blob]))}
 
 
 def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: int = 64, spp: int = 128, gt_spp: int = 4096,
                seed: int = 0, reference_renderer_spp: int = 0, reference_npz=None, converged_spp: int = 0,
-               example: str = "default", quiet: bool = False) -> dict:
-    """Run the benchmark; writes ``bench_8dna.json``, ``bench_8dna.md`` and ``8dna_*.png`` into ``out_dir``."""
+               example: str = "default", light=None, quiet: bool = False) -> dict:
+    """Run the benchmark; writes ``bench_8dna.json``, ``bench_8dna.md`` and ``8dna_*.png`` into ``out_dir``.
+
+    ``light``: the sphere light's centre (x, y, z in m; default the example's LIGHT_CENTER), outside the blob's box by
+    more than its radius (USAGE otherwise). Figures over the blob's own pixels (:func:`blob_pixels`) are reported
+    beside the image-wide ones: where the lamp is in view its edge pixels dominate those."""
     from nasset_bakers.mitsuba.eightdna import bake
     from nasset_benchmarks.accuracy import check_asset_fits
     from nasset_converters.mitsuba import load_mitsuba
@@ -368,6 +433,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
         raise UsageError("--res must be >= 4 and --spp, --gt-spp >= 2")
     if example not in ("default", "heterogeneous"):
         raise UsageError(f"--example must be default or heterogeneous, got {example!r}")
+    light_center = check_light(LIGHT_CENTER if light is None else light)
     # what was given is checked before anything is baked or rendered
     checked = {}  # path -> the asset opened for the checks (opened once)
     for path, ff in ((asset, False), (farfield, True)):
@@ -379,7 +445,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     setup: dict[str, float] = {}
     mi = load_mitsuba()
     mi.set_log_level(mi.LogLevel.Error)
-    xml = write_example_scene(out / "scene", res=res, heterogeneous=example == "heterogeneous")
+    xml = write_example_scene(out / "scene", res=res, heterogeneous=example == "heterogeneous", light_center=light_center)
     mscene = mi.load_file(str(xml))
     for flag, path in (("--asset", asset), ("--farfield", farfield)):  # a given asset of another object: not the blob's bounds
         if path is not None:
@@ -403,12 +469,13 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
 
     sensor = _mi_sensor(mi, res, CAMERA)
     shapes = [s for s in mscene.shapes() if s.id() in EXAMPLE_ASSET_IDS]
-    light = SphereLight(LIGHT_CENTER, LIGHT_RADIUS, LIGHT_RADIANCE)
+    light = SphereLight(light_center, LIGHT_RADIUS, LIGHT_RADIANCE)
+    blob = blob_pixels(mi, mscene, sensor, res)
 
     # reference (or the one an earlier run stored, for the same resolution)
     t = time.perf_counter()
     if stored is not None:
-        gt, var_gt, gt_spp = stored
+        gt, var_gt, gt_spp, noise_map = stored
         say(f"reference: {reference_npz} ({gt_spp} spp)")
     else:
         say(f"reference: Mitsuba {mi.variant()} volpath {gt_spp} spp at {res}x{res}")
@@ -421,7 +488,8 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
                 say(f"  reference chunk {k + 1}/{chunks} {time.perf_counter() - t:.0f}s")
         gt = np.mean(imgs, 0)
         h = chunks // 2
-        var_gt = float(np.mean((np.mean(imgs[:h], 0) - np.mean(imgs[h:2 * h], 0)) ** 2) / 4.0)
+        noise_map = (np.mean(imgs[:h], 0) - np.mean(imgs[h:2 * h], 0)) ** 2 / 4.0  # per pixel and channel, two halves
+        var_gt = float(np.mean(noise_map))
     setup["reference_s"] = time.perf_counter() - t
 
     rows = {}
@@ -449,7 +517,8 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
         if converged_spp > spp:  # Table 1 also at many spp: the model's own (bias) error, little noise left
             img_c, var_c = r.render(res, converged_spp, CAMERA, seed=seed + 17)
             rows[name]["converged"] = {"spp": converged_spp, "variance": float(var_c.mean()),
-                                       "mse": float(np.mean((img_c - gt) ** 2)) - var_gt}
+                                       "mse": float(np.mean((img_c - gt) ** 2)) - var_gt,
+                                       "blob": blob_figures(img_c, var_c, gt, noise_map, blob)}
             say(f"  {name} {converged_spp} spp (converged error): MSE {rows[name]['converged']['mse']:.3e}")
     if reference_renderer_spp > 0:
         rows["8dna in reference_renderer"] = _reference_renderer(out, xml, asset, res, reference_renderer_spp, seed, say)
@@ -473,12 +542,13 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     report = {
         "benchmark": "8dna",
         "scene": f"built-in translucent example ({example}) + small sphere light (converters/mitsuba/eightdna_example.py)",
-        "light": {"type": "sphere", "center": list(LIGHT_CENTER), "radius_m": LIGHT_RADIUS, "radiance": list(LIGHT_RADIANCE)},
+        "light": {"type": "sphere", "center": list(light_center), "radius_m": LIGHT_RADIUS, "radiance": list(LIGHT_RADIANCE)},
         "assets": {"8dna": str(asset), "far_field": str(farfield)},
         "asset_sizes": {k: _prov(p) for k, p in (("8dna", asset), ("far_field", farfield))},
         "resolution": [res, res], "spp": spp,
         "reference": {"spp": gt_spp, "noise_variance": var_gt, "mean_radiance": float(gt.mean()),
-                      "lit_pixel_fraction": float(mask.mean())},
+                      "lit_pixel_fraction": float(mask.mean()), "blob_pixels": int(blob.sum()),
+                      "noise_variance_blob": None if noise_map is None else float(np.mean(noise_map[blob]))},
         "mitsuba": {"version": mi.__version__, "variant": mi.variant()},
         "table": table,
         "timing_includes": {"path tracing": "one mi.render call + readback, after a warm-up render at the same spp",
@@ -494,8 +564,9 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     write_text_atomic(out / "bench_8dna.json", json.dumps(report, indent=2))
     write_text_atomic(out / "bench_8dna.md", summary_markdown(report))
     with atomic_output(out / "bench_8dna_images.npz", "images file") as tmp:  # reused as --reference-npz: never half written
+        maps = {} if noise_map is None else {"reference_noise_map": noise_map.astype(np.float32)}
         np.savez_compressed(tmp, reference=gt.astype(np.float32), reference_spp=gt_spp, reference_noise_variance=var_gt,
-                            **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})
+                            **maps, **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})
     return report
 
 
@@ -614,6 +685,18 @@ def summary_markdown(r: dict) -> str:
         eq = t.get("path_tracing_equal_error")
         eqs = f"{eq['spp']:.0f} spp, {eq['time_s']:.2f}s ({eq['speedup']:.2f}x)" if eq else ""
         lines.append(f"| {t['method']} | {t['spp']} | {t['mse']:.3e} | {conv} | {t['variance']:.3e} | {t['time_s']:.2f} | {eqs} |")
+    ref = r["reference"]
+    blob_rows = [(t["method"], t["converged"]["blob"]) for t in r["table"] if (t.get("converged") or {}).get("blob", {}).get("pixels")]
+    if blob_rows:
+        noise = ref.get("noise_variance_blob")
+        lines += ["", f"Over the blob's {ref['blob_pixels']} pixels (all 4 x 4 sub-pixel rays hit it: no lamp, no silhouette; "
+                  f"light at {', '.join(f'{v:g}' for v in r['light']['center'])}; reference noise there "
+                  + (f"{noise:.2e}" if noise is not None else "unknown: an images file from before it was stored") + "):", "",
+                  "| method | bias² over the blob | MSE − variance over the blob | energy % (R / G / B) |", "|---|---|---|---|"]
+        for name, b in blob_rows:
+            bias = "" if b.get("bias2") is None else f"{b['bias2']:.3e}"
+            lines.append(f"| {name} | {bias} | {b['mse_minus_variance']:.3e} | "
+                         + " / ".join(f"{100 * v:.1f}" for v in b["energy"]) + " |")
     m = r["machine"]
     lines += ["", "MSE: over all pixels and channels, minus the reference's own noise variance. Bias²: that MSE minus the "
               "render's own variance (the error left at infinite spp). Variance: mean per-pixel variance of the estimate. "
@@ -645,6 +728,9 @@ def add_args(p) -> None:
     p.add_argument("--converged-spp", type=count_arg(0, MAX_SPP), default=None,
                    help="also render both neural assets at this spp for their model error (default 512; 0 with --quick)")
     p.add_argument("--reference-npz", default=None, help="reuse the reference image of an earlier run (its bench_8dna_images.npz)")
+    p.add_argument("--light", type=light_arg, default=None, metavar="X,Y,Z",
+                   help="the sphere light's centre in m (default 0.35,0.04,0.12, right of the blob; e.g. 0.25,-0.1,-0.25 "
+                        "backlights it); outside the blob's box. Write --light=X,Y,Z when X is negative")
     p.add_argument("--quick", action="store_true",
                    help="tiny bakes and small renders, a few minutes (a smoke run: errors near the reference's noise)")
     p.add_argument("--seed", type=seed_arg, default=0)
@@ -659,7 +745,7 @@ def run(args) -> int:
                         gt_spp=args.gt_spp or q.get("gt_spp", 4096), seed=args.seed,
                         reference_renderer_spp=args.reference_renderer_spp, reference_npz=args.reference_npz,
                         converged_spp=args.converged_spp if args.converged_spp is not None else q.get("converged_spp", 512),
-                        example=args.example, quiet=args.json)
+                        example=args.example, light=args.light, quiet=args.json)
     if args.json:
         print(json.dumps(report, indent=2))
     else:

@@ -47,6 +47,7 @@ class TrainSettings:
     buffer: int = 1 << 18  # tuples per online-buffer fill (paper: 128^4)
     reuse: int = 1  # passes over each buffer fill before it is regenerated (paper: 1)
     init_std: float = 0.05
+    average: float = 0.0  # decay of the exponential weight average exported (over the second half of training); 0: the last step's
     far_field: bool = False
     seed: int = 0
     device: str = "auto"
@@ -297,6 +298,8 @@ def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=
     state = checkpoint.restore(model, opt, sched) if checkpoint is not None else None
     history: list = list(state.get("history", [])) if state else []
     start = int(state["step"]) if state else 0
+    average = WeightAverage(torch, list(model.parameters()), settings.average, settings.steps // 2,
+                            state.get("average") if state else None)
     acc = [0.0, 0.0, 0]
     net = dp.wrap(torch, model)
     for step in range(start, settings.steps):
@@ -314,6 +317,7 @@ def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=
         (loss * dp.weight(len(idx), n)).backward()
         opt.step()
         sched.step()
+        average.update(step)
         acc[0] += dp.mean(torch, float(nll.detach()) * dp.weight(len(idx), n))
         acc[1] += dp.mean(torch, float(l2.detach()) * dp.weight(len(idx), n))
         acc[2] += 1
@@ -324,12 +328,44 @@ def train(buffer, domain, settings: TrainSettings, *, progress=None, checkpoint=
                 progress(step + 1, history[-1]["nll"], history[-1]["albedo_l2"])
         if checkpoint is not None and dp.is_main and ((step + 1) % 250 == 0 or step == settings.steps - 1):
             checkpoint.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
-                             "step": step + 1, "history": history})
+                             "step": step + 1, "history": history, "average": average.shadow})
     seconds = time.perf_counter() - t0
+    average.apply()
     model.eval()
     tensors, networks = export(model)
     diff = onnx_parity(model, networks)
     return TrainResult(model, tensors, networks, history, seconds, str(device), diff, getattr(buffer, "refreshes", 0))
+
+
+class WeightAverage:
+    """Exponential average of the weights over the second half of training (Polyak averaging), exported in place
+    of the last step's: ``shadow = decay * shadow + (1 - decay) * weights`` after every step from ``start`` on.
+    ``decay`` 0 keeps the last step's weights. ``shadow``: the averaged tensors (checkpointed), None before ``start``."""
+
+    def __init__(self, torch, params: list, decay: float, start: int, shadow: list | None = None) -> None:
+        if not 0.0 <= decay < 1.0:
+            raise error("CONVERT_TRAINING", f"weight average decay {decay} outside [0, 1)")
+        self.torch, self.params, self.decay, self.start = torch, params, float(decay), int(start)
+        self.shadow = None if shadow is None or not decay else [s.to(p.device) for s, p in zip(shadow, params, strict=True)]
+
+    def update(self, step: int) -> None:
+        """After optimiser step ``step`` (0-based)."""
+        if not self.decay or step < self.start:
+            return
+        with self.torch.no_grad():
+            if self.shadow is None:
+                self.shadow = [p.detach().clone() for p in self.params]
+            else:
+                for s, p in zip(self.shadow, self.params, strict=True):
+                    s.mul_(self.decay).add_(p.detach(), alpha=1.0 - self.decay)
+
+    def apply(self) -> None:
+        """Copy the average into the weights (nothing when there is none)."""
+        if self.shadow is None:
+            return
+        with self.torch.no_grad():
+            for s, p in zip(self.shadow, self.params, strict=True):
+                p.copy_(s)
 
 
 def export(model) -> tuple[dict, dict]:

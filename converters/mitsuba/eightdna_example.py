@@ -114,11 +114,11 @@ def density_grid(n: int = 24) -> np.ndarray:
 
 
 def write_example_scene(folder: str | Path, *, light: bool = True, res: int = 128, max_depth: int = 1024,
-                        heterogeneous: bool = False) -> Path:
+                        heterogeneous: bool = False, light_center=LIGHT_CENTER) -> Path:
     """Write ``scene.xml`` (asset + small sphere light, or the asset alone) and ``meshes/blob.ply``; returns the XML path.
 
     ``heterogeneous``: the medium is a grid (``media/density.vol``, :func:`density_grid` times sigma_t) instead of
-    homogeneous."""
+    homogeneous. ``light_center``: the lamp's centre (m; default LIGHT_CENTER, right of the blob)."""
     from .examples import write_ply
 
     folder = Path(folder)
@@ -135,7 +135,7 @@ def write_example_scene(folder: str | Path, *, light: bool = True, res: int = 12
         medium = _GRID.format(albedo=_v(MEDIUM_ALBEDO), lo=_v(lo), span=_v(hi - lo), scale=MEDIUM_SIGMA_T)
     else:
         medium = _HOMOGENEOUS.format(albedo=_v(MEDIUM_ALBEDO), sigma_t=MEDIUM_SIGMA_T)
-    lamp = _LIGHT.format(c=_v(LIGHT_CENTER), r=LIGHT_RADIUS, L=_v(LIGHT_RADIANCE)) if light else ""
+    lamp = _LIGHT.format(c=_v(light_center), r=LIGHT_RADIUS, L=_v(LIGHT_RADIANCE)) if light else ""
     xml = folder / "scene.xml"
     xml.write_text(_XML.format(max_depth=max_depth, fov=CAMERA["fov"], origin=_v(CAMERA["origin"]), target=_v(CAMERA["target"]),
                                up=_v(CAMERA["up"]), res=int(res), medium=medium, alpha=BOUNDARY[1], ior=BOUNDARY[0],

@@ -67,6 +67,10 @@ def test_eightdna_bake_table():
         model = [] if size == "hq" else flat(eightdna.SIZES[size])  # hq: "the paper's sizes" (kinds/8dna.md)
         heldout = presets.EIGHTDNA_MITSUBA_SAMPLER[size]["heldout"]
         assert rows[size] == [t["steps"], t["batch"], t["buffer"], t["reuse"], *model, heldout], size
+    text = (SPEC / "bake-8dna.md").read_text(encoding="utf-8")  # the weight average, in the training paragraph
+    averaged = [size for size, t in presets.EIGHTDNA_TRAIN.items() if t.get("average")]
+    assert averaged == ["small"] and "`small` exports an exponential average of the weights" in text
+    assert f"(`average` {presets.EIGHTDNA_TRAIN['small']['average']}:" in text
 
 
 @pytest.mark.parametrize("doc, header, sizes", [

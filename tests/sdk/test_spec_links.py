@@ -48,3 +48,14 @@ def test_relative_links_in_spec_resolve():
             elif anchor and target.suffix == ".md" and anchor not in _anchors(target):
                 bad.append(f"{md.relative_to(SPEC)} -> {link} (anchor)")
     assert not bad, bad
+
+
+def test_test_files_named_in_the_docs_exist():
+    """``tests/....py`` named in spec/, docs/ and the README is a file (a renamed test left two stale names)."""
+    root = SPEC.parent
+    missing = []
+    for md in [*SPEC.rglob("*.md"), *(root / "docs").rglob("*.md"), root / "README.md"]:
+        for name in set(re.findall(r"\btests/[\w/]+\.py\b", md.read_text(encoding="utf-8"))):
+            if not (root / name).is_file():
+                missing.append(f"{md.relative_to(root)}: {name}")
+    assert not missing, "\n".join(missing)
