@@ -337,15 +337,20 @@ def check_given_asset(path, *, far_field: bool):
     return asset
 
 
-def _reference_npz(path, res: int) -> tuple:
+def _reference_npz(path, res: int, light_center, example: str) -> tuple:
     """(reference [res, res, 3], its noise variance, its spp, its per-pixel noise [res, res, 3] or None for a file from
-    before it was stored) of an earlier run (``--reference-npz``)."""
+    before it was stored) of an earlier run (``--reference-npz``), made under the same light and example (a file from
+    before they were stored holds the default light and example)."""
+    from nasset_converters.mitsuba.eightdna_example import LIGHT_CENTER
+
     file = Path(path)
     try:
         with np.load(file, allow_pickle=False) as z:
             gt, var_gt, gt_spp = z["reference"].astype(np.float64), float(z["reference_noise_variance"]), int(z["reference_spp"])
             noise_map = z["reference_noise_map"].astype(np.float64) if "reference_noise_map" in z.files else None
-    except (OSError, KeyError, ValueError) as exc:
+            its_light = tuple(float(v) for v in z["light_center"]) if "light_center" in z.files else tuple(LIGHT_CENTER)
+            its_example = str(z["example"]) if "example" in z.files else "default"
+    except (OSError, KeyError, ValueError, TypeError) as exc:
         raise UsageError(f"--reference-npz {file}: not the images file of an earlier run ({exc})") from None
     if gt.shape != (res, res, 3):
         raise UsageError(f"--reference-npz {file} holds a {'x'.join(map(str, gt.shape[:2]))} image, not {res}x{res}")
@@ -353,6 +358,10 @@ def _reference_npz(path, res: int) -> tuple:
         raise UsageError(f"--reference-npz {file}: its reference is not finite")
     if noise_map is not None and (noise_map.shape != gt.shape or not np.isfinite(noise_map).all()):
         raise UsageError(f"--reference-npz {file}: its noise map is not finite or not {res}x{res}")
+    if len(its_light) != 3 or not np.allclose(its_light, light_center, rtol=0, atol=1e-6) or its_example != example:
+        raise UsageError(f"--reference-npz {file} is a reference of the {its_example} example under the light at "
+                         f"{','.join(f'{v:g}' for v in its_light)}, not of the {example} example at "
+                         f"{','.join(f'{v:g}' for v in light_center)}")
     return gt, var_gt, gt_spp, noise_map
 
 
@@ -440,7 +449,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
         if path is not None:
             checked[Path(path)] = check_given_asset(path, far_field=ff)
     asset, farfield = (None if p is None else Path(p) for p in (asset, farfield))
-    stored = None if reference_npz is None else _reference_npz(reference_npz, res)
+    stored = None if reference_npz is None else _reference_npz(reference_npz, res, light_center, example)
     t_all = time.perf_counter()
     setup: dict[str, float] = {}
     mi = load_mitsuba()
@@ -566,7 +575,8 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
     with atomic_output(out / "bench_8dna_images.npz", "images file") as tmp:  # reused as --reference-npz: never half written
         maps = {} if noise_map is None else {"reference_noise_map": noise_map.astype(np.float32)}
         np.savez_compressed(tmp, reference=gt.astype(np.float32), reference_spp=gt_spp, reference_noise_variance=var_gt,
-                            **maps, **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})
+                            light_center=np.asarray(light_center, np.float64), example=np.asarray(example), **maps,
+                            **{f"img{k}": r["image"].astype(np.float32) for k, r in enumerate(rows.values())})
     return report
 
 

@@ -122,3 +122,11 @@ def test_a_backlit_bench_reports_the_blob_figures(tmp_path):
     assert "Over the blob's" in summary_markdown(r)
     with np.load(tmp_path / "o" / "bench_8dna_images.npz") as z:
         assert z["reference_noise_map"].shape == (16, 16, 3)
+    # the images file is a reference of that light: reused under another light it is refused, under the same one taken
+    npz = tmp_path / "o" / "bench_8dna_images.npz"
+    kw = dict(asset=paths["eight"], farfield=paths["six"], res=16, spp=2, gt_spp=4, converged_spp=4, quiet=True)
+    with pytest.raises(NassetError) as exc:
+        bench_8dna(tmp_path / "o2", reference_npz=npz, **kw)
+    assert exc.value.code == "USAGE" and "0.25,-0.1,-0.25" in exc.value.message
+    again = bench_8dna(tmp_path / "o3", reference_npz=npz, light=BACKLIT, **kw)
+    assert again["reference"]["noise_variance_blob"] == pytest.approx(r["reference"]["noise_variance_blob"], rel=1e-6)
