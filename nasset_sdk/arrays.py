@@ -23,9 +23,9 @@ def real_dtype(value) -> np.dtype | None:
     return dt if dt.kind in "fiu" else None
 
 
-def real_array(value, message: str, *, dtype=None, file: str | None = None) -> np.ndarray:
+def real_array(value, message: str, *, dtype=None) -> np.ndarray:
     """``value`` as a numpy array (its own real dtype, or ``dtype``); UsageError(``message``) when it holds no real
     numbers."""
     if real_dtype(value) is None:
-        raise UsageError(message, file=file)
+        raise UsageError(message)
     return np.asarray(value, dtype)

@@ -110,8 +110,7 @@ def export(path: str | os.PathLike, out_dir: str | os.PathLike) -> dict:
     from .view import fallback_color
 
     asset = open_viewable(path)
-    out_dir = path_arg(out_dir, "web export: the output folder")
-    out = Path(out_dir)
+    out = path_arg(out_dir, "web export: the output folder")
     if out.exists() and not out.is_dir():
         raise UsageError("-o must name a folder", file=str(out))
     try:
