@@ -437,7 +437,6 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
 
     say = (lambda *a: None) if quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     out = Path(out_dir)
-    output_folder(out)
     if res < 4 or spp < 2 or gt_spp < 2:
         raise UsageError("--res must be >= 4 and --spp, --gt-spp >= 2")
     if example not in ("default", "heterogeneous"):
@@ -450,6 +449,7 @@ def bench_8dna(out_dir, *, asset=None, farfield=None, size: str = "small", res: 
             checked[Path(path)] = check_given_asset(path, far_field=ff)
     asset, farfield = (None if p is None else Path(p) for p in (asset, farfield))
     stored = None if reference_npz is None else _reference_npz(reference_npz, res, light_center, example)
+    output_folder(out)  # created once what was given is known to be usable
     t_all = time.perf_counter()
     setup: dict[str, float] = {}
     mi = load_mitsuba()

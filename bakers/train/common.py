@@ -88,6 +88,13 @@ def training_key(settings) -> dict:
     return {k: v for k, v in settings.__dict__.items() if k not in ("energy_gain", "plane_blur")}
 
 
+def state_fits(model, saved) -> bool:
+    """``saved`` (a state dict) has exactly ``model``'s tensor names and shapes."""
+    mine = model.state_dict()
+    return isinstance(saved, dict) and saved.keys() == mine.keys() and all(
+        getattr(saved[k], "shape", None) == v.shape for k, v in mine.items())
+
+
 class TorchCheckpoint:
     """Training state in the dataset folder; read back with ``weights_only=True`` (no pickle code)."""
 
@@ -111,8 +118,12 @@ class TorchCheckpoint:
         return state
 
     def restore(self, model, opt, sched) -> dict | None:
-        """Put a matching checkpoint's model, optimiser and scheduler state back; returns it (None: start fresh)."""
+        """Put a matching checkpoint's model, optimiser and scheduler state back; returns it (None: start fresh).
+        A checkpoint whose tensors do not fit ``model`` (names or shapes: a preset's network changed under the same
+        settings) is not this bake's and is left unread, rather than half loaded."""
         state = self.load()
+        if state and not state_fits(model, state.get("model")):
+            state = None
         if state:
             model.load_state_dict(state["model"])
             opt.load_state_dict(state["opt"])
