@@ -101,12 +101,13 @@ NEUPRESS_TRAIN = {
     "hq": dict(epochs=80, batch=4096, sampling_epochs=40, sampling_samples=16384, sampling_bins=24, prt_dirs=1024),
 }
 
-#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 9000 steps with each buffer
-#: used 4 times, in-scene bias^2 2.24e-5 on the mean of four seeds against 3.91e-5 for 3000 steps, bake
-#: 5 min on an idle 2-core machine (spec/bake-8dna.md#seeds)
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 9000 steps, each buffer used
+#: once (fresh tuples), the weight average; with hq's 4 x 128 flows its in-scene bias^2 is 1.31e-5 on the mean of three
+#: seeds (1.83e-5 before), a backlit blob's blue +10 % (+25 % before); bake about 8.5 min on an idle 2-core machine
+#: (spec/bake-8dna.md#backlit)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
-    "small": dict(steps=9000, batch=2048, buffer=1 << 18, reuse=4, average=0.999),
+    "small": dict(steps=9000, batch=2048, buffer=1 << 18, reuse=1, average=0.999),
     "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
 }
 

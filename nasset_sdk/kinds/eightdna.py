@@ -37,7 +37,7 @@ SPLINE_DTYPE_NAMES = {"float64": np.float64, "float32": np.float32}
 #:            flow hidden layers, flow width, albedo hidden layers, albedo width)
 SIZES = {
     "tiny": (8, 4, 4, 8, 4, 2, 16, 1, 16),
-    "small": (32, 8, 16, 32, 16, 3, 64, 2, 64),
+    "small": (32, 8, 16, 32, 16, 4, 128, 2, 64),
     "hq": (64, 8, 32, 32, 32, 4, 128, 2, 128),
 }
 FLOWS = ("flow1", "flow2", "flow3", "flow4")

@@ -16,10 +16,10 @@ from nasset_sdk.examples import example_builder  # noqa: E402
 
 #: float32 Dr.Jit against the SDK's float64 splines: the network inputs agree to float32 rounding
 #: (~1e-7), the splines' log densities to ~1e-5; relative tolerance 5e-3 of albedo and of 99 % of the
-#: densities (the rest within :data:`RTOL_ALL`: the small preset's random 3 x 64 conditioners amplify
-#: float32 input rounding to 0.9 % at a few of 6000 densities)
+#: densities (the rest within :data:`RTOL_ALL`: the small preset's random 4 x 128 conditioners amplify
+#: float32 input rounding to 2.2 % at 1 of 2000 densities; 3 x 64 ones, before, to 0.9 %)
 RTOL = 5e-3
-RTOL_ALL = 2e-2
+RTOL_ALL = 3e-2
 
 
 def _close(a, b):
@@ -90,7 +90,7 @@ def test_sample_matches_sdk(mi, pair, rng):
     ui, wi, pdf = sdk.sample(x, wo, ch, u=z)
     ctx = jit.context(_vec(mi, x, mi.Point3f), _vec(mi, wo))
     st = jit.sample(ctx, mi.UInt32(ch.astype(np.uint32)), [mi.Float(z[:, j].astype(np.float32)) for j in range(4)])
-    # positions and directions: 99 % within 2e-4 (of the box size), all within 1e-2 (the 3 x 64 conditioners
+    # positions and directions: 99 % within 2e-4 (of the box size), all within 1e-2 (the 4 x 128 conditioners
     # amplify float32 rounding of s1..s3 into the later spline parameters)
     for got, ref in ((_np(st["u"]) / np.abs(ui).max(), ui / np.abs(ui).max()), (_np(st["w"]), wi)):
         err = np.abs(got - ref).max(axis=1)
