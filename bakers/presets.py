@@ -102,8 +102,8 @@ NEUPRESS_TRAIN = {
 }
 
 #: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 9000 steps, each buffer used
-#: once (fresh tuples), the weight average; with hq's 4 x 128 flows its in-scene bias^2 is 1.31e-5 on the mean of three
-#: seeds (1.83e-5 before), a backlit blob's blue +10 % (+25 % before); bake about 8.5 min on an idle 2-core machine
+#: once (fresh tuples), the weight average; with hq's 4 x 128 flows its in-scene bias^2 is 1.39e-5 on the mean of four
+#: seeds (1.95e-5 before), a backlit blob's blue +12 % (+23 % before); bake about 9 min on an idle 2-core machine
 #: (spec/bake-8dna.md#backlit)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
