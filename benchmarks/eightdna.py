@@ -366,16 +366,14 @@ def _reference_npz(path, res: int, light_center, example: str) -> tuple:
 
 
 def light_arg(text: str) -> tuple:
-    """argparse type of ``--light X,Y,Z``: three numbers (range checked by :func:`check_light`)."""
+    """argparse type of ``--light X,Y,Z``: :func:`check_light` of the comma-separated numbers, refused as argparse's
+    usage error (exit 2) before any work."""
     import argparse
 
-    parts = text.split(",")
     try:
-        if len(parts) != 3:
-            raise ValueError
-        return tuple(float(v) for v in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected three numbers X,Y,Z, got {text!r}") from None
+        return check_light(text.split(","))
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(exc.message) from None
 
 
 def check_light(center) -> tuple:
