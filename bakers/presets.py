@@ -101,13 +101,13 @@ NEUPRESS_TRAIN = {
     "hq": dict(epochs=80, batch=4096, sampling_epochs=40, sampling_samples=16384, sampling_bins=24, prt_dirs=1024),
 }
 
-#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 9000 steps, each buffer used
-#: once (fresh tuples), the weight average; with hq's 4 x 128 flows its in-scene bias^2 is 1.39e-5 on the mean of four
-#: seeds (1.95e-5 before), a backlit blob's blue +12 % (+23 % before); bake about 9 min on an idle 2-core machine
-#: (spec/bake-8dna.md#backlit)
+#: per-preset training defaults (network sizes: nasset_sdk.kinds.eightdna.SIZES). small: 13 000 steps, each buffer
+#: used once (fresh tuples), the weight average, hq's 4 x 128 flows: under the bench's light every seed of four within
+#: 2.8 % and bias^2 mean 1.17e-5; backlit means +4 / +3 / -1 %; bake 14.5 min on an idle 2-core machine
+#: (spec/bake-8dna.md#steps)
 EIGHTDNA_TRAIN = {
     "tiny": dict(steps=60, batch=1024, buffer=1 << 14, reuse=1),
-    "small": dict(steps=9000, batch=2048, buffer=1 << 18, reuse=1, average=0.999),
+    "small": dict(steps=13000, batch=2048, buffer=1 << 18, reuse=1, average=0.999),
     "hq": dict(steps=20000, batch=8192, buffer=1 << 21, reuse=1),
 }
 
