@@ -1,7 +1,7 @@
 """Benchmark (not a test): render throughput vs the bound set by onnxruntime and Embree.
 
     python -m nasset_benchmarks.renderer_throughput [--size small] [--res 256] [--spp 8] [--threads 1,2] [--repeat 3]
-    python -m nasset_benchmarks.renderer_throughput --scene 8dna-near [--size small] [--res 128] [--spp 2]
+    python -m nasset_benchmarks.renderer_throughput --scene 8dna-near [--size small | --asset A.usdc] [--res 128] [--spp 2]
     python -m nasset_benchmarks.renderer_throughput --hair [--strands 20000] [--segments 4] [--res 128] [--spp 4]
     python -m nasset_benchmarks.renderer_throughput --usd SCENE.usda [--res 64] [--spp 16] [--repeat 3]
 
@@ -23,10 +23,11 @@ Rates are per second of this process's CPU time (``--clock cpu``, the default: s
 with other jobs, where wall time swings 2x) or of wall time (``--clock wall``); the time splits are wall
 time within the render.
 
-``--scene 8dna-near`` (:func:`eightdna_near_field`): one 8dna example asset lit by a small sphere
-light at about one box size (near field: light samples at x_o and at every flow sample u_i). It prints
-camera samples/s (median), onnxruntime calls and network rows per camera sample and the time split
-(trace, onnx, network = the rest of the evaluator: encodings and spline math, other).
+``--scene 8dna-near`` (:func:`eightdna_near_field`): one 8dna asset (the example of ``--size``, random
+networks, or a baked ``--asset``, the camera and light framed on its box) lit by a small sphere light at
+about one box size (near field: light samples at x_o and at every flow sample u_i). It prints camera
+samples/s (median), onnxruntime calls and network rows per camera sample and the time split (trace, onnx,
+network = the rest of the evaluator: encodings and spline math, other).
 
 The process's heap is set as the ``nasset`` command sets it (``--allocator nasset``, the default:
 nasset_sdk.process.tune_allocator) or left at glibc's defaults (``--allocator default``).
@@ -175,16 +176,24 @@ def run_one(scene, a, threads: int) -> dict:
     return out
 
 
-def _eightdna_scene(size: str):
+def _eightdna_scene(size: str, asset: str | None = None):
+    """The near-field scene around the ``size`` example asset, or around the 8dna asset file ``asset``."""
     from nasset_reference_renderer.scene import load_scene
     from nasset_reference_renderer.testscenes import SceneBuilder
+    from nasset_sdk.asset import Asset
     from nasset_sdk.examples import example_builder
 
     tmp = Path(tempfile.mkdtemp())
-    asset = example_builder("8dna", size=size, seed=0).write(tmp / "e.usdc")
+    given = asset is not None
+    asset = Path(asset).resolve() if given else example_builder("8dna", size=size, seed=0).write(tmp / "e.usdc")
+    centre, scale = np.zeros(3), 1.0  # the example's box: 1.02 on a side, centred
+    if given:
+        lo, hi = (np.asarray(v, np.float64) for v in Asset.open(asset).domain)
+        centre, scale = (lo + hi) / 2, float(np.max(hi - lo)) / 1.02
+    at = lambda p: tuple(centre + scale * np.asarray(p))  # noqa: E731 -- the layout framed on the asset's box
     b = SceneBuilder()
-    b.camera((0, 0.4, 3.0), (0, 0, 0), focal=55)
-    b.sphere_light("Bulb", (0.9, 0.9, 0.8), 0.35, 8.0)  # near field: about one box size from the asset
+    b.camera(at((0, 0.4, 3.0)), tuple(centre), focal=55)
+    b.sphere_light("Bulb", at((0.9, 0.9, 0.8)), 0.35 * scale, 8.0)  # near field: about one box size from the asset
     b.asset("Obj", asset)
     return load_scene(b.write(tmp / "bench8.usda"))
 
@@ -210,7 +219,7 @@ def eightdna_near_field(a, threads: int) -> dict:
     from nasset_reference_renderer.integrator import RenderSettings, prepare_assets, render, resolve_settings
     from nasset_reference_renderer.plan import make_plan
 
-    scene = _eightdna_scene(a.size)
+    scene = _eightdna_scene(a.size, a.asset)
     settings = resolve_settings(RenderSettings(spp=a.spp, width=a.res, height=a.res, threads=threads, batch=a.batch, workers=a.workers), scene)
     width, height = scene.camera.default_resolution(settings.width, settings.height)
     plan = make_plan(scene, width=width, height=height, spp=settings.spp, max_depth=settings.max_depth,
@@ -349,6 +358,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scene", default="rna", choices=("rna", "8dna-near"))
     ap.add_argument("--size", default="small")
+    ap.add_argument("--asset", metavar="FILE", help="--scene 8dna-near: this 8dna asset instead of the --size example")
     ap.add_argument("--res", type=int, default=256)
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--threads", default="1,2", help="onnxruntime intra-op threads, a comma list (0: its default)")
@@ -367,6 +377,8 @@ def main(argv=None) -> int:
     ap.add_argument("--allocator", default="nasset", choices=("nasset", "default"),
                     help="the heap settings the `nasset` command runs with (nasset_sdk.process), or glibc's defaults")
     a = ap.parse_args(argv)
+    if a.asset and (a.scene != "8dna-near" or not Path(a.asset).is_file()):
+        ap.error(f"--asset {a.asset}: " + ("applies to --scene 8dna-near only" if a.scene != "8dna-near" else "no such file"))
     global _clock
     _clock = time.process_time if a.clock == "cpu" else time.perf_counter
     print(f"rates per second of {'CPU time of this process' if a.clock == 'cpu' else 'wall time'}; render threads {a.workers}")
@@ -376,7 +388,8 @@ def main(argv=None) -> int:
         tuned = tune_allocator()
         print("allocator: " + ("the nasset command's heap settings" if tuned else "unchanged (not glibc, or set by the user)"))
     if a.scene == "8dna-near":
-        print(f"scene: 8dna '{a.size}' example asset, sphere light in the near field, {a.res}x{a.res} x {a.spp} spp "
+        what = f"asset {a.asset}" if a.asset else f"'{a.size}' example asset"
+        print(f"scene: 8dna {what}, sphere light in the near field, {a.res}x{a.res} x {a.spp} spp "
               f"(median of {a.repeat} renders per thread setting)")
         for threads in [int(t) for t in a.threads.split(",")]:
             _print_eightdna(a, threads)
