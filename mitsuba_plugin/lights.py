@@ -14,6 +14,12 @@
 
 Sample points lie :data:`FAR` along the direction (shadow rays end there).
 
+- ``nasset_sky``: several of the two above as one emitter (``part_0``, ``part_1``, ... : cone and dome emitters).
+  Mitsuba keeps one environment emitter per scene (the one an escaping ray sees), so a USD scene with a dome and a
+  sun of non-zero angle, or two such suns, gets their sum: radiance ``sum_j L_j(d)``, a part chosen with
+  probability ``w_j`` (its irradiance at normal incidence: a cone's ``E``, a dome's pi times its mean radiance over
+  the sphere) and sampled as alone, pdf ``sum_j w_j pdf_j(d)`` (the one-sample mixture).
+
 - ``nasset_area``: the emission of a mesh (spec/renderer.md#sidedness, #mesh-lights), attached to its shape:
   ``front`` radiance on the side its triangles' winding faces, ``back`` radiance on the other (Mitsuba's
   ``area`` emits from the front alone). Sampled by the shape's area (pdf ``d^2 / (A |cos theta_l|)``).
@@ -33,14 +39,22 @@ from nasset_sdk.errors import error
 NAME = "nasset_cone"
 DOME = "nasset_dome"
 AREA = "nasset_area"
+SKY = "nasset_sky"
 #: distance of the sample point along a direction (shadow rays end there): far beyond any scene the
 #: renderer accepts (spec/renderer.md#limits), still exact enough in float32 for the ray direction
 FAR = 1e9
 _REGISTERED: set[str] = set()
 
 
+def sphere_mean(image: np.ndarray) -> np.ndarray:
+    """Mean over the sphere [3] of a lat-long image [H, W, 3] (row r at polar angle pi (r + 0.5) / H, weights sin theta)."""
+    h = image.shape[0]
+    sin_t = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+    return (image.mean(axis=1) * sin_t[:, None]).sum(0) / max(sin_t.sum(), 1e-30)
+
+
 def register(mi) -> None:
-    """Register ``nasset_cone`` for the active variant (idempotent)."""
+    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area`` and ``nasset_sky`` for the active variant (idempotent)."""
     if mi.variant() in _REGISTERED:
         return
 
@@ -54,6 +68,7 @@ def register(mi) -> None:
                 raise error("SCENE_UNSUPPORTED", f"nasset_cone: angle {2 * math.degrees(half)} outside (0, 180) degrees")
             self.cos_t = math.cos(half)
             e = np.asarray(props.get("irradiance", mi.ScalarColor3f(1.0)), np.float64).reshape(3)
+            self.sky_weight = float(np.mean(e))  # irradiance at normal incidence (nasset_sky's choice of a part)
             self.le = mi.Color3f(*(e / (math.pi * math.sin(half) ** 2)).tolist())
             self.pdf_value = 1.0 / (2.0 * math.pi * (1.0 - self.cos_t))
             self.frame = mi.Frame3f(mi.Vector3f(*self.axis_np.tolist()))
@@ -61,6 +76,12 @@ def register(mi) -> None:
 
         def _inside(self, d):
             return dr.dot(d, self.frame.n) >= self.cos_t
+
+        def radiance(self, d, active=True):
+            return dr.select(active & self._inside(d), mi.Spectrum(self.le), 0.0)
+
+        def pdf(self, d, active=True):
+            return dr.select(active & self._inside(d), self.pdf_value, 0.0)
 
         def sample_direction(self, it, sample, active=True):
             d = self.frame.to_world(mi.warp.square_to_uniform_cone(sample, self.cos_t))
@@ -75,13 +96,13 @@ def register(mi) -> None:
             return ds, mi.Spectrum(self.le) / self.pdf_value
 
         def pdf_direction(self, it, ds, active=True):
-            return dr.select(self._inside(ds.d), self.pdf_value, 0.0)
+            return self.pdf(ds.d)
 
         def eval_direction(self, it, ds, active=True):
-            return dr.select(self._inside(ds.d), mi.Spectrum(self.le), 0.0)
+            return self.radiance(ds.d)
 
         def eval(self, si, active=True):
-            return dr.select(self._inside(-si.wi), mi.Spectrum(self.le), 0.0)
+            return self.radiance(-si.wi)
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             return dr.zeros(mi.Ray3f), mi.Spectrum(0)
@@ -123,6 +144,7 @@ def register(mi) -> None:
                 self.h, self.w = img.shape[:2]
                 self.tex = mi.Float(np.ascontiguousarray(img * self.scale, np.float32).ravel())
                 self.dist = mi.DiscreteDistribution(mi.Float(np.asarray(latlong_pmf(img), np.float32)))
+            self.sky_weight = math.pi * float(np.mean(self.scale * (1.0 if self.image is None else sphere_mean(self.image))))
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
 
         def _to_local(self, d):
@@ -142,13 +164,13 @@ def register(mi) -> None:
             row = mi.UInt32(dr.clip(mi.Int32(dr.floor(v * self.h)), 0, self.h - 1))
             return row * self.w + col, dr.safe_sqrt(1.0 - dr.square(dr.clip(dl.y, -1.0, 1.0)))
 
-        def _radiance(self, d, active=True):
+        def radiance(self, d, active=True):
             if self.tex is None:
                 return mi.Spectrum(self.le)
             idx, _ = self._texel(d)
             return mi.Spectrum(dr.gather(mi.Color3f, self.tex, idx, active))
 
-        def _pdf(self, d, active=True):
+        def pdf(self, d, active=True):
             if self.tex is None:
                 return mi.Float(1.0 / (4.0 * math.pi))
             idx, sin_t = self._texel(d)
@@ -184,13 +206,13 @@ def register(mi) -> None:
             return ds, value
 
         def pdf_direction(self, it, ds, active=True):
-            return self._pdf(ds.d, active)
+            return self.pdf(ds.d, active)
 
         def eval_direction(self, it, ds, active=True):
-            return self._radiance(ds.d, active)
+            return self.radiance(ds.d, active)
 
         def eval(self, si, active=True):
-            return self._radiance(-si.wi, active)
+            return self.radiance(-si.wi, active)
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             return dr.zeros(mi.Ray3f), mi.Spectrum(0)
@@ -200,6 +222,68 @@ def register(mi) -> None:
 
         def to_string(self):
             return f"NassetDomeLight[{'constant' if self.tex is None else f'{self.w}x{self.h} lat-long'}]"
+
+    class SkyLight(mi.Emitter):
+        """Cone and dome emitters (``part_<i>``) as one environment emitter: their sum, sampled as a mixture."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            keys = sorted((k for k in props.keys() if k.startswith("part_")), key=lambda k: int(k[5:]))
+            self.parts = [props[k] for k in keys]
+            if not self.parts or not all(hasattr(p, "sky_weight") for p in self.parts):
+                raise error("SCENE_INVALID", f"{SKY}: its parts must be {NAME} or {DOME} emitters")
+            w = np.maximum([p.sky_weight for p in self.parts], 0.0)
+            w = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
+            self.weights = [float(v) for v in w]
+            self.starts = [float(v) for v in np.concatenate([[0.0], np.cumsum(w)[:-1]])]
+            self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
+
+        def radiance(self, d, active=True):
+            return sum((p.radiance(d, active) for p in self.parts[1:]), self.parts[0].radiance(d, active))
+
+        def pdf(self, d, active=True):
+            return sum((w * p.pdf(d, active) for w, p in zip(self.weights[1:], self.parts[1:], strict=True)),
+                       self.weights[0] * self.parts[0].pdf(d, active))
+
+        def sample_direction(self, it, sample, active=True):
+            k, lo, w = mi.UInt32(0), mi.Float(0.0), mi.Float(self.weights[0])
+            for j in range(1, len(self.parts)):  # the part whose interval [start, start + weight) holds sample.x
+                past = sample.x >= self.starts[j]
+                k, lo, w = dr.select(past, j, k), dr.select(past, self.starts[j], lo), dr.select(past, self.weights[j], w)
+            reused = mi.Point2f(dr.minimum((sample.x - lo) / dr.select(w > 0, w, 1.0), 1.0 - 1e-7), sample.y)
+            d = mi.Vector3f(0.0, 0.0, 1.0)
+            for j, p in enumerate(self.parts):
+                ds_j, _ = p.sample_direction(it, reused, active & (k == j))
+                d = dr.select(k == j, ds_j.d, d)
+            pdf = self.pdf(d, active)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.d = d
+            ds.p = it.p + d * FAR
+            ds.n = -d
+            ds.dist = FAR
+            ds.pdf = pdf
+            ds.delta = False
+            ds.emitter = mi.EmitterPtr(self)
+            value = self.radiance(d, active)
+            return ds, dr.select(pdf > 0, value / dr.select(pdf > 0, pdf, 1.0), 0.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            return self.pdf(ds.d, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self.radiance(ds.d, active)
+
+        def eval(self, si, active=True):
+            return self.radiance(-si.wi, active)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return f"NassetSkyLight[{', '.join(p.to_string() for p in self.parts)}]"
 
     class AreaLight(mi.Emitter):
         """Emission of a mesh on both sides of its triangles: ``front`` (the winding's side) and ``back`` RGB."""
@@ -240,4 +324,5 @@ def register(mi) -> None:
     mi.register_emitter(NAME, lambda props: ConeLight(props))
     mi.register_emitter(DOME, lambda props: DomeLight(props))
     mi.register_emitter(AREA, lambda props: AreaLight(props))
+    mi.register_emitter(SKY, lambda props: SkyLight(props))
     _REGISTERED.add(mi.variant())

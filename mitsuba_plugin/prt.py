@@ -37,11 +37,13 @@ class PrtTables:
 
 
 def domes(scene) -> list:
-    """The scene's ``nasset_dome`` emitters as the reference renderer's DomeLight (scale, image, rotation)."""
+    """The scene's ``nasset_dome`` emitters (alone, or parts of a ``nasset_sky``) as the reference renderer's
+    DomeLight (scale, image, rotation)."""
     out = []
     for em in scene.emitters():
-        if type(em).__name__ == "DomeLight" and hasattr(em, "rotation"):
-            out.append(DomeLight(em.scale, em.image, rotation=em.rotation))
+        for part in getattr(em, "parts", [em]):
+            if type(part).__name__ == "DomeLight" and hasattr(part, "rotation"):
+                out.append(DomeLight(part.scale, part.image, rotation=part.rotation))
     return out
 
 

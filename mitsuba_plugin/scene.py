@@ -264,6 +264,9 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         elif not isinstance(lt, MitsubaLight):
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere, rect and dome lights, not {type(lt).__name__}",
                         file=str(path), prim=lt.desc.prim)
+    infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]
+    if len(infinite) > 1:  # Mitsuba keeps one environment emitter: a dome and angular suns become their sum
+        light_entries["sky"] = {"type": lights_jit.SKY, **{f"part_{i}": light_entries.pop(k) for i, k in enumerate(infinite)}}
     for ent in light_entries.values():
         if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})

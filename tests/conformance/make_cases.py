@@ -359,6 +359,18 @@ def b_dome(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_suns_and_dome(ctx):
+    env_map(ctx.dir / "env.exr")
+    ctx.files.append("env.exr")
+    ctx.camera(eye=(0.3, 2.2, 3.0), target=(0.3, -0.2, 0.0))
+    ctx.floor(diffuse=(0.4, 0.4, 0.4))
+    ctx.sb.distant("Sun", (-0.7, 1.0, 0.25), 2.0, angle=12.0)
+    ctx.sb.distant("LowSun", (0.9, 0.45, -0.3), 1.5, angle=30.0, color=(1.0, 0.8, 0.6))
+    dome = ctx.sb.dome("Sky", 0.5, texture="./env.exr")
+    ctx.sb._xform(dome.GetPrim(), rotate((0, 1, 0), -40.0))
+    ctx.asset("Asset", "rna_rand.usdc", translate(0.0, 0.3, 0.0))
+
+
 def b_self_shadow(ctx):
     ctx.camera(eye=(0.0, 0.4, 2.2))
     ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
@@ -489,6 +501,9 @@ CASES = [
     Case("rna_rect_light", "RectLight emitting toward its local -Z, tilted: one-sided emitter, area sampling", b_rect),
     Case("rna_dome_exr", "DomeLight with an asymmetric lat-long OpenEXR texture, rotated 25 degrees about +Y: texture "
          "orientation and importance sampling", b_dome),
+    Case("rna_suns_and_dome", "two DistantLights with angles 12 and 30 degrees and a rotated lat-long DomeLight together: "
+         "every light seen by escaping rays (several lights at infinity, not one environment) and sampled, asset above a "
+         "floor", b_suns_and_dome),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "
          "self-occlusion only (no other objects: next-event estimation only)", b_self_shadow),
     Case("rna_shadow_on_asset", "a box between the light and the asset: light samples blocked by another object contribute 0 "

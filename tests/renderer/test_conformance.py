@@ -34,6 +34,7 @@ MUTANT_CASES = {
     "other_instance_is_self": ["rna_instances_shadow"],
     "distant_angle_ignored": ["rna_distant_angle"],
     "dome_mirrored": ["rna_dome_exr"],
+    "one_escaped_light": ["rna_suns_and_dome"],
     "no_asset_indirect": ["rna_indirect"],
     "mis_weights_one": ["rna_sphere_light"],
     "quality_hq": ["rna_quality_variant"],

@@ -163,6 +163,21 @@ def dome_mirrored():
     DomeLight.uv_to_dir = staticmethod(lambda uv: (lambda r: (r[0] * np.array([-1.0, 1.0, 1.0]), r[1]))(to_dir(uv)))
 
 
+def one_escaped_light():
+    """Escaping rays see only the first light at infinity (a renderer that keeps one environment light); the others
+    are still sampled."""
+    from nasset_reference_renderer import lights
+
+    first: list = []
+    for cls in (lights.DistantLight, lights.DomeLight):
+        def le_escaped(self, d, _orig=cls.le_escaped):
+            first[:] = first or [id(self)]
+            le = _orig(self, d)
+            return le if first[0] == id(self) else np.zeros_like(le)
+
+        cls.le_escaped = le_escaped
+
+
 def no_asset_indirect():
     """Rays never continue from a neural asset (next-event estimation only, even with other objects)."""
     from nasset_reference_renderer import integrator, plan
@@ -325,7 +340,7 @@ def fiber_exempt_stops_search():
 
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
-                                   distant_angle_ignored, dome_mirrored, no_asset_indirect, mis_weights_one, quality_hq,
+                                   distant_angle_ignored, dome_mirrored, one_escaped_light, no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
                                    eightdna_light_at_xo,
