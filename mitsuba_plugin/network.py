@@ -8,7 +8,7 @@ activations, the decoders' angular features: Slice, Concat, reductions, arithmet
 operator of the format's allow-list raises SCENE_UNSUPPORTED naming it.
 
 An affine layer with more than ``LINEAR_CHUNK`` outputs runs as several ``Linear`` of at most that many outputs
-on the same ``CoopVec`` (the same sums, in the same order): on ``llvm_ad_rgb`` a 4 x 128 network ran at 48 G
+on the same ``CoopVec`` (the same sums; results equal to float32 rounding): on ``llvm_ad_rgb`` a 4 x 128 network ran at 48 G
 multiply-adds/s as whole layers and at 85 G in chunks of 64, where a 3 x 64 one runs at 73-82 G (2 cores;
 docs/bench-mitsuba-jit.md#linear-chunks).
 """
