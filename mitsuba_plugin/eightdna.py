@@ -425,19 +425,20 @@ def draw(sampler) -> tuple:
     return u_ch, z, sampler.next_2d(), sampler.next_2d(), sampler.next_1d(), sampler.next_2d()
 
 
-def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> dict:
+def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on, lights=None) -> dict:
     """The 8dna estimator at asset hits ``on`` (spec/renderer.md#8dna) for the ``nasset_path`` integrator.
 
     rnd: the vertex's random numbers (:func:`draw`); si: the hit; wo_world: -ray.d; sid: the hit shape's
     registry id (UInt32); assets: (index, EightDnaJit) of the scene's 8dna assets; tab, k: the integrator's
-    instance tables and instance index; x, n, wo: the object-space inputs. Returns 'L' (Spectrum: direct lobe
+    instance tables and instance index; x, n, wo: the object-space inputs; lights: the light surfaces shadow rays pass
+    through (:func:`.plugins.shapes_named`; None: every shape blocks them). Returns 'L' (Spectrum: direct lobe
     at x_o plus the light sample at u_i, to be multiplied by the path throughput), the continuation 'd'
     (world, unit), 'from_u' (Bool: it leaves the world point 'origin' = u_i M, else x_o), 'weight' (Spectrum
     throughput factor; 0 where a GGX continuation passes through the asset: 'weight_passed'), 'pdf' (its world
     solid-angle pdf for MIS at a reached light) and 'alive'."""
     import drjit as dr
 
-    from .plugins import _mis, _of_asset, _trace
+    from .plugins import _mis, _occluder, _of_asset
 
     u_ch, z, u_ex, u_eu, u_pick, u_g = rnd
     ch = dr.minimum(mi.UInt32(u_ch * 3.0), 2)
@@ -464,7 +465,11 @@ def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> d
         return active & bt.is_valid() & (dr.reinterpret_array(mi.UInt32, bt.shape) == sid)
 
     # direct lobe at x_o: an ordinary light sample (the asset occludes; w_i on the viewer's side)
-    ds_x, ew_x = scene.sample_emitter_direction(si, u_ex, True, on)
+    ds_x, ew_x = scene.sample_emitter_direction(si, u_ex, lights is None, on)
+    if lights is not None:  # the shadow ray passes through light surfaces (spec/renderer.md#light-surfaces)
+        blocked, _ = _occluder(mi, scene, si.spawn_ray_to(ds_x.p), mi.UInt32(0), mi.UInt32(0), mi.UInt32(0),
+                               on & (ds_x.pdf != 0), lights)
+        ew_x = dr.select(blocked.is_valid(), 0.0, ew_x)
     wl_x = obj(ds_x.d)
     f3 = dict(alpha=mi.Color3f(0), pd=mi.Float(0.5), fd=mi.Float(0), pdl=mi.Float(0), u=mi.Point3f(0), wf=mi.Vector3f(0),
               p_u=mi.Color3f(0), nu=mi.Vector3f(0), wg=mi.Vector3f(0), pdg=mi.Float(0), fg=mi.Float(0))
@@ -496,7 +501,7 @@ def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on) -> d
     ds_u, ew_u = scene.sample_emitter_direction(it, u_eu, False, good_u)
     wl_u = obj(ds_u.d)
     ok_u = good_u & (ds_u.pdf != 0) & (dr.dot(f3["nu"], wl_u) > 0)
-    sh, _ = _trace(mi, scene, it.spawn_ray_to(ds_u.p), sid, mi.UInt32(0), mi.UInt32(0), ok_u)
+    sh, _ = _occluder(mi, scene, it.spawn_ray_to(ds_u.p), sid, mi.UInt32(0), mi.UInt32(0), ok_u, lights)
     ok_u &= ~sh.is_valid()
     ok_u = backtrace(u_w, ds_u.d, ok_u)
     p_l, p_f = mi.Color3f(0), mi.Color3f(0)

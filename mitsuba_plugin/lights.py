@@ -12,7 +12,9 @@
   sin theta, the second implementation's) then uniformly in the texel's (u, v): pdf
   ``pmf W H / (2 pi^2 sin theta)``; the constant dome uniformly on the sphere.
 
-Sample points lie :data:`FAR` along the direction (shadow rays end there).
+Sample points lie :data:`FAR` along the direction (shadow rays end there). ``camera_visible`` false (USD
+``nasset:cameraVisibility``, spec/renderer.md#light-surfaces): :meth:`eval_camera`, what an escaping camera ray sees,
+is black; every other ray sees the light.
 
 - ``nasset_sky``: several of the two above as one emitter (``part_0``, ``part_1``, ... : cone and dome emitters).
   Mitsuba keeps one environment emitter per scene (the one an escaping ray sees), so a USD scene with a dome and a
@@ -69,6 +71,7 @@ def register(mi) -> None:
             self.cos_t = math.cos(half)
             e = np.asarray(props.get("irradiance", mi.ScalarColor3f(1.0)), np.float64).reshape(3)
             self.sky_weight = float(np.mean(e))  # irradiance at normal incidence (nasset_sky's choice of a part)
+            self.camera_visible = bool(props.get("camera_visible", True))
             self.le = mi.Color3f(*(e / (math.pi * math.sin(half) ** 2)).tolist())
             self.pdf_value = 1.0 / (2.0 * math.pi * (1.0 - self.cos_t))
             self.frame = mi.Frame3f(mi.Vector3f(*self.axis_np.tolist()))
@@ -103,6 +106,9 @@ def register(mi) -> None:
 
         def eval(self, si, active=True):
             return self.radiance(-si.wi)
+
+        def eval_camera(self, si, active=True):
+            return self.eval(si, active) if self.camera_visible else mi.Spectrum(0.0)
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             return dr.zeros(mi.Ray3f), mi.Spectrum(0)
@@ -145,6 +151,7 @@ def register(mi) -> None:
                 self.tex = mi.Float(np.ascontiguousarray(img * self.scale, np.float32).ravel())
                 self.dist = mi.DiscreteDistribution(mi.Float(np.asarray(latlong_pmf(img), np.float32)))
             self.sky_weight = math.pi * float(np.mean(self.scale * (1.0 if self.image is None else sphere_mean(self.image))))
+            self.camera_visible = bool(props.get("camera_visible", True))
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
 
         def _to_local(self, d):
@@ -214,6 +221,9 @@ def register(mi) -> None:
         def eval(self, si, active=True):
             return self.radiance(-si.wi, active)
 
+        def eval_camera(self, si, active=True):
+            return self.eval(si, active) if self.camera_visible else mi.Spectrum(0.0)
+
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             return dr.zeros(mi.Ray3f), mi.Spectrum(0)
 
@@ -236,10 +246,14 @@ def register(mi) -> None:
             w = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
             self.weights = [float(v) for v in w]
             self.starts = [float(v) for v in np.concatenate([[0.0], np.cumsum(w)[:-1]])]
+            self.camera_visible = all(p.camera_visible for p in self.parts)
             self.m_flags = mi.EmitterFlags.Infinite | mi.EmitterFlags.SpatiallyVarying
 
         def radiance(self, d, active=True):
             return sum((p.radiance(d, active) for p in self.parts[1:]), self.parts[0].radiance(d, active))
+
+        def eval_camera(self, si, active=True):
+            return sum((p.eval_camera(si, active) for p in self.parts[1:]), self.parts[0].eval_camera(si, active))
 
         def pdf(self, d, active=True):
             return sum((w * p.pdf(d, active) for w, p in zip(self.weights[1:], self.parts[1:], strict=True)),

@@ -47,6 +47,11 @@ FOUR_PI = 4.0 * math.pi
 #: against rays that make no progress (spec/renderer.md#fibers: no crossing limit; in rna_fiber_dense
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
+#: shape id prefixes of a USD scene's light surfaces (spec/renderer.md#light-surfaces: the sphere of a SphereLight, the
+#: rectangle of a RectLight): shadow rays pass through them (Mitsuba's own lights block them, as in an XML scene);
+#: those hidden from camera rays (``nasset:cameraVisibility`` false) let camera rays through too
+LIGHT_SURFACE_PREFIX = "nasset_lightsurface_"
+HIDDEN_PREFIX = LIGHT_SURFACE_PREFIX + "hidden_"
 #: scenes with at most this many fiber instances trace rays leaving one on split structures (:func:`split_scenes`)
 MAX_SPLIT_INSTANCES = 8
 
@@ -145,6 +150,10 @@ def register(mi) -> None:
             import mitsuba as mi  # dr.syntax recompiles this method without register()'s closure
             assets, lut, tab = self.instances(scene)
             split_scenes(mi, scene)  # built here, outside the symbolic loop whose rays use them
+            hidden = shapes_named(mi, scene, HIDDEN_PREFIX)  # light surfaces camera rays pass through (None: none)
+            lights = shapes_named(mi, scene, LIGHT_SURFACE_PREFIX)  # light surfaces shadow rays pass through
+            env = scene.environment()
+            env_hidden = env is not None and not getattr(env, "camera_visible", True)  # its camera view: eval_camera
             prt = prt_mode.tables(mi, scene, assets, tab) if self.prt else None  # PRT mode: neupress by .prt
             shaded = _by_kind(assets, "rna") + ([] if self.prt else _by_kind(assets, "neupress"))  # transport + technique
             eight = _by_kind(assets, "8dna")
@@ -174,6 +183,8 @@ def register(mi) -> None:
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
                 si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
+                if dr.hint(hidden is not None, mode="scalar"):
+                    si = _past_hidden(mi, scene, ray, si, hidden, active & (depth == 0))
                 if dr.hint(near, mode="scalar"):
                     passed = dr.select(c_moved, c_passed, passed)
                 beta[pending] *= dr.select(passed, t_sh, t_un)
@@ -182,7 +193,10 @@ def register(mi) -> None:
                 # emission reached by the previous vertex's continuation
                 ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
                 em_pdf = scene.pdf_emitter_direction(prev_si, ds, ~prev_delta)
-                L += beta * _mis(prev_pdf, dr.select(prev_delta, 0.0, em_pdf)) * ds.emitter.eval(si, active)
+                seen = ds.emitter.eval(si, active)
+                if dr.hint(env_hidden, mode="scalar"):  # an escaping camera ray sees only the lights shown to the camera
+                    seen = dr.select((depth == 0) & ~si.is_valid(), env.eval_camera(si, active), seen)
+                L += beta * _mis(prev_pdf, dr.select(prev_delta, 0.0, em_pdf)) * seen
 
                 active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
                 sid = dr.reinterpret_array(mi.UInt32, si.shape)
@@ -218,7 +232,7 @@ def register(mi) -> None:
                 ray_em = si.spawn_ray_to(ds_em.p)
                 if dr.hint(near, mode="scalar"):
                     ray_em = dr.select(moved, _ray_to_from(mi, si, p_f, ds_em.p), ray_em)
-                si_sh, passed_sh = _trace(mi, scene, ray_em, dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em)
+                si_sh, passed_sh = _occluder(mi, scene, ray_em, dr.select(on_asset, sid, 0), ex_lo, ex_hi, active_em, lights)
                 active_em &= ~si_sh.is_valid()
                 if dr.hint(near, mode="scalar"):
                     ray_x = si.spawn_ray(ds_em.d)
@@ -241,7 +255,7 @@ def register(mi) -> None:
                     d8, pdf8, alive8, from_u8, origin8 = mi.Vector3f(0), mi.Float(0), mi.Bool(False), mi.Bool(False), mi.Point3f(0)
                     if on_8:  # symbolic, like the transport kinds: the flows run only in packets with an 8dna lane
                         L, t_un, t_sh, d8, pdf8, alive8, from_u8, origin8 = _eightdna_vertex(
-                            mi, scene, rnd8, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh)
+                            mi, scene, rnd8, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh, lights)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
@@ -386,6 +400,56 @@ def _branch(mi, own, ray, tmax, lo, hi, active):
     return passed
 
 
+def shapes_named(mi, scene, prefix: str):
+    """UInt32 [max registry id + 1]: 1 for the scene's shapes whose id starts with ``prefix``; None when there are none."""
+    ids = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]) for sh in scene.shapes() if sh.id().startswith(prefix)]
+    if not ids:
+        return None
+    lut = np.zeros(max(ids) + 1, np.uint32)
+    lut[ids] = 1
+    return mi.UInt32(lut)
+
+
+def _on(mi, si, lut):
+    """Whether ``si`` hit a shape marked in ``lut`` (:func:`shapes_named`)."""
+    sid = dr.reinterpret_array(mi.UInt32, si.shape)
+    return si.is_valid() & (dr.gather(mi.UInt32, lut, sid, si.is_valid() & (sid < dr.width(lut))) > 0)
+
+
+@dr.syntax
+def _past_hidden(mi, scene, ray, si, hidden, active):
+    """``si`` of camera rays (``active``) moved past the light surfaces hidden from them (a sphere is entered and left)."""
+    skip = active & _on(mi, si, hidden)
+    r = mi.Ray3f(ray)
+    i = mi.UInt32(0)
+    while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_hidden"):
+        r = _beyond(r, si)
+        si_next = scene.ray_intersect(r, skip)
+        si[skip] = si_next
+        skip &= _on(mi, si, hidden)
+        i += 1
+    return si
+
+
+@dr.syntax
+def _occluder(mi, scene, ray, ignore, lo, hi, active, lights):
+    """:func:`_trace` of a shadow ray, passing through the light surfaces marked in ``lights`` (None: none): its first
+    occluder (invalid: the light is reached) and whether it crossed instance ``ignore`` on the way."""
+    si, passed = _trace(mi, scene, ray, ignore, lo, hi, active)
+    if dr.hint(lights is not None, mode="scalar"):
+        skip = active & _on(mi, si, lights)
+        r = mi.Ray3f(ray)
+        i = mi.UInt32(0)
+        while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_past_lights"):
+            r = _beyond(r, si)
+            si_next, passed_next = _trace(mi, scene, r, ignore, lo, hi, skip)
+            si[skip] = si_next
+            passed |= skip & passed_next
+            skip &= _on(mi, si, lights)
+            i += 1
+    return si, passed
+
+
 @dr.syntax
 def _trace_skipping(mi, scene, ray, ignore, lo, hi, active):
     """:func:`_trace` on the whole scene: re-trace past every hit on shape ``ignore``. No limit on the number
@@ -528,13 +592,13 @@ def _prt_vertex(mi, prt, tab, k, si, wo_o, on_prt, L, beta):
     return L
 
 
-def _eightdna_vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh):
+def _eightdna_vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh, lights):
     """:func:`.eightdna.vertex` at the lanes ``on_8`` as the state of the integrator's symbolic ``if``:
     returns (L plus beta times the vertex's light, t_un and t_sh with its continuation weights, the
     continuation's world direction, its world pdf, whether it lives, whether it leaves u_i M, u_i M)."""
     import drjit as dr
 
-    v = eightdna.vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8)
+    v = eightdna.vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, lights)
     L = dr.select(on_8, L + beta * v["L"], L)
     t_un = dr.select(on_8, v["weight"], t_un)
     t_sh = dr.select(on_8, v["weight_passed"], t_sh)

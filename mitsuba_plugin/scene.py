@@ -25,7 +25,7 @@ from nasset_sdk.errors import error, path_arg
 
 from . import lights as lights_jit
 from . import preview
-from .plugins import BSDF, INTEGRATOR, asset_for, register
+from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, asset_for, register
 from .variant import jit_mitsuba
 
 _PLY_DIR: list[str] = []
@@ -256,14 +256,18 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         entries[f"asset_{j}"] = asset_shape(inst.file, mw.T, mi=mi)  # USD row vectors -> Mitsuba column vectors
     lights, light_entries = build_lights(desc.lights, str(path))
     for k, lt in enumerate(lights):
+        visible = bool(getattr(lt.desc, "camera_visible", True))  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
         if isinstance(lt, ConeDistantLight):
             light_entries[f"cone_{k}"] = {"type": lights_jit.NAME, "direction": mi.ScalarVector3f(lt.axis.tolist()), "angle": float(lt.desc.angle),
-                                          "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist())}
+                                          "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
+                                          "camera_visible": visible}
         elif isinstance(lt, DomeLight):
-            light_entries[f"dome_{k}"] = _dome_entry(mi, lt)
+            light_entries[f"dome_{k}"] = {**_dome_entry(mi, lt), "camera_visible": visible}
         elif not isinstance(lt, MitsubaLight):
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere, rect and dome lights, not {type(lt).__name__}",
                         file=str(path), prim=lt.desc.prim)
+        elif lt.has_shape:  # a light surface: shadow rays pass through it, camera rays too when it is hidden from them
+            light_entries[(LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + lt.key] = light_entries.pop(lt.key)
     infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]
     if len(infinite) > 1:  # Mitsuba keeps one environment emitter: a dome and angular suns become their sum
         light_entries["sky"] = {"type": lights_jit.SKY, **{f"part_{i}": light_entries.pop(k) for i, k in enumerate(infinite)}}

@@ -371,6 +371,24 @@ def b_suns_and_dome(ctx):
     ctx.asset("Asset", "rna_rand.usdc", translate(0.0, 0.3, 0.0))
 
 
+def _hide_from_camera(light):
+    from pxr import Sdf
+
+    light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool, custom=True).Set(False)
+
+
+def b_hidden_lights(ctx):
+    env_map(ctx.dir / "env.exr")
+    ctx.files.append("env.exr")
+    ctx.camera()
+    ctx.floor()
+    _hide_from_camera(ctx.sb.sphere_light("Bulb", (0.25, 0.15, 1.2), 0.25, 12.0, color=(1.0, 0.9, 0.8)))
+    _hide_from_camera(ctx.sb.rect_light("Panel", (-0.9, 0.5, -0.6), 0.8, 0.5, (0.6, -0.2, 1.0), 6.0))
+    _hide_from_camera(ctx.sb.dome("Sky", 0.6, texture="./env.exr"))
+    ctx.sb.distant("Sun", (-0.5, 1.0, 0.3), 1.5, angle=10.0)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_self_shadow(ctx):
     ctx.camera(eye=(0.0, 0.4, 2.2))
     ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
@@ -504,6 +522,10 @@ CASES = [
     Case("rna_suns_and_dome", "two DistantLights with angles 12 and 30 degrees and a rotated lat-long DomeLight together: "
          "every light seen by escaping rays (several lights at infinity, not one environment) and sampled, asset above a "
          "floor", b_suns_and_dome),
+    Case("rna_hidden_lights", "a SphereLight in front of the asset, a RectLight facing the camera and a textured DomeLight, all "
+         "with nasset:cameraVisibility = false, and a visible sun with an angle: camera rays pass through the hidden "
+         "surfaces and see black where they escape, every other ray reaches them; the sphere lies between the sun and the "
+         "floor, which it must not shadow", b_hidden_lights),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "
          "self-occlusion only (no other objects: next-event estimation only)", b_self_shadow),
     Case("rna_shadow_on_asset", "a box between the light and the asset: light samples blocked by another object contribute 0 "
