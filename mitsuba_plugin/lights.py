@@ -60,7 +60,40 @@ def register(mi) -> None:
     if mi.variant() in _REGISTERED:
         return
 
-    class ConeLight(mi.Emitter):
+    class AtInfinity(mi.Emitter):
+        """What the lights at infinity share: Mitsuba's interface on their ``radiance(d)`` and ``pdf(d)`` (world
+        directions), samples :data:`FAR` along the direction, and ``camera_visible``."""
+
+        def far_sample(self, it, d, pdf):
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.d = d
+            ds.p = it.p + d * FAR
+            ds.n = -d
+            ds.dist = FAR
+            ds.pdf = pdf
+            ds.delta = False
+            ds.emitter = mi.EmitterPtr(self)
+            return ds
+
+        def pdf_direction(self, it, ds, active=True):
+            return self.pdf(ds.d, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self.radiance(ds.d, active)
+
+        def eval(self, si, active=True):
+            return self.radiance(-si.wi, active)
+
+        def eval_camera(self, si, active=True):
+            return self.eval(si, active) if self.camera_visible else mi.Spectrum(0.0)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+    class ConeLight(AtInfinity):
         def __init__(self, props):
             super().__init__(props)
             a = np.asarray(props.get("direction", mi.ScalarVector3f(0, 0, 1)), np.float64).reshape(3)
@@ -88,38 +121,12 @@ def register(mi) -> None:
 
         def sample_direction(self, it, sample, active=True):
             d = self.frame.to_world(mi.warp.square_to_uniform_cone(sample, self.cos_t))
-            ds = dr.zeros(mi.DirectionSample3f)
-            ds.d = d
-            ds.p = it.p + d * FAR
-            ds.n = -d
-            ds.dist = FAR
-            ds.pdf = mi.Float(self.pdf_value)
-            ds.delta = False
-            ds.emitter = mi.EmitterPtr(self)
-            return ds, mi.Spectrum(self.le) / self.pdf_value
-
-        def pdf_direction(self, it, ds, active=True):
-            return self.pdf(ds.d)
-
-        def eval_direction(self, it, ds, active=True):
-            return self.radiance(ds.d)
-
-        def eval(self, si, active=True):
-            return self.radiance(-si.wi)
-
-        def eval_camera(self, si, active=True):
-            return self.eval(si, active) if self.camera_visible else mi.Spectrum(0.0)
-
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
-
-        def traverse(self, callback):
-            pass
+            return self.far_sample(it, d, mi.Float(self.pdf_value)), mi.Spectrum(self.le) / self.pdf_value
 
         def to_string(self):
             return f"NassetConeLight[cos_t={self.cos_t}]"
 
-    class DomeLight(mi.Emitter):
+    class DomeLight(AtInfinity):
         def __init__(self, props):
             super().__init__(props)
             self.scale = np.asarray(props.get("radiance", mi.ScalarColor3f(1.0)), np.float64).reshape(3)
@@ -202,38 +209,12 @@ def register(mi) -> None:
                 pdf = dr.select(ok, p_uv / (2.0 * math.pi * math.pi * dr.select(ok, sin_t, 1.0)), 0.0)
                 le = mi.Spectrum(dr.gather(mi.Color3f, self.tex, idx, active))
                 value = dr.select(pdf > 0, le / dr.select(pdf > 0, pdf, 1.0), 0.0)
-            ds = dr.zeros(mi.DirectionSample3f)
-            ds.d = d
-            ds.p = it.p + d * FAR
-            ds.n = -d
-            ds.dist = FAR
-            ds.pdf = pdf
-            ds.delta = False
-            ds.emitter = mi.EmitterPtr(self)
-            return ds, value
-
-        def pdf_direction(self, it, ds, active=True):
-            return self.pdf(ds.d, active)
-
-        def eval_direction(self, it, ds, active=True):
-            return self.radiance(ds.d, active)
-
-        def eval(self, si, active=True):
-            return self.radiance(-si.wi, active)
-
-        def eval_camera(self, si, active=True):
-            return self.eval(si, active) if self.camera_visible else mi.Spectrum(0.0)
-
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
-
-        def traverse(self, callback):
-            pass
+            return self.far_sample(it, d, pdf), value
 
         def to_string(self):
             return f"NassetDomeLight[{'constant' if self.tex is None else f'{self.w}x{self.h} lat-long'}]"
 
-    class SkyLight(mi.Emitter):
+    class SkyLight(AtInfinity):
         """Cone and dome emitters (``part_<i>``) as one environment emitter: their sum, sampled as a mixture."""
 
         def __init__(self, props):
@@ -270,31 +251,8 @@ def register(mi) -> None:
                 ds_j, _ = p.sample_direction(it, reused, active & (k == j))
                 d = dr.select(k == j, ds_j.d, d)
             pdf = self.pdf(d, active)
-            ds = dr.zeros(mi.DirectionSample3f)
-            ds.d = d
-            ds.p = it.p + d * FAR
-            ds.n = -d
-            ds.dist = FAR
-            ds.pdf = pdf
-            ds.delta = False
-            ds.emitter = mi.EmitterPtr(self)
             value = self.radiance(d, active)
-            return ds, dr.select(pdf > 0, value / dr.select(pdf > 0, pdf, 1.0), 0.0)
-
-        def pdf_direction(self, it, ds, active=True):
-            return self.pdf(ds.d, active)
-
-        def eval_direction(self, it, ds, active=True):
-            return self.radiance(ds.d, active)
-
-        def eval(self, si, active=True):
-            return self.radiance(-si.wi, active)
-
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
-
-        def traverse(self, callback):
-            pass
+            return self.far_sample(it, d, pdf), dr.select(pdf > 0, value / dr.select(pdf > 0, pdf, 1.0), 0.0)
 
         def to_string(self):
             return f"NassetSkyLight[{', '.join(p.to_string() for p in self.parts)}]"
