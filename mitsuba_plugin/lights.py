@@ -22,6 +22,10 @@ is black; every other ray sees the light.
   probability ``w_j`` (its irradiance at normal incidence: a cone's ``E``, a dome's pi times its mean radiance over
   the sphere) and sampled as alone, pdf ``sum_j w_j pdf_j(d)`` (the one-sample mixture).
 
+- ``nasset_spot``: a point light with ``UsdLux.ShapingAPI`` (spec/renderer.md#spot-lights): radiant intensity
+  ``intensity`` times the falloff at the angle theta between the emitted direction and ``axis``: ``linear`` in theta
+  (1 inside the beam ``cone (1 - softness)``, 0 outside ``cone``, degrees) or ``smoothstep`` (Cycles' spot).
+
 - ``nasset_area``: the emission of a mesh (spec/renderer.md#sidedness, #mesh-lights), attached to its shape:
   ``front`` radiance on the side its triangles' winding faces, ``back`` radiance on the other (Mitsuba's
   ``area`` emits from the front alone). Sampled by the shape's area (pdf ``d^2 / (A |cos theta_l|)``).
@@ -42,6 +46,8 @@ NAME = "nasset_cone"
 DOME = "nasset_dome"
 AREA = "nasset_area"
 SKY = "nasset_sky"
+SPOT = "nasset_spot"
+SPOT_PROFILES = ("linear", "smoothstep")
 #: distance of the sample point along a direction (shadow rays end there): far beyond any scene the
 #: renderer accepts (spec/renderer.md#limits), still exact enough in float32 for the ray direction
 FAR = 1e9
@@ -56,7 +62,8 @@ def sphere_mean(image: np.ndarray) -> np.ndarray:
 
 
 def register(mi) -> None:
-    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area`` and ``nasset_sky`` for the active variant (idempotent)."""
+    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area``, ``nasset_sky`` and ``nasset_spot`` for the active
+    variant (idempotent)."""
     if mi.variant() in _REGISTERED:
         return
 
@@ -257,6 +264,66 @@ def register(mi) -> None:
         def to_string(self):
             return f"NassetSkyLight[{', '.join(p.to_string() for p in self.parts)}]"
 
+    class SpotLight(mi.Emitter):
+        """A point light whose intensity falls off around ``axis`` (delta position)."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.position = mi.Point3f(*np.asarray(props.get("position", mi.ScalarPoint3f(0.0)), np.float64).reshape(3).tolist())
+            self.intensity = mi.Color3f(*np.asarray(props.get("intensity", mi.ScalarColor3f(1.0)), np.float64).reshape(3).tolist())
+            a = np.asarray(props.get("axis", mi.ScalarVector3f(0, 0, -1)), np.float64).reshape(3)
+            if not np.isfinite(a).all() or np.linalg.norm(a) < 1e-30:
+                raise error("SCENE_INVALID", f"{SPOT}: axis {a.tolist()} is not a direction")
+            self.axis = mi.Vector3f(*(a / np.linalg.norm(a)).tolist())
+            self.cone = math.radians(float(props.get("cone", 90.0)))
+            self.softness = min(max(float(props.get("softness", 0.0)), 0.0), 1.0)
+            self.profile = str(props.get("profile", "linear"))
+            if self.profile not in SPOT_PROFILES or not math.isfinite(self.cone):
+                raise error("SCENE_INVALID", f"{SPOT}: profile {self.profile!r} / cone {self.cone} (profiles: {', '.join(SPOT_PROFILES)})")
+            self.m_flags = mi.EmitterFlags.DeltaPosition
+
+        def falloff(self, cos_t):
+            ct = dr.clip(cos_t, -1.0, 1.0)
+            if self.profile == "smoothstep":
+                cc = math.cos(self.cone)
+                if self.softness <= 0.0:
+                    return dr.select(ct > cc, 1.0, 0.0)
+                x = dr.clip((ct - cc) / max((1.0 - cc) * self.softness, 1e-30), 0.0, 1.0)
+                return x * x * (3.0 - 2.0 * x)
+            beam = self.cone * (1.0 - self.softness)
+            th = dr.acos(ct)
+            ramp = (self.cone - th) / max(self.cone - beam, 1e-30)
+            return dr.select(th <= beam, 1.0, dr.select(th < self.cone, ramp, 0.0))
+
+        def sample_direction(self, it, sample, active=True):
+            v = self.position - it.p
+            dist = dr.norm(v)
+            d = v / dr.select(dist > 0, dist, 1.0)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.p, ds.d, ds.dist, ds.pdf, ds.delta = self.position, d, dist, mi.Float(1.0), True
+            ds.emitter = mi.EmitterPtr(self)
+            inv2 = dr.select(dist > 0, dr.rcp(dr.square(dist)), 0.0)
+            return ds, mi.Spectrum(self.intensity) * self.falloff(dr.dot(-d, self.axis)) * inv2
+
+        def pdf_direction(self, it, ds, active=True):
+            return mi.Float(0.0)
+
+        def eval_direction(self, it, ds, active=True):
+            inv2 = dr.select(ds.dist > 0, dr.rcp(dr.square(ds.dist)), 0.0)
+            return mi.Spectrum(self.intensity) * self.falloff(dr.dot(-ds.d, self.axis)) * inv2
+
+        def eval(self, si, active=True):
+            return mi.Spectrum(0.0)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return f"NassetSpotLight[cone={math.degrees(self.cone)}, softness={self.softness}, {self.profile}]"
+
     class AreaLight(mi.Emitter):
         """Emission of a mesh on both sides of its triangles: ``front`` (the winding's side) and ``back`` RGB."""
 
@@ -297,4 +364,5 @@ def register(mi) -> None:
     mi.register_emitter(DOME, lambda props: DomeLight(props))
     mi.register_emitter(AREA, lambda props: AreaLight(props))
     mi.register_emitter(SKY, lambda props: SkyLight(props))
+    mi.register_emitter(SPOT, lambda props: SpotLight(props))
     _REGISTERED.add(mi.variant())

@@ -225,9 +225,9 @@ def _expand_asset(mi, shape, path: Path) -> None:
 
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
     """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
-    ones area lights), asset instances, point / distant (delta or cone) / sphere / rectangle / dome lights,
+    ones area lights), asset instances, point / spot / distant (delta or cone) / sphere / rectangle / dome lights,
     the camera."""
-    from nasset_mitsuba_renderer.lights import ConeDistantLight, DomeLight, MitsubaLight, build_lights
+    from nasset_mitsuba_renderer.lights import ConeDistantLight, DomeLight, MitsubaLight, SpotLight, build_lights
     from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
     from nasset_mitsuba_renderer.usdscene import read_scene
 
@@ -263,6 +263,12 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
                                           "camera_visible": visible}
         elif isinstance(lt, DomeLight):
             light_entries[f"dome_{k}"] = {**_dome_entry(mi, lt), "camera_visible": visible}
+        elif isinstance(lt, SpotLight):  # Mitsuba's point emitter without its cone: the plugin's nasset_spot
+            cone, soft, profile = lt.desc.shaping
+            light_entries[lt.key] = {"type": lights_jit.SPOT, "position": mi.ScalarPoint3f(*lt.mi_dict["position"]),
+                                     "intensity": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
+                                     "axis": mi.ScalarVector3f(lt.axis.tolist()), "cone": float(cone), "softness": float(soft),
+                                     "profile": str(profile)}
         elif not isinstance(lt, MitsubaLight):
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders point, distant, sphere, rect and dome lights, not {type(lt).__name__}",
                         file=str(path), prim=lt.desc.prim)

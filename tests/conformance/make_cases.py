@@ -389,6 +389,30 @@ def b_hidden_lights(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def _spot(ctx, name, position, aim, intensity, cone, softness, profile, color=(1, 1, 1)):
+    """A point light (radius 0) with UsdLux.ShapingAPI aimed along ``aim`` (its local -Z)."""
+    from pxr import Gf, Sdf, UsdGeom, UsdLux
+
+    from nasset_reference_renderer.testscenes import _frame_matrix
+
+    lt = ctx.sb.sphere_light(name, position, 0.0, intensity, color=color)
+    m = _frame_matrix(-np.asarray(aim, np.float64), position)
+    UsdGeom.Xformable(lt.GetPrim()).GetOrderedXformOps()[0].Set(Gf.Matrix4d(*np.asarray(m, np.float64).ravel().tolist()))
+    api = UsdLux.ShapingAPI.Apply(lt.GetPrim())
+    api.CreateShapingConeAngleAttr(float(cone))
+    api.CreateShapingConeSoftnessAttr(float(softness))
+    lt.GetPrim().CreateAttribute("nasset:shaping:falloff", Sdf.ValueTypeNames.Token, custom=True).Set(profile)
+    return lt
+
+
+def b_spot_lights(ctx):
+    ctx.camera()
+    ctx.floor()
+    _spot(ctx, "Spot", (0.6, 1.5, 0.6), (-0.45, -1.0, -0.4), 25.0, 30.0, 0.4, "linear", color=(1.0, 0.9, 0.8))
+    _spot(ctx, "Blender", (-1.0, 1.2, 0.2), (0.8, -1.0, -0.1), 15.0, 20.0, 0.3, "smoothstep", color=(0.7, 0.8, 1.0))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_self_shadow(ctx):
     ctx.camera(eye=(0.0, 0.4, 2.2))
     ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
@@ -526,6 +550,9 @@ CASES = [
          "with nasset:cameraVisibility = false, and a visible sun with an angle: camera rays pass through the hidden "
          "surfaces and see black where they escape, every other ray reaches them; the sphere lies between the sun and the "
          "floor, which it must not shadow", b_hidden_lights),
+    Case("rna_spot_lights", "two point lights with UsdLux.ShapingAPI aimed past the asset at the floor: a linear falloff "
+         "(cone 30 degrees, softness 0.4) and nasset:shaping:falloff = smoothstep (cone 20, softness 0.3): the pools "
+         "of light, their soft edges and the asset's light samples", b_spot_lights),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "
          "self-occlusion only (no other objects: next-event estimation only)", b_self_shadow),
     Case("rna_shadow_on_asset", "a box between the light and the asset: light samples blocked by another object contribute 0 "

@@ -36,6 +36,7 @@ MUTANT_CASES = {
     "dome_mirrored": ["rna_dome_exr"],
     "one_escaped_light": ["rna_suns_and_dome"],
     "camera_visibility_ignored": ["rna_hidden_lights"],
+    "spot_shaping_ignored": ["rna_spot_lights"],
     "no_asset_indirect": ["rna_indirect"],
     "mis_weights_one": ["rna_sphere_light"],
     "quality_hq": ["rna_quality_variant"],

@@ -185,6 +185,13 @@ def camera_visibility_ignored():
     lights.Light.camera_visible = property(lambda self: True, lambda self, value: None)
 
 
+def spot_shaping_ignored():
+    """UsdLux.ShapingAPI ignored: a spot light is an unshaped point light."""
+    from nasset_reference_renderer import scene
+
+    scene._Loader._shaping = lambda self, prim, M: {}
+
+
 def no_asset_indirect():
     """Rays never continue from a neural asset (next-event estimation only, even with other objects)."""
     from nasset_reference_renderer import integrator, plan
@@ -348,6 +355,7 @@ def fiber_exempt_stops_search():
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, one_escaped_light, camera_visibility_ignored,
+                                   spot_shaping_ignored,
                                    no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
