@@ -226,7 +226,13 @@ def _expand_asset(mi, shape, path: Path) -> None:
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
     """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
     ones area lights), asset instances, point / spot / distant (delta or cone) / sphere / rectangle / dome lights,
-    the camera."""
+    the camera (its film filtered as the render settings say, spec/renderer.md#render-settings)."""
+    return usd_scene_settings(path, width, height, mi=mi)[0]
+
+
+def usd_scene_settings(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> tuple[dict, dict]:
+    """(:func:`usd_scene`'s dict, the scene's authored render settings: ``max_depth``, ``pixel_filter``,
+    ``pixel_filter_stddev`` where authored)."""
     from nasset_mitsuba_renderer.lights import ConeDistantLight, DomeLight, MitsubaLight, SpotLight, build_lights
     from nasset_mitsuba_renderer.render import mi_mesh, sensor_dict
     from nasset_mitsuba_renderer.usdscene import read_scene
@@ -241,6 +247,9 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
     expose(desc)
     w, h = desc.camera.resolution(width, height)
     entries: dict = {"type": "scene", "sensor": sensor_dict(mi, desc.camera, w, h)}
+    rs = dict(desc.render_settings)
+    if rs.get("pixel_filter") == "gaussian":  # Mitsuba's gaussian: the spec's filter, radius 4 stddev
+        entries["sensor"]["film"]["rfilter"] = {"type": "gaussian", "stddev": float(rs.get("pixel_filter_stddev", 0.5))}
     for k, m in enumerate(desc.meshes):
         mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
         bsdf = mi.load_dict({"type": preview.NAME, **_preview_props(mi, m)})
@@ -281,7 +290,7 @@ def usd_scene(path: str, width: int | None = None, height: int | None = None, *,
         if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
-    return entries
+    return entries, rs
 
 
 def _emission_sides(mesh) -> tuple:
