@@ -182,9 +182,7 @@ def register(mi) -> None:
             queue = LightQueue(mi, dr.width(ray)) if self.defer and shaded else None
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
-                si, passed = _trace(mi, scene, ray, ignore, ign_lo, ign_hi, active)
-                if dr.hint(hidden is not None, mode="scalar"):
-                    si = _past_hidden(mi, scene, ray, si, hidden, active & (depth == 0))
+                si, passed = _trace_onward(mi, scene, ray, ignore, ign_lo, ign_hi, active, lights, hidden, depth == 0)
                 if dr.hint(near, mode="scalar"):
                     passed = dr.select(c_moved, c_passed, passed)
                 beta[pending] *= dr.select(passed, t_sh, t_un)
@@ -416,37 +414,44 @@ def _on(mi, si, lut):
     return si.is_valid() & (dr.gather(mi.UInt32, lut, sid, si.is_valid() & (sid < dr.width(lut))) > 0)
 
 
-@dr.syntax
-def _past_hidden(mi, scene, ray, si, hidden, active):
-    """``si`` of camera rays (``active``) moved past the light surfaces hidden from them (a sphere is entered and left)."""
-    skip = active & _on(mi, si, hidden)
-    r = mi.Ray3f(ray)
-    i = mi.UInt32(0)
-    while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_hidden"):
-        r = _beyond(r, si)
-        si_next = scene.ray_intersect(r, skip)
-        si[skip] = si_next
-        skip &= _on(mi, si, hidden)
-        i += 1
-    return si
+def _trace_onward(mi, scene, ray, ignore, lo, hi, active, lights, hidden, camera):
+    """:func:`_trace` of a camera or continuation ray among light surfaces (spec/renderer.md#light-surfaces): it passes
+    through a light surface it meets from behind (a RectLight's back, a SphereLight from inside) and, for ``camera``
+    rays, through those hidden from the camera. ``lights`` / ``hidden``: :func:`shapes_named` (None: none)."""
+    if lights is None:
+        return _trace(mi, scene, ray, ignore, lo, hi, active)
+
+    def onward(si):
+        through = mi.Frame3f.cos_theta(si.wi) <= 0.0
+        if hidden is not None:
+            through |= camera & _on(mi, si, hidden)
+        return _on(mi, si, lights) & through
+
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, onward)
 
 
-@dr.syntax
 def _occluder(mi, scene, ray, ignore, lo, hi, active, lights):
     """:func:`_trace` of a shadow ray, passing through the light surfaces marked in ``lights`` (None: none): its first
     occluder (invalid: the light is reached) and whether it crossed instance ``ignore`` on the way."""
+    if lights is None:
+        return _trace(mi, scene, ray, ignore, lo, hi, active)
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lambda si: _on(mi, si, lights))
+
+
+@dr.syntax
+def _trace_past(mi, scene, ray, ignore, lo, hi, active, through):
+    """:func:`_trace`, traced on past every hit where ``through(si)`` holds; the crossings of ``ignore`` accumulate."""
     si, passed = _trace(mi, scene, ray, ignore, lo, hi, active)
-    if dr.hint(lights is not None, mode="scalar"):
-        skip = active & _on(mi, si, lights)
-        r = mi.Ray3f(ray)
-        i = mi.UInt32(0)
-        while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_past_lights"):
-            r = _beyond(r, si)
-            si_next, passed_next = _trace(mi, scene, r, ignore, lo, hi, skip)
-            si[skip] = si_next
-            passed |= skip & passed_next
-            skip &= _on(mi, si, lights)
-            i += 1
+    skip = active & through(si)
+    r = mi.Ray3f(ray)
+    i = mi.UInt32(0)
+    while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_past_lights"):
+        r = _beyond(r, si)
+        si_next, passed_next = _trace(mi, scene, r, ignore, lo, hi, skip)
+        si[skip] = si_next
+        passed |= skip & passed_next
+        skip &= through(si)
+        i += 1
     return si, passed
 
 

@@ -82,7 +82,8 @@ class Tracer:
         ng = si.n.numpy().T.astype(np.float64)
         return valid & (obj >= 0), obj, t, si.prim_index.numpy().astype(np.int64), si.uv.numpy().T.astype(np.float64), ng
 
-    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None, until_passed=False):
+    def trace(self, o, d, maxt=None, ignore=None, transparent=None, max_skips=64, exempt=None, until_passed=False,
+              back_through=None):
         """-> dict(hit, obj, t, prim, b1, b2, passed).
 
         ``ignore[i]``: object index ray i passes through, recording it in ``passed`` (-1: none);
@@ -90,7 +91,9 @@ class Tracer:
         (a fiber hit's own segment and its neighbours: spec/renderer.md#fibers);
         ``transparent``: bool per object index, objects every ray passes through without record
         (light shapes for shadow rays); ``until_passed``: a ray ends where it first passes through its ignored
-        object (with ``transparent`` everything: whether the ray meets that object's own triangles at all).
+        object (with ``transparent`` everything: whether the ray meets that object's own triangles at all);
+        ``back_through``: bool per object index, objects a ray passes through where it meets them from behind (the
+        light surfaces of spec/renderer.md#light-surfaces: a RectLight's back, a SphereLight from inside).
         """
         m = len(o)
         o = np.array(o, np.float64)
@@ -112,6 +115,8 @@ class Tracer:
                 through = through & ~((prim >= exempt[todo, 0]) & (prim < exempt[todo, 1]))
             if transparent is not None:
                 skip = skip | (hit & transparent[np.maximum(obj, 0)])
+            if back_through is not None:
+                skip = skip | (hit & back_through[np.maximum(obj, 0)] & (np.einsum("ij,ij->i", ng, d[todo]) > 0))
             if until_passed:
                 skip = skip & ~through
             fin = ~skip
@@ -365,7 +370,8 @@ class PathTracer:
         ignore = np.full(m, -1, np.int64)
         while len(idx):
             camera = depth == 0  # camera rays: every ray of the first pass, none after
-            tr = self.tracer.trace(o, d, ignore=ignore, transparent=self.hidden_shapes if camera.all() else None)
+            tr = self.tracer.trace(o, d, ignore=ignore, transparent=self.hidden_shapes if camera.all() else None,
+                                   back_through=self.light_shapes)
             p = o + d * np.where(np.isfinite(tr["t"]), tr["t"], 0.0)[:, None]
             p = self._surface_points(tr["obj"], tr["prim"], tr["b1"], tr["b2"], p)
             # escaped: infinite lights
@@ -509,7 +515,7 @@ class PathTracer:
         passed = np.zeros(len(o), bool)
         here, away = np.nonzero(~moved)[0], np.nonzero(moved)[0]
         if len(here):
-            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here],
+            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here], back_through=self.light_shapes,
                                              exempt=None if exempt is None else exempt[here])["passed"]
         if len(away):
             passed[away] = self.own_branch(o[away], wc[away], np.full(len(away), np.inf), obj[away],

@@ -413,6 +413,14 @@ def b_spot_lights(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_rect_light_back(ctx):
+    ctx.camera()
+    ctx.floor()
+    ctx.sb.rect_light("Panel", (0.25, 0.35, 1.1), 0.9, 0.6, (0.2, -0.3, -1.0), 8.0, color=(1.0, 0.85, 0.7))
+    ctx.sb.distant("Sun", (-0.4, 1.0, 0.6), 1.5)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_self_shadow(ctx):
     ctx.camera(eye=(0.0, 0.4, 2.2))
     ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
@@ -553,6 +561,9 @@ CASES = [
     Case("rna_spot_lights", "two point lights with UsdLux.ShapingAPI aimed past the asset at the floor: a linear falloff "
          "(cone 30 degrees, softness 0.4) and nasset:shaping:falloff = smoothstep (cone 20, softness 0.3): the pools "
          "of light, their soft edges and the asset's light samples", b_spot_lights),
+    Case("rna_rect_light_back", "a RectLight between the camera and the asset, emitting away from the camera toward the "
+         "asset and the floor: camera rays reach its back and pass through it (one-sided light surface), its light on "
+         "the asset", b_rect_light_back),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "
          "self-occlusion only (no other objects: next-event estimation only)", b_self_shadow),
     Case("rna_shadow_on_asset", "a box between the light and the asset: light samples blocked by another object contribute 0 "

@@ -246,6 +246,13 @@ def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
     assert row["passed"], row
 
 
+def test_rect_light_back_case_passes_via_cli(nr):
+    """``rna_rect_light_back``: camera rays reach a RectLight's back and pass through it (spec/renderer.md#light-surfaces);
+    Mitsuba's rectangle stopped them, black (16.7x the tolerance before)."""
+    row = _conformance(["rna_rect_light_back"])["rna_rect_light_back"]
+    assert row["passed"], row
+
+
 def test_missing_camera_is_a_scene_error(nr, tmp_path):
     b = SceneBuilder()
     b.distant("Sun", (0, 1, 0), 1.0)

@@ -192,6 +192,24 @@ def spot_shaping_ignored():
     scene._Loader._shaping = lambda self, prim, M: {}
 
 
+def rect_back_blocks():
+    """A RectLight's back stops rays, black (Mitsuba's one-sided rectangle), instead of letting them through."""
+    from nasset_reference_renderer import lights
+
+    def _hit(self, o, d):
+        den = d @ self.n
+        side = np.abs(den) > 1e-12
+        t = np.where(side, ((self.c - o) @ self.n) / np.where(side, den, -1.0), lights.INF)
+        q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
+        return np.where(side & (t > 0) & self._inside(q), t, lights.INF)
+
+    def intersect(self, o, d):
+        t = self._hit(o, d)
+        return t, np.where((np.isfinite(t) & ((d @ self.n) < 0))[:, None], self.L, 0.0)
+
+    lights.RectLight._hit, lights.RectLight.intersect = _hit, intersect
+
+
 def no_asset_indirect():
     """Rays never continue from a neural asset (next-event estimation only, even with other objects)."""
     from nasset_reference_renderer import integrator, plan
@@ -355,7 +373,7 @@ def fiber_exempt_stops_search():
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, one_escaped_light, camera_visibility_ignored,
-                                   spot_shaping_ignored,
+                                   spot_shaping_ignored, rect_back_blocks,
                                    no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
