@@ -48,8 +48,9 @@ FOUR_PI = 4.0 * math.pi
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
 #: shape id prefixes of a USD scene's light surfaces (spec/renderer.md#light-surfaces: the sphere of a SphereLight, the
-#: rectangle of a RectLight): shadow rays pass through them (Mitsuba's own lights block them, as in an XML scene);
-#: those hidden from camera rays (``nasset:cameraVisibility`` false) let camera rays through too
+#: rectangle of a RectLight, the ellipse of a DiskLight, the side of a CylinderLight): shadow rays pass through them
+#: (Mitsuba's own lights block them, as in an XML scene); those hidden from camera rays (``nasset:cameraVisibility``
+#: false) let camera rays through too
 LIGHT_SURFACE_PREFIX = "nasset_lightsurface_"
 HIDDEN_PREFIX = LIGHT_SURFACE_PREFIX + "hidden_"
 #: scenes with at most this many fiber instances trace rays leaving one on split structures (:func:`split_scenes`)

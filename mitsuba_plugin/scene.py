@@ -225,7 +225,7 @@ def _expand_asset(mi, shape, path: Path) -> None:
 
 def usd_scene(path: str, width: int | None = None, height: int | None = None, *, mi=None) -> dict:
     """Scene dict of a nasset USD scene: meshes (UsdPreviewSurface as the ``nasset_preview`` BSDF; emissive
-    ones area lights), asset instances, point / spot / distant (delta or cone) / sphere / rectangle / dome lights,
+    ones area lights), asset instances, point / spot / distant (delta or cone) / sphere / rect / disk / cylinder / dome lights,
     the camera (its film filtered as the render settings say, spec/renderer.md#render-settings)."""
     return usd_scene_settings(path, width, height, mi=mi)[0]
 
@@ -279,8 +279,8 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
                                      "axis": mi.ScalarVector3f(lt.axis.tolist()), "cone": float(cone), "softness": float(soft),
                                      "profile": str(profile)}
         elif not isinstance(lt, MitsubaLight):
-            raise error("SCENE_UNSUPPORTED", "the Mitsuba plugin renders point, spot, distant, sphere, rect and dome lights, "
-                        f"not {type(lt).__name__}", file=str(path), prim=lt.desc.prim)
+            raise error("SCENE_UNSUPPORTED", "the Mitsuba plugin renders point, spot, distant, sphere, rect, disk, cylinder and "
+                        f"dome lights, not {type(lt).__name__}", file=str(path), prim=lt.desc.prim)
         elif lt.has_shape:  # a light surface: shadow rays pass through it, camera rays too when it is hidden from them
             light_entries[(LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + lt.key] = light_entries.pop(lt.key)
     infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]

@@ -43,7 +43,7 @@ def _col(arr, n):
 
 
 class MitsubaLight:
-    """A light backed by a Mitsuba emitter (point, directional, area sphere, area rectangle)."""
+    """A light backed by a Mitsuba emitter (point, directional, area sphere, rectangle, disk, cylinder)."""
 
     infinite = False
 
@@ -270,6 +270,33 @@ def build_lights(desc_lights: list[Light], scene_path: str):
             row = local @ mw  # row-vector: p_world = p_local_mitsuba @ local @ mw
             area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
             ent = {"type": "rectangle", "to_world": mi.ScalarTransform4f(row.T.tolist()), "emitter": area}
+            lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
+        elif d.type == "DiskLight":
+            import mitsuba as mi
+
+            ex, ey = mw[0, :3] * d.radius, mw[1, :3] * d.radius
+            area = float(np.pi * np.linalg.norm(np.cross(ex, ey)))
+            if area <= 0:
+                continue
+            le = rad / area if d.normalize else rad
+            # Mitsuba's disk is the unit disk in local XY emitting toward +Z; USD's emits toward -Z: as the RectLight
+            row = np.diag([d.radius, -d.radius, -1.0, 1.0]) @ mw
+            area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
+            ent = {"type": "disk", "to_world": mi.ScalarTransform4f(row.T.tolist()), "emitter": area}
+            lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
+        elif d.type == "CylinderLight":
+            # the side of a round cylinder along the prim's local X (the reference renderer's reading: the mean scale
+            # across the axis), emitting outward; Mitsuba's cylinder has no caps and its normals point outward
+            axis = mw[0, :3]
+            lw = d.length * float(np.linalg.norm(axis))
+            rw = d.radius * float(np.linalg.norm(mw[1:3, :3], axis=1).mean())
+            if lw <= 0 or rw <= 0:
+                continue
+            le = rad / (2.0 * np.pi * rw * lw) if d.normalize else rad
+            c, u = mw[3, :3], axis / np.linalg.norm(axis)
+            area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
+            ent = {"type": "cylinder", "p0": (c - 0.5 * lw * u).tolist(), "p1": (c + 0.5 * lw * u).tolist(), "radius": rw,
+                   "emitter": area}
             lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
         elif d.type == "DomeLight":
             lights.append(DomeLight(d))

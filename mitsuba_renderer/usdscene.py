@@ -13,7 +13,7 @@ from nasset_sdk.errors import SceneError
 
 _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
 MAX_SETTINGS_PIXELS = 1 << 26  # a render settings' resolution above it is ignored, as in the reference renderer
-_LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DomeLight"}
+_LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DiskLight", "CylinderLight", "DomeLight"}
 
 
 @dataclass
@@ -47,6 +47,7 @@ class Light:
     radius: float = 0.0
     width: float = 0.0
     height: float = 0.0
+    length: float = 0.0  # CylinderLight (along its local X)
     normalize: bool = False
     texture: np.ndarray | None = None  # [H, W, 3] lat-long
     camera_visible: bool = True  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
@@ -582,6 +583,12 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         lt.radius = float(get("radius", 0.5))
         if bool(get("treatAsPoint", False)):
             lt.radius = 0.0
+    elif tn == "DiskLight":
+        lt.radius = float(get("radius", 0.5))
+    elif tn == "CylinderLight":
+        lt.radius, lt.length = float(get("radius", 0.5)), float(get("length", 1.0))
+        if bool(get("treatAsLine", False)):
+            _say(path)("treatAsLine ignored: rendered as the cylinder of its radius", ppath)
     elif tn == "RectLight":
         lt.width, lt.height = float(get("width", 1.0)), float(get("height", 1.0))
         if get("texture:file", None):

@@ -421,6 +421,27 @@ def b_rect_light_back(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_disk_cylinder_lights(ctx):
+    from pxr import UsdLux
+
+    from nasset_reference_renderer.testscenes import _frame_matrix
+
+    ctx.camera()
+    ctx.floor()
+    disk = UsdLux.DiskLight.Define(ctx.sb.stage, "/World/Disk")
+    disk.CreateIntensityAttr(4.0)
+    disk.CreateRadiusAttr(0.35)
+    disk.CreateNormalizeAttr(True)
+    ctx.sb._xform(disk.GetPrim(), scale(1.6, 0.7, 1.0) @ _frame_matrix(-np.array([-0.5, -1.0, -0.4]), (0.9, 1.4, 0.7)))
+    tube = UsdLux.CylinderLight.Define(ctx.sb.stage, "/World/Tube")
+    tube.CreateIntensityAttr(3.0)
+    tube.CreateRadiusAttr(0.06)
+    tube.CreateLengthAttr(1.4)
+    tube.CreateColorAttr((0.7, 0.85, 1.0))
+    ctx.sb._xform(tube.GetPrim(), _frame_matrix((0.3, 0.0, 1.0), (-0.2, 0.25, 1.1)))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_self_shadow(ctx):
     ctx.camera(eye=(0.0, 0.4, 2.2))
     ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
@@ -564,6 +585,8 @@ CASES = [
     Case("rna_rect_light_back", "a RectLight between the camera and the asset, emitting away from the camera toward the "
          "asset and the floor: camera rays reach its back and pass through it (one-sided light surface), its light on "
          "the asset", b_rect_light_back),
+    Case("rna_disk_cylinder_lights", "a tilted DiskLight, normalized, scaled into an ellipse, and a CylinderLight in front of "
+         "the asset, its side in view: one-sided disk, the tube emitting outward and hit only from outside", b_disk_cylinder_lights),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "
          "self-occlusion only (no other objects: next-event estimation only)", b_self_shadow),
     Case("rna_shadow_on_asset", "a box between the light and the asset: light samples blocked by another object contribute 0 "

@@ -82,7 +82,7 @@ def test_rays_pass_a_rect_light_from_behind(tmp_path):
     assert abs(with_panel[centre].mean() / without[centre].mean() - 1.0) < 0.1, with_panel[centre].mean()
 
 
-@pytest.mark.parametrize("case", ["rna_hidden_lights", "rna_suns_and_dome", "rna_rect_light_back"])
+@pytest.mark.parametrize("case", ["rna_hidden_lights", "rna_suns_and_dome", "rna_rect_light_back", "rna_disk_cylinder_lights"])
 def test_light_conformance_cases(tmp_path, case):
     """At twice the case's spp (spec/conformance.md: a noisier renderer passes ``--spp-scale``): the plugin picks one light
     per vertex where the reference renderer samples each, about 4x the variance with four lights."""

@@ -246,10 +246,12 @@ def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
     assert row["passed"], row
 
 
-def test_rect_light_back_case_passes_via_cli(nr):
-    """``rna_rect_light_back``: camera rays reach a RectLight's back and pass through it (spec/renderer.md#light-surfaces);
-    Mitsuba's rectangle stopped them, black (16.7x the tolerance before)."""
-    row = _conformance(["rna_rect_light_back"])["rna_rect_light_back"]
+@pytest.mark.parametrize("case", ["rna_rect_light_back", "rna_disk_cylinder_lights"])
+def test_light_surface_cases_pass_via_cli(nr, case):
+    """``rna_rect_light_back``: camera rays reach a RectLight's back and pass through it (spec/renderer.md#light-surfaces;
+    Mitsuba's rectangle stopped them, black: 16.7x the tolerance before). ``rna_disk_cylinder_lights``: DiskLight and
+    CylinderLight (SCENE_UNSUPPORTED before)."""
+    row = _conformance([case])[case]
     assert row["passed"], row
 
 
