@@ -43,6 +43,63 @@ def render_settings(b, path, camera=None, resolution=(8, 8), **attrs):
     return s
 
 
+def check_gaussian_pixel_filter(render, tmp_path, spp: int = 256) -> None:
+    """``render(scene, spp, seed=)`` [H, W, 3] of an emissive (radiance 1) half plane x < 0 whose edge projects onto the
+    image's centre line, with ``nasset:pixelFilter = "gaussian"`` (stddev 0.5 px) in its render settings: each column is
+    the filter's mass left of the edge, the truncated Gaussian's CDF (H x spp Bernoulli samples: within 5 sigma); the
+    same scene without the filter gives the box filter's 0 / 1 step."""
+    from pxr import Sdf
+
+    def edge(name, **attrs):
+        b = SceneBuilder()
+        b.camera((0, 0, 0), (0, 0, -1))
+        b.mesh("Half", [(-50, -50, -1), (0, -50, -1), (0, 50, -1), (-50, 50, -1)], [(0, 1, 2, 3)], diffuse=(0, 0, 0),
+               specular=(0, 0, 0), emission=(1, 1, 1))
+        st = render_settings(b, "/Render/Settings", resolution=(8, 4))
+        for key, (kind, value) in attrs.items():
+            st.GetPrim().CreateAttribute(key, kind).Set(value)
+        return b.write(tmp_path / name)
+
+    s = 0.5
+    img = render(edge("gauss.usda", **{"nasset:pixelFilter": (Sdf.ValueTypeNames.Token, "gaussian"),
+                                       "nasset:pixelFilterStddev": (Sdf.ValueTypeNames.Float, s)}), spp, seed=5)
+    assert img.shape == (4, 8, 3)
+    x = np.linspace(-4 * s, 4 * s, 200001)
+    density = np.exp(-x * x / (2 * s * s)) - np.exp(-8.0)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(x))])
+    cdf /= cdf[-1]
+    expect = np.interp(4.0 - (np.arange(8) + 0.5), x, cdf)  # a sample of column j lands left of the edge
+    n = 4 * spp
+    got = img[..., 0].mean(0)
+    sigma = np.maximum(np.sqrt(expect * (1 - expect) / n), 1.0 / n)
+    assert np.all(np.abs(got - expect) <= 5 * sigma), (got, expect)
+    assert 0.05 < got[4] < 0.3 and 0.7 < got[3] < 0.95  # neither the box's 0 / 1 step
+    # a sample on the pixel border may land on either side
+    np.testing.assert_allclose(render(edge("box.usda"), spp, seed=5)[..., 0].mean(0), [1, 1, 1, 1, 0, 0, 0, 0], atol=2.0 / n)
+
+
+def check_settings_max_depth(render, tmp_path, spp: int = 4) -> None:
+    """``render(scene, spp, seed=, max_depth=)``: ``nasset:maxDepth`` of the render settings is the bounce limit when the
+    caller gives none, and a caller's limit wins (a floor under a ceiling, lit by a bulb out of view)."""
+    from pxr import Sdf
+
+    def scene(name, depth=None):
+        b, _ = floor_scene()
+        b.quad("Ceiling", (0, 5, 0), 10.0, normal=(0, -1, 0), diffuse=(0.8, 0.8, 0.8))
+        b.sphere_light("Bulb", (2, 1.5, 0), 0.2, 20.0)  # outside the view
+        b.stage.RemovePrim("/World/Sun")
+        st = render_settings(b, "/Render/Settings", resolution=(8, 8))
+        if depth is not None:
+            st.GetPrim().CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int).Set(depth)
+        return b.write(tmp_path / name)
+
+    plain, one = scene("plain.usda"), scene("one.usda", 1)
+    direct = render(plain, spp, seed=2, max_depth=1)
+    np.testing.assert_array_equal(render(one, spp, seed=2), direct)
+    assert render(plain, spp, seed=2).mean() > 1.01 * direct.mean()  # the ceiling's bounce
+    np.testing.assert_array_equal(render(one, spp, seed=2, max_depth=5), render(plain, spp, seed=2))
+
+
 def product_camera_scene():
     """:func:`two_camera_scene` whose settings name ``Top`` and whose render product names ``Below`` (the product's
     camera is the one rendered)."""

@@ -15,7 +15,7 @@ pytest.importorskip("mitsuba")
 from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
 from nasset_sdk.errors import SceneError  # noqa: E402
-from tests.stage_scenes import RED, THETA, E, hidden_camera_scene, product_camera_scene  # noqa: E402, F401
+from tests.stage_scenes import RED, THETA, E, check_gaussian_pixel_filter, check_settings_max_depth, hidden_camera_scene, product_camera_scene  # noqa: E402, F401  # noqa: E402
 from tests.stage_scenes import floor_scene as _floor_scene  # noqa: E402
 from tests.stage_scenes import render_settings as _settings  # noqa: E402
 from tests.stage_scenes import two_camera_scene as _two_camera_scene  # noqa: E402
@@ -249,65 +249,20 @@ def test_asset_placed_with_a_payload_renders_as_with_a_reference(tmp_path):
 
 # -- custom render settings (spec/renderer.md#render-settings) ------------------------------------------------------
 
-def _edge_scene(tmp_path, **attrs):
-    """An emissive (radiance 1) half plane x < 0 at z = -1 in front of a camera at the origin: its edge projects onto
-    the vertical line through the image centre."""
-    b = SceneBuilder()
-    b.camera((0, 0, 0), (0, 0, -1))
-    b.mesh("Half", [(-50, -50, -1), (0, -50, -1), (0, 50, -1), (-50, 50, -1)], [(0, 1, 2, 3)], diffuse=(0, 0, 0),
-           specular=(0, 0, 0), emission=(1, 1, 1))
-    s = _settings(b, "/Render/Settings", resolution=(8, 4))
-    for name, (kind, value) in attrs.items():
-        s.GetPrim().CreateAttribute(name, kind).Set(value)
-    return b.write(tmp_path / "edge.usda")
-
-
 def test_gaussian_pixel_filter_of_the_settings_is_applied(tmp_path):
-    """``nasset:pixelFilter = "gaussian"`` spreads the edge over the columns beside it as the truncated Gaussian's
-    CDF says (each column a mean of H x spp Bernoulli samples: checked within 5 sigma); the box filter was used."""
-    from pxr import Sdf
-
+    """``nasset:pixelFilter = "gaussian"`` spreads an edge as the truncated Gaussian's CDF says (stage_scenes); the box
+    filter was used."""
     from nasset_mitsuba_renderer import render as mitsuba
 
-    s, spp = 0.5, 256
-    scene = _edge_scene(tmp_path, **{"nasset:pixelFilter": (Sdf.ValueTypeNames.Token, "gaussian"),
-                                     "nasset:pixelFilterStddev": (Sdf.ValueTypeNames.Float, s)})
-    img = mitsuba.render(scene, spp, seed=5)
-    assert img.shape == (4, 8, 3)
-    x = np.linspace(-4 * s, 4 * s, 200001)
-    density = np.exp(-x * x / (2 * s * s)) - np.exp(-8.0)
-    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(x))])
-    cdf /= cdf[-1]
-    expect = np.interp(4.0 - (np.arange(8) + 0.5), x, cdf)  # a sample of column j lands left of the edge
-    n = 4 * spp
-    got = img[..., 0].mean(0)
-    sigma = np.maximum(np.sqrt(expect * (1 - expect) / n), 1.0 / n)
-    assert np.all(np.abs(got - expect) <= 5 * sigma), (got, expect)
-    assert 0.05 < got[4] < 0.3 and 0.7 < got[3] < 0.95  # neither the box's 0 / 1 step
+    check_gaussian_pixel_filter(mitsuba.render, tmp_path)
 
 
 def test_max_depth_of_the_settings_is_the_default(tmp_path):
     """``nasset:maxDepth`` is the bounce limit when the caller gives none (the CLI's --max-depth absent); a caller's
     limit wins. It was ignored (5 bounces)."""
-    from pxr import Sdf
-
     from nasset_mitsuba_renderer import render as mitsuba
 
-    def scene(name, depth=None):
-        b, _ = _floor_scene()
-        b.quad("Ceiling", (0, 5, 0), 10.0, normal=(0, -1, 0), diffuse=(0.8, 0.8, 0.8))
-        b.sphere_light("Bulb", (2, 1.5, 0), 0.2, 20.0)  # outside the view
-        b.stage.RemovePrim("/World/Sun")
-        s = _settings(b, "/Render/Settings", resolution=(8, 8))
-        if depth is not None:
-            s.GetPrim().CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int).Set(depth)
-        return b.write(tmp_path / name)
-
-    plain, one = scene("plain.usda"), scene("one.usda", 1)
-    direct = mitsuba.render(plain, 4, seed=2, max_depth=1)
-    np.testing.assert_array_equal(mitsuba.render(one, 4, seed=2), direct)
-    assert mitsuba.render(plain, 4, seed=2).mean() > 1.01 * direct.mean()  # the ceiling's bounce
-    np.testing.assert_array_equal(mitsuba.render(one, 4, seed=2, max_depth=5), mitsuba.render(plain, 4, seed=2))
+    check_settings_max_depth(mitsuba.render, tmp_path)
 
 
 def test_geom_subset_of_another_element_type_is_warned(tmp_path):
