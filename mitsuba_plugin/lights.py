@@ -295,6 +295,11 @@ def register(mi) -> None:
             ramp = (self.cone - th) / max(self.cone - beam, 1e-30)
             return dr.select(th <= beam, 1.0, dr.select(th < self.cone, ramp, 0.0))
 
+        def irradiance(self, d, dist):
+            """I falloff / dist^2 at a point seen along the unit direction ``d`` toward the light, ``dist`` away."""
+            inv2 = dr.select(dist > 0, dr.rcp(dr.square(dist)), 0.0)
+            return mi.Spectrum(self.intensity) * self.falloff(dr.dot(-d, self.axis)) * inv2
+
         def sample_direction(self, it, sample, active=True):
             v = self.position - it.p
             dist = dr.norm(v)
@@ -302,15 +307,13 @@ def register(mi) -> None:
             ds = dr.zeros(mi.DirectionSample3f)
             ds.p, ds.d, ds.dist, ds.pdf, ds.delta = self.position, d, dist, mi.Float(1.0), True
             ds.emitter = mi.EmitterPtr(self)
-            inv2 = dr.select(dist > 0, dr.rcp(dr.square(dist)), 0.0)
-            return ds, mi.Spectrum(self.intensity) * self.falloff(dr.dot(-d, self.axis)) * inv2
+            return ds, self.irradiance(d, dist)
 
         def pdf_direction(self, it, ds, active=True):
             return mi.Float(0.0)
 
         def eval_direction(self, it, ds, active=True):
-            inv2 = dr.select(ds.dist > 0, dr.rcp(dr.square(ds.dist)), 0.0)
-            return mi.Spectrum(self.intensity) * self.falloff(dr.dot(-ds.d, self.axis)) * inv2
+            return self.irradiance(ds.d, ds.dist)
 
         def eval(self, si, active=True):
             return mi.Spectrum(0.0)

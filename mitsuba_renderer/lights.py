@@ -230,6 +230,26 @@ class DomeLight:
         return wi, np.full(m, np.inf), self.eval_dir(wi), self.pdf_dir(wi)
 
 
+def _surface_light(d: Light, key: str, rad: np.ndarray, shape: dict, area: float) -> MitsubaLight | None:
+    """A light surface: the Mitsuba ``shape`` with an area emitter of radiance ``rad``, per unit of its world ``area``
+    when the light normalizes; None for a surface of zero area."""
+    if area <= 0:
+        return None
+    le = rad / area if d.normalize else rad
+    ent = {**shape, "emitter": {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}}
+    return MitsubaLight(d, key, ent, delta=False, has_shape=True)
+
+
+def _planar_to_world(sx: float, sy: float, mw: np.ndarray):
+    """Mitsuba ``to_world`` of a planar light of half extents ``sx``, ``sy`` (row-vector prim transform ``mw``): Mitsuba's
+    rectangle and disk lie in local XY emitting toward +Z, USD's toward -Z, so local (x, y, z) -> (sx x, -sy y, -z) (a
+    rotation by pi about X: handedness kept) before ``mw``."""
+    import mitsuba as mi
+
+    row = np.diag([sx, -sy, -1.0, 1.0]) @ mw  # row-vector: p_world = p_local_mitsuba @ local @ mw
+    return mi.ScalarTransform4f(row.T.tolist())
+
+
 def build_lights(desc_lights: list[Light], scene_path: str):
     """-> (lights, mitsuba dict entries)."""
     lights, entries = [], {}
@@ -252,56 +272,31 @@ def build_lights(desc_lights: list[Light], scene_path: str):
                 ent = {"type": "point", "position": c.tolist(), "intensity": {"type": "rgb", "value": rad.tolist()}}
                 lights.append(MitsubaLight(d, key, ent, delta=True, has_shape=False) if d.shaping is None else SpotLight(d, key, ent))
             else:
-                le = rad / (4.0 * np.pi * r * r) if d.normalize else rad
-                area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
-                ent = {"type": "sphere", "center": c.tolist(), "radius": r, "emitter": area}
-                lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
+                lights.append(_surface_light(d, key, rad, {"type": "sphere", "center": c.tolist(), "radius": r}, 4.0 * np.pi * r * r))
         elif d.type == "RectLight":
-            import mitsuba as mi
-
-            ex, ey = mw[0, :3] * d.width, mw[1, :3] * d.height
-            area = float(np.linalg.norm(np.cross(ex, ey)))
-            if area <= 0:
-                continue
-            le = rad / area if d.normalize else rad
-            # Mitsuba's rectangle is [-1, 1]^2 in local XY emitting toward +Z; USD's emits toward -Z:
-            # scale by (w/2, -h/2, -1) (a rotation by pi about X, so handedness is kept).
-            local = np.diag([0.5 * d.width, -0.5 * d.height, -1.0, 1.0])
-            row = local @ mw  # row-vector: p_world = p_local_mitsuba @ local @ mw
-            area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
-            ent = {"type": "rectangle", "to_world": mi.ScalarTransform4f(row.T.tolist()), "emitter": area}
-            lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
+            ex, ey = mw[0, :3] * d.width, mw[1, :3] * d.height  # Mitsuba's rectangle is [-1, 1]^2
+            shape = {"type": "rectangle", "to_world": _planar_to_world(0.5 * d.width, 0.5 * d.height, mw)}
+            lights.append(_surface_light(d, key, rad, shape, float(np.linalg.norm(np.cross(ex, ey)))))
         elif d.type == "DiskLight":
-            import mitsuba as mi
-
-            ex, ey = mw[0, :3] * d.radius, mw[1, :3] * d.radius
-            area = float(np.pi * np.linalg.norm(np.cross(ex, ey)))
-            if area <= 0:
-                continue
-            le = rad / area if d.normalize else rad
-            # Mitsuba's disk is the unit disk in local XY emitting toward +Z; USD's emits toward -Z: as the RectLight
-            row = np.diag([d.radius, -d.radius, -1.0, 1.0]) @ mw
-            area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
-            ent = {"type": "disk", "to_world": mi.ScalarTransform4f(row.T.tolist()), "emitter": area}
-            lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
+            ex, ey = mw[0, :3] * d.radius, mw[1, :3] * d.radius  # Mitsuba's disk is the unit disk
+            shape = {"type": "disk", "to_world": _planar_to_world(d.radius, d.radius, mw)}
+            lights.append(_surface_light(d, key, rad, shape, float(np.pi * np.linalg.norm(np.cross(ex, ey)))))
         elif d.type == "CylinderLight":
             # the side of a round cylinder along the prim's local X (the reference renderer's reading: the mean scale
             # across the axis), emitting outward; Mitsuba's cylinder has no caps and its normals point outward
             axis = mw[0, :3]
             lw = d.length * float(np.linalg.norm(axis))
             rw = d.radius * float(np.linalg.norm(mw[1:3, :3], axis=1).mean())
-            if lw <= 0 or rw <= 0:
-                continue
-            le = rad / (2.0 * np.pi * rw * lw) if d.normalize else rad
-            c, u = mw[3, :3], axis / np.linalg.norm(axis)
-            area = {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}
-            ent = {"type": "cylinder", "p0": (c - 0.5 * lw * u).tolist(), "p1": (c + 0.5 * lw * u).tolist(), "radius": rw,
-                   "emitter": area}
-            lights.append(MitsubaLight(d, key, ent, delta=False, has_shape=True))
+            c, u = mw[3, :3], axis / max(float(np.linalg.norm(axis)), 1e-300)
+            shape = {"type": "cylinder", "p0": (c - 0.5 * lw * u).tolist(), "p1": (c + 0.5 * lw * u).tolist(), "radius": rw}
+            lights.append(_surface_light(d, key, rad, shape, 2.0 * np.pi * rw * lw if lw > 0 and rw > 0 else 0.0))
         elif d.type == "DomeLight":
             lights.append(DomeLight(d))
         else:
             raise SceneError("SCENE_UNSUPPORTED", f"light type {d.type}", file=scene_path, prim=d.prim)
+        if lights and lights[-1] is None:  # a light surface of zero area emits nothing
+            lights.pop()
+            continue
         if isinstance(lights[-1], MitsubaLight):
             entries[key] = lights[-1].mi_dict
     return lights, entries

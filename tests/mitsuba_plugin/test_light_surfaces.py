@@ -43,43 +43,45 @@ def test_camera_visibility(tmp_path, hidden_bulb, hidden_dome, centre, corner):
     assert np.allclose(img[8, 8], centre, rtol=1e-5) and np.allclose(img[0, 0], corner, rtol=1e-5), (img[8, 8], img[0, 0])
 
 
-def _floor_under(tmp_path, name, bulb):
+def _as_bright_as_without(scene, spp, centre):
+    """The centre of ``scene(with_light=True)`` over that of ``scene(with_light=False)`` (direct light only): the
+    faint light there must not darken the floor (within 10 %). Returns the light-free render's centre pixels."""
+    with_light = render(scene(True), spp, width=16, height=16, max_depth=1)
+    without = render(scene(False), spp, width=16, height=16, max_depth=1)
+    assert abs(with_light[centre].mean() / without[centre].mean() - 1.0) < 0.1, with_light[centre].mean()
+    return without[centre]
+
+
+def _floor_under(tmp_path, bulb):
     b = SceneBuilder()
     b.camera((2.5, 1.0, 0.0), (0, 0, 0), focal=80)  # low: the sphere is out of view, the floor under it in view
     b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0.5, 0.5, 0.5))
     b.distant("Sun", (0, 1, 0), 2.0)
     if bulb:  # a faint light sphere between the sun and the floor's centre
         b.sphere_light("Bulb", (0, 0.8, 0), 0.4, 1e-6)
-    return b.write(tmp_path / f"{name}.usda")
+    return b.write(tmp_path / f"bulb_{bulb}.usda")
 
 
 def test_a_light_surface_casts_no_shadow(tmp_path):
     """The floor's centre, under a faint light sphere that covers the sun's direction, is as bright as without the
     sphere: rho E / pi = 0.318 (the light picked is the sun half the time, then weighted 2x). Before: 0, in shadow."""
-    with_bulb = render(_floor_under(tmp_path, "b", True), 256, width=16, height=16, max_depth=1)
-    without = render(_floor_under(tmp_path, "n", False), 256, width=16, height=16, max_depth=1)
-    centre = (slice(6, 10), slice(6, 10))
-    assert np.allclose(without[centre], 0.5 * 2.0 / np.pi, rtol=1e-3)
-    assert abs(with_bulb[centre].mean() / without[centre].mean() - 1.0) < 0.1, with_bulb[centre].mean()
+    without = _as_bright_as_without(lambda bulb: _floor_under(tmp_path, bulb), 256, (slice(6, 10), slice(6, 10)))
+    assert np.allclose(without, 0.5 * 2.0 / np.pi, rtol=1e-3)
 
 
 def test_rays_pass_a_rect_light_from_behind(tmp_path):
     """The camera sees the back of a faint RectLight (it emits away from the camera) and, through it, the floor as bright
     as without the light (rho E cos / pi under a delta sun, within 10 %). Before: black, Mitsuba's rectangle stops it."""
-    def scene(name, panel):
+    def scene(panel):
         b = SceneBuilder()
         b.camera((0, 1.0, 3.0), (0, 0, 0))
         b.quad("Floor", (0, -0.5, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
         b.distant("Sun", (0, 1, 0), 2.0)
         if panel:
             b.rect_light("Panel", (0, 0.3, 0.5), 1.5, 1.0, (0, 0.3, -1.0), 1e-6)
-        return b.write(tmp_path / f"{name}.usda")
+        return b.write(tmp_path / f"panel_{panel}.usda")
 
-    with_panel = render(scene("p", True), 64, width=16, height=16, max_depth=1)
-    without = render(scene("n", False), 64, width=16, height=16, max_depth=1)
-    centre = (slice(7, 9), slice(7, 9))
-    assert without[centre].mean() > 0.1
-    assert abs(with_panel[centre].mean() / without[centre].mean() - 1.0) < 0.1, with_panel[centre].mean()
+    assert _as_bright_as_without(scene, 64, (slice(7, 9), slice(7, 9))).mean() > 0.1
 
 
 @pytest.mark.parametrize("case", ["rna_hidden_lights", "rna_suns_and_dome", "rna_rect_light_back", "rna_disk_cylinder_lights"])
