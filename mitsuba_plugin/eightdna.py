@@ -430,8 +430,8 @@ def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on, ligh
 
     rnd: the vertex's random numbers (:func:`draw`); si: the hit; wo_world: -ray.d; sid: the hit shape's
     registry id (UInt32); assets: (index, EightDnaJit) of the scene's 8dna assets; tab, k: the integrator's
-    instance tables and instance index; x, n, wo: the object-space inputs; lights: the light surfaces shadow rays pass
-    through (:func:`.plugins.shapes_named`; None: every shape blocks them). Returns 'L' (Spectrum: direct lobe
+    instance tables and instance index; x, n, wo: the object-space inputs; lights: what shadow rays pass through, light
+    surfaces and absent cut-outs (:class:`.plugins.PassThrough`; None: every shape blocks them). Returns 'L' (Spectrum: direct lobe
     at x_o plus the light sample at u_i, to be multiplied by the path throughput), the continuation 'd'
     (world, unit), 'from_u' (Bool: it leaves the world point 'origin' = u_i M, else x_o), 'weight' (Spectrum
     throughput factor; 0 where a GGX continuation passes through the asset: 'weight_passed'), 'pdf' (its world

@@ -328,31 +328,40 @@ def register(mi) -> None:
             return f"NassetSpotLight[cone={math.degrees(self.cone)}, softness={self.softness}, {self.profile}]"
 
     class AreaLight(mi.Emitter):
-        """Emission of a mesh on both sides of its triangles: ``front`` (the winding's side) and ``back`` RGB."""
+        """Emission of a mesh on both sides of its triangles: ``front`` (the winding's side) and ``back`` RGB. With a
+        ``texture`` (a textures.ImageLookup, attached after loading) the sides flagged ``textured_front`` /
+        ``textured_back`` emit max(texture, 0) at the point's texture coordinates instead (spec/renderer.md#textures:
+        the constants are its mean, so Mitsuba's light selection by power is unchanged)."""
 
         def __init__(self, props):
             super().__init__(props)
             self.front, self.back = (mi.Color3f(*np.asarray(props.get(k, mi.ScalarColor3f(0.0)), np.float64).reshape(3).tolist())
                                      for k in ("front", "back"))
+            self.textured = (bool(props.get("textured_front", False)), bool(props.get("textured_back", False)))
+            self.texture = None
             self.m_flags = mi.EmitterFlags.Surface
 
-        def _side(self, seen_from_front, active):
-            return dr.select(active, dr.select(seen_from_front, self.front, self.back), mi.Color3f(0))
+        def _side(self, seen_from_front, uv, active):
+            value = dr.select(seen_from_front, self.front, self.back)
+            if self.texture is not None and any(self.textured):
+                textured = dr.select(seen_from_front, mi.Bool(self.textured[0]), mi.Bool(self.textured[1]))
+                value = dr.select(textured, dr.maximum(self.texture.eval(uv.x, uv.y, active & textured), 0.0), value)
+            return dr.select(active, value, mi.Color3f(0))
 
         def eval(self, si, active=True):
-            return self._side(mi.Frame3f.cos_theta(si.wi) > 0, active)
+            return self._side(mi.Frame3f.cos_theta(si.wi) > 0, si.uv, active)
 
         def sample_direction(self, it, sample, active=True):
             ds = self.get_shape().sample_direction(it, sample, active)
             ok = active & (ds.pdf != 0.0)
             ds.emitter = mi.EmitterPtr(self)
-            return ds, self._side(dr.dot(ds.d, ds.n) < 0, ok) / dr.select(ok, ds.pdf, 1.0)
+            return ds, self._side(dr.dot(ds.d, ds.n) < 0, ds.uv, ok) / dr.select(ok, ds.pdf, 1.0)
 
         def pdf_direction(self, it, ds, active=True):
             return self.get_shape().pdf_direction(it, ds, active)
 
         def eval_direction(self, it, ds, active=True):
-            return self._side(dr.dot(ds.d, ds.n) < 0, active)
+            return self._side(dr.dot(ds.d, ds.n) < 0, ds.uv, active)
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             return dr.zeros(mi.Ray3f), mi.Spectrum(0)

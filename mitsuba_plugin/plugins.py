@@ -152,7 +152,7 @@ def register(mi) -> None:
             assets, lut, tab = self.instances(scene)
             split_scenes(mi, scene)  # built here, outside the symbolic loop whose rays use them
             hidden = shapes_named(mi, scene, HIDDEN_PREFIX)  # light surfaces camera rays pass through (None: none)
-            lights = shapes_named(mi, scene, LIGHT_SURFACE_PREFIX)  # light surfaces shadow rays pass through
+            lights = PassThrough.of(mi, scene)  # light surfaces and absent cut-outs rays pass through (None: none)
             env = scene.environment()
             env_hidden = env is not None and not getattr(env, "camera_visible", True)  # its camera view: eval_camera
             prt = prt_mode.tables(mi, scene, assets, tab) if self.prt else None  # PRT mode: neupress by .prt
@@ -415,28 +415,68 @@ def _on(mi, si, lut):
     return si.is_valid() & (dr.gather(mi.UInt32, lut, sid, si.is_valid() & (sid < dr.width(lut))) > 0)
 
 
+class PassThrough:
+    """What rays of a USD scene pass through: light surfaces (spec/renderer.md#light-surfaces; shadow rays always,
+    camera and continuation rays from behind, camera rays those hidden from the camera) and cut-outs where they are
+    absent (spec/renderer.md#cutouts: the ``presence`` of their ``nasset_preview`` BSDF, every ray alike)."""
+
+    def __init__(self, mi, lights, cutouts: list) -> None:
+        self.mi, self.lights, self.cutouts = mi, lights, cutouts
+
+    @classmethod
+    def of(cls, mi, scene):
+        """The scene's light surfaces (:data:`LIGHT_SURFACE_PREFIX`) and cut-outs; None when it has neither."""
+        lights = shapes_named(mi, scene, LIGHT_SURFACE_PREFIX)
+        cutouts = [(int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]), sh.bsdf().presence) for sh in scene.shapes()
+                   if sh.bsdf() is not None and getattr(sh.bsdf(), "presence", None) is not None]
+        return None if lights is None and not cutouts else cls(mi, lights, cutouts)
+
+    def absent(self, si):
+        """[Bool] ``si`` hit a cut-out where it is absent. The uniform number of a fractional opacity is a hash of the
+        hit (its point and distance): one per hit, as the spec draws it."""
+        mi = self.mi
+        out = mi.Bool(False)
+        if not self.cutouts:
+            return out
+        sid = dr.reinterpret_array(mi.UInt32, si.shape)
+        bits = [dr.reinterpret_array(mi.UInt32, v) for v in (si.p.x, si.p.y, si.p.z, si.t)]
+        u = mi.sample_tea_float32(bits[0] ^ (bits[1] * 0x9E3779B1), bits[2] ^ (bits[3] * 0x85EBCA77), 4)
+        for shape_id, presence in self.cutouts:
+            on = si.is_valid() & (sid == shape_id)
+            out |= on & ~presence.present(si, u, on)
+        return out
+
+    def shadow(self, si):
+        """[Bool] a shadow ray goes on past hit ``si``."""
+        through = self.absent(si)
+        return through if self.lights is None else through | _on(self.mi, si, self.lights)
+
+    def onward(self, si, hidden, camera):
+        """[Bool] a camera (``camera``) or continuation ray goes on past hit ``si``; ``hidden``: the light surfaces
+        hidden from the camera (:func:`shapes_named`, None: none)."""
+        through = self.absent(si)
+        if self.lights is None:
+            return through
+        behind = self.mi.Frame3f.cos_theta(si.wi) <= 0.0
+        if hidden is not None:
+            behind |= camera & _on(self.mi, si, hidden)
+        return through | (_on(self.mi, si, self.lights) & behind)
+
+
 def _trace_onward(mi, scene, ray, ignore, lo, hi, active, lights, hidden, camera):
-    """:func:`_trace` of a camera or continuation ray among light surfaces (spec/renderer.md#light-surfaces): it passes
-    through a light surface it meets from behind (a RectLight's back, a SphereLight from inside) and, for ``camera``
-    rays, through those hidden from the camera. ``lights`` / ``hidden``: :func:`shapes_named` (None: none)."""
+    """:func:`_trace` of a camera or continuation ray among light surfaces and cut-outs: it passes what
+    ``lights`` (a :class:`PassThrough`, None: nothing) says; ``hidden``: :func:`shapes_named` (None: none)."""
     if lights is None:
         return _trace(mi, scene, ray, ignore, lo, hi, active)
-
-    def onward(si):
-        through = mi.Frame3f.cos_theta(si.wi) <= 0.0
-        if hidden is not None:
-            through |= camera & _on(mi, si, hidden)
-        return _on(mi, si, lights) & through
-
-    return _trace_past(mi, scene, ray, ignore, lo, hi, active, onward)
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lambda si: lights.onward(si, hidden, camera))
 
 
 def _occluder(mi, scene, ray, ignore, lo, hi, active, lights):
-    """:func:`_trace` of a shadow ray, passing through the light surfaces marked in ``lights`` (None: none): its first
+    """:func:`_trace` of a shadow ray, passing what ``lights`` (a :class:`PassThrough`, None: nothing) says: its first
     occluder (invalid: the light is reached) and whether it crossed instance ``ignore`` on the way."""
     if lights is None:
         return _trace(mi, scene, ray, ignore, lo, hi, active)
-    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lambda si: _on(mi, si, lights))
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lights.shadow)
 
 
 @dr.syntax

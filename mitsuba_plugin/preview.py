@@ -5,6 +5,17 @@ F with ``f0`` (taken literally: F0 = 0 still reflects at grazing angles). Sampli
 the GGX normal distribution with probability 1/2 each; the pdf is the mixture's. Properties: ``kd``, ``f0`` (rgb),
 ``alpha`` (float, clamped to >= 1e-3).
 
+Shading normals (spec/renderer.md#shading-normals): with ``normals`` (the name of a 3-wide mesh attribute of world
+corner normals, :func:`nasset_mitsuba_plugin.scene.usd_scene` writes it) a hit is shaded in the frame of ``ns``, the
+normalised barycentric sum of its corners' normals, flipped with the front side's geometric normal ``ng`` toward the
+viewer; where ``ns . wo <= 1e-6`` (or ``ns`` is undefined) the frame is ``ng``'s. A direction counts only above both
+``ns`` and ``ng``, so no light leaks through a surface. Without ``normals``, ``ns = ng``.
+
+Per-hit inputs (spec/renderer.md#textures, #primvar-colors): with ``per_hit`` (a
+:class:`~nasset_mitsuba_plugin.textures.PerHitInputs`, attached after loading) the front's kd, f0 and alpha come from
+textures and primvar colours at each hit. With ``normal_map`` (a :class:`~nasset_mitsuba_plugin.textures.ImageLookup`)
+the shading normal is the map's (spec/renderer.md#normal-maps) and the value carries the bump-terminator term.
+
 Sides (spec/renderer.md#sidedness): both sides are front-facing, shaded alike, unless ``one_sided`` (a hit on the
 back reflects nothing: the path ends) or a back material is given (``back_kd``, ``back_f0``, ``back_alpha``: the
 back is shaded with it). The back is where the geometric normal, times ``front_sign`` (-1 for a prim whose front
@@ -36,6 +47,10 @@ def register(mi) -> None:
             self.alpha = max(float(props.get("alpha", 0.25)), 1e-3)
             self.one_sided = bool(props.get("one_sided", False))
             self.front_sign = float(props.get("front_sign", 1.0))
+            self.normals = str(props.get("normals", ""))
+            self.per_hit = None  # a textures.PerHitInputs, set after loading (usd_scene): kd, f0, alpha per hit
+            self.normal_map = None  # a textures.ImageLookup of a tangent-space normal map, set after loading
+            self.presence = None  # a textures.Presence of a cut-out, set after loading (the integrator reads it)
             self.has_back = "back_kd" in props
             if self.has_back:
                 self.back_kd = mi.Color3f(props.get("back_kd"))
@@ -57,6 +72,8 @@ def register(mi) -> None:
             """(kd, f0, alpha, GGX distribution, active) of the side of hit si the viewer is on: a one-sided back leaves
             no lane active, a back material's parameters on the back (spec/renderer.md#sidedness)."""
             kd, f0, alpha = self.kd, self.f0, mi.Float(self.alpha)
+            if self.per_hit is not None:  # textures, primvar colours (nasset_mitsuba_plugin.textures)
+                kd, f0, alpha = self.per_hit.material(si, active)
             if self.one_sided or self.has_back:
                 back = dr.dot(si.n, si.to_world(si.wi)) * self.front_sign < 0
                 if self.one_sided:
@@ -67,10 +84,10 @@ def register(mi) -> None:
             return kd, f0, alpha, mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha, True), active
 
         def _eval_pdf(self, wi, wo, active, side):
-            """(f cos_o [Color3f], pdf) with wi (camera side) and wo (light side) local, already flipped to wi.z >= 0,
+            """(f cos_o [Color3f], pdf) with wi (camera side) and wo (light side) in the shading frame (:meth:`_frame`),
             with the parameters ``side`` of :meth:`_side`."""
-            kd, f0, alpha, ggx, active = side
-            ok = active & (wi.z > 0) & (wo.z > 0)
+            kd, f0, alpha, ggx, side_active = side
+            ok = active & side_active & (wi.z > 0) & (wo.z > 0)
             h = dr.normalize(wi + wo)
             d = ggx.eval(h)
             g2 = dr.rcp(1.0 + self._lambda(wi, alpha) + self._lambda(wo, alpha))
@@ -83,40 +100,84 @@ def register(mi) -> None:
             pdf = P_SPECULAR * pdf_spec + (1.0 - P_SPECULAR) * wo.z * (1.0 / math.pi)
             return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
 
+        def _frame(self, si, active):
+            """(shading frame, geometric normal flipped toward the viewer [world], the viewer's direction in the frame,
+            the interpolated normal flipped alike under a normal map, else None: the terminator term's reference)."""
+            wo_w = si.to_world(si.wi)
+            ng = dr.select(dr.dot(si.n, wo_w) < 0, -si.n, si.n)
+            if not self.normals and self.normal_map is None:
+                return mi.Frame3f(ng), ng, mi.Frame3f(ng).to_local(wo_w), None
+            # the interpolated normal on the front side (the triangle's own without normals), not yet flipped
+            n = dr.normalize(si.shape.eval_attribute_3(self.normals, si, active)) if self.normals else si.n * self.front_sign
+            smooth = None
+            if self.normal_map is not None:
+                smooth, n = n, self._mapped(si, n, active)
+            sign = dr.dot(si.n, wo_w) * self.front_sign  # flipped with ng (of the front side)
+            ns = dr.mulsign(n, sign)
+            frame = mi.Frame3f(dr.select(dr.dot(ns, wo_w) > 1e-6, ns, ng))  # also ng where ns is NaN (a zero sum)
+            if smooth is not None:
+                smooth = dr.mulsign(smooth, sign)
+                smooth = dr.select(dr.all(dr.isfinite(smooth)), smooth, frame.n)
+            return frame, ng, frame.to_local(wo_w), smooth
+
+        def _mapped(self, si, n, active):
+            """The normal map's normal (spec/renderer.md#normal-maps): its texel (x, y, z) in the frame T = dP/ds made
+            orthogonal to ``n``, B = n x T, n; T any tangent where the triangle's st are degenerate; ``n`` where the
+            result is zero or not finite."""
+            v = self.normal_map.eval(si.uv.x, si.uv.y, active)
+            dpds = si.dp_du
+            tan = dpds - n * dr.dot(n, dpds)
+            length = dr.norm(tan)
+            ok = dr.isfinite(length) & (length > 1e-12 * dr.norm(dpds))
+            tan = dr.select(ok, tan / dr.select(ok, length, 1.0), mi.Frame3f(n).s)
+            turned = tan * v.x + dr.cross(n, tan) * v.y + n * v.z
+            size = dr.norm(turned)
+            good = dr.isfinite(size) & (size > 1e-12)
+            return dr.select(good, turned / dr.select(good, size, 1.0), n)
+
         @staticmethod
-        def _flip(si, wo):
-            s = dr.select(si.wi.z < 0, -1.0, 1.0)
-            return mi.Vector3f(si.wi.x, si.wi.y, si.wi.z * s), mi.Vector3f(wo.x, wo.y, wo.z * s), s
+        def _terminator(smooth, mapped, w):
+            """Estevez et al.'s bump-terminator shadowing (Mitsuba's normalmap, spec/renderer.md#normal-maps) at world
+            direction ``w``: a GGX masking term with alpha^2 = min(tan^2(theta_d) / 8, 1), theta_d the angle between the
+            interpolated normal ``smooth`` and ``mapped``; 0 at or below ``smooth``'s horizon; 1 without a map."""
+            if smooth is None:
+                return 1.0
+            cos_d = dr.minimum(dr.abs(dr.dot(smooth, mapped)), 1.0)
+            alpha2 = dr.minimum(0.125 * (1.0 - cos_d * cos_d) / dr.maximum(cos_d * cos_d, 1e-30), 1.0)
+            cos_i = dr.dot(smooth, w)
+            c2 = dr.maximum(cos_i * cos_i, 1e-30)
+            return dr.select(cos_i > 1e-6, 2.0 / (1.0 + dr.sqrt(1.0 + alpha2 * (1.0 - c2) / c2)), 0.0)
 
         def eval(self, ctx, si, wo, active=True):
-            wi, wl, _ = self._flip(si, wo)
-            return self._eval_pdf(wi, wl, active, self._side(si, active))[0]
+            return self.eval_pdf(ctx, si, wo, active)[0]
 
         def pdf(self, ctx, si, wo, active=True):
-            wi, wl, _ = self._flip(si, wo)
-            return self._eval_pdf(wi, wl, active, self._side(si, active))[1]
+            return self.eval_pdf(ctx, si, wo, active)[1]
 
         def eval_pdf(self, ctx, si, wo, active=True):
-            wi, wl, _ = self._flip(si, wo)
-            return self._eval_pdf(wi, wl, active, self._side(si, active))
+            frame, ng, wi, smooth = self._frame(si, active)
+            w = si.to_world(wo)
+            value, pdf = self._eval_pdf(wi, frame.to_local(w), active & (dr.dot(w, ng) > 0), self._side(si, active))
+            return value * self._terminator(smooth, frame.n, w), pdf
 
         def sample(self, ctx, si, sample1, sample2, active=True):
-            wi, _, s = self._flip(si, si.wi)
+            frame, ng, wi, smooth = self._frame(si, active)
             side = self._side(si, active)
             spec = sample1 < P_SPECULAR
             m, _ = side[3].sample(wi, sample2)
             w_spec = mi.reflect(wi, m)
             w_diff = mi.warp.square_to_cosine_hemisphere(sample2)
             wl = dr.select(spec, w_spec, w_diff)
-            value, pdf = self._eval_pdf(wi, wl, active, side)
+            w_world = frame.to_world(wl)
+            value, pdf = self._eval_pdf(wi, wl, active & (dr.dot(w_world, ng) > 0), side)
             bs = dr.zeros(mi.BSDFSample3f)
-            bs.wo = mi.Vector3f(wl.x, wl.y, wl.z * s)
+            bs.wo = si.to_local(w_world)
             bs.pdf = pdf
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(dr.select(spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
             bs.sampled_component = dr.select(spec, mi.UInt32(1), mi.UInt32(0))
             ok = active & (pdf > 0)
-            return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+            return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0) * self._terminator(smooth, frame.n, w_world)
 
         def traverse(self, callback):
             pass

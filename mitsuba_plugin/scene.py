@@ -24,7 +24,7 @@ import numpy as np
 from nasset_sdk.errors import error, path_arg
 
 from . import lights as lights_jit
-from . import preview
+from . import preview, textures
 from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, asset_for, register
 from .variant import jit_mitsuba
 
@@ -251,13 +251,29 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
     if rs.get("pixel_filter") == "gaussian":  # Mitsuba's gaussian: the spec's filter, radius 4 stddev
         entries["sensor"]["film"]["rfilter"] = {"type": "gaussian", "stddev": float(rs.get("pixel_filter_stddev", 0.5))}
     for k, m in enumerate(desc.meshes):
-        mesh = mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
-        bsdf = mi.load_dict({"type": preview.NAME, **_preview_props(mi, m)})
-        entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
         front, back = _emission_sides(m)
+        corners = _corner_attributes(m)
+        unwelded = corners or m.corner_st is not None
+        mesh = _corner_mesh(mi, f"mesh_{k}", m, corners) if unwelded else mi_mesh(mi, f"mesh_{k}", m.points, m.faces)
+        bsdf = mi.load_dict({"type": preview.NAME, **_preview_props(mi, m),
+                             "normals": NORMALS_ATTRIBUTE if NORMALS_ATTRIBUTE in corners else ""})
+        hit = m.material.per_hit
+        if hit is not None and hit.varies_material:
+            bsdf.per_hit = textures.PerHitInputs(mi, hit)
+        if hit is not None and "normal" in hit.textures:
+            bsdf.normal_map = textures.ImageLookup(mi, hit.textures["normal"])
+        if m.material.presence is not None:  # a cut-out: rays pass where it is absent (plugins.PassThrough)
+            bsdf.presence = textures.Presence(mi, *m.material.presence, None if hit is None else hit.textures.get("opacity"))
+        entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
         if np.any(front > 0) or np.any(back > 0):
-            entries[f"mesh_{k}"]["emitter"] = {"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
-                                               "back": mi.ScalarColor3f(back.tolist())}
+            emission = hit.textures.get("emissiveColor") if hit is not None else None
+            sides = _material_sides(m) if emission is not None else (False, False)
+            emitter = mi.load_dict({"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
+                                    "back": mi.ScalarColor3f(back.tolist()), "textured_front": sides[0],
+                                    "textured_back": sides[1]})
+            if emission is not None:
+                emitter.texture = textures.ImageLookup(mi, emission)
+            entries[f"mesh_{k}"]["emitter"] = emitter
     for j, inst in enumerate(desc.assets):
         mw = np.asarray(inst.to_world, np.float64)
         if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
@@ -291,6 +307,48 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries, rs
+
+
+#: the mesh attribute of world corner normals the ``nasset_preview`` BSDF reads (Mitsuba interpolates it)
+NORMALS_ATTRIBUTE = "vertex_nasset_ns"
+
+
+def _corner_attributes(mesh) -> dict:
+    """{attribute name: values [F, 3, 3]} a mesh's BSDF reads at its triangles' corners: world shading normals (zero ones
+    kept: the BSDF normalises their barycentric sum as spec/renderer.md#shading-normals does; Mitsuba's own vertex
+    normals would be normalised per corner, a zero one to NaN), primvar colours. (Texture coordinates are the mesh's
+    own, ``vertex_texcoords``: hits and an emitter's position samples carry them as ``uv``.)"""
+    out = {}
+    if mesh.corner_normals is not None:
+        out[NORMALS_ATTRIBUTE] = np.nan_to_num(np.asarray(mesh.corner_normals, np.float64))
+    if mesh.corner_colors is not None:
+        out[textures.COLOR_ATTRIBUTE] = np.asarray(mesh.corner_colors, np.float64)
+    return out
+
+
+def _corner_mesh(mi, name: str, mesh, attributes: dict):
+    """A ``mi.Mesh`` of a mesh's world triangles, unwelded (3 vertices per triangle), carrying its corner texture
+    coordinates (``corner_st``) as texcoords and ``attributes`` ({name: [F, 3, 3]}) per corner: Mitsuba interpolates
+    both with a hit's barycentrics (``si.uv``, ``eval_attribute_3``)."""
+    faces = np.asarray(mesh.faces, np.int64)
+    pts = np.asarray(mesh.points, np.float64)[faces].reshape(-1, 3)
+    out = mi.Mesh(name, len(pts), len(faces), has_vertex_texcoords=mesh.corner_st is not None)
+    prm = mi.traverse(out)
+    prm["vertex_positions"] = mi.Float(np.ascontiguousarray(pts, np.float32).ravel())
+    prm["faces"] = mi.UInt32(np.arange(len(pts), dtype=np.uint32))
+    if mesh.corner_st is not None:
+        prm["vertex_texcoords"] = mi.Float(np.ascontiguousarray(np.clip(mesh.corner_st, -1e30, 1e30), np.float32).ravel())
+    prm.update()
+    for key, values in attributes.items():
+        out.add_attribute(key, 3, mi.Float(np.ascontiguousarray(values, np.float32).ravel()))
+    return out
+
+
+def _material_sides(mesh) -> tuple[bool, bool]:
+    """(the winding's side, the other side) of a mesh: whether its material (not its back material, nor nothing on a
+    one-sided prim's back) shades that side, as :func:`_emission_sides` assigns them."""
+    back = not mesh.one_sided and mesh.back_material is None
+    return (True, back) if mesh.front_sign > 0 else (back, True)
 
 
 def _emission_sides(mesh) -> tuple:

@@ -549,7 +549,8 @@ class PathTracer:
             sel = obj == k
             cn = self.objects[k]["corner_normals"][prim[sel]]
             ns[sel] = (1.0 - b1[sel] - b2[sel])[:, None] * cn[:, 0] + b1[sel][:, None] * cn[:, 1] + b2[sel][:, None] * cn[:, 2]
-        ns = normalized(np.where(flip[:, None], -ns, ns))
+        front = np.array([float(o_.get("front_sign", 1.0)) for o_ in self.objects] + [1.0])[obj]
+        ns = normalized(np.where((flip != (front < 0))[:, None], -ns, ns))  # flipped with the front side's ng
         n = np.where((dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
         back = self._backs(obj, prim, wo)
         mat = self._materials(obj, back)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -153,6 +154,11 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
     objects = []
     for k, mesh in enumerate(desc.meshes):
         name = f"nasset_obj_{k}"
+        if mesh.material.per_hit is not None:  # spec/renderer.md#textures: the Mitsuba plugin renders them
+            warnings.warn(f"{desc.path}:{mesh.prim}: textures and primvar colours are not rendered by this implementation; "
+                          "the inputs' own values are used", stacklevel=2)
+        if mesh.material.presence is not None:  # spec/renderer.md#cutouts: the Mitsuba plugin renders them
+            warnings.warn(f"{desc.path}:{mesh.prim}: opacity < 1 rendered opaque by this implementation (cut-outs)", stacklevel=2)
         fn = _face_normals(mesh.points, mesh.faces)
         entries[name] = mi_mesh(mi, name, mesh.points, mesh.faces)
         cn = mesh.corner_normals if mesh.corner_normals is not None else np.repeat(fn[:, None], 3, 1)

@@ -8,8 +8,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nasset_sdk import stage_rules
+from nasset_sdk import curves, stage_rules
 from nasset_sdk.errors import SceneError
+from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
+
+from .usdtextures import PER_HIT_INPUTS, PerHit, TextureReader, corner_values, texture_fallback
 
 _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
 MAX_SETTINGS_PIXELS = 1 << 26  # a render settings' resolution above it is ignored, as in the reference renderer
@@ -23,6 +26,8 @@ class Material:
     alpha: float
     emission: np.ndarray
     specular: bool  # the GGX lobe is present (always: Schlick F is non-zero at grazing angles even for F0 = 0)
+    per_hit: PerHit | None = None  # textured inputs / primvar colours (spec/renderer.md#textures); kd, f0, alpha: constants
+    presence: tuple | None = None  # (opacity, opacityThreshold) in [0, 1] of a cut-out (spec/renderer.md#cutouts); None: opaque
 
 
 @dataclass
@@ -35,6 +40,8 @@ class Mesh:
     one_sided: bool = False  # doubleSided authored false (spec/renderer.md#sidedness)
     back_material: Material | None = None  # nasset:backMaterial
     front_sign: float = 1.0  # -1 where the front is against (v1 - v0) x (v2 - v0) of the world triangle
+    corner_st: np.ndarray | None = None  # [F, 3, 2] texture coordinates at the corners (a textured material)
+    corner_colors: np.ndarray | None = None  # [F, 3, 3] primvar colours at the corners (spec/renderer.md#primvar-colors)
 
 
 @dataclass
@@ -138,16 +145,38 @@ def _m4(gf) -> np.ndarray:
     return np.array([[gf[i][j] for j in range(4)] for i in range(4)], np.float64)
 
 
-def _input(shader, name, default, t=None):
+def _input(shader, name, default, t=None, per_hit: dict | None = None, textures: TextureReader | None = None):
     """A UsdPreviewSurface input's value, followed through connections to a material's or node graph's interface
-    input (nasset_sdk.stage_rules.input_source); one fed by a shader output (a texture) gives its own authored value,
-    else ``default``, with a warning."""
+    input (nasset_sdk.stage_rules.input_source). One fed by a shader output gives its own authored value, else
+    ``default``; where that output is one :mod:`.usdtextures` reads per hit (a UsdUVTexture on diffuseColor, roughness or
+    metallic, a UsdPrimvarReader_float3 on diffuseColor), it goes into ``per_hit`` (its Texture, or ("color", (primvar,
+    fallback))) and a texture that cannot be read gives its authored fallback; any other is warned about."""
     from pxr import Usd
 
     producer, v = stage_rules.input_source(shader.GetInput(name), Usd.TimeCode.Default() if t is None else t)
-    if producer is not None:  # spec/renderer.md#limits, unsupported shading: the input's own value, else the fallback
-        warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected to {producer[0].GetPath()}.outputs:{producer[1]}; "
-                      "its texture is not rendered here (the input's own value, else the fallback, is used)", stacklevel=3)
+    if producer is None:
+        return default if v is None else v
+    node, output = producer[0], str(producer[1])
+    nid = node.GetIdAttr().Get()
+    if per_hit is not None and textures is not None:
+        if name == "diffuseColor" and nid == "UsdPrimvarReader_float3":
+            varname = str(stage_rules.input_source(node.GetInput("varname"), textures.t)[1] or "displayColor") \
+                if node.GetInput("varname") else "displayColor"
+            fb = stage_rules.input_source(node.GetInput("fallback"), textures.t)[1] if node.GetInput("fallback") else None
+            fallback = np.full(3, 0.18) if fb is None else _checked(fb, 3, "fallback", textures.scene, str(node.GetPath()), 1.0)
+            per_hit["color"] = (varname, fallback)
+            return default if v is None else v
+        if nid == "UsdUVTexture" and output in PER_HIT_INPUTS.get(name, ()):
+            tex = textures.read(node, output)
+            if tex is not None:
+                per_hit[name] = tex
+            else:
+                fallback = texture_fallback(node, output, textures.t)
+                v = v if fallback is None else fallback
+            return default if v is None else v
+    # spec/renderer.md#limits, unsupported shading: the input's own value, else the fallback
+    warnings.warn(f"{shader.GetPath()}.inputs:{name} is connected to {node.GetPath()}.outputs:{output}; it is not rendered "
+                  "here (the input's own value, else the fallback, is used)", stacklevel=3)
     return default if v is None else v
 
 
@@ -170,20 +199,31 @@ def _checked(value, n: int, name: str, path: str, shader: str, top: float = np.i
     return np.clip(v, 0.0, top)
 
 
-def _display_color(prim, say, t, primvars: stage_rules.InheritedPrimvars) -> np.ndarray:
+def _display_opacity(prim, say, t, primvars: stage_rules.InheritedPrimvars) -> tuple | None:
+    """An unbound prim's presence (spec/renderer.md#cutouts): its ``displayOpacity`` (its mean, warned when several
+    values), as an opacity without a threshold; None where it is opaque."""
+    do = primvars.find(prim, "displayOpacity")
+    opacity = do.Get(t) if do is not None else None
+    opacity = np.asarray(opacity, np.float64).ravel() if opacity is not None and len(opacity) else None
+    if opacity is None or not np.isfinite(opacity).all() or opacity.mean() >= 1.0:
+        return None
+    if len(opacity) > 1:
+        say(f"displayOpacity of {len(opacity)} values read as their mean", str(prim.GetPath()))
+    return float(np.clip(opacity.mean(), 0.0, 1.0)), 0.0
+
+
+def _display_color(prim, say, t, primvars: stage_rules.InheritedPrimvars, per_hit: dict | None = None) -> np.ndarray:
     """An unbound prim's diffuse colour (spec/renderer.md#limits, unbound meshes): its ``displayColor`` primvar, else a
-    constant one of an ancestor; 0.18 grey without one. Several values are read as their mean, with a warning."""
+    constant one of an ancestor; 0.18 grey without one. Several values are their mean; with ``per_hit`` they are also
+    interpolated per hit (``per_hit["color"]``, spec/renderer.md#primvar-colors), else warned about."""
     dc = primvars.find(prim, "displayColor")
     val = dc.Get(t) if dc is not None else None
     val = np.asarray(val, np.float64).reshape(-1, 3) if val is not None and len(val) else None
-    do = primvars.find(prim, "displayOpacity")
-    opacity = do.Get(t) if do is not None else None
-    if opacity is not None and len(opacity) and np.mean(np.asarray(opacity, np.float64)) < 1.0:
-        say("displayOpacity < 1 rendered opaque (its presence, spec/renderer.md#cutouts, is the reference renderer's)",
-            str(prim.GetPath()))
     if val is None or not np.isfinite(val).all():
         return np.full(3, 0.18)
-    if len(val) > 1:
+    if len(val) > 1 and per_hit is not None:
+        per_hit["color"] = ("displayColor", np.full(3, 0.18))
+    elif len(val) > 1:
         say(f"displayColor of {len(val)} values read as their mean (not interpolated per hit)", str(prim.GetPath()))
     return np.clip(val.mean(0), 0.0, 1.0)
 
@@ -197,18 +237,22 @@ def _say(path: str):
 
 def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = None, material=None,
                   primvars: stage_rules.InheritedPrimvars | None = None,
-                  bindings: stage_rules.MaterialBindings | None = None) -> Material:
+                  bindings: stage_rules.MaterialBindings | None = None, textures: TextureReader | None = None) -> Material:
     """The material bound to ``prim`` (or the UsdShade.Material ``material`` itself); ``primvars`` and ``bindings``:
-    the scene's inherited primvars and material bindings, remembered across the meshes of one traversal."""
+    the scene's inherited primvars and material bindings, remembered across the meshes of one traversal; ``textures``:
+    the scene's texture reader (without it, inputs fed by textures are warned about and read as their own values)."""
     say = _say(path)
     kd = np.array([0.18, 0.18, 0.18])
     spec, rough, metal, use_spec, ior = np.zeros(3), 0.5, 0.0, 0, 1.5
     emis = np.zeros(3)
+    per_hit: dict = {}
     mat = material
     if mat is None:
         mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say, bindings)
+    presence = None
     if not mat:
-        kd = _display_color(prim, say, t, primvars or stage_rules.InheritedPrimvars())
+        kd = _display_color(prim, say, t, primvars or stage_rules.InheritedPrimvars(), per_hit if textures else None)
+        presence = _display_opacity(prim, say, t, primvars or stage_rules.InheritedPrimvars())
     else:
         shader = stage_rules.surface_shader(mat)
         if shader is None:
@@ -219,25 +263,42 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
             raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not one of {', '.join(PREVIEW_SURFACES)}", file=path,
                              prim=str(shader.GetPath()))
         where = str(shader.GetPath())
-        kd = _checked(_input(shader, "diffuseColor", kd, t), 3, "diffuseColor", path, where, 1.0)
+        kd = _checked(_input(shader, "diffuseColor", kd, t, per_hit, textures), 3, "diffuseColor", path, where, 1.0)
         spec = _checked(_input(shader, "specularColor", spec, t), 3, "specularColor", path, where, 1.0)
-        rough = float(_checked(_input(shader, "roughness", rough, t), 1, "roughness", path, where, 1.0)[0])
-        metal = float(_checked(_input(shader, "metallic", metal, t), 1, "metallic", path, where, 1.0)[0])
+        rough = float(_checked(_input(shader, "roughness", rough, t, per_hit, textures), 1, "roughness", path, where, 1.0)[0])
+        metal = float(_checked(_input(shader, "metallic", metal, t, per_hit, textures), 1, "metallic", path, where, 1.0)[0])
         use_spec = int(_checked(_input(shader, "useSpecularWorkflow", use_spec, t), 1, "useSpecularWorkflow", path, where)[0])
         ior = float(_checked(_input(shader, "ior", ior, t), 1, "ior", path, where)[0])
         if ior <= 0:
             raise SceneError("SCENE_INVALID", f"ior = {ior!r} must be > 0", file=path, prim=where, attribute="inputs:ior")
-        emis = _checked(_input(shader, "emissiveColor", emis, t), 3, "emissiveColor", path, where)
-        if float(_input(shader, "opacity", 1.0, t)) < 1.0:
-            warnings.warn(f"{shader.GetPath()}: opacity < 1 rendered opaque (cut-outs, spec/renderer.md#cutouts, are "
-                          "the reference renderer's)", stacklevel=2)
+        emis = _checked(_input(shader, "emissiveColor", emis, t, per_hit, textures), 3, "emissiveColor", path, where)
+        if "emissiveColor" in per_hit:  # spec/renderer.md#textures: its mean is the material's constant
+            tex = per_hit["emissiveColor"]
+            emis = np.maximum(tex.image.reshape(-1, 3).mean(0, dtype=np.float64) * tex.scale + tex.bias, 0.0)
+        if shader.GetInput("normal"):  # a tangent-space normal map (spec/renderer.md#normal-maps), else warned
+            _input(shader, "normal", None, t, per_hit, textures)
+        opacity = float(_checked(_input(shader, "opacity", 1.0, t, per_hit, textures), 1, "opacity", path, where, 1.0)[0])
+        threshold = float(_checked(_input(shader, "opacityThreshold", 0.0, t), 1, "opacityThreshold", path, where, 1.0)[0])
+        if "opacity" in per_hit or opacity < (threshold if threshold > 0 else 1.0):  # spec/renderer.md#cutouts
+            presence = (opacity, threshold)
+    r0 = ((1.0 - ior) / (1.0 + ior)) ** 2
     if use_spec == 1:
         k, f0 = kd.copy(), spec
     else:
         k = kd * (1.0 - metal)
-        r0 = ((1.0 - ior) / (1.0 + ior)) ** 2
         f0 = r0 * (1.0 - metal) + kd * metal
-    return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True)
+    hit = None
+    if per_hit:
+        color = per_hit.pop("color", None)
+        textured = {name: per_hit[name] for name in PER_HIT_INPUTS if name in per_hit and not (name == "diffuseColor" and color)}
+        varnames = sorted({tex.varname for tex in textured.values()})
+        if len(varnames) > 1:
+            say(f"textures read different primvars {varnames}; all are read at {next(iter(textured.values())).varname!r}",
+                str(mat.GetPath()) if mat else str(prim.GetPath()))
+        hit = PerHit(np.asarray(kd, np.float64), rough, None if use_spec == 1 else metal, np.asarray(spec, np.float64), r0,
+                     textured, color)
+    return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True,
+                    per_hit=hit, presence=presence)
 
 
 DEFAULT_PURPOSES = stage_rules.Purposes(frozenset({"default", "render"}), "full")
@@ -346,6 +407,8 @@ def read_scene(path: str) -> SceneDesc:
     hiding = stage_rules.Hiding(t, purposes)
     inherited = stage_rules.InheritedPrimvars()  # displayColor of unbound meshes, O(1) per mesh however deep
     bindings = stage_rules.MaterialBindings()  # bound materials, O(1) per mesh however deep
+    textures = TextureReader(path, t, say)  # each image decoded once
+    tessellations: dict = {}  # (type, sizes, axis) -> implicit_mesh(...)
     cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
@@ -402,11 +465,33 @@ def read_scene(path: str) -> SceneDesc:
             one_sided, back, sign = _sidedness(prim, mw, path, t, purposes)
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
-            cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts), mw, t)
+            cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, (pts, counts, idx), mw, t, sign)
+            layout = (faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts))
             for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes, bindings):
-                meshes.append(Mesh(where, wp, faces[sel], read_material(binding, path, t, purposes, primvars=inherited,
-                                                 bindings=bindings),
-                                   None if cn is None else cn[sel], one_sided, back, sign))
+                material = read_material(binding, path, t, purposes, primvars=inherited, bindings=bindings, textures=textures)
+                mesh = Mesh(where, wp, faces[sel], material, None if cn is None else cn[sel], one_sided, back, sign)
+                if material.per_hit is not None:
+                    _per_hit_corners(mesh, prim, material.per_hit, layout, sel, inherited, t, say)
+                meshes.append(mesh)
+            continue
+        if tn in ("BasisCurves", "Points"):  # tubes and spheres (spec/renderer.md#curves-and-points)
+            mesh = _curves_or_points(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), t, say)
+            if mesh is not None:
+                mesh.back_material = _sidedness(prim, np.eye(4), path, t, purposes)[1]
+                mesh.material = read_material(prim, path, t, purposes, primvars=inherited, bindings=bindings)
+                meshes.append(mesh)
+            continue
+        if tn in IMPLICIT_PRIMS:
+            mw = _m4(cache.GetLocalToWorldTransform(prim))
+            mesh = _implicit_mesh(prim, tn, mw, path, t, tessellations)
+            mesh.one_sided, mesh.back_material, mesh.front_sign = _sidedness(prim, mw, path, t, purposes)
+            mesh.material = read_material(prim, path, t, purposes, primvars=inherited, bindings=bindings, textures=textures)
+            if mesh.material.per_hit is not None:
+                n = len(mesh.faces)
+                layout = (mesh.faces, np.arange(3 * n).reshape(n, 3), np.arange(n), len(mesh.points), 3 * n, n)
+                _per_hit_corners(mesh, prim, mesh.material.per_hit, layout, slice(None), inherited, t, say)
+            say(f"implicit {tn} tessellated into {len(mesh.faces)} triangles", ppath)
+            meshes.append(mesh)
             continue
         if tn in _STRUCTURAL:
             continue
@@ -475,30 +560,118 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rule
     return [g for g in out if g[2].any()]
 
 
-def _corner_normals(prim, faces, corners, face_of, nv, nidx, nfaces, mw, t):
-    """Authored normals (primvars:normals, else normals) as world shading normals per triangle corner."""
+#: triangles one curves or points prim may add (the reference renderer's bound)
+MAX_CURVE_TRIANGLES = 1 << 24
+
+
+def _curves_or_points(prim, tname: str, mw, t, say) -> Mesh | None:
+    """A BasisCurves or Points prim as its tubes or spheres in the world (nasset_sdk.curves, this package's fiber
+    tessellation), corner normals outward (its front: a mirroring transform winds the triangles the other way); None,
+    warned, when it has nothing to draw. Material and back material are the caller's."""
+    from .rna import fiber_tubes
+
+    def tessellate(points, counts, widths):
+        return fiber_tubes(points, counts, widths, curves.TUBE_SIDES)[:5]
+
+    where = str(prim.GetPath())
+    mesh = curves.curves_or_points_mesh(prim, tname, t, tessellate, lambda m: say(m, where), MAX_CURVE_TRIANGLES)
+    if mesh is None:
+        return None
+    local, faces, normals = mesh
+    say(f"{tname} tessellated into {len(faces)} triangles", where)
+    n = normals @ np.linalg.inv(mw[:3, :3]).T
+    n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+    front = -1.0 if float(np.linalg.det(mw[:3, :3])) < 0 else 1.0
+    return Mesh(where, local @ mw[:3, :3] + mw[3, :3], faces, None, n, front_sign=front)
+
+
+def _implicit_mesh(prim, tname: str, mw, path: str, t, tessellations: dict) -> Mesh:
+    """An implicit prim (spec/renderer.md#implicit-prims) as the SDK's reference tessellation in the world, its corner
+    normals on its front (a leftHanded prim's front is its inside); material and sides are the caller's to fill."""
+    size = {}
+    for name, fallback in IMPLICIT_PRIMS[tname].items():
+        attr = prim.GetAttribute(name)
+        v = attr.Get(t) if attr else None
+        try:
+            v = float(fallback if v is None else v)
+        except (TypeError, ValueError):
+            v = float("nan")
+        if not (np.isfinite(v) and 0 < v <= 1e12):  # the reference renderer's bound on world coordinates
+            raise SceneError("SCENE_INVALID", f"{tname} {name} = {v!r} must be finite and > 0", file=path,
+                             prim=str(prim.GetPath()), attribute=name)
+        size[name] = v
+    attr = prim.GetAttribute("axis")
+    axis = str(attr.Get(t)) if attr and attr.Get(t) is not None else "Z"
+    if axis not in ("X", "Y", "Z"):
+        raise SceneError("SCENE_INVALID", f"{tname} axis {axis!r} (X, Y or Z)", file=path, prim=str(prim.GetPath()),
+                         attribute="axis")
+    key = (tname, tuple(size.items()), axis)
+    if key not in tessellations:
+        tessellations[key] = implicit_mesh(tname, size, axis)
+    pts, faces, normals = tessellations[key]
     from pxr import UsdGeom
 
+    if UsdGeom.Gprim(prim).GetOrientationAttr().Get(t) == UsdGeom.Tokens.leftHanded:
+        normals = -normals
+    n = normals @ np.linalg.inv(mw[:3, :3]).T
+    n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
+    return Mesh(str(prim.GetPath()), pts @ mw[:3, :3] + mw[3, :3], faces, None, n)
+
+
+def _per_hit_corners(mesh: Mesh, prim, hit: PerHit, layout: tuple, sel, primvars, t, say) -> None:
+    """The texture coordinates and primvar colours at the corners of ``mesh`` (the faces ``sel`` of ``prim``) that its
+    material reads per hit; a primvar that is missing or unusable gives its reader's fallback, with a warning."""
+    where = str(prim.GetPath())
+    if hit.textures:
+        st = corner_values(primvars.find(prim, hit.varname), 2, layout, t)
+        if st is None:
+            say(f"textured material but no usable primvar {hit.varname!r} (float2, finite, vertex / faceVarying / uniform / "
+                "constant): its reader's fallback is used", where)
+            st = np.broadcast_to(next(iter(hit.textures.values())).st_fallback, (len(layout[0]), 3, 2))
+        mesh.corner_st = np.ascontiguousarray(st[sel], np.float64)
+    if hit.color is not None:
+        varname, fallback = hit.color
+        colors = corner_values(primvars.find(prim, varname), 3, layout, t)
+        if colors is None:
+            if varname != "displayColor":
+                say(f"no usable colour primvar {varname!r} (float3, finite): its reader's fallback is used", where)
+            colors = np.broadcast_to(fallback, (len(layout[0]), 3, 3))
+        mesh.corner_colors = np.ascontiguousarray(colors[sel], np.float64)
+
+
+def _corner_normals(prim, faces, corners, face_of, polygons, mw, t, front_sign: float = 1.0):
+    """World shading normals per triangle corner [F, 3, 3] (spec/renderer.md#shading-normals): the authored ones
+    (primvars:normals, else normals), else for a subdivision surface the smooth normals of its cage (on the front side:
+    times ``front_sign``), else None. ``polygons``: the mesh's (points, faceVertexCounts, faceVertexIndices)."""
+    from pxr import UsdGeom
+
+    pts, counts, idx = polygons
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("normals")
+    vals, interp = None, None
     if pv and pv.HasAuthoredValue():
         vals, interp = pv.ComputeFlattened(t), pv.GetInterpolation()
+        if vals is None:
+            warnings.warn(f"{prim.GetPath()}: primvars:normals has indices outside its values: ignored", stacklevel=3)
     else:
         a = UsdGeom.Mesh(prim).GetNormalsAttr()
-        if not a or not a.HasAuthoredValue():
+        if a and a.HasAuthoredValue():
+            vals, interp = a.Get(t), UsdGeom.Mesh(prim).GetNormalsInterpolation()
+    n = None
+    if vals is not None and len(vals):
+        v = np.asarray(vals, np.float64).reshape(-1, 3)
+        if interp in ("vertex", "varying") and len(v) == len(pts):
+            n = v[faces]
+        elif interp == "faceVarying" and len(v) == len(idx):
+            n = v[corners]
+        elif interp == "uniform" and len(v) == len(counts):
+            n = np.repeat(v[face_of][:, None], 3, 1)
+        else:
+            warnings.warn(f"{prim.GetPath()}: normals with interpolation {interp!r} and {len(v)} values ignored", stacklevel=3)
+    if n is None:
+        scheme = UsdGeom.Mesh(prim).GetSubdivisionSchemeAttr().Get(t)
+        if scheme in (None, UsdGeom.Tokens.none):
             return None
-        vals, interp = a.Get(t), UsdGeom.Mesh(prim).GetNormalsInterpolation()
-    if vals is None:
-        return None
-    v = np.asarray(vals, np.float64).reshape(-1, 3)
-    if interp in ("vertex", "varying") and len(v) == nv:
-        n = v[faces]
-    elif interp == "faceVarying" and len(v) == nidx:
-        n = v[corners]
-    elif interp == "uniform" and len(v) == nfaces:
-        n = np.repeat(v[face_of][:, None], 3, 1)
-    else:
-        warnings.warn(f"{prim.GetPath()}: normals with interpolation {interp!r} and {len(v)} values ignored", stacklevel=3)
-        return None
+        n = stage_rules.smooth_vertex_normals(pts, counts, idx, front_sign < 0)[faces]  # a cage shades smooth, as usdview draws it
     n = n @ np.linalg.inv(mw[:3, :3]).T
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
 

@@ -419,3 +419,25 @@ def composition_errors(stage) -> list:
     [(prim path, USD's message)] in USD's order. USD composes the stage without what failed; a renderer warns about
     each, naming the prim."""
     return [(str(f.rootSite.path), str(f).strip()) for f in stage.GetCompositionErrors()]
+
+
+def smooth_vertex_normals(points: np.ndarray, counts: np.ndarray, idx: np.ndarray, reversed_winding: bool) -> np.ndarray:
+    """Unit normals [V,3] of the ``points`` [V,3] of polygons ``counts`` / ``idx``: at each polygon corner the
+    cross product of its two edges, (next - p) x (prev - p) (area-weighted, Hydra's smooth normals of a cage), summed
+    per point; negated for a reversed winding. The shading normals of a subdivision surface's cage without authored
+    normals (spec/renderer.md#shading-normals). A point whose sum vanishes gets (0, 0, 1)."""
+    starts = np.repeat(np.cumsum(counts) - counts, counts)
+    n = np.repeat(counts, counts)
+    k = np.arange(len(idx)) - starts
+    nxt, prv = idx[starts + (k + 1) % n], idx[starts + (k - 1) % n]
+    p = points[idx]
+    a, b = points[nxt] - p, points[prv] - p
+    cross = np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], 1)
+    acc = np.zeros((len(points), 3))
+    np.add.at(acc, idx, -cross if reversed_winding else cross)
+    length = np.sqrt((acc * acc).sum(1))
+    out = np.tile([0.0, 0.0, 1.0], (len(points), 1))
+    ok = length > 1e-300
+    out[ok] = acc[ok] / length[ok, None]
+    return out

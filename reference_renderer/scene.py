@@ -19,14 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from nasset_sdk import stage_rules
+from nasset_sdk import curves, stage_rules
 from nasset_sdk.errors import NassetError, SceneError, UsageError, error, usd_reason
+from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
-from .curves import BASES, SPHERE_TRIANGLES, TUBE_TRIANGLES, CurveError, polylines, segment_count, sphere_mesh, tube_mesh
 from .film import MAX_IMAGE_PIXELS
-from .implicit import IMPLICIT_PRIMS, implicit_mesh
 from .lights import (
     MAX_MESH_LIGHT_TRIANGLES,
     SPOT_FALLOFFS,
@@ -40,7 +39,8 @@ from .lights import (
     RectLight,
     SphereLight,
 )
-from .sampling import box3, cross3, face_normals
+from .sampling import box3, face_normals
+from .shaders import rna_fiber
 from .textures import WRAP_MODES, ImageTexture, Opacity, PrimvarColor, TexturedMaterial, srgb_to_linear, transform2d
 
 #: Bounds the renderer checks on scene values (spec/renderer.md#limits).
@@ -189,25 +189,6 @@ class Scene:
     def corner_rows(self, prim: np.ndarray, inst: np.ndarray) -> np.ndarray:
         """Rows of tri_normals / tri_st [n] of mesh triangles ``prim`` [n] on instances ``inst`` [n]."""
         return prim + self.corner_offsets[inst]
-
-
-def smooth_vertex_normals(points: np.ndarray, counts: np.ndarray, idx: np.ndarray, reversed_winding: bool) -> np.ndarray:
-    """Unit normals [V,3] of the ``points`` [V,3] (world) of polygons ``counts`` / ``idx``: at each polygon corner the
-    cross product of its two edges, (next - p) x (prev - p) (area-weighted, Hydra's smooth normals of a cage), summed
-    per point; negated for a reversed winding. A point whose sum vanishes gets (0, 0, 1)."""
-    starts = np.repeat(np.cumsum(counts) - counts, counts)
-    n = np.repeat(counts, counts)
-    k = np.arange(len(idx)) - starts
-    nxt, prv = idx[starts + (k + 1) % n], idx[starts + (k - 1) % n]
-    p = points[idx]
-    cross = cross3(points[nxt] - p, points[prv] - p)
-    acc = np.zeros((len(points), 3))
-    np.add.at(acc, idx, -cross if reversed_winding else cross)
-    length = np.sqrt((acc * acc).sum(1))
-    out = np.tile([0.0, 0.0, 1.0], (len(points), 1))
-    ok = length > 1e-300
-    out[ok] = acc[ok] / length[ok, None]
-    return out
 
 
 def world_points(points: np.ndarray, M: np.ndarray) -> np.ndarray:
@@ -1084,7 +1065,7 @@ class _Loader:
                 self.warn(f"normals with interpolation {interp!r} and {len(nv)} values ignored", path)
         smooth = normals is None and subdivided
         if smooth:  # a subdivision surface's cage shades smooth, as usdview draws it
-            normals = smooth_vertex_normals(pts, counts, idx, False)[tri]
+            normals = stage_rules.smooth_vertex_normals(pts, counts, idx, False)[tri]
         back = self._back_material(prim)
         groups = self._face_groups(mesh, len(counts))  # [(prim path, material, faces or None)]
         varname = self._st_varname([g[1] for g in groups] + [back])
@@ -1309,60 +1290,25 @@ class _Loader:
         self._add(inst, tris, n, np.arange(len(faces)))
 
     def _curves_or_points(self, prim, tname):
-        """BasisCurves as tubes and Points as spheres of their widths (:mod:`curves`, spec/renderer.md#curves-and-points)."""
+        """BasisCurves as tubes and Points as spheres of their widths (nasset_sdk.curves, spec/renderer.md#curves-and-points)."""
         from pxr import UsdGeom
 
         path = prim.GetPath()
         geom = UsdGeom.BasisCurves(prim) if tname == "BasisCurves" else UsdGeom.Points(prim)
-        with self._reading(path):
-            pts = np.asarray(geom.GetPointsAttr().Get(self.time) or [], np.float64).reshape(-1, 3)
-            counts = (np.asarray(geom.GetCurveVertexCountsAttr().Get(self.time) or [], np.int64)
-                      if tname == "BasisCurves" else np.ones(len(pts), np.int64))
-            wv = geom.GetWidthsAttr().Get(self.time)
-            wv = None if wv is None else np.asarray(wv, np.float64).ravel()
-        if not len(pts) or not len(counts):
-            self.warn(f"{tname} without points skipped", path)
+
+        def tessellate(points, counts, widths):
+            tubes = rna_fiber.tessellate(points, counts, widths, curves.TUBE_SIDES)
+            return tubes.points, tubes.faces, tubes.tri_seg, tubes.p0, tubes.p1
+
+        try:
+            with self._reading(path):
+                mesh = curves.curves_or_points_mesh(prim, tname, self.time, tessellate, lambda m: self.warn(m, path),
+                                                    MAX_INSTANCED_TRIANGLES)
+        except SceneError as exc:
+            raise self.err(exc.code, exc.message, path, exc.attribute) from None
+        if mesh is None:
             return
-        if not np.isfinite(pts).all() or (counts < 1).any() or counts.sum() != len(pts):
-            raise self.err("SCENE_INVALID", f"{tname} points and curveVertexCounts do not match (or are not finite)",
-                           path, "curveVertexCounts" if tname == "BasisCurves" else "points")
-        interp = geom.GetWidthsInterpolation()
-        if wv is None or not len(wv):
-            self.warn(f"{tname} without widths: width 1 (scene units)", path)
-            widths = np.ones(len(pts))
-        elif interp == "constant" and len(wv) == 1:
-            widths = np.full(len(pts), wv[0])
-        elif interp == "uniform" and len(wv) == len(counts):
-            widths = np.repeat(wv, counts)
-        elif len(wv) == len(pts):  # vertex (or varying of linear curves and points)
-            widths = wv
-        else:
-            self.warn(f"{tname} widths ({interp}, {len(wv)} values) read as their mean", path)
-            widths = np.full(len(pts), float(np.mean(wv)))
-        if not (np.isfinite(widths).all() and (widths >= 0).all() and widths.max() <= MAX_WORLD_COORDINATE):
-            raise self.err("SCENE_INVALID", "widths must be finite and >= 0", path, "widths")
-        if tname == "Points":
-            if len(pts) * SPHERE_TRIANGLES > MAX_INSTANCED_TRIANGLES:
-                raise self.err("SCENE_INVALID", f"{len(pts)} points: their spheres would exceed {MAX_INSTANCED_TRIANGLES} "
-                               "triangles", path, "points")
-            local, faces, nrm = sphere_mesh(pts, widths)
-        else:
-            kind = str(geom.GetTypeAttr().Get(self.time) or "cubic")
-            basis = str(geom.GetBasisAttr().Get(self.time) or "bezier")
-            wrap = str(geom.GetWrapAttr().Get(self.time) or "nonperiodic")
-            if kind not in ("linear", "cubic") or basis not in BASES or wrap not in ("nonperiodic", "periodic", "pinned"):
-                raise self.err("SCENE_UNSUPPORTED", f"BasisCurves type {kind!r}, basis {basis!r}, wrap {wrap!r}", path, "basis")
-            if segment_count(counts, kind, basis, wrap) * TUBE_TRIANGLES > MAX_INSTANCED_TRIANGLES:  # >= the exact count
-                raise self.err("SCENE_INVALID", f"{len(counts)} curves: their tubes would exceed {MAX_INSTANCED_TRIANGLES} "
-                               "triangles", path, "curveVertexCounts")
-            try:
-                p, c, w = polylines(pts, counts, widths, kind, basis, wrap)
-            except CurveError as exc:
-                raise self.err("SCENE_INVALID", f"curveVertexCounts do not fit: {exc}", path, "curveVertexCounts") from None
-            local, faces, nrm = tube_mesh(p, c, w)
-        if not len(faces):
-            self.warn(f"{tname} of zero width or length skipped", path)
-            return
+        local, faces, nrm = mesh
         M = self.matrix(geom)
         if np.linalg.det(M[:3, :3]) < 0:  # mirrored: keep the triangles wound about their outward normals
             faces, nrm = faces[:, [0, 2, 1]], nrm[:, [0, 2, 1]]

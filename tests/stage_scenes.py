@@ -100,6 +100,212 @@ def check_settings_max_depth(render, tmp_path, spp: int = 4) -> None:
     np.testing.assert_array_equal(render(one, spp, seed=2, max_depth=5), render(plain, spp, seed=2))
 
 
+def check_shading_normals(render, tmp_path, spp: int = 4) -> None:
+    """``render(scene, spp, seed=, max_depth=)``: a diffuse floor (geometric normal +Y) under the delta sun of
+    :func:`floor_scene`, its four corners carrying one authored normal ``ns``, seen from above with direct light only, is
+    ``albedo E max(0, ns . l) / pi`` everywhere (spec/renderer.md#shading-normals): a normal tilted toward the sun is
+    brighter than the flat floor, one tilted away darker, one past the sun's horizon black; zero normals shade with the
+    geometric normal; a leftHanded prim wound the other way round reads its normals on its front as well."""
+    from pxr import Gf, UsdGeom
+
+    albedo = 0.6
+
+    def scene(name, tilt_deg, *, left_handed=False):
+        b, floor = floor_scene((albedo,) * 3)
+        mesh = UsdGeom.Mesh(floor)
+        if left_handed:  # the same surface, its front still up: USD reads the reversed winding as leftHanded
+            mesh.GetFaceVertexIndicesAttr().Set([3, 2, 1, 0])
+            mesh.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+        t = np.radians(tilt_deg) if tilt_deg is not None else None
+        n = (0.0, 0.0, 0.0) if t is None else (float(np.sin(t)), float(np.cos(t)), 0.0)  # in the sun's plane (x, y)
+        mesh.CreateNormalsAttr([Gf.Vec3f(*n)] * 4)
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+        return b.write(tmp_path / f"{name}.usda")
+
+    def expect(cos):
+        return albedo * E * max(cos, 0.0) / np.pi
+
+    cases = {"toward": (20.0, {}, np.cos(THETA - np.radians(20))), "away": (-20.0, {}, np.cos(THETA + np.radians(20))),
+             "past_horizon": (-70.0, {}, 0.0), "zero": (None, {}, np.cos(THETA)),
+             "left_handed": (20.0, {"left_handed": True}, np.cos(THETA - np.radians(20)))}
+    for name, (tilt, kw, cos) in cases.items():
+        img = render(scene(name, tilt, **kw), spp, seed=1, max_depth=1)
+        np.testing.assert_allclose(img, expect(cos), rtol=2e-3, atol=1e-5, err_msg=name)
+
+
+def check_cage_normals(render, tmp_path, spp: int = 64) -> None:
+    """``render(scene, spp, seed=, max_depth=)``: a cube without normals whose ``subdivisionScheme`` is the schema's
+    fallback (catmullClark) shades with its cage's smooth normals (the normalised diagonals at the corners), as the
+    reference renderer renders it (direct light under a delta sun: the same values up to pixel jitter): a face seen
+    head-on under a sun behind the camera reads cos(ns, l) < 1 away from its centre, the faceted cube (scheme none) 1."""
+    from pxr import UsdGeom
+
+    from nasset_reference_renderer import RenderSettings, load_scene
+    from nasset_reference_renderer import render as reference
+
+    def cube(scheme):
+        b = SceneBuilder()
+        b.camera((0, 0, 5), (0, 0, 0), focal=50)
+        b.distant("Sun", (0, 0, 1), 1.0)
+        pts = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+        faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+        m = b.mesh("Cube", pts, faces, diffuse=(0.5, 0.5, 0.5), specular=(0.0, 0.0, 0.0))
+        if scheme is None:
+            m.GetSubdivisionSchemeAttr().Clear()
+        return b.write(tmp_path / f"cube_{scheme}.usda")
+
+    size = dict(width=24, height=24)  # the front face fills the image
+    smooth = render(cube(None), spp, seed=1, max_depth=1, **size)
+    ref = reference(load_scene(cube(None)), RenderSettings(spp=spp, max_depth=1, seed=1, **size)).image[..., :3]
+    flat = render(cube(UsdGeom.Tokens.none), spp, seed=1, max_depth=1, **size)
+    np.testing.assert_allclose(flat, 0.5 / np.pi, rtol=2e-3)  # faceted: the face's own normal
+    assert smooth.mean() < 0.9 * flat.mean() and smooth[0, 0].mean() < 0.75 * flat[0, 0].mean()
+    np.testing.assert_allclose(smooth, ref, rtol=1e-2)
+
+
+def check_implicit_prims_and_curves(render, tmp_path, spp: int = 256) -> None:
+    """``render(scene, spp, seed=, max_depth=, width=, height=)``: implicit prims (a Sphere, a leftHanded Sphere seen
+    from inside-out shading, a Cube, a Capsule along X) and plain curves and points (linear and cubic BasisCurves, a
+    Points cloud) render as the reference renderer renders them, with the SDK's tessellations (spec/renderer.md#implicit-
+    prims, #curves-and-points): direct light from a delta sun, relative RMSE within 8 % at 32 x 32 (the two renders
+    sample pixels at other points) and means within 2 %. Both Mitsuba implementations refused these prims."""
+    import warnings
+
+    from pxr import Gf, UsdGeom
+
+    from nasset_reference_renderer import RenderSettings, load_scene
+    from nasset_reference_renderer import render as reference
+
+    b = SceneBuilder()
+    b.camera((0, 2.5, 4.0), (0, 0.3, 0), focal=30)
+    b.quad("Floor", (0, 0, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
+
+    def place(prim, at, scale=1.0):
+        xf = UsdGeom.Xformable(prim)
+        xf.AddTranslateOp().Set(Gf.Vec3d(*at))
+        xf.AddScaleOp().Set(Gf.Vec3f(scale, scale, scale))
+        UsdShadeBind(prim, b.material(prim.GetName() + "Mat", diffuse=(0.8, 0.5, 0.3), specular=(0.04,) * 3, roughness=0.4))
+
+    def UsdShadeBind(prim, mat):
+        from pxr import UsdShade
+
+        UsdShade.MaterialBindingAPI.Apply(prim).Bind(mat)
+
+    place(UsdGeom.Sphere.Define(b.stage, "/World/Ball").GetPrim(), (-1.0, 0.5, 0.0), 0.5)
+    inside = UsdGeom.Sphere.Define(b.stage, "/World/Inside")
+    inside.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    place(inside.GetPrim(), (1.0, 0.4, -0.5), 0.4)
+    place(UsdGeom.Cube.Define(b.stage, "/World/Box").GetPrim(), (0.2, 0.25, -1.0), 0.25)
+    capsule = UsdGeom.Capsule.Define(b.stage, "/World/Pill")
+    capsule.CreateAxisAttr(UsdGeom.Tokens.x)
+    place(capsule.GetPrim(), (0.0, 0.3, 1.0), 0.3)
+    arcs = UsdGeom.BasisCurves.Define(b.stage, "/World/Arcs")
+    t = np.linspace(0, np.pi, 9)
+    pts = np.concatenate([np.stack([np.cos(t) * 0.6 - 0.5, np.sin(t) * 0.6 + 0.05, 0.8 + 0 * t], 1),
+                          np.stack([np.cos(t) * 0.4 + 0.9, np.sin(t) * 0.4 + 0.05, 0.6 + 0 * t], 1)])
+    arcs.CreatePointsAttr([Gf.Vec3f(*map(float, q)) for q in pts])
+    arcs.CreateCurveVertexCountsAttr([9, 9])
+    arcs.CreateTypeAttr(UsdGeom.Tokens.linear)
+    arcs.CreateWidthsAttr([0.08])
+    arcs.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+    loop = UsdGeom.BasisCurves.Define(b.stage, "/World/Loop")
+    ring = [(0.5 * np.cos(a) + 0.3, 0.9, 0.5 * np.sin(a) - 0.2) for a in np.linspace(0, 2 * np.pi, 8, endpoint=False)]
+    loop.CreatePointsAttr([Gf.Vec3f(*map(float, q)) for q in ring])
+    loop.CreateCurveVertexCountsAttr([8])
+    loop.CreateTypeAttr(UsdGeom.Tokens.cubic)
+    loop.CreateBasisAttr(UsdGeom.Tokens.bspline)
+    loop.CreateWrapAttr(UsdGeom.Tokens.periodic)
+    loop.CreateWidthsAttr([0.06] * 8)
+    dots = UsdGeom.Points.Define(b.stage, "/World/Dots")
+    dots.CreatePointsAttr([Gf.Vec3f(-0.3 + 0.2 * k, 0.08, 1.6) for k in range(5)])
+    dots.CreateWidthsAttr([0.12] * 5)
+    b.distant("Sun", (0.4, 0.8, 0.45), 3.0)
+    scene = b.write(tmp_path / "prims.usda")
+    size = dict(width=32, height=32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "tessellated into N triangles"
+        want = reference(load_scene(scene), RenderSettings(spp=spp, max_depth=1, seed=3, **size)).image[..., :3]
+        got = render(scene, spp, seed=4, max_depth=1, **size)
+    rel = float(np.sqrt(np.mean((got - want) ** 2)) / want.mean())
+    assert rel < 0.08, rel
+    np.testing.assert_allclose(got.mean((0, 1)), want.mean((0, 1)), rtol=0.02)
+
+
+#: the per-hit inputs :func:`textured_scene` builds (spec/renderer.md#textures, #primvar-colors)
+TEXTURED_VARIANTS = ("repeat", "mirror", "clamp", "black", "exr", "channels", "transform2d", "face_varying", "primvar_color",
+                     "display_color", "missing_file")
+
+
+def textured_scene(tmp_path, variant: str) -> str:
+    """A 2 x 2 quad seen from above on a dark ground under a delta sun, its UsdPreviewSurface fed per hit as ``variant``
+    says (one of :data:`TEXTURED_VARIANTS`): a 24 x 16 8-bit sRGB checker-and-ramps PNG on diffuseColor read at st from
+    -0.7 to 1.7 with each wrap mode; a linear OpenEXR of ramps (mirror); roughness and metallic from the g and b channels
+    of a raw PNG; a UsdTransform2d between the primvar reader and the texture, with scale and bias; faceVarying st; a
+    UsdPrimvarReader_float3 colour; an unbound mesh's varying displayColor; a missing file with an authored fallback."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+
+    from nasset_sdk.images import write_exr, write_png
+
+    yy, xx = np.mgrid[:16, :24]
+    checker = np.stack([np.where((xx // 4 + yy // 4) % 2 == 0, 230, 30), xx * 10, yy * 15], -1).astype(np.uint8)
+    write_png(tmp_path / "checker.png", checker)
+    ramps = np.zeros((8, 8, 3), np.uint8)
+    ramps[..., 1], ramps[..., 2] = np.linspace(0, 255, 8)[None, :], np.linspace(0, 255, 8)[:, None]
+    write_png(tmp_path / "ramps.png", ramps)
+    write_exr(tmp_path / "ramps.exr", np.stack([xx / 24.0, yy / 16.0, 0.5 + 0.0 * xx], -1).astype(np.float32))
+
+    b = SceneBuilder()
+    b.camera((0, 4, 0.01), (0, 0, 0), focal=35)
+    b.quad("Ground", (0, -0.01, 0), 8, diffuse=(0.2, 0.2, 0.2))
+    st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32) * 2.4 - 0.7
+    q = b.quad("Quad", (0, 0, 0), 2.0, diffuse=(0.5, 0.5, 0.5), specular=(0.04,) * 3)
+    looks = "/World/Looks/QuadMat"
+    if variant in ("repeat", "mirror", "clamp", "black"):
+        b.texture("QuadMat", {"diffuseColor": "rgb"}, "checker.png", wrap=variant, st=st, mesh=q)
+    elif variant == "exr":
+        b.texture("QuadMat", {"diffuseColor": "rgb"}, "ramps.exr", wrap="mirror", st=st, mesh=q)
+    elif variant == "channels":
+        UsdShade.MaterialBindingAPI(q.GetPrim()).Bind(b.material("Metal", diffuse=(0.6, 0.4, 0.2), metallic=0.0))
+        b.texture("Metal", {"roughness": "g", "metallic": "b"}, "ramps.png", wrap="clamp", space="raw", st=st, mesh=q)
+    elif variant == "transform2d":
+        node = b.texture("QuadMat", {"diffuseColor": "rgb"}, "checker.png", wrap="repeat", st=st, mesh=q,
+                         scale=(1.5, 0.8, 1.0, 1.0), bias=(0.05, 0.1, 0.0, 0.0))
+        xf = UsdShade.Shader.Define(b.stage, f"{looks}/Transform")
+        xf.CreateIdAttr("UsdTransform2d")
+        xf.CreateInput("scale", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(1.7, 0.6))
+        xf.CreateInput("rotation", Sdf.ValueTypeNames.Float).Set(30.0)
+        xf.CreateInput("translation", Sdf.ValueTypeNames.Float2).Set(Gf.Vec2f(0.2, -0.3))
+        reader = UsdShade.Shader(b.stage.GetPrimAtPath(f"{looks}/st"))
+        xf.CreateInput("in", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        node.GetInput("st").ConnectToSource(xf.ConnectableAPI(), "result")
+    elif variant == "face_varying":
+        b.texture("QuadMat", {"diffuseColor": "rgb"}, "checker.png", wrap="repeat")
+        pv = UsdGeom.PrimvarsAPI(q).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+        pv.Set(np.array([[0, 0], [2, 0], [1.5, 1.3], [0, 1]], np.float32))
+    elif variant == "primvar_color":
+        surface = UsdShade.Shader(b.stage.GetPrimAtPath(f"{looks}/PreviewSurface"))
+        reader = UsdShade.Shader.Define(b.stage, f"{looks}/Tint")
+        reader.CreateIdAttr("UsdPrimvarReader_float3")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("tint")
+        surface.GetInput("diffuseColor").ConnectToSource(reader.ConnectableAPI(), "result")
+        pv = UsdGeom.PrimvarsAPI(q).CreatePrimvar("tint", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+        pv.Set(np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0.2]], np.float32))
+    elif variant == "display_color":
+        m = UsdGeom.Mesh.Define(b.stage, "/World/Unbound")
+        m.CreatePointsAttr([(-1, 0.01, -1), (1, 0.01, -1), (1, 0.01, 1), (-1, 0.01, 1)])
+        m.CreateFaceVertexCountsAttr([4])
+        m.CreateFaceVertexIndicesAttr([0, 3, 2, 1])
+        m.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        m.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set([(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)])
+    elif variant == "missing_file":
+        node = b.texture("QuadMat", {"diffuseColor": "rgb"}, "nowhere.png", wrap="repeat", st=st, mesh=q)
+        node.CreateInput("fallback", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(0.9, 0.1, 0.3, 1.0))
+    else:
+        raise ValueError(variant)
+    b.distant("Sun", (0.3, 0.9, 0.2), 3.0)
+    return b.write(tmp_path / f"{variant}.usda")
+
+
 def product_camera_scene():
     """:func:`two_camera_scene` whose settings name ``Top`` and whose render product names ``Below`` (the product's
     camera is the one rendered)."""

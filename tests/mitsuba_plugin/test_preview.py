@@ -27,6 +27,7 @@ def _bsdf_and_si(mi, alpha, wi, n):
     si = dr.zeros(mi.SurfaceInteraction3f, n)
     si.wi = mi.Vector3f(*(np.asarray(wi, np.float64) / np.linalg.norm(wi)).tolist())
     si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    si.n = mi.Normal3f(0, 0, 1)  # the geometric normal (a flat hit): directions below it count for nothing
     return b, si
 
 

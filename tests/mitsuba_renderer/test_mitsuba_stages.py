@@ -389,13 +389,30 @@ def test_preview_surface_inputs_are_clamped_or_invalid(tmp_path, value, expect):
 
 
 def test_connected_input_uses_its_own_authored_value(tmp_path):
-    """A diffuseColor fed by a texture this implementation does not render keeps the input's own authored value
-    (spec/renderer.md#limits, unsupported shading), with a warning; the 0.18 fallback was used."""
+    """A diffuseColor fed by a texture that cannot be read (no such file) keeps the input's own authored value
+    (spec/renderer.md#textures), with a warning; the 0.18 fallback was used. An input fed by an output this reader does
+    not read (a texture on specularColor) does the same."""
     b, _ = _floor_scene()
-    b.texture("FloorMat", {"diffuseColor": "rgb"}, "wood.png")
-    with pytest.warns(UserWarning, match="inputs:diffuseColor is connected"):
+    b.texture("FloorMat", {"diffuseColor": "rgb", "specularColor": "rgb"}, "wood.png")
+    with pytest.warns(UserWarning, match="wood.png is not found") as seen:
         desc = read_scene(b.write(tmp_path / "s.usda"))
+    assert any("inputs:specularColor is connected" in str(w.message) for w in seen)
     np.testing.assert_allclose(_kd(desc, "/World/Floor")[0], 0.6, rtol=1e-6)
+    assert desc.meshes[0].material.per_hit is None
+
+
+def test_textures_are_read_and_warned_as_not_rendered_here(tmp_path):
+    """A readable texture is read onto the material and its texture coordinates onto the mesh (the Mitsuba plugin renders
+    them, tests/mitsuba_plugin/test_textures.py); this implementation renders the input's own value and says so."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.stage_scenes import textured_scene
+
+    scene = textured_scene(tmp_path, "repeat")
+    mesh = next(m for m in read_scene(scene).meshes if m.prim == "/World/Quad")
+    tex = mesh.material.per_hit.textures["diffuseColor"]
+    assert tex.image.shape == (16, 24, 3) and tex.wrap == ("repeat", "repeat") and mesh.corner_st.shape == (len(mesh.faces), 3, 2)
+    with pytest.warns(UserWarning, match="textures and primvar colours are not rendered by this implementation"):
+        mitsuba.render(scene, 1, width=8, height=8)
 
 
 @pytest.mark.parametrize("feature", ["one-sided", "back material", "bad back material"])
@@ -426,3 +443,30 @@ def test_sidedness_is_read(tmp_path, feature):
     assert mesh.one_sided == (feature == "one-sided")
     if feature == "back material":
         np.testing.assert_allclose(mesh.back_material.kd, (0.1, 0.9, 0.2), rtol=1e-6)
+
+
+def test_authored_normals_shade_the_surface(tmp_path):
+    """Shading normals (spec/renderer.md#shading-normals) on a floor lit by a sun: tilted, zero and leftHanded cases.
+    A leftHanded prim's normals were flipped against its front and shaded faceted."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.stage_scenes import check_shading_normals
+
+    check_shading_normals(mitsuba.render, tmp_path)
+
+
+def test_a_subdivision_cage_shades_smooth(tmp_path):
+    """A mesh of the schema's fallback scheme (catmullClark) without normals shades with its cage's smooth normals, as
+    the reference renderer does; it was faceted."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.stage_scenes import check_cage_normals
+
+    check_cage_normals(mitsuba.render, tmp_path)
+
+
+def test_implicit_prims_and_curves_render(tmp_path):
+    """Implicit prims, BasisCurves and Points are tessellated by the SDK's rules (nasset_sdk.implicit, nasset_sdk.curves)
+    and render as the reference renderer renders them; they were SCENE_UNSUPPORTED."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.stage_scenes import check_implicit_prims_and_curves
+
+    check_implicit_prims_and_curves(mitsuba.render, tmp_path, spp=64)

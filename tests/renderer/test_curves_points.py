@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
-from nasset_reference_renderer.curves import polylines
 from nasset_reference_renderer.testscenes import SceneBuilder
+from nasset_sdk.curves import polylines
 from nasset_sdk.errors import SceneError
 
 P = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 0.0], [3.0, 2.0, 1.0], [4.0, 0.0, 0.0]])

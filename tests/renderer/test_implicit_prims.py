@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
-from nasset_reference_renderer.implicit import IMPLICIT_PRIMS, implicit_mesh
 from nasset_reference_renderer.testscenes import SceneBuilder
 from nasset_sdk.errors import SceneError
+from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
 
 
 def _volume(pts, faces) -> float:

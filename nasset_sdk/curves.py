@@ -1,7 +1,8 @@
-"""Plain ``BasisCurves`` and ``Points`` prims as triangles (spec/renderer.md#curves-and-points), in the prim's space.
+"""Plain ``BasisCurves`` and ``Points`` prims as triangles (spec/renderer.md#curves-and-points), in the prim's space:
+the rules every renderer of this project reads them by (:func:`curves_or_points_mesh`).
 
-Curves become closed prisms around the segments of their polylines (the tessellation of fiber assets,
-:func:`shaders.rna_fiber.tessellate`, ``TUBE_SIDES`` sides), radius ``width / 2``; cubic curves (``bezier``,
+Curves become closed prisms around the segments of their polylines (the tessellation of fiber assets, which each
+renderer passes in as ``tessellate``; ``TUBE_SIDES`` sides), radius ``width / 2``; cubic curves (``bezier``,
 ``bspline``, ``catmullRom``; ``nonperiodic``, ``periodic`` or ``pinned``) are first evaluated at
 :data:`SAMPLES_PER_SEGMENT` points per segment. Points become spheres of diameter ``width`` (an icosphere of 80
 triangles). Corner normals are the tube's radial directions (its axis on the caps) and the spheres' radial ones.
@@ -11,8 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .shaders.rna_fiber import TUBE_SIDES, tessellate
+from .errors import SceneError
 
+#: sides of a tube's prisms (the fiber tessellation's, spec/renderer.md#fibers)
+TUBE_SIDES = 8
 #: triangles of one segment's prism (the sides' 2 x TUBE_SIDES, two capping fans of TUBE_SIDES - 2) and of one point's
 #: sphere (an icosphere subdivided once)
 TUBE_TRIANGLES = 4 * TUBE_SIDES - 4
@@ -97,21 +100,22 @@ def polylines(points, counts, widths, curve_type: str = "linear", basis: str = "
     return np.concatenate(out_p), np.asarray(out_c, np.int64), np.maximum(np.concatenate(out_w), 0.0)
 
 
-def tube_mesh(points, counts, widths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(points [V,3], faces [F,3] wound outward, unit corner normals [F,3,3]) of prisms around the polylines."""
-    tubes = tessellate(points, counts, widths, TUBE_SIDES)
+def tube_mesh(points, counts, widths, tessellate) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points [V,3], faces [F,3] wound outward, unit corner normals [F,3,3]) of prisms around the polylines.
+    ``tessellate(points, counts, widths)``: the renderer's fiber tessellation (``TUBE_SIDES`` sides) as (vertices [V,3],
+    faces [F,3], segment of each face [F], segment starts [S,3], segment ends [S,3])."""
+    verts, tri_faces, seg, p0, p1 = tessellate(points, counts, widths)
     n = TUBE_SIDES
-    seg = tubes.tri_seg
-    local = np.arange(len(tubes.faces)) % TUBE_TRIANGLES  # the face's place in its segment: 2n sides, then two caps
-    axis = tubes.p1 - tubes.p0
+    local = np.arange(len(tri_faces)) % TUBE_TRIANGLES  # the face's place in its segment: 2n sides, then two caps
+    axis = p1 - p0
     axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-300)
-    centre = np.where((tubes.faces % (2 * n) < n)[..., None], tubes.p0[seg][:, None], tubes.p1[seg][:, None])  # [F,3,3]
-    radial = tubes.points[tubes.faces] - centre
+    centre = np.where((tri_faces % (2 * n) < n)[..., None], p0[seg][:, None], p1[seg][:, None])  # [F,3,3]
+    radial = verts[tri_faces] - centre
     radial = radial - (radial * axis[seg][:, None]).sum(-1, keepdims=True) * axis[seg][:, None]
     radial = radial / np.maximum(np.linalg.norm(radial, axis=-1, keepdims=True), 1e-300)
     cap0, cap1 = (local >= 2 * n) & (local < 3 * n - 2), local >= 3 * n - 2
     normals = np.where(cap0[:, None, None], -axis[seg][:, None], np.where(cap1[:, None, None], axis[seg][:, None], radial))
-    return tubes.points, tubes.faces, normals
+    return verts, tri_faces, normals
 
 
 def sphere_mesh(points, widths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -128,3 +132,67 @@ def sphere_mesh(points, widths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     faces = (np.arange(len(p))[:, None, None] * len(unit) + tri[None]).reshape(-1, 3)
     normals = np.broadcast_to(unit[tri][None], (len(p), len(tri), 3, 3)).reshape(-1, 3, 3)
     return verts, faces, normals
+
+
+def curves_or_points_mesh(prim, tname: str, time, tessellate, warn, max_triangles: int):
+    """(points [V,3] in the prim's space, faces [F,3] wound outward, unit corner normals [F,3,3]) of a ``BasisCurves``
+    (``tname``) or ``Points`` prim by spec/renderer.md#curves-and-points, or None (warned) when it has no points or
+    no triangles. ``tessellate``: see :func:`tube_mesh`; ``warn(message)``. SceneError naming the prim and attribute:
+    SCENE_INVALID for counts that do not fit, non-finite points or widths, negative widths, more than ``max_triangles``
+    triangles; SCENE_UNSUPPORTED for another type, basis or wrap."""
+    from pxr import UsdGeom
+
+    where = str(prim.GetPath())
+
+    def fail(code, message, attribute):
+        return SceneError(code, message, file=prim.GetStage().GetRootLayer().identifier, prim=where, attribute=attribute)
+
+    geom = UsdGeom.BasisCurves(prim) if tname == "BasisCurves" else UsdGeom.Points(prim)
+    pts = np.asarray(geom.GetPointsAttr().Get(time) or [], np.float64).reshape(-1, 3)
+    counts = (np.asarray(geom.GetCurveVertexCountsAttr().Get(time) or [], np.int64)
+              if tname == "BasisCurves" else np.ones(len(pts), np.int64))
+    wv = geom.GetWidthsAttr().Get(time)
+    wv = None if wv is None else np.asarray(wv, np.float64).ravel()
+    if not len(pts) or not len(counts):
+        warn(f"{tname} without points skipped")
+        return None
+    if not np.isfinite(pts).all() or (counts < 1).any() or counts.sum() != len(pts):
+        raise fail("SCENE_INVALID", f"{tname} points and curveVertexCounts do not match (or are not finite)",
+                   "curveVertexCounts" if tname == "BasisCurves" else "points")
+    interp = geom.GetWidthsInterpolation()
+    if wv is None or not len(wv):
+        warn(f"{tname} without widths: width 1 (scene units)")
+        widths = np.ones(len(pts))
+    elif interp == "constant" and len(wv) == 1:
+        widths = np.full(len(pts), wv[0])
+    elif interp == "uniform" and len(wv) == len(counts):
+        widths = np.repeat(wv, counts)
+    elif len(wv) == len(pts):  # vertex (or varying of linear curves and points)
+        widths = wv
+    else:
+        warn(f"{tname} widths ({interp}, {len(wv)} values) read as their mean")
+        widths = np.full(len(pts), float(np.mean(wv)))
+    if not (np.isfinite(widths).all() and (widths >= 0).all() and widths.max() <= 1e12):
+        raise fail("SCENE_INVALID", "widths must be finite and >= 0", "widths")
+    if tname == "Points":
+        if len(pts) * SPHERE_TRIANGLES > max_triangles:
+            raise fail("SCENE_INVALID", f"{len(pts)} points: their spheres would exceed {max_triangles} triangles", "points")
+        local, faces, nrm = sphere_mesh(pts, widths)
+    else:
+        kind = str(geom.GetTypeAttr().Get(time) or "cubic")
+        basis = str(geom.GetBasisAttr().Get(time) or "bezier")
+        wrap = str(geom.GetWrapAttr().Get(time) or "nonperiodic")
+        if kind not in ("linear", "cubic") or basis not in BASES or wrap not in ("nonperiodic", "periodic", "pinned"):
+            raise fail("SCENE_UNSUPPORTED", f"BasisCurves type {kind!r}, basis {basis!r}, wrap {wrap!r}", "basis")
+        if segment_count(counts, kind, basis, wrap) * TUBE_TRIANGLES > max_triangles:  # >= the exact count
+            raise fail("SCENE_INVALID", f"{len(counts)} curves: their tubes would exceed {max_triangles} triangles",
+                       "curveVertexCounts")
+        try:
+            p, c, w = polylines(pts, counts, widths, kind, basis, wrap)
+        except CurveError as exc:
+            raise fail("SCENE_INVALID", f"curveVertexCounts do not fit: {exc}", "curveVertexCounts") from None
+        local, faces, nrm = tube_mesh(p, c, w, tessellate)
+    if not len(faces):
+        warn(f"{tname} of zero width or length skipped")
+        return None
+    return local, faces, nrm
