@@ -183,11 +183,13 @@ def register(mi) -> None:
             queue = LightQueue(mi, dr.width(ray)) if self.defer and shaded else None
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
-                si, passed = _trace_onward(mi, scene, ray, ignore, ign_lo, ign_hi, active, lights, hidden, depth == 0)
+                si, passed, via_lights = _trace_onward(mi, scene, ray, ignore, ign_lo, ign_hi, active, lights, hidden,
+                                                       depth == 0, _light_emission(mi, scene, prev_si, prev_pdf, prev_delta))
                 if dr.hint(near, mode="scalar"):
                     passed = dr.select(c_moved, c_passed, passed)
                 beta[pending] *= dr.select(passed, t_sh, t_un)
                 valid |= active & si.is_valid()
+                L += beta * via_lights
 
                 # emission reached by the previous vertex's continuation
                 ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
@@ -451,24 +453,41 @@ class PassThrough:
         through = self.absent(si)
         return through if self.lights is None else through | _on(self.mi, si, self.lights)
 
-    def onward(self, si, hidden, camera):
-        """[Bool] a camera (``camera``) or continuation ray goes on past hit ``si``; ``hidden``: the light surfaces
-        hidden from the camera (:func:`shapes_named`, None: none)."""
+    def onward(self, si):
+        """[Bool] a camera or continuation ray goes on past hit ``si``: every light surface (met on its emitting side
+        it adds its emission on the way, :meth:`seen`), an absent cut-out."""
         through = self.absent(si)
+        return through if self.lights is None else through | _on(self.mi, si, self.lights)
+
+    def seen(self, si, hidden, camera):
+        """[Bool] hit ``si`` is a light surface whose emission a camera (``camera``) or continuation ray takes on its
+        way: not one hidden from camera rays (``hidden``: :func:`shapes_named`, None: none). Its back emits nothing."""
         if self.lights is None:
-            return through
-        behind = self.mi.Frame3f.cos_theta(si.wi) <= 0.0
-        if hidden is not None:
-            behind |= camera & _on(self.mi, si, hidden)
-        return through | (_on(self.mi, si, self.lights) & behind)
+            return self.mi.Bool(False)
+        seen = _on(self.mi, si, self.lights)
+        return seen if hidden is None else seen & ~(camera & _on(self.mi, si, hidden))
 
 
-def _trace_onward(mi, scene, ray, ignore, lo, hi, active, lights, hidden, camera):
-    """:func:`_trace` of a camera or continuation ray among light surfaces and cut-outs: it passes what
-    ``lights`` (a :class:`PassThrough`, None: nothing) says; ``hidden``: :func:`shapes_named` (None: none)."""
+def _light_emission(mi, scene, prev_si, prev_pdf, prev_delta):
+    """``emission(si, mask)``: the radiance of the emitter hit at ``si`` toward the previous vertex ``prev_si``, times
+    the MIS weight of a continuation of pdf ``prev_pdf`` (1 after a delta or camera vertex, ``prev_delta``)."""
+    def emission(si, m):
+        ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
+        pdf = scene.pdf_emitter_direction(prev_si, ds, m & ~prev_delta)
+        return _mis(prev_pdf, dr.select(prev_delta, 0.0, pdf)) * ds.emitter.eval(si, m)
+
+    return emission
+
+
+def _trace_onward(mi, scene, ray, ignore, lo, hi, active, lights, hidden, camera, emission):
+    """:func:`_trace` of a camera or continuation ray among light surfaces and cut-outs (spec/renderer.md#light-surfaces,
+    #cutouts): it passes what ``lights`` (a :class:`PassThrough`, None: nothing) says, and returns (si, passed, the sum
+    of ``emission(si, mask)`` over the light surfaces it passed and saw); ``hidden``: :func:`shapes_named`."""
     if lights is None:
-        return _trace(mi, scene, ray, ignore, lo, hi, active)
-    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lambda si: lights.onward(si, hidden, camera))
+        si, passed = _trace(mi, scene, ray, ignore, lo, hi, active)
+        return si, passed, mi.Spectrum(0.0)
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lights.onward,
+                       lambda si, m: emission(si, m & lights.seen(si, hidden, camera)))
 
 
 def _occluder(mi, scene, ray, ignore, lo, hi, active, lights):
@@ -476,14 +495,18 @@ def _occluder(mi, scene, ray, ignore, lo, hi, active, lights):
     occluder (invalid: the light is reached) and whether it crossed instance ``ignore`` on the way."""
     if lights is None:
         return _trace(mi, scene, ray, ignore, lo, hi, active)
-    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lights.shadow)
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lights.shadow)[:2]
 
 
 @dr.syntax
-def _trace_past(mi, scene, ray, ignore, lo, hi, active, through):
-    """:func:`_trace`, traced on past every hit where ``through(si)`` holds; the crossings of ``ignore`` accumulate."""
+def _trace_past(mi, scene, ray, ignore, lo, hi, active, through, collect=None):
+    """:func:`_trace`, traced on past every hit where ``through(si)`` holds; the crossings of ``ignore`` accumulate.
+    Returns (si, passed, the sum of ``collect(si, mask)`` over the hits passed; 0 without ``collect``)."""
     si, passed = _trace(mi, scene, ray, ignore, lo, hi, active)
     skip = active & through(si)
+    acc = mi.Spectrum(0.0)
+    if dr.hint(collect is not None, mode="scalar"):
+        acc += collect(si, skip)
     r = mi.Ray3f(ray)
     i = mi.UInt32(0)
     while dr.hint(skip & (i < MAX_SKIPS), max_iterations=-1, label="nasset_past_lights"):
@@ -492,8 +515,10 @@ def _trace_past(mi, scene, ray, ignore, lo, hi, active, through):
         si[skip] = si_next
         passed |= skip & passed_next
         skip &= through(si)
+        if dr.hint(collect is not None, mode="scalar"):
+            acc += collect(si, skip)
         i += 1
-    return si, passed
+    return si, passed, acc
 
 
 @dr.syntax

@@ -303,7 +303,7 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
     if len(infinite) > 1:  # Mitsuba keeps one environment emitter: a dome and angular suns become their sum
         light_entries["sky"] = {"type": lights_jit.SKY, **{f"part_{i}": light_entries.pop(k) for i, k in enumerate(infinite)}}
     for ent in light_entries.values():
-        if "emitter" in ent:  # a light surface ends the path (spec/renderer.md#light-surfaces): it reflects nothing
+        if "emitter" in ent:  # a light surface reflects nothing (spec/renderer.md#light-surfaces: rays go on past it)
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
     entries.update(light_entries)
     return entries, rs

@@ -370,8 +370,7 @@ class PathTracer:
         ignore = np.full(m, -1, np.int64)
         while len(idx):
             camera = depth == 0  # camera rays: every ray of the first pass, none after
-            tr = self.tracer.trace(o, d, ignore=ignore, transparent=self.hidden_shapes if camera.all() else None,
-                                   back_through=self.light_shapes)
+            tr = self._trace_past_lights(L, idx, o, d, ignore, camera.all(), prev_pdf, prev_p, beta)
             p = o + d * np.where(np.isfinite(tr["t"]), tr["t"], 0.0)[:, None]
             p = self._surface_points(tr["obj"], tr["prim"], tr["b1"], tr["b2"], p)
             # escaped: infinite lights
@@ -388,10 +387,6 @@ class PathTracer:
                 np.add.at(L, idx[miss], beta[miss] * le)
             obj = tr["obj"]
             kinds = np.array([o_["kind"] for o_ in self.objects] + [-1])[obj]
-            # area lights hit
-            hl = kinds == Kind.LIGHT
-            if np.any(hl):
-                self._shape_light_hits(L, idx, hl, obj, o + d * np.maximum(tr["t"] - 10.0 * ray_eps(p), 0.0)[:, None], d, prev_pdf, prev_p, beta)
             # plain meshes: emission
             hm = kinds == Kind.MESH
             if np.any(hm):
@@ -449,6 +444,36 @@ class PathTracer:
             o, d, prev_pdf = origin, new_d[k], new_pdf[k]
             ignore = np.where(is_asset[k], obj[k], -1)
         return L
+
+    def _trace_past_lights(self, L, idx, o, d, ignore, camera: bool, prev_pdf, prev_p, beta, max_lights: int = 64):
+        """:meth:`Tracer.trace` of rays among light surfaces (spec/renderer.md#light-surfaces): each light surface a ray
+        meets on its emitting side adds its emission (MIS-weighted) to ``L`` and the ray goes on past it (they occlude
+        nothing; met from behind they are passed by the tracer; ``camera`` rays pass the ones hidden from the camera
+        without adding them). Returns the trace of the rays' first hit that is not a light surface, ``t`` from ``o``."""
+        hidden = self.hidden_shapes if camera else None
+        tr = self.tracer.trace(o, d, ignore=ignore, transparent=hidden, back_through=self.light_shapes)
+        start = np.zeros(len(o))  # distance from o of each row's current trace origin
+        rows = np.arange(len(o))
+        for _ in range(max_lights):
+            rows = rows[self.light_shapes[tr["obj"][rows]]]
+            if not len(rows):
+                break
+            at = start[rows] + tr["t"][rows]  # the light surface, from o
+            hl = np.zeros(len(o), bool)
+            hl[rows] = True
+            t_hit = np.where(hl, start + tr["t"], 0.0)
+            near = o + d * t_hit[:, None]
+            before = o + d * np.maximum(t_hit - 10.0 * ray_eps(near), 0.0)[:, None]  # re-intersected for its emission
+            self._shape_light_hits(L, idx, hl, tr["obj"], before, d, prev_pdf, prev_p, beta)
+            beyond = o[rows] + d[rows] * at[:, None]
+            beyond = beyond + d[rows] * (10.0 * ray_eps(beyond))[:, None]
+            more = self.tracer.trace(beyond, d[rows], ignore=ignore[rows], transparent=hidden, back_through=self.light_shapes)
+            start[rows] = np.einsum("ij,ij->i", beyond - o[rows], d[rows])
+            for key in ("hit", "obj", "prim", "b1", "b2"):
+                tr[key][rows] = more[key]
+            tr["t"][rows] = np.where(more["hit"], start[rows] + more["t"], np.inf)
+            tr["passed"][rows] |= more["passed"]
+        return tr
 
     def _shape_light_hits(self, L, idx, hl, obj, o, d, prev_pdf, prev_p, beta):
         mi = self.mi
@@ -515,7 +540,7 @@ class PathTracer:
         passed = np.zeros(len(o), bool)
         here, away = np.nonzero(~moved)[0], np.nonzero(moved)[0]
         if len(here):
-            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here], back_through=self.light_shapes,
+            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here], transparent=self.light_shapes,
                                              exempt=None if exempt is None else exempt[here])["passed"]
         if len(away):
             passed[away] = self.own_branch(o[away], wc[away], np.full(len(away), np.inf), obj[away],

@@ -16,7 +16,7 @@ from .usdtextures import PER_HIT_INPUTS, PerHit, TextureReader, corner_values, t
 
 _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
 MAX_SETTINGS_PIXELS = 1 << 26  # a render settings' resolution above it is ignored, as in the reference renderer
-_LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DiskLight", "CylinderLight", "DomeLight"}
+_LIGHTS = {"DistantLight", "SphereLight", "RectLight", "DiskLight", "CylinderLight", "DomeLight", "DomeLight_1"}
 
 
 @dataclass
@@ -259,10 +259,23 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
             raise SceneError("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface",
                              file=path, prim=str(mat.GetPath()))
         sid = shader.GetIdAttr().Get()
-        if sid not in PREVIEW_SURFACES:
-            raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not one of {', '.join(PREVIEW_SURFACES)}", file=path,
+        if sid not in PREVIEW_SURFACES and sid not in stage_rules.MTLX_SURFACES:
+            raise SceneError("SCENE_UNSUPPORTED", f"shader {sid!r} is not one of "
+                             f"{', '.join(PREVIEW_SURFACES + tuple(stage_rules.MTLX_SURFACES))}", file=path,
                              prim=str(shader.GetPath()))
         where = str(shader.GetPath())
+    if mat and sid in stage_rules.MTLX_SURFACES:  # read as UsdPreviewSurface values (spec/renderer.md#materials)
+        def finite(v, default, name):
+            out = _checked(default if v is None else v, int(np.size(default)), name, path, where)
+            return out if np.size(default) > 1 else float(out[0])
+
+        vals = stage_rules.mtlx_preview_values(shader, sid, t, say, finite)
+        kd = np.asarray(vals["diffuseColor"], np.float64)
+        rough, metal = (float(np.clip(vals[k], 0.0, 1.0)) for k in ("roughness", "metallic"))
+        ior, emis = vals["ior"], np.asarray(vals["emissiveColor"], np.float64)
+        if ior <= 0:
+            raise SceneError("SCENE_INVALID", f"ior = {ior!r} must be > 0", file=path, prim=where, attribute="inputs:specular_IOR")
+    elif mat:
         kd = _checked(_input(shader, "diffuseColor", kd, t, per_hit, textures), 3, "diffuseColor", path, where, 1.0)
         spec = _checked(_input(shader, "specularColor", spec, t), 3, "specularColor", path, where, 1.0)
         rough = float(_checked(_input(shader, "roughness", rough, t, per_hit, textures), 1, "roughness", path, where, 1.0)[0])
@@ -764,9 +777,19 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             _say(path)("treatAsLine ignored: rendered as the cylinder of its radius", ppath)
     elif tn == "RectLight":
         lt.width, lt.height = float(get("width", 1.0)), float(get("height", 1.0))
-        if get("texture:file", None):
-            raise SceneError("SCENE_UNSUPPORTED", "textured RectLight is not supported", file=path, prim=ppath)
-    elif tn == "DomeLight":
+        if get("texture:file", None):  # spec/renderer.md#lights: ignored, as the reference renderer does
+            _say(path)("RectLight texture:file is ignored", ppath)
+    elif tn in ("DomeLight", "DomeLight_1"):
+        if tn == "DomeLight_1":  # poleAxis: the texture's top pole along +Y, +Z, or the stage's up axis
+            from pxr import UsdGeom
+
+            pole = str(get("poleAxis", "scene"))
+            if pole not in ("scene", "Y", "Z"):
+                raise SceneError("SCENE_INVALID", f"poleAxis {pole!r} (scene, Y or Z)", file=path, prim=ppath, attribute="poleAxis")
+            if pole == "Z" or (pole == "scene" and UsdGeom.GetStageUpAxis(prim.GetStage()) == UsdGeom.Tokens.z):
+                lt.to_world = lt.to_world.copy()
+                lt.to_world[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]) @ lt.to_world[:3, :3]
+            lt.type = "DomeLight"
         tex = get("texture:file", None)
         fmt = str(get("texture:format", "automatic"))
         if tex is not None and str(tex.path if isinstance(tex, Sdf.AssetPath) else tex):

@@ -441,3 +441,39 @@ def smooth_vertex_normals(points: np.ndarray, counts: np.ndarray, idx: np.ndarra
     ok = length > 1e-300
     out[ok] = acc[ok] / length[ok, None]
     return out
+
+#: MaterialX surface shaders read as UsdPreviewSurface (spec/renderer.md#materials): their inputs with the
+#: MaterialX fallbacks, and the lobes UsdPreviewSurface lacks (warned about when they are on)
+MTLX_SURFACES = {
+    "ND_standard_surface_surfaceshader": {
+        "inputs": {"base": 1.0, "base_color": (0.8, 0.8, 0.8), "metalness": 0.0, "specular_roughness": 0.2,
+                   "specular_IOR": 1.5, "emission": 0.0, "emission_color": (1.0, 1.0, 1.0)},
+        "dropped": ("coat", "transmission", "subsurface", "sheen", "thin_film_thickness", "specular_anisotropy")},
+    "ND_open_pbr_surface_surfaceshader": {
+        "inputs": {"base_weight": 1.0, "base_color": (0.8, 0.8, 0.8), "base_metalness": 0.0, "specular_roughness": 0.3,
+                   "specular_ior": 1.5, "emission_luminance": 0.0, "emission_color": (1.0, 1.0, 1.0)},
+        "dropped": ("coat_weight", "transmission_weight", "subsurface_weight", "fuzz_weight", "thin_film_weight",
+                    "specular_roughness_anisotropy")},
+}
+
+
+def mtlx_preview_values(shader, sid: str, time, warn: Warn, finite) -> dict:
+    """UsdPreviewSurface values of a MaterialX standard_surface or open_pbr_surface ``shader`` (id ``sid``, a key of
+    :data:`MTLX_SURFACES`): base colour x weight, metalness, specular roughness and IOR, emission x colour; a lobe
+    UsdPreviewSurface lacks is warned about when it is on, a connected input uses its own value (warned).
+    ``finite(value, default, name)``: the caller's check of one input's value (SCENE_INVALID naming it)."""
+    names = MTLX_SURFACES[sid]
+    vals = {}
+    for name, default in names["inputs"].items():
+        producer, v = input_source(shader.GetInput(name), time)
+        if producer is not None:
+            warn(f"MaterialX input {name!r} is connected; its own value is used", shader.GetPath())
+        vals[name] = finite(v, default, name)
+    for name in names["dropped"]:
+        inp = shader.GetInput(name)
+        v = inp.Get(time) if inp else None
+        if v is not None and float(np.max(v)) > 0.0:
+            warn(f"MaterialX {name} is dropped (no UsdPreviewSurface counterpart)", shader.GetPath())
+    b, c, m, r, i, e, ec = (vals[k] for k in names["inputs"])
+    return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
+            "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}

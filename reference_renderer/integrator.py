@@ -241,6 +241,18 @@ class PathIntegrator:
         w = power_heuristic(prev_pdf, light.pdf(o, d))
         return np.where(specular | no_mis, 1.0, w)
 
+    def light_surfaces(self, L, idx, beta, o, d, t_geometry, prev_pdf, specular, no_mis, camera: bool) -> None:
+        """Every light surface the rays (``o``, ``d`` [n, 3], throughput ``beta``, of image rows ``idx``) meet on its
+        emitting side before ``t_geometry`` [n] adds its emission, MIS-weighted, to ``L``; the rays go on: light surfaces
+        occlude nothing (spec/renderer.md#light-surfaces). ``camera`` rays do not see the lights hidden from them."""
+        for k, light in enumerate(self.scene.lights):
+            if light.area and (not camera or light.camera_visible):
+                tl, le = light.intersect(o, d)
+                m = np.nonzero(tl < t_geometry)[0]
+                if len(m):
+                    w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
+                    L[idx[m]] += beta[m] * le[m] * w[:, None]
+
     def _mesh_light_mis(self, inst, prev_pdf, specular, o, d):
         """MIS weights [n] of emission reached on mesh instances ``inst`` [n] (1 where the mesh is no light)."""
         w = np.ones(len(inst))
@@ -286,25 +298,9 @@ class PathIntegrator:
                     break
             no_mis = np.zeros(len(idx), bool)
             if has_area:
-                t_hit = hits.t.copy()
-                light_hit = np.full(len(idx), -1)
-                le_hit = np.zeros((len(idx), 3))
-                for k, light in enumerate(lights):
-                    if light.area and (depth > 0 or light.camera_visible):
-                        tl, le = light.intersect(o, d)
-                        closer = tl < t_hit
-                        t_hit[closer] = tl[closer]
-                        light_hit[closer] = k
-                        le_hit[closer] = le[closer]
-                for k in unique(light_hit[light_hit >= 0]):
-                    m = light_hit == k
-                    w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
-                    L[idx[m]] += beta[m] * le_hit[m] * w[:, None]
-                esc = (hits.prim < 0) & (light_hit < 0)
-                surf = (hits.prim >= 0) & (light_hit < 0)
-            else:  # no light has a shape: nothing but geometry can be hit
-                esc = hits.prim < 0
-                surf = ~esc
+                self.light_surfaces(L, idx, beta, o, d, hits.t, prev_pdf, specular, no_mis, depth == 0)
+            esc = hits.prim < 0
+            surf = ~esc
             if esc.any():
                 for k, light in enumerate(lights):
                     # a delta light is never reached by a ray; a dome hidden from the camera is not seen by camera rays

@@ -70,17 +70,6 @@ PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
 #: MaterialX surfaces mapped to UsdPreviewSurface: inputs in the order (base weight, base colour, metalness,
 #: specular roughness, specular IOR, emission weight, emission colour) with their MaterialX defaults, and the
 #: lobes whose weight is warned when on
-MTLX_SURFACES = {
-    "ND_standard_surface_surfaceshader": {
-        "inputs": {"base": 1.0, "base_color": (0.8, 0.8, 0.8), "metalness": 0.0, "specular_roughness": 0.2,
-                   "specular_IOR": 1.5, "emission": 0.0, "emission_color": (1.0, 1.0, 1.0)},
-        "dropped": ("coat", "transmission", "subsurface", "sheen", "thin_film_thickness", "specular_anisotropy")},
-    "ND_open_pbr_surface_surfaceshader": {
-        "inputs": {"base_weight": 1.0, "base_color": (0.8, 0.8, 0.8), "base_metalness": 0.0, "specular_roughness": 0.3,
-                   "specular_ior": 1.5, "emission_luminance": 0.0, "emission_color": (1.0, 1.0, 1.0)},
-        "dropped": ("coat_weight", "transmission_weight", "subsurface_weight", "fuzz_weight", "thin_film_weight",
-                    "specular_roughness_anisotropy")},
-}
 SUPPORTED_LIGHTS = ("DistantLight", "SphereLight", "RectLight", "DiskLight", "CylinderLight", "DomeLight", "DomeLight_1")
 PREVIEW_DEFAULTS = {
     "diffuseColor": (0.18, 0.18, 0.18), "emissiveColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 0,
@@ -718,17 +707,17 @@ class _Loader:
             raise self.err("SCENE_UNSUPPORTED", "material has no surface shader on outputs:surface or outputs:mtlx:surface"
                            + (f" (only {', '.join(others)}: another renderer's shading)" if others else ""), mpath)
         sid = shader.GetIdAttr().Get()
-        if sid not in PREVIEW_SURFACES and sid not in MTLX_SURFACES:
+        if sid not in PREVIEW_SURFACES and sid not in stage_rules.MTLX_SURFACES:
             source = shader.GetImplementationSource()  # id, sourceAsset (MDL, OSL) or sourceCode
             assets = [f"{a.GetName()} {a.Get().path}" for a in shader.GetPrim().GetAuthoredAttributes()
                       if a.GetName().startswith("info:") and a.GetName().endswith(":sourceAsset")]
             what = f"has id {sid!r}" if source == "id" else f"is implemented by {', '.join(assets) or source}"
             raise self.err("SCENE_UNSUPPORTED", f"surface shader {shader.GetPath()} {what}; supported: "
-                           f"{', '.join(PREVIEW_SURFACES + tuple(MTLX_SURFACES))}", mpath)
+                           f"{', '.join(PREVIEW_SURFACES + tuple(stage_rules.MTLX_SURFACES))}", mpath)
         vals = dict(PREVIEW_DEFAULTS)
         textures = {}  # input name -> (ImageTexture, st primvar name)
         primvar_color = None  # diffuseColor from a UsdPrimvarReader_float3
-        if sid in MTLX_SURFACES:
+        if sid in stage_rules.MTLX_SURFACES:
             vals.update(self._mtlx_surface(shader, sid))
         for inp in shader.GetInputs() if sid in PREVIEW_SURFACES else ():
             name = inp.GetBaseName()
@@ -805,24 +794,9 @@ class _Loader:
         return Opacity(op, threshold) if texture is None else Opacity(op, threshold, texture[0], varname)
 
     def _mtlx_surface(self, shader, sid: str) -> dict:
-        """UsdPreviewSurface values of a MaterialX standard_surface or open_pbr_surface (spec/renderer.md#materials):
-        base colour x weight, metalness, specular roughness and IOR, emission; lobes UsdPreviewSurface lacks are
-        warned about when they are on, connected inputs use their own values (warned)."""
-        names = MTLX_SURFACES[sid]
-        vals = {}
-        for name, default in names["inputs"].items():
-            producer, v = self._read_input(shader.GetInput(name))
-            if producer is not None:
-                self.warn(f"MaterialX input {name!r} is connected; its own value is used", shader.GetPath())
-            vals[name] = self._finite(v, default, shader.GetPath(), name)
-        for name in names["dropped"]:
-            inp = shader.GetInput(name)
-            v = inp.Get(self.time) if inp else None
-            if v is not None and float(np.max(v)) > 0.0:
-                self.warn(f"MaterialX {name} is dropped (no UsdPreviewSurface counterpart)", shader.GetPath())
-        b, c, m, r, i, e, ec = (vals[k] for k in names["inputs"])
-        return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
-                "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0}
+        """UsdPreviewSurface values of a MaterialX surface (nasset_sdk.stage_rules.mtlx_preview_values)."""
+        return stage_rules.mtlx_preview_values(shader, sid, self.time, self.warn,
+                                               lambda v, default, name: self._finite(v, default, shader.GetPath(), name))
 
     def _read_input(self, inp) -> tuple:
         """(producer, value) of a shader input (nasset_sdk.stage_rules.input_source)."""

@@ -100,6 +100,45 @@ def check_settings_max_depth(render, tmp_path, spp: int = 4) -> None:
     np.testing.assert_array_equal(render(one, spp, seed=2, max_depth=5), render(plain, spp, seed=2))
 
 
+def check_light_surfaces_occlude_nothing(render, tmp_path, spp: int = 64) -> None:
+    """``render(scene, spp, seed=, max_depth=, width=, height=)``: light surfaces occlude nothing
+    (spec/renderer.md#light-surfaces). (1) A camera ray through a RectLight's emitting side sees its radiance plus the
+    dome behind it, exactly; through its back the dome alone. (2) A zero-power RectLight hidden from the camera, 0.5
+    over a floor lit by a constant dome, with a box beside (so that the floor's BSDF rays are traced), leaves the image
+    as it is without it, as in Cycles: before, the floor's BSDF rays ended on it and the floor under it read 48 %."""
+    from pxr import Sdf
+
+    def panel_in_view(name, facing):
+        b = SceneBuilder()
+        b.camera((0, 0, 3.0), (0, 0, 0), focal=50)
+        b.dome("Sky", 0.25)
+        b.rect_light("Panel", (0, 0, 0), 4.0, 4.0, facing, 2.0)
+        return b.write(tmp_path / f"{name}.usda")
+
+    front = render(panel_in_view("front", (0, 0, 1)), 4, seed=1, max_depth=1, width=8, height=8)
+    back = render(panel_in_view("back", (0, 0, -1)), 4, seed=1, max_depth=1, width=8, height=8)
+    np.testing.assert_allclose(front, 2.25, rtol=1e-4)  # 2 + 0.25: before, 2 (the ray ended on the light)
+    np.testing.assert_allclose(back, 0.25, rtol=1e-4)
+
+    def floor(name, panel):
+        b = SceneBuilder()
+        b.camera((0, 1.6, 2.4), (0, 0, 0), focal=35)
+        b.quad("Floor", (0, 0, 0), 4.0, diffuse=(0.7, 0.7, 0.7))
+        b.mesh("Box", [(1.2, 0, 0.6), (1.6, 0, 0.6), (1.6, 0.4, 0.6), (1.2, 0.4, 0.6)], [(0, 1, 2, 3)], diffuse=(0.5, 0.5, 0.5))
+        b.dome("Sky", 1.0)
+        if panel:
+            light = b.rect_light("Panel", (0, 0.5, 0), 1.2, 1.2, (0, -1, 0), 1e-9)
+            light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool, custom=True).Set(False)
+        return b.write(tmp_path / f"{name}.usda")
+
+    size = dict(width=16, height=16)
+    with_panel = render(floor("with", True), spp, seed=2, max_depth=2, **size)
+    without = render(floor("without", False), spp, seed=3, max_depth=2, **size)
+    under = (slice(6, 11), slice(5, 11))
+    assert abs(with_panel[under].mean() / without[under].mean() - 1.0) < 0.03, (with_panel[under].mean(), without[under].mean())
+    assert abs(with_panel.mean() / without.mean() - 1.0) < 0.02, (with_panel.mean(), without.mean())
+
+
 def check_shading_normals(render, tmp_path, spp: int = 4) -> None:
     """``render(scene, spp, seed=, max_depth=)``: a diffuse floor (geometric normal +Y) under the delta sun of
     :func:`floor_scene`, its four corners carrying one authored normal ``ns``, seen from above with direct light only, is

@@ -421,6 +421,17 @@ def b_rect_light_back(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_lights_in_the_way(ctx):
+    ctx.camera()
+    ctx.floor()
+    # a wide, faint panel hidden from the camera over the asset, between it and a bright sky; a small bulb in view in
+    # front of the floor (the floor behind it shows through)
+    _hide_from_camera(ctx.sb.rect_light("Panel", (0.0, 0.9, 0.0), 2.4, 2.4, (0.0, -1.0, 0.0), 0.15))
+    ctx.sb.sphere_light("Bulb", (0.7, -0.25, 1.2), 0.12, 3.0, color=(1.0, 0.8, 0.6))
+    ctx.sb.dome("Sky", 1.2, color=(0.6, 0.75, 1.0))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_disk_cylinder_lights(ctx):
     from pxr import UsdLux
 
@@ -585,6 +596,10 @@ CASES = [
     Case("rna_rect_light_back", "a RectLight between the camera and the asset, emitting away from the camera toward the "
          "asset and the floor: camera rays reach its back and pass through it (one-sided light surface), its light on "
          "the asset", b_rect_light_back),
+    Case("rna_lights_in_the_way", "light surfaces occlude nothing: a wide faint RectLight hidden from the camera over the "
+         "asset and the floor, between them and a bright dome, and a small SphereLight in view in front of the floor; "
+         "rays that meet a light surface add its emission and go on (the dome reaches the asset and the floor through "
+         "the panel, the floor shows behind the bulb)", b_lights_in_the_way),
     Case("rna_disk_cylinder_lights", "a tilted DiskLight, normalized, scaled into an ellipse, and a CylinderLight in front of "
          "the asset, its side in view: one-sided disk, the tube emitting outward and hit only from outside", b_disk_cylinder_lights),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "

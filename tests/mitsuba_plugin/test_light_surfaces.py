@@ -35,10 +35,10 @@ def _bulb_in_front(tmp_path, name, hidden_bulb, hidden_dome):
 
 
 @pytest.mark.parametrize("hidden_bulb, hidden_dome, centre, corner", [
-    (False, False, 5.0, 0.5), (True, False, 0.5, 0.5), (False, True, 5.0, 0.0), (True, True, 0.0, 0.0)])
+    (False, False, 5.5, 0.5), (True, False, 0.5, 0.5), (False, True, 5.0, 0.0), (True, True, 0.0, 0.0)])
 def test_camera_visibility(tmp_path, hidden_bulb, hidden_dome, centre, corner):
-    """What a camera ray sees is exact here (direct lighting only, no surface in the scene): the sphere's radiance, or
-    through it the dome's, or black."""
+    """What a camera ray sees is exact here (direct lighting only, no surface in the scene): the sphere's radiance plus
+    the dome's behind it (light surfaces occlude nothing), or through a hidden sphere the dome's, or black."""
     img = render(_bulb_in_front(tmp_path, "s", hidden_bulb, hidden_dome), 4, width=16, height=16, max_depth=1)
     assert np.allclose(img[8, 8], centre, rtol=1e-5) and np.allclose(img[0, 0], corner, rtol=1e-5), (img[8, 8], img[0, 0])
 
@@ -84,7 +84,16 @@ def test_rays_pass_a_rect_light_from_behind(tmp_path):
     assert _as_bright_as_without(scene, 64, (slice(7, 9), slice(7, 9))).mean() > 0.1
 
 
-@pytest.mark.parametrize("case", ["rna_hidden_lights", "rna_suns_and_dome", "rna_rect_light_back", "rna_disk_cylinder_lights"])
+def test_light_surfaces_occlude_nothing(tmp_path):
+    """A ray goes on past every light surface it meets (spec/renderer.md#light-surfaces); the plugin's rays ended on the
+    first one, so a faint area light between a dome and a floor darkened the floor under it to 48 %."""
+    from tests.stage_scenes import check_light_surfaces_occlude_nothing
+
+    check_light_surfaces_occlude_nothing(render, tmp_path)
+
+
+@pytest.mark.parametrize("case", ["rna_hidden_lights", "rna_suns_and_dome", "rna_rect_light_back", "rna_disk_cylinder_lights",
+                                  "rna_lights_in_the_way"])
 def test_light_conformance_cases(tmp_path, case):
     """At twice the case's spp (spec/conformance.md: a noisier renderer passes ``--spp-scale``): the plugin picks one light
     per vertex where the reference renderer samples each, about 4x the variance with four lights."""

@@ -246,7 +246,7 @@ def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
     assert row["passed"], row
 
 
-@pytest.mark.parametrize("case", ["rna_rect_light_back", "rna_disk_cylinder_lights"])
+@pytest.mark.parametrize("case", ["rna_rect_light_back", "rna_disk_cylinder_lights", "rna_lights_in_the_way"])
 def test_light_surface_cases_pass_via_cli(nr, case):
     """``rna_rect_light_back``: camera rays reach a RectLight's back and pass through it (spec/renderer.md#light-surfaces;
     Mitsuba's rectangle stopped them, black: 16.7x the tolerance before). ``rna_disk_cylinder_lights``: DiskLight and

@@ -470,3 +470,70 @@ def test_implicit_prims_and_curves_render(tmp_path):
     from tests.stage_scenes import check_implicit_prims_and_curves
 
     check_implicit_prims_and_curves(mitsuba.render, tmp_path, spp=64)
+
+
+def test_materialx_surfaces_are_read_as_preview_surface_values(tmp_path):
+    """A MaterialX standard_surface or open_pbr_surface (spec/renderer.md#materials) is read as the reference renderer
+    reads it: kd = base x base_color x (1 - metalness), F0 = (1 - m) ((1 - ior) / (1 + ior))^2 + m c, alpha =
+    roughness^2, emission x colour; a coat that is on is warned about. Both Mitsuba implementations refused them
+    (SCENE_UNSUPPORTED), so a scene from a MaterialX pipeline did not load."""
+    from pxr import Gf, Sdf, UsdShade
+
+    for sid, names in (("ND_standard_surface_surfaceshader", ("base", "base_color", "metalness", "specular_roughness",
+                                                              "specular_IOR", "emission", "emission_color", "coat")),
+                       ("ND_open_pbr_surface_surfaceshader", ("base_weight", "base_color", "base_metalness",
+                                                              "specular_roughness", "specular_ior", "emission_luminance",
+                                                              "emission_color", "coat_weight"))):
+        b, floor = _floor_scene()
+        mat = UsdShade.Material.Define(b.stage, "/World/Looks/X")
+        sh = UsdShade.Shader.Define(b.stage, "/World/Looks/X/Surface")
+        sh.CreateIdAttr(sid)
+        f, c3 = Sdf.ValueTypeNames.Float, Sdf.ValueTypeNames.Color3f
+        for name, kind, value in zip(names, (f, c3, f, f, f, f, c3, f),
+                                     (0.8, Gf.Vec3f(0.5, 0.25, 1.0), 0.25, 0.6, 1.8, 2.0, Gf.Vec3f(0.1, 0.2, 0.3), 1.0), strict=True):
+            sh.CreateInput(name, kind).Set(value)
+        mat.CreateOutput("mtlx:surface", Sdf.ValueTypeNames.Token).ConnectToSource(sh.ConnectableAPI(), "out")
+        UsdShade.MaterialBindingAPI(floor).Bind(mat)
+        with pytest.warns(UserWarning, match="dropped"):
+            m = read_scene(b.write(tmp_path / f"{sid}.usda")).meshes[0].material
+        c = 0.8 * np.array([0.5, 0.25, 1.0])
+        r0 = ((1 - 1.8) / (1 + 1.8)) ** 2
+        np.testing.assert_allclose(m.kd, c * 0.75, rtol=1e-6)
+        np.testing.assert_allclose(m.f0, 0.75 * r0 + 0.25 * c, rtol=1e-6)
+        np.testing.assert_allclose([m.alpha], [0.36], rtol=1e-6)
+        np.testing.assert_allclose(m.emission, [0.2, 0.4, 0.6], rtol=1e-6)
+
+
+def test_dome_light_1_pole_axis_turns_the_texture(tmp_path):
+    """DomeLight_1 (USD 24) with poleAxis Z turns the texture's top pole (+Y) onto +Z (spec/renderer.md#lights); with Y,
+    or scene on a Y-up stage, it is a DomeLight. Both Mitsuba implementations refused DomeLight_1. A RectLight's
+    texture:file is ignored with a warning, as in the reference renderer (it was SCENE_UNSUPPORTED)."""
+    from pxr import Sdf, UsdLux
+
+    def light(pole):
+        b, _ = _floor_scene()
+        d = UsdLux.DomeLight_1.Define(b.stage, "/World/Dome")
+        if pole is not None:
+            d.GetPrim().CreateAttribute("poleAxis", Sdf.ValueTypeNames.Token).Set(pole)
+        return next(lt for lt in read_scene(b.write(tmp_path / f"d_{pole}.usda")).lights if lt.prim == "/World/Dome")
+
+    turned = light("Z")
+    assert turned.type == "DomeLight"
+    up = np.array([0.0, 1.0, 0.0]) @ turned.to_world[:3, :3]  # the texture's +Y pole in the world (row vectors)
+    np.testing.assert_allclose(up, [0.0, 0.0, 1.0], atol=1e-12)
+    for pole in ("Y", "scene", None):
+        np.testing.assert_allclose(light(pole).to_world[:3, :3], np.eye(3), atol=1e-12)
+    b, _ = _floor_scene()
+    r = b.rect_light("Panel", (0, 2, 0), 1.0, 1.0, (0, -1, 0), 2.0)
+    r.GetPrim().CreateAttribute("inputs:texture:file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath("./t.exr"))
+    with pytest.warns(UserWarning, match="texture:file is ignored"):
+        assert any(lt.type == "RectLight" for lt in read_scene(b.write(tmp_path / "rect.usda")).lights)
+
+
+def test_light_surfaces_occlude_nothing(tmp_path):
+    """A ray goes on past every light surface it meets (spec/renderer.md#light-surfaces); this implementation's rays
+    ended on the first one, so a faint area light between a dome and a floor darkened the floor under it to 48 %."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.stage_scenes import check_light_surfaces_occlude_nothing
+
+    check_light_surfaces_occlude_nothing(mitsuba.render, tmp_path, spp=32)

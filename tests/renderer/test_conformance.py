@@ -37,7 +37,7 @@ MUTANT_CASES = {
     "one_escaped_light": ["rna_suns_and_dome"],
     "camera_visibility_ignored": ["rna_hidden_lights"],
     "spot_shaping_ignored": ["rna_spot_lights"],
-    "rect_back_blocks": ["rna_rect_light_back"],
+    "light_surfaces_occlude": ["rna_lights_in_the_way"],
     "no_asset_indirect": ["rna_indirect"],
     "mis_weights_one": ["rna_sphere_light"],
     "quality_hq": ["rna_quality_variant"],

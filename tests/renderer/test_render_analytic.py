@@ -107,3 +107,16 @@ def test_wavefront_bands_cover_every_pixel(tmp_path, monkeypatch):
     assert res.stats.camera_samples == 13 * 11 * 16
     m, se = mean_and_stderr(res.image, res.variance)
     assert np.all(np.abs(m - a) < SIGMA * se + 1e-9)
+
+
+def test_light_surfaces_occlude_nothing(tmp_path):
+    """spec/renderer.md#light-surfaces: a ray goes on past every light surface it meets, adding its emission. Before,
+    a ray ended on the first one, so a faint area light between a dome and a floor (with another object in the scene,
+    so that the floor's BSDF rays were traced) darkened the floor under it to 48 %; Cycles leaves it unchanged."""
+    from tests.stage_scenes import check_light_surfaces_occlude_nothing
+
+    def reference(scene, spp, seed=0, max_depth=None, width=None, height=None):
+        settings = RenderSettings(spp=spp, seed=seed, max_depth=max_depth, width=width, height=height)
+        return render(load_scene(scene), settings).image[..., :3]
+
+    check_light_surfaces_occlude_nothing(reference, tmp_path)

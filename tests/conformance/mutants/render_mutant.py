@@ -192,22 +192,25 @@ def spot_shaping_ignored():
     scene._Loader._shaping = lambda self, prim, M: {}
 
 
-def rect_back_blocks():
-    """A RectLight's back stops rays, black (Mitsuba's one-sided rectangle), instead of letting them through."""
-    from nasset_reference_renderer import lights
+def light_surfaces_occlude():
+    """A ray ends at the first light surface it meets (Mitsuba's emitter shapes; the spec's rule before 2026-12-07)
+    instead of going on past every light surface; a RectLight's back still lets it through."""
+    from nasset_reference_renderer.integrator import PathIntegrator
 
-    def _hit(self, o, d):
-        den = d @ self.n
-        side = np.abs(den) > 1e-12
-        t = np.where(side, ((self.c - o) @ self.n) / np.where(side, den, -1.0), lights.INF)
-        q = o + d * np.where(np.isfinite(t), t, 0.0)[:, None] - self.c
-        return np.where(side & (t > 0) & self._inside(q), t, lights.INF)
+    def light_surfaces(self, L, idx, beta, o, d, t_geometry, prev_pdf, specular, no_mis, camera):
+        t_near, k_near, le_near = t_geometry.copy(), np.full(len(o), -1), np.zeros((len(o), 3))
+        for k, light in enumerate(self.scene.lights):
+            if light.area and (not camera or light.camera_visible):
+                tl, le = light.intersect(o, d)
+                closer = tl < t_near
+                t_near[closer], k_near[closer], le_near[closer] = tl[closer], k, le[closer]
+        for k in np.unique(k_near[k_near >= 0]):
+            m = np.nonzero(k_near == k)[0]
+            w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
+            L[idx[m]] += beta[m] * le_near[m] * w[:, None]
+            beta[m] = 0.0  # the path ends there
 
-    def intersect(self, o, d):
-        t = self._hit(o, d)
-        return t, np.where((np.isfinite(t) & ((d @ self.n) < 0))[:, None], self.L, 0.0)
-
-    lights.RectLight._hit, lights.RectLight.intersect = _hit, intersect
+    PathIntegrator.light_surfaces = light_surfaces
 
 
 def no_asset_indirect():
@@ -373,7 +376,7 @@ def fiber_exempt_stops_search():
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, one_escaped_light, camera_visibility_ignored,
-                                   spot_shaping_ignored, rect_back_blocks,
+                                   spot_shaping_ignored, light_surfaces_occlude,
                                    no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
