@@ -53,6 +53,8 @@ MAX_SKIPS = 1 << 16
 #: false) let camera rays through too
 LIGHT_SURFACE_PREFIX = "nasset_lightsurface_"
 HIDDEN_PREFIX = LIGHT_SURFACE_PREFIX + "hidden_"
+#: in a light surface's id after its prefix: an opaque one (``nasset:opaqueSurface``: rays end on its emitting side)
+OPAQUE_MARK = "opaque_"
 #: scenes with at most this many fiber instances trace rays leaving one on split structures (:func:`split_scenes`)
 MAX_SPLIT_INSTANCES = 8
 
@@ -401,9 +403,11 @@ def _branch(mi, own, ray, tmax, lo, hi, active):
     return passed
 
 
-def shapes_named(mi, scene, prefix: str):
-    """UInt32 [max registry id + 1]: 1 for the scene's shapes whose id starts with ``prefix``; None when there are none."""
-    ids = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]) for sh in scene.shapes() if sh.id().startswith(prefix)]
+def shapes_named(mi, scene, prefix: str, mark: str = ""):
+    """UInt32 [max registry id + 1]: 1 for the scene's shapes whose id starts with ``prefix`` (and holds ``mark``);
+    None when there are none."""
+    ids = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]) for sh in scene.shapes()
+           if sh.id().startswith(prefix) and mark in sh.id()]
     if not ids:
         return None
     lut = np.zeros(max(ids) + 1, np.uint32)
@@ -422,16 +426,18 @@ class PassThrough:
     camera and continuation rays from behind, camera rays those hidden from the camera) and cut-outs where they are
     absent (spec/renderer.md#cutouts: the ``presence`` of their ``nasset_preview`` BSDF, every ray alike)."""
 
-    def __init__(self, mi, lights, cutouts: list) -> None:
-        self.mi, self.lights, self.cutouts = mi, lights, cutouts
+    def __init__(self, mi, lights, opaque, cutouts: list) -> None:
+        self.mi, self.lights, self.opaque, self.cutouts = mi, lights, opaque, cutouts
 
     @classmethod
     def of(cls, mi, scene):
-        """The scene's light surfaces (:data:`LIGHT_SURFACE_PREFIX`) and cut-outs; None when it has neither."""
+        """The scene's light surfaces (:data:`LIGHT_SURFACE_PREFIX`; the opaque ones, :data:`OPAQUE_MARK`) and cut-outs;
+        None when it has neither."""
         lights = shapes_named(mi, scene, LIGHT_SURFACE_PREFIX)
+        opaque = shapes_named(mi, scene, LIGHT_SURFACE_PREFIX, OPAQUE_MARK)
         cutouts = [(int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0]), sh.bsdf().presence) for sh in scene.shapes()
                    if sh.bsdf() is not None and getattr(sh.bsdf(), "presence", None) is not None]
-        return None if lights is None and not cutouts else cls(mi, lights, cutouts)
+        return None if lights is None and not cutouts else cls(mi, lights, opaque, cutouts)
 
     def absent(self, si):
         """[Bool] ``si`` hit a cut-out where it is absent. The uniform number of a fractional opacity is a hash of the
@@ -453,11 +459,20 @@ class PassThrough:
         through = self.absent(si)
         return through if self.lights is None else through | _on(self.mi, si, self.lights)
 
-    def onward(self, si):
-        """[Bool] a camera or continuation ray goes on past hit ``si``: every light surface (met on its emitting side
-        it adds its emission on the way, :meth:`seen`), an absent cut-out."""
+    def onward(self, si, hidden, camera):
+        """[Bool] a camera (``camera``) or continuation ray goes on past hit ``si``: a light surface (met on its emitting
+        side it adds its emission on the way, :meth:`seen`), but for an opaque one met on its emitting side and not
+        hidden from this camera ray (``hidden``: :func:`shapes_named`, None: none), where it ends; an absent cut-out."""
         through = self.absent(si)
-        return through if self.lights is None else through | _on(self.mi, si, self.lights)
+        if self.lights is None:
+            return through
+        passes = _on(self.mi, si, self.lights)
+        if self.opaque is not None:
+            stop = _on(self.mi, si, self.opaque) & (self.mi.Frame3f.cos_theta(si.wi) > 0.0)
+            if hidden is not None:
+                stop &= ~(camera & _on(self.mi, si, hidden))
+            passes &= ~stop
+        return through | passes
 
     def seen(self, si, hidden, camera):
         """[Bool] hit ``si`` is a light surface whose emission a camera (``camera``) or continuation ray takes on its
@@ -486,7 +501,7 @@ def _trace_onward(mi, scene, ray, ignore, lo, hi, active, lights, hidden, camera
     if lights is None:
         si, passed = _trace(mi, scene, ray, ignore, lo, hi, active)
         return si, passed, mi.Spectrum(0.0)
-    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lights.onward,
+    return _trace_past(mi, scene, ray, ignore, lo, hi, active, lambda si: lights.onward(si, hidden, camera),
                        lambda si, m: emission(si, m & lights.seen(si, hidden, camera)))
 
 

@@ -25,7 +25,7 @@ from nasset_sdk.errors import error, path_arg
 
 from . import lights as lights_jit
 from . import preview, textures
-from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, asset_for, register
+from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, OPAQUE_MARK, asset_for, register
 from .variant import jit_mitsuba
 
 _PLY_DIR: list[str] = []
@@ -297,8 +297,9 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
         elif not isinstance(lt, MitsubaLight):
             raise error("SCENE_UNSUPPORTED", "the Mitsuba plugin renders point, spot, distant, sphere, rect, disk, cylinder and "
                         f"dome lights, not {type(lt).__name__}", file=str(path), prim=lt.desc.prim)
-        elif lt.has_shape:  # a light surface: shadow rays pass through it, camera rays too when it is hidden from them
-            light_entries[(LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + lt.key] = light_entries.pop(lt.key)
+        elif lt.has_shape:  # a light surface: rays pass it (spec/renderer.md#light-surfaces), but for opaque ones
+            mark = OPAQUE_MARK if getattr(lt.desc, "opaque", False) else ""
+            light_entries[(LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + mark + lt.key] = light_entries.pop(lt.key)
     infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]
     if len(infinite) > 1:  # Mitsuba keeps one environment emitter: a dome and angular suns become their sum
         light_entries["sky"] = {"type": lights_jit.SKY, **{f"part_{i}": light_entries.pop(k) for i, k in enumerate(infinite)}}

@@ -191,8 +191,11 @@ class PathTracer:
                             lt.emitter = sh.emitter()
         self.light_of_obj = {k: o["light"] for k, o in enumerate(objects) if o["kind"] == Kind.LIGHT}
         reflective = [k for k, o in enumerate(objects) if o["kind"] != Kind.LIGHT]
-        # light shapes are seen by camera and continuation rays but do not block shadow rays
+        # light shapes: seen by camera and continuation rays, which go on past them (but for opaque ones,
+        # nasset:opaqueSurface, where they end); no light shape blocks shadow rays (spec/renderer.md#light-surfaces)
         self.light_shapes = np.array([o["kind"] == Kind.LIGHT for o in objects] + [False])
+        self.clear_lights = self.light_shapes & ~np.array(
+            [o["kind"] == Kind.LIGHT and bool(getattr(o["light"].desc, "opaque", False)) for o in objects] + [False])
         self.every_shape = np.ones(len(objects) + 1, bool)
         self.n_reflective = len(reflective)
         # nasset:cameraVisibility = false (spec/renderer.md#light-surfaces): camera rays pass through the light's shape
@@ -449,7 +452,8 @@ class PathTracer:
         """:meth:`Tracer.trace` of rays among light surfaces (spec/renderer.md#light-surfaces): each light surface a ray
         meets on its emitting side adds its emission (MIS-weighted) to ``L`` and the ray goes on past it (they occlude
         nothing; met from behind they are passed by the tracer; ``camera`` rays pass the ones hidden from the camera
-        without adding them). Returns the trace of the rays' first hit that is not a light surface, ``t`` from ``o``."""
+        without adding them), but for an opaque one (``nasset:opaqueSurface``), where it ends. Returns the trace of the
+        rays' first hit that is not a light surface they pass, ``t`` from ``o``."""
         hidden = self.hidden_shapes if camera else None
         tr = self.tracer.trace(o, d, ignore=ignore, transparent=hidden, back_through=self.light_shapes)
         start = np.zeros(len(o))  # distance from o of each row's current trace origin
@@ -465,6 +469,10 @@ class PathTracer:
             near = o + d * t_hit[:, None]
             before = o + d * np.maximum(t_hit - 10.0 * ray_eps(near), 0.0)[:, None]  # re-intersected for its emission
             self._shape_light_hits(L, idx, hl, tr["obj"], before, d, prev_pdf, prev_p, beta)
+            go_on = self.clear_lights[tr["obj"][rows]]  # an opaque light surface ends the ray: its hit stays
+            rows, at = rows[go_on], at[go_on]
+            if not len(rows):
+                break
             beyond = o[rows] + d[rows] * at[:, None]
             beyond = beyond + d[rows] * (10.0 * ray_eps(beyond))[:, None]
             more = self.tracer.trace(beyond, d[rows], ignore=ignore[rows], transparent=hidden, back_through=self.light_shapes)
@@ -540,7 +548,8 @@ class PathTracer:
         passed = np.zeros(len(o), bool)
         here, away = np.nonzero(~moved)[0], np.nonzero(moved)[0]
         if len(here):
-            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here], transparent=self.light_shapes,
+            passed[here] = self.tracer.trace(o[here], wc[here], None, obj[here], transparent=self.clear_lights,
+                                             back_through=self.light_shapes,
                                              exempt=None if exempt is None else exempt[here])["passed"]
         if len(away):
             passed[away] = self.own_branch(o[away], wc[away], np.full(len(away), np.inf), obj[away],

@@ -58,6 +58,7 @@ class Light:
     normalize: bool = False
     texture: np.ndarray | None = None  # [H, W, 3] lat-long
     camera_visible: bool = True  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
+    opaque: bool = False  # nasset:opaqueSurface: rays end on its surface (Mitsuba's emitter shapes)
     shaping: tuple | None = None  # (cone angle, softness, profile) of UsdLux.ShapingAPI (spec/renderer.md#spot-lights)
 
 
@@ -106,6 +107,16 @@ class SceneDesc:
     render_settings: dict = field(default_factory=dict)  # max_depth, pixel_filter, pixel_filter_stddev where authored
 
 
+def _float_attr(prim, name: str, default: float, t) -> float:
+    """Attribute ``name`` of ``prim`` as a float (``default`` when unauthored), NaN when it is not a number."""
+    attr = prim.GetAttribute(name)
+    v = attr.Get(t) if attr else None
+    try:
+        return float(default if v is None else v)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
 def _read_camera(prim, to_world, path, t) -> Camera:
     """spec/renderer.md#cameras: lens and apertures in tenths of a scene unit, focusDistance in scene units."""
     from pxr import UsdGeom
@@ -114,12 +125,7 @@ def _read_camera(prim, to_world, path, t) -> Camera:
     ppath = str(prim.GetPath())
 
     def get(name, default):
-        attr = prim.GetAttribute(name)
-        v = attr.Get(t) if attr else None
-        try:
-            v = float(default if v is None else v)
-        except (TypeError, ValueError):
-            v = float("nan")
+        v = _float_attr(prim, name, default, t)
         if not np.isfinite(v):
             raise SceneError("SCENE_INVALID", f"camera {name} is not a finite number", file=path, prim=ppath)
         return v
@@ -603,12 +609,7 @@ def _implicit_mesh(prim, tname: str, mw, path: str, t, tessellations: dict) -> M
     normals on its front (a leftHanded prim's front is its inside); material and sides are the caller's to fill."""
     size = {}
     for name, fallback in IMPLICIT_PRIMS[tname].items():
-        attr = prim.GetAttribute(name)
-        v = attr.Get(t) if attr else None
-        try:
-            v = float(fallback if v is None else v)
-        except (TypeError, ValueError):
-            v = float("nan")
+        v = _float_attr(prim, name, fallback, t)
         if not (np.isfinite(v) and 0 < v <= 1e12):  # the reference renderer's bound on world coordinates
             raise SceneError("SCENE_INVALID", f"{tname} {name} = {v!r} must be finite and > 0", file=path,
                              prim=str(prim.GetPath()), attribute=name)
@@ -727,16 +728,16 @@ def _shaping(prim, get, path, t) -> tuple | None:
     return cone, soft, profile
 
 
-def _camera_visible(prim, path, t) -> bool:
-    """``nasset:cameraVisibility`` of a light (spec/renderer.md#light-surfaces): fallback true; a bool, else
-    SCENE_INVALID naming the attribute."""
-    attr = prim.GetAttribute("nasset:cameraVisibility")
+def _light_flag(prim, name: str, fallback: bool, path, t) -> bool:
+    """A bool flag of a light (``nasset:cameraVisibility``, ``nasset:opaqueSurface``: spec/renderer.md#light-surfaces):
+    ``fallback`` when unauthored; another type is SCENE_INVALID naming the attribute."""
+    attr = prim.GetAttribute(name)
     if not attr or not attr.HasAuthoredValue():
-        return True
+        return fallback
     v = attr.Get(t)
     if not isinstance(v, bool):
-        raise SceneError("SCENE_INVALID", f"nasset:cameraVisibility must be a bool (got {attr.GetTypeName()} {v!r})", file=path,
-                         prim=str(prim.GetPath()), attribute="nasset:cameraVisibility")
+        raise SceneError("SCENE_INVALID", f"{name} must be a bool (got {attr.GetTypeName()} {v!r})", file=path,
+                         prim=str(prim.GetPath()), attribute=name)
     return v
 
 
@@ -762,7 +763,8 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
     _unhonoured_light_features(prim, path, t)
-    lt.camera_visible = _camera_visible(prim, path, t)
+    lt.camera_visible = _light_flag(prim, "nasset:cameraVisibility", True, path, t)
+    lt.opaque = _light_flag(prim, "nasset:opaqueSurface", False, path, t)
     if tn == "DistantLight":
         lt.angle = float(get("angle", 0.53))
     elif tn == "SphereLight":

@@ -241,17 +241,26 @@ class PathIntegrator:
         w = power_heuristic(prev_pdf, light.pdf(o, d))
         return np.where(specular | no_mis, 1.0, w)
 
-    def light_surfaces(self, L, idx, beta, o, d, t_geometry, prev_pdf, specular, no_mis, camera: bool) -> None:
+    def light_surfaces(self, L, idx, beta, o, d, t_geometry, prev_pdf, specular, no_mis, camera: bool) -> np.ndarray:
         """Every light surface the rays (``o``, ``d`` [n, 3], throughput ``beta``, of image rows ``idx``) meet on its
         emitting side before ``t_geometry`` [n] adds its emission, MIS-weighted, to ``L``; the rays go on: light surfaces
-        occlude nothing (spec/renderer.md#light-surfaces). ``camera`` rays do not see the lights hidden from them."""
+        occlude nothing (spec/renderer.md#light-surfaces), but for an opaque one (``nasset:opaqueSurface``), where the
+        ray ends: only the surfaces up to the nearest opaque one count. ``camera`` rays do not see the lights hidden from
+        them. Returns [n] bool: the rays that ended on an opaque light surface."""
+        met = []
+        t_end = np.array(t_geometry, np.float64)
         for k, light in enumerate(self.scene.lights):
             if light.area and (not camera or light.camera_visible):
                 tl, le = light.intersect(o, d)
-                m = np.nonzero(tl < t_geometry)[0]
-                if len(m):
-                    w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
-                    L[idx[m]] += beta[m] * le[m] * w[:, None]
+                met.append((k, light.opaque, tl, le))
+                if light.opaque:
+                    t_end = np.minimum(t_end, tl)
+        for k, opaque, tl, le in met:
+            m = np.nonzero((tl <= t_end) & (tl < t_geometry) if opaque else tl < t_end)[0]
+            if len(m):
+                w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
+                L[idx[m]] += beta[m] * le[m] * w[:, None]
+        return t_end < t_geometry
 
     def _mesh_light_mis(self, inst, prev_pdf, specular, o, d):
         """MIS weights [n] of emission reached on mesh instances ``inst`` [n] (1 where the mesh is no light)."""
@@ -297,10 +306,11 @@ class PathIntegrator:
                 if not len(idx):
                     break
             no_mis = np.zeros(len(idx), bool)
+            ended = np.zeros(len(idx), bool)
             if has_area:
-                self.light_surfaces(L, idx, beta, o, d, hits.t, prev_pdf, specular, no_mis, depth == 0)
-            esc = hits.prim < 0
-            surf = ~esc
+                ended = self.light_surfaces(L, idx, beta, o, d, hits.t, prev_pdf, specular, no_mis, depth == 0)
+            esc = (hits.prim < 0) & ~ended
+            surf = (hits.prim >= 0) & ~ended
             if esc.any():
                 for k, light in enumerate(lights):
                     # a delta light is never reached by a ray; a dome hidden from the camera is not seen by camera rays

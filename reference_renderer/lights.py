@@ -48,6 +48,7 @@ class Light:
     infinite = False  # reached by escaping rays
     area = False  # has a shape that rays can hit
     camera_visible = True  # False: camera rays pass through the shape (``nasset:cameraVisibility``)
+    opaque = False  # True: camera and continuation rays end on the shape (``nasset:opaqueSurface``, Mitsuba's emitters)
     prim = ""
 
     def sample(self, p, u):

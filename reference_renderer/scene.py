@@ -79,7 +79,7 @@ PREVIEW_DEFAULTS = {
 }
 _LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:normalize",
                  "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular",
-                 "nasset:cameraVisibility"}
+                 "nasset:cameraVisibility", "nasset:opaqueSurface"}
 _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
     "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness",
@@ -413,12 +413,12 @@ class _Loader:
                 elif prim.HasAPI(UsdLux.LightAPI) or tname.endswith("Light") or tname.startswith("DomeLight"):
                     n = len(self.lights)
                     self._light(prim, tname)
-                    vis = prim.GetAttribute("nasset:cameraVisibility")
-                    if vis and vis.HasAuthoredValue() and self.lights[n:]:
-                        if not isinstance(vis.Get(self.time), bool):
-                            raise self.err("SCENE_INVALID", "nasset:cameraVisibility must be a bool", str(prim.GetPath()),
-                                           "nasset:cameraVisibility")
-                        self.lights[n].camera_visible = bool(vis.Get(self.time))  # spec/renderer.md#light-surfaces
+                    for name, field_name in (("nasset:cameraVisibility", "camera_visible"), ("nasset:opaqueSurface", "opaque")):
+                        attr = prim.GetAttribute(name)  # spec/renderer.md#light-surfaces
+                        if attr and attr.HasAuthoredValue() and self.lights[n:]:
+                            if not isinstance(attr.Get(self.time), bool):
+                                raise self.err("SCENE_INVALID", f"{name} must be a bool", str(prim.GetPath()), name)
+                            setattr(self.lights[n], field_name, bool(attr.Get(self.time)))
                 elif tname == "Mesh":
                     self._mesh(prim)
                 elif tname in IMPLICIT_PRIMS:

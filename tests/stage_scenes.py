@@ -103,22 +103,29 @@ def check_settings_max_depth(render, tmp_path, spp: int = 4) -> None:
 def check_light_surfaces_occlude_nothing(render, tmp_path, spp: int = 64) -> None:
     """``render(scene, spp, seed=, max_depth=, width=, height=)``: light surfaces occlude nothing
     (spec/renderer.md#light-surfaces). (1) A camera ray through a RectLight's emitting side sees its radiance plus the
-    dome behind it, exactly; through its back the dome alone. (2) A zero-power RectLight hidden from the camera, 0.5
+    dome behind it, exactly; through its back the dome alone; an opaque one (``nasset:opaqueSurface``) ends the ray on
+    its emitting side. (2) A zero-power RectLight hidden from the camera, 0.5
     over a floor lit by a constant dome, with a box beside (so that the floor's BSDF rays are traced), leaves the image
     as it is without it, as in Cycles: before, the floor's BSDF rays ended on it and the floor under it read 48 %."""
     from pxr import Sdf
 
-    def panel_in_view(name, facing):
+    def panel_in_view(name, facing, opaque=False):
         b = SceneBuilder()
         b.camera((0, 0, 3.0), (0, 0, 0), focal=50)
         b.dome("Sky", 0.25)
-        b.rect_light("Panel", (0, 0, 0), 4.0, 4.0, facing, 2.0)
+        light = b.rect_light("Panel", (0, 0, 0), 4.0, 4.0, facing, 2.0)
+        if opaque:
+            light.GetPrim().CreateAttribute("nasset:opaqueSurface", Sdf.ValueTypeNames.Bool, custom=True).Set(True)
         return b.write(tmp_path / f"{name}.usda")
 
-    front = render(panel_in_view("front", (0, 0, 1)), 4, seed=1, max_depth=1, width=8, height=8)
-    back = render(panel_in_view("back", (0, 0, -1)), 4, seed=1, max_depth=1, width=8, height=8)
-    np.testing.assert_allclose(front, 2.25, rtol=1e-4)  # 2 + 0.25: before, 2 (the ray ended on the light)
-    np.testing.assert_allclose(back, 0.25, rtol=1e-4)
+    def seen(name, facing, opaque=False):
+        return render(panel_in_view(name, facing, opaque), 4, seed=1, max_depth=1, width=8, height=8)
+
+    np.testing.assert_allclose(seen("front", (0, 0, 1)), 2.25, rtol=1e-4)  # 2 + 0.25: before, 2 (the ray ended there)
+    np.testing.assert_allclose(seen("back", (0, 0, -1)), 0.25, rtol=1e-4)
+    # nasset:opaqueSurface (Mitsuba's emitter shapes): the ray ends on its emitting side, passes its back
+    np.testing.assert_allclose(seen("opaque_front", (0, 0, 1), True), 2.0, rtol=1e-4)
+    np.testing.assert_allclose(seen("opaque_back", (0, 0, -1), True), 0.25, rtol=1e-4)
 
     def floor(name, panel):
         b = SceneBuilder()

@@ -1182,7 +1182,7 @@ class StageConverter:
         return tex
 
     def _area_light(self, shape, sid, cls, emitter) -> None:
-        from pxr import UsdLux
+        from pxr import Sdf
 
         p = _Params(self.mi, emitter)
         radiance = p.rgb("radiance")
@@ -1199,6 +1199,14 @@ class StageConverter:
                       "its surface (black unless it has a BSDF)")
         m = self._to_world(shape)
         path = self._name("/World/Lights", sid)
+        light = self._area_light_prim(shape, cls, m, radiance, path, sid)
+        # Mitsuba's emitter shape is opaque: rays end on it (renderer.md#light-surfaces; Cycles' lights occlude nothing)
+        light.GetPrim().CreateAttribute("nasset:opaqueSurface", Sdf.ValueTypeNames.Bool, custom=True).Set(True)
+
+    def _area_light_prim(self, shape, cls, m, radiance, path, sid):
+        """The UsdLux light of an area emitter on a Mitsuba rectangle, disk or sphere (its transform ``m``)."""
+        from pxr import UsdLux
+
         if cls in ("Rectangle", "Disk"):  # the local [-1, 1]^2 square or unit disk, as a RectLight or DiskLight
             if cls == "Rectangle":
                 light = UsdLux.RectLight.Define(self.stage, path)
@@ -1218,6 +1226,7 @@ class StageConverter:
             light.CreateTreatAsPointAttr(False)
             self._xform(light.GetPrim(), _frame_row([0.0, 0.0, 1.0], m[:3, 3]))
             self._light_common(light, radiance, path, f"area emitter on sphere {sid}")
+        return light
 
     def lights(self) -> None:
         from pxr import UsdLux

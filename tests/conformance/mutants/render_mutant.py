@@ -195,22 +195,9 @@ def spot_shaping_ignored():
 def light_surfaces_occlude():
     """A ray ends at the first light surface it meets (Mitsuba's emitter shapes; the spec's rule before 2026-12-07)
     instead of going on past every light surface; a RectLight's back still lets it through."""
-    from nasset_reference_renderer.integrator import PathIntegrator
+    from nasset_reference_renderer import lights
 
-    def light_surfaces(self, L, idx, beta, o, d, t_geometry, prev_pdf, specular, no_mis, camera):
-        t_near, k_near, le_near = t_geometry.copy(), np.full(len(o), -1), np.zeros((len(o), 3))
-        for k, light in enumerate(self.scene.lights):
-            if light.area and (not camera or light.camera_visible):
-                tl, le = light.intersect(o, d)
-                closer = tl < t_near
-                t_near[closer], k_near[closer], le_near[closer] = tl[closer], k, le[closer]
-        for k in np.unique(k_near[k_near >= 0]):
-            m = np.nonzero(k_near == k)[0]
-            w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
-            L[idx[m]] += beta[m] * le_near[m] * w[:, None]
-            beta[m] = 0.0  # the path ends there
-
-    PathIntegrator.light_surfaces = light_surfaces
+    lights.Light.opaque = property(lambda self: True, lambda self, value: None)
 
 
 def no_asset_indirect():
