@@ -48,9 +48,9 @@ FOUR_PI = 4.0 * math.pi
 #: rays cross more than 16 prism faces of their own asset)
 MAX_SKIPS = 1 << 16
 #: shape id prefixes of a USD scene's light surfaces (spec/renderer.md#light-surfaces: the sphere of a SphereLight, the
-#: rectangle of a RectLight, the ellipse of a DiskLight, the side of a CylinderLight): shadow rays pass through them
-#: (Mitsuba's own lights block them, as in an XML scene); those hidden from camera rays (``nasset:cameraVisibility``
-#: false) let camera rays through too
+#: rectangle of a RectLight, the ellipse of a DiskLight, the side of a CylinderLight): every ray passes through them
+#: (Mitsuba's own lights block rays, as in an XML scene), but for an opaque one (:data:`OPAQUE_MARK`); those hidden
+#: from camera rays (``nasset:cameraVisibility`` false) show camera rays nothing
 LIGHT_SURFACE_PREFIX = "nasset_lightsurface_"
 HIDDEN_PREFIX = LIGHT_SURFACE_PREFIX + "hidden_"
 #: in a light surface's id after its prefix: an opaque one (``nasset:opaqueSurface``: rays end on its emitting side)
@@ -422,9 +422,10 @@ def _on(mi, si, lut):
 
 
 class PassThrough:
-    """What rays of a USD scene pass through: light surfaces (spec/renderer.md#light-surfaces; shadow rays always,
-    camera and continuation rays from behind, camera rays those hidden from the camera) and cut-outs where they are
-    absent (spec/renderer.md#cutouts: the ``presence`` of their ``nasset_preview`` BSDF, every ray alike)."""
+    """What rays of a USD scene pass through: light surfaces (spec/renderer.md#light-surfaces; shadow rays every one,
+    camera and continuation rays every one but an opaque one met on its emitting side, adding the emission of those
+    they see on the way) and cut-outs where they are absent (spec/renderer.md#cutouts: the ``presence`` of their
+    ``nasset_preview`` BSDF, every ray alike)."""
 
     def __init__(self, mi, lights, opaque, cutouts: list) -> None:
         self.mi, self.lights, self.opaque, self.cutouts = mi, lights, opaque, cutouts
