@@ -185,8 +185,9 @@ def register(mi) -> None:
             queue = LightQueue(mi, dr.width(ray)) if self.defer and shaded else None
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
+                emission = _light_emission(mi, scene, prev_si, prev_pdf, prev_delta)  # MIS-weighted, from prev_si
                 si, passed, via_lights = _trace_onward(mi, scene, ray, ignore, ign_lo, ign_hi, active, lights, hidden,
-                                                       depth == 0, _light_emission(mi, scene, prev_si, prev_pdf, prev_delta))
+                                                       depth == 0, emission)
                 if dr.hint(near, mode="scalar"):
                     passed = dr.select(c_moved, c_passed, passed)
                 beta[pending] *= dr.select(passed, t_sh, t_un)
@@ -194,12 +195,10 @@ def register(mi) -> None:
                 L += beta * via_lights
 
                 # emission reached by the previous vertex's continuation
-                ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-                em_pdf = scene.pdf_emitter_direction(prev_si, ds, ~prev_delta)
-                seen = ds.emitter.eval(si, active)
+                seen = emission(si, active)
                 if dr.hint(env_hidden, mode="scalar"):  # an escaping camera ray sees only the lights shown to the camera
-                    seen = dr.select((depth == 0) & ~si.is_valid(), env.eval_camera(si, active), seen)
-                L += beta * _mis(prev_pdf, dr.select(prev_delta, 0.0, em_pdf)) * seen
+                    seen = dr.select((depth == 0) & ~si.is_valid(), env.eval_camera(si, active), seen)  # (MIS weight 1)
+                L += beta * seen
 
                 active_next = active & (depth + 1 < self.max_depth) & si.is_valid()
                 sid = dr.reinterpret_array(mi.UInt32, si.shape)

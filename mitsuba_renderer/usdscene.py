@@ -12,7 +12,7 @@ from nasset_sdk import curves, stage_rules
 from nasset_sdk.errors import SceneError
 from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
 
-from .usdtextures import PER_HIT_INPUTS, PerHit, TextureReader, corner_values, texture_fallback
+from .usdtextures import PER_HIT_INPUTS, PerHit, TextureReader, at_corners, corner_values, primvar_color, texture_fallback
 
 _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings", "RenderProduct", "RenderVar"}
 MAX_SETTINGS_PIXELS = 1 << 26  # a render settings' resolution above it is ignored, as in the reference renderer
@@ -166,11 +166,7 @@ def _input(shader, name, default, t=None, per_hit: dict | None = None, textures:
     nid = node.GetIdAttr().Get()
     if per_hit is not None and textures is not None:
         if name == "diffuseColor" and nid == "UsdPrimvarReader_float3":
-            varname = str(stage_rules.input_source(node.GetInput("varname"), textures.t)[1] or "displayColor") \
-                if node.GetInput("varname") else "displayColor"
-            fb = stage_rules.input_source(node.GetInput("fallback"), textures.t)[1] if node.GetInput("fallback") else None
-            fallback = np.full(3, 0.18) if fb is None else _checked(fb, 3, "fallback", textures.scene, str(node.GetPath()), 1.0)
-            per_hit["color"] = (varname, fallback)
+            per_hit["color"] = primvar_color(node, textures.t, textures.scene)
             return default if v is None else v
         if nid == "UsdUVTexture" and output in PER_HIT_INPUTS.get(name, ()):
             tex = textures.read(node, output)
@@ -484,8 +480,8 @@ def read_scene(path: str) -> SceneDesc:
             one_sided, back, sign = _sidedness(prim, mw, path, t, purposes)
             faces = np.asarray(faces, np.int64)
             face_of = np.asarray(face_of, np.int64)
-            cn = _corner_normals(prim, faces, np.asarray(corners, np.int64), face_of, (pts, counts, idx), mw, t, sign)
             layout = (faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts))
+            cn = _corner_normals(prim, layout, (pts, counts, idx), mw, t, sign)
             for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes, bindings):
                 material = read_material(binding, path, t, purposes, primvars=inherited, bindings=bindings, textures=textures)
                 mesh = Mesh(where, wp, faces[sel], material, None if cn is None else cn[sel], one_sided, back, sign)
@@ -607,6 +603,8 @@ def _curves_or_points(prim, tname: str, mw, t, say) -> Mesh | None:
 def _implicit_mesh(prim, tname: str, mw, path: str, t, tessellations: dict) -> Mesh:
     """An implicit prim (spec/renderer.md#implicit-prims) as the SDK's reference tessellation in the world, its corner
     normals on its front (a leftHanded prim's front is its inside); material and sides are the caller's to fill."""
+    from pxr import UsdGeom
+
     size = {}
     for name, fallback in IMPLICIT_PRIMS[tname].items():
         v = _float_attr(prim, name, fallback, t)
@@ -623,8 +621,6 @@ def _implicit_mesh(prim, tname: str, mw, path: str, t, tessellations: dict) -> M
     if key not in tessellations:
         tessellations[key] = implicit_mesh(tname, size, axis)
     pts, faces, normals = tessellations[key]
-    from pxr import UsdGeom
-
     if UsdGeom.Gprim(prim).GetOrientationAttr().Get(t) == UsdGeom.Tokens.leftHanded:
         normals = -normals
     n = normals @ np.linalg.inv(mw[:3, :3]).T
@@ -653,10 +649,11 @@ def _per_hit_corners(mesh: Mesh, prim, hit: PerHit, layout: tuple, sel, primvars
         mesh.corner_colors = np.ascontiguousarray(colors[sel], np.float64)
 
 
-def _corner_normals(prim, faces, corners, face_of, polygons, mw, t, front_sign: float = 1.0):
+def _corner_normals(prim, layout, polygons, mw, t, front_sign: float = 1.0):
     """World shading normals per triangle corner [F, 3, 3] (spec/renderer.md#shading-normals): the authored ones
-    (primvars:normals, else normals), else for a subdivision surface the smooth normals of its cage (on the front side:
-    times ``front_sign``), else None. ``polygons``: the mesh's (points, faceVertexCounts, faceVertexIndices)."""
+    (primvars:normals, else normals; vertex, varying, faceVarying or uniform), else for a subdivision surface the
+    smooth normals of its cage (on the front side: times ``front_sign``), else None. ``layout``: as
+    :func:`.usdtextures.corner_values`'; ``polygons``: the mesh's (points, faceVertexCounts, faceVertexIndices)."""
     from pxr import UsdGeom
 
     pts, counts, idx = polygons
@@ -673,19 +670,14 @@ def _corner_normals(prim, faces, corners, face_of, polygons, mw, t, front_sign: 
     n = None
     if vals is not None and len(vals):
         v = np.asarray(vals, np.float64).reshape(-1, 3)
-        if interp in ("vertex", "varying") and len(v) == len(pts):
-            n = v[faces]
-        elif interp == "faceVarying" and len(v) == len(idx):
-            n = v[corners]
-        elif interp == "uniform" and len(v) == len(counts):
-            n = np.repeat(v[face_of][:, None], 3, 1)
-        else:
+        n = at_corners(v, interp, layout, ("vertex", "varying", "faceVarying", "uniform"))
+        if n is None:
             warnings.warn(f"{prim.GetPath()}: normals with interpolation {interp!r} and {len(v)} values ignored", stacklevel=3)
     if n is None:
         scheme = UsdGeom.Mesh(prim).GetSubdivisionSchemeAttr().Get(t)
         if scheme in (None, UsdGeom.Tokens.none):
             return None
-        n = stage_rules.smooth_vertex_normals(pts, counts, idx, front_sign < 0)[faces]  # a cage shades smooth, as usdview draws it
+        n = stage_rules.smooth_vertex_normals(pts, counts, idx, front_sign < 0)[layout[0]]  # a cage shades smooth, as usdview draws it
     n = n @ np.linalg.inv(mw[:3, :3]).T
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
 

@@ -26,6 +26,8 @@ PER_HIT_INPUTS = {"diffuseColor": ("rgb",), "roughness": ("r", "g", "b", "a"), "
 SHADING_INPUTS = ("diffuseColor", "roughness", "metallic")
 
 Warn = Callable[[str, str], None]  # (message, prim path)
+#: USD interpolations of per-element values a mesh's corners read (:func:`at_corners`)
+INTERPOLATIONS = ("vertex", "varying", "faceVarying", "uniform", "constant")
 
 
 @dataclass
@@ -76,7 +78,7 @@ def _srgb_decode(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, np.power((c + 0.055) / 1.055, 2.4))
 
 
-def _input_value(shader, name: str, t):
+def input_value(shader, name: str, t):
     """The value reaching ``shader``'s input ``name`` (None when unset or fed by a shader output)."""
     from nasset_sdk import stage_rules
 
@@ -95,10 +97,27 @@ def _finite(value, n: int, what: str, scene: str, prim: str, bound: float = 1e9)
     return v[:n]
 
 
+def primvar_color(node, t, scene: str) -> tuple[str, np.ndarray]:
+    """(primvar name, fallback colour [3]) of a ``UsdPrimvarReader_float3`` feeding diffuseColor
+    (spec/renderer.md#primvar-colors): ``varname`` (fallback ``displayColor``), ``fallback`` clamped to [0, 1] (else
+    0.18 grey); SCENE_INVALID naming the reader for a fallback that is not 3 finite numbers."""
+    fb = input_value(node, "fallback", t)
+    if fb is None:
+        return str(input_value(node, "varname", t) or "displayColor"), np.full(3, 0.18)
+    try:
+        v = np.asarray(fb, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        v = np.full(1, np.nan)
+    if len(v) != 3 or not np.isfinite(v).all():
+        raise SceneError("SCENE_INVALID", f"fallback = {fb!r} is not 3 finite number(s)", file=scene, prim=str(node.GetPath()),
+                         attribute="inputs:fallback")
+    return str(input_value(node, "varname", t) or "displayColor"), np.clip(v, 0.0, 1.0)
+
+
 def texture_fallback(node, output: str, t):
     """A UsdUVTexture's authored ``inputs:fallback`` as the output ``output`` gives it (its rgb, or one channel; a
     shorter value keeps (0, 0, 0, 1) for the rest), None when not authored: the value of a texture that is not read."""
-    v = _input_value(node, "fallback", t)
+    v = input_value(node, "fallback", t)
     if v is None:
         return None
     v = np.asarray(v, np.float64).ravel()[:4]
@@ -119,7 +138,7 @@ class TextureReader:
         """The texture ``node`` (a UsdUVTexture) gives through ``output``; None, warned, when its image cannot be used
         (no file, not found, a format other than OpenEXR / PNG / JPEG, a UDIM set, a file inside a package)."""
         where = str(node.GetPath())
-        asset = _input_value(node, "file", self.t)
+        asset = input_value(node, "file", self.t)
         path = getattr(asset, "path", "") or ""
         resolved = getattr(asset, "resolvedPath", "") or ""
         problem = ("has no inputs:file" if not path else "is a UDIM tile set" if "<UDIM>" in path
@@ -132,14 +151,14 @@ class TextureReader:
         rgba, bits = self._image(resolved, where)
         channel = -1 if output == "rgb" else "rgba".find(output)
         image = rgba[..., :3] if channel < 0 else np.repeat(rgba[..., channel:channel + 1], 3, -1)
-        space = str(_input_value(node, "sourceColorSpace", self.t) or "auto")
+        space = str(input_value(node, "sourceColorSpace", self.t) or "auto")
         if space not in ("auto", "raw", "sRGB"):
             self.warn(f"sourceColorSpace {space!r} read as raw (linear)", where)
         if channel != 3 and (space == "sRGB" or (space == "auto" and bits == 8)):  # alpha is never decoded
             image = _srgb_decode(image)
         wrap = []
         for name in ("wrapS", "wrapT"):
-            mode = str(_input_value(node, name, self.t) or "useMetadata")
+            mode = str(input_value(node, name, self.t) or "useMetadata")
             if mode == "useMetadata":  # none of these formats carries a wrap mode: UsdUVTexture then gives black
                 mode = "black"
             elif mode not in WRAP_MODES:
@@ -148,7 +167,7 @@ class TextureReader:
             wrap.append(mode)
         scale, bias = np.ones(4), np.zeros(4)
         for name, out in (("scale", scale), ("bias", bias)):
-            v = _input_value(node, name, self.t)
+            v = input_value(node, name, self.t)
             if v is not None:
                 v = np.asarray(v, np.float64).ravel()[:4]
                 if not np.isfinite(v).all():
@@ -191,7 +210,7 @@ class TextureReader:
         reader = source(node, "st")
         if reader is not None and reader.GetIdAttr().Get() == "UsdTransform2d":
             where = str(reader.GetPath())
-            vals = {name: _input_value(reader, name, self.t) for name in ("scale", "rotation", "translation")}
+            vals = {name: input_value(reader, name, self.t) for name in ("scale", "rotation", "translation")}
             scale = _finite((1.0, 1.0) if vals["scale"] is None else vals["scale"], 2, "scale", self.scene, where)
             angle = np.radians(_finite(0.0 if vals["rotation"] is None else vals["rotation"], 1, "rotation", self.scene, where)[0])
             move = _finite((0.0, 0.0) if vals["translation"] is None else vals["translation"], 2, "translation", self.scene, where)
@@ -199,9 +218,9 @@ class TextureReader:
             uv = np.concatenate([np.array([[c, -s], [s, c]]) @ np.diag(scale), move[:, None]], 1)
             reader = source(reader, "in")
         if reader is not None and reader.GetIdAttr().Get() == "UsdPrimvarReader_float2":
-            fb = _input_value(reader, "fallback", self.t)
+            fb = input_value(reader, "fallback", self.t)
             fallback = np.zeros(2) if fb is None else _finite(fb, 2, "fallback", self.scene, str(reader.GetPath()))
-            return str(_input_value(reader, "varname", self.t) or "st"), uv, fallback
+            return str(input_value(reader, "varname", self.t) or "st"), uv, fallback
         self.warn("UsdUVTexture st is not read from a UsdPrimvarReader_float2 (directly or through a UsdTransform2d); "
                   "primvar 'st' is used", str(node.GetPath()))
         return "st", uv, np.zeros(2)
@@ -211,15 +230,22 @@ def corner_values(primvar, width: int, layout: tuple, t) -> np.ndarray | None:
     """Values [F, 3, width] of ``primvar`` (flattened if indexed) at the triangles' corners, None when it is missing or
     unusable (not finite, another width, a length its interpolation does not give). ``layout``: (triangles [F, 3] point
     indices, their face-vertex slots [F, 3], face of each triangle [F], points, face-vertex slots, faces)."""
-    tri, corners, face_of, n_points, n_slots, n_faces = layout
     vals = primvar.ComputeFlattened(t) if primvar is not None else None
     if vals is None or not len(vals):
         return None
     v = np.asarray(vals, np.float64)
     if v.size % width or not np.isfinite(v).all():
         return None
-    v = v.reshape(-1, width)
-    interp = primvar.GetInterpolation()
+    return at_corners(v.reshape(-1, width), primvar.GetInterpolation(), layout)
+
+
+def at_corners(v: np.ndarray, interp: str, layout: tuple, interpolations=INTERPOLATIONS) -> np.ndarray | None:
+    """Values [F, 3, w] at the triangles' corners of per-element values ``v`` [N, w] of USD interpolation ``interp``
+    (one of ``interpolations``), None when it is another or ``N`` is not the count it gives. ``layout``: as
+    :func:`corner_values`'."""
+    tri, corners, face_of, n_points, n_slots, n_faces = layout
+    if interp not in interpolations:
+        return None
     if interp in ("vertex", "varying") and len(v) == n_points:
         return v[tri]
     if interp == "faceVarying" and len(v) == n_slots:
@@ -227,5 +253,5 @@ def corner_values(primvar, width: int, layout: tuple, t) -> np.ndarray | None:
     if interp == "uniform" and len(v) == n_faces:
         return np.repeat(v[face_of][:, None], 3, 1)
     if interp == "constant" and len(v) == 1:
-        return np.broadcast_to(v[0], (len(tri), 3, width)).copy()
+        return np.broadcast_to(v[0], (len(tri), 3, v.shape[1])).copy()
     return None
