@@ -10,14 +10,19 @@ raised on the fly up to 32 MiB) with fresh ``mmap`` pages and returns heap memor
 threshold to the kernel, so the same pages are faulted in and zeroed again on every wavefront.
 Measured on the 8dna near-field bench (docs/benchmarks.md#allocator): renders 1.155x faster (median of
 19 rounds) with less spread between runs, at the same peak memory.
+
+:func:`single_threaded_blas` is scoped instead: the reference renderer's ``load_scene`` and ``render`` hold numpy's
+BLAS to one thread while they run, and give it back afterwards (docs/benchmarks.md#blas-threads).
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
 import sys
+import threading
 
 #: blocks below this many bytes come from the heap (glibc's largest allowed mmap threshold on 64-bit)
 MMAP_THRESHOLD = 32 * 1024 * 1024
@@ -56,3 +61,64 @@ def tune_allocator() -> bool:
     libc.mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     libc.mallopt.restype = ctypes.c_int
     return bool(libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD))
+
+
+#: (get, set) thread-count functions of the OpenBLAS builds numpy and scipy wheels bundle, by symbol name
+_OPENBLAS_SYMBOLS = (("openblas_get_num_threads64_", "openblas_set_num_threads64_"),
+                     ("openblas_get_num_threads", "openblas_set_num_threads"),
+                     ("scipy_openblas_get_num_threads", "scipy_openblas_set_num_threads"),
+                     ("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"))
+_blas_lock = threading.Lock()
+_blas_depth = 0
+_blas_saved: list = []  # [(set function, thread count before)] while _blas_depth > 0
+
+
+def _loaded_openblas() -> list:
+    """(get, set) ctypes functions of each OpenBLAS library mapped into this process (Linux: ``/proc/self/maps``;
+    elsewhere none)."""
+    try:
+        with open("/proc/self/maps") as f:
+            paths = {line.split(None, 5)[5].strip() for line in f if "openblas" in line.lower() and line.count(" ") >= 5}
+    except (OSError, IndexError):
+        return []
+    found = []
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)  # already loaded: the same handle, nothing is initialised again
+        except OSError:
+            continue
+        for get_name, set_name in _OPENBLAS_SYMBOLS:
+            if hasattr(lib, get_name) and hasattr(lib, set_name):
+                get, put = getattr(lib, get_name), getattr(lib, set_name)
+                get.restype, get.argtypes, put.restype, put.argtypes = ctypes.c_int, (), None, (ctypes.c_int,)
+                found.append((get, put))
+                break
+    return found
+
+
+@contextlib.contextmanager
+def single_threaded_blas():
+    """numpy's BLAS (OpenBLAS) on one thread while the block runs, as before it afterwards.
+
+    The renderers' wavefronts multiply [n, 3] rows by 3 x 3 matrices and vectors. OpenBLAS splits such products
+    over its threads, which then wait for the next one by spinning on ``sched_yield``: on the dense-hair bench that
+    kept a second core busy in the kernel for the whole render (2.3 s of system time in a 2.6 s render on one
+    render thread), and with two render threads it took the core the second one needed (docs/benchmarks.md#blas-threads).
+    The results do not depend on the thread count (the products split by rows). Nested and concurrent blocks share
+    one setting; the last to leave restores the counts. Without OpenBLAS in the process this does nothing."""
+    global _blas_depth
+    with _blas_lock:
+        if _blas_depth == 0:
+            _blas_saved[:] = [(put, get()) for get, put in _loaded_openblas()]
+            for put, _ in _blas_saved:
+                put(1)
+        _blas_depth += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas_depth -= 1
+            if _blas_depth == 0:
+                for put, count in _blas_saved:
+                    put(count)
+                _blas_saved.clear()

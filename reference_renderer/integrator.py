@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nasset_sdk.errors import UsageError
+from nasset_sdk.process import single_threaded_blas
 
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
@@ -519,7 +520,13 @@ def render(scene, settings: RenderSettings | None = None, *, plan: RenderPlan | 
     The image is a sum over jobs, one per wavefront (a band of a tile's rows, for the samples of one pass) with its
     own random numbers; ``settings.workers`` threads trace them (numpy, onnxruntime and Embree release the
     interpreter lock) and the film adds their results in job order, so the image does not depend on the number of
-    threads (spec/renderer.md#film)."""
+    threads (spec/renderer.md#film). numpy's BLAS runs on one thread meanwhile
+    (:func:`nasset_sdk.process.single_threaded_blas`)."""
+    with single_threaded_blas():
+        return _render(scene, settings, plan, load_components)
+
+
+def _render(scene, settings: RenderSettings | None, plan: RenderPlan | None, load_components: bool) -> RenderResult:
     from .scene import Scene
 
     if not isinstance(scene, Scene):

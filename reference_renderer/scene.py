@@ -22,6 +22,7 @@ import numpy as np
 from nasset_sdk import curves, stage_rules
 from nasset_sdk.errors import NassetError, SceneError, UsageError, error, usd_reason
 from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
+from nasset_sdk.process import single_threaded_blas
 
 from .bsdf import MIN_ALPHA, MaterialTable
 from .camera import LENS_UNIT, Camera
@@ -251,7 +252,9 @@ def is_asset_file(path: str) -> bool:
 def load_scene(source, *, time=None, search_paths=None) -> Scene:
     """Load a scene from a path or an opened ``Usd.Stage`` (which keeps its own resolver context).
 
-    ``search_paths``: folders where USD's resolver looks up bare asset paths (``chair.usdc``) of a scene file."""
+    ``search_paths``: folders where USD's resolver looks up bare asset paths (``chair.usdc``) of a scene file. numpy's
+    BLAS runs on one thread meanwhile (:func:`nasset_sdk.process.single_threaded_blas`: the tessellation's products
+    are [n, 3] rows by 3 x 3 matrices)."""
     from pxr import Ar
 
     from nasset_sdk.references import resolver_context
@@ -272,7 +275,7 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
             raise UsageError(f"load_scene: source must be a path or a Usd.Stage, got {type(source).__name__}")
         stage = source
         file = stage.GetRootLayer().realPath or stage.GetRootLayer().identifier
-    with Ar.ResolverContextBinder(stage.GetPathResolverContext()):
+    with Ar.ResolverContextBinder(stage.GetPathResolverContext()), single_threaded_blas():
         return _Loader(stage, file, render_time(stage, time)).load()
 
 
