@@ -422,8 +422,7 @@ def read_scene(path: str) -> SceneDesc:
     hiding = stage_rules.Hiding(t, purposes)
     inherited = stage_rules.InheritedPrimvars()  # displayColor of unbound meshes, O(1) per mesh however deep
     bindings = stage_rules.MaterialBindings()  # bound materials, O(1) per mesh however deep
-    textures = TextureReader(path, t, say)  # each image decoded once
-    tessellations: dict = {}  # (type, sizes, axis) -> implicit_mesh(...)
+    reading = _Reading(path, t, purposes, inherited, bindings, TextureReader(path, t, say), {}, say)
     cameras = stage_rules.stage_cameras(stage)  # whatever their visibility and purpose
     meshes, lights, assets = [], [], []
     # unloaded payload prims (assets placed with a payload arc) are not "loaded": traverse them too
@@ -457,60 +456,16 @@ def read_scene(path: str) -> SceneDesc:
         if tn in _LIGHTS:
             lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path, t))
             continue
-        if tn == "Mesh":
-            m = UsdGeom.Mesh(prim)
-            pts = np.asarray(m.GetPointsAttr().Get(t) or [], np.float64).reshape(-1, 3)
-            counts = np.asarray(m.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
-            idx = np.asarray(m.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
-            if len(pts) == 0 or len(counts) == 0:
-                warnings.warn(f"{ppath}: empty mesh ignored", stacklevel=2)
-                continue
-            if counts.sum() != len(idx) or np.any(counts < 3) or idx.min() < 0 or idx.max() >= len(pts):
-                raise SceneError("SCENE_INVALID", "mesh topology is invalid", file=path, prim=ppath)
-            faces, corners, face_of = [], [], []
-            start = 0
-            for fi, c in enumerate(counts):  # fan triangulation
-                f = idx[start:start + c]
-                faces.extend([(f[0], f[k], f[k + 1]) for k in range(1, c - 1)])
-                corners.extend([(start, start + k, start + k + 1) for k in range(1, c - 1)])
-                face_of.extend([fi] * (c - 2))
-                start += c
-            mw = _m4(cache.GetLocalToWorldTransform(prim))
-            wp = pts @ mw[:3, :3] + mw[3, :3]
-            one_sided, back, sign = _sidedness(prim, mw, path, t, purposes)
-            faces = np.asarray(faces, np.int64)
-            face_of = np.asarray(face_of, np.int64)
-            layout = (faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts))
-            cn = _corner_normals(prim, layout, (pts, counts, idx), mw, t, sign)
-            for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, purposes, bindings):
-                material = read_material(binding, path, t, purposes, primvars=inherited, bindings=bindings, textures=textures)
-                mesh = Mesh(where, wp, faces[sel], material, None if cn is None else cn[sel], one_sided, back, sign)
-                if material.per_hit is not None:
-                    _per_hit_corners(mesh, prim, material.per_hit, layout, sel, inherited, t, say)
-                meshes.append(mesh)
+        if tn == "Mesh" or tn in ("BasisCurves", "Points") or tn in IMPLICIT_PRIMS:
+            meshes.extend(_gprim_meshes(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), reading))
             continue
-        if tn in ("BasisCurves", "Points"):  # tubes and spheres (spec/renderer.md#curves-and-points)
-            mesh = _curves_or_points(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), t, say)
-            if mesh is not None:
-                mesh.back_material = _sidedness(prim, np.eye(4), path, t, purposes)[1]
-                mesh.material = read_material(prim, path, t, purposes, primvars=inherited, bindings=bindings)
-                meshes.append(mesh)
-            continue
-        if tn in IMPLICIT_PRIMS:
-            mw = _m4(cache.GetLocalToWorldTransform(prim))
-            mesh = _implicit_mesh(prim, tn, mw, path, t, tessellations)
-            mesh.one_sided, mesh.back_material, mesh.front_sign = _sidedness(prim, mw, path, t, purposes)
-            mesh.material = read_material(prim, path, t, purposes, primvars=inherited, bindings=bindings, textures=textures)
-            if mesh.material.per_hit is not None:
-                n = len(mesh.faces)
-                layout = (mesh.faces, np.arange(3 * n).reshape(n, 3), np.arange(n), len(mesh.points), 3 * n, n)
-                _per_hit_corners(mesh, prim, mesh.material.per_hit, layout, slice(None), inherited, t, say)
-            say(f"implicit {tn} tessellated into {len(mesh.faces)} triangles", ppath)
-            meshes.append(mesh)
+        if tn == "PointInstancer":  # its subtree renders only as its instances (spec/renderer.md#geometry)
+            it.PruneChildren()
+            meshes.extend(_point_instancer(prim, cache, reading))
             continue
         if tn in _STRUCTURAL:
             continue
-        if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim) or tn == "PointInstancer":
+        if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim):
             raise SceneError("SCENE_UNSUPPORTED", f"prim type {tn!r} is not supported", file=path, prim=ppath)
         warnings.warn(f"{ppath}: prim type {tn!r} ignored", stacklevel=2)
     chosen = stage_rules.render_camera(stage, settings, path, say, cameras)
@@ -518,6 +473,178 @@ def read_scene(path: str) -> SceneDesc:
     camera.settings_resolution = stage_rules.settings_resolution(stage, settings, t, say, MAX_SETTINGS_PIXELS)
     stage_rules.conform_warning(settings, t, camera.settings_resolution, camera.h_aperture, camera.v_aperture, say)
     return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
+
+
+@dataclass
+class _Reading:
+    """What the geometry readers of one :func:`read_scene` share."""
+    path: str  # the scene file
+    t: object  # the render time (Usd.TimeCode)
+    purposes: stage_rules.Purposes
+    primvars: stage_rules.InheritedPrimvars
+    bindings: stage_rules.MaterialBindings
+    textures: TextureReader  # each image decoded once
+    tessellations: dict  # (type, sizes, axis) -> implicit_mesh(...)
+    say: object  # warn(message, prim path)
+
+
+def _gprim_meshes(prim, tn: str, mw, r: _Reading) -> list[Mesh]:
+    """The meshes of a Mesh (one per material group), BasisCurves, Points or implicit prim placed by ``mw`` (4x4, row
+    vectors: its world transform, or a PointInstancer prototype part's); [] when it draws nothing (warned)."""
+    from pxr import UsdGeom
+
+    path, t, ppath = r.path, r.t, str(prim.GetPath())
+    if tn in ("BasisCurves", "Points"):  # tubes and spheres (spec/renderer.md#curves-and-points)
+        mesh = _curves_or_points(prim, tn, mw, t, r.say)
+        if mesh is None:
+            return []
+        mesh.back_material = _sidedness(prim, np.eye(4), path, t, r.purposes)[1]
+        mesh.material = read_material(prim, path, t, r.purposes, primvars=r.primvars, bindings=r.bindings)
+        return [mesh]
+    if tn in IMPLICIT_PRIMS:
+        mesh = _implicit_mesh(prim, tn, mw, path, t, r.tessellations)
+        mesh.one_sided, mesh.back_material, mesh.front_sign = _sidedness(prim, mw, path, t, r.purposes)
+        mesh.material = read_material(prim, path, t, r.purposes, primvars=r.primvars, bindings=r.bindings, textures=r.textures)
+        if mesh.material.per_hit is not None:
+            n = len(mesh.faces)
+            layout = (mesh.faces, np.arange(3 * n).reshape(n, 3), np.arange(n), len(mesh.points), 3 * n, n)
+            _per_hit_corners(mesh, prim, mesh.material.per_hit, layout, slice(None), r.primvars, t, r.say)
+        r.say(f"implicit {tn} tessellated into {len(mesh.faces)} triangles", ppath)
+        return [mesh]
+    m = UsdGeom.Mesh(prim)
+    pts = np.asarray(m.GetPointsAttr().Get(t) or [], np.float64).reshape(-1, 3)
+    counts = np.asarray(m.GetFaceVertexCountsAttr().Get(t) or [], np.int64)
+    idx = np.asarray(m.GetFaceVertexIndicesAttr().Get(t) or [], np.int64)
+    if len(pts) == 0 or len(counts) == 0:
+        warnings.warn(f"{ppath}: empty mesh ignored", stacklevel=3)
+        return []
+    if counts.sum() != len(idx) or np.any(counts < 3) or idx.min() < 0 or idx.max() >= len(pts):
+        raise SceneError("SCENE_INVALID", "mesh topology is invalid", file=path, prim=ppath)
+    faces, corners, face_of = [], [], []
+    start = 0
+    for fi, c in enumerate(counts):  # fan triangulation
+        f = idx[start:start + c]
+        faces.extend([(f[0], f[k], f[k + 1]) for k in range(1, c - 1)])
+        corners.extend([(start, start + k, start + k + 1) for k in range(1, c - 1)])
+        face_of.extend([fi] * (c - 2))
+        start += c
+    wp = pts @ mw[:3, :3] + mw[3, :3]
+    one_sided, back, sign = _sidedness(prim, mw, path, t, r.purposes)
+    faces = np.asarray(faces, np.int64)
+    face_of = np.asarray(face_of, np.int64)
+    layout = (faces, np.asarray(corners, np.int64), face_of, len(pts), len(idx), len(counts))
+    cn = _corner_normals(prim, layout, (pts, counts, idx), mw, t, sign)
+    out = []
+    for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, r.purposes, r.bindings):
+        material = read_material(binding, path, t, r.purposes, primvars=r.primvars, bindings=r.bindings, textures=r.textures)
+        mesh = Mesh(where, wp, faces[sel], material, None if cn is None else cn[sel], one_sided, back, sign)
+        if material.per_hit is not None:
+            _per_hit_corners(mesh, prim, material.per_hit, layout, sel, r.primvars, t, r.say)
+        out.append(mesh)
+    return out
+
+
+#: instances of one PointInstancer, checked before USD computes their transforms; triangles its instances may add
+#: (the reference renderer's bounds, spec/renderer.md#limits)
+MAX_INSTANCES = 1 << 20
+MAX_INSTANCED_TRIANGLES = 1 << 24
+
+
+def _point_instancer(prim, cache, r: _Reading) -> list[Mesh]:
+    """The instances of a PointInstancer (spec/renderer.md#geometry): each instance whose mask entry is true renders
+    its prototype's meshes, curves, points and implicit prims (visible, not of a purpose left out, by their own
+    attributes), placed by ``M_prim · M_root⁻¹ · X_i · M_instancer``. A prototype's parts are read once, placed
+    relative to its root, and the instances of a part are one Mesh (two where some of them mirror: the front sign is
+    per mesh). A neural asset, a nested PointInstancer or another geometry type in a prototype is
+    ``SCENE_UNSUPPORTED``; a light in one is warned about (it is not instanced)."""
+    from pxr import Usd, UsdGeom, UsdLux
+
+    from nasset_sdk.references import asset_source
+
+    path, t, ppath = r.path, r.t, str(prim.GetPath())
+    where = dict(file=path, prim=ppath, attribute="protoIndices")
+    pi = UsdGeom.PointInstancer(prim)
+    protos = [prim.GetStage().GetPrimAtPath(p) for p in pi.GetPrototypesRel().GetForwardedTargets()]
+    indices = np.asarray(pi.GetProtoIndicesAttr().Get(t) or [], np.int64)
+    if len(indices) > MAX_INSTANCES:
+        raise SceneError("SCENE_INVALID", f"{len(indices)} instances, more than {MAX_INSTANCES}", **where)
+    xforms = pi.ComputeInstanceTransformsAtTime(t, t, UsdGeom.PointInstancer.IncludeProtoXform,
+                                                UsdGeom.PointInstancer.IgnoreMask)  # the mask is applied below
+    if xforms is None or len(xforms) != len(indices):
+        raise SceneError("SCENE_INVALID", "PointInstancer instances cannot be computed (protoIndices, positions, "
+                         "orientations, scales or the prototypes disagree)", **where)
+    if len(indices) and (indices.min() < 0 or indices.max() >= len(protos) or not all(protos)):
+        raise SceneError("SCENE_INVALID", "protoIndices name a prototype that is missing", **where)
+    mask = np.asarray(pi.ComputeMaskAtTime(t) or [True] * len(indices), bool)
+    placements = np.asarray(xforms, np.float64).reshape(-1, 4, 4) @ _m4(cache.GetLocalToWorldTransform(prim))
+    if not np.isfinite(placements[mask]).all():
+        raise SceneError("SCENE_INVALID", "an instance transform is not finite (positions, orientations or scales)",
+                         file=path, prim=ppath, attribute="positions")
+    out, added = [], 0
+    for k, root in enumerate(protos):
+        parts = []
+        walk = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies()))
+        for p in walk:
+            img = UsdGeom.Imageable(p)
+            if img and (img.GetVisibilityAttr().Get(t) == UsdGeom.Tokens.invisible
+                        or img.GetPurposeAttr().Get(t) not in r.purposes.included):
+                walk.PruneChildren()
+                continue
+            tn = str(p.GetTypeName())
+            if asset_source(p) is not None or tn in ("NeuralAsset", "PointInstancer"):
+                raise SceneError("SCENE_UNSUPPORTED", f"a {tn or 'neural asset'} as a PointInstancer prototype (meshes, "
+                                 "curves, points and implicit prims are rendered)", file=path, prim=str(p.GetPath()))
+            if tn in ("Mesh", "BasisCurves", "Points") or tn in IMPLICIT_PRIMS:
+                parts.append((p, tn))
+            elif p.IsA(UsdGeom.Gprim):
+                raise SceneError("SCENE_UNSUPPORTED", f"geometry type {tn} in a PointInstancer prototype is not supported",
+                                 file=path, prim=str(p.GetPath()))
+            elif p.HasAPI(UsdLux.LightAPI) or tn.endswith("Light"):
+                r.say("a light in a PointInstancer prototype is not instanced: it does not light the scene", str(p.GetPath()))
+        chosen = placements[mask & (indices == k)]
+        if not parts or not len(chosen):
+            continue
+        root_m = _m4(cache.GetLocalToWorldTransform(root))
+        if not np.isfinite(root_m).all() or abs(np.linalg.det(root_m[:3, :3])) < 1e-30:
+            raise SceneError("SCENE_INVALID", "a prototype root's transform is singular or not finite", file=path,
+                             prim=str(root.GetPath()), attribute="xformOpOrder")
+        to_root = np.linalg.inv(root_m)
+        for p, tn in parts:
+            for mesh in _gprim_meshes(p, tn, _m4(cache.GetLocalToWorldTransform(p)) @ to_root, r):
+                added += len(mesh.faces) * len(chosen)
+                if added > MAX_INSTANCED_TRIANGLES:
+                    raise SceneError("SCENE_INVALID", f"the instances add more than {MAX_INSTANCED_TRIANGLES} triangles",
+                                     **where)
+                out.extend(_placed(mesh, chosen))
+    return out
+
+
+def _placed(mesh: Mesh, placements: np.ndarray) -> list[Mesh]:
+    """``mesh`` (placed relative to its prototype root) moved by each of ``placements`` [n, 4, 4] (row vectors), as
+    one Mesh of n copies, or two when some placements mirror and others do not (a mirroring placement flips the
+    front sign, as a mirroring world transform does)."""
+    out = []
+    mirrors = np.linalg.det(placements[:, :3, :3]) < 0
+    for flip in (False, True):
+        P = placements[mirrors == flip]
+        if not len(P):
+            continue
+        n, v = len(P), len(mesh.points)
+        points = (mesh.points[None] @ P[:, :3, :3] + P[:, None, 3, :3]).reshape(-1, 3)
+        faces = (mesh.faces[None] + v * np.arange(n)[:, None, None]).reshape(-1, 3)
+        normals = None
+        if mesh.corner_normals is not None:  # by each placement's inverse transpose, then unit length again
+            inv_t = np.linalg.inv(P[:, :3, :3]).transpose(0, 2, 1)
+            nrm = (mesh.corner_normals[None].reshape(1, -1, 3) @ inv_t).reshape(-1, 3, 3)
+            normals = nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-300)
+        out.append(Mesh(mesh.prim, points, faces, mesh.material, normals, mesh.one_sided, mesh.back_material,
+                        -mesh.front_sign if flip else mesh.front_sign, _tiled(mesh.corner_st, n), _tiled(mesh.corner_colors, n)))
+    return out
+
+
+def _tiled(corner_values: np.ndarray | None, n: int) -> np.ndarray | None:
+    """Per-corner values [F, 3, C] of one copy repeated for n copies [n * F, 3, C]."""
+    return None if corner_values is None else np.tile(corner_values, (n, 1, 1))
 
 
 def _sidedness(prim, mw, path, t, purposes):
