@@ -10,6 +10,7 @@ import numpy as np
 
 from nasset_sdk import curves, stage_rules
 from nasset_sdk.errors import SceneError
+from nasset_sdk.images import packaged_name
 from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
 
 from .usdtextures import PER_HIT_INPUTS, PerHit, TextureReader, at_corners, corner_values, primvar_color, texture_fallback
@@ -379,11 +380,12 @@ def _read_exr(path: str, light_prim: str, scene: str) -> np.ndarray:
     and chunk table checked before OpenEXR decodes): ``IMAGE_INVALID`` for a file it refuses, ``SCENE_INVALID`` for
     pixels that are not finite and >= 0, as the reference renderer."""
     from nasset_sdk.errors import NassetError
-    from nasset_sdk.images import read_exr
+    from nasset_sdk.images import local_image_copy, read_exr
 
     where = dict(file=scene, prim=light_prim, attribute="inputs:texture:file")
     try:
-        img = read_exr(path)
+        with local_image_copy(path) as local:  # a file inside a package (usdz): a temporary copy
+            img = read_exr(local)
     except NassetError as exc:
         raise SceneError("IMAGE_INVALID", f"dome texture {path}: {exc.message}", **where) from None
     if not np.isfinite(img).all() or (img < 0).any():
@@ -920,7 +922,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             if not resolved:
                 raw = tex.path if isinstance(tex, Sdf.AssetPath) else str(tex)
                 resolved = raw if os.path.isabs(raw) else os.path.join(os.path.dirname(os.path.abspath(path)), raw)
-            if not os.path.exists(resolved):
+            if not (packaged_name(resolved) or os.path.exists(resolved)):
                 raise SceneError("SCENE_INVALID", f"dome texture {resolved} does not exist", file=path, prim=ppath)
             lt.texture = _read_exr(resolved, ppath, path)
     lt.shaping = _shaping(prim, get, path, t)

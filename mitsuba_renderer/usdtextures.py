@@ -136,15 +136,18 @@ class TextureReader:
 
     def read(self, node, output: str) -> Texture | None:
         """The texture ``node`` (a UsdUVTexture) gives through ``output``; None, warned, when its image cannot be used
-        (no file, not found, a format other than OpenEXR / PNG / JPEG, a UDIM set, a file inside a package)."""
+        (no file, not found, a format other than OpenEXR / PNG / JPEG, a UDIM set). A file inside a package (usdz) is
+        read through USD's resolver."""
+        from nasset_sdk.images import packaged_name
+
         where = str(node.GetPath())
         asset = input_value(node, "file", self.t)
         path = getattr(asset, "path", "") or ""
         resolved = getattr(asset, "resolvedPath", "") or ""
+        packaged = packaged_name(resolved)
         problem = ("has no inputs:file" if not path else "is a UDIM tile set" if "<UDIM>" in path
-                   else "is inside a package (not read here)" if resolved.endswith("]")
-                   else "is not found" if not resolved or not os.path.isfile(resolved)
-                   else "is not OpenEXR, PNG or JPEG" if not resolved.lower().endswith(SUFFIXES) else "")
+                   else "is not found" if not resolved or not (packaged or os.path.isfile(resolved))
+                   else "is not OpenEXR, PNG or JPEG" if not (packaged or resolved).lower().endswith(SUFFIXES) else "")
         if problem:
             self.warn(f"texture {path or '(none)'} {problem}; its fallback, else the input's own value, is used", where)
             return None
@@ -182,12 +185,13 @@ class TextureReader:
     def _image(self, resolved: str, where: str) -> tuple[np.ndarray, int]:
         """(rgba [H, W, 4] float32, bits per channel) of an image file, decoded once, through the SDK's bounded
         readers (the header's size is checked before any pixel is decoded)."""
-        from nasset_sdk.images import read_exr, read_png_jpeg
+        from nasset_sdk.images import local_image_copy, packaged_name, read_exr, read_png_jpeg
 
         if resolved not in self.images:
             try:
-                img, bits = (read_exr(resolved, alpha=True), 32) if resolved.lower().endswith(".exr") \
-                    else read_png_jpeg(resolved, alpha=True)
+                with local_image_copy(resolved) as local:  # a file inside a package: a temporary copy
+                    exr = (packaged_name(resolved) or resolved).lower().endswith(".exr")
+                    img, bits = (read_exr(local, alpha=True), 32) if exr else read_png_jpeg(local, alpha=True)
             except NassetError as exc:
                 raise SceneError("IMAGE_INVALID", f"texture {resolved}: {exc.message}", file=self.scene, prim=where,
                                  attribute="inputs:file") from None

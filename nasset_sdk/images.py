@@ -30,6 +30,47 @@ EXR_LINES_PER_CHUNK = (1, 1, 1, 16, 32, 16, 32, 32, 32, 256)
 MAX_EXR_OFFSETS_CHECKED = 1 << 20
 
 
+#: largest image file read out of a package (usdz) into a temporary file
+MAX_PACKAGED_IMAGE_BYTES = 1 << 30
+
+
+def packaged_name(resolved: str) -> str:
+    """The file name inside a package of a package-relative resolved path (``a.usdz[tex/wood.png]`` -> ``tex/wood.png``,
+    the innermost for nested packages), or "" for a plain path."""
+    from pxr import Ar
+
+    if not resolved or not Ar.IsPackageRelativePath(resolved):
+        return ""
+    inner = resolved
+    while Ar.IsPackageRelativePath(inner):
+        inner = Ar.SplitPackageRelativePathInner(inner)[1]
+    return inner
+
+
+@contextlib.contextmanager
+def local_image_copy(resolved: str):
+    """A file path holding the image USD resolved to ``resolved``: the path itself, or for a file inside a package (usdz)
+    a temporary copy read through USD's resolver (at most :data:`MAX_PACKAGED_IMAGE_BYTES`; ``IMAGE_INVALID``
+    otherwise), named with the packaged file's suffix."""
+    from pxr import Ar
+
+    packaged = packaged_name(resolved)
+    if not packaged:
+        yield resolved
+        return
+    handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+    if handle is None:
+        raise error("IMAGE_INVALID", "cannot be read from its package", file=resolved)
+    size = handle.GetSize()
+    if size > MAX_PACKAGED_IMAGE_BYTES:
+        raise error("IMAGE_INVALID", f"{size} bytes in its package, above {MAX_PACKAGED_IMAGE_BYTES}", file=resolved)
+    with tempfile.TemporaryDirectory() as tmp:
+        local = os.path.join(tmp, "image" + os.path.splitext(packaged)[1].lower())
+        with open(local, "wb") as fh:
+            fh.write(bytes(handle.GetBuffer()))
+        yield local
+
+
 def finite_float32(image) -> np.ndarray:
     """``image`` as a contiguous float32 array with NaN -> 0 and every value clamped to
     [-IMAGE_VALUE_MAX, IMAGE_VALUE_MAX], so no Inf/NaN ever reaches a file (same shape)."""

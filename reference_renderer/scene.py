@@ -21,6 +21,7 @@ import numpy as np
 
 from nasset_sdk import curves, stage_rules
 from nasset_sdk.errors import NassetError, SceneError, UsageError, error, usd_reason
+from nasset_sdk.images import local_image_copy, packaged_name
 from nasset_sdk.implicit import IMPLICIT_PRIMS, implicit_mesh
 from nasset_sdk.process import single_threaded_blas
 
@@ -282,47 +283,6 @@ def load_scene(source, *, time=None, search_paths=None) -> Scene:
 def render_time(stage, time=None):
     """The ``Usd.TimeCode`` a scene renders at (nasset_sdk.stage_rules.render_time)."""
     return stage_rules.render_time(stage, time)
-
-
-#: largest image file read out of a package (usdz) into a temporary file
-MAX_PACKAGED_IMAGE_BYTES = 1 << 30
-
-
-def _packaged_name(resolved: str) -> str:
-    """The file name inside a package of a package-relative resolved path (``a.usdz[tex/wood.png]`` -> ``tex/wood.png``,
-    the innermost for nested packages), or "" for a plain path."""
-    from pxr import Ar
-
-    if not resolved or not Ar.IsPackageRelativePath(resolved):
-        return ""
-    inner = resolved
-    while Ar.IsPackageRelativePath(inner):
-        inner = Ar.SplitPackageRelativePathInner(inner)[1]
-    return inner
-
-
-@contextlib.contextmanager
-def _local_copy(resolved: str, packaged: str):
-    """A file path holding the image: ``resolved`` itself, or for a file inside a package (usdz) a temporary copy
-    read through USD's resolver (at most MAX_PACKAGED_IMAGE_BYTES; ``IMAGE_INVALID`` otherwise)."""
-    import tempfile
-
-    from pxr import Ar
-
-    if not packaged:
-        yield resolved
-        return
-    handle = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
-    if handle is None:
-        raise error("IMAGE_INVALID", "cannot be read from its package", file=resolved)
-    size = handle.GetSize()
-    if size > MAX_PACKAGED_IMAGE_BYTES:
-        raise error("IMAGE_INVALID", f"{size} bytes in its package, above {MAX_PACKAGED_IMAGE_BYTES}", file=resolved)
-    with tempfile.TemporaryDirectory() as tmp:
-        local = os.path.join(tmp, "image" + os.path.splitext(packaged)[1].lower())
-        with open(local, "wb") as fh:
-            fh.write(bytes(handle.GetBuffer()))
-        yield local
 
 
 class _Loader:
@@ -866,7 +826,7 @@ class _Loader:
         if not resolved:
             self.warn(f"texture {asset.path} not found; {unread}", tpath)
             return None
-        if not (_packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
+        if not (packaged_name(resolved) or resolved).lower().endswith(TEXTURE_SUFFIXES):
             self.warn(f"texture {asset.path}: only OpenEXR, PNG and JPEG textures are read; {unread}", tpath)
             return None
         if resolved not in self.images:  # one decode per file
@@ -931,7 +891,7 @@ class _Loader:
         from .film import read_exr
 
         resolved = asset.resolvedPath or ""
-        packaged = _packaged_name(resolved)
+        packaged = packaged_name(resolved)
         if not resolved or not (packaged or os.path.isfile(resolved)):
             raise self.err("SCENE_INVALID", f"{what} not found: {asset.path}", prim, attribute)
         name = (packaged or resolved).lower()
@@ -939,7 +899,7 @@ class _Loader:
         if not exr and not (ldr and name.endswith(TEXTURE_SUFFIXES)):
             raise self.err("SCENE_UNSUPPORTED", f"{what} {asset.path}: only OpenEXR images", prim, attribute)
         try:
-            with _local_copy(resolved, packaged) as local:  # textures (ldr) keep their alpha: [H, W, 4]
+            with local_image_copy(resolved) as local:  # textures (ldr) keep their alpha: [H, W, 4]
                 image, bits = (read_exr(local, alpha=ldr), 32) if exr else read_png_jpeg(local, alpha=ldr)
         except NassetError as exc:
             raise self.err("IMAGE_INVALID", f"{what} {resolved}: {exc.message}", prim, attribute) from None

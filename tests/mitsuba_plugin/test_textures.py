@@ -57,3 +57,21 @@ def test_a_corrupt_texture_is_a_typed_error(tmp_path):
     with pytest.raises(NassetError) as info:
         render(scene, 1, **SIZE)
     assert info.value.code == "IMAGE_INVALID" and "/World/Looks/QuadMat" in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("variant", ["repeat", "exr"])
+def test_textures_inside_a_usdz_package_render_like_the_loose_files(tmp_path, variant):
+    """A usdz holding the scene and its texture (resolved as ``scene.usdz[checker.png]``, read through USD's resolver)
+    renders as the loose files do, bit for bit at the same seed, with the loose images deleted. Before, the Mitsuba
+    implementations warned and used the texture's fallback: the packaged checker rendered flat."""
+    from pxr import Sdf, UsdUtils
+
+    loose = textured_scene(tmp_path, variant)
+    want = render(loose, 16, seed=4, max_depth=1, **SIZE)
+    package = tmp_path / "scene.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(loose)), str(package))
+    for image in ("checker.png", "ramps.png", "ramps.exr"):
+        (tmp_path / image).unlink()
+    got = render(str(package), 16, seed=4, max_depth=1, **SIZE)
+    assert got.std() > 0.05 * got.mean()  # the texture's detail, not its fallback's flat value
+    np.testing.assert_array_equal(got, want)

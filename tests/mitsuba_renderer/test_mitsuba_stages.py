@@ -504,6 +504,25 @@ def test_materialx_surfaces_are_read_as_preview_surface_values(tmp_path):
         np.testing.assert_allclose(m.emission, [0.2, 0.4, 0.6], rtol=1e-6)
 
 
+def test_dome_texture_inside_a_usdz_package_is_read(tmp_path):
+    """A dome's OpenEXR inside a usdz (``scene.usdz[sky.exr]``) is read through USD's resolver, the same pixels as the loose
+    file, which is deleted first. Before, the Mitsuba implementations refused it (SCENE_INVALID: does not exist)."""
+    from pxr import Sdf, UsdUtils
+
+    from nasset_sdk.images import write_exr
+
+    sky = np.random.default_rng(0).random((8, 16, 3)).astype(np.float32)
+    write_exr(tmp_path / "sky.exr", sky)
+    b, _ = _floor_scene()
+    b.dome("Dome", 1.0, texture="./sky.exr")
+    loose = b.write(tmp_path / "scene.usda")
+    package = tmp_path / "scene.usdz"
+    assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(loose)), str(package))
+    (tmp_path / "sky.exr").unlink()
+    dome = next(lt for lt in read_scene(str(package)).lights if lt.prim == "/World/Dome")
+    np.testing.assert_array_equal(dome.texture, sky)
+
+
 def test_dome_light_1_pole_axis_turns_the_texture(tmp_path):
     """DomeLight_1 (USD 24) with poleAxis Z turns the texture's top pole (+Y) onto +Z (spec/renderer.md#lights); with Y,
     or scene on a Y-up stage, it is a DomeLight. Both Mitsuba implementations refused DomeLight_1. A RectLight's
