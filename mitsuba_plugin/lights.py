@@ -61,6 +61,46 @@ def sphere_mean(image: np.ndarray) -> np.ndarray:
     return (image.mean(axis=1) * sin_t[:, None]).sum(0) / max(sin_t.sum(), 1e-30)
 
 
+def luminance(rgb) -> float:
+    """Rec. 709 luminance of an RGB triple (negative channels count as 0)."""
+    r, g, b = np.maximum(np.asarray(rgb, np.float64).reshape(3), 0.0)
+    return float(0.2126 * r + 0.7152 * g + 0.0722 * b)
+
+
+def light_power(lt, radius: float) -> float:
+    """Emitted power (luminance) of a light as the second implementation's ``build_lights`` reads it (``lt``): the weight
+    by which Mitsuba picks it for a light sample (pbrt's power light sampler). Lights at infinity send their
+    irradiance through the cross-section of the scene's bounding sphere of ``radius``: a sun E pi r^2, a dome of mean
+    radiance L 4 pi^2 r^2 L; a point light 4 pi I, a spot its cone's share of that; a light surface pi L A (its
+    emitted radiance, per area where it normalizes, times its world area)."""
+    d = lt.desc
+    if d.type == "DistantLight":
+        return luminance(d.radiance) * math.pi * radius * radius
+    if d.type == "DomeLight":
+        tex = getattr(lt, "tex", None)
+        mean = np.asarray(d.radiance, np.float64) * (1.0 if tex is None else sphere_mean(np.asarray(tex, np.float64)[..., :3]))
+        return luminance(mean) * 4.0 * math.pi * math.pi * radius * radius
+    if getattr(lt, "has_shape", False):
+        return luminance(lt.mi_dict["emitter"]["radiance"]["value"]) * math.pi * float(lt.area)
+    return luminance(d.radiance) * 4.0 * math.pi  # a point light; a spot as if it had no cone (it aims at the scene)
+
+
+#: share of a light sample's emitter choice made by power; the rest is uniform over the emitters (a defensive mixture)
+POWER_SHARE = 0.5
+
+
+def selection_weights(powers: dict, share: float | None = None) -> dict:
+    """``sampling_weight`` of each emitter {key: power}: ``share`` (:data:`POWER_SHARE`) of the choice by power, the rest
+    uniform. Power alone can starve a light that is weak but aimed at what the camera sees (a spot on the subject
+    beside bright lamps far off); the uniform part keeps every emitter's probability at least (1 - share) / n."""
+    share = POWER_SHARE if share is None else share
+    p = {k: v if math.isfinite(v) and v > 0 else 0.0 for k, v in powers.items()}
+    total = sum(p.values())
+    n = max(len(p), 1)
+    if total <= 0:
+        return {k: 1.0 for k in p}
+    return {k: float((1.0 - share) / n + share * v / total) for k, v in p.items()}
+
 def register(mi) -> None:
     """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area``, ``nasset_sky`` and ``nasset_spot`` for the active
     variant (idempotent)."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import math
 import os
 import re
 import tempfile
@@ -250,6 +251,8 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
     rs = dict(desc.render_settings)
     if rs.get("pixel_filter") == "gaussian":  # Mitsuba's gaussian: the spec's filter, radius 4 stddev
         entries["sensor"]["film"]["rfilter"] = {"type": "gaussian", "stddev": float(rs.get("pixel_filter_stddev", 0.5))}
+    powers: dict = {}  # emitter entry -> its power (lights.light_power), by which Mitsuba picks an emitter
+    emissive = []  # (mesh index, front and back emission, emissive texture or None) of the emissive meshes
     for k, m in enumerate(desc.meshes):
         front, back = _emission_sides(m)
         corners = _corner_attributes(m)
@@ -266,43 +269,56 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
             bsdf.presence = textures.Presence(mi, *m.material.presence, None if hit is None else hit.textures.get("opacity"))
         entries[f"mesh_{k}"] = {"type": "ply", "filename": _mesh_ply(mi, mesh), "bsdf": bsdf, "face_normals": True}
         if np.any(front > 0) or np.any(back > 0):
-            emission = hit.textures.get("emissiveColor") if hit is not None else None
-            sides = _material_sides(m) if emission is not None else (False, False)
-            emitter = mi.load_dict({"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
-                                    "back": mi.ScalarColor3f(back.tolist()), "textured_front": sides[0],
-                                    "textured_back": sides[1]})
-            if emission is not None:
-                emitter.texture = textures.ImageLookup(mi, emission)
-            entries[f"mesh_{k}"]["emitter"] = emitter
+            tri = m.points[m.faces]
+            area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+            powers[f"mesh_{k}"] = math.pi * area * (lights_jit.luminance(front) + lights_jit.luminance(back))
+            emissive.append((k, front, back, hit.textures.get("emissiveColor") if hit is not None else None))
     for j, inst in enumerate(desc.assets):
         mw = np.asarray(inst.to_world, np.float64)
         if not np.isfinite(mw).all() or abs(np.linalg.det(mw[:3, :3])) < 1e-30:
             raise error("SCENE_INVALID", "asset instance transform is singular", file=str(path), prim=inst.prim)
         entries[f"asset_{j}"] = asset_shape(inst.file, mw.T, mi=mi)  # USD row vectors -> Mitsuba column vectors
     lights, light_entries = build_lights(desc.lights, str(path))
+    radius = _scene_radius(mi, desc)
     for k, lt in enumerate(lights):
         visible = bool(getattr(lt.desc, "camera_visible", True))  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
+        key = lt.key if isinstance(lt, MitsubaLight) else f"cone_{k}" if isinstance(lt, ConeDistantLight) else f"dome_{k}"
         if isinstance(lt, ConeDistantLight):
-            light_entries[f"cone_{k}"] = {"type": lights_jit.NAME, "direction": mi.ScalarVector3f(lt.axis.tolist()), "angle": float(lt.desc.angle),
-                                          "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
-                                          "camera_visible": visible}
+            light_entries[key] = {"type": lights_jit.NAME, "direction": mi.ScalarVector3f(lt.axis.tolist()), "angle": float(lt.desc.angle),
+                                  "irradiance": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
+                                  "camera_visible": visible}
         elif isinstance(lt, DomeLight):
-            light_entries[f"dome_{k}"] = {**_dome_entry(mi, lt), "camera_visible": visible}
+            light_entries[key] = {**_dome_entry(mi, lt), "camera_visible": visible}
         elif isinstance(lt, SpotLight):  # Mitsuba's point emitter without its cone: the plugin's nasset_spot
             cone, soft, profile = lt.desc.shaping
-            light_entries[lt.key] = {"type": lights_jit.SPOT, "position": mi.ScalarPoint3f(*lt.mi_dict["position"]),
-                                     "intensity": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
-                                     "axis": mi.ScalarVector3f(lt.axis.tolist()), "cone": float(cone), "softness": float(soft),
-                                     "profile": str(profile)}
+            light_entries[key] = {"type": lights_jit.SPOT, "position": mi.ScalarPoint3f(*lt.mi_dict["position"]),
+                                  "intensity": mi.ScalarColor3f(np.asarray(lt.desc.radiance, np.float64).tolist()),
+                                  "axis": mi.ScalarVector3f(lt.axis.tolist()), "cone": float(cone), "softness": float(soft),
+                                  "profile": str(profile)}
         elif not isinstance(lt, MitsubaLight):
             raise error("SCENE_UNSUPPORTED", "the Mitsuba plugin renders point, spot, distant, sphere, rect, disk, cylinder and "
                         f"dome lights, not {type(lt).__name__}", file=str(path), prim=lt.desc.prim)
         elif lt.has_shape:  # a light surface: rays pass it (spec/renderer.md#light-surfaces), but for opaque ones
             mark = OPAQUE_MARK if getattr(lt.desc, "opaque", False) else ""
-            light_entries[(LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + mark + lt.key] = light_entries.pop(lt.key)
+            key = (LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + mark + lt.key
+            light_entries[key] = light_entries.pop(lt.key)
+        powers[key] = lights_jit.light_power(lt, radius)
     infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]
     if len(infinite) > 1:  # Mitsuba keeps one environment emitter: a dome and angular suns become their sum
+        powers["sky"] = sum(powers.pop(k) for k in infinite)
         light_entries["sky"] = {"type": lights_jit.SKY, **{f"part_{i}": light_entries.pop(k) for i, k in enumerate(infinite)}}
+    weights = lights_jit.selection_weights(powers)  # Mitsuba picks one emitter per light sample, by these
+    for key, ent in light_entries.items():
+        (ent["emitter"] if "emitter" in ent else ent)["sampling_weight"] = weights[key]
+    for k, front, back, texture in emissive:
+        m = desc.meshes[k]
+        sides = _material_sides(m) if texture is not None else (False, False)
+        emitter = mi.load_dict({"type": lights_jit.AREA, "front": mi.ScalarColor3f(front.tolist()),
+                                "back": mi.ScalarColor3f(back.tolist()), "textured_front": sides[0],
+                                "textured_back": sides[1], "sampling_weight": weights[f"mesh_{k}"]})
+        if texture is not None:
+            emitter.texture = textures.ImageLookup(mi, texture)
+        entries[f"mesh_{k}"]["emitter"] = emitter
     for ent in light_entries.values():
         if "emitter" in ent:  # a light surface reflects nothing (spec/renderer.md#light-surfaces: rays go on past it)
             ent.setdefault("bsdf", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.0}})
@@ -392,6 +408,22 @@ def _dome_entry(mi, lt) -> dict:
     if lt.tex is not None:
         ent["bitmap"] = mi.Bitmap(np.ascontiguousarray(lt.tex[..., :3], np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
     return ent
+
+
+def _scene_radius(mi, desc) -> float:
+    """Half the diagonal of the box around the scene's geometry: its meshes' points and its asset instances' geometry
+    (world); 1 for a scene without any."""
+    boxes = [(m.points.min(0), m.points.max(0)) for m in desc.meshes if len(m.points)]
+    for inst in desc.assets:
+        pts = np.asarray(asset_for(mi, os.path.abspath(inst.file)).geometry.points, np.float64).reshape(-1, 3)
+        if len(pts):
+            w = pts @ np.asarray(inst.to_world, np.float64)[:3, :3] + np.asarray(inst.to_world, np.float64)[3, :3]
+            boxes.append((w.min(0), w.max(0)))
+    if not boxes:
+        return 1.0
+    lo, hi = np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
+    r = 0.5 * float(np.linalg.norm(hi - lo))
+    return r if np.isfinite(r) and r > 0 else 1.0
 
 
 def recentre(desc) -> np.ndarray:

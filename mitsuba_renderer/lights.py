@@ -50,6 +50,7 @@ class MitsubaLight:
     def __init__(self, desc: Light, key: str, mi_dict: dict, delta: bool, has_shape: bool) -> None:
         self.desc, self.key, self.mi_dict, self.delta, self.has_shape = desc, key, mi_dict, delta, has_shape
         self.emitter = None  # bound after mi.load_dict
+        self.area = 0.0  # world area of a light surface (has_shape)
 
     def sample(self, mi, p, n, u):
         m = len(p)
@@ -237,7 +238,9 @@ def _surface_light(d: Light, key: str, rad: np.ndarray, shape: dict, area: float
         return None
     le = rad / area if d.normalize else rad
     ent = {**shape, "emitter": {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}}
-    return MitsubaLight(d, key, ent, delta=False, has_shape=True)
+    light = MitsubaLight(d, key, ent, delta=False, has_shape=True)
+    light.area = area
+    return light
 
 
 def _planar_to_world(sx: float, sy: float, mw: np.ndarray):
