@@ -398,7 +398,7 @@ def read_scene(path: str) -> SceneDesc:
 
     import nasset_sdk  # noqa: F401  (registers the codeless schema so NeuralAsset is a known type)
     from nasset_sdk.paths import open_checked_stage
-    from nasset_sdk.references import asset_source
+    from nasset_sdk.references import asset_source, embedded_asset_file
 
     path = str(path)
     if not os.path.exists(path):
@@ -439,10 +439,10 @@ def read_scene(path: str) -> SceneDesc:
         ppath = str(prim.GetPath())
         source = asset_source(prim)  # the asset's root reached through composition, whatever the prim's type
         if source is not None or tn == "NeuralAsset" or (tn == "" and (prim.HasAuthoredReferences() or prim.HasAuthoredPayloads())):
-            if source is not None and source.embedded:
-                raise SceneError("SCENE_UNSUPPORTED", "an asset embedded in a flattened scene (render it with nasset render, "
-                                 "or reference the asset file)", file=path, prim=ppath)
-            file = source.layer if source is not None else _asset_target(prim)
+            if source is not None and source.embedded:  # a flattened scene: the asset is read from a copy of its specs
+                file = embedded_asset_file(source)
+            else:
+                file = source.layer if source is not None else _asset_target(prim)
             if source is None and tn == "" and ppath in broken:  # spec/renderer.md#scene-input
                 raise SceneError("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {file} "
                                  f"({broken[ppath]})", file=path, prim=ppath)

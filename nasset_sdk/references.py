@@ -91,6 +91,34 @@ def embedded_layer(source: AssetSource):
     return copy
 
 
+_embedded_files: dict = {}  # (scene layer, prim, its mtime and size) -> the written copy
+_embedded_folder: list = []  # the process's folder of copies, made on first use
+
+
+def embedded_asset_file(source: AssetSource) -> str:
+    """A ``.usdc`` file holding :func:`embedded_layer` of ``source`` (an asset embedded in a flattened scene), for readers
+    that open assets by path (the Mitsuba implementations): written atomically once per scene file, prim and file
+    version into a private temporary folder of this process, removed at exit."""
+    import atexit
+    import shutil
+    import tempfile
+
+    st = os.stat(source.layer) if os.path.isfile(source.layer) else None
+    key = (source.layer, source.prim, st.st_mtime_ns if st else None, st.st_size if st else None)
+    if key not in _embedded_files:
+        if not _embedded_folder:
+            folder = tempfile.mkdtemp(prefix="nasset-embedded-")
+            atexit.register(shutil.rmtree, folder, True)
+            _embedded_folder.append(folder)
+        out = os.path.join(_embedded_folder[0], f"asset_{len(_embedded_files)}.usdc")
+        tmp = out + ".tmp.usdc"
+        if not embedded_layer(source).Export(tmp):
+            raise error("WRITE_FAILED", "cannot write the embedded asset's copy", file=out, prim=source.prim)
+        os.replace(tmp, out)
+        _embedded_files[key] = out
+    return _embedded_files[key]
+
+
 def open_source(source: AssetSource, *, load: str = "none"):
     """Open the asset of ``source`` as an :class:`~nasset_sdk.asset.Asset` (components loaded per ``load``).
 
@@ -125,4 +153,5 @@ def resolver_context(search_paths) -> object | None:
     return Ar.DefaultResolverContext(folders) if folders else None
 
 
-__all__ = ["AssetSource", "asset_source", "embedded_layer", "fallback_owner", "open_source", "resolver_context"]
+__all__ = ["AssetSource", "asset_source", "embedded_asset_file", "embedded_layer", "fallback_owner", "open_source",
+           "resolver_context"]

@@ -64,11 +64,12 @@ def test_constant_asset_closed_form(nr, tmp_path, lit_from_camera):
     assert cover[0, 0, 0] == 0.0  # background: no dome
 
 
-@pytest.mark.parametrize("how", ["Xform", "usdz"])
+@pytest.mark.parametrize("how", ["Xform", "usdz", "flattened"])
 def test_asset_found_through_composition(nr, tmp_path, how):
     """The asset's root reached through composition (spec/format.md#referencing-an-asset): a ``def Xform`` reference,
-    and the same scene packaged as usdz, render as the untyped reference does."""
-    from pxr import UsdUtils
+    the same scene packaged as usdz, and flattened (the asset's specs inline in the scene layer: read from a copy of
+    them, nasset_sdk.references.embedded_asset_file; it was SCENE_UNSUPPORTED), render as the untyped reference does."""
+    from pxr import Usd, UsdUtils
 
     constant_rna_asset(tmp_path / "const.usdc", unshadowed=(1.0, 0.5, 0.25), shadowed=(0.1, 0.2, 0.3))
 
@@ -86,6 +87,10 @@ def test_asset_found_through_composition(nr, tmp_path, how):
     if how == "usdz":
         assert UsdUtils.CreateNewUsdzPackage(path, str(tmp_path / "scene.usdz"))
         path = tmp_path / "scene.usdz"
+    elif how == "flattened":
+        Usd.Stage.Open(str(path)).Flatten().Export(str(tmp_path / "flat.usda"))
+        (tmp_path / "const.usdc").unlink()  # only the flattened copy of the asset is left
+        path = tmp_path / "flat.usda"
     img = nr.render(str(path), 1, width=16, height=16, seed=3)
     assert ref.max() > 0 and np.abs(ref[:, :8]).sum() < np.abs(ref[:, 8:]).sum()  # shifted right: the transform applies
     np.testing.assert_allclose(img, ref, atol=1e-6)
