@@ -539,11 +539,20 @@ def _gprim_meshes(prim, tn: str, mw, r: _Reading) -> list[Mesh]:
     out = []
     for where, binding, sel in _face_groups(m, face_of, len(counts), path, t, r.purposes, r.bindings):
         material = read_material(binding, path, t, r.purposes, primvars=r.primvars, bindings=r.bindings, textures=r.textures)
-        mesh = Mesh(where, wp, faces[sel], material, None if cn is None else cn[sel], one_sided, back, sign)
+        mesh = Mesh(where, *_used_points(wp, faces[sel]), material, None if cn is None else cn[sel], one_sided, back, sign)
         if material.per_hit is not None:
             _per_hit_corners(mesh, prim, material.per_hit, layout, sel, r.primvars, t, r.say)
         out.append(mesh)
     return out
+
+
+def _used_points(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the points ``faces`` use, the faces renumbered to them): a material group of a mesh carries its own points only,
+    so a mesh of many GeomSubsets does not repeat all its points per subset (and per instance when instanced)."""
+    if len(faces) and len(points) <= 3 * len(faces) and np.bincount(faces.ravel(), minlength=len(points)).all():
+        return points, faces  # every point used: nothing to drop
+    used, renumbered = np.unique(faces, return_inverse=True)
+    return points[used], renumbered.reshape(faces.shape).astype(faces.dtype)
 
 
 #: instances of one PointInstancer, checked before USD computes their transforms; triangles its instances may add

@@ -117,3 +117,31 @@ def test_instances_render_as_in_the_reference_renderer(tmp_path):
     from nasset_mitsuba_renderer import render as mitsuba
 
     check_point_instancer(mitsuba.render, tmp_path, spp=64)
+
+
+def test_material_groups_carry_only_the_points_they_use(tmp_path):
+    """A prototype mesh of 20 000 points, 3 of them used, split in two materialBind GeomSubsets, instanced 50 times: each
+    group's Mesh holds the points its faces use (3 per copy), not all 20 000 per group and per instance (160 MB here,
+    unbounded for a hostile file: the triangle bound does not bound points)."""
+    from pxr import UsdShade
+
+    def define(stage, p):
+        mesh = UsdGeom.Mesh.Define(stage, p)
+        pts = [Gf.Vec3f(0, 0, 0), Gf.Vec3f(0.2, 0, 0), Gf.Vec3f(0, 0.2, 0)] + [Gf.Vec3f(9, 9, 9)] * 19997
+        mesh.CreatePointsAttr(pts)
+        mesh.CreateFaceVertexCountsAttr([3, 3])
+        mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 0, 2, 1])
+        binding = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+        for name, face in (("front", 0), ("back", 1)):
+            subset = binding.CreateMaterialBindSubset(name, [face], UsdGeom.Tokens.face)
+            mat = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
+            shader = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/S")
+            shader.CreateIdAttr("UsdPreviewSurface")
+            mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
+
+    desc = _read(_instancer(tmp_path, define, n=50))
+    parts = [m for m in desc.meshes if m.prim.startswith("/World/Scatter")]
+    assert len(parts) == 2 and all(len(m.faces) == 50 and len(m.points) == 150 for m in parts)
+    for m in parts:  # the renumbered faces still draw the triangle (0, 0.2) x (0, 0.2) moved to y = 2
+        np.testing.assert_allclose(m.points[m.faces].reshape(-1, 3).max(0), [0.2, 2.2, 0.0], atol=1e-6)
