@@ -75,25 +75,33 @@ _blas_saved: list = []  # [(set function, thread count before)] while _blas_dept
 
 def _loaded_openblas() -> list:
     """(get, set) ctypes functions of each OpenBLAS library mapped into this process (Linux: ``/proc/self/maps``;
-    elsewhere none)."""
+    elsewhere none); each library's functions looked up once."""
     try:
         with open("/proc/self/maps") as f:
             paths = {line.split(None, 5)[5].strip() for line in f if "openblas" in line.lower() and line.count(" ") >= 5}
     except (OSError, IndexError):
         return []
-    found = []
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)  # already loaded: the same handle, nothing is initialised again
-        except OSError:
-            continue
-        for get_name, set_name in _OPENBLAS_SYMBOLS:
-            if hasattr(lib, get_name) and hasattr(lib, set_name):
-                get, put = getattr(lib, get_name), getattr(lib, set_name)
-                get.restype, get.argtypes, put.restype, put.argtypes = ctypes.c_int, (), None, (ctypes.c_int,)
-                found.append((get, put))
-                break
-    return found
+    for path in paths - _blas_functions.keys():
+        _blas_functions[path] = _openblas_functions(path)
+    return [_blas_functions[p] for p in sorted(paths) if _blas_functions[p] is not None]
+
+
+_blas_functions: dict = {}  # library path -> its (get, set) thread-count functions, or None
+
+
+def _openblas_functions(path: str):
+    """(get, set) thread-count functions of the OpenBLAS library at ``path`` (already loaded: the same handle, nothing is
+    initialised again), or None where it has neither naming."""
+    try:
+        lib = ctypes.CDLL(path)
+    except OSError:
+        return None
+    for get_name, set_name in _OPENBLAS_SYMBOLS:
+        if hasattr(lib, get_name) and hasattr(lib, set_name):
+            get, put = getattr(lib, get_name), getattr(lib, set_name)
+            get.restype, get.argtypes, put.restype, put.argtypes = ctypes.c_int, (), None, (ctypes.c_int,)
+            return get, put
+    return None
 
 
 @contextlib.contextmanager
