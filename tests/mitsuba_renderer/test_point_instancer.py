@@ -8,15 +8,14 @@ import warnings
 
 import numpy as np
 import pytest
-from pxr import Gf, UsdGeom, Vt
+from pxr import Gf, UsdGeom
 
 pytest.importorskip("mitsuba")
 
 from nasset_mitsuba_renderer import usdscene  # noqa: E402
 from nasset_reference_renderer import load_scene  # noqa: E402
-from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
 from nasset_sdk.errors import SceneError  # noqa: E402
-from tests.stage_scenes import check_point_instancer, point_instancer_scene  # noqa: E402
+from tests.stage_scenes import check_point_instancer, instancer_with_prototype, point_instancer_scene  # noqa: E402
 
 
 def _read(path):
@@ -60,21 +59,8 @@ def test_corner_normals_follow_each_instance(tmp_path):
         np.testing.assert_allclose(np.linalg.norm(m.corner_normals, axis=-1), 1.0, atol=1e-12)
 
 
-def _instancer(tmp_path, define=None, n=2, proto_indices=None, position=(0.0, 2.0, 0.0)):
-    b = SceneBuilder()
-    b.camera((0, 6, 0.001), (0, 0, 0), focal=20)
-    b.quad("Floor", (0, 0, 0), 10.0)
-    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
-    pi = UsdGeom.PointInstancer.Define(b.stage, "/World/Scatter")
-    root = UsdGeom.Xform.Define(b.stage, "/World/Scatter/Prototypes/Thing")
-    if define is None:
-        UsdGeom.Cube.Define(b.stage, "/World/Scatter/Prototypes/Thing/Part").CreateSizeAttr(0.5)
-    else:
-        define(b.stage, "/World/Scatter/Prototypes/Thing/Part")
-    pi.CreatePrototypesRel().SetTargets([root.GetPath()])
-    pi.CreateProtoIndicesAttr(Vt.IntArray(proto_indices if proto_indices is not None else [0] * n))
-    pi.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(*position)] * n))
-    return b.write(tmp_path / "s.usda")
+def _instancer(tmp_path, define=None, n=2, proto_indices=None, position=None):
+    return instancer_with_prototype(tmp_path, define, n=n, proto_indices=proto_indices, position=position)
 
 
 @pytest.mark.parametrize("what, define, code", [
@@ -84,7 +70,7 @@ def _instancer(tmp_path, define=None, n=2, proto_indices=None, position=(0.0, 2.
 def test_unsupported_prototype_contents_name_the_prim(tmp_path, what, define, code):
     with pytest.raises(SceneError) as info:
         _read(_instancer(tmp_path, define))
-    assert info.value.code == code and "/World/Scatter/Prototypes/Thing/Part" in str(info.value), what
+    assert info.value.code == code and "/World/Scatter/Prototypes/Lamp/Part" in str(info.value), what
 
 
 def test_bad_instances_are_scene_invalid(tmp_path, monkeypatch):
@@ -108,7 +94,7 @@ def test_light_in_a_prototype_is_warned_by_name(tmp_path):
     from pxr import UsdLux
 
     path = _instancer(tmp_path, lambda stage, p: UsdLux.SphereLight.Define(stage, p))
-    with pytest.warns(UserWarning, match="/World/Scatter/Prototypes/Thing/Part.*not instanced"):
+    with pytest.warns(UserWarning, match="/World/Scatter/Prototypes/Lamp/Part.*not instanced"):
         desc = usdscene.read_scene(str(path))
     assert not any(lt.prim.startswith("/World/Scatter") for lt in desc.lights)
 
@@ -140,7 +126,7 @@ def test_material_groups_carry_only_the_points_they_use(tmp_path):
             mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
             UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
 
-    desc = _read(_instancer(tmp_path, define, n=50))
+    desc = _read(_instancer(tmp_path, define, n=50, position=(0.0, 2.0, 0.0)))
     parts = [m for m in desc.meshes if m.prim.startswith("/World/Scatter")]
     assert len(parts) == 2 and all(len(m.faces) == 50 and len(m.points) == 150 for m in parts)
     for m in parts:  # the renumbered faces still draw the triangle (0, 0.2) x (0, 0.2) moved to y = 2

@@ -110,17 +110,9 @@ def test_points_and_curves_prototypes_are_placed_like_meshes(tmp_path):
 
 def _instancer_with_prototype(tmp_path, define):
     """A PointInstancer of one prototype Xform under which ``define(stage, path)`` puts a child, over a lit floor."""
-    b = SceneBuilder()
-    b.camera((0, 6, 0.001), (0, 0, 0), focal=20)
-    b.quad("Floor", (0, 0, 0), 10.0)
-    b.distant("Sun", (0.0, 1.0, 0.0), 1.0)
-    pi = UsdGeom.PointInstancer.Define(b.stage, "/World/Scatter")
-    root = UsdGeom.Xform.Define(b.stage, "/World/Scatter/Prototypes/Lamp")
-    define(b.stage, "/World/Scatter/Prototypes/Lamp/Part")
-    pi.CreatePrototypesRel().SetTargets([root.GetPath()])
-    pi.CreateProtoIndicesAttr(Vt.IntArray([0, 0]))
-    pi.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 2, 0), Gf.Vec3f(1, 2, 0)]))
-    return b.write(tmp_path / "s.usda")
+    from tests.stage_scenes import instancer_with_prototype
+
+    return instancer_with_prototype(tmp_path, define)
 
 
 def test_light_in_a_prototype_is_warned_by_name(tmp_path):
