@@ -644,9 +644,8 @@ def _placed(mesh: Mesh, placements: np.ndarray) -> list[Mesh]:
         points = (mesh.points[None] @ P[:, :3, :3] + P[:, None, 3, :3]).reshape(-1, 3)
         faces = (mesh.faces[None] + v * np.arange(n)[:, None, None]).reshape(-1, 3)
         normals = None
-        if mesh.corner_normals is not None:  # by each placement's inverse transpose, then unit length again
-            inv_t = np.linalg.inv(P[:, :3, :3]).transpose(0, 2, 1)
-            nrm = (mesh.corner_normals[None].reshape(1, -1, 3) @ inv_t).reshape(-1, 3, 3)
+        if mesh.corner_normals is not None:  # by each placement's inverse transpose (or its limit), then unit length again
+            nrm = (mesh.corner_normals[None].reshape(1, -1, 3) @ stage_rules.normal_matrix(P[:, :3, :3])).reshape(-1, 3, 3)
             normals = nrm / np.maximum(np.linalg.norm(nrm, axis=-1, keepdims=True), 1e-300)
         out.append(Mesh(mesh.prim, points, faces, mesh.material, normals, mesh.one_sided, mesh.back_material,
                         -mesh.front_sign if flip else mesh.front_sign, _tiled(mesh.corner_st, n), _tiled(mesh.corner_colors, n)))
@@ -732,7 +731,7 @@ def _curves_or_points(prim, tname: str, mw, t, say) -> Mesh | None:
         return None
     local, faces, normals = mesh
     say(f"{tname} tessellated into {len(faces)} triangles", where)
-    n = normals @ np.linalg.inv(mw[:3, :3]).T
+    n = normals @ stage_rules.normal_matrix(mw[:3, :3])
     n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
     front = -1.0 if float(np.linalg.det(mw[:3, :3])) < 0 else 1.0
     return Mesh(where, local @ mw[:3, :3] + mw[3, :3], faces, None, n, front_sign=front)
@@ -761,7 +760,7 @@ def _implicit_mesh(prim, tname: str, mw, path: str, t, tessellations: dict) -> M
     pts, faces, normals = tessellations[key]
     if UsdGeom.Gprim(prim).GetOrientationAttr().Get(t) == UsdGeom.Tokens.leftHanded:
         normals = -normals
-    n = normals @ np.linalg.inv(mw[:3, :3]).T
+    n = normals @ stage_rules.normal_matrix(mw[:3, :3])
     n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
     return Mesh(str(prim.GetPath()), pts @ mw[:3, :3] + mw[3, :3], faces, None, n)
 
@@ -816,7 +815,7 @@ def _corner_normals(prim, layout, polygons, mw, t, front_sign: float = 1.0):
         if scheme in (None, UsdGeom.Tokens.none):
             return None
         n = stage_rules.smooth_vertex_normals(pts, counts, idx, front_sign < 0)[layout[0]]  # a cage shades smooth, as usdview draws it
-    n = n @ np.linalg.inv(mw[:3, :3]).T
+    n = n @ stage_rules.normal_matrix(mw[:3, :3])
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
 
 

@@ -421,6 +421,19 @@ def composition_errors(stage) -> list:
     return [(str(f.rootSite.path), str(f).strip()) for f in stage.GetCompositionErrors()]
 
 
+def normal_matrix(m3) -> np.ndarray:
+    """The 3x3 matrix [3, 3] (or a stack [n, 3, 3] for m3 [n, 3, 3]) that takes object-space normals, as rows, to world
+    normals of the same side, up to length, for the linear part ``m3`` of a row-vector transform: the cofactor matrix
+    (its rows the cross products of m3's rows, = det(m3) inv(m3)^T) times the sign of det(m3). Unlike inv(m3)^T it exists
+    for every transform: one that flattens a surface (a scale of 0 along its normal, a legal USD transform) still gives
+    the surface's normal, and one that collapses it gives zero normals, on triangles of zero area that no ray meets."""
+    m = np.asarray(m3, np.float64)
+    r0, r1, r2 = m[..., 0, :], m[..., 1, :], m[..., 2, :]
+    cof = np.stack([np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)], -2)
+    sign = np.where(np.linalg.det(m) < 0, -1.0, 1.0)
+    return cof * np.asarray(sign)[..., None, None]
+
+
 def smooth_vertex_normals(points: np.ndarray, counts: np.ndarray, idx: np.ndarray, reversed_winding: bool) -> np.ndarray:
     """Unit normals [V,3] of the ``points`` [V,3] of polygons ``counts`` / ``idx``: at each polygon corner the
     cross product of its two edges, (next - p) x (prev - p) (area-weighted, Hydra's smooth normals of a cage), summed

@@ -128,7 +128,12 @@ class Instance:
     corner_offset: int = 0  # mesh instances: triangle ``prim``'s row in Scene.tri_normals / tri_st is prim + corner_offset
 
     def __post_init__(self):
-        self.to_object = np.linalg.inv(self.to_world)
+        # only neural instances shade in object space (their transforms are checked to be regular); a plain mesh may be
+        # flattened or collapsed by a singular transform (a scale of 0), which USD allows: its pseudo-inverse then
+        if self.kind == "neural" or abs(np.linalg.det(self.to_world[:3, :3])) > 0:
+            self.to_object = np.linalg.inv(self.to_world)
+        else:
+            self.to_object = np.linalg.pinv(self.to_world)
 
 
 @dataclass
@@ -1042,7 +1047,7 @@ class _Loader:
         if normals is None:
             normals = np.repeat(nn[:, None], 3, 1)
         else:
-            normals = normals[:, flip] @ np.linalg.inv(M[:3, :3]).T  # row-vector convention: the inverse transpose
+            normals = normals[:, flip] @ stage_rules.normal_matrix(M[:3, :3])  # the inverse transpose, or its limit
             normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-300)
             if src["smooth"] and reverse:  # computed ones follow the winding's front, as the geometric normals do
                 normals = -normals
@@ -1219,7 +1224,7 @@ class _Loader:
         if UsdGeom.Gprim(prim).GetOrientationAttr().Get(self.time) == "leftHanded":
             nrm = -nrm  # the front of a left-handed prim is its inside
         tris = pw[faces]
-        n = nrm @ np.linalg.inv(M[:3, :3]).T
+        n = nrm @ stage_rules.normal_matrix(M[:3, :3])
         n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
         self.warn(f"implicit {tname} tessellated into {len(faces)} triangles", prim.GetPath())
         inst = Instance("mesh", str(prim.GetPath()), 0, 0, M, material=self._material(prim),
@@ -1250,7 +1255,7 @@ class _Loader:
         if np.linalg.det(M[:3, :3]) < 0:  # mirrored: keep the triangles wound about their outward normals
             faces, nrm = faces[:, [0, 2, 1]], nrm[:, [0, 2, 1]]
         tris = (local @ M[:3, :3] + M[3, :3])[faces]
-        n = nrm @ np.linalg.inv(M[:3, :3]).T
+        n = nrm @ stage_rules.normal_matrix(M[:3, :3])
         n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-300)
         self.warn(f"{tname} tessellated into {len(faces)} triangles", path)
         inst = Instance("mesh", str(path), 0, 0, M, material=self._material(prim, varying_colors=False),

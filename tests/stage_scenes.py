@@ -335,6 +335,46 @@ def instancer_with_prototype(tmp_path, define=None, *, n: int = 2, proto_indices
     return b.write(tmp_path / "s.usda")
 
 
+def singular_transforms_scene(tmp_path, *, collapsed: bool = True) -> str:
+    """Transforms that USD allows and that have no inverse (spec/renderer.md#shading-normals): a Cube flattened by a
+    scale of 0 along y (it draws as a square, its top and bottom faces' normals +-y), and, with
+    ``collapsed``, a Sphere and a PointInstancer instance scaled to 0 in every axis (they draw nothing), beside a Cube
+    instance of scale 1, over a lit floor."""
+    from pxr import Gf, UsdGeom, Vt
+
+    b = SceneBuilder()
+    b.camera((0, 3.0, 3.0), (0, 0.2, 0), focal=28)
+    b.quad("Floor", (0, 0, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
+    flat = UsdGeom.Cube.Define(b.stage, "/World/Flat")
+    xf = UsdGeom.Xformable(flat)
+    xf.AddTranslateOp().Set(Gf.Vec3d(-0.8, 0.6, 0.0))
+    xf.AddScaleOp().Set(Gf.Vec3f(0.5, 0.0, 0.5))
+    pi = UsdGeom.PointInstancer.Define(b.stage, "/World/Scatter")
+    box = UsdGeom.Cube.Define(b.stage, "/World/Scatter/Prototypes/Box")
+    box.CreateSizeAttr(0.5)
+    pi.CreatePrototypesRel().SetTargets([box.GetPath()])
+    pi.CreateProtoIndicesAttr(Vt.IntArray([0, 0] if collapsed else [0]))
+    pi.CreatePositionsAttr(Vt.Vec3fArray([Gf.Vec3f(0.8, 0.25, 0.0), Gf.Vec3f(0.0, 0.25, 1.0)][:2 if collapsed else 1]))
+    pi.CreateScalesAttr(Vt.Vec3fArray([Gf.Vec3f(1, 1, 1), Gf.Vec3f(0, 0, 0)][:2 if collapsed else 1]))
+    if collapsed:
+        gone = UsdGeom.Sphere.Define(b.stage, "/World/Gone")
+        UsdGeom.Xformable(gone).AddScaleOp().Set(Gf.Vec3f(0.0, 0.0, 0.0))
+    b.distant("Sun", (0.4, 0.8, 0.45), 3.0)
+    return b.write(tmp_path / ("singular.usda" if collapsed else "regular.usda"))
+
+
+def check_singular_transforms(render, tmp_path, spp: int = 256) -> None:
+    """``render(scene, spp, seed=, max_depth=, width=, height=)``: :func:`singular_transforms_scene` renders as the
+    reference renderer renders it (direct light: relative RMSE within 8 %, means within 2 %), and as the same scene
+    without the collapsed prims (means within 2 %). Both renderers failed on such a scene: numpy's inverse of a singular
+    matrix (the reference renderer's SCENE_INVALID "wrong type or shape", the Mitsuba reader's LinAlgError)."""
+    check_direct_light_like_the_reference(render, singular_transforms_scene(tmp_path), spp)
+    size = dict(width=32, height=32)
+    with_collapsed = render(singular_transforms_scene(tmp_path), spp, seed=4, max_depth=1, **size)
+    without = render(singular_transforms_scene(tmp_path, collapsed=False), spp, seed=4, max_depth=1, **size)
+    np.testing.assert_allclose(with_collapsed.mean((0, 1)), without.mean((0, 1)), rtol=0.02)
+
+
 def check_point_instancer(render, tmp_path, spp: int = 256) -> None:
     """``render(scene, spp, seed=, max_depth=, width=, height=)``: the instances of :func:`point_instancer_scene` render
     as the reference renderer renders them (spec/renderer.md#geometry): direct light from a delta sun, relative RMSE

@@ -27,3 +27,10 @@ def test_implicit_prims_and_curves_render(tmp_path):
     from tests.stage_scenes import check_implicit_prims_and_curves
 
     check_implicit_prims_and_curves(render, tmp_path)
+
+
+def test_singular_transforms_flatten_or_collapse_geometry(tmp_path):
+    """Zero scales (tests/stage_scenes.py::check_singular_transforms): the scene reader raised numpy's LinAlgError."""
+    from tests.stage_scenes import check_singular_transforms
+
+    check_singular_transforms(render, tmp_path)

@@ -472,6 +472,14 @@ def test_implicit_prims_and_curves_render(tmp_path):
     check_implicit_prims_and_curves(mitsuba.render, tmp_path, spp=64)
 
 
+def test_singular_transforms_flatten_or_collapse_geometry(tmp_path):
+    """Zero scales (tests/stage_scenes.py::check_singular_transforms): the reader raised numpy's LinAlgError."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.stage_scenes import check_singular_transforms
+
+    check_singular_transforms(mitsuba.render, tmp_path, spp=64)
+
+
 def test_materialx_surfaces_are_read_as_preview_surface_values(tmp_path):
     """A MaterialX standard_surface or open_pbr_surface (spec/renderer.md#materials) is read as the reference renderer
     reads it: kd = base x base_color x (1 - metalness), F0 = (1 - m) ((1 - ior) / (1 + ior))^2 + m c, alpha =

@@ -62,3 +62,21 @@ def test_subdivision_cage_without_normals_shades_smooth(tmp_path):
     flat, _ = cube(UsdGeom.Tokens.none)
     ng = np.repeat(flat.tri_ng[:, None], 3, 1).reshape(-1, 3)
     np.testing.assert_allclose(np.abs(flat.tri_normals.reshape(-1, 3)), np.abs(ng), atol=1e-12)
+
+
+def test_singular_transforms_flatten_or_collapse_geometry(tmp_path):
+    """A Cube flattened by a scale of 0 along y draws as a square; a Sphere and a PointInstancer instance scaled to 0
+    draw nothing (tests/stage_scenes.py::check_singular_transforms). The scene was SCENE_INVALID ("a value of the wrong
+    type or shape (LinAlgError: Singular matrix)"): every instance's inverse and the normals' inverse transpose."""
+    import warnings
+
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+    from tests.stage_scenes import check_singular_transforms
+
+    def reference(scene, spp, seed=0, max_depth=None, width=None, height=None):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "tessellated into N triangles"
+            settings = RenderSettings(spp=spp, seed=seed, max_depth=max_depth, width=width, height=height)
+            return render(load_scene(scene), settings).image[..., :3]
+
+    check_singular_transforms(reference, tmp_path, spp=64)

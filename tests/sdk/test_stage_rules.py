@@ -156,3 +156,23 @@ def test_material_bindings_equal_usds_per_prim_computation(seed, collections):
             got = {p.GetPath(): bindings.compute(p, purpose) for p in order}
             assert {k: m.GetPath() if m else None for k, m in got.items()} == want
     assert len(set(want.values())) > 2  # several materials, and unbound prims
+
+
+def test_normal_matrix_is_the_inverse_transpose_up_to_length_and_exists_when_it_does_not():
+    """stage_rules.normal_matrix: on random regular transforms (mirroring ones included) the unit normals are those of
+    inv(M)^T; on a transform that flattens along y a y-normal stays +y and an x-normal goes to zero; a stack of matrices
+    gives the stack of their matrices."""
+    import numpy as np
+
+    from nasset_sdk.stage_rules import normal_matrix
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        m, n = rng.normal(size=(3, 3)), rng.normal(size=(8, 3))
+        a, b = n @ np.linalg.inv(m).T, n @ normal_matrix(m)
+        np.testing.assert_allclose(b / np.linalg.norm(b, axis=1, keepdims=True), a / np.linalg.norm(a, axis=1, keepdims=True),
+                                   atol=1e-10)
+    flat = normal_matrix(np.diag([2.0, 0.0, 3.0]))
+    np.testing.assert_allclose(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]) @ flat, [[0.0, 6.0, 0.0], [0.0, 0.0, 0.0]])
+    stack = rng.normal(size=(5, 3, 3))
+    np.testing.assert_allclose(normal_matrix(stack), np.stack([normal_matrix(m) for m in stack]))
