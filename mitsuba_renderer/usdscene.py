@@ -152,6 +152,27 @@ def _m4(gf) -> np.ndarray:
     return np.array([[gf[i][j] for j in range(4)] for i in range(4)], np.float64)
 
 
+#: bounds of spec/renderer.md#limits: |entry| of a world transform, |world coordinate| of a triangle vertex
+MAX_TRANSFORM = 1e15
+MAX_WORLD_COORDINATE = 1e12
+
+
+def _checked_world(m: np.ndarray, path: str, prim: str, *, regular: bool = False) -> np.ndarray:
+    """The world transform ``m`` [4, 4] of ``prim``, SCENE_INVALID unless finite with every entry <= MAX_TRANSFORM and,
+    where ``regular`` (cameras, neural assets), |det M3| >= 1e-12 (spec/renderer.md#limits)."""
+    if not np.isfinite(m).all() or np.abs(m).max() > MAX_TRANSFORM:
+        raise SceneError("SCENE_INVALID", f"world transform is not finite or has an entry above {MAX_TRANSFORM:g}", file=path,
+                         prim=prim, attribute="xformOpOrder")
+    if regular and abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise SceneError("SCENE_INVALID", "world transform is singular", file=path, prim=prim, attribute="xformOpOrder")
+    return m
+
+
+def _world(cache, prim, path: str, *, regular: bool = False) -> np.ndarray:
+    """:func:`_checked_world` transform of ``prim`` from the XformCache ``cache``."""
+    return _checked_world(_m4(cache.GetLocalToWorldTransform(prim)), path, str(prim.GetPath()), regular=regular)
+
+
 def _input(shader, name, default, t=None, per_hit: dict | None = None, textures: TextureReader | None = None):
     """A UsdPreviewSurface input's value, followed through connections to a material's or node graph's interface
     input (nasset_sdk.stage_rules.input_source). One fed by a shader output gives its own authored value, else
@@ -450,16 +471,16 @@ def read_scene(path: str) -> SceneDesc:
                 it.PruneChildren()
                 if not file:
                     raise SceneError("SCENE_INVALID", "NeuralAsset prim references no asset file", file=path, prim=ppath)
-                assets.append(AssetInstance(ppath, file, _asset_to_world(prim, cache)))
+                assets.append(AssetInstance(ppath, file, _checked_world(_asset_to_world(prim, cache), path, ppath, regular=True)))
                 _units_warning(stage, file, assets[-1].to_world, ppath, say)
                 continue
         if tn == "Camera":
             continue
         if tn in _LIGHTS:
-            lights.append(_read_light(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), path, t))
+            lights.append(_read_light(prim, tn, _world(cache, prim, path), path, t))
             continue
         if tn == "Mesh" or tn in ("BasisCurves", "Points") or tn in IMPLICIT_PRIMS:
-            meshes.extend(_gprim_meshes(prim, tn, _m4(cache.GetLocalToWorldTransform(prim)), reading))
+            meshes.extend(_gprim_meshes(prim, tn, _world(cache, prim, path), reading))
             continue
         if tn == "PointInstancer":  # its subtree renders only as its instances (spec/renderer.md#geometry)
             it.PruneChildren()
@@ -470,8 +491,13 @@ def read_scene(path: str) -> SceneDesc:
         if prim.HasAPI(UsdLux.LightAPI) or tn.endswith("Light") or prim.IsA(UsdGeom.Gprim):
             raise SceneError("SCENE_UNSUPPORTED", f"prim type {tn!r} is not supported", file=path, prim=ppath)
         warnings.warn(f"{ppath}: prim type {tn!r} ignored", stacklevel=2)
+    for mesh in meshes:  # spec/renderer.md#limits: float32 ray casting
+        big = float(np.abs(mesh.points).max(initial=0.0))
+        if big > MAX_WORLD_COORDINATE:
+            raise SceneError("SCENE_INVALID", f"world coordinates up to {big:.3g} exceed the bound {MAX_WORLD_COORDINATE:g}",
+                             file=path, prim=mesh.prim, attribute="xformOpOrder")
     chosen = stage_rules.render_camera(stage, settings, path, say, cameras)
-    camera = _read_camera(chosen, _m4(cache.GetLocalToWorldTransform(chosen)), path, t)
+    camera = _read_camera(chosen, _world(cache, chosen, path, regular=True), path, t)
     camera.settings_resolution = stage_rules.settings_resolution(stage, settings, t, say, MAX_SETTINGS_PIXELS)
     stage_rules.conform_warning(settings, t, camera.settings_resolution, camera.h_aperture, camera.v_aperture, say)
     return SceneDesc(path, camera, meshes, lights, assets, stage_rules.nasset_settings(settings, t, say))
@@ -521,7 +547,9 @@ def _gprim_meshes(prim, tn: str, mw, r: _Reading) -> list[Mesh]:
         warnings.warn(f"{ppath}: empty mesh ignored", stacklevel=3)
         return []
     if counts.sum() != len(idx) or np.any(counts < 3) or idx.min() < 0 or idx.max() >= len(pts):
-        raise SceneError("SCENE_INVALID", "mesh topology is invalid", file=path, prim=ppath)
+        raise SceneError("SCENE_INVALID", "mesh topology is invalid", file=path, prim=ppath, attribute="faceVertexIndices")
+    if not np.isfinite(pts).all():
+        raise SceneError("SCENE_INVALID", "mesh points are not finite", file=path, prim=ppath, attribute="points")
     faces, corners, face_of = [], [], []
     start = 0
     for fi, c in enumerate(counts):  # fan triangulation
@@ -587,10 +615,10 @@ def _point_instancer(prim, cache, r: _Reading) -> list[Mesh]:
     if len(indices) and (indices.min() < 0 or indices.max() >= len(protos) or not all(protos)):
         raise SceneError("SCENE_INVALID", "protoIndices name a prototype that is missing", **where)
     mask = np.asarray(pi.ComputeMaskAtTime(t) or [True] * len(indices), bool)
-    placements = np.asarray(xforms, np.float64).reshape(-1, 4, 4) @ _m4(cache.GetLocalToWorldTransform(prim))
-    if not np.isfinite(placements[mask]).all():
-        raise SceneError("SCENE_INVALID", "an instance transform is not finite (positions, orientations or scales)",
-                         file=path, prim=ppath, attribute="positions")
+    placements = np.asarray(xforms, np.float64).reshape(-1, 4, 4) @ _world(cache, prim, path)
+    if not np.isfinite(placements[mask]).all() or (len(placements) and np.abs(placements[mask]).max(initial=0) > MAX_TRANSFORM):
+        raise SceneError("SCENE_INVALID", f"an instance transform is not finite or has an entry above {MAX_TRANSFORM:g} "
+                         "(positions, orientations or scales)", file=path, prim=ppath, attribute="positions")
     out, added = [], 0
     for k, root in enumerate(protos):
         parts = []
@@ -621,7 +649,7 @@ def _point_instancer(prim, cache, r: _Reading) -> list[Mesh]:
                              prim=str(root.GetPath()), attribute="xformOpOrder")
         to_root = np.linalg.inv(root_m)
         for p, tn in parts:
-            for mesh in _gprim_meshes(p, tn, _m4(cache.GetLocalToWorldTransform(p)) @ to_root, r):
+            for mesh in _gprim_meshes(p, tn, _world(cache, p, path) @ to_root, r):
                 added += len(mesh.faces) * len(chosen)
                 if added > MAX_INSTANCED_TRIANGLES:
                     raise SceneError("SCENE_INVALID", f"the instances add more than {MAX_INSTANCED_TRIANGLES} triangles",

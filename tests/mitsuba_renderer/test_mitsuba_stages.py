@@ -564,3 +564,40 @@ def test_light_surfaces_occlude_nothing(tmp_path):
     from tests.stage_scenes import check_light_surfaces_occlude_nothing
 
     check_light_surfaces_occlude_nothing(mitsuba.render, tmp_path, spp=32)
+
+
+def _bad_world(tmp_path, what):
+    from pxr import Gf, UsdGeom
+
+    b, _ = _floor_scene()
+    if what == "nan points":
+        b.mesh("Bad", [(0, 0, 0), (float("nan"), 0, 0), (0, 1, 0)], [[0, 1, 2]], diffuse=(0.5, 0.5, 0.5))
+    elif what == "huge points":
+        b.mesh("Bad", [(0, 0, 0), (1e30, 0, 0), (0, 1, 0)], [[0, 1, 2]], diffuse=(0.5, 0.5, 0.5))
+    elif what == "nan transform":
+        UsdGeom.Xformable(UsdGeom.Cube.Define(b.stage, "/World/Bad")).AddTranslateOp().Set(Gf.Vec3d(float("nan"), 0, 0))
+    elif what == "huge transform":
+        UsdGeom.Xformable(UsdGeom.Cube.Define(b.stage, "/World/Bad")).AddScaleOp().Set(Gf.Vec3f(1e16, 1, 1))
+    elif what == "nan light transform":
+        light = b.rect_light("Bad", (0, 2, 0), 1.0, 1.0, (0, -1, 0), 2.0)
+        UsdGeom.Xformable(light).AddTranslateOp(opSuffix="nan").Set(Gf.Vec3d(0, float("inf"), 0))
+    return b.write(tmp_path / "bad.usda")
+
+
+@pytest.mark.parametrize("what, attribute", [("nan points", "points"), ("huge points", "xformOpOrder"),
+                                             ("nan transform", "xformOpOrder"), ("huge transform", "xformOpOrder"),
+                                             ("nan light transform", "xformOpOrder")])
+def test_world_bounds_are_the_reference_renderers(tmp_path, what, attribute):
+    """spec/renderer.md#limits: world transforms finite with entries <= 1e15, world coordinates <= 1e12, finite points:
+    SCENE_INVALID naming the prim, as the reference renderer says (it refuses the same scenes). The Mitsuba reader passed
+    them on: the second implementation rendered NaN geometry silently, the plugin failed inside Mitsuba's parser
+    without naming the prim."""
+    from nasset_reference_renderer import load_scene
+
+    scene = _bad_world(tmp_path, what)
+    with pytest.raises(SceneError) as ref:
+        load_scene(scene)
+    with pytest.raises(SceneError) as ours:
+        read_scene(scene)
+    assert ref.value.code == ours.value.code == "SCENE_INVALID"
+    assert ours.value.prim == "/World/Bad" and ours.value.attribute == attribute, str(ours.value)
