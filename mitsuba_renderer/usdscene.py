@@ -128,7 +128,7 @@ def _read_camera(prim, to_world, path, t) -> Camera:
     def get(name, default):
         v = _float_attr(prim, name, default, t)
         if not np.isfinite(v):
-            raise SceneError("SCENE_INVALID", f"camera {name} is not a finite number", file=path, prim=ppath)
+            raise SceneError("SCENE_INVALID", f"camera {name} is not a finite number", file=path, prim=ppath, attribute=name)
         return v
 
     projection = cam.GetProjectionAttr().Get(t) or "perspective"
@@ -137,8 +137,11 @@ def _read_camera(prim, to_world, path, t) -> Camera:
     focal, ha = get("focalLength", 50.0), get("horizontalAperture", 20.955)
     va = get("verticalAperture", 15.2908)
     f_stop, focus = get("fStop", 0.0), get("focusDistance", 0.0)
-    if min(focal, ha, va) <= 0 or min(f_stop, focus) < 0:
-        raise SceneError("SCENE_INVALID", "camera lens or aperture out of range", file=path, prim=ppath)
+    for name, v, positive in (("focalLength", focal, True), ("horizontalAperture", ha, True), ("verticalAperture", va, True),
+                              ("fStop", f_stop, False), ("focusDistance", focus, False)):
+        if v < 0 or (positive and v == 0):
+            raise SceneError("SCENE_INVALID", f"camera {name} = {v!r} must be {'> 0' if positive else '>= 0'}", file=path,
+                             prim=ppath, attribute=name)
     thin = projection == "perspective" and f_stop > 0 and focus > 0
     exposure = (2.0 ** get("exposure", 0.0) * get("exposure:responsivity", 1.0) * get("exposure:time", 1.0)
                 * get("exposure:iso", 100.0) / 100.0 / get("exposure:fStop", 1.0) ** 2)
@@ -152,9 +155,12 @@ def _m4(gf) -> np.ndarray:
     return np.array([[gf[i][j] for j in range(4)] for i in range(4)], np.float64)
 
 
-#: bounds of spec/renderer.md#limits: |entry| of a world transform, |world coordinate| of a triangle vertex
+#: bounds of spec/renderer.md#limits: |entry| of a world transform, |world coordinate| of a triangle vertex, a light's
+#: exposure (stops) and intensity * 2^exposure * color (per channel)
 MAX_TRANSFORM = 1e15
 MAX_WORLD_COORDINATE = 1e12
+MAX_LIGHT_EXPOSURE = 1000.0
+MAX_LIGHT_SCALE = 1e30
 
 
 def _checked_world(m: np.ndarray, path: str, prim: str, *, regular: bool = False) -> np.ndarray:
@@ -910,14 +916,29 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         v = a.Get(t) if a else None
         return default if v is None else v
 
-    rad = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)
+    def invalid(message, attribute):
+        return SceneError("SCENE_INVALID", message, file=path, prim=ppath, attribute=attribute)
+
+    exposure = float(get("exposure", 0.0))
+    if not (np.isfinite(exposure) and abs(exposure) <= MAX_LIGHT_EXPOSURE):  # spec/renderer.md#limits
+        raise invalid(f"exposure {exposure!r} must be finite with |exposure| <= {MAX_LIGHT_EXPOSURE:g} stops", "inputs:exposure")
+    color = np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)
     if bool(get("enableColorTemperature", False)):  # USD's own blackbody curve (spec/renderer.md#lights)
         from pxr import UsdLux
 
         kelvin = float(get("colorTemperature", 6500.0))
-        if not (np.isfinite(kelvin) and kelvin > 0):
-            raise SceneError("SCENE_INVALID", "colorTemperature must be finite and > 0", file=path, prim=ppath)
-        rad = rad * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
+        if not (np.isfinite(kelvin) and 0 < kelvin <= MAX_LIGHT_SCALE):
+            raise invalid(f"colorTemperature {kelvin!r} must be finite and > 0 (kelvin)", "inputs:colorTemperature")
+        color = color * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        rad = float(get("intensity", 1.0)) * np.exp2(exposure) * color
+    if not np.isfinite(rad).all() or (rad < 0).any() or rad.max(initial=0.0) > MAX_LIGHT_SCALE:
+        raise invalid(f"intensity * 2^exposure * color = {rad.tolist()} must be finite, >= 0 and <= {MAX_LIGHT_SCALE:g}",
+                      "inputs:intensity")
+    for name in ("angle", "radius", "width", "height", "length"):
+        v = get(name, None)
+        if v is not None and not np.isfinite(float(v)):
+            raise invalid(f"inputs:{name} = {v!r} must be finite", f"inputs:{name}")
     lt = Light(ppath, tn, rad, mw, normalize=bool(get("normalize", False)))
     _unhonoured_light_features(prim, path, t)
     lt.camera_visible = _light_flag(prim, "nasset:cameraVisibility", True, path, t)
@@ -926,12 +947,18 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         lt.angle = float(get("angle", 0.53))
     elif tn == "SphereLight":
         lt.radius = float(get("radius", 0.5))
+        if lt.radius < 0:
+            raise invalid("radius must be >= 0", "inputs:radius")
         if bool(get("treatAsPoint", False)):
             lt.radius = 0.0
     elif tn == "DiskLight":
         lt.radius = float(get("radius", 0.5))
+        if lt.radius < 0:
+            raise invalid("radius must be >= 0", "inputs:radius")
     elif tn == "CylinderLight":
         lt.radius, lt.length = float(get("radius", 0.5)), float(get("length", 1.0))
+        if lt.radius < 0 or lt.length < 0:
+            raise invalid("radius and length must be >= 0", "inputs:radius")
         if bool(get("treatAsLine", False)):
             _say(path)("treatAsLine ignored: rendered as the cylinder of its radius", ppath)
     elif tn == "RectLight":

@@ -722,7 +722,7 @@ class _Loader:
             emission = np.maximum(emission_texture[0].mean, 0.0)
         specular_workflow = bool(int(vals["useSpecularWorkflow"]))
         ior = float(vals["ior"])
-        if not specular_workflow and ior <= 0.0:  # F0 = ((1 - ior) / (1 + ior))^2 has no meaning there (a pole at -1)
+        if not ior > 0.0:  # spec/renderer.md#materials, input ranges (in the metallic workflow F0 has a pole at -1)
             raise self.err("SCENE_INVALID", f"ior = {ior!r} must be > 0", shader.GetPath(), "inputs:ior")
 
         def value(name):
@@ -971,8 +971,10 @@ class _Loader:
         pts = np.asarray(pts, np.float64).reshape(-1, 3)
         counts = np.asarray(counts, np.int64)
         idx = np.asarray(idx, np.int64)
-        if (counts < 3).any() or counts.sum() != len(idx) or idx.min() < 0 or idx.max() >= len(pts) or not np.isfinite(pts).all():
-            raise self.err("SCENE_INVALID", "mesh topology invalid (counts/indices/points)", path, "faceVertexIndices")
+        if (counts < 3).any() or counts.sum() != len(idx) or idx.min() < 0 or idx.max() >= len(pts):
+            raise self.err("SCENE_INVALID", "mesh topology invalid (counts/indices)", path, "faceVertexIndices")
+        if not np.isfinite(pts).all():
+            raise self.err("SCENE_INVALID", "mesh points are not finite", path, "points")
         scheme = mesh.GetSubdivisionSchemeAttr().Get(self.time)
         subdivided = scheme not in (None, UsdGeom.Tokens.none)
         if subdivided:

@@ -567,7 +567,8 @@ def test_light_surfaces_occlude_nothing(tmp_path):
 
 
 def _bad_world(tmp_path, what):
-    from pxr import Gf, UsdGeom
+    """(scene, the prim the error must name) of a scene with one bad value (test below)."""
+    from pxr import Gf, Sdf, UsdGeom
 
     b, _ = _floor_scene()
     if what == "nan points":
@@ -581,23 +582,48 @@ def _bad_world(tmp_path, what):
     elif what == "nan light transform":
         light = b.rect_light("Bad", (0, 2, 0), 1.0, 1.0, (0, -1, 0), 2.0)
         UsdGeom.Xformable(light).AddTranslateOp(opSuffix="nan").Set(Gf.Vec3d(0, float("inf"), 0))
-    return b.write(tmp_path / "bad.usda")
+    elif what.startswith("light "):  # "light <attribute> <value>" on a sphere light
+        _, name, value = what.split(" ")
+        b.sphere_light("Bad", (0, 2, 0), 0.3, 2.0).GetPrim().GetAttribute(name).Set(
+            Gf.Vec3f(float(value), 1.0, 1.0) if name == "inputs:color" else float(value))
+    elif what.startswith("cylinder ") or what.startswith("disk "):
+        from pxr import UsdLux
+
+        light = (UsdLux.CylinderLight if what.startswith("cylinder") else UsdLux.DiskLight).Define(b.stage, "/World/Bad")
+        light.GetPrim().CreateAttribute(what.split(" ")[1], Sdf.ValueTypeNames.Float).Set(-1.0)
+    elif what == "ior -1, specular workflow":
+        b.mesh("Bad", [(0, 0, 0), (1, 0, 0), (0, 1, 0)], [[0, 1, 2]], diffuse=(0.5, 0.5, 0.5))
+        shader = next(p for p in b.stage.Traverse() if p.GetTypeName() == "Shader" and "Bad" in str(p.GetPath()))
+        shader.CreateAttribute("inputs:useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(1)
+        shader.CreateAttribute("inputs:ior", Sdf.ValueTypeNames.Float).Set(-1.0)
+        return b.write(tmp_path / "bad.usda"), str(shader.GetPath())
+    elif what.startswith("camera "):
+        b.stage.GetPrimAtPath("/World/Camera").GetAttribute(what.split(" ")[1]).Set(0.0)
+        return b.write(tmp_path / "bad.usda"), "/World/Camera"
+    return b.write(tmp_path / "bad.usda"), "/World/Bad"
 
 
-@pytest.mark.parametrize("what, attribute", [("nan points", "points"), ("huge points", "xformOpOrder"),
-                                             ("nan transform", "xformOpOrder"), ("huge transform", "xformOpOrder"),
-                                             ("nan light transform", "xformOpOrder")])
-def test_world_bounds_are_the_reference_renderers(tmp_path, what, attribute):
-    """spec/renderer.md#limits: world transforms finite with entries <= 1e15, world coordinates <= 1e12, finite points:
-    SCENE_INVALID naming the prim, as the reference renderer says (it refuses the same scenes). The Mitsuba reader passed
-    them on: the second implementation rendered NaN geometry silently, the plugin failed inside Mitsuba's parser
-    without naming the prim."""
+@pytest.mark.parametrize("what, attribute", [
+    ("nan points", "points"), ("huge points", "xformOpOrder"), ("nan transform", "xformOpOrder"),
+    ("huge transform", "xformOpOrder"), ("nan light transform", "xformOpOrder"),
+    ("light inputs:intensity -2", "inputs:intensity"), ("light inputs:color nan", "inputs:intensity"),
+    ("light inputs:exposure 2000", "inputs:exposure"), ("light inputs:radius -1", "inputs:radius"),
+    ("cylinder inputs:length", "inputs:radius"), ("disk inputs:radius", "inputs:radius"),
+    ("ior -1, specular workflow", "inputs:ior"), ("camera focalLength", "focalLength"),
+    ("camera horizontalAperture", "horizontalAperture")])
+def test_bad_values_are_refused_as_the_reference_renderer_refuses_them(tmp_path, what, attribute):
+    """spec/renderer.md#limits and #materials: SCENE_INVALID naming the prim and attribute, from the Mitsuba reader and
+    the reference renderer alike. Before, the Mitsuba reader passed on NaN geometry and transforms (the second
+    implementation rendered them silently, the plugin failed in Mitsuba's parser without naming the prim), negative or
+    NaN light values (a NaN image), an exposure of 2000 (OverflowError), and named no camera attribute; the reference
+    renderer divided by zero on ior = -1 in the specular workflow (the spec refuses ior <= 0 in either)."""
     from nasset_reference_renderer import load_scene
 
-    scene = _bad_world(tmp_path, what)
+    scene, prim = _bad_world(tmp_path, what)
     with pytest.raises(SceneError) as ref:
         load_scene(scene)
     with pytest.raises(SceneError) as ours:
         read_scene(scene)
     assert ref.value.code == ours.value.code == "SCENE_INVALID"
-    assert ours.value.prim == "/World/Bad" and ours.value.attribute == attribute, str(ours.value)
+    assert ours.value.prim == ref.value.prim == prim and ours.value.attribute == ref.value.attribute == attribute, \
+        (str(ours.value), str(ref.value))
