@@ -731,14 +731,16 @@ def _face_groups(mesh, face_of, n_faces: int, path: str, t, purposes: stage_rule
             continue
         ind = np.asarray(subset.GetIndicesAttr().Get(t) or [], np.int64)
         if len(ind) and (ind.min() < 0 or ind.max() >= n_faces):
-            raise SceneError("SCENE_INVALID", "GeomSubset face indices outside the mesh", file=path, prim=str(subset.GetPath()))
+            raise SceneError("SCENE_INVALID", "GeomSubset face indices outside the mesh", file=path, prim=str(subset.GetPath()),
+                             attribute="indices")
         free = ind[owner[ind] < 0]
         owner[free] = len(groups)
         groups.append((str(subset.GetPath()), subset.GetPrim()))
     holes = np.asarray(mesh.GetHoleIndicesAttr().Get(t) or [], np.int64)
     if len(holes):
         if holes.min() < 0 or holes.max() >= n_faces:
-            raise SceneError("SCENE_INVALID", "hole indices outside the mesh", file=path, prim=str(mesh.GetPath()))
+            raise SceneError("SCENE_INVALID", "hole indices outside the mesh", file=path, prim=str(mesh.GetPath()),
+                             attribute="holeIndices")
         owner[holes] = -2
     out = [(where, prim, owner[face_of] == k) for k, (where, prim) in enumerate(groups)]
     rest = owner[face_of] == -1
@@ -986,7 +988,8 @@ def _read_light(prim, tn, mw, path, t) -> Light:
                 raw = tex.path if isinstance(tex, Sdf.AssetPath) else str(tex)
                 resolved = raw if os.path.isabs(raw) else os.path.join(os.path.dirname(os.path.abspath(path)), raw)
             if not (packaged_name(resolved) or os.path.exists(resolved)):
-                raise SceneError("SCENE_INVALID", f"dome texture {resolved} does not exist", file=path, prim=ppath)
+                raise SceneError("SCENE_INVALID", f"dome texture {resolved} does not exist", file=path, prim=ppath,
+                                 attribute="inputs:texture:file")
             lt.texture = _read_exr(resolved, ppath, path)
     lt.shaping = _shaping(prim, get, path, t)
     point = tn == "SphereLight" and lt.radius * float(np.cbrt(abs(np.linalg.det(mw[:3, :3])))) <= 0  # world radius 0

@@ -597,6 +597,16 @@ def _bad_world(tmp_path, what):
         shader.CreateAttribute("inputs:useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(1)
         shader.CreateAttribute("inputs:ior", Sdf.ValueTypeNames.Float).Set(-1.0)
         return b.write(tmp_path / "bad.usda"), str(shader.GetPath())
+    elif what == "subset outside the mesh":
+        from pxr import UsdShade
+
+        binding = UsdShade.MaterialBindingAPI.Apply(b.stage.GetPrimAtPath("/World/Floor"))
+        subset = binding.CreateMaterialBindSubset("Bad", [0, 7], UsdGeom.Tokens.face)
+        return b.write(tmp_path / "bad.usda"), str(subset.GetPath())
+    elif what == "dome texture missing":
+        from pxr import UsdLux
+
+        UsdLux.DomeLight.Define(b.stage, "/World/Bad").CreateTextureFileAttr("./nope.exr")
     elif what.startswith("camera "):
         b.stage.GetPrimAtPath("/World/Camera").GetAttribute(what.split(" ")[1]).Set(0.0)
         return b.write(tmp_path / "bad.usda"), "/World/Camera"
@@ -610,10 +620,11 @@ def _bad_world(tmp_path, what):
     ("light inputs:exposure 2000", "inputs:exposure"), ("light inputs:radius -1", "inputs:radius"),
     ("cylinder inputs:length", "inputs:radius"), ("disk inputs:radius", "inputs:radius"),
     ("ior -1, specular workflow", "inputs:ior"), ("camera focalLength", "focalLength"),
-    ("camera horizontalAperture", "horizontalAperture")])
+    ("camera horizontalAperture", "horizontalAperture"), ("subset outside the mesh", "indices"),
+    ("dome texture missing", "inputs:texture:file")])
 def test_bad_values_are_refused_as_the_reference_renderer_refuses_them(tmp_path, what, attribute):
     """spec/renderer.md#limits and #materials: SCENE_INVALID naming the prim and attribute, from the Mitsuba reader and
-    the reference renderer alike. Before, the Mitsuba reader passed on NaN geometry and transforms (the second
+    the reference renderer alike (16 scenes). Before, the Mitsuba reader passed on NaN geometry and transforms (the second
     implementation rendered them silently, the plugin failed in Mitsuba's parser without naming the prim), negative or
     NaN light values (a NaN image), an exposure of 2000 (OverflowError), and named no camera attribute; the reference
     renderer divided by zero on ior = -1 in the specular workflow (the spec refuses ior <= 0 in either)."""
