@@ -47,10 +47,10 @@ class MitsubaLight:
 
     infinite = False
 
-    def __init__(self, desc: Light, key: str, mi_dict: dict, delta: bool, has_shape: bool) -> None:
+    def __init__(self, desc: Light, key: str, mi_dict: dict, delta: bool, has_shape: bool, area: float = 0.0) -> None:
         self.desc, self.key, self.mi_dict, self.delta, self.has_shape = desc, key, mi_dict, delta, has_shape
+        self.area = area  # world area of a light surface (has_shape)
         self.emitter = None  # bound after mi.load_dict
-        self.area = 0.0  # world area of a light surface (has_shape)
 
     def sample(self, mi, p, n, u):
         m = len(p)
@@ -238,9 +238,7 @@ def _surface_light(d: Light, key: str, rad: np.ndarray, shape: dict, area: float
         return None
     le = rad / area if d.normalize else rad
     ent = {**shape, "emitter": {"type": "area", "radiance": {"type": "rgb", "value": le.tolist()}}}
-    light = MitsubaLight(d, key, ent, delta=False, has_shape=True)
-    light.area = area
-    return light
+    return MitsubaLight(d, key, ent, delta=False, has_shape=True, area=area)
 
 
 def _planar_to_world(sx: float, sy: float, mw: np.ndarray):

@@ -368,10 +368,8 @@ def check_singular_transforms(render, tmp_path, spp: int = 256) -> None:
     reference renderer renders it (direct light: relative RMSE within 8 %, means within 2 %), and as the same scene
     without the collapsed prims (means within 2 %). Both renderers failed on such a scene: numpy's inverse of a singular
     matrix (the reference renderer's SCENE_INVALID "wrong type or shape", the Mitsuba reader's LinAlgError)."""
-    check_direct_light_like_the_reference(render, singular_transforms_scene(tmp_path), spp)
-    size = dict(width=32, height=32)
-    with_collapsed = render(singular_transforms_scene(tmp_path), spp, seed=4, max_depth=1, **size)
-    without = render(singular_transforms_scene(tmp_path, collapsed=False), spp, seed=4, max_depth=1, **size)
+    with_collapsed = check_direct_light_like_the_reference(render, singular_transforms_scene(tmp_path), spp)
+    without = render(singular_transforms_scene(tmp_path, collapsed=False), spp, seed=4, max_depth=1, width=32, height=32)
     np.testing.assert_allclose(with_collapsed.mean((0, 1)), without.mean((0, 1)), rtol=0.02)
 
 
@@ -382,9 +380,10 @@ def check_point_instancer(render, tmp_path, spp: int = 256) -> None:
     check_direct_light_like_the_reference(render, point_instancer_scene(tmp_path), spp)
 
 
-def check_direct_light_like_the_reference(render, scene, spp: int) -> None:
+def check_direct_light_like_the_reference(render, scene, spp: int) -> np.ndarray:
     """``render``'s image of ``scene`` with direct light only (max_depth 1) against the reference renderer's, 32 x 32 at
-    ``spp``: relative RMSE within 8 % (the two renders sample pixels at other points) and means within 2 %."""
+    ``spp``: relative RMSE within 8 % (the two renders sample pixels at other points) and means within 2 %. Returns
+    ``render``'s image (seed 4)."""
     import warnings
 
     from nasset_reference_renderer import RenderSettings, load_scene
@@ -398,6 +397,7 @@ def check_direct_light_like_the_reference(render, scene, spp: int) -> None:
     rel = float(np.sqrt(np.mean((got - want) ** 2)) / want.mean())
     assert rel < 0.08, rel
     np.testing.assert_allclose(got.mean((0, 1)), want.mean((0, 1)), rtol=0.02)
+    return got
 
 
 #: the per-hit inputs :func:`textured_scene` builds (spec/renderer.md#textures, #primvar-colors)
