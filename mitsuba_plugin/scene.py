@@ -11,11 +11,14 @@ written once per asset file to a cache folder) carrying the ``nasset`` marker BS
 
 from __future__ import annotations
 
+import atexit
 import copy
 import hashlib
+import itertools
 import math
 import os
 import re
+import shutil
 import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -30,11 +33,15 @@ from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, OPAQ
 from .variant import jit_mitsuba
 
 _PLY_DIR: list[str] = []
+_PLY_NUMBERS = itertools.count()  # names of the scene meshes' PLY files, unique in the process
 
 
 def _cache_dir() -> Path:
+    """This process's folder of PLY files (Mitsuba scene dicts name meshes by file), removed at exit."""
     if not _PLY_DIR:
-        _PLY_DIR.append(tempfile.mkdtemp(prefix="nasset_mitsuba_"))
+        folder = tempfile.mkdtemp(prefix="nasset_mitsuba_")
+        atexit.register(shutil.rmtree, folder, True)
+        _PLY_DIR.append(folder)
     return Path(_PLY_DIR[0])
 
 
@@ -504,6 +511,6 @@ def expose(desc) -> None:
 
 def _mesh_ply(mi, mesh) -> str:
     """A world-space plain mesh written to the cache folder (scene dicts cannot attach a BSDF to a Mesh object)."""
-    out = _cache_dir() / f"mesh_{len(list(_cache_dir().glob('mesh_*.ply')))}.ply"
+    out = _cache_dir() / f"mesh_{next(_PLY_NUMBERS)}.ply"  # was numbered by listing the folder: quadratic in meshes
     mesh.write_ply(str(out))
     return str(out)

@@ -12,6 +12,8 @@ and ``ds.uv`` of an emitter's position sample) and the mesh attribute :data:`COL
 
 from __future__ import annotations
 
+import weakref
+
 import drjit as dr
 import numpy as np
 
@@ -45,13 +47,28 @@ def _wrap(mi, i, n: int, mode: str):
     return dr.clip(i, 0, n - 1), inside if mode == "black" else mi.Bool(True)
 
 
+#: id of a texel array (``Texture.image``) -> (a weak reference to it, its texels on the device): textures that share
+#: an array share one upload, for as long as the array lives
+_UPLOADED: dict[int, tuple] = {}
+
+
+def _device_texels(mi, image: np.ndarray):
+    """``image`` [H, W, 3] as one flat device ``Float`` [H * W * 3], uploaded once per array and variant."""
+    key = id(image)
+    ref, texels = _UPLOADED.get(key, (None, None))
+    if ref is None or ref() is not image or not isinstance(texels, mi.Float):
+        texels = mi.Float(np.ascontiguousarray(image, np.float32).ravel())
+        _UPLOADED[key] = (weakref.ref(image, lambda _, key=key: _UPLOADED.pop(key, None)), texels)
+    return texels
+
+
 class ImageLookup:
     """One texture (``nasset_mitsuba_renderer.usdtextures.Texture``) on the device."""
 
     def __init__(self, mi, tex) -> None:
         self.mi = mi
         self.h, self.w = (int(v) for v in tex.image.shape[:2])
-        self.texels = mi.Float(np.ascontiguousarray(tex.image, np.float32).ravel())  # [H * W * 3]
+        self.texels = _device_texels(mi, tex.image)  # [H * W * 3]
         self.wrap = tuple(tex.wrap)
         self.scale = mi.ScalarColor3f(*map(float, tex.scale))
         self.bias = mi.ScalarColor3f(*map(float, tex.bias))

@@ -128,16 +128,26 @@ def texture_fallback(node, output: str, t):
 
 
 class TextureReader:
-    """Reads the UsdUVTextures of one scene (each image file decoded once)."""
+    """Reads the UsdUVTextures of one scene: each image file decoded once, each (file, channel, colour decode) made
+    once, each (UsdUVTexture, output) read once, so the meshes and materials that share a texture share its arrays
+    (a scene of many meshes bound to one textured material holds one copy of its texels, not one per mesh)."""
 
     def __init__(self, scene: str, t, warn: Warn) -> None:
         self.scene, self.t, self.warn = scene, t, warn
         self.images: dict[str, tuple[np.ndarray, int]] = {}  # resolved path -> (rgba [H, W, 4], bits)
+        self.texels: dict[tuple, np.ndarray] = {}  # (resolved path, channel, decoded) -> [H, W, 3] float32
+        self.textures: dict[tuple[str, str], Texture | None] = {}  # (UsdUVTexture path, output) -> as read
 
     def read(self, node, output: str) -> Texture | None:
         """The texture ``node`` (a UsdUVTexture) gives through ``output``; None, warned, when its image cannot be used
         (no file, not found, a format other than OpenEXR / PNG / JPEG, a UDIM set). A file inside a package (usdz) is
-        read through USD's resolver."""
+        read through USD's resolver. Read once per (node, output): later calls return the same object."""
+        key = (str(node.GetPath()), str(output))
+        if key not in self.textures:
+            self.textures[key] = self._read(node, output)
+        return self.textures[key]
+
+    def _read(self, node, output: str) -> Texture | None:
         from nasset_sdk.images import packaged_name
 
         where = str(node.GetPath())
@@ -153,12 +163,15 @@ class TextureReader:
             return None
         rgba, bits = self._image(resolved, where)
         channel = -1 if output == "rgb" else "rgba".find(output)
-        image = rgba[..., :3] if channel < 0 else np.repeat(rgba[..., channel:channel + 1], 3, -1)
         space = str(input_value(node, "sourceColorSpace", self.t) or "auto")
         if space not in ("auto", "raw", "sRGB"):
             self.warn(f"sourceColorSpace {space!r} read as raw (linear)", where)
-        if channel != 3 and (space == "sRGB" or (space == "auto" and bits == 8)):  # alpha is never decoded
-            image = _srgb_decode(image)
+        decode = channel != 3 and (space == "sRGB" or (space == "auto" and bits == 8))  # alpha is never decoded
+        if (resolved, channel, decode) not in self.texels:
+            image = rgba[..., :3] if channel < 0 else np.repeat(rgba[..., channel:channel + 1], 3, -1)
+            self.texels[resolved, channel, decode] = np.ascontiguousarray(_srgb_decode(image) if decode else image,
+                                                                          np.float32)
+        image = self.texels[resolved, channel, decode]
         wrap = []
         for name in ("wrapS", "wrapT"):
             mode = str(input_value(node, name, self.t) or "useMetadata")
@@ -179,8 +192,7 @@ class TextureReader:
                 out[:len(v)] = v
         pick = slice(0, 3) if channel < 0 else [channel] * 3
         varname, uv, st_fallback = self._st(node)
-        return Texture(np.ascontiguousarray(image, np.float32), (wrap[0], wrap[1]), scale[pick], bias[pick], uv, varname,
-                       st_fallback)
+        return Texture(image, (wrap[0], wrap[1]), scale[pick], bias[pick], uv, varname, st_fallback)
 
     def _image(self, resolved: str, where: str) -> tuple[np.ndarray, int]:
         """(rgba [H, W, 4] float32, bits per channel) of an image file, decoded once, through the SDK's bounded

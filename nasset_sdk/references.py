@@ -70,9 +70,15 @@ def asset_source(prim) -> AssetSource | None:
     return AssetSource(_layer_path(header.layer), str(header.path), True)
 
 
+#: properties of an embedded root that place the instance in its scene, not the asset: dropped from the copy (object space
+#: ignores the root's transform, spec/format.md#coordinates), so that every instance of one asset copies to the same specs
+_PLACEMENT = ("xformOpOrder", "visibility", "purpose", "proxyPrim")
+
+
 def embedded_layer(source: AssetSource):
     """An anonymous layer holding the embedded asset's specs copied to ``/Asset`` (its default prim, typed
-    ``NeuralAsset``) with the scene layer's ``upAxis`` and ``metersPerUnit``; ``SCENE_INVALID`` if it cannot be read."""
+    ``NeuralAsset``) with the scene layer's ``upAxis`` and ``metersPerUnit``, without the root's placement in the scene
+    (its ``xformOp``s, visibility and purpose); ``SCENE_INVALID`` if it cannot be read."""
     from pxr import Sdf
 
     from .asset import ROOT
@@ -84,7 +90,11 @@ def embedded_layer(source: AssetSource):
     if not Sdf.CopySpec(scene, source.prim, copy, ROOT):
         raise error("SCENE_INVALID", "cannot copy the embedded asset's specs", file=source.layer, prim=source.prim)
     copy.defaultPrim = ROOT.lstrip("/")
-    copy.GetPrimAtPath(ROOT).typeName = ASSET_TYPE
+    root = copy.GetPrimAtPath(ROOT)
+    root.typeName = ASSET_TYPE
+    for prop in list(root.properties):
+        if prop.name in _PLACEMENT or prop.name.startswith("xformOp:"):
+            root.RemoveProperty(prop)
     for key in ("upAxis", "metersPerUnit"):
         if scene.pseudoRoot.HasInfo(key):
             copy.pseudoRoot.SetInfo(key, scene.pseudoRoot.GetInfo(key))
@@ -92,14 +102,18 @@ def embedded_layer(source: AssetSource):
 
 
 _embedded_files: dict = {}  # (scene layer, prim, its mtime and size) -> the written copy
+_embedded_digests: dict = {}  # sha-256 of a written copy's bytes -> that copy
 _embedded_folder: list = []  # the process's folder of copies, made on first use
 
 
 def embedded_asset_file(source: AssetSource) -> str:
     """A ``.usdc`` file holding :func:`embedded_layer` of ``source`` (an asset embedded in a flattened scene), for readers
     that open assets by path (the Mitsuba implementations): written atomically once per scene file, prim and file
-    version into a private temporary folder of this process, removed at exit."""
+    version into a private temporary folder of this process, removed at exit. Instances whose copies are the same bytes
+    (one asset placed several times: flattening repeats its specs under each instance) get the same file, so a
+    reader that caches assets by path reads it once."""
     import atexit
+    import hashlib
     import shutil
     import tempfile
 
@@ -114,7 +128,14 @@ def embedded_asset_file(source: AssetSource) -> str:
         tmp = out + ".tmp.usdc"
         if not embedded_layer(source).Export(tmp):
             raise error("WRITE_FAILED", "cannot write the embedded asset's copy", file=out, prim=source.prim)
-        os.replace(tmp, out)
+        with open(tmp, "rb") as f:
+            digest = hashlib.file_digest(f, "sha256").hexdigest()
+        if digest in _embedded_digests:
+            os.remove(tmp)
+            out = _embedded_digests[digest]
+        else:
+            os.replace(tmp, out)
+            _embedded_digests[digest] = out
         _embedded_files[key] = out
     return _embedded_files[key]
 

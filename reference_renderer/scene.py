@@ -1288,7 +1288,7 @@ class _Loader:
     def _neural(self, prim, source, composition_error=None):
         from pxr import UsdGeom
 
-        from nasset_sdk.references import open_source
+        from nasset_sdk.references import embedded_asset_file, open_source
 
         path = str(prim.GetPath())
         if source is None:
@@ -1299,7 +1299,9 @@ class _Loader:
             raise self.err("SCENE_INVALID", f"referenced asset file not found, or it is not a neural asset: {refs[0]}{why}",
                            path)
         file = Path(source.display)
-        key = source.display if "[" in source.display or source.embedded else os.path.realpath(source.layer)
+        # one asset per file; instances embedded in a flattened scene share one when their specs are the same
+        key = (embedded_asset_file(source) if source.embedded else source.display if "[" in source.display
+               else os.path.realpath(source.layer))
         if key not in self.asset_index:
             try:
                 asset = open_source(source, load="none")

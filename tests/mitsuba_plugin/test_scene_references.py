@@ -14,10 +14,13 @@ from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset 
 
 
 def test_flattened_scene_renders_as_the_referencing_one(tmp_path):
-    """The same image at the same seed, with the asset file deleted after flattening, to float32 rounding: the two
-    instances are two embedded copies in the flattened layer, so two assets to the plugin (14 of 2304 values differ by at
-    most 1.1e-7 relative)."""
+    """The same image at the same seed, with the asset file deleted after flattening, to float32 rounding. The two
+    instances are two embedded copies in the flattened layer; without their placement (the xformOps) they are the same
+    specs, so one file and one asset to the plugin (it was one per instance: a flattened scene of N instances read and
+    held the asset N times)."""
     from pxr import Usd
+
+    from nasset_mitsuba_renderer.usdscene import read_scene
 
     random_rna_asset(tmp_path / "a.usdc")
     b = SceneBuilder()
@@ -33,5 +36,7 @@ def test_flattened_scene_renders_as_the_referencing_one(tmp_path):
     Usd.Stage.Open(str(scene)).Flatten().Export(str(tmp_path / "flat.usda"))
     (tmp_path / "a.usdc").unlink()
     got = render(str(tmp_path / "flat.usda"), 4, seed=2, width=32, height=24)
+    files = {inst.file for inst in read_scene(str(tmp_path / "flat.usda")).assets}
+    assert len(files) == 1, files
     assert want[:, :16].mean() > 0.01 and want[:, 16:].mean() > 0.01  # both instances in view
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)

@@ -176,3 +176,28 @@ def test_search_path_asset_keeps_its_own_package(tmp_path, monkeypatch):
     with pytest.raises(SceneError) as exc:
         load_scene(_scene(shots, "bad.usdc", name="bad.usda"), search_paths=[lib])
     assert exc.value.code == "SCENE_INVALID" and "outside.txt" in str(exc.value)
+
+
+def test_flattened_instances_of_one_asset_share_it(tmp_path):
+    """Flattening repeats an asset's specs under each instance, with the instance's xformOps on the copy's root. Each
+    instance was read as its own asset (N instances: the asset's networks, tensors and structures N times); now copies
+    equal but for their placement are one asset, a different asset stays its own, and the image is the unflattened
+    scene's."""
+    from pxr import Usd
+
+    constant_rna_asset(tmp_path / "a.usdc")
+    constant_rna_asset(tmp_path / "b.usdc", unshadowed=(0.2, 0.9, 0.4))
+    b = SceneBuilder()
+    b.camera((0, 0, 4), (0, 0, 0), focal=40)
+    b.distant("Sun", (0.3, 1.0, 0.5), 2.0)
+    for name, file, x in (("Left", "./a.usdc", -1.1), ("Middle", "./b.usdc", 0.0), ("Right", "./a.usdc", 1.1)):
+        m = np.eye(4)
+        m[3, :3] = (x, 0.0, 0.0)
+        b.asset(name, file, m, typed="Xform")
+    scene = b.write(tmp_path / "three.usda")
+    want = render(load_scene(scene), RenderSettings(**SETTINGS)).image
+    Usd.Stage.Open(scene).Flatten().Export(str(tmp_path / "flat.usda"))
+    s = load_scene(tmp_path / "flat.usda")
+    assert len(s.assets) == 2 and len([i for i in s.instances if i.kind == "neural"]) == 3
+    assert len(np.unique(want[..., 1] > 0.0)) == 2  # something rendered
+    np.testing.assert_allclose(render(s, RenderSettings(**SETTINGS)).image, want, atol=1e-6)
