@@ -856,7 +856,8 @@ def _corner_normals(prim, layout, polygons, mw, t, front_sign: float = 1.0):
 
 
 def _unhonoured_light_features(prim, path, t) -> None:
-    """Warnings naming the light features this implementation does not render: light filters."""
+    """Warnings naming the light features this implementation does not render: light filters, diffuse and specular
+    multipliers, shadows turned off (spec/renderer.md#lights)."""
     from pxr import UsdLux
 
     say = _say(path)
@@ -864,6 +865,9 @@ def _unhonoured_light_features(prim, path, t) -> None:
     filters = UsdLux.LightAPI(prim).GetFiltersRel().GetForwardedTargets() if prim.HasAPI(UsdLux.LightAPI) else []
     if filters:
         say(f"light:filters {', '.join(map(str, filters))} ignored", where)
+    unhonoured = stage_rules.unrendered_light_inputs(prim, t)
+    if unhonoured:
+        say(f"{unhonoured} not rendered: the light lights every response and casts shadows", where)
 
 
 def _shaping(prim, get, path, t) -> tuple | None:

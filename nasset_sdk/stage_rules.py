@@ -421,6 +421,22 @@ def composition_errors(stage) -> list:
     return [(str(f.rootSite.path), str(f).strip()) for f in stage.GetCompositionErrors()]
 
 
+#: UsdLux light inputs no renderer here honours, with the value that means "no effect" (spec/renderer.md#lights)
+UNRENDERED_LIGHT_INPUTS = (("inputs:diffuse", 1.0), ("inputs:specular", 1.0), ("inputs:shadow:enable", True))
+
+
+def unrendered_light_inputs(prim, time) -> str:
+    """The authored light inputs of ``prim`` that would change its light and are not rendered, as "name = value, ..."
+    ("" when none): a diffuse or specular multiplier other than 1, shadows turned off (UsdLux.ShadowAPI)."""
+    said = []
+    for name, neutral in UNRENDERED_LIGHT_INPUTS:
+        attr = prim.GetAttribute(name)
+        value = attr.Get(time) if attr and attr.HasAuthoredValue() else None
+        if value is not None and value != neutral:
+            said.append(f"{name} = {value}")
+    return ", ".join(said)
+
+
 def normal_matrix(m3) -> np.ndarray:
     """The 3x3 matrix [3, 3] (or a stack [n, 3, 3] for m3 [n, 3, 3]) that takes object-space normals, as rows, to world
     normals of the same side, up to length, for the linear part ``m3`` of a row-vector transform: the cofactor matrix

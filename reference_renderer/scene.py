@@ -81,6 +81,7 @@ PREVIEW_DEFAULTS = {
 }
 _LIGHT_COMMON = {"inputs:intensity", "inputs:exposure", "inputs:color", "inputs:normalize",
                  "inputs:enableColorTemperature", "inputs:colorTemperature", "inputs:diffuse", "inputs:specular",
+                 "inputs:shadow:enable",
                  "nasset:cameraVisibility", "nasset:opaqueSurface"}
 _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
@@ -1396,6 +1397,9 @@ class _Loader:
         if filters and filters.GetForwardedTargets():
             self.warn(f"light:filters {', '.join(map(str, filters.GetForwardedTargets()))} ignored: the light is "
                       "rendered unfiltered", path)
+        unhonoured = stage_rules.unrendered_light_inputs(prim, self.time)
+        if unhonoured:
+            self.warn(f"{unhonoured} not rendered: the light lights every response and casts shadows", path)
         for link in ("lightLink", "shadowLink"):  # a collection that leaves objects out: every object is lit all the same
             coll = Usd.CollectionAPI(prim, link)
             include_root = coll.GetIncludeRootAttr().Get(self.time) if coll.GetIncludeRootAttr() else None

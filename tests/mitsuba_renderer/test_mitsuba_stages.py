@@ -638,3 +638,36 @@ def test_bad_values_are_refused_as_the_reference_renderer_refuses_them(tmp_path,
     assert ref.value.code == ours.value.code == "SCENE_INVALID"
     assert ours.value.prim == ref.value.prim == prim and ours.value.attribute == ref.value.attribute == attribute, \
         (str(ours.value), str(ref.value))
+
+
+@pytest.mark.parametrize("authored, said", [
+    ({"inputs:diffuse": 0.0}, "inputs:diffuse = 0.0"),
+    ({"inputs:specular": 2.5, "inputs:diffuse": 1.0}, "inputs:specular = 2.5"),
+    ({"inputs:shadow:enable": False}, "inputs:shadow:enable = False"),
+    ({"inputs:diffuse": 1.0, "inputs:specular": 1.0, "inputs:shadow:enable": True}, None),
+])
+def test_light_inputs_no_renderer_honours_are_warned_alike(tmp_path, authored, said):
+    """spec/renderer.md#lights: a diffuse / specular multiplier other than 1 or shadows turned off is not rendered and is
+    warned by both readers, naming the light and the input (the reference renderer accepted diffuse and specular
+    silently, and the Mitsuba reader all three); neutral values say nothing."""
+    import warnings
+
+    from pxr import Sdf
+
+    from nasset_reference_renderer import load_scene
+
+    b, _ = _floor_scene()
+    sun = b.stage.GetPrimAtPath("/World/Sun")
+    for name, value in authored.items():
+        kind = Sdf.ValueTypeNames.Bool if isinstance(value, bool) else Sdf.ValueTypeNames.Float
+        sun.CreateAttribute(name, kind).Set(value)
+    scene = b.write(tmp_path / "lights.usda")
+    for read in (load_scene, read_scene):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            read(scene)
+        messages = [str(w.message) for w in caught if "not rendered" in str(w.message)]
+        if said is None:
+            assert messages == [], (read, messages)
+        else:
+            assert len(messages) == 1 and said in messages[0] and "/World/Sun" in messages[0], (read, messages)
