@@ -475,7 +475,7 @@ class EightDnaShader:
 
     def _backtrace_ok(self, u_w, w_w, k):
         """The ray u_i - t w first meets this instance."""
-        tr = self.pt.tracer.trace(u_w, -w_w, transparent=self.pt.light_shapes)
+        tr = self.pt.shadow_tracer.trace(u_w, -w_w, transparent=self.pt.light_shapes)  # light surfaces passed
         return tr["hit"] & (tr["obj"] == k)
 
     def _instance(self, L, idx, p, ng, wo, k, prim, b1, b2, beta, cont, uu, rng):

@@ -162,8 +162,10 @@ def _filter_offsets(rng, n: int, kind: str, stddev: float) -> np.ndarray:
 
 
 class PathTracer:
-    def __init__(self, mi, scene, objects, lights, camera, *, max_depth=5, rr_depth=3, log=None) -> None:
-        """``objects``: list of dicts (kind, mesh/asset data, world triangles) indexed by Tracer object index."""
+    def __init__(self, mi, scene, objects, lights, camera, *, max_depth=5, rr_depth=3, log=None, shadow_scene=None) -> None:
+        """``objects``: list of dicts (kind, mesh/asset data, world triangles) indexed by Tracer object index;
+        ``shadow_scene``: the same shapes without the light surfaces (None: ``scene`` has none), for the rays that pass
+        every light surface (shadow rays, branch tests)."""
         import drjit as dr
 
         self.mi, self.scene, self.objects, self.lights, self.camera = mi, scene, objects, lights, camera
@@ -175,6 +177,7 @@ class PathTracer:
             if k is not None:
                 ids[int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(sh))[0])] = k
         self.tracer = Tracer(mi, scene, ids)
+        self.shadow_tracer = self.tracer if shadow_scene is None else Tracer(mi, shadow_scene, ids)  # shapes shared
         geo = [o_["bbox"] for o_ in objects if "bbox" in o_]
         if geo:
             lo = np.min([g[0] for g in geo], axis=0)
@@ -534,7 +537,7 @@ class PathTracer:
 
         Blocking by other objects is a ray from ``at``, object ``obj[i]`` (None: no asset) passed through; ``passed``
         (the asset lies on the ray) is, where visible and moved, the branch from ``o`` (:meth:`own_branch`)."""
-        tr = self.tracer.trace(at, wi, maxt, obj, transparent=self.light_shapes, exempt=exempt)
+        tr = self.shadow_tracer.trace(at, wi, maxt, obj, transparent=self.light_shapes, exempt=exempt)
         vis, passed = ~tr["hit"], tr["passed"]
         b = np.nonzero(vis & moved)[0]
         if len(b):
@@ -560,7 +563,8 @@ class PathTracer:
         """[n] bool: whether the rays meet a triangle of object ``obj[i]`` (outside ``exempt[i]``) before ``maxt``, every
         other surface passed through: the branch from x of a hit whose light is fetched elsewhere
         (spec/kinds/rna.md#near-field-fetch: only the asset's own triangles count on that ray)."""
-        return self.tracer.trace(o, d, maxt, obj, transparent=self.every_shape, exempt=exempt, until_passed=True)["passed"]
+        return self.shadow_tracer.trace(o, d, maxt, obj, transparent=self.every_shape, exempt=exempt,
+                                        until_passed=True)["passed"]
 
     def fetch_points(self, p, obj):
         """(fetch points [m, 3], rows where they differ from p) of rna and neupress hits p on instances ``obj``:
