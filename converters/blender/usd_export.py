@@ -36,6 +36,7 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     ConvertResult,
     StageConverter,
     TextureMap,
+    ggx_alpha_of_beckmann,
     parse_replace,
     report,
     usd_check,
@@ -985,9 +986,13 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: linked Glossy BSDF {'Color' if c_linked else 'Roughness'} dropped")
         rough = float(np.clip(rough, 0.0, 1.0))
         k = multiscatter_scale(rough, col[:3]) if node.distribution == "MULTI_GGX" else np.ones(3)
+        beckmann = node.distribution == "BECKMANN"
+        if beckmann:  # Cycles' alpha = roughness^2, as the renderer's: its GGX stand-in (spec/bake.md#materials)
+            rough = math.sqrt(float(ggx_alpha_of_beckmann(rough * rough)))
         notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it"
                      + (f"; x ({', '.join(f'{v:.3f}' for v in k)}) for Cycles' multiple-scattering GGX" if
-                        node.distribution == "MULTI_GGX" else "") + ")"
+                        node.distribution == "MULTI_GGX" else "")
+                     + ("; Beckmann as GGX of alpha x 0.82-0.93" if beckmann else "") + ")"
                      + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
                 "roughness": rough}
