@@ -27,6 +27,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import drjit as dr
 import numpy as np
@@ -63,8 +64,19 @@ MAX_SPLIT_INSTANCES = 8
 #: (uniform world sphere) or an object-space sampler with ``sample(u)`` and ``pdf(w)``; 8dna: its own vertex
 #: estimator (:func:`.eightdna.vertex`)
 JIT_KINDS = {"rna": RnaJit, "neupress": NeupressJit, "8dna": EightDnaJit}
-_ASSETS: dict[tuple[str, str], object] = {}  # (variant, file) -> asset read once per process
+_ASSETS: dict[tuple, object] = {}  # (variant, file, its version) -> asset read once per process and file version
 _REGISTERED: set[str] = set()
+
+
+def file_version(filename: str) -> tuple | None:
+    """(mtime, size, inode) of the file behind ``filename`` (None if it cannot be stat'ed: Asset.open says why)."""
+    from nasset_sdk.paths import outer_file
+
+    try:
+        st = os.stat(outer_file(str(filename)))
+    except OSError:
+        return None
+    return (st.st_mtime_ns, st.st_size, st.st_ino)
 
 
 def asset_for(mi, filename: str):
@@ -73,7 +85,7 @@ def asset_for(mi, filename: str):
     a non-zero one on kind 8dna)."""
     from nasset_sdk.asset import Asset
 
-    key = (mi.variant(), str(filename))
+    key = (mi.variant(), str(filename), file_version(filename))  # a file rewritten in place is read again
     if key not in _ASSETS:
         asset = Asset.open(filename)
         kind = asset.kind
@@ -81,6 +93,8 @@ def asset_for(mi, filename: str):
         if kind not in JIT_KINDS:
             raise error("SCENE_UNSUPPORTED", f"the Mitsuba plugin renders kinds {', '.join(JIT_KINDS)}, not {kind!r}",
                         file=str(filename))
+        for old in [k for k in _ASSETS if k[:2] == key[:2]]:  # an earlier version of the file
+            del _ASSETS[old]
         _ASSETS[key] = JIT_KINDS[kind](mi, filename)
     return _ASSETS[key]
 

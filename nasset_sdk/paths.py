@@ -453,7 +453,20 @@ def open_checked_stage(path: str | os.PathLike, load=None, *, scene: bool = Fals
     layer = Sdf.Layer.FindOrOpen(os.fspath(path))
     if layer is None:
         return None
-    return Usd.Stage.Open(layer, Usd.Stage.LoadNone if load is None else load)
+    _reload_if_changed(layer)
+    stage = Usd.Stage.Open(layer, Usd.Stage.LoadNone if load is None else load)
+    for used in stage.GetUsedLayers():
+        if used is not layer:
+            _reload_if_changed(used)
+    return stage
+
+
+def _reload_if_changed(layer) -> None:
+    """USD keeps a layer that something in the process still holds (another stage, a cached asset) as it was read: a
+    file rewritten since (a bake to the same path) composed its old content, unchecked against the new one. Reload
+    it when its file changed (Sdf compares the file's timestamp: a no-op otherwise), unless it has unsaved edits."""
+    if not layer.anonymous and not layer.dirty:
+        layer.Reload()
 
 
 def strip_external(layer):

@@ -373,6 +373,29 @@ def check_singular_transforms(render, tmp_path, spp: int = 256) -> None:
     np.testing.assert_allclose(with_collapsed.mean((0, 1)), without.mean((0, 1)), rtol=0.02)
 
 
+def check_rewritten_asset_is_read_again(render, tmp_path) -> None:
+    """``render(scene, spp, width, height) -> [H, W, 3]`` of a scene whose asset file is rewritten in place (a bake to
+    the same path) while another stage in the process still composes it: the second render shows the new asset. The
+    reference renderer composed the layer USD kept (the old content) and the plugin its cached asset: the old image,
+    without a word. An asset of constant transport T under a sun facing the camera: the image mean scales with T."""
+    from nasset_reference_renderer.testscenes import constant_rna_asset
+
+    constant_rna_asset(tmp_path / "a.usdc", unshadowed=(1.0, 1.0, 1.0))
+    b = SceneBuilder()
+    b.camera((0, 0, 3), (0, 0, 0), focal=45)
+    b.distant("Sun", (0, 0, 1), 2.0)
+    b.asset("A", "./a.usdc", np.eye(4), typed="Xform")
+    scene = b.write(tmp_path / "rewritten.usda")
+    from pxr import Usd
+
+    holder = Usd.Stage.Open(scene)  # another stage of the process composes the asset
+    assert holder.GetPrimAtPath("/World/A")
+    first = float(np.mean(render(scene, 4, 16, 16)))
+    constant_rna_asset(tmp_path / "a.usdc", unshadowed=(0.2, 0.2, 0.2))
+    second = float(np.mean(render(scene, 4, 16, 16)))
+    assert first > 0.1 and abs(second / first - 0.2) < 0.02, (first, second)
+
+
 def check_point_instancer(render, tmp_path, spp: int = 256) -> None:
     """``render(scene, spp, seed=, max_depth=, width=, height=)``: the instances of :func:`point_instancer_scene` render
     as the reference renderer renders them (spec/renderer.md#geometry): direct light from a delta sun, relative RMSE

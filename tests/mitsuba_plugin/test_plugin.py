@@ -498,3 +498,13 @@ def test_replace_refuses_a_shape_inside_a_shapegroup(mi, tmp_path, rna_asset_pat
     with pytest.raises(SceneError) as exc:
         load_file(tmp_path / "s.xml", mi=mi, replace={"ball": str(rna_asset_path)})
     assert exc.value.code == "CONVERT_SHAPE_UNKNOWN" and "shapegroup 'g'" in exc.value.message
+
+
+def test_an_asset_rewritten_in_place_is_read_again(tmp_path):
+    """The plugin cached assets and their fallback meshes by path: a bake to the same path rendered the old asset in
+    the same process (tests/stage_scenes.py::check_rewritten_asset_is_read_again); the cache now keys the file's
+    version (mtime, size, inode)."""
+    from tests.stage_scenes import check_rewritten_asset_is_read_again
+
+    check_rewritten_asset_is_read_again(lambda scene, spp, w, h: render(scene, spp, width=w, height=h, max_depth=1),
+                                        tmp_path)

@@ -201,3 +201,30 @@ def test_flattened_instances_of_one_asset_share_it(tmp_path):
     assert len(s.assets) == 2 and len([i for i in s.instances if i.kind == "neural"]) == 3
     assert len(np.unique(want[..., 1] > 0.0)) == 2  # something rendered
     np.testing.assert_allclose(render(s, RenderSettings(**SETTINGS)).image, want, atol=1e-6)
+
+
+def test_an_asset_rewritten_in_place_is_read_again(tmp_path):
+    """tests/stage_scenes.py::check_rewritten_asset_is_read_again: USD kept the layer another stage held, as first read
+    (nasset_sdk.paths.open_checked_stage now reloads a layer whose file changed, unless it has unsaved edits)."""
+    from tests.stage_scenes import check_rewritten_asset_is_read_again
+
+    def reference(scene, spp, w, h):
+        return render(load_scene(scene), RenderSettings(width=w, height=h, spp=spp, max_depth=1)).image
+
+    check_rewritten_asset_is_read_again(reference, tmp_path)
+
+
+def test_unsaved_edits_of_an_open_layer_are_kept(tmp_path):
+    """The reload is skipped for a layer with unsaved edits: what this process changed in memory is what it renders."""
+    from pxr import Gf, Sdf
+
+    constant_rna_asset(tmp_path / "a.usdc")
+    scene = _scene(tmp_path, "./a.usdc")
+    layer = Sdf.Layer.FindOrOpen(scene)
+    m = np.eye(4)
+    m[3, :3] = (-SHIFT[0], 0.0, 0.0)
+    layer.GetAttributeAtPath("/World/Chair.xformOp:transform").default = Gf.Matrix4d(m.tolist())
+    assert layer.dirty
+    img = _image(scene)
+    cols = np.nonzero(img.sum(axis=(0, 2)) > 0)[0]
+    assert cols.mean() < img.shape[1] / 2  # moved left by the unsaved edit (it is authored right of the centre)
