@@ -88,7 +88,7 @@ def shared_texture_scene(tmp_path, meshes: int = 6) -> str:
     write_png(tmp_path / "wood.png", np.random.default_rng(0).integers(0, 256, (32, 48, 3), dtype=np.uint8))
     b = SceneBuilder()
     b.camera((0, 8, 0.01), (0, 0, 0), focal=20)
-    shared = UsdShade.Material
+    shared = None  # the first quad's material
     for i in range(meshes + 1):
         q = b.quad(f"Q{i}", (i - meshes / 2, 0, 0), 0.9)
         UsdGeom.PrimvarsAPI(q).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(
