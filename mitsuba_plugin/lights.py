@@ -71,7 +71,7 @@ def light_power(lt, radius: float) -> float:
     """Emitted power (luminance) of a light as the second implementation's ``build_lights`` reads it (``lt``): the weight
     by which Mitsuba picks it for a light sample (pbrt's power light sampler). Lights at infinity send their
     irradiance through the cross-section of the scene's bounding sphere of ``radius``: a sun E pi r^2, a dome of mean
-    radiance L 4 pi^2 r^2 L; a point light 4 pi I, a spot its cone's share of that; a light surface pi L A (its
+    radiance L 4 pi^2 r^2 L; a point light 4 pi I, a spot the same (it aims at the scene); a light surface pi L A (its
     emitted radiance, per area where it normalizes, times its world area)."""
     d = lt.desc
     if d.type == "DistantLight":

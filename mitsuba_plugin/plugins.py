@@ -27,7 +27,6 @@
 from __future__ import annotations
 
 import math
-import os
 
 import drjit as dr
 import numpy as np
@@ -64,19 +63,8 @@ MAX_SPLIT_INSTANCES = 8
 #: (uniform world sphere) or an object-space sampler with ``sample(u)`` and ``pdf(w)``; 8dna: its own vertex
 #: estimator (:func:`.eightdna.vertex`)
 JIT_KINDS = {"rna": RnaJit, "neupress": NeupressJit, "8dna": EightDnaJit}
-_ASSETS: dict[tuple, object] = {}  # (variant, file, its version) -> asset read once per process and file version
+_ASSETS: dict[tuple, object] = {}  # (variant, file, its identity) -> asset read once per process and file version
 _REGISTERED: set[str] = set()
-
-
-def file_version(filename: str) -> tuple | None:
-    """(mtime, size, inode) of the file behind ``filename`` (None if it cannot be stat'ed: Asset.open says why)."""
-    from nasset_sdk.paths import outer_file
-
-    try:
-        st = os.stat(outer_file(str(filename)))
-    except OSError:
-        return None
-    return (st.st_mtime_ns, st.st_size, st.st_ino)
 
 
 def asset_for(mi, filename: str):
@@ -84,8 +72,9 @@ def asset_for(mi, filename: str):
     errors from the SDK, SCENE_UNSUPPORTED for other kinds; NEAR_FIELD_INVALID for a bad ``nasset:nearFieldFetch``, or
     a non-zero one on kind 8dna)."""
     from nasset_sdk.asset import Asset
+    from nasset_sdk.safeopen import file_identity
 
-    key = (mi.variant(), str(filename), file_version(filename))  # a file rewritten in place is read again
+    key = (mi.variant(), str(filename), file_identity(filename))  # a file rewritten in place is read again
     if key not in _ASSETS:
         asset = Asset.open(filename)
         kind = asset.kind

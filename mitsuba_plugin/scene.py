@@ -26,10 +26,11 @@ from pathlib import Path
 import numpy as np
 
 from nasset_sdk.errors import error, path_arg
+from nasset_sdk.safeopen import file_identity
 
 from . import lights as lights_jit
 from . import preview, textures
-from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, OPAQUE_MARK, asset_for, file_version, register
+from .plugins import BSDF, HIDDEN_PREFIX, INTEGRATOR, LIGHT_SURFACE_PREFIX, OPAQUE_MARK, asset_for, register
 from .variant import jit_mitsuba
 
 _PLY_DIR: list[str] = []
@@ -49,7 +50,7 @@ def fallback_ply(mi, filename: str) -> str:
     """Path of a PLY file holding the asset's object-space mesh (with its normals when it has them)."""
     asset = asset_for(mi, filename)
     g = asset.geometry
-    version = repr(file_version(filename))  # a file rewritten in place gets a new mesh file
+    version = repr(file_identity(filename))  # a file rewritten in place gets a new mesh file
     out = _cache_dir() / (hashlib.sha256(f"{os.path.abspath(filename)}|{version}".encode()).hexdigest()[:16] + ".ply")
     if not out.exists():
         pts = np.ascontiguousarray(g.points, np.float32)

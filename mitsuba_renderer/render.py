@@ -194,12 +194,11 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         scene = mi.load_dict(entries)
     except Exception as exc:
         raise SceneError("SCENE_INVALID", f"Mitsuba could not build the scene: {str(exc).splitlines()[0][:300]}", file=scene_path) from None
-    shaped = {o["id"] for o in objects if o["kind"] == Kind.LIGHT}
-    shadow_scene = None
-    if shaped:  # shadow rays pass every light surface: traced on the other shapes alone (Mitsuba's analytic shapes are
-        # costly to intersect, and each one met cost a re-cast: 100 sphere lights made a render 80x slower)
-        shadow_scene = mi.load_dict({"type": "scene", **{k: v for k, v in entries.items()
-                                                          if k.startswith(("nasset_obj_", "nasset_inst_"))}})
+    # shadow rays pass every light surface: traced on the other shapes alone (Mitsuba's analytic shapes are costly to
+    # intersect, and each one met cost a re-cast: 100 sphere lights made a render 80x slower)
+    solid = [o["id"] for o in objects if o["kind"] != Kind.LIGHT]
+    shadow_scene = (mi.load_dict({"type": "scene", **{k: entries[k] for k in solid}}) if len(solid) < len(objects)
+                    else None)
     key = f"ctx{len(_CONTEXTS)}"
     _CONTEXTS[key] = {"objects": objects, "lights": lights, "camera": cam, "width": w, "height": h, "shadow_scene": shadow_scene,
                       "pixel_filter": (rs.get("pixel_filter", "box"), rs.get("pixel_filter_stddev", 0.5))}

@@ -101,7 +101,7 @@ def embedded_layer(source: AssetSource):
     return copy
 
 
-_embedded_files: dict = {}  # (scene layer, prim, its mtime and size) -> the written copy
+_embedded_files: dict = {}  # (scene layer, prim, the layer file's identity) -> the written copy
 _embedded_digests: dict = {}  # sha-256 of a written copy's bytes -> that copy
 _embedded_folder: list = []  # the process's folder of copies, made on first use
 
@@ -117,8 +117,9 @@ def embedded_asset_file(source: AssetSource) -> str:
     import shutil
     import tempfile
 
-    st = os.stat(source.layer) if os.path.isfile(source.layer) else None
-    key = (source.layer, source.prim, st.st_mtime_ns if st else None, st.st_size if st else None)
+    from .safeopen import file_identity
+
+    key = (source.layer, source.prim, file_identity(source.layer))
     if key not in _embedded_files:
         if not _embedded_folder:
             folder = tempfile.mkdtemp(prefix="nasset-embedded-")

@@ -486,7 +486,7 @@ _SAFE: dict[tuple, bool] = {}
 _WRITTEN: set[tuple] = set()
 
 
-def _identity(path: str | os.PathLike) -> tuple | None:
+def file_identity(path: str | os.PathLike) -> tuple | None:
     """(device, inode, size, mtime, ctime, inner path) of the file behind ``path``; None if it cannot be stat'ed.
     Any change to the file (a rewrite, a replacement, a different link target) changes it."""
     from .paths import outer_file
@@ -502,7 +502,7 @@ def _identity(path: str | os.PathLike) -> tuple | None:
 
 def trust(path: str | os.PathLike) -> None:
     """Record that this process just wrote ``path``: :func:`ensure_safe` opens it without a probe while it is unchanged."""
-    key = _identity(path)
+    key = file_identity(path)
     if key is not None:
         _SAFE[key] = True
         _WRITTEN.add(key)
@@ -510,7 +510,7 @@ def trust(path: str | os.PathLike) -> None:
 
 def written_here(path: str | os.PathLike) -> bool:
     """True when this process wrote ``path`` (:func:`trust`) and it is unchanged since."""
-    key = _identity(path)
+    key = file_identity(path)
     return key is not None and key in _WRITTEN
 
 
@@ -518,7 +518,7 @@ def ensure_safe(path: str | os.PathLike, *, timeout: float = DEFAULT_TIMEOUT_S, 
     """Probe ``path`` at level ``full`` (:func:`ensure_readable`) before it is opened in this process, unless this
     process wrote it (:func:`trust`) or already probed it (as an asset when ``asset``), unchanged since. Every reader
     of an untrusted layer calls this first (spec/security.md#bounds)."""
-    key = _identity(path)
+    key = file_identity(path)
     if key is not None and key in _SAFE and (_SAFE[key] or not asset):
         return
     result = ensure_readable(path, level="full", timeout=timeout, asset=asset)
@@ -533,7 +533,7 @@ _COMPOSED: set[tuple] = set()
 def ensure_composes(root: str | os.PathLike, files, *, asset: bool, search_paths: list[str]) -> None:
     """Compose the tree of layer ``files`` rooted at ``root`` in a probe child (level ``compose``) unless this process
     already did, every file unchanged since; raises as :func:`ensure_readable`."""
-    key = (asset, tuple(search_paths), tuple(sorted(map(str, (_identity(f) for f in files)))))
+    key = (asset, tuple(search_paths), tuple(sorted(map(str, (file_identity(f) for f in files)))))
     if key in _COMPOSED:
         return
     ensure_readable(root, level="compose", asset=asset, search_paths=search_paths)
