@@ -333,6 +333,9 @@ def _wrappers(folder: Path, size: int) -> str:
     from nasset_sdk.images import write_png
 
     write_png(folder / "flat.png", np.full((4, 4, 3), (128, 128, 255), np.uint8))  # tangent-space +Z: the mesh normal
+    y, x = np.mgrid[0:64, 0:64] / 64.0  # a height field of 6 x 4 bumps (sRGB-encoded, as a painted height map is)
+    write_png(folder / "bumps.png", np.repeat(np.round(255 * (0.5 + 0.25 * np.sin(6 * np.pi * x) * np.cos(4 * np.pi * y)))
+                                              .astype(np.uint8)[..., None], 3, -1))
     diffuse = '<bsdf type="diffuse"><rgb name="reflectance" value="{}"/></bsdf>'
 
     def ball(bid, x, bsdf):
@@ -344,8 +347,8 @@ def _wrappers(folder: Path, size: int) -> str:
                            + diffuse.format("0.1, 0.3, 0.8") + "</bsdf>")
             + ball("normal", -0.7, '<bsdf type="normalmap"><texture type="bitmap" name="normalmap"><string name="filename" '
                    'value="flat.png"/><boolean name="raw" value="true"/></texture>' + diffuse.format("0.7, 0.7, 0.2") + "</bsdf>")
-            + ball("bump", 0.0, '<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="flat.png"/>'
-                   '<boolean name="raw" value="true"/></texture>' + diffuse.format("0.2, 0.7, 0.7") + "</bsdf>")
+            + ball("bump", 0.0, '<bsdf type="bumpmap"><texture type="bitmap"><string name="filename" value="bumps.png"/>'
+                   '</texture><float name="scale" value="0.3"/>' + diffuse.format("0.2, 0.7, 0.7") + "</bsdf>")
             + ball("mask", 0.7, '<bsdf type="mask"><float name="opacity" value="1"/>' + diffuse.format("0.7, 0.2, 0.7") + "</bsdf>")
             + SUN + SKY + "</scene>")
 
@@ -436,7 +439,7 @@ SCENES = {
     "spot": FidelityScene("spot", _spot, "spot light (cutoff 22 deg, beam 15 deg) and a point light over a floor and a ball"),
     "defaults": FidelityScene("defaults", _defaults, "Mitsuba defaults: max_depth -1 (unbounded) and the Gaussian "
                               "reconstruction filter, bright diffuse walls"),
-    "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (flat), "
+    "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (a sinusoidal height on a sphere), "
                               "mask (opaque) around diffuse BSDFs"),
     "instances": FidelityScene("instances", _instances, "shapegroup (sphere + cube) placed by three instances"),
     "mesh_emitter": FidelityScene("mesh_emitter", _mesh_emitter, "area emitter on an OBJ quad (a mesh light: "
@@ -645,6 +648,18 @@ NOTES = """
 - normal_maps read ratio 1.15 and MSE / noise 17 (32 x 32, 64 spp; 1.04 now): the converter wrote the normalmap to
   UsdPreviewSurface normal, which the renderer ignored. It now turns the shading normal in Mitsuba's frame and
   applies Mitsuba's default bump-terminator term (spec/renderer.md#normal-maps).
+- Beckmann roughness (Mitsuba's default distribution of `roughconductor` and `roughplastic`; not in the table): a
+  twosided aluminium floor at alpha 0.4 read 1.17 / 1.13 / 1.08, MSE / noise 32.9 (32 x 32, 256 spp), the same floor
+  with `distribution="ggx"` ratio 1.01, MSE / noise 1.24. A Beckmann alpha is now written as the GGX alpha whose lobe is closest
+  (spec/bake.md#materials): 24.0; a mirror floor at 0.7 28.0 -> 24.0 (20 % dark: GGX keeps less energy at high
+  roughness), a copper ball at 0.3 3.55 -> 2.62. What is left needs a lobe UsdPreviewSurface does not have.
+- bumpmap (the `wrappers` ball, a sinusoidal height at scale 0.3) read MSE / noise 2.1 (32 x 32, 64 spp; 1.0 now)
+  while its bump was dropped. The height is now written as the tangent-space normal map it amounts to on the shape's
+  uv layout (spec/bake.md#materials). A floor of sinusoidal stripes (32 x 32, 64 spp) read 1.22 (MSE / noise 31) at
+  bump scale 0.5 and 1.44 (79) at scale 2 while dropped; converted, 1.025 (4.1) and 1.17 (31): steep bumps stay
+  brighter, as 12 % and 30 % of that floor face away from the camera, which Mitsuba shades black and the renderer
+  with the unmapped normal (spec/renderer.md#normal-maps). A ball and a box with moderate bumps: 1.019 (2.1) -> 1.00
+  (0.95).
 - Not converted: an area emitter on a null BSDF. Mitsuba's path tracer does not show it to the camera and
   lights the scene from it by emitter samples only, which no USD light reproduces; the shape is skipped with
   a warning.

@@ -669,13 +669,18 @@ class StageConverter:
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
 
     # -- materials ----------------------------------------------------------------------------
-    def material(self, bsdf, shape_name: str, emission=None, back: bool = False) -> str:
-        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id); ``back``: a twosided BSDF's back."""
+    def material(self, bsdf, shape_name: str, emission=None, back: bool = False, shape=None) -> str:
+        """Material prim path for a Mitsuba BSDF (deduplicated by the BSDF's id, and for a bump map by the uv layout of
+        ``shape``: the normal map it becomes depends on it); ``back``: a twosided BSDF's back."""
+        bump = None
+        if shape is not None and "BumpMap" in str(bsdf):
+            metric = self._uv_metric(shape)
+            bump = metric.key if metric is not None else "no uv"
         key = (bsdf.id() or f"@{shape_name}", None if emission is None else ("texture", id(emission))
-               if isinstance(emission, TextureMap) else tuple(np.round(emission, 9)), back, self.looks_root)
+               if isinstance(emission, TextureMap) else tuple(np.round(emission, 9)), back, self.looks_root, bump)
         if key in self.materials:
             return self.materials[key]
-        inputs, notes = self.map_bsdf(bsdf, back=back)
+        inputs, notes = self.map_bsdf(bsdf, back=back, shape=shape)
         for n in notes:
             self.warn(f"shape {shape_name}: {n}")
         if emission is not None:
@@ -718,6 +723,64 @@ class StageConverter:
             sh.CreateInput(k, types[k]).Set(v)
         mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
         return path
+
+    def _uv_mesh(self, shape):
+        """``(points [V, 3] world space, faces [F, 3], uv [V, 2], normals [V, 3] or None)`` of a shape as the converter
+        writes it, for its uv layout; None for a shape written without texture coordinates (a disk, a mesh without
+        them, curves)."""
+        cls = _class_name(shape)
+        p = self.mi.traverse(shape)
+        if cls in MESH_CLASSES or "vertex_positions" in p:
+            pts = _np(p["vertex_positions"]).reshape(-1, 3)
+            uv = _np(p["vertex_texcoords"]).reshape(-1, 2) if "vertex_texcoords" in p else None
+            nrm = _np(p["vertex_normals"]).reshape(-1, 3) if "vertex_normals" in p else None
+            if uv is None or len(uv) != len(pts):
+                return None
+            return pts, np.asarray(p["faces"], np.int64).reshape(-1, 3), uv, nrm if nrm is not None and nrm.shape == pts.shape else None
+        if cls not in ("Rectangle", "Sphere", "Cylinder"):
+            return None
+        pts, faces, nrm, uv = analytic.local_mesh(cls)
+        if cls == "Sphere":
+            pts, faces, uv = latlong_sphere()
+            nrm = pts
+        m = self._to_world(shape)
+        return pts @ m[:3, :3].T + m[:3, 3], faces, uv, nrm @ np.linalg.inv(m[:3, :3])
+
+    def _uv_metric(self, shape, to_uv=None):
+        """:func:`.bump.uv_metric` of a shape (None without a usable uv layout); ``to_uv``: the height texture's."""
+        from .bump import uv_metric
+
+        mesh = self._uv_mesh(shape)
+        return None if mesh is None else uv_metric(*mesh, to_uv=to_uv)
+
+    def _bump_map(self, bsdf, prefix: str, shape, notes: list) -> TextureMap | None:
+        """A ``bumpmap``'s height bitmap as the tangent-space normal map it amounts to on ``shape`` (:mod:`.bump`), or
+        None (a procedural height, a shape without texture coordinates: the bump is dropped)."""
+        from .bump import bump_normal_texels
+
+        p = _Params(self.mi, bsdf, prefix)
+        key = prefix + "nested_texture.data"
+        if key not in p.p or shape is None:
+            return None
+        to_uv = p.uv_transform("nested_texture")
+        metric = self._uv_metric(shape, to_uv)
+        if metric is None:
+            notes.append(f"bumpmap on a {_class_name(shape)} written without usable texture coordinates: dropped")
+            return None
+        hw = np.asarray(p.p[key]).shape[:2]
+        height = p.p.properties[key][2]
+        upsample = 2 if 4 * hw[0] * hw[1] <= TEXTURE_MAX_PIXELS else 1
+        texels = bump_normal_texels(self.mi, height, hw, p.scalar("scale", 1.0), metric, to_uv, upsample)
+        wrap = bitmap_sampling(self.mi, height, hw, to_uv)[0]
+        tex = TextureMap(texels, "bump map as a normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)), wrap)
+        if to_uv is not None:
+            tex.uv = st_transform(to_uv)
+        if metric.k is None:
+            notes.append("bumpmap: its strength varies over the shape's uv layout; the normal map takes each texel's from "
+                         "the nearest triangle" + (" (the texture repeats over the shape: approximate)"
+                                                   if to_uv is not None and abs(np.linalg.det(to_uv[:2, :2])) > 1.0 + 1e-6
+                                                   else ""))
+        return tex
 
     def _texture_input(self, mat_path: str, surface, name: str, tex: TextureMap) -> None:
         """Write ``tex`` as OpenEXR (linear) beside the output and connect ``name`` of ``surface`` to a
@@ -763,12 +826,14 @@ class StageConverter:
             surface.CreateInput(name, kind).ConnectToSource(node.ConnectableAPI(), "rgb")
         self.textured_materials.add(mat_path)  # its prims need texture coordinates
 
-    def map_bsdf(self, bsdf, prefix: str = "", cls: str | None = None, back: bool = False) -> tuple[dict, list]:
+    def map_bsdf(self, bsdf, prefix: str = "", cls: str | None = None, back: bool = False,
+                 shape=None) -> tuple[dict, list]:
         """UsdPreviewSurface inputs for a Mitsuba BSDF and notes on what the mapping loses.
 
         Returns ``({input: value}, [notes])``; the table is in spec/bake.md#scene-conversion. Wrappers
         (``twosided``, ``normalmap``, ``bumpmap``, ``mask``, ``blendbsdf``) recurse into their nested BSDFs,
-        whose parameters carry ``prefix``; ``back`` maps a twosided BSDF's back side.
+        whose parameters carry ``prefix``; ``back`` maps a twosided BSDF's back side; ``shape``: the shape the
+        material is for (a bump map becomes a normal map for its uv layout).
         """
         mi = self.mi
         notes: list[str] = []
@@ -779,10 +844,11 @@ class StageConverter:
         if cls == "TwoSided":
             k = 1 if back and _two_sides_differ(text) else 0
             inner = re.search(rf"brdf\[{k}\]\s*=\s*(\w+)", text)
-            return self.map_bsdf(bsdf, f"{prefix}brdf_{k}.", inner.group(1) if inner else "SmoothDiffuse")
+            return self.map_bsdf(bsdf, f"{prefix}brdf_{k}.", inner.group(1) if inner else "SmoothDiffuse", shape=shape)
         if cls in WRAPPERS:
             inner = re.search(r"nested_bsdf\s*=\s*(\w+)", text)
-            out, notes = self.map_bsdf(bsdf, f"{prefix}nested_bsdf.", inner.group(1) if inner else "SmoothDiffuse")
+            out, notes = self.map_bsdf(bsdf, f"{prefix}nested_bsdf.", inner.group(1) if inner else "SmoothDiffuse",
+                                       shape=shape)
             if cls == "Mask":  # Mitsuba's mask is presence: UsdPreviewSurface opacity, threshold 0 (renderer.md#cutouts)
                 p = _Params(mi, bsdf, prefix)
                 img = p.bitmap("opacity")
@@ -810,6 +876,8 @@ class StageConverter:
                 to_uv = pn.uv_transform("normalmap")
                 if to_uv is not None:
                     out["normal"].uv = st_transform(to_uv)
+            elif cls == "BumpMap" and (normal := self._bump_map(bsdf, prefix, shape, notes)) is not None:
+                out["normal"] = normal
             else:
                 notes.append(f"{cls}: the nested BSDF is converted, its {WRAPPERS[cls]} is dropped (the reference "
                              "renderer shades with the mesh normals)")
@@ -818,8 +886,8 @@ class StageConverter:
             pw = _Params(mi, bsdf, prefix)
             w = float(np.clip(pw.scalar("weight", 0.5), 0.0, 1.0))
             c0, c1 = (re.search(rf"nested_bsdf\[{k}\]\s*=\s*(\w+)", text) for k in (0, 1))
-            a, na = self.map_bsdf(bsdf, f"{prefix}bsdf_0.", c0.group(1) if c0 else "SmoothDiffuse")
-            b, nb = self.map_bsdf(bsdf, f"{prefix}bsdf_1.", c1.group(1) if c1 else "SmoothDiffuse")
+            a, na = self.map_bsdf(bsdf, f"{prefix}bsdf_0.", c0.group(1) if c0 else "SmoothDiffuse", shape=shape)
+            b, nb = self.map_bsdf(bsdf, f"{prefix}bsdf_1.", c1.group(1) if c1 else "SmoothDiffuse", shape=shape)
             out, how = blend_inputs(a, b, w)
             textured = pw.bitmap("weight") is not None or bool(pw.textured or pw.unread)
             return out, na + nb + [f"blendbsdf (weight {w:.3g}): {how}"] + (
@@ -1050,12 +1118,12 @@ class StageConverter:
     def _bind(self, prim, shape, sid, emission) -> str:
         from pxr import UsdShade
 
-        mat_path = self.material(shape.bsdf(), sid, emission)
+        mat_path = self.material(shape.bsdf(), sid, emission, shape=shape)
         UsdShade.MaterialBindingAPI.Apply(prim).Bind(UsdShade.Material(self.stage.GetPrimAtPath(mat_path)))
         if _has_back_bsdf(shape.bsdf()) or (emission is not None and not _is_one_sided(shape.bsdf())):
             # the back side's own material (spec/renderer.md#sidedness): no USD schema names one. Mitsuba's area
             # emitter emits from the front only, so the back material of an emitter has no emission.
-            back = self.material(shape.bsdf(), sid, None, back=True)
+            back = self.material(shape.bsdf(), sid, None, back=True, shape=shape)
             prim.CreateRelationship("nasset:backMaterial", custom=True).SetTargets([back])
         return mat_path
 
@@ -1139,19 +1207,8 @@ class StageConverter:
     def _sphere(self, shape, sid, emission) -> None:
         from pxr import Gf, UsdGeom
 
-        if self.material(shape.bsdf(), sid, emission) in self.textured_materials:
-            # textured: a latitude-longitude mesh carrying Mitsuba's sphere parameterisation
-            # u = phi / 2pi, v = theta / pi (local +Z pole), in the sphere's local frame
-            theta = np.linspace(0.0, np.pi, SPHERE_RINGS + 1)
-            phi = np.linspace(0.0, 2.0 * np.pi, 2 * SPHERE_RINGS + 1)
-            th, ph = np.meshgrid(theta, phi, indexing="ij")
-            pts = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
-            uv = np.stack([ph / (2.0 * np.pi), th / np.pi], -1).reshape(-1, 2)
-            cols = 2 * SPHERE_RINGS + 1
-            i, j = np.meshgrid(np.arange(SPHERE_RINGS), np.arange(2 * SPHERE_RINGS), indexing="ij")
-            a, b = (i * cols + j).ravel(), (i * cols + j + 1).ravel()
-            c, d = a + cols, b + cols
-            faces = np.concatenate([np.stack([a, c, d], 1)[i.ravel() < SPHERE_RINGS - 1], np.stack([a, d, b], 1)[i.ravel() > 0]])
+        if self.material(shape.bsdf(), sid, emission, shape=shape) in self.textured_materials:
+            pts, faces, uv = latlong_sphere()  # textured: a mesh carrying Mitsuba's sphere parameterisation
             self._write_mesh(sid, pts, faces, pts.copy(), shape, "Sphere", emission, local_to_world=True, uv=uv)
             return
         path = self._name(self.geometry_root, sid)
@@ -1456,6 +1513,23 @@ class StageConverter:
 
 #: wrapper BSDFs with one nested BSDF -> what of them is not converted (``mask`` keeps its opacity)
 WRAPPERS = {"NormalMap": "normal map", "BumpMap": "bump map", "Mask": "nothing"}
+
+
+def latlong_sphere() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(points [V, 3], faces [F, 3], uv [V, 2])`` of the unit sphere as a latitude-longitude mesh of
+    :data:`SPHERE_RINGS` rings carrying Mitsuba's parameterisation u = phi / 2pi, v = theta / pi (local +Z pole),
+    with a seam of repeated vertices at phi = 0 (its normals are its points)."""
+    theta = np.linspace(0.0, np.pi, SPHERE_RINGS + 1)
+    phi = np.linspace(0.0, 2.0 * np.pi, 2 * SPHERE_RINGS + 1)
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    pts = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
+    uv = np.stack([ph / (2.0 * np.pi), th / np.pi], -1).reshape(-1, 2)
+    cols = 2 * SPHERE_RINGS + 1
+    i, j = np.meshgrid(np.arange(SPHERE_RINGS), np.arange(2 * SPHERE_RINGS), indexing="ij")
+    a, b = (i * cols + j).ravel(), (i * cols + j + 1).ravel()
+    c, d = a + cols, b + cols
+    faces = np.concatenate([np.stack([a, c, d], 1)[i.ravel() < SPHERE_RINGS - 1], np.stack([a, d, b], 1)[i.ravel() > 0]])
+    return pts, faces, uv
 
 
 def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
