@@ -68,11 +68,13 @@ def reads_placement(socket) -> bool:
     return False
 
 
-def bake_input(bpy, ob, material, socket, size: int) -> np.ndarray:
+def bake_input(bpy, ob, material, socket, size: int, normal: bool = False) -> np.ndarray:
     """Linear values [size, size, 3] (top row first) of input ``socket`` of a node of ``material`` over ``ob``'s
-    active render UV map, baked by Cycles (module docstring). ``ob``'s material slots, the selection and the render
-    settings are put back; the temporary material and image are removed. Raises RuntimeError (Cycles' message)
-    when Cycles cannot bake the object."""
+    active render UV map, baked by Cycles (module docstring). ``normal``: instead, the material's shading normal
+    (its Bump and Normal Map nodes, and a bump-only Displacement, as Cycles applies them) in the tangent space of that
+    UV map, encoded ``(n + 1) / 2`` (Cycles' ``NORMAL`` bake, +X +Y +Z: the frame of renderer.md#normal-maps).
+    ``ob``'s material slots, the selection and the render settings are put back; the temporary material and image
+    are removed. Raises RuntimeError (Cycles' message) when Cycles cannot bake the object."""
     from . import quiet_stdout
 
     scene, layer = bpy.context.scene, bpy.context.view_layer
@@ -88,16 +90,17 @@ def bake_input(bpy, ob, material, socket, size: int) -> np.ndarray:
         if outside:
             scene.collection.objects.link(ob)
         nt = tmp.node_tree
-        src = next(s for s in nt.nodes[socket.node.name].inputs if s.identifier == socket.identifier)
-        feed = src.links[0].from_socket
         out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial" and n.is_active_output)
-        for name in ("Volume", "Displacement"):
+        for name in ("Volume",) if normal else ("Volume", "Displacement"):
             for link in list(out.inputs[name].links):
                 nt.links.remove(link)
-        emit = nt.nodes.new("ShaderNodeEmission")
-        emit.inputs["Strength"].default_value = 1.0
-        nt.links.new(feed, emit.inputs["Color"])  # a float becomes grey, as Cycles converts it
-        nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+        if not normal:
+            src = next(s for s in nt.nodes[socket.node.name].inputs if s.identifier == socket.identifier)
+            feed = src.links[0].from_socket
+            emit = nt.nodes.new("ShaderNodeEmission")
+            emit.inputs["Strength"].default_value = 1.0
+            nt.links.new(feed, emit.inputs["Color"])  # a float becomes grey, as Cycles converts it
+            nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
         target = nt.nodes.new("ShaderNodeTexImage")
         target.image = img
         nt.nodes.active = target
@@ -110,7 +113,11 @@ def bake_input(bpy, ob, material, socket, size: int) -> np.ndarray:
         scene.render.engine = "CYCLES"
         c.samples, c.use_denoising, c.use_adaptive_sampling, c.device = BAKE_SAMPLES, False, False, "CPU"
         with quiet_stdout():
-            bpy.ops.object.bake(type="EMIT", margin=max(2, size // 64), use_clear=True, target="IMAGE_TEXTURES")
+            if normal:
+                bpy.ops.object.bake(type="NORMAL", normal_space="TANGENT", normal_r="POS_X", normal_g="POS_Y",
+                                    normal_b="POS_Z", margin=max(2, size // 64), use_clear=True, target="IMAGE_TEXTURES")
+            else:
+                bpy.ops.object.bake(type="EMIT", margin=max(2, size // 64), use_clear=True, target="IMAGE_TEXTURES")
         px = np.array(img.pixels[:], np.float64).reshape(size, size, 4)[::-1, :, :3]  # Blender rows bottom-up
     finally:
         for s, m in zip(ob.material_slots, slots, strict=False):

@@ -526,9 +526,9 @@ class _BlenderConverter(StageConverter):
             return self.materials[key]
         baked: list = []
 
-        def bake(resolved, socket, node, scalar: bool, notes: list):
+        def bake(resolved, socket, node, scalar: bool, notes: list, normal: bool = False):
             baked.append(socket.name)
-            return self._bake(ob, ob_name, mat, resolved, socket, node, scalar, notes)
+            return self._bake(ob, ob_name, mat, resolved, socket, node, scalar, notes, normal)
 
         inputs, notes = map_material(mat, bake)
         if baked:  # Generated coordinates, UV layouts: per object
@@ -552,10 +552,10 @@ class _BlenderConverter(StageConverter):
             self.emissive_materials.add(path)
         return path
 
-    def _bake(self, ob, ob_name: str, mat, resolved, socket, node, scalar: bool, notes: list):
+    def _bake(self, ob, ob_name: str, mat, resolved, socket, node, scalar: bool, notes: list, normal: bool = False):
         """A :class:`TextureMap` of ``socket``'s value over ``ob``'s UV map, baked by Cycles (procedural_bake), or None
         with a note naming why not (no mesh object, no UV map, Cycles' error); UV islands of ``mat``'s faces that
-        overlap are noted."""
+        overlap are noted. ``normal``: the material's tangent-space shading normal instead (a normal map)."""
         import time
 
         from .procedural_bake import bake_input, bake_size, reads_placement, uv_overlap, uv_triangles
@@ -583,13 +583,16 @@ class _BlenderConverter(StageConverter):
         size = bake_size(self.bpy, ob)
         start = time.perf_counter()
         try:
-            rgb = bake_input(self.bpy, ob, resolved, socket, size)
+            rgb = bake_input(self.bpy, ob, resolved, socket, size, normal=normal)
         except (RuntimeError, AttributeError) as exc:  # Cycles' error; linked (read-only) data
             notes.append(f"{what} dropped: Cycles could not bake object {ob_name} ({str(exc).strip()}); its default "
                          "value used")
             return None
-        notes.append(f"{what} baked by Cycles over UV map {uv!r} into a {size} x {size} linear image "
-                     f"({time.perf_counter() - start:.1f} s)")
+        notes.append(f"{what} baked by Cycles over UV map {uv!r} into a {size} x {size} "
+                     f"{'tangent-space normal map' if normal else 'linear image'} ({time.perf_counter() - start:.1f} s)")
+        if normal:
+            return TextureMap(rgb, f"Cycles normal bake of {socket.name} from {node.bl_idname} ({size}x{size}, object "
+                              f"{ob_name})", scale_bias=((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)), wrap="clamp")
         if scalar:  # a colour into a float socket: its luminance (Rec. 709)
             rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
         # clamped: a UV map within [0, 1] reads no texel of the far edge at its own edges (repeat blended them in)
@@ -927,14 +930,30 @@ def map_material(mat, bake=None) -> tuple[dict, list]:
         notes: list = []
         if out.inputs["Volume"].is_linked:
             notes.append(f"material {mat.name}: volume shader dropped (the surface alone is written)")
-        if out.inputs["Displacement"].is_linked:
-            notes.append(f"material {mat.name}: displacement ({mat.displacement_method.lower().replace('_', ' ')}) "
-                         "dropped (the undisplaced, unbumped surface is written)")
         # ``bake`` rides on the material record that every mapping function receives (read by image_texture)
         record = SimpleNamespace(name=mat.name, bake=None if bake is None else
-                                 (lambda socket, node, scalar, notes: bake(resolved, socket, node, scalar, notes)))
+                                 (lambda socket, node, scalar, notes, normal=False:
+                                  bake(resolved, socket, node, scalar, notes, normal)))
         inputs = _map_shader(record, out.inputs["Surface"].links[0].from_node, notes)
+        if out.inputs["Displacement"].is_linked:
+            if mat.displacement_method == "BUMP" and record.bake is not None and inputs is not None \
+                    and "normal" not in inputs and not _emitter_only(inputs):
+                # Cycles shades the surface with the displacement as a bump: the normal it makes, baked
+                normal = record.bake(out.inputs["Displacement"], out.inputs["Displacement"].links[0].from_node, False,
+                                     notes, normal=True)
+                if normal is not None:
+                    inputs["normal"] = normal
+            else:
+                notes.append(f"material {mat.name}: displacement ({mat.displacement_method.lower().replace('_', ' ')}) "
+                             "dropped (the undisplaced, unbumped surface is written"
+                             + ("; a bump-only displacement is baked into a normal map for mesh objects)"
+                                if mat.displacement_method != "BUMP" else ")"))
     return (grey, notes) if inputs is None else (inputs, notes)
+
+
+def _emitter_only(inputs: dict) -> bool:
+    """Whether mapped ``inputs`` are an Emission shader's (black, no normal to shade with)."""
+    return "emissiveColor" in inputs and inputs.get("diffuseColor") == (0.0, 0.0, 0.0)
 
 
 #: Cycles' default surface, which it shows where no material is assigned: a Diffuse BSDF of colour 0.8 (before, the
@@ -1408,26 +1427,33 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
 
 
 def normal_map(mat, socket, notes: list) -> TextureMap | None:
-    """A tangent-space normal map for a Normal input fed by a Normal Map node (tangent space) reading an Image
-    Texture, else None with a note: texels (n + 1) / 2 with the node's Strength folded in, n' = z + (n - z) strength
-    in tangent space (Cycles mixes the world normals so; the renderer normalises), and UsdUVTexture scale 2, bias -1
-    (renderer.md#normal-maps)."""
+    """A tangent-space normal map for a Normal input, else None with a note. Fed by a tangent-space Normal Map node
+    reading an Image Texture: its texels (n + 1) / 2 with the node's Strength folded in, n' = z + (n - z) strength in
+    tangent space (Cycles mixes the world normals so; the renderer normalises), and UsdUVTexture scale 2, bias -1
+    (renderer.md#normal-maps). Fed by anything else (a Bump node, a procedural normal map, a linked Strength): the
+    normal Cycles shades with, baked per object in that tangent space where the material has a Cycles bake."""
     node = socket.links[0].from_node
-    if node.bl_idname != "ShaderNodeNormalMap" or node.space != "TANGENT":
+    plain = node.bl_idname == "ShaderNodeNormalMap" and node.space == "TANGENT"
+    strength, s_linked = _socket(node, "Strength", 1.0) if plain else (1.0, False)
+    color = node.inputs["Color"] if plain else None
+    tried: list = []
+    tex = image_texture(mat, color, tried) if plain and not s_linked and color.is_linked else None
+    bake = getattr(mat, "bake", None)  # the converter's Cycles bake for one object (procedural_bake)
+    if tex is None and bake is not None and socket.node.bl_idname in BAKED_NODES:
+        return bake(socket, node, False, notes, normal=True)
+    notes.extend(tried)
+    if not plain:
         what = node.bl_idname if node.bl_idname != "ShaderNodeNormalMap" else f"a Normal Map in {node.space} space"
         notes.append(f"material {mat.name}: {socket.name} from {what} dropped (tangent-space Normal Map nodes are "
-                     "converted; the mesh normals used)")
+                     "converted, other normals are baked by Cycles for mesh objects; the mesh normals used)")
         return None
-    strength, s_linked = _socket(node, "Strength", 1.0)
-    color = node.inputs["Color"]
-    if s_linked or not color.is_linked:
-        notes.append(f"material {mat.name}: Normal Map {'Strength linked' if s_linked else 'without an image'} "
-                     "dropped (the mesh normals used)")
-        return None
-    tex = image_texture(mat, color, notes)
     if tex is None:
+        if s_linked or not color.is_linked:
+            notes.append(f"material {mat.name}: Normal Map {'Strength linked' if s_linked else 'without an image'} "
+                         "dropped (the mesh normals used)")
         return None
-    if color.links[0].from_node.image.colorspace_settings.name == "sRGB":
+    if color.links[0].from_node.bl_idname == "ShaderNodeTexImage" and \
+            color.links[0].from_node.image.colorspace_settings.name == "sRGB":
         notes.append(f"material {mat.name}: normal map {tex.what} is in sRGB (decoded; normal maps are Non-Color)")
     n = 2.0 * tex.image - 1.0
     n = np.array([0.0, 0.0, 1.0]) + (n - np.array([0.0, 0.0, 1.0])) * max(float(strength), 0.0)

@@ -692,7 +692,8 @@ def test_a_mapping_node_turning_the_environment_turns_the_dome(tmp_path, vector_
 def test_volumes_displacement_and_light_linking_are_named(tmp_path):
     """A world volume (fog), a material's volume next to its surface, its displacement, and light linking (an object
     receiving only some lights, a light lighting only some objects) change Cycles' image and were dropped without a
-    word."""
+    word. A bump-only displacement (Cycles' default method) is now baked into a normal map; one that moves the
+    geometry stays dropped, named."""
     from nasset_converters.blender.fidelity import _add, _light, _material, _new_scene, _world
 
     _new_scene(bpy, 8, (0.0, -3.0, 1.0), (0.0, 0.0, 0.0))
@@ -704,14 +705,21 @@ def test_volumes_displacement_and_light_linking_are_named(tmp_path):
     mat.node_tree.links.new(mat.node_tree.nodes.new("ShaderNodeVolumeAbsorption").outputs[0], out.inputs["Volume"])
     mat.node_tree.links.new(mat.node_tree.nodes.new("ShaderNodeDisplacement").outputs[0], out.inputs["Displacement"])
     cube = _add(bpy, "cube", "Jelly", mat)
+    moved = _material(bpy, "Moved")  # true displacement moves the geometry: dropped (a bump-only one is baked)
+    moved.displacement_method = "DISPLACEMENT"
+    out = next(n for n in moved.node_tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    moved.node_tree.links.new(moved.node_tree.nodes.new("ShaderNodeDisplacement").outputs[0], out.inputs["Displacement"])
+    _add(bpy, "cube", "Moved", moved, location=(3.0, 0.0, 0.0))
     lamp = _light(bpy, "Lamp", "POINT", (1.0, -1.0, 2.0), energy=10.0)
     only = bpy.data.collections.new("OnlyThese")
     lamp.light_linking.receiver_collection = only
     cube.light_linking.blocker_collection = only
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "v.blend"))
     text = "\n".join(convert_scene(tmp_path / "v.blend", tmp_path / "s.usda").warnings)
-    for part in ("world World: its volume", "material Jelly: volume shader dropped", "material Jelly: displacement",
-                 "light Lamp: light linking", "object Jelly: light linking"):
+    for part in ("world World: its volume", "material Jelly: volume shader dropped",
+                 "material Jelly: Displacement from ShaderNodeDisplacement baked by Cycles",
+                 "material Moved: displacement (displacement) dropped", "light Lamp: light linking",
+                 "object Jelly: light linking"):
         assert part in text, (part, text)
 
 
