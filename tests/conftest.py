@@ -27,6 +27,23 @@ def rng():
     return np.random.default_rng(stat_seed(1234))  # 1234 unless the seed sweep (tests/stats_sweep.py) shifts it
 
 
+# -- the order test files run in ----------------------------------------------------------------------------------
+#: the longest test files (seconds of one worker on the 2-core machine, 2026-12-07: 200, 177, 147, 138, 124, 90, 80, 65,
+#: 60, 53, 53): they start first, so that the two workers end together instead of one running a long file alone at
+#: the end (pytest-xdist's default order is by number of tests: the one-test hostile corpus ran last). scripts/test.sh
+#: passes --no-loadscope-reorder so that this order is kept.
+LONGEST_FILES = ("tests/renderer/test_conformance.py", "tests/sdk/test_hostile_corpus.py",
+                 "tests/mitsuba_renderer/test_near_field.py", "tests/sdk/test_security_paths.py",
+                 "tests/mitsuba_renderer/test_mitsuba_impl.py", "tests/bakers/test_train_parallel.py",
+                 "tests/converters/test_blender_fidelity.py", "tests/bakers/test_neupress_bake.py",
+                 "tests/sdk/test_security_networks.py", "tests/bakers/test_8dna_bake.py", "tests/bakers/test_cluster.py")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {f: k for k, f in enumerate(LONGEST_FILES)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))  # stable: files stay whole
+
+
 # -- the stress suite's example counts (tests/stress): each test worker hands its counts to the main process ----
 
 
