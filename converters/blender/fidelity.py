@@ -319,7 +319,7 @@ def _normal_maps(bpy, folder: Path, size: int) -> None:
 def _bumps(bpy, folder: Path, size: int) -> None:
     # bumps Cycles computes from a height, baked per object into tangent-space normal maps: a floor whose Diffuse BSDF
     # Normal is a Bump node (distance 0.05) on a Wave texture (UV), a ball whose material Output takes a Displacement
-    # node (bump only, Cycles' default) on a Noise texture
+    # node (bump only, Cycles' default) on a Noise texture, a Glossy BSDF ball bumped by a Noise texture
     _new_scene(bpy, size, (0.0, -2.0, 2.4), (0.0, 0.0, 0.2))
     floor = _material(bpy, "Ridges", **{"Color": (0.6, 0.6, 0.6)})
     nt = floor.node_tree
@@ -339,6 +339,17 @@ def _bumps(bpy, folder: Path, size: int) -> None:
     out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
     nt.links.new(disp.outputs["Displacement"], out.inputs["Displacement"])
     _add(bpy, "uv_sphere", "Ball", ball, smooth=True, radius=0.4, location=(0.0, 0.3, 0.4))
+    from .examples import shader_material
+
+    metal, glossy = shader_material(bpy, "Hammered", "ShaderNodeBsdfAnisotropic")  # a Glossy BSDF (its Normal was ignored)
+    glossy.inputs["Roughness"].default_value = 0.3
+    nt = metal.node_tree
+    noise, bump = nt.nodes.new("ShaderNodeTexNoise"), nt.nodes.new("ShaderNodeBump")
+    noise.inputs["Scale"].default_value = 5.0
+    bump.inputs["Distance"].default_value = 0.1
+    nt.links.new(noise.outputs["Fac"], bump.inputs["Height"])
+    nt.links.new(bump.outputs["Normal"], glossy.inputs["Normal"])
+    _add(bpy, "uv_sphere", "Metal", metal, smooth=True, radius=0.3, location=(0.75, 0.1, 0.3))
     _light(bpy, "Sun", "SUN", (0.0, 0.0, 3.0), energy=2.5, rotation=(0.0, math.radians(58.0), 0.0), angle=math.radians(2.0))
     _world(bpy)
 
@@ -1034,8 +1045,9 @@ SCENES = {
                                    "face corner)"),
     "normal_maps": FidelityScene("normal_maps", _normal_maps, "a Normal Map node (tangent space, strength 0.8) on a "
                                  "Diffuse BSDF floor: stripes leaning +-35 deg along U, a low sun"),
-    "bumps": FidelityScene("bumps", _bumps, "a Bump node (Wave texture height) on a Diffuse BSDF floor and a bump-only "
-                           "Displacement (Noise texture) on a Principled ball, baked into normal maps, a low sun"),
+    "bumps": FidelityScene("bumps", _bumps, "a Bump node (Wave texture height) on a Diffuse BSDF floor, a bump-only "
+                           "Displacement (Noise texture) on a Principled ball and a Bump node on a Glossy BSDF ball, "
+                           "baked into normal maps, a low sun"),
     "cutouts": FidelityScene("cutouts", _cutouts, "alpha as presence: a Principled Alpha from an RGBA image (checker "
                              "holes, patterned shadow), a Mix of a Transparent and a Diffuse BSDF (0.6), a ball of "
                              "Alpha 0.4"),
@@ -1263,9 +1275,11 @@ NOTES = """
   renderer interpolates per hit (spec/renderer.md#primvar-colors).
 - normal_maps read ratio 1.13 and MSE / noise 27 (32 x 32, 64 spp; 1.02 now): Normal Map nodes were dropped and the
   renderer ignored UsdPreviewSurface normal (spec/renderer.md#normal-maps).
-- bumps read ratio 1.03 and MSE / noise 37 (32 x 32, 32 spp; 1.07 now): a Bump node on a BSDF's Normal and a bump-only
-  Displacement were dropped (warned). The normal Cycles shades with is now baked per object by Cycles' tangent-space
-  normal bake and written as a normal map (spec/bake-blender.md#scene-conversion).
+- bumps read ratio 1.03 and MSE / noise 37 (32 x 32, 32 spp, before its Glossy ball was added; 1.07 then): a Bump
+  node on a BSDF's Normal and a bump-only Displacement were dropped (warned), and a Glossy BSDF's Normal was ignored
+  without a word (a bumped Glossy ball alone: ratio 1.037, MSE / noise 3.1 at 48 x 48, 64 spp; 0.999 and 0.45 now).
+  The normal Cycles shades with is now baked per object by Cycles' tangent-space normal bake and written as a normal
+  map (spec/bake-blender.md#scene-conversion).
 - cutouts read MSE / noise 63 (32 x 32, 64 spp; 0.98 now): alpha was dropped and the renderer drew every surface
   opaque. Principled Alpha (constant or an image's alpha) and a Mix with a Transparent BSDF are now the
   UsdPreviewSurface opacity, which the renderer reads as presence (spec/renderer.md#cutouts).

@@ -1013,8 +1013,11 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
                         node.distribution == "MULTI_GGX" else "")
                      + ("; Beckmann as GGX of alpha x 0.82-0.93" if beckmann else "") + ")"
                      + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
-        return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
-                "roughness": rough}
+        out = {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
+               "roughness": rough}
+        if node.inputs["Normal"].is_linked and (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
+            out["normal"] = nmap  # (before 2026-12-07 a Glossy BSDF's normal input was ignored without a word)
+        return out
     if node.bl_idname == "ShaderNodeHoldout":  # Cycles: black to the camera (alpha 0), an absorbing black surface
         notes.append(f"material {mat.name}: Holdout written as a black surface (the film's alpha 0 is not carried)")
         return dict(NO_SURFACE)
@@ -1439,7 +1442,7 @@ def normal_map(mat, socket, notes: list) -> TextureMap | None:
     tried: list = []
     tex = image_texture(mat, color, tried) if plain and not s_linked and color.is_linked else None
     bake = getattr(mat, "bake", None)  # the converter's Cycles bake for one object (procedural_bake)
-    if tex is None and bake is not None and socket.node.bl_idname in BAKED_NODES:
+    if tex is None and bake is not None:  # (the material is baked as it is: any BSDF node)
         return bake(socket, node, False, notes, normal=True)
     notes.extend(tried)
     if not plain:
