@@ -558,7 +558,7 @@ class _BlenderConverter(StageConverter):
         overlap are noted. ``normal``: the material's tangent-space shading normal instead (a normal map)."""
         import time
 
-        from .procedural_bake import bake_input, bake_size, reads_placement, uv_overlap, uv_triangles
+        from .procedural_bake import BAKE_MAX, bake_input, bake_size, reads_placement, uv_overlap, uv_triangles
 
         what = f"material {mat.name}: {socket.name} from {node.bl_idname}"
         if ob is None or ob.type != "MESH":
@@ -580,7 +580,7 @@ class _BlenderConverter(StageConverter):
         if self.geometry_root.startswith("/Prototypes") and reads_placement(socket):
             notes.append(f"{what} reads where the object is placed (world position, camera): its instances differ in "
                          f"Cycles; baked for {ob_name} and used for every instance")
-        size = bake_size(self.bpy, ob)
+        size = min(2 * bake_size(self.bpy, ob), BAKE_MAX) if normal else bake_size(self.bpy, ob)
         start = time.perf_counter()
         try:
             rgb = bake_input(self.bpy, ob, resolved, socket, size, normal=normal)
@@ -1238,6 +1238,12 @@ def _combine(parts: list, mat, notes: list) -> dict:
     if any("opacity" in inputs for _, inputs in parts):
         notes.append(f"material {mat.name}: the opacity of a shader inside a Mix / Add Shader dropped (opaque; a Mix "
                      "with a Transparent BSDF is converted)")
+    normals = [(w, inputs["normal"]) for w, inputs in parts if "normal" in inputs]
+    if normals:  # one shading normal per material: the heaviest shader's (before 2026-12-07 dropped without a word)
+        w, out["normal"] = max(normals, key=lambda p: p[0])
+        if len(normals) < len(parts) or len({id(n) for _, n in normals}) > 1:
+            notes.append(f"material {mat.name}: the normal map of one shader ({out['normal'].what}, weight {w:.3g}) "
+                         "applied to the whole Mix / Add Shader (one shading normal per material)")
     return out
 
 
