@@ -525,10 +525,16 @@ class _BlenderConverter(StageConverter):
         if key in self.materials:
             return self.materials[key]
         baked: list = []
+        normals: dict = {}  # the material's normal bake: one per object, whichever of its shaders asks first
 
         def bake(resolved, socket, node, scalar: bool, notes: list, normal: bool = False):
             baked.append(socket.name)
-            return self._bake(ob, ob_name, mat, resolved, socket, node, scalar, notes, normal)
+            if normal and "map" in normals:
+                return normals["map"]
+            result = self._bake(ob, ob_name, mat, resolved, socket, node, scalar, notes, normal)
+            if normal:
+                normals["map"] = result
+            return result
 
         inputs, notes = map_material(mat, bake)
         if baked:  # Generated coordinates, UV layouts: per object
