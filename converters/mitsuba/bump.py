@@ -12,7 +12,8 @@ so a normal map reproduces it once the shape's ``K = (-1 / |dP/du|, a / (|dP/du|
 :func:`uv_metric` reads K off the shape's triangles in uv space (one value where the layout is uniform, the nearest
 triangle's per texel where it is not: a sphere's rows); :func:`bump_normal_texels` evaluates Mitsuba's own gradient
 (``eval_1_grad``: filter, wrap and ``to_uv`` as Mitsuba applies them), averaged over four points per texel, at twice
-the height's resolution where that fits (a bilinear height's gradient steps at its texel centres).
+the height's resolution where that fits (:func:`normal_map_size`: a bilinear height's gradient steps at its texel
+centres).
 """
 
 from __future__ import annotations
@@ -107,15 +108,27 @@ def _weighted_quantile(x: np.ndarray, w: np.ndarray, q: float, order: np.ndarray
     return float(x[order][min(np.searchsorted(cw, q * cw[-1]), len(x) - 1)])
 
 
-def bump_normal_texels(mi, texture, shape_hw: tuple[int, int], scale: float, metric: UvMetric,
-                       to_uv: np.ndarray | None, upsample: int = 1) -> np.ndarray:
-    """Tangent-space normals [upsample H, upsample W, 3] encoded as ``(n + 1) / 2`` of a bump map with height
-    ``texture`` (a Mitsuba texture; its gradient is evaluated by Mitsuba) times ``scale`` on a shape of uv ``metric``;
-    ``shape_hw`` is the height texture's resolution, the normal map covers its texture space (and takes its ``to_uv``).
-    At ``upsample`` 2 each texel lies inside one of the height's bilinear cells, where the gradient is what Mitsuba
-    computes; at 1 a texel centre sits on the step between two cells and takes their mean (steep bumps lose contrast:
-    measured 4-5x the squared error of ``upsample`` 2 against Mitsuba's bump map on a sinusoidal height)."""
-    h, w = shape_hw[0] * upsample, shape_hw[1] * upsample
+#: points per call of Mitsuba's gradient (bounds the memory of one evaluation)
+GRAD_CHUNK = 1 << 20
+
+
+def normal_map_size(shape_hw: tuple[int, int], max_pixels: int) -> tuple[int, int]:
+    """The normal map's resolution for a height of ``shape_hw``: twice it where that fits in ``max_pixels`` texels
+    (each texel then lies inside one of the height's bilinear cells, where the gradient is what Mitsuba computes; at
+    the same resolution a texel centre sits on the step between two cells and takes their mean: steep bumps lose
+    contrast, measured 4-5x the squared error against Mitsuba's bump map on a sinusoidal height), else the largest
+    size of the height's aspect within ``max_pixels`` (a larger height is resampled)."""
+    h, w = int(shape_hw[0]), int(shape_hw[1])
+    f = 2.0 if 4 * h * w <= max_pixels else min(1.0, float(np.sqrt(max_pixels / max(h * w, 1))))
+    return max(1, int(h * f)), max(1, int(w * f))
+
+
+def bump_normal_texels(mi, texture, out_hw: tuple[int, int], scale: float, metric: UvMetric,
+                       to_uv: np.ndarray | None) -> np.ndarray:
+    """Tangent-space normals [H, W, 3] (``out_hw``, :func:`normal_map_size`) encoded as ``(n + 1) / 2`` of a bump map
+    with height ``texture`` (a Mitsuba texture; its gradient is evaluated by Mitsuba) times ``scale`` on a shape of uv
+    ``metric``; the normal map covers the height's texture space (and takes its ``to_uv``)."""
+    h, w = int(out_hw[0]), int(out_hw[1])
     y, x = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
     centres = np.stack([x.ravel(), y.ravel()], 1)
     inv = np.linalg.inv(np.asarray(to_uv, np.float64)) if to_uv is not None else np.eye(3)
@@ -133,7 +146,9 @@ def bump_normal_texels(mi, texture, shape_hw: tuple[int, int], scale: float, met
 
 
 def _eval_grad(mi, texture, uv: np.ndarray) -> np.ndarray:
-    """Mitsuba's ``eval_1_grad`` [N, 2] of ``texture`` at shape uv points [N, 2]."""
+    """Mitsuba's ``eval_1_grad`` [N, 2] of ``texture`` at shape uv points [N, 2] (in chunks of :data:`GRAD_CHUNK`)."""
+    if len(uv) > GRAD_CHUNK:
+        return np.concatenate([_eval_grad(mi, texture, uv[k:k + GRAD_CHUNK]) for k in range(0, len(uv), GRAD_CHUNK)])
     si = mi.SurfaceInteraction3f()
     if mi.variant().startswith("scalar"):
         out = []

@@ -756,7 +756,7 @@ class StageConverter:
     def _bump_map(self, bsdf, prefix: str, shape, notes: list) -> TextureMap | None:
         """A ``bumpmap``'s height bitmap as the tangent-space normal map it amounts to on ``shape`` (:mod:`.bump`), or
         None (a procedural height, a shape without texture coordinates: the bump is dropped)."""
-        from .bump import bump_normal_texels
+        from .bump import bump_normal_texels, normal_map_size
 
         p = _Params(self.mi, bsdf, prefix)
         key = prefix + "nested_texture.data"
@@ -769,8 +769,8 @@ class StageConverter:
             return None
         hw = np.asarray(p.p[key]).shape[:2]
         height = p.p.properties[key][2]
-        upsample = 2 if 4 * hw[0] * hw[1] <= TEXTURE_MAX_PIXELS else 1
-        texels = bump_normal_texels(self.mi, height, hw, p.scalar("scale", 1.0), metric, to_uv, upsample)
+        texels = bump_normal_texels(self.mi, height, normal_map_size(hw, TEXTURE_MAX_PIXELS), p.scalar("scale", 1.0),
+                                    metric, to_uv)
         wrap = bitmap_sampling(self.mi, height, hw, to_uv)[0]
         tex = TextureMap(texels, "bump map as a normal map", ((2.0, 2.0, 2.0, 1.0), (-1.0, -1.0, -1.0, 0.0)), wrap)
         if to_uv is not None:

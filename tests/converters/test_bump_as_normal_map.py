@@ -93,7 +93,7 @@ def test_converted_normal_map_renders_like_mitsubas_bump_map(mi, tmp_path, name,
     metric = bump.uv_metric(*_world_mesh(mi, loaded), to_uv=to_uv3)
     assert (metric.k is None) == (name == "sphere")  # a sphere's strength varies with latitude; the others are uniform
     texture = mi.traverse(loaded.bsdf()).properties["nested_texture.data"][2]
-    texels = bump.bump_normal_texels(mi, texture, (64, 64), 0.3, metric, to_uv3, upsample=2)
+    texels = bump.bump_normal_texels(mi, texture, bump.normal_map_size((64, 64), 1 << 22), 0.3, metric, to_uv3)
     assert texels.shape == (128, 128, 3) and np.all(np.isfinite(texels))
     normal_map = {"type": "bitmap", "bitmap": mi.Bitmap(texels.astype(np.float32)), "raw": True}
     if to_uv is not None:
@@ -172,3 +172,9 @@ def test_converted_scene_writes_one_normal_map_per_uv_layout(tmp_path):
     notes = " ".join(res.warnings)
     assert "shape d: bumpmap on a Disk written without usable texture coordinates: dropped" in notes
     assert "shape e: BumpMap: the nested BSDF is converted, its bump map is dropped" in notes
+
+
+def test_normal_map_size_doubles_small_heights_and_bounds_large_ones():
+    assert bump.normal_map_size((64, 32), 1 << 22) == (128, 64)
+    big = bump.normal_map_size((8192, 4096), 1 << 22)
+    assert big[0] * big[1] <= 1 << 22 and abs(big[0] / big[1] - 2.0) < 0.01
