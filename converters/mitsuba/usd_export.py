@@ -188,6 +188,11 @@ def texel_values(data, raw: bool) -> np.ndarray:
     return np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
 
 
+#: procedural Mitsuba textures of uv alone, written as images of their values (Mitsuba evaluates them at the texel
+#: centres; before 2026-12-07 replaced by the mean of their colours), at RASTERIZED_TEXELS² in their texture space
+RASTERIZED_TEXTURES = ("Checkerboard",)
+RASTERIZED_TEXELS = 256
+
 #: UsdPreviewSurface float inputs a converted texture feeds through its ``r`` output (its texels are grey)
 SCALAR_TEXTURE_INPUTS = ("roughness", "metallic", "opacity")
 
@@ -275,16 +280,20 @@ NEAREST_REPEAT = 8
 TEXTURE_MAX_PIXELS = 1 << 22
 
 
-def _eval_texture(mi, tex, uv: np.ndarray) -> np.ndarray:
-    """Mitsuba's own value [N, 3] of texture ``tex`` at texture coordinates ``uv`` [N, 2] (before its ``to_uv``)."""
+def _eval_texture(mi, tex, uv: np.ndarray, scalar: bool = False) -> np.ndarray:
+    """Mitsuba's own value [N, 3] of texture ``tex`` at texture coordinates ``uv`` [N, 2] (before its ``to_uv``);
+    ``scalar``: its float value (``eval_1``, what a float parameter reads) in the three channels. (Mitsuba 3.9's
+    checkerboard swaps its two colours in ``eval_1``: a float parameter reads the other colour than ``eval``.)"""
     si = mi.SurfaceInteraction3f()
     if mi.variant().startswith("scalar"):
         out = []
         for u, v in uv:
             si.uv = mi.Point2f(float(u), float(v))
-            out.append(np.resize(_np(tex.eval(si)).ravel(), 3))
+            out.append(np.resize(_np(tex.eval_1(si) if scalar else tex.eval(si)).ravel(), 3))
         return np.array(out)
     si.uv = mi.Point2f(*np.ascontiguousarray(uv.T, np.float32))
+    if scalar:
+        return np.repeat(np.asarray(tex.eval_1(si), np.float64).ravel()[:, None], 3, 1)
     val = tex.eval(si)
     return np.stack([np.asarray(val[c], np.float64).ravel() for c in range(3)], 1)
 
@@ -354,18 +363,36 @@ class _Params:
         return [k[len(self.prefix):] for k in self.p.keys() if k.startswith(self.prefix)]
 
     def has(self, name: str) -> bool:
+        """Whether parameter ``name`` is there: a value, a bitmap, or a texture of its own parameters (a checkerboard
+        roughness was taken for an absent one, and the BSDF's other parameters read instead, before 2026-12-07)."""
         k = self.prefix + name
-        return any(x in self.p for x in (k, k + ".value", k + ".data"))
+        return any(x in self.p for x in (k, k + ".value", k + ".data")) or any(x.startswith(k + ".") for x in self.p.keys())
 
-    def bitmap(self, name: str) -> np.ndarray | None:
-        """Linear texels [H, W, 3] of a bitmap texture parameter (None for anything else)."""
+    def bitmap(self, name: str, scalar: bool = False) -> np.ndarray | None:
+        """Linear texels [H, W, 3] of a bitmap texture parameter, or of a procedural one of
+        :data:`RASTERIZED_TEXTURES` (:meth:`rasterized`; ``scalar``: as a float parameter reads it); None for
+        anything else."""
         k = self.prefix + name
         if k + ".data" not in self.p:
-            return None
+            return self.rasterized(name, scalar)
         # the texture's own description says whether it is raw (the owner's would name its first bitmap's flag: the
         # front's for a twosided BSDF's back)
         flag = re.search(r"raw\s*=\s*(\d)", str(self.p.properties[k + ".data"][2]))
         return texel_values(self.p[k + ".data"], bool(flag and flag.group(1) == "1"))
+
+    def rasterized(self, name: str, scalar: bool = False) -> np.ndarray | None:
+        """Linear texels [N, N, 3] (:data:`RASTERIZED_TEXELS`) of a procedural texture parameter whose value depends on
+        uv alone (:data:`RASTERIZED_TEXTURES`), in its texture space (before its ``to_uv``, as a bitmap's texels are),
+        evaluated by Mitsuba at the texel centres (``scalar``: its float value, grey); None for anything else."""
+        k = self.prefix + name + ".to_uv"
+        if k not in self.p or _class_name(tex := self.p.properties[k][2]) not in RASTERIZED_TEXTURES:
+            return None
+        n = RASTERIZED_TEXELS
+        g = (np.arange(n) + 0.5) / n
+        v, u = np.meshgrid(g, g, indexing="ij")  # row r holds v = (r + 0.5) / n: Mitsuba's top row first
+        inv = np.linalg.inv(np.asarray(self.p[k].matrix, np.float64).reshape(3, 3))
+        shape_uv = np.stack([u.ravel(), v.ravel()], 1) @ inv[:2, :2].T + inv[:2, 2]
+        return np.maximum(_eval_texture(self.mi, tex, shape_uv, scalar), 0.0).reshape(n, n, 3)
 
     def texture_map(self, name: str, texels: np.ndarray, what: str, scale_bias=None) -> TextureMap:
         """A :class:`TextureMap` of the bitmap parameter ``name`` holding ``texels`` (its converted values) with the
@@ -469,7 +496,7 @@ class _Params:
         """A grey :class:`TextureMap` (a colour bitmap read as its luminance, as Mitsuba evaluates a float texture)
         for a bitmap parameter, else its value; both through ``per_texel`` (e.g. alpha -> sqrt for a roughness)."""
         f = per_texel or (lambda x: x)
-        img = self.bitmap(name)
+        img = self.bitmap(name, scalar=True)
         if img is None:
             return float(f(self.scalar(name, default)))
         lum = img @ np.array([0.212671, 0.715160, 0.072169])
@@ -851,7 +878,7 @@ class StageConverter:
                                        shape=shape)
             if cls == "Mask":  # Mitsuba's mask is presence: UsdPreviewSurface opacity, threshold 0 (renderer.md#cutouts)
                 p = _Params(mi, bsdf, prefix)
-                img = p.bitmap("opacity")
+                img = p.bitmap("opacity", scalar=True)
                 if img is None:
                     out["opacity"] = float(np.clip(p.scalar("opacity", 1.0), 0.0, 1.0))
                     if p.textured or p.unread:  # a procedural opacity (a bitmap one is a texture below)
