@@ -976,6 +976,48 @@ SHADER_NODES = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfPrincipled", "ShaderNode
                 "ShaderNodeMixShader", "ShaderNodeAddShader", "ShaderNodeBsdfTransparent")
 
 
+#: BSDF nodes without a UsdPreviewSurface counterpart, written as the closest opaque surface (warned; before
+#: 2026-12-07 each was grey 0.8 whatever its colour): their Color as a diffuse albedo (Subsurface Scattering: the far
+#: field of its random walk; Toon), half of it (Translucent: the light it passes to the other side, shown on both), or
+#: black with the Fresnel reflection of the IOR times Color (Glass, as convert-scene writes Mitsuba's dielectrics), or
+#: black (Refraction: no reflection; Sheen: a grazing lobe of little albedo). A ball of each under a sun against Cycles
+#: (48², 64 spp, MSE / noise, grey before -> now): Subsurface 36 -> 1.4, Translucent 521 -> 14 (diffuse 145, black 78),
+#: Sheen 760 -> 24, Toon 272 -> 156, Glass 2.0 -> 1.9 (1.13 -> 0.86 of Cycles' mean: the light it lets through)
+APPROXIMATED_SHADERS = {"ShaderNodeSubsurfaceScattering": "diffuse", "ShaderNodeBsdfTranslucent": "half",
+                        "ShaderNodeBsdfToon": "diffuse", "ShaderNodeBsdfGlass": "glass",
+                        "ShaderNodeBsdfRefraction": "black", "ShaderNodeBsdfSheen": "black"}
+
+
+def _approximated_shader(mat, node, notes: list) -> dict:
+    """UsdPreviewSurface inputs standing for a node of :data:`APPROXIMATED_SHADERS` (a note says what is lost)."""
+    how = APPROXIMATED_SHADERS[node.bl_idname]
+    col, linked = _socket(node, "Color", (0.8, 0.8, 0.8, 1.0))
+    if linked:
+        col = color_input(mat, node.inputs["Color"], notes) or col
+    col = col if isinstance(col, (TextureMap, ColorPrimvar)) else tuple(float(c) for c in col[:3])
+    name = node.bl_idname.replace("ShaderNodeBsdf", "").replace("ShaderNode", "")
+    out = dict(NO_SURFACE)
+    if how in ("diffuse", "half"):
+        out["diffuseColor"] = col if how == "diffuse" else _scaled(col, 0.5)
+        what = "a diffuse surface of its Color" + (" x 0.5" if how == "half" else "")
+    elif how == "glass":
+        ior, _ = _socket(node, "IOR", 1.5)
+        rough, _ = _socket(node, "Roughness", 0.0)
+        f0 = ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2
+        tint = np.asarray(col if isinstance(col, tuple) else (1.0, 1.0, 1.0), np.float64)
+        out.update(specularColor=tuple(float(c) for c in np.clip(f0 * tint, 0.0, 1.0)),
+                   roughness=float(np.clip(rough, 0.0, 1.0)))
+        what = f"an opaque black reflector with F0 {f0:.4f} (its IOR {float(ior):.3g})"
+    else:
+        what = "black (" + ("it only refracts" if name == "Refraction" else "a grazing lobe of little albedo") + ")"
+    if node.inputs.get("Normal") is not None and node.inputs["Normal"].is_linked:
+        if (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
+            out["normal"] = nmap
+    notes.append(f"material {mat.name}: {name} BSDF has no counterpart (UsdPreviewSurface transmission and scattering "
+                 f"are not rendered): written as {what}; bake the object into a neural asset (--replace)")
+    return out
+
+
 def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     """UsdPreviewSurface inputs of the shader ``node`` (None, with a note, when it is not convertible). Mix and Add
     Shaders combine their inputs' parameters (:func:`_combine`)."""
@@ -1030,6 +1072,8 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     if node.bl_idname == "ShaderNodeBsdfTransparent":  # alone: nothing there (presence 0)
         return {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0),
                 "roughness": 1.0, "opacity": 0.0}
+    if node.bl_idname in APPROXIMATED_SHADERS:
+        return _approximated_shader(mat, node, notes)
     if node.bl_idname not in SHADER_NODES:
         notes.append(f"material {mat.name}: {node.bl_idname} is not convertible ({', '.join(SHADER_NODES)} are): grey")
         return None
