@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mitsuba")
@@ -408,10 +409,33 @@ def test_a_textured_blend_weight_is_warned(tmp_path):
         assert any("blendbsdf weight is a texture" in w for w in res.warnings) is warned, weight
 
 
-def test_a_procedural_mask_opacity_is_warned(tmp_path):
-    # a checkerboard (any non-bitmap texture) opacity was replaced by its mean without a word
+def test_a_procedural_mask_opacity_is_its_image_or_warned(tmp_path):
+    """A non-bitmap opacity was replaced by its mean without a word; it is warned, and a checkerboard (which Mitsuba
+    evaluates from uv alone) is written as the image of the float values Mitsuba's mask reads (``eval_1``)."""
+    from pxr import Usd, UsdShade
+
+    from nasset_converters.mitsuba import load_mitsuba
+    from nasset_converters.mitsuba.usd_export import RASTERIZED_TEXELS
+    from nasset_sdk.images import read_exr
+
     xml = tmp_path / "mask.xml"
-    xml.write_text(HEAD + '<shape type="rectangle"><bsdf type="mask"><texture type="checkerboard" name="opacity"/>'
-                   '<bsdf type="diffuse"/></bsdf></shape></scene>')
+    xml.write_text(HEAD + '<shape type="rectangle"><bsdf type="mask" id="cut"><texture type="checkerboard" '
+                   'name="opacity"/><bsdf type="diffuse"/></bsdf></shape></scene>')
     res = convert_scene(xml, tmp_path / "mask.usda", check_usd=False)
-    assert any("mask opacity is a texture the converter cannot map" in w for w in res.warnings)
+    assert not any("cannot map" in w for w in res.warnings), res.warnings
+    stage = Usd.Stage.Open(str(tmp_path / "mask.usda"))
+    src = UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/cut/PreviewSurface")).GetInput("opacity")
+    texels = read_exr(UsdShade.Shader(src.GetConnectedSource()[0].GetPrim()).GetInput("file").Get().resolvedPath)
+    mi = load_mitsuba(None)
+    g = (np.arange(RASTERIZED_TEXELS) + 0.5) / RASTERIZED_TEXELS
+    v, u = np.meshgrid(g, g, indexing="ij")
+    si = mi.SurfaceInteraction3f()
+    si.uv = mi.Point2f(u.ravel().astype(np.float32), v.ravel().astype(np.float32))
+    want = np.asarray(mi.load_dict({"type": "checkerboard"}).eval_1(si)).reshape(u.shape)
+    np.testing.assert_allclose(texels[..., 0], want, atol=1e-6)
+
+    # a texture the converter cannot evaluate from uv (a mesh attribute): its mean, warned
+    xml.write_text(HEAD + '<shape type="rectangle"><bsdf type="mask"><texture type="mesh_attribute" name="opacity">'
+                   '<string name="name" value="vertex_color"/></texture><bsdf type="diffuse"/></bsdf></shape></scene>')
+    res = convert_scene(xml, tmp_path / "mask2.usda", check_usd=False)
+    assert any("mask opacity is a texture the converter cannot map" in w for w in res.warnings), res.warnings
