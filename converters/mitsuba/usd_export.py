@@ -979,6 +979,14 @@ class StageConverter:
             for lobe in ("clearcoat", "sheen", "spec_trans", "anisotropic", "flatness"):
                 if p.scalar(lobe, 0.0) > 0:
                     notes.append(f"principled {lobe} ignored")
+        elif cls == "Hair":  # a fibre's colour: the absorption's inverse of Chiang et al.'s colour mapping
+            colour = hair_colour(p)
+            notes.append(f"hair BSDF written as a diffuse surface of its colour {np.round(colour, 3).tolist()} (from its "
+                         "absorption); a fur or hair is better baked (nasset bake --kind rna) and put in place with --replace")
+            eta = p.scalar("eta", 1.55)
+            f0 = ((eta - 1.0) / (eta + 1.0)) ** 2  # the cuticle's reflection (its R lobe), rough as the fibre is
+            out = {**spec_wf, "diffuseColor": colour, "specularColor": (f0,) * 3,
+                   "roughness": float(np.clip(p.scalar("longitudinal_roughness", 0.3), 0.0, 1.0))}
         elif cls in ("SmoothDielectric", "RoughDielectric", "ThinDielectric"):
             eta = p.scalar("eta", 1.5)
             rough = math.sqrt(p.scalar("alpha", 0.0)) if cls == "RoughDielectric" else 0.0
@@ -1540,6 +1548,25 @@ class StageConverter:
 
 #: wrapper BSDFs with one nested BSDF -> what of them is not converted (``mask`` keeps its opacity)
 WRAPPERS = {"NormalMap": "normal map", "BumpMap": "bump map", "Mask": "nothing"}
+
+
+#: absorption per unit concentration of eumelanin and pheomelanin (Mitsuba's ``hair``, after d'Eon et al. 2011)
+EUMELANIN_SIGMA_A = np.array([0.419, 0.697, 1.37])
+PHEOMELANIN_SIGMA_A = np.array([0.187, 0.4, 1.05])
+
+
+def hair_colour(p) -> np.ndarray:
+    """The colour [3] a Mitsuba ``hair`` BSDF's absorption stands for: ``exp(-sqrt(sigma_a) f(beta_n))``, the inverse of
+    Chiang et al.'s (2016) mapping from a colour to an absorption, ``f`` their polynomial of the azimuthal roughness
+    ``beta_n``; ``sigma_a`` from the melanin concentrations (``use_pigmentation``) or given."""
+    pigment = float(np.ravel(_np(p.p[p.prefix + "use_pigmentation"]))[0]) if p.has("use_pigmentation") else 1.0
+    if pigment:
+        sigma_a = p.scalar("eumelanin", 1.3) * EUMELANIN_SIGMA_A + p.scalar("pheomelanin", 0.2) * PHEOMELANIN_SIGMA_A
+    else:
+        sigma_a = p.rgb("sigma_a", (0.06, 0.1, 0.2))
+    b = p.scalar("azimuthal_roughness", 0.3)
+    f = 5.969 - 0.215 * b + 2.532 * b**2 - 10.73 * b**3 + 5.574 * b**4 + 0.245 * b**5
+    return np.clip(np.exp(-np.sqrt(np.maximum(sigma_a, 0.0)) * f), 0.0, 1.0)
 
 
 def latlong_sphere() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
