@@ -1119,8 +1119,12 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         notes.append(f"material {mat.name}: linked Principled emission dropped")
     elif e_strength > 0:
         emission = _scaled(e_color if isinstance(e_color, TextureMap) else e_color[:3], float(e_strength))
+    transmission, t_linked = _socket(node, "Transmission Weight", 0.0)
+    transmission = 0.0 if t_linked else float(np.clip(transmission, 0.0, 1.0))
     for name, off in _DROPPED:
         v, linked = _socket(node, name, off)
+        if name == "Transmission Weight" and not linked:
+            continue  # a constant weight scales the diffuse base below
         if linked or not np.allclose(np.ravel(v)[:3], np.ravel(off)[:3], rtol=0.0, atol=1e-6):
             notes.append(f"material {mat.name}: Principled {name} dropped (no UsdPreviewSurface counterpart; "
                          "bake the object into a neural asset)")
@@ -1135,6 +1139,14 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         inputs["opacity"] = alpha if isinstance(alpha, TextureMap) else float(np.clip(alpha, 0.0, 1.0))
     if emission is not None:
         inputs["emissiveColor"] = emission
+    if transmission > 0.0 and _mean(inputs["metallic"]) < 1.0:
+        # Cycles' dielectric base is diffuse x (1 - t) + transmission x t under the specular layer: the transmitted
+        # part has no counterpart, so it goes (before 2026-12-07 the whole base stayed diffuse: a Principled glass ball
+        # was written as an opaque white one)
+        inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], 1.0 - transmission)
+        notes.append(f"material {mat.name}: Principled Transmission Weight {transmission:.3g}: the diffuse base x "
+                     f"{1.0 - transmission:.3g} (the light it lets through is not rendered; bake the object into a neural "
+                     "asset)")
     metal = inputs["metallic"]
     if not isinstance(metal, TextureMap) and float(metal) > 0.0 and not isinstance(inputs["roughness"], TextureMap):
         base = inputs["diffuseColor"]
