@@ -30,7 +30,7 @@ UNIFORM_SPREAD = 0.02
 class UvMetric:
     """How a height gradient in uv turns into a tangent-space normal on one shape.
 
-    ``k`` [3]: K where the layout is uniform; else ``centroids`` [F, 2] (triangles' uv, texture space, mod 1) and
+    ``k`` [3]: K where the layout is uniform; else ``centroids`` [F, 2] (the triangles' centres in the shape's uv) and
     ``per_triangle`` [F, 3] give each texel the K of its nearest triangle. ``key``: equal keys give equal normal maps."""
 
     k: np.ndarray | None
@@ -38,13 +38,17 @@ class UvMetric:
     per_triangle: np.ndarray | None
     key: tuple
 
-    def at(self, tex_uv: np.ndarray) -> np.ndarray:
-        """K [N, 3] at texture-space points [N, 2] in the unit square."""
+    def at(self, tex_uv: np.ndarray, to_uv: np.ndarray | None = None) -> np.ndarray:
+        """K [N, 3] at points [N, 2] in the unit square of a texture's space (``to_uv`` [3, 3]: the texture's uv
+        transform; the triangles are looked up there, modulo 1)."""
         if self.k is not None:
             return np.broadcast_to(self.k, (len(tex_uv), 3))
         from scipy.spatial import cKDTree
 
-        tree = cKDTree(np.mod(self.centroids, 1.0), boxsize=1.0 + 1e-12)  # periodic: a repeating texture's seams
+        c = self.centroids
+        if to_uv is not None:
+            c = c @ np.asarray(to_uv, np.float64)[:2, :2].T + np.asarray(to_uv, np.float64)[:2, 2]
+        tree = cKDTree(np.mod(c, 1.0), boxsize=1.0 + 1e-12)  # periodic: a repeating texture's seams
         return self.per_triangle[tree.query(np.mod(tex_uv, 1.0))[1]]
 
 
@@ -83,9 +87,8 @@ def triangle_metric(pts: np.ndarray, faces: np.ndarray, uv: np.ndarray, normals:
     return k, area, ok
 
 
-def uv_metric(pts, faces, uv, normals=None, to_uv: np.ndarray | None = None) -> UvMetric | None:
-    """The shape's :class:`UvMetric` (None when no triangle has a usable uv layout). ``to_uv`` [3, 3]: the height
-    texture's uv transform (its texels' triangles are looked up in texture space)."""
+def uv_metric(pts, faces, uv, normals=None) -> UvMetric | None:
+    """The shape's :class:`UvMetric` (None when no triangle has a usable uv layout)."""
     k, area, ok = triangle_metric(np.asarray(pts, np.float64), np.asarray(faces, np.int64), np.asarray(uv, np.float64),
                                   None if normals is None else np.asarray(normals, np.float64))
     if not ok.any():
@@ -97,8 +100,6 @@ def uv_metric(pts, faces, uv, normals=None, to_uv: np.ndarray | None = None) -> 
     if np.abs(hi - lo).max() <= UNIFORM_SPREAD * scale:
         return UvMetric(med, None, None, ("uniform", *np.round(med / scale, 4), float(f"{scale:.4g}")))
     tri_uv = np.asarray(uv, np.float64)[np.asarray(faces, np.int64)[ok]].mean(1)
-    if to_uv is not None:
-        tri_uv = tri_uv @ np.asarray(to_uv, np.float64)[:2, :2].T + np.asarray(to_uv, np.float64)[:2, 2]
     key = ("per-triangle", len(k), float(f"{k.sum():.6g}"), float(f"{tri_uv.sum():.6g}"))
     return UvMetric(None, tri_uv, k, key)
 
@@ -137,7 +138,7 @@ def bump_normal_texels(mi, texture, out_hw: tuple[int, int], scale: float, metri
         tex_pts = centres + [ox / w, oy / h]
         grad += _eval_grad(mi, texture, tex_pts @ inv[:2, :2].T + inv[:2, 2])
     grad *= 0.25 * float(scale)
-    k = metric.at(centres)
+    k = metric.at(centres, to_uv)
     n = np.stack([k[:, 0] * grad[:, 0], k[:, 1] * grad[:, 0] + k[:, 2] * grad[:, 1], np.ones(len(grad))], 1)
     n = np.nan_to_num(n, nan=0.0, posinf=0.0, neginf=0.0)
     n[:, 2] = 1.0

@@ -519,6 +519,7 @@ class StageConverter:
         self.names: set[str] = set()
         self.materials: dict = {}
         self.textured_materials: set[str] = set()
+        self.uv_metrics: dict[int, tuple] = {}  # id(shape) -> (shape, its uv layout for bump maps: _uv_metric)
         self.color_primvars: dict = {}  # material path -> ColorPrimvar its meshes carry
         self.prototypes: dict[str, str] = {}  # shapegroup name -> class prim path
         self.hide_emitters = False  # the integrator's hide_emitters (read by integrator())
@@ -773,12 +774,16 @@ class StageConverter:
         m = self._to_world(shape)
         return pts @ m[:3, :3].T + m[:3, 3], faces, uv, nrm @ np.linalg.inv(m[:3, :3])
 
-    def _uv_metric(self, shape, to_uv=None):
-        """:func:`.bump.uv_metric` of a shape (None without a usable uv layout); ``to_uv``: the height texture's."""
+    def _uv_metric(self, shape):
+        """:func:`.bump.uv_metric` of a shape (None without a usable uv layout), worked out once per shape (its material
+        key and each of its bump maps read it)."""
         from .bump import uv_metric
 
-        mesh = self._uv_mesh(shape)
-        return None if mesh is None else uv_metric(*mesh, to_uv=to_uv)
+        key = id(shape)
+        if key not in self.uv_metrics:
+            mesh = self._uv_mesh(shape)
+            self.uv_metrics[key] = (shape, None if mesh is None else uv_metric(*mesh))  # the shape held: its id stays
+        return self.uv_metrics[key][1]
 
     def _bump_map(self, bsdf, prefix: str, shape, notes: list) -> TextureMap | None:
         """A ``bumpmap``'s height bitmap as the tangent-space normal map it amounts to on ``shape`` (:mod:`.bump`), or
@@ -790,7 +795,7 @@ class StageConverter:
         if key not in p.p or shape is None:
             return None
         to_uv = p.uv_transform("nested_texture")
-        metric = self._uv_metric(shape, to_uv)
+        metric = self._uv_metric(shape)
         if metric is None:
             notes.append(f"bumpmap on a {_class_name(shape)} written without usable texture coordinates: dropped")
             return None

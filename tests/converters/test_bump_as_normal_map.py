@@ -90,7 +90,7 @@ def test_converted_normal_map_renders_like_mitsubas_bump_map(mi, tmp_path, name,
     ref, ref2 = (_render(mi, shape, bumped, seed) for seed in (1, 2))
     loaded = mi.load_dict(dict(shape, bsdf=bumped))
     to_uv3 = None if to_uv is None else np.asarray(to_uv.matrix, np.float64)[[0, 1, 3]][:, [0, 1, 3]]
-    metric = bump.uv_metric(*_world_mesh(mi, loaded), to_uv=to_uv3)
+    metric = bump.uv_metric(*_world_mesh(mi, loaded))
     assert (metric.k is None) == (name == "sphere")  # a sphere's strength varies with latitude; the others are uniform
     texture = mi.traverse(loaded.bsdf()).properties["nested_texture.data"][2]
     texels = bump.bump_normal_texels(mi, texture, bump.normal_map_size((64, 64), 1 << 22), 0.3, metric, to_uv3)
