@@ -1010,9 +1010,8 @@ def _approximated_shader(mat, node, notes: list) -> dict:
         what = f"an opaque black reflector with F0 {f0:.4f} (its IOR {float(ior):.3g})"
     else:
         what = "black (" + ("it only refracts" if name == "Refraction" else "a grazing lobe of little albedo") + ")"
-    if node.inputs.get("Normal") is not None and node.inputs["Normal"].is_linked:
-        if (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
-            out["normal"] = nmap
+    if (nmap := _linked_normal(mat, node, notes)) is not None:
+        out["normal"] = nmap
     notes.append(f"material {mat.name}: {name} BSDF has no counterpart (UsdPreviewSurface transmission and scattering "
                  f"are not rendered): written as {what}; bake the object into a neural asset (--replace)")
     return out
@@ -1063,7 +1062,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
                      + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
         out = {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
                "roughness": rough}
-        if node.inputs["Normal"].is_linked and (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
+        if (nmap := _linked_normal(mat, node, notes)) is not None:
             out["normal"] = nmap  # (before 2026-12-07 a Glossy BSDF's normal input was ignored without a word)
         return out
     if node.bl_idname == "ShaderNodeHoldout":  # Cycles: black to the camera (alpha 0), an absorbing black surface
@@ -1086,7 +1085,7 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: Diffuse BSDF roughness {rough:.3g} dropped (Lambertian)")
         out = {"diffuseColor": col if isinstance(col, (TextureMap, ColorPrimvar)) else col[:3], "roughness": 1.0,
                "metallic": 0.0, "useSpecularWorkflow": 1, "specularColor": (0.0, 0.0, 0.0)}
-        if node.inputs["Normal"].is_linked and (nmap := normal_map(mat, node.inputs["Normal"], notes)) is not None:
+        if (nmap := _linked_normal(mat, node, notes)) is not None:
             out["normal"] = nmap
         return out
     if node.bl_idname == "ShaderNodeEmission":
@@ -1495,6 +1494,12 @@ def image_texture(mat, socket, notes: list, *, scalar: bool = False) -> TextureM
     if scalar and is_color:  # a colour into a float socket: its luminance (Rec. 709)
         rgb = np.repeat((rgb @ np.array([0.2126, 0.7152, 0.0722]))[..., None], 3, -1)
     return TextureMap(rgb, what, wrap=wrap, uv=uv)
+
+
+def _linked_normal(mat, node, notes: list) -> TextureMap | None:
+    """:func:`normal_map` of a shader node's Normal input where something is linked to it, else None."""
+    socket = node.inputs.get("Normal")
+    return normal_map(mat, socket, notes) if socket is not None and socket.is_linked else None
 
 
 def normal_map(mat, socket, notes: list) -> TextureMap | None:
