@@ -4,6 +4,7 @@
     python -m nasset_benchmarks.renderer_throughput --scene 8dna-near [--size small | --asset A.usdc] [--res 128] [--spp 2]
     python -m nasset_benchmarks.renderer_throughput --hair [--strands 20000] [--segments 4] [--res 128] [--spp 4]
     python -m nasset_benchmarks.renderer_throughput --usd SCENE.usda [--res 64] [--spp 16] [--repeat 3]
+    python -m nasset_benchmarks.renderer_throughput --lights 8,64,512 [--res 64] [--spp 16] [--repeat 3]
 
 Scene: one rna asset under a distant light (no other objects: NEE only). For each onnxruntime
 thread setting, in one process and with that same setting throughout, it renders ``--repeat``
@@ -35,6 +36,13 @@ nasset_sdk.process.tune_allocator) or left at glibc's defaults (``--allocator de
 ``--usd SCENE`` (:func:`main_usd`): any scene, e.g. one from ``nasset convert-scene``: the setup's CPU time
 by phase and peak memory (on dense hair the setup, not the render loop, is what a short render waits for),
 then camera samples/s and Embree queries per camera sample of the render loop.
+
+``--lights N,...`` (:func:`main_lights`): a floor and a ball under N small sphere lights of powers spanning 100x,
+rendered with every light sampled at every vertex (``light_draws = 0``) and with the default draws
+(spec/renderer.md#light-selection), alternating, in one process: CPU time, Embree queries per camera sample, the
+per-sample variance (the film's variance of the pixel means times spp, averaged over the image) and the speed-up at
+equal error, (time x variance) of every light over that of the draws; the two image means with their standard errors
+say whether they agree.
 """
 
 from __future__ import annotations
@@ -354,6 +362,58 @@ def main_usd(a) -> int:
     return 0
 
 
+def many_lights_scene(n: int, path) -> str:
+    """A 16 x 16 floor and a ball under ``n`` sphere lights (radius 0.05-0.2, 0.3-3 m up, powers over 100x about a
+    total that does not depend on ``n``, random colours, hidden from the camera: their own pixels would dominate the
+    variance), seen from above at an angle. Returns the written scene's path."""
+    from pxr import Sdf
+
+    from nasset_reference_renderer.testscenes import SceneBuilder
+
+    rng = np.random.default_rng(n)
+    b = SceneBuilder()
+    b.camera((0, 5, 7), (0, 0, 0), focal=30)
+    b.quad("Floor", (0, 0, 0), 16.0, diffuse=(0.6, 0.6, 0.6))
+    b.sphere_mesh("Ball", (0, 1, 0), 1.0, diffuse=(0.5, 0.3, 0.2))
+    for i in range(n):
+        p = (rng.uniform(-8, 8), rng.uniform(0.3, 3.0), rng.uniform(-8, 8))
+        r = rng.uniform(0.05, 0.2)
+        light = b.sphere_light(f"L{i}", p, r, 20.0 / (n * r * r) * 10 ** rng.uniform(-1, 1),
+                               color=tuple(rng.uniform(0.3, 1.0, 3)))
+        light.GetPrim().CreateAttribute("nasset:cameraVisibility", Sdf.ValueTypeNames.Bool).Set(False)
+    return b.write(path)
+
+
+def main_lights(a) -> int:
+
+    from nasset_reference_renderer import RenderSettings, load_scene, render
+
+    print(f"many lights: {a.res}x{a.res} x {a.spp} spp, max depth 4, every light (light_draws 0) against the default "
+          f"draws, alternating, least CPU time of {a.repeat}")
+    print("| lights | every light: s, queries / camera sample, variance | draws: s, queries / camera sample, variance "
+          "| time ratio | equal-error speed-up | image means (every / draws, standard errors) |")
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in [int(v) for v in a.lights.split(",")]:
+            scene = load_scene(many_lights_scene(n, Path(tmp) / f"lights{n}.usda"))
+            runs = {0: [], RenderSettings.light_draws: []}
+            for _ in range(a.repeat):
+                for draws in runs:
+                    res = render(scene, RenderSettings(width=a.res, height=a.res, spp=a.spp, max_depth=4, seed=len(runs[draws]),
+                                                       workers=a.workers, light_draws=draws))
+                    runs[draws].append(res)
+            row = {}
+            for draws, rs in runs.items():
+                t = min(r.stats.cpu_total if a.clock == "cpu" else r.stats.time_total for r in rs)
+                r = rs[0]
+                k = r.image.shape[0] * r.image.shape[1]
+                var = float(r.variance.mean()) * a.spp
+                row[draws] = (t, r.stats.rays / r.stats.camera_samples, var, r.image.mean(), np.sqrt(r.variance.mean(-1).sum()) / k)
+            (t0, q0, v0, m0, e0), (t1, q1, v1, m1, e1) = row[0], row[RenderSettings.light_draws]
+            print(f"| {n} | {t0:.2f}, {q0:.1f}, {v0:.3g} | {t1:.2f}, {q1:.1f}, {v1:.3g} | {t0 / t1:.2f}x | "
+                  f"{t0 * v0 / (t1 * v1):.2f}x | {m0:.4f} ± {e0:.4f} / {m1:.4f} ± {e1:.4f} |")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--scene", default="rna", choices=("rna", "8dna-near"))
@@ -367,6 +427,8 @@ def main(argv=None) -> int:
     ap.add_argument("--profile", type=int, default=12, help="top entries of a profiled render (0: none)")
     ap.add_argument("--hair", action="store_true", help="dense-hair scenes instead (see main_hair)")
     ap.add_argument("--usd", metavar="FILE", help="a USD scene instead: setup by phase, then the render loop (main_usd)")
+    ap.add_argument("--lights", metavar="N,...", help="scenes of N sphere lights instead: every light against the "
+                                                      "draws of spec/renderer.md#light-selection (main_lights)")
     ap.add_argument("--strands", type=int, default=20000)
     ap.add_argument("--segments", type=int, default=4)
     ap.add_argument("--workers", type=int, default=1,
@@ -398,6 +460,8 @@ def main(argv=None) -> int:
         return main_hair(a)
     if a.usd:
         return main_usd(a)
+    if a.lights:
+        return main_lights(a)
     scene = _scene(a.size)
     print(f"scene: rna '{a.size}' asset, distant light, {a.res}x{a.res} x {a.spp} spp "
           f"(median of {a.repeat} renders per thread setting)")

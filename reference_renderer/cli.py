@@ -69,7 +69,8 @@ def run(args) -> int:
                               progress=not args.quiet,
                               neupress_sampling=getattr(args, "neupress_sampling", "auto"), prt=bool(getattr(args, "prt", False)),
                               eightdna_sampling=getattr(args, "eightdna_sampling", "mis"),
-                              rna_continuation=getattr(args, "rna_continuation", "lobes"))
+                              rna_continuation=getattr(args, "rna_continuation", "lobes"),
+                              light_draws=getattr(args, "light_draws", RenderSettings.light_draws))
     check_settings(settings, min_depth=1)
     # sizes given on the command line are checked before the scene is read; the final size again below
     check_image_size(1 if args.width is None else args.width, 1 if args.height is None else args.height, args.spp)
@@ -135,6 +136,9 @@ def add_args(p) -> None:
     p.add_argument("--prt", action="store_true", help="neupress: shade with the PRT component and the dome's SH projection")
     p.add_argument("--8dna-sampling", dest="eightdna_sampling", default="mis", choices=["light", "flow", "mis"],
                    help="8dna: emitter sampling, the asset's own sampling (GGX lobe, flow directions), or both with MIS")
+    p.add_argument("--light-draws", type=int, default=8,
+                   help="light samples per shading vertex for each kind of light (delta / other) with more lights than "
+                        "this, drawn by power (0 = sample every light; the expected image is the same)")
     p.add_argument("--rna-continuation", default="lobes", choices=["uniform", "lobes"],
                    help="rna: continuation directions from the uniform sphere, or from a mixture of it with lobes "
                         "(surfaces: cosine and mirror; fibers: forward and specular cone; default: same expectation, "

@@ -22,6 +22,8 @@ from nasset_sdk.process import single_threaded_blas
 from .accel import Accel
 from .bsdf import bsdf_eval, bsdf_sample
 from .film import MAX_SPP, Film, check_image_size, pixel_offsets
+from .light_selection import DRAWS as LIGHT_DRAWS
+from .light_selection import MAX_DRAWS, LightSelection
 from .lights import MeshLight
 from .plan import RenderPlan, make_plan
 from .sampling import barycentric, cross3, dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
@@ -48,6 +50,7 @@ class RenderSettings:
     prt: bool = False  # neupress PRT mode
     eightdna_sampling: str = "mis"  # light | flow | mis (spec/renderer.md#8dna)
     rna_continuation: str = "lobes"  # uniform | lobes (spec/renderer.md#neural-assets, #fibers)
+    light_draws: int = LIGHT_DRAWS  # light samples per vertex of a kind with more lights (0: every light; #light-selection)
 
 
 @dataclass
@@ -148,6 +151,7 @@ class PathIntegrator:
             if isinstance(light, MeshLight):
                 self.inst_light[light.instance] = k
         self.nee = [k for k, on in enumerate(plan.light_nee) if on]
+        self.light_choice = LightSelection(scene.lights, self.nee, settings.light_draws)
         # object-space corner normals of each asset's triangles (None for fibers: shaded from the curve axis)
         self.asset_corner_n = []
         for data in scene.assets:
@@ -234,12 +238,15 @@ class PathIntegrator:
         with _Timer(self.stats, "trace"):
             return self.accel.occluded(o, d, tmax)
 
-    def _mis_light(self, k, prev_pdf, specular, o, d, no_mis):
-        """Weight of radiance from light k reached by a BSDF / continuation sample."""
+    def _mis_light(self, k, prev_pdf, specular, o, d, no_mis, count=None):
+        """Weight of radiance from light k reached by a BSDF / continuation sample from ``o``; ``count``: the light's
+        expected samples per vertex at ``o`` (light_selection), computed when not given."""
         light = self.scene.lights[k]
         if not self.plan.light_nee[k]:
             return np.ones(len(d))
-        w = power_heuristic(prev_pdf, light.pdf(o, d))
+        if count is None:
+            count = self.light_choice.count(k, o)
+        w = power_heuristic(prev_pdf, count * light.pdf(o, d))
         return np.where(specular | no_mis, 1.0, w)
 
     def light_surfaces(self, L, idx, beta, o, d, t_geometry, prev_pdf, specular, no_mis, camera: bool) -> np.ndarray:
@@ -256,20 +263,21 @@ class PathIntegrator:
                 met.append((k, light.opaque, tl, le))
                 if light.opaque:
                     t_end = np.minimum(t_end, tl)
-        for k, opaque, tl, le in met:
-            m = np.nonzero((tl <= t_end) & (tl < t_geometry) if opaque else tl < t_end)[0]
-            if len(m):
-                w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m])
-                L[idx[m]] += beta[m] * le[m] * w[:, None]
+        hits = [(k, le, np.nonzero((tl <= t_end) & (tl < t_geometry) if opaque else tl < t_end)[0]) for k, opaque, tl, le in met]
+        hits = [(k, le, m) for k, le, m in hits if len(m)]
+        counts = self.light_choice.counts([(k, m) for k, _, m in hits], o)
+        for (k, le, m), count in zip(hits, counts, strict=True):
+            w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m], count)
+            L[idx[m]] += beta[m] * le[m] * w[:, None]
         return t_end < t_geometry
 
     def _mesh_light_mis(self, inst, prev_pdf, specular, o, d):
         """MIS weights [n] of emission reached on mesh instances ``inst`` [n] (1 where the mesh is no light)."""
         w = np.ones(len(inst))
         k_of = self.inst_light[inst]
-        for k in unique(k_of[k_of >= 0]):
-            m = k_of == k
-            w[m] = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], np.zeros(int(m.sum()), bool))
+        pairs = [(k, np.nonzero(k_of == k)[0]) for k in unique(k_of[k_of >= 0])]
+        for (k, m), count in zip(pairs, self.light_choice.counts(pairs, o), strict=True):
+            w[m] = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], np.zeros(len(m), bool), count)
         return w
 
     # -- main loop -------------------------------------------------------------------------
@@ -448,9 +456,7 @@ class PathIntegrator:
         wo_l = to_local(wo, t, b, ns)
         indirect = self.indirect[inst]
         xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
-        for k in self.nee:
-            light = self.scene.lights[k]
-            wi, dist, li, pdf = light.sample(x, rng.random((len(x), 2)))
+        for delta, wi, dist, li, pdf in self.light_choice.samples(x, rng):
             cos = dot(wi, ns)
             ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (max3(li) > 0)
             s = np.nonzero(ok)[0]
@@ -460,7 +466,7 @@ class PathIntegrator:
                                 *(() if looked_up is None else (a[s] for a in looked_up)))
             if smooth is not None:
                 f = f * bump_terminator(smooth[s], ns[s], wi[s])[:, None]
-            w = np.ones(len(s)) if light.delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
+            w = np.ones(len(s)) if delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
             c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
             nz = max3(c) > 0
             s, c = s[nz], c[nz]
@@ -676,7 +682,7 @@ BACKENDS = ("embree", "numpy")
 
 def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
     """``USAGE`` error unless ``s`` is a RenderSettings whose spp, seed, max_depth (min_depth ..), rr_depth, batch, tile,
-    threads and workers are integers within their bounds, width and height integers or None (their bounds:
+    threads, workers and light_draws are integers within their bounds, width and height integers or None (their bounds:
     film.check_image_size) and backend one of :data:`BACKENDS`."""
     if not isinstance(s, RenderSettings):
         raise UsageError(f"render settings must be a RenderSettings, got {type(s).__name__}")
@@ -684,6 +690,7 @@ def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
                                 ("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("rr_depth", s.rr_depth, 0, MAX_DEPTH),
                                 ("batch", s.batch, 1, MAX_BATCH), ("tile", s.tile, 1, MAX_TILE),
                                 ("threads", s.threads, 0, MAX_THREADS), ("workers", s.workers, 0, MAX_THREADS),
+                                ("light_draws", s.light_draws, 0, MAX_DRAWS),
                                 ("width", s.width, 1, None), ("height", s.height, 1, None)):
         if value is None and name in ("max_depth", "width", "height"):
             continue  # filled in from the scene (resolve_settings, the camera's own resolution)

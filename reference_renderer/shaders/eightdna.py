@@ -5,9 +5,9 @@ Near-field 8D transport at the first hit x_o, per colour channel k:
     L_o = integral f_d(w_o, w_i) L_i(x_o, w_i) V(x_o, w_i) dw_i                       (direct lobe, analytic)
         + integral integral alpha^k(x_o, w_o) p^k(u_i, w_i) L_i^k(u_i, w_i) dA(u_i) dw_i   (indirect, neural)
 
-Direct lobe: one light sample per light at x_o (ordinary shadow ray, the asset occludes) and the
+Direct lobe: one light sample per light (or draw: light_selection) at x_o (ordinary shadow ray, the asset occludes) and the
 GGX-sampled continuation, power heuristic. Neural part: one channel c uniform in {0,1,2}, one
-(u_i, w_i) ~ p^c from the flow; at u_i one light sample per light (shadow ray from u_i ignoring the
+(u_i, w_i) ~ p^c from the flow; at u_i one light sample per light or draw (shadow ray from u_i ignoring the
 asset) and the flow's direction w_i as the continuation, power heuristic between the light pdf and
 the channel-averaged conditional p(w_i | u_i) = mean_k p^k(u_i, w_i) / mean_k p^k(u_i). Samples
 with n_u . w_i <= 0 or whose back-traced ray u_i - t w_i misses the asset contribute nothing.
@@ -72,14 +72,10 @@ class EightdnaShader:
         p_d = direct_probability(np.where(cos_o > 0, fresnel_dielectric(cos_o, ev.eta), 0.0), alpha)
         ngf = np.where((dot(h.ng, -h.d) < 0)[:, None], -h.ng, h.ng)  # geometric normal on the viewer's side
         x_off = h.x + ngf * h.scale
-        use_light = {k: (integ.scene.lights[k].delta or smode != "flow") for k in integ.nee}
+        delta_only = smode == "flow"  # then lights with a surface or solid angle are reached by the flow's samples
 
         # 1. direct lobe: light samples at x_o (the asset itself occludes)
-        for k in integ.nee:
-            light = integ.scene.lights[k]
-            if not use_light[k]:
-                continue
-            wi, dist, li, pdf = light.sample(h.x, rng.random((n, 2)))
+        for delta, wi, dist, li, pdf in integ.light_choice.samples(h.x, rng, delta_only=delta_only):
             s = np.nonzero((pdf > 0) & (max3(li) > 0) & (dot(wi, ngf) > 0))[0]  # the lobe only where it can count
             wi_obj, jac = fr.dir_to_object(wi[s], h.inst[s])
             f, pb = ev.direct_eval_pdf(h.n_obj[s], h.wo_obj[s], wi_obj)
@@ -88,7 +84,7 @@ class EightdnaShader:
             s, wi_obj, jac, f, pb = s[keep], wi_obj[keep], jac[keep], f[keep], pb[keep]
             if not len(s):
                 continue
-            if light.delta or smode == "light":
+            if delta or smode == "light":
                 w = np.ones(len(s))
             else:
                 pb = p_d[s] * pb * jac
@@ -110,11 +106,7 @@ class EightdnaShader:
 
         # rows needing p^k(u_i, w_i): light samples at u_i, then the flow continuation
         q_rows, q_w, nee_info = [], [], []
-        for k in integ.nee:
-            light = integ.scene.lights[k]
-            if not use_light[k]:
-                continue
-            wl, dist, li, pl = light.sample(u_w, rng.random((n, 2)))
+        for delta, wl, dist, li, pl in integ.light_choice.samples(u_w, rng, delta_only=delta_only):
             wl_obj, jac = fr.dir_to_object(wl, h.inst)
             s = np.nonzero((pl > 0) & (max3(li) > 0) & (dot(n_u, wl_obj) > 0))[0]
             if not len(s):
@@ -125,7 +117,7 @@ class EightdnaShader:
             s = s[self._backtrace_ok(u_w[s], wl[s], h.inst[s])]
             q_rows.append(s)
             q_w.append(wl_obj[s])
-            nee_info.append((light.delta, li[s], pl[s], jac[s]))
+            nee_info.append((delta, li[s], pl[s], jac[s]))
         n_nee = sum(len(s) for s in q_rows)
         dn = np.nonzero(cont_on & choose_d)[0]
         fn = np.nonzero(cont_on & ~choose_d)[0]

@@ -5,7 +5,7 @@ Far-field 6D transport at the first hit x_o (object-space inputs, world-space ra
     L_o(x_o, w_o) = integral over the sphere of L_i(w_i) [S(x_o, w_o, w_i) + f_r(w_o, w_i) |n.w_i| V_self(w_i)] dw_i
 
 estimated with two techniques combined by the power heuristic: light sampling (every light, one
-sample each, dome lights importance-sampled) and the asset technique p_a (the Gaussian lobe of the
+sample each, or the draws of light_selection; dome lights importance-sampled) and the asset technique p_a (the Gaussian lobe of the
 ``sampling`` network, or the uniform sphere when the asset has none or the plan leaves it
 unloaded). Shadow rays ignore the asset (S contains the self-shadowing); the same ray records
 whether the asset itself lies on it, which zeroes the surface-reflection term (V_self). The asset
@@ -125,7 +125,6 @@ class NeupressShader:
         if mode.get("prt"):
             self._prt(h, ev, L)
             return None
-        n = len(h)
         smode, lobe = mode["sampling"], mode["lobe"]
         cont_on = integ.indirect[h.inst] | (smode != "dome")
         sigma = None
@@ -139,11 +138,8 @@ class NeupressShader:
         fetch = integ.fetch_points(h.x, h.inst)  # None: every hit fetches its light at x (f = 0)
         at = h.x if fetch is None else fetch[0]
         rows, wis, wgt, selfh = [], [], [], []
-        for k in integ.nee:
-            light = integ.scene.lights[k]
-            if smode == "lobe" and not light.delta:  # reached by the lobe samples instead
-                continue
-            wi, dist, li, pdf = light.sample(at, rng.random((n, 2)))
+        # with the lobe, lights with a surface or solid angle are reached by the lobe samples instead
+        for delta, wi, dist, li, pdf in integ.light_choice.samples(at, rng, delta_only=smode == "lobe"):
             s = np.nonzero((pdf > 0) & (max3(li) > 0))[0]
             if not len(s):
                 continue
@@ -151,7 +147,7 @@ class NeupressShader:
             free = hh.prim < 0
             s = s[free]
             wi_obj, jac = self.frames.dir_to_object(wi[s], h.inst[s])
-            if light.delta or smode == "dome":
+            if delta or smode == "dome":
                 w = np.ones(len(s))
             else:
                 p_a = gaussian_lobe_pdf(h.n_obj[s], sigma[s], wi_obj) * jac if lobe else np.full(len(s), INV_4PI)

@@ -92,7 +92,7 @@ def light_shadows(integ, s, x_s, wi_s, dist_s, inst_s, shadow_origin, fetch):
 
 
 def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=None, fetch=None):
-    """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light (kept when no other object
+    """Rows to evaluate at rna hit points x [n,3]: one light sample per NEE light or draw (light_selection; kept when no other object
     blocks it; ``self_hit`` says whether the asset itself does) and one continuation where ``indirect``.
     ``shadow_origin(s, wi_s, at) -> (origins, exempt or None)`` places the shadow rays of rows s leaving the points
     ``at`` [len(s),3] (the hits x[s] or their fetch points); they are aimed at the light sample point
@@ -109,9 +109,7 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=N
     n = len(x)
     rows_ray, rows_wi, rows_w, rows_self, rows_kind = [], [], [], [], []
     at = x if fetch is None else fetch[0]
-    for k in integ.nee:
-        light = integ.scene.lights[k]
-        wi, dist, li, pdf = light.sample(at, rng.random((n, 2)))
+    for delta, wi, dist, li, pdf in integ.light_choice.samples(at, rng):
         ok = (pdf > 0) & (max3(li) > 0)
         s = np.nonzero(ok)[0]
         if not len(s):
@@ -121,7 +119,7 @@ def rna_sample_rows(integ, x, inst, indirect, rng, shadow_origin, continuation=N
         h, self_hit = light_shadows(integ, s, x_s, wi_s, dist_s, inst_s, shadow_origin, fetch)
         free = h.prim < 0  # no other object in the way
         s = s[free]
-        if light.delta:
+        if delta:
             w = np.ones(len(s))
         else:
             p_cont = INV_4PI if continuation is None else continuation.pdf(s, wi[s])

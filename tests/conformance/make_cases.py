@@ -389,6 +389,22 @@ def b_hidden_lights(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_many_lights(ctx):
+    """28 small SphereLights hidden from the camera and 12 point lights around the asset (both kinds beyond the
+    reference renderer's 8 light draws per vertex, spec/renderer.md#light-selection), powers over 30x, on a floor."""
+    rng = np.random.default_rng(40)
+    ctx.camera()
+    ctx.floor()
+    for i in range(28):
+        p = (rng.uniform(-1.6, 1.6), rng.uniform(-0.3, 1.4), rng.uniform(-1.6, 1.0))
+        _hide_from_camera(ctx.sb.sphere_light(f"Bulb{i}", p, rng.uniform(0.04, 0.1), 10 ** rng.uniform(0.3, 1.8),
+                                              color=tuple(rng.uniform(0.4, 1.0, 3))))
+    for i in range(12):
+        p = (rng.uniform(-1.6, 1.6), rng.uniform(-0.2, 1.4), rng.uniform(-1.6, 1.0))
+        ctx.sb.sphere_light(f"Point{i}", p, 0.0, 10 ** rng.uniform(-0.8, 0.6), color=tuple(rng.uniform(0.4, 1.0, 3)))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def _spot(ctx, name, position, aim, intensity, cone, softness, profile, color=(1, 1, 1)):
     """A point light (radius 0) with UsdLux.ShapingAPI aimed along ``aim`` (its local -Z)."""
     from pxr import Gf, Sdf, UsdGeom, UsdLux
@@ -600,6 +616,9 @@ CASES = [
          "asset and the floor, between them and a bright dome, and a small SphereLight in view in front of the floor; "
          "rays that meet a light surface add its emission and go on (the dome reaches the asset and the floor through "
          "the panel, the floor shows behind the bulb)", b_lights_in_the_way),
+    Case("rna_many_lights", "40 lights around the asset on a floor: 28 small SphereLights hidden from the camera and 12 point "
+         "lights, powers over 30x: every light's share of the asset's and the floor's light, whether an implementation "
+         "samples every light or draws some (spec/renderer.md#light-selection)", b_many_lights),
     Case("rna_disk_cylinder_lights", "a tilted DiskLight, normalized, scaled into an ellipse, and a CylinderLight in front of "
          "the asset, its side in view: one-sided disk, the tube emitting outward and hit only from outside", b_disk_cylinder_lights),
     Case("rna_self_shadow", "lone constant-transport asset lit from the side: the shadowed/unshadowed branch is chosen by "

@@ -1,0 +1,205 @@
+"""Light selection (spec/renderer.md#light-selection): a kind of light with more than ``light_draws`` lights is sampled
+by that many stratified draws per vertex, by importance. The importance terms and probabilities against closed forms,
+the draws against their probabilities, scenes of many lights against the same scenes with every light sampled (meshes
+and the three neural kinds), and the light samples per vertex bounded whatever the number of lights."""
+
+import argparse
+
+import numpy as np
+import pytest
+
+import nasset_reference_renderer.light_selection as selection
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.cli import add_args
+from nasset_reference_renderer.light_selection import LightSelection, importance_terms
+from nasset_reference_renderer.lights import DiskLight, DistantLight, DomeLight, PointLight, RectLight, SphereLight
+from nasset_reference_renderer.sampling import luminance
+from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset
+from nasset_sdk.errors import UsageError
+from nasset_sdk.examples import example_builder
+from tests.renderer.render_stats import assert_renders_agree, render_finite
+from tests.stats import chi2_test
+
+GREY = np.array([2.0, 2.0, 2.0])
+
+
+def _importance(light, x):
+    c, a, b = importance_terms(light)
+    return a if c is None else a / max(float(np.sum((np.asarray(x) - c) ** 2)), b)
+
+
+def test_importance_is_the_irradiance_bound():
+    """Far from a light its importance is the irradiance it gives at normal incidence; near it, capped."""
+    x = np.array([0.0, 0.0, 4.0])  # 4 m from lights at the origin
+    assert _importance(PointLight((0, 0, 0), GREY), x) == pytest.approx(2.0 / 16)
+    spot = PointLight((0, 0, 0), GREY, axis=(0, 0, 1), cone_deg=20.0)  # as a point light: it aims at the scene
+    assert _importance(spot, x) == pytest.approx(2.0 / 16)
+    assert _importance(SphereLight((0, 0, 0), 0.5, GREY), x) == pytest.approx(np.pi * 2.0 * 0.25 / 16)
+    assert _importance(SphereLight((0, 0, 0), 0.5, GREY), (0, 0, 0.1)) == pytest.approx(np.pi * 2.0)  # inside: pi L
+    rect = RectLight((0, 0, 0), (1.0, 0, 0), (0, 0.5, 0), GREY)  # edge vectors: a 1 x 0.5 rectangle
+    assert _importance(rect, x) == pytest.approx(2.0 * 0.5 / 16)
+    disk = DiskLight((0, 0, 0), (0.5, 0, 0), (0, 0.5, 0), GREY)
+    assert _importance(disk, x) == pytest.approx(2.0 * np.pi * 0.25 / 16)
+    assert _importance(DistantLight((0, 1, 0), GREY, 0.0), x) == pytest.approx(2.0)
+    assert _importance(DomeLight(GREY), x) == pytest.approx(np.pi * 2.0)
+    img = np.zeros((64, 8, 3))  # a lat-long image: rows weighted by their solid angle (the lower half holds half)
+    img[32:] = 4.0
+    assert _importance(DomeLight((1, 1, 1), img), x) == pytest.approx(np.pi * 2.0, rel=1e-3)
+    red = np.array([1.0, 0.0, 0.0])
+    assert _importance(PointLight((0, 0, 0), red), x) == pytest.approx(luminance(red) / 16)
+    # zero, negative and non-finite lights have no importance; a light on the point is finite
+    assert importance_terms(PointLight((0, 0, 0), np.zeros(3)))[1] == 0.0
+    assert importance_terms(PointLight((0, 0, 0), np.array([np.inf, 0, 0])))[1] == 0.0
+    assert importance_terms(PointLight((np.nan, 0, 0), GREY))[1] == 0.0
+    assert np.isfinite(_importance(PointLight((0, 0, 0), GREY), (0, 0, 0)))
+
+
+def _kind(lights):
+    sel = LightSelection(lights, list(range(len(lights))), draws=2)
+    assert sel.any_drawn
+    return sel, sel.kinds[0]
+
+
+def test_probabilities_follow_importance_with_a_uniform_share():
+    lights = [PointLight((0, 0, 0), GREY), PointLight((10, 0, 0), GREY), PointLight((0, 10, 0), np.zeros(3))]
+    sel, kind = _kind(lights)
+    x = np.array([[0.0, 0.0, 1.0], [10.0, 0.0, 1.0], [5.0, 5.0, 1.0]])
+    prob = kind.probabilities(x)
+    np.testing.assert_allclose(prob.sum(1), 1.0)
+    a = selection.UNIFORM_SHARE / 3
+    imp = np.array([[_importance(light, xi) for light in lights] for xi in x])
+    np.testing.assert_allclose(prob, a + (1 - selection.UNIFORM_SHARE) * imp / imp.sum(1, keepdims=True))
+    assert prob[0, 0] > 0.9 and prob[1, 1] > 0.9  # the near light
+    assert (prob >= a * (1 - 1e-12)).all()  # every light keeps its share: none is never drawn
+    # every importance zero (or the points not finite): uniform
+    zero = [PointLight((i, 0, 0), np.zeros(3)) for i in range(3)]
+    np.testing.assert_allclose(_kind(zero)[1].probabilities(x), 1 / 3)
+    np.testing.assert_allclose(kind.probabilities(np.array([[np.nan, 0.0, 0.0]])), 1 / 3)
+    # count: draws x P at each point, 1 for lights sampled every time, 0 for lights not sampled at vertices
+    np.testing.assert_allclose(sel.count(1, x), 2 * prob[:, 1])
+    few = LightSelection(lights[:2], [0], draws=2)
+    assert (few.count(0, x) == 1).all() and (few.count(1, x) == 0).all()
+    both = sel.counts([(0, np.array([2, 0])), (1, np.array([1]))], x)
+    np.testing.assert_allclose(both[0], 2 * prob[[2, 0], 0])
+    np.testing.assert_allclose(both[1], 2 * prob[[1], 1])
+
+
+def test_few_lights_are_each_sampled_once_in_order():
+    """At most ``draws`` lights of a kind: every light, in the scene's order, with the random numbers the integrator
+    always drew for it (so images of such scenes do not change)."""
+    lights = [PointLight((0, 1, 0), np.full(3, v)) for v in (1.0, 2.0, 3.0)] + [SphereLight((0, 3, 0), 0.5, GREY)]
+    sel = LightSelection(lights, [0, 1, 2, 3])
+    assert not sel.any_drawn
+    p = np.zeros((6, 3))
+    got = list(sel.samples(p, np.random.default_rng(4)))
+    rng = np.random.default_rng(4)
+    want = [(light.delta, *light.sample(p, rng.random((6, 2)))) for light in lights]
+    assert len(got) == 4
+    for g, w in zip(got, want, strict=True):
+        assert g[0] == w[0]
+        for a, b in zip(g[1:], w[1:], strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert len(list(sel.samples(p, np.random.default_rng(4), delta_only=True))) == 3
+
+
+def test_draws_are_stratified_by_probability():
+    """20 point lights around a point, 8 draws per vertex: at every vertex each light is drawn floor(8 P_k) or
+    ceil(8 P_k) times (the strata), the counts over vertices follow 8 P_k (chi-squared), and a draw of light k
+    carries pdf 8 P_k. Lights are told apart by their direction from the vertex."""
+    rng = np.random.default_rng(0)
+    centres = rng.normal(size=(20, 3)) * np.linspace(0.3, 3.0, 20)[:, None]
+    lights = [PointLight(c, GREY * (1 + i % 3)) for i, c in enumerate(centres)]
+    sel = LightSelection(lights, list(range(20)))
+    n, d = 3000, selection.DRAWS
+    x = np.zeros((n, 3))
+    p_k = sel.kinds[0].probabilities(x[:1])[0]
+    draws = list(sel.samples(x, np.random.default_rng(1)))
+    assert len(draws) == d and all(g[0] for g in draws)  # delta lights
+    dirs = centres / np.linalg.norm(centres, axis=1, keepdims=True)
+    k = np.stack([np.argmax(g[1] @ dirs.T, 1) for g in draws], 1)  # [n, d] light of each draw
+    for t, g in enumerate(draws):
+        np.testing.assert_allclose(g[1], dirs[k[:, t]], atol=1e-12)
+        np.testing.assert_allclose(g[4], d * p_k[k[:, t]])
+    per_vertex = np.stack([(k == j).sum(1) for j in range(20)], 1)  # [n, 20]
+    assert (per_vertex >= np.floor(d * p_k - 1e-9)).all() and (per_vertex <= np.ceil(d * p_k + 1e-9)).all()
+    assert chi2_test(per_vertex.sum(0), p_k)[2] > 1e-4
+
+
+def test_delta_and_other_lights_are_drawn_apart():
+    lights = [PointLight((i, 1.0, 0.0), GREY) for i in range(10)] + [SphereLight((i, 3.0, 0.0), 0.2, GREY) for i in range(3)]
+    sel = LightSelection(lights, list(range(13)))
+    got = list(sel.samples(np.zeros((5, 3)), np.random.default_rng(1)))
+    # the three spheres each once, then the draws among the ten point lights
+    assert [g[0] for g in got] == [False] * 3 + [True] * selection.DRAWS
+    assert (sel.count(10, np.zeros((5, 3))) == 1).all()
+    assert [g[0] for g in sel.samples(np.zeros((5, 3)), np.random.default_rng(1), delta_only=True)] == \
+        [True] * selection.DRAWS
+
+
+def _many_lights(b, rng, spheres, points, *, near=(0.0, 0.0, 0.0), spread=3.0):
+    c = np.asarray(near)
+    for i in range(spheres):
+        p = c + (rng.uniform(-spread, spread), rng.uniform(0.6, 1.5), rng.uniform(-spread, spread))
+        b.sphere_light(f"S{i}", p, rng.uniform(0.1, 0.3), rng.uniform(0.5, 3.0), color=tuple(rng.uniform(0.3, 1, 3)))
+    for i in range(points):
+        p = c + (rng.uniform(-spread, spread), rng.uniform(0.5, 2.0), rng.uniform(-spread, spread))
+        b.sphere_light(f"P{i}", p, 0.0, rng.uniform(0.2, 3.0))
+
+
+def _every_light_and_drawn(path, **kw):
+    """(render with every light sampled, render with the default draws): independent seeds."""
+    return render_finite(path, seed=1, light_draws=0, **kw), render_finite(path, seed=2, **kw)
+
+
+def test_many_lights_over_a_glossy_floor(tmp_path):
+    """64 sphere lights and 12 point lights over a glossy floor beside a ball: the drawn lights give the image of
+    every light sampled, and a vertex traces DRAWS shadow rays per kind, not one per light. The floor reflects the
+    sphere lights through both techniques, so the MIS weight at a BSDF sample that meets a light must count that
+    light's draws: with the light's own pdf instead (the count left out) the image means are 15-17 standard errors
+    apart."""
+    b = SceneBuilder()
+    b.camera((0, 2.5, 5), (0, 0, 0), focal=30)
+    b.quad("Floor", (0, 0, 0), 12.0, diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9), roughness=0.3)
+    b.sphere_mesh("Ball", (0.5, 0.5, -1), 0.5, diffuse=(0.5, 0.5, 0.5))
+    _many_lights(b, np.random.default_rng(1), 64, 12)
+    path = b.write(tmp_path / "s.usda")
+    every, drawn = _every_light_and_drawn(path, width=32, height=32, spp=64, max_depth=2)
+    assert drawn.image.mean() > 0.1
+    assert_renders_agree(every, drawn, z_mean=4.5, z_pixel=4.5, pixel_fraction=0.01)
+    rays = [r.stats.rays / r.stats.camera_samples for r in (every, drawn)]
+    assert rays[1] < 0.3 * rays[0], rays
+
+
+@pytest.mark.parametrize("kind", ["rna", "neupress", "8dna"])
+def test_many_lights_on_neural_assets(tmp_path, kind):
+    """Each neural kind's light samples (rna rows, the neupress lobe's MIS, 8dna's at x_o and at u_i) under 12 sphere
+    lights and 10 point lights near the asset, with a floor for continuations: drawn lights give the image of every
+    light sampled."""
+    if kind == "rna":
+        asset = random_rna_asset(tmp_path / "a.usdc", seed=3)
+    else:
+        asset = example_builder(kind, size="tiny", seed=2).write(tmp_path / "a.usdc")
+    b = SceneBuilder()
+    b.camera((0, 0.6, 3.0), (0, 0, 0), focal=45)
+    b.quad("Floor", (0, -0.6, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
+    b.asset("Obj", asset)
+    _many_lights(b, np.random.default_rng(2), 12, 10, spread=1.5)
+    path = b.write(tmp_path / "s.usda")
+    every, drawn = _every_light_and_drawn(path, width=20, height=20, spp=32, max_depth=3)
+    assert drawn.image.mean() > 0.01
+    assert_renders_agree(every, drawn, z_mean=4.5, z_pixel=4.5, pixel_fraction=0.02)
+
+
+def test_light_draws_setting(tmp_path):
+    """``light_draws`` is checked like the other settings; the CLI's default is the renderer's."""
+    b = SceneBuilder()
+    b.camera((0, 2, 3), (0, 0, 0))
+    b.quad("Floor", (0, 0, 0), 4.0)
+    _many_lights(b, np.random.default_rng(0), 10, 0)
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    for bad in (-1, selection.MAX_DRAWS + 1, 2.0, True):
+        with pytest.raises(UsageError, match="light_draws"):
+            render(scene, RenderSettings(width=4, height=4, spp=1, light_draws=bad))
+    p = argparse.ArgumentParser()
+    add_args(p)
+    assert p.parse_args(["s.usda", "-o", "x.exr"]).light_draws == selection.DRAWS == RenderSettings().light_draws
