@@ -24,12 +24,15 @@ from .bsdf import bsdf_eval, bsdf_sample
 from .film import MAX_SPP, Film, check_image_size, pixel_offsets
 from .light_selection import DRAWS as LIGHT_DRAWS
 from .light_selection import MAX_DRAWS, LightSelection
-from .lights import MeshLight
+from .lights import MeshLight, rays_near_shapes
 from .plan import RenderPlan, make_plan
 from .sampling import barycentric, cross3, dot, face_normals, frame, normalize, power_heuristic, to_local, to_world
 from .shaders import NeuralShading, shader_class, variant_of
 from .shaders.common import max3, unique
 from .shadow import aim_shadow
+
+#: with more light shapes than this, a ray batch tests each shape only on the rays passing near it (lights.rays_near_shapes)
+CULLED_LIGHT_SHAPES = 8
 
 
 @dataclass
@@ -255,20 +258,32 @@ class PathIntegrator:
         occlude nothing (spec/renderer.md#light-surfaces), but for an opaque one (``nasset:opaqueSurface``), where the
         ray ends: only the surfaces up to the nearest opaque one count. ``camera`` rays do not see the lights hidden from
         them. Returns [n] bool: the rays that ended on an opaque light surface."""
-        met = []
+        met = []  # (light, opaque, rays tested (None: all), their t, their Le)
         t_end = np.array(t_geometry, np.float64)
-        for k, light in enumerate(self.scene.lights):
-            if light.area and (not camera or light.camera_visible):
-                tl, le = light.intersect(o, d)
-                met.append((k, light.opaque, tl, le))
-                if light.opaque:
+        shapes = [(k, light) for k, light in enumerate(self.scene.lights) if light.area and (not camera or light.camera_visible)]
+        near = [None] * len(shapes)
+        if len(shapes) > CULLED_LIGHT_SHAPES:  # many lights: each tests only the rays that pass near it
+            near = rays_near_shapes([light.bounding_sphere() for _, light in shapes], o, d, t_end)
+        for (k, light), r in zip(shapes, near, strict=True):
+            if r is not None and not len(r):
+                continue
+            tl, le = light.intersect(o, d) if r is None else light.intersect(o[r], d[r])
+            met.append((k, light.opaque, r, tl, le))
+            if light.opaque:
+                if r is None:
                     t_end = np.minimum(t_end, tl)
-        hits = [(k, le, np.nonzero((tl <= t_end) & (tl < t_geometry) if opaque else tl < t_end)[0]) for k, opaque, tl, le in met]
-        hits = [(k, le, m) for k, le, m in hits if len(m)]
+                else:
+                    t_end[r] = np.minimum(t_end[r], tl)
+        hits = []
+        for k, opaque, r, tl, le in met:
+            te, tg = (t_end, t_geometry) if r is None else (t_end[r], t_geometry[r])
+            sel = np.nonzero((tl <= te) & (tl < tg) if opaque else tl < te)[0]
+            if len(sel):
+                hits.append((k, le[sel], sel if r is None else r[sel]))
         counts = self.light_choice.counts([(k, m) for k, _, m in hits], o)
         for (k, le, m), count in zip(hits, counts, strict=True):
             w = self._mis_light(k, prev_pdf[m], specular[m], o[m], d[m], no_mis[m], count)
-            L[idx[m]] += beta[m] * le[m] * w[:, None]
+            L[idx[m]] += beta[m] * le * w[:, None]
         return t_end < t_geometry
 
     def _mesh_light_mis(self, inst, prev_pdf, specular, o, d):

@@ -65,6 +65,10 @@ class Light:
         """(t [N], Le [N,3]) of the light's own shape; t = inf on a miss."""
         return np.full(len(o), INF), np.zeros((len(o), 3))
 
+    def bounding_sphere(self):
+        """(centre [3], radius) of a sphere holding the light's shape, or None (no shape, or not bounded)."""
+        return None
+
     def power_is_zero(self) -> bool:
         return False
 
@@ -210,6 +214,9 @@ class SphereLight(Light):
         t = self._hit(o, d)
         return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
 
+    def bounding_sphere(self):
+        return self.c, self.r
+
 
 class _SurfaceLight(Light):
     """An analytic light surface sampled uniformly by area (``A``, radiance ``L``): subclasses give its points
@@ -258,6 +265,9 @@ class CylinderLight(_SurfaceLight):
         self.L = np.asarray(radiance, np.float64)
         self.prim = prim
 
+    def bounding_sphere(self):
+        return self.c, float(np.hypot(self.r, 0.5 * self.len))
+
     def _point(self, u):
         phi = 2.0 * np.pi * u[:, 1:2]
         return self.c + (u[:, 0:1] - 0.5) * self.len * self.a + self.r * (np.cos(phi) * self.u + np.sin(phi) * self.v)
@@ -290,12 +300,22 @@ class RectLight(_SurfaceLight):
         self.L = np.asarray(radiance, np.float64)
         self.prim = prim
 
+    def bounding_sphere(self):
+        return self.c, 0.5 * float(max(np.linalg.norm(self.ex + self.ey), np.linalg.norm(self.ex - self.ey)))  # the corners
+
     def _point(self, u):
         """Points [N, 3] on the light, uniform by area, for samples ``u`` [N, 2]."""
         return self.c + (u[:, 0:1] - 0.5) * self.ex + (u[:, 1:2] - 0.5) * self.ey
 
     def _inside(self, q):
-        """True where ``q`` [N, 3] (from the centre, in the light's plane) lies on the light."""
+        """True where ``q`` [N, 3] (from the centre, in the light's plane) lies on the light: q = a e_x + b e_y with |a|,
+        |b| <= 1/2. Edges that are not orthogonal (a sheared prim) take the dual basis, so that what rays hit is the
+        parallelogram the light's samples cover."""
+        exy = self.ex @ self.ey
+        if abs(exy) > 1e-12 * np.sqrt((self.ex @ self.ex) * (self.ey @ self.ey)):
+            g = np.array([[self.ex @ self.ex, exy], [exy, self.ey @ self.ey]])
+            ab = np.stack([q @ self.ex, q @ self.ey], 1) @ np.linalg.inv(g)
+            return (np.abs(ab[:, 0]) <= 0.5) & (np.abs(ab[:, 1]) <= 0.5)
         sx = (q @ self.ex) / (self.ex @ self.ex)
         sy = (q @ self.ey) / (self.ey @ self.ey)
         return (np.abs(sx) <= 0.5) & (np.abs(sy) <= 0.5)
@@ -323,6 +343,10 @@ class DiskLight(RectLight):
         g = np.array([[self.ex @ self.ex, self.ex @ self.ey], [self.ex @ self.ey, self.ey @ self.ey]])
         self.g_inv = np.linalg.inv(g) if abs(np.linalg.det(g)) > 1e-300 else np.zeros((2, 2))
 
+    def bounding_sphere(self):
+        # a e_x + b e_y with a^2 + b^2 <= 1 lies within sqrt(|e_x|^2 + |e_y|^2) of the centre (Cauchy-Schwarz)
+        return self.c, float(np.sqrt(self.ex @ self.ex + self.ey @ self.ey))
+
     def _point(self, u):
         q = square_to_uniform_disk(u)  # uniform on the unit disk, so on its affine image
         return self.c + q[:, 0:1] * self.ex + q[:, 1:2] * self.ey
@@ -330,6 +354,51 @@ class DiskLight(RectLight):
     def _inside(self, q):
         ab = np.stack([q @ self.ex, q @ self.ey], 1) @ self.g_inv  # q = a e_x + b e_y
         return (ab * ab).sum(1) <= 1.0
+
+
+#: rays x light shapes tested at once by :func:`rays_near_shapes` (bounds its matrices' memory)
+_CULL_CHUNK = 1 << 21
+
+
+def rays_near_shapes(spheres: list, o: np.ndarray, d: np.ndarray, t_end: np.ndarray) -> list:
+    """For each bounding sphere (centre [3], radius) of ``spheres`` (None: not bounded), the rows [k] of the rays ``o``,
+    ``d`` [n,3] that may meet it before ``t_end`` [n] (every row where None): the rays whose line passes within the
+    radius of the centre and whose segment (0, t_end) reaches the sphere's span along the ray. Conservative: a slack
+    of 1e-9 of the squared coordinates covers the rounding of the expansion |c - o|^2 = |c|^2 - 2 o.c + |o|^2, which
+    needs no [n, m, 3] array, so the exact test of the shape on these rows finds every hit."""
+    n = len(o)
+    out: list = [None] * len(spheres)
+    idx = [i for i, sph in enumerate(spheres) if sph is not None]
+    if not idx:
+        return [np.arange(n)] * len(spheres)
+    c = np.array([spheres[i][0] for i in idx], np.float64)
+    r = np.array([spheres[i][1] for i in idx], np.float64)
+    origin = c.mean(0)  # about the shapes' mean centre: the expansion keeps its precision far from the world's origin
+    c = c - origin
+    cc = np.einsum("mk,mk->m", c, c)
+    parts: list = [[] for _ in idx]
+    step = max(1, _CULL_CHUNK // len(idx))
+    for s in range(0, n, step):
+        oo, dd = o[s:s + step] - origin, d[s:s + step]
+        o2, d2 = np.einsum("nk,nk->n", oo, oo), np.maximum(np.einsum("nk,nk->n", dd, dd), 1e-300)
+        vv = cc[None] - 2.0 * (oo @ c.T) + o2[:, None]  # |c - o|^2
+        vd = dd @ c.T - np.einsum("nk,nk->n", dd, oo)[:, None]  # (c - o).d
+        slack = 1e-9 * (cc[None] + o2[:, None] + r * r)
+        near = vv - vd * vd / d2[:, None] <= r * r + slack
+        t_c, half = vd / d2[:, None], (r + np.sqrt(slack)) / np.sqrt(d2)[:, None]
+        near &= (t_c + half > 0) & (t_c - half < t_end[s:s + step, None])
+        rows, cols = np.nonzero(near)
+        order = np.argsort(cols, kind="stable")
+        rows, cols = rows[order] + s, cols[order]
+        ends = np.cumsum(np.bincount(cols, minlength=len(idx)))
+        for j, (a, b) in enumerate(zip(np.concatenate([[0], ends[:-1]]), ends, strict=True)):
+            parts[j].append(rows[a:b])
+    for j, i in enumerate(idx):
+        out[i] = np.concatenate(parts[j])
+    for i, sph in enumerate(spheres):
+        if sph is None:
+            out[i] = np.arange(n)
+    return out
 
 
 #: Emissive meshes with at most this many triangles are sampled as lights (``MeshLight.pdf`` tests each triangle).

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from nasset_reference_renderer import RenderSettings, load_scene, render
-from nasset_reference_renderer.lights import DiskLight
+from nasset_reference_renderer.lights import DiskLight, RectLight
 from nasset_reference_renderer.testscenes import SceneBuilder
 from tests.stats import stat_seed
 
@@ -32,6 +32,24 @@ def test_disk_light_samples_integrate_the_irradiance_and_match_its_pdf(sx, sy):
     assert abs(e_mc / e_q - 1) < 0.01
     _, _, li_b, pdf_b = light.sample(np.tile([0.0, 2.0, 0.0], (100, 1)), rng.random((100, 2)))
     assert not li_b.any() and not pdf_b.any()  # nothing above it
+
+
+def test_sheared_rect_light_is_hit_where_it_is_sampled():
+    """A RectLight under a shear (edges not orthogonal) is the parallelogram its samples cover: every sampled direction
+    hits it with the sample's own pdf (rays tested the two slabs across the edges before: the parallelogram's sharp
+    corners were never hit, a sample there had pdf 0 as a hit, and rays beyond its obtuse corners hit a light that was
+    not there)."""
+    light = RectLight([0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.8, 0.0, -0.6], [1.0, 1.0, 1.0])  # 37 degrees apart, emits down
+    rng = np.random.default_rng(stat_seed(32))
+    p = rng.uniform(-1.0, 1.0, (20_000, 3)) * [1.0, 0.0, 1.0]
+    wi, _, li, pdf = light.sample(p, rng.random((len(p), 2)))
+    assert (pdf > 0).all()
+    np.testing.assert_allclose(light.pdf(p, wi), pdf, rtol=1e-9)
+    # a point just beyond an obtuse corner is not on the light
+    corner = light.c + 0.5 * light.ex - 0.5 * light.ey
+    beyond = corner + 0.05 * (light.ex - light.ey) / np.linalg.norm(light.ex - light.ey)
+    t, _ = light.intersect(beyond[None] - [0.0, 1.0, 0.0], np.array([[0.0, 1.0, 0.0]]))
+    assert np.isinf(t).all()
 
 
 def test_floor_under_a_disk_light_matches_the_closed_form(tmp_path):

@@ -12,7 +12,16 @@ import nasset_reference_renderer.light_selection as selection
 from nasset_reference_renderer import RenderSettings, load_scene, render
 from nasset_reference_renderer.cli import add_args
 from nasset_reference_renderer.light_selection import LightSelection, importance_terms
-from nasset_reference_renderer.lights import DiskLight, DistantLight, DomeLight, PointLight, RectLight, SphereLight
+from nasset_reference_renderer.lights import (
+    CylinderLight,
+    DiskLight,
+    DistantLight,
+    DomeLight,
+    PointLight,
+    RectLight,
+    SphereLight,
+    rays_near_shapes,
+)
 from nasset_reference_renderer.sampling import luminance
 from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset
 from nasset_sdk.errors import UsageError
@@ -203,3 +212,33 @@ def test_light_draws_setting(tmp_path):
     p = argparse.ArgumentParser()
     add_args(p)
     assert p.parse_args(["s.usda", "-o", "x.exr"]).light_draws == selection.DRAWS == RenderSettings().light_draws
+
+
+@pytest.mark.parametrize("offset, size", [(0.0, 1.0), (1e4, 1e-2), (-3e3, 30.0)])
+def test_rays_near_shapes_keep_every_hit(offset, size):
+    """The culling of light shapes by bounding spheres (many light surfaces) keeps every ray that meets a shape before
+    t_end, far from the origin and at small and large scales too, and culls most rays of a scattered batch."""
+    rng = np.random.default_rng(int(abs(offset)) + 1)
+    c = lambda: offset + size * rng.uniform(-2, 2, 3)  # noqa: E731
+    lights = []
+    for _ in range(12):
+        r = size * rng.uniform(0.05, 0.4)
+        ax = rng.normal(size=3)
+        lights += [SphereLight(c(), r, GREY), RectLight(c(), size * rng.normal(size=3), size * rng.normal(size=3), GREY),
+                   DiskLight(c(), size * rng.normal(size=3), size * rng.normal(size=3), GREY),
+                   CylinderLight(c(), ax, r, size * rng.uniform(0.2, 2.0), GREY)]
+    n = 4000
+    o = offset + size * rng.uniform(-3, 3, (n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)  # unit directions, as the renderer's rays
+    t_end = np.where(rng.random(n) < 0.3, np.inf, rng.uniform(0.0, 3.0, n))
+    near = rays_near_shapes([light.bounding_sphere() for light in lights], o, d, t_end)
+    kept = hits = 0
+    for light, rows in zip(lights, near, strict=True):
+        t, _ = light.intersect(o, d)
+        hit = np.nonzero(t < t_end)[0]
+        assert set(hit) <= set(rows.tolist()), type(light).__name__
+        kept, hits = kept + len(rows), hits + len(hit)
+    assert hits > 50 and kept < 0.5 * n * len(lights)
+    # a shape without bounds is tested on every ray
+    assert (rays_near_shapes([None, lights[0].bounding_sphere()], o, d, t_end)[0] == np.arange(n)).all()
