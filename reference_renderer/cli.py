@@ -89,7 +89,10 @@ def run(args) -> int:
                      batch=args.batch, neupress_sampling=settings.neupress_sampling, prt=settings.prt,
                      eightdna_sampling=settings.eightdna_sampling, rna_continuation=settings.rna_continuation)
     if args.explain:
+        from .light_selection import LightSelection
+
         print(plan.explain())
+        print("  " + LightSelection(scene.lights, [k for k, on in enumerate(plan.light_nee) if on], settings.light_draws).describe())
     prepare_assets(scene, plan, settings)
     result = render(scene, settings, plan=plan)
     write_exr(args.output, result.image)

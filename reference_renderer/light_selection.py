@@ -130,6 +130,17 @@ class LightSelection:
     def any_drawn(self) -> bool:
         return bool(self.kinds)
 
+    def describe(self) -> str:
+        """One line for ``nasset render --explain``: how the vertices' light samples are chosen."""
+        if not self.kinds:
+            return f"light selection: every light sampled at every vertex ({len(self.nee)} with shadow rays)"
+        parts = [f"{len(k.kind)} {'delta lights' if k.delta else 'lights with a surface or solid angle'}: "
+                 f"{self.draws} stratified draws per vertex by importance" for k in self.kinds]
+        rest = len(self.nee) - sum(len(k.kind) for k in self.kinds)
+        if rest:
+            parts.append(f"{rest} others: each sampled at every vertex")
+        return "light selection (spec/renderer.md#light-selection): " + "; ".join(parts)
+
     def count(self, k: int, p: np.ndarray) -> np.ndarray:
         """[n] expected number of samples of light ``k`` per vertex at points ``p`` [n,3]: 1 where every light of
         its kind is sampled, ``draws P_k(p)`` where its kind is drawn, 0 for a light not sampled at vertices."""

@@ -199,6 +199,22 @@ def test_many_lights_on_neural_assets(tmp_path, kind):
     assert_renders_agree(every, drawn, z_mean=4.5, z_pixel=4.5, pixel_fraction=0.02)
 
 
+def test_explain_says_how_lights_are_chosen(tmp_path, capsys):
+    from nasset_sdk.cli import main as nasset
+
+    b = SceneBuilder()
+    b.camera((0, 2, 3), (0, 0, 0))
+    b.quad("Floor", (0, 0, 0), 4.0)
+    _many_lights(b, np.random.default_rng(0), 10, 3)
+    path = b.write(tmp_path / "s.usda")
+    args = [path, "-o", str(tmp_path / "o.exr"), "--width", "4", "--height", "4", "--spp", "1", "--explain", "--quiet"]
+    assert nasset(["render", *args]) == 0
+    out = capsys.readouterr().out
+    assert "10 lights with a surface or solid angle: 8 stratified draws per vertex" in out and "3 others" in out
+    assert nasset(["render", *args, "--light-draws", "0"]) == 0
+    assert "every light sampled at every vertex (13 with shadow rays)" in capsys.readouterr().out
+
+
 def test_light_draws_setting(tmp_path):
     """``light_draws`` is checked like the other settings; the CLI's default is the renderer's."""
     b = SceneBuilder()
