@@ -425,13 +425,14 @@ def draw(sampler) -> tuple:
     return u_ch, z, sampler.next_2d(), sampler.next_2d(), sampler.next_1d(), sampler.next_2d()
 
 
-def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on, lights=None) -> dict:
+def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on, lights=None, emitters=None) -> dict:
     """The 8dna estimator at asset hits ``on`` (spec/renderer.md#8dna) for the ``nasset_path`` integrator.
 
     rnd: the vertex's random numbers (:func:`draw`); si: the hit; wo_world: -ray.d; sid: the hit shape's
     registry id (UInt32); assets: (index, EightDnaJit) of the scene's 8dna assets; tab, k: the integrator's
     instance tables and instance index; x, n, wo: the object-space inputs; lights: what shadow rays pass through, light
-    surfaces and absent cut-outs (:class:`.plugins.PassThrough`; None: every shape blocks them). Returns 'L' (Spectrum: direct lobe
+    surfaces and absent cut-outs (:class:`.plugins.PassThrough`; None: every shape blocks them); emitters: what picks a
+    light sample's emitter (a :class:`.light_choice.EmitterChoice`; None: the scene). Returns 'L' (Spectrum: direct lobe
     at x_o plus the light sample at u_i, to be multiplied by the path throughput), the continuation 'd'
     (world, unit), 'from_u' (Bool: it leaves the world point 'origin' = u_i M, else x_o), 'weight' (Spectrum
     throughput factor; 0 where a GGX continuation passes through the asset: 'weight_passed'), 'pdf' (its world
@@ -465,7 +466,8 @@ def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on, ligh
         return active & bt.is_valid() & (dr.reinterpret_array(mi.UInt32, bt.shape) == sid)
 
     # direct lobe at x_o: an ordinary light sample (the asset occludes; w_i on the viewer's side)
-    ds_x, ew_x = scene.sample_emitter_direction(si, u_ex, lights is None, on)
+    emitters = scene if emitters is None else emitters
+    ds_x, ew_x = emitters.sample_emitter_direction(si, u_ex, lights is None, on)
     if lights is not None:  # the shadow ray passes through light surfaces (spec/renderer.md#light-surfaces)
         blocked, _ = _occluder(mi, scene, si.spawn_ray_to(ds_x.p), mi.UInt32(0), mi.UInt32(0), mi.UInt32(0),
                                on & (ds_x.pdf != 0), lights)
@@ -498,7 +500,7 @@ def vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x, n, wo, on, ligh
     u_w = mi.Point3f(_apply(mi, fwd, f3["u"], point=True))
     it = dr.zeros(mi.Interaction3f)
     it.p, it.time, it.wavelengths = u_w, si.time, si.wavelengths
-    ds_u, ew_u = scene.sample_emitter_direction(it, u_eu, False, good_u)
+    ds_u, ew_u = emitters.sample_emitter_direction(it, u_eu, False, good_u)
     wl_u = obj(ds_u.d)
     ok_u = good_u & (ds_u.pdf != 0) & (dr.dot(f3["nu"], wl_u) > 0)
     sh, _ = _occluder(mi, scene, it.spawn_ray_to(ds_u.p), sid, mi.UInt32(0), mi.UInt32(0), ok_u, lights)

@@ -37,6 +37,7 @@ from . import eightdna
 from . import prt as prt_mode
 from .deferred import LightQueue
 from .eightdna import EightDnaJit
+from .light_choice import emitter_choice
 from .neupress import NeupressJit
 from .rna import RnaJit
 
@@ -158,6 +159,7 @@ def register(mi) -> None:
             split_scenes(mi, scene)  # built here, outside the symbolic loop whose rays use them
             hidden = shapes_named(mi, scene, HIDDEN_PREFIX)  # light surfaces camera rays pass through (None: none)
             lights = PassThrough.of(mi, scene)  # light surfaces and absent cut-outs rays pass through (None: none)
+            emitters = emitter_choice(mi, scene)  # the scene itself (Mitsuba's choice) unless it has many emitters
             env = scene.environment()
             env_hidden = env is not None and not getattr(env, "camera_visible", True)  # its camera view: eval_camera
             prt = prt_mode.tables(mi, scene, assets, tab) if self.prt else None  # PRT mode: neupress by .prt
@@ -188,7 +190,7 @@ def register(mi) -> None:
             queue = LightQueue(mi, dr.width(ray)) if self.defer and shaded else None
 
             while dr.hint(active, max_iterations=self.max_depth + 1, label="nasset_path"):
-                emission = _light_emission(mi, scene, prev_si, prev_pdf, prev_delta)  # MIS-weighted, from prev_si
+                emission = _light_emission(mi, scene, emitters, prev_si, prev_pdf, prev_delta)  # MIS-weighted, from prev_si
                 si, passed, via_lights = _trace_onward(mi, scene, ray, ignore, ign_lo, ign_hi, active, lights, hidden,
                                                        depth == 0, emission)
                 if dr.hint(near, mode="scalar"):
@@ -232,7 +234,7 @@ def register(mi) -> None:
                     moved, p_f = _fetch_point(mi, tab, k, si, on_asset & ~on_8)
                     si_l = mi.SurfaceInteraction3f(si)
                     si_l.p = p_f
-                ds_em, em_weight = scene.sample_emitter_direction(si_l, sampler.next_2d(), False, active_next)
+                ds_em, em_weight = emitters.sample_emitter_direction(si_l, sampler.next_2d(), False, active_next)
                 active_em = active_next & (ds_em.pdf != 0.0) & ~on_8
                 ray_em = si.spawn_ray_to(ds_em.p)
                 if dr.hint(near, mode="scalar"):
@@ -260,7 +262,8 @@ def register(mi) -> None:
                     d8, pdf8, alive8, from_u8, origin8 = mi.Vector3f(0), mi.Float(0), mi.Bool(False), mi.Bool(False), mi.Point3f(0)
                     if on_8:  # symbolic, like the transport kinds: the flows run only in packets with an 8dna lane
                         L, t_un, t_sh, d8, pdf8, alive8, from_u8, origin8 = _eightdna_vertex(
-                            mi, scene, rnd8, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh, lights)
+                            mi, scene, rnd8, si, -ray.d, sid, eight, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh, lights,
+                            emitters)
 
                 # continuation
                 bs, bsdf_weight = bsdf.sample(ctx, si, sampler.next_1d(), sampler.next_2d(), on_plain)
@@ -486,12 +489,13 @@ class PassThrough:
         return seen if hidden is None else seen & ~(camera & _on(self.mi, si, hidden))
 
 
-def _light_emission(mi, scene, prev_si, prev_pdf, prev_delta):
+def _light_emission(mi, scene, emitters, prev_si, prev_pdf, prev_delta):
     """``emission(si, mask)``: the radiance of the emitter hit at ``si`` toward the previous vertex ``prev_si``, times
-    the MIS weight of a continuation of pdf ``prev_pdf`` (1 after a delta or camera vertex, ``prev_delta``)."""
+    the MIS weight of a continuation of pdf ``prev_pdf`` (1 after a delta or camera vertex, ``prev_delta``) against
+    the light samples of ``emitters`` (the scene, or a light_choice.EmitterChoice)."""
     def emission(si, m):
         ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-        pdf = scene.pdf_emitter_direction(prev_si, ds, m & ~prev_delta)
+        pdf = emitters.pdf_emitter_direction(prev_si, ds, m & ~prev_delta)
         return _mis(prev_pdf, dr.select(prev_delta, 0.0, pdf)) * ds.emitter.eval(si, m)
 
     return emission
@@ -681,13 +685,14 @@ def _prt_vertex(mi, prt, tab, k, si, wo_o, on_prt, L, beta):
     return L
 
 
-def _eightdna_vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh, lights):
+def _eightdna_vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, L, beta, t_un, t_sh, lights,
+                     emitters):
     """:func:`.eightdna.vertex` at the lanes ``on_8`` as the state of the integrator's symbolic ``if``:
     returns (L plus beta times the vertex's light, t_un and t_sh with its continuation weights, the
     continuation's world direction, its world pdf, whether it lives, whether it leaves u_i M, u_i M)."""
     import drjit as dr
 
-    v = eightdna.vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, lights)
+    v = eightdna.vertex(mi, scene, rnd, si, wo_world, sid, assets, tab, k, x_o, n_o, wo_o, on_8, lights, emitters)
     L = dr.select(on_8, L + beta * v["L"], L)
     t_un = dr.select(on_8, v["weight"], t_un)
     t_sh = dr.select(on_8, v["weight_passed"], t_sh)
