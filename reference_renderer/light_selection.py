@@ -194,7 +194,7 @@ class LightSelection:
     def _drawn(self, kind: _Kind, p: np.ndarray, rng: np.random.Generator):
         """``draws`` samples of a drawn kind at points ``p``, stratified: a vertex's draw t picks the light whose slice
         of the vertex's cdf holds ``(t + v) / draws`` (one uniform v per vertex: a light of probability P is drawn
-        floor(draws P) or ceil(draws P) times, each draw still of marginal probability P), and that number, rescaled
+        floor(draws P) or ceil(draws P) times, draws P on average), and that number, rescaled
         to [0, 1) inside the slice, is the first coordinate of the light's own sample; each light chosen samples all
         its (vertex, draw) pairs in one call."""
         n, d, m = len(p), self.draws, len(kind.kind)
