@@ -297,6 +297,31 @@ def _cutouts(folder: Path, size: int) -> str:
             + SUN.replace("-0.4, -0.8, -0.45", "-0.2, -0.9, -0.3") + SKY + "</scene>")
 
 
+def _many_lights(folder: Path, size: int) -> str:
+    # 24 small sphere emitters and 16 point lights over a floor beside a ball, powers over 30x: more than the reference
+    # renderer samples at every vertex (it draws 8 per kind, spec/renderer.md#light-selection), and more than the plugin
+    # leaves to Mitsuba's choice by weight. Mitsuba picks among the 40 uniformly: at 32 x 32 x 64 spp its image mean
+    # moves by 2-3 % between seeds, so the test renders 256 spp
+    rng = np.random.default_rng(24)
+    lights = []
+    for i in range(24):
+        x, y, z = rng.uniform(-1.8, 1.8), rng.uniform(0.15, 1.2), rng.uniform(-1.8, 1.2)
+        r, g, b = rng.uniform(0.3, 1.0, 3) * 10 ** rng.uniform(0.3, 1.5)
+        lights.append(f'<shape type="sphere" id="bulb{i}"><point name="center" x="{x:.4f}" y="{y:.4f}" z="{z:.4f}"/>'
+                      f'<float name="radius" value="{rng.uniform(0.02, 0.06):.4f}"/><emitter type="area"><rgb name="radiance" '
+                      f'value="{r:.4f}, {g:.4f}, {b:.4f}"/></emitter></shape>\n')
+    for i in range(16):
+        x, y, z = rng.uniform(-1.8, 1.8), rng.uniform(0.2, 1.4), rng.uniform(-1.8, 1.2)
+        r, g, b = rng.uniform(0.3, 1.0, 3) * 10 ** rng.uniform(-1.2, 0.0)
+        lights.append(f'<emitter type="point" id="point{i}"><point name="position" x="{x:.4f}" y="{y:.4f}" z="{z:.4f}"/>'
+                      f'<rgb name="intensity" value="{r:.4f}, {g:.4f}, {b:.4f}"/></emitter>\n')
+    return (HEADER.format(depth=4, rfilter=BOX, origin="0, 2.2, 3.0", size=size)
+            + FLOOR.format(bsdf='<bsdf type="diffuse"><rgb name="reflectance" value="0.6, 0.6, 0.6"/></bsdf>')
+            + '<shape type="sphere" id="ball"><point name="center" x="0.3" y="0.3" z="-0.2"/><float name="radius" value="0.3"/>\n'
+              ' <bsdf type="diffuse"><rgb name="reflectance" value="0.3, 0.6, 0.3"/></bsdf></shape>\n'
+            + "".join(lights) + "</scene>")
+
+
 def _spot(folder: Path, size: int) -> str:
     spot = ('<emitter type="spot" id="spot"><transform name="to_world"><lookat origin="0.5, 1.8, 0.4" target="-0.2, 0, 0" '
             'up="0, 1, 0"/></transform><rgb name="intensity" value="12, 11, 9"/><float name="cutoff_angle" value="22"/>'
@@ -431,12 +456,16 @@ class FidelityScene:
     write: object
     what: str
     unsupported: str = ""  # why the conversion does not render like Mitsuba; "" when it does
+    test_spp: int = 64  # spp of its 32 x 32 test: more where Mitsuba's own image mean is noisier than the 3 % bound
 
 
 SCENES = {
     "textures": FidelityScene("textures", _textures, "8-bit sRGB PNG bitmaps on a floor (diffuse, tiled and turned by "
                                       "to_uv) and a sphere (principled)"),
     "spot": FidelityScene("spot", _spot, "spot light (cutoff 22 deg, beam 15 deg) and a point light over a floor and a ball"),
+    "many_lights": FidelityScene("many_lights", _many_lights, "24 small sphere emitters and 16 point lights over a floor "
+                                 "and a ball, powers over 30x (lights drawn per vertex by the reference renderer, chosen by "
+                                 "the vertex in the plugin)", test_spp=256),
     "defaults": FidelityScene("defaults", _defaults, "Mitsuba defaults: max_depth -1 (unbounded) and the Gaussian "
                               "reconstruction filter, bright diffuse walls"),
     "wrappers": FidelityScene("wrappers", _wrappers, "blendbsdf of two diffuse BSDFs; normalmap (flat), bumpmap (a sinusoidal height on a sphere), "
