@@ -92,7 +92,7 @@ def run(args) -> int:
         from .light_selection import LightSelection
 
         print(plan.explain())
-        print("  " + LightSelection(scene.lights, [k for k, on in enumerate(plan.light_nee) if on], settings.light_draws).describe())
+        print("  " + LightSelection(scene.lights, plan.nee, settings.light_draws).describe())
     prepare_assets(scene, plan, settings)
     result = render(scene, settings, plan=plan)
     write_exr(args.output, result.image)

@@ -153,8 +153,14 @@ class PathIntegrator:
         for k, light in enumerate(scene.lights):
             if isinstance(light, MeshLight):
                 self.inst_light[light.instance] = k
-        self.nee = [k for k, on in enumerate(plan.light_nee) if on]
+        self.nee = plan.nee
         self.light_choice = LightSelection(scene.lights, self.nee, settings.light_draws)
+        # light shapes camera rays / other rays meet, with their bounding spheres where there are many (light_surfaces)
+        self.light_shapes = {}
+        for camera in (True, False):
+            shapes = [(k, light) for k, light in enumerate(scene.lights) if light.area and (not camera or light.camera_visible)]
+            spheres = [light.bounding_sphere() for _, light in shapes] if len(shapes) > CULLED_LIGHT_SHAPES else None
+            self.light_shapes[camera] = shapes, spheres
         # object-space corner normals of each asset's triangles (None for fibers: shaded from the curve axis)
         self.asset_corner_n = []
         for data in scene.assets:
@@ -260,10 +266,10 @@ class PathIntegrator:
         them. Returns [n] bool: the rays that ended on an opaque light surface."""
         met = []  # (light, opaque, rays tested (None: all), their t, their Le)
         t_end = np.array(t_geometry, np.float64)
-        shapes = [(k, light) for k, light in enumerate(self.scene.lights) if light.area and (not camera or light.camera_visible)]
+        shapes, spheres = self.light_shapes[camera]
         near = [None] * len(shapes)
-        if len(shapes) > CULLED_LIGHT_SHAPES:  # many lights: each tests only the rays that pass near it
-            near = rays_near_shapes([light.bounding_sphere() for _, light in shapes], o, d, t_end)
+        if spheres is not None:  # many lights: each tests only the rays that pass near it
+            near = rays_near_shapes(spheres, o, d, t_end)
         for (k, light), r in zip(shapes, near, strict=True):
             if r is not None and not len(r):
                 continue

@@ -44,15 +44,11 @@ def importance_terms(light: Light) -> tuple[np.ndarray | None, float, float]:
     elif isinstance(light, _SurfaceLight):
         c, a, b = light.c, light.A * luminance(light.L), light.A
     elif isinstance(light, MeshLight):
-        areas = 0.5 * np.linalg.norm(np.cross(light.tri[:, 1] - light.tri[:, 0], light.tri[:, 2] - light.tri[:, 0]), axis=1)
-        centres = light.tri.mean(1)
-        c = (areas @ centres) / max(float(areas.sum()), 1e-300) if len(areas) else np.zeros(3)
-        a, b = light.area_total * (luminance(light.L) + luminance(light.L_back)), light.area_total
+        c, a, b = light.centroid, light.area_total * (luminance(light.L) + luminance(light.L_back)), light.area_total
     elif isinstance(light, DistantLight):
         c, a, b = None, luminance(light.E), 1.0
     elif isinstance(light, DomeLight):
-        mean = light.scale if light.image is None else light.scale * _dome_mean(light.image)
-        c, a, b = None, np.pi * luminance(mean), 1.0
+        c, a, b = None, np.pi * luminance(light.mean_radiance), 1.0
     else:
         c, a, b = None, 0.0, 1.0
     a = float(a)
@@ -62,13 +58,6 @@ def importance_terms(light: Light) -> tuple[np.ndarray | None, float, float]:
     if c is not None and not np.isfinite(c).all():
         c, a = None, 0.0
     return (None if c is None else np.asarray(c, np.float64)), a, b
-
-
-def _dome_mean(image: np.ndarray) -> np.ndarray:
-    """[3] mean radiance of a lat-long image [H, W, 3] over the sphere (rows weighted by sin theta)."""
-    h = image.shape[0]
-    w = np.sin((np.arange(h) + 0.5) / h * np.pi)
-    return np.tensordot(w, image.mean(1), 1) / max(w.sum(), 1e-300)
 
 
 def _below(cdf: np.ndarray, j: np.ndarray) -> np.ndarray:

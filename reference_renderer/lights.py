@@ -426,6 +426,8 @@ class MeshLight(Light):
         self.n = cr / np.maximum(2.0 * areas, 1e-300)[:, None]
         self.area_total = float(areas.sum())
         self.cdf = np.cumsum(areas) / max(self.area_total, 1e-300)
+        # [3] area-weighted centroid of the triangles (where light selection measures its distance from)
+        self.centroid = (areas @ self.tri.mean(1)) / max(self.area_total, 1e-300) if len(areas) else np.zeros(3)
 
     def power_is_zero(self):
         return not ((self.L > 0).any() or (self.L_back > 0).any()) or not self.area_total > 0
@@ -495,11 +497,13 @@ class DomeLight(Light):
         self.R = np.eye(3) if rotation is None else np.asarray(rotation, np.float64)
         self.Rinv = np.linalg.inv(self.R)
         self.image = None if image is None else np.asarray(image, np.float64)
+        self.mean_radiance = self.scale  # [3] over the sphere of directions
         if self.image is not None:
             h, w = self.image.shape[:2]
-            theta = (np.arange(h) + 0.5) / h * np.pi
+            sin_t = np.sin((np.arange(h) + 0.5) / h * np.pi)  # the rows' solid angle
             lum = np.maximum(luminance(self.image * self.scale), 0.0)
-            self.dist = Distribution2D(lum * np.sin(theta)[:, None])
+            self.dist = Distribution2D(lum * sin_t[:, None])
+            self.mean_radiance = self.scale * (sin_t @ self.image.mean(1)) / max(float(sin_t.sum()), 1e-300)
 
     def power_is_zero(self):
         if not (self.scale > 0).any():

@@ -49,6 +49,11 @@ class RenderPlan:
     notes: list = field(default_factory=list)
     asset_modes: list = field(default_factory=list)  # per scene.assets entry: kind-specific rendering choices
 
+    @property
+    def nee(self) -> list[int]:
+        """Indices of the scene's lights sampled at shading vertices (``light_nee``)."""
+        return [k for k, on in enumerate(self.light_nee) if on]
+
     def explain(self) -> str:
         lines = [f"render plan: {self.width}x{self.height}, {self.spp} spp, max depth {self.max_depth}",
                  f"  tiles {self.tile}x{self.tile}, {self.spp_per_pass} spp per pass (<= {self.batch} camera rays in flight)",

@@ -1,6 +1,7 @@
-"""Small USD stages that both renderers' stage-reading tests build (tests/renderer/test_usd_stages.py and
+"""Small USD stages that several renderers' tests build (tests/renderer/test_usd_stages.py and
 tests/mitsuba_renderer/test_mitsuba_stages.py): a diffuse floor seen from above under a delta DistantLight of
-irradiance E at angle THETA, whose radiance is ``albedo E cos(THETA) / pi``."""
+irradiance E at angle THETA, whose radiance is ``albedo E cos(THETA) / pi``; scenes of many lights
+(tests/renderer/test_light_selection.py and tests/mitsuba_plugin/test_light_selection.py)."""
 
 from __future__ import annotations
 
@@ -605,3 +606,37 @@ def ancestor_visits_ratio(tmp_path, monkeypatch, read, **kw) -> tuple[int, int]:
             read(path, depth)
         counts.append(visits.count)
     return counts[0], counts[1]
+
+
+def add_many_lights(b, rng, spheres: int, points: int, *, spread: float = 3.0) -> None:
+    """``spheres`` small sphere lights (radius 0.1-0.3, 0.6-1.5 up, random colours) and ``points`` point lights (0.5-2
+    up) scattered over +-``spread`` in x and z: more of each kind than a vertex samples one by one
+    (spec/renderer.md#light-selection)."""
+    for i in range(spheres):
+        p = (rng.uniform(-spread, spread), rng.uniform(0.6, 1.5), rng.uniform(-spread, spread))
+        b.sphere_light(f"S{i}", p, rng.uniform(0.1, 0.3), rng.uniform(0.5, 3.0), color=tuple(rng.uniform(0.3, 1, 3)))
+    for i in range(points):
+        p = (rng.uniform(-spread, spread), rng.uniform(0.5, 2.0), rng.uniform(-spread, spread))
+        b.sphere_light(f"P{i}", p, 0.0, rng.uniform(0.2, 3.0))
+
+
+def glossy_floor_many_lights(path) -> str:
+    """64 sphere lights and 12 point lights over a glossy floor beside a ball: the floor reflects the sphere lights
+    through both light samples and BSDF samples, so MIS with many lights shows in its image."""
+    b = SceneBuilder()
+    b.camera((0, 2.5, 5), (0, 0, 0), focal=30)
+    b.quad("Floor", (0, 0, 0), 12.0, diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9), roughness=0.3)
+    b.sphere_mesh("Ball", (0.5, 0.5, -1), 0.5, diffuse=(0.5, 0.5, 0.5))
+    add_many_lights(b, np.random.default_rng(1), 64, 12)
+    return b.write(path)
+
+
+def asset_among_many_lights(path, asset: str, seed: int = 2) -> str:
+    """The neural ``asset`` on a diffuse floor among 12 sphere lights and 10 point lights within 1.5 of it, placed by
+    ``seed``."""
+    b = SceneBuilder()
+    b.camera((0, 0.6, 3.0), (0, 0, 0), focal=45)
+    b.quad("Floor", (0, -0.6, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
+    b.asset("Obj", asset)
+    add_many_lights(b, np.random.default_rng(seed), 12, 10, spread=1.5)
+    return b.write(path)

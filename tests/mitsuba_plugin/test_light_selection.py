@@ -17,6 +17,7 @@ from nasset_mitsuba_plugin.render import render  # noqa: E402
 from nasset_mitsuba_renderer.lights import build_lights  # noqa: E402
 from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
+from tests.stage_scenes import asset_among_many_lights, glossy_floor_many_lights  # noqa: E402
 
 
 def _scene(tmp_path):
@@ -78,30 +79,6 @@ def test_emitters_carry_the_weights_and_the_image_keeps_its_mean_with_less_varia
 
 
 # -- the choice by where the vertex is (mitsuba_plugin/light_choice.py), with many emitters -------------------------
-def _many_lights_scene(tmp_path, asset=None, name="many.usda"):
-    """64 small sphere lights and 12 point lights over a glossy floor beside a ball (the reference renderer's test scene
-    of tests/renderer/test_light_selection.py), or around ``asset`` on a diffuse floor."""
-    b = SceneBuilder()
-    rng = np.random.default_rng(1)
-    if asset is None:
-        b.camera((0, 2.5, 5), (0, 0, 0), focal=30)
-        b.quad("Floor", (0, 0, 0), 12.0, diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9), roughness=0.3)
-        b.sphere_mesh("Ball", (0.5, 0.5, -1), 0.5, diffuse=(0.5, 0.5, 0.5))
-        spheres, points, spread = 64, 12, 3.0
-    else:
-        b.camera((0, 0.6, 3.0), (0, 0, 0), focal=45)
-        b.quad("Floor", (0, -0.6, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
-        b.asset("Obj", asset)
-        spheres, points, spread = 12, 10, 1.5
-    for i in range(spheres):
-        p = (rng.uniform(-spread, spread), rng.uniform(0.6, 1.5), rng.uniform(-spread, spread))
-        b.sphere_light(f"S{i}", p, rng.uniform(0.1, 0.3), rng.uniform(0.5, 3.0), color=tuple(rng.uniform(0.3, 1, 3)))
-    for i in range(points):
-        p = (rng.uniform(-spread, spread), rng.uniform(0.5, 2.0), rng.uniform(-spread, spread))
-        b.sphere_light(f"P{i}", p, 0.0, rng.uniform(0.2, 3.0))
-    return b.write(tmp_path / name)
-
-
 def test_spatial_choice_probabilities_and_draws(tmp_path):
     """At a point, the choice's probabilities sum to 1, follow the importance of the module docstring (checked in
     numpy from the emitters' terms), and the emitters drawn follow them (chi-squared over 40 000 draws)."""
@@ -115,7 +92,7 @@ def test_spatial_choice_probabilities_and_draws(tmp_path):
     mi = jit_mitsuba()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        scene = mi.load_dict(usd_scene(_many_lights_scene(tmp_path), 8, 8, mi=mi))
+        scene = mi.load_dict(usd_scene(glossy_floor_many_lights(tmp_path / "many.usda"), 8, 8, mi=mi))
     choice = EmitterChoice(mi, scene)
     m = choice.m
     assert m == 76
@@ -146,13 +123,13 @@ def test_spatial_choice_keeps_the_image(tmp_path, monkeypatch, what):
     import nasset_mitsuba_plugin.light_choice as choice
     from tests.renderer.render_stats import assert_renders_agree
 
-    asset = None
     if what == "8dna":
         from nasset_sdk.examples import example_builder
 
         asset = example_builder("8dna", size="tiny", seed=2).write(tmp_path / "a.usdc")
-    scene = _many_lights_scene(tmp_path, asset)
-    spp = 64 if asset is None else 32
+        scene, spp = asset_among_many_lights(tmp_path / "many.usda", asset, seed=1), 32
+    else:
+        scene, spp = glossy_floor_many_lights(tmp_path / "many.usda"), 64
 
     def renders(seeds):
         imgs = [render(scene, spp, seed=s, width=32, height=32, max_depth=2) for s in seeds]

@@ -27,6 +27,7 @@ from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset
 from nasset_sdk.errors import UsageError
 from nasset_sdk.examples import example_builder
 from tests.renderer.render_stats import assert_renders_agree, render_finite
+from tests.stage_scenes import add_many_lights, asset_among_many_lights, glossy_floor_many_lights
 from tests.stats import chi2_test
 
 GREY = np.array([2.0, 2.0, 2.0])
@@ -145,16 +146,6 @@ def test_delta_and_other_lights_are_drawn_apart():
         [True] * selection.DRAWS
 
 
-def _many_lights(b, rng, spheres, points, *, near=(0.0, 0.0, 0.0), spread=3.0):
-    c = np.asarray(near)
-    for i in range(spheres):
-        p = c + (rng.uniform(-spread, spread), rng.uniform(0.6, 1.5), rng.uniform(-spread, spread))
-        b.sphere_light(f"S{i}", p, rng.uniform(0.1, 0.3), rng.uniform(0.5, 3.0), color=tuple(rng.uniform(0.3, 1, 3)))
-    for i in range(points):
-        p = c + (rng.uniform(-spread, spread), rng.uniform(0.5, 2.0), rng.uniform(-spread, spread))
-        b.sphere_light(f"P{i}", p, 0.0, rng.uniform(0.2, 3.0))
-
-
 def _every_light_and_drawn(path, **kw):
     """(render with every light sampled, render with the default draws): independent seeds."""
     return render_finite(path, seed=1, light_draws=0, **kw), render_finite(path, seed=2, **kw)
@@ -166,12 +157,7 @@ def test_many_lights_over_a_glossy_floor(tmp_path):
     sphere lights through both techniques, so the MIS weight at a BSDF sample that meets a light must count that
     light's draws: with the light's own pdf instead (the count left out) the image means are 15-17 standard errors
     apart."""
-    b = SceneBuilder()
-    b.camera((0, 2.5, 5), (0, 0, 0), focal=30)
-    b.quad("Floor", (0, 0, 0), 12.0, diffuse=(0.05, 0.05, 0.05), specular=(0.9, 0.9, 0.9), roughness=0.3)
-    b.sphere_mesh("Ball", (0.5, 0.5, -1), 0.5, diffuse=(0.5, 0.5, 0.5))
-    _many_lights(b, np.random.default_rng(1), 64, 12)
-    path = b.write(tmp_path / "s.usda")
+    path = glossy_floor_many_lights(tmp_path / "s.usda")
     every, drawn = _every_light_and_drawn(path, width=32, height=32, spp=64, max_depth=2)
     assert drawn.image.mean() > 0.1
     assert_renders_agree(every, drawn, z_mean=4.5, z_pixel=4.5, pixel_fraction=0.01)
@@ -188,12 +174,7 @@ def test_many_lights_on_neural_assets(tmp_path, kind):
         asset = random_rna_asset(tmp_path / "a.usdc", seed=3)
     else:
         asset = example_builder(kind, size="tiny", seed=2).write(tmp_path / "a.usdc")
-    b = SceneBuilder()
-    b.camera((0, 0.6, 3.0), (0, 0, 0), focal=45)
-    b.quad("Floor", (0, -0.6, 0), 6.0, diffuse=(0.5, 0.5, 0.5))
-    b.asset("Obj", asset)
-    _many_lights(b, np.random.default_rng(2), 12, 10, spread=1.5)
-    path = b.write(tmp_path / "s.usda")
+    path = asset_among_many_lights(tmp_path / "s.usda", asset)
     every, drawn = _every_light_and_drawn(path, width=20, height=20, spp=32, max_depth=3)
     assert drawn.image.mean() > 0.01
     assert_renders_agree(every, drawn, z_mean=4.5, z_pixel=4.5, pixel_fraction=0.02)
@@ -205,7 +186,7 @@ def test_explain_says_how_lights_are_chosen(tmp_path, capsys):
     b = SceneBuilder()
     b.camera((0, 2, 3), (0, 0, 0))
     b.quad("Floor", (0, 0, 0), 4.0)
-    _many_lights(b, np.random.default_rng(0), 10, 3)
+    add_many_lights(b, np.random.default_rng(0), 10, 3)
     path = b.write(tmp_path / "s.usda")
     args = [path, "-o", str(tmp_path / "o.exr"), "--width", "4", "--height", "4", "--spp", "1", "--explain", "--quiet"]
     assert nasset(["render", *args]) == 0
@@ -220,7 +201,7 @@ def test_light_draws_setting(tmp_path):
     b = SceneBuilder()
     b.camera((0, 2, 3), (0, 0, 0))
     b.quad("Floor", (0, 0, 0), 4.0)
-    _many_lights(b, np.random.default_rng(0), 10, 0)
+    add_many_lights(b, np.random.default_rng(0), 10, 0)
     scene = load_scene(b.write(tmp_path / "s.usda"))
     for bad in (-1, selection.MAX_DRAWS + 1, 2.0, True):
         with pytest.raises(UsageError, match="light_draws"):
