@@ -300,6 +300,9 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
             return out if np.size(default) > 1 else float(out[0])
 
         vals = stage_rules.mtlx_preview_values(shader, sid, t, say, finite)
+        if vals["transmission"] > 0.0:
+            say(f"MaterialX transmission {vals['transmission']:.3g} is not rendered here (spec/renderer.md#transmission; "
+                "the reference renderer renders it): the surface is its opaque part", where)
         kd = np.asarray(vals["diffuseColor"], np.float64)
         rough, metal = (float(np.clip(vals[k], 0.0, 1.0)) for k in ("roughness", "metallic"))
         ior, emis = vals["ior"], np.asarray(vals["emissiveColor"], np.float64)

@@ -9,6 +9,13 @@ or lerp(((1-ior)/(1+ior))^2, diffuseColor, metallic); alpha = max(roughness^2, 1
 G2 is the height-correlated Smith term. Both sides of a surface are front faces unless the prim is
 one-sided (spec/renderer.md#sidedness, handled by the integrator).
 Specular directions are drawn from the distribution of visible normals (Heitz 2018).
+
+A material with a transmission weight t (MaterialX ``transmission``, spec/renderer.md#transmission) is
+``(1 - t) f + t f_glass``: a dielectric of relative IOR eta with the same GGX alpha and the exact Fresnel
+reflectance F, reflecting F and transmitting (1 - F) times the transmission colour. A solid one refracts
+(Walter et al. 2007, radiance form: no eta^2 factor); a thin-walled one lets the light through unbent, its
+transmitted lobe the reflected one mirrored through the surface, with the reflectance of a slab
+R = 2 F / (1 + F) (every internal bounce summed, Mitsuba's thindielectric).
 """
 
 from __future__ import annotations
@@ -16,6 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from nasset_sdk.kinds.boundary import fresnel_dielectric
 
 from .sampling import (
     INV_PI,
@@ -77,6 +86,74 @@ def reflect(w, h):
     return 2.0 * dot(w, h)[:, None] * h - w
 
 
+def mirror_z(w):
+    """w [N,3] mirrored through the local tangent plane (z negated)."""
+    return w * np.array([1.0, 1.0, -1.0])
+
+
+def refract(wo, h, eta):
+    """Direction [N,3] refracted from wo about microfacet normal h [N,3] into a medium of relative IOR eta [N]
+    (n_inside / n_outside, wo outside); rows under total internal reflection are undefined (their F is 1)."""
+    c = dot(wo, h)
+    cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) / (eta * eta), 0.0))
+    return normalize(-wo / eta[:, None] + (c / eta - cos_t)[:, None] * h)
+
+
+def glass_reflectance(cos_oh, eta, thin):
+    """Reflectance [N] of the glass lobe at wo.h: exact dielectric Fresnel F (1 under total internal reflection),
+    or for a thin wall the slab's 2 F / (1 + F)."""
+    f = fresnel_dielectric(cos_oh, eta)
+    return np.where(thin, 2.0 * f / (1.0 + f), f)
+
+
+def glass_eval(wo, wi, alpha, eta, thin, tint):
+    """f(wo, wi) [N,3] (cosine not included) and pdf [N] of the glass lobe in the local frame (wo.z > 0).
+
+    ``eta`` [N]: IOR of the side wo is not on over the side it is on; ``thin`` [N] bool; ``tint`` [N,3] the
+    transmission colour. Reflection for wi.z > 0; below, refraction (solid) or the mirrored reflection lobe (thin)."""
+    up = wi[:, 2] > 0
+    cos_o = np.maximum(wo[:, 2], 1e-300)
+    cos_i = np.maximum(np.abs(wi[:, 2]), 1e-300)
+    g2 = 1.0 / (1.0 + ggx_lambda(wo, alpha) + ggx_lambda(wi, alpha))
+    g1 = ggx_g1(wo, alpha)
+    # reflection, and the thin wall's transmission (its mirrored twin): h = normalize(wo + wi') with wi' above
+    wr = np.where((up | thin)[:, None], np.where(up[:, None], wi, mirror_z(wi)), wi)
+    hr = normalize(wo + wr)
+    cos_ohr = dot(wo, hr)
+    fr = glass_reflectance(np.clip(cos_ohr, 0.0, 1.0), eta, thin)
+    w_r = np.where(up, fr, 1.0 - fr)
+    dr = ggx_d(hr, alpha)
+    f_r = w_r * dr * g2 / (4.0 * cos_o * cos_i)
+    p_r = w_r * g1 * dr / (4.0 * cos_o)
+    ok_r = (up | thin) & (cos_ohr > 0)
+    # solid refraction: h = -normalize(wo + eta wi) turned up; wo.h > 0 > wi.h
+    ht = wo + eta[:, None] * wi
+    ht = normalize(np.where((ht[:, 2] < 0)[:, None], -ht, ht))
+    c_o, c_i = dot(wo, ht), dot(wi, ht)
+    den = (c_o + eta * c_i) ** 2
+    ft = 1.0 - fresnel_dielectric(np.clip(c_o, 0.0, 1.0), eta)
+    dt = ggx_d(ht, alpha)
+    f_t = ft * dt * g2 * np.abs(c_i) * np.abs(c_o) / (cos_o * cos_i * np.maximum(den, 1e-300))
+    p_t = ft * g1 * dt * np.maximum(c_o, 0.0) / cos_o * eta * eta * np.abs(c_i) / np.maximum(den, 1e-300)
+    ok_t = ~up & ~thin & (c_o > 0) & (c_i < 0) & (den > 0)
+    f = np.where(ok_r, f_r, np.where(ok_t, f_t, 0.0))
+    pdf = np.where(ok_r, p_r, np.where(ok_t, p_t, 0.0))
+    f = f[:, None] * np.where(up[:, None], 1.0, tint)
+    return f, pdf
+
+
+def glass_sample(wo, alpha, eta, thin, u_lobe, u):
+    """(wi [N,3], valid [N]) of the glass lobe: h ~ VNDF(wo), reflected with probability R(wo.h), else refracted
+    (solid) or reflected and mirrored through the surface (thin). A reflection below the surface, or a transmission
+    above it, is not valid (its density is not the lobe's pdf there)."""
+    h = ggx_sample_vndf(wo, alpha, u)
+    r = reflect(wo, h)
+    keep = u_lobe < glass_reflectance(np.clip(dot(wo, h), 0.0, 1.0), eta, thin)
+    through = np.where(thin[:, None], mirror_z(r), refract(wo, h, eta))
+    wi = np.where(keep[:, None], r, through)
+    return wi, np.where(keep | thin, r[:, 2] > 0, wi[:, 2] < 0)
+
+
 # -- material table -------------------------------------------------------------------------
 def spec_probability(kd: np.ndarray, f0: np.ndarray) -> np.ndarray:
     """Probability [N] of sampling the specular lobe for diffuse colours kd [N,3] and F0 [N,3]."""
@@ -102,6 +179,24 @@ class MaterialTable:
     textures: list = field(default_factory=list)  # [M] TexturedMaterial | None (empty: none textured)
     opacities: list = field(default_factory=list)  # [M] textures.Opacity | None (empty: every material opaque)
     emission_textures: list = field(default_factory=list)  # [M] textures.ImageTexture | None: emission per hit
+    transmission: np.ndarray | None = None  # [M] glass weight t in [0, 1] (None: no material transmits)
+    transmission_color: np.ndarray | None = None  # [M,3] tint of the transmitted light
+    eta: np.ndarray | None = None  # [M] IOR of the glass lobe (inside over outside)
+    thin: np.ndarray | None = None  # [M] bool: thin-walled (unbent transmission)
+
+    @property
+    def transmits(self) -> bool:
+        return self.transmission is not None and bool((self.transmission > 0).any())
+
+    def glass(self, m: np.ndarray, outside: np.ndarray):
+        """(t [N], tint [N,3], eta [N], thin [N]) of materials m [N] seen from ``outside`` [N] bool (the front of
+        the surface: eta is the material's, else its inverse; a thin wall's is the material's), None where no
+        material transmits."""
+        if not self.transmits:
+            return None
+        eta = self.eta[m]
+        thin = self.thin[m]
+        return self.transmission[m], self.transmission_color[m], np.where(outside | thin, eta, 1.0 / eta), thin
 
     def emission_at(self, m: np.ndarray, st: np.ndarray | None) -> np.ndarray:
         """Emitted radiance [N,3] of materials m [N] at texture coordinates st [N,2] (their constant where untextured;
@@ -143,11 +238,13 @@ class MaterialTable:
         return kd, f0, alpha
 
 
-def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None):
-    """f(wo, wi) [N,3] and pdf(wi) [N] for local-frame directions (normal = +Z).
+def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None, glass=None):
+    """f(wo, wi) [N,3] and pdf(wi) [N] for local-frame directions (normal = +Z, wo.z > 0; wi below the surface
+    counts only through ``glass``).
 
     ``kd``, ``f0`` [N,3] and ``alpha`` [N] override the materials' constants (textured materials,
-    :meth:`MaterialTable.lookup`).
+    :meth:`MaterialTable.lookup`); ``glass``: :meth:`MaterialTable.glass` of the rows, None where no material
+    transmits.
     """
     kd = mt.kd[m] if kd is None else kd
     f0 = mt.f0[m] if f0 is None else f0
@@ -162,21 +259,36 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None):
     den = 4.0 * np.maximum(wo[:, 2] * wi[:, 2], 1e-300)
     f = kd * INV_PI + fres * (d * g2 / den)[:, None]
     f = np.where(ok[:, None], f, 0.0)
-    pdf = (1.0 - ps) * cosine_hemisphere_pdf(wi) + ps * ggx_reflect_pdf(wo, wi, alpha)
-    return f, np.where(ok, pdf, 0.0)
+    pdf = np.where(ok, (1.0 - ps) * cosine_hemisphere_pdf(wi) + ps * ggx_reflect_pdf(wo, wi, alpha), 0.0)
+    if glass is None:
+        return f, pdf
+    t, tint, eta, thin = glass
+    fg, pg = glass_eval(wo, wi, alpha, eta, thin, tint)
+    return (1.0 - t)[:, None] * f + t[:, None] * fg, (1.0 - t) * pdf + t * pg
 
 
-def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None, alpha=None):
-    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample (``kd``, ``f0``, ``alpha`` as in
-    bsdf_eval)."""
+def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None, alpha=None, glass=None):
+    """Sample wi: returns (wi [N,3], f [N,3], pdf [N]); pdf 0 marks a failed sample (``kd``, ``f0``, ``alpha``,
+    ``glass`` as in bsdf_eval). The glass lobe is drawn with probability t."""
     kd = mt.kd[m] if kd is None else kd
     f0 = mt.f0[m] if f0 is None else f0
     alpha = mt.alpha[m] if alpha is None else alpha
+    u_lobe = np.asarray(u_lobe, np.float64)
+    through = np.zeros(len(u_lobe), bool)
+    if glass is not None:  # u_lobe < t: the glass lobe (u_lobe / t chooses within it), else the rest, rescaled
+        t = glass[0]
+        through = u_lobe < t
+        u_lobe = np.where(through, u_lobe / np.maximum(t, 1e-300), (u_lobe - t) / np.maximum(1.0 - t, 1e-300))
     ps = spec_probability(kd, f0)
-    spec = u_lobe < ps
+    spec = (u_lobe < ps) & ~through
     wi = square_to_cosine_hemisphere(u)
     if spec.any():
         h = ggx_sample_vndf(wo[spec], alpha[spec], u[spec])
         wi[spec] = reflect(wo[spec], h)
-    f, pdf = bsdf_eval(mt, m, wo, wi, kd, f0, alpha)
-    return wi, f, pdf
+    valid = np.ones(len(u_lobe), bool)
+    if through.any():
+        _, _, eta, thin = glass
+        wi[through], valid[through] = glass_sample(wo[through], alpha[through], eta[through], thin[through],
+                                                   u_lobe[through], u[through])
+    f, pdf = bsdf_eval(mt, m, wo, wi, kd, f0, alpha, glass)
+    return wi, np.where(valid[:, None], f, 0.0), np.where(valid, pdf, 0.0)

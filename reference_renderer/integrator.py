@@ -476,38 +476,58 @@ class PathIntegrator:
         t, b = frame(ns)
         wo_l = to_local(wo, t, b, ns)
         indirect = self.indirect[inst]
-        xo = x + ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
+        offset = ng * (self.eps * (1.0 + max3(np.abs(x)) / self.accel.scale))[:, None]
+        xo = x + offset
+        # glass (spec/renderer.md#transmission): directions below the surface count too, their rays start below it
+        glass = self.mt.glass(mat, seen_front)
+        transmits = None if glass is None else glass[0] > 0
+
+        def sub(rows):
+            """The per-row material arguments of bsdf_eval / bsdf_sample for ``rows``."""
+            args = () if looked_up is None else tuple(a[rows] for a in looked_up)
+            if glass is not None:
+                args = (args or (None, None, None)) + (tuple(a[rows] for a in glass),)
+            return args
+
         for delta, wi, dist, li, pdf in self.light_choice.samples(x, rng):
             cos = dot(wi, ns)
             ok = (pdf > 0) & (cos > 0) & (dot(wi, ng) > 0) & (max3(li) > 0)
+            if transmits is not None:
+                ok |= transmits & (pdf > 0) & (cos < 0) & (dot(wi, ng) < 0) & (max3(li) > 0)
             s = np.nonzero(ok)[0]
             if not len(s):
                 continue
-            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]),
-                                *(() if looked_up is None else (a[s] for a in looked_up)))
+            f, bpdf = bsdf_eval(self.mt, mat[s], wo_l[s], to_local(wi[s], t[s], b[s], ns[s]), *sub(s))
+            below = cos[s] < 0
             if smooth is not None:
-                f = f * bump_terminator(smooth[s], ns[s], wi[s])[:, None]
+                f = f * np.where(below, 1.0, bump_terminator(smooth[s], ns[s], wi[s]))[:, None]
             w = np.ones(len(s)) if delta else np.where(indirect[s], power_heuristic(pdf[s], bpdf), 1.0)
-            c = beta[s] * f * (cos[s] * w / pdf[s])[:, None] * li[s]
+            c = beta[s] * f * (np.abs(cos[s]) * w / pdf[s])[:, None] * li[s]
             nz = max3(c) > 0
-            s, c = s[nz], c[nz]
+            s, c, below = s[nz], c[nz], below[nz]
             if not len(s):
                 continue
-            d_shadow, tmax = aim_shadow(x[s], xo[s], wi[s], dist[s], self.eps)
-            vis = ~self.occluded(xo[s], d_shadow, tmax)
+            start = np.where(below[:, None], x[s] - offset[s], xo[s])
+            d_shadow, tmax = aim_shadow(x[s], start, wi[s], dist[s], self.eps)
+            vis = ~self.occluded(start, d_shadow, tmax)
             L[ridx[s[vis]]] += c[vis]  # s holds each ray once: no repeated indices
         cont = np.nonzero(indirect)[0]
         if not len(cont):
             return None
         wi_l, f, pdf = bsdf_sample(self.mt, mat[cont], wo_l[cont], rng.random(len(cont)), rng.random((len(cont), 2)),
-                                   *(() if looked_up is None else (a[cont] for a in looked_up)))
+                                   *sub(cont))
         wi = to_world(wi_l, t[cont], b[cont], ns[cont])
-        ok = (pdf > 0) & (wi_l[:, 2] > 0) & (dot(wi, ng[cont]) > 0)
+        side = dot(wi, ng[cont])
+        ok = (pdf > 0) & (wi_l[:, 2] > 0) & (side > 0)
+        if transmits is not None:
+            ok |= transmits[cont] & (pdf > 0) & (wi_l[:, 2] < 0) & (side < 0)
         c = cont[ok]
-        nb = beta[c] * f[ok] * (wi_l[ok, 2] / pdf[ok])[:, None]
+        nb = beta[c] * f[ok] * (np.abs(wi_l[ok, 2]) / pdf[ok])[:, None]
+        below = side[ok] < 0
         if smooth is not None:
-            nb *= bump_terminator(smooth[c], ns[c], wi[ok])[:, None]
-        return ridx[c], xo[c], wi[ok], nb, pdf[ok], np.full(len(c), -1, np.int64), None
+            nb *= np.where(below, 1.0, bump_terminator(smooth[c], ns[c], wi[ok]))[:, None]
+        start = np.where(below[:, None], x[c] - offset[c], xo[c])
+        return ridx[c], start, wi[ok], nb, pdf[ok], np.full(len(c), -1, np.int64), None
 
     # -- neural assets ---------------------------------------------------------------------
     def to_object(self, v, inst, point=False):

@@ -146,8 +146,11 @@ def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sam
             inst_notes.append(f"neural {inst.prim} ({scene.assets[inst.asset].path.name}): "
                               f"{'indirect on' if indirect[i] else 'indirect off'} ({why})")
         else:
-            indirect[i] = (others or not inst.planar) and max_depth > 1
+            mt = scene.materials
+            glass = mt.transmits and inst.material >= 0 and mt.transmission[inst.material] > 0
+            indirect[i] = (others or not inst.planar or glass) and max_depth > 1
             why = "other objects present" if others else ("non-planar, may reflect onto itself" if not inst.planar
+                                                            else "transmits: light passes through it" if glass
                                                             else "lone planar mesh: NEE only")
             inst_notes.append(f"mesh {inst.prim} ({inst.n_tri} tris): {'indirect on' if indirect[i] else 'indirect off'}"
                               f" ({why})")

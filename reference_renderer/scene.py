@@ -419,7 +419,8 @@ class _Loader:
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
                               textures=[m[5] if len(m) > 5 else None for m in mats],
                               opacities=[m[6] if len(m) > 6 else None for m in mats],
-                              emission_textures=[m[7][0] if len(m) > 7 and m[7] is not None else None for m in mats])
+                              emission_textures=[m[7][0] if len(m) > 7 and m[7] is not None else None for m in mats],
+                              **_glass_columns([m[8] if len(m) > 8 else None for m in mats]))
         return Scene(
             file=self.file, camera=camera, triangles=tris,
             tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
@@ -738,9 +739,12 @@ class _Loader:
                                     textures["normal"][0] if "normal" in textures else None)
         kd, f0, alpha = material.constants()
         textured = material if set(textures) - {"opacity", "emissiveColor"} or primvar_color is not None else None
+        glass = None  # (weight, colour [3], ior, thin) of a transmitting MaterialX surface (spec/renderer.md#transmission)
+        if vals.get("transmission", 0.0) > 0.0:
+            glass = (vals["transmission"], np.asarray(vals["transmissionColor"], np.float64), ior, vals["thinWalled"])
         self.mat_index[mpath] = len(self.mat_rows)
         self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity,
-                              None if emission_texture is None else (emission_texture[0], varname)))
+                              None if emission_texture is None else (emission_texture[0], varname), glass))
         return self.mat_index[mpath]
 
     def _primvar_reader(self, producer, where) -> PrimvarColor | None:
@@ -1511,3 +1515,14 @@ class _Loader:
                 if pole == "Z" or (pole == "scene" and UsdGeom.GetStageUpAxis(self.stage) == UsdGeom.Tokens.z):
                     rotation = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]) @ rotation  # +Y -> +Z first
             self.lights.append(DomeLight(scale, image, rotation, path))
+
+
+def _glass_columns(rows: list) -> dict:
+    """MaterialTable's glass columns (transmission, transmission_color, eta, thin) from per-material (weight,
+    colour, ior, thin) or None; no columns when no material transmits."""
+    if all(r is None for r in rows):
+        return {}
+    rows = [(0.0, np.ones(3), 1.5, False) if r is None else r for r in rows]
+    return {"transmission": np.array([r[0] for r in rows], np.float64),
+            "transmission_color": np.array([r[1] for r in rows], np.float64),
+            "eta": np.array([r[2] for r in rows], np.float64), "thin": np.array([bool(r[3]) for r in rows])}

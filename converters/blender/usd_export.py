@@ -34,9 +34,11 @@ import numpy as np
 from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     ColorPrimvar,
     ConvertResult,
+    Glass,
     StageConverter,
     TextureMap,
     ggx_alpha_of_beckmann,
+    mean_color,
     parse_replace,
     report,
     usd_check,
@@ -1005,15 +1007,24 @@ def _approximated_shader(mat, node, notes: list) -> dict:
         rough, _ = _socket(node, "Roughness", 0.0)
         f0 = ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2
         tint = np.asarray(col if isinstance(col, tuple) else (1.0, 1.0, 1.0), np.float64)
-        out.update(specularColor=tuple(float(c) for c in np.clip(f0 * tint, 0.0, 1.0)),
-                   roughness=float(np.clip(rough, 0.0, 1.0)))
-        what = f"an opaque black reflector with F0 {f0:.4f} (its IOR {float(ior):.3g})"
+        rough = float(np.clip(rough, 0.0, 1.0))
+        # the UsdPreviewSurface keeps the opaque reflector for renderers that read only it; the MaterialX glass
+        # (renderer.md#transmission) is what the renderers here read
+        out.update(specularColor=tuple(float(c) for c in np.clip(f0 * tint, 0.0, 1.0)), roughness=rough,
+                   glass=Glass(1.0, tuple(float(c) for c in np.clip(tint, 0.0, 1.0)), max(float(ior), 1e-3), rough, False))
+        distribution = getattr(node, "distribution", "GGX")
+        what = (f"a MaterialX glass (IOR {float(ior):.3g}, roughness {rough:.3g}, renderer.md#transmission); its Color "
+                "tints the transmitted light only (Cycles tints the reflection too)"
+                + (f"; GGX for its {distribution} distribution" if distribution not in ("GGX", "MULTI_GGX") else ""))
     else:
         what = "black (" + ("it only refracts" if name == "Refraction" else "a grazing lobe of little albedo") + ")"
     if (nmap := _linked_normal(mat, node, notes)) is not None:
         out["normal"] = nmap
-    notes.append(f"material {mat.name}: {name} BSDF has no counterpart (UsdPreviewSurface transmission and scattering "
-                 f"are not rendered): written as {what}; bake the object into a neural asset (--replace)")
+    if how == "glass":
+        notes.append(f"material {mat.name}: Glass BSDF written as {what}")
+    else:
+        notes.append(f"material {mat.name}: {name} BSDF has no counterpart (UsdPreviewSurface transmission and scattering "
+                     f"are not rendered): written as {what}; bake the object into a neural asset (--replace)")
     return out
 
 
@@ -1139,13 +1150,19 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
     if emission is not None:
         inputs["emissiveColor"] = emission
     if transmission > 0.0 and _mean(inputs["metallic"]) < 1.0:
-        # Cycles' dielectric base is diffuse x (1 - t) + transmission x t under the specular layer: the transmitted
-        # part has no counterpart, so it goes (before 2026-12-07 the whole base stayed diffuse: a Principled glass ball
-        # was written as an opaque white one)
+        # Cycles' dielectric base is diffuse x (1 - t) + transmission x t under the specular layer: a MaterialX glass of
+        # weight t x (1 - metallic) (renderer.md#transmission), tinted by the base colour, beside the opaque rest; the
+        # UsdPreviewSurface alone keeps the diffuse base x (1 - t) for renderers that read only it
+        metal, rough, base = _mean(inputs["metallic"]), _mean(inputs["roughness"]), inputs["diffuseColor"]
+        tint = np.clip(mean_color(base), 0.0, 1.0)
+        ior, _ = _socket(node, "IOR", 1.5)
+        inputs["glass"] = Glass(transmission * (1.0 - metal), tuple(float(c) for c in tint), max(float(ior), 1e-3),
+                                float(np.clip(rough, 0.0, 1.0)), False, base=tuple(float(c) for c in tint),
+                                metalness=metal / max(1.0 - transmission * (1.0 - metal), 1e-12))
         inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], 1.0 - transmission)
-        notes.append(f"material {mat.name}: Principled Transmission Weight {transmission:.3g}: the diffuse base x "
-                     f"{1.0 - transmission:.3g} (the light it lets through is not rendered; bake the object into a neural "
-                     "asset)")
+        notes.append(f"material {mat.name}: Principled Transmission Weight {transmission:.3g}: a MaterialX glass of "
+                     f"weight {transmission * (1.0 - metal):.3g} tinted by the mean base colour"
+                     + (" (textured: its mean)" if isinstance(base, (TextureMap, ColorPrimvar)) else ""))
     metal = inputs["metallic"]
     if not isinstance(metal, TextureMap) and float(metal) > 0.0 and not isinstance(inputs["roughness"], TextureMap):
         base = inputs["diffuseColor"]
@@ -1268,6 +1285,10 @@ def _combine(parts: list, mat, notes: list) -> dict:
     """Specular-workflow inputs of ``sum(w * shader)`` over ``parts`` [(w, inputs)]: kd, F0 and emission are the
     weighted sums (a texture is kept and the constant colours are added to its texels; of two textures the heavier
     one is kept, noted), the roughness is the mean weighted by each part's w x mean F0 (the lobes it shapes)."""
+    glasses = [(w * inputs["glass"].weight, inputs["glass"]) for w, inputs in parts if "glass" in inputs]
+    t = min(sum(w for w, _ in glasses), 1.0)  # the glass weight of the sum; the rest is (1 - t) x the opaque parts
+    parts = [(w * (1.0 - inputs["glass"].weight if "glass" in inputs else 1.0) / max(1.0 - t, 1e-12), inputs)
+             for w, inputs in parts]
     kd_tex, kd_sum, f0, em, rough_w, rough = None, np.zeros(3), np.zeros(3), np.zeros(3), 0.0, 0.0
     for w, inputs in parts:
         kd, f, r, e = _specular_form(inputs)
@@ -1294,8 +1315,13 @@ def _combine(parts: list, mat, notes: list) -> dict:
         kd = tuple(float(c) for c in kd_sum)
     out = {"diffuseColor": kd, "useSpecularWorkflow": 1, "specularColor": tuple(float(c) for c in f0),
            "roughness": rough / rough_w if rough_w > 0 else 1.0}
+    em *= max(1.0 - t, 1e-12)  # emission is not part of the glass mixture: the parts' own weights
     if em.any():
         out["emissiveColor"] = tuple(float(c) for c in em)
+    if glasses:  # of several glasses the heaviest one's IOR, tint and roughness; the base is the opaque parts'
+        out["glass"] = dataclasses.replace(max(glasses, key=lambda g: g[0])[1], weight=t, base=mean_color(kd))
+        if len(glasses) > 1:
+            notes.append(f"material {mat.name}: {len(glasses)} glasses in a Mix / Add Shader written as the heaviest one")
     if any("opacity" in inputs for _, inputs in parts):
         notes.append(f"material {mat.name}: the opacity of a shader inside a Mix / Add Shader dropped (opaque; a Mix "
                      "with a Transparent BSDF is converted)")

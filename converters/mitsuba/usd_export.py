@@ -32,6 +32,7 @@ Conventions (Mitsuba -> USD, both right-handed, scene units kept, +Y declared up
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -206,6 +207,23 @@ class TextureMap:
     scale_bias: tuple | None = None  # UsdUVTexture (scale, bias) float4s, e.g. a tangent-space normal map's 2, -1
     wrap: str = "repeat"  # UsdUVTexture wrapS / wrapT
     uv: tuple | None = None  # UsdTransform2d (scale [2], rotation in degrees, translation [2]) of st; None: identity
+
+
+@dataclass
+class Glass:
+    """A transmitting surface (renderer.md#transmission), written beside the UsdPreviewSurface as a MaterialX
+    ``standard_surface`` on ``outputs:mtlx:surface``: transmission ``weight`` tinted by ``color``, the dielectric's
+    ``ior`` and specular ``roughness`` (alpha = roughness^2), ``thin`` walled or solid. The rest of the surface, weight
+    ``1 - weight``, is a dielectric of base colour ``base`` (its mean where textured) and ``metalness``: no texture
+    reaches the MaterialX shader."""
+
+    weight: float
+    color: tuple
+    ior: float
+    roughness: float
+    thin: bool
+    base: tuple = (0.0, 0.0, 0.0)
+    metalness: float = 0.0
 
 
 @dataclass
@@ -721,6 +739,8 @@ class StageConverter:
     def _write_material(self, name: str, inputs: dict) -> str:
         from pxr import Gf, Sdf, UsdShade
 
+        inputs = dict(inputs)
+        glass = inputs.pop("glass", None)
         path = self._name(self.looks_root, name)
         mat = UsdShade.Material.Define(self.stage, path)
         sh = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
@@ -750,7 +770,28 @@ class StageConverter:
                 v = float(v)
             sh.CreateInput(k, types[k]).Set(v)
         mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+        if glass is not None:
+            self._write_glass(mat, path, glass)
         return path
+
+    def _write_glass(self, mat, path: str, glass: Glass) -> None:
+        """The MaterialX ``standard_surface`` of a transmitting material on ``outputs:mtlx:surface`` (read before the
+        UsdPreviewSurface by renderers of MaterialX, renderer.md#materials)."""
+        from pxr import Gf, Sdf, UsdShade
+
+        sh = UsdShade.Shader.Define(self.stage, f"{path}/StandardSurface")
+        sh.CreateIdAttr("ND_standard_surface_surfaceshader")
+        f, c = Sdf.ValueTypeNames.Float, Sdf.ValueTypeNames.Color3f
+        sh.CreateInput("base", f).Set(1.0)
+        sh.CreateInput("base_color", c).Set(Gf.Vec3f(*(float(x) for x in np.clip(glass.base, 0.0, 1.0))))
+        sh.CreateInput("metalness", f).Set(float(np.clip(glass.metalness, 0.0, 1.0)))
+        sh.CreateInput("specular_IOR", f).Set(float(glass.ior))
+        sh.CreateInput("specular_roughness", f).Set(float(glass.roughness))
+        sh.CreateInput("transmission", f).Set(float(glass.weight))
+        sh.CreateInput("transmission_color", c).Set(Gf.Vec3f(*(float(x) for x in glass.color)))
+        sh.CreateInput("thin_walled", Sdf.ValueTypeNames.Bool).Set(bool(glass.thin))
+        sh.CreateOutput("out", Sdf.ValueTypeNames.Token)
+        mat.CreateSurfaceOutput("mtlx").ConnectToSource(sh.ConnectableAPI(), "out")
 
     def _uv_mesh(self, shape):
         """``(points [V, 3] world space, faces [F, 3], uv [V, 2], normals [V, 3] or None)`` of a shape as the converter
@@ -994,11 +1035,24 @@ class StageConverter:
                    "roughness": float(np.clip(p.scalar("longitudinal_roughness", 0.3), 0.0, 1.0))}
         elif cls in ("SmoothDielectric", "RoughDielectric", "ThinDielectric"):
             eta = p.scalar("eta", 1.5)
-            rough = math.sqrt(p.scalar("alpha", 0.0)) if cls == "RoughDielectric" else 0.0
+            rough = 0.0
+            if cls == "RoughDielectric":
+                beckmann = "beckmann" in text
+                rough = math.sqrt(float(ggx_alpha_of_beckmann(p.scalar("alpha", 0.1)) if beckmann
+                                        else max(p.scalar("alpha", 0.1), 0.0)))
+                if beckmann:
+                    notes.append(f"{cls}: Beckmann distribution approximated by GGX (alpha x 0.82-0.93, "
+                                 "usd_export.ggx_alpha_of_beckmann)")
+            else:
+                notes.append(f"{cls}: smooth glass approximated by GGX with the renderer's minimum roughness")
+            tint = np.clip(p.rgb("specular_transmittance", (1.0,) * 3), 0.0, 1.0)
+            if not np.allclose(p.rgb("specular_reflectance", (1.0,) * 3), 1.0):
+                notes.append(f"{cls}: specular_reflectance ignored (the MaterialX glass reflects its Fresnel untinted)")
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
-            notes.append(f"{cls} has no counterpart (UsdPreviewSurface transmission is not rendered): written as an "
-                         f"opaque black reflector with F0 {f0:.4f}; bake the object into a neural asset (--replace)")
-            out = {**spec_wf, "diffuseColor": (0.0, 0.0, 0.0), "specularColor": (f0,) * 3, "roughness": rough}
+            # UsdPreviewSurface has no transmission: its output keeps the opaque black reflector for renderers that
+            # read only it; the renderers here read the MaterialX glass (renderer.md#transmission)
+            out = {**spec_wf, "diffuseColor": (0.0, 0.0, 0.0), "specularColor": (f0,) * 3, "roughness": rough,
+                   "glass": Glass(1.0, tuple(float(c) for c in tint), float(eta), float(rough), cls == "ThinDielectric")}
         else:
             color = next((p.rgb(k) for k in ("reflectance", "diffuse_reflectance", "base_color", "albedo")
                           if p.has(k)), None)
@@ -1174,8 +1228,10 @@ class StageConverter:
 
     @staticmethod
     def _sided(shape, emission) -> bool:
-        """True when the shape's front side shows: a one-sided BSDF, a twosided one with two BSDFs, or an emitter."""
-        return emission is not None or _is_one_sided(shape.bsdf()) or _has_back_bsdf(shape.bsdf())
+        """True when the shape's front side shows: a one-sided BSDF, a twosided one with two BSDFs, an emitter, or a
+        solid dielectric (its front is its outside)."""
+        return (emission is not None or _is_one_sided(shape.bsdf()) or _has_back_bsdf(shape.bsdf())
+                or (shape.bsdf() is not None and _class_name(shape.bsdf()) in ("SmoothDielectric", "RoughDielectric")))
 
     def _mesh(self, shape, sid, cls, emission) -> None:
         p = self.mi.traverse(shape)
@@ -1595,7 +1651,21 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
     """UsdPreviewSurface inputs of ``(1 - w) a + w b`` and how it was made.
 
     Same workflow: every input blended linearly (colours, textures texel by texel or with the other's
-    constant, roughness), an approximation of the blended lobes. Different workflows: the dominant one."""
+    constant, roughness), an approximation of the blended lobes. Different workflows: the dominant one. A glass
+    (:class:`Glass`) blends by its transmission weight: ``(1 - w) t_a + w t_b``, the rest of the surface the other
+    BSDF's (exact for one glass and one opaque BSDF); of two glasses the heavier one's IOR and roughness."""
+    ga, gb = a.get("glass"), b.get("glass")
+    if ga is not None or gb is not None:
+        weight = (1.0 - w) * (ga.weight if ga else 0.0) + w * (gb.weight if gb else 0.0)
+        glass = dataclasses.replace(gb if gb is not None and (ga is None or w > 0.5) else ga, weight=weight)
+        if ga is not None and gb is not None:
+            out, how = blend_inputs({k: v for k, v in a.items() if k != "glass"},
+                                    {k: v for k, v in b.items() if k != "glass"}, w)
+        else:
+            out, how = dict(b if ga is not None else a), "the opaque BSDF"
+            glass = dataclasses.replace(glass, base=mean_color(out.get("diffuseColor", (0.0, 0.0, 0.0))))
+        out["glass"] = glass
+        return out, f"transmission weight {weight:.3g}, the rest {how}"
     if a.get("useSpecularWorkflow") != b.get("useSpecularWorkflow"):
         return (dict(b) if w > 0.5 else dict(a)), "BSDFs of different UsdPreviewSurface workflows: the heavier one is kept"
     out = {}
@@ -1617,6 +1687,15 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
             if np.ndim(out[k]) == 0:
                 out[k] = float(out[k])
     return out, "parameters blended linearly (an approximation of the blended lobes)"
+
+
+def mean_color(value) -> tuple:
+    """A colour input's constant, or a texture's mean texel (a primvar colour: grey 0.5)."""
+    if isinstance(value, TextureMap):
+        return tuple(float(c) for c in value.image.reshape(-1, 3).mean(0))
+    if isinstance(value, ColorPrimvar):
+        return (0.5, 0.5, 0.5)
+    return tuple(float(c) for c in np.broadcast_to(np.asarray(value, np.float64), (3,)))
 
 
 def _is_one_sided(bsdf) -> bool:

@@ -64,11 +64,11 @@ def test_mtlx_lobes_without_a_preview_counterpart_are_warned(tmp_path):
         mat = UsdShade.Material.Define(stage, "/World/Looks/Mx")
         sh = UsdShade.Shader.Define(stage, "/World/Looks/Mx/Surface")
         sh.CreateIdAttr("ND_standard_surface_surfaceshader")
-        sh.CreateInput("transmission", Sdf.ValueTypeNames.Float).Set(0.8)
+        sh.CreateInput("coat", Sdf.ValueTypeNames.Float).Set(0.8)
         mat.CreateSurfaceOutput("mtlx").ConnectToSource(sh.ConnectableAPI(), "out")
         return mat
 
-    with pytest.warns(UserWarning, match="transmission is dropped"):
+    with pytest.warns(UserWarning, match="coat is dropped"):
         _floor_scene(tmp_path, "mx", mtlx)
 
 

@@ -1,0 +1,148 @@
+"""Transmission (spec/renderer.md#transmission): the glass lobe of a MaterialX surface with ``transmission`` > 0.
+
+The lobe's sampling density is its pdf (checked by integrating the pdf over the sphere against the share of valid
+samples), smooth glass keeps the analytic Fresnel energy, and a glass pane or ball inside a uniform dome shows the
+dome (a white furnace: nothing absorbs, so every path ends in the dome's radiance). Before, transmission was dropped
+with a warning and the glass rendered as an opaque reflector."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdShade
+
+from nasset_reference_renderer import RenderSettings, load_scene, render
+from nasset_reference_renderer.bsdf import glass_eval, glass_sample
+from nasset_reference_renderer.testscenes import SceneBuilder
+
+CASES = [(1.5, False, 0.3, 0.6), (1 / 1.5, False, 0.3, 0.6), (1 / 1.5, False, 0.3, 1.2), (1.5, True, 0.5, 1.0)]
+
+
+def _lobe(n, eta, thin, alpha, theta):
+    wo = np.tile([np.sin(theta), 0.0, np.cos(theta)], (n, 1))
+    return wo, np.full(n, eta), np.full(n, thin), np.full(n, alpha), np.ones((n, 3))
+
+
+@pytest.mark.parametrize("eta, thin, alpha, theta", CASES)
+def test_the_pdf_integrates_to_the_share_of_valid_samples(eta, thin, alpha, theta):
+    rng = np.random.default_rng(3)
+    n = 400_000
+    wo, e, t, a, tint = _lobe(n, eta, thin, alpha, theta)
+    _, valid = glass_sample(wo, a, e, t, rng.random(n), rng.random((n, 2)))
+    z = rng.uniform(-1.0, 1.0, n)
+    phi = rng.uniform(0.0, 2.0 * np.pi, n)
+    r = np.sqrt(1.0 - z * z)
+    uniform = np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+    _, pdf = glass_eval(wo, uniform, a, e, t, tint)
+    integral = 4.0 * np.pi * pdf.mean()
+    se = 4.0 * np.pi * pdf.std() / np.sqrt(n)
+    assert abs(integral - valid.mean()) < 5 * se + 2e-3, (integral, se, valid.mean())
+
+
+@pytest.mark.parametrize("eta, thin, alpha, theta", CASES)
+def test_sampled_weights_match_the_lobe_integrated_uniformly(eta, thin, alpha, theta):
+    """E[f |cos| / pdf] over the lobe's samples equals the integral of f |cos| over the sphere."""
+    rng = np.random.default_rng(4)
+    n = 400_000
+    wo, e, t, a, tint = _lobe(n, eta, thin, alpha, theta)
+    wi, valid = glass_sample(wo, a, e, t, rng.random(n), rng.random((n, 2)))
+    f, pdf = glass_eval(wo, wi, a, e, t, tint)
+    w = np.where(valid & (pdf > 0), f[:, 0] * np.abs(wi[:, 2]) / np.maximum(pdf, 1e-300), 0.0)
+    z = rng.uniform(-1.0, 1.0, n)
+    phi = rng.uniform(0.0, 2.0 * np.pi, n)
+    r = np.sqrt(1.0 - z * z)
+    fu, _ = glass_eval(wo, np.stack([r * np.cos(phi), r * np.sin(phi), z], 1), a, e, t, tint)
+    u = 4.0 * np.pi * fu[:, 0] * np.abs(z)
+    se = np.hypot(w.std(), u.std()) / np.sqrt(n)
+    assert np.isfinite(w).all() and abs(w.mean() - u.mean()) < 5 * se, (w.mean(), u.mean(), se)
+
+
+@pytest.mark.parametrize("eta, thin, expect", [
+    (1.5, False, 0.04 + 0.96 / 1.5 ** 2),  # entering: R + T / eta^2 (radiance)
+    (1 / 1.5, False, 0.04 + 0.96 * 1.5 ** 2),  # leaving
+    (1.5, True, 1.0)])  # a thin wall passes what it does not reflect
+def test_smooth_glass_at_normal_incidence_has_the_fresnel_energy(eta, thin, expect):
+    rng = np.random.default_rng(5)
+    n = 100_000
+    wo, e, t, a, tint = _lobe(n, eta, thin, 1e-3, 0.0)
+    wi, valid = glass_sample(wo, a, e, t, rng.random(n), rng.random((n, 2)))
+    f, pdf = glass_eval(wo, wi, a, e, t, tint)
+    w = np.where(valid, f[:, 0] * np.abs(wi[:, 2]) / np.maximum(pdf, 1e-300), 0.0)
+    assert w.mean() == pytest.approx(expect, rel=2e-3)
+
+
+def _glass_material(stage, path, *, thin, roughness=0.0, ior=1.5, color=(1.0, 1.0, 1.0), universal=False):
+    mat = UsdShade.Material.Define(stage, path)
+    sh = UsdShade.Shader.Define(stage, f"{path}/Surface")
+    sh.CreateIdAttr("ND_standard_surface_surfaceshader")
+    sh.CreateInput("base", Sdf.ValueTypeNames.Float).Set(0.0)
+    sh.CreateInput("transmission", Sdf.ValueTypeNames.Float).Set(1.0)
+    sh.CreateInput("transmission_color", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*color))
+    sh.CreateInput("specular_IOR", Sdf.ValueTypeNames.Float).Set(ior)
+    sh.CreateInput("specular_roughness", Sdf.ValueTypeNames.Float).Set(roughness)
+    sh.CreateInput("thin_walled", Sdf.ValueTypeNames.Bool).Set(thin)
+    mat.CreateSurfaceOutput("mtlx").ConnectToSource(sh.ConnectableAPI(), "out")
+    if universal:  # an opaque black UsdPreviewSurface beside it, as convert-scene writes it
+        ps = UsdShade.Shader.Define(stage, f"{path}/Preview")
+        ps.CreateIdAttr("UsdPreviewSurface")
+        ps.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.0, 0.0, 0.0))
+        mat.CreateSurfaceOutput().ConnectToSource(ps.ConnectableAPI(), "surface")
+    return mat
+
+
+@pytest.mark.parametrize("shape, thin, roughness", [("pane", True, 0.0), ("ball", False, 0.0), ("ball", False, 0.3)])
+def test_glass_in_a_uniform_dome_shows_the_dome(tmp_path, shape, thin, roughness):
+    """White furnace: a smooth pane or ball (and a rough ball, which loses only GGX's single-scattering energy, a few
+    per cent) in a dome of radiance 1 renders 1 wherever the camera looks; an opaque black reflector (the glass before
+    transmission was read) renders its Fresnel reflection, about 0.1 in the middle."""
+    b = SceneBuilder()
+    b.camera((0, 0, 4), (0, 0, 0), focal=50)
+    prim = b.quad("Pane", (0, 0, 0), 1.5, normal=(0, 0, 1)) if shape == "pane" else \
+        b.sphere_mesh("Ball", (0, 0, 0), 0.8, subdivisions=4)
+    mat = _glass_material(b.stage, "/World/Looks/Glass", thin=thin, roughness=roughness, universal=True)
+    UsdShade.MaterialBindingAPI.Apply(prim.GetPrim()).Bind(mat)
+    b.dome("Sky", 1.0)
+    path = b.write(tmp_path / "furnace.usda")
+    img = render(load_scene(path), RenderSettings(spp=64, width=16, height=16, max_depth=24, seed=2)).image
+    centre = img[5:11, 5:11].mean()
+    assert np.isfinite(img).all()
+    assert centre == pytest.approx(1.0, abs=0.06 if roughness else 0.02), centre
+
+
+def test_a_thin_pane_tints_what_it_lets_through(tmp_path):
+    """A thin pane of transmission colour c over a white dome: the light through it is (1 - R) c, its reflection R."""
+    b = SceneBuilder()
+    b.camera((0, 0, 4), (0, 0, 0), focal=50)
+    prim = b.quad("Pane", (0, 0, 0), 1.5, normal=(0, 0, 1))
+    c = (0.2, 0.6, 1.0)
+    UsdShade.MaterialBindingAPI.Apply(prim.GetPrim()).Bind(_glass_material(b.stage, "/World/Looks/G", thin=True, color=c))
+    b.dome("Sky", 1.0)
+    img = render(load_scene(b.write(tmp_path / "tint.usda")), RenderSettings(spp=32, width=16, height=16,
+                                                                           max_depth=8, seed=3)).image
+    f = 0.04  # normal incidence, eta 1.5: the slab reflects 2 F / (1 + F)
+    r = 2 * f / (1 + f)
+    np.testing.assert_allclose(img[6:10, 6:10].mean((0, 1)), r + (1 - r) * np.asarray(c), atol=0.02)
+
+
+def test_the_mitsuba_implementations_say_they_render_glass_opaque(tmp_path):
+    """The Mitsuba plugin and the second implementation read scenes through nasset_mitsuba_renderer.usdscene, which
+    does not render transmission yet: it says so, naming the shader."""
+    from nasset_mitsuba_renderer.usdscene import read_material
+
+    b = SceneBuilder()
+    mat = _glass_material(b.stage, "/World/Looks/Glass", thin=False)
+    with pytest.warns(UserWarning, match="transmission 1 is not rendered here.*/World/Looks/Glass/Surface|"
+                                         "/World/Looks/Glass/Surface.*transmission 1 is not rendered here"):
+        read_material(mat.GetPrim(), str(tmp_path / "s.usda"), Usd.TimeCode.Default(), material=mat)
+
+
+def test_mtlx_output_is_read_before_the_universal_one():
+    """A material with both outputs is read through MaterialX's (the render context a MaterialX renderer asks for), and
+    through the universal one when the MaterialX shader is not one the renderers read."""
+    from nasset_sdk import stage_rules
+
+    b = SceneBuilder()
+    mat = _glass_material(b.stage, "/World/Looks/Glass", thin=False, universal=True)
+    assert stage_rules.surface_shader(mat).GetPath() == Sdf.Path("/World/Looks/Glass/Surface")
+    UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/Glass/Surface")).SetShaderId("ND_gltf_pbr_surfaceshader")
+    assert stage_rules.surface_shader(mat).GetPath() == Sdf.Path("/World/Looks/Glass/Preview")
