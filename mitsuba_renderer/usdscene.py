@@ -211,7 +211,7 @@ def _input(shader, name, default, t=None, per_hit: dict | None = None, textures:
 
 
 #: surface shaders read as UsdPreviewSurface (spec/renderer.md#limits, surface shaders)
-PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
+PREVIEW_SURFACES = stage_rules.PREVIEW_SURFACES
 
 
 def _checked(value, n: int, name: str, path: str, shader: str, top: float = np.inf) -> np.ndarray:

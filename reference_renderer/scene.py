@@ -68,7 +68,7 @@ class SceneWarning(UserWarning):
 
 
 #: surface shader ids read with UsdPreviewSurface's inputs
-PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
+PREVIEW_SURFACES = stage_rules.PREVIEW_SURFACES
 #: MaterialX surfaces mapped to UsdPreviewSurface: inputs in the order (base weight, base colour, metalness,
 #: specular roughness, specular IOR, emission weight, emission colour) with their MaterialX defaults, and the
 #: lobes whose weight is warned when on
