@@ -484,12 +484,14 @@ MTLX_SURFACES = {
     "ND_standard_surface_surfaceshader": {
         "inputs": {"base": 1.0, "base_color": (0.8, 0.8, 0.8), "metalness": 0.0, "specular_roughness": 0.2,
                    "specular_IOR": 1.5, "emission": 0.0, "emission_color": (1.0, 1.0, 1.0)},
-        "glass": {"transmission": 0.0, "transmission_color": (1.0, 1.0, 1.0), "thin_walled": 0},
+        "glass": {"transmission": 0.0, "transmission_color": (1.0, 1.0, 1.0), "thin_walled": 0,
+                  "specular_color": (1.0, 1.0, 1.0)},
         "dropped": ("coat", "subsurface", "sheen", "thin_film_thickness", "specular_anisotropy", "transmission_depth")},
     "ND_open_pbr_surface_surfaceshader": {
         "inputs": {"base_weight": 1.0, "base_color": (0.8, 0.8, 0.8), "base_metalness": 0.0, "specular_roughness": 0.3,
                    "specular_ior": 1.5, "emission_luminance": 0.0, "emission_color": (1.0, 1.0, 1.0)},
-        "glass": {"transmission_weight": 0.0, "transmission_color": (1.0, 1.0, 1.0), "geometry_thin_walled": 0},
+        "glass": {"transmission_weight": 0.0, "transmission_color": (1.0, 1.0, 1.0), "geometry_thin_walled": 0,
+                  "specular_color": (1.0, 1.0, 1.0)},
         "dropped": ("coat_weight", "subsurface_weight", "fuzz_weight", "thin_film_weight",
                     "specular_roughness_anisotropy", "transmission_depth")},
 }
@@ -498,10 +500,10 @@ MTLX_SURFACES = {
 def mtlx_preview_values(shader, sid: str, time, warn: Warn, finite) -> dict:
     """UsdPreviewSurface values of a MaterialX standard_surface or open_pbr_surface ``shader`` (id ``sid``, a key of
     :data:`MTLX_SURFACES`): base colour x weight, metalness, specular roughness and IOR, emission x colour, and the
-    glass lobe (spec/renderer.md#transmission) as ``transmission`` (weight in [0, 1]), ``transmissionColor`` ([3] in
-    [0, 1]) and ``thinWalled`` (bool); another lobe UsdPreviewSurface lacks is warned about when it is on, a
-    connected input uses its own value (warned). ``finite(value, default, name)``: the caller's check of one input's
-    value (SCENE_INVALID naming it)."""
+    glass lobe (spec/renderer.md#transmission) as ``transmission`` (weight in [0, 1]), ``transmissionColor`` and
+    ``specularTint`` (the specular colour: [3] in [0, 1] each) and ``thinWalled`` (bool); another lobe
+    UsdPreviewSurface lacks is warned about when it is on, a connected input uses its own value (warned).
+    ``finite(value, default, name)``: the caller's check of one input's value (SCENE_INVALID naming it)."""
     names = MTLX_SURFACES[sid]
     vals = {}
     for name, default in {**names["inputs"], **names["glass"]}.items():
@@ -515,8 +517,8 @@ def mtlx_preview_values(shader, sid: str, time, warn: Warn, finite) -> dict:
         if v is not None and float(np.max(v)) > 0.0:
             warn(f"MaterialX {name} is dropped (no UsdPreviewSurface counterpart)", shader.GetPath())
     b, c, m, r, i, e, ec = (vals[k] for k in names["inputs"])
-    t, tc, thin = (vals[k] for k in names["glass"])
+    t, tc, thin, sc = (vals[k] for k in names["glass"])
     return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
             "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0,
             "transmission": float(np.clip(t, 0.0, 1.0)), "transmissionColor": tuple(np.clip(tc, 0.0, 1.0)),
-            "thinWalled": bool(np.asarray(thin).ravel()[0] != 0)}
+            "thinWalled": bool(np.asarray(thin).ravel()[0] != 0), "specularTint": tuple(np.clip(sc, 0.0, 1.0))}

@@ -12,7 +12,7 @@ Specular directions are drawn from the distribution of visible normals (Heitz 20
 
 A material with a transmission weight t (MaterialX ``transmission``, spec/renderer.md#transmission) is
 ``(1 - t) f + t f_glass``: a dielectric of relative IOR eta with the same GGX alpha and the exact Fresnel
-reflectance F, reflecting F and transmitting (1 - F) times the transmission colour. A solid one refracts
+reflectance F, reflecting F times the specular colour and transmitting (1 - F) times the transmission colour. A solid one refracts
 (Walter et al. 2007, radiance form: no eta^2 factor); a thin-walled one lets the light through unbent, its
 transmitted lobe the reflected one mirrored through the surface, with the reflectance of a slab
 R = 2 F / (1 + F) (every internal bounce summed, Mitsuba's thindielectric).
@@ -106,11 +106,12 @@ def glass_reflectance(cos_oh, eta, thin):
     return np.where(thin, 2.0 * f / (1.0 + f), f)
 
 
-def glass_eval(wo, wi, alpha, eta, thin, tint):
+def glass_eval(wo, wi, alpha, eta, thin, tint, reflect_tint=None):
     """f(wo, wi) [N,3] (cosine not included) and pdf [N] of the glass lobe in the local frame (wo.z > 0).
 
     ``eta`` [N]: IOR of the side wo is not on over the side it is on; ``thin`` [N] bool; ``tint`` [N,3] the
-    transmission colour. Reflection for wi.z > 0; below, refraction (solid) or the mirrored reflection lobe (thin)."""
+    transmission colour, ``reflect_tint`` [N,3] the reflection's (None: white). Reflection for wi.z > 0; below,
+    refraction (solid) or the mirrored reflection lobe (thin). The tints do not change the pdf."""
     up = wi[:, 2] > 0
     cos_o = np.maximum(wo[:, 2], 1e-300)
     cos_i = np.maximum(np.abs(wi[:, 2]), 1e-300)
@@ -138,7 +139,7 @@ def glass_eval(wo, wi, alpha, eta, thin, tint):
     ok_t = ~up & ~thin & (c_o > 0) & (c_i < 0) & (den > 0)
     f = np.where(ok_r, f_r, np.where(ok_t, f_t, 0.0))
     pdf = np.where(ok_r, p_r, np.where(ok_t, p_t, 0.0))
-    f = f[:, None] * np.where(up[:, None], 1.0, tint)
+    f = f[:, None] * np.where(up[:, None], 1.0 if reflect_tint is None else reflect_tint, tint)
     return f, pdf
 
 
@@ -183,20 +184,22 @@ class MaterialTable:
     transmission_color: np.ndarray | None = None  # [M,3] tint of the transmitted light
     eta: np.ndarray | None = None  # [M] IOR of the glass lobe (inside over outside)
     thin: np.ndarray | None = None  # [M] bool: thin-walled (unbent transmission)
+    reflection_color: np.ndarray | None = None  # [M,3] tint of the glass lobe's reflection (MaterialX specular_color)
 
     @property
     def transmits(self) -> bool:
         return self.transmission is not None and bool((self.transmission > 0).any())
 
     def glass(self, m: np.ndarray, outside: np.ndarray):
-        """(t [N], tint [N,3], eta [N], thin [N]) of materials m [N] seen from ``outside`` [N] bool (the front of
-        the surface: eta is the material's, else its inverse; a thin wall's is the material's), None where no
-        material transmits."""
+        """(t [N], tint [N,3], eta [N], thin [N], reflection tint [N,3]) of materials m [N] seen from ``outside``
+        [N] bool (the front of the surface: eta is the material's, else its inverse; a thin wall's is the
+        material's), None where no material transmits."""
         if not self.transmits:
             return None
         eta = self.eta[m]
         thin = self.thin[m]
-        return self.transmission[m], self.transmission_color[m], np.where(outside | thin, eta, 1.0 / eta), thin
+        return (self.transmission[m], self.transmission_color[m], np.where(outside | thin, eta, 1.0 / eta), thin,
+                self.reflection_color[m])
 
     def emission_at(self, m: np.ndarray, st: np.ndarray | None) -> np.ndarray:
         """Emitted radiance [N,3] of materials m [N] at texture coordinates st [N,2] (their constant where untextured;
@@ -262,8 +265,8 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None, glass=
     pdf = np.where(ok, (1.0 - ps) * cosine_hemisphere_pdf(wi) + ps * ggx_reflect_pdf(wo, wi, alpha), 0.0)
     if glass is None:
         return f, pdf
-    t, tint, eta, thin = glass
-    fg, pg = glass_eval(wo, wi, alpha, eta, thin, tint)
+    t, tint, eta, thin, reflect_tint = glass
+    fg, pg = glass_eval(wo, wi, alpha, eta, thin, tint, reflect_tint)
     return (1.0 - t)[:, None] * f + t[:, None] * fg, (1.0 - t) * pdf + t * pg
 
 
@@ -287,7 +290,7 @@ def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None, alpha=Non
         wi[spec] = reflect(wo[spec], h)
     valid = np.ones(len(u_lobe), bool)
     if through.any():
-        _, _, eta, thin = glass
+        _, _, eta, thin, _ = glass
         wi[through], valid[through] = glass_sample(wo[through], alpha[through], eta[through], thin[through],
                                                    u_lobe[through], u[through])
     f, pdf = bsdf_eval(mt, m, wo, wi, kd, f0, alpha, glass)

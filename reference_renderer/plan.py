@@ -3,7 +3,8 @@
 * Lights that cannot reach any geometry (zero power; a RectLight with every scene point behind
   it) get no shadow rays; they stay visible to rays that hit them.
 * A vertex continues its path only when something else in the scene could reflect light back
-  to it: another object, or a non-planar mesh (which can reflect onto itself). A lone neural
+  to it: another object, or a non-planar mesh (which can reflect onto itself); a lone planar mesh too when its
+  material transmits or has a sharp lobe (GGX alpha below SHARP_ALPHA), which light samples rarely meet. A lone neural
   asset has all of its own interreflection baked in, so it gets next-event estimation only
   (light-sampling weight 1; unbiased because every reachable light is sampled).
 * Each asset file loads only the components the renderer evaluates (the kind's required ones);
@@ -25,6 +26,9 @@ from nasset_sdk.errors import UsageError
 
 from .lights import DomeLight, RectLight
 
+#: GGX alpha below which a lone planar mesh keeps its continuation rays: light samples rarely fall in so narrow a lobe
+#: (a mirror floor under a dome, NEE only, showed almost none of the dome it reflects)
+SHARP_ALPHA = 0.1
 NEUPRESS_SAMPLING = ("auto", "dome", "lobe", "mis")
 EIGHTDNA_SAMPLING = ("light", "flow", "mis")
 #: rna continuation densities (spec/renderer.md#neural-assets): the uniform sphere, or the kind's mixture of it with
@@ -147,10 +151,13 @@ def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sam
                               f"{'indirect on' if indirect[i] else 'indirect off'} ({why})")
         else:
             mt = scene.materials
-            glass = mt.transmits and inst.material >= 0 and mt.transmission[inst.material] > 0
-            indirect[i] = (others or not inst.planar or glass) and max_depth > 1
+            mats = [m for m in (inst.material, inst.back_material) if m >= 0]
+            glass = mt.transmits and any(mt.transmission[m] > 0 for m in mats)
+            sharp = any(mt.alpha[m] < SHARP_ALPHA for m in mats)
+            indirect[i] = (others or not inst.planar or glass or sharp) and max_depth > 1
             why = "other objects present" if others else ("non-planar, may reflect onto itself" if not inst.planar
                                                             else "transmits: light passes through it" if glass
+                                                            else "a sharp lobe light samples rarely meet" if sharp
                                                             else "lone planar mesh: NEE only")
             inst_notes.append(f"mesh {inst.prim} ({inst.n_tri} tris): {'indirect on' if indirect[i] else 'indirect off'}"
                               f" ({why})")

@@ -739,9 +739,10 @@ class _Loader:
                                     textures["normal"][0] if "normal" in textures else None)
         kd, f0, alpha = material.constants()
         textured = material if set(textures) - {"opacity", "emissiveColor"} or primvar_color is not None else None
-        glass = None  # (weight, colour [3], ior, thin) of a transmitting MaterialX surface (spec/renderer.md#transmission)
-        if vals.get("transmission", 0.0) > 0.0:
-            glass = (vals["transmission"], np.asarray(vals["transmissionColor"], np.float64), ior, vals["thinWalled"])
+        glass = None  # (weight, colour [3], ior, thin, reflection tint [3]) of a transmitting MaterialX surface
+        if vals.get("transmission", 0.0) > 0.0:  # (spec/renderer.md#transmission)
+            glass = (vals["transmission"], np.asarray(vals["transmissionColor"], np.float64), ior, vals["thinWalled"],
+                     np.asarray(vals["specularTint"], np.float64))
         self.mat_index[mpath] = len(self.mat_rows)
         self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity,
                               None if emission_texture is None else (emission_texture[0], varname), glass))
@@ -1518,11 +1519,12 @@ class _Loader:
 
 
 def _glass_columns(rows: list) -> dict:
-    """MaterialTable's glass columns (transmission, transmission_color, eta, thin) from per-material (weight,
-    colour, ior, thin) or None; no columns when no material transmits."""
+    """MaterialTable's glass columns (transmission, transmission_color, eta, thin, reflection_color) from
+    per-material (weight, colour, ior, thin, reflection tint) or None; no columns when no material transmits."""
     if all(r is None for r in rows):
         return {}
-    rows = [(0.0, np.ones(3), 1.5, False) if r is None else r for r in rows]
+    rows = [(0.0, np.ones(3), 1.5, False, np.ones(3)) if r is None else r for r in rows]
     return {"transmission": np.array([r[0] for r in rows], np.float64),
             "transmission_color": np.array([r[1] for r in rows], np.float64),
-            "eta": np.array([r[2] for r in rows], np.float64), "thin": np.array([bool(r[3]) for r in rows])}
+            "eta": np.array([r[2] for r in rows], np.float64), "thin": np.array([bool(r[3]) for r in rows]),
+            "reflection_color": np.array([r[4] for r in rows], np.float64)}

@@ -1011,10 +1011,11 @@ def _approximated_shader(mat, node, notes: list) -> dict:
         # the UsdPreviewSurface keeps the opaque reflector for renderers that read only it; the MaterialX glass
         # (renderer.md#transmission) is what the renderers here read
         out.update(specularColor=tuple(float(c) for c in np.clip(f0 * tint, 0.0, 1.0)), roughness=rough,
-                   glass=Glass(1.0, tuple(float(c) for c in np.clip(tint, 0.0, 1.0)), max(float(ior), 1e-3), rough, False))
+                   glass=Glass(1.0, tuple(float(c) for c in np.clip(tint, 0.0, 1.0)), max(float(ior), 1e-3), rough, False,
+                               specular=tuple(float(c) for c in np.clip(tint, 0.0, 1.0))))
         distribution = getattr(node, "distribution", "GGX")
-        what = (f"a MaterialX glass (IOR {float(ior):.3g}, roughness {rough:.3g}, renderer.md#transmission); its Color "
-                "tints the transmitted light only (Cycles tints the reflection too)"
+        what = (f"a MaterialX glass (IOR {float(ior):.3g}, roughness {rough:.3g}, renderer.md#transmission), its Color "
+                "on both the transmission and the reflection"
                 + (f"; GGX for its {distribution} distribution" if distribution not in ("GGX", "MULTI_GGX") else ""))
     else:
         what = "black (" + ("it only refracts" if name == "Refraction" else "a grazing lobe of little albedo") + ")"
@@ -1154,14 +1155,16 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
         # weight t x (1 - metallic) (renderer.md#transmission), tinted by the base colour, beside the opaque rest; the
         # UsdPreviewSurface alone keeps the diffuse base x (1 - t) for renderers that read only it
         metal, rough, base = _mean(inputs["metallic"]), _mean(inputs["roughness"]), inputs["diffuseColor"]
-        tint = np.clip(mean_color(base), 0.0, 1.0)
+        colour = np.clip(mean_color(base), 0.0, 1.0)
+        tint = np.sqrt(colour)  # Cycles tints a pass through (two refractions) by the base colour once
         ior, _ = _socket(node, "IOR", 1.5)
         inputs["glass"] = Glass(transmission * (1.0 - metal), tuple(float(c) for c in tint), max(float(ior), 1e-3),
-                                float(np.clip(rough, 0.0, 1.0)), False, base=tuple(float(c) for c in tint),
+                                float(np.clip(rough, 0.0, 1.0)), False, base=tuple(float(c) for c in colour),
                                 metalness=metal / max(1.0 - transmission * (1.0 - metal), 1e-12))
         inputs["diffuseColor"] = _scaled(inputs["diffuseColor"], 1.0 - transmission)
         notes.append(f"material {mat.name}: Principled Transmission Weight {transmission:.3g}: a MaterialX glass of "
-                     f"weight {transmission * (1.0 - metal):.3g} tinted by the mean base colour"
+                     f"weight {transmission * (1.0 - metal):.3g} tinted by the square root of the base colour at each "
+                     "refraction"
                      + (" (textured: its mean)" if isinstance(base, (TextureMap, ColorPrimvar)) else ""))
     metal = inputs["metallic"]
     if not isinstance(metal, TextureMap) and float(metal) > 0.0 and not isinstance(inputs["roughness"], TextureMap):

@@ -213,7 +213,8 @@ class TextureMap:
 class Glass:
     """A transmitting surface (renderer.md#transmission), written beside the UsdPreviewSurface as a MaterialX
     ``standard_surface`` on ``outputs:mtlx:surface``: transmission ``weight`` tinted by ``color``, the dielectric's
-    ``ior`` and specular ``roughness`` (alpha = roughness^2), ``thin`` walled or solid. The rest of the surface, weight
+    ``ior`` and specular ``roughness`` (alpha = roughness^2), its reflection tinted by ``specular``, ``thin`` walled
+    or solid. The rest of the surface, weight
     ``1 - weight``, is a dielectric of base colour ``base`` (its mean where textured) and ``metalness``: no texture
     reaches the MaterialX shader."""
 
@@ -224,6 +225,7 @@ class Glass:
     thin: bool
     base: tuple = (0.0, 0.0, 0.0)
     metalness: float = 0.0
+    specular: tuple = (1.0, 1.0, 1.0)  # the reflection's tint (standard_surface specular_color)
 
 
 @dataclass
@@ -787,6 +789,7 @@ class StageConverter:
         sh.CreateInput("metalness", f).Set(float(np.clip(glass.metalness, 0.0, 1.0)))
         sh.CreateInput("specular_IOR", f).Set(float(glass.ior))
         sh.CreateInput("specular_roughness", f).Set(float(glass.roughness))
+        sh.CreateInput("specular_color", c).Set(Gf.Vec3f(*(float(x) for x in np.clip(glass.specular, 0.0, 1.0))))
         sh.CreateInput("transmission", f).Set(float(glass.weight))
         sh.CreateInput("transmission_color", c).Set(Gf.Vec3f(*(float(x) for x in glass.color)))
         sh.CreateInput("thin_walled", Sdf.ValueTypeNames.Bool).Set(bool(glass.thin))
@@ -1046,13 +1049,13 @@ class StageConverter:
             else:
                 notes.append(f"{cls}: smooth glass approximated by GGX with the renderer's minimum roughness")
             tint = np.clip(p.rgb("specular_transmittance", (1.0,) * 3), 0.0, 1.0)
-            if not np.allclose(p.rgb("specular_reflectance", (1.0,) * 3), 1.0):
-                notes.append(f"{cls}: specular_reflectance ignored (the MaterialX glass reflects its Fresnel untinted)")
+            reflect = np.clip(p.rgb("specular_reflectance", (1.0,) * 3), 0.0, 1.0)
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
             # UsdPreviewSurface has no transmission: its output keeps the opaque black reflector for renderers that
             # read only it; the renderers here read the MaterialX glass (renderer.md#transmission)
             out = {**spec_wf, "diffuseColor": (0.0, 0.0, 0.0), "specularColor": (f0,) * 3, "roughness": rough,
-                   "glass": Glass(1.0, tuple(float(c) for c in tint), float(eta), float(rough), cls == "ThinDielectric")}
+                   "glass": Glass(1.0, tuple(float(c) for c in tint), float(eta), float(rough), cls == "ThinDielectric",
+                                  specular=tuple(float(c) for c in reflect))}
         else:
             color = next((p.rgb(k) for k in ("reflectance", "diffuse_reflectance", "base_color", "albedo")
                           if p.has(k)), None)

@@ -146,3 +146,22 @@ def test_mtlx_output_is_read_before_the_universal_one():
     assert stage_rules.surface_shader(mat).GetPath() == Sdf.Path("/World/Looks/Glass/Surface")
     UsdShade.Shader(b.stage.GetPrimAtPath("/World/Looks/Glass/Surface")).SetShaderId("ND_gltf_pbr_surfaceshader")
     assert stage_rules.surface_shader(mat).GetPath() == Sdf.Path("/World/Looks/Glass/Preview")
+
+
+@pytest.mark.parametrize("roughness, continues", [(0.0, True), (0.25, True), (0.6, False)])
+def test_a_lone_mirror_floor_keeps_its_continuation_and_shows_the_dome(tmp_path, roughness, continues):
+    """The plan gives a lone planar mesh NEE only, unless its lobe is sharp (alpha < SHARP_ALPHA) or it transmits:
+    light samples almost never fall in a mirror's lobe, so NEE alone showed next to nothing of the dome a lone mirror
+    floor reflects (unbiased, but nearly every sample 0). A metal mirror under a dome of radiance 1 reflects about 1."""
+    from nasset_reference_renderer.plan import make_plan
+
+    b = SceneBuilder()
+    b.camera((0, 2, 2), (0, 0, 0), focal=50)
+    b.quad("Mirror", (0, 0, 0), 8.0, diffuse=(1.0, 1.0, 1.0), metallic=1.0, roughness=roughness)
+    b.dome("Sky", 1.0)
+    scene = load_scene(b.write(tmp_path / "mirror.usda"))
+    plan = make_plan(scene, width=8, height=8, spp=1, max_depth=4, tile=64, batch=65536)
+    assert bool(plan.instance_indirect[0]) == continues
+    if roughness == 0.0:
+        img = render(scene, RenderSettings(spp=16, width=8, height=8, max_depth=4, seed=1)).image
+        assert img.mean() == pytest.approx(1.0, abs=0.03) and img.std() < 0.05, (img.mean(), img.std())
