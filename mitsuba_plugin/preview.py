@@ -56,10 +56,19 @@ def register(mi) -> None:
                 self.back_kd = mi.Color3f(props.get("back_kd"))
                 self.back_f0 = mi.Color3f(props.get("back_f0", mi.ScalarColor3f(0.04)))
                 self.back_alpha = max(float(props.get("back_alpha", 0.25)), 1e-3)
+            # the glass lobe of a transmitting material (spec/renderer.md#transmission): weight, colours, IOR, thin wall
+            self.glass = float(props.get("glass", 0.0))
+            self.glass_tint = mi.Color3f(props.get("glass_tint", mi.ScalarColor3f(1.0)))
+            self.glass_reflect = mi.Color3f(props.get("glass_reflect", mi.ScalarColor3f(1.0)))
+            self.glass_ior = float(props.get("glass_ior", 1.5))
+            self.glass_thin = bool(props.get("glass_thin", False))
             flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
-            self.m_flags = flags
             self.m_components = [mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide,
                                  mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide]
+            if self.glass > 0:
+                flags = flags | mi.BSDFFlags.GlossyTransmission
+                self.m_components.append(mi.BSDFFlags.GlossyTransmission | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide)
+            self.m_flags = flags
 
         @staticmethod
         def _lambda(w, alpha):
@@ -99,6 +108,69 @@ def register(mi) -> None:
             pdf_spec = g1 * dr.maximum(dr.dot(wi, h), 0.0) * d / dr.maximum(wi.z, 1e-12) / dr.maximum(4.0 * dr.abs(dr.dot(wo, h)), 1e-12)
             pdf = P_SPECULAR * pdf_spec + (1.0 - P_SPECULAR) * wo.z * (1.0 / math.pi)
             return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
+
+        @staticmethod
+        def _fresnel(c, eta):
+            """Unpolarised dielectric Fresnel reflectance at |c| for relative IOR eta (1 under total internal
+            reflection), as nasset_sdk.kinds.boundary.fresnel_dielectric."""
+            c = dr.clip(dr.abs(c), 0.0, 1.0)
+            sin_t2 = (1.0 - c * c) / (eta * eta)
+            ct = dr.sqrt(dr.maximum(1.0 - sin_t2, 0.0))
+            rs = (c - eta * ct) / dr.maximum(c + eta * ct, 1e-12)
+            rp = (eta * c - ct) / dr.maximum(eta * c + ct, 1e-12)
+            return dr.select(sin_t2 >= 1.0, 1.0, dr.clip(0.5 * (rs * rs + rp * rp), 0.0, 1.0))
+
+        def _reflectance(self, c, eta):
+            """The glass lobe's reflectance at wi.h: F, or a thin wall's 2 F / (1 + F)."""
+            f = self._fresnel(c, eta)
+            return 2.0 * f / (1.0 + f) if self.glass_thin else f
+
+        def _eta(self, si):
+            """IOR across the surface from the viewer's side: the material's from its front, else the inverse."""
+            outside = dr.dot(si.n, si.to_world(si.wi)) * self.front_sign > 0
+            return dr.select(outside | self.glass_thin, self.glass_ior, 1.0 / self.glass_ior)
+
+        def _glass_eval_pdf(self, wi, wo, eta, alpha, ggx, active):
+            """(f |cos_o| [Color3f], pdf) of the glass lobe, wi the viewer's direction (wi.z > 0) and wo the light's
+            in the shading frame (as reference_renderer.bsdf.glass_eval)."""
+            up = wo.z > 0
+            g2 = dr.rcp(1.0 + self._lambda(wi, alpha) + self._lambda(wo, alpha))
+            g1 = dr.rcp(1.0 + self._lambda(wi, alpha))
+            cos_i = dr.maximum(wi.z, 1e-12)
+            wr = dr.select(up, wo, mi.Vector3f(wo.x, wo.y, -wo.z))  # the thin wall's transmission: mirrored
+            hr = dr.normalize(wi + wr)
+            c_r = dr.dot(wi, hr)
+            fr = self._reflectance(c_r, eta)
+            w_r = dr.select(up, fr, 1.0 - fr)
+            d_r = ggx.eval(hr)
+            f_r = w_r * d_r * g2 / (4.0 * cos_i)  # times |cos_o| / cos_o
+            p_r = w_r * g1 * d_r / (4.0 * cos_i)
+            ok_r = (up | self.glass_thin) & (c_r > 0)
+            ht = wi + eta * wo
+            ht = dr.normalize(dr.select(ht.z < 0, -ht, ht))
+            c_i, c_o = dr.dot(wi, ht), dr.dot(wo, ht)
+            den = dr.maximum(dr.square(c_i + eta * c_o), 1e-12)
+            ft = 1.0 - self._fresnel(dr.maximum(c_i, 0.0), eta)
+            d_t = ggx.eval(ht)
+            f_t = ft * d_t * g2 * dr.abs(c_o) * dr.abs(c_i) / (cos_i * den)
+            p_t = ft * g1 * d_t * dr.maximum(c_i, 0.0) / cos_i * eta * eta * dr.abs(c_o) / den
+            ok_t = ~up & (not self.glass_thin) & (c_i > 0) & (c_o < 0)
+            value = dr.select(ok_r, f_r, dr.select(ok_t, f_t, 0.0)) * dr.select(up, self.glass_reflect, self.glass_tint)
+            pdf = dr.select(ok_r, p_r, dr.select(ok_t, p_t, 0.0))
+            return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+        def _mixed_eval_pdf(self, si, frame, ng, wi, w, active, side):
+            """(value, pdf) at world direction w: the opaque lobes, and with a glass weight t ``(1 - t)`` of them plus
+            ``t`` glass (transmission below the surface, where both normals agree)."""
+            wl = frame.to_local(w)
+            above = dr.dot(w, ng) > 0
+            value, pdf = self._eval_pdf(wi, wl, active & above, side)
+            if self.glass <= 0:
+                return value, pdf
+            consistent = dr.select(above, wl.z > 0, wl.z < 0) & side[4]
+            gv, gp = self._glass_eval_pdf(wi, wl, self._eta(si), side[2], side[3], active & consistent)
+            t = self.glass
+            return (1.0 - t) * value + t * gv, (1.0 - t) * pdf + t * gp
 
         def _frame(self, si, active):
             """(shading frame, geometric normal flipped toward the viewer [world], the viewer's direction in the frame,
@@ -154,36 +226,68 @@ def register(mi) -> None:
         def pdf(self, ctx, si, wo, active=True):
             return self.eval_pdf(ctx, si, wo, active)[1]
 
+        def _terminator_above(self, smooth, n, w, ng):
+            """:meth:`_terminator` for directions above the surface; 1 for transmitted ones."""
+            if smooth is None:
+                return 1.0
+            return dr.select(dr.dot(w, ng) > 0, self._terminator(smooth, n, w), 1.0)
+
         def eval_pdf(self, ctx, si, wo, active=True):
             frame, ng, wi, smooth = self._frame(si, active)
             w = si.to_world(wo)
-            value, pdf = self._eval_pdf(wi, frame.to_local(w), active & (dr.dot(w, ng) > 0), self._side(si, active))
-            return value * self._terminator(smooth, frame.n, w), pdf
+            value, pdf = self._mixed_eval_pdf(si, frame, ng, wi, w, active, self._side(si, active))
+            return value * self._terminator_above(smooth, frame.n, w, ng), pdf
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             frame, ng, wi, smooth = self._frame(si, active)
             side = self._side(si, active)
-            spec = sample1 < P_SPECULAR
+            t = self.glass
+            through = mi.Bool(False)
+            valid = mi.Bool(True)
+            u = sample1
+            if t > 0:  # sample1 < t: the glass lobe (sample1 / t picks reflection or transmission), else the rest
+                through = sample1 < t
+                u = dr.select(through, sample1 / t, (sample1 - t) / max(1.0 - t, 1e-12))
+            spec = (u < P_SPECULAR) & ~through
             m, _ = side[3].sample(wi, sample2)
             w_spec = mi.reflect(wi, m)
             w_diff = mi.warp.square_to_cosine_hemisphere(sample2)
-            wl = dr.select(spec, w_spec, w_diff)
+            wl = dr.select(spec | through, w_spec, w_diff)
+            if t > 0:
+                eta = self._eta(si)
+                keep = u < self._reflectance(dr.dot(wi, m), eta)
+                if self.glass_thin:
+                    passed = mi.Vector3f(w_spec.x, w_spec.y, -w_spec.z)
+                else:
+                    passed = _refract(wi, m, eta)
+                wl = dr.select(through & ~keep, passed, wl)
+                # an opaque sample below the surface (whose glass lobe has a density there) is no sample either
+                valid = dr.select(through, dr.select(keep | self.glass_thin, w_spec.z > 0, wl.z < 0), wl.z > 0)
             w_world = frame.to_world(wl)
-            value, pdf = self._eval_pdf(wi, wl, active & (dr.dot(w_world, ng) > 0), side)
+            value, pdf = self._mixed_eval_pdf(si, frame, ng, wi, w_world, active, side)
             bs = dr.zeros(mi.BSDFSample3f)
             bs.wo = si.to_local(w_world)
             bs.pdf = pdf
             bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(dr.select(spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
-            bs.sampled_component = dr.select(spec, mi.UInt32(1), mi.UInt32(0))
-            ok = active & (pdf > 0)
-            return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0) * self._terminator(smooth, frame.n, w_world)
+            kind = dr.select(wl.z < 0, mi.UInt32(+mi.BSDFFlags.GlossyTransmission), mi.UInt32(+mi.BSDFFlags.GlossyReflection))
+            bs.sampled_type = mi.UInt32(dr.select(spec | through, kind, mi.UInt32(+mi.BSDFFlags.DiffuseReflection)))
+            bs.sampled_component = dr.select(through & (wl.z < 0), mi.UInt32(2), dr.select(spec | through, mi.UInt32(1), mi.UInt32(0)))
+            ok = active & valid & (pdf > 0)
+            bs.pdf = dr.select(ok, pdf, 0.0)
+            return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0) * self._terminator_above(smooth, frame.n, w_world, ng)
 
         def traverse(self, callback):
             pass
 
         def to_string(self):
             return f"NassetPreviewBSDF[alpha={self.alpha}]"
+
+    def _refract(wi, m, eta):
+        """wi refracted about microfacet normal m into a medium of relative IOR eta (wi outside; undefined under
+        total internal reflection, whose reflectance is 1), as reference_renderer.bsdf.refract."""
+        c = dr.dot(wi, m)
+        cos_t = dr.sqrt(dr.maximum(1.0 - (1.0 - c * c) / (eta * eta), 0.0))
+        return dr.normalize(-wi / eta + (c / eta - cos_t) * m)
 
     mi.register_bsdf(NAME, lambda props: PreviewBSDF(props))
     _REGISTERED.add(mi.variant())

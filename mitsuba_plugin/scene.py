@@ -397,6 +397,11 @@ def _preview_props(mi, mesh) -> dict:
     props = {**material(mesh.material), "one_sided": bool(mesh.one_sided), "front_sign": float(mesh.front_sign)}
     if mesh.back_material is not None and not mesh.one_sided:
         props.update(material(mesh.back_material, "back_"))
+    if mesh.material.glass is not None:  # spec/renderer.md#transmission (the front material's, on both sides)
+        t, tint, ior, thin, reflect = mesh.material.glass
+        props.update({"glass": float(t), "glass_tint": mi.ScalarColor3f(np.clip(tint, 0, 1).tolist()),
+                      "glass_reflect": mi.ScalarColor3f(np.clip(reflect, 0, 1).tolist()), "glass_ior": float(ior),
+                      "glass_thin": bool(thin)})
     return props
 
 

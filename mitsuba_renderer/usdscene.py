@@ -29,6 +29,9 @@ class Material:
     specular: bool  # the GGX lobe is present (always: Schlick F is non-zero at grazing angles even for F0 = 0)
     per_hit: PerHit | None = None  # textured inputs / primvar colours (spec/renderer.md#textures); kd, f0, alpha: constants
     presence: tuple | None = None  # (opacity, opacityThreshold) in [0, 1] of a cut-out (spec/renderer.md#cutouts); None: opaque
+    #: (weight, transmission colour [3], ior, thin, reflection colour [3]) of a transmitting MaterialX surface
+    #: (spec/renderer.md#transmission); None: no transmission
+    glass: tuple | None = None
 
 
 @dataclass
@@ -279,7 +282,7 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
     mat = material
     if mat is None:
         mat = stage_rules.bound_material(prim, purposes or DEFAULT_PURPOSES, say, bindings)
-    presence = None
+    presence = glass = None
     if not mat:
         kd = _display_color(prim, say, t, primvars or stage_rules.InheritedPrimvars(), per_hit if textures else None)
         presence = _display_opacity(prim, say, t, primvars or stage_rules.InheritedPrimvars())
@@ -300,14 +303,14 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
             return out if np.size(default) > 1 else float(out[0])
 
         vals = stage_rules.mtlx_preview_values(shader, sid, t, say, finite)
-        if vals["transmission"] > 0.0:
-            say(f"MaterialX transmission {vals['transmission']:.3g} is not rendered here (spec/renderer.md#transmission; "
-                "the reference renderer renders it): the surface is its opaque part", where)
         kd = np.asarray(vals["diffuseColor"], np.float64)
         rough, metal = (float(np.clip(vals[k], 0.0, 1.0)) for k in ("roughness", "metallic"))
         ior, emis = vals["ior"], np.asarray(vals["emissiveColor"], np.float64)
         if ior <= 0:
             raise SceneError("SCENE_INVALID", f"ior = {ior!r} must be > 0", file=path, prim=where, attribute="inputs:specular_IOR")
+        if vals["transmission"] > 0.0:
+            glass = (vals["transmission"], np.asarray(vals["transmissionColor"], np.float64), float(ior),
+                     bool(vals["thinWalled"]), np.asarray(vals["specularTint"], np.float64))
     elif mat:
         kd = _checked(_input(shader, "diffuseColor", kd, t, per_hit, textures), 3, "diffuseColor", path, where, 1.0)
         spec = _checked(_input(shader, "specularColor", spec, t), 3, "specularColor", path, where, 1.0)
@@ -344,7 +347,7 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
         hit = PerHit(np.asarray(kd, np.float64), rough, None if use_spec == 1 else metal, np.asarray(spec, np.float64), r0,
                      textured, color)
     return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True,
-                    per_hit=hit, presence=presence)
+                    per_hit=hit, presence=presence, glass=glass)
 
 
 DEFAULT_PURPOSES = stage_rules.Purposes(frozenset({"default", "render"}), "full")

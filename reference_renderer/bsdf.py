@@ -288,7 +288,8 @@ def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None, alpha=Non
     if spec.any():
         h = ggx_sample_vndf(wo[spec], alpha[spec], u[spec])
         wi[spec] = reflect(wo[spec], h)
-    valid = np.ones(len(u_lobe), bool)
+    # an opaque sample below the surface is no sample (the glass lobe has a density there that did not draw it)
+    valid = wi[:, 2] > 0 if glass is not None else np.ones(len(u_lobe), bool)
     if through.any():
         _, _, eta, thin, _ = glass
         wi[through], valid[through] = glass_sample(wo[through], alpha[through], eta[through], thin[through],

@@ -1092,7 +1092,7 @@ SCENES = {
                                 "metal (0.35), matte without specular"),
     "glass": FidelityScene("glass", _glass, "transmission: a green Glass BSDF ball (IOR 1.45, sharp), Principled "
                            "Transmission Weight 1 on a blue box (roughness 0.15, 2 cm above the floor) and 0.5 on an "
-                           "orange ball (roughness 0.3), 8 bounces, an area light", plugin=False),
+                           "orange ball (roughness 0.3), 8 bounces, an area light"),
     "world_color": FidelityScene("world_color", _world_color, "a constant-colour world (strength 1.5) the only light"),
     "hdri": FidelityScene("hdri", _hdri, "an Environment Texture world (coarse 16 x 8 EXR) seen behind a ball"),
     "render_settings": FidelityScene("render_settings", _render_settings, "max bounces 2 in an open box of bright walls, "

@@ -479,7 +479,6 @@ class FidelityScene:
     what: str
     unsupported: str = ""  # why the conversion does not render like Mitsuba; "" when it does
     test_spp: int = 64  # spp of its 32 x 32 test: more where Mitsuba's own image mean is noisier than the 3 % bound
-    plugin: bool = True  # whether the Mitsuba plugin renders what it shows (glass: not yet, spec/renderer.md#transmission)
 
 
 SCENES = {
@@ -523,7 +522,7 @@ SCENES = {
     "sunsky": FidelityScene("sunsky", _sunsky, "Mitsuba's sunsky (a low sun, turbidity 3) over a floor, a ball and a box; "
                                              "the sky in view"),
     "glass": FidelityScene("glass", _glass, "dielectrics over a checkered floor: a tinted thindielectric pane, a smooth "
-                           "dielectric ball, a roughdielectric box (GGX alpha 0.15), max_depth 8", plugin=False),
+                           "dielectric ball, a roughdielectric box (GGX alpha 0.15), max_depth 8"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
                                  "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }

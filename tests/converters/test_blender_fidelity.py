@@ -26,7 +26,7 @@ def test_converted_blender_scene_renders_like_cycles(tmp_path, name):
     assert r["noise_ratio"] < 1.4, (name, r["noise_ratio"], r["psnr"], r["psnr_seed"])
 
 
-@pytest.mark.parametrize("name", [n for n in SCENES if SCENES[n].plugin])
+@pytest.mark.parametrize("name", list(SCENES))
 def test_converted_blender_scene_renders_like_cycles_in_the_mitsuba_plugin(tmp_path, name):
     """The converted stage rendered by the Mitsuba plugin, at 64 spp: the plugin picks one light per vertex, so its
     means need more samples than the reference renderer's (spot read 0.970 at 32 spp, 1.001 at 256). Its variance
