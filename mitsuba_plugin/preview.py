@@ -61,7 +61,8 @@ def register(mi) -> None:
             self.glass_tint = mi.Color3f(props.get("glass_tint", mi.ScalarColor3f(1.0)))
             self.glass_reflect = mi.Color3f(props.get("glass_reflect", mi.ScalarColor3f(1.0)))
             self.glass_ior = float(props.get("glass_ior", 1.5))
-            self.glass_thin = bool(props.get("glass_thin", False))
+            # an index-matched solid bends nothing: a thin wall (spec/renderer.md#transmission)
+            self.glass_thin = bool(props.get("glass_thin", False)) or abs(self.glass_ior - 1.0) < 1e-4
             flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
             self.m_components = [mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide,
                                  mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide]
