@@ -5,7 +5,7 @@ whole wavefront and calls ``scene.ray_intersect`` (Mitsuba/Embree-free BVH in th
 Rays that must ignore an asset instance re-trace past its hits (recording that they passed
 through it: the rna branch choice). Lights are sampled one by one (NEE on every light), area
 lights through Mitsuba's emitters; plain surfaces use the spec's UsdPreviewSurface BSDF in numpy
-(Mitsuba has no BSDF with that exact lobe); neural-asset vertices evaluate the asset's
+(Mitsuba has no BSDF with that exact lobe), with the glass lobe of a transmitting material; neural-asset vertices evaluate the asset's
 transport in batches through onnxruntime.
 
 Kinds plug in through :data:`ASSET_SHADERS` (kind -> shader class; ``register_shader(kind, cls)``):
@@ -234,10 +234,17 @@ class PathTracer:
 
     def _continues(self, obj, depth):
         cont = depth < self.max_depth
-        if self.n_reflective <= 1:
-            planar = np.array([self.objects[k].get("planar", False) for k in range(len(self.objects))] + [False])
+        if self.n_reflective <= 1:  # a lone planar mesh: NEE only, unless it transmits or its lobe is sharp
+            planar = np.array([self.objects[k].get("planar", False) and not self._needs_continuation(k)
+                               for k in range(len(self.objects))] + [False])
             cont &= ~planar[obj] & np.array([self.objects[k]["kind"] == Kind.MESH for k in range(len(self.objects))] + [False])[obj]
         return cont
+
+    def _needs_continuation(self, k) -> bool:
+        """Whether mesh k's material transmits or has a GGX alpha below 0.1 (spec/renderer.md#plan): light samples
+        alone rarely meet such a lobe."""
+        mats = [m for m in (self.objects[k].get("material"), self.objects[k].get("back_material")) if m is not None]
+        return any(m.glass is not None or m.alpha < 0.1 for m in mats)
 
     # -- BSDF (spec/renderer.md#materials) -------------------------------------------------------------
 
@@ -256,8 +263,66 @@ class PathTracer:
         g2 = 1.0 / (1.0 + lam(dot(n, wo)) + lam(dot(n, wi)))
         return h, nh, dd, g2
 
+    @staticmethod
+    def _fresnel(cos_i, eta):
+        """Dielectric Fresnel reflectance [m] at |cos_i| into relative IOR eta [m] (1 under total internal reflection)."""
+        c = np.clip(np.abs(cos_i), 0.0, 1.0)
+        g2 = eta * eta - 1.0 + c * c  # (eta cos_t)^2
+        g = np.sqrt(np.maximum(g2, 0.0))
+        a = (g - c) / np.maximum(g + c, 1e-300)
+        b = (c * (g + c) - 1.0) / np.maximum(c * (g - c) + 1.0, 1e-300)
+        return np.where(g2 <= 0.0, 1.0, np.clip(0.5 * a * a * (1.0 + b * b), 0.0, 1.0))
+
+    def glass_eval(self, mat, n, wo, wi):
+        """Glass lobe (spec/renderer.md#transmission) -> f * |cos_i| [m, 3] and its pdf: reflection above n, below it
+        refraction (solid) or the reflection mirrored through the tangent plane (thin); h sampled by D(h) (n.h)."""
+        eta, thin, alpha = mat["eta"], mat["thin"], mat["alpha"]
+        co, ci = dot(n, wo), dot(n, wi)
+        up = ci > 0
+        a2 = alpha * alpha
+
+        def d_of(nh):
+            den = nh * nh * (a2 - 1.0) + 1.0
+            return np.where(nh > 0, a2 / (np.pi * den * den), 0.0)
+
+        def lam(c):
+            c = np.clip(np.abs(c), 1e-12, 1.0)
+            return (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
+
+        g2 = 1.0 / (1.0 + lam(co) + lam(ci))
+        mirrored = wi - 2.0 * ci[:, None] * n
+        hr = normalized(wo + np.where(up[:, None], wi, mirrored))
+        nh, oh = dot(n, hr), dot(wo, hr)
+        f = self._fresnel(oh, eta)
+        r = np.where(thin, 2.0 * f / (1.0 + f), f)
+        w = np.where(up, r, 1.0 - r)
+        dr = d_of(nh)
+        val_r = w * dr * g2 / (4.0 * np.maximum(co, 1e-12))
+        pdf_r = w * dr * nh / (4.0 * np.maximum(np.abs(oh), 1e-12))
+        ok_r = (up | thin) & (oh > 0) & (co > 0)
+        ht = -(wo + eta[:, None] * wi)
+        ht = normalized(np.where((dot(n, ht) < 0)[:, None], -ht, ht))
+        o_h, i_h, n_h = dot(wo, ht), dot(wi, ht), dot(n, ht)
+        den = np.maximum((o_h + eta * i_h) ** 2, 1e-300)
+        t = 1.0 - self._fresnel(o_h, eta)
+        dt = d_of(n_h)
+        val_t = t * dt * g2 * np.abs(o_h) * np.abs(i_h) / (np.maximum(co, 1e-12) * den)
+        pdf_t = t * dt * n_h * eta * eta * np.abs(i_h) / den
+        ok_t = ~up & ~thin & (o_h > 0) & (i_h < 0) & (co > 0)
+        val = np.where(ok_r, val_r, np.where(ok_t, val_t, 0.0))[:, None] * np.where(up[:, None], mat["reflect"], mat["tint"])
+        return val, np.where(ok_r, pdf_r, np.where(ok_t, pdf_t, 0.0))
+
     def bsdf_eval(self, mat, n, wo, wi):
-        """-> f * cos_i [m, 3] and pdf of bsdf_sample (solid angle)."""
+        """-> f * cos_i [m, 3] and pdf of bsdf_sample (solid angle); with glass rows (``mat["t"]`` > 0) the mixture
+        (1 - t) opaque + t glass."""
+        val, pdf = self._opaque_eval(mat, n, wo, wi)
+        if "t" not in mat:
+            return val, pdf
+        gv, gp = self.glass_eval(mat, n, wo, wi)
+        t = mat["t"]
+        return (1.0 - t)[:, None] * val + t[:, None] * gv, (1.0 - t) * pdf + t * gp
+
+    def _opaque_eval(self, mat, n, wo, wi):
         co, ci = dot(n, wo), dot(n, wi)
         ok = (co > 0) & (ci > 0)
         val = mat["kd"] / np.pi * ci[:, None]
@@ -286,10 +351,29 @@ class PathTracer:
         st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
         h = (st * np.cos(ph))[:, None] * t + (st * np.sin(ph))[:, None] * b + ct[:, None] * n
         ws = 2.0 * dot(wo, h)[:, None] * h - wo
+        valid = np.ones(len(wo), bool)
+        glass = np.zeros(len(wo), bool)
+        if "t" in mat:  # us < t: the glass lobe (us / t: reflect or pass), else the opaque lobes with us rescaled
+            t = mat["t"]
+            glass = us < t
+            us = np.where(glass, us / np.maximum(t, 1e-300), (us - t) / np.maximum(1.0 - t, 1e-300))
         pick_spec = us < mat["ps"]
         wi = np.where(pick_spec[:, None], ws, wd)
-        fc, pdf = self.bsdf_eval(mat, n, wo, wi)
-        return normalized(wi), fc, pdf
+        if glass.any():
+            eta, oh = mat["eta"], dot(wo, h)
+            f = self._fresnel(oh, eta)
+            keep = us < np.where(mat["thin"], 2.0 * f / (1.0 + f), f)
+            cos_t = np.sqrt(np.maximum(1.0 - (1.0 - oh * oh) / (eta * eta), 0.0))
+            refracted = (oh / eta - cos_t)[:, None] * h - wo / eta[:, None]
+            mirrored = ws - 2.0 * dot(ws, n)[:, None] * n
+            passed = np.where(mat["thin"][:, None], mirrored, refracted)
+            wg = np.where(keep[:, None], ws, passed)
+            wi = np.where(glass[:, None], wg, wi)
+            # a reflection below, a transmission above, or an opaque sample below a glass: no sample
+            valid = np.where(glass, (oh > 0) & np.where(keep | mat["thin"], dot(ws, n) > 0, dot(wg, n) < 0),
+                             dot(wi, n) > 0)
+        fc, pdf = self.bsdf_eval(mat, n, wo, normalized(wi))
+        return normalized(wi), np.where(valid[:, None], fc, 0.0), np.where(valid, pdf, 0.0)
 
     def _backs(self, obj, prim, wo):
         """[n] bool: mesh hits seen from their back (spec/renderer.md#sidedness: the front normal faces away from wo)."""
@@ -306,9 +390,14 @@ class PathTracer:
         ob = self.objects[k]
         return ob["back_material"] if back_rows and ob.get("back_material") is not None else ob["material"]
 
-    def _materials(self, obj, back):
+    def _materials(self, obj, back, outside=None):
+        """Per-row material arrays of hits on objects ``obj`` (``back``: seen from the back, for back materials); with
+        a transmitting material also the glass rows' t, tint, reflect, thin and eta (the IOR seen from ``outside``,
+        the prim's front; else its inverse; spec/renderer.md#transmission)."""
         m = len(obj)
         kd, f0, alpha, ps, spec = np.zeros((m, 3)), np.zeros((m, 3)), np.ones(m), np.zeros(m), np.zeros(m, bool)
+        t, tint, reflect, ior, thin = np.zeros(m), np.ones((m, 3)), np.ones((m, 3)), np.ones(m), np.zeros(m, bool)
+        any_glass = False
         for k in np.unique(obj):
             for side in (False, True):
                 sel = (obj == k) & (back == side)
@@ -319,7 +408,16 @@ class PathTracer:
                 if mt.specular:
                     a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
                     ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
-        return {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
+                if mt.glass is not None:
+                    any_glass = True
+                    gw, gt, gi, gthin, gr = mt.glass
+                    t[sel], tint[sel], reflect[sel], ior[sel] = gw, gt, gr, gi
+                    thin[sel] = bool(gthin) or abs(gi - 1.0) < 1e-4  # index-matched: unbent
+        out = {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
+        if any_glass:
+            front = np.ones(m, bool) if outside is None else outside
+            out.update(t=t, tint=tint, reflect=reflect, thin=thin, eta=np.where(front | thin, ior, 1.0 / ior))
+        return out
 
     # -- main loop ------------------------------------------------------------------------------------
 
@@ -591,18 +689,20 @@ class PathTracer:
         ns = normalized(np.where((flip != (front < 0))[:, None], -ns, ns))  # flipped with the front side's ng
         n = np.where((dot(ns, wo) <= 1e-6)[:, None], ngf, ns)
         back = self._backs(obj, prim, wo)
-        mat = self._materials(obj, back)
+        mat = self._materials(obj, back, outside=dot(ng * front[:, None], wo) > 0)
+        # glass rows take light from below the surface too, where both normals agree
+        through = mat["t"] > 0 if "t" in mat else np.zeros(len(p), bool)
         one_sided = np.array([bool(o_.get("one_sided")) for o_ in self.objects] + [False])[obj]
         beta = np.where((one_sided & back)[:, None], 0.0, beta)  # the back of a one-sided mesh: the path ends
         for wi, lw, pl, delta, vis, _ in self._nee(p, ng, n, rng, None):
             fc, pb = self.bsdf_eval(mat, n, wo, wi)
-            above = dot(wi, ngf) > 0
+            above = (dot(wi, ngf) > 0) | (through & (dot(wi, ngf) < 0) & (dot(wi, n) < 0))
             fc = fc * above[:, None]
             w = np.ones(len(p)) if delta else np.where(cont, power(pl, pb), 1.0)
             c = beta * fc * lw * (w * vis)[:, None]
             np.add.at(L, idx, c)
         wi, fc, pdf = self.bsdf_sample(mat, n, wo, rng.random((len(p), 2)), rng.random(len(p)))
-        ok = cont & (pdf > 0) & (dot(wi, ngf) > 0)
+        ok = cont & (pdf > 0) & ((dot(wi, ngf) > 0) | (through & (dot(wi, ngf) < 0) & (dot(wi, n) < 0)))
         nb = np.where(ok[:, None], beta * fc / np.maximum(pdf, 1e-300)[:, None], 0.0)
         return nb, wi, pdf, ok
 

@@ -158,10 +158,6 @@ def build(scene_path: str, width: int | None = None, height: int | None = None, 
         if mesh.material.per_hit is not None:  # spec/renderer.md#textures: the Mitsuba plugin renders them
             warnings.warn(f"{desc.path}:{mesh.prim}: textures and primvar colours are not rendered by this implementation; "
                           "the inputs' own values are used", stacklevel=2)
-        if any(m is not None and m.glass is not None for m in (mesh.material, mesh.back_material)):
-            warnings.warn(f"{desc.path}:{mesh.prim}: MaterialX transmission is not rendered by this implementation "
-                          "(spec/renderer.md#transmission; the reference renderer and the Mitsuba plugin render it): the "
-                          "surface is its opaque part", stacklevel=2)
         if mesh.material.presence is not None:  # spec/renderer.md#cutouts: the Mitsuba plugin renders them
             warnings.warn(f"{desc.path}:{mesh.prim}: opacity < 1 rendered opaque by this implementation (cut-outs)", stacklevel=2)
         fn = _face_normals(mesh.points, mesh.faces)

@@ -1193,6 +1193,9 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             inputs["diffuseColor"], how = _layered_diffuse(inputs["diffuseColor"], inputs["roughness"], inputs["ior"])
             notes.append(f"material {mat.name}: Principled base colour x {how} for the specular layer's albedo "
                          "(Cycles layers the lobes, UsdPreviewSurface adds them)")
+    if "glass" in inputs and transmission < 1.0:  # the glass's opaque rest: the diffuse base as written, before x (1 - t)
+        base = np.asarray(mean_color(inputs["diffuseColor"]), np.float64) / (1.0 - transmission)
+        inputs["glass"] = dataclasses.replace(inputs["glass"], base=tuple(float(c) for c in np.clip(base, 0.0, 1.0)))
     return inputs
 
 
