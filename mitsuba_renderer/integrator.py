@@ -233,7 +233,10 @@ class PathTracer:
         return p
 
     def _continues(self, obj, depth):
-        cont = depth < self.max_depth
+        # the last vertex (depth max_depth) continues too, for the emission its sample reaches (MIS with its light
+        # samples, as spec/renderer.md#integrator weighs every vertex): with NEE alone there, a sharp lobe's light
+        # (a glass's, a mirror's) came from rare huge light samples. With max_depth 1 no vertex continues.
+        cont = np.full(len(obj), self.max_depth > 1) & (depth <= self.max_depth)
         if self.n_reflective <= 1:  # a lone planar mesh: NEE only, unless it transmits or its lobe is sharp
             planar = np.array([self.objects[k].get("planar", False) and not self._needs_continuation(k)
                                for k in range(len(self.objects))] + [False])
@@ -503,8 +506,8 @@ class PathTracer:
                     if not ob.get("one_sided"):
                         em[(obj == k) & back] = self._side_material(k, True).emission
                 np.add.at(L, idx[hm], beta[hm] * em[hm])
-            surf = hm | (kinds == Kind.ASSET)
-            # compact to surface vertices
+            # compact to surface vertices; a ray from the last vertex (depth max_depth) gathers emission only
+            surf = (hm | (kinds == Kind.ASSET)) & (depth < self.max_depth)
             sel = np.nonzero(surf)[0]
             if len(sel) == 0:
                 break

@@ -153,7 +153,8 @@ def make_plan(scene, *, width, height, spp, max_depth, tile, batch, neupress_sam
             mt = scene.materials
             mats = [m for m in (inst.material, inst.back_material) if m >= 0]
             glass = mt.transmits and any(mt.transmission[m] > 0 for m in mats)
-            sharp = any(mt.alpha[m] < SHARP_ALPHA for m in mats)
+            sharp = any(min(mt.alpha[m], mt.textures[m].sharpest_alpha if m < len(mt.textures) and mt.textures[m]
+                            else np.inf) < SHARP_ALPHA for m in mats)
             indirect[i] = (others or not inst.planar or glass or sharp) and max_depth > 1
             why = "other objects present" if others else ("non-planar, may reflect onto itself" if not inst.planar
                                                             else "transmits: light passes through it" if glass

@@ -123,6 +123,14 @@ class TexturedMaterial:
         return any(isinstance(v, ImageTexture) for v in (self.diffuse, self.roughness, self.metallic, self.normal))
 
     @property
+    def sharpest_alpha(self) -> float:
+        """The smallest GGX alpha any hit can read: over a roughness texture's texels, else the constant's."""
+        r = self.roughness
+        lo = float(np.clip((r.image[..., 0] * r.scale[0] + r.bias[0]).min(), 0.0, 1.0)) if isinstance(r, ImageTexture) \
+            else float(np.clip(r, 0.0, 1.0))
+        return max(lo * lo, self.min_alpha)
+
+    @property
     def reads_colors(self) -> bool:
         """The diffuse colour comes from a primvar (:class:`PrimvarColor`): lookups need the hits' colours."""
         return isinstance(self.diffuse, PrimvarColor)

@@ -145,3 +145,11 @@ def test_glass_value_is_the_reference_renderers(mi, rng, thin):
                       np.tile([0.8, 1.0, 0.6], (n, 1)))
     want = f * np.abs(o[:, 2:3])
     np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-5)
+
+
+def test_glass_conformance_case(tmp_path):
+    """``rna_behind_glass`` (spec/renderer.md#transmission) passes through the plugin at the case's own spp."""
+    from tests.mitsuba_plugin.test_plugin import _run_case
+
+    row = _run_case("rna_behind_glass", tmp_path)
+    assert row["passed"], row

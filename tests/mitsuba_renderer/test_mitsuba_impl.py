@@ -251,6 +251,13 @@ def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
     assert row["passed"], row
 
 
+def test_glass_case_passes_via_cli(nr):
+    """``rna_behind_glass``: the asset seen through a thin pane and beside solid glass (spec/renderer.md#transmission;
+    before this implementation rendered glass, it warned and shaded the opaque part)."""
+    row = _conformance(["rna_behind_glass"])["rna_behind_glass"]
+    assert row["passed"], row
+
+
 @pytest.mark.parametrize("case", ["rna_rect_light_back", "rna_disk_cylinder_lights", "rna_lights_in_the_way"])
 def test_light_surface_cases_pass_via_cli(nr, case):
     """``rna_rect_light_back``: camera rays reach a RectLight's back and pass through it (spec/renderer.md#light-surfaces;

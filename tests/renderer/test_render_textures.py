@@ -482,6 +482,9 @@ def _orm_floor(tmp_path, textured: bool, rough=0.5, metal=0.0):
     pts = np.asarray(quad.GetPointsAttr().Get())
     b.distant("Sun", (0.0, 0.5, -1.0), 3.0, angle=5.0)
     b.dome("Sky", 0.3)
+    # a second object, out of view: every variant keeps its continuation rays (a lone planar mesh of a sharp lobe keeps
+    # them, a rough one does not: spec/renderer.md#plan), so the three renders draw the same paths
+    b.quad("Far", (0, 0, 40), 0.1)
     st = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
     UsdGeom.PrimvarsAPI(quad).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(st)
     if textured:

@@ -23,17 +23,21 @@ def _lobe(n, eta, thin, alpha, theta):
     return wo, np.full(n, eta), np.full(n, thin), np.full(n, alpha), np.ones((n, 3))
 
 
+def _uniform_sphere(rng, n):
+    """n directions [n, 3] uniform over the sphere (density 1 / 4 pi)."""
+    z = rng.uniform(-1.0, 1.0, n)
+    phi = rng.uniform(0.0, 2.0 * np.pi, n)
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
+
+
 @pytest.mark.parametrize("eta, thin, alpha, theta", CASES)
 def test_the_pdf_integrates_to_the_share_of_valid_samples(eta, thin, alpha, theta):
     rng = np.random.default_rng(3)
     n = 400_000
     wo, e, t, a, tint = _lobe(n, eta, thin, alpha, theta)
     _, valid = glass_sample(wo, a, e, t, rng.random(n), rng.random((n, 2)))
-    z = rng.uniform(-1.0, 1.0, n)
-    phi = rng.uniform(0.0, 2.0 * np.pi, n)
-    r = np.sqrt(1.0 - z * z)
-    uniform = np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
-    _, pdf = glass_eval(wo, uniform, a, e, t, tint)
+    _, pdf = glass_eval(wo, _uniform_sphere(rng, n), a, e, t, tint)
     integral = 4.0 * np.pi * pdf.mean()
     se = 4.0 * np.pi * pdf.std() / np.sqrt(n)
     assert abs(integral - valid.mean()) < 5 * se + 2e-3, (integral, se, valid.mean())
@@ -48,11 +52,9 @@ def test_sampled_weights_match_the_lobe_integrated_uniformly(eta, thin, alpha, t
     wi, valid = glass_sample(wo, a, e, t, rng.random(n), rng.random((n, 2)))
     f, pdf = glass_eval(wo, wi, a, e, t, tint)
     w = np.where(valid & (pdf > 0), f[:, 0] * np.abs(wi[:, 2]) / np.maximum(pdf, 1e-300), 0.0)
-    z = rng.uniform(-1.0, 1.0, n)
-    phi = rng.uniform(0.0, 2.0 * np.pi, n)
-    r = np.sqrt(1.0 - z * z)
-    fu, _ = glass_eval(wo, np.stack([r * np.cos(phi), r * np.sin(phi), z], 1), a, e, t, tint)
-    u = 4.0 * np.pi * fu[:, 0] * np.abs(z)
+    uniform = _uniform_sphere(rng, n)
+    fu, _ = glass_eval(wo, uniform, a, e, t, tint)
+    u = 4.0 * np.pi * fu[:, 0] * np.abs(uniform[:, 2])
     se = np.hypot(w.std(), u.std()) / np.sqrt(n)
     assert np.isfinite(w).all() and abs(w.mean() - u.mean()) < 5 * se, (w.mean(), u.mean(), se)
 
