@@ -982,12 +982,16 @@ SHADER_NODES = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfPrincipled", "ShaderNode
 #: 2026-12-07 each was grey 0.8 whatever its colour): their Color as a diffuse albedo (Subsurface Scattering: the far
 #: field of its random walk; Toon), half of it (Translucent: the light it passes to the other side, shown on both), or
 #: black with the Fresnel reflection of the IOR times Color (Glass, as convert-scene writes Mitsuba's dielectrics), or
-#: black (Refraction: no reflection; Sheen: a grazing lobe of little albedo). A ball of each under a sun against Cycles
-#: (48², 64 spp, MSE / noise, grey before -> now): Subsurface 36 -> 1.4, Translucent 521 -> 14 (diffuse 145, black 78),
-#: Sheen 760 -> 24, Toon 272 -> 156, Glass 2.0 -> 1.9 (1.13 -> 0.86 of Cycles' mean: the light it lets through)
+#: black (Sheen: a grazing lobe of little albedo). A ball of each under a sun against Cycles (48², 64 spp, MSE / noise,
+#: grey before -> now): Subsurface 36 -> 1.4, Translucent 521 -> 14 (diffuse 145, black 78), Sheen 760 -> 24, Toon
+#: 272 -> 156, Glass 2.0 -> 1.9 (1.13 -> 0.86 of Cycles' mean: the light it lets through). Glass and Refraction are
+#: now MaterialX glasses beside that opaque fallback (renderer.md#transmission); Refraction without its reflection
+#: (specular_color 0): a lifted ball over a checker under a sky reads 0.93 of Cycles there, MSE / noise 7.0 (48², 128
+#: spp; 0.92 at roughness 0.3), since Cycles' Refraction BSDF passes the light the Fresnel term would reflect (black
+#: before: 0.55, MSE / noise 372)
 APPROXIMATED_SHADERS = {"ShaderNodeSubsurfaceScattering": "diffuse", "ShaderNodeBsdfTranslucent": "half",
                         "ShaderNodeBsdfToon": "diffuse", "ShaderNodeBsdfGlass": "glass",
-                        "ShaderNodeBsdfRefraction": "black", "ShaderNodeBsdfSheen": "black"}
+                        "ShaderNodeBsdfRefraction": "glass", "ShaderNodeBsdfSheen": "black"}
 
 
 def _approximated_shader(mat, node, notes: list) -> dict:
@@ -1010,19 +1014,22 @@ def _approximated_shader(mat, node, notes: list) -> dict:
         rough = float(np.clip(rough, 0.0, 1.0))
         # the UsdPreviewSurface keeps the opaque reflector for renderers that read only it; the MaterialX glass
         # (renderer.md#transmission) is what the renderers here read
-        out.update(specularColor=tuple(float(c) for c in np.clip(f0 * tint, 0.0, 1.0)), roughness=rough,
-                   glass=Glass(1.0, tuple(float(c) for c in np.clip(tint, 0.0, 1.0)), max(float(ior), 1e-3), rough, False,
-                               specular=tuple(float(c) for c in np.clip(tint, 0.0, 1.0))))
+        refraction = name == "Refraction"  # no reflection: the glass's specular colour 0, the fallback black
+        colour = tuple(float(c) for c in np.clip(tint, 0.0, 1.0))
+        out.update(specularColor=(0.0, 0.0, 0.0) if refraction else tuple(float(c) for c in np.clip(f0 * tint, 0.0, 1.0)),
+                   roughness=rough, glass=Glass(1.0, colour, max(float(ior), 1e-3), rough, False,
+                                                specular=(0.0, 0.0, 0.0) if refraction else colour))
         distribution = getattr(node, "distribution", "GGX")
         what = (f"a MaterialX glass (IOR {float(ior):.3g}, roughness {rough:.3g}, renderer.md#transmission), its Color "
-                "on both the transmission and the reflection"
+                + ("on the transmission, no reflection (Cycles' Refraction BSDF also passes the light the Fresnel "
+                   "term would reflect: about 7 % dark)" if refraction else "on both the transmission and the reflection")
                 + (f"; GGX for its {distribution} distribution" if distribution not in ("GGX", "MULTI_GGX") else ""))
     else:
         what = "black (" + ("it only refracts" if name == "Refraction" else "a grazing lobe of little albedo") + ")"
     if (nmap := _linked_normal(mat, node, notes)) is not None:
         out["normal"] = nmap
     if how == "glass":
-        notes.append(f"material {mat.name}: Glass BSDF written as {what}")
+        notes.append(f"material {mat.name}: {name} BSDF written as {what}")
     else:
         notes.append(f"material {mat.name}: {name} BSDF has no counterpart (UsdPreviewSurface transmission and scattering "
                      f"are not rendered): written as {what}; bake the object into a neural asset (--replace)")

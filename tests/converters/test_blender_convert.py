@@ -972,10 +972,12 @@ def test_shaders_without_a_counterpart_keep_their_colour():
         np.testing.assert_allclose(inputs["diffuseColor"], diffuse, atol=1e-6, err_msg=kind)
         f0 = ((1.6 - 1.0) / 2.6) ** 2 * np.array(colour) if kind == "ShaderNodeBsdfGlass" else np.zeros(3)
         np.testing.assert_allclose(inputs["specularColor"], f0, atol=1e-6, err_msg=kind)
-        if kind == "ShaderNodeBsdfGlass":  # beside the opaque fallback, a MaterialX glass (spec/renderer.md#transmission)
-            g = inputs["glass"]
-            assert (g.weight, g.ior, g.thin) == (1.0, pytest.approx(1.6), False)
-            np.testing.assert_allclose([g.color, g.specular], [colour, colour], atol=1e-6)
+        if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):  # beside the opaque fallback, a MaterialX
+            g = inputs["glass"]  # glass (spec/renderer.md#transmission); Refraction reflects nothing
+            assert (g.weight, g.thin) == (1.0, False)
+            assert g.ior == pytest.approx(1.6 if kind == "ShaderNodeBsdfGlass" else 1.45)  # the node's default IOR
+            reflect = colour if kind == "ShaderNodeBsdfGlass" else (0.0, 0.0, 0.0)
+            np.testing.assert_allclose([g.color, g.specular], [colour, reflect], atol=1e-6)
             assert any("MaterialX glass" in n for n in notes), notes
         else:
             assert any("has no counterpart" in n and "neural asset" in n for n in notes), (kind, notes)
