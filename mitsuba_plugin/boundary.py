@@ -10,6 +10,19 @@ import math
 from .rna import safe_normalize
 
 
+def fresnel(cos_i, eta):
+    """Unpolarised dielectric Fresnel reflectance at |cos_i| (NaN read as 0) for relative IOR ``eta`` (a float or a
+    per-lane Float), 1 under total internal reflection: ``nasset_sdk.kinds.boundary.fresnel_dielectric`` in Dr.Jit."""
+    import drjit as dr
+
+    c = dr.clip(dr.abs(dr.select(dr.isnan(cos_i), 0.0, cos_i)), 0.0, 1.0)
+    st2 = (1.0 - c * c) / (eta * eta)
+    ct = dr.sqrt(dr.maximum(1.0 - st2, 0.0))
+    rs = (c - eta * ct) / dr.maximum(c + eta * ct, 1e-12)
+    rp = (eta * c - ct) / dr.maximum(eta * c + ct, 1e-12)
+    return dr.select(st2 >= 1.0, 1.0, dr.clip(0.5 * (rs * rs + rp * rp), 0.0, 1.0))
+
+
 class GgxJit:
     """GGX rough-dielectric reflection of relative IOR ``eta`` and roughness ``alpha``: :meth:`eval`
     (f |n.wi|, 1/sr), :meth:`pdf` (per steradian), :meth:`sample`, :meth:`fresnel`."""
@@ -20,15 +33,7 @@ class GgxJit:
 
     def fresnel(self, cos_i):
         """Unpolarised dielectric Fresnel reflectance at |cos_i| (1 under total internal reflection)."""
-        import drjit as dr
-
-        c = dr.clip(dr.abs(dr.select(dr.isnan(cos_i), 0.0, cos_i)), 0.0, 1.0)
-        eta = self.eta
-        st2 = (1.0 - c * c) / (eta * eta)
-        ct = dr.sqrt(dr.maximum(1.0 - st2, 0.0))
-        rs = (c - eta * ct) / dr.maximum(c + eta * ct, 1e-12)
-        rp = (eta * c - ct) / dr.maximum(eta * c + ct, 1e-12)
-        return dr.select(st2 >= 1.0, 1.0, dr.clip(0.5 * (rs * rs + rp * rp), 0.0, 1.0))
+        return fresnel(cos_i, self.eta)
 
     def _d(self, cos_h):
         import drjit as dr

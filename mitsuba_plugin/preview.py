@@ -28,6 +28,8 @@ import math
 
 import drjit as dr
 
+from .boundary import fresnel
+
 NAME = "nasset_preview"
 _REGISTERED: set[str] = set()
 #: probability of sampling the GGX lobe
@@ -61,8 +63,7 @@ def register(mi) -> None:
             self.glass_tint = mi.Color3f(props.get("glass_tint", mi.ScalarColor3f(1.0)))
             self.glass_reflect = mi.Color3f(props.get("glass_reflect", mi.ScalarColor3f(1.0)))
             self.glass_ior = float(props.get("glass_ior", 1.5))
-            # an index-matched solid bends nothing: a thin wall (spec/renderer.md#transmission)
-            self.glass_thin = bool(props.get("glass_thin", False)) or abs(self.glass_ior - 1.0) < 1e-4
+            self.glass_thin = bool(props.get("glass_thin", False))
             flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
             self.m_components = [mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide,
                                  mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide]
@@ -110,20 +111,9 @@ def register(mi) -> None:
             pdf = P_SPECULAR * pdf_spec + (1.0 - P_SPECULAR) * wo.z * (1.0 / math.pi)
             return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
 
-        @staticmethod
-        def _fresnel(c, eta):
-            """Unpolarised dielectric Fresnel reflectance at |c| for relative IOR eta (1 under total internal
-            reflection), as nasset_sdk.kinds.boundary.fresnel_dielectric."""
-            c = dr.clip(dr.abs(c), 0.0, 1.0)
-            sin_t2 = (1.0 - c * c) / (eta * eta)
-            ct = dr.sqrt(dr.maximum(1.0 - sin_t2, 0.0))
-            rs = (c - eta * ct) / dr.maximum(c + eta * ct, 1e-12)
-            rp = (eta * c - ct) / dr.maximum(eta * c + ct, 1e-12)
-            return dr.select(sin_t2 >= 1.0, 1.0, dr.clip(0.5 * (rs * rs + rp * rp), 0.0, 1.0))
-
         def _reflectance(self, c, eta):
             """The glass lobe's reflectance at wi.h: F, or a thin wall's 2 F / (1 + F)."""
-            f = self._fresnel(c, eta)
+            f = fresnel(c, eta)
             return 2.0 * f / (1.0 + f) if self.glass_thin else f
 
         def _eta(self, si):
@@ -151,7 +141,7 @@ def register(mi) -> None:
             ht = dr.normalize(dr.select(ht.z < 0, -ht, ht))
             c_i, c_o = dr.dot(wi, ht), dr.dot(wo, ht)
             den = dr.maximum(dr.square(c_i + eta * c_o), 1e-12)
-            ft = 1.0 - self._fresnel(dr.maximum(c_i, 0.0), eta)
+            ft = 1.0 - fresnel(dr.maximum(c_i, 0.0), eta)
             d_t = ggx.eval(ht)
             f_t = ft * d_t * g2 * dr.abs(c_o) * dr.abs(c_i) / (cos_i * den)
             p_t = ft * g1 * d_t * dr.maximum(c_i, 0.0) / cos_i * eta * eta * dr.abs(c_o) / den

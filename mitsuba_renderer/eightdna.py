@@ -14,7 +14,7 @@ import numpy as np
 
 from nasset_sdk.errors import SceneError
 
-from .integrator import ray_eps, register_shader
+from .integrator import fresnel, ray_eps, register_shader
 from .rna import check_network, checked, open_root, read_triangles, safe_normalize, triplane
 
 TWO_PI = 2.0 * np.pi
@@ -120,15 +120,6 @@ def local_frame(n):
     t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * c, -sign * n[:, 0]], 1)
     b = np.stack([c, sign + n[:, 1] ** 2 * a, -n[:, 1]], 1)
     return t, b
-
-
-def fresnel(c, eta):
-    c = np.abs(c)
-    st2 = (1.0 - c * c) / (eta * eta)
-    ct = np.sqrt(np.maximum(1.0 - st2, 0.0))
-    rs = (c - eta * ct) / np.maximum(c + eta * ct, 1e-12)
-    rp = (eta * c - ct) / np.maximum(eta * c + ct, 1e-12)
-    return np.where(st2 >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
 
 
 class Ggx:

@@ -44,6 +44,16 @@ def ray_eps(p):
     return _EPS_REL * np.max(np.abs(p), axis=1) + _EPS_SCENE[0]
 
 
+def fresnel(c, eta):
+    """Unpolarised dielectric Fresnel reflectance [m] at |c| for relative IOR eta (1 under total internal reflection)."""
+    c = np.abs(c)
+    st2 = (1.0 - c * c) / (eta * eta)
+    ct = np.sqrt(np.maximum(1.0 - st2, 0.0))
+    rs = (c - eta * ct) / np.maximum(c + eta * ct, 1e-12)
+    rp = (eta * c - ct) / np.maximum(eta * c + ct, 1e-12)
+    return np.where(st2 >= 1.0, 1.0, 0.5 * (rs * rs + rp * rp))
+
+
 def power(a, b):
     a2, b2 = a * a, b * b
     return np.where(a2 + b2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
@@ -266,16 +276,6 @@ class PathTracer:
         g2 = 1.0 / (1.0 + lam(dot(n, wo)) + lam(dot(n, wi)))
         return h, nh, dd, g2
 
-    @staticmethod
-    def _fresnel(cos_i, eta):
-        """Dielectric Fresnel reflectance [m] at |cos_i| into relative IOR eta [m] (1 under total internal reflection)."""
-        c = np.clip(np.abs(cos_i), 0.0, 1.0)
-        g2 = eta * eta - 1.0 + c * c  # (eta cos_t)^2
-        g = np.sqrt(np.maximum(g2, 0.0))
-        a = (g - c) / np.maximum(g + c, 1e-300)
-        b = (c * (g + c) - 1.0) / np.maximum(c * (g - c) + 1.0, 1e-300)
-        return np.where(g2 <= 0.0, 1.0, np.clip(0.5 * a * a * (1.0 + b * b), 0.0, 1.0))
-
     def glass_eval(self, mat, n, wo, wi):
         """Glass lobe (spec/renderer.md#transmission) -> f * |cos_i| [m, 3] and its pdf: reflection above n, below it
         refraction (solid) or the reflection mirrored through the tangent plane (thin); h sampled by D(h) (n.h)."""
@@ -296,7 +296,7 @@ class PathTracer:
         mirrored = wi - 2.0 * ci[:, None] * n
         hr = normalized(wo + np.where(up[:, None], wi, mirrored))
         nh, oh = dot(n, hr), dot(wo, hr)
-        f = self._fresnel(oh, eta)
+        f = fresnel(oh, eta)
         r = np.where(thin, 2.0 * f / (1.0 + f), f)
         w = np.where(up, r, 1.0 - r)
         dr = d_of(nh)
@@ -307,7 +307,7 @@ class PathTracer:
         ht = normalized(np.where((dot(n, ht) < 0)[:, None], -ht, ht))
         o_h, i_h, n_h = dot(wo, ht), dot(wi, ht), dot(n, ht)
         den = np.maximum((o_h + eta * i_h) ** 2, 1e-300)
-        t = 1.0 - self._fresnel(o_h, eta)
+        t = 1.0 - fresnel(o_h, eta)
         dt = d_of(n_h)
         val_t = t * dt * g2 * np.abs(o_h) * np.abs(i_h) / (np.maximum(co, 1e-12) * den)
         pdf_t = t * dt * n_h * eta * eta * np.abs(i_h) / den
@@ -364,7 +364,7 @@ class PathTracer:
         wi = np.where(pick_spec[:, None], ws, wd)
         if glass.any():
             eta, oh = mat["eta"], dot(wo, h)
-            f = self._fresnel(oh, eta)
+            f = fresnel(oh, eta)
             keep = us < np.where(mat["thin"], 2.0 * f / (1.0 + f), f)
             cos_t = np.sqrt(np.maximum(1.0 - (1.0 - oh * oh) / (eta * eta), 0.0))
             refracted = (oh / eta - cos_t)[:, None] * h - wo / eta[:, None]
@@ -415,7 +415,7 @@ class PathTracer:
                     any_glass = True
                     gw, gt, gi, gthin, gr = mt.glass
                     t[sel], tint[sel], reflect[sel], ior[sel] = gw, gt, gr, gi
-                    thin[sel] = bool(gthin) or abs(gi - 1.0) < 1e-4  # index-matched: unbent
+                    thin[sel] = gthin
         out = {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
         if any_glass:
             front = np.ones(m, bool) if outside is None else outside

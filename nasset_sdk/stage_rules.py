@@ -373,6 +373,8 @@ def bound_material(prim, purposes: Purposes, warn: Warn, bindings: MaterialBindi
     return mat
 
 
+#: |IOR - 1| below which a solid glass is index-matched and read as thin-walled (spec/renderer.md#transmission)
+INDEX_MATCHED = 1e-4
 #: surface shader ids read with UsdPreviewSurface's inputs
 PREVIEW_SURFACES = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
 
@@ -521,4 +523,7 @@ def mtlx_preview_values(shader, sid: str, time, warn: Warn, finite) -> dict:
     return {"diffuseColor": tuple(np.clip(b * c, 0, 1)), "metallic": float(m), "roughness": float(r), "ior": float(i),
             "emissiveColor": tuple(np.maximum(e * ec, 0.0)), "useSpecularWorkflow": 0,
             "transmission": float(np.clip(t, 0.0, 1.0)), "transmissionColor": tuple(np.clip(tc, 0.0, 1.0)),
-            "thinWalled": bool(np.asarray(thin).ravel()[0] != 0), "specularTint": tuple(np.clip(sc, 0.0, 1.0))}
+            # an index-matched solid bends nothing: it is read as a thin wall (refraction at IOR 1 sends every
+            # microfacet's light straight on, a direction no GGX density holds)
+            "thinWalled": bool(np.asarray(thin).ravel()[0] != 0) or abs(float(i) - 1.0) < INDEX_MATCHED,
+            "specularTint": tuple(np.clip(sc, 0.0, 1.0))}

@@ -1518,11 +1518,6 @@ class _Loader:
             self.lights.append(DomeLight(scale, image, rotation, path))
 
 
-#: |IOR - 1| below which a solid glass is index-matched: it passes light unbent, as a thin wall does (refraction at
-#: IOR 1 sends every microfacet's light straight on, a direction no GGX density holds)
-INDEX_MATCHED = 1e-4
-
-
 def _glass_columns(rows: list) -> dict:
     """MaterialTable's glass columns (transmission, transmission_color, eta, thin, reflection_color) from
     per-material (weight, colour, ior, thin, reflection tint) or None; no columns when no material transmits."""
@@ -1531,7 +1526,5 @@ def _glass_columns(rows: list) -> dict:
     rows = [(0.0, np.ones(3), 1.5, False, np.ones(3)) if r is None else r for r in rows]
     return {"transmission": np.array([r[0] for r in rows], np.float64),
             "transmission_color": np.array([r[1] for r in rows], np.float64),
-            "eta": np.array([r[2] for r in rows], np.float64),
-            # an index-matched solid (IOR 1) bends nothing: a thin wall (spec/renderer.md#transmission)
-            "thin": np.array([bool(r[3]) or abs(r[2] - 1.0) < INDEX_MATCHED for r in rows]),
+            "eta": np.array([r[2] for r in rows], np.float64), "thin": np.array([bool(r[3]) for r in rows]),
             "reflection_color": np.array([r[4] for r in rows], np.float64)}
