@@ -52,6 +52,20 @@ def local_mesh(cls: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray
     raise ValueError(f"not an analytic shape class: {cls!r}")
 
 
+def corner_uv(cls: str) -> np.ndarray:
+    """Mitsuba's ``uv`` at each corner of :func:`local_mesh`'s faces [F, 3, 2] (a faceVarying ``st``) for the disk and
+    the cylinder, whose angle coordinate (disk v, cylinder u = phi / 2pi in [0, 1)) wraps: a face across phi = 0
+    reads 1 at its corners on that side, not 0, and a disk's centre reads its face's middle angle (u = r = 0 there)."""
+    _, faces, _, uv = local_mesh(cls)
+    out = uv[faces].copy()
+    k, ring = (1, slice(1, None)) if cls == "Disk" else (0, slice(None))  # the angle coordinate, its corners
+    a = out[:, ring, k]
+    out[:, ring, k] = np.where(np.ptp(a, axis=1, keepdims=True) > 0.5, np.where(a < 0.5, a + 1.0, a), a)
+    if cls == "Disk":
+        out[:, 0, k] = out[:, 1:, k].mean(1)
+    return out
+
+
 def _sphere(rings: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A closed latitude-longitude unit sphere: one vertex per pole, ``rings - 1`` rings of ``2 rings`` vertices."""
     cols = 2 * rings

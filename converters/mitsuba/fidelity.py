@@ -470,6 +470,27 @@ def _glass(folder: Path, size: int) -> str:
             + SKY + "</scene>")
 
 
+def _uv_layouts(folder: Path, size: int) -> str:
+    # one checker bitmap on the three layouts a converter must make itself: a standing cylinder with its seam
+    # (phi = 0) toward the camera, a disk (polar uv) and an OBJ without texture coordinates (Mitsuba's uv there: the
+    # barycentric coordinates of each triangle)
+    _checker_png(folder / "check.png", [(235, 90, 40), (30, 60, 200)], squares=6)
+    (folder / "prism.obj").write_text("v -0.3 0 0.3\nv 0.3 0 0.3\nv 0 0.55 0.3\nv 0 0 -0.3\n"
+                                      "f 1 2 3\nf 2 4 3\nf 4 1 3\n")
+    tex = ('<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="check.png"/>'
+           '</texture></bsdf>')
+    return (HEADER.format(depth=3, rfilter=BOX, origin="0, 1.1, 2.6", size=size)
+            + FLOOR.format(bsdf=GREY_DIFFUSE)
+            + '<shape type="cylinder" id="can"><transform name="to_world"><scale x="0.25" y="0.25" z="0.6"/>'
+              f'<rotate x="1" angle="-90"/><rotate y="1" angle="-90"/><translate x="-0.55"/></transform>{tex}</shape>\n'
+            + '<shape type="disk" id="disk"><transform name="to_world"><scale value="0.3"/><rotate x="1" angle="-60"/>'
+              f'<translate x="0.05" y="0.35" z="-0.2"/></transform>{tex}</shape>\n'
+            + '<shape type="obj" id="prism"><string name="filename" value="prism.obj"/><boolean name="face_normals" '
+              f'value="true"/><transform name="to_world"><rotate y="1" angle="25"/><translate x="0.6" z="0.1"/></transform>{tex}'
+              '</shape>\n'
+            + SUN + SKY + "</scene>")
+
+
 @dataclass
 class FidelityScene:
     """A named scene: ``write(folder, size)`` writes its files and returns the XML text."""
@@ -523,6 +544,8 @@ SCENES = {
                                              "the sky in view"),
     "glass": FidelityScene("glass", _glass, "dielectrics over a checkered floor: a tinted thindielectric pane, a smooth "
                            "dielectric ball, a roughdielectric box (GGX alpha 0.15), max_depth 8"),
+    "uv_layouts": FidelityScene("uv_layouts", _uv_layouts, "one checker bitmap on a cylinder (its seam in view), a disk "
+                                "(polar uv) and an OBJ without texture coordinates (Mitsuba reads barycentrics there)"),
     "orientation": FidelityScene("orientation", _orientation, "front sides: one-sided panels mirrored (scale -1) or with "
                                  "flip_normals, flip_normals rectangle and disk emitters, a twosided emitting panel"),
 }

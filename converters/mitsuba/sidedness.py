@@ -56,7 +56,18 @@ def front_sign(mi, shape, pts: np.ndarray, faces: np.ndarray, normals: np.ndarra
 def faces_facing_as_mitsuba(mi, shape, pts: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None, *,
                             mirrored: bool = False) -> np.ndarray:
     """``faces`` [F, k] (convex polygons of k corners) with the winding of each face turned where needed so that
-    its USD front is Mitsuba's front: the side of the vertex normals summed over the face's corners (of the face
+    its USD front is Mitsuba's front (:func:`turned_faces`)."""
+    faces = np.asarray(faces, np.int64)
+    turn = turned_faces(mi, shape, pts, faces, normals, mirrored=mirrored)
+    out = faces.copy()
+    out[turn] = out[turn][:, ::-1]
+    return out
+
+
+def turned_faces(mi, shape, pts: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None, *,
+                 mirrored: bool = False) -> np.ndarray:
+    """Which of ``faces`` [F, k] (convex polygons of k corners) must have their winding reversed ([F] bool) so that
+    their USD front is Mitsuba's front: the side of the vertex normals summed over the face's corners (of the face
     normal without ``normals``), times :func:`front_sign`. ``pts`` [V, 3] and ``normals`` [V, 3] are in world space;
     ``mirrored``: the prim is written with a transform of negative determinant (its USD front is the left-hand side
     of the world winding)."""
@@ -67,7 +78,4 @@ def faces_facing_as_mitsuba(mi, shape, pts: np.ndarray, faces: np.ndarray, norma
     mitsuba = cr if normals is None else np.asarray(normals, np.float64)[faces].sum(1)
     mitsuba = mitsuba * front_sign(mi, shape, pts, fan, normals)
     usd = -cr if mirrored else cr
-    turn = (mitsuba * usd).sum(1) < 0.0
-    out = faces.copy()
-    out[turn] = out[turn][:, ::-1]
-    return out
+    return (mitsuba * usd).sum(1) < 0.0

@@ -58,10 +58,12 @@ from .scene import (
     refuse_emitter,
     shapegroup_children,
 )
-from .sidedness import faces_facing_as_mitsuba, sampled_normal
+from .sidedness import sampled_normal, turned_faces
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
+#: Mitsuba's uv at a triangle's corners on a mesh without texture coordinates: its barycentric coordinates (b1, b2)
+BARYCENTRIC_UV = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
 #: an envmap is written at up to this many times its resolution (resampled with Mitsuba's own lookup), as
 #: long as the written map stays within ENVMAP_MAX_PIXELS
 ENVMAP_UPSAMPLE = 8
@@ -798,8 +800,8 @@ class StageConverter:
 
     def _uv_mesh(self, shape):
         """``(points [V, 3] world space, faces [F, 3], uv [V, 2], normals [V, 3] or None)`` of a shape as the converter
-        writes it, for its uv layout; None for a shape written without texture coordinates (a disk, a mesh without
-        them, curves)."""
+        writes it, for its uv layout; None for a shape without per-vertex texture coordinates (a disk or a mesh without
+        them, whose faceVarying uv has no layout to bake a map on; curves)."""
         cls = _class_name(shape)
         p = self.mi.traverse(shape)
         if cls in MESH_CLASSES or "vertex_positions" in p:
@@ -1175,7 +1177,7 @@ class StageConverter:
         elif cls in ("Disk", "Cylinder"):  # world space, the tessellation bakes use (spec/bake.md#analytic-shapes)
             pts, faces, nrm = analytic.world_mesh(self.mi, shape)
             self.warn(f"shape {sid}: {cls.lower()} tessellated into {len(faces)} triangles")
-            uv = analytic.local_mesh(cls)[3] if cls == "Cylinder" else None  # a fan cannot carry the disk's polar uv
+            uv = analytic.corner_uv(cls)
             self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
         elif cls in ("LinearCurve", "BSplineCurve", "BSpline"):
             self._curves(shape, sid, cls, emission)
@@ -1246,18 +1248,24 @@ class StageConverter:
         uv = _np(p["vertex_texcoords"]).reshape(-1, 2) if "vertex_texcoords" in p else None
         if uv is not None and len(uv) != len(pts):
             uv = None
+        if uv is None and self.material(shape.bsdf(), sid, emission, shape=shape) in self.textured_materials:
+            uv = np.tile(BARYCENTRIC_UV, (len(faces), 1, 1))  # Mitsuba's uv on a mesh without them: (b1, b2)
         self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
 
     def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False, uv=None) -> None:
-        """A UsdGeom.Mesh; ``uv`` [V, 2] in Mitsuba's convention (v = 0 at the image's top row) becomes the
-        vertex primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom row)."""
+        """A UsdGeom.Mesh; ``uv`` in Mitsuba's convention (v = 0 at the image's top row), per point [V, 2] or per face
+        corner [F, 3, 2], becomes the vertex or faceVarying primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom
+        row)."""
         from pxr import Sdf, UsdGeom, Vt
 
         m = self._to_world(shape) if local_to_world else np.eye(4)
         if self._sided(shape, emission) and abs(np.linalg.det(m[:3, :3])) > 1e-300:  # (a flat transform has no sides)
             world = pts @ m[:3, :3].T + m[:3, 3]
             wn = None if normals is None else normals @ np.linalg.inv(m[:3, :3])  # the inverse transpose, on rows
-            faces = faces_facing_as_mitsuba(self.mi, shape, world, faces, wn, mirrored=bool(np.linalg.det(m[:3, :3]) < 0))
+            turn = turned_faces(self.mi, shape, world, faces, wn, mirrored=bool(np.linalg.det(m[:3, :3]) < 0))
+            faces = np.where(turn[:, None], np.asarray(faces)[:, ::-1], faces)
+            if uv is not None and uv.ndim == 3:  # a face's corners turn with it
+                uv = np.where(turn[:, None, None], uv[:, ::-1], uv)
         path = self._name(self.geometry_root, sid)
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pts, np.float32)))
@@ -1271,17 +1279,16 @@ class StageConverter:
         lo, hi = np.asarray(pts, np.float32).min(0), np.asarray(pts, np.float32).max(0)
         mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi])))
         if uv is not None:
+            interp = UsdGeom.Tokens.faceVarying if uv.ndim == 3 else UsdGeom.Tokens.vertex
+            uv = uv.reshape(-1, 2)
             st = np.stack([uv[:, 0], 1.0 - uv[:, 1]], 1)
-            pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+            pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, interp)
             pv.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(st, np.float32)))
         if local_to_world:
             self._xform(mesh.GetPrim(), _row(m))
         mat = self._bind(mesh.GetPrim(), shape, sid, emission)
         if mat in self.color_primvars:
             self._color_primvar(mesh, shape, sid, self.color_primvars[mat], len(pts), len(faces))
-        if mat in self.textured_materials and uv is None:
-            self.warn(f"shape {sid}: textured material but the {cls} has no texture coordinates: the texture's corner "
-                      "texel is used")
         self._one_sided(mesh, shape)
         self.record(path, f"shape {sid} ({cls}, {len(faces)} faces)")
 
