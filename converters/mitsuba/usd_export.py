@@ -62,6 +62,9 @@ from .sidedness import sampled_normal, turned_faces
 
 #: Mitsuba shape classes whose vertices ``mi.traverse`` exposes in world space.
 MESH_CLASSES = ("PLYMesh", "OBJMesh", "SerializedMesh", "Cube", "Mesh")
+#: how far behind its light an emitter's own surface is written, in units of the shape's size (a sphere: the fraction
+#: of its radius it is shrunk by): far beyond the renderers' float32 intersection error, invisible in an image
+LIGHT_SURFACE_SET_BACK = 1e-3
 #: Mitsuba's uv at a triangle's corners on a mesh without texture coordinates: its barycentric coordinates (b1, b2)
 BARYCENTRIC_UV = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
 #: an envmap is written at up to this many times its resolution (resampled with Mitsuba's own lookup), as
@@ -1167,23 +1170,48 @@ class StageConverter:
                           "triangles only; this one is reached by BSDF rays only: right mean, more noise")
         if cls in MESH_CLASSES or "vertex_positions" in self.mi.traverse(shape):
             self._mesh(shape, sid, cls, emission)
-        elif cls == "Rectangle":
-            pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
-            uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
-            self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
-                             shape, cls, emission, local_to_world=True, uv=uv)
-        elif cls == "Sphere":
-            self._sphere(shape, sid, emission)
-        elif cls in ("Disk", "Cylinder"):  # world space, the tessellation bakes use (spec/bake.md#analytic-shapes)
-            pts, faces, nrm = analytic.world_mesh(self.mi, shape)
-            self.warn(f"shape {sid}: {cls.lower()} tessellated into {len(faces)} triangles")
-            uv = analytic.corner_uv(cls)
-            self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
+        elif cls in ("Rectangle", "Sphere", "Disk", "Cylinder"):
+            self._analytic(shape, sid, cls, emission)
         elif cls in ("LinearCurve", "BSplineCurve", "BSpline"):
             self._curves(shape, sid, cls, emission)
         else:
             self.warn(f"shape {sid}: {cls} is not convertible (obj, ply, serialized, cube, rectangle, disk, sphere, "
                       f"cylinder, linearcurve, bsplinecurve are): skipped")
+
+    def _analytic(self, shape, sid, cls, emission, placed: np.ndarray | None = None) -> None:
+        """A ``rectangle``, ``sphere``, ``disk`` or ``cylinder``; ``placed`` [4, 4]: a world transform applied after the
+        shape's own (an emitter's surface set back behind its light, :meth:`_light_surface`)."""
+        m = self._to_world(shape) if placed is None else placed @ self._to_world(shape)
+        if cls == "Rectangle":
+            pts = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+            uv = 0.5 * (pts[:, :2] + 1.0)  # Mitsuba's rectangle parameterisation
+            self._write_mesh(sid, pts, np.array([[0, 1, 2, 3]]), np.tile([0.0, 0.0, 1.0], (4, 1)),
+                             shape, cls, emission, local_to_world=True, uv=uv, to_world=m)
+        elif cls == "Sphere":
+            self._sphere(shape, sid, emission, to_world=m)
+        else:  # world space, the tessellation bakes use (spec/bake.md#analytic-shapes)
+            pts, faces, nrm = analytic.world_mesh(self.mi, shape)
+            if placed is None:
+                self.warn(f"shape {sid}: {cls.lower()} tessellated into {len(faces)} triangles")
+            else:
+                pts = pts @ placed[:3, :3].T + placed[:3, 3]
+            self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=analytic.corner_uv(cls))
+
+    def _light_surface(self, shape, sid, cls) -> None:
+        """The surface of a Mitsuba emitter shape written as a UsdLux light: the shape with its BSDF, set back behind
+        the light's emitting side by :data:`LIGHT_SURFACE_SET_BACK` of its size (a sphere shrunk by it about its
+        centre). In Mitsuba the shape is opaque: it shadows the scene's other lights and shows its back (black for a
+        one-sided BSDF); a light surface occludes nothing (renderer.md#light-surfaces), and rays that reach the
+        light's emitting side end there (``nasset:opaqueSurface``), before its surface."""
+        m = self._to_world(shape)
+        placed = np.eye(4)
+        if cls == "Sphere":
+            placed[:3, :3] *= 1.0 - LIGHT_SURFACE_SET_BACK
+            placed[:3, 3] = LIGHT_SURFACE_SET_BACK * m[:3, 3]
+        else:
+            size = float(max(np.linalg.norm(m[:3, 0]), np.linalg.norm(m[:3, 1])))
+            placed[:3, 3] = -LIGHT_SURFACE_SET_BACK * size * sampled_normal(self.mi, shape)[1]
+        self._analytic(shape, sid, cls, None, placed=placed)
 
     def _curves(self, shape, sid, cls, emission) -> None:
         """A ``linearcurve`` / ``bsplinecurve`` as UsdGeom.BasisCurves (``linear``, or ``cubic`` ``bspline``) of its
@@ -1252,13 +1280,14 @@ class StageConverter:
             uv = np.tile(BARYCENTRIC_UV, (len(faces), 1, 1))  # Mitsuba's uv on a mesh without them: (b1, b2)
         self._write_mesh(sid, pts, faces, nrm, shape, cls, emission, uv=uv)
 
-    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False, uv=None) -> None:
+    def _write_mesh(self, sid, pts, faces, normals, shape, cls, emission, local_to_world=False, uv=None,
+                    to_world: np.ndarray | None = None) -> None:
         """A UsdGeom.Mesh; ``uv`` in Mitsuba's convention (v = 0 at the image's top row), per point [V, 2] or per face
         corner [F, 3, 2], becomes the vertex or faceVarying primvar ``st = (u, 1 - v)`` (USD: t = 0 at the bottom
-        row)."""
+        row). ``local_to_world``: ``pts`` are in the shape's local space, placed by ``to_world`` (default the shape's)."""
         from pxr import Sdf, UsdGeom, Vt
 
-        m = self._to_world(shape) if local_to_world else np.eye(4)
+        m = (self._to_world(shape) if to_world is None else to_world) if local_to_world else np.eye(4)
         if self._sided(shape, emission) and abs(np.linalg.det(m[:3, :3])) > 1e-300:  # (a flat transform has no sides)
             world = pts @ m[:3, :3].T + m[:3, 3]
             wn = None if normals is None else normals @ np.linalg.inv(m[:3, :3])  # the inverse transpose, on rows
@@ -1310,18 +1339,20 @@ class StageConverter:
         pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(want.primvar, Sdf.ValueTypeNames.Color3fArray, interp)
         pv.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(rgb * want.scale, np.float32)))
 
-    def _sphere(self, shape, sid, emission) -> None:
+    def _sphere(self, shape, sid, emission, to_world: np.ndarray | None = None) -> None:
+        """A ``sphere`` placed by ``to_world`` (default the shape's as Mitsuba draws it)."""
         from pxr import Gf, UsdGeom
 
+        m = self._to_world(shape) if to_world is None else to_world
         if self.material(shape.bsdf(), sid, emission, shape=shape) in self.textured_materials:
             pts, faces, uv = latlong_sphere()  # textured: a mesh carrying Mitsuba's sphere parameterisation
-            self._write_mesh(sid, pts, faces, pts.copy(), shape, "Sphere", emission, local_to_world=True, uv=uv)
+            self._write_mesh(sid, pts, faces, pts.copy(), shape, "Sphere", emission, local_to_world=True, uv=uv,
+                             to_world=m)
             return
         path = self._name(self.geometry_root, sid)
         sph = UsdGeom.Sphere.Define(self.stage, path)
         sph.CreateRadiusAttr(1.0)
         sph.CreateExtentAttr([Gf.Vec3f(-1, -1, -1), Gf.Vec3f(1, 1, 1)])
-        m = self._to_world(shape)
         self._xform(sph.GetPrim(), _row(m))
         self._bind(sph.GetPrim(), shape, sid, emission)
         self._one_sided(sph, shape)
@@ -1367,19 +1398,15 @@ class StageConverter:
         self._unread(f"shape {sid}", p)
         bsdf_params = _Params(self.mi, shape.bsdf())
         if any(k.endswith("reflectance.value") and np.any(bsdf_params.rgb(k[: -len(".value")]) > 0) for k in bsdf_params.keys()):
-            self.warn(f"shape {sid}: the reflectance of the emitting {cls} is dropped (it becomes a light)")
-        if len(self.scene.emitters()) > 1:
-            self.warn(f"shape {sid}: the emitting {cls.lower()} becomes a UsdLux light, whose surface casts no shadow: in "
-                      "Mitsuba it is an opaque shape that shadows the scene's other lights (an obj or ply emitter becomes "
-                      "a mesh light, which keeps them)")
-        if self.hide_emitters:
-            self.warn(f"shape {sid}: hidden emitter: camera rays pass through the {cls.lower()} light, where Mitsuba shows "
-                      "its surface (black unless it has a BSDF)")
+            self.warn(f"shape {sid}: the reflectance of the emitting {cls}'s emitting side is dropped (rays end at its "
+                      "light); its other side keeps it")
         m = self._to_world(shape)
         path = self._name("/World/Lights", sid)
         light = self._area_light_prim(shape, cls, m, radiance, path, sid)
-        # Mitsuba's emitter shape is opaque: rays end on it (renderer.md#light-surfaces; Cycles' lights occlude nothing)
+        # Mitsuba's emitter shape is opaque: rays end on it (renderer.md#light-surfaces; Cycles' lights occlude nothing),
+        # and its surface behind the light shadows the other lights
         light.GetPrim().CreateAttribute("nasset:opaqueSurface", Sdf.ValueTypeNames.Bool, custom=True).Set(True)
+        self._light_surface(shape, sid, cls)
 
     def _area_light_prim(self, shape, cls, m, radiance, path, sid):
         """The UsdLux light of an area emitter on a Mitsuba rectangle, disk or sphere (its transform ``m``)."""

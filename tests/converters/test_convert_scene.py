@@ -201,6 +201,25 @@ def test_lights(converted):
     np.testing.assert_allclose(-m[2, :3], [0, -1, 0], atol=1e-6)
 
 
+def test_emitter_shapes_keep_their_surface_behind_their_light(converted):
+    """Mitsuba's emitter shapes are opaque (they shadow other lights and show their back); a UsdLux light occludes
+    nothing, so each one's surface is written too, just behind the light's emitting side: the bulb's sphere shrunk by
+    1e-3 of its radius about its centre, the panel's quad 1e-3 of its size above the light (it emits down, -Y).
+    Before, neither had a surface: a light seen from behind showed what lies beyond it."""
+    from pxr import UsdGeom
+
+    _, stage, _ = converted
+    bulb = UsdGeom.Sphere(stage.GetPrimAtPath("/World/Geometry/bulb"))
+    m = _xf(stage, "/World/Geometry/bulb")
+    assert bulb.GetRadiusAttr().Get() * np.linalg.norm(m[0, :3]) == pytest.approx(0.2 * (1 - 1e-3), rel=1e-6)
+    np.testing.assert_allclose(m[3, :3], [0, 4, 0], atol=1e-6)
+    panel = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Geometry/panel"))
+    world = np.c_[np.array(panel.GetPointsAttr().Get()), np.ones(4)] @ _xf(stage, "/World/Geometry/panel")
+    np.testing.assert_allclose(world[:, 1], 5.0 + 1e-3, atol=1e-6)
+    np.testing.assert_allclose(np.abs(world[:, [0, 2]]), 1.0, atol=1e-6)
+    assert not panel.GetDoubleSidedAttr().Get()  # Mitsuba's default diffuse is one-sided: its back is black
+
+
 def test_envmap_texture_written_and_referenced(converted):
     from pxr import UsdLux
 
@@ -250,7 +269,6 @@ def test_shapes_and_materials(converted):
     np.testing.assert_allclose(np.hypot(pts[:, 0], pts[:, 1]), 1.0, atol=1e-6)
     assert pts[:, 2].min() == pytest.approx(0.0) and pts[:, 2].max() == pytest.approx(1.0)
     np.testing.assert_allclose(nrm[:, :2], pts[:, :2], atol=1e-6)
-    assert not stage.GetPrimAtPath("/World/Geometry/bulb") and not stage.GetPrimAtPath("/World/Geometry/panel")
 
     rp = _shader_inputs(stage, _bound(stage, "/World/Geometry/box"))
     assert rp["roughness"] == pytest.approx(0.5)  # sqrt(alpha 0.25)
