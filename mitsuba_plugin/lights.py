@@ -29,6 +29,11 @@ is black; every other ray sees the light.
 - ``nasset_area``: the emission of a mesh (spec/renderer.md#sidedness, #mesh-lights), attached to its shape:
   ``front`` radiance on the side its triangles' winding faces, ``back`` radiance on the other (Mitsuba's
   ``area`` emits from the front alone). Sampled by the shape's area (pdf ``d^2 / (A |cos theta_l|)``).
+
+- ``nasset_spread``: a RectLight's or DiskLight's emission with a ``nasset:spread`` below pi (spec/renderer.md#lights),
+  attached to its rectangle or disk: ``radiance`` on the normal's side times Cycles' soft-box profile
+  ``(tan h - tan a)+ / (tan h - h)``, ``h = spread / 2`` (``3 / h^3`` for ``h <= 0.05``), ``a`` the angle from the normal.
+  Sampled by the shape's area, as Mitsuba's ``area``.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ DOME = "nasset_dome"
 AREA = "nasset_area"
 SKY = "nasset_sky"
 SPOT = "nasset_spot"
+SPREAD = "nasset_spread"
 SPOT_PROFILES = ("linear", "smoothstep")
 #: distance of the sample point along a direction (shadow rays end there): far beyond any scene the
 #: renderer accepts (spec/renderer.md#limits), still exact enough in float32 for the ray direction
@@ -102,8 +108,8 @@ def selection_weights(powers: dict, share: float | None = None) -> dict:
     return {k: float((1.0 - share) / n + share * v / total) for k, v in p.items()}
 
 def register(mi) -> None:
-    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area``, ``nasset_sky`` and ``nasset_spot`` for the active
-    variant (idempotent)."""
+    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area``, ``nasset_sky``, ``nasset_spot`` and ``nasset_spread``
+    for the active variant (idempotent)."""
     if mi.variant() in _REGISTERED:
         return
 
@@ -412,7 +418,50 @@ def register(mi) -> None:
         def to_string(self):
             return "NassetAreaLight"
 
+    class SpreadLight(mi.Emitter):
+        """``nasset_spread`` (module docstring): Mitsuba's ``area`` emission times the spread's profile."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.radiance = mi.Color3f(*np.asarray(props.get("radiance", mi.ScalarColor3f(1.0)), np.float64).reshape(3).tolist())
+            h = 0.5 * float(props.get("spread", math.pi))
+            self.tan_h = math.tan(h)
+            self.scale = 3.0 / h**3 if h <= 0.05 else 1.0 / (self.tan_h - h)
+            self.m_flags = mi.EmitterFlags.Surface
+
+        def _value(self, cos_a, active):
+            """Radiance toward a direction at cos_a from the normal (0 behind it)."""
+            c = dr.maximum(cos_a, 1e-30)
+            tan_a = dr.safe_sqrt(1.0 - c * c) / c
+            f = dr.maximum(self.tan_h - tan_a, 0.0) * self.scale
+            return dr.select(active & (cos_a > 0), self.radiance * f, mi.Color3f(0))
+
+        def eval(self, si, active=True):
+            return self._value(mi.Frame3f.cos_theta(si.wi), active)
+
+        def sample_direction(self, it, sample, active=True):
+            ds = self.get_shape().sample_direction(it, sample, active)
+            ok = active & (ds.pdf != 0.0)
+            ds.emitter = mi.EmitterPtr(self)
+            return ds, self._value(-dr.dot(ds.d, ds.n), ok) / dr.select(ok, ds.pdf, 1.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            return self.get_shape().pdf_direction(it, ds, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self._value(-dr.dot(ds.d, ds.n), active)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+        def to_string(self):
+            return f"NassetSpreadLight[tan_h={self.tan_h}]"
+
     mi.register_emitter(NAME, lambda props: ConeLight(props))
+    mi.register_emitter(SPREAD, lambda props: SpreadLight(props))
     mi.register_emitter(DOME, lambda props: DomeLight(props))
     mi.register_emitter(AREA, lambda props: AreaLight(props))
     mi.register_emitter(SKY, lambda props: SkyLight(props))

@@ -308,6 +308,10 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
             mark = OPAQUE_MARK if getattr(lt.desc, "opaque", False) else ""
             key = (LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + mark + lt.key
             light_entries[key] = light_entries.pop(lt.key)
+            if lt.desc.spread < math.pi:  # a RectLight's or DiskLight's nasset:spread (spec/renderer.md#lights)
+                ent = light_entries[key]  # (lt.mi_dict: kept as built, its power is the same)
+                light_entries[key] = {**ent, "emitter": {"type": lights_jit.SPREAD, "spread": float(lt.desc.spread),
+                                                         "radiance": mi.ScalarColor3f(*ent["emitter"]["radiance"]["value"])}}
         powers[key] = lights_jit.light_power(lt, radius)
     infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]
     if len(infinite) > 1:  # Mitsuba keeps one environment emitter: a dome and angular suns become their sum

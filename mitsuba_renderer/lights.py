@@ -70,7 +70,18 @@ class MitsubaLight:
         le = wv * pdf[:, None]
         ok = pdf > 0
         le[~ok] = 0.0
+        if self.desc.spread < np.pi:  # the spread's profile at the sampled point, seen along -wi
+            le *= spread_factor(-(wi * _col(ds.n.numpy(), m)).sum(1), self.desc.spread)[:, None]
         return wi, dist, le, np.where(ok, pdf, 1.0)
+
+
+def spread_factor(cos_a, spread: float):
+    """spec/renderer.md#lights: the factor [N] of a RectLight's or DiskLight's radiance at cos_a [N] from its emitting
+    normal for nasset:spread ``spread`` < pi: (tan h - tan a)+ / (tan h - h), h = spread / 2 (3 / h^3 for h <= 0.05)."""
+    h = 0.5 * spread
+    c = np.clip(np.asarray(cos_a, np.float64), 1e-300, 1.0)
+    scale = 3.0 / (h * h * h) if h <= 0.05 else 1.0 / (np.tan(h) - h)
+    return np.where(np.asarray(cos_a) > 0.0, np.maximum(np.tan(h) - np.sqrt(1.0 - c * c) / c, 0.0) * scale, 0.0)
 
 
 def spot_falloff(cos_theta, cone_deg: float, softness: float, profile: str):

@@ -64,6 +64,7 @@ class Light:
     camera_visible: bool = True  # nasset:cameraVisibility (spec/renderer.md#light-surfaces)
     opaque: bool = False  # nasset:opaqueSurface: rays end on its surface (Mitsuba's emitter shapes)
     shaping: tuple | None = None  # (cone angle, softness, profile) of UsdLux.ShapingAPI (spec/renderer.md#spot-lights)
+    spread: float = float(np.pi)  # nasset:spread of a RectLight or DiskLight, radians (spec/renderer.md#lights)
 
 
 @dataclass
@@ -967,6 +968,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
         lt.radius = float(get("radius", 0.5))
         if lt.radius < 0:
             raise invalid("radius must be >= 0", "inputs:radius")
+        lt.spread = stage_rules.light_spread(prim, t, path)
     elif tn == "CylinderLight":
         lt.radius, lt.length = float(get("radius", 0.5)), float(get("length", 1.0))
         if lt.radius < 0 or lt.length < 0:
@@ -975,6 +977,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
             _say(path)("treatAsLine ignored: rendered as the cylinder of its radius", ppath)
     elif tn == "RectLight":
         lt.width, lt.height = float(get("width", 1.0)), float(get("height", 1.0))
+        lt.spread = stage_rules.light_spread(prim, t, path)
         if get("texture:file", None):  # spec/renderer.md#lights: ignored, as the reference renderer does
             _say(path)("RectLight texture:file is ignored", ppath)
     elif tn in ("DomeLight", "DomeLight_1"):

@@ -446,6 +446,37 @@ def unrendered_light_inputs(prim, time) -> str:
     return ", ".join(said)
 
 
+#: the range of a RectLight's or DiskLight's ``nasset:spread`` (radians, full apex; spec/renderer.md#lights)
+MIN_SPREAD, MAX_SPREAD = 1e-3, float(np.pi)
+
+
+def light_spread(prim, time, file: str) -> float:
+    """The ``nasset:spread`` of a RectLight or DiskLight prim (radians; unauthored: pi, a Lambertian emitter);
+    ``SCENE_INVALID`` naming the attribute when it is not a finite float in [MIN_SPREAD, MAX_SPREAD]."""
+    attr = prim.GetAttribute("nasset:spread")
+    if not (attr and attr.HasAuthoredValue()):
+        return MAX_SPREAD
+    value = attr.Get(time)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not MIN_SPREAD <= float(value) <= MAX_SPREAD + 1e-6:
+        raise SceneError("SCENE_INVALID", f"nasset:spread {value!r} must be a float in [{MIN_SPREAD:g}, pi] (radians)",
+                         file=file, prim=str(prim.GetPath()), attribute="nasset:spread")
+    return min(float(value), MAX_SPREAD)
+
+
+def spread_profile(cos_a, spread: float):
+    """The factor [N] of an area light's radiance toward directions at cos_a [N] from its emitting normal for a
+    ``nasset:spread`` of ``spread`` radians (spec/renderer.md#lights, Cycles' soft-box grid): max(tan h - tan a, 0) N,
+    h = spread / 2, N = 1 / (tan h - h) (3 / h^3 for h <= 0.05), which keeps the power; 1 at spread pi; 0 behind."""
+    cos_a = np.asarray(cos_a, np.float64)
+    if spread >= MAX_SPREAD:
+        return np.where(cos_a > 0.0, 1.0, 0.0)
+    h = 0.5 * spread
+    norm = 3.0 / h**3 if h <= 0.05 else 1.0 / (np.tan(h) - h)
+    c = np.maximum(cos_a, 1e-300)
+    tan_a = np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c
+    return np.where(cos_a > 0.0, np.maximum(np.tan(h) - tan_a, 0.0) * norm, 0.0)
+
+
 def normal_matrix(m3) -> np.ndarray:
     """The 3x3 matrix [3, 3] (or a stack [n, 3, 3] for m3 [n, 3, 3]) that takes object-space normals, as rows, to world
     normals of the same side, up to length, for the linear part ``m3`` of a row-vector transform: the cofactor matrix

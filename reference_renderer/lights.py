@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from nasset_sdk.stage_rules import MAX_SPREAD, spread_profile
+
 from .sampling import (
     INV_4PI,
     Distribution2D,
@@ -223,9 +225,16 @@ class _SurfaceLight(Light):
     (``_point``), the cosine at the light toward ``-wi`` (``_cos``) and the ray hit (``_hit``)."""
 
     area = True
+    spread = MAX_SPREAD  # nasset:spread of a RectLight or DiskLight (radians; pi: Lambertian)
 
     def power_is_zero(self):
         return not (self.L > 0).any() or self.A <= 0
+
+    def _radiance(self, cos_l):
+        """Radiance [N, 3] toward directions at cos_l [N] from the emitting normal (the spread's profile)."""
+        if self.spread >= MAX_SPREAD:
+            return np.broadcast_to(self.L, (len(cos_l), 3))
+        return spread_profile(cos_l, self.spread)[:, None] * self.L
 
     def sample(self, p, u):
         q = self._point(u)
@@ -236,7 +245,7 @@ class _SurfaceLight(Light):
         cos_l = self._cos(wi, q)
         ok = cos_l > 1e-9  # the emitting side faces p
         pdf = np.where(ok, d2 / (np.maximum(cos_l, 1e-300) * self.A), 0.0)
-        return wi, dist, np.where(ok[:, None], self.L, 0.0), pdf
+        return wi, dist, np.where(ok[:, None], self._radiance(cos_l), 0.0), pdf
 
     def pdf(self, p, wi):
         t = self._hit(p, wi)
@@ -248,7 +257,11 @@ class _SurfaceLight(Light):
 
     def intersect(self, o, d):
         t = self._hit(o, d)
-        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+        hit = np.isfinite(t)
+        if self.spread >= MAX_SPREAD:
+            return t, np.where(hit[:, None], self.L, 0.0)
+        cos_l = self._cos(d, o + d * np.where(hit, t, 0.0)[:, None])
+        return t, np.where(hit[:, None], self._radiance(cos_l), 0.0)
 
 
 class CylinderLight(_SurfaceLight):
@@ -289,8 +302,10 @@ class CylinderLight(_SurfaceLight):
 
 
 class RectLight(_SurfaceLight):
-    def __init__(self, center, axis_x, axis_y, radiance, prim: str = "") -> None:
-        """axis_x / axis_y: full edge vectors (width and height, world space, scale included)."""
+    def __init__(self, center, axis_x, axis_y, radiance, prim: str = "", spread: float = MAX_SPREAD) -> None:
+        """axis_x / axis_y: full edge vectors (width and height, world space, scale included); ``spread``: its
+        nasset:spread (radians)."""
+        self.spread = float(spread)
         self.c = np.asarray(center, np.float64)
         self.ex = np.asarray(axis_x, np.float64)
         self.ey = np.asarray(axis_y, np.float64)
@@ -337,8 +352,8 @@ class DiskLight(RectLight):
     space, scale included: a disk under non-uniform scale is an ellipse), emitting along -(e_x x e_y), sampled
     uniformly by area."""
 
-    def __init__(self, center, axis_x, axis_y, radiance, prim: str = "") -> None:
-        super().__init__(center, axis_x, axis_y, radiance, prim)
+    def __init__(self, center, axis_x, axis_y, radiance, prim: str = "", spread: float = MAX_SPREAD) -> None:
+        super().__init__(center, axis_x, axis_y, radiance, prim, spread)
         self.A *= np.pi  # pi |e_x x e_y|
         g = np.array([[self.ex @ self.ex, self.ex @ self.ey], [self.ex @ self.ey, self.ey @ self.ey]])
         self.g_inv = np.linalg.inv(g) if abs(np.linalg.det(g)) > 1e-300 else np.zeros((2, 2))

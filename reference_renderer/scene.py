@@ -87,8 +87,8 @@ _LIGHT_INPUTS = {
     "DistantLight": {"inputs:angle"},
     "SphereLight": {"inputs:radius", "treatAsPoint", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness",
                     "nasset:shaping:falloff"},
-    "RectLight": {"inputs:width", "inputs:height"},
-    "DiskLight": {"inputs:radius"},
+    "RectLight": {"inputs:width", "inputs:height", "nasset:spread"},
+    "DiskLight": {"inputs:radius", "nasset:spread"},
     "CylinderLight": {"inputs:radius", "inputs:length", "treatAsLine"},
     "DomeLight": {"inputs:texture:file", "inputs:texture:format", "guideRadius"},
     "DomeLight_1": {"inputs:texture:file", "inputs:texture:format", "guideRadius", "poleAxis"},
@@ -1472,7 +1472,7 @@ class _Loader:
             ex, ey = w * M[0, :3], h * M[1, :3]
             area = float(np.linalg.norm(np.cross(ex, ey)))
             L = scale / area if normalize and area > 0 else scale
-            self.lights.append(RectLight(M[3, :3], ex, ey, L, path))
+            self.lights.append(RectLight(M[3, :3], ex, ey, L, path, stage_rules.light_spread(prim, self.time, self.file)))
         elif tname == "CylinderLight":
             cl = UsdLux.CylinderLight(prim)
             r, length = float(g(cl.GetRadiusAttr(), 0.5)), float(g(cl.GetLengthAttr(), 1.0))
@@ -1495,7 +1495,7 @@ class _Loader:
             ex, ey = r * M[0, :3], r * M[1, :3]
             area = float(np.pi * np.linalg.norm(np.cross(ex, ey)))
             L = scale / area if normalize and area > 0 else scale
-            self.lights.append(DiskLight(M[3, :3], ex, ey, L, path))
+            self.lights.append(DiskLight(M[3, :3], ex, ey, L, path, stage_rules.light_spread(prim, self.time, self.file)))
         else:
             dl = UsdLux.DomeLight(prim)
             fmt = g(dl.GetTextureFormatAttr(), "automatic")

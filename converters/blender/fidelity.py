@@ -623,6 +623,20 @@ def _area_lights(bpy, folder: Path, size: int) -> None:
            size_y=0.2)
 
 
+def _area_spread(bpy, folder: Path, size: int) -> None:
+    # area lights narrowed by Spread (Cycles' soft-box grid): a rectangle at 60 deg tilted over a ball and an ellipse
+    # at 35 deg straight down, whose light falls in a pool on the floor; a dim world
+    _new_scene(bpy, size, (0.0, -2.8, 1.5), (0.0, 0.0, 0.3))
+    _floor(bpy, (0.6, 0.6, 0.6))
+    _world(bpy, strength=0.2)
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "White", **{"Color": (0.8, 0.8, 0.8)}), smooth=True, radius=0.3,
+         location=(-0.3, 0.0, 0.3))
+    _light(bpy, "Rect", "AREA", (-0.9, 0.0, 1.2), energy=40.0, rgb=(1.0, 0.8, 0.6), shape="RECTANGLE", size=0.6,
+           size_y=0.3, rotation=(0.0, math.radians(-35.0), 0.0), spread=math.radians(60.0))
+    _light(bpy, "Ellipse", "AREA", (0.6, 0.2, 1.3), energy=25.0, rgb=(0.7, 0.9, 1.0), shape="ELLIPSE", size=0.5,
+           size_y=0.3, spread=math.radians(35.0))
+
+
 def _surface_types(bpy, folder: Path, size: int) -> None:
     # objects that are not meshes but render as surfaces (their evaluated mesh), and hard edges on a smooth mesh
     _new_scene(bpy, size, (0.0, -2.8, 1.6), (0.0, 0.0, 0.3))
@@ -1098,6 +1112,8 @@ SCENES = {
     "render_settings": FidelityScene("render_settings", _render_settings, "max bounces 2 in an open box of bright walls, "
                                      "Gaussian pixel filter 1.5 px"),
     "area_lights": FidelityScene("area_lights", _area_lights, "rectangle, square, disk and ellipse area lights"),
+    "area_spread": FidelityScene("area_spread", _area_spread, "area lights narrowed by Spread: a rectangle at 60 deg over "
+                                 "a ball, an ellipse at 35 deg casting a pool of light on the floor", test_spp=256),
     "surface_types": FidelityScene("surface_types", _surface_types, "a bevelled curve, extruded text, a NURBS sphere, "
                                    "a metaball; a cube under Shade Auto Smooth (hard edges on smooth faces)"),
     "node_links": FidelityScene("node_links", _node_links, "links as Cycles reads them: an Image Texture through two "

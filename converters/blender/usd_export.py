@@ -246,7 +246,9 @@ class _BlenderConverter(StageConverter):
 
     # -- lights -------------------------------------------------------------------------------
     def lights(self) -> None:
-        from pxr import UsdLux
+        from pxr import Sdf, UsdLux
+
+        from nasset_sdk import stage_rules
 
         renders = render_visible(self.bpy.context.view_layer)
         placed = [ob for ob in self.bscene.objects if ob.type == "LIGHT" and renders(ob)]
@@ -315,8 +317,13 @@ class _BlenderConverter(StageConverter):
                     light.CreateHeightAttr(h)
                     area = w * h * sx * sy
                 self._xform(light.GetPrim(), row)
-                if getattr(lt, "spread", math.pi) < math.pi - 1e-6:
-                    self.warn(f"light {ob.name}: area light spread dropped (Lambertian emission)")
+                spread = float(getattr(lt, "spread", math.pi))
+                if spread < math.pi - 1e-6:  # Cycles' soft-box profile, the same in the renderers (renderer.md#lights)
+                    if spread < stage_rules.MIN_SPREAD:
+                        self.warn(f"light {ob.name}: area light spread {spread:.3g} rad written as the narrowest a "
+                                  f"renderer reads, {stage_rules.MIN_SPREAD:g} rad (Cycles: a parallel beam)")
+                    light.GetPrim().CreateAttribute("nasset:spread", Sdf.ValueTypeNames.Float, custom=True).Set(
+                        max(spread, stage_rules.MIN_SPREAD))
                 self._hidden_from_camera(light)
                 self._light_common(light, color * float(lt.energy) / (math.pi * max(area, 1e-12)), path,
                                    f"area {ob.name} ({lt.energy:.4g} W, {w:.3g} x {h:.3g})")

@@ -1,5 +1,6 @@
 """Conversion fidelity for Blender: each scene of ``nasset_converters.blender.fidelity`` rendered by Cycles and,
-converted, by the reference renderer at 32x32 and 32 spp (and by the Mitsuba plugin at 64 spp) (the full-size table is docs/conversion-fidelity.md).
+converted, by the reference renderer at 32x32 and 32 spp (and by the Mitsuba plugin at 64 spp; a scene whose means need
+more samples sets its ``test_spp``: area_spread, 128 and 256) (the full-size table is docs/conversion-fidelity.md).
 
 Bounds as in tests/converters/test_conversion_fidelity.py: the mean within 3 % per channel (2 % is the
 target at full size) and the MSE against Cycles at most 1.4x what the two images' noise explains
@@ -21,7 +22,7 @@ from nasset_converters.blender.fidelity import SCENES, measure  # noqa: E402
 
 @pytest.mark.parametrize("name", list(SCENES))
 def test_converted_blender_scene_renders_like_cycles(tmp_path, name):
-    r = measure(name, tmp_path, size=32, spp=32)
+    r = measure(name, tmp_path, size=32, spp=SCENES[name].test_spp // 2)  # 32 but where a scene needs more
     assert np.all(np.abs(np.asarray(r["ratio"]) - 1.0) < 0.03), (name, r["ratio"])
     assert r["noise_ratio"] < 1.4, (name, r["noise_ratio"], r["psnr"], r["psnr_seed"])
 
@@ -35,7 +36,7 @@ def test_converted_blender_scene_renders_like_cycles_in_the_mitsuba_plugin(tmp_p
     2026-12-07 eleven scenes failed, MSE / noise 3.3-4700: every texture read as its input's own value (textures,
     procedural_textures, texture_ops, pixel_art, pbr_textures, emission_texture, node_links), colour attributes as their
     mean, normal maps and cut-outs ignored, smooth balls faceted (principled)."""
-    r = measure(name, tmp_path, size=32, spp=64, renderer="plugin")
+    r = measure(name, tmp_path, size=32, spp=SCENES[name].test_spp, renderer="plugin")  # 64 but where a scene needs more
     assert np.all(np.abs(np.asarray(r["ratio"]) - 1.0) < 0.03), (name, r["ratio"])
     assert r["noise_ratio"] < 2.5, (name, r["noise_ratio"], r["psnr"], r["psnr_seed"])
 

@@ -107,3 +107,17 @@ def test_many_lights_conformance_case(tmp_path):
     0.136, 0.060, 0.047 and 0.032 at 1, 2, 4 and 8x."""
     row = _run_case("rna_many_lights", tmp_path, spp_scale=2)
     assert row["passed"], row
+
+
+@pytest.mark.parametrize("light", ["rect", "disk"])
+def test_floor_beside_a_spread_light_matches_the_quadrature(tmp_path, light):
+    """nasset:spread (spec/renderer.md#lights) in the plugin (its nasset_spread emitter): the floor 0.3 beside the
+    centre of a light of spread 70 deg reads kd / pi times the quadrature of Cycles' profile (4x what a Lambertian
+    light gives there), as in the reference renderer's test. Two seeds bound the noise."""
+    import math
+
+    from tests.renderer.test_light_spread import spread_stage
+
+    path, expect = spread_stage(tmp_path / "s.usda", math.radians(70), light)
+    a, b = (render(path, 256, width=4, height=4, max_depth=2, seed=s).mean() for s in (1, 2))
+    assert abs(0.5 * (a + b) - expect) < 3 * abs(a - b) + 0.02 * expect, (a, b, expect)

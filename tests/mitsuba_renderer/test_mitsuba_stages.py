@@ -671,3 +671,18 @@ def test_light_inputs_no_renderer_honours_are_warned_alike(tmp_path, authored, s
             assert messages == [], (read, messages)
         else:
             assert len(messages) == 1 and said in messages[0] and "/World/Sun" in messages[0], (read, messages)
+
+
+@pytest.mark.parametrize("light", ["rect", "disk"])
+def test_floor_beside_a_spread_light_matches_the_quadrature(tmp_path, light):
+    """nasset:spread (spec/renderer.md#lights) in the second implementation: the floor 0.3 beside the centre of a light
+    of spread 70 deg reads kd / pi times the quadrature of Cycles' profile (4x what a Lambertian light gives there);
+    the same stage as the reference renderer's test. Two seeds bound the noise."""
+    import math
+
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.renderer.test_light_spread import spread_stage
+
+    path, expect = spread_stage(tmp_path / "s.usda", math.radians(70), light)
+    a, b = (mitsuba.render(path, 256, width=4, height=4, max_depth=2, seed=s).mean() for s in (1, 2))
+    assert abs(0.5 * (a + b) - expect) < 3 * abs(a - b) + 0.02 * expect, (a, b, expect)
