@@ -30,10 +30,11 @@ is black; every other ray sees the light.
   ``front`` radiance on the side its triangles' winding faces, ``back`` radiance on the other (Mitsuba's
   ``area`` emits from the front alone). Sampled by the shape's area (pdf ``d^2 / (A |cos theta_l|)``).
 
-- ``nasset_spread``: a RectLight's or DiskLight's emission with a ``nasset:spread`` below pi (spec/renderer.md#lights),
-  attached to its rectangle or disk: ``radiance`` on the normal's side times Cycles' soft-box profile
-  ``(tan h - tan a)+ / (tan h - h)``, ``h = spread / 2`` (``3 / h^3`` for ``h <= 0.05``), ``a`` the angle from the normal.
-  Sampled by the shape's area, as Mitsuba's ``area``.
+- ``nasset_profiled``: a light surface whose emission depends on its direction, attached to its shape: ``radiance`` on
+  the normal's side times a RectLight's or DiskLight's ``nasset:spread`` below pi (Cycles' soft-box profile
+  ``(tan h - tan a)+ / (tan h - h)``, ``h = spread / 2``, ``3 / h^3`` for ``h <= 0.05``, ``a`` the angle from the normal;
+  spec/renderer.md#lights), or a SphereLight's spot cone (:func:`spot_falloff` of the emitted direction against
+  ``axis``; spec/renderer.md#spot-lights). Sampled by the shape, as Mitsuba's ``area``.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ DOME = "nasset_dome"
 AREA = "nasset_area"
 SKY = "nasset_sky"
 SPOT = "nasset_spot"
-SPREAD = "nasset_spread"
+PROFILED = "nasset_profiled"
 SPOT_PROFILES = ("linear", "smoothstep")
 #: distance of the sample point along a direction (shadow rays end there): far beyond any scene the
 #: renderer accepts (spec/renderer.md#limits), still exact enough in float32 for the ray direction
@@ -107,9 +108,25 @@ def selection_weights(powers: dict, share: float | None = None) -> dict:
         return {k: 1.0 for k in p}
     return {k: float((1.0 - share) / n + share * v / total) for k, v in p.items()}
 
+def spot_falloff(cos_t, cone: float, softness: float, profile: str):
+    """spec/renderer.md#spot-lights in Dr.Jit: the factor of a spot's emission at cos_t from its axis, ``cone`` its
+    half-angle (radians), ``linear`` in the angle or ``smoothstep`` (Cycles')."""
+    ct = dr.clip(cos_t, -1.0, 1.0)
+    if profile == "smoothstep":
+        cc = math.cos(cone)
+        if softness <= 0.0:
+            return dr.select(ct > cc, 1.0, 0.0)
+        x = dr.clip((ct - cc) / max((1.0 - cc) * softness, 1e-30), 0.0, 1.0)
+        return x * x * (3.0 - 2.0 * x)
+    beam = cone * (1.0 - softness)
+    th = dr.acos(ct)
+    ramp = (cone - th) / max(cone - beam, 1e-30)
+    return dr.select(th <= beam, 1.0, dr.select(th < cone, ramp, 0.0))
+
+
 def register(mi) -> None:
-    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area``, ``nasset_sky``, ``nasset_spot`` and ``nasset_spread``
-    for the active variant (idempotent)."""
+    """Register ``nasset_cone``, ``nasset_dome``, ``nasset_area``, ``nasset_sky``, ``nasset_spot`` and
+    ``nasset_profiled`` for the active variant (idempotent)."""
     if mi.variant() in _REGISTERED:
         return
 
@@ -329,17 +346,7 @@ def register(mi) -> None:
             self.m_flags = mi.EmitterFlags.DeltaPosition
 
         def falloff(self, cos_t):
-            ct = dr.clip(cos_t, -1.0, 1.0)
-            if self.profile == "smoothstep":
-                cc = math.cos(self.cone)
-                if self.softness <= 0.0:
-                    return dr.select(ct > cc, 1.0, 0.0)
-                x = dr.clip((ct - cc) / max((1.0 - cc) * self.softness, 1e-30), 0.0, 1.0)
-                return x * x * (3.0 - 2.0 * x)
-            beam = self.cone * (1.0 - self.softness)
-            th = dr.acos(ct)
-            ramp = (self.cone - th) / max(self.cone - beam, 1e-30)
-            return dr.select(th <= beam, 1.0, dr.select(th < self.cone, ramp, 0.0))
+            return spot_falloff(cos_t, self.cone, self.softness, self.profile)
 
         def irradiance(self, d, dist):
             """I falloff / dist^2 at a point seen along the unit direction ``d`` toward the light, ``dist`` away."""
@@ -418,38 +425,49 @@ def register(mi) -> None:
         def to_string(self):
             return "NassetAreaLight"
 
-    class SpreadLight(mi.Emitter):
-        """``nasset_spread`` (module docstring): Mitsuba's ``area`` emission times the spread's profile."""
+    class ProfiledLight(mi.Emitter):
+        """``nasset_profiled`` (module docstring): Mitsuba's ``area`` emission times a profile of the emitted direction:
+        a RectLight's or DiskLight's ``spread``, or a SphereLight's spot cone (``axis``, ``cone``, ``softness``,
+        ``profile``)."""
 
         def __init__(self, props):
             super().__init__(props)
             self.radiance = mi.Color3f(*np.asarray(props.get("radiance", mi.ScalarColor3f(1.0)), np.float64).reshape(3).tolist())
             h = 0.5 * float(props.get("spread", math.pi))
-            self.tan_h = math.tan(h)
+            self.tan_h = math.tan(h) if h < 0.5 * math.pi else math.inf
             self.scale = 3.0 / h**3 if h <= 0.05 else 1.0 / (self.tan_h - h)
+            a = np.asarray(props.get("axis", mi.ScalarVector3f(0, 0, 0)), np.float64).reshape(3)
+            self.axis = mi.Vector3f(*(a / np.linalg.norm(a)).tolist()) if np.linalg.norm(a) > 0 else None
+            self.cone = math.radians(float(props.get("cone", 180.0)))
+            self.softness = min(max(float(props.get("softness", 0.0)), 0.0), 1.0)
+            self.profile = str(props.get("profile", "linear"))
             self.m_flags = mi.EmitterFlags.Surface
 
-        def _value(self, cos_a, active):
-            """Radiance toward a direction at cos_a from the normal (0 behind it)."""
-            c = dr.maximum(cos_a, 1e-30)
-            tan_a = dr.safe_sqrt(1.0 - c * c) / c
-            f = dr.maximum(self.tan_h - tan_a, 0.0) * self.scale
+        def _value(self, emitted, n, active):
+            """Radiance along the unit direction ``emitted`` leaving a point of normal ``n`` (0 behind it)."""
+            cos_a = dr.dot(emitted, n)
+            f = mi.Float(1.0)
+            if math.isfinite(self.tan_h):
+                c = dr.maximum(cos_a, 1e-30)
+                f = dr.maximum(self.tan_h - dr.safe_sqrt(1.0 - c * c) / c, 0.0) * self.scale
+            if self.axis is not None:
+                f = f * spot_falloff(dr.dot(emitted, self.axis), self.cone, self.softness, self.profile)
             return dr.select(active & (cos_a > 0), self.radiance * f, mi.Color3f(0))
 
         def eval(self, si, active=True):
-            return self._value(mi.Frame3f.cos_theta(si.wi), active)
+            return self._value(si.to_world(si.wi), si.n, active)
 
         def sample_direction(self, it, sample, active=True):
             ds = self.get_shape().sample_direction(it, sample, active)
             ok = active & (ds.pdf != 0.0)
             ds.emitter = mi.EmitterPtr(self)
-            return ds, self._value(-dr.dot(ds.d, ds.n), ok) / dr.select(ok, ds.pdf, 1.0)
+            return ds, self._value(-ds.d, ds.n, ok) / dr.select(ok, ds.pdf, 1.0)
 
         def pdf_direction(self, it, ds, active=True):
             return self.get_shape().pdf_direction(it, ds, active)
 
         def eval_direction(self, it, ds, active=True):
-            return self._value(-dr.dot(ds.d, ds.n), active)
+            return self._value(-ds.d, ds.n, active)
 
         def sample_ray(self, time, sample1, sample2, sample3, active=True):
             return dr.zeros(mi.Ray3f), mi.Spectrum(0)
@@ -458,10 +476,10 @@ def register(mi) -> None:
             pass
 
         def to_string(self):
-            return f"NassetSpreadLight[tan_h={self.tan_h}]"
+            return f"NassetProfiledLight[tan_h={self.tan_h}, cone={math.degrees(self.cone)}]"
 
     mi.register_emitter(NAME, lambda props: ConeLight(props))
-    mi.register_emitter(SPREAD, lambda props: SpreadLight(props))
+    mi.register_emitter(PROFILED, lambda props: ProfiledLight(props))
     mi.register_emitter(DOME, lambda props: DomeLight(props))
     mi.register_emitter(AREA, lambda props: AreaLight(props))
     mi.register_emitter(SKY, lambda props: SkyLight(props))

@@ -308,9 +308,10 @@ def usd_scene_settings(path: str, width: int | None = None, height: int | None =
             mark = OPAQUE_MARK if getattr(lt.desc, "opaque", False) else ""
             key = (LIGHT_SURFACE_PREFIX if visible else HIDDEN_PREFIX) + mark + lt.key
             light_entries[key] = light_entries.pop(lt.key)
-            if lt.desc.spread < math.pi:  # a RectLight's or DiskLight's nasset:spread (spec/renderer.md#lights)
-                ent = light_entries[key]  # (lt.mi_dict: kept as built, its power is the same)
-                light_entries[key] = {**ent, "emitter": {"type": lights_jit.SPREAD, "spread": float(lt.desc.spread),
+            profile = _emission_profile(mi, lt)
+            if profile:  # a spread or a spot cone (spec/renderer.md#lights, #spot-lights); lt.mi_dict is kept as built
+                ent = light_entries[key]
+                light_entries[key] = {**ent, "emitter": {"type": lights_jit.PROFILED, **profile,
                                                          "radiance": mi.ScalarColor3f(*ent["emitter"]["radiance"]["value"])}}
         powers[key] = lights_jit.light_power(lt, radius)
     infinite = [k for k, ent in light_entries.items() if ent.get("type") in (lights_jit.NAME, lights_jit.DOME)]
@@ -518,6 +519,20 @@ def expose(desc) -> None:
     for mat in {id(m.material): m.material for m in desc.meshes}.values():  # a shared material once
         mat.emission = np.asarray(mat.emission, np.float64) * e
     desc.camera.exposure = 1.0
+
+
+def _emission_profile(mi, lt) -> dict:
+    """Properties of the plugin's ``nasset_profiled`` emitter for a light surface whose emission depends on direction:
+    a RectLight's or DiskLight's ``nasset:spread`` below pi, a SphereLight's spot cone (its prim's -Z); {} for neither."""
+    out = {}
+    if lt.desc.spread < math.pi:
+        out["spread"] = float(lt.desc.spread)
+    if lt.desc.shaping is not None:
+        cone, soft, profile = lt.desc.shaping
+        axis = -np.asarray(lt.desc.to_world[2, :3], np.float64)
+        out.update({"axis": mi.ScalarVector3f(*(axis / max(float(np.linalg.norm(axis)), 1e-300)).tolist()),
+                    "cone": float(cone), "softness": float(soft), "profile": str(profile)})
+    return out
 
 
 def _mesh_ply(mi, mesh) -> str:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lights import MitsubaLight, p3, spread_factor, v3
+from .lights import MitsubaLight, p3, v3
 
 FOUR_PI = 4.0 * np.pi
 INV_FOUR_PI = 1.0 / FOUR_PI
@@ -596,9 +596,9 @@ class PathTracer:
             si = self.scene.ray_intersect(ray)
             le = np.asarray(lt.emitter.eval(si).numpy(), np.float64)
             le = le.T if le.ndim == 2 else np.broadcast_to(le, (len(sel), 3))
-            if lt.desc.spread < np.pi:  # spec/renderer.md#lights: the spread's profile toward the ray's origin
+            if lt.has_profile:  # its emission toward the ray's origin (spec/renderer.md#lights, #spot-lights)
                 n = np.asarray(si.n.numpy(), np.float64)
-                le = le * spread_factor(-(d[sel] * (n.T if n.ndim == 2 else n)).sum(1), lt.desc.spread)[:, None]
+                le = le * lt.profile(-d[sel], n.T if n.ndim == 2 else np.broadcast_to(n, (len(sel), 3)))[:, None]
             w = np.ones(len(sel))
             cam = prev_pdf[sel] == 0
             if np.any(~cam):

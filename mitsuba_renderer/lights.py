@@ -70,9 +70,26 @@ class MitsubaLight:
         le = wv * pdf[:, None]
         ok = pdf > 0
         le[~ok] = 0.0
-        if self.desc.spread < np.pi:  # the spread's profile at the sampled point, seen along -wi
-            le *= spread_factor(-(wi * _col(ds.n.numpy(), m)).sum(1), self.desc.spread)[:, None]
+        if self.has_profile:  # the emission toward p leaves the sampled point along -wi
+            le *= self.profile(-wi, _col(ds.n.numpy(), m))[:, None]
         return wi, dist, le, np.where(ok, pdf, 1.0)
+
+    @property
+    def has_profile(self) -> bool:
+        """Whether the light surface's emission depends on its direction (:meth:`profile`)."""
+        return self.has_shape and (self.desc.spread < np.pi or self.desc.shaping is not None)
+
+    def profile(self, emitted, normal):
+        """The factor [N] of the surface's radiance along unit directions ``emitted`` [N, 3] leaving points of normal
+        ``normal`` [N, 3]: a RectLight's or DiskLight's spread (spec/renderer.md#lights), a SphereLight's spot cone
+        against its prim's -Z (spec/renderer.md#spot-lights)."""
+        f = np.ones(len(emitted))
+        if self.desc.spread < np.pi:
+            f = f * spread_factor((emitted * normal).sum(1), self.desc.spread)
+        if self.desc.shaping is not None:
+            axis = -_norm(self.desc.to_world[2, :3][None])[0]
+            f = f * spot_falloff(emitted @ axis, *self.desc.shaping)
+        return f
 
 
 def spread_factor(cos_a, spread: float):

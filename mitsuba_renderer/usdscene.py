@@ -1005,8 +1005,7 @@ def _read_light(prim, tn, mw, path, t) -> Light:
                                  attribute="inputs:texture:file")
             lt.texture = _read_exr(resolved, ppath, path)
     lt.shaping = _shaping(prim, get, path, t)
-    point = tn == "SphereLight" and lt.radius * float(np.cbrt(abs(np.linalg.det(mw[:3, :3])))) <= 0  # world radius 0
-    if lt.shaping is not None and not point:
-        _say(path)("UsdLux.ShapingAPI ignored: a spot cone applies to point lights only", ppath)
+    if lt.shaping is not None and tn != "SphereLight":  # a point light's or a sphere's spot cone (#spot-lights)
+        _say(path)("UsdLux.ShapingAPI ignored: a spot cone applies to sphere and point lights only", ppath)
         lt.shaping = None
     return lt

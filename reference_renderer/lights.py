@@ -169,14 +169,25 @@ class PointLight(Light):
 class SphereLight(Light):
     area = True
 
-    def __init__(self, center, radius: float, radiance, prim: str = "") -> None:
+    def __init__(self, center, radius: float, radiance, prim: str = "", *, axis=None, cone_deg: float = 180.0,
+                 softness: float = 0.0, falloff: str = "linear") -> None:
+        """``axis`` [3]: a spot's direction (UsdLux.ShapingAPI: each emitted direction's radiance times
+        :func:`spot_falloff` of it; None: the same in every direction); ``cone_deg``, ``softness``, ``falloff`` as there."""
         self.c = np.asarray(center, np.float64)
         self.r = float(radius)
         self.L = np.asarray(radiance, np.float64)
         self.prim = prim
+        self.axis = None if axis is None or cone_deg >= 180.0 else normalize(np.asarray(axis, np.float64)[None])[0]
+        self.cone_deg, self.softness, self.falloff = float(cone_deg), float(softness), falloff
 
     def power_is_zero(self):
-        return not (self.L > 0).any()
+        return not (self.L > 0).any() or (self.axis is not None and self.cone_deg <= 0.0)
+
+    def _radiance(self, emitted):
+        """Radiance [N, 3] along the unit directions ``emitted`` [N, 3] leaving the sphere (a spot's cone)."""
+        if self.axis is None:
+            return np.broadcast_to(self.L, (len(emitted), 3))
+        return spot_falloff(emitted @ self.axis, self.cone_deg, self.softness, self.falloff)[:, None] * self.L
 
     def _cone(self, p):
         v = self.c - p
@@ -195,7 +206,7 @@ class SphereLight(Light):
         pdf = np.where(outside, 1.0 / (2.0 * np.pi * np.maximum(1.0 - cos_max, 1e-300)), 0.0)
         tt = self._hit(p, wi)
         ok = outside & np.isfinite(tt)
-        return wi, np.where(ok, tt, INF), np.where(ok[:, None], self.L, 0.0), np.where(ok, pdf, 0.0)
+        return wi, np.where(ok, tt, INF), np.where(ok[:, None], self._radiance(-wi), 0.0), np.where(ok, pdf, 0.0)
 
     def pdf(self, p, wi):
         axis, cos_max, outside = self._cone(p)
@@ -214,7 +225,7 @@ class SphereLight(Light):
 
     def intersect(self, o, d):
         t = self._hit(o, d)
-        return t, np.where(np.isfinite(t)[:, None], self.L, 0.0)
+        return t, np.where(np.isfinite(t)[:, None], self._radiance(-d), 0.0)
 
     def bounding_sphere(self):
         return self.c, self.r

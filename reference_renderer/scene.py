@@ -1442,10 +1442,8 @@ class _Loader:
             if v is not None and not np.isfinite(float(v)):
                 raise self.err("SCENE_INVALID", f"{name} = {v!r} must be finite", path, name)
         M = self.matrix(UsdGeom.Xformable(prim))
-        if prim.HasAPI(UsdLux.ShapingAPI) and not (tname == "SphereLight" and (
-                bool(g(UsdLux.SphereLight(prim).GetTreatAsPointAttr(), False)) or not g(UsdLux.SphereLight(prim).GetRadiusAttr(), 0.5))):
-            self.warn("UsdLux.ShapingAPI is only applied to point lights (SphereLight with treatAsPoint or radius 0): "
-                      "ignored", path)
+        if prim.HasAPI(UsdLux.ShapingAPI) and tname != "SphereLight":
+            self.warn("UsdLux.ShapingAPI is only applied to sphere and point lights: ignored", path)
         if tname == "DistantLight":
             angle = float(g(UsdLux.DistantLight(prim).GetAngleAttr(), 0.53))
             self.lights.append(DistantLight(M[2, :3], scale, angle, path))
@@ -1461,7 +1459,7 @@ class _Loader:
             else:
                 rw = r * sc
                 L = scale / (4.0 * np.pi * rw * rw) if normalize else scale
-                self.lights.append(SphereLight(M[3, :3], rw, L, path))
+                self.lights.append(SphereLight(M[3, :3], rw, L, path, **self._shaping(prim, M)))
         elif tname == "RectLight":
             rl = UsdLux.RectLight(prim)
             w = float(g(rl.GetWidthAttr(), 1.0))

@@ -144,6 +144,17 @@ def _spot(bpy, folder: Path, size: int) -> None:
     _light(bpy, "Bulb", "POINT", (-1.2, -0.8, 1.0), energy=8.0, rgb=(0.6, 0.7, 1.0))
 
 
+def _soft_spot(bpy, folder: Path, size: int) -> None:
+    # a spot with a radius (Soft Falloff off, the exact case) over a ball: its shadow has a penumbra
+    _new_scene(bpy, size, (0.0, -3.0, 2.2), (0.0, 0.0, 0.2))
+    _floor(bpy, (0.6, 0.6, 0.6))
+    _add(bpy, "uv_sphere", "Ball", _material(bpy, "Green", **{"Color": (0.3, 0.6, 0.3)}), smooth=True, radius=0.3,
+         location=(0.0, 0.2, 0.3))
+    _light(bpy, "Spot", "SPOT", (0.5, -0.2, 1.6), energy=150.0, rgb=(1.0, 0.9, 0.75), spot_size=math.radians(60.0),
+           spot_blend=0.3, rotation=(math.radians(15.0), math.radians(20.0), 0.0), shadow_soft_size=0.3,
+           use_soft_falloff=False)
+
+
 def _instances(bpy, folder: Path, size: int) -> None:
     _new_scene(bpy, size, (0.0, -2.8, 1.4), (0.0, 0.0, 0.3))
     _floor(bpy)
@@ -1065,6 +1076,8 @@ SCENES = {
     "textures": FidelityScene("textures", _textures, "Image Texture nodes: an 8-bit sRGB PNG on a Diffuse BSDF floor (UVs through a Mapping node), "
                               "a Non-Color PNG as a Principled Base Color on a box"),
     "spot": FidelityScene("spot", _spot, "spot light (size 50 deg, blend 0.3) and a point light over a floor and a ball"),
+    "soft_spot": FidelityScene("soft_spot", _soft_spot, "a spot light with a radius (0.3 m, Soft Falloff off; size 60 deg, "
+                               "blend 0.3) over a ball: a penumbra"),
     "instances": FidelityScene("instances", _instances, "a collection (sphere + cube) placed by three collection "
                                "instances; two linked duplicates sharing one mesh"),
     "sidedness": FidelityScene("sidedness", _sidedness, "panels seen from the front and from behind, one with backface "

@@ -277,10 +277,6 @@ class _BlenderConverter(StageConverter):
                 light = UsdLux.SphereLight.Define(self.stage, path)
                 row = _row(ob)
                 scale = float(np.cbrt(abs(np.linalg.det(_row(ob, unit=False)[:3, :3]))))
-                if lt.type == "SPOT" and r * scale > 0:
-                    self.warn(f"light {ob.name}: spot of radius {r * scale:.3g} written as a point spot (hard shadows; "
-                              "the reference renderer shapes point lights only)")
-                    r = 0.0
                 if r * scale > 0 and getattr(lt, "use_soft_falloff", False):
                     self.warn(f"light {ob.name}: Soft Falloff (Blender's default) makes Cycles light each point from a "
                               f"disk of radius {r * scale:.3g} facing it, dimmer than the stage's sphere light by "

@@ -93,11 +93,11 @@ def test_point_spot_lights_and_materials(tmp_path):
     L = 100.0 / (4 * math.pi ** 2 * 0.01)  # sphere light radiance P / (4 pi^2 r^2)
     assert np.isclose(_attr(stage, "/World/Lights/Bulb", "inputs:intensity"), L, rtol=1e-5)
     assert np.isclose(_attr(stage, "/World/Lights/Bulb", "inputs:radius"), 0.1, rtol=1e-6)
-    # the spot of radius 0.1 becomes a point spot (the renderer shapes point lights only), warned
-    assert any("Spot" in w and "point spot" in w for w in res.warnings)
+    # the spot of radius 0.1 is the same sphere, shaped (renderer.md#spot-lights); it was a point spot before
+    assert not any("Spot" in w and "point spot" in w for w in res.warnings)
     spot = stage.GetPrimAtPath("/World/Lights/Spot")
-    assert spot.GetAttribute("treatAsPoint").Get() and np.isclose(spot.GetAttribute("inputs:intensity").Get(),
-                                                                   100.0 / (4 * math.pi), rtol=1e-5)
+    assert not spot.GetAttribute("treatAsPoint").Get() and np.isclose(spot.GetAttribute("inputs:intensity").Get(), L, rtol=1e-5)
+    assert np.isclose(spot.GetAttribute("inputs:radius").Get(), 0.1, rtol=1e-6)
     assert spot.GetAttribute("nasset:shaping:falloff").Get() == "smoothstep"
     assert np.isclose(spot.GetAttribute("inputs:shaping:cone:angle").Get(), 22.5, rtol=1e-5)  # spot_size 45 deg / 2
     assert not stage.GetPrimAtPath("/World/Lights/Bulb").GetAttribute("nasset:cameraVisibility").Get()

@@ -111,7 +111,7 @@ def test_many_lights_conformance_case(tmp_path):
 
 @pytest.mark.parametrize("light", ["rect", "disk"])
 def test_floor_beside_a_spread_light_matches_the_quadrature(tmp_path, light):
-    """nasset:spread (spec/renderer.md#lights) in the plugin (its nasset_spread emitter): the floor 0.3 beside the
+    """nasset:spread (spec/renderer.md#lights) in the plugin (its nasset_profiled emitter): the floor 0.3 beside the
     centre of a light of spread 70 deg reads kd / pi times the quadrature of Cycles' profile (4x what a Lambertian
     light gives there), as in the reference renderer's test. Two seeds bound the noise."""
     import math

@@ -51,3 +51,16 @@ def test_spot_lights_conformance_case(tmp_path):
     """At twice the case's spp: the plugin picks one of the two lights per vertex, the reference renderer samples both."""
     row = _run_case("rna_spot_lights", tmp_path, spp_scale=2)
     assert row["passed"], row
+
+
+@pytest.mark.parametrize("x", [0.0, 0.7])
+def test_floor_under_a_sphere_spot_matches_the_quadrature(tmp_path, x):
+    """A spot with a radius (spec/renderer.md#spot-lights; the plugin's nasset_profiled emitter on the sphere): the
+    floor under its centre and near its cone's edge reads kd / pi times the quadrature of the shaped sphere, as in the
+    reference renderer's test. Two seeds bound the noise."""
+    from nasset_mitsuba_plugin.render import render
+    from tests.renderer.test_sphere_spot import sphere_spot_stage
+
+    path, expect = sphere_spot_stage(tmp_path / "s.usda", x)
+    a, b = (render(path, 256, width=4, height=4, max_depth=2, seed=s).mean() for s in (1, 2))
+    assert abs(0.5 * (a + b) - expect) < 3 * abs(a - b) + 0.02 * expect, (a, b, expect)

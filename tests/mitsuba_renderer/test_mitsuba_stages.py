@@ -304,12 +304,16 @@ def test_asset_in_other_units_without_the_converting_scale_is_warned(tmp_path, s
 @pytest.mark.parametrize("feature", ["shaping", "filters"])
 def test_unrendered_light_features_are_warned_by_name(tmp_path, feature):
     """Light filters are read by the reference renderer and not rendered here; a spot cone on a light that is not a
-    point light is ignored (spec/renderer.md#spot-lights). Both were said by name. (Spot cones on point lights and
-    lights hidden from camera rays are rendered: test_mitsuba_impl.py.)"""
+    sphere or point light (a RectLight) is ignored (spec/renderer.md#spot-lights). Both were said by name. (Spot cones on
+    point lights and spheres, and lights hidden from camera rays, are rendered: test_mitsuba_impl.py and
+    test_floor_under_a_sphere_spot_matches_the_quadrature.)"""
     from pxr import UsdLux
 
     b, _ = _floor_scene()
-    bulb = b.sphere_light("Bulb", (0, 2, 0), 0.2 if feature == "shaping" else 0.0, 5.0).GetPrim()
+    if feature == "shaping":
+        bulb = UsdLux.RectLight.Define(b.stage, "/World/Bulb").GetPrim()
+    else:
+        bulb = b.sphere_light("Bulb", (0, 2, 0), 0.0, 5.0).GetPrim()
     if feature == "shaping":
         UsdLux.ShapingAPI.Apply(bulb).CreateShapingConeAngleAttr(30.0)
         expect = "/World/Bulb: UsdLux.ShapingAPI ignored"
@@ -684,5 +688,17 @@ def test_floor_beside_a_spread_light_matches_the_quadrature(tmp_path, light):
     from tests.renderer.test_light_spread import spread_stage
 
     path, expect = spread_stage(tmp_path / "s.usda", math.radians(70), light)
+    a, b = (mitsuba.render(path, 256, width=4, height=4, max_depth=2, seed=s).mean() for s in (1, 2))
+    assert abs(0.5 * (a + b) - expect) < 3 * abs(a - b) + 0.02 * expect, (a, b, expect)
+
+
+@pytest.mark.parametrize("x", [0.0, 0.7])
+def test_floor_under_a_sphere_spot_matches_the_quadrature(tmp_path, x):
+    """A spot with a radius (spec/renderer.md#spot-lights) in the second implementation: the floor under its centre and
+    near its cone's edge reads kd / pi times the quadrature of the shaped sphere, as in the reference renderer's test."""
+    from nasset_mitsuba_renderer import render as mitsuba
+    from tests.renderer.test_sphere_spot import sphere_spot_stage
+
+    path, expect = sphere_spot_stage(tmp_path / "s.usda", x)
     a, b = (mitsuba.render(path, 256, width=4, height=4, max_depth=2, seed=s).mean() for s in (1, 2))
     assert abs(0.5 * (a + b) - expect) < 3 * abs(a - b) + 0.02 * expect, (a, b, expect)
