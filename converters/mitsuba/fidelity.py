@@ -683,6 +683,9 @@ NOTES = """
   own plane before their end and were shadowed by the light itself (a floor point 3 m beside a panel 1 m up
   got 0 instead of its irradiance). They are now aimed at the light sample from the offset origin, at mesh
   vertices and neural-asset hits alike (spec/renderer.md#ray-offsets).
+- uv_layouts was 2.96 (64 x 64, 64 spp; the reference renderer): the OBJ without texture coordinates read the bitmap's corner texel
+  where Mitsuba reads each triangle's barycentrics, the disk had no uv (Mitsuba's is polar), and the cylinder's faces across
+  phi = 0 ran u back from 0.995 to 0. All three are faceVarying `st` now (spec/bake.md#shapes).
 - Residual: envmap keeps MSE / noise 1.7 from the resampled map (8x, nearest texels) against Mitsuba's
   bilinear lookup.
 - Before these conversions the issue measured (ratio, PSNR vs seed-to-seed): 8-bit textures 1.8-2.0

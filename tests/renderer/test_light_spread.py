@@ -44,6 +44,19 @@ def test_spread_keeps_the_power_and_cuts_beyond_its_half_angle(spread):
     assert float(spread_profile(np.array([1.0]), math.pi / 2)[0]) == pytest.approx(1 / (1 - math.pi / 4), rel=1e-12)
 
 
+def sampled_irradiance(light, x: float, n: int, rng):
+    """(irradiance at the floor point (x, 0, 0), normal +Y, by n light samples; wi [m, 3], li [m, 3] of the m samples of
+    non-zero pdf), after checking that each sampled direction meets the light at the sample's distance with its
+    radiance (what light samples and rays that hit the light add must agree)."""
+    p = np.tile([x, 0.0, 0.0], (n, 1))
+    wi, dist, li, pdf = light.sample(p, rng.random((n, 2)))
+    ok = pdf > 0
+    t, le = light.intersect(p[ok], wi[ok])
+    np.testing.assert_allclose(t, dist[ok], rtol=1e-9)
+    np.testing.assert_allclose(le, li[ok], rtol=1e-9, atol=1e-12)
+    return np.sum(li[ok, 0] * wi[ok, 1] / pdf[ok]) / n, wi[ok], li[ok]
+
+
 @pytest.mark.parametrize("light_class", [RectLight, DiskLight])
 def test_light_samples_and_hits_agree_and_integrate_the_irradiance(light_class):
     """Irradiance at points under a unit-radiance light of spread 50 deg, by light sampling, against a midpoint
@@ -60,13 +73,7 @@ def test_light_samples_and_hits_agree_and_integrate_the_irradiance(light_class):
     else:
         x, z, da = 0.5 * x.ravel(), 0.5 * z.ravel(), (0.5 / 600) ** 2
     for px in (0.0, 0.3, 0.6):
-        p = np.tile([px, 0.0, 0.0], (300_000, 1))
-        wi, dist, li, pdf = light.sample(p, rng.random((len(p), 2)))
-        ok = pdf > 0
-        t, le = light.intersect(p[ok], wi[ok])
-        np.testing.assert_allclose(t, dist[ok], rtol=1e-9)
-        np.testing.assert_allclose(le, li[ok], rtol=1e-9, atol=1e-12)
-        e_mc = np.sum(li[ok, 0] * wi[ok, 1] / pdf[ok]) / len(p)
+        e_mc, _, _ = sampled_irradiance(light, px, 300_000, rng)
         d2 = (x - px) ** 2 + 1.0 + z * z
         cos = 1.0 / np.sqrt(d2)  # at the point and at the light (both planes horizontal)
         e_q = np.sum(_cycles_profile(np.arccos(cos), spread) * cos * cos / d2) * da

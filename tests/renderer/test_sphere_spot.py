@@ -11,6 +11,7 @@ import pytest
 from nasset_reference_renderer import RenderSettings, load_scene, render
 from nasset_reference_renderer.lights import SphereLight
 from nasset_reference_renderer.testscenes import SceneBuilder
+from tests.renderer.test_light_spread import sampled_irradiance
 from tests.stats import stat_seed
 
 KD = 0.5
@@ -69,14 +70,8 @@ def test_sphere_spot_samples_and_hits_agree_and_shape_each_emitted_direction():
     rng = np.random.default_rng(stat_seed(43))
     edge = HEIGHT * np.tan(np.radians(CONE))  # the centre's cone meets the floor here
     for x in (0.0, 0.6 * edge, edge):
-        p = np.tile([x, 0.0, 0.0], (200_000, 1))
-        wi, dist, li, pdf = light.sample(p, rng.random((len(p), 2)))
-        ok = pdf > 0
-        t, le = light.intersect(p[ok], wi[ok])
-        np.testing.assert_allclose(t, dist[ok], rtol=1e-9)
-        np.testing.assert_allclose(le, li[ok], rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(li[ok, 0], _smoothstep_falloff(wi[ok, 1]), rtol=1e-9, atol=1e-12)  # emitted: -wi
-        e_mc = np.sum(li[ok, 0] * wi[ok, 1] / pdf[ok]) / len(p)
+        e_mc, wi, li = sampled_irradiance(light, x, 200_000, rng)
+        np.testing.assert_allclose(li[:, 0], _smoothstep_falloff(wi[:, 1]), rtol=1e-9, atol=1e-12)  # emitted: -wi
         assert abs(e_mc / _irradiance(np.array([x, 0.0, 0.0])) - 1) < 0.01, x
     assert _irradiance(np.array([edge, 0.0, 0.0])) > 0.02 * _irradiance(np.zeros(3))  # the soft edge: a point spot's is 0
 
