@@ -380,7 +380,32 @@ def register(mi) -> None:
         def to_string(self):
             return f"NassetSpotLight[cone={math.degrees(self.cone)}, softness={self.softness}, {self.profile}]"
 
-    class AreaLight(mi.Emitter):
+    class ShapeEmitter(mi.Emitter):
+        """What the emitters attached to a shape share: the shape's samples (by area) and their pdf, and the radiance
+        :meth:`leaving` a point of normal ``n`` (texture coordinates ``uv``) along the unit direction ``emitted``."""
+
+        def leaving(self, emitted, n, uv, active):
+            raise NotImplementedError
+
+        def sample_direction(self, it, sample, active=True):
+            ds = self.get_shape().sample_direction(it, sample, active)
+            ok = active & (ds.pdf != 0.0)
+            ds.emitter = mi.EmitterPtr(self)
+            return ds, self.leaving(-ds.d, ds.n, ds.uv, ok) / dr.select(ok, ds.pdf, 1.0)
+
+        def pdf_direction(self, it, ds, active=True):
+            return self.get_shape().pdf_direction(it, ds, active)
+
+        def eval_direction(self, it, ds, active=True):
+            return self.leaving(-ds.d, ds.n, ds.uv, active)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
+
+        def traverse(self, callback):
+            pass
+
+    class AreaLight(ShapeEmitter):
         """Emission of a mesh on both sides of its triangles: ``front`` (the winding's side) and ``back`` RGB. With a
         ``texture`` (a textures.ImageLookup, attached after loading) the sides flagged ``textured_front`` /
         ``textured_back`` emit max(texture, 0) at the point's texture coordinates instead (spec/renderer.md#textures:
@@ -404,28 +429,13 @@ def register(mi) -> None:
         def eval(self, si, active=True):
             return self._side(mi.Frame3f.cos_theta(si.wi) > 0, si.uv, active)
 
-        def sample_direction(self, it, sample, active=True):
-            ds = self.get_shape().sample_direction(it, sample, active)
-            ok = active & (ds.pdf != 0.0)
-            ds.emitter = mi.EmitterPtr(self)
-            return ds, self._side(dr.dot(ds.d, ds.n) < 0, ds.uv, ok) / dr.select(ok, ds.pdf, 1.0)
-
-        def pdf_direction(self, it, ds, active=True):
-            return self.get_shape().pdf_direction(it, ds, active)
-
-        def eval_direction(self, it, ds, active=True):
-            return self._side(dr.dot(ds.d, ds.n) < 0, ds.uv, active)
-
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
-
-        def traverse(self, callback):
-            pass
+        def leaving(self, emitted, n, uv, active):
+            return self._side(dr.dot(emitted, n) > 0, uv, active)
 
         def to_string(self):
             return "NassetAreaLight"
 
-    class ProfiledLight(mi.Emitter):
+    class ProfiledLight(ShapeEmitter):
         """``nasset_profiled`` (module docstring): Mitsuba's ``area`` emission times a profile of the emitted direction:
         a RectLight's or DiskLight's ``spread``, or a SphereLight's spot cone (``axis``, ``cone``, ``softness``,
         ``profile``)."""
@@ -443,7 +453,7 @@ def register(mi) -> None:
             self.profile = str(props.get("profile", "linear"))
             self.m_flags = mi.EmitterFlags.Surface
 
-        def _value(self, emitted, n, active):
+        def leaving(self, emitted, n, uv, active):
             """Radiance along the unit direction ``emitted`` leaving a point of normal ``n`` (0 behind it)."""
             cos_a = dr.dot(emitted, n)
             f = mi.Float(1.0)
@@ -455,25 +465,7 @@ def register(mi) -> None:
             return dr.select(active & (cos_a > 0), self.radiance * f, mi.Color3f(0))
 
         def eval(self, si, active=True):
-            return self._value(si.to_world(si.wi), si.n, active)
-
-        def sample_direction(self, it, sample, active=True):
-            ds = self.get_shape().sample_direction(it, sample, active)
-            ok = active & (ds.pdf != 0.0)
-            ds.emitter = mi.EmitterPtr(self)
-            return ds, self._value(-ds.d, ds.n, ok) / dr.select(ok, ds.pdf, 1.0)
-
-        def pdf_direction(self, it, ds, active=True):
-            return self.get_shape().pdf_direction(it, ds, active)
-
-        def eval_direction(self, it, ds, active=True):
-            return self._value(-ds.d, ds.n, active)
-
-        def sample_ray(self, time, sample1, sample2, sample3, active=True):
-            return dr.zeros(mi.Ray3f), mi.Spectrum(0)
-
-        def traverse(self, callback):
-            pass
+            return self.leaving(si.to_world(si.wi), si.n, si.uv, active)
 
         def to_string(self):
             return f"NassetProfiledLight[tan_h={self.tan_h}, cone={math.degrees(self.cone)}]"
