@@ -58,9 +58,10 @@ class _Backend:
 
 class EmbreeBackend(_Backend):
     """Embree (through embreex) over ``triangles`` [F,3,3]; ``robust``: Embree's watertight mode. ``mesh``: the same
-    triangles as (points [V,3], faces [F,3]) when the caller has them: Embree then gets shared vertices, which
-    embreex copies faster (it copies element by element) and which take less memory (a fibre prism's 28
-    triangles share 16 points); the hits are the same, the corners being the same float32 values."""
+    triangles as (points [V,3], faces [F,3]) when the caller has them: Embree then holds shared vertices, less
+    memory (a fibre prism's 28 triangles share 16 points); the hits are the same, the corners being the same
+    float32 values. Embree reads the triangles from arrays this backend keeps (:mod:`.embree`), or, where that
+    cannot be set up, from embreex's element-by-element copy."""
 
     def __init__(self, triangles: np.ndarray, robust: bool = True, mesh: tuple | None = None) -> None:
         from nasset_sdk.extras import require_extras
@@ -69,14 +70,21 @@ class EmbreeBackend(_Backend):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
+        from .embree import attach_triangles, shared_buffers
+
         self.robust = robust
         self.scene = rtcore_scene.EmbreeScene(robust=robust)
-        if len(triangles) and mesh is not None:
-            TriangleMesh(self.scene, np.ascontiguousarray(mesh[0], np.float32), np.ascontiguousarray(mesh[1], np.uint32))
-        elif len(triangles):
-            TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
         self.empty = len(triangles) == 0
-        if not self.empty:  # Embree builds its BVH at the first query: build it now, with the scene setup
+        self.shared = None  # (points, faces) Embree reads in place
+        if not self.empty:
+            buffers = shared_buffers(triangles, mesh)
+            if attach_triangles(self.scene, *buffers):
+                self.shared = buffers
+            elif mesh is not None:
+                TriangleMesh(self.scene, buffers[0][:-1], buffers[1])
+            else:
+                TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
+            # Embree builds its BVH at the first query: build it now, with the scene setup
             self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=1)
 
     def closest(self, o, d, tmax):

@@ -78,8 +78,9 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
     r = 0.5 * np.asarray(widths, np.float64)
     starts = np.concatenate([[0], np.cumsum(c)[:-1]])
     # segments (i, i + 1) inside each curve, in curve order
-    a = np.concatenate([np.arange(s, s + n - 1) for s, n in zip(starts, c, strict=True)]) if len(c) else np.zeros(0, np.int64)
     curve = np.repeat(np.arange(len(c)), c - 1)
+    seg_first = np.concatenate([[0], np.cumsum(c - 1)])  # first segment of each curve
+    a = np.arange(len(curve)) - seg_first[curve] + starts[curve]  # its first point
     p0, p1, r0, r1 = p[a], p[a + 1], r[a], r[a + 1]
     seg_len = np.linalg.norm(p1 - p0, axis=1)
     tiny = 1e-9 * (1.0 + float(np.abs(p).max(initial=0.0)))
@@ -105,7 +106,6 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
     tri_seg = np.repeat(live_ids, per)
     n_tri = np.where(live, per, 0)
     first = np.concatenate([[0], np.cumsum(n_tri)])  # [S+1] first triangle of each segment
-    seg_first = np.concatenate([[0], np.cumsum(c - 1)])  # first segment of each curve
     seg = np.arange(n_seg)
     lo_seg = np.maximum(seg - 1, seg_first[curve])
     hi_seg = np.minimum(seg + 1, seg_first[curve + 1] - 1)
