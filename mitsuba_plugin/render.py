@@ -60,14 +60,15 @@ def render(path: str, spp: int, *, width: int | None = None, height: int | None 
            variant: str | None = None, prt: bool = False) -> np.ndarray:
     """float32 [H, W, 3] radiance of the scene at ``path`` rendered with ``nasset_path``.
 
-    ``max_depth``: scattering vertices as in spec/renderer.md#integrator (1 = direct lighting only); None: a USD
+    ``max_depth``: scattering vertices as in spec/renderer.md#integrator (1 = direct lighting only, 0 = the emitters
+    in view); None: a USD
     scene's ``nasset:maxDepth`` (spec/renderer.md#render-settings), else 5. ``nasset_path`` counts like Mitsuba's
     ``path`` (the camera ray is a segment too), so it gets ``max_depth + 1``.
     ``prt``: neupress assets in PRT mode (:mod:`.prt`; USAGE error for an asset without ``prt`` or a scene without a dome)."""
     if int(spp) < 1:
         raise error("USAGE", f"spp must be >= 1 (got {spp})")
-    if max_depth is not None and int(max_depth) < 1:
-        raise error("USAGE", f"max_depth must be >= 1 (got {max_depth})")
+    if max_depth is not None and int(max_depth) < 0:
+        raise error("USAGE", f"max_depth must be >= 0 (got {max_depth})")
     mi = jit_mitsuba(variant)
     scene, own_depth = load_scene_depth(path, width, height, mi=mi)
     if max_depth is None:

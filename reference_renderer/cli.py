@@ -71,7 +71,7 @@ def run(args) -> int:
                               eightdna_sampling=getattr(args, "eightdna_sampling", "mis"),
                               rna_continuation=getattr(args, "rna_continuation", "lobes"),
                               light_draws=getattr(args, "light_draws", RenderSettings.light_draws))
-    check_settings(settings, min_depth=1)
+    check_settings(settings)
     # sizes given on the command line are checked before the scene is read; the final size again below
     check_image_size(1 if args.width is None else args.width, 1 if args.height is None else args.height, args.spp)
     outputs = {"-o": args.output, "--png": args.png, "--variance": args.variance}
@@ -116,7 +116,8 @@ def add_args(p) -> None:
     p.add_argument("--width", type=int, default=None)
     p.add_argument("--height", type=int, default=None)
     p.add_argument("--max-depth", type=int, default=None,
-                   help="scattering vertices per path (default: the scene's nasset:maxDepth render setting, else 5)")
+                   help="scattering vertices per path, 0: only the emitters in view (default: the scene's nasset:maxDepth render "
+                        "setting, else 5)")
     p.add_argument("--search-path", action="append", default=None, metavar="DIR",
                    help="folder where USD's resolver looks up bare asset paths of the scene (repeatable; "
                         "PXR_AR_DEFAULT_SEARCH_PATH works too)")

@@ -701,13 +701,13 @@ DEFAULT_MAX_DEPTH = 5
 
 def resolve_settings(s: RenderSettings, scene) -> RenderSettings:
     """``s`` with ``max_depth`` filled in when it is None: the scene's ``nasset:maxDepth`` (-1: unbounded, i.e.
-    MAX_DEPTH with Russian roulette), else DEFAULT_MAX_DEPTH."""
+    MAX_DEPTH with Russian roulette; 0: only what the camera sees emitting), else DEFAULT_MAX_DEPTH."""
     import dataclasses
 
     if s.max_depth is not None:
         return s
     md = getattr(scene, "render_settings", {}).get("max_depth")
-    return dataclasses.replace(s, max_depth=DEFAULT_MAX_DEPTH if md is None else (MAX_DEPTH if md < 0 else max(int(md), 1)))
+    return dataclasses.replace(s, max_depth=DEFAULT_MAX_DEPTH if md is None else (MAX_DEPTH if md < 0 else int(md)))
 
 
 #: Bounds of the other render settings (spec/renderer.md#limits); image size and spp: film.check_image_size.
@@ -721,14 +721,14 @@ MAX_THREADS = 1024
 BACKENDS = ("embree", "numpy")
 
 
-def check_settings(s: RenderSettings, *, min_depth: int = 0) -> None:
-    """``USAGE`` error unless ``s`` is a RenderSettings whose spp, seed, max_depth (min_depth ..), rr_depth, batch, tile,
+def check_settings(s: RenderSettings) -> None:
+    """``USAGE`` error unless ``s`` is a RenderSettings whose spp, seed, max_depth, rr_depth, batch, tile,
     threads, workers and light_draws are integers within their bounds, width and height integers or None (their bounds:
     film.check_image_size) and backend one of :data:`BACKENDS`."""
     if not isinstance(s, RenderSettings):
         raise UsageError(f"render settings must be a RenderSettings, got {type(s).__name__}")
     for name, value, lo, hi in (("spp", s.spp, 1, MAX_SPP), ("seed", s.seed, 0, (1 << 64) - 1),
-                                ("max_depth", s.max_depth, min_depth, MAX_DEPTH), ("rr_depth", s.rr_depth, 0, MAX_DEPTH),
+                                ("max_depth", s.max_depth, 0, MAX_DEPTH), ("rr_depth", s.rr_depth, 0, MAX_DEPTH),
                                 ("batch", s.batch, 1, MAX_BATCH), ("tile", s.tile, 1, MAX_TILE),
                                 ("threads", s.threads, 0, MAX_THREADS), ("workers", s.workers, 0, MAX_THREADS),
                                 ("light_draws", s.light_draws, 0, MAX_DRAWS),

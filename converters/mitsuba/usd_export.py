@@ -701,18 +701,15 @@ class StageConverter:
         md = integrator_depths(integ).get("max_depth")
         if md is not None:
             info["max_depth"] = md
-            info["renderer_max_depth"] = -1 if md < 0 else max(md - 1, 1)
+            info["renderer_max_depth"] = -1 if md < 0 else max(md - 1, 0)
             from pxr import Sdf, UsdRender
 
             # the renderer counts scattering vertices, Mitsuba path segments (spec/bake.md#scene-conversion)
             settings = UsdRender.Settings.Define(self.stage, "/Render/Settings")
             settings.GetPrim().CreateAttribute("nasset:maxDepth", Sdf.ValueTypeNames.Int, custom=True).Set(
                 info["renderer_max_depth"])
-            if md == 0:
-                self.warn("integrator max_depth 0 (black image) written as renderer depth 1")
-            elif md == 1:  # the renderer's least depth lights surfaces
-                self.warn("integrator max_depth 1 (only the emitters in view, surfaces black) written as renderer depth 1 "
-                          "(direct lighting)")
+            if md == 0:  # renderer depth 0 still shows the emitters in view
+                self.warn("integrator max_depth 0 (a black image) written as renderer depth 0 (the emitters in view)")
         self.hide_emitters = hides_emitters(self.mi, integ)
         if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
             info["hide_emitters"] = True

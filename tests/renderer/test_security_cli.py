@@ -37,7 +37,7 @@ def _render(scene, out, *extra):
 
 @pytest.mark.parametrize("args", [("--width", 0), ("--width", -3), ("--height", 0), ("--width", 100_000_000, "--height", 100_000),
                                   ("--width", 70_000, "--height", 1), ("--spp", 0), ("--spp", -1), ("--spp", 10**12),
-                                  ("--width", 8192, "--height", 8192, "--spp", 1 << 20), ("--max-depth", 0), ("--tile", 0),
+                                  ("--width", 8192, "--height", 8192, "--spp", 1 << 20), ("--max-depth", -2), ("--tile", 0),
                                   ("--batch", 1 << 30), ("--threads", -1)])
 def test_bad_sizes_are_usage_errors_before_allocating(cases, tmp_path, args):
     r = nasset("render", cases["r9_geometry_offset_300"], "-o", tmp_path / "o.exr", "--quiet", *args, timeout=60)
