@@ -120,6 +120,14 @@ def _row(m_col: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(m_col.T)
 
 
+#: Mitsuba integrators whose image is the path tracer's at their depth (direct: depth 2; the path-replay and
+#: projective ones differ in their derivatives, the particle tracer in its noise; measured on a lit ball over a floor
+#: at max_depth 3, 24^2, 64 spp: 0.998-1.019 of Mitsuba's mean, MSE / noise 0.95-1.32)
+PATH_TRACERS = ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator", "VolumetricMisPathIntegrator",
+                "DirectIntegrator", "PRBIntegrator", "PRBVolpathIntegrator", "PathProjectiveIntegrator",
+                "DirectProjectiveIntegrator", "ParticleTracerIntegrator")
+
+
 def _class_name(obj) -> str:
     s = str(obj)
     return re.split(r"[\[:]", s, maxsplit=1)[0].strip().replace(" BSDF", "") if s else type(obj).__name__
@@ -714,8 +722,10 @@ class StageConverter:
         if self.hide_emitters:  # camera rays see no emitter: each light is written hidden from the camera
             info["hide_emitters"] = True
         self.result.integrator = info
-        if cls not in ("PathIntegrator", "VolumetricPathIntegrator", "VolumetricSimplePathIntegrator",
-                       "VolumetricMisPathIntegrator", "DirectIntegrator"):  # path tracers; direct: depth 2
+        if cls == "BasicPRBIntegrator":  # BSDF samples only: no light is sampled, so delta lights light nothing
+            self.warn("integrator prb_basic samples no light: in Mitsuba point, spot and directional lights light nothing; "
+                      "the reference renderer samples them")
+        elif cls not in PATH_TRACERS:
             self.warn(f"integrator {cls} has no USD counterpart: the reference renderer path-traces")
 
     # -- materials ----------------------------------------------------------------------------
