@@ -3,7 +3,8 @@
 ``f = kd / pi + D G2 F / (4 cos_o cos_i)``: GGX D with ``alpha``, height-correlated Smith G2, Schlick
 F with ``f0`` (taken literally: F0 = 0 still reflects at grazing angles). Sampling: the diffuse lobe (cosine) or
 the GGX normal distribution with probability 1/2 each; the pdf is the mixture's. Properties: ``kd``, ``f0`` (rgb),
-``alpha`` (float, clamped to >= 1e-3).
+``alpha`` (float, clamped to >= 1e-3), ``beckmann`` (bool: a Beckmann D and Smith G2 in the lobe, its half vectors
+drawn with density D(h) cos_h; the glass lobe stays GGX).
 
 Shading normals (spec/renderer.md#shading-normals): with ``normals`` (the name of a 3-wide mesh attribute of world
 corner normals, :func:`nasset_mitsuba_plugin.scene.usd_scene` writes it) a hit is shaded in the frame of ``ns``, the
@@ -47,6 +48,7 @@ def register(mi) -> None:
             self.kd = mi.Color3f(props.get("kd", mi.ScalarColor3f(0.18)))
             self.f0 = mi.Color3f(props.get("f0", mi.ScalarColor3f(0.04)))
             self.alpha = max(float(props.get("alpha", 0.25)), 1e-3)
+            self.beckmann = bool(props.get("beckmann", False))  # Beckmann microfacets (nasset:microfacet)
             self.one_sided = bool(props.get("one_sided", False))
             self.front_sign = float(props.get("front_sign", 1.0))
             self.normals = str(props.get("normals", ""))
@@ -58,6 +60,7 @@ def register(mi) -> None:
                 self.back_kd = mi.Color3f(props.get("back_kd"))
                 self.back_f0 = mi.Color3f(props.get("back_f0", mi.ScalarColor3f(0.04)))
                 self.back_alpha = max(float(props.get("back_alpha", 0.25)), 1e-3)
+                self.back_beckmann = bool(props.get("back_beckmann", False))
             # the glass lobe of a transmitting material (spec/renderer.md#transmission): weight, colours, IOR, thin wall
             self.glass = float(props.get("glass", 0.0))
             self.glass_tint = mi.Color3f(props.get("glass_tint", mi.ScalarColor3f(1.0)))
@@ -79,10 +82,35 @@ def register(mi) -> None:
             t2 = dr.maximum(1.0 - c2, 0.0) / dr.maximum(c2, 1e-12)
             return 0.5 * (dr.sqrt(1.0 + alpha * alpha * t2) - 1.0)
 
+        @staticmethod
+        def _beckmann_d(h, alpha):
+            """exp(-tan^2 / alpha^2) / (pi alpha^2 cos^4) of a local half vector h (0 below the surface)."""
+            c2 = dr.maximum(dr.square(h.z), 1e-18)  # c2^2 stays a normal float32
+            a2 = alpha * alpha
+            d = dr.exp(-dr.maximum(1.0 - c2, 0.0) / (c2 * a2)) / (math.pi * a2 * c2 * c2)
+            return dr.select(h.z > 0, d, 0.0)
+
+        @staticmethod
+        def _beckmann_lambda(w, alpha):
+            """Smith Lambda of Beckmann in Walter et al.'s rational form (spec/renderer.md#materials)."""
+            c = dr.clip(dr.abs(w.z), 1e-6, 1.0)
+            a = c / (alpha * dr.sqrt(dr.maximum(1.0 - c * c, 1e-12)))
+            return dr.select(a < 1.6, (1.0 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a), 0.0)
+
+        @staticmethod
+        def _beckmann_sample(alpha, u):
+            """A local half vector of density D(h) cos_h."""
+            t2 = -alpha * alpha * dr.log(dr.maximum(1.0 - u.x, 1e-7))
+            c = dr.rsqrt(1.0 + t2)
+            s = dr.sqrt(dr.maximum(1.0 - c * c, 0.0))
+            sp, cp = dr.sincos(2.0 * math.pi * u.y)
+            return mi.Vector3f(s * cp, s * sp, c)
+
         def _side(self, si, active):
-            """(kd, f0, alpha, GGX distribution, active) of the side of hit si the viewer is on: a one-sided back leaves
-            no lane active, a back material's parameters on the back (spec/renderer.md#sidedness)."""
+            """(kd, f0, alpha, GGX distribution, active, Beckmann mask) of the side of hit si the viewer is on: a
+            one-sided back leaves no lane active, a back material's parameters on the back (spec/renderer.md#sidedness)."""
             kd, f0, alpha = self.kd, self.f0, mi.Float(self.alpha)
+            beckmann = mi.Bool(self.beckmann)
             if self.per_hit is not None:  # textures, primvar colours (nasset_mitsuba_plugin.textures)
                 kd, f0, alpha = self.per_hit.material(si, active)
             if self.one_sided or self.has_back:
@@ -92,22 +120,26 @@ def register(mi) -> None:
                 else:
                     kd, f0 = dr.select(back, self.back_kd, kd), dr.select(back, self.back_f0, f0)
                     alpha = dr.select(back, self.back_alpha, alpha)
-            return kd, f0, alpha, mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha, True), active
+                    beckmann = dr.select(back, self.back_beckmann, beckmann)
+            return kd, f0, alpha, mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha, True), active, beckmann
 
         def _eval_pdf(self, wi, wo, active, side):
             """(f cos_o [Color3f], pdf) with wi (camera side) and wo (light side) in the shading frame (:meth:`_frame`),
             with the parameters ``side`` of :meth:`_side`."""
-            kd, f0, alpha, ggx, side_active = side
+            kd, f0, alpha, ggx, side_active, beckmann = side
             ok = active & side_active & (wi.z > 0) & (wo.z > 0)
             h = dr.normalize(wi + wo)
-            d = ggx.eval(h)
-            g2 = dr.rcp(1.0 + self._lambda(wi, alpha) + self._lambda(wo, alpha))
+            d = dr.select(beckmann, self._beckmann_d(h, alpha), ggx.eval(h))
+            g2 = dr.rcp(1.0 + dr.select(beckmann, self._beckmann_lambda(wi, alpha) + self._beckmann_lambda(wo, alpha),
+                                        self._lambda(wi, alpha) + self._lambda(wo, alpha)))
             f = f0 + (1.0 - f0) * dr.power(dr.maximum(1.0 - dr.dot(wi, h), 0.0), 5.0)
             spec = d * g2 * f / dr.maximum(4.0 * wi.z * wo.z, 1e-12)
             value = (kd * (1.0 / math.pi) + spec) * wo.z
             # visible-normal density D_wi(h) = G1(wi) max(0, wi.h) D(h) / cos_i, times the reflection Jacobian 1 / (4 wo.h)
             g1 = dr.rcp(1.0 + self._lambda(wi, alpha))
             pdf_spec = g1 * dr.maximum(dr.dot(wi, h), 0.0) * d / dr.maximum(wi.z, 1e-12) / dr.maximum(4.0 * dr.abs(dr.dot(wo, h)), 1e-12)
+            # Beckmann's half vectors have density D(h) cos_h
+            pdf_spec = dr.select(beckmann, d * dr.maximum(h.z, 0.0) / dr.maximum(4.0 * dr.abs(dr.dot(wi, h)), 1e-12), pdf_spec)
             pdf = P_SPECULAR * pdf_spec + (1.0 - P_SPECULAR) * wo.z * (1.0 / math.pi)
             return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
 
@@ -240,20 +272,22 @@ def register(mi) -> None:
                 through = sample1 < t
                 u = dr.select(through, sample1 / t, (sample1 - t) / max(1.0 - t, 1e-12))
             spec = (u < P_SPECULAR) & ~through
-            m, _ = side[3].sample(wi, sample2)
-            w_spec = mi.reflect(wi, m)
+            m, _ = side[3].sample(wi, sample2)  # GGX's visible normals: the glass lobe's always
+            m_spec = dr.select(side[5], self._beckmann_sample(side[2], sample2), m)
+            w_spec = mi.reflect(wi, m_spec)
+            w_glass = mi.reflect(wi, m)
             w_diff = mi.warp.square_to_cosine_hemisphere(sample2)
-            wl = dr.select(spec | through, w_spec, w_diff)
+            wl = dr.select(through, w_glass, dr.select(spec, w_spec, w_diff))
             if t > 0:
                 eta = self._eta(si)
                 keep = u < self._reflectance(dr.dot(wi, m), eta)
                 if self.glass_thin:
-                    passed = mi.Vector3f(w_spec.x, w_spec.y, -w_spec.z)
+                    passed = mi.Vector3f(w_glass.x, w_glass.y, -w_glass.z)
                 else:
                     passed = _refract(wi, m, eta)
                 wl = dr.select(through & ~keep, passed, wl)
                 # an opaque sample below the surface (whose glass lobe has a density there) is no sample either
-                valid = dr.select(through, dr.select(keep | self.glass_thin, w_spec.z > 0, wl.z < 0), wl.z > 0)
+                valid = dr.select(through, dr.select(keep | self.glass_thin, w_glass.z > 0, wl.z < 0), wl.z > 0)
             w_world = frame.to_world(wl)
             value, pdf = self._mixed_eval_pdf(si, frame, ng, wi, w_world, active, side)
             bs = dr.zeros(mi.BSDFSample3f)

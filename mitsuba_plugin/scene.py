@@ -397,7 +397,8 @@ def _preview_props(mi, mesh) -> dict:
     """``nasset_preview`` properties of a mesh: its material, and its sides (spec/renderer.md#sidedness)."""
     def material(mat, prefix=""):
         return {f"{prefix}kd": mi.ScalarColor3f(np.clip(mat.kd, 0, 1).tolist()),
-                f"{prefix}f0": mi.ScalarColor3f(np.clip(mat.f0, 0, 1).tolist()), f"{prefix}alpha": float(mat.alpha)}
+                f"{prefix}f0": mi.ScalarColor3f(np.clip(mat.f0, 0, 1).tolist()), f"{prefix}alpha": float(mat.alpha),
+                f"{prefix}beckmann": bool(mat.beckmann)}
 
     props = {**material(mesh.material), "one_sided": bool(mesh.one_sided), "front_sign": float(mesh.front_sign)}
     if mesh.back_material is not None and not mesh.one_sided:

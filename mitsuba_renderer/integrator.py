@@ -262,16 +262,23 @@ class PathTracer:
     # -- BSDF (spec/renderer.md#materials) -------------------------------------------------------------
 
     @staticmethod
-    def _ggx_terms(n, wo, wi, alpha):
+    def _microfacet_terms(n, wo, wi, alpha, beckmann):
+        """(h, n.h, D(h), height-correlated G2) of the GGX lobe, Beckmann's on rows where ``beckmann`` [m] bool (its
+        Lambda in Walter et al.'s rational form, spec/renderer.md#materials)."""
         h = normalized(wo + wi)
         nh = np.clip(dot(n, h), 0.0, 1.0)
         a2 = alpha * alpha
         den = nh * nh * (a2 - 1.0) + 1.0
-        dd = a2 / (np.pi * den * den)
+        c2 = np.maximum(nh * nh, 1e-150)  # c2^2 stays a normal number
+        tan2 = np.maximum(1.0 - c2, 0.0) / c2
+        dd = np.where(beckmann, np.exp(-tan2 / a2) / (np.pi * a2 * c2 * c2), a2 / (np.pi * den * den))
 
         def lam(c):
             c = np.clip(np.abs(c), 1e-12, 1.0)
-            return (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
+            ggx = (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
+            a = c / (alpha * np.sqrt(np.maximum(1.0 - c * c, 1e-300)))
+            beck = np.where(a < 1.6, (1.0 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a), 0.0)
+            return np.where(beckmann, beck, ggx)
 
         g2 = 1.0 / (1.0 + lam(dot(n, wo)) + lam(dot(n, wi)))
         return h, nh, dd, g2
@@ -331,7 +338,7 @@ class PathTracer:
         val = mat["kd"] / np.pi * ci[:, None]
         pdf = (1.0 - mat["ps"]) * np.maximum(ci, 0.0) / np.pi
         if np.any(mat["spec"]):
-            h, nh, dd, g2 = self._ggx_terms(n, wo, wi, mat["alpha"])
+            h, nh, dd, g2 = self._microfacet_terms(n, wo, wi, mat["alpha"], mat["beckmann"])
             oh = np.clip(dot(wo, h), 0.0, 1.0)
             f = mat["f0"] + (1.0 - mat["f0"]) * ((1.0 - oh) ** 5)[:, None]
             spec = (dd * g2 / (4.0 * np.maximum(co, 1e-12)))[:, None] * f
@@ -347,13 +354,20 @@ class PathTracer:
         ph = 2.0 * np.pi * u[:, 1]
         z = np.sqrt(np.maximum(0.0, 1.0 - u[:, 0]))
         wd = (r * np.cos(ph))[:, None] * t + (r * np.sin(ph))[:, None] * b + z[:, None] * n
-        # GGX D(h)(n.h) lobe
+        # D(h)(n.h) lobes: GGX (the glass lobe's always), Beckmann's where the material says
         a2 = mat["alpha"] ** 2
-        tan2 = a2 * u[:, 0] / np.maximum(1.0 - u[:, 0], 1e-12)
-        ct = 1.0 / np.sqrt(1.0 + tan2)
-        st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
-        h = (st * np.cos(ph))[:, None] * t + (st * np.sin(ph))[:, None] * b + ct[:, None] * n
-        ws = 2.0 * dot(wo, h)[:, None] * h - wo
+
+        def half_vector(tan2):
+            ct = 1.0 / np.sqrt(1.0 + tan2)
+            st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
+            return (st * np.cos(ph))[:, None] * t + (st * np.sin(ph))[:, None] * b + ct[:, None] * n
+
+        h = half_vector(a2 * u[:, 0] / np.maximum(1.0 - u[:, 0], 1e-12))
+        h_spec = h
+        if np.any(mat["beckmann"]):
+            h_beck = half_vector(-a2 * np.log(np.maximum(1.0 - u[:, 0], 1e-16)))
+            h_spec = np.where(mat["beckmann"][:, None], h_beck, h)
+        ws = 2.0 * dot(wo, h_spec)[:, None] * h_spec - wo
         valid = np.ones(len(wo), bool)
         glass = np.zeros(len(wo), bool)
         if "t" in mat:  # us < t: the glass lobe (us / t: reflect or pass), else the opaque lobes with us rescaled
@@ -368,12 +382,13 @@ class PathTracer:
             keep = us < np.where(mat["thin"], 2.0 * f / (1.0 + f), f)
             cos_t = np.sqrt(np.maximum(1.0 - (1.0 - oh * oh) / (eta * eta), 0.0))
             refracted = (oh / eta - cos_t)[:, None] * h - wo / eta[:, None]
-            mirrored = ws - 2.0 * dot(ws, n)[:, None] * n
+            wr = 2.0 * oh[:, None] * h - wo  # reflected by the glass lobe's (GGX) h
+            mirrored = wr - 2.0 * dot(wr, n)[:, None] * n
             passed = np.where(mat["thin"][:, None], mirrored, refracted)
-            wg = np.where(keep[:, None], ws, passed)
+            wg = np.where(keep[:, None], wr, passed)
             wi = np.where(glass[:, None], wg, wi)
             # a reflection below, a transmission above, or an opaque sample below a glass: no sample
-            valid = np.where(glass, (oh > 0) & np.where(keep | mat["thin"], dot(ws, n) > 0, dot(wg, n) < 0),
+            valid = np.where(glass, (oh > 0) & np.where(keep | mat["thin"], dot(wr, n) > 0, dot(wg, n) < 0),
                              dot(wi, n) > 0)
         fc, pdf = self.bsdf_eval(mat, n, wo, normalized(wi))
         return normalized(wi), np.where(valid[:, None], fc, 0.0), np.where(valid, pdf, 0.0)
@@ -399,6 +414,7 @@ class PathTracer:
         the prim's front; else its inverse; spec/renderer.md#transmission)."""
         m = len(obj)
         kd, f0, alpha, ps, spec = np.zeros((m, 3)), np.zeros((m, 3)), np.ones(m), np.zeros(m), np.zeros(m, bool)
+        beckmann = np.zeros(m, bool)
         t, tint, reflect, ior, thin = np.zeros(m), np.ones((m, 3)), np.ones((m, 3)), np.ones(m), np.zeros(m, bool)
         any_glass = False
         for k in np.unique(obj):
@@ -407,7 +423,7 @@ class PathTracer:
                 if not np.any(sel):
                     continue
                 mt = self._side_material(k, side)
-                kd[sel], f0[sel], alpha[sel], spec[sel] = mt.kd, mt.f0, mt.alpha, mt.specular
+                kd[sel], f0[sel], alpha[sel], spec[sel], beckmann[sel] = mt.kd, mt.f0, mt.alpha, mt.specular, mt.beckmann
                 if mt.specular:
                     a, b = float(np.max(mt.f0)), float(np.max(mt.kd))
                     ps[sel] = 1.0 if b <= 0 else float(np.clip(a / max(a + b, 1e-12), 0.1, 0.9))
@@ -416,7 +432,7 @@ class PathTracer:
                     gw, gt, gi, gthin, gr = mt.glass
                     t[sel], tint[sel], reflect[sel], ior[sel] = gw, gt, gr, gi
                     thin[sel] = gthin
-        out = {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec}
+        out = {"kd": kd, "f0": f0, "alpha": alpha, "ps": ps, "spec": spec, "beckmann": beckmann}
         if any_glass:
             front = np.ones(m, bool) if outside is None else outside
             out.update(t=t, tint=tint, reflect=reflect, thin=thin, eta=np.where(front | thin, ior, 1.0 / ior))

@@ -32,6 +32,7 @@ class Material:
     #: (weight, transmission colour [3], ior, thin, reflection colour [3]) of a transmitting MaterialX surface
     #: (spec/renderer.md#transmission); None: no transmission
     glass: tuple | None = None
+    beckmann: bool = False  # the specular lobe's microfacets are Beckmann's (nasset:microfacet; the glass lobe stays GGX)
 
 
 @dataclass
@@ -331,6 +332,7 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
         threshold = float(_checked(_input(shader, "opacityThreshold", 0.0, t), 1, "opacityThreshold", path, where, 1.0)[0])
         if "opacity" in per_hit or opacity < (threshold if threshold > 0 else 1.0):  # spec/renderer.md#cutouts
             presence = (opacity, threshold)
+    beckmann = bool(mat) and stage_rules.shader_microfacet(shader, t, path) == "beckmann"
     r0 = ((1.0 - ior) / (1.0 + ior)) ** 2
     if use_spec == 1:
         k, f0 = kd.copy(), spec
@@ -348,7 +350,7 @@ def read_material(prim, path, t=None, purposes: stage_rules.Purposes | None = No
         hit = PerHit(np.asarray(kd, np.float64), rough, None if use_spec == 1 else metal, np.asarray(spec, np.float64), r0,
                      textured, color)
     return Material(kd=k, f0=np.asarray(f0, np.float64), alpha=max(rough * rough, 1e-3), emission=emis, specular=True,
-                    per_hit=hit, presence=presence, glass=glass)
+                    per_hit=hit, presence=presence, glass=glass, beckmann=beckmann)
 
 
 DEFAULT_PURPOSES = stage_rules.Purposes(frozenset({"default", "render"}), "full")

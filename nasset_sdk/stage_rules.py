@@ -463,6 +463,23 @@ def light_spread(prim, time, file: str) -> float:
     return min(float(value), MAX_SPREAD)
 
 
+#: microfacet distributions of a material's specular lobe (``nasset:microfacet`` on its surface shader)
+MICROFACETS = ("ggx", "beckmann")
+
+
+def shader_microfacet(shader, time, file: str) -> str:
+    """The ``nasset:microfacet`` of a surface shader prim (spec/renderer.md#materials): ``ggx`` (unauthored) or
+    ``beckmann``; ``SCENE_INVALID`` naming the attribute for another value."""
+    attr = shader.GetPrim().GetAttribute("nasset:microfacet")
+    if not (attr and attr.HasAuthoredValue()):
+        return "ggx"
+    value = attr.Get(time)
+    if not isinstance(value, str) or value not in MICROFACETS:
+        raise SceneError("SCENE_INVALID", f"nasset:microfacet {value!r} must be one of {', '.join(MICROFACETS)}",
+                         file=file, prim=str(shader.GetPath()), attribute="nasset:microfacet")
+    return value
+
+
 def spread_profile(cos_a, spread: float):
     """The factor [N] of an area light's radiance toward directions at cos_a [N] from its emitting normal for a
     ``nasset:spread`` of ``spread`` radians (spec/renderer.md#lights, Cycles' soft-box grid): max(tan h - tan a, 0) N,

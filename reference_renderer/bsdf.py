@@ -8,7 +8,9 @@ kd = diffuseColor * (1 - metallic); F is Schlick with F0 = specularColor (specul
 or lerp(((1-ior)/(1+ior))^2, diffuseColor, metallic); alpha = max(roughness^2, 1e-3);
 G2 is the height-correlated Smith term. Both sides of a surface are front faces unless the prim is
 one-sided (spec/renderer.md#sidedness, handled by the integrator).
-Specular directions are drawn from the distribution of visible normals (Heitz 2018).
+Specular directions are drawn from the distribution of visible normals (Heitz 2018). A material whose shader
+says ``nasset:microfacet = beckmann`` has a Beckmann D and Smith G2 in the lobe instead (its glass lobe stays
+GGX), its half vectors drawn with density D(h) cos_h.
 
 A material with a transmission weight t (MaterialX ``transmission``, spec/renderer.md#transmission) is
 ``(1 - t) f + t f_glass``: a dielectric of relative IOR eta with the same GGX alpha and the exact Fresnel
@@ -80,6 +82,58 @@ def ggx_reflect_pdf(wo, wi, alpha):
     ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     pdf = ggx_g1(wo, alpha) * ggx_d(h, alpha) / (4.0 * np.maximum(wo[:, 2], 1e-300))
     return np.where(ok, pdf, 0.0)
+
+
+# -- Beckmann (a material's nasset:microfacet = beckmann; spec/renderer.md#materials) ----------------------------
+
+
+def beckmann_d(h, alpha):
+    """exp(-tan^2 / alpha^2) / (pi alpha^2 cos^4) of half vectors h [N,3] (0 below the surface)."""
+    c2 = np.maximum(h[:, 2] ** 2, 1e-150)  # c2^2 stays a normal number
+    t2 = np.maximum(1.0 - c2, 0.0) / c2
+    a2 = alpha * alpha
+    return np.where(h[:, 2] > 0, np.exp(-t2 / a2) / (np.pi * a2 * c2 * c2), 0.0)
+
+
+def beckmann_lambda(w, alpha):
+    """Smith's Lambda of the Beckmann distribution in Walter et al.'s (2007) rational form (as Cycles and Mitsuba
+    evaluate it): a = cos / (alpha sin); (1 - 1.259 a + 0.396 a^2) / (3.535 a + 2.181 a^2) for a < 1.6, else 0."""
+    c = np.abs(w[:, 2])
+    s = np.sqrt(np.maximum(1.0 - c * c, 0.0))
+    a = c / np.maximum(alpha * s, 1e-300)
+    rational = (1.0 - 1.259 * a + 0.396 * a * a) / np.maximum(3.535 * a + 2.181 * a * a, 1e-300)
+    return np.where(a < 1.6, rational, 0.0)
+
+
+def beckmann_sample(alpha, u):
+    """Half vectors [N,3] with density D(h) cos_h (tan^2 = -alpha^2 log(1 - u0), phi = 2 pi u1)."""
+    t2 = -(alpha * alpha) * np.log1p(-np.minimum(u[:, 0], 1.0 - 1e-16))
+    c = 1.0 / np.sqrt(1.0 + t2)
+    s = np.sqrt(np.maximum(1.0 - c * c, 0.0))
+    phi = 2.0 * np.pi * u[:, 1]
+    return np.stack([s * np.cos(phi), s * np.sin(phi), c], 1)
+
+
+def beckmann_reflect_pdf(wo, wi, alpha):
+    """Solid-angle pdf of wi = reflect(wo, h) with h of density D(h) cos_h: D cos_h / (4 wo.h)."""
+    h = normalize(wo + wi)
+    ok = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    pdf = beckmann_d(h, alpha) * h[:, 2] / (4.0 * np.maximum(dot(wo, h), 1e-300))
+    return np.where(ok, pdf, 0.0)
+
+
+def microfacet_terms(wo, wi, h, alpha, beckmann):
+    """(D(h) [N], height-correlated G2 [N], reflection pdf of wi [N]) of the GGX lobe, or of Beckmann's on rows
+    where ``beckmann`` [N] bool (None: none)."""
+    d = ggx_d(h, alpha)
+    g2 = 1.0 / (1.0 + ggx_lambda(wo, alpha) + ggx_lambda(wi, alpha))
+    pdf = ggx_reflect_pdf(wo, wi, alpha)
+    if beckmann is not None and beckmann.any():
+        b = beckmann
+        d[b] = beckmann_d(h[b], alpha[b])
+        g2[b] = 1.0 / (1.0 + beckmann_lambda(wo[b], alpha[b]) + beckmann_lambda(wi[b], alpha[b]))
+        pdf[b] = beckmann_reflect_pdf(wo[b], wi[b], alpha[b])
+    return d, g2, pdf
 
 
 def reflect(w, h):
@@ -185,6 +239,7 @@ class MaterialTable:
     eta: np.ndarray | None = None  # [M] IOR of the glass lobe (inside over outside)
     thin: np.ndarray | None = None  # [M] bool: thin-walled (unbent transmission)
     reflection_color: np.ndarray | None = None  # [M,3] tint of the glass lobe's reflection (MaterialX specular_color)
+    beckmann: np.ndarray | None = None  # [M] bool: the specular lobe's distribution is Beckmann's (None: all GGX)
 
     @property
     def transmits(self) -> bool:
@@ -255,14 +310,14 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None, glass=
     ps = spec_probability(kd, f0)
     ok = (wo[:, 2] > 0) & (wi[:, 2] > 0)
     h = normalize(wo + wi)
-    d = ggx_d(h, alpha)
-    g2 = 1.0 / (1.0 + ggx_lambda(wo, alpha) + ggx_lambda(wi, alpha))
+    d, g2, spec_pdf = microfacet_terms(wo, wi, h, np.broadcast_to(alpha, len(m)).astype(np.float64),
+                                       None if mt.beckmann is None else mt.beckmann[m])
     cos_oh = np.clip(dot(wo, h), 0.0, 1.0)
     fres = f0 + (1.0 - f0) * ((1.0 - cos_oh) ** 5)[:, None]
     den = 4.0 * np.maximum(wo[:, 2] * wi[:, 2], 1e-300)
     f = kd * INV_PI + fres * (d * g2 / den)[:, None]
     f = np.where(ok[:, None], f, 0.0)
-    pdf = np.where(ok, (1.0 - ps) * cosine_hemisphere_pdf(wi) + ps * ggx_reflect_pdf(wo, wi, alpha), 0.0)
+    pdf = np.where(ok, (1.0 - ps) * cosine_hemisphere_pdf(wi) + ps * spec_pdf, 0.0)
     if glass is None:
         return f, pdf
     t, tint, eta, thin, reflect_tint = glass
@@ -287,6 +342,8 @@ def bsdf_sample(mt: MaterialTable, m, wo, u_lobe, u, kd=None, f0=None, alpha=Non
     wi = square_to_cosine_hemisphere(u)
     if spec.any():
         h = ggx_sample_vndf(wo[spec], alpha[spec], u[spec])
+        if mt.beckmann is not None and (b := mt.beckmann[m][spec]).any():
+            h[b] = beckmann_sample(alpha[spec][b], u[spec][b])
         wi[spec] = reflect(wo[spec], h)
     # an opaque sample below the surface is no sample (the glass lobe has a density there that did not draw it)
     valid = wi[:, 2] > 0 if glass is not None else np.ones(len(u_lobe), bool)

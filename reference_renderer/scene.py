@@ -420,7 +420,8 @@ class _Loader:
                               textures=[m[5] if len(m) > 5 else None for m in mats],
                               opacities=[m[6] if len(m) > 6 else None for m in mats],
                               emission_textures=[m[7][0] if len(m) > 7 and m[7] is not None else None for m in mats],
-                              **_glass_columns([m[8] if len(m) > 8 else None for m in mats]))
+                              **_glass_columns([m[8] if len(m) > 8 else None for m in mats]),
+                              beckmann=_beckmann_column([len(m) > 9 and m[9] == "beckmann" for m in mats]))
         return Scene(
             file=self.file, camera=camera, triangles=tris,
             tri_inst=np.concatenate(self.tri_inst) if n else np.zeros(0, np.int64),
@@ -750,9 +751,10 @@ class _Loader:
         if vals.get("transmission", 0.0) > 0.0:  # (spec/renderer.md#transmission)
             glass = (vals["transmission"], np.asarray(vals["transmissionColor"], np.float64), ior, vals["thinWalled"],
                      np.asarray(vals["specularTint"], np.float64))
+        microfacet = stage_rules.shader_microfacet(shader, self.time, self.file)
         self.mat_index[mpath] = len(self.mat_rows)
         self.mat_rows.append((kd, f0, alpha, emission, mpath, textured, opacity,
-                              None if emission_texture is None else (emission_texture[0], varname), glass))
+                              None if emission_texture is None else (emission_texture[0], varname), glass, microfacet))
         return self.mat_index[mpath]
 
     def _primvar_reader(self, producer, where) -> PrimvarColor | None:
@@ -1521,6 +1523,11 @@ class _Loader:
                 if pole == "Z" or (pole == "scene" and UsdGeom.GetStageUpAxis(self.stage) == UsdGeom.Tokens.z):
                     rotation = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]) @ rotation  # +Y -> +Z first
             self.lights.append(DomeLight(scale, image, rotation, path))
+
+
+def _beckmann_column(flags: list) -> np.ndarray | None:
+    """MaterialTable.beckmann: [M] bool, None when every material's lobe is GGX."""
+    return np.array(flags, bool) if any(flags) else None
 
 
 def _glass_columns(rows: list) -> dict:

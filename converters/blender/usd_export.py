@@ -37,7 +37,6 @@ from nasset_converters.mitsuba.usd_export import (  # noqa: F401
     Glass,
     StageConverter,
     TextureMap,
-    ggx_alpha_of_beckmann,
     mean_color,
     parse_replace,
     report,
@@ -1074,16 +1073,16 @@ def _map_shader(mat, node, notes: list, depth: int = 0) -> dict | None:
             notes.append(f"material {mat.name}: linked Glossy BSDF {'Color' if c_linked else 'Roughness'} dropped")
         rough = float(np.clip(rough, 0.0, 1.0))
         k = multiscatter_scale(rough, col[:3]) if node.distribution == "MULTI_GGX" else np.ones(3)
-        beckmann = node.distribution == "BECKMANN"
-        if beckmann:  # Cycles' alpha = roughness^2, as the renderer's: its GGX stand-in (spec/bake.md#materials)
-            rough = math.sqrt(float(ggx_alpha_of_beckmann(rough * rough)))
-        notes.append(f"material {mat.name}: Glossy BSDF as a GGX lobe of specular colour Color (Schlick Fresnel from it"
+        beckmann = node.distribution == "BECKMANN"  # Cycles' alpha = roughness^2, as the renderer's
+        notes.append(f"material {mat.name}: Glossy BSDF as a {'Beckmann' if beckmann else 'GGX'} lobe of specular colour "
+                     "Color (Schlick Fresnel from it"
                      + (f"; x ({', '.join(f'{v:.3f}' for v in k)}) for Cycles' multiple-scattering GGX" if
-                        node.distribution == "MULTI_GGX" else "")
-                     + ("; Beckmann as GGX of alpha x 0.82-0.93" if beckmann else "") + ")"
+                        node.distribution == "MULTI_GGX" else "") + ")"
                      + (", anisotropy dropped" if abs(aniso) > 1e-6 else ""))
         out = {"diffuseColor": (0.0, 0.0, 0.0), "useSpecularWorkflow": 1, "specularColor": _scaled(col[:3], k),
                "roughness": rough}
+        if beckmann:  # renderer.md#materials (before 2026-12-07 a GGX of alpha x 0.82-0.93 stood in for it)
+            out["microfacet"] = "beckmann"
         if (nmap := _linked_normal(mat, node, notes)) is not None:
             out["normal"] = nmap  # (before 2026-12-07 a Glossy BSDF's normal input was ignored without a word)
         return out
@@ -1331,6 +1330,10 @@ def _combine(parts: list, mat, notes: list) -> dict:
         kd = tuple(float(c) for c in kd_sum)
     out = {"diffuseColor": kd, "useSpecularWorkflow": 1, "specularColor": tuple(float(c) for c in f0),
            "roughness": rough / rough_w if rough_w > 0 else 1.0}
+    # the microfacet distribution of the part that weighs most in the specular lobe
+    heaviest = max(parts, key=lambda part: part[0] * float(np.mean(_specular_form(part[1])[1])), default=None)
+    if heaviest is not None and heaviest[1].get("microfacet"):
+        out["microfacet"] = heaviest[1]["microfacet"]
     em *= max(1.0 - t, 1e-12)  # emission is not part of the glass mixture: the parts' own weights
     if em.any():
         out["emissiveColor"] = tuple(float(c) for c in em)

@@ -755,10 +755,13 @@ class StageConverter:
 
         inputs = dict(inputs)
         glass = inputs.pop("glass", None)
+        microfacet = inputs.pop("microfacet", None)
         path = self._name(self.looks_root, name)
         mat = UsdShade.Material.Define(self.stage, path)
         sh = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
         sh.CreateIdAttr("UsdPreviewSurface")
+        if microfacet is not None:  # renderer.md#materials: the lobe's microfacet distribution
+            sh.GetPrim().CreateAttribute("nasset:microfacet", Sdf.ValueTypeNames.Token, custom=True).Set(microfacet)
         types = {"diffuseColor": Sdf.ValueTypeNames.Color3f, "specularColor": Sdf.ValueTypeNames.Color3f,
                  "emissiveColor": Sdf.ValueTypeNames.Color3f, "useSpecularWorkflow": Sdf.ValueTypeNames.Int,
                  "roughness": Sdf.ValueTypeNames.Float, "metallic": Sdf.ValueTypeNames.Float,
@@ -994,13 +997,10 @@ class StageConverter:
             diffuse = p.texture_or_rgb("diffuse_reflectance", (0.5,) * 3, "plastic diffuse reflectance",
                                        lambda c: np.clip(c * plastic_diffuse_scale(eta, c if nonlinear else None), 0, 1))
             f0 = ((eta - 1.0) / (eta + 1.0)) ** 2 * p.rgb("specular_reflectance", (1.0,) * 3)
-            if cls == "RoughPlastic":
-                beckmann = "beckmann" in text
-                rough = p.scalar_or_texture("alpha", 0.1, "roughplastic alpha", lambda a: np.sqrt(
-                    ggx_alpha_of_beckmann(a) if beckmann else np.maximum(a, 0.0)))
-                if beckmann:
-                    notes.append(f"{cls}: Beckmann distribution approximated by GGX (alpha x 0.82-0.93, "
-                                 "usd_export.ggx_alpha_of_beckmann)")
+            microfacet = None
+            if cls == "RoughPlastic":  # Beckmann (Mitsuba's default) written as nasset:microfacet (renderer.md#materials)
+                microfacet = "beckmann" if "beckmann" in text else None
+                rough = p.scalar_or_texture("alpha", 0.1, "roughplastic alpha", lambda a: np.sqrt(np.maximum(a, 0.0)))
             else:
                 rough = 0.0
                 notes.append("plastic: smooth specular approximated by GGX with the renderer's minimum roughness")
@@ -1008,28 +1008,29 @@ class StageConverter:
                          f"diffuse_reflectance x {float(np.mean(kd / np.maximum(r, 1e-12))):.3f} for the coating's "
                          "transmission (spec/bake.md#scene-conversion)")
             out = {**spec_wf, "diffuseColor": diffuse, "specularColor": np.clip(f0, 0, 1), "roughness": rough}
+            if microfacet:
+                out["microfacet"] = microfacet
         elif cls in ("SmoothConductor", "RoughConductor"):
             eta, k = p.rgb("eta", (0.0,) * 3), p.rgb("k", (1.0,) * 3)
             f0 = ((eta - 1.0) ** 2 + k * k) / np.maximum((eta + 1.0) ** 2 + k * k, 1e-12)
             f0 = f0 * p.rgb("specular_reflectance", (1.0,) * 3)
-            if cls == "RoughConductor":
-                beckmann = "beckmann" in text
-                to_ggx = ggx_alpha_of_beckmann if beckmann else (lambda a: np.maximum(a, 0.0))
+            microfacet = None
+            if cls == "RoughConductor":  # Beckmann (Mitsuba's default) written as nasset:microfacet
+                microfacet = "beckmann" if "beckmann" in text else None
                 if p.has("alpha"):
-                    rough = p.scalar_or_texture("alpha", 0.1, "roughconductor alpha", lambda a: np.sqrt(to_ggx(a)))
+                    rough = p.scalar_or_texture("alpha", 0.1, "roughconductor alpha", lambda a: np.sqrt(np.maximum(a, 0.0)))
                 else:
                     au, av = p.scalar("alpha_u", 0.1), p.scalar("alpha_v", 0.1)
                     if abs(au - av) > 1e-6:
                         notes.append(f"anisotropic roughness ({au:.3g}, {av:.3g}) replaced by their mean")
-                    rough = math.sqrt(float(to_ggx(0.5 * (au + av))))
-                if beckmann:
-                    notes.append(f"{cls}: Beckmann distribution approximated by GGX (alpha x 0.82-0.93, "
-                                 "usd_export.ggx_alpha_of_beckmann)")
+                    rough = math.sqrt(max(0.5 * (au + av), 0.0))
             else:
                 rough = 0.0
                 notes.append("conductor: mirror approximated by GGX with the renderer's minimum roughness")
             notes.append(f"{cls}: complex Fresnel approximated by Schlick with F0 {np.round(f0, 4).tolist()}")
             out = {"useSpecularWorkflow": 0, "metallic": 1.0, "diffuseColor": np.clip(f0, 0, 1), "roughness": rough}
+            if microfacet:
+                out["microfacet"] = microfacet
         elif cls == "Principled":
             spec = p.scalar("specular", 0.5)
             s = math.sqrt(min(max(0.08 * spec, 0.0), 0.99))
@@ -1716,6 +1717,10 @@ def blend_inputs(a: dict, b: dict, w: float) -> tuple[dict, str]:
     for k in dict.fromkeys([*a, *b]):
         if k == "useSpecularWorkflow":
             out[k] = a[k]
+            continue
+        if k == "microfacet":  # the heavier BSDF's distribution
+            if (mf := (b if w > 0.5 else a).get(k)) is not None:
+                out[k] = mf
             continue
         va, vb = a.get(k, b.get(k)), b.get(k, a.get(k))
         if isinstance(va, TextureMap) or isinstance(vb, TextureMap):

@@ -276,8 +276,10 @@ def test_shapes_and_materials(converted):
     np.testing.assert_allclose(rp["diffuseColor"], np.array([0.7, 0.3, 0.1]) * _plastic_scale_by_quadrature(1.4896), rtol=2e-3)
 
     au = _shader_inputs(stage, _bound(stage, "/World/Geometry/ball"))
-    # Mitsuba's default Beckmann alpha 0.09 as GGX alpha 0.09 (0.928 - 0.115 * 0.09) (spec/bake.md#materials)
-    assert au["metallic"] == 1.0 and au["roughness"] == pytest.approx(math.sqrt(0.09 * (0.928 - 0.115 * 0.09)))
+    # Mitsuba's default Beckmann alpha 0.09, written as itself with nasset:microfacet (spec/bake.md#materials)
+    assert au["metallic"] == 1.0 and au["roughness"] == pytest.approx(0.3)
+    ball_shader = stage.GetPrimAtPath(_bound(stage, "/World/Geometry/ball") + "/PreviewSurface")
+    assert ball_shader.GetAttribute("nasset:microfacet").Get() == "beckmann"
     assert au["diffuseColor"][0] > au["diffuseColor"][2]  # gold: red > blue F0
 
     pr = _shader_inputs(stage, _bound(stage, "/World/Geometry/cube"))

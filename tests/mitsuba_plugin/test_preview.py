@@ -20,10 +20,11 @@ def mi():
     return mi
 
 
-def _bsdf_and_si(mi, alpha, wi, n):
+def _bsdf_and_si(mi, alpha, wi, n, beckmann=False):
     import drjit as dr
 
-    b = mi.load_dict({"type": preview.NAME, "alpha": alpha, "kd": mi.ScalarColor3f(0.5, 0.3, 0.2), "f0": mi.ScalarColor3f(0.04)})
+    b = mi.load_dict({"type": preview.NAME, "alpha": alpha, "kd": mi.ScalarColor3f(0.5, 0.3, 0.2), "f0": mi.ScalarColor3f(0.04),
+                      "beckmann": beckmann})
     si = dr.zeros(mi.SurfaceInteraction3f, n)
     si.wi = mi.Vector3f(*(np.asarray(wi, np.float64) / np.linalg.norm(wi)).tolist())
     si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
@@ -31,15 +32,17 @@ def _bsdf_and_si(mi, alpha, wi, n):
     return b, si
 
 
-@pytest.mark.parametrize("alpha,wi", [(0.05, (0.3, 0.2, 0.93)), (0.3, (0.9, 0.0, 0.2)), (1.0, (0.2, 0.1, -0.9))])
-def test_sampling_matches_pdf(mi, alpha, wi):
+@pytest.mark.parametrize("alpha,wi,beckmann", [(0.05, (0.3, 0.2, 0.93), False), (0.3, (0.9, 0.0, 0.2), False),
+                                               (1.0, (0.2, 0.1, -0.9), False), (0.08, (0.3, 0.2, 0.93), True),
+                                               (0.4, (0.9, 0.0, 0.2), True)])
+def test_sampling_matches_pdf(mi, alpha, wi, beckmann):
     """Lobe choice from u0 (split and rescaled, so the 2D sampler is exact for the mixture); samples with
     zero weight (below the horizon) are failed samples."""
     import drjit as dr
 
     def sample(u):
         n = len(u)
-        b, si = _bsdf_and_si(mi, alpha, wi, n)
+        b, si = _bsdf_and_si(mi, alpha, wi, n, beckmann)
         spec = u[:, 0] < preview.P_SPECULAR
         u0 = np.where(spec, u[:, 0] / preview.P_SPECULAR, (u[:, 0] - preview.P_SPECULAR) / (1 - preview.P_SPECULAR))
         lobe = np.where(spec, 0.25, 0.75).astype(np.float32)
@@ -49,7 +52,7 @@ def test_sampling_matches_pdf(mi, alpha, wi):
         return v
 
     def pdf(v):
-        b, si = _bsdf_and_si(mi, alpha, wi, len(v))
+        b, si = _bsdf_and_si(mi, alpha, wi, len(v), beckmann)
         return np.asarray(b.pdf(mi.BSDFContext(), si, mi.Vector3f(*[mi.Float(v[:, k].astype(np.float32)) for k in range(3)])).numpy(),
                           np.float64)
 
@@ -83,6 +86,32 @@ def test_value_is_the_spec_formula(mi, rng):
     f = f0 + (1 - f0) * (1 - (a * h).sum(1)) ** 5
     want = (kd[None] / np.pi + (d * g2 * f / (4 * a[:, 2] * o[:, 2]))[:, None]) * o[:, 2:3]
     np.testing.assert_allclose(got, want, rtol=2e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("alpha", [0.1, 0.45])
+def test_beckmann_value_is_the_reference_renderers(mi, rng, alpha):
+    """nasset:microfacet = beckmann: the plugin's f cos_o against the reference renderer's numpy lobe (an independent
+    implementation of the same formula), and unlike the GGX lobe of the same alpha."""
+    from nasset_reference_renderer import bsdf as ref
+
+    n = 3000
+    wi = rng.normal(size=(n, 3))
+    wo = rng.normal(size=(n, 3))
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]) + 0.05, np.abs(wo[:, 2]) + 0.05
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    got = {}
+    for beckmann in (True, False):
+        b, si = _bsdf_and_si(mi, alpha, (0, 0, 1), n, beckmann)
+        si.wi = mi.Vector3f(*[mi.Float(wi[:, k].astype(np.float32)) for k in range(3)])
+        got[beckmann] = np.asarray(b.eval(mi.BSDFContext(), si, mi.Vector3f(*[mi.Float(wo[:, k].astype(np.float32))
+                                                                               for k in range(3)])).numpy()).reshape(3, -1).T
+    table = ref.MaterialTable(np.array([[0.5, 0.3, 0.2]]), np.full((1, 3), 0.04), np.array([alpha]), np.zeros((1, 3)), ["m"],
+                              beckmann=np.array([True]))
+    f, _ = ref.bsdf_eval(table, np.zeros(n, int), wi, wo)
+    want = f * wo[:, 2:3]
+    np.testing.assert_allclose(got[True], want, rtol=2e-3, atol=2e-5)
+    assert np.abs(got[False] - want).max() > 0.05 * np.abs(want).max()
 
 
 def _glass_bsdf_and_si(mi, glass, thin, wi, n, alpha=0.3, ior=1.5):
