@@ -36,17 +36,25 @@ _library: list = []  # [ctypes.CDLL or None], resolved once
 
 
 def loaded_embree_path() -> str | None:
-    """Path of the Embree 4 library mapped into this process (the one the embreex extension links), from
-    /proc/self/maps; None where it cannot be read (not Linux) or none is mapped."""
+    """Path of the Embree 4 library the embreex extension links, among those mapped into this process (/proc/self/maps):
+    the one in embreex's own wheel folders (``embreex.libs``, or the package folder), else the only one mapped. None
+    where that is not known: not Linux, none mapped, or several and none of embreex's own (Blender's ``bpy`` maps its
+    own Embree; a scene of one library must not be handed to the other)."""
+    import importlib.util
+    import os
+
     try:
         with open("/proc/self/maps") as maps:
-            for line in maps:
-                path = line.split(None, 5)[-1].strip()
-                if "/libembree4" in path:
-                    return path
+            mapped = list(dict.fromkeys(line.split(None, 5)[-1].strip() for line in maps if "/libembree4" in line))
     except OSError:
         return None
-    return None
+    spec = importlib.util.find_spec("embreex")
+    if spec is not None and spec.origin:
+        package = os.path.dirname(os.path.realpath(spec.origin))
+        own = [p for p in mapped if os.path.dirname(os.path.realpath(p)) in (package, package + ".libs")]
+        if own:
+            return own[0]
+    return mapped[0] if len(mapped) == 1 else None
 
 
 def _embree():

@@ -124,3 +124,22 @@ def test_shared_buffers_layout():
     p, f = _mesh(50, 80)
     points, faces = embree.shared_buffers(None, (p, f))
     np.testing.assert_array_equal(points[faces], p[f].astype(np.float32))
+
+
+def test_the_library_is_embreexs_own_when_blender_maps_another(monkeypatch):
+    """Blender's bpy maps its own Embree 4; a scene made by embreex's library must be handed to that one only."""
+    import os
+
+    pytest.importorskip("bpy")
+    import bpy  # noqa: F401
+
+    mapped = {line.split()[-1] for line in open("/proc/self/maps") if "/libembree4" in line}
+    assert len(mapped) >= 2, mapped  # the case this guards: two Embree libraries in one process
+    chosen = embree.loaded_embree_path()
+    assert os.path.basename(os.path.dirname(chosen)) in ("embreex.libs", "embreex"), chosen
+    o, d, tmax = _rays(3000, seed=9)
+    tri = _soup(500, seed=8)
+    shared = EmbreeBackend(tri)
+    assert shared.shared is not None
+    for a, b in zip(shared.closest(o, d, tmax), _copied(monkeypatch, tri).closest(o, d, tmax), strict=True):
+        np.testing.assert_array_equal(a, b)
