@@ -147,7 +147,8 @@ def test_the_second_implementation_shows_the_dome_through_glass(tmp_path, shape,
 @pytest.mark.parametrize("outside, thin, t", [(True, False, 1.0), (False, False, 1.0), (True, True, 1.0),
                                               (True, False, 0.5)])
 def test_the_second_implementations_glass_samples_by_its_pdf(outside, thin, t):
-    """chi-squared: the second implementation's BSDF sampler (opaque lobes and glass, u_lobe split) against its pdf."""
+    """chi-squared: the second implementation's BSDF sampler (opaque lobes and glass, u_lobe split) against its pdf; the
+    half-glass with a Beckmann opaque lobe beside its GGX glass lobe (spec/renderer.md#materials)."""
     from nasset_mitsuba_renderer.integrator import PathTracer
     from tests.stats import SIGNIFICANCE, sphere_chi2
 
@@ -157,7 +158,8 @@ def test_the_second_implementations_glass_samples_by_its_pdf(outside, thin, t):
         eta = 1.5 if outside or thin else 1 / 1.5
         return {"kd": np.tile([0.5, 0.3, 0.2], (n, 1)), "f0": np.full((n, 3), 0.04), "alpha": np.full(n, 0.35),
                 "ps": np.full(n, 0.5), "spec": np.ones(n, bool), "t": np.full(n, t), "tint": np.ones((n, 3)),
-                "reflect": np.ones((n, 3)), "thin": np.full(n, thin), "eta": np.full(n, eta)}
+                "reflect": np.ones((n, 3)), "thin": np.full(n, thin), "eta": np.full(n, eta),
+                "beckmann": np.full(n, t < 1.0)}  # a half-glass: its opaque lobe Beckmann's, its glass lobe GGX's
 
     def frame(n):
         return np.tile([0.0, 0.0, 1.0], (n, 1)), np.tile([0.6, 0.0, 0.8], (n, 1))
