@@ -61,6 +61,7 @@ def register(mi) -> None:
                 self.back_f0 = mi.Color3f(props.get("back_f0", mi.ScalarColor3f(0.04)))
                 self.back_alpha = max(float(props.get("back_alpha", 0.25)), 1e-3)
                 self.back_beckmann = bool(props.get("back_beckmann", False))
+            self.has_beckmann = self.beckmann or (self.has_back and self.back_beckmann)  # else GGX only is traced
             # the glass lobe of a transmitting material (spec/renderer.md#transmission): weight, colours, IOR, thin wall
             self.glass = float(props.get("glass", 0.0))
             self.glass_tint = mi.Color3f(props.get("glass_tint", mi.ScalarColor3f(1.0)))
@@ -129,17 +130,22 @@ def register(mi) -> None:
             kd, f0, alpha, ggx, side_active, beckmann = side
             ok = active & side_active & (wi.z > 0) & (wo.z > 0)
             h = dr.normalize(wi + wo)
-            d = dr.select(beckmann, self._beckmann_d(h, alpha), ggx.eval(h))
-            g2 = dr.rcp(1.0 + dr.select(beckmann, self._beckmann_lambda(wi, alpha) + self._beckmann_lambda(wo, alpha),
-                                        self._lambda(wi, alpha) + self._lambda(wo, alpha)))
+            d = ggx.eval(h)
+            l_i, l_o = self._lambda(wi, alpha), self._lambda(wo, alpha)
+            if self.has_beckmann:
+                d = dr.select(beckmann, self._beckmann_d(h, alpha), d)
+                l_i = dr.select(beckmann, self._beckmann_lambda(wi, alpha), l_i)
+                l_o = dr.select(beckmann, self._beckmann_lambda(wo, alpha), l_o)
+            g2 = dr.rcp(1.0 + l_i + l_o)
             f = f0 + (1.0 - f0) * dr.power(dr.maximum(1.0 - dr.dot(wi, h), 0.0), 5.0)
             spec = d * g2 * f / dr.maximum(4.0 * wi.z * wo.z, 1e-12)
             value = (kd * (1.0 / math.pi) + spec) * wo.z
             # visible-normal density D_wi(h) = G1(wi) max(0, wi.h) D(h) / cos_i, times the reflection Jacobian 1 / (4 wo.h)
             g1 = dr.rcp(1.0 + self._lambda(wi, alpha))
             pdf_spec = g1 * dr.maximum(dr.dot(wi, h), 0.0) * d / dr.maximum(wi.z, 1e-12) / dr.maximum(4.0 * dr.abs(dr.dot(wo, h)), 1e-12)
-            # Beckmann's half vectors have density D(h) cos_h
-            pdf_spec = dr.select(beckmann, d * dr.maximum(h.z, 0.0) / dr.maximum(4.0 * dr.abs(dr.dot(wi, h)), 1e-12), pdf_spec)
+            if self.has_beckmann:  # Beckmann's half vectors have density D(h) cos_h
+                pdf_spec = dr.select(beckmann, d * dr.maximum(h.z, 0.0) / dr.maximum(4.0 * dr.abs(dr.dot(wi, h)), 1e-12),
+                                     pdf_spec)
             pdf = P_SPECULAR * pdf_spec + (1.0 - P_SPECULAR) * wo.z * (1.0 / math.pi)
             return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
 
@@ -273,7 +279,7 @@ def register(mi) -> None:
                 u = dr.select(through, sample1 / t, (sample1 - t) / max(1.0 - t, 1e-12))
             spec = (u < P_SPECULAR) & ~through
             m, _ = side[3].sample(wi, sample2)  # GGX's visible normals: the glass lobe's always
-            m_spec = dr.select(side[5], self._beckmann_sample(side[2], sample2), m)
+            m_spec = dr.select(side[5], self._beckmann_sample(side[2], sample2), m) if self.has_beckmann else m
             w_spec = mi.reflect(wi, m_spec)
             w_glass = mi.reflect(wi, m)
             w_diff = mi.warp.square_to_cosine_hemisphere(sample2)

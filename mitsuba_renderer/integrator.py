@@ -267,21 +267,26 @@ class PathTracer:
         Lambda in Walter et al.'s rational form, spec/renderer.md#materials)."""
         h = normalized(wo + wi)
         nh = np.clip(dot(n, h), 0.0, 1.0)
+        co, ci = np.clip(np.abs(dot(n, wo)), 1e-12, 1.0), np.clip(np.abs(dot(n, wi)), 1e-12, 1.0)
         a2 = alpha * alpha
         den = nh * nh * (a2 - 1.0) + 1.0
-        c2 = np.maximum(nh * nh, 1e-150)  # c2^2 stays a normal number
-        tan2 = np.maximum(1.0 - c2, 0.0) / c2
-        dd = np.where(beckmann, np.exp(-tan2 / a2) / (np.pi * a2 * c2 * c2), a2 / (np.pi * den * den))
+        dd = a2 / (np.pi * den * den)
 
         def lam(c):
-            c = np.clip(np.abs(c), 1e-12, 1.0)
-            ggx = (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
-            a = c / (alpha * np.sqrt(np.maximum(1.0 - c * c, 1e-300)))
-            beck = np.where(a < 1.6, (1.0 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a), 0.0)
-            return np.where(beckmann, beck, ggx)
+            return (np.sqrt(c * c + a2 * (1.0 - c * c)) / c - 1.0) * 0.5
 
-        g2 = 1.0 / (1.0 + lam(dot(n, wo)) + lam(dot(n, wi)))
-        return h, nh, dd, g2
+        lo, li = lam(co), lam(ci)
+        if np.any(beckmann):
+            c2 = np.maximum(nh * nh, 1e-150)  # c2^2 stays a normal number
+            tan2 = np.maximum(1.0 - c2, 0.0) / c2
+            dd = np.where(beckmann, np.exp(-tan2 / a2) / (np.pi * a2 * c2 * c2), dd)
+
+            def lam_beckmann(c):
+                a = c / (alpha * np.sqrt(np.maximum(1.0 - c * c, 1e-300)))
+                return np.where(a < 1.6, (1.0 - 1.259 * a + 0.396 * a * a) / (3.535 * a + 2.181 * a * a), 0.0)
+
+            lo, li = np.where(beckmann, lam_beckmann(co), lo), np.where(beckmann, lam_beckmann(ci), li)
+        return h, nh, dd, 1.0 / (1.0 + lo + li)
 
     def glass_eval(self, mat, n, wo, wi):
         """Glass lobe (spec/renderer.md#transmission) -> f * |cos_i| [m, 3] and its pdf: reflection above n, below it

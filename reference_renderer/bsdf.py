@@ -130,6 +130,7 @@ def microfacet_terms(wo, wi, h, alpha, beckmann):
     pdf = ggx_reflect_pdf(wo, wi, alpha)
     if beckmann is not None and beckmann.any():
         b = beckmann
+        alpha = np.broadcast_to(alpha, b.shape)
         d[b] = beckmann_d(h[b], alpha[b])
         g2[b] = 1.0 / (1.0 + beckmann_lambda(wo[b], alpha[b]) + beckmann_lambda(wi[b], alpha[b]))
         pdf[b] = beckmann_reflect_pdf(wo[b], wi[b], alpha[b])
@@ -310,8 +311,7 @@ def bsdf_eval(mt: MaterialTable, m, wo, wi, kd=None, f0=None, alpha=None, glass=
     ps = spec_probability(kd, f0)
     ok = (wo[:, 2] > 0) & (wi[:, 2] > 0)
     h = normalize(wo + wi)
-    d, g2, spec_pdf = microfacet_terms(wo, wi, h, np.broadcast_to(alpha, len(m)).astype(np.float64),
-                                       None if mt.beckmann is None else mt.beckmann[m])
+    d, g2, spec_pdf = microfacet_terms(wo, wi, h, alpha, None if mt.beckmann is None else mt.beckmann[m])
     cos_oh = np.clip(dot(wo, h), 0.0, 1.0)
     fres = f0 + (1.0 - f0) * ((1.0 - cos_oh) ** 5)[:, None]
     den = 4.0 * np.maximum(wo[:, 2] * wi[:, 2], 1e-300)

@@ -146,62 +146,48 @@ def test_beckmann_distribution_terms(alpha):
     np.testing.assert_allclose(g_approx[keep], g_exact[keep], rtol=4e-3)
 
 
+def _material_table(kd, f0, alpha):
+    return bsdf.MaterialTable(np.array([kd]), np.array([f0]), np.array([alpha]), np.zeros((1, 3)), ["m"])
+
+
+def _check_mixture(mt, wo, rng, name):
+    """bsdf_sample of material 0 seen from wo [1,3] against bsdf_eval's pdf (chi-squared), and the pdf and value a
+    sample reports equal eval's at its direction; returns (wi [1000,3], f [1000,3]) of those samples."""
+    def sample(u):
+        n = len(u)
+        wi, f, pdf = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), u)
+        wi[pdf <= 0] = np.nan
+        return wi
+
+    def pdf(v):
+        return bsdf.bsdf_eval(mt, np.zeros(len(v), int), np.repeat(wo, len(v), 0), v)[1]
+
+    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60)
+    _report(name, p, dof)
+    assert p > P_MIN
+    n = 1000
+    wi, f, pdf_s = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), rng.random((n, 2)))
+    f_e, pdf_e = bsdf.bsdf_eval(mt, np.zeros(n, int), np.repeat(wo, n, 0), wi)
+    np.testing.assert_allclose(pdf_s, pdf_e, rtol=1e-9)
+    np.testing.assert_allclose(f, f_e, rtol=1e-9)
+    return wi, f_e
+
+
 def test_beckmann_material_in_the_mixture():
     """A Beckmann material through bsdf_sample / bsdf_eval: chi-squared, the pdf a sample reports equals eval's,
     and its lobe differs from the GGX one of the same alpha (the flag is read)."""
     mt = _material_table([0.2, 0.2, 0.2], [0.6, 0.6, 0.6], 0.25)
     mt.beckmann = np.array([True])
     wo = np.array([[0.6, 0.1, np.sqrt(1 - 0.37)]])
-    rng = np.random.default_rng(3)
-
-    def sample(u):
-        n = len(u)
-        wi, f, pdf = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), u)
-        wi[pdf <= 0] = np.nan
-        return wi
-
-    def pdf(v):
-        return bsdf.bsdf_eval(mt, np.zeros(len(v), int), np.repeat(wo, len(v), 0), v)[1]
-
-    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60)
-    _report("bsdf mixture beckmann", p, dof)
-    assert p > P_MIN
-    n = 1000
-    wi, f, pdf_s = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), rng.random((n, 2)))
-    f_e, pdf_e = bsdf.bsdf_eval(mt, np.zeros(n, int), np.repeat(wo, n, 0), wi)
-    np.testing.assert_allclose(pdf_s, pdf_e, rtol=1e-9)
-    np.testing.assert_allclose(f, f_e, rtol=1e-9)
+    wi, f_e = _check_mixture(mt, wo, np.random.default_rng(3), "bsdf mixture beckmann")
     mt.beckmann = None
-    f_ggx, _ = bsdf.bsdf_eval(mt, np.zeros(n, int), np.repeat(wo, n, 0), wi)
+    f_ggx, _ = bsdf.bsdf_eval(mt, np.zeros(len(wi), int), np.repeat(wo, len(wi), 0), wi)
     assert np.abs(f_ggx - f_e).max() > 0.05 * np.abs(f_e).max()
-
-
-def _material_table(kd, f0, alpha):
-    return bsdf.MaterialTable(np.array([kd]), np.array([f0]), np.array([alpha]), np.zeros((1, 3)), ["m"])
 
 
 def test_bsdf_mixture_sampling_and_pdf():
     mt = _material_table([0.5, 0.4, 0.3], [0.3, 0.3, 0.3], 0.2)
-    wo = np.array([[0.5, 0.2, np.sqrt(1 - 0.29)]])
-    rng = np.random.default_rng(1)
-
-    def sample(u):
-        n = len(u)
-        wi, f, pdf = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), u)
-        wi[pdf <= 0] = np.nan
-        return wi
-
-    def pdf(v):
-        return bsdf.bsdf_eval(mt, np.zeros(len(v), int), np.repeat(wo, len(v), 0), v)[1]
-
-    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60)
-    _report("bsdf mixture", p, dof)
-    assert p > P_MIN
-    n = 1000
-    wi, f, pdf_s = bsdf.bsdf_sample(mt, np.zeros(n, int), np.repeat(wo, n, 0), rng.random(n), rng.random((n, 2)))
-    f_e, pdf_e = bsdf.bsdf_eval(mt, np.zeros(n, int), np.repeat(wo, n, 0), wi)
-    np.testing.assert_allclose(pdf_s, pdf_e, rtol=1e-9)
-    np.testing.assert_allclose(f, f_e, rtol=1e-9)
+    _check_mixture(mt, np.array([[0.5, 0.2, np.sqrt(1 - 0.29)]]), np.random.default_rng(1), "bsdf mixture")
 
 
 P0 = np.array([[0.3, -0.2, 0.1]])
