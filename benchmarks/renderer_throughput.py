@@ -305,15 +305,21 @@ def run_hair(scene, a) -> dict:
 
 
 def tessellation_bytes(scene) -> dict:
-    """Bytes per fiber segment the renderer holds for the scene's fibre prisms (numpy arrays; Embree's own
-    copy as float32 triangles, without its BVH nodes)."""
-    segs = sum(len(data.fiber.p0) for data in scene.assets if data.fiber is not None)
-    n_tri = len(scene.triangles)
-    # world corners, instance and local ids, unit face normals (neural triangles have no corner normals or
-    # texture coordinates: Scene.tri_normals), + Embree's float32 copy
+    """Bytes per fiber segment the renderer holds for the scene's fibre prisms, without Embree's BVH nodes:
+    ``renderer`` its numpy arrays per triangle (world corners, instance and local ids, unit face normals; neural
+    triangles have no corner normals or texture coordinates), ``embree`` the arrays Embree reads in place (float32
+    world points per instance, the quads and their tables per asset: reference_renderer/embree.py)."""
+    fibres = [data for data in scene.assets if data.fiber is not None]
+    segs = sum(len(data.fiber.p0) * len(data.prims) for data in fibres)
+    n_tri = sum(len(data.fiber.faces) * len(data.prims) for data in fibres)
     per_tri = (scene.triangles.itemsize * 9 + scene.tri_inst.itemsize + scene.tri_local.itemsize
-               + scene.tri_ng.itemsize * 3 + 4 * 9)
-    return dict(segments=segs, triangles=n_tri, tri_per_segment=n_tri / max(segs, 1), bytes_per_segment=per_tri * n_tri / max(segs, 1))
+               + scene.tri_ng.itemsize * 3)
+    embree = sum(12 * (len(data.fiber.points) + 1) * len(data.prims)
+                 + sum(a.nbytes for a in (data.fiber.quads, data.fiber.quad_tri, data.fiber.quad_corners) if a is not None)
+                 for data in fibres)
+    per_seg = lambda b: b / max(segs, 1)  # noqa: E731
+    return dict(segments=segs, triangles=n_tri, tri_per_segment=per_seg(n_tri), renderer=per_seg(per_tri * n_tri),
+                embree=per_seg(embree), bytes_per_segment=per_seg(per_tri * n_tri + embree))
 
 
 def main_hair(a) -> int:
@@ -330,7 +336,8 @@ def main_hair(a) -> int:
               f"{r['first_setup']:.2f} s (plan, decoder, integrator arrays, Embree build), this render {r['setup']:.2f} s")
         del scene
     print(f"tessellation: {mem['triangles']:,} triangles, {mem['tri_per_segment']:.0f} per segment, "
-          f"{mem['bytes_per_segment']:,.0f} B per segment in renderer arrays; peak RSS "
+          f"{mem['bytes_per_segment']:,.0f} B per segment ({mem['renderer']:,.0f} in renderer arrays, "
+          f"{mem['embree']:,.0f} in arrays Embree reads, without its BVH); peak RSS "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB")
     return 0
 
@@ -352,7 +359,8 @@ def main_usd(a) -> int:
     print(f"scene: {a.usd}, {len(scene.triangles):,} triangles; setup (CPU s): load {t_load:.1f}, structures and "
           f"first render {t_struct:.1f}; peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:,.0f} MiB")
     if mem:
-        print(f"fibres: {mem['triangles']:,} triangles, {mem['bytes_per_segment']:,.0f} B per segment in renderer arrays")
+        print(f"fibres: {mem['triangles']:,} triangles, {mem['bytes_per_segment']:,.0f} B per segment "
+              f"({mem['renderer']:,.0f} in renderer arrays, {mem['embree']:,.0f} in arrays Embree reads)")
     for _ in range(a.repeat):
         st = render(scene, RenderSettings(width=a.res, height=a.res, spp=a.spp, progress=False, workers=a.workers)).stats
         loop = st.cpu_total if a.clock == "cpu" else st.time_total

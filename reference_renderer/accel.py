@@ -58,10 +58,14 @@ class _Backend:
 
 class EmbreeBackend(_Backend):
     """Embree (through embreex) over ``triangles`` [F,3,3]; ``robust``: Embree's watertight mode. ``mesh``: the same
-    triangles as (points [V,3], faces [F,3]) when the caller has them: Embree then holds shared vertices, less
-    memory (a fibre prism's 28 triangles share 16 points); the hits are the same, the corners being the same
-    float32 values. Embree reads the triangles from arrays this backend keeps (:mod:`.embree`), or, where that
-    cannot be set up, from embreex's element-by-element copy."""
+    triangles as (points [V,3], faces [F,3]) or (points, faces, quads) when the caller has them: Embree then holds
+    shared vertices, less memory (a fibre prism's 28 triangles share 16 points); the hits are the same, the corners
+    being the same float32 values. ``quads`` (quads [Q,4], tri [Q,2], corners [Q,2,2] of
+    :func:`.embree.quads_of_pairs`) or None: the triangles in pairs sharing an edge, which Embree then holds as
+    quads: the same triangles in half the primitives, and on the long thin sides of fibre prisms, whose triangles
+    each span their side's whole box, a faster structure (docs/benchmarks.md#hair-quads); hits are still reported as
+    (triangle, barycentrics). Embree reads these arrays in place (:mod:`.embree`), or, where that cannot be set up,
+    embreex copies the triangles element by element."""
 
     def __init__(self, triangles: np.ndarray, robust: bool = True, mesh: tuple | None = None) -> None:
         from nasset_sdk.extras import require_extras
@@ -70,20 +74,27 @@ class EmbreeBackend(_Backend):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
-        from .embree import attach_triangles, shared_buffers
+        from .embree import attach_quads, attach_triangles, shared_buffers, shared_points
 
         self.robust = robust
         self.scene = rtcore_scene.EmbreeScene(robust=robust)
         self.empty = len(triangles) == 0
-        self.shared = None  # (points, faces) Embree reads in place
+        self.shared = None  # (points, faces or quads) Embree reads in place
+        self.quads = None  # (tri [Q,2], corners [Q,2,2]) where Embree holds quads
         if not self.empty:
-            buffers = shared_buffers(triangles, mesh)
-            if attach_triangles(self.scene, *buffers):
-                self.shared = buffers
-            elif mesh is not None:
-                TriangleMesh(self.scene, buffers[0][:-1], buffers[1])
-            else:
-                TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
+            quads = mesh[2] if mesh is not None and len(mesh) > 2 else None
+            if quads is not None:
+                points = shared_points(mesh[0])
+                if attach_quads(self.scene, points, quads[0]):
+                    self.shared, self.quads = (points, quads[0]), (quads[1], quads[2])
+            if self.shared is None:
+                buffers = shared_buffers(triangles, mesh)
+                if attach_triangles(self.scene, *buffers):
+                    self.shared = buffers
+                elif mesh is not None:
+                    TriangleMesh(self.scene, buffers[0][:-1], buffers[1])
+                else:
+                    TriangleMesh(self.scene, np.ascontiguousarray(triangles, np.float32))
             # Embree builds its BVH at the first query: build it now, with the scene setup
             self.scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), output=1)
 
@@ -94,8 +105,17 @@ class EmbreeBackend(_Backend):
         dist = np.ascontiguousarray(np.minimum(tmax, 3.0e38), np.float32)
         r = self.scene.run(np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32), dists=dist, output=1)
         prim = r["primID"].astype(np.int64)
-        t = np.where(prim >= 0, r["tfar"].astype(np.float64), np.inf)
-        return t, prim, r["u"].astype(np.float64), r["v"].astype(np.float64)
+        hit = prim >= 0
+        t = np.where(hit, r["tfar"].astype(np.float64), np.inf)
+        if self.quads is None:
+            return t, prim, r["u"].astype(np.float64), r["v"].astype(np.float64)
+        from .embree import quad_hits_as_triangles
+
+        u, v = np.zeros(n), np.zeros(n)
+        if hit.any():
+            rows = np.nonzero(hit)[0]
+            prim[rows], u[rows], v[rows] = quad_hits_as_triangles(*self.quads, prim[rows], r["u"][rows], r["v"][rows])
+        return t, prim, u, v
 
     def occluded(self, o, d, tmax):
         n = len(o)
@@ -204,8 +224,9 @@ class Accel:
     [n_instances] bool or None: separate instances made of closed convex pieces (fibre prisms) whose
     structure may use Embree's faster non-robust mode (see the module docstring). ``boxes``: per instance
     (lo [3], hi [3]) of its triangles (None for one without), when the caller has them; else computed here.
-    ``meshes``: per instance its triangles as (points [V,3], faces [k,3]) or None (see :class:`EmbreeBackend`),
-    used for separate instances. ``cutout`` [n_instances] bool or None: instances (not separate) whose hits are
+    ``meshes``: per instance its triangles as (points [V,3], faces [k,3]) or (points, faces, quads or None), or None
+    (see :class:`EmbreeBackend`), used for separate instances. ``cutout`` [n_instances] bool or None: instances (not
+    separate) whose hits are
     kept only where ``presence(triangles [k], u [k], v [k]) -> bool [k]`` says so (set :attr:`presence`; while it
     is None they are opaque).
     """

@@ -175,13 +175,16 @@ class Scene:
         return np.array([i.corner_offset for i in self.instances], np.int64)
 
     def world_mesh(self, i: int) -> tuple | None:
-        """Neural instance ``i``'s triangles as (world points [V,3], faces [k,3]), computed as the loader computed
-        them (the same bits); None for other instances."""
+        """Neural instance ``i``'s triangles as (world points [V,3], faces [k,3], quads), computed as the loader computed
+        them (the same bits); quads: (quads [Q,4], tri [Q,2], corners [Q,2,2]) the same triangles in pairs, as Embree
+        may hold them (fibre prisms: ``FiberTubes.quads``; embree.quads_of_pairs), or None. None for other instances."""
         inst = self.instances[i]
         if inst.kind != "neural":
             return None
         data = self.assets[inst.asset]
-        return world_points(data.points, inst.to_world), data.faces
+        fiber = data.fiber
+        quads = None if fiber is None or fiber.quads is None else (fiber.quads, fiber.quad_tri, fiber.quad_corners)
+        return world_points(data.points, inst.to_world), data.faces, quads
 
     def corner_rows(self, prim: np.ndarray, inst: np.ndarray) -> np.ndarray:
         """Rows of tri_normals / tri_st [n] of mesh triangles ``prim`` [n] on instances ``inst`` [n]."""

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..embree import quads_of_pairs
 from ..sampling import (
     INV_4PI,
     Z_AXIS,
@@ -64,6 +65,9 @@ class FiberTubes:
     r0: np.ndarray  # [S] radius at p0 (width / 2)
     r1: np.ndarray  # [S] radius at p1
     exempt: np.ndarray  # [S,2] triangle range [lo, hi) of the segment and its neighbours in its curve
+    quads: np.ndarray | None = None  # [Q,4] uint32: the faces as Embree quads (embree.quads_of_pairs), or None
+    quad_tri: np.ndarray | None = None  # [Q,2] uint32: the two triangles of each quad
+    quad_corners: np.ndarray | None = None  # [Q,2,2] uint8: where each triangle's corners 1 and 2 are in its quad
 
 
 def _unit_rows(v):
@@ -110,7 +114,21 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
     lo_seg = np.maximum(seg - 1, seg_first[curve])
     hi_seg = np.minimum(seg + 1, seg_first[curve + 1] - 1)
     exempt = np.stack([first[lo_seg], first[hi_seg + 1]], 1).astype(np.int64)
-    return FiberTubes(verts.reshape(-1, 3), faces.astype(np.int64), tri_seg.astype(np.int64), p0, p1, r0, r1, exempt)
+    # Embree holds a segment's coplanar triangle pairs as quads (reference_renderer/accel.py: half the primitives):
+    # side triangle k with k + N, the cap fans' triangles 2m with 2m + 1
+    fans = np.arange(0, sides - 3, 2)
+    local_pairs = np.concatenate([np.stack([k, k + sides], 1), np.stack([2 * sides + fans, 2 * sides + fans + 1], 1),
+                                  np.stack([3 * sides - 2 + fans, 3 * sides - 1 + fans], 1)])
+    local_quads, local_tri, local_corners = quads_of_pairs(local, local_pairs)
+    quads = (live_ids[:, None, None] * 2 * sides + local_quads[None].astype(np.int64)).reshape(-1, 4)
+    quad_tri = (np.arange(len(live_ids))[:, None, None] * per + local_tri[None]).reshape(-1, 2)
+    corners = np.broadcast_to(local_corners, (len(live_ids), *local_corners.shape)).reshape(-1, 2, 2)
+    if quads.size and max(quads.max(), quad_tri.max()) >= 2**32 - 1:
+        quads = quad_tri = corners = None  # beyond Embree's 32-bit indices (Embree refuses the points anyway)
+    else:
+        quads, quad_tri, corners = quads.astype(np.uint32), quad_tri.astype(np.uint32), np.ascontiguousarray(corners)
+    return FiberTubes(verts.reshape(-1, 3), faces.astype(np.int64), tri_seg.astype(np.int64), p0, p1, r0, r1, exempt,
+                      quads, quad_tri, corners)
 
 
 def fiber_frame(tubes: FiberTubes, seg, x_obj, wo_obj):

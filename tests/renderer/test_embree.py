@@ -143,3 +143,86 @@ def test_the_library_is_embreexs_own_when_blender_maps_another(monkeypatch):
     assert shared.shared is not None
     for a, b in zip(shared.closest(o, d, tmax), _copied(monkeypatch, tri).closest(o, d, tmax), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def _quad_soup(n=3000, seed=6):
+    """Pairs of triangles sharing an edge, bent out of plane (the quad's two triangles need not be coplanar), and
+    every third pair's second triangle alone (no pair given), as (points [V,3], faces [F,3], pairs [P,2])."""
+    rng = np.random.default_rng(seed)
+    centre = rng.uniform(-1.0, 1.0, (n, 1, 3))
+    corners = centre + rng.normal(0.0, 0.08, (n, 4, 3))  # a, s0, b, s1 of each would-be quad
+    points = corners.reshape(-1, 3)
+    base = 4 * np.arange(n)[:, None]
+    first = base + [0, 1, 3]  # (a, s0, s1)
+    second = base + [2, 3, 1]  # (b, s1, s0)
+    rot = rng.integers(0, 3, n)  # the triangles' corners start anywhere
+    first = np.stack([np.roll(f, r) for f, r in zip(first, rot, strict=True)])
+    second = np.stack([np.roll(f, -r) for f, r in zip(second, rot, strict=True)])
+    faces = np.concatenate([first, second])
+    pairs = np.stack([np.arange(n), n + np.arange(n)], 1)
+    return points, faces, pairs[np.arange(n) % 3 != 0]
+
+
+def test_quads_of_pairs_layout():
+    """Every triangle is in exactly one quad; Embree's two triangles of a quad, (v0, v1, v3) and (v2, v3, v1), are
+    the named triangles' corners; ``corners`` points at each named triangle's corners 1 and 2."""
+    points, faces, pairs = _quad_soup(60)
+    quads, tri, corners = embree.quads_of_pairs(faces, pairs)
+    assert len(quads) == len(faces) - len(pairs)
+    assert sorted(np.unique(tri).tolist()) == list(range(len(faces)))
+    for h, at in ((0, [0, 1, 3]), (1, [2, 3, 1])):
+        paired = tri[:, 0] != tri[:, 1]
+        np.testing.assert_array_equal(np.sort(quads[paired][:, at], 1), np.sort(faces[tri[paired, h]], 1))
+        for k in (1, 2):
+            np.testing.assert_array_equal(np.take_along_axis(quads, corners[:, h, k - 1:k].astype(np.int64), 1)[:, 0],
+                                          faces[tri[:, h], k])
+    alone = tri[:, 0] == tri[:, 1]
+    np.testing.assert_array_equal(quads[alone], faces[tri[alone, 0]][:, [0, 1, 2, 2]])
+    # pairs that share no edge, or a triangle with itself, stay apart; a triangle in two pairs is an error
+    q2, t2, _ = embree.quads_of_pairs(faces[:4], [[0, 1], [2, 2]])
+    assert len(q2) == 4 and (t2[:, 0] == t2[:, 1]).all()
+    with pytest.raises(NassetError) as exc:
+        embree.quads_of_pairs(faces, [[0, 60], [60, 1]])
+    assert exc.value.code == "USAGE"
+
+
+@pytest.mark.parametrize("robust", [True, False])
+def test_quads_give_the_triangles_hits(robust):
+    """The same triangles held by Embree as quads (non-planar ones too, and triangles alone) and as triangles: the
+    same rays hit, on the same triangle away from the shared edge, at the same distance; the barycentrics reported
+    for the named triangle give the point on the ray; shadow queries agree."""
+    points, faces, pairs = _quad_soup()
+    tri = points[faces]
+    quads = embree.quads_of_pairs(faces, pairs)
+    held = EmbreeBackend(tri, robust=robust, mesh=(points, faces, quads))
+    assert held.quads is not None, "the in-place path must be taken on this platform (Linux, embreex 4)"
+    plain = EmbreeBackend(tri, robust=robust, mesh=(points, faces))
+    o, d, tmax = _rays(seed=7)
+    (t, prim, u, v), (t0, prim0, _, _) = held.closest(o, d, tmax), plain.closest(o, d, tmax)
+    hit = prim >= 0
+    assert 0.3 < hit.mean() < 0.99 and (prim0[~hit] < 0).all()
+    np.testing.assert_array_equal(hit, prim0 >= 0)
+    assert (prim[hit] == prim0[hit]).mean() > 0.999  # only where a ray meets the shared edge may the two differ
+    np.testing.assert_allclose(t[hit], t0[hit], rtol=1e-5, atol=1e-6)
+    assert (u[hit] >= -1e-6).all() and (v[hit] >= -1e-6).all() and (u[hit] + v[hit] <= 1 + 1e-6).all()
+    c = tri[prim[hit]]
+    p = c[:, 0] * (1 - u[hit] - v[hit])[:, None] + c[:, 1] * u[hit][:, None] + c[:, 2] * v[hit][:, None]
+    np.testing.assert_allclose(p, o[hit] + t[hit][:, None] * d[hit], atol=2e-5)
+    np.testing.assert_array_equal(held.occluded(o, d, tmax), plain.occluded(o, d, tmax))
+
+
+def test_fibre_prisms_pair_into_quads():
+    """The fibre tessellation's pairs: each prism side's two triangles and the cap fans' triangles two by two (14
+    quads for 28 triangles at 8 sides), each pair in one plane, every triangle once."""
+    from nasset_reference_renderer.shaders.rna_fiber import tessellate
+    from nasset_reference_renderer.testscenes import dense_hair_curves
+
+    g = dense_hair_curves(50, 4, seed=1)
+    tubes = tessellate(g.points, g.counts, g.widths)
+    assert len(tubes.quads) * 2 == len(tubes.faces) and (tubes.quad_tri[:, 0] != tubes.quad_tri[:, 1]).all()
+    assert sorted(tubes.quad_tri.ravel().tolist()) == list(range(len(tubes.faces)))
+    p = tubes.points[tubes.quads.astype(np.int64)]  # [Q,4,3]: coplanar corners
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 3] - p[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    assert np.abs(((p[:, 2] - p[:, 0]) * n).sum(1)).max() < 1e-9
+    np.testing.assert_array_equal(tubes.tri_seg[tubes.quad_tri[:, 0]], tubes.tri_seg[tubes.quad_tri[:, 1]])

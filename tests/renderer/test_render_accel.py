@@ -209,16 +209,27 @@ def _first_fiber_hits(acc, tri_inst, tubes, rng, n=600):
     return o[m] + d[m] * h.t[m][:, None], d[m], tubes.tri_seg[h.prim[m]]
 
 
-@pytest.mark.parametrize("fast", [False, True])
-def test_fiber_rays_cost_constant_embree_calls(fast):
+def _tuft_meshes(tubes, held):
+    """``Accel``'s meshes for :func:`_hair_scene`: the tuft as a triangle soup (None), as shared points and faces,
+    or as those in quads (what the renderer gives Embree)."""
+    if held == "soup":
+        return None
+    quads = (tubes.quads, tubes.quad_tri, tubes.quad_corners) if held == "quads" else None
+    return [(tubes.points, tubes.faces, quads), None]
+
+
+@pytest.mark.parametrize("fast,held", [(False, "soup"), (True, "soup"), (True, "quads"), (False, "quads")])
+def test_fiber_rays_cost_constant_embree_calls(fast, held):
     """Rays leaving fiber hits (exempt ranges of their segment and neighbours) through a dense tuft: the same
     hits and self_hit flags as brute force, at a fixed number of Embree rays each although they cross many
     fibre triangles; also with the tuft's structure in Embree's non-robust mode (``fast``, as the renderer
-    builds fibre assets)."""
+    builds fibre assets), and with its triangles held as quads (``held``, as the renderer holds them)."""
     tri, tri_inst, tubes = _hair_scene()
     rng = np.random.default_rng(4)
-    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([fast, False]))
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([fast, False]),
+                meshes=_tuft_meshes(tubes, held))
     assert [p.backend.robust for p in acc.parts] == [not fast, True]
+    assert (acc.parts[0].backend.quads is not None) == (held == "quads")
     x, _, seg = _first_fiber_hits(acc, tri_inst, tubes, rng)  # then random directions from there
     exempt = tubes.exempt[seg].copy()
     exempt[::7] = -1  # rows with nothing exempt (surface rows in a batch of mixed kinds)
@@ -244,12 +255,14 @@ def test_fiber_rays_cost_constant_embree_calls(fast):
     assert ((h2.self_hit == s_b2) & (h2.prim == p_b2)).mean() > 0.98
 
 
-def test_fiber_rays_leaving_outward_cost_one_query():
+@pytest.mark.parametrize("held", ["soup", "quads"])
+def test_fiber_rays_leaving_outward_cost_one_query(held):
     """Rays leaving fiber hits back toward the side the fibre was seen from do not re-hit the triangle they
     start on (the branch test starts at eps from x): one Embree query each, with the brute force's answers."""
     tri, tri_inst, tubes = _hair_scene()
     rng = np.random.default_rng(5)
-    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([True, False]))
+    acc = Accel(tri, tri_inst, separate=np.array([True, False]), fast=np.array([True, False]),
+                meshes=_tuft_meshes(tubes, held))
     x, d, seg = _first_fiber_hits(acc, tri_inst, tubes, rng)
     exempt = tubes.exempt[seg]
     wi = -d + rng.normal(0, 0.2, (len(x), 3))  # back out, spread: some rays cross other fibres of the tuft

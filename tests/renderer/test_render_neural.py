@@ -237,7 +237,7 @@ def test_mesh_rows_and_boxes_with_neural_instances_between_meshes(tmp_path):
     np.testing.assert_array_equal(np.stack(mixed.bounds), np.stack([p.min(0), p.max(0)]))
     own = mixed.triangles[neural.first_tri:neural.first_tri + neural.n_tri]
     np.testing.assert_array_equal(np.stack(neural.box), np.stack([own.reshape(-1, 3).min(0), own.reshape(-1, 3).max(0)]))
-    pts, faces = mixed.world_mesh(1)
+    pts, faces, _ = mixed.world_mesh(1)
     assert mixed.world_mesh(0) is None and mixed.world_mesh(2) is None
     np.testing.assert_array_equal(pts[faces], own)
 
