@@ -429,6 +429,27 @@ def b_spot_lights(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def _microfacet(ctx, mesh_name, value):
+    """Set ``nasset:microfacet`` on the UsdPreviewSurface of the material ``ctx.sb.mesh`` made for ``mesh_name``."""
+    from pxr import Sdf
+
+    shader = ctx.sb.stage.GetPrimAtPath(f"/World/Looks/{mesh_name}Mat/PreviewSurface")
+    shader.CreateAttribute("nasset:microfacet", Sdf.ValueTypeNames.Token, custom=True).Set(value)
+
+
+def b_beckmann(ctx):
+    """A rough copper floor and a glossy plastic block, both with Beckmann microfacets, a wide panel low behind the asset
+    facing the camera: the floor's highlight runs toward the camera, its spread and tail the shape of D."""
+    ctx.camera(eye=(0.0, 0.8, 3.2), target=(0.0, -0.35, 0.0))
+    ctx.floor(diffuse=(0.95, 0.64, 0.54), metallic=1.0, roughness=0.55)  # alpha 0.30
+    _microfacet(ctx, "Floor", "beckmann")
+    _box(ctx, "Block", (0.55, -0.5, -0.3), (1.05, -0.05, 0.2), diffuse=(0.02, 0.03, 0.08), specular=(0.5, 0.5, 0.5),
+         roughness=0.7)  # alpha 0.49
+    _microfacet(ctx, "Block", "beckmann")
+    ctx.sb.rect_light("Panel", (0.0, 0.2, -1.8), 2.0, 0.8, (0.0, -0.25, 1.0), 3.0, color=(1.0, 0.9, 0.8))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_rect_light_back(ctx):
     ctx.camera()
     ctx.floor()
@@ -641,6 +662,9 @@ CASES = [
     Case("rna_spot_lights", "two point lights with UsdLux.ShapingAPI aimed past the asset at the floor: a linear falloff "
          "(cone 30 degrees, softness 0.4) and nasset:shaping:falloff = smoothstep (cone 20, softness 0.3): the pools "
          "of light, their soft edges and the asset's light samples", b_spot_lights),
+    Case("rna_beckmann", "a rough copper floor (alpha 0.30) and a glossy plastic block (alpha 0.49) with nasset:microfacet = "
+         "beckmann, a bulb low behind the asset and a faint sun: Beckmann's D, its rational Lambda in the "
+         "height-correlated G2 and its half-vector sampling, the asset's light reflected by the floor", b_beckmann),
     Case("rna_rect_light_back", "a RectLight between the camera and the asset, emitting away from the camera toward the "
          "asset and the floor: camera rays reach its back and pass through it (one-sided light surface), its light on "
          "the asset", b_rect_light_back),

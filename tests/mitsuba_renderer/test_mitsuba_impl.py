@@ -278,6 +278,13 @@ def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
     assert row["passed"], row
 
 
+def test_beckmann_case_passes_via_cli(nr):
+    """``rna_beckmann``: Beckmann microfacets on a metal floor and a plastic block (nasset:microfacet,
+    spec/renderer.md#materials); the same scene with GGX lobes is 2x its tolerance and 6x its bias tolerance."""
+    row = _conformance(["rna_beckmann"])["rna_beckmann"]
+    assert row["passed"], row
+
+
 def test_glass_case_passes_via_cli(nr):
     """``rna_behind_glass``: the asset seen through a thin pane and beside solid glass (spec/renderer.md#transmission;
     before this implementation rendered glass, it warned and shaded the opaque part)."""

@@ -37,6 +37,7 @@ MUTANT_CASES = {
     "one_escaped_light": ["rna_suns_and_dome"],
     "camera_visibility_ignored": ["rna_hidden_lights"],
     "spot_shaping_ignored": ["rna_spot_lights"],
+    "beckmann_as_ggx": ["rna_beckmann"],
     "light_surfaces_occlude": ["rna_lights_in_the_way"],
     "no_asset_indirect": ["rna_indirect"],
     "mis_weights_one": ["rna_sphere_light"],
