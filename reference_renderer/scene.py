@@ -155,7 +155,8 @@ class Scene:
     # where a mesh has none), rows as tri_normals
     tri_color: np.ndarray | None = None  # [F_mesh,3,3] primvar colours at the corners of mesh triangles, rows as
     # tri_normals; None when no material reads one (spec/renderer.md#primvar-colors)
-    tri_ng: np.ndarray | None = None  # [F,3] unit geometric normals of all triangles (zero for degenerate ones)
+    tri_ng: np.ndarray | None = None  # [F,3] unit geometric normals of all triangles (zero for degenerate ones, and for
+    # fibre prisms: a fibre hit takes no surface normal, spec/renderer.md#fibers; 8.4 M of them took 0.5-2 CPU s)
     render_settings: dict = field(default_factory=dict)  # nasset:* values of the UsdRender.Settings prim (spec/renderer.md#render-settings)
     #: ray-casting structures built for this scene (integrator.scene_accel): built once per scene, not per render
     #: (the geometry arrays above are not changed after loading)
@@ -416,7 +417,7 @@ class _Loader:
         n = len(self.tris)
         tris = np.concatenate(self.tris) if n else np.zeros((0, 3, 3))
         self._check_world_bounds()
-        self._clipping_warning(camera, tris)
+        self._clipping_warning(camera)
         mats = self.mat_rows or [(np.zeros(3), np.zeros(3), 1.0, np.zeros(3), "none")]
         table = MaterialTable(np.array([m[0] for m in mats]), np.array([m[1] for m in mats]),
                               np.array([m[2] for m in mats]), np.array([m[3] for m in mats]), [m[4] for m in mats],
@@ -572,7 +573,7 @@ class _Loader:
                                     camera.vertical_aperture, self.warn)
         return camera
 
-    def _clipping_warning(self, camera: Camera, tris: np.ndarray) -> None:
+    def _clipping_warning(self, camera: Camera) -> None:
         """Clipping is not rendered (spec/renderer.md#cameras): a warning naming the camera when its
         ``clippingPlanes`` are authored, or when triangle vertices in front of it lie nearer than its
         ``clippingRange`` near distance or beyond its far one (a view USD would cut, the whole scene here)."""
@@ -584,21 +585,29 @@ class _Loader:
             near, far = (float(v) for v in (cam.GetClippingRangeAttr().Get(self.time) or (1.0, 1e6)))
         if planes is not None and len(planes):
             self.warn(f"{len(planes)} clippingPlanes ignored: nothing is clipped", camera.prim)
-        if not len(tris):
-            return
         M = camera.to_world
-        # the camera-space depth -z of each corner: one column of the inverse, per coordinate column (a [3F,3]
-        # matrix product took 3.5 s on the 8.4 M triangles of a dense groom)
+        # the camera-space depth -z of each vertex: one column of the inverse, per coordinate column (a [3F,3] matrix
+        # product took 3.5 s on the 8.4 M triangles of a dense groom)
         w = -np.linalg.inv(M[:3, :3])[:, 2]
-        corners = tris.reshape(-1, 3)
-        depth = corners[:, 0] * w[0]
-        depth += corners[:, 1] * w[1]
-        depth += corners[:, 2] * w[2]
-        depth -= float(M[3, :3] @ w)
-        depth = depth[depth > 0]
-        if len(depth) and (depth.min() < near or depth.max() > far):
+        lo, hi = np.inf, -np.inf
+        for inst, tris in zip(self.instances, self.tris, strict=True):
+            if not len(tris):
+                continue
+            if inst.kind == "neural":  # its corners are the world points its faces use: a fibre's are 5x fewer
+                data = self.assets[inst.asset]
+                vertices = world_points(data.points[data.used_points], inst.to_world)
+            else:
+                vertices = tris.reshape(-1, 3)
+            depth = vertices[:, 0] * w[0]
+            depth += vertices[:, 1] * w[1]
+            depth += vertices[:, 2] * w[2]
+            depth -= float(M[3, :3] @ w)
+            depth = depth[depth > 0]
+            if len(depth):
+                lo, hi = min(lo, float(depth.min())), max(hi, float(depth.max()))
+        if lo <= hi and (lo < near or hi > far):
             self.warn(f"clippingRange ({near:g}, {far:g}) ignored: geometry in front of the camera lies at depths "
-                      f"{depth.min():.4g} to {depth.max():.4g}, and nothing is clipped", camera.prim)
+                      f"{lo:.4g} to {hi:.4g}, and nothing is clipped", camera.prim)
 
     def _exposure_scale(self, cam) -> float:
         """The camera's linear exposure scale (``UsdGeomCamera::ComputeLinearExposureScale``: 2^exposure x
@@ -1364,7 +1373,8 @@ class _Loader:
             data.used_points = slice(None) if used.all() else np.nonzero(used)[0]
         inst = Instance("neural", path, 0, 0, M, asset=ai)
         box = box3(pw[data.used_points]) if len(data.faces) else None
-        self._add(inst, tris, None, np.arange(len(data.faces)), ng=face_normals(tris), box=box)
+        ng = np.zeros((len(tris), 3)) if data.fiber is not None else face_normals(tris)
+        self._add(inst, tris, None, np.arange(len(data.faces)), ng=ng, box=box)
 
     # -- lights ----------------------------------------------------------------------------
     def _shaping(self, prim, M) -> dict:

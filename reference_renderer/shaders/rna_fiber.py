@@ -120,15 +120,15 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
     local_pairs = np.concatenate([np.stack([k, k + sides], 1), np.stack([2 * sides + fans, 2 * sides + fans + 1], 1),
                                   np.stack([3 * sides - 2 + fans, 3 * sides - 1 + fans], 1)])
     local_quads, local_tri, local_corners = quads_of_pairs(local, local_pairs)
-    quads = (live_ids[:, None, None] * 2 * sides + local_quads[None].astype(np.int64)).reshape(-1, 4)
-    quad_tri = (np.arange(len(live_ids))[:, None, None] * per + local_tri[None]).reshape(-1, 2)
-    corners = np.broadcast_to(local_corners, (len(live_ids), *local_corners.shape)).reshape(-1, 2, 2)
-    if quads.size and max(quads.max(), quad_tri.max()) >= 2**32 - 1:
-        quads = quad_tri = corners = None  # beyond Embree's 32-bit indices (Embree refuses the points anyway)
-    else:
-        quads, quad_tri, corners = quads.astype(np.uint32), quad_tri.astype(np.uint32), np.ascontiguousarray(corners)
-    return FiberTubes(verts.reshape(-1, 3), faces.astype(np.int64), tri_seg.astype(np.int64), p0, p1, r0, r1, exempt,
-                      quads, quad_tri, corners)
+    quads = quad_tri = corners = None
+    if len(live_ids) * 2 * sides < 2**32 - 1:  # Embree's 32-bit indices (beyond them Embree refuses the points anyway)
+        base = live_ids.astype(np.uint32)[:, None, None]
+        quads = (base * np.uint32(2 * sides) + local_quads[None]).reshape(-1, 4)
+        quad_tri = (np.arange(len(live_ids), dtype=np.uint32)[:, None, None] * np.uint32(per)
+                    + local_tri[None].astype(np.uint32)).reshape(-1, 2)
+        corners = np.ascontiguousarray(np.broadcast_to(local_corners, (len(live_ids), *local_corners.shape))).reshape(-1, 2, 2)
+    return FiberTubes(verts.reshape(-1, 3), faces.astype(np.int64, copy=False), tri_seg.astype(np.int64, copy=False), p0, p1,
+                      r0, r1, exempt, quads, quad_tri, corners)
 
 
 def fiber_frame(tubes: FiberTubes, seg, x_obj, wo_obj):

@@ -217,6 +217,37 @@ def test_example_fiber_asset_renders(tmp_path):
     assert np.isfinite(img).all() and img.min() >= 0.0 and img.max() > 0.0
 
 
+def test_fibre_prisms_need_no_face_normals(tmp_path):
+    """The loader stores zero geometric normals for fibre prisms (the work of 8.4 M cross products on a dense groom):
+    no renderer path reads them. The same scene with their true normals (and a mirrored surface asset beside, whose
+    normals are read) renders bit for bit the same image; its surface asset's normals are the true ones."""
+    from nasset_reference_renderer.sampling import face_normals
+    from nasset_sdk.examples import example_builder
+
+    fiber = example_builder("rna", variant="fiber", size="tiny", seed=0).write(tmp_path / "fiber.usdc")
+    surf = example_builder("rna", size="tiny", seed=1).write(tmp_path / "surf.usdc")
+    b = SceneBuilder()
+    b.camera((0, 0.6, 2.2), (0, 0.4, 0))
+    b.sphere_light("Bulb", (1.0, 1.5, 1.0), 0.2, 5.0)
+    b.quad("Floor", (0, 0, 0), 4, diffuse=(0.5, 0.5, 0.5))
+    b.asset("Hair", fiber)
+    M = np.diag([-1.0, 1.0, 1.0, 1.0])
+    M[3, :3] = (0.8, 0.3, -0.3)
+    b.asset("Ball", surf, M)
+    path = b.write(tmp_path / "scene.usda")
+    settings = RenderSettings(spp=2, width=24, height=24, seed=4, max_depth=3)
+    zero, true = _load(path), _load(path)
+    hair, ball = (next(i for i in zero.instances if i.prim.endswith(name)) for name in ("Hair", "Ball"))
+    rows = slice(hair.first_tri, hair.first_tri + hair.n_tri)
+    assert hair.n_tri > 0 and not zero.tri_ng[rows].any()
+    own = slice(ball.first_tri, ball.first_tri + ball.n_tri)
+    np.testing.assert_array_equal(zero.tri_ng[own], face_normals(zero.triangles[own]))
+    true.tri_ng[rows] = face_normals(true.triangles[rows])
+    a, c = render(zero, settings), render(true, settings)
+    assert a.image.max() > 0.0 and a.stats.rays == c.stats.rays
+    np.testing.assert_array_equal(a.image, c.image)
+
+
 def test_ray_structures_built_once_per_scene(tmp_path):
     """Renders of one scene share its ray-casting structures (built at the first render): the same image as a
     freshly loaded scene, each render counting only its own rays. The fibre asset's structure is in Embree's

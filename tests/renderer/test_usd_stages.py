@@ -262,6 +262,35 @@ def test_camera_clipping_that_would_cut_geometry_is_warned(tmp_path, clip, warne
     assert any("clippingRange" in m and "/World/Camera" in m for m in scene.warnings) == warned, scene.warnings
 
 
+@pytest.mark.parametrize("variant", ["surface", "fiber"])
+def test_clipping_warning_reads_an_assets_points(tmp_path, variant):
+    """A neural asset's depth range comes from the world points its faces use (a fibre's prisms have five corners per
+    point): the warned range is the brute-force range over every triangle corner in front of the camera."""
+    import re
+
+    from pxr import Gf, UsdGeom
+
+    from nasset_reference_renderer.testscenes import SceneBuilder
+    from nasset_sdk.examples import example_builder
+
+    asset = example_builder("rna", variant=variant, size="tiny", seed=0).write(tmp_path / "a.usdc")
+    b = SceneBuilder()
+    b.camera((0.3, 0.5, 2.5), (0, 0.3, 0))
+    b.distant("Sun", (0.5, 1.0, 0.35), 3.0)
+    M = np.diag([1.3, 0.8, 1.1, 1.0])
+    M[3, :3] = (0.2, -0.1, 0.4)
+    b.asset("Asset", asset, M)
+    UsdGeom.Camera(b.stage.GetPrimAtPath("/World/Camera")).CreateClippingRangeAttr(Gf.Vec2f(5.0, 100.0))
+    scene = load_scene(b.write(tmp_path / "s.usda"))
+    (said,) = [m for m in scene.warnings if "clippingRange" in m]
+    lo, hi = (float(v) for v in re.search(r"depths (\S+) to (\S+),", said).groups())
+    corners = scene.triangles.reshape(-1, 3)
+    C = scene.camera.to_world
+    depth = -((corners - C[3, :3]) @ np.linalg.inv(C[:3, :3])[:, 2])
+    depth = depth[depth > 0]
+    assert (lo, hi) == (float(f"{depth.min():.4g}"), float(f"{depth.max():.4g}"))
+
+
 def test_missing_texture_file_is_said_to_be_missing(tmp_path):
     """A UsdUVTexture whose PNG is not there was reported as a format the renderer does not read."""
     b, _ = _floor_scene()
