@@ -308,7 +308,7 @@ def tessellation_bytes(scene) -> dict:
     """Bytes per fiber segment the renderer holds for the scene's fibre prisms, without Embree's BVH nodes:
     ``renderer`` its numpy arrays per triangle (world corners, instance and local ids, unit face normals; neural
     triangles have no corner normals or texture coordinates), ``embree`` the arrays Embree reads in place (float32
-    world points per instance, the quads and their tables per asset: reference_renderer/embree.py)."""
+    world points per instance, the quads and their tables per asset: nasset_sdk/embree.py)."""
     fibres = [data for data in scene.assets if data.fiber is not None]
     segs = sum(len(data.fiber.p0) * len(data.prims) for data in fibres)
     n_tri = sum(len(data.fiber.faces) * len(data.prims) for data in fibres)

@@ -61,10 +61,10 @@ class EmbreeBackend(_Backend):
     triangles as (points [V,3], faces [F,3]) or (points, faces, quads) when the caller has them: Embree then holds
     shared vertices, less memory (a fibre prism's 28 triangles share 16 points); the hits are the same, the corners
     being the same float32 values. ``quads`` (quads [Q,4], tri [Q,2], corners [Q,2,2] of
-    :func:`.embree.quads_of_pairs`) or None: the triangles in pairs sharing an edge, which Embree then holds as
+    :func:`nasset_sdk.embree.quads_of_pairs`) or None: the triangles in pairs sharing an edge, which Embree then holds as
     quads: the same triangles in half the primitives, and on the long thin sides of fibre prisms, whose triangles
     each span their side's whole box, a faster structure (docs/benchmarks.md#hair-quads); hits are still reported as
-    (triangle, barycentrics). Embree reads these arrays in place (:mod:`.embree`), or, where that cannot be set up,
+    (triangle, barycentrics). Embree reads these arrays in place (:mod:`nasset_sdk.embree`), or, where that cannot be set up,
     embreex copies the triangles element by element."""
 
     def __init__(self, triangles: np.ndarray, robust: bool = True, mesh: tuple | None = None) -> None:
@@ -74,7 +74,7 @@ class EmbreeBackend(_Backend):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
-        from .embree import attach_quads, attach_triangles, shared_buffers, shared_points
+        from nasset_sdk.embree import attach_quads, attach_triangles, shared_buffers, shared_points
 
         self.robust = robust
         self.scene = rtcore_scene.EmbreeScene(robust=robust)
@@ -109,7 +109,7 @@ class EmbreeBackend(_Backend):
         t = np.where(hit, r["tfar"].astype(np.float64), np.inf)
         if self.quads is None:
             return t, prim, r["u"].astype(np.float64), r["v"].astype(np.float64)
-        from .embree import quad_hits_as_triangles
+        from nasset_sdk.embree import quad_hits_as_triangles
 
         u, v = np.zeros(n), np.zeros(n)
         if hit.any():

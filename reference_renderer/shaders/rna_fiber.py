@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..embree import quads_of_pairs
+from nasset_sdk.embree import quads_of_pairs
+
 from ..sampling import (
     INV_4PI,
     Z_AXIS,

@@ -1,4 +1,4 @@
-"""Embree reading the renderer's arrays in place (reference_renderer/embree.py) against embreex's own copy.
+"""Embree reading the renderer's arrays in place (nasset_sdk/embree.py) against embreex's own copy.
 
 Both put the same float32 corners into the same Embree library, so every hit must be the same bit for
 bit: distance, triangle and barycentrics, on closest-hit and shadow queries, in both of Embree's modes,
@@ -10,8 +10,8 @@ import gc
 import numpy as np
 import pytest
 
-from nasset_reference_renderer import embree
 from nasset_reference_renderer.accel import EmbreeBackend
+from nasset_sdk import embree
 from nasset_sdk.errors import NassetError
 
 

@@ -107,6 +107,39 @@ def test_fiber_self_shadow_ignores_its_own_segments(assets):
         assert shadowed[back & inner].all() and not shadowed[front].any(), (light, shadowed)
 
 
+def test_tube_mesh_and_tangents_curve_by_curve():
+    """The tube mesh and tangents, built for all curves at once, against a construction curve by curve: np.gradient
+    along each curve, two triangles per side between the rings of a segment's two points, owners the two points."""
+    from nasset_sdk.geometry import CurvesGeometry
+
+    rng = np.random.default_rng(4)
+    counts = np.array([2, 5, 3, 2, 7, 4])
+    n = counts.sum()
+    geo = CurvesGeometry(rng.normal(size=(n, 3)), counts, rng.uniform(0.01, 0.05, n))
+    p = np.asarray(geo.points, np.float64)
+    want_t, want_faces, want_owner, start = [], [], [], 0
+    k = np.arange(view.TUBE_SIDES)
+    for c in counts:
+        want_t.append(np.gradient(p[start:start + c], axis=0))
+        for s in range(start, start + c - 1):
+            i0, i1 = s * view.TUBE_SIDES + k, (s + 1) * view.TUBE_SIDES + (k + 1) % view.TUBE_SIDES
+            j0, j1 = s * view.TUBE_SIDES + (k + 1) % view.TUBE_SIDES, (s + 1) * view.TUBE_SIDES + k
+            want_faces += [np.stack([i0, j0, i1], 1), np.stack([i0, i1, j1], 1)]
+            want_owner += [[s, s + 1]] * (2 * view.TUBE_SIDES)
+        start += c
+    want_t = np.concatenate(want_t)
+    np.testing.assert_allclose(view.curve_tangents(geo), want_t / np.linalg.norm(want_t, axis=1, keepdims=True),
+                               rtol=1e-12, atol=1e-15)
+    pts, faces, owner = view.tube_mesh(geo)
+    assert pts.shape == (n * view.TUBE_SIDES, 3)
+    np.testing.assert_array_equal(faces, np.concatenate(want_faces))
+    np.testing.assert_array_equal(owner, np.array(want_owner))
+    ring = pts.reshape(n, view.TUBE_SIDES, 3) - p[:, None]  # each ring: the point's half width from it, across t
+    radius = np.broadcast_to(0.5 * np.asarray(geo.widths, np.float64)[:, None], ring.shape[:2])
+    np.testing.assert_allclose(np.linalg.norm(ring, axis=2), radius, rtol=1e-9)
+    np.testing.assert_allclose((ring * view.curve_tangents(geo)[:, None]).sum(2), 0.0, atol=1e-12)
+
+
 def test_triplane_channel_image_shape(assets):
     asset = Asset.open(assets["rna"])
     planes = np.asarray(asset.tensor("core", "triplane"), np.float32)
