@@ -522,6 +522,26 @@ def b_disk_cylinder_lights(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_light_spread(ctx):
+    """A RectLight over the floor in front of the asset with nasset:spread 0.9 rad (a soft box: a pool of light with a
+    soft edge) and a DiskLight from the side with spread 1.6 rad; the panel's own face is in view."""
+    from pxr import Sdf, UsdLux
+
+    from nasset_reference_renderer.testscenes import _frame_matrix
+
+    ctx.camera(eye=(0.0, 1.3, 3.2), target=(0.0, -0.2, 0.0))
+    ctx.floor()
+    rect = ctx.sb.rect_light("Box", (0.3, 0.9, 0.5), 0.5, 0.35, (-0.25, -1.0, -0.2), 12.0, color=(1.0, 0.9, 0.75))
+    rect.GetPrim().CreateAttribute("nasset:spread", Sdf.ValueTypeNames.Float, custom=True).Set(0.9)
+    disk = UsdLux.DiskLight.Define(ctx.sb.stage, "/World/Side")
+    disk.CreateIntensityAttr(6.0)
+    disk.CreateRadiusAttr(0.25)
+    disk.CreateColorAttr((0.7, 0.8, 1.0))
+    ctx.sb._xform(disk.GetPrim(), _frame_matrix(-np.array([1.0, -0.45, -0.1]), (-1.3, 0.4, 0.2)))
+    disk.GetPrim().CreateAttribute("nasset:spread", Sdf.ValueTypeNames.Float, custom=True).Set(1.6)
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_self_shadow(ctx):
     ctx.camera(eye=(0.0, 0.4, 2.2))
     ctx.sb.distant("Sun", (1.0, 0.35, 0.2), 2.0)
@@ -663,8 +683,11 @@ CASES = [
          "(cone 30 degrees, softness 0.4) and nasset:shaping:falloff = smoothstep (cone 20, softness 0.3): the pools "
          "of light, their soft edges and the asset's light samples", b_spot_lights),
     Case("rna_beckmann", "a rough copper floor (alpha 0.30) and a glossy plastic block (alpha 0.49) with nasset:microfacet = "
-         "beckmann, a bulb low behind the asset and a faint sun: Beckmann's D, its rational Lambda in the "
+         "beckmann, a wide RectLight low behind the asset facing the camera: Beckmann's D, its rational Lambda in the "
          "height-correlated G2 and its half-vector sampling, the asset's light reflected by the floor", b_beckmann),
+    Case("rna_light_spread", "a RectLight over the floor with nasset:spread = 0.9 rad (a soft box: the pool of light and its "
+         "soft edge) and a DiskLight from the side with spread 1.6 rad: the spread's profile on light samples "
+         "and on rays that meet the lights, the power it keeps", b_light_spread),
     Case("rna_rect_light_back", "a RectLight between the camera and the asset, emitting away from the camera toward the "
          "asset and the floor: camera rays reach its back and pass through it (one-sided light surface), its light on "
          "the asset", b_rect_light_back),

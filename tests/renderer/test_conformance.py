@@ -38,6 +38,7 @@ MUTANT_CASES = {
     "camera_visibility_ignored": ["rna_hidden_lights"],
     "spot_shaping_ignored": ["rna_spot_lights"],
     "beckmann_as_ggx": ["rna_beckmann"],
+    "spread_ignored": ["rna_light_spread"],
     "light_surfaces_occlude": ["rna_lights_in_the_way"],
     "no_asset_indirect": ["rna_indirect"],
     "mis_weights_one": ["rna_sphere_light"],

@@ -199,6 +199,13 @@ def beckmann_as_ggx():
     scene._beckmann_column = lambda flags: None
 
 
+def spread_ignored():
+    """``nasset:spread`` ignored: every RectLight and DiskLight a Lambertian emitter."""
+    from nasset_sdk import stage_rules
+
+    stage_rules.light_spread = lambda prim, time, file: stage_rules.MAX_SPREAD
+
+
 def light_surfaces_occlude():
     """A ray ends at the first light surface it meets (Mitsuba's emitter shapes; the spec's rule before 2026-12-07)
     instead of going on past every light surface; a RectLight's back still lets it through."""
@@ -370,7 +377,7 @@ def fiber_exempt_stops_search():
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, one_escaped_light, camera_visibility_ignored,
-                                   spot_shaping_ignored, beckmann_as_ggx, light_surfaces_occlude,
+                                   spot_shaping_ignored, beckmann_as_ggx, spread_ignored, light_surfaces_occlude,
                                    no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
