@@ -226,3 +226,17 @@ def test_fibre_prisms_pair_into_quads():
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     assert np.abs(((p[:, 2] - p[:, 0]) * n).sum(1)).max() < 1e-9
     np.testing.assert_array_equal(tubes.tri_seg[tubes.quad_tri[:, 0]], tubes.tri_seg[tubes.quad_tri[:, 1]])
+
+
+def test_quads_fall_back_to_triangles(monkeypatch):
+    """Where Embree cannot take the quads in place, the backend holds the same faces as triangles: the triangle hits."""
+    points, faces, pairs = _quad_soup(500, seed=8)
+    tri = points[faces]
+    with monkeypatch.context() as m:
+        m.setattr(embree, "attach_quads", lambda *a: False)
+        fallback = EmbreeBackend(tri, robust=False, mesh=(points, faces, embree.quads_of_pairs(faces, pairs)))
+    assert fallback.quads is None and fallback.shared is not None and fallback.shared[1].shape == faces.shape
+    plain = EmbreeBackend(tri, robust=False, mesh=(points, faces))
+    o, d, tmax = _rays(5000, seed=10)
+    for a, b in zip(fallback.closest(o, d, tmax), plain.closest(o, d, tmax), strict=True):
+        np.testing.assert_array_equal(a, b)
