@@ -30,6 +30,17 @@ BASES = {
 }
 
 
+def linear_segments(counts) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The segments (i, i + 1) inside linear curves of ``counts`` [C] points, in curve order: (first point of each
+    segment [S], its curve [S], first segment of each curve [C+1]) (S = sum(max(counts - 1, 0)))."""
+    c = np.asarray(counts, np.int64)
+    n_seg = np.maximum(c - 1, 0)
+    curve = np.repeat(np.arange(len(c)), n_seg)
+    seg_first = np.concatenate([[0], np.cumsum(n_seg)])
+    starts = np.cumsum(c) - c
+    return np.arange(len(curve)) - seg_first[curve] + starts[curve], curve, seg_first
+
+
 class CurveError(ValueError):
     """Curves whose vertex counts do not fit their type, basis and wrap (the caller names the prim)."""
 

@@ -3,10 +3,11 @@
 embreex's ``TriangleMesh`` copies a mesh into Embree one element at a time through Python indexing: 5.7 s
 of CPU for the 8.4 M triangles of a 20 000-strand groom (docs/benchmarks.md#hair-setup), about 0.7 us per
 triangle of any large mesh. Its ray queries, though, are the fastest the reference renderer and the viewer
-(``nasset view``) have: one C loop over the rays with the interpreter lock released. (Tracing from Python through ctypes, sixteen rays to a
-call, was measured at 0.78x of embreex's ray rate with two render threads, from the lock taken back after
-every call.) So an ``EmbreeScene`` is made as usual, and the geometry is attached to its Embree scene
-with ``rtcSetSharedGeometryBuffer`` through ctypes, on the same library the embreex extension has loaded.
+(``nasset view``) have: one C loop over the rays with the interpreter lock released. (Tracing from Python
+through ctypes, sixteen rays to a call, was measured at 0.78x of embreex's ray rate with two render threads,
+from the lock taken back after every call.) So an ``EmbreeScene`` is made as usual, and the geometry is
+attached to its Embree scene with ``rtcSetSharedGeometryBuffer`` through ctypes, on the same library the
+embreex extension has loaded.
 
 The embreex scene keeps its ``RTCScene`` in a C field. Its position is checked at run time before it is
 read: the type's size, and the field beside it (``is_committed``, public) written from Python and read

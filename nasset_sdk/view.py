@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .curves import linear_segments
 from .errors import UsageError
 from .geometry import CurvesGeometry, MeshGeometry
 from .images import write_png
@@ -191,23 +192,13 @@ def tube_mesh(curves: CurvesGeometry, sides: int = TUBE_SIDES):
     b2 = np.cross(t, b1)
     ang = 2 * np.pi * np.arange(sides) / sides
     ring = p[:, None] + r[:, None, None] * (np.cos(ang)[None, :, None] * b1[:, None] + np.sin(ang)[None, :, None] * b2[:, None])
-    c = np.asarray(curves.counts, np.int64)
-    starts = np.cumsum(c) - c
-    seg = _segments(starts, c)
+    seg = linear_segments(curves.counts)[0]
     k = np.arange(sides)
     i0, i1 = seg[:, None] * sides + k, (seg[:, None] + 1) * sides + (k + 1) % sides  # [S, sides]
     j0, j1 = seg[:, None] * sides + (k + 1) % sides, (seg[:, None] + 1) * sides + k
     faces = np.stack([np.stack([i0, j0, i1], -1), np.stack([i0, i1, j1], -1)], 1).reshape(-1, 3)  # per segment: 2 x sides
     owner = np.repeat(np.stack([seg, seg + 1], 1), 2 * sides, axis=0)
     return ring.reshape(-1, 3), faces.astype(np.int64), owner.astype(np.int64)
-
-
-def _segments(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """First points of every segment (i, i + 1) inside curves of ``counts`` points starting at ``starts``, in order."""
-    n_seg = np.maximum(counts - 1, 0)
-    first = np.cumsum(n_seg) - n_seg
-    curve = np.repeat(np.arange(len(counts)), n_seg)
-    return (np.arange(int(n_seg.sum())) - first[curve] + starts[curve]).astype(np.int64)
 
 
 class _Tracer:

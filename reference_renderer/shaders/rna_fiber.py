@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nasset_sdk.curves import linear_segments
 from nasset_sdk.embree import quads_of_pairs
 
 from ..sampling import (
@@ -81,11 +82,7 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
     p = np.asarray(points, np.float64).reshape(-1, 3)
     c = np.asarray(counts, np.int64)
     r = 0.5 * np.asarray(widths, np.float64)
-    starts = np.concatenate([[0], np.cumsum(c)[:-1]])
-    # segments (i, i + 1) inside each curve, in curve order
-    curve = np.repeat(np.arange(len(c)), c - 1)
-    seg_first = np.concatenate([[0], np.cumsum(c - 1)])  # first segment of each curve
-    a = np.arange(len(curve)) - seg_first[curve] + starts[curve]  # its first point
+    a, curve, seg_first = linear_segments(c)  # segments (a, a + 1) inside each curve, in curve order
     p0, p1, r0, r1 = p[a], p[a + 1], r[a], r[a + 1]
     seg_len = np.linalg.norm(p1 - p0, axis=1)
     tiny = 1e-9 * (1.0 + float(np.abs(p).max(initial=0.0)))
