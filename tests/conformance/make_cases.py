@@ -450,6 +450,18 @@ def b_beckmann(ctx):
     ctx.asset("Asset", "rna_rand.usdc")
 
 
+def b_spot_radius(ctx):
+    """A spot with a radius (a SphereLight of radius 0.2 with ShapingAPI, Cycles' spot with Soft Falloff off) aimed at
+    the asset from above the camera: a pool of light on the floor and the asset's soft-edged shadow in it."""
+    ctx.camera()
+    ctx.floor()
+    spot = _spot(ctx, "Spot", (-0.5, 1.6, 0.9), (0.45, -1.0, -0.55), 60.0, 32.0, 0.25, "smoothstep", color=(1.0, 0.9, 0.8))
+    spot.CreateRadiusAttr(0.2)
+    spot.CreateNormalizeAttr(True)  # radiance 60 / (4 pi 0.2^2) from each point of the sphere
+    ctx.sb.distant("Fill", (0.3, 1.0, -0.6), 0.3, color=(0.6, 0.7, 1.0))
+    ctx.asset("Asset", "rna_rand.usdc")
+
+
 def b_rect_light_back(ctx):
     ctx.camera()
     ctx.floor()
@@ -688,6 +700,9 @@ CASES = [
     Case("rna_light_spread", "a RectLight over the floor with nasset:spread = 0.9 rad (a soft box: the pool of light and its "
          "soft edge) and a DiskLight from the side with spread 1.6 rad: the spread's profile on light samples "
          "and on rays that meet the lights, the power it keeps", b_light_spread),
+    Case("rna_spot_radius", "a spot with a radius (SphereLight of radius 0.2, ShapingAPI cone 32 degrees, smoothstep "
+         "falloff) aimed at the asset, a faint fill sun: the shaping of every point of the sphere, the asset's soft shadow "
+         "in the pool of light", b_spot_radius),
     Case("rna_rect_light_back", "a RectLight between the camera and the asset, emitting away from the camera toward the "
          "asset and the floor: camera rays reach its back and pass through it (one-sided light surface), its light on "
          "the asset", b_rect_light_back),

@@ -183,7 +183,7 @@ def _run_case(name, tmp_path, spp_scale=1):
 
 
 @pytest.mark.parametrize("case", ["rna_instances_transforms", "rna_shadow_on_asset", "rna_distant_angle", "rna_scale_tiny",
-                                  "rna_sphere_light", "rna_near_field_fetch", "rna_beckmann", "rna_light_spread",
+                                  "rna_sphere_light", "rna_near_field_fetch", "rna_beckmann", "rna_light_spread", "rna_spot_radius",
                                   "neupress_distant",
                                   "neupress_near_field_fetch",
                                   pytest.param("neupress_direct", marks=pytest.mark.slow)])

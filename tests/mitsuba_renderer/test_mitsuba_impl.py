@@ -278,12 +278,13 @@ def test_fiber_and_neupress_cases_pass_via_cli(nr, case):
     assert row["passed"], row
 
 
-@pytest.mark.parametrize("case", ["rna_beckmann", "rna_light_spread"])
-def test_beckmann_and_spread_cases_pass_via_cli(nr, case):
+@pytest.mark.parametrize("case", ["rna_beckmann", "rna_light_spread", "rna_spot_radius"])
+def test_beckmann_spread_and_spot_radius_cases_pass_via_cli(nr, case):
     """``rna_beckmann``: Beckmann microfacets on a metal floor and a plastic block (nasset:microfacet,
     spec/renderer.md#materials; with GGX lobes the scene is 2x its tolerance, 6x its bias tolerance).
     ``rna_light_spread``: a RectLight and a DiskLight with nasset:spread (spec/renderer.md#lights; as Lambertian
-    emitters 11x its tolerance)."""
+    emitters 11x its tolerance). ``rna_spot_radius``: ShapingAPI on a SphereLight of radius 0.2 (spec/renderer.md#spot-lights;
+    unshaped, 11x its tolerance)."""
     row = _conformance([case])[case]
     assert row["passed"], row
 

@@ -39,6 +39,7 @@ MUTANT_CASES = {
     "spot_shaping_ignored": ["rna_spot_lights"],
     "beckmann_as_ggx": ["rna_beckmann"],
     "spread_ignored": ["rna_light_spread"],
+    "sphere_shaping_ignored": ["rna_spot_radius"],
     "light_surfaces_occlude": ["rna_lights_in_the_way"],
     "no_asset_indirect": ["rna_indirect"],
     "mis_weights_one": ["rna_sphere_light"],

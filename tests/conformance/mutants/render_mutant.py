@@ -199,6 +199,19 @@ def beckmann_as_ggx():
     scene._beckmann_column = lambda flags: None
 
 
+def sphere_shaping_ignored():
+    """UsdLux.ShapingAPI ignored on a SphereLight of radius > 0 (the rule before 2026-12-07): a spot with a radius
+    lights every direction like an unshaped sphere light."""
+    from nasset_reference_renderer import lights
+
+    init = lights.SphereLight.__init__
+
+    def unshaped(self, center, radius, radiance, prim="", **shaping):
+        init(self, center, radius, radiance, prim)
+
+    lights.SphereLight.__init__ = unshaped
+
+
 def spread_ignored():
     """``nasset:spread`` ignored: every RectLight and DiskLight a Lambertian emitter."""
     from nasset_sdk import stage_rules
@@ -377,7 +390,8 @@ def fiber_exempt_stops_search():
 MUTANTS = {f.__name__: f for f in (swap_branches, cos_factor, world_directions, world_points, triplane_uv_swapped,
                                    triplane_planes_rotated, other_shadows_ignored, asset_casts_no_shadow, other_instance_is_self,
                                    distant_angle_ignored, dome_mirrored, one_escaped_light, camera_visibility_ignored,
-                                   spot_shaping_ignored, beckmann_as_ggx, spread_ignored, light_surfaces_occlude,
+                                   spot_shaping_ignored, beckmann_as_ggx, spread_ignored,
+                                   sphere_shaping_ignored, light_surfaces_occlude,
                                    no_asset_indirect, mis_weights_one, quality_hq,
                                    neupress_wi_flipped, neupress_reflection_dropped, neupress_lobe_width,
                                    eightdna_pdf_scale, eightdna_direction_flipped, eightdna_u_untransformed,
