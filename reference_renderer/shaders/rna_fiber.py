@@ -119,7 +119,9 @@ def tessellate(points, counts, widths, sides: int = TUBE_SIDES) -> FiberTubes:
                                   np.stack([3 * sides - 2 + fans, 3 * sides - 1 + fans], 1)])
     local_quads, local_tri, local_corners = quads_of_pairs(local, local_pairs)
     quads = quad_tri = corners = None
-    if len(live_ids) * 2 * sides < 2**32 - 1:  # Embree's 32-bit indices (beyond them Embree refuses the points anyway)
+    # Embree's 32-bit indices: the points of every segment (dead ones too) and the triangles of the live ones (beyond
+    # them Embree refuses the points anyway)
+    if max(n_seg * 2 * sides, len(live_ids) * per) < 2**32 - 1:
         base = live_ids.astype(np.uint32)[:, None, None]
         quads = (base * np.uint32(2 * sides) + local_quads[None]).reshape(-1, 4)
         quad_tri = (np.arange(len(live_ids), dtype=np.uint32)[:, None, None] * np.uint32(per)
