@@ -24,6 +24,7 @@ import copy
 
 import numpy as np
 
+from nasset_sdk import embree
 from nasset_sdk.errors import UsageError
 
 from .sampling import box3
@@ -74,8 +75,6 @@ class EmbreeBackend(_Backend):
         from embreex import rtcore_scene
         from embreex.mesh_construction import TriangleMesh
 
-        from nasset_sdk.embree import attach_quads, attach_triangles, shared_buffers, shared_points
-
         self.robust = robust
         self.scene = rtcore_scene.EmbreeScene(robust=robust)
         self.empty = len(triangles) == 0
@@ -84,12 +83,12 @@ class EmbreeBackend(_Backend):
         if not self.empty:
             quads = mesh[2] if mesh is not None and len(mesh) > 2 else None
             if quads is not None:
-                points = shared_points(mesh[0])
-                if attach_quads(self.scene, points, quads[0]):
+                points = embree.shared_points(mesh[0])
+                if embree.attach_quads(self.scene, points, quads[0]):
                     self.shared, self.quads = (points, quads[0]), (quads[1], quads[2])
             if self.shared is None:
-                buffers = shared_buffers(triangles, mesh)
-                if attach_triangles(self.scene, *buffers):
+                buffers = embree.shared_buffers(triangles, mesh)
+                if embree.attach_triangles(self.scene, *buffers):
                     self.shared = buffers
                 elif mesh is not None:
                     TriangleMesh(self.scene, buffers[0][:-1], buffers[1])
@@ -109,12 +108,10 @@ class EmbreeBackend(_Backend):
         t = np.where(hit, r["tfar"].astype(np.float64), np.inf)
         if self.quads is None:
             return t, prim, r["u"].astype(np.float64), r["v"].astype(np.float64)
-        from nasset_sdk.embree import quad_hits_as_triangles
-
         u, v = np.zeros(n), np.zeros(n)
         if hit.any():
             rows = np.nonzero(hit)[0]
-            prim[rows], u[rows], v[rows] = quad_hits_as_triangles(*self.quads, prim[rows], r["u"][rows], r["v"][rows])
+            prim[rows], u[rows], v[rows] = embree.quad_hits_as_triangles(*self.quads, prim[rows], r["u"][rows], r["v"][rows])
         return t, prim, u, v
 
     def occluded(self, o, d, tmax):

@@ -87,42 +87,33 @@ def test_surface_continuation_mixture(wo, n):
     assert np.allclose(np.linalg.norm(v, axis=1), 1.0) and (sc.pdf(rows(1000), v) >= 0.4 / (4 * np.pi)).all()
 
 
-@pytest.mark.parametrize("alpha,theta", [(0.3, 0.4), (0.7, 1.1), (0.15, 0.9)])
-def test_ggx_visible_normals(alpha, theta):
+def _check_reflection_lobe(label, theta, half_vectors, reflect_pdf):
+    """Chi-squared of directions reflected about ``half_vectors(wo [n,3], u [n,2])`` at the view angle ``theta``
+    (those below the surface dropped) against ``reflect_pdf(wo [n,3], wi [n,3])``."""
     wo = np.array([[np.sin(theta), 0.0, np.cos(theta)]])
 
     def sample(u):
-        n = len(u)
-        h = bsdf.ggx_sample_vndf(np.repeat(wo, n, 0), np.full(n, alpha), u)
-        wi = bsdf.reflect(np.repeat(wo, n, 0), h)
+        w = np.repeat(wo, len(u), 0)
+        wi = bsdf.reflect(w, half_vectors(w, u))
         wi[wi[:, 2] <= 0] = np.nan
         return wi
 
-    def pdf(v):
-        return bsdf.ggx_reflect_pdf(np.repeat(wo, len(v), 0), v, np.full(len(v), alpha))
-
-    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60, sub=8)
-    _report(f"ggx a={alpha}", p, dof)
+    p, dof, _ = sphere_chi2(sample, lambda v: reflect_pdf(np.repeat(wo, len(v), 0), v), n_theta=30, n_phi=60, sub=8)
+    _report(label, p, dof)
     assert p > P_MIN
+
+
+@pytest.mark.parametrize("alpha,theta", [(0.3, 0.4), (0.7, 1.1), (0.15, 0.9)])
+def test_ggx_visible_normals(alpha, theta):
+    _check_reflection_lobe(f"ggx a={alpha}", theta, lambda w, u: bsdf.ggx_sample_vndf(w, np.full(len(u), alpha), u),
+                           lambda w, v: bsdf.ggx_reflect_pdf(w, v, np.full(len(v), alpha)))
 
 
 @pytest.mark.parametrize("alpha, wo_theta", [(0.3, 0.4), (0.6, 1.35), (0.08, 1.0)])
 def test_beckmann_sampling_matches_pdf(alpha, wo_theta):
     """nasset:microfacet = beckmann: half vectors of density D cos_h, reflected, against beckmann_reflect_pdf."""
-    wo = np.array([[np.sin(wo_theta), 0.0, np.cos(wo_theta)]])
-
-    def sample(u):
-        n = len(u)
-        wi = bsdf.reflect(np.repeat(wo, n, 0), bsdf.beckmann_sample(np.full(n, alpha), u))
-        wi[wi[:, 2] <= 0] = np.nan
-        return wi
-
-    def pdf(v):
-        return bsdf.beckmann_reflect_pdf(np.repeat(wo, len(v), 0), v, np.full(len(v), alpha))
-
-    p, dof, _ = sphere_chi2(sample, pdf, n_theta=30, n_phi=60, sub=8)
-    _report(f"beckmann a={alpha}", p, dof)
-    assert p > P_MIN
+    _check_reflection_lobe(f"beckmann a={alpha}", wo_theta, lambda w, u: bsdf.beckmann_sample(np.full(len(u), alpha), u),
+                           lambda w, v: bsdf.beckmann_reflect_pdf(w, v, np.full(len(v), alpha)))
 
 
 @pytest.mark.parametrize("alpha", [0.05, 0.3, 0.9])
