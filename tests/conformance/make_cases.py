@@ -536,7 +536,9 @@ def b_disk_cylinder_lights(ctx):
 
 def b_light_spread(ctx):
     """A RectLight over the floor in front of the asset with nasset:spread 0.9 rad (a soft box: a pool of light with a
-    soft edge) and a DiskLight from the side with spread 1.6 rad; the panel's own face is in view."""
+    soft edge) and a DiskLight from the side with spread 1.6 rad; the panel's own face is in view. A faint dome lights
+    what the boxes do not (a renderer that takes one light sample per vertex must not waste it on a box whose cone
+    misses the point: docs/bench-mitsuba-jit.md#cone-lights)."""
     from pxr import Sdf, UsdLux
 
     from nasset_reference_renderer.testscenes import _frame_matrix
@@ -551,6 +553,7 @@ def b_light_spread(ctx):
     disk.CreateColorAttr((0.7, 0.8, 1.0))
     ctx.sb._xform(disk.GetPrim(), _frame_matrix(-np.array([1.0, -0.45, -0.1]), (-1.3, 0.4, 0.2)))
     disk.GetPrim().CreateAttribute("nasset:spread", Sdf.ValueTypeNames.Float, custom=True).Set(1.6)
+    ctx.sb.dome("Sky", 0.15, color=(0.6, 0.7, 0.9))
     ctx.asset("Asset", "rna_rand.usdc")
 
 
@@ -698,8 +701,8 @@ CASES = [
          "beckmann, a wide RectLight low behind the asset facing the camera: Beckmann's D, its rational Lambda in the "
          "height-correlated G2 and its half-vector sampling, the asset's light reflected by the floor", b_beckmann),
     Case("rna_light_spread", "a RectLight over the floor with nasset:spread = 0.9 rad (a soft box: the pool of light and its "
-         "soft edge) and a DiskLight from the side with spread 1.6 rad: the spread's profile on light samples "
-         "and on rays that meet the lights, the power it keeps", b_light_spread),
+         "soft edge) and a DiskLight from the side with spread 1.6 rad, a faint dome: the spread's profile on light "
+         "samples and on rays that meet the lights, the power it keeps", b_light_spread),
     Case("rna_spot_radius", "a spot with a radius (SphereLight of radius 0.2, ShapingAPI cone 32 degrees, smoothstep "
          "falloff) aimed at the asset, a faint fill sun: the shaping of every point of the sphere, the asset's soft shadow "
          "in the pool of light", b_spot_radius),
