@@ -13,8 +13,9 @@ reaches x, as in the reference renderer's choice. A light sample's pdf is the em
 pdf a continuation that meets the emitter is weighed with. It offers the two scene methods the integrator calls
 (``sample_emitter_direction``, ``pdf_emitter_direction``).
 
-**Emitters that light a cone only.** A spot (``nasset_spot``), a RectLight or DiskLight with a spread below 90 degrees
-and a SphereLight with a spot cone below 90 degrees (``nasset_profiled``) send no light outside a cone: apex a_j, axis
+**Emitters that light a cone only.** A spot (``nasset_spot``), a RectLight or DiskLight with a spread below 180 degrees
+(half-angle below 90) and a SphereLight with a spot cone below 90 degrees (``nasset_profiled``) send no light outside a
+cone (the reference renderer's emission_cone, spec/renderer.md#light-selection): apex a_j, axis
 n_j, half-angle theta_j, the apex a point light's position, or for a light surface of bounding radius rho moved back
 along the axis until the cone holds the surface (rho / tan(theta) behind a planar light's centre, rho / sin(theta)
 behind a sphere's): every ray the light emits leaves a point inside that cone in a direction within theta of n_j, so
@@ -66,7 +67,7 @@ def emitter_cone(mi, e):
     if e.axis is not None and e.cone < 0.5 * math.pi:  # a SphereLight's spot cone: the sphere inside it
         axis = np.asarray(e.axis, np.float64).reshape(3)
         return centre - axis * rho / math.sin(max(e.cone, 1e-6)), axis, math.cos(e.cone)
-    if math.isfinite(e.tan_h):  # a spread below 90 degrees on a planar light (RectLight, DiskLight)
+    if math.isfinite(e.tan_h):  # a half-spread below 90 degrees on a planar light (RectLight, DiskLight)
         normal = _plane_normal(mi, e.get_shape())
         if normal is not None:
             h = math.atan(e.tan_h)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lights import DistantLight, DomeLight, Light, MeshLight, PointLight, SphereLight, _SurfaceLight
+from .lights import DistantLight, DomeLight, Light, MeshLight, PointLight, RectLight, SphereLight, _SurfaceLight
 from .sampling import luminance
 
 #: light samples per vertex and kind when that kind has more lights than this (the default of
@@ -60,6 +60,25 @@ def importance_terms(light: Light) -> tuple[np.ndarray | None, float, float]:
     return (None if c is None else np.asarray(c, np.float64)), a, b
 
 
+def emission_cone(light: Light) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """(apex [3], unit axis [3], cos theta) of the cone outside which ``light`` sends no light, or None: a spot (apex
+    its position, theta its cone angle), a SphereLight with a spot cone below 90 degrees or a RectLight or DiskLight
+    with a spread below pi (theta half the spread). A light surface's apex is moved back along the axis until the cone
+    holds the light's bounding sphere (radius rho): rho / sin(theta) behind its centre for a spot cone, rho / tan(theta)
+    for a planar light (its plane's disk of radius rho lies on the cone); every ray the light emits leaves a point
+    inside the cone within theta of the axis, so it stays inside (spec/renderer.md#light-selection)."""
+    if isinstance(light, PointLight) and light.axis is not None:
+        return np.asarray(light.c, np.float64), light.axis, float(np.cos(np.radians(min(light.cone_deg, 180.0))))
+    if isinstance(light, SphereLight) and light.axis is not None and light.cone_deg < 90.0:
+        theta = np.radians(max(light.cone_deg, 1e-6))
+        return light.c - light.axis * light.r / np.sin(theta), light.axis, float(np.cos(theta))
+    if isinstance(light, RectLight) and light.spread < np.pi:  # DiskLight too
+        h = 0.5 * light.spread
+        centre, rho = light.bounding_sphere()
+        return np.asarray(centre, np.float64) - light.n * rho / np.tan(h), light.n, float(np.cos(h))
+    return None
+
+
 def _below(cdf: np.ndarray, j: np.ndarray) -> np.ndarray:
     """[r, d] the cdf [r, m] just below column j [r, d] of each row (0 below the first)."""
     return np.where(j > 0, np.take_along_axis(cdf, np.maximum(j - 1, 0), 1), 0.0)
@@ -80,6 +99,11 @@ class _Kind:
         self.origin = self.centre[self.finite].mean(0) if self.finite.any() else np.zeros(3)
         self.c = self.centre - self.origin
         self.c2 = np.einsum("mk,mk->m", self.c, self.c)
+        cones = [emission_cone(lights[k]) for k in kind]
+        self.coned = np.array([i for i, cone in enumerate(cones) if cone is not None], np.int64)  # columns with a cone
+        self.apex = np.array([cones[i][0] for i in self.coned]).reshape(-1, 3)
+        self.axis = np.array([cones[i][1] for i in self.coned]).reshape(-1, 3)
+        self.cos_cone = np.array([cones[i][2] for i in self.coned])
 
     def probabilities(self, p: np.ndarray) -> np.ndarray:
         """[n, m] probability of each light of the kind at points ``p`` [n,3]: UNIFORM_SHARE uniform, the rest by
@@ -91,6 +115,10 @@ class _Kind:
         x = p - self.origin
         d2 = np.einsum("nk,nk->n", x, x)[:, None] + self.c2[None] - 2.0 * (x @ self.c.T)
         imp = np.where(self.finite, self.a / np.maximum(d2, self.b), self.a)
+        if len(self.coned):  # 0 outside a light's emission cone (emission_cone)
+            v = [p[:, k:k + 1] - self.apex[:, k] for k in range(3)]  # [n, c] each: from each apex to x
+            along = v[0] * self.axis[:, 0] + v[1] * self.axis[:, 1] + v[2] * self.axis[:, 2]
+            imp[:, self.coned] *= along >= self.cos_cone * np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
         total = imp.sum(1, keepdims=True)
         ok = np.isfinite(total) & (total > 0)
         share = np.where(ok, imp / np.where(ok, total, 1.0), 1.0 / m)

@@ -640,3 +640,49 @@ def asset_among_many_lights(path, asset: str, seed: int = 2) -> str:
     b.asset("Obj", asset)
     add_many_lights(b, np.random.default_rng(seed), 12, 10, spread=1.5)
     return b.write(path)
+
+
+def cone_lights_scene(path) -> str:
+    """A floor under two soft boxes (RectLights with nasset:spread 0.9 and 0.6 rad, each a pool of light), a spot (a
+    point light with ShapingAPI, 25 degrees), a spot with a radius (a SphereLight of radius 0.15, 30 degrees) and a
+    faint dome: most of the floor lies outside most of the cones."""
+    from pxr import Gf, Sdf, UsdGeom, UsdLux
+
+    from nasset_reference_renderer.testscenes import _frame_matrix
+
+    b = SceneBuilder()
+    b.camera((0, 4.5, 4.5), (0, 0, 0), focal=28)
+    b.quad("Floor", (0, 0, 0), 8.0, diffuse=(0.6, 0.6, 0.6))
+    for name, centre, aim, spread in (("BoxA", (-1.5, 1.2, 0.5), (0.3, -1.0, 0.0), 0.9),
+                                      ("BoxB", (1.6, 1.0, -0.8), (-0.2, -1.0, 0.3), 0.6)):
+        lt = b.rect_light(name, centre, 0.6, 0.4, aim, 10.0)
+        lt.GetPrim().CreateAttribute("nasset:spread", Sdf.ValueTypeNames.Float, custom=True).Set(spread)
+    for name, position, aim, radius, cone in (("Spot", (0.0, 2.5, -1.5), (0.1, -1.0, 0.6), 0.0, 25.0),
+                                               ("Ball", (-0.5, 2.0, 2.0), (0.6, -1.0, -0.2), 0.15, 30.0)):
+        lt = b.sphere_light(name, position, radius, 30.0)
+        m = _frame_matrix(-np.asarray(aim, np.float64), position)
+        UsdGeom.Xformable(lt.GetPrim()).GetOrderedXformOps()[0].Set(Gf.Matrix4d(*np.asarray(m, np.float64).ravel().tolist()))
+        UsdLux.ShapingAPI.Apply(lt.GetPrim()).CreateShapingConeAngleAttr(cone)
+    b.dome("Sky", 0.05)
+    return b.write(path)
+
+
+def spot_stage_scene(path, n: int = 12, seed: int = 3) -> str:
+    """A floor under ``n`` spots (point lights with ShapingAPI, cones of 12-22 degrees) hung at random over it, each
+    aimed at a random point of the floor: a stage of pools of light, most of the floor outside most of the cones."""
+    from pxr import Gf, UsdGeom, UsdLux
+
+    from nasset_reference_renderer.testscenes import _frame_matrix
+
+    rng = np.random.default_rng(seed)
+    b = SceneBuilder()
+    b.camera((0, 5.0, 4.0), (0, 0, 0), focal=26)
+    b.quad("Floor", (0, 0, 0), 8.0, diffuse=(0.6, 0.6, 0.6))
+    for i in range(n):
+        pos = np.array([rng.uniform(-3, 3), 2.2, rng.uniform(-3, 3)])
+        aim = np.array([rng.uniform(-3, 3), 0.0, rng.uniform(-3, 3)]) - pos
+        lt = b.sphere_light(f"Spot{i}", pos, 0.0, 20.0)
+        m = _frame_matrix(-aim / np.linalg.norm(aim), pos)
+        UsdGeom.Xformable(lt.GetPrim()).GetOrderedXformOps()[0].Set(Gf.Matrix4d(*np.asarray(m, np.float64).ravel().tolist()))
+        UsdLux.ShapingAPI.Apply(lt.GetPrim()).CreateShapingConeAngleAttr(float(rng.uniform(12, 22)))
+    return b.write(path)

@@ -17,7 +17,7 @@ from nasset_mitsuba_plugin.render import render  # noqa: E402
 from nasset_mitsuba_renderer.lights import build_lights  # noqa: E402
 from nasset_mitsuba_renderer.usdscene import read_scene  # noqa: E402
 from nasset_reference_renderer.testscenes import SceneBuilder  # noqa: E402
-from tests.stage_scenes import asset_among_many_lights, glossy_floor_many_lights  # noqa: E402
+from tests.stage_scenes import asset_among_many_lights, cone_lights_scene, glossy_floor_many_lights  # noqa: E402
 
 
 def _scene(tmp_path):
@@ -146,31 +146,6 @@ def test_spatial_choice_keeps_the_image(tmp_path, monkeypatch, what):
 
 
 # -- emitters that light a cone only: a spread, a spot (mitsuba_plugin/light_choice.py, emitter_cone) ----------------
-def _cone_lights_scene(path):
-    """A floor under two soft boxes (RectLights with nasset:spread 0.9 and 0.6 rad, each a pool of light), a spot (a
-    point light with ShapingAPI, 25 degrees), a spot with a radius (a SphereLight of radius 0.15, 30 degrees) and a
-    faint dome: most of the floor lies outside most of the cones."""
-    from pxr import Gf, Sdf, UsdGeom, UsdLux
-
-    from nasset_reference_renderer.testscenes import _frame_matrix
-
-    b = SceneBuilder()
-    b.camera((0, 4.5, 4.5), (0, 0, 0), focal=28)
-    b.quad("Floor", (0, 0, 0), 8.0, diffuse=(0.6, 0.6, 0.6))
-    for name, centre, aim, spread in (("BoxA", (-1.5, 1.2, 0.5), (0.3, -1.0, 0.0), 0.9),
-                                      ("BoxB", (1.6, 1.0, -0.8), (-0.2, -1.0, 0.3), 0.6)):
-        lt = b.rect_light(name, centre, 0.6, 0.4, aim, 10.0)
-        lt.GetPrim().CreateAttribute("nasset:spread", Sdf.ValueTypeNames.Float, custom=True).Set(spread)
-    for name, position, aim, radius, cone in (("Spot", (0.0, 2.5, -1.5), (0.1, -1.0, 0.6), 0.0, 25.0),
-                                               ("Ball", (-0.5, 2.0, 2.0), (0.6, -1.0, -0.2), 0.15, 30.0)):
-        lt = b.sphere_light(name, position, radius, 30.0)
-        m = _frame_matrix(-np.asarray(aim, np.float64), position)
-        UsdGeom.Xformable(lt.GetPrim()).GetOrderedXformOps()[0].Set(Gf.Matrix4d(*np.asarray(m, np.float64).ravel().tolist()))
-        UsdLux.ShapingAPI.Apply(lt.GetPrim()).CreateShapingConeAngleAttr(cone)
-    b.dome("Sky", 0.05)
-    return b.write(path)
-
-
 def test_cone_lights_give_nothing_outside_their_cones(tmp_path):
     """Where emitter_cone says a point is outside an emitter's cone, the emitter's own light samples from that point
     (Mitsuba's sample_direction, 64 per point) carry no light; inside, some do. Checked for the four cone lights of the
@@ -184,7 +159,7 @@ def test_cone_lights_give_nothing_outside_their_cones(tmp_path):
     mi = jit_mitsuba()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        scene = mi.load_dict(usd_scene(_cone_lights_scene(tmp_path / "cones.usda"), 8, 8, mi=mi))
+        scene = mi.load_dict(usd_scene(cone_lights_scene(tmp_path / "cones.usda"), 8, 8, mi=mi))
     rng = np.random.default_rng(7)
     pts = np.concatenate([rng.uniform([-4, 0, -4], [4, 0, 4], (300, 3)), rng.uniform([-4, 0, -4], [4, 2.5, 4], (100, 3))])
     k = 64
@@ -215,7 +190,7 @@ def test_cone_lights_choice_keeps_the_image_with_less_noise(tmp_path, monkeypatc
     import nasset_mitsuba_plugin.light_choice as choice
     from tests.renderer.render_stats import assert_renders_agree
 
-    scene = _cone_lights_scene(tmp_path / "cones.usda")
+    scene = cone_lights_scene(tmp_path / "cones.usda")
 
     def renders(seeds):
         imgs = [render(scene, 16, seed=s, width=32, height=32, max_depth=2) for s in seeds]
@@ -242,7 +217,7 @@ def test_choice_unrolled_and_looped_agree_with_numpy(tmp_path):
     mi = jit_mitsuba()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        scene = mi.load_dict(usd_scene(_cone_lights_scene(tmp_path / "cones.usda"), 8, 8, mi=mi))
+        scene = mi.load_dict(usd_scene(cone_lights_scene(tmp_path / "cones.usda"), 8, 8, mi=mi))
     rng = np.random.default_rng(8)
     x = rng.uniform([-4, 0, -4], [4, 2.5, 4], (300, 3))
     centre, b, factor, const = emitter_terms(mi, scene)

@@ -11,7 +11,7 @@ import pytest
 import nasset_reference_renderer.light_selection as selection
 from nasset_reference_renderer import RenderSettings, load_scene, render
 from nasset_reference_renderer.cli import add_args
-from nasset_reference_renderer.light_selection import LightSelection, importance_terms
+from nasset_reference_renderer.light_selection import LightSelection, emission_cone, importance_terms
 from nasset_reference_renderer.lights import (
     CylinderLight,
     DiskLight,
@@ -27,7 +27,7 @@ from nasset_reference_renderer.testscenes import SceneBuilder, random_rna_asset
 from nasset_sdk.errors import UsageError
 from nasset_sdk.examples import example_builder
 from tests.renderer.render_stats import assert_renders_agree, render_finite
-from tests.stage_scenes import add_many_lights, asset_among_many_lights, glossy_floor_many_lights
+from tests.stage_scenes import add_many_lights, asset_among_many_lights, glossy_floor_many_lights, spot_stage_scene
 from tests.stats import chi2_test
 
 GREY = np.array([2.0, 2.0, 2.0])
@@ -62,6 +62,50 @@ def test_importance_is_the_irradiance_bound():
     assert importance_terms(PointLight((0, 0, 0), np.array([np.inf, 0, 0])))[1] == 0.0
     assert importance_terms(PointLight((np.nan, 0, 0), GREY))[1] == 0.0
     assert np.isfinite(_importance(PointLight((0, 0, 0), GREY), (0, 0, 0)))
+
+
+@pytest.mark.parametrize("light", [
+    PointLight((0.2, 2.0, -0.3), GREY, axis=(0.1, -1.0, 0.3), cone_deg=25.0),
+    SphereLight((0.2, 2.0, -0.3), 0.3, GREY, axis=(-0.2, -1.0, 0.1), cone_deg=30.0),
+    RectLight((0.2, 1.5, -0.3), (0.8, 0.0, 0.0), (0.0, 0.2, 0.5), GREY, spread=0.9),
+    DiskLight((0.2, 1.5, -0.3), (0.4, 0.1, 0.0), (0.0, 0.1, -0.3), GREY, spread=1.6),
+], ids=["spot", "sphere spot", "rect spread", "disk spread"])
+def test_emission_cone_holds_every_lit_point(light):
+    """Where emission_cone puts a point outside the cone, the light's own samples from it (64 each) carry nothing; inside,
+    most points get some light. 600 points around the light and below it."""
+    rng = np.random.default_rng(12)
+    apex, axis, cos_t = emission_cone(light)
+    x = rng.uniform([-3, -1, -3], [3, 3.5, 3], (600, 3))
+    v = x - apex
+    inside = v @ axis >= cos_t * np.linalg.norm(v, axis=1)
+    assert 0.03 < inside.mean() < 0.7
+    k = 64
+    _, _, li, _ = light.sample(np.repeat(x, k, 0), rng.random((len(x) * k, 2)))
+    lit = (li.max(1) > 0).reshape(len(x), k).any(1)
+    assert not (lit & ~inside).any(), np.nonzero(lit & ~inside)[0][:5]
+    assert lit[inside].mean() > 0.5
+    # lights that may light any point in front of them: no cone
+    assert emission_cone(PointLight((0, 0, 0), GREY)) is None
+    assert emission_cone(RectLight((0, 0, 0), (1.0, 0, 0), (0, 1.0, 0), GREY)) is None
+    assert emission_cone(SphereLight((0, 0, 0), 0.3, GREY, axis=(0, 0, 1), cone_deg=120.0)) is None
+
+
+def test_spots_are_drawn_where_they_reach(tmp_path, monkeypatch):
+    """A stage of 12 spots over a floor, 2 draws per vertex: the importance with the spots' cones gives the same image as
+    without them (both unbiased) at less than a fifth of the variance (measured: 16x less)."""
+    scene = load_scene(spot_stage_scene(tmp_path / "stage.usda"))
+
+    def renders(seeds):
+        imgs = [render(scene, RenderSettings(spp=16, width=32, height=32, seed=s, light_draws=2, max_depth=2)).image
+                for s in seeds]
+        return type("R", (), {"image": np.mean(imgs, 0), "variance": np.var(imgs, 0, ddof=1) / len(imgs)})()
+
+    coned = renders(range(1, 5))
+    monkeypatch.setattr(selection, "emission_cone", lambda light: None)
+    plain = renders(range(11, 15))
+    assert coned.image.mean() > 0.05
+    assert_renders_agree(coned, plain, z_mean=4.5, z_pixel=6.0, pixel_fraction=0.02)
+    assert coned.variance.mean() < 0.2 * plain.variance.mean(), (coned.variance.mean(), plain.variance.mean())
 
 
 def _kind(lights):
