@@ -48,8 +48,11 @@ def emitter_choice(mi, scene):
     """An :class:`EmitterChoice` for ``scene``, or the scene itself (Mitsuba's choice) with fewer than SPATIAL_MIN
     emitters none of which lights a cone only (:func:`emitter_cone`)."""
     ems = scene.emitters()
-    if len(ems) >= SPATIAL_MIN or (len(ems) > 1 and any(emitter_cone(mi, e) is not None for e in ems)):
+    if len(ems) >= SPATIAL_MIN:
         return EmitterChoice(mi, scene)
+    cones = [emitter_cone(mi, e) for e in ems]
+    if len(ems) > 1 and any(cone is not None for cone in cones):
+        return EmitterChoice(mi, scene, cones=cones)
     return scene
 
 
@@ -121,15 +124,17 @@ def emitter_terms(mi, scene) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
 
 class EmitterChoice:
     """The emitter choice of the module docstring for ``scene`` (its emitters fixed at construction); ``unrolled``:
-    straight-line code over the emitters (default: up to :data:`UNROLLED_MAX` of them) or a Dr.Jit loop."""
+    straight-line code over the emitters (default: up to :data:`UNROLLED_MAX` of them) or a Dr.Jit loop; ``cones``:
+    :func:`emitter_cone` of each emitter where the caller has them (else found here)."""
 
-    def __init__(self, mi, scene, unrolled: bool | None = None) -> None:
+    def __init__(self, mi, scene, unrolled: bool | None = None, cones: list | None = None) -> None:
         self.mi, self.scene = mi, scene
         centre, b, factor, const = emitter_terms(mi, scene)
         self.m = len(b)
         apex, axis, cos_cone = np.zeros((self.m, 3)), np.tile([0.0, 0.0, 1.0], (self.m, 1)), np.full(self.m, -2.0)
-        for j, e in enumerate(scene.emitters()):
-            cone = emitter_cone(mi, e)
+        if cones is None:
+            cones = [emitter_cone(mi, e) for e in scene.emitters()]
+        for j, cone in enumerate(cones):
             if cone is not None:
                 apex[j], axis[j], cos_cone[j] = cone
         self.unrolled = self.m <= UNROLLED_MAX if unrolled is None else bool(unrolled)

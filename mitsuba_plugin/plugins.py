@@ -159,7 +159,7 @@ def register(mi) -> None:
             split_scenes(mi, scene)  # built here, outside the symbolic loop whose rays use them
             hidden = shapes_named(mi, scene, HIDDEN_PREFIX)  # light surfaces camera rays pass through (None: none)
             lights = PassThrough.of(mi, scene)  # light surfaces and absent cut-outs rays pass through (None: none)
-            emitters = emitter_choice(mi, scene)  # the scene itself (Mitsuba's choice) unless it has many emitters
+            emitters = emitter_choice(mi, scene)  # the scene itself (Mitsuba's choice) unless many emitters or cone lights
             env = scene.environment()
             env_hidden = env is not None and not getattr(env, "camera_visible", True)  # its camera view: eval_camera
             prt = prt_mode.tables(mi, scene, assets, tab) if self.prt else None  # PRT mode: neupress by .prt
